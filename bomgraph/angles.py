@@ -1,0 +1,37 @@
+"""Angle wrapping: the only place in bomgraph where 2*pi appears.
+
+Every comparison of bearings or headings goes through :func:`angle_residual`, which is also
+the ``residual`` handed to filterpy's EKF update.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+TWO_PI = 2.0 * np.pi
+
+
+def wrap_angle(angle_rad: ArrayLike) -> np.ndarray:
+    """Wrap angles to the half-open interval (-pi, pi], element-wise like a numpy ufunc.
+
+    Parameters
+    ----------
+    angle_rad : float or array
+        Angles in radians, any real value.
+
+    Returns
+    -------
+    ndarray or numpy float
+        Same shape as the input; ``-pi`` maps to ``+pi``.
+    """
+    a = np.asarray(angle_rad, dtype=float)
+    return np.pi - np.mod(np.pi - a, TWO_PI)[()]
+
+
+def angle_residual(a_rad: ArrayLike, b_rad: ArrayLike) -> np.ndarray:
+    """The wrapped difference ``a - b`` in (-pi, pi], element-wise.
+
+    This is the ``residual`` passed to filterpy's ``ExtendedKalmanFilter.update``.
+    """
+    return wrap_angle(np.subtract(a_rad, b_rad, dtype=float))

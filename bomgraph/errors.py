@@ -1,0 +1,52 @@
+"""The exceptions bomgraph raises: one base class, one subclass per kind of mistake.
+
+Every message says what is wrong and, where it can, what to do about it.
+"""
+
+from __future__ import annotations
+
+
+class BomgraphError(Exception):
+    """Base class of every error bomgraph raises on purpose."""
+
+
+class StreamFormatError(BomgraphError, ValueError):
+    """A measurement stream or estimate file breaks the format (names file, line and key)."""
+
+    def __init__(self, message: str, *, path: str | None = None, line: int | None = None,
+                 key: str | None = None) -> None:
+        where = []
+        if path is not None:
+            where.append(str(path))
+        if line is not None:
+            where.append(f"line {line}")
+        prefix = ": ".join([", ".join(where)]) if where else ""
+        if key is not None:
+            message = f"'{key}': {message}"
+        super().__init__(f"{prefix}: {message}" if prefix else message)
+        self.path = path
+        self.line = line
+        self.key = key
+
+
+class ConfigError(BomgraphError, ValueError):
+    """A configuration value is out of range or inconsistent."""
+
+
+class EvaluationError(BomgraphError, ValueError):
+    """An estimate cannot be scored against the truth (e.g. too few common landmarks)."""
+
+
+class UnknownMethodError(BomgraphError, KeyError):
+    """A method name is not in the registry."""
+
+    def __str__(self) -> str:  # KeyError quotes its message; keep it readable
+        return str(self.args[0])
+
+
+class DatasetError(BomgraphError, ValueError):
+    """A recorded dataset file is missing or malformed (names file and line)."""
+
+
+class DegenerateGeometryError(BomgraphError, ValueError):
+    """The geometry does not determine the quantity asked for (no parallax, too few points)."""

@@ -1,0 +1,404 @@
+"""The Mapper protocol, the MapEstimate it returns, the runner, and the registry of methods.
+
+Every method (BOM-STMDS, the baselines) is a Mapper: it is built from a
+:class:`~bomgraph.stream.StreamHeader` (never the truth), fed one :class:`~bomgraph.stream.Step`
+at a time, and asked for a :class:`MapEstimate` at checkpoints (the paper updates its map every
+10 steps). :func:`run` drives a mapper over a stream and records estimates and wall times.
+
+Methods are found by name through a registry of ``"module:attribute"`` strings imported only on
+use, so ``bomgraph`` names the ``baselines`` methods without importing them.
+"""
+
+from __future__ import annotations
+
+import importlib
+import json
+import os
+import time
+from dataclasses import dataclass, field
+from typing import Any, Callable, Iterable, Mapping, Protocol, runtime_checkable
+
+import numpy as np
+
+from .errors import ConfigError, StreamFormatError, UnknownMethodError
+from .stream import Step, StreamHeader, Truth
+
+
+def _ro(a: np.ndarray | None, dtype: Any, shape_tail: tuple[int, ...]) -> np.ndarray | None:
+    if a is None:
+        return None
+    out = np.array(a, dtype=dtype).reshape((-1, *shape_tail))
+    out.setflags(write=False)
+    return out
+
+
+@dataclass(frozen=True, eq=False)
+class MapEstimate:
+    """What a mapper knows at one moment, in its own frame.
+
+    Attributes
+    ----------
+    landmark_ids : ndarray of shape (n,), int64
+    landmarks_xy : ndarray of shape (n, 2), metres
+    pose_t : ndarray of shape (m,), int64, or None
+        Step indices of the estimated robot poses.
+    poses : ndarray of shape (m, 3) or None
+        ``[x_m, y_m, psi_rad]`` per entry of ``pose_t``.
+    landmark_cov : ndarray of shape (n, 2, 2) or None
+    pose_cov : ndarray of shape (m, 3, 3) or None
+    info : mapping
+        Method diagnostics (convergence, stress, landmarks left out and why, ...).
+    """
+
+    landmark_ids: np.ndarray
+    landmarks_xy: np.ndarray
+    pose_t: np.ndarray | None = None
+    poses: np.ndarray | None = None
+    landmark_cov: np.ndarray | None = None
+    pose_cov: np.ndarray | None = None
+    info: Mapping[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        ids = _ro(self.landmark_ids, np.int64, ())
+        xy = _ro(self.landmarks_xy, float, (2,))
+        if ids.shape[0] != xy.shape[0]:
+            raise ConfigError(f"MapEstimate: {ids.shape[0]} ids but {xy.shape[0]} positions")
+        object.__setattr__(self, "landmark_ids", ids)
+        object.__setattr__(self, "landmarks_xy", xy)
+        object.__setattr__(self, "pose_t", _ro(self.pose_t, np.int64, ()))
+        object.__setattr__(self, "poses", _ro(self.poses, float, (3,)))
+        object.__setattr__(self, "landmark_cov", _ro(self.landmark_cov, float, (2, 2)))
+        object.__setattr__(self, "pose_cov", _ro(self.pose_cov, float, (3, 3)))
+        if (self.pose_t is None) != (self.poses is None):
+            raise ConfigError("MapEstimate: pose_t and poses go together")
+        if self.poses is not None and len(self.poses) != len(self.pose_t):
+            raise ConfigError("MapEstimate: pose_t and poses differ in length")
+        if self.landmark_cov is not None and len(self.landmark_cov) != len(ids):
+            raise ConfigError("MapEstimate: one 2x2 covariance per landmark")
+        if self.pose_cov is not None and (self.poses is None or len(self.pose_cov) != len(self.poses)):
+            raise ConfigError("MapEstimate: one 3x3 covariance per pose")
+
+    @classmethod
+    def empty(cls, **info: Any) -> "MapEstimate":
+        """No landmarks yet (``info`` says why)."""
+        return cls(np.zeros(0, np.int64), np.zeros((0, 2)), info=info)
+
+    def __len__(self) -> int:
+        return len(self.landmark_ids)
+
+
+@runtime_checkable
+class Mapper(Protocol):
+    """A bearing-only mapper. Construct it with the header (and options), then feed steps.
+
+    ``step`` is called once per step in order ``t = 0, 1, 2, ...``; ``estimate`` may be called
+    at any time and returns the current map (possibly empty), never raising for lack of data.
+    """
+
+    def step(self, step: Step) -> None: ...
+
+    def estimate(self) -> MapEstimate: ...
+
+
+# --------------------------------------------------------------------------------------------
+# Running
+# --------------------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class Checkpoint:
+    """The estimate after step ``t`` and the wall time ``estimate()`` took."""
+
+    t: int
+    estimate: MapEstimate
+    estimate_s: float
+
+
+@dataclass(frozen=True, eq=False)
+class RunResult:
+    """The outcome of :func:`run`.
+
+    Attributes
+    ----------
+    method : str
+    checkpoints : tuple of Checkpoint
+        In increasing ``t``; the last one is taken after the final step.
+    step_s : ndarray of shape (T,)
+        Wall time of each ``mapper.step`` call.
+    total_s : float
+        Wall time of the whole run (steps and estimates).
+    """
+
+    method: str
+    checkpoints: tuple[Checkpoint, ...]
+    step_s: np.ndarray
+    total_s: float
+
+    @property
+    def final(self) -> MapEstimate:
+        return self.checkpoints[-1].estimate
+
+    def at(self, t: int) -> MapEstimate:
+        """The estimate at checkpoint ``t`` (KeyError-free: a ConfigError names the choices)."""
+        for c in self.checkpoints:
+            if c.t == t:
+                return c.estimate
+        raise ConfigError(f"no checkpoint at t = {t}; checkpoints are "
+                          f"{[c.t for c in self.checkpoints]}")
+
+    def timing(self) -> dict[str, float]:
+        est = np.array([c.estimate_s for c in self.checkpoints])
+        return {"total": float(self.total_s), "steps": float(self.step_s.sum()),
+                "step_median": float(np.median(self.step_s)) if self.step_s.size else 0.0,
+                "estimates": float(est.sum()),
+                "estimate_median": float(np.median(est)) if est.size else 0.0}
+
+
+def checkpoint_times(n_steps: int, every: int) -> list[int]:
+    """Steps after which the map is estimated: ``every, 2*every, ...`` and the last step."""
+    if every < 1:
+        raise ConfigError(f"checkpoint_every must be >= 1, got {every}")
+    last = n_steps - 1
+    ts = list(range(every, last + 1, every))
+    if not ts or ts[-1] != last:
+        ts.append(last)
+    return ts
+
+
+def run(mapper: Mapper, steps: Iterable[Step], *, checkpoint_every: int = 10,
+        method: str | None = None) -> RunResult:
+    """Feed ``steps`` to ``mapper``; estimate the map every ``checkpoint_every`` steps and last.
+
+    Parameters
+    ----------
+    mapper : Mapper
+    steps : iterable of Step
+        May be a lazy :class:`~bomgraph.stream.StreamReader`.
+    checkpoint_every : int
+        The paper maps every 10 steps (t = 10, 20, ...); the final step is always a checkpoint.
+    method : str, optional
+        Name recorded in the result (defaults to the mapper's class name).
+    """
+    if checkpoint_every < 1:
+        raise ConfigError(f"checkpoint_every must be >= 1, got {checkpoint_every}")
+    clock = time.perf_counter
+    start = clock()
+    step_s: list[float] = []
+    checkpoints: list[Checkpoint] = []
+    last_t = -1
+    for st in steps:
+        t0 = clock()
+        mapper.step(st)
+        step_s.append(clock() - t0)
+        last_t = st.t
+        if st.t > 0 and st.t % checkpoint_every == 0:
+            t0 = clock()
+            est = mapper.estimate()
+            checkpoints.append(Checkpoint(st.t, est, clock() - t0))
+    if last_t < 0:
+        raise ConfigError("run(): the stream has no steps")
+    if not checkpoints or checkpoints[-1].t != last_t:
+        t0 = clock()
+        est = mapper.estimate()
+        checkpoints.append(Checkpoint(last_t, est, clock() - t0))
+    return RunResult(method or type(mapper).__name__, tuple(checkpoints),
+                     np.array(step_s), clock() - start)
+
+
+# --------------------------------------------------------------------------------------------
+# Registry
+# --------------------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class MethodInfo:
+    """A registered method: its name, where its factory lives, and what it is."""
+
+    name: str
+    target: str
+    description: str
+    needs_truth: bool = False
+
+
+_REGISTRY: dict[str, MethodInfo] = {}
+
+
+def register_method(name: str, target: str, description: str, *,
+                    needs_truth: bool = False) -> None:
+    """Register ``"package.module:Factory"`` under ``name``; the module is imported on use.
+
+    The factory is called as ``Factory(header, **options)`` (and ``truth=`` when
+    ``needs_truth``) and must return a :class:`Mapper`.
+    """
+    if ":" not in target:
+        raise ConfigError(f"method target must be 'module:attribute', got {target!r}")
+    _REGISTRY[name] = MethodInfo(name, target, description, needs_truth)
+
+
+for _name, _target, _desc, _truth in [
+    ("triangulate", "bomgraph.triangulate:TriangulateMapper",
+     "dead reckoning + least-squares ray intersection (the naive baseline)", False),
+    ("stmds-cs", "bomgraph.stmds.mapper:make_stmds_cs",
+     "BOM-STMDS Method 1: DMC-SPL + classical scaling", False),
+    ("stmds-smacof", "bomgraph.stmds.mapper:make_stmds_smacof",
+     "BOM-STMDS Method 2: classical scaling to t=40, weighted SMACOF from t=50", False),
+    ("stmds-cs-loc", "bomgraph.stmds.mapper:make_stmds_cs_loc",
+     "BOM-STMDS Method 1 with robot localisation (last p positions)", False),
+    ("stmds-smacof-loc", "bomgraph.stmds.mapper:make_stmds_smacof_loc",
+     "BOM-STMDS Method 2 with robot localisation (last p positions)", False),
+    ("ekf", "baselines.ekf:EkfMapper",
+     "bearing-only EKF-SLAM (filterpy), delayed constrained initialisation", False),
+    ("ekf-invdepth", "baselines.ekf:InverseDepthEkfMapper",
+     "bearing-only EKF-SLAM (filterpy), undelayed inverse-depth initialisation", False),
+    ("gtsam-batch", "baselines.factor_graph:BatchMapper",
+     "GTSAM bearing factor graph, Levenberg-Marquardt at each checkpoint", False),
+    ("gtsam-isam2", "baselines.factor_graph:Isam2Mapper",
+     "GTSAM bearing factor graph, incremental iSAM2", False),
+    ("hybrid", "baselines.hybrid:HybridMapper",
+     "GTSAM seeded with the BOM-STMDS map (alignment + resection)", False),
+    ("oracle", "baselines.factor_graph:OracleMapper",
+     "LM started from the ground truth: the accuracy bound (benchmarks only)", True),
+]:
+    register_method(_name, _target, _desc, needs_truth=_truth)
+
+
+def available_methods() -> list[MethodInfo]:
+    """Every registered method, in registration order."""
+    return list(_REGISTRY.values())
+
+
+def method_info(name: str) -> MethodInfo:
+    try:
+        return _REGISTRY[name]
+    except KeyError:
+        raise UnknownMethodError(f"unknown method {name!r}; known methods: "
+                                 f"{', '.join(_REGISTRY)}") from None
+
+
+def method_factory(name: str) -> Callable[..., Mapper]:
+    """Import and return the factory registered under ``name``."""
+    info = method_info(name)
+    module, attr = info.target.split(":")
+    try:
+        return getattr(importlib.import_module(module), attr)
+    except (ImportError, AttributeError) as exc:
+        raise UnknownMethodError(f"method {name!r} is registered as {info.target!r} but cannot "
+                                 f"be loaded: {exc}") from exc
+
+
+def create_mapper(name: str, header: StreamHeader, *, truth: Truth | None = None,
+                  **options: Any) -> Mapper:
+    """Build the mapper registered under ``name`` for a stream with ``header``.
+
+    ``truth`` is passed only to methods that declare ``needs_truth`` (the oracle bound), and
+    such a method refuses to run without it.
+    """
+    info = method_info(name)
+    factory = method_factory(name)
+    if info.needs_truth:
+        if truth is None:
+            raise ConfigError(f"method {name!r} reads the ground truth (a benchmark bound); the "
+                              f"stream has none")
+        return factory(header, truth=truth, **options)
+    return factory(header, **options)
+
+
+# --------------------------------------------------------------------------------------------
+# The estimate file (STREAM_FORMAT.md, last section)
+# --------------------------------------------------------------------------------------------
+
+ESTIMATE_FORMAT = "bomgraph-estimate"
+
+
+def _estimate_parts(est: MapEstimate) -> dict[str, Any]:
+    out: dict[str, Any] = {"landmarks": [[int(i), float(x), float(y)] for i, (x, y)
+                                         in zip(est.landmark_ids, est.landmarks_xy)]}
+    if est.poses is not None:
+        out["poses"] = [[int(t), float(p[0]), float(p[1]), float(p[2])]
+                        for t, p in zip(est.pose_t, est.poses)]
+    return out
+
+
+def estimate_to_json(result: RunResult) -> dict[str, Any]:
+    """The estimate file of a run: the final map, every checkpoint and the timings."""
+    obj: dict[str, Any] = {"format": ESTIMATE_FORMAT, "version": 1, "method": result.method}
+    obj.update(_estimate_parts(result.final))
+    obj["checkpoints"] = [{"t": c.t, **_estimate_parts(c.estimate)} for c in result.checkpoints]
+    obj["timing_s"] = result.timing()
+    return obj
+
+
+def write_estimate(result: RunResult, path: str | os.PathLike[str]) -> None:
+    with open(path, "w", encoding="utf-8") as fh:
+        json.dump(estimate_to_json(result), fh, allow_nan=False)
+        fh.write("\n")
+
+
+@dataclass(frozen=True)
+class EstimateFile:
+    """An estimate file read back: the final map and the checkpoints."""
+
+    method: str
+    final: MapEstimate
+    checkpoints: tuple[Checkpoint, ...]
+    timing_s: Mapping[str, float]
+
+
+def _parse_estimate_parts(obj: Mapping[str, Any], path: str, where: str) -> MapEstimate:
+    def bad(key: str, msg: str) -> StreamFormatError:
+        return StreamFormatError(msg, path=path, key=f"{where}{key}")
+
+    lms = obj.get("landmarks")
+    if not isinstance(lms, list):
+        raise bad("landmarks", "missing or not a list of [id, x_m, y_m]")
+    try:
+        lm = np.array(lms, dtype=float).reshape(-1, 3)
+    except (TypeError, ValueError):
+        raise bad("landmarks", "must be a list of [id, x_m, y_m]") from None
+    if lm.size and (not np.all(np.isfinite(lm)) or np.any(lm[:, 0] != np.round(lm[:, 0]))
+                    or np.any(lm[:, 0] < 0)):
+        raise bad("landmarks", "ids must be non-negative integers and positions finite")
+    if len(np.unique(lm[:, 0])) != len(lm):
+        raise bad("landmarks", "a landmark id appears twice")
+    pose_t = poses = None
+    if obj.get("poses") is not None:
+        try:
+            p = np.array(obj["poses"], dtype=float).reshape(-1, 4)
+        except (TypeError, ValueError):
+            raise bad("poses", "must be a list of [t, x_m, y_m, psi_rad]") from None
+        if not np.all(np.isfinite(p)):
+            raise bad("poses", "must be finite")
+        pose_t, poses = p[:, 0].astype(np.int64), p[:, 1:]
+    return MapEstimate(lm[:, 0].astype(np.int64), lm[:, 1:], pose_t=pose_t, poses=poses)
+
+
+def read_estimate(path: str | os.PathLike[str]) -> EstimateFile:
+    """Read an estimate file written by ``bomgraph run``."""
+    path = str(path)
+    try:
+        with open(path, encoding="utf-8") as fh:
+            obj = json.load(fh)
+    except OSError as exc:
+        raise StreamFormatError(f"cannot open: {exc.strerror}", path=path) from None
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise StreamFormatError(f"not a JSON estimate file ({exc})", path=path) from None
+    if not isinstance(obj, dict) or obj.get("format") != ESTIMATE_FORMAT:
+        raise StreamFormatError(f"must be a JSON object with \"format\": \"{ESTIMATE_FORMAT}\"",
+                                path=path, key="format")
+    if obj.get("version") != 1:
+        raise StreamFormatError("unknown version; this reader knows version 1", path=path,
+                                key="version")
+    final = _parse_estimate_parts(obj, path, "")
+    cps = []
+    for k, c in enumerate(obj.get("checkpoints") or []):
+        if not isinstance(c, dict) or not isinstance(c.get("t"), int):
+            raise StreamFormatError("each checkpoint needs an integer t", path=path,
+                                    key=f"checkpoints[{k}].t")
+        cps.append(Checkpoint(c["t"], _parse_estimate_parts(c, path, f"checkpoints[{k}]."),
+                              0.0))
+    timing = obj.get("timing_s") or {}
+    return EstimateFile(str(obj.get("method", "")), final, tuple(cps), dict(timing))
+
+
+__all__ = ["MapEstimate", "Mapper", "Checkpoint", "RunResult", "run", "checkpoint_times",
+           "MethodInfo", "register_method", "available_methods", "method_info",
+           "method_factory", "create_mapper", "estimate_to_json", "write_estimate",
+           "read_estimate", "EstimateFile"]
