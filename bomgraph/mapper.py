@@ -255,7 +255,7 @@ for _name, _target, _desc, _truth in [
     ("hybrid", "baselines.hybrid:HybridMapper",
      "GTSAM seeded with the BOM-STMDS map (alignment + resection)", False),
     ("oracle", "baselines.factor_graph:OracleMapper",
-     "LM started from the ground truth: the accuracy bound (benchmarks only)", True),
+     "LM started from the ground truth: the accuracy bound (MLE)", True),
 ]:
     register_method(_name, _target, _desc, needs_truth=_truth)
 

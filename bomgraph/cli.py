@@ -1,0 +1,185 @@
+"""The ``bomgraph`` command: argument parsing and printing only.
+
+Every command is one library call plus printing. A user error (a BomgraphError) prints one
+line to stderr and exits with status 2, without a traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from typing import Any, Callable, Sequence
+
+import numpy as np
+
+from .errors import BomgraphError
+
+
+def _positive_int(text: str) -> int:
+    v = int(text)
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"must be >= 1, got {v}")
+    return v
+
+
+def _parse_options(pairs: Sequence[str]) -> dict[str, Any]:
+    """``key=value`` pairs for a method's options; values parsed as JSON when they can be."""
+    out: dict[str, Any] = {}
+    for p in pairs:
+        if "=" not in p:
+            raise BomgraphError(f"--option takes key=value, got {p!r}")
+        k, v = p.split("=", 1)
+        try:
+            out[k] = json.loads(v)
+        except json.JSONDecodeError:
+            out[k] = v
+    return out
+
+
+# --------------------------------------------------------------------------------------------
+# Commands
+# --------------------------------------------------------------------------------------------
+
+def cmd_simulate(args: argparse.Namespace) -> int:
+    from .sim import SimConfig, make_priors, simulate, with_priors
+    from .stream import write_stream
+
+    config = SimConfig(n_landmarks=args.landmarks, n_steps=args.steps,
+                       sensor_range_m=args.sensor_range, noise_scale=args.noise_scale,
+                       fov_rad=math.radians(args.fov_deg),
+                       wrong_association_rate=args.wrong_association_rate)
+    rng = np.random.default_rng(args.seed)
+    stream = simulate(config, rng, meta={"seed": args.seed})
+    if args.prior_fraction > 0:
+        stream = with_priors(stream, make_priors(stream.truth, args.prior_fraction,
+                                                 args.prior_sigma, rng))
+    write_stream(stream, args.out)
+    print(f"wrote {args.out}: {len(stream.steps)} steps, {config.n_landmarks} landmarks, "
+          f"{len(stream.header.priors)} priors")
+    return 0
+
+
+def cmd_run(args: argparse.Namespace) -> int:
+    from .mapper import create_mapper, method_info, run, write_estimate
+    from .stream import StreamReader
+
+    options = _parse_options(args.option)
+    if method_info(args.method).needs_truth and not args.allow_truth:
+        raise BomgraphError(f"method {args.method!r} reads the ground truth; it is a benchmark "
+                            f"bound, not a mapper (pass --allow-truth to run it anyway)")
+    with StreamReader(args.stream) as reader:
+        mapper = create_mapper(args.method, reader.header, truth=reader.truth, **options)
+        result = run(mapper, reader, checkpoint_every=args.checkpoint_every,
+                     method=args.method)
+    write_estimate(result, args.out)
+    est = result.final
+    print(f"{args.method}: {len(est)} landmarks mapped at t = {result.checkpoints[-1].t} "
+          f"in {result.total_s:.3f} s; wrote {args.out}")
+    return 0
+
+
+def cmd_evaluate(args: argparse.Namespace) -> int:
+    from .evaluate import error_table, score_estimate
+    from .mapper import read_estimate
+    from .stream import read_stream
+
+    est = read_estimate(args.estimate)
+    stream = read_stream(args.stream)
+    if stream.truth is None:
+        raise BomgraphError(f"{args.stream}: the stream has no ground truth to evaluate "
+                            f"against")
+    score = score_estimate(est.final, stream.truth, with_scale=args.similarity)
+    table = error_table(est.checkpoints, stream.truth) if est.checkpoints else None
+    if args.json:
+        out = {"method": est.method, **score.as_dict()}
+        if table is not None:
+            out["checkpoints"] = {k: v.tolist() for k, v in table.items()}
+        print(json.dumps(out, allow_nan=True))
+        return 0
+    print(f"method {est.method}: {score.n_common} of {score.n_truth} landmarks mapped "
+          f"({score.n_mapped} in the estimate)")
+    print(f"  landmark MPE {100 * score.mpe_m:.2f} cm, RMSE {100 * score.rmse_m:.2f} cm, "
+          f"median {100 * score.median_m:.2f} cm, max {100 * score.max_m:.2f} cm")
+    if score.n_poses:
+        print(f"  robot position error: last {100 * score.robot_last_m:.2f} cm, mean over "
+              f"{score.n_poses} poses {100 * score.robot_mean_m:.2f} cm")
+    if table is not None and len(table["t"]) > 1:
+        print("  t      MPE [cm]  mapped")
+        for t, m, n in zip(table["t"], table["mpe_m"], table["n_mapped"]):
+            print(f"  {t:<6d} {100 * m:8.2f}  {n:6d}")
+    return 0
+
+
+def cmd_methods(args: argparse.Namespace) -> int:
+    from .mapper import available_methods
+
+    for info in available_methods():
+        flag = "  (benchmark only: reads the truth)" if info.needs_truth else ""
+        print(f"{info.name:18s} {info.description}{flag}")
+    return 0
+
+
+# --------------------------------------------------------------------------------------------
+# Parser
+# --------------------------------------------------------------------------------------------
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="bomgraph", description="Bearing-only mapping toolkit: "
+                                "BOM-STMDS and SLAM baselines side by side.")
+    sub = p.add_subparsers(dest="command", required=True)
+
+    s = sub.add_parser("simulate", help="simulate a run of the paper's world into a stream file")
+    s.add_argument("--seed", type=int, default=0)
+    s.add_argument("--landmarks", type=_positive_int, default=50)
+    s.add_argument("--steps", type=int, default=300, help="number of moves (default 300)")
+    s.add_argument("--sensor-range", type=float, default=1.0, help="metres (default 1.0)")
+    s.add_argument("--fov-deg", type=float, default=360.0, help="field of view (default 360)")
+    s.add_argument("--noise-scale", type=float, default=1.0,
+                   help="multiplies the paper's noise; 0 gives noise-free data")
+    s.add_argument("--wrong-association-rate", type=float, default=0.0)
+    s.add_argument("--prior-fraction", type=float, default=0.0,
+                   help="fraction of landmark pairs with a known distance (Exp. 3: 0.1)")
+    s.add_argument("--prior-sigma", type=float, default=0.03, help="metres per axis")
+    s.add_argument("--out", required=True)
+    s.set_defaults(func=cmd_simulate)
+
+    r = sub.add_parser("run", help="run a method on a stream file and write its estimate")
+    r.add_argument("stream")
+    r.add_argument("--method", required=True, help="see `bomgraph methods`")
+    r.add_argument("--out", required=True)
+    r.add_argument("--checkpoint-every", type=_positive_int, default=10)
+    r.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
+                   help="a method option (repeatable)")
+    r.add_argument("--allow-truth", action="store_true", help=argparse.SUPPRESS)
+    r.set_defaults(func=cmd_run)
+
+    e = sub.add_parser("evaluate", help="score an estimate file against a stream's truth")
+    e.add_argument("estimate")
+    e.add_argument("stream")
+    e.add_argument("--json", action="store_true", help="print one JSON object")
+    e.add_argument("--similarity", action="store_true", help="also fit a scale")
+    e.set_defaults(func=cmd_evaluate)
+
+    m = sub.add_parser("methods", help="list the available methods")
+    m.set_defaults(func=cmd_methods)
+    return p
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    func: Callable[[argparse.Namespace], int] = args.func
+    try:
+        return func(args)
+    except BomgraphError as exc:
+        print(f"bomgraph: error: {exc}", file=sys.stderr)
+        return 2
+    except OSError as exc:
+        print(f"bomgraph: error: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())
