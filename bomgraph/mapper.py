@@ -292,11 +292,11 @@ def create_mapper(name: str, header: StreamHeader, *, truth: Truth | None = None
     such a method refuses to run without it.
     """
     info = method_info(name)
+    if info.needs_truth and truth is None:
+        raise ConfigError(f"method {name!r} reads the ground truth (a benchmark bound); the "
+                          f"stream has none")
     factory = method_factory(name)
     if info.needs_truth:
-        if truth is None:
-            raise ConfigError(f"method {name!r} reads the ground truth (a benchmark bound); the "
-                              f"stream has none")
         return factory(header, truth=truth, **options)
     return factory(header, **options)
 

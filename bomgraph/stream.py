@@ -274,6 +274,14 @@ def _is_int(v: Any) -> bool:
     return isinstance(v, int) and not isinstance(v, bool)
 
 
+_MAX_ID = int(np.iinfo(np.int64).max)
+
+
+def _is_id(v: Any) -> bool:
+    """A landmark id: a JSON integer in [0, 2**63 - 1]."""
+    return _is_int(v) and 0 <= v <= _MAX_ID
+
+
 def _is_num(v: Any) -> bool:
     return isinstance(v, (int, float)) and not isinstance(v, bool)
 
@@ -356,7 +364,7 @@ def _parse_priors(v: Any, ctx: _Ctx) -> tuple[Prior, ...]:
             if sub not in p:
                 raise ctx.error(f"{key}.{sub}", "missing required key")
         for sub in ("i", "j"):
-            if not _is_int(p[sub]) or p[sub] < 0:
+            if not _is_id(p[sub]):
                 raise ctx.error(f"{key}.{sub}", f"must be a non-negative integer landmark id, "
                                                 f"got {json.dumps(p[sub])[:40]}")
         if p["i"] == p["j"]:
@@ -380,7 +388,7 @@ def _parse_truth(v: Any, ctx: _Ctx) -> Truth | None:
         raise ctx.error("truth.landmarks", "must be a list of [id, x_m, y_m]")
     ids, xy = [], []
     for k, e in enumerate(lms):
-        if not (isinstance(e, list) and len(e) == 3 and _is_int(e[0]) and e[0] >= 0
+        if not (isinstance(e, list) and len(e) == 3 and _is_id(e[0])
                 and _is_num(e[1]) and _is_num(e[2])):
             raise ctx.error(f"truth.landmarks[{k}]", f"must be [id, x_m, y_m] with a "
                                                      f"non-negative integer id, got "
@@ -436,7 +444,7 @@ def _parse_step(obj: dict, expected_t: int, ctx: _Ctx) -> Step:
                                               f"{json.dumps(e)[:60]}")
         if e[0] < 0:
             raise ctx.error(f"bearings[{k}]", f"landmark id must be >= 0, got {e[0]}")
-        if e[0] > np.iinfo(np.int64).max:
+        if e[0] > _MAX_ID:
             raise ctx.error(f"bearings[{k}]", f"landmark id {e[0]} is too large")
         ids[k] = e[0]
         vals[k] = e[1]

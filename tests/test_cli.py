@@ -1,0 +1,49 @@
+"""The command line: the simulate -> run -> evaluate pipeline and its user errors."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from bomgraph.cli import main
+
+
+def test_pipeline_simulate_run_evaluate(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    run_file, est_file = tmp_path / "run.jsonl", tmp_path / "est.json"
+    assert main(["simulate", "--seed", "3", "--steps", "60", "--landmarks", "20",
+                 "--prior-fraction", "0.1", "--out", str(run_file)]) == 0
+    assert main(["run", str(run_file), "--method", "triangulate", "--out", str(est_file)]) == 0
+    capsys.readouterr()
+    assert main(["evaluate", str(est_file), str(run_file), "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["method"] == "triangulate" and out["n_truth"] == 20
+    assert 0 < out["mpe_m"] < 1.0
+    assert out["checkpoints"]["t"] == [10, 20, 30, 40, 50, 60]
+    assert main(["evaluate", str(est_file), str(run_file)]) == 0
+    assert "landmark MPE" in capsys.readouterr().out
+
+
+def test_methods_lists_the_registry(capsys: pytest.CaptureFixture) -> None:
+    assert main(["methods"]) == 0
+    out = capsys.readouterr().out
+    assert "triangulate" in out and "stmds-smacof" in out and "oracle" in out
+
+
+def test_user_errors_print_one_line_and_exit_2(tmp_path: Path) -> None:
+    bad = tmp_path / "bad.jsonl"
+    bad.write_text('{"format": "bomgraph-stream", "version": 1, "bearing_sigma_rad": 0.05, '
+                   '"odometry_sigma": [0.03, 0, 0.05]}\n{"t": 0, "bearings": [[1, "x"]]}\n')
+    proc = subprocess.run([sys.executable, "-m", "bomgraph.cli", "run", str(bad), "--method",
+                           "triangulate", "--out", str(tmp_path / "e.json")],
+                          capture_output=True, text=True)
+    assert proc.returncode == 2
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in proc.stderr
+    assert "line 2" in lines[0] and "bearings[0]" in lines[0] and str(bad) in lines[0]
+    proc = subprocess.run([sys.executable, "-m", "bomgraph.cli", "run", str(bad), "--method",
+                           "nope", "--out", "x"], capture_output=True, text=True)
+    assert proc.returncode == 2 and "unknown method" in proc.stderr

@@ -1,0 +1,294 @@
+"""The stream reader and writer: exact round trip, every refusal of the format, fuzzing."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from bomgraph.errors import StreamFormatError
+from bomgraph.sim import SimConfig, paper_design, simulate_run
+from bomgraph.stream import (Prior, Step, Stream, StreamHeader, StreamReader, Truth,
+                             read_stream, write_stream)
+
+HEADER = {"format": "bomgraph-stream", "version": 1, "bearing_sigma_rad": 0.0524,
+          "odometry_sigma": [0.03, 0.0, 0.0524], "sensor_range_m": 1.0,
+          "truth": {"landmarks": [[0, 0.4, 1.2], [1, 2.0, 0.3]],
+                    "poses": [[1.0, 1.0, 0.0], [1.15, 1.0, 0.2]]}}
+STEPS = [{"t": 0, "bearings": [[0, 1.93]]},
+         {"t": 1, "odom": [0.15, 0.0, 0.2], "bearings": [[0, 1.84], [1, -1.02]]}]
+
+
+def write_lines(path: Path, objs: list) -> Path:
+    path.write_text("".join((o if isinstance(o, str) else json.dumps(o)) + "\n" for o in objs))
+    return path
+
+
+def test_format_example_reads(tmp_path: Path) -> None:
+    s = read_stream(write_lines(tmp_path / "ex.jsonl", [HEADER, *STEPS]))
+    assert len(s.steps) == 2
+    assert s.header.bearing_sigma_rad == 0.0524
+    assert s.header.odometry_sigma == (0.03, 0.0, 0.0524)
+    assert s.steps[0].odom is None
+    np.testing.assert_array_equal(s.steps[1].landmark_ids, [0, 1])
+    np.testing.assert_array_equal(s.steps[1].odom, [0.15, 0.0, 0.2])
+    np.testing.assert_array_equal(s.truth.landmark_ids, [0, 1])
+    assert s.truth.poses.shape == (2, 3)
+    assert not hasattr(s.header, "truth")
+
+
+def test_round_trip_is_exact_and_byte_stable(tmp_path: Path) -> None:
+    stream = simulate_run(paper_design(0)[3], SimConfig(n_steps=40), prior_fraction=0.1)
+    a, b = tmp_path / "a.jsonl", tmp_path / "b.jsonl"
+    write_stream(stream, a)
+    back = read_stream(a)
+    assert back == stream
+    assert back.header.priors == stream.header.priors
+    write_stream(back, b)
+    assert a.read_bytes() == b.read_bytes()
+
+
+def test_same_seed_gives_byte_identical_file(tmp_path: Path) -> None:
+    spec = paper_design(7)[11]
+    write_stream(simulate_run(spec, SimConfig(n_steps=30)), tmp_path / "1.jsonl")
+    write_stream(simulate_run(spec, SimConfig(n_steps=30)), tmp_path / "2.jsonl")
+    assert (tmp_path / "1.jsonl").read_bytes() == (tmp_path / "2.jsonl").read_bytes()
+    write_stream(simulate_run(paper_design(8)[11], SimConfig(n_steps=30)), tmp_path / "3.jsonl")
+    assert (tmp_path / "1.jsonl").read_bytes() != (tmp_path / "3.jsonl").read_bytes()
+
+
+def test_bearings_are_wrapped_on_read(tmp_path: Path) -> None:
+    steps = [{"t": 0, "bearings": [[0, 4.0], [1, -3.5], [2, -np.pi]]}]
+    s = read_stream(write_lines(tmp_path / "w.jsonl", [{**HEADER, "truth": None}, *steps]))
+    np.testing.assert_allclose(s.steps[0].bearings_rad, [4.0 - 2 * np.pi, -3.5 + 2 * np.pi,
+                                                         np.pi])
+
+
+def test_lazy_reader_yields_steps_one_by_one(tmp_path: Path) -> None:
+    path = write_lines(tmp_path / "ex.jsonl", [HEADER, *STEPS])
+    with StreamReader(path) as reader:
+        assert reader.header.sensor_range_m == 1.0
+        it = iter(reader)
+        assert next(it).t == 0
+        assert next(it).t == 1
+        with pytest.raises(StopIteration):
+            next(it)
+
+
+def test_arrays_handed_out_are_read_only(tmp_path: Path) -> None:
+    s = read_stream(write_lines(tmp_path / "ex.jsonl", [HEADER, *STEPS]))
+    with pytest.raises(ValueError):
+        s.steps[1].bearings_rad[0] = 0.0
+    with pytest.raises(ValueError):
+        s.truth.landmarks_xy[0, 0] = 0.0
+
+
+def _refusal(tmp_path: Path, lines: list, line: int, key: str | None, text: str) -> None:
+    path = write_lines(tmp_path / "bad.jsonl", lines)
+    with pytest.raises(StreamFormatError) as info:
+        read_stream(path)
+    msg = str(info.value)
+    assert str(path) in msg, msg
+    assert f"line {line}" in msg, msg
+    if key is not None:
+        assert f"'{key}'" in msg, msg
+    assert text in msg, msg
+    assert info.value.line == line
+
+
+H = {k: v for k, v in HEADER.items() if k != "truth"}
+
+REFUSALS = [
+    # (description, lines, line number, key, text in message)
+    ("not JSON", [H, "{\"t\": 0, \"bearings\": [}"], 2, None, "not valid JSON"),
+    ("header not JSON", ["nonsense", *STEPS], 1, None, "not valid JSON"),
+    ("not an object", [H, "[1, 2]"], 2, None, "expected a JSON object"),
+    ("wrong format", [{**H, "format": "other"}, *STEPS], 1, "format", "bomgraph-stream"),
+    ("missing format", [{k: v for k, v in H.items() if k != "format"}, *STEPS], 1, "format",
+     "missing"),
+    ("unknown version", [{**H, "version": 2}, *STEPS], 1, "version", "unknown version"),
+    ("float version", [{**H, "version": 1.5}, *STEPS], 1, "version", "unknown version"),
+    ("missing bearing sigma", [{k: v for k, v in H.items() if k != "bearing_sigma_rad"},
+                               *STEPS], 1, "bearing_sigma_rad", "missing"),
+    ("missing odometry sigma", [{k: v for k, v in H.items() if k != "odometry_sigma"},
+                                *STEPS], 1, "odometry_sigma", "missing"),
+    ("zero bearing sigma", [{**H, "bearing_sigma_rad": 0.0}, *STEPS], 1, "bearing_sigma_rad",
+     "> 0"),
+    ("negative bearing sigma", [{**H, "bearing_sigma_rad": -0.1}, *STEPS], 1,
+     "bearing_sigma_rad", "> 0"),
+    ("negative odometry sigma", [{**H, "odometry_sigma": [0.03, -0.01, 0.05]}, *STEPS], 1,
+     "odometry_sigma", ">= 0"),
+    ("short odometry sigma", [{**H, "odometry_sigma": [0.03, 0.05]}, *STEPS], 1,
+     "odometry_sigma", "3 numbers"),
+    ("NaN in header", [json.dumps(H).replace("0.0524,", "NaN,", 1), *STEPS], 1,
+     "bearing_sigma_rad", "non-finite"),
+    ("Infinity in a bearing", [H, STEPS[0], json.dumps(STEPS[1]).replace("1.84", "Infinity")],
+     3, "bearings[0][1]", "non-finite"),
+    ("overflowing number", [H, STEPS[0], json.dumps(STEPS[1]).replace("1.84", "1e999")], 3,
+     "bearings[0][1]", "non-finite"),
+    ("t out of sequence", [H, STEPS[0], {**STEPS[1], "t": 2}], 3, "t", "expected 1, got 2"),
+    ("t not starting at 0", [H, {**STEPS[0], "t": 1}], 2, "t", "expected 0"),
+    ("missing t", [H, {"bearings": []}], 2, "t", "missing"),
+    ("odom missing after t=0", [H, STEPS[0], {"t": 1, "bearings": []}], 3, "odom",
+     "missing at t = 1"),
+    ("odom null after t=0", [H, STEPS[0], {"t": 1, "odom": None, "bearings": []}], 3, "odom",
+     "missing"),
+    ("odom wrong length", [H, STEPS[0], {**STEPS[1], "odom": [0.1, 0.2]}], 3, "odom",
+     "3 numbers, got 2"),
+    ("odom at t=0", [H, {**STEPS[0], "odom": [0.1, 0.0, 0.0]}], 2, "odom", "t = 0"),
+    ("negative odom_sigma", [H, STEPS[0], {**STEPS[1], "odom_sigma": [0.1, 0.0, -1.0]}], 3,
+     "odom_sigma", ">= 0"),
+    ("missing bearings", [H, {"t": 0}], 2, "bearings", "missing"),
+    ("bearing entry not a pair", [H, {"t": 0, "bearings": [[0, 1.0, 2.0]]}], 2, "bearings[0]",
+     "[int, number]"),
+    ("bearing id float", [H, {"t": 0, "bearings": [[0.5, 1.0]]}], 2, "bearings[0]",
+     "[int, number]"),
+    ("bearing value string", [H, {"t": 0, "bearings": [[0, "north"]]}], 2, "bearings[0]",
+     "[int, number]"),
+    ("bearing id bool", [H, {"t": 0, "bearings": [[True, 1.0]]}], 2, "bearings[0]",
+     "[int, number]"),
+    ("negative id", [H, {"t": 0, "bearings": [[-3, 1.0]]}], 2, "bearings[0]", ">= 0"),
+    ("duplicate id", [H, {"t": 0, "bearings": [[4, 1.0], [4, 1.1]]}], 2, "bearings",
+     "appears twice"),
+    ("prior same landmark", [{**H, "priors": [{"i": 3, "j": 3, "distance_m": 1.0,
+                                                "sigma_m": 0.1}]}, *STEPS], 1, "priors[0]",
+     "twice"),
+    ("prior zero distance", [{**H, "priors": [{"i": 3, "j": 4, "distance_m": 0.0,
+                                                "sigma_m": 0.1}]}, *STEPS], 1,
+     "priors[0].distance_m", "> 0"),
+    ("prior negative sigma", [{**H, "priors": [{"i": 3, "j": 4, "distance_m": 1.0,
+                                                 "sigma_m": -0.1}]}, *STEPS], 1,
+     "priors[0].sigma_m", "> 0"),
+    ("prior missing key", [{**H, "priors": [{"i": 3, "j": 4, "distance_m": 1.0}]}, *STEPS], 1,
+     "priors[0].sigma_m", "missing"),
+    ("truth pose count", [HEADER, STEPS[0]], 1, "truth.poses", "2 truth poses"),
+    ("unknown header key", [{**H, "colour": "red"}, *STEPS], 1, "colour", "unknown key"),
+    ("unknown step key", [H, {**STEPS[0], "range": 3}], 2, "range", "unknown key"),
+    ("blank line between", [H, STEPS[0], "", STEPS[1]], 3, None, "blank line"),
+    ("no steps", [H], 2, None, "no step lines"),
+]
+
+
+@pytest.mark.parametrize("case", REFUSALS, ids=[c[0] for c in REFUSALS])
+def test_every_refusal_names_file_line_and_key(tmp_path: Path, case: tuple) -> None:
+    _, lines, line, key, text = case
+    _refusal(tmp_path, lines, line, key, text)
+
+
+def test_empty_file_and_bad_utf8(tmp_path: Path) -> None:
+    (tmp_path / "empty.jsonl").write_bytes(b"")
+    with pytest.raises(StreamFormatError, match="line 1: empty file"):
+        read_stream(tmp_path / "empty.jsonl")
+    (tmp_path / "bin.jsonl").write_bytes(json.dumps(H).encode() + b"\n\xff\xfe\n")
+    with pytest.raises(StreamFormatError, match="line 2: not UTF-8"):
+        read_stream(tmp_path / "bin.jsonl")
+    with pytest.raises(StreamFormatError, match="cannot open"):
+        read_stream(tmp_path / "missing.jsonl")
+
+
+def test_final_newline_optional(tmp_path: Path) -> None:
+    text = "\n".join(json.dumps(o) for o in [H, *STEPS])
+    (tmp_path / "a.jsonl").write_text(text)
+    (tmp_path / "b.jsonl").write_text(text + "\n")
+    assert read_stream(tmp_path / "a.jsonl") == read_stream(tmp_path / "b.jsonl")
+    (tmp_path / "c.jsonl").write_text(text + "\n\n")
+    with pytest.raises(StreamFormatError, match="blank line"):
+        read_stream(tmp_path / "c.jsonl")
+
+
+def test_data_classes_validate_when_built_in_code() -> None:
+    with pytest.raises(StreamFormatError, match="bearing_sigma_rad"):
+        StreamHeader(bearing_sigma_rad=0.0, odometry_sigma=(0.1, 0.1, 0.1))
+    with pytest.raises(StreamFormatError, match="t = 1"):
+        Stream(StreamHeader(0.1, (0.1, 0.0, 0.1)),
+               (Step(1, None, np.array([0]), np.array([0.1])),))
+    with pytest.raises(StreamFormatError, match="truth poses"):
+        Stream(StreamHeader(0.1, (0.1, 0.0, 0.1)),
+               (Step(0, None, np.array([0]), np.array([0.1])),),
+               Truth(np.array([0]), np.zeros((1, 2)), np.zeros((3, 3))))
+
+
+# --------------------------------------------------------------------------------------------
+# Fuzzing: the reader only ever returns a valid stream or raises StreamFormatError.
+# --------------------------------------------------------------------------------------------
+
+def _valid_text() -> str:
+    return "".join(json.dumps(o) + "\n" for o in [HEADER, *STEPS])
+
+
+def _read_bytes(tmp_dir: Path, data: bytes) -> None:
+    path = tmp_dir / "fuzz.jsonl"
+    path.write_bytes(data)
+    try:
+        s = read_stream(path)
+    except StreamFormatError:
+        return
+    assert isinstance(s, Stream)
+    assert [st.t for st in s.steps] == list(range(len(s.steps)))
+    for st in s.steps:
+        assert np.all(np.isfinite(st.bearings_rad))
+        assert np.all(st.bearings_rad <= np.pi) and np.all(st.bearings_rad > -np.pi)
+
+
+@settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(data=st.binary(max_size=400))
+def test_fuzz_arbitrary_bytes(tmp_path: Path, data: bytes) -> None:
+    _read_bytes(tmp_path, data)
+
+
+@settings(max_examples=400, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(pos=st.integers(0, 10_000), cut=st.integers(0, 12),
+       insert=st.text(alphabet='{}[]",:0123456789.-eE tnulrfasNIy\n', max_size=12))
+def test_fuzz_mangled_valid_files(tmp_path: Path, pos: int, cut: int, insert: str) -> None:
+    text = _valid_text()
+    pos = pos % (len(text) + 1)
+    mangled = text[:pos] + insert + text[pos + cut:]
+    _read_bytes(tmp_path, mangled.encode())
+
+
+json_values = st.recursive(
+    st.none() | st.booleans() | st.integers(-5, 5) | st.floats(allow_nan=True,
+                                                               allow_infinity=True) | st.text(max_size=3),
+    lambda children: st.lists(children, max_size=3) | st.dictionaries(st.text(max_size=4),
+                                                                      children, max_size=3),
+    max_leaves=8)
+
+
+@settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(key=st.sampled_from(["t", "odom", "odom_sigma", "bearings", "time_s"]),
+       value=json_values, which=st.integers(0, 1))
+def test_fuzz_step_values(tmp_path: Path, key: str, value: object, which: int) -> None:
+    steps = [dict(s) for s in STEPS]
+    steps[which][key] = value
+    text = json.dumps(HEADER) + "\n" + "".join(json.dumps(s) + "\n" for s in steps)
+    _read_bytes(tmp_path, text.encode())
+
+
+@settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(key=st.sampled_from(["format", "version", "bearing_sigma_rad", "odometry_sigma",
+                            "sensor_range_m", "priors", "truth", "meta"]), value=json_values)
+def test_fuzz_header_values(tmp_path: Path, key: str, value: object) -> None:
+    header = dict(HEADER)
+    header[key] = value
+    text = json.dumps(header) + "\n" + "".join(json.dumps(s) + "\n" for s in STEPS)
+    _read_bytes(tmp_path, text.encode())
+
+
+def test_prior_round_trip(tmp_path: Path) -> None:
+    h = StreamHeader(0.05, (0.03, 0.0, 0.05), priors=(Prior(1, 2, 0.5, 0.03),))
+    s = Stream(h, (Step(0, None, np.array([1, 2]), np.array([0.3, -0.2])),))
+    write_stream(s, tmp_path / "p.jsonl")
+    assert read_stream(tmp_path / "p.jsonl") == s
+
+
+def test_huge_ids_are_refused_not_crashing(tmp_path: Path) -> None:
+    big = 2 ** 70
+    _refusal(tmp_path, [H, {"t": 0, "bearings": [[big, 1.0]]}], 2, "bearings[0]", "too large")
+    _refusal(tmp_path, [{**H, "priors": [{"i": big, "j": 1, "distance_m": 1.0, "sigma_m": 0.1}]},
+                        *STEPS], 1, "priors[0].i", "non-negative integer")
+    _refusal(tmp_path, [{**H, "truth": {"landmarks": [[big, 0.0, 0.0]]}}, *STEPS], 1,
+             "truth.landmarks[0]", "non-negative integer")
