@@ -121,6 +121,80 @@ def cmd_methods(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cm(v: float) -> str:
+    return "   -  " if v is None or not math.isfinite(v) else f"{100 * v:6.2f}"
+
+
+def format_summary(summary: Sequence[dict]) -> str:
+    """The comparison table as text: one block per experiment, one row per arm."""
+    lines = []
+    by_exp: dict[str, list[dict]] = {}
+    for row in summary:
+        by_exp.setdefault(row["experiment"], []).append(row)
+    for exp, rows in by_exp.items():
+        times = sorted({int(k.split("@")[1]) for r in rows for k in r if k.startswith("mpe_mean_m@")})
+        lines.append(f"\n== {exp} ==  landmark MPE [cm] mean/median±std at t; robot: error "
+                     f"[cm] of the latest pose at the end; conv: converged runs; NEES: robot "
+                     f"pose; wall time per run")
+        head = f"{'arm':30s} {'runs':>4s} " + " ".join(f"{'t=' + str(t):>17s}" for t in times)
+        head += f" {'robot':>7s} {'conv':>5s} {'NEES':>6s} {'wall s':>7s}  paper"
+        lines.append(head)
+        for r in rows:
+            cells = []
+            for t in times:
+                m, md, sd = (r.get(f"mpe_mean_m@{t}"), r.get(f"mpe_median_m@{t}"),
+                             r.get(f"mpe_std_m@{t}"))
+                cells.append(f"{_cm(m).strip()}/{_cm(md).strip()}±{_cm(sd).strip()}")
+            conv = r.get("converged_rate")
+            conv_s = "  -  " if conv is None or not math.isfinite(conv) else f"{100 * conv:4.0f}%"
+            nees = r.get("nees_pose_mean")
+            nees_s = "   -  " if nees is None or not math.isfinite(nees) else f"{nees:6.2f}"
+            fail = f"  FAILED {r['failed']}: {'; '.join(r['errors'])[:120]}" if r["failed"] else ""
+            lines.append(f"{r['arm'][:30]:30s} {r['runs']:4d} " + " ".join(f"{c:>17s}" for c in cells)
+                         + f" {_cm(r.get('robot_last_mean_m')):>7s} {conv_s:>5s} {nees_s:>6s}"
+                         f" {r.get('wall_s_mean', float('nan')):7.3f}  {r.get('paper', '')}{fail}")
+    return "\n".join(lines)
+
+
+def cmd_compare(args: argparse.Namespace) -> int:
+    from .bench import Executor, compare, paper_experiments
+
+    exps = paper_experiments(quick=args.quick, seed=args.seed)
+    names = args.experiments.split(",") if args.experiments else list(exps)
+    unknown = [n for n in names if n not in exps]
+    if unknown:
+        raise BomgraphError(f"unknown experiment(s) {unknown}; choose from {list(exps)}")
+    if args.scheduler or args.dask_local:
+        executor = Executor("dask", scheduler=args.scheduler, dask_local=args.dask_local or 0)
+    elif args.jobs == 1:
+        executor = Executor("serial")
+    else:
+        executor = Executor("processes", n_jobs=args.jobs)
+    bar = None
+    if not args.no_progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=0, unit="run", desc="compare", file=sys.stderr)
+
+    def progress(done: int, total: int) -> None:
+        if bar is not None:
+            bar.total = total
+            bar.n = done
+            bar.refresh()
+
+    try:
+        result = compare([exps[n] for n in names], args.out, executor=executor,
+                         use_cache=not args.no_cache, figures=not args.no_figures,
+                         progress=progress)
+    finally:
+        if bar is not None:
+            bar.close()
+    print(format_summary(result.summary))
+    print(f"\n{len(result.results)} runs in {result.wall_s:.1f} s; wrote "
+          f"{', '.join(result.files)}")
+    return 0
+
+
 # --------------------------------------------------------------------------------------------
 # Parser
 # --------------------------------------------------------------------------------------------
@@ -161,6 +235,23 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--json", action="store_true", help="print one JSON object")
     e.add_argument("--similarity", action="store_true", help="also fit a scale")
     e.set_defaults(func=cmd_evaluate)
+
+    c = sub.add_parser("compare", help="the paper's experiments, every method side by side")
+    c.add_argument("--quick", action="store_true",
+                   help="2 runs of 150 steps per arm (a demo), instead of 25 runs of 300")
+    c.add_argument("--experiments", default="",
+                   help="comma-separated subset of exp1,exp2,exp3,all (default: all four)")
+    c.add_argument("--out", default="compare-results", help="output folder")
+    c.add_argument("--seed", type=int, default=0)
+    c.add_argument("--jobs", type=int, default=-1, help="local processes (-1: one per core)")
+    c.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                   help="run on an existing Dask distributed scheduler, e.g. tcp://host:8786")
+    c.add_argument("--dask-local", type=int, default=0, metavar="N",
+                   help="start a local Dask cluster of N worker processes")
+    c.add_argument("--no-cache", action="store_true", help="ignore and do not write the cache")
+    c.add_argument("--no-figures", action="store_true")
+    c.add_argument("--no-progress", action="store_true")
+    c.set_defaults(func=cmd_compare)
 
     m = sub.add_parser("methods", help="list the available methods")
     m.set_defaults(func=cmd_methods)

@@ -1,0 +1,528 @@
+"""Experiments as data, and the runner that executes them serially, in local processes, or on
+a Dask cluster (paper section IV: Exp. 1 mapping, Exp. 2 SLAM, Exp. 3 priors).
+
+An :class:`Experiment` is a list of :class:`Arm` (a method with options, with or without prior
+pairs) crossed with a run design (:func:`bomgraph.sim.paper_design`). Each (arm, run) pair is a
+:class:`Task`; :func:`run_task` is a pure function of the task (the stream is simulated from
+its seed), so results are identical whether tasks run serially, in processes or on Dask, and a
+finished task is cached as a small JSON file so an interrupted sweep resumes.
+
+The core never prints: progress is reported through a callback.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import os
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any, Callable, Iterable, Iterator, Mapping, Sequence
+
+import numpy as np
+
+from .errors import ConfigError, EvaluationError
+from .evaluate import score_estimate
+from .mapper import MapEstimate, create_mapper, method_info, run
+from .sim import RunSpec, SimConfig, paper_design, simulate_run
+from .stream import Stream, Truth
+
+REPORT_TIMES = (50, 100, 200, 300)
+
+#: What the paper reports (simulation, 25 runs), for the tables: (experiment, arm) -> text.
+PAPER_REPORTED: dict[tuple[str, str], str] = {
+    ("exp1", "stmds-cs"): "MPE 4.78 cm at t=300",
+    ("exp1", "stmds-smacof"): "MPE 2.87 cm at t=300",
+    ("exp2", "stmds-cs-loc"): "robot error < 10 cm",
+    ("exp2", "stmds-smacof-loc"): "robot error < 6 cm",
+    ("exp2", "ekf"): "better than Method 2 before t=100, about equal later; robot error lower",
+    ("exp3", "stmds-smacof+priors"): "clearly lower MPE than without priors, above all early",
+}
+
+
+@dataclass(frozen=True)
+class Arm:
+    """One curve of an experiment: a method, its options, and the prior pairs it is given."""
+
+    label: str
+    method: str
+    options: Mapping[str, Any] = field(default_factory=dict)
+    prior_fraction: float = 0.0
+
+    def key(self) -> dict[str, Any]:
+        return {"label": self.label, "method": self.method, "options": dict(self.options),
+                "prior_fraction": self.prior_fraction}
+
+
+@dataclass(frozen=True)
+class Experiment:
+    """Arms crossed with a run design."""
+
+    name: str
+    title: str
+    arms: tuple[Arm, ...]
+    sim: SimConfig = SimConfig()
+    seed: int = 0
+    n_layouts: int = 5
+    n_starts: int = 5
+    prior_sigma_xy_m: float = 0.03
+    checkpoint_every: int = 10
+
+    def runs(self) -> list[RunSpec]:
+        return paper_design(self.seed, self.n_layouts, self.n_starts)
+
+    def tasks(self) -> list["Task"]:
+        return [Task(self.name, arm, spec, self.sim, self.prior_sigma_xy_m,
+                     self.checkpoint_every) for arm in self.arms for spec in self.runs()]
+
+
+@dataclass(frozen=True)
+class Task:
+    """One method on one simulated run."""
+
+    experiment: str
+    arm: Arm
+    spec: RunSpec
+    sim: SimConfig
+    prior_sigma_xy_m: float = 0.03
+    checkpoint_every: int = 10
+
+    def stream(self) -> Stream:
+        return simulate_run(self.spec, self.sim, prior_fraction=self.arm.prior_fraction,
+                            prior_sigma_xy_m=self.prior_sigma_xy_m)
+
+    def key(self) -> str:
+        """A content hash: the same task always has the same key (cache file name)."""
+        blob = json.dumps({"arm": self.arm.key(), "spec": asdict(self.spec),
+                           "sim": asdict(self.sim), "prior_sigma": self.prior_sigma_xy_m,
+                           "every": self.checkpoint_every, "v": CACHE_VERSION},
+                          sort_keys=True, default=str)
+        return hashlib.sha256(blob.encode()).hexdigest()[:20]
+
+
+CACHE_VERSION = 1
+
+
+# --------------------------------------------------------------------------------------------
+# The paper's experiments
+# --------------------------------------------------------------------------------------------
+
+def paper_experiments(*, quick: bool = False, seed: int = 0) -> dict[str, Experiment]:
+    """Exp. 1-3 and the all-methods comparison on the paper setup.
+
+    ``quick`` keeps every arm but runs 2 layouts x 1 start of 150 steps (a demo and a test).
+    """
+    sim = SimConfig(n_steps=150) if quick else SimConfig()
+    size = dict(n_layouts=2, n_starts=1) if quick else {}
+    exps = [
+        Experiment("exp1", "Exp. 1: mapping without localisation", (
+            Arm("stmds-cs", "stmds-cs"),
+            Arm("stmds-smacof", "stmds-smacof"),
+            Arm("stmds-cs (paper fusion)", "stmds-cs", {"fusion": "paper"}),
+            Arm("stmds-smacof (paper fusion)", "stmds-smacof", {"fusion": "paper"}),
+        ), sim, seed, **size),
+        Experiment("exp2", "Exp. 2: simultaneous localisation and mapping", (
+            Arm("stmds-cs-loc", "stmds-cs-loc"),
+            Arm("stmds-smacof-loc", "stmds-smacof-loc"),
+            Arm("ekf", "ekf"),
+            Arm("gtsam-batch", "gtsam-batch"),
+            Arm("gtsam-isam2", "gtsam-isam2"),
+            Arm("hybrid", "hybrid"),
+        ), sim, seed, **size),
+        Experiment("exp3", "Exp. 3: 10% of the pairs known as priors", (
+            Arm("stmds-smacof", "stmds-smacof"),
+            Arm("stmds-smacof+priors", "stmds-smacof", prior_fraction=0.1),
+            Arm("stmds-cs", "stmds-cs"),
+            Arm("stmds-cs+priors", "stmds-cs", prior_fraction=0.1),
+        ), sim, seed, **size),
+        Experiment("all", "Every method side by side", (
+            Arm("triangulate", "triangulate"),
+            Arm("stmds-cs", "stmds-cs"),
+            Arm("stmds-smacof", "stmds-smacof"),
+            Arm("stmds-smacof-loc", "stmds-smacof-loc"),
+            Arm("ekf", "ekf"),
+            Arm("gtsam-batch", "gtsam-batch"),
+            Arm("gtsam-isam2", "gtsam-isam2"),
+            Arm("hybrid", "hybrid"),
+            Arm("oracle", "oracle"),
+        ), sim, seed, **size),
+    ]
+    return {e.name: e for e in exps}
+
+
+# --------------------------------------------------------------------------------------------
+# One task
+# --------------------------------------------------------------------------------------------
+
+def _pose_nees(est: MapEstimate, truth: Truth, alignment: Any) -> float:
+    """NEES of the latest estimated pose (x, y, psi) in the aligned frame, or NaN."""
+    if est.pose_cov is None or est.poses is None or truth.poses is None or not len(est.poses):
+        return float("nan")
+    from .angles import angle_residual
+
+    k = int(np.argmax(est.pose_t))
+    p = alignment.apply_poses(est.poses[k:k + 1])[0]
+    true = truth.poses[est.pose_t[k]]
+    e = np.array([p[0] - true[0], p[1] - true[1], float(angle_residual(p[2], true[2]))])
+    t = np.eye(3)
+    t[:2, :2] = alignment.rotation
+    t[2, 2] = np.linalg.det(alignment.rotation)
+    cov = t @ est.pose_cov[k] @ t.T
+    try:
+        return float(e @ np.linalg.solve(cov, e))
+    except np.linalg.LinAlgError:
+        return float("nan")
+
+
+def _landmark_nees(est: MapEstimate, truth: Truth, alignment: Any) -> float:
+    if est.landmark_cov is None:
+        return float("nan")
+    from .evaluate import landmark_nees
+
+    try:
+        return float(np.mean(landmark_nees(est, truth, alignment)))
+    except np.linalg.LinAlgError:
+        return float("nan")
+
+
+def _jsonable(v: Any) -> Any:
+    if isinstance(v, (bool, np.bool_)):
+        return bool(v)
+    if isinstance(v, (int, np.integer)):
+        return int(v)
+    if isinstance(v, (float, np.floating)):
+        return float(v)
+    if isinstance(v, str) or v is None:
+        return v
+    if isinstance(v, (list, tuple, np.ndarray)) and len(v) <= 64:
+        return [_jsonable(x) for x in v]
+    return None
+
+
+def run_task(task: Task) -> dict[str, Any]:
+    """Simulate the task's run, run its method, and score every checkpoint.
+
+    Returns a JSON-ready dict: per-checkpoint errors, timings, the method's final diagnostics.
+    A method that raises is recorded as a failure with the reason, never dropped.
+    """
+    stream = task.stream()
+    truth = stream.truth
+    out: dict[str, Any] = {"experiment": task.experiment, "arm": task.arm.label,
+                           "method": task.arm.method, "run": task.spec.name,
+                           "layout": task.spec.layout, "start": task.spec.start,
+                           "key": task.key()}
+    try:
+        needs_truth = method_info(task.arm.method).needs_truth
+        mapper = create_mapper(task.arm.method, stream.header,
+                               truth=truth if needs_truth else None, **dict(task.arm.options))
+        result = run(mapper, stream.steps, checkpoint_every=task.checkpoint_every,
+                     method=task.arm.label)
+    except Exception as exc:  # a failing method is a result, reported with its reason
+        out.update(ok=False, error=f"{type(exc).__name__}: {exc}")
+        return out
+    rows = []
+    for c in result.checkpoints:
+        row: dict[str, Any] = {"t": c.t, "n_mapped": len(c.estimate), "estimate_s": c.estimate_s}
+        try:
+            s = score_estimate(c.estimate, truth)
+            row.update(mpe_m=s.mpe_m, rmse_m=s.rmse_m, median_m=s.median_m, max_m=s.max_m,
+                       n_common=s.n_common, robot_last_m=s.robot_last_m,
+                       robot_mean_m=s.robot_mean_m,
+                       nees_landmark=_landmark_nees(c.estimate, truth, s.alignment),
+                       nees_pose=_pose_nees(c.estimate, truth, s.alignment))
+        except EvaluationError:
+            row.update(mpe_m=math.nan, rmse_m=math.nan, median_m=math.nan, max_m=math.nan,
+                       n_common=0, robot_last_m=math.nan, robot_mean_m=math.nan,
+                       nees_landmark=math.nan, nees_pose=math.nan)
+        rows.append(row)
+    info = {k: _jsonable(v) for k, v in result.final.info.items()}
+    out.update(ok=True, checkpoints=rows, total_s=result.total_s,
+               step_median_s=float(np.median(result.step_s)),
+               converged=info.get("converged"), info=info)
+    return out
+
+
+# --------------------------------------------------------------------------------------------
+# Executing many tasks
+# --------------------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class Executor:
+    """Where tasks run: ``"serial"``, ``"processes"`` (joblib, one per core by default) or
+    ``"dask"`` (an existing scheduler at ``scheduler`` or a local cluster of
+    ``dask_local`` workers)."""
+
+    backend: str = "processes"
+    n_jobs: int = -1
+    scheduler: str | None = None
+    dask_local: int = 0
+
+    def __post_init__(self) -> None:
+        if self.backend not in ("serial", "processes", "dask"):
+            raise ConfigError(f"backend must be serial, processes or dask, got {self.backend!r}")
+        if self.backend == "dask" and not (self.scheduler or self.dask_local > 0):
+            raise ConfigError("the dask backend needs a scheduler address or dask_local > 0")
+
+
+def _cache_path(cache_dir: Path, task: Task) -> Path:
+    return cache_dir / f"{task.experiment}-{task.key()}.json"
+
+
+def execute(tasks: Sequence[Task], executor: Executor = Executor(), *,
+            cache_dir: str | os.PathLike[str] | None = None,
+            progress: Callable[[int, int], None] | None = None) -> list[dict[str, Any]]:
+    """Run ``tasks`` and return their results in the order of ``tasks``.
+
+    Finished tasks found in ``cache_dir`` are not run again; new results are written there as
+    they arrive, so an interrupted sweep resumes where it stopped.
+    """
+    results: list[dict[str, Any] | None] = [None] * len(tasks)
+    cache = Path(cache_dir) if cache_dir is not None else None
+    if cache is not None:
+        cache.mkdir(parents=True, exist_ok=True)
+        for k, t in enumerate(tasks):
+            p = _cache_path(cache, t)
+            if p.exists():
+                try:
+                    results[k] = json.loads(p.read_text())
+                except (json.JSONDecodeError, OSError):
+                    results[k] = None
+    todo = [k for k, r in enumerate(results) if r is None]
+    done = len(tasks) - len(todo)
+    if progress:
+        progress(done, len(tasks))
+    for k, res in _dispatch([tasks[k] for k in todo], todo, executor):
+        results[k] = res
+        if cache is not None and res.get("ok"):  # failures are re-run next time
+            tmp = _cache_path(cache, tasks[k]).with_suffix(".tmp")
+            tmp.write_text(json.dumps(res, allow_nan=True))
+            tmp.replace(_cache_path(cache, tasks[k]))
+        done += 1
+        if progress:
+            progress(done, len(tasks))
+    return [r for r in results if r is not None]
+
+
+def _indexed(k: int, task: Task) -> tuple[int, dict[str, Any]]:
+    return k, run_task(task)
+
+
+def _dispatch(tasks: list[Task], index: list[int],
+              executor: Executor) -> Iterator[tuple[int, dict[str, Any]]]:
+    if not tasks:
+        return
+    if executor.backend == "serial":
+        for k, t in zip(index, tasks):
+            yield k, run_task(t)
+    elif executor.backend == "processes":
+        from joblib import Parallel, delayed
+
+        par = Parallel(n_jobs=executor.n_jobs, return_as="generator_unordered")
+        yield from par(delayed(_indexed)(k, t) for k, t in zip(index, tasks))
+    else:
+        yield from _dispatch_dask(tasks, index, executor)
+
+
+def _dispatch_dask(tasks: list[Task], index: list[int],
+                   executor: Executor) -> Iterator[tuple[int, dict[str, Any]]]:
+    from distributed import Client, LocalCluster, as_completed
+
+    cluster = None
+    if executor.scheduler:
+        client = Client(executor.scheduler)
+    else:
+        cluster = LocalCluster(n_workers=executor.dask_local, threads_per_worker=1,
+                               processes=True, host="127.0.0.1", dashboard_address=None)
+        client = Client(cluster)
+    try:
+        futures = client.map(_indexed, index, tasks, pure=False)
+        for fut in as_completed(futures):
+            yield fut.result()
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+
+
+# --------------------------------------------------------------------------------------------
+# Summaries
+# --------------------------------------------------------------------------------------------
+
+def _value_at(res: Mapping[str, Any], t: int, key: str) -> float:
+    """The metric at checkpoint ``t`` (the last checkpoint at or before ``t``)."""
+    best = math.nan
+    for row in res.get("checkpoints", []):
+        if row["t"] <= t:
+            v = row.get(key)
+            best = math.nan if v is None else float(v)
+    return best
+
+
+def summarise(results: Sequence[Mapping[str, Any]],
+              times: Sequence[int] = REPORT_TIMES) -> list[dict[str, Any]]:
+    """One row per (experiment, arm): MPE at ``times`` (mean, median, std), robot error,
+    convergence, NEES, wall time. Failed runs are counted, not hidden."""
+    groups: dict[tuple[str, str], list[Mapping[str, Any]]] = {}
+    for r in results:
+        groups.setdefault((r["experiment"], r["arm"]), []).append(r)
+    exp_last: dict[str, int] = {}
+    for r in results:
+        if r.get("ok") and r["checkpoints"]:
+            exp_last[r["experiment"]] = max(exp_last.get(r["experiment"], 0),
+                                            r["checkpoints"][-1]["t"])
+    rows = []
+    for (exp, arm), rs in groups.items():
+        ok = [r for r in rs if r.get("ok")]
+        last_t = exp_last.get(exp, 0)
+        row: dict[str, Any] = {"experiment": exp, "arm": arm, "method": rs[0]["method"],
+                               "runs": len(rs), "failed": len(rs) - len(ok),
+                               "errors": sorted({r.get("error", "") for r in rs
+                                                 if not r.get("ok")})}
+        for t in sorted({*[t for t in times if t <= last_t], last_t} - {0}):
+            v = np.array([_value_at(r, t, "mpe_m") for r in ok])
+            row[f"mpe_mean_m@{t}"] = float(np.nanmean(v)) if np.any(np.isfinite(v)) else math.nan
+            row[f"mpe_median_m@{t}"] = float(np.nanmedian(v)) if np.any(np.isfinite(v)) else math.nan
+            row[f"mpe_std_m@{t}"] = float(np.nanstd(v)) if np.any(np.isfinite(v)) else math.nan
+        robot = np.array([_value_at(r, last_t, "robot_last_m") for r in ok])
+        row["robot_last_mean_m"] = float(np.nanmean(robot)) if np.any(np.isfinite(robot)) else math.nan
+        rm = np.array([np.nanmean([c["robot_last_m"] for c in r["checkpoints"]])
+                       if any(np.isfinite(c["robot_last_m"]) for c in r["checkpoints"])
+                       else math.nan for r in ok])
+        row["robot_over_time_mean_m"] = float(np.nanmean(rm)) if np.any(np.isfinite(rm)) else math.nan
+        conv = [r.get("converged") for r in ok if r.get("converged") is not None]
+        row["converged_rate"] = float(np.mean(conv)) if conv else math.nan
+        nees = np.array([_value_at(r, last_t, "nees_pose") for r in ok])
+        row["nees_pose_mean"] = float(np.nanmean(nees)) if np.any(np.isfinite(nees)) else math.nan
+        nl = np.array([_value_at(r, last_t, "nees_landmark") for r in ok])
+        row["nees_landmark_mean"] = float(np.nanmean(nl)) if np.any(np.isfinite(nl)) else math.nan
+        wall = np.array([r["total_s"] for r in ok])
+        row["wall_s_mean"] = float(wall.mean()) if wall.size else math.nan
+        row["paper"] = PAPER_REPORTED.get((exp, arm), "")
+        row["last_t"] = last_t
+        rows.append(row)
+    return rows
+
+
+def error_curves(results: Sequence[Mapping[str, Any]], metric: str = "mpe_m"
+                 ) -> dict[tuple[str, str], tuple[np.ndarray, np.ndarray]]:
+    """Per (experiment, arm): checkpoint times ``(k,)`` and the metric ``(runs, k)``."""
+    out: dict[tuple[str, str], tuple[np.ndarray, np.ndarray]] = {}
+    groups: dict[tuple[str, str], list[Mapping[str, Any]]] = {}
+    for r in results:
+        if r.get("ok"):
+            groups.setdefault((r["experiment"], r["arm"]), []).append(r)
+    for key, rs in groups.items():
+        ts = np.array([c["t"] for c in rs[0]["checkpoints"]])
+        vals = np.array([[_value_at(r, t, metric) for t in ts] for r in rs])
+        out[key] = (ts, vals)
+    return out
+
+
+def results_to_csv_rows(results: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
+    """Long format: one row per (experiment, arm, run, checkpoint)."""
+    rows = []
+    for r in results:
+        if not r.get("ok"):
+            rows.append({"experiment": r["experiment"], "arm": r["arm"], "run": r["run"],
+                         "ok": False, "error": r.get("error", "")})
+            continue
+        for c in r["checkpoints"]:
+            rows.append({"experiment": r["experiment"], "arm": r["arm"], "run": r["run"],
+                         "ok": True, "error": "", **c})
+    return rows
+
+
+def strip_timings(results: Iterable[Mapping[str, Any]]) -> list[dict[str, Any]]:
+    """Results without wall times (which differ between runs), for reproducibility checks."""
+    out = []
+    for r in results:
+        r2 = {k: v for k, v in r.items() if k not in ("total_s", "step_median_s")}
+        if "checkpoints" in r2:
+            r2["checkpoints"] = [{k: v for k, v in c.items() if k != "estimate_s"}
+                                 for c in r2["checkpoints"]]
+        if "info" in r2 and isinstance(r2["info"], dict):
+            r2["info"] = {k: v for k, v in r2["info"].items() if not k.endswith("_s")}
+        out.append(r2)
+    return out
+
+
+__all__ = ["Arm", "Experiment", "Task", "Executor", "paper_experiments", "run_task", "execute",
+           "summarise", "error_curves", "results_to_csv_rows", "strip_timings",
+           "PAPER_REPORTED", "REPORT_TIMES"]
+
+
+# --------------------------------------------------------------------------------------------
+# The comparison: run, summarise, write
+# --------------------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class CompareResult:
+    """What :func:`compare` produced: raw results, the summary table and the files written."""
+
+    results: tuple[dict[str, Any], ...]
+    summary: tuple[dict[str, Any], ...]
+    files: tuple[str, ...]
+    wall_s: float
+
+
+def _write_csv(path: Path, rows: Sequence[Mapping[str, Any]]) -> None:
+    import csv
+
+    cols: list[str] = []
+    for r in rows:
+        for k in r:
+            if k not in cols:
+                cols.append(k)
+    with open(path, "w", newline="", encoding="utf-8") as fh:
+        w = csv.DictWriter(fh, fieldnames=cols)
+        w.writeheader()
+        for r in rows:
+            w.writerow({k: (";".join(map(str, v)) if isinstance(v, list) else v)
+                        for k, v in r.items()})
+
+
+def compare(experiments: Sequence[Experiment], out_dir: str | os.PathLike[str], *,
+            executor: Executor = Executor(), use_cache: bool = True, figures: bool = True,
+            progress: Callable[[int, int], None] | None = None) -> CompareResult:
+    """Run ``experiments``, write ``results.json``, ``results.csv``, ``summary.csv`` and the
+    figures (PNG) into ``out_dir``, and return the summary.
+
+    Finished runs are cached in ``out_dir/cache`` so an interrupted sweep resumes.
+    """
+    import time
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    start = time.perf_counter()
+    tasks = [t for e in experiments for t in e.tasks()]
+    results = execute(tasks, executor, cache_dir=out / "cache" if use_cache else None,
+                      progress=progress)
+    summary = summarise(results)
+    wall = time.perf_counter() - start
+    files = [out / "results.json", out / "results.csv", out / "summary.csv"]
+    (out / "results.json").write_text(json.dumps(
+        {"experiments": [{"name": e.name, "title": e.title,
+                          "arms": [a.key() for a in e.arms], "seed": e.seed,
+                          "runs": len(e.runs()), "n_steps": e.sim.n_steps}
+                         for e in experiments],
+         "summary": summary, "results": results, "wall_s": wall}, allow_nan=True, indent=1))
+    _write_csv(out / "results.csv", results_to_csv_rows(results))
+    _write_csv(out / "summary.csv", summary)
+    if figures:
+        from .plots import write_compare_figures
+
+        files += write_compare_figures(out, experiments, results)
+    return CompareResult(tuple(results), tuple(summary), tuple(str(f) for f in files), wall)
+
+
+def example_estimate(method: str, experiment: Experiment, *, run_index: int = 0,
+                     t: int | None = None) -> tuple[Stream, MapEstimate]:
+    """One run of ``method`` on the experiment's first run; the estimate at checkpoint ``t``
+    (the last one by default). For the map figures (paper fig. 3 and 5)."""
+    spec = experiment.runs()[run_index]
+    stream = simulate_run(spec, experiment.sim)
+    needs_truth = method_info(method).needs_truth
+    mapper = create_mapper(method, stream.header, truth=stream.truth if needs_truth else None)
+    res = run(mapper, stream.steps, checkpoint_every=experiment.checkpoint_every)
+    return stream, (res.final if t is None else res.at(t))

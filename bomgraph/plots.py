@@ -1,0 +1,139 @@
+"""Figures: ``plot_*_on_axes(ax, ...)`` functions. matplotlib is imported only here and in the
+CLI. Each function draws on the axes it is given and returns them; it never shows or saves.
+
+The paper's figures: fig. 3/5 (map and trajectory), fig. 4/6/7/8 (errors against time).
+"""
+
+from __future__ import annotations
+
+from typing import Mapping, Sequence
+
+import numpy as np
+
+from .evaluate import Alignment
+from .mapper import MapEstimate
+from .stream import Truth
+
+
+def plot_error_vs_time_on_axes(ax, curves: Mapping[str, tuple[np.ndarray, np.ndarray]], *,
+                               ylabel: str = "landmark MPE [cm]", scale: float = 100.0,
+                               band: str = "iqr", title: str | None = None):
+    """Mean (line) and spread (band) of an error over time, one curve per label.
+
+    Parameters
+    ----------
+    curves : mapping label -> (t (k,), values (runs, k)) in metres
+    band : ``"iqr"`` (25-75 percentiles) or ``"std"`` (mean +- one std)
+    """
+    for label, (t, vals) in curves.items():
+        v = np.asarray(vals, dtype=float) * scale
+        if not np.any(np.isfinite(v)):
+            continue
+        with np.errstate(all="ignore"):
+            mean = np.nanmean(v, axis=0)
+            if band == "std":
+                lo, hi = mean - np.nanstd(v, axis=0), mean + np.nanstd(v, axis=0)
+            else:
+                lo, hi = np.nanpercentile(v, 25, axis=0), np.nanpercentile(v, 75, axis=0)
+        (line,) = ax.plot(t, mean, label=label, lw=1.6)
+        ax.fill_between(t, lo, hi, color=line.get_color(), alpha=0.18, lw=0)
+    ax.set_xlabel("time step t")
+    ax.set_ylabel(ylabel)
+    ax.set_ylim(bottom=0)
+    ax.grid(True, alpha=0.3)
+    if title:
+        ax.set_title(title)
+    ax.legend(fontsize="small")
+    return ax
+
+
+def plot_map_on_axes(ax, truth: Truth, estimate: MapEstimate | None = None,
+                     alignment: Alignment | None = None, *, title: str | None = None,
+                     trajectory_t: Sequence[int] | None = None):
+    """True landmarks and trajectory, and an aligned estimate with error lines (fig. 3/5)."""
+    ax.plot(truth.landmarks_xy[:, 0], truth.landmarks_xy[:, 1], "k^", ms=6, mfc="none",
+            label="true landmarks")
+    if truth.poses is not None:
+        sel = truth.poses if trajectory_t is None else truth.poses[np.asarray(trajectory_t)]
+        ax.plot(sel[:, 0], sel[:, 1], "k--", lw=0.9, label="true trajectory")
+    if estimate is not None and len(estimate):
+        al = alignment or Alignment(np.eye(2), np.zeros(2))
+        xy = al.apply(estimate.landmarks_xy)
+        ax.plot(xy[:, 0], xy[:, 1], "o", color="tab:red", ms=4, label="estimated landmarks")
+        common, ie, it = np.intersect1d(estimate.landmark_ids, truth.landmark_ids,
+                                        return_indices=True)
+        for a, b in zip(xy[ie], truth.landmarks_xy[it]):
+            ax.plot([a[0], b[0]], [a[1], b[1]], "-", color="tab:red", lw=0.7)
+        if estimate.poses is not None and len(estimate.poses):
+            p = al.apply(estimate.poses[:, :2])
+            ax.plot(p[:, 0], p[:, 1], "-", color="tab:blue", lw=1.2,
+                    label="estimated trajectory")
+    ax.set_aspect("equal")
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+    ax.grid(True, alpha=0.3)
+    if title:
+        ax.set_title(title)
+    ax.legend(fontsize="small", loc="upper right")
+    return ax
+
+
+def write_compare_figures(out_dir, experiments, results) -> list:
+    """The comparison's figures as PNG files in ``out_dir``; returns their paths.
+
+    One error-against-time figure per experiment (landmark MPE; robot error too for Exp. 2,
+    the paper's figs. 4, 6, 7, 8) and an example map with trajectory (figs. 3 and 5).
+    """
+    from pathlib import Path
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from .bench import error_curves, example_estimate
+    from .evaluate import score_estimate
+
+    out = Path(out_dir)
+    files = []
+    mpe = error_curves(results, "mpe_m")
+    robot = error_curves(results, "robot_last_m")
+    for exp in experiments:
+        curves = {arm: c for (e, arm), c in mpe.items() if e == exp.name}
+        if not curves:
+            continue
+        rob = {arm: c for (e, arm), c in robot.items()
+               if e == exp.name and np.any(np.isfinite(c[1]))}
+        ncol = 2 if rob else 1
+        fig, axes = plt.subplots(1, ncol, figsize=(6.4 * ncol, 4.4), squeeze=False)
+        plot_error_vs_time_on_axes(axes[0, 0], curves,
+                                   title=f"{exp.title}: landmarks ({len(exp.runs())} runs)")
+        if rob:
+            plot_error_vs_time_on_axes(axes[0, 1], rob, ylabel="robot position error [cm]",
+                                       title="robot position (latest pose)")
+        fig.tight_layout()
+        path = out / f"{exp.name}_error_vs_time.png"
+        fig.savefig(path, dpi=120)
+        plt.close(fig)
+        files.append(path)
+    # Example map (fig. 5: Method 2 with localisation at t = 100; fig. 3: the truth)
+    exp = experiments[0]
+    try:
+        t_show = 100 if exp.sim.n_steps >= 100 else None
+        stream, est = example_estimate("stmds-smacof-loc", exp, t=t_show)
+        al = score_estimate(est, stream.truth).alignment
+        traj = np.arange(0, (t_show or exp.sim.n_steps) + 1)
+        fig, ax = plt.subplots(figsize=(6.0, 6.0))
+        plot_map_on_axes(ax, stream.truth, est, al, trajectory_t=traj,
+                         title=f"stmds-smacof-loc, run {exp.runs()[0].name}, "
+                               f"t = {t_show or exp.sim.n_steps}")
+        fig.tight_layout()
+        path = out / "example_map.png"
+        fig.savefig(path, dpi=120)
+        plt.close(fig)
+        files.append(path)
+    except Exception as exc:  # the map figure is optional; say why it is missing
+        (out / "example_map.txt").write_text(f"example map not drawn: {type(exc).__name__}: "
+                                             f"{exc}\n")
+        files.append(out / "example_map.txt")
+    return files
