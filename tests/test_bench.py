@@ -85,3 +85,15 @@ def test_executor_validates() -> None:
         Executor("threads")
     with pytest.raises(ConfigError):
         Executor("dask")
+
+
+def test_existing_dask_scheduler_by_address() -> None:
+    from distributed import LocalCluster
+
+    tasks = _exp((Arm("tri", "triangulate"),)).tasks()[:2]
+    serial = strip_timings(execute(tasks, Executor("serial")))
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=True, host="127.0.0.1",
+                      dashboard_address=None) as cluster:
+        remote = strip_timings(execute(tasks, Executor("dask",
+                                                       scheduler=cluster.scheduler_address)))
+    assert json.dumps(serial) == json.dumps(remote)

@@ -1,0 +1,19 @@
+"""The paper's Exp. 3 on the paper setup (25 runs), every arm side by side.
+
+    python scripts/exp3_priors.py [--quick] [--out results/exp3] [--jobs N]
+
+A thin call into the library: `bomgraph.bench.compare` with the experiment of
+`bomgraph.bench.paper_experiments`; prints the table, writes JSON, CSV and PNG figures.
+"""
+
+from __future__ import annotations
+
+import sys
+
+from bomgraph.cli import main
+
+if __name__ == "__main__":
+    args = sys.argv[1:]
+    if "--out" not in args:
+        args += ["--out", "results/exp3"]
+    sys.exit(main(["compare", "--experiments", "exp3", *args]))
