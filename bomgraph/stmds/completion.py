@@ -1,0 +1,124 @@
+"""Distance matrix correction by shortest path lengths, DMC-SPL (paper section III-D.1).
+
+The known pairs form an undirected graph whose edge lengths are the fused *distances* (not
+squared: path lengths add). A missing entry of the distance matrix is replaced by the length of
+the shortest path between its two landmarks (Dijkstra over ``scipy.sparse.csgraph``, which is
+``O(n E log n)`` on the sparse graph instead of Floyd-Warshall's ``O(n^3)``). A graph in
+several pieces cannot be embedded as one map: :func:`largest_component` picks the biggest piece
+and names the landmarks left out.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.sparse import coo_matrix, csr_matrix
+from scipy.sparse.csgraph import connected_components, shortest_path
+
+from ..errors import ConfigError
+
+# csgraph treats an explicit 0 as "no edge"; coincident landmarks get this length instead.
+_MIN_EDGE_M = 1e-12
+
+
+def edge_graph(n: int, first: np.ndarray, second: np.ndarray,
+               length: np.ndarray) -> csr_matrix:
+    """The symmetric sparse ``(n, n)`` graph with ``length`` on edges ``first -- second``."""
+    first = np.asarray(first, np.int64)
+    second = np.asarray(second, np.int64)
+    w = np.maximum(np.asarray(length, float), _MIN_EDGE_M)
+    if first.size and (first.min() < 0 or max(first.max(), second.max()) >= n):
+        raise ConfigError(f"edge_graph: vertex index out of range 0..{n - 1}")
+    rows = np.concatenate([first, second])
+    cols = np.concatenate([second, first])
+    return coo_matrix((np.concatenate([w, w]), (rows, cols)), shape=(n, n)).tocsr()
+
+
+@dataclass(frozen=True, eq=False)
+class Component:
+    """The vertices kept (largest connected component) and those left out, as index arrays."""
+
+    kept: np.ndarray
+    left_out: np.ndarray
+    n_components: int
+
+
+def largest_component(n: int, first: np.ndarray, second: np.ndarray,
+                      size_weight: np.ndarray | None = None) -> Component:
+    """The largest connected component of the graph of known pairs on ``n`` vertices.
+
+    Ties go to the component holding the smallest vertex index. Vertices without any edge count
+    as components of their own (so an empty graph keeps vertex 0 alone). ``size_weight``
+    (shape ``(n,)``) counts vertices unequally, e.g. landmarks 1 and robot positions 0.
+    """
+    if n == 0:
+        return Component(np.zeros(0, np.int64), np.zeros(0, np.int64), 0)
+    g = edge_graph(n, first, second, np.ones(len(first)))
+    n_comp, labels = connected_components(g, directed=False)
+    sizes = np.bincount(labels, weights=size_weight, minlength=n_comp)
+    best = int(np.argmax(sizes))   # argmax takes the first maximum: the smallest label
+    keep = labels == best
+    return Component(np.flatnonzero(keep), np.flatnonzero(~keep), int(n_comp))
+
+
+def prune_low_degree(n: int, first: np.ndarray, second: np.ndarray,
+                     min_degree: int) -> np.ndarray:
+    """The ``k``-core: repeatedly drop vertices with fewer than ``k`` edges.
+
+    ``k = min(min_degree, n_with_edges - 1)`` so that a complete graph on few vertices (a
+    triangle, ...) is kept whole. In the plane a vertex needs 3 known distances to a rigid set
+    to be located uniquely (2 leave a mirror ambiguity, 1 a free rotation); the 3-core removes
+    such under-determined landmarks (e.g. ones known only through one or two priors).
+
+    Returns
+    -------
+    ndarray of shape (n,), bool
+        Vertices kept.
+    """
+    first = np.asarray(first, np.int64)
+    second = np.asarray(second, np.int64)
+    alive = np.zeros(n, bool)
+    alive[first] = alive[second] = True
+    k = min(int(min_degree), max(int(alive.sum()) - 1, 0))
+    edge = np.ones(len(first), bool)
+    while True:
+        deg = np.bincount(first[edge], minlength=n) + np.bincount(second[edge], minlength=n)
+        drop = alive & (deg < k)
+        if not drop.any():
+            return alive
+        alive &= ~drop
+        edge &= alive[first] & alive[second]
+
+
+def shortest_path_completion(n: int, first: np.ndarray, second: np.ndarray,
+                             distance_m: np.ndarray, *, keep_known: bool = True) -> np.ndarray:
+    """The distance matrix with missing entries completed by shortest paths (DMC-SPL).
+
+    Returns a dense symmetric ``(n, n)`` array of distances (zero diagonal, ``inf`` where no
+    path exists).
+
+    Parameters
+    ----------
+    n : int
+        Number of vertices.
+    first, second : arrays of shape (P,)
+        Edges (dense indices).
+    distance_m : array of shape (P,)
+        Edge lengths (distances, not squared).
+    keep_known : bool
+        True (the paper): known pairs keep their fused distance and only missing entries take
+        the shortest path length. False: every entry is a shortest path length (ISOMAP), which
+        also shortens known pairs that violate the triangle inequality.
+    """
+    g = edge_graph(n, first, second, distance_m)
+    full = shortest_path(g, method="D", directed=False)
+    if keep_known and len(first):
+        d = np.maximum(np.asarray(distance_m, float), _MIN_EDGE_M)
+        full[first, second] = d
+        full[second, first] = d
+    return full
+
+
+__all__ = ["edge_graph", "Component", "largest_component", "prune_low_degree",
+           "shortest_path_completion"]

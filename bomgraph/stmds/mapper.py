@@ -1,0 +1,537 @@
+"""BOM-STMDS as a Mapper: the online schedule of the paper (Algorithm 1, sections III-B to III-E).
+
+Every step: triangulate the landmarks seen at ``t-1`` and ``t`` (III-B), gate degenerate
+geometry, and fuse every pair's instantaneous squared distance into the distance store (III-C;
+priors from the stream header are the initial estimates). At every ``estimate()`` call: take
+the known pairs, keep the largest connected component of their graph, and reconstruct
+coordinates (III-D):
+
+* Method 1 (``method="cs"``): DMC-SPL (shortest paths on distances) + classical scaling.
+* Method 2 (``method="smacof"``): Method 1 while ``t < smacof_from_t`` (t = 10..40 with the
+  paper's checkpoints), weighted SMACOF on the known pairs from ``t >= smacof_from_t`` (t = 50
+  on), warm-started from the previous map (landmarks new to it are placed by the
+  classical-scaling map aligned onto the previous one) or from the classical-scaling map.
+
+Localisation (III-E, ``localise=True``): the matrix is extended with the last ``window``
+(the paper's p = 6) robot positions. Robot-robot distances come from dead reckoning the
+odometry inside the window; robot-landmark distances are the triangulation depths ``r1``
+(from pose ``t-1``) and ``r2`` (from pose ``t``), fused by inverse variance per (pose, landmark).
+A heading is then found for every pose in the window by resection: the circular mean of
+``atan2(landmark - robot) - bearing`` over the landmarks it saw. MDS cannot tell a map from its
+mirror image; the bearings can, so a localising mapper reflects its output when the mirrored
+resection fits the bearings better, and every pose is returned in a frame with the measured
+(counter-clockwise) bearing convention.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields, replace
+from typing import Any
+
+import numpy as np
+
+from ..angles import angle_residual, wrap_angle
+from ..errors import ConfigError
+from ..evaluate import align
+from ..mapper import MapEstimate
+from ..stream import Step, StreamHeader
+from .completion import largest_component, prune_low_degree, shortest_path_completion
+from .distances import FUSION_RULES, DistanceStore, IdIndex
+from .mds import LaplacianSolver, classical_scaling, smacof, stress1
+from .triangulation import (gate_points, pair_squared_distances, range_variances,
+                            triangulate_rays)
+
+METHODS = ("cs", "smacof")
+WEIGHTS = ("binary", "inverse-variance")
+INITS = ("previous", "classical")
+
+
+@dataclass(frozen=True)
+class StmdsConfig:
+    """Options of BOM-STMDS; the defaults are the paper's (with the corrected fusion rule).
+
+    Attributes
+    ----------
+    method : {"cs", "smacof"}
+        Method 1 (DMC-SPL + classical scaling) or Method 2 (SMACOF from ``smacof_from_t``).
+    smacof_from_t : int
+        First step at which Method 2 uses SMACOF (the paper: 50; classical scaling before).
+    fusion : str
+        Distance fusion rule, one of ``distances.FUSION_RULES``; ``"paper"`` is eq. 3-4 taken
+        literally (it collapses, see the benchmark); the default is the corrected rule.
+    min_count : int
+        Instantaneous estimates a pair needs (without a prior) to count as known.
+    min_parallax_rad : float
+        Gate: least angle between a landmark's two rays.
+    max_range_factor : float
+        Gate: largest depth as a multiple of the header's ``sensor_range_m`` (ignored when the
+        header has none, unless ``max_range_m`` is given).
+    max_range_m : float or None
+        Gate: largest depth in metres (overrides ``max_range_factor``).
+    max_relative_range_sigma : float
+        Gate: largest first-order relative std. dev. of a landmark's depth (``inf``: off).
+    weights : {"binary", "inverse-variance"}
+        SMACOF weights: 1 for every known pair (the paper) or 1 / variance of the fused
+        distance (normalised to mean 1).
+    smacof_init : {"previous", "classical"}
+        Warm start of SMACOF: the previous map, or the DMC-SPL classical-scaling map.
+    smacof_max_iter, smacof_tol, smacof_relaxation
+        SMACOF iterations, relative stress tolerance, over-relaxation in (0, 2).
+    min_degree : int
+        Landmarks need this many known distances (a ``min_degree``-core of the graph, see
+        ``completion.prune_low_degree``) to be mapped; 3 locates a point in the plane.
+    map_unobserved : bool
+        Also map landmarks known only through priors (never triangulated). Off by default: the
+        map covers what the robot has seen, priors only constrain it.
+    dmc_keep_known : bool
+        DMC-SPL replaces only the missing entries (True, the paper) or every entry by its
+        shortest path (False, ISOMAP).
+    localise : bool
+        Extend the matrix with the last ``window`` robot positions (III-E) and return poses.
+    window : int
+        The paper's p (6).
+    """
+
+    method: str = "smacof"
+    smacof_from_t: int = 50
+    fusion: str = "m3inv"
+    min_count: int = 5
+    min_degree: int = 3
+    min_parallax_rad: float = math.radians(1.0)
+    max_range_factor: float = 2.0
+    max_range_m: float | None = None
+    max_relative_range_sigma: float = math.inf
+    weights: str = "binary"
+    smacof_init: str = "previous"
+    smacof_max_iter: int = 300
+    smacof_tol: float = 1e-6
+    smacof_relaxation: float = 1.0
+    map_unobserved: bool = False
+    dmc_keep_known: bool = True
+    localise: bool = False
+    window: int = 6
+
+    def __post_init__(self) -> None:
+        def need(ok: bool, msg: str) -> None:
+            if not ok:
+                raise ConfigError(f"StmdsConfig: {msg}")
+
+        need(self.method in METHODS, f"method must be one of {METHODS}, got {self.method!r}")
+        need(self.fusion in FUSION_RULES,
+             f"fusion must be one of {FUSION_RULES}, got {self.fusion!r}")
+        need(self.weights in WEIGHTS, f"weights must be one of {WEIGHTS}, got {self.weights!r}")
+        need(self.smacof_init in INITS,
+             f"smacof_init must be one of {INITS}, got {self.smacof_init!r}")
+        need(self.smacof_from_t >= 0, "smacof_from_t must be >= 0")
+        need(self.min_count >= 1, "min_count must be >= 1")
+        need(self.min_degree >= 1, "min_degree must be >= 1")
+        need(0 <= self.min_parallax_rad < math.pi / 2, "min_parallax_rad must be in [0, pi/2)")
+        need(self.max_range_factor > 0, "max_range_factor must be > 0")
+        need(self.max_range_m is None or self.max_range_m > 0, "max_range_m must be > 0")
+        need(self.max_relative_range_sigma > 0, "max_relative_range_sigma must be > 0")
+        need(self.smacof_max_iter >= 0, "smacof_max_iter must be >= 0")
+        need(self.smacof_tol >= 0, "smacof_tol must be >= 0")
+        need(0 < self.smacof_relaxation < 2, "smacof_relaxation must be in (0, 2)")
+        need(self.window >= 2, "window (p) must be >= 2")
+
+    @classmethod
+    def with_options(cls, base: "StmdsConfig | None" = None, **options: Any) -> "StmdsConfig":
+        """``base`` (or the defaults) with ``options`` replaced; unknown names are refused."""
+        names = {f.name for f in fields(cls)}
+        unknown = sorted(set(options) - names)
+        if unknown:
+            raise ConfigError(f"unknown BOM-STMDS option(s) {unknown}; known options: "
+                              f"{sorted(names)}")
+        return replace(base or cls(), **options)
+
+
+class _PoseWindow:
+    """The last ``p`` poses: odometry between them, their bearings and robot-landmark sums."""
+
+    def __init__(self, size: int) -> None:
+        self.size = size
+        self.t: list[int] = []
+        self.odom: list[np.ndarray] = []        # odom[k] leads from pose k-1 to pose k
+        self.bearing_idx: list[np.ndarray] = []  # dense landmark indices seen at the pose
+        self.bearings: list[np.ndarray] = []
+        self.rl_idx: list[np.ndarray] = []       # robot-landmark estimates: landmark index
+        self.rl_w: list[np.ndarray] = []         # sum of 1 / var
+        self.rl_wd: list[np.ndarray] = []        # sum of d / var
+
+    def reset(self) -> None:
+        self.__init__(self.size)  # type: ignore[misc]
+
+    def push(self, t: int, odom: np.ndarray | None, idx: np.ndarray,
+             bearings: np.ndarray) -> None:
+        if odom is None and self.t:
+            self.reset()
+        self.t.append(t)
+        self.odom.append(np.zeros(3) if odom is None else np.asarray(odom, float))
+        self.bearing_idx.append(idx)
+        self.bearings.append(bearings)
+        self.rl_idx.append(np.zeros(0, np.int64))
+        self.rl_w.append(np.zeros(0))
+        self.rl_wd.append(np.zeros(0))
+        if len(self.t) > self.size:
+            for lst in (self.t, self.odom, self.bearing_idx, self.bearings, self.rl_idx,
+                        self.rl_w, self.rl_wd):
+                del lst[0]
+
+    def add_ranges(self, k: int, idx: np.ndarray, dist: np.ndarray, var: np.ndarray) -> None:
+        """Fold robot-landmark distance estimates into pose ``k`` of the window."""
+        if k < 0 or k >= len(self.t) or idx.size == 0:
+            return
+        w = 1.0 / np.maximum(var, 1e-300)
+        old_i, old_w, old_wd = self.rl_idx[k], self.rl_w[k], self.rl_wd[k]
+        all_i = np.concatenate([old_i, idx])
+        uniq, inv = np.unique(all_i, return_inverse=True)
+        self.rl_idx[k] = uniq
+        self.rl_w[k] = np.bincount(inv, np.concatenate([old_w, w]), len(uniq))
+        self.rl_wd[k] = np.bincount(inv, np.concatenate([old_wd, w * dist]), len(uniq))
+
+    def robot_pairs(self, sigma: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray,
+                                                       np.ndarray]:
+        """Dead-reckoned distances between all poses of the window and their variances.
+
+        Returns ``(a, b, distance_m, variance_m2)`` with window positions ``a < b``.
+        """
+        m = len(self.t)
+        u = np.array(self.odom[1:]).reshape(-1, 3)
+        psi = np.concatenate([[0.0], np.cumsum(u[:, 2])])
+        c, s = np.cos(psi[:-1]), np.sin(psi[:-1])
+        step = np.column_stack([c * u[:, 0] - s * u[:, 1], s * u[:, 0] + c * u[:, 1]])
+        xy = np.concatenate([np.zeros((1, 2)), np.cumsum(step, axis=0)])
+        a, b = np.triu_indices(m, 1)
+        off = xy[b] - xy[a]
+        dist = np.hypot(off[:, 0], off[:, 1])
+        unit = off / np.maximum(dist, 1e-300)[:, None]
+        # First-order variance: motion k (pose k-1 -> k) moves the offset when a < k <= b.
+        k = np.arange(1, m)
+        inside = (k[None, :] > a[:, None]) & (k[None, :] <= b[:, None])       # (pairs, m-1)
+        # d off / d(dx, dy)_k = R(psi_{k-1}); projected on the unit offset.
+        rx = unit[:, None, 0] * c[None, :] + unit[:, None, 1] * s[None, :]
+        ry = -unit[:, None, 0] * s[None, :] + unit[:, None, 1] * c[None, :]
+        # d off / d dpsi_k turns every later motion: the lever is xy_b - xy_k.
+        lever = xy[b][:, None, :] - xy[k][None, :, :]
+        perp = unit[:, None, 0] * (-lever[..., 1]) + unit[:, None, 1] * lever[..., 0]
+        inside_turn = (k[None, :] > a[:, None]) & (k[None, :] < b[:, None])
+        var = (inside * (rx ** 2 * sigma[0] ** 2 + ry ** 2 * sigma[1] ** 2)).sum(1) \
+            + (inside_turn * perp ** 2).sum(1) * sigma[2] ** 2
+        return a, b, dist, var
+
+
+class StmdsMapper:
+    """BOM-STMDS (Methods 1 and 2, optionally localising) as a :class:`~bomgraph.mapper.Mapper`.
+
+    Parameters
+    ----------
+    header : StreamHeader
+        Sigmas, sensor range and priors of the stream.
+    config : StmdsConfig, optional
+        Defaults to ``StmdsConfig()`` (Method 2, the corrected fusion rule).
+    **options
+        Replace fields of ``config`` (e.g. ``fusion="paper"``).
+    """
+
+    def __init__(self, header: StreamHeader, config: StmdsConfig | None = None,
+                 **options: Any) -> None:
+        self.config = StmdsConfig.with_options(config, **options) if options else (
+            config or StmdsConfig())
+        cfg = self.config
+        self.header = header
+        self._bearing_sigma = float(header.bearing_sigma_rad)
+        if cfg.max_range_m is not None:
+            self._max_range = float(cfg.max_range_m)
+        elif header.sensor_range_m is not None:
+            self._max_range = cfg.max_range_factor * float(header.sensor_range_m)
+        else:
+            self._max_range = math.inf
+        self._ids = IdIndex()
+        self._store = DistanceStore(cfg.fusion, cfg.min_count)
+        self._prev_ids: np.ndarray | None = None   # sorted landmark ids seen at t-1
+        self._prev_bearings: np.ndarray | None = None
+        self._t = -1
+        self._n_steps = 0
+        self._n_gated = 0
+        self._triangulated = np.zeros(0, bool)   # by dense index: ever passed the gates
+        self._n_triangulated = 0
+        self._prev_xy = np.zeros((0, 2))   # previous map by dense landmark index (NaN: absent)
+        self._window = _PoseWindow(cfg.window) if cfg.localise else None
+        if header.priors:
+            pi = self._ids.lookup(np.array([p.i for p in header.priors], np.int64))
+            pj = self._ids.lookup(np.array([p.j for p in header.priors], np.int64))
+            self._store.add_priors(pi, pj, [p.distance_m for p in header.priors],
+                                   [p.sigma_m for p in header.priors])
+
+    # ------------------------------------------------------------------------------ steps
+    def step(self, step: Step) -> None:
+        """Triangulate the landmarks seen at ``t-1`` and ``t`` and fuse their pair distances."""
+        order = np.argsort(step.landmark_ids, kind="stable")
+        ids = step.landmark_ids[order]
+        brg = step.bearings_rad[order]
+        self._t = step.t
+        self._n_steps += 1
+        idx_now = self._ids.lookup(ids) if ids.size else np.zeros(0, np.int64)
+        if self._window is not None:
+            self._window.push(step.t, step.odom, idx_now, brg)
+        prev_ids, prev_brg = self._prev_ids, self._prev_bearings
+        self._prev_ids, self._prev_bearings = ids, brg
+        if step.odom is None or prev_ids is None or prev_ids.size == 0 or ids.size == 0:
+            return
+        pos = np.searchsorted(prev_ids, ids)
+        pos[pos >= prev_ids.size] = 0
+        common = prev_ids[pos] == ids
+        if not common.any():
+            return
+        sigma = step.odometry_sigma(self.header)
+        tri = triangulate_rays(step.odom, prev_brg[pos[common]], brg[common])
+        var_r1, var_r2 = range_variances(tri, sigma, self._bearing_sigma)
+        ok = gate_points(tri, var_r1, min_parallax_rad=self.config.min_parallax_rad,
+                         max_range_m=self._max_range,
+                         max_relative_range_sigma=self.config.max_relative_range_sigma)
+        idx = idx_now[common]
+        self._n_triangulated += int(ok.sum())
+        if len(self._triangulated) < len(self._ids):
+            grown = np.zeros(max(len(self._ids), 2 * len(self._triangulated)), bool)
+            grown[:len(self._triangulated)] = self._triangulated
+            self._triangulated = grown
+        self._triangulated[idx_now[common][ok]] = True
+        self._n_gated += int((~ok).sum())
+        if not ok.all():
+            tri = tri.subset(ok)
+            idx = idx[ok]
+            var_r1, var_r2 = var_r1[ok], var_r2[ok]
+        if self._window is not None:
+            self._window.add_ranges(len(self._window.t) - 2, idx, tri.range_prev_m, var_r1)
+            self._window.add_ranges(len(self._window.t) - 1, idx, tri.range_now_m, var_r2)
+        if len(tri) < 2:
+            return
+        pairs = pair_squared_distances(tri, sigma, self._bearing_sigma)
+        self._store.add(idx[pairs.first], idx[pairs.second], pairs.squared_distance_m2,
+                        pairs.variance_m4, pairs.offset_trace_m2)
+
+    # ------------------------------------------------------------------------------ map
+    def _base_info(self) -> dict[str, Any]:
+        cfg = self.config
+        return {"method": f"stmds-{cfg.method}" + ("-loc" if cfg.localise else ""),
+                "t": self._t, "fusion": cfg.fusion, "n_pairs_stored": len(self._store),
+                "n_triangulated": self._n_triangulated, "n_gated": self._n_gated}
+
+    def estimate(self) -> MapEstimate:
+        """The map now (and the window's poses when localising); never raises for lack of data."""
+        cfg = self.config
+        info = self._base_info()
+        known = self._store.known()
+        info["n_known_pairs"] = len(known)
+        n_lm = len(self._ids)
+        first, second = known.first, known.second
+        dist, var = known.distance_m, known.variance_m2
+        n_nodes = n_lm
+        robot_nodes = np.zeros(0, np.int64)
+        if self._window is not None and len(self._window.t) >= 1:
+            first, second, dist, var, robot_nodes = self._extend(first, second, dist, var, n_lm)
+            n_nodes = n_lm + len(robot_nodes)
+        if len(first) == 0:
+            self._prev_xy = np.zeros((0, 2))
+            info.update(reason="no known pair of landmarks yet", left_out=[])
+            return MapEstimate.empty(**info)
+        if not cfg.map_unobserved:
+            seen = np.ones(n_nodes, bool)
+            seen[:n_lm] = False
+            m_seen = min(len(self._triangulated), n_lm)
+            seen[:m_seen] = self._triangulated[:m_seen]
+            live = seen[first] & seen[second]
+            first, second, dist, var = first[live], second[live], dist[live], var[live]
+        touched = prune_low_degree(n_nodes, first, second, cfg.min_degree)
+        live = touched[first] & touched[second]
+        first, second, dist, var = first[live], second[live], dist[live], var[live]
+        if len(first) == 0:
+            self._prev_xy = np.zeros((0, 2))
+            info.update(reason=f"no landmarks with {cfg.min_degree} known distances yet",
+                        left_out=[])
+            return MapEstimate.empty(**info)
+        nodes = np.flatnonzero(touched)
+        local = np.full(n_nodes, -1, np.int64)
+        local[nodes] = np.arange(len(nodes))
+        lf, ls = local[first], local[second]
+        # the component with the most landmarks (robot positions do not count)
+        comp = largest_component(len(nodes), lf, ls, (nodes < n_lm).astype(float))
+        keep = np.zeros(len(nodes), bool)
+        keep[comp.kept] = True
+        sel = keep[lf] & keep[ls]
+        kept_nodes = nodes[comp.kept]
+        renum = np.full(len(nodes), -1, np.int64)
+        renum[comp.kept] = np.arange(len(comp.kept))
+        ef, es = renum[lf[sel]], renum[ls[sel]]
+        ed, ev = dist[sel], var[sel]
+        n = len(kept_nodes)
+        is_lm = kept_nodes < n_lm
+        left = np.concatenate([nodes[comp.left_out], np.flatnonzero(~touched)])
+        info["left_out"] = sorted(int(i) for i in self._ids.ids[left[left < n_lm]])
+        info["n_components"] = comp.n_components
+        info["n_mapped_pairs"] = int(sel.sum())
+
+        use_smacof = cfg.method == "smacof" and self._t >= cfg.smacof_from_t
+        full = shortest_path_completion(n, ef, es, ed, keep_known=cfg.dmc_keep_known)
+        xy_cs, _ = classical_scaling(full * full)
+        xy = xy_cs
+        info["reconstruction"] = "classical-scaling"
+        w = np.ones(len(ed)) if cfg.weights == "binary" else self._inverse_variance(ev)
+        if use_smacof and n >= 2:
+            init = self._warm_start(kept_nodes, xy_cs) if cfg.smacof_init == "previous" \
+                else xy_cs
+            res = smacof(n, ef, es, ed, init=init, weights=w, max_iter=cfg.smacof_max_iter,
+                         tol=cfg.smacof_tol, relaxation=cfg.smacof_relaxation,
+                         solver=LaplacianSolver(n, ef, es, w))
+            xy = res.points
+            info.update(reconstruction="smacof", smacof_iterations=res.n_iter,
+                        smacof_converged=res.converged)
+        info["stress1"] = stress1(xy, ef, es, ed, w) if len(ed) else 0.0
+        self._prev_xy = np.full((n_lm, 2), np.nan)
+        self._prev_xy[kept_nodes[is_lm]] = xy[is_lm]
+
+        lm_idx = kept_nodes[is_lm]
+        lm_ids = self._ids.ids[lm_idx]
+        lm_xy = xy[is_lm]
+        pose_t = poses = None
+        if self._window is not None and robot_nodes.size:
+            lm_xy, pose_t, poses, reflected = self._poses(kept_nodes, xy, n_lm, lm_idx, lm_xy)
+            info["reflected"] = reflected
+        order = np.argsort(lm_ids)
+        return MapEstimate(lm_ids[order], lm_xy[order], pose_t=pose_t, poses=poses, info=info)
+
+    @staticmethod
+    def _inverse_variance(var: np.ndarray) -> np.ndarray:
+        w = 1.0 / np.maximum(var, 1e-300)
+        return w / w.mean()
+
+    def _warm_start(self, kept_nodes: np.ndarray, xy_cs: np.ndarray) -> np.ndarray:
+        """The previous map where it has the node, else the CS map aligned onto it."""
+        prev_all = np.full((len(kept_nodes), 2), np.nan)
+        inside = kept_nodes < len(self._prev_xy)
+        prev_all[inside] = self._prev_xy[kept_nodes[inside]]
+        have = np.isfinite(prev_all[:, 0])
+        if have.sum() < 3:
+            return xy_cs
+        prev = prev_all[have]
+        if have.all():
+            return prev
+        al = align(xy_cs[have], prev, allow_reflection=True)
+        out = al.apply(xy_cs)
+        out[have] = prev
+        return out
+
+    # ------------------------------------------------------------------------------ III-E
+    def _extend(self, first: np.ndarray, second: np.ndarray, dist: np.ndarray,
+                var: np.ndarray, n_lm: int) -> tuple[np.ndarray, ...]:
+        """Append the window's robot positions as nodes ``n_lm + k`` with their distances."""
+        win = self._window
+        assert win is not None
+        m = len(win.t)
+        robot_nodes = n_lm + np.arange(m)
+        parts_f, parts_s, parts_d, parts_v = [first], [second], [dist], [var]
+        if m >= 2:
+            sigma = np.asarray(self.header.odometry_sigma, float)
+            a, b, d, v = win.robot_pairs(sigma)
+            parts_f.append(robot_nodes[a])
+            parts_s.append(robot_nodes[b])
+            parts_d.append(d)
+            parts_v.append(np.maximum(v, 1e-12))
+        for k in range(m):
+            if win.rl_idx[k].size:
+                w = win.rl_w[k]
+                parts_f.append(win.rl_idx[k])
+                parts_s.append(np.full(win.rl_idx[k].size, robot_nodes[k]))
+                parts_d.append(win.rl_wd[k] / w)
+                parts_v.append(1.0 / w)
+        return (np.concatenate(parts_f), np.concatenate(parts_s), np.concatenate(parts_d),
+                np.concatenate(parts_v), robot_nodes)
+
+    def _poses(self, kept_nodes: np.ndarray, xy: np.ndarray, n_lm: int, lm_idx: np.ndarray,
+               lm_xy: np.ndarray) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None,
+                                           bool]:
+        """Headings by resection; reflect the frame when the mirror image fits better."""
+        win = self._window
+        assert win is not None
+        where = {int(k): j for j, k in enumerate(kept_nodes)}
+        rows = [(k, where[n_lm + k]) for k in range(len(win.t)) if (n_lm + k) in where]
+        if not rows:
+            return lm_xy, None, None, False
+        lm_pos = {int(i): j for j, i in enumerate(lm_idx)}
+        ks = np.array([r[0] for r in rows])
+        robot_xy = xy[[r[1] for r in rows]]
+        best = None
+        for sign in (1.0, -1.0):
+            flip = np.array([1.0, sign])
+            psis, resid = [], 0.0
+            for row, k in enumerate(ks):
+                sel = [j for j, i in enumerate(win.bearing_idx[k]) if int(i) in lm_pos]
+                if not sel:
+                    psis.append(np.nan)
+                    continue
+                pts = lm_xy[[lm_pos[int(win.bearing_idx[k][j])] for j in sel]] * flip
+                r = robot_xy[row] * flip
+                direction = np.arctan2(pts[:, 1] - r[1], pts[:, 0] - r[0])
+                cand = direction - win.bearings[k][sel]
+                mean = math.atan2(np.sin(cand).mean(), np.cos(cand).mean())
+                psis.append(mean)
+                resid += float(np.sum(angle_residual(cand, mean) ** 2))
+            if best is None or resid < best[0]:
+                best = (resid, sign, np.array(psis))
+        assert best is not None
+        _, sign, psi = best
+        flip = np.array([1.0, sign])
+        psi = self._fill_headings(ks, psi)
+        poses = np.column_stack([robot_xy * flip, wrap_angle(psi)])
+        pose_t = np.array([win.t[k] for k in ks], np.int64)
+        good = np.isfinite(poses).all(axis=1)
+        return lm_xy * flip, pose_t[good], poses[good], bool(sign < 0)
+
+    def _fill_headings(self, ks: np.ndarray, psi: np.ndarray) -> np.ndarray:
+        """Poses that saw no mapped landmark take the heading of a neighbour plus odometry."""
+        win = self._window
+        assert win is not None
+        psi = psi.copy()
+        for _ in range(len(psi)):
+            miss = ~np.isfinite(psi)
+            if not miss.any() or miss.all():
+                break
+            for row in np.flatnonzero(miss):
+                k = ks[row]
+                if row > 0 and np.isfinite(psi[row - 1]) and ks[row - 1] == k - 1:
+                    psi[row] = psi[row - 1] + win.odom[k][2]
+                elif row + 1 < len(psi) and np.isfinite(psi[row + 1]) and ks[row + 1] == k + 1:
+                    psi[row] = psi[row + 1] - win.odom[k + 1][2]
+        return psi
+
+
+def _make(header: StreamHeader, method: str, localise: bool, options: dict) -> StmdsMapper:
+    config = options.pop("config", None)
+    base = config or StmdsConfig()
+    return StmdsMapper(header, StmdsConfig.with_options(base, method=method, localise=localise,
+                                                         **options))
+
+
+def make_stmds_cs(header: StreamHeader, **options: Any) -> StmdsMapper:
+    """Method 1: DMC-SPL + classical scaling at every estimate."""
+    return _make(header, "cs", False, options)
+
+
+def make_stmds_smacof(header: StreamHeader, **options: Any) -> StmdsMapper:
+    """Method 2: classical scaling before ``smacof_from_t``, weighted SMACOF from then on."""
+    return _make(header, "smacof", False, options)
+
+
+def make_stmds_cs_loc(header: StreamHeader, **options: Any) -> StmdsMapper:
+    """Method 1 with the last ``window`` robot positions in the matrix (III-E)."""
+    return _make(header, "cs", True, options)
+
+
+def make_stmds_smacof_loc(header: StreamHeader, **options: Any) -> StmdsMapper:
+    """Method 2 with the last ``window`` robot positions in the matrix (III-E)."""
+    return _make(header, "smacof", True, options)
+
+
+__all__ = ["StmdsConfig", "StmdsMapper", "make_stmds_cs", "make_stmds_smacof",
+           "make_stmds_cs_loc", "make_stmds_smacof_loc"]

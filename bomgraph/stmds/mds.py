@@ -1,0 +1,258 @@
+"""Coordinates from distances: classical scaling and weighted SMACOF (paper section III-D, eq. 6).
+
+Classical scaling double-centres the squared distance matrix, ``B = -1/2 J D2 J`` with
+``J = I - 11^T / n``, and takes the top two eigenpairs (``scipy.linalg.eigh`` with a subset of
+eigenvalues; negative eigenvalues are clipped to zero). It minimises Strain globally.
+
+Weighted SMACOF minimises the raw stress of eq. 6,
+``sigma(X) = sum_{known i<j} w_ij (delta_ij - |x_i - x_j|)^2``, by iterative majorisation: the
+Guttman transform ``X+ = V^+ B(X) X`` where ``V = sum w_ij (e_i - e_j)(e_i - e_j)^T`` is the
+weighted graph Laplacian and ``B(X) X`` is accumulated edge by edge (no dense ``n x n`` work).
+``V^+`` is never formed: the Laplacian with one vertex grounded is factorised once (sparse LU)
+and the factorisation is reused by every iteration; the grounded solution is then centred, which
+equals ``V^+ b`` for a connected graph. An over-relaxed step ``X + alpha (X+ - X)`` with
+``0 < alpha < 2`` still never increases the stress (the majoriser is a quadratic symmetric about
+``X+``); ``alpha = 1`` is the textbook algorithm. Weights are binary (the paper) or inverse
+variances of the fused distances (an option, chosen by the caller). Stress-1 is
+``sqrt(sigma(X) / sum w delta^2)``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.linalg
+from scipy.sparse import coo_matrix
+from scipy.sparse.linalg import splu
+
+from ..errors import ConfigError, DegenerateGeometryError
+
+
+def double_centre(squared_distance: np.ndarray) -> np.ndarray:
+    """``-1/2 J D2 J`` of a symmetric ``(n, n)`` squared distance matrix (a new array)."""
+    d2 = np.asarray(squared_distance, dtype=float)
+    row = d2.mean(axis=1)
+    total = row.mean()
+    return -0.5 * (d2 - row[:, None] - row[None, :] + total)
+
+
+def classical_scaling(squared_distance: np.ndarray, dim: int = 2) -> tuple[np.ndarray, np.ndarray]:
+    """Classical (Torgerson) scaling of a complete squared distance matrix.
+
+    Parameters
+    ----------
+    squared_distance : array of shape (n, n)
+        Symmetric, zero diagonal, finite (m^2).
+    dim : int
+        Embedding dimension.
+
+    Returns
+    -------
+    points : ndarray of shape (n, dim)
+        Centred coordinates (m).
+    eigenvalues : ndarray of shape (dim,)
+        The top eigenvalues of ``B``, descending (before clipping at zero).
+    """
+    d2 = np.asarray(squared_distance, dtype=float)
+    n = d2.shape[0]
+    if d2.shape != (n, n):
+        raise ConfigError(f"classical_scaling: need a square matrix, got {d2.shape}")
+    if not np.all(np.isfinite(d2)):
+        raise DegenerateGeometryError("classical_scaling: the squared distance matrix has "
+                                      "missing (non-finite) entries; complete it first "
+                                      "(shortest_path_completion)")
+    if n == 0:
+        return np.zeros((0, dim)), np.zeros(dim)
+    b = double_centre(d2)
+    k = min(dim, n)
+    vals, vecs = scipy.linalg.eigh(b, subset_by_index=[n - k, n - 1], check_finite=False)
+    vals, vecs = vals[::-1], vecs[:, ::-1]
+    pts = np.zeros((n, dim))
+    pts[:, :k] = vecs * np.sqrt(np.maximum(vals, 0.0))
+    ev = np.zeros(dim)
+    ev[:k] = vals
+    return pts, ev
+
+
+def raw_stress(points: np.ndarray, first: np.ndarray, second: np.ndarray,
+               dissimilarity: np.ndarray, weights: np.ndarray) -> float:
+    """Eq. 6: ``sum w (delta - |x_i - x_j|)^2`` over the listed pairs."""
+    diff = points[first] - points[second]
+    r = np.sqrt(np.einsum("pa,pa->p", diff, diff)) - dissimilarity
+    return float(np.dot(weights, r * r))
+
+
+def stress1(points: np.ndarray, first: np.ndarray, second: np.ndarray,
+            dissimilarity: np.ndarray, weights: np.ndarray) -> float:
+    """Kruskal's Stress-1 ``sqrt(raw stress / sum w delta^2)``."""
+    norm = float(np.dot(weights, dissimilarity * dissimilarity))
+    if norm <= 0:
+        return 0.0
+    return float(np.sqrt(raw_stress(points, first, second, dissimilarity, weights) / norm))
+
+
+class LaplacianSolver:
+    """Solves ``V y = b`` for the weighted Laplacian ``V`` of a connected graph (``b`` summing to
+    zero), returning the centred solution ``V^+ b``; factorised once, reused.
+
+    Parameters
+    ----------
+    n : int
+    first, second : arrays of shape (P,)
+        Edges (each once).
+    weights : array of shape (P,)
+        Positive edge weights.
+    """
+
+    def __init__(self, n: int, first: np.ndarray, second: np.ndarray,
+                 weights: np.ndarray) -> None:
+        self.n = n
+        if n <= 1:
+            self._lu = None
+            return
+        w = np.asarray(weights, float)
+        deg = np.bincount(first, w, n) + np.bincount(second, w, n)
+        rows = np.concatenate([first, second, np.arange(n)])
+        cols = np.concatenate([second, first, np.arange(n)])
+        vals = np.concatenate([-w, -w, deg])
+        lap = coo_matrix((vals, (rows, cols)), shape=(n, n)).tocsc()
+        self._lu = splu(lap[1:, 1:].tocsc())
+
+    def solve(self, b: np.ndarray) -> np.ndarray:
+        """``V^+ b`` for ``b`` of shape (n, k) with zero column sums."""
+        if self._lu is None:
+            return np.zeros_like(b)
+        y = np.zeros_like(b)
+        y[1:] = self._lu.solve(np.ascontiguousarray(b[1:]))
+        return y - y.mean(axis=0)
+
+
+@dataclass(frozen=True, eq=False)
+class SmacofResult:
+    """The outcome of :func:`smacof`.
+
+    Attributes
+    ----------
+    points : ndarray of shape (n, dim)
+        Centred coordinates (m).
+    stress1 : float
+        Stress-1 of ``points``.
+    raw_stress : float
+        Eq. 6 at ``points``.
+    n_iter : int
+        Guttman transforms applied.
+    converged : bool
+        The relative stress decrease fell below ``tol`` before ``max_iter``.
+    history : ndarray of shape (n_iter + 1,)
+        Raw stress before each iteration and at the end (non-increasing).
+    """
+
+    points: np.ndarray
+    stress1: float
+    raw_stress: float
+    n_iter: int
+    converged: bool
+    history: np.ndarray
+
+
+def _smacof_single(x: np.ndarray, first: np.ndarray, second: np.ndarray, delta: np.ndarray,
+                   weights: np.ndarray, solver: LaplacianSolver, max_iter: int, tol: float,
+                   relaxation: float) -> tuple[np.ndarray, list[float], bool]:
+    """The SMACOF loop (one vectorised Guttman transform per iteration).
+
+    Returns the final points, the raw stress history (starting point first) and whether the
+    relative decrease fell below ``tol``. An iterate whose stress rose (only possible through
+    round-off at a stationary point) is not accepted.
+    """
+    n, dim = x.shape
+    wd = weights * delta
+    x = x - x.mean(axis=0)
+    diff = x[first] - x[second]
+    dist = np.sqrt(np.einsum("pa,pa->p", diff, diff))
+    r = dist - delta
+    s = float(np.dot(weights, r * r))
+    history = [s]
+    bx = np.empty_like(x)
+    for _ in range(max_iter):
+        if s == 0.0:
+            return x, history, True
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ratio = np.where(dist > 0, wd / dist, 0.0)
+        c = ratio[:, None] * diff
+        for a in range(dim):
+            bx[:, a] = np.bincount(first, c[:, a], n) - np.bincount(second, c[:, a], n)
+        g = solver.solve(bx)
+        x_new = g if relaxation == 1.0 else x + relaxation * (g - x)
+        diff_new = x_new[first] - x_new[second]
+        dist_new = np.sqrt(np.einsum("pa,pa->p", diff_new, diff_new))
+        r = dist_new - delta
+        s_new = float(np.dot(weights, r * r))
+        if s_new > s:
+            return x, history, True
+        x, diff, dist = x_new, diff_new, dist_new
+        history.append(s_new)
+        done = (s - s_new) <= tol * s
+        s = s_new
+        if done:
+            return x, history, True
+    return x, history, False
+
+
+def smacof(n: int, first: np.ndarray, second: np.ndarray, dissimilarity: np.ndarray, *,
+           init: np.ndarray, weights: np.ndarray | None = None, max_iter: int = 300,
+           tol: float = 1e-6, relaxation: float = 1.0,
+           solver: LaplacianSolver | None = None) -> SmacofResult:
+    """Weighted SMACOF on the known pairs only (eq. 6), started from ``init``.
+
+    Parameters
+    ----------
+    n : int
+        Number of points; the graph of ``first -- second`` must be connected.
+    first, second : arrays of shape (P,), int
+        The known pairs (each once).
+    dissimilarity : array of shape (P,)
+        Target distances (m, not squared).
+    init : array of shape (n, dim)
+        Starting coordinates (e.g. classical scaling after DMC-SPL, or the previous map).
+    weights : array of shape (P,), optional
+        Positive weights; all ones (the paper's binary weights) if None.
+    max_iter : int
+        Most Guttman transforms.
+    tol : float
+        Stop when the raw stress decreases by less than ``tol`` times itself.
+    relaxation : float
+        Step ``X + relaxation (X+ - X)``, in ``(0, 2)``; 1 is the plain Guttman transform.
+    solver : LaplacianSolver, optional
+        A factorisation of the weighted Laplacian to reuse.
+
+    Returns
+    -------
+    SmacofResult
+    """
+    first = np.asarray(first, np.int64)
+    second = np.asarray(second, np.int64)
+    delta = np.asarray(dissimilarity, float)
+    w = np.ones_like(delta) if weights is None else np.asarray(weights, float)
+    x0 = np.array(init, dtype=float)
+    if x0.ndim != 2 or x0.shape[0] != n:
+        raise ConfigError(f"smacof: init must have shape (n={n}, dim), got {x0.shape}")
+    if not (first.shape == second.shape == delta.shape == w.shape):
+        raise ConfigError("smacof: first, second, dissimilarity and weights differ in length")
+    if np.any(w <= 0) or not np.all(np.isfinite(w)):
+        raise ConfigError("smacof: weights must be finite and > 0 (leave unknown pairs out)")
+    if not 0 < relaxation < 2:
+        raise ConfigError(f"smacof: relaxation must be in (0, 2), got {relaxation}")
+    if max_iter < 0:
+        raise ConfigError("smacof: max_iter must be >= 0")
+    if solver is None:
+        solver = LaplacianSolver(n, first, second, w)
+    x, hist, conv = _smacof_single(x0, first, second, delta, w, solver, max_iter, tol,
+                                   relaxation)
+    norm = float(np.dot(w, delta * delta))
+    s1 = float(np.sqrt(hist[-1] / norm)) if norm > 0 else 0.0
+    return SmacofResult(x, s1, hist[-1], len(hist) - 1, conv, np.array(hist))
+
+
+__all__ = ["double_centre", "classical_scaling", "raw_stress", "stress1", "LaplacianSolver",
+           "SmacofResult", "smacof"]
