@@ -1,0 +1,241 @@
+"""Strict line parsing shared by the dataset importers.
+
+Real recordings arrive as whitespace-separated text (MRCLAM ``.dat``, g2o, GTSAM's Victoria
+Park file). These helpers read them with one rule: a line that cannot be read is a
+:class:`~bomgraph.errors.DatasetError` naming the file, the line number and the field, with
+what to fix. Nothing is skipped except comment lines (starting with the comment character) and
+whitespace-only lines, which carry no data.
+
+Files ending in ``.gz`` are decompressed transparently; CRLF line endings, tabs and trailing
+blanks are accepted (a public MRCLAM copy uses them).
+"""
+
+from __future__ import annotations
+
+import gzip
+import math
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Iterator, Literal, Sequence
+
+import numpy as np
+
+from ..errors import DatasetError
+
+FieldKind = Literal["int", "float"]
+
+
+def dataset_error(path: str | os.PathLike[str], line: int | None, field: str | None,
+                  message: str) -> DatasetError:
+    """A :class:`DatasetError` whose message starts with ``file, line N: field 'f':``."""
+    where = str(path)
+    if line is not None:
+        where += f", line {line}"
+    if field is not None:
+        where += f": field '{field}'"
+    return DatasetError(f"{where}: {message}")
+
+
+def find_file(directory: str | os.PathLike[str], name: str) -> Path:
+    """``directory/name`` or, failing that, ``directory/name.gz``.
+
+    Raises
+    ------
+    DatasetError
+        When neither exists (the message lists what was tried).
+    """
+    d = Path(directory)
+    for candidate in (d / name, d / (name + ".gz")):
+        if candidate.is_file():
+            return candidate
+    raise DatasetError(f"{d}: neither {name} nor {name}.gz exists; check the dataset "
+                       f"directory (each MRCLAM folder holds Barcodes.dat, "
+                       f"Landmark_Groundtruth.dat and RobotN_*.dat)")
+
+
+def has_file(directory: str | os.PathLike[str], name: str) -> bool:
+    """Whether ``directory/name`` or ``directory/name.gz`` exists."""
+    d = Path(directory)
+    return (d / name).is_file() or (d / (name + ".gz")).is_file()
+
+
+def read_text(path: str | os.PathLike[str]) -> str:
+    """The whole file as text (gzip-decompressed if the name ends in ``.gz``).
+
+    Raises
+    ------
+    DatasetError
+        When the file is missing, unreadable, not gzip despite its name, or not ASCII/UTF-8.
+    """
+    p = Path(path)
+    try:
+        raw = gzip.decompress(p.read_bytes()) if p.suffix == ".gz" else p.read_bytes()
+    except FileNotFoundError:
+        raise DatasetError(f"{p}: file not found; check the path") from None
+    except (OSError, EOFError) as exc:
+        raise DatasetError(f"{p}: cannot read ({exc}); if it is not gzip data, drop the .gz "
+                           f"suffix") from None
+    try:
+        return raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = raw[:exc.start].count(b"\n") + 1
+        raise dataset_error(p, line, None, f"not UTF-8 text (byte {exc.start}); the file "
+                                           f"is corrupt or not a text dataset") from None
+
+
+@dataclass(frozen=True)
+class Line:
+    """One data line: its 1-based number in the file and its whitespace-separated tokens."""
+
+    number: int
+    tokens: list[str]
+
+
+def data_lines(text: str, *, comment: str | None = "#") -> Iterator[Line]:
+    """The non-comment, non-blank lines of ``text`` with their 1-based line numbers."""
+    for number, raw in enumerate(text.splitlines(), start=1):
+        stripped = raw.strip()
+        if not stripped or (comment is not None and stripped.startswith(comment)):
+            continue
+        yield Line(number, stripped.split())
+
+
+def parse_float(token: str, path: str | os.PathLike[str], line: int, field: str) -> float:
+    """A finite float, or a DatasetError naming file, line and field."""
+    try:
+        value = float(token)
+    except ValueError:
+        raise dataset_error(path, line, field, f"cannot read {token[:40]!r} as a number; "
+                                               f"fix or delete this line") from None
+    if not math.isfinite(value):
+        raise dataset_error(path, line, field, f"{token[:40]!r} is not a finite number; "
+                                               f"fix or delete this line")
+    return value
+
+
+def parse_int(token: str, path: str | os.PathLike[str], line: int, field: str) -> int:
+    """An integer written without a fraction, or a DatasetError naming file, line, field."""
+    try:
+        return int(token)
+    except ValueError:
+        raise dataset_error(path, line, field, f"cannot read {token[:40]!r} as an integer; "
+                                               f"fix or delete this line") from None
+
+
+def read_table(path: str | os.PathLike[str], fields: Sequence[tuple[str, FieldKind]], *,
+               comment: str | None = "#") -> tuple[dict[str, np.ndarray], np.ndarray]:
+    """Read a whitespace-separated numeric table with exactly ``len(fields)`` columns.
+
+    Parameters
+    ----------
+    path : path-like
+        The file (``.gz`` is decompressed).
+    fields : sequence of (name, "int" | "float")
+        Column names (used in error messages and as keys of the result) and types.
+    comment : str or None
+        Lines starting with this are skipped.
+
+    Returns
+    -------
+    columns : dict of str to ndarray of shape (n,)
+        One array per column: int64 for "int", float64 for "float".
+    line_numbers : ndarray of shape (n,), int64
+        The 1-based line number of each row, for later error messages.
+
+    Raises
+    ------
+    DatasetError
+        On a wrong number of columns, an unreadable or non-finite number, naming the file,
+        the line number and the field.
+    """
+    names = [f for f, _ in fields]
+    columns: list[list[float | int]] = [[] for _ in fields]
+    numbers: list[int] = []
+    for line in data_lines(read_text(path), comment=comment):
+        numbers.append(line.number)
+        if len(line.tokens) != len(fields):
+            raise dataset_error(path, line.number, None,
+                                f"expected {len(fields)} fields ({', '.join(names)}), got "
+                                f"{len(line.tokens)}; fix or delete this line")
+        for k, ((name, kind), token) in enumerate(zip(fields, line.tokens)):
+            if kind == "int":
+                columns[k].append(parse_int(token, path, line.number, name))
+            else:
+                columns[k].append(parse_float(token, path, line.number, name))
+    table = {name: np.array(col, dtype=np.int64 if kind == "int" else float)
+             for (name, kind), col in zip(fields, columns)}
+    return table, np.array(numbers, dtype=np.int64)
+
+
+def chain_order(edges: Sequence[tuple[int, int, int]],
+                path: str | os.PathLike[str]) -> list[int]:
+    """Order pose ids along a single chain of odometry edges.
+
+    Parameters
+    ----------
+    edges : sequence of (from_id, to_id, line_number)
+        The odometry records in file order.
+    path : path-like
+        For error messages.
+
+    Returns
+    -------
+    list of int
+        Pose ids from the chain's start to its end (``len(edges) + 1`` of them).
+
+    Raises
+    ------
+    DatasetError
+        When a pose has two outgoing or two incoming edges, an edge joins a pose to itself, or
+        the edges form a loop or several chains (a stream holds one odometry chain).
+    """
+    succ: dict[int, tuple[int, int]] = {}
+    pred: dict[int, tuple[int, int]] = {}
+    for a, b, line in edges:
+        if a == b:
+            raise dataset_error(path, line, None, f"odometry from pose {a} to itself; fix or "
+                                                  f"delete this line")
+        if a in succ:
+            raise dataset_error(path, line, None,
+                                f"pose {a} already has odometry to pose {succ[a][0]} (line "
+                                f"{succ[a][1]}); a stream holds one odometry chain, so loop "
+                                f"closures and branches cannot be imported; delete one edge")
+        if b in pred:
+            raise dataset_error(path, line, None,
+                                f"pose {b} already has odometry from pose {pred[b][0]} (line "
+                                f"{pred[b][1]}); a stream holds one odometry chain, so loop "
+                                f"closures and branches cannot be imported; delete one edge")
+        succ[a] = (b, line)
+        pred[b] = (a, line)
+    starts = [a for a, _, _ in edges if a not in pred]
+    if not edges:
+        return []
+    if not starts:
+        raise dataset_error(path, edges[0][2], None, "the odometry edges form a closed loop; a "
+                                                     "stream needs a chain with a first pose")
+    if len(starts) > 1:
+        line = succ[starts[1]][1]
+        raise dataset_error(path, line, None,
+                            f"the odometry edges form {len(starts)} separate chains (starting "
+                            f"at poses {', '.join(str(s) for s in starts[:4])}); a stream "
+                            f"needs one unbroken chain")
+    order = [starts[0]]
+    while order[-1] in succ and len(order) <= len(edges):
+        order.append(succ[order[-1]][0])
+    if len(order) != len(edges) + 1:
+        # the chain from the start is shorter: the remaining edges form a loop
+        visited = set(order)
+        line = next(line for a, _, line in edges if a not in visited)
+        raise dataset_error(path, line, None, "this odometry edge is on a closed loop apart "
+                                              "from the main chain; a stream needs one chain")
+    return order
+
+
+def file_label(path: str | os.PathLike[str]) -> str:
+    """The file name alone, for metadata (no absolute paths in streams)."""
+    return Path(path).name
+
+
+__all__ = ["dataset_error", "find_file", "has_file", "read_text", "Line", "data_lines",
+           "parse_float", "parse_int", "read_table", "chain_order", "file_label"]

@@ -1,0 +1,312 @@
+"""Bearing-only g2o files -> a :class:`~bomgraph.stream.Stream` (issue 7, part 2).
+
+Reads the 2-D bearing-only subset of g2o's text format used by the Sapienza "Probabilistic
+Robotics" bearing-only SLAM project (``shared/data/bearing_only_sim_g2o/SOURCE.md``)::
+
+    VERTEX_SE2 id x y theta                 a pose (initial estimate, or truth in truth_path)
+    VERTEX_XY  id x y                       a landmark (likewise)
+    FIX id [id ...]                         gauge: vertices held fixed
+    EDGE_SE2 i j dx dy dth  I11 I12 I13 I22 I23 I33
+                                            odometry from pose i to pose j in the frame of i,
+                                            with the upper triangle of its INFORMATION matrix
+    EDGE_BEARING_SE2_XY i l bearing w       bearing from pose i to landmark l, information w
+
+Lines starting with ``#`` and blank lines are skipped; any other record is an error (this is
+not a general g2o reader). Poses become steps in the order of the ``EDGE_SE2`` chain, which
+must be one unbroken chain (no loop closures: the stream format holds one odometry chain).
+Landmark ids are the g2o vertex ids.
+
+**Odometry sigma.** g2o's ``EdgeSE2`` error is ``toVector(Z^-1 (X_i^-1 X_j))`` with ``Z`` the
+measurement: its translation part is the deviation of the predicted translation from the
+measured one rotated into the frame of ``Z``, ``e_t = R(dth)^T (t_pred - t_meas)``; its angle
+part is ``th_pred - th_meas``. The stream's sigmas are on the components of ``[dx, dy, dpsi]``
+in the frame of pose i, so the covariance ``Omega^-1`` is mapped by ``J = diag(R(dth), 1)``:
+``Sigma_stream = J Omega^-1 J^T``, and each sigma is the square root of a diagonal entry. The
+stream keeps no correlations; the largest dropped correlation coefficient goes to
+``meta["odometry_max_dropped_correlation"]``. If every edge gives the same sigmas they are the
+header's ``odometry_sigma``; otherwise each step carries its own ``odom_sigma`` and the header
+holds the per-component median.
+
+**Bearing sigma.** ``1 / sqrt(w)`` of the bearing edges (their median if they differ; the
+spread goes to meta). The project's notes call ``w`` a placeholder: pass ``bearing_sigma_rad``
+to override it. With ``truth_path`` the residuals against the truth are measured and recorded
+in ``meta["truth_check"]`` (they are not used for the header).
+
+**Truth.** ``truth_path`` is read for its ``VERTEX_SE2`` (one per step, matched by id) and
+``VERTEX_XY`` lines; its edges are ignored (the project's ground-truth file repeats the noisy
+edges). The vertices of ``path`` itself are initial estimates: they are counted in meta, not
+used.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..angles import angle_residual
+from ..errors import DatasetError
+from ..geometry import between
+from ..stream import Step, Stream, StreamHeader, Truth
+from ._text import (chain_order, data_lines, dataset_error, file_label, parse_float,
+                    parse_int, read_text)
+from .mrclam import bearing_residuals, robust_bearing_stats
+
+_RECORDS = {
+    "VERTEX_SE2": ["id", "x", "y", "theta"],
+    "VERTEX_XY": ["id", "x", "y"],
+    "EDGE_SE2": ["i", "j", "dx", "dy", "dth", "I11", "I12", "I13", "I22", "I23", "I33"],
+    "EDGE_BEARING_SE2_XY": ["i", "l", "bearing", "w"],
+}
+_INT_FIELDS = {"id", "i", "j", "l"}
+
+
+class _G2oFile:
+    """The records of one g2o file, validated line by line."""
+
+    def __init__(self, path: str | os.PathLike[str]) -> None:
+        self.path = Path(path)
+        self.poses: dict[int, tuple[np.ndarray, int]] = {}
+        self.landmarks: dict[int, tuple[np.ndarray, int]] = {}
+        self.odometry: list[tuple[int, int, int, np.ndarray, np.ndarray]] = []
+        self.bearings: list[tuple[int, int, int, float, float]] = []
+        self.fixed: list[int] = []
+        for line in data_lines(read_text(self.path)):
+            tag = line.tokens[0]
+            if tag == "FIX":
+                if len(line.tokens) < 2:
+                    raise dataset_error(self.path, line.number, "id",
+                                        "FIX needs at least one vertex id")
+                self.fixed += [parse_int(tok, self.path, line.number, "id")
+                               for tok in line.tokens[1:]]
+                continue
+            if tag not in _RECORDS:
+                raise dataset_error(self.path, line.number, "tag",
+                                    f"unsupported record {tag[:40]!r}; this importer reads "
+                                    f"{', '.join(sorted(_RECORDS))} and FIX (bearing-only "
+                                    f"2-D SLAM); remove the line or convert the file")
+            names = _RECORDS[tag]
+            if len(line.tokens) - 1 != len(names):
+                raise dataset_error(self.path, line.number, None,
+                                    f"{tag} needs {len(names)} fields ({' '.join(names)}), got "
+                                    f"{len(line.tokens) - 1}; fix or delete this line")
+            vals: dict[str, Any] = {}
+            for name, tok in zip(names, line.tokens[1:]):
+                if name in _INT_FIELDS:
+                    vals[name] = parse_int(tok, self.path, line.number, name)
+                    if vals[name] < 0:
+                        raise dataset_error(self.path, line.number, name,
+                                            f"vertex id must be >= 0, got {vals[name]}")
+                else:
+                    vals[name] = parse_float(tok, self.path, line.number, name)
+            self._add(tag, vals, line.number)
+
+    def _add(self, tag: str, v: dict[str, Any], line: int) -> None:
+        if tag in ("VERTEX_SE2", "VERTEX_XY"):
+            vid = v["id"]
+            if vid in self.poses or vid in self.landmarks:
+                first = (self.poses.get(vid) or self.landmarks[vid])[1]
+                raise dataset_error(self.path, line, "id", f"vertex {vid} is defined twice "
+                                                           f"(first on line {first})")
+            if tag == "VERTEX_SE2":
+                self.poses[vid] = (np.array([v["x"], v["y"], v["theta"]]), line)
+            else:
+                self.landmarks[vid] = (np.array([v["x"], v["y"]]), line)
+        elif tag == "EDGE_SE2":
+            info = np.array([[v["I11"], v["I12"], v["I13"]],
+                             [v["I12"], v["I22"], v["I23"]],
+                             [v["I13"], v["I23"], v["I33"]]])
+            if not np.all(np.linalg.eigvalsh(info) > 0):
+                raise dataset_error(self.path, line, "information",
+                                    "the information matrix (I11 I12 I13 I22 I23 I33) is not "
+                                    "positive definite; give a valid information matrix")
+            self.odometry.append((v["i"], v["j"], line,
+                                  np.array([v["dx"], v["dy"], v["dth"]]), info))
+        else:
+            if not v["w"] > 0:
+                raise dataset_error(self.path, line, "w", f"bearing information must be > 0, "
+                                                          f"got {v['w']}")
+            self.bearings.append((v["i"], v["l"], line, v["bearing"], v["w"]))
+
+
+def odometry_sigma_from_information(dth_rad: float, information: np.ndarray
+                                    ) -> tuple[np.ndarray, float]:
+    """Independent ``[dx, dy, dpsi]`` sigmas of a g2o ``EDGE_SE2`` (module docstring).
+
+    Parameters
+    ----------
+    dth_rad : float
+        The edge's measured rotation (its error is expressed in the measurement's frame).
+    information : ndarray of shape (3, 3)
+        The edge's information matrix, positive definite.
+
+    Returns
+    -------
+    sigma : ndarray of shape (3,)
+        ``[sigma_dx_m, sigma_dy_m, sigma_dpsi_rad]``.
+    max_correlation : float
+        The largest absolute correlation coefficient the independent sigmas drop.
+    """
+    c, s = math.cos(dth_rad), math.sin(dth_rad)
+    jac = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    cov = jac @ np.linalg.inv(information) @ jac.T
+    sigma = np.sqrt(np.diag(cov))
+    corr = cov / np.outer(sigma, sigma)
+    return sigma, float(np.max(np.abs(corr[np.triu_indices(3, 1)])))
+
+
+def import_g2o(path: str | os.PathLike[str], *, truth_path: str | os.PathLike[str] | None = None,
+               bearing_sigma_rad: float | None = None) -> Stream:
+    """Import a bearing-only g2o file (see the module docstring).
+
+    Parameters
+    ----------
+    path : path-like
+        The g2o file with the measurement edges (e.g. the initial-guess file).
+    truth_path : path-like, optional
+        A g2o file whose vertices are the ground truth (one ``VERTEX_SE2`` per pose of the
+        chain; ``VERTEX_XY`` for the landmarks).
+    bearing_sigma_rad : float, optional
+        Overrides the sigma derived from the bearing edges' information.
+
+    Returns
+    -------
+    Stream
+        One step per pose along the odometry chain; no time stamps.
+
+    Raises
+    ------
+    DatasetError
+        A malformed line (file, line, field), odometry that is not one chain, a bearing from a
+        pose that is not on the chain, a repeated bearing, or truth that misses a pose.
+    """
+    g = _G2oFile(path)
+    edges = [(i, j, line) for i, j, line, _, _ in g.odometry]
+    order = chain_order(edges, g.path)
+    if not order:
+        observers = sorted({i for i, _, _, _, _ in g.bearings})
+        if len(observers) > 1:
+            raise dataset_error(g.path, None, None,
+                                f"bearings from {len(observers)} poses but no EDGE_SE2 "
+                                f"odometry joining them; a stream needs one odometry chain")
+        if not observers and not g.poses:
+            raise dataset_error(g.path, None, None, "no EDGE_SE2 and no EDGE_BEARING_SE2_XY "
+                                                    "records: nothing to import")
+        order = observers or [min(g.poses)]
+    step_of = {pid: t for t, pid in enumerate(order)}
+    pose_ids = set(step_of)
+
+    # odometry ------------------------------------------------------------------------------
+    by_target = {j: (meas, info) for _, j, _, meas, info in g.odometry}
+    odoms = np.zeros((len(order) - 1, 3))
+    sig = np.zeros((len(order) - 1, 3))
+    max_corr = 0.0
+    for t, pid in enumerate(order[1:], start=0):
+        meas, info = by_target[pid]
+        odoms[t] = meas
+        sig[t], corr = odometry_sigma_from_information(meas[2], info)
+        max_corr = max(max_corr, corr)
+    uniform = len(sig) == 0 or bool(np.allclose(sig, sig[0], rtol=1e-9, atol=0.0))
+    header_odo = (tuple(float(v) for v in sig[0]) if len(sig) and uniform
+                  else tuple(float(v) for v in np.median(sig, axis=0)) if len(sig)
+                  else (0.0, 0.0, 0.0))
+
+    # bearings ------------------------------------------------------------------------------
+    per_step: list[dict[int, float]] = [{} for _ in order]
+    first_line: dict[tuple[int, int], int] = {}
+    weights = []
+    for i, lid, line, brg, w in g.bearings:
+        if i not in step_of:
+            kind = "a landmark" if i in g.landmarks else "not on the odometry chain"
+            raise dataset_error(g.path, line, "i", f"bearing from vertex {i}, which is {kind}; "
+                                                   f"the first id must be a pose of the chain")
+        if lid in pose_ids:
+            raise dataset_error(g.path, line, "l", f"bearing to vertex {lid}, which is a pose; "
+                                                   f"the second id must be a landmark")
+        if (i, lid) in first_line:
+            raise dataset_error(g.path, line, None,
+                                f"a second bearing from pose {i} to landmark {lid} (first on "
+                                f"line {first_line[(i, lid)]}); one landmark appears at most "
+                                f"once per step: merge or delete one")
+        first_line[(i, lid)] = line
+        per_step[step_of[i]][lid] = brg
+        weights.append(w)
+    w_arr = np.array(weights, dtype=float)
+    if bearing_sigma_rad is not None:
+        if not (math.isfinite(bearing_sigma_rad) and bearing_sigma_rad > 0):
+            raise DatasetError(f"bearing_sigma_rad must be a finite number > 0, got "
+                               f"{bearing_sigma_rad!r}")
+        sigma_b = float(bearing_sigma_rad)
+        sigma_source = "given by the caller"
+    elif w_arr.size:
+        sigma_b = float(np.median(1.0 / np.sqrt(w_arr)))
+        sigma_source = "1/sqrt(w) of the EDGE_BEARING_SE2_XY information (median)"
+    else:
+        raise dataset_error(g.path, None, None, "no EDGE_BEARING_SE2_XY records, so no bearing "
+                                                "sigma; pass bearing_sigma_rad")
+
+    steps = []
+    for t, lms in enumerate(per_step):
+        ids = np.array(sorted(lms), dtype=np.int64)
+        steps.append(Step(t=t, odom=None if t == 0 else odoms[t - 1],
+                          landmark_ids=ids, bearings_rad=np.array([lms[k] for k in ids.tolist()]),
+                          odom_sigma=None if (t == 0 or uniform) else sig[t - 1]))
+
+    meta: dict[str, Any] = {
+        "source": "g2o bearing-only SLAM file",
+        "files": {"edges": file_label(g.path)},
+        "importer": "bomgraph.datasets.g2o.import_g2o",
+        "pose_ids": [int(p) for p in order],
+        "n_odometry_edges": len(g.odometry), "n_bearing_edges": len(g.bearings),
+        "initial_vertices_not_used": {"VERTEX_SE2": len(g.poses), "VERTEX_XY": len(g.landmarks)},
+        "fixed_vertex_ids": sorted(set(g.fixed)),
+        "fixed_steps": sorted(step_of[v] for v in set(g.fixed) if v in step_of),
+        "odometry_sigma_source": "EDGE_SE2 information, mapped to [dx, dy, dpsi] in the frame "
+                                 "of pose i (J = diag(R(dth), 1)), diagonal kept",
+        "odometry_sigma_per_step": not uniform,
+        "odometry_max_dropped_correlation": max_corr,
+        "bearing_sigma_source": sigma_source,
+        "bearing_information_range": ([float(w_arr.min()), float(w_arr.max())]
+                                      if w_arr.size else None),
+    }
+
+    truth = None
+    if truth_path is not None:
+        tg = _G2oFile(truth_path)
+        meta["files"]["truth"] = file_label(tg.path)
+        missing = [p for p in order if p not in tg.poses]
+        if missing:
+            raise dataset_error(tg.path, None, None,
+                                f"no VERTEX_SE2 for pose {missing[0]} ({len(missing)} of "
+                                f"{len(order)} poses missing); the truth needs every pose")
+        lm_ids = np.array(sorted(tg.landmarks), dtype=np.int64)
+        observed = {lid for _, lid, _, _, _ in g.bearings}
+        unknown = sorted(observed - set(lm_ids.tolist()))
+        if unknown:
+            raise dataset_error(tg.path, None, None,
+                                f"no VERTEX_XY for observed landmark {unknown[0]} "
+                                f"({len(unknown)} missing); the truth needs every landmark")
+        truth = Truth(lm_ids, np.array([tg.landmarks[k][0] for k in lm_ids.tolist()]
+                                       ).reshape(-1, 2),
+                      np.array([tg.poses[p][0] for p in order]).reshape(-1, 3))
+        check: dict[str, Any] = {}
+        tmp = Stream(StreamHeader(sigma_b, header_odo), tuple(steps), truth)
+        r, _, _ = bearing_residuals(tmp)
+        if r.size >= 2:
+            check["bearing"] = robust_bearing_stats(r)
+        if len(order) > 1:
+            inc = between(truth.poses[:-1], truth.poses[1:])
+            err = odoms - inc
+            err[:, 2] = angle_residual(odoms[:, 2], inc[:, 2])
+            check["odometry_rms_error"] = [float(v) for v in np.sqrt(np.mean(err ** 2, axis=0))]
+            check["odometry_mean_error"] = [float(v) for v in err.mean(axis=0)]
+        meta["truth_check"] = check
+
+    header = StreamHeader(bearing_sigma_rad=sigma_b, odometry_sigma=header_odo, meta=meta)
+    return Stream(header, tuple(steps), truth)
+
+
+__all__ = ["import_g2o", "odometry_sigma_from_information"]

@@ -1,0 +1,813 @@
+"""UTIAS MRCLAM recordings -> a bearing-only :class:`~bomgraph.stream.Stream` of keyframes.
+
+The paper (section IV) works on steps with parallax between consecutive poses: the simulated
+robot moves 10-20 cm per step. An MRCLAM robot moves at most 9 cm/s and its camera reports
+bursts of detections at about 4 Hz, so consecutive bursts are only a few centimetres apart.
+This importer turns one robot's recording (``shared/data/mrclam*/SOURCE.md``) into keyframes:
+
+1. **Rows.** ``Barcodes.dat`` maps the barcode column of ``RobotN_Measurement.dat`` to
+   subjects. By the dataset's rule subjects 1-5 are robots (their sightings are dropped) and
+   barcodes absent from the table are false detections (dropped); only subjects listed in
+   ``Landmark_Groundtruth.dat`` are landmarks, and the subject number is the landmark id.
+   Every dropped row is counted in ``meta["rows"]``; nothing vanishes silently. Ranges are
+   dropped (bearing-only); ``keep_ranges=True`` keeps them in ``meta["ranges_m"]``.
+2. **Odometry.** The logged velocity commands ``(v, w)`` are held from one odometry time to
+   the next (zero-order hold) and integrated exactly along circular arcs over the real time
+   differences, which gives a continuous dead-reckoned pose ``P(t)``. The commands take effect
+   ``command_delay_s`` (default 0.2 s) after their time stamp: on mrclam6 that lowers the
+   keyframe heading error from 0.094 to 0.080 rad RMS (mean over robots; delay 0, 0.1, 0.2,
+   0.3 s give 0.094, 0.085, 0.080, 0.081).
+3. **Bursts.** Detections whose timestamps differ by at most ``burst_gap_s`` form one burst
+   (the camera writes one frame's detections with up to 1 ms spread).
+4. **Keyframes.** The first burst is keyframe 0; a later burst becomes the next keyframe as
+   soon as the dead-reckoned motion since the previous keyframe reaches ``min_distance_m`` or
+   turns by ``min_turn_rad``. Keyframes are chosen from the odometry only, never from truth.
+   The odometry of step ``t`` is ``between(P(t_{t-1}), P(t_t))`` (``[dx, dy, dpsi]`` in the
+   frame of keyframe ``t-1``).
+5. **Attachment.** Each detection goes to the keyframe nearest in time if it is within
+   ``attach_window_s``; its bearing is re-expressed for the heading change the odometry shows
+   between the detection and the keyframe, ``b + (psi(t_m) - psi(t_k))``, which is exact for
+   rotation and needs no range. The translation in between (at most 9 cm/s times the window)
+   is neglected; it is part of the calibrated bearing sigma. If a landmark is detected more
+   than once for one keyframe, the detection closest in time is kept and the others are
+   counted in ``meta["rows"]["duplicate_in_keyframe"]``.
+6. **Truth.** The ground-truth pose at each keyframe time is interpolated linearly in x, y and
+   along the shorter arc in heading (:func:`interpolate_poses`). Keyframes exist only where
+   the robot's ground truth exists (bursts outside it, or inside a gap in it longer than
+   ``max_truth_gap_s``, are dropped and counted), so every step has a true pose.
+7. **Calibration** (``calibrate=True``, needs the robot's ground truth).
+
+   *Odometry.* Per step, the error ``e = odom - between(truth_{t-1}, truth_t)`` (heading by
+   :func:`~bomgraph.angles.angle_residual`) is modelled per component ``j`` as zero-mean
+   Gaussian with variance ``a_j^2 + (b_j l)^2 + (c_j |dpsi|)^2``, where ``l`` and ``dpsi`` are
+   the step's odometry length and turn. ``(a, b, c)`` are fitted by maximum likelihood
+   (started from a non-negative least-squares fit of ``e^2``); steps whose error exceeds 5
+   fitted sigmas are excluded and the fit repeated once. Each step's ``odom_sigma`` is the
+   model evaluated at its odometry; the header's ``odometry_sigma`` is the per-component median
+   of those.
+
+   *Bearings.* Residuals ``r = angle_residual(bearing, predicted from truth pose and truth
+   landmark)`` for every bearing in the stream. Location ``m = median(r)`` (the per-robot
+   bias), spread ``s = 1.4826 MAD(r)``; outliers are ``|r - m| > 5 s``. The header's
+   ``bearing_sigma_rad`` is the RMS of the inlier residuals about zero, so the bias (which no
+   mapper can remove) counts as error. Bias, spread, outlier and gross (> 0.2 rad) counts go to
+   ``meta["bearing_calibration"]``. Outliers stay in the stream: methods must cope with them.
+
+   Without calibration (``calibrate=False``, e.g. ``mrclam1``, which has no robot ground
+   truth) the sigmas are :data:`DEFAULT_ODOMETRY_MODEL` and :data:`DEFAULT_BEARING_SIGMA_RAD`,
+   measured on ``mrclam6`` robots 1-5 with the default keyframing (scripts/inspect_datasets.py).
+
+``header.sensor_range_m`` is the largest range measured among the kept detections (the ranges
+themselves are not in the stream).
+
+**Default thresholds** (``python scripts/inspect_datasets.py --sweep``: mrclam6 robots 1-5,
+command delay 0.2 s). Landmarks are 3.7 m away (median) and mostly ahead in a +-0.6 rad field
+of view, so the parallax between consecutive keyframes is small whatever the threshold (median
+about 0.8 deg at 0.3 m / 0.3 rad). The depth information of consecutive-keyframe
+triangulations, ``sum (parallax / sigma)^2``, stays between about 7,900 and 11,000 with no trend
+for distance thresholds from 0.05 m to 1.0 m, while the number of keyframes falls from 3,172 to
+297. Below 0.3 m the number of shared landmarks with more than 2 deg of parallax falls (142 at
+0.3 m, 94 at 0.2 m, 33 at 0.1 m, 0.3 s window). So 0.3 m is the smallest distance that keeps
+the parallax, and it gives filters and smoothers the most steps (689 over the five robots).
+0.3 rad of turn keeps three quarters of the 1.2 rad field of view shared between keyframes.
+Attachment windows of 0, 0.3 and 0.6 s (0, 1 and 2 bursts either side) keep 1,196, 1,639 and
+1,955 bearings, with residual spreads of 0.0105, 0.0107 and 0.0113 rad and calibrated sigmas
+of 0.0153, 0.0157 and 0.0165 rad; 0.6 s is the default (63 % more bearings for 8 % more
+sigma; the neglected translation is at most 5.4 cm). Re-expressing attached bearings by the
+odometry turn matters: without it the 0.6 s window gives a spread of 0.0133 and a sigma of
+0.0201 rad. Re-expressed bearings may lie slightly outside the camera's field of view.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any, Mapping
+
+import numpy as np
+from scipy.optimize import minimize, nnls
+
+from ..angles import angle_residual, wrap_angle
+from ..errors import ConfigError, DatasetError
+from ..geometry import between
+from ..stream import Step, Stream, StreamHeader, Truth
+from ._text import dataset_error, file_label, find_file, has_file, read_table
+
+ROBOT_SUBJECTS = (1, 2, 3, 4, 5)
+"""Subject numbers of the five robots (dataset rule, SOURCE.md quirk 1)."""
+
+GROSS_OUTLIER_RAD = 0.2
+"""A bearing residual beyond this is a gross outlier (SOURCE.md quirk 5)."""
+
+OUTLIER_MADS = 5.0
+"""Residuals farther than this many robust sigmas from the median are outliers."""
+
+DEFAULT_BEARING_SIGMA_RAD = 0.0160
+"""Bearing sigma used when not calibrating: the pooled calibration over mrclam6 robots 1-5
+with the default :class:`KeyframeConfig` (``python scripts/inspect_datasets.py``)."""
+
+DEFAULT_ODOMETRY_MODEL = ((0.0001, 0.0664, 0.0690),   # dx:   a [m], b [m/m], c [m/rad]
+                          (0.0048, 0.0634, 0.0016),   # dy
+                          (0.0274, 0.0949, 0.1382))   # dpsi: a [rad], b [rad/m], c [rad/rad]
+"""``(a, b, c)`` per component of the odometry sigma model used when not calibrating: the
+pooled fit over mrclam6 robots 1-5 with the default :class:`KeyframeConfig`."""
+
+_MIN_SIGMA_FLOOR = 1e-4
+"""Lower bound on the model's constant term ``a`` (a zero sigma would be infinite weight)."""
+
+MIN_BEARING_SIGMA_RAD = 1e-4
+"""Lower bound on a calibrated bearing sigma (noise-free input would give 0, not a valid
+stream header)."""
+
+
+@dataclass(frozen=True)
+class KeyframeConfig:
+    """How detections are grouped into keyframes (module docstring, steps 3-5).
+
+    Attributes
+    ----------
+    min_distance_m : float
+        A new keyframe once the odometry has travelled this far since the last one ...
+    min_turn_rad : float
+        ... or turned this much (whichever comes first).
+    burst_gap_s : float
+        Detections closer in time than this belong to one camera burst.
+    attach_window_s : float
+        Detections at most this far in time from a keyframe are attached to it.
+    rotate_bearings : bool
+        Re-express attached bearings by the odometry heading change (recommended).
+    max_truth_gap_s : float
+        Bursts inside a gap in the robot's ground truth longer than this are dropped.
+    command_delay_s : float
+        The logged velocity commands take effect this long after their time stamp (the
+        odometry time stamps are shifted by it before integration).
+    """
+
+    min_distance_m: float = 0.3
+    min_turn_rad: float = 0.3
+    burst_gap_s: float = 0.02
+    attach_window_s: float = 0.6
+    rotate_bearings: bool = True
+    max_truth_gap_s: float = 0.5
+    command_delay_s: float = 0.2
+
+    def __post_init__(self) -> None:
+        def need(ok: bool, msg: str) -> None:
+            if not ok:
+                raise ConfigError(f"KeyframeConfig: {msg}")
+
+        for name in ("min_distance_m", "min_turn_rad", "burst_gap_s", "attach_window_s",
+                     "max_truth_gap_s", "command_delay_s"):
+            v = getattr(self, name)
+            need(isinstance(v, (int, float)) and math.isfinite(v) and v >= 0,
+                 f"{name} must be a finite number >= 0, got {v!r}")
+        need(self.min_distance_m > 0 or self.min_turn_rad > 0,
+             "min_distance_m and min_turn_rad cannot both be 0 (every burst would be a "
+             "keyframe with no parallax); set at least one > 0")
+        need(self.min_turn_rad < math.pi, "min_turn_rad must be < pi")
+        need(self.max_truth_gap_s > 0, "max_truth_gap_s must be > 0")
+
+
+# --------------------------------------------------------------------------------------------
+# Reading the files
+# --------------------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class MrclamRobotData:
+    """The raw tables of one robot, as read (times in Unix seconds).
+
+    Attributes
+    ----------
+    barcode_subject : dict of int to int
+        Barcode number -> subject number.
+    landmark_ids : ndarray of shape (n,), int64
+    landmarks_xy : ndarray of shape (n, 2)
+    odometry : dict with "time_s", "v_mps", "w_radps", each (k,)
+    measurements : dict with "time_s", "barcode", "range_m", "bearing_rad", each (m,)
+    groundtruth : dict with "time_s", "x_m", "y_m", "psi_rad", each (g,), or None
+    files : dict of role -> file name
+    """
+
+    barcode_subject: Mapping[int, int]
+    landmark_ids: np.ndarray
+    landmarks_xy: np.ndarray
+    odometry: Mapping[str, np.ndarray]
+    measurements: Mapping[str, np.ndarray]
+    groundtruth: Mapping[str, np.ndarray] | None
+    files: Mapping[str, str]
+
+
+def _check_sorted(path: Path, time_s: np.ndarray, lines: np.ndarray) -> None:
+    bad = np.flatnonzero(np.diff(time_s) < 0)
+    if bad.size:
+        k = int(bad[0]) + 1
+        raise dataset_error(path, int(lines[k]), "time",
+                            f"time {time_s[k]:.3f} is earlier than the previous row's "
+                            f"{time_s[k - 1]:.3f}; rows must be in time order (sort the file)")
+
+
+def read_mrclam_robot(data_dir: str | os.PathLike[str], robot: int) -> MrclamRobotData:
+    """Read the files of one MRCLAM robot (``.dat`` or ``.dat.gz``).
+
+    Parameters
+    ----------
+    data_dir : path-like
+        The dataset folder (e.g. ``shared/data/mrclam6``).
+    robot : int
+        1..5.
+
+    Returns
+    -------
+    MrclamRobotData
+        ``groundtruth`` is None when ``RobotN_Groundtruth.dat`` is absent (mrclam1).
+
+    Raises
+    ------
+    DatasetError
+        On a missing file or a malformed line (naming file, line and field).
+    """
+    if isinstance(robot, bool) or not isinstance(robot, (int, np.integer)) \
+            or robot not in ROBOT_SUBJECTS:
+        raise DatasetError(f"robot must be one of 1, 2, 3, 4, 5, got {robot!r}")
+    d = Path(data_dir)
+    if not d.is_dir():
+        raise DatasetError(f"{d}: not a directory; pass the MRCLAM dataset folder")
+    files: dict[str, str] = {}
+
+    p = find_file(d, "Barcodes.dat")
+    files["barcodes"] = file_label(p)
+    bc, bc_lines = read_table(p, [("subject", "int"), ("barcode", "int")])
+    seen: dict[int, int] = {}
+    for k, (s, b) in enumerate(zip(bc["subject"].tolist(), bc["barcode"].tolist())):
+        if b in seen:
+            raise dataset_error(p, int(bc_lines[k]), "barcode",
+                                f"barcode {b} is listed twice (subjects {seen[b]} and {s}); "
+                                f"each barcode must name one subject")
+        seen[b] = s
+
+    p = find_file(d, "Landmark_Groundtruth.dat")
+    files["landmarks"] = file_label(p)
+    lm, lm_lines = read_table(p, [("subject", "int"), ("x", "float"), ("y", "float"),
+                                  ("x_std", "float"), ("y_std", "float")])
+    ids = lm["subject"]
+    _, first_index = np.unique(ids, return_index=True)
+    dup = np.setdiff1d(np.arange(ids.size), first_index)
+    if dup.size:
+        k = int(dup[0])
+        raise dataset_error(p, int(lm_lines[k]), "subject",
+                            f"landmark {int(ids[k])} is listed twice; keep one row")
+    robots_in_lm = np.isin(ids, ROBOT_SUBJECTS)
+    if robots_in_lm.any():
+        k = int(np.flatnonzero(robots_in_lm)[0])
+        raise dataset_error(p, int(lm_lines[k]), "subject",
+                            f"subject {int(ids[k])} is a robot (1-5), not a landmark")
+
+    p = find_file(d, f"Robot{robot}_Odometry.dat")
+    files["odometry"] = file_label(p)
+    od, od_lines = read_table(p, [("time", "float"), ("v", "float"), ("w", "float")])
+    if od["time"].size < 2:
+        raise DatasetError(f"{p}: needs at least 2 odometry rows to integrate, got "
+                           f"{od['time'].size}")
+    _check_sorted(p, od["time"], od_lines)
+
+    p = find_file(d, f"Robot{robot}_Measurement.dat")
+    files["measurements"] = file_label(p)
+    me, me_lines = read_table(p, [("time", "float"), ("barcode", "int"), ("range", "float"),
+                                  ("bearing", "float")])
+    _check_sorted(p, me["time"], me_lines)
+    neg = np.flatnonzero(me["range"] < 0)
+    if neg.size:
+        k = int(neg[0])
+        raise dataset_error(p, int(me_lines[k]), "range",
+                            f"negative range {me['range'][k]}; fix or delete this line")
+
+    gt = None
+    if has_file(d, f"Robot{robot}_Groundtruth.dat"):
+        p = find_file(d, f"Robot{robot}_Groundtruth.dat")
+        files["groundtruth"] = file_label(p)
+        g, g_lines = read_table(p, [("time", "float"), ("x", "float"), ("y", "float"),
+                                    ("heading", "float")])
+        if g["time"].size < 2:
+            raise DatasetError(f"{p}: needs at least 2 ground-truth rows to interpolate")
+        _check_sorted(p, g["time"], g_lines)
+        gt = {"time_s": g["time"], "x_m": g["x"], "y_m": g["y"], "psi_rad": g["heading"]}
+
+    return MrclamRobotData(
+        barcode_subject=seen, landmark_ids=ids,
+        landmarks_xy=np.column_stack([lm["x"], lm["y"]]),
+        odometry={"time_s": od["time"], "v_mps": od["v"], "w_radps": od["w"]},
+        measurements={"time_s": me["time"], "barcode": me["barcode"], "range_m": me["range"],
+                      "bearing_rad": me["bearing"]},
+        groundtruth=gt, files=files)
+
+
+# --------------------------------------------------------------------------------------------
+# Kinematics and interpolation
+# --------------------------------------------------------------------------------------------
+
+def _arc(v: np.ndarray, w: np.ndarray, dt: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Displacement ``(dx, dy)`` in the start frame of a constant-(v, w) arc of duration dt."""
+    th = w * dt
+    small = np.abs(th) < 1e-6
+    w_safe = np.where(small, 1.0, w)
+    # Series for tiny turns: sin(th)/w ~ dt (1 - th^2/6), (1 - cos th)/w ~ dt th / 2.
+    dx = np.where(small, v * dt * (1.0 - th * th / 6.0), v * np.sin(th) / w_safe)
+    dy = np.where(small, v * dt * th / 2.0, v * (1.0 - np.cos(th)) / w_safe)
+    return dx, dy
+
+
+def integrate_odometry(time_s: np.ndarray, v_mps: np.ndarray,
+                       w_radps: np.ndarray) -> np.ndarray:
+    """Dead-reckon velocity commands held constant between their time stamps.
+
+    Parameters
+    ----------
+    time_s : ndarray of shape (k,)
+        Non-decreasing time stamps.
+    v_mps, w_radps : ndarray of shape (k,)
+        Forward and angular velocity commanded from each time stamp to the next.
+
+    Returns
+    -------
+    ndarray of shape (k, 3)
+        Poses ``[x_m, y_m, psi_rad]`` at the time stamps, starting from the origin. The
+        heading is NOT wrapped (it is the cumulative turn), so differences of it are turns.
+    """
+    t = np.asarray(time_s, dtype=float)
+    v = np.asarray(v_mps, dtype=float)[:-1]
+    w = np.asarray(w_radps, dtype=float)[:-1]
+    dt = np.diff(t)
+    lx, ly = _arc(v, w, dt)
+    psi = np.concatenate([[0.0], np.cumsum(w * dt)])
+    c, s = np.cos(psi[:-1]), np.sin(psi[:-1])
+    x = np.concatenate([[0.0], np.cumsum(c * lx - s * ly)])
+    y = np.concatenate([[0.0], np.cumsum(s * lx + c * ly)])
+    return np.column_stack([x, y, psi])
+
+
+def odometry_poses_at(time_s: np.ndarray, v_mps: np.ndarray, w_radps: np.ndarray,
+                      poses: np.ndarray, query_s: np.ndarray) -> np.ndarray:
+    """The dead-reckoned pose at arbitrary times inside ``[time_s[0], time_s[-1]]``.
+
+    Parameters
+    ----------
+    time_s, v_mps, w_radps : ndarray of shape (k,)
+        The odometry log.
+    poses : ndarray of shape (k, 3)
+        :func:`integrate_odometry` of that log.
+    query_s : ndarray of shape (m,)
+        Query times (clipped to the log's span).
+
+    Returns
+    -------
+    ndarray of shape (m, 3)
+        Poses with unwrapped (cumulative) heading, exact along each held arc.
+    """
+    t = np.asarray(time_s, dtype=float)
+    q = np.clip(np.asarray(query_s, dtype=float), t[0], t[-1])
+    k = np.clip(np.searchsorted(t, q, side="right") - 1, 0, len(t) - 1)
+    dt = q - t[k]
+    v = np.asarray(v_mps, dtype=float)[k]
+    w = np.asarray(w_radps, dtype=float)[k]
+    lx, ly = _arc(v, w, dt)
+    p = poses[k]
+    c, s = np.cos(p[:, 2]), np.sin(p[:, 2])
+    return np.column_stack([p[:, 0] + c * lx - s * ly, p[:, 1] + s * lx + c * ly,
+                            p[:, 2] + w * dt])
+
+
+def interpolate_poses(time_s: np.ndarray, poses: np.ndarray,
+                      query_s: np.ndarray) -> np.ndarray:
+    """Interpolate poses in time: linear in x, y; along the shorter arc in heading.
+
+    Parameters
+    ----------
+    time_s : ndarray of shape (g,)
+        Non-decreasing time stamps of the known poses.
+    poses : ndarray of shape (g, 3)
+        ``[x_m, y_m, psi_rad]`` (heading may be wrapped).
+    query_s : ndarray of shape (m,)
+        Times inside ``[time_s[0], time_s[-1]]``.
+
+    Returns
+    -------
+    ndarray of shape (m, 3)
+        Interpolated poses, heading wrapped to (-pi, pi].
+    """
+    t = np.asarray(time_s, dtype=float)
+    p = np.asarray(poses, dtype=float)
+    q = np.asarray(query_s, dtype=float)
+    k = np.clip(np.searchsorted(t, q, side="right") - 1, 0, len(t) - 2)
+    span = t[k + 1] - t[k]
+    s = np.where(span > 0, (q - t[k]) / np.where(span > 0, span, 1.0), 0.0)
+    s = np.clip(s, 0.0, 1.0)
+    a, b = p[k], p[k + 1]
+    xy = a[:, :2] + s[:, None] * (b[:, :2] - a[:, :2])
+    psi = wrap_angle(a[:, 2] + s * angle_residual(b[:, 2], a[:, 2]))
+    return np.column_stack([xy, psi])
+
+
+def select_keyframes(poses: np.ndarray, min_distance_m: float,
+                     min_turn_rad: float) -> np.ndarray:
+    """Indices of the candidate poses that become keyframes.
+
+    Parameters
+    ----------
+    poses : ndarray of shape (n, 3)
+        Dead-reckoned poses of the candidates (bursts) in time order, cumulative heading.
+    min_distance_m, min_turn_rad : float
+        A candidate becomes a keyframe when its motion from the previous keyframe reaches
+        either threshold (a threshold of 0 is ignored). Candidate 0 is always a keyframe.
+
+    Returns
+    -------
+    ndarray of shape (K,), int64
+        Increasing indices, starting with 0 (empty if there are no candidates).
+    """
+    n = len(poses)
+    if n == 0:
+        return np.zeros(0, dtype=np.int64)
+    dist_on = min_distance_m > 0
+    turn_on = min_turn_rad > 0
+    out = [0]
+    last = poses[0]
+    # Sequential by nature: each choice depends on the previous keyframe.
+    for i in range(1, n):
+        u = between(last, poses[i])
+        if (dist_on and math.hypot(u[0], u[1]) >= min_distance_m) or \
+                (turn_on and abs(poses[i, 2] - last[2]) >= min_turn_rad):
+            out.append(i)
+            last = poses[i]
+    return np.array(out, dtype=np.int64)
+
+
+# --------------------------------------------------------------------------------------------
+# Calibration helpers (also used by the g2o importer and scripts/inspect_datasets.py)
+# --------------------------------------------------------------------------------------------
+
+def bearing_residuals(stream: Stream) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Residuals of every bearing in a stream against its truth poses and landmarks.
+
+    Parameters
+    ----------
+    stream : Stream
+        Must carry truth poses and the truth positions of every landmark observed.
+
+    Returns
+    -------
+    residual_rad : ndarray of shape (m,)
+        ``angle_residual(measured, predicted)``.
+    step_t : ndarray of shape (m,), int64
+        The step of each bearing.
+    landmark_ids : ndarray of shape (m,), int64
+    """
+    truth = stream.truth
+    if truth is None or truth.poses is None:
+        raise DatasetError("bearing residuals need truth poses; this stream has none")
+    counts = np.array([len(s.landmark_ids) for s in stream.steps], dtype=np.int64)
+    if counts.sum() == 0:
+        z = np.zeros(0)
+        return z, z.astype(np.int64), z.astype(np.int64)
+    step_t = np.repeat(np.arange(len(stream.steps)), counts)
+    ids = np.concatenate([s.landmark_ids for s in stream.steps])
+    meas = np.concatenate([s.bearings_rad for s in stream.steps])
+    order = np.argsort(truth.landmark_ids)
+    pos = np.searchsorted(truth.landmark_ids, ids, sorter=order)
+    pos = np.clip(pos, 0, len(order) - 1)
+    idx = order[pos]
+    missing = truth.landmark_ids[idx] != ids
+    if missing.any():
+        raise DatasetError(f"landmark {int(ids[missing][0])} is observed but has no truth "
+                           f"position")
+    pose = truth.poses[step_t]
+    lxy = truth.landmarks_xy[idx]
+    pred = angle_residual(np.arctan2(lxy[:, 1] - pose[:, 1], lxy[:, 0] - pose[:, 0]),
+                          pose[:, 2])
+    return angle_residual(meas, pred), step_t, ids
+
+
+def robust_bearing_stats(residual_rad: np.ndarray) -> dict[str, Any]:
+    """Bias, robust spread, outliers and the resulting bearing sigma of residuals.
+
+    Parameters
+    ----------
+    residual_rad : ndarray of shape (m,)
+
+    Returns
+    -------
+    dict
+        ``n``, ``bias_rad`` (median), ``spread_rad`` (1.4826 MAD), ``n_outliers``
+        (``|r - median| > OUTLIER_MADS * spread``), ``outlier_rate``, ``n_gross`` (``|r| >
+        GROSS_OUTLIER_RAD``), ``inlier_std_rad`` (about the inlier mean), ``sigma_rad`` (RMS of
+        inliers about zero: bias included; at least ``MIN_BEARING_SIGMA_RAD``),
+        ``max_abs_rad``.
+    """
+    r = np.asarray(residual_rad, dtype=float)
+    if r.size < 2:
+        raise DatasetError(f"need at least 2 bearing residuals to calibrate, got {r.size}")
+    med = float(np.median(r))
+    spread = 1.4826 * float(np.median(np.abs(r - med)))
+    out = np.abs(r - med) > OUTLIER_MADS * spread if spread > 0 else np.zeros(r.shape, bool)
+    inl = r[~out]
+    return {"n": int(r.size), "bias_rad": med, "spread_rad": spread,
+            "n_outliers": int(out.sum()), "outlier_rate": float(out.mean()),
+            "n_gross": int((np.abs(r) > GROSS_OUTLIER_RAD).sum()),
+            "inlier_std_rad": float(np.std(inl)),
+            "sigma_rad": max(float(np.sqrt(np.mean(inl ** 2))), MIN_BEARING_SIGMA_RAD),
+            "max_abs_rad": float(np.max(np.abs(r)))}
+
+
+def odometry_sigma_model(model: np.ndarray, odoms: np.ndarray) -> np.ndarray:
+    """Evaluate the sigma model ``sqrt(a^2 + (b l)^2 + (c |dpsi|)^2)`` per component.
+
+    Parameters
+    ----------
+    model : array of shape (3, 3)
+        Row j = ``(a_j, b_j, c_j)`` for component j of ``[dx, dy, dpsi]``.
+    odoms : array of shape (T, 3)
+
+    Returns
+    -------
+    ndarray of shape (T, 3)
+    """
+    m = np.asarray(model, dtype=float)
+    u = np.asarray(odoms, dtype=float).reshape(-1, 3)
+    reg = np.column_stack([np.ones(len(u)), np.hypot(u[:, 0], u[:, 1]), np.abs(u[:, 2])])
+    return np.sqrt((reg ** 2) @ (m ** 2).T)
+
+
+def fit_odometry_sigma(odoms: np.ndarray, errors: np.ndarray) -> tuple[np.ndarray, dict]:
+    """Fit the odometry sigma model to observed increment errors (maximum likelihood).
+
+    Parameters
+    ----------
+    odoms : ndarray of shape (T, 3)
+        The odometry increments (regressors: ``l = |(dx, dy)|`` and ``|dpsi|``).
+    errors : ndarray of shape (T, 3)
+        ``odom - true increment`` per step (heading wrapped).
+
+    Returns
+    -------
+    model : ndarray of shape (3, 3)
+        Row j = ``(a_j, b_j, c_j)``; ``a_j >= 1e-4``.
+    info : dict
+        ``n_steps``, ``n_excluded`` (errors beyond 5 fitted sigmas, excluded from the refit),
+        ``mean_error`` per component.
+    """
+    u = np.asarray(odoms, dtype=float).reshape(-1, 3)
+    e = np.asarray(errors, dtype=float).reshape(-1, 3)
+    if len(u) < 6:
+        raise DatasetError(f"need at least 6 steps to calibrate the odometry sigma, got "
+                           f"{len(u)}; use smaller keyframe thresholds or calibrate=False")
+    reg2 = np.column_stack([np.ones(len(u)), np.hypot(u[:, 0], u[:, 1]) ** 2, u[:, 2] ** 2])
+    model = np.zeros((3, 3))
+    keep = np.ones(len(u), dtype=bool)
+    for _ in range(2):
+        for j in range(3):
+            model[j] = _fit_variance(reg2[keep], e[keep, j] ** 2)
+        z = np.abs(e) / odometry_sigma_model(model, u)
+        keep = np.all(z <= 5.0, axis=1)
+    return model, {"n_steps": int(len(u)), "n_excluded": int((~keep).sum()),
+                   "mean_error": [float(v) for v in e[keep].mean(axis=0)]}
+
+
+def _fit_variance(reg2: np.ndarray, e2: np.ndarray) -> np.ndarray:
+    """``(a, b, c) >= 0`` maximising the Gaussian likelihood with var = reg2 @ (a,b,c)^2."""
+    floor2 = _MIN_SIGMA_FLOOR ** 2
+    start, _ = nnls(reg2, e2)
+    start = np.maximum(start, [floor2, 0.0, 0.0])
+    scale = np.maximum(start, floor2)
+
+    def nll(p: np.ndarray) -> tuple[float, np.ndarray]:
+        theta = p * scale
+        var = reg2 @ theta
+        val = float(np.sum(np.log(var) + e2 / var))
+        grad = (reg2 * (1.0 / var - e2 / var ** 2)[:, None]).sum(axis=0) * scale
+        return val, grad
+
+    res = minimize(nll, start / scale, jac=True, method="L-BFGS-B",
+                   bounds=[(floor2 / scale[0], None), (0.0, None), (0.0, None)])
+    theta = (res.x if res.success or res.fun <= nll(start / scale)[0] else start / scale) * scale
+    return np.sqrt(np.maximum(theta, 0.0))
+
+
+# --------------------------------------------------------------------------------------------
+# The importer
+# --------------------------------------------------------------------------------------------
+
+def import_mrclam(data_dir: str | os.PathLike[str], robot: int, *,
+                  keyframe: KeyframeConfig = KeyframeConfig(), keep_ranges: bool = False,
+                  calibrate: bool = True) -> Stream:
+    """Import one MRCLAM robot as a keyframed bearing-only stream (see the module docstring).
+
+    Parameters
+    ----------
+    data_dir : path-like
+        ``shared/data/mrclam6`` (complete) or ``shared/data/mrclam1`` (gzip, no robot truth).
+    robot : int
+        1..5.
+    keyframe : KeyframeConfig
+        Keyframing and attachment thresholds.
+    keep_ranges : bool
+        Also store ``[t, landmark_id, range_m]`` of every kept bearing in ``meta["ranges_m"]``.
+    calibrate : bool
+        Fit the odometry and bearing sigmas against the robot's ground truth (required to
+        exist); False uses the documented defaults measured on mrclam6.
+
+    Returns
+    -------
+    Stream
+        Steps = keyframes (``time_s`` = Unix time); truth = landmarks and, if the robot's
+        ground truth exists, the interpolated pose of every keyframe.
+
+    Raises
+    ------
+    DatasetError
+        Missing or malformed files, no usable detections, or ``calibrate=True`` without the
+        robot's ground truth.
+    """
+    if not isinstance(keyframe, KeyframeConfig):
+        raise ConfigError(f"keyframe must be a KeyframeConfig, got {type(keyframe).__name__}")
+    raw = read_mrclam_robot(data_dir, robot)
+    gt = raw.groundtruth
+    if calibrate and gt is None:
+        raise DatasetError(f"{Path(data_dir)}: no Robot{robot}_Groundtruth.dat, so the sigmas "
+                           f"cannot be calibrated; pass calibrate=False (CLI: --no-calibrate) "
+                           f"to use the defaults measured on mrclam6")
+    me = raw.measurements
+    od = dict(raw.odometry)
+    od["time_s"] = od["time_s"] + keyframe.command_delay_s
+    n_rows = int(me["time_s"].size)
+
+    # 1. classify rows -------------------------------------------------------------------
+    barcodes = me["barcode"]
+    known = np.array([b in raw.barcode_subject for b in barcodes.tolist()], dtype=bool)
+    subject = np.array([raw.barcode_subject.get(b, -1) for b in barcodes.tolist()],
+                       dtype=np.int64)
+    is_robot = known & np.isin(subject, ROBOT_SUBJECTS)
+    is_landmark = known & np.isin(subject, raw.landmark_ids)
+    is_other = known & ~is_robot & ~is_landmark
+    rows: dict[str, Any] = {
+        "total": n_rows,
+        "robot_sightings": int(is_robot.sum()),
+        "unknown_barcode": int((~known).sum()),
+        "unknown_barcode_values": sorted(set(barcodes[~known].tolist())),
+        "subject_without_landmark_truth": int(is_other.sum()),
+    }
+
+    # 2. time window: odometry span, and ground-truth span / gaps --------------------------
+    t_m = me["time_s"]
+    in_odo = (t_m >= od["time_s"][0]) & (t_m <= od["time_s"][-1])
+    in_time = in_odo.copy()
+    in_gap = np.zeros(n_rows, dtype=bool)
+    if gt is not None:
+        tg = gt["time_s"]
+        in_time &= (t_m >= tg[0]) & (t_m <= tg[-1])
+        k = np.clip(np.searchsorted(tg, t_m, side="right") - 1, 0, len(tg) - 2)
+        in_gap = in_time & ((tg[k + 1] - tg[k]) > keyframe.max_truth_gap_s)
+    use = is_landmark & in_time & ~in_gap
+    rows["outside_time_span"] = int((is_landmark & ~in_time).sum())
+    rows["in_truth_gap"] = int((is_landmark & in_gap).sum())
+    idx = np.flatnonzero(use)
+    if idx.size == 0:
+        raise DatasetError(f"{Path(data_dir)}: robot {robot} has no landmark detection inside "
+                           f"its odometry{' and ground-truth' if gt is not None else ''} time "
+                           f"span; nothing to import")
+
+    # 3. bursts; 4. keyframes ---------------------------------------------------------------
+    tu = t_m[idx]
+    new_burst = np.concatenate([[True], np.diff(tu) > keyframe.burst_gap_s])
+    burst_of = np.cumsum(new_burst) - 1
+    burst_t = tu[new_burst]
+    odo_poses = integrate_odometry(od["time_s"], od["v_mps"], od["w_radps"])
+
+    def odo_at(q: np.ndarray) -> np.ndarray:
+        return odometry_poses_at(od["time_s"], od["v_mps"], od["w_radps"], odo_poses, q)
+
+    kf_burst = select_keyframes(odo_at(burst_t), keyframe.min_distance_m,
+                                keyframe.min_turn_rad)
+    kf_t = burst_t[kf_burst]
+    kf_pose = odo_at(kf_t)
+
+    # 5. attach detections to the nearest keyframe in time -----------------------------------
+    j = np.clip(np.searchsorted(kf_t, tu), 1, max(len(kf_t) - 1, 1))
+    if len(kf_t) == 1:
+        near = np.zeros(tu.size, dtype=np.int64)
+    else:
+        near = np.where(np.abs(tu - kf_t[j - 1]) <= np.abs(tu - kf_t[j]), j - 1, j)
+    # A keyframe's own burst is always attached to it (its spread is below burst_gap_s).
+    own = np.isin(burst_of, kf_burst)
+    near = np.where(own, np.searchsorted(kf_t, burst_t[burst_of]), near)
+    dt = tu - kf_t[near]
+    attached = own | (np.abs(dt) <= keyframe.attach_window_s)
+    rows["between_keyframes"] = int((~attached).sum())
+    bearing = me["bearing_rad"][idx].copy()
+    if keyframe.rotate_bearings:
+        bearing = bearing + (odo_at(tu)[:, 2] - kf_pose[near, 2])
+    a_step = near[attached]
+    a_id = subject[idx][attached]
+    a_brg = wrap_angle(bearing[attached])
+    a_rng = me["range_m"][idx][attached]
+    a_dt = np.abs(dt[attached])
+    # one landmark at most once per keyframe: keep the detection closest in time
+    order = np.lexsort((np.arange(a_step.size), a_dt, a_id, a_step))
+    a_step, a_id, a_brg, a_rng = a_step[order], a_id[order], a_brg[order], a_rng[order]
+    first = np.concatenate([[True], (np.diff(a_step) != 0) | (np.diff(a_id) != 0)])
+    rows["duplicate_in_keyframe"] = int((~first).sum())
+    a_step, a_id, a_brg, a_rng = a_step[first], a_id[first], a_brg[first], a_rng[first]
+    rows["kept"] = int(a_step.size)
+    accounted = (rows["robot_sightings"] + rows["unknown_barcode"]
+                 + rows["subject_without_landmark_truth"] + rows["outside_time_span"]
+                 + rows["in_truth_gap"] + rows["between_keyframes"]
+                 + rows["duplicate_in_keyframe"] + rows["kept"])
+    if accounted != n_rows:  # an internal invariant, not user input
+        raise RuntimeError(f"row accounting broken: {accounted} != {n_rows}")
+
+    # steps -----------------------------------------------------------------------------------
+    n_kf = len(kf_t)
+    odoms = between(kf_pose[:-1], kf_pose[1:]) if n_kf > 1 else np.zeros((0, 3))
+    bounds = np.searchsorted(a_step, np.arange(n_kf + 1))
+    truth_poses = None
+    if gt is not None:
+        truth_poses = interpolate_poses(
+            gt["time_s"], np.column_stack([gt["x_m"], gt["y_m"], gt["psi_rad"]]), kf_t)
+
+    # 7. calibration --------------------------------------------------------------------------
+    if calibrate and truth_poses is not None:  # calibrate without truth was refused above
+        true_inc = between(truth_poses[:-1], truth_poses[1:])
+        err = odoms - true_inc
+        err[:, 2] = angle_residual(odoms[:, 2], true_inc[:, 2])
+        model, odo_info = fit_odometry_sigma(odoms, err)
+        lo = np.hypot(odoms[:, 0], odoms[:, 1])
+        lt = np.hypot(true_inc[:, 0], true_inc[:, 1])
+        moving = lo > 0.5 * keyframe.min_distance_m
+        turning = np.abs(odoms[:, 2]) > 0.5 * keyframe.min_turn_rad
+        odo_info["length_ratio_truth_over_odometry"] = (
+            float(np.median(lt[moving] / lo[moving])) if moving.any() else None)
+        odo_info["turn_ratio_truth_over_odometry"] = (
+            float(np.median(true_inc[turning, 2] / odoms[turning, 2])) if turning.any()
+            else None)
+        odo_info["rms_error"] = [float(v) for v in np.sqrt(np.mean(err ** 2, axis=0))]
+    else:
+        model = np.asarray(DEFAULT_ODOMETRY_MODEL, dtype=float)
+        odo_info = {"source": "DEFAULT_ODOMETRY_MODEL (mrclam6 robots 1-5, default keyframes)"}
+    step_sigma = odometry_sigma_model(model, odoms)
+
+    steps = []
+    for t in range(n_kf):
+        sl = slice(bounds[t], bounds[t + 1])
+        steps.append(Step(t=t, odom=None if t == 0 else odoms[t - 1],
+                          landmark_ids=a_id[sl], bearings_rad=a_brg[sl],
+                          odom_sigma=None if t == 0 else step_sigma[t - 1],
+                          time_s=float(kf_t[t])))
+    truth = Truth(raw.landmark_ids, raw.landmarks_xy, truth_poses)
+    header_odo = (tuple(float(v) for v in np.median(step_sigma, axis=0)) if n_kf > 1
+                  else tuple(float(v) for v in model[:, 0]))
+    sensor_range = float(a_rng.max()) if a_rng.size and a_rng.max() > 0 else None
+    meta: dict[str, Any] = {
+        "source": "UTIAS MRCLAM", "dataset": Path(data_dir).resolve().name, "robot": int(robot),
+        "citation": "K. Y. K. Leung, Y. Halpern, T. D. Barfoot, H. H. T. Liu, The UTIAS "
+                    "Multi-Robot Cooperative Localization and Mapping Dataset, IJRR 30(8), "
+                    "969-974, 2011",
+        "licence": "third-party research data (ASRL, University of Toronto); cite, do not "
+                   "relicense",
+        "files": dict(raw.files),
+        "importer": "bomgraph.datasets.mrclam.import_mrclam",
+        "keyframe": asdict(keyframe),
+        "rows": rows,
+        "n_bursts": int(burst_t.size),
+        "bearing_fov_rad": [float(a_brg.min()), float(a_brg.max())] if a_brg.size else None,
+        "sensor_range_source": "largest measured range among kept detections",
+        "odometry_model": {"form": "sigma_j = sqrt(a_j^2 + (b_j l)^2 + (c_j |dpsi|)^2)",
+                           "components": ["dx_m", "dy_m", "dpsi_rad"],
+                           "abc": [[float(v) for v in row] for row in model], **odo_info},
+        "calibrated": bool(calibrate),
+    }
+    if gt is not None:
+        tg = gt["time_s"]
+        k = np.clip(np.searchsorted(tg, kf_t, side="right") - 1, 0, len(tg) - 2)
+        meta["truth_max_bracket_s"] = float(np.max(tg[k + 1] - tg[k]))
+    if calibrate and truth_poses is not None:
+        stream0 = Stream(StreamHeader(1.0, header_odo), tuple(steps), truth)
+        r, _, _ = bearing_residuals(stream0)
+        stats = robust_bearing_stats(r)
+        bearing_sigma = stats["sigma_rad"]
+        meta["bearing_calibration"] = stats
+    else:
+        bearing_sigma = DEFAULT_BEARING_SIGMA_RAD
+        meta["bearing_calibration"] = {"source": "DEFAULT_BEARING_SIGMA_RAD (mrclam6 robots "
+                                                 "1-5, default keyframes)"}
+    if keep_ranges:
+        meta["ranges_m"] = [[int(s), int(i), float(r)] for s, i, r in zip(a_step, a_id, a_rng)]
+    header = StreamHeader(bearing_sigma_rad=float(bearing_sigma), odometry_sigma=header_odo,
+                          sensor_range_m=sensor_range, meta=meta)
+    return Stream(header, tuple(steps), truth)
+
+
+__all__ = ["KeyframeConfig", "MrclamRobotData", "read_mrclam_robot", "integrate_odometry",
+           "odometry_poses_at", "interpolate_poses", "select_keyframes", "bearing_residuals",
+           "robust_bearing_stats", "odometry_sigma_model", "fit_odometry_sigma",
+           "import_mrclam", "ROBOT_SUBJECTS", "GROSS_OUTLIER_RAD", "OUTLIER_MADS",
+           "DEFAULT_BEARING_SIGMA_RAD", "DEFAULT_ODOMETRY_MODEL", "MIN_BEARING_SIGMA_RAD"]
