@@ -195,6 +195,44 @@ def cmd_compare(args: argparse.Namespace) -> int:
     return 0
 
 
+def _report_import(stream: Any, out: str) -> int:
+    from .stream import write_stream
+
+    write_stream(stream, out)
+    n_brg = sum(len(st.landmark_ids) for st in stream.steps)
+    truth = "no truth" if stream.truth is None else (
+        "truth: landmarks only" if stream.truth.poses is None else "truth: poses + landmarks")
+    print(f"wrote {out}: {len(stream.steps)} steps, {n_brg} bearings, "
+          f"{len(stream.landmark_ids())} landmarks; bearing sigma "
+          f"{stream.header.bearing_sigma_rad:.4f} rad, odometry sigma "
+          f"{', '.join(f'{v:.4f}' for v in stream.header.odometry_sigma)}; {truth}")
+    return 0
+
+
+def cmd_import_mrclam(args: argparse.Namespace) -> int:
+    from .datasets.mrclam import KeyframeConfig, import_mrclam
+
+    keyframe = KeyframeConfig(min_distance_m=args.min_distance, min_turn_rad=args.min_turn,
+                              attach_window_s=args.attach_window)
+    return _report_import(import_mrclam(args.dir, args.robot, keyframe=keyframe,
+                                        keep_ranges=args.keep_ranges,
+                                        calibrate=not args.no_calibrate), args.out)
+
+
+def cmd_import_g2o(args: argparse.Namespace) -> int:
+    from .datasets.g2o import import_g2o
+
+    return _report_import(import_g2o(args.file, truth_path=args.truth,
+                                     bearing_sigma_rad=args.bearing_sigma), args.out)
+
+
+def cmd_import_victoria(args: argparse.Namespace) -> int:
+    from .datasets.victoria import import_victoria
+
+    return _report_import(import_victoria(args.file, bearing_sigma_rad=args.bearing_sigma),
+                          args.out)
+
+
 # --------------------------------------------------------------------------------------------
 # Parser
 # --------------------------------------------------------------------------------------------
@@ -252,6 +290,33 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--no-figures", action="store_true")
     c.add_argument("--no-progress", action="store_true")
     c.set_defaults(func=cmd_compare)
+
+    i = sub.add_parser("import", help="turn a real dataset into a stream file")
+    isub = i.add_subparsers(dest="dataset", required=True)
+    im = isub.add_parser("mrclam", help="one robot of a UTIAS MRCLAM folder, keyframed")
+    im.add_argument("dir", help="the dataset folder (.dat or .dat.gz files)")
+    im.add_argument("--robot", type=int, required=True, choices=range(1, 6), metavar="{1..5}")
+    im.add_argument("--out", required=True)
+    im.add_argument("--min-distance", type=float, default=0.3, help="metres (default 0.3)")
+    im.add_argument("--min-turn", type=float, default=0.3, help="radians (default 0.3)")
+    im.add_argument("--attach-window", type=float, default=0.6, help="seconds (default 0.6)")
+    im.add_argument("--keep-ranges", action="store_true", help="keep ranges in the meta")
+    im.add_argument("--no-calibrate", action="store_true",
+                    help="use the default sigmas (needed without robot ground truth, mrclam1)")
+    im.set_defaults(func=cmd_import_mrclam)
+    ig = isub.add_parser("g2o", help="a bearing-only g2o file")
+    ig.add_argument("file")
+    ig.add_argument("--truth", default=None, help="a g2o file whose vertices are the truth")
+    ig.add_argument("--bearing-sigma", type=float, default=None,
+                    help="radians (default: from the bearing edges' information)")
+    ig.add_argument("--out", required=True)
+    ig.set_defaults(func=cmd_import_g2o)
+    iv = isub.add_parser("victoria", help="GTSAM's victoria_park.txt")
+    iv.add_argument("file")
+    iv.add_argument("--bearing-sigma", type=float, default=None,
+                    help="radians (default: median propagated point covariance)")
+    iv.add_argument("--out", required=True)
+    iv.set_defaults(func=cmd_import_victoria)
 
     m = sub.add_parser("methods", help="list the available methods")
     m.set_defaults(func=cmd_methods)
