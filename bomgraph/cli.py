@@ -212,8 +212,9 @@ def _report_import(stream: Any, out: str) -> int:
 def cmd_import_mrclam(args: argparse.Namespace) -> int:
     from .datasets.mrclam import KeyframeConfig, import_mrclam
 
-    keyframe = KeyframeConfig(min_distance_m=args.min_distance, min_turn_rad=args.min_turn,
-                              attach_window_s=args.attach_window)
+    given = {"min_distance_m": args.min_distance, "min_turn_rad": args.min_turn,
+             "attach_window_s": args.attach_window}
+    keyframe = KeyframeConfig(**{k: v for k, v in given.items() if v is not None})
     return _report_import(import_mrclam(args.dir, args.robot, keyframe=keyframe,
                                         keep_ranges=args.keep_ranges,
                                         calibrate=not args.no_calibrate), args.out)
@@ -297,9 +298,10 @@ def build_parser() -> argparse.ArgumentParser:
     im.add_argument("dir", help="the dataset folder (.dat or .dat.gz files)")
     im.add_argument("--robot", type=int, required=True, choices=range(1, 6), metavar="{1..5}")
     im.add_argument("--out", required=True)
-    im.add_argument("--min-distance", type=float, default=0.3, help="metres (default 0.3)")
-    im.add_argument("--min-turn", type=float, default=0.3, help="radians (default 0.3)")
-    im.add_argument("--attach-window", type=float, default=0.6, help="seconds (default 0.6)")
+    im.add_argument("--min-distance", type=float, help="keyframe distance, metres "
+                    "(default: KeyframeConfig's, 0.3)")
+    im.add_argument("--min-turn", type=float, help="keyframe turn, radians (default 0.3)")
+    im.add_argument("--attach-window", type=float, help="seconds (default 0.6)")
     im.add_argument("--keep-ranges", action="store_true", help="keep ranges in the meta")
     im.add_argument("--no-calibrate", action="store_true",
                     help="use the default sigmas (needed without robot ground truth, mrclam1)")
