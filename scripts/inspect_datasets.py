@@ -27,8 +27,7 @@ import numpy as np
 from bomgraph.angles import angle_residual
 from bomgraph.datasets.g2o import import_g2o
 from bomgraph.datasets.mrclam import (KeyframeConfig, bearing_residuals, fit_odometry_sigma,
-                                      import_mrclam, interpolate_poses, odometry_sigma_model,
-                                      read_mrclam_robot, robust_bearing_stats)
+                                      import_mrclam, odometry_sigma_model, robust_bearing_stats)
 from bomgraph.datasets.victoria import import_victoria
 from bomgraph.geometry import between
 from bomgraph.stream import Stream
@@ -62,22 +61,6 @@ def consecutive_parallax(stream: Stream) -> tuple[np.ndarray, np.ndarray]:
     return np.array(common), (np.concatenate(par) if par else np.zeros(0))
 
 
-def raw_bearing_residuals(data_dir: Path, robot: int) -> np.ndarray:
-    """Residuals of every landmark detection at its own time (no keyframing)."""
-    raw = read_mrclam_robot(data_dir, robot)
-    gt = raw.groundtruth
-    me = raw.measurements
-    subj = np.array([raw.barcode_subject.get(b, -1) for b in me["barcode"].tolist()])
-    t = me["time_s"]
-    keep = np.isin(subj, raw.landmark_ids) & (t >= gt["time_s"][0]) & (t <= gt["time_s"][-1])
-    pose = interpolate_poses(gt["time_s"],
-                             np.column_stack([gt["x_m"], gt["y_m"], gt["psi_rad"]]), t[keep])
-    lxy = raw.landmarks_xy[np.searchsorted(raw.landmark_ids, subj[keep])]
-    pred = angle_residual(np.arctan2(lxy[:, 1] - pose[:, 1], lxy[:, 0] - pose[:, 0]),
-                          pose[:, 2])
-    return angle_residual(me["bearing_rad"][keep], pred)
-
-
 def step_odometry_errors(stream: Stream) -> tuple[np.ndarray, np.ndarray]:
     """Odometry of steps 1.. and its error against the truth increments."""
     odoms = np.array([s.odom for s in stream.steps[1:]])
@@ -101,7 +84,7 @@ def inspect_mrclam6(data: Path, out: dict) -> None:
         k = np.array([len(st.landmark_ids) for st in s.steps])
         common, par = consecutive_parallax(s)
         r, _, _ = bearing_residuals(s)
-        raw_stats = robust_bearing_stats(raw_bearing_residuals(d, robot))
+        raw_stats = m["raw_bearing_check"]
         kf = m["bearing_calibration"]
         u, e = step_odometry_errors(s)
         z = e / np.array([st.odom_sigma for st in s.steps[1:]])
@@ -122,7 +105,8 @@ def inspect_mrclam6(data: Path, out: dict) -> None:
         print(f"  raw detections: n {raw_stats['n']}, bias {raw_stats['bias_rad']:+.4f} rad, "
               f"spread (1.4826 MAD) {raw_stats['spread_rad']:.4f}, outliers (> 5 spreads) "
               f"{raw_stats['n_outliers']} ({100 * raw_stats['outlier_rate']:.2f} %), gross "
-              f"(> 0.2 rad) {raw_stats['n_gross']}, max |r| {raw_stats['max_abs_rad']:.3f}")
+              f"(> 0.2 rad) {raw_stats['n_gross']}, max |r| {raw_stats['max_abs_rad']:.3f}, "
+              f"FOV {fmt(raw_stats['fov_rad'], 3)} rad")
         print(f"  keyframe bearings: n {kf['n']}, bias {kf['bias_rad']:+.4f}, spread "
               f"{kf['spread_rad']:.4f}, outliers {kf['n_outliers']} "
               f"({100 * kf['outlier_rate']:.2f} %), gross {kf['n_gross']} -> header "

@@ -113,7 +113,7 @@ def make_mrclam(folder: Path, *, v: float = 0.08, w: float | np.ndarray = 0.15,
                     crlf=crlf, gz=gz)
     ids = np.array(list(LANDMARKS))
     xy = np.array(list(LANDMARKS.values()))
-    rows, counts = [], {"landmark": 0, "robot": 0, "unknown": 0, "gross": 0}
+    rows, counts = [], {"landmark": 0, "robot": 0, "unknown": 0, "gross": 0, "repeat": 0}
     k_meas = 0
     for b, k in enumerate(range(25, n - 25, 25)):
         brg = bearings_to(gt[k], xy)
@@ -138,6 +138,7 @@ def make_mrclam(folder: Path, *, v: float = 0.08, w: float | np.ndarray = 0.15,
                     rows.append(f"{_r(t[k] + 0.001)} \t {BARCODES[int(ids[seen][0])]} \t 2.0 \t "
                                 f"0.3{end}")
                     counts["landmark"] += 1
+                    counts["repeat"] += 1
     write_table(folder / "Robot1_Measurement.dat", rows, crlf=crlf, gz=gz)
     counts["total"] = len(rows)
     return {"t": t, "gt": gt, "counts": counts}
@@ -231,6 +232,11 @@ def test_noise_free_excerpt_gives_exact_odometry_bearings_and_truth(tmp_path):
     np.testing.assert_array_equal(s.truth.landmark_ids, list(LANDMARKS))
     assert s.header.bearing_sigma_rad == pytest.approx(1e-4)
     assert np.all(np.array([st.odom_sigma for st in s.steps[1:]]) < 2e-3)
+    # every landmark detection at its own time (the 1 ms repeats carry a wrong bearing, 0.3)
+    raw = s.header.meta["raw_bearing_check"]
+    assert raw["n"] == world["counts"]["landmark"]
+    assert raw["bias_rad"] == pytest.approx(0.0, abs=1e-9)
+    assert raw["n_outliers"] == world["counts"]["repeat"] > 0
 
 
 def test_rows_are_all_accounted_for(tmp_path):
@@ -444,6 +450,8 @@ def test_real_mrclam6_robot4_shows_its_bearing_bias():
     cal = s.header.meta["bearing_calibration"]
     assert -0.02 < cal["bias_rad"] < -0.008  # SOURCE.md quirk 6: about -0.01 rad
     assert cal["outlier_rate"] < 0.05
+    raw = s.header.meta["raw_bearing_check"]  # all 2023 landmark detections
+    assert raw["n"] == 2023 and -0.02 < raw["bias_rad"] < -0.008
 
 
 @needs_data

@@ -53,6 +53,11 @@ This importer turns one robot's recording (``shared/data/mrclam*/SOURCE.md``) in
    mapper can remove) counts as error. Bias, spread, outlier and gross (> 0.2 rad) counts go to
    ``meta["bearing_calibration"]``. Outliers stay in the stream: methods must cope with them.
 
+   Whenever the robot's ground truth exists, the same statistics of every landmark detection
+   at its own time (before keyframing, against the truth interpolated there) and the raw
+   bearing range (the camera's field of view) go to ``meta["raw_bearing_check"]``: the
+   sensor's quirks (bias, outliers, field of view) independent of the keyframing.
+
    Without calibration (``calibrate=False``, e.g. ``mrclam1``, which has no robot ground
    truth) the sigmas are :data:`DEFAULT_ODOMETRY_MODEL` and :data:`DEFAULT_BEARING_SIGMA_RAD`,
    measured on ``mrclam6`` robots 1-5 with the default keyframing (scripts/inspect_datasets.py).
@@ -499,7 +504,7 @@ def robust_bearing_stats(residual_rad: np.ndarray) -> dict[str, Any]:
     -------
     dict
         ``n``, ``bias_rad`` (median), ``spread_rad`` (1.4826 MAD), ``n_outliers``
-        (``|r - median| > OUTLIER_MADS * spread``), ``outlier_rate``, ``n_gross`` (``|r| >
+        (``|r - median| > OUTLIER_MADS * max(spread, MIN_BEARING_SIGMA_RAD)``), ``outlier_rate``, ``n_gross`` (``|r| >
         GROSS_OUTLIER_RAD``), ``inlier_std_rad`` (about the inlier mean), ``sigma_rad`` (RMS of
         inliers about zero: bias included; at least ``MIN_BEARING_SIGMA_RAD``),
         ``max_abs_rad``.
@@ -509,7 +514,7 @@ def robust_bearing_stats(residual_rad: np.ndarray) -> dict[str, Any]:
         raise DatasetError(f"need at least 2 bearing residuals to calibrate, got {r.size}")
     med = float(np.median(r))
     spread = 1.4826 * float(np.median(np.abs(r - med)))
-    out = np.abs(r - med) > OUTLIER_MADS * spread if spread > 0 else np.zeros(r.shape, bool)
+    out = np.abs(r - med) > OUTLIER_MADS * max(spread, MIN_BEARING_SIGMA_RAD)
     inl = r[~out]
     return {"n": int(r.size), "bias_rad": med, "spread_rad": spread,
             "n_outliers": int(out.sum()), "outlier_rate": float(out.mean()),
@@ -789,6 +794,20 @@ def import_mrclam(data_dir: str | os.PathLike[str], robot: int, *,
         tg = gt["time_s"]
         k = np.clip(np.searchsorted(tg, kf_t, side="right") - 1, 0, len(tg) - 2)
         meta["truth_max_bracket_s"] = float(np.max(tg[k + 1] - tg[k]))
+        # the sensor's own quirks, before keyframing: every landmark detection inside the
+        # truth span against the truth interpolated at its own time
+        det = is_landmark & in_time & ~in_gap
+        det_pose = interpolate_poses(tg, np.column_stack([gt["x_m"], gt["y_m"], gt["psi_rad"]]),
+                                     t_m[det])
+        det_xy = raw.landmarks_xy[np.searchsorted(raw.landmark_ids, subject[det],
+                                                  sorter=np.argsort(raw.landmark_ids))]
+        if det.sum() >= 2:
+            det_r = angle_residual(me["bearing_rad"][det], np.arctan2(
+                det_xy[:, 1] - det_pose[:, 1], det_xy[:, 0] - det_pose[:, 0]) - det_pose[:, 2])
+            meta["raw_bearing_check"] = {
+                **robust_bearing_stats(det_r),
+                "fov_rad": [float(me["bearing_rad"][det].min()),
+                            float(me["bearing_rad"][det].max())]}
     if calibrate and truth_poses is not None:
         stream0 = Stream(StreamHeader(1.0, header_odo), tuple(steps), truth)
         r, _, _ = bearing_residuals(stream0)
