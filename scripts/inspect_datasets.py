@@ -27,7 +27,9 @@ import numpy as np
 from bomgraph.angles import angle_residual
 from bomgraph.datasets.g2o import import_g2o
 from bomgraph.datasets.mrclam import (KeyframeConfig, bearing_residuals, fit_odometry_sigma,
-                                      import_mrclam, odometry_sigma_model, robust_bearing_stats)
+                                      import_mrclam, integrate_odometry, odometry_poses_at,
+                                      odometry_sigma_model, read_mrclam_robot,
+                                      robust_bearing_stats)
 from bomgraph.datasets.victoria import import_victoria
 from bomgraph.geometry import between
 from bomgraph.stream import Stream
@@ -61,13 +63,25 @@ def consecutive_parallax(stream: Stream) -> tuple[np.ndarray, np.ndarray]:
     return np.array(common), (np.concatenate(par) if par else np.zeros(0))
 
 
-def step_odometry_errors(stream: Stream) -> tuple[np.ndarray, np.ndarray]:
-    """Odometry of steps 1.. and its error against the truth increments."""
+def step_odometry_errors(stream: Stream, data_dir: Path, robot: int,
+                        keyframe: KeyframeConfig) -> tuple[np.ndarray, np.ndarray]:
+    """The sigma-model regressors of steps 1.. and their odometry errors against the truth.
+
+    The regressors are the odometry length and the whole (unwrapped) turn, recomputed from the
+    raw odometry at the keyframe times, as the importer does.
+    """
     odoms = np.array([s.odom for s in stream.steps[1:]])
     inc = between(stream.truth.poses[:-1], stream.truth.poses[1:])
     err = odoms - inc
     err[:, 2] = angle_residual(odoms[:, 2], inc[:, 2])
-    return odoms, err
+    od = read_mrclam_robot(data_dir, robot).odometry
+    t = od["time_s"] + keyframe.command_delay_s
+    poses = integrate_odometry(t, od["v_mps"], od["w_radps"])
+    kf = odometry_poses_at(t, od["v_mps"], od["w_radps"], poses,
+                           np.array([s.time_s for s in stream.steps]))
+    regress = odoms.copy()
+    regress[:, 2] = np.diff(kf[:, 2])
+    return regress, err
 
 
 def fmt(v: Any, nd: int = 4) -> str:
@@ -86,7 +100,7 @@ def inspect_mrclam6(data: Path, out: dict) -> None:
         r, _, _ = bearing_residuals(s)
         raw_stats = m["raw_bearing_check"]
         kf = m["bearing_calibration"]
-        u, e = step_odometry_errors(s)
+        u, e = step_odometry_errors(s, d, robot, KeyframeConfig())
         z = e / np.array([st.odom_sigma for st in s.steps[1:]])
         span = s.steps[-1].time_s - s.steps[0].time_s
         pooled_r.append(r)

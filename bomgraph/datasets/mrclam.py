@@ -40,7 +40,7 @@ This importer turns one robot's recording (``shared/data/mrclam*/SOURCE.md``) in
    *Odometry.* Per step, the error ``e = odom - between(truth_{t-1}, truth_t)`` (heading by
    :func:`~bomgraph.angles.angle_residual`) is modelled per component ``j`` as zero-mean
    Gaussian with variance ``a_j^2 + (b_j l)^2 + (c_j |dpsi|)^2``, where ``l`` and ``dpsi`` are
-   the step's odometry length and turn. ``(a, b, c)`` are fitted by maximum likelihood
+   the step's odometry length and whole (unwrapped) turn. ``(a, b, c)`` are fitted by maximum likelihood
    (started from a non-negative least-squares fit of ``e^2``); steps whose error exceeds 5
    fitted sigmas are excluded and the fit repeated once. Each step's ``odom_sigma`` is the
    model evaluated at its odometry; the header's ``odometry_sigma`` is the per-component median
@@ -113,9 +113,9 @@ DEFAULT_BEARING_SIGMA_RAD = 0.0160
 """Bearing sigma used when not calibrating: the pooled calibration over mrclam6 robots 1-5
 with the default :class:`KeyframeConfig` (``python scripts/inspect_datasets.py``)."""
 
-DEFAULT_ODOMETRY_MODEL = ((0.0001, 0.0664, 0.0690),   # dx:   a [m], b [m/m], c [m/rad]
+DEFAULT_ODOMETRY_MODEL = ((0.0001, 0.0664, 0.0688),   # dx:   a [m], b [m/m], c [m/rad]
                           (0.0048, 0.0634, 0.0016),   # dy
-                          (0.0274, 0.0949, 0.1382))   # dpsi: a [rad], b [rad/m], c [rad/rad]
+                          (0.0282, 0.0936, 0.1361))   # dpsi: a [rad], b [rad/m], c [rad/rad]
 """``(a, b, c)`` per component of the odometry sigma model used when not calibrating: the
 pooled fit over mrclam6 robots 1-5 with the default :class:`KeyframeConfig`."""
 
@@ -733,6 +733,10 @@ def import_mrclam(data_dir: str | os.PathLike[str], robot: int, *,
     # steps -----------------------------------------------------------------------------------
     n_kf = len(kf_t)
     odoms = between(kf_pose[:-1], kf_pose[1:]) if n_kf > 1 else np.zeros((0, 3))
+    # the sigma model's regressors: length and the whole (unwrapped) turn, which exceeds pi
+    # when the robot spins during a long stretch without detections
+    regress = odoms.copy()
+    regress[:, 2] = np.diff(kf_pose[:, 2])
     bounds = np.searchsorted(a_step, np.arange(n_kf + 1))
     truth_poses = None
     if gt is not None:
@@ -744,7 +748,7 @@ def import_mrclam(data_dir: str | os.PathLike[str], robot: int, *,
         true_inc = between(truth_poses[:-1], truth_poses[1:])
         err = odoms - true_inc
         err[:, 2] = angle_residual(odoms[:, 2], true_inc[:, 2])
-        model, odo_info = fit_odometry_sigma(odoms, err)
+        model, odo_info = fit_odometry_sigma(regress, err)
         lo = np.hypot(odoms[:, 0], odoms[:, 1])
         lt = np.hypot(true_inc[:, 0], true_inc[:, 1])
         moving = lo > 0.5 * keyframe.min_distance_m
@@ -758,7 +762,7 @@ def import_mrclam(data_dir: str | os.PathLike[str], robot: int, *,
     else:
         model = np.asarray(DEFAULT_ODOMETRY_MODEL, dtype=float)
         odo_info = {"source": "DEFAULT_ODOMETRY_MODEL (mrclam6 robots 1-5, default keyframes)"}
-    step_sigma = odometry_sigma_model(model, odoms)
+    step_sigma = odometry_sigma_model(model, regress)
 
     steps = []
     for t in range(n_kf):
