@@ -12,6 +12,7 @@ The core never prints: progress is reported through a callback.
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 import math
@@ -56,8 +57,72 @@ class Arm:
 
 
 @dataclass(frozen=True)
+class SimSource:
+    """A simulated run of a design (``prior_fraction`` > 0 adds Exp. 3 priors)."""
+
+    spec: RunSpec
+    sim: SimConfig = SimConfig()
+    prior_fraction: float = 0.0
+    prior_sigma_xy_m: float = 0.03
+
+    @property
+    def name(self) -> str:
+        return self.spec.name
+
+    def stream(self) -> Stream:
+        return simulate_run(self.spec, self.sim, prior_fraction=self.prior_fraction,
+                            prior_sigma_xy_m=self.prior_sigma_xy_m)
+
+    def key(self) -> dict[str, Any]:
+        return {"spec": asdict(self.spec), "sim": asdict(self.sim),
+                "prior_fraction": self.prior_fraction, "prior_sigma": self.prior_sigma_xy_m}
+
+
+@dataclass(frozen=True)
+class DatasetSource:
+    """A real recording, imported on use: ``kind`` is ``mrclam``, ``g2o`` or ``victoria``."""
+
+    kind: str
+    path: str
+    robot: int | None = None
+    truth_path: str | None = None
+    label: str = ""
+
+    @property
+    def name(self) -> str:
+        if self.label:
+            return self.label
+        base = Path(self.path).name
+        return f"{base}-r{self.robot}" if self.robot is not None else base
+
+    def stream(self) -> Stream:
+        return _load_dataset(self.kind, self.path, self.robot, self.truth_path)
+
+    def key(self) -> dict[str, Any]:
+        p = Path(self.path)
+        stamp = p.stat().st_mtime_ns if p.exists() else 0
+        return {"kind": self.kind, "path": str(p.resolve()), "robot": self.robot,
+                "truth": self.truth_path, "mtime": stamp}
+
+
+@functools.lru_cache(maxsize=16)
+def _load_dataset(kind: str, path: str, robot: int | None, truth_path: str | None) -> Stream:
+    from . import datasets
+
+    if kind == "mrclam":
+        if robot is None:
+            raise ConfigError("an MRCLAM source needs a robot number (1-5)")
+        return datasets.import_mrclam(path, robot)
+    if kind == "g2o":
+        return datasets.import_g2o(path, truth_path=truth_path)
+    if kind == "victoria":
+        return datasets.import_victoria(path)
+    raise ConfigError(f"unknown dataset kind {kind!r}; use mrclam, g2o or victoria")
+
+
+@dataclass(frozen=True)
 class Experiment:
-    """Arms crossed with a run design."""
+    """Arms crossed with a run design (simulated) or with recorded ``sources``."""
 
     name: str
     title: str
@@ -68,40 +133,60 @@ class Experiment:
     n_starts: int = 5
     prior_sigma_xy_m: float = 0.03
     checkpoint_every: int = 10
+    sources: tuple[DatasetSource, ...] = ()
 
     def runs(self) -> list[RunSpec]:
         return paper_design(self.seed, self.n_layouts, self.n_starts)
 
     def tasks(self) -> list["Task"]:
-        return [Task(self.name, arm, spec, self.sim, self.prior_sigma_xy_m,
-                     self.checkpoint_every) for arm in self.arms for spec in self.runs()]
+        if self.sources:
+            return [Task(self.name, arm, src, self.checkpoint_every)
+                    for arm in self.arms for src in self.sources]
+        return [Task(self.name, arm, SimSource(spec, self.sim, arm.prior_fraction,
+                                               self.prior_sigma_xy_m), self.checkpoint_every)
+                for arm in self.arms for spec in self.runs()]
 
 
 @dataclass(frozen=True)
 class Task:
-    """One method on one simulated run."""
+    """One method on one run (simulated or recorded)."""
 
     experiment: str
     arm: Arm
-    spec: RunSpec
-    sim: SimConfig
-    prior_sigma_xy_m: float = 0.03
+    source: SimSource | DatasetSource
     checkpoint_every: int = 10
 
     def stream(self) -> Stream:
-        return simulate_run(self.spec, self.sim, prior_fraction=self.arm.prior_fraction,
-                            prior_sigma_xy_m=self.prior_sigma_xy_m)
+        return self.source.stream()
 
     def key(self) -> str:
         """A content hash: the same task always has the same key (cache file name)."""
-        blob = json.dumps({"arm": self.arm.key(), "spec": asdict(self.spec),
-                           "sim": asdict(self.sim), "prior_sigma": self.prior_sigma_xy_m,
-                           "every": self.checkpoint_every, "v": CACHE_VERSION},
+        blob = json.dumps({"arm": self.arm.key(), "source": self.source.key(),
+                           "every": self.checkpoint_every, "v": CACHE_VERSION,
+                           "code": code_fingerprint()},
                           sort_keys=True, default=str)
         return hashlib.sha256(blob.encode()).hexdigest()[:20]
 
 
 CACHE_VERSION = 1
+
+
+@functools.lru_cache(maxsize=1)
+def code_fingerprint() -> str:
+    """A hash of the installed ``bomgraph`` and ``baselines`` sources: a cached result is
+    reused only by the code that produced it."""
+    import importlib.util
+
+    h = hashlib.sha256()
+    for pkg in ("bomgraph", "baselines"):
+        spec = importlib.util.find_spec(pkg)
+        if spec is None or not spec.submodule_search_locations:
+            continue
+        root = Path(list(spec.submodule_search_locations)[0])
+        for f in sorted(root.rglob("*.py")):
+            h.update(str(f.relative_to(root)).encode())
+            h.update(f.read_bytes())
+    return h.hexdigest()[:16]
 
 
 # --------------------------------------------------------------------------------------------
@@ -149,6 +234,34 @@ def paper_experiments(*, quick: bool = False, seed: int = 0) -> dict[str, Experi
         ), sim, seed, **size),
     ]
     return {e.name: e for e in exps}
+
+
+ALL_METHODS = ("triangulate", "stmds-cs", "stmds-smacof", "stmds-smacof-loc", "ekf",
+               "gtsam-batch", "gtsam-isam2", "hybrid", "oracle")
+
+
+def real_experiments(data_dir: str | os.PathLike[str],
+                     methods: Sequence[str] = ALL_METHODS) -> dict[str, Experiment]:
+    """Every method on the recordings with ground truth: MRCLAM6 robots 1-5 and the
+    bearing-only g2o set (``data_dir`` is the shared data folder)."""
+    root = Path(data_dir)
+    arms = tuple(Arm(m, m) for m in methods)
+    exps = {}
+    if (root / "mrclam6").is_dir():
+        exps["mrclam6"] = Experiment(
+            "mrclam6", "MRCLAM Dataset 6 (real), robots 1-5", arms,
+            sources=tuple(DatasetSource("mrclam", str(root / "mrclam6"), robot=r,
+                                        label=f"mrclam6-r{r}") for r in range(1, 6)))
+    g2o_dir = root / "bearing_only_sim_g2o"
+    if g2o_dir.is_dir():
+        gt = g2o_dir / "slam2D_bearing_only_ground_truth.g2o"
+        exps["g2o"] = Experiment(
+            "g2o", "bearing-only g2o set (Sapienza course, simulated)", arms,
+            sources=(DatasetSource("g2o", str(g2o_dir / "slam2D_bearing_only_initial_guess.g2o"),
+                                   truth_path=str(gt), label="g2o"),))
+    if not exps:
+        raise ConfigError(f"no dataset folders (mrclam6, bearing_only_sim_g2o) under {root}")
+    return exps
 
 
 # --------------------------------------------------------------------------------------------
@@ -206,12 +319,18 @@ def run_task(task: Task) -> dict[str, Any]:
     Returns a JSON-ready dict: per-checkpoint errors, timings, the method's final diagnostics.
     A method that raises is recorded as a failure with the reason, never dropped.
     """
-    stream = task.stream()
-    truth = stream.truth
     out: dict[str, Any] = {"experiment": task.experiment, "arm": task.arm.label,
-                           "method": task.arm.method, "run": task.spec.name,
-                           "layout": task.spec.layout, "start": task.spec.start,
+                           "method": task.arm.method, "run": task.source.name,
                            "key": task.key()}
+    try:
+        stream = task.stream()
+    except Exception as exc:  # a source that cannot be read is a failed run, with the reason
+        out.update(ok=False, error=f"{type(exc).__name__}: {exc}")
+        return out
+    truth = stream.truth
+    if truth is None:
+        out.update(ok=False, error="the stream has no ground truth to score against")
+        return out
     try:
         needs_truth = method_info(task.arm.method).needs_truth
         mapper = create_mapper(task.arm.method, stream.header,
@@ -237,6 +356,17 @@ def run_task(task: Task) -> dict[str, Any]:
                        nees_landmark=math.nan, nees_pose=math.nan)
         rows.append(row)
     info = {k: _jsonable(v) for k, v in result.final.info.items()}
+    final = result.final
+    try:  # the final map and trajectory in the truth's frame, for the map figures
+        al = score_estimate(final, truth).alignment
+        out["final_map"] = {
+            "landmarks": [[int(i), float(x), float(y)] for i, (x, y)
+                          in zip(final.landmark_ids, al.apply(final.landmarks_xy))],
+            "poses": ([] if final.poses is None else
+                      [[int(t), float(x), float(y)] for t, (x, y)
+                       in zip(final.pose_t, al.apply(final.poses[:, :2]))])}
+    except EvaluationError:
+        out["final_map"] = None
     out.update(ok=True, checkpoints=rows, total_s=result.total_s,
                step_median_s=float(np.median(result.step_s)),
                converged=info.get("converged"), info=info)
@@ -447,7 +577,8 @@ def strip_timings(results: Iterable[Mapping[str, Any]]) -> list[dict[str, Any]]:
     return out
 
 
-__all__ = ["Arm", "Experiment", "Task", "Executor", "paper_experiments", "run_task", "execute",
+__all__ = ["Arm", "Experiment", "Task", "Executor", "paper_experiments", "real_experiments",
+           "SimSource", "DatasetSource", "compare", "CompareResult", "code_fingerprint", "run_task", "execute",
            "summarise", "error_curves", "results_to_csv_rows", "strip_timings",
            "PAPER_REPORTED", "REPORT_TIMES"]
 

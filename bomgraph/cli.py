@@ -159,7 +159,12 @@ def format_summary(summary: Sequence[dict]) -> str:
 def cmd_compare(args: argparse.Namespace) -> int:
     from .bench import Executor, compare, paper_experiments
 
-    exps = paper_experiments(quick=args.quick, seed=args.seed)
+    if args.real:
+        from .bench import real_experiments
+
+        exps = real_experiments(args.real)
+    else:
+        exps = paper_experiments(quick=args.quick, seed=args.seed)
     names = args.experiments.split(",") if args.experiments else list(exps)
     unknown = [n for n in names if n not in exps]
     if unknown:
@@ -279,7 +284,11 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--quick", action="store_true",
                    help="2 runs of 150 steps per arm (a demo), instead of 25 runs of 300")
     c.add_argument("--experiments", default="",
-                   help="comma-separated subset of exp1,exp2,exp3,all (default: all four)")
+                   help="comma-separated subset of exp1,exp2,exp3,all (default: all four); "
+                        "with --real: mrclam6,g2o")
+    c.add_argument("--real", default=None, metavar="DATA_DIR",
+                   help="every method on the recorded datasets under DATA_DIR (e.g. "
+                        "../shared/data) instead of the simulation")
     c.add_argument("--out", default="compare-results", help="output folder")
     c.add_argument("--seed", type=int, default=0)
     c.add_argument("--jobs", type=int, default=-1, help="local processes (-1: one per core)")

@@ -6,6 +6,7 @@ The paper's figures: fig. 3/5 (map and trajectory), fig. 4/6/7/8 (errors against
 
 from __future__ import annotations
 
+import warnings
 from typing import Mapping, Sequence
 
 import numpy as np
@@ -29,7 +30,8 @@ def plot_error_vs_time_on_axes(ax, curves: Mapping[str, tuple[np.ndarray, np.nda
         v = np.asarray(vals, dtype=float) * scale
         if not np.any(np.isfinite(v)):
             continue
-        with np.errstate(all="ignore"):
+        with warnings.catch_warnings():  # columns where no run has a map yet are NaN
+            warnings.simplefilter("ignore", RuntimeWarning)
             mean = np.nanmean(v, axis=0)
             if band == "std":
                 lo, hi = mean - np.nanstd(v, axis=0), mean + np.nanstd(v, axis=0)
@@ -116,8 +118,14 @@ def write_compare_figures(out_dir, experiments, results) -> list:
         fig.savefig(path, dpi=120)
         plt.close(fig)
         files.append(path)
+    for exp in experiments:
+        if exp.sources:
+            files += _write_source_maps(out, exp, results, plt)
+    sim_exps = [e for e in experiments if not e.sources]
+    if not sim_exps:
+        return files
     # Example map (fig. 5: Method 2 with localisation at t = 100; fig. 3: the truth)
-    exp = experiments[0]
+    exp = sim_exps[0]
     try:
         t_show = 100 if exp.sim.n_steps >= 100 else None
         stream, est = example_estimate("stmds-smacof-loc", exp, t=t_show)
@@ -136,4 +144,48 @@ def write_compare_figures(out_dir, experiments, results) -> list:
         (out / "example_map.txt").write_text(f"example map not drawn: {type(exc).__name__}: "
                                              f"{exc}\n")
         files.append(out / "example_map.txt")
+    return files
+
+
+def _write_source_maps(out, exp, results, plt) -> list:
+    """One figure per recorded source: every method's final map (aligned) over the truth."""
+    files = []
+    for src in exp.sources:
+        truth = src.stream().truth
+        rs = [r for r in results if r["experiment"] == exp.name and r["run"] == src.name]
+        n = len(rs)
+        if not n or truth is None:
+            continue
+        ncol = min(n, 3)
+        nrow = (n + ncol - 1) // ncol
+        fig, axes = plt.subplots(nrow, ncol, figsize=(4.6 * ncol, 4.4 * nrow), squeeze=False)
+        for ax, r in zip(axes.ravel(), rs):
+            plot_map_on_axes(ax, truth, title=f"{r['arm']}")
+            fm = r.get("final_map")
+            if not r.get("ok") or not fm:
+                reason = r.get("error", "no map (fewer than 3 landmarks)")
+                ax.text(0.5, 0.5, f"FAILED\n{reason[:60]}", transform=ax.transAxes,
+                        ha="center", va="center", color="tab:red", fontsize=8, wrap=True)
+                continue
+            lm = np.array(fm["landmarks"], dtype=float).reshape(-1, 3)
+            ax.plot(lm[:, 1], lm[:, 2], "o", color="tab:red", ms=4, label="estimate")
+            ids = dict(zip(truth.landmark_ids.tolist(), truth.landmarks_xy))
+            for i, x, y in lm:
+                if int(i) in ids:
+                    tx, ty = ids[int(i)]
+                    ax.plot([x, tx], [y, ty], "-", color="tab:red", lw=0.7)
+            if fm["poses"]:
+                p = np.array(fm["poses"], dtype=float)
+                ax.plot(p[:, 1], p[:, 2], "-", color="tab:blue", lw=0.9, label="est. trajectory")
+            mpe = r["checkpoints"][-1].get("mpe_m")
+            ax.set_title(f"{r['arm']}: MPE {100 * mpe:.1f} cm" if mpe == mpe else r["arm"])
+            ax.legend(fontsize="x-small", loc="upper right")
+        for ax in axes.ravel()[n:]:
+            ax.set_visible(False)
+        fig.suptitle(f"{exp.title}: {src.name}")
+        fig.tight_layout()
+        path = out / f"{exp.name}_{src.name}_maps.png"
+        fig.savefig(path, dpi=100)
+        plt.close(fig)
+        files.append(path)
     return files
