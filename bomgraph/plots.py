@@ -159,8 +159,13 @@ def _write_source_maps(out, exp, results, plt) -> list:
         ncol = min(n, 3)
         nrow = (n + ncol - 1) // ncol
         fig, axes = plt.subplots(nrow, ncol, figsize=(4.6 * ncol, 4.4 * nrow), squeeze=False)
+        pts = truth.landmarks_xy if truth.poses is None else np.vstack(
+            [truth.landmarks_xy, truth.poses[:, :2]])
+        lo, hi = pts.min(0) - 0.5, pts.max(0) + 0.5
         for ax, r in zip(axes.ravel(), rs):
             plot_map_on_axes(ax, truth, title=f"{r['arm']}")
+            ax.set_xlim(lo[0], hi[0])
+            ax.set_ylim(lo[1], hi[1])
             fm = r.get("final_map")
             if not r.get("ok") or not fm:
                 reason = r.get("error", "no map (fewer than 3 landmarks)")
