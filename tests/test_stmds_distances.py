@@ -36,7 +36,7 @@ def test_paper_rule_is_eq_3_and_4() -> None:
 
 
 def test_storage_grows_with_observed_pairs_and_ignores_pair_order() -> None:
-    store = DistanceStore("squared")
+    store = DistanceStore("fused")
     store.add(np.array([3, 0, 5]), np.array([1, 9, 2]), np.ones(3), np.ones(3))
     store.add(np.array([1, 2]), np.array([3, 7]), np.ones(2), np.ones(2))
     assert len(store) == 4
@@ -60,7 +60,7 @@ def test_the_corrected_rule_does_not_favour_short_estimates() -> None:
     d = np.array([0.8, 1.25])
     var = 0.01 * d ** 6
     paper = DistanceStore("paper")
-    fixed = DistanceStore("m3inv")
+    fixed = DistanceStore("scale-free")
     for store in (paper, fixed):
         for dk, vk in zip(d, var):
             store.add(np.array([0]), np.array([1]), np.array([dk * dk]), np.array([vk]))
@@ -69,7 +69,7 @@ def test_the_corrected_rule_does_not_favour_short_estimates() -> None:
 
 
 def test_min_count_and_priors_decide_what_is_known() -> None:
-    store = DistanceStore("m3inv", min_count=3)
+    store = DistanceStore("scale-free", min_count=3)
     store.add_priors(np.array([4]), np.array([2]), [1.2], [0.03])
     for _ in range(2):
         store.add(np.array([0, 2]), np.array([1, 4]), np.array([1.0, 1.44]), np.array([0.1, 0.1]))

@@ -39,12 +39,12 @@ from ..stream import Step, StreamHeader
 from .completion import largest_component, prune_low_degree, shortest_path_completion
 from .distances import FUSION_RULES, DistanceStore, IdIndex
 from .mds import LaplacianSolver, classical_scaling, smacof, stress1
-from .triangulation import (gate_points, pair_squared_distances, range_variances,
-                            triangulate_rays)
+from .triangulation import (compose_odometry, gate_points, pair_squared_distances,
+                            range_variances, triangulate_rays)
 
 METHODS = ("cs", "smacof")
 WEIGHTS = ("binary", "inverse-variance")
-INITS = ("previous", "classical")
+INITS = ("best", "previous", "classical")
 
 
 @dataclass(frozen=True)
@@ -62,6 +62,10 @@ class StmdsConfig:
         literally (it collapses, see the benchmark); the default is the corrected rule.
     min_count : int
         Instantaneous estimates a pair needs (without a prior) to count as known.
+    baselines : tuple of int
+        Step gaps ``k`` to triangulate over: the pose ``k`` steps back and now, with the
+        chained odometry and its covariance. The paper uses consecutive steps, ``(1,)``; a
+        longer baseline gives more parallax per unit of odometry noise.
     min_parallax_rad : float
         Gate: least angle between a landmark's two rays.
     max_range_factor : float
@@ -74,8 +78,11 @@ class StmdsConfig:
     weights : {"binary", "inverse-variance"}
         SMACOF weights: 1 for every known pair (the paper) or 1 / variance of the fused
         distance (normalised to mean 1).
-    smacof_init : {"previous", "classical"}
-        Warm start of SMACOF: the previous map, or the DMC-SPL classical-scaling map.
+    smacof_init : {"best", "previous", "classical"}
+        Warm start of SMACOF: the previous map (landmarks new to it placed by the
+        classical-scaling map aligned onto it), the DMC-SPL classical-scaling map (the paper),
+        or both, keeping the result with the lower stress ("best": a fold-over carried along
+        from an early map cannot persist).
     smacof_max_iter, smacof_tol, smacof_relaxation
         SMACOF iterations, relative stress tolerance, over-relaxation in (0, 2).
     min_degree : int
@@ -95,15 +102,16 @@ class StmdsConfig:
 
     method: str = "smacof"
     smacof_from_t: int = 50
-    fusion: str = "m3inv"
+    fusion: str = "scale-free"
     min_count: int = 5
     min_degree: int = 3
+    baselines: tuple[int, ...] = (1,)
     min_parallax_rad: float = math.radians(1.0)
     max_range_factor: float = 2.0
     max_range_m: float | None = None
     max_relative_range_sigma: float = math.inf
     weights: str = "binary"
-    smacof_init: str = "previous"
+    smacof_init: str = "best"
     smacof_max_iter: int = 300
     smacof_tol: float = 1e-6
     smacof_relaxation: float = 1.0
@@ -126,6 +134,10 @@ class StmdsConfig:
         need(self.smacof_from_t >= 0, "smacof_from_t must be >= 0")
         need(self.min_count >= 1, "min_count must be >= 1")
         need(self.min_degree >= 1, "min_degree must be >= 1")
+        object.__setattr__(self, "baselines", tuple(int(k) for k in self.baselines))
+        need(len(self.baselines) >= 1 and all(k >= 1 for k in self.baselines)
+             and len(set(self.baselines)) == len(self.baselines),
+             "baselines must be distinct step gaps >= 1, e.g. (1,) or (5,)")
         need(0 <= self.min_parallax_rad < math.pi / 2, "min_parallax_rad must be in [0, pi/2)")
         need(self.max_range_factor > 0, "max_range_factor must be > 0")
         need(self.max_range_m is None or self.max_range_m > 0, "max_range_m must be > 0")
@@ -249,8 +261,9 @@ class StmdsMapper:
             self._max_range = math.inf
         self._ids = IdIndex()
         self._store = DistanceStore(cfg.fusion, cfg.min_count)
-        self._prev_ids: np.ndarray | None = None   # sorted landmark ids seen at t-1
-        self._prev_bearings: np.ndarray | None = None
+        # the last max(baselines) + 1 steps: (sorted ids, bearings, dense idx, odom, sigma)
+        self._history: list[tuple] = []
+        self._max_baseline = max(cfg.baselines)
         self._t = -1
         self._n_steps = 0
         self._n_gated = 0
@@ -266,7 +279,8 @@ class StmdsMapper:
 
     # ------------------------------------------------------------------------------ steps
     def step(self, step: Step) -> None:
-        """Triangulate the landmarks seen at ``t-1`` and ``t`` and fuse their pair distances."""
+        """Triangulate the landmarks seen ``k`` steps ago and now (``k`` in ``baselines``; the
+        paper: ``t-1`` and ``t``) and fuse their pair distances."""
         order = np.argsort(step.landmark_ids, kind="stable")
         ids = step.landmark_ids[order]
         brg = step.bearings_rad[order]
@@ -275,41 +289,62 @@ class StmdsMapper:
         idx_now = self._ids.lookup(ids) if ids.size else np.zeros(0, np.int64)
         if self._window is not None:
             self._window.push(step.t, step.odom, idx_now, brg)
-        prev_ids, prev_brg = self._prev_ids, self._prev_bearings
-        self._prev_ids, self._prev_bearings = ids, brg
-        if step.odom is None or prev_ids is None or prev_ids.size == 0 or ids.size == 0:
+        hist = self._history
+        if step.odom is None:
+            hist.clear()
+        hist.append((ids, brg, idx_now, step.odom,
+                     None if step.odom is None else step.odometry_sigma(self.header)))
+        if len(hist) > self._max_baseline + 1:
+            del hist[0]
+        if ids.size == 0:
+            return
+        for k in self.config.baselines:
+            if len(hist) > k:
+                self._triangulate(k, hist[-1 - k], ids, brg, idx_now)
+
+    def _triangulate(self, k: int, base: tuple, ids: np.ndarray, brg: np.ndarray,
+                     idx_now: np.ndarray) -> None:
+        """Sequential triangulation between the pose ``k`` steps back and now; fuse the pairs."""
+        prev_ids, prev_brg = base[0], base[1]
+        if prev_ids.size == 0:
             return
         pos = np.searchsorted(prev_ids, ids)
         pos[pos >= prev_ids.size] = 0
         common = prev_ids[pos] == ids
         if not common.any():
             return
-        sigma = step.odometry_sigma(self.header)
-        tri = triangulate_rays(step.odom, prev_brg[pos[common]], brg[common])
-        var_r1, var_r2 = range_variances(tri, sigma, self._bearing_sigma)
+        if k == 1:
+            odom, odo_unc = self._history[-1][3], self._history[-1][4]
+        else:
+            recent = self._history[-k:]
+            odom, odo_unc = compose_odometry([h[3] for h in recent], [h[4] for h in recent])
+        tri = triangulate_rays(odom, prev_brg[pos[common]], brg[common])
+        var_r1, var_r2 = range_variances(tri, odo_unc, self._bearing_sigma)
         ok = gate_points(tri, var_r1, min_parallax_rad=self.config.min_parallax_rad,
                          max_range_m=self._max_range,
                          max_relative_range_sigma=self.config.max_relative_range_sigma)
         idx = idx_now[common]
-        self._n_triangulated += int(ok.sum())
+        n_ok = int(ok.sum())
+        self._n_triangulated += n_ok
+        self._n_gated += len(ok) - n_ok
+        if n_ok < len(ok):
+            tri = tri.subset(ok)
+            idx = idx[ok]
+            var_r1, var_r2 = var_r1[ok], var_r2[ok]
         if len(self._triangulated) < len(self._ids):
             grown = np.zeros(max(len(self._ids), 2 * len(self._triangulated)), bool)
             grown[:len(self._triangulated)] = self._triangulated
             self._triangulated = grown
-        self._triangulated[idx_now[common][ok]] = True
-        self._n_gated += int((~ok).sum())
-        if not ok.all():
-            tri = tri.subset(ok)
-            idx = idx[ok]
-            var_r1, var_r2 = var_r1[ok], var_r2[ok]
+        self._triangulated[idx] = True
         if self._window is not None:
-            self._window.add_ranges(len(self._window.t) - 2, idx, tri.range_prev_m, var_r1)
-            self._window.add_ranges(len(self._window.t) - 1, idx, tri.range_now_m, var_r2)
+            last = len(self._window.t) - 1
+            self._window.add_ranges(last - k, idx, tri.range_prev_m, var_r1)
+            self._window.add_ranges(last, idx, tri.range_now_m, var_r2)
         if len(tri) < 2:
             return
-        pairs = pair_squared_distances(tri, sigma, self._bearing_sigma)
+        pairs = pair_squared_distances(tri, odo_unc, self._bearing_sigma)
         self._store.add(idx[pairs.first], idx[pairs.second], pairs.squared_distance_m2,
-                        pairs.variance_m4, pairs.offset_trace_m2)
+                        pairs.variance_m4, pairs.translation_variance_m4)
 
     # ------------------------------------------------------------------------------ map
     def _base_info(self) -> dict[str, Any]:
@@ -379,14 +414,25 @@ class StmdsMapper:
         info["reconstruction"] = "classical-scaling"
         w = np.ones(len(ed)) if cfg.weights == "binary" else self._inverse_variance(ev)
         if use_smacof and n >= 2:
-            init = self._warm_start(kept_nodes, xy_cs) if cfg.smacof_init == "previous" \
-                else xy_cs
-            res = smacof(n, ef, es, ed, init=init, weights=w, max_iter=cfg.smacof_max_iter,
-                         tol=cfg.smacof_tol, relaxation=cfg.smacof_relaxation,
-                         solver=LaplacianSolver(n, ef, es, w))
-            xy = res.points
-            info.update(reconstruction="smacof", smacof_iterations=res.n_iter,
-                        smacof_converged=res.converged)
+            inits = []
+            if cfg.smacof_init in ("best", "previous"):
+                warm = self._warm_start(kept_nodes, xy_cs)
+                if warm is not None:
+                    inits.append(("previous", warm))
+            if cfg.smacof_init == "classical" or not inits or cfg.smacof_init == "best":
+                inits.append(("classical", xy_cs))
+            solver = LaplacianSolver(n, ef, es, w)
+            best = None
+            for name, init in inits:
+                res = smacof(n, ef, es, ed, init=init, weights=w, max_iter=cfg.smacof_max_iter,
+                             tol=cfg.smacof_tol, relaxation=cfg.smacof_relaxation,
+                             solver=solver)
+                if best is None or res.raw_stress < best[1].raw_stress:
+                    best = (name, res)
+            assert best is not None
+            xy = best[1].points
+            info.update(reconstruction="smacof", smacof_iterations=best[1].n_iter,
+                        smacof_converged=best[1].converged, smacof_init=best[0])
         info["stress1"] = stress1(xy, ef, es, ed, w) if len(ed) else 0.0
         self._prev_xy = np.full((n_lm, 2), np.nan)
         self._prev_xy[kept_nodes[is_lm]] = xy[is_lm]
@@ -406,14 +452,15 @@ class StmdsMapper:
         w = 1.0 / np.maximum(var, 1e-300)
         return w / w.mean()
 
-    def _warm_start(self, kept_nodes: np.ndarray, xy_cs: np.ndarray) -> np.ndarray:
-        """The previous map where it has the node, else the CS map aligned onto it."""
+    def _warm_start(self, kept_nodes: np.ndarray, xy_cs: np.ndarray) -> np.ndarray | None:
+        """The previous map where it has the node, else the CS map aligned onto it (None when
+        the previous map shares fewer than 3 nodes)."""
         prev_all = np.full((len(kept_nodes), 2), np.nan)
         inside = kept_nodes < len(self._prev_xy)
         prev_all[inside] = self._prev_xy[kept_nodes[inside]]
         have = np.isfinite(prev_all[:, 0])
         if have.sum() < 3:
-            return xy_cs
+            return None
         prev = prev_all[have]
         if have.all():
             return prev

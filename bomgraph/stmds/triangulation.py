@@ -153,22 +153,70 @@ def triangulate_rays(odom: ArrayLike, bearing_prev_rad: ArrayLike,
                             np.column_stack([cb, sb]))
 
 
-def measurement_sigmas(odometry_sigma: ArrayLike, bearing_sigma_rad: float) -> np.ndarray:
-    """The std. devs. ``(5,)`` of ``[dx, dy, dpsi, theta_prev, theta_now]``."""
-    o = np.asarray(odometry_sigma, dtype=float).reshape(3)
-    return np.array([o[0], o[1], o[2], bearing_sigma_rad, bearing_sigma_rad])
+def odometry_covariance(odometry: ArrayLike) -> np.ndarray:
+    """A ``(3, 3)`` odometry covariance from std. devs. ``(3,)`` (independent components) or
+    from a ``(3, 3)`` covariance (returned as a float array)."""
+    o = np.asarray(odometry, dtype=float)
+    if o.shape == (3,):
+        return np.diag(o * o)
+    if o.shape == (3, 3):
+        return o
+    raise ConfigError(f"odometry uncertainty must be 3 sigmas or a 3x3 covariance, got shape "
+                      f"{o.shape}")
 
 
-def point_covariance(tri: RayTriangulation, odometry_sigma: ArrayLike,
+def compose_odometry(odoms: ArrayLike, sigmas: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+    """Chain ``K`` odometry increments into one, with its first-order covariance.
+
+    Parameters
+    ----------
+    odoms : array of shape (K, 3)
+        Increments ``[dx_m, dy_m, dpsi_rad]`` of consecutive steps.
+    sigmas : array of shape (K, 3)
+        Their independent std. devs.
+
+    Returns
+    -------
+    increment : ndarray of shape (3,)
+        The motion from the first pose to the last, in the frame of the first (heading not
+        wrapped: it is only used through sines and cosines).
+    covariance : ndarray of shape (3, 3)
+    """
+    u = np.asarray(odoms, dtype=float).reshape(-1, 3)
+    sig = np.asarray(sigmas, dtype=float).reshape(-1, 3)
+    psi = np.concatenate([[0.0], np.cumsum(u[:, 2])])
+    c, s = np.cos(psi[:-1]), np.sin(psi[:-1])
+    step = np.column_stack([c * u[:, 0] - s * u[:, 1], s * u[:, 0] + c * u[:, 1]])
+    xy = np.concatenate([np.zeros((1, 2)), np.cumsum(step, axis=0)])
+    k = len(u)
+    lever = xy[-1] - xy[1:]                       # (K, 2): end minus pose after motion k
+    jac = np.zeros((3, 3 * k))
+    jac[0, 0::3], jac[0, 1::3], jac[0, 2::3] = c, -s, -lever[:, 1]
+    jac[1, 0::3], jac[1, 1::3], jac[1, 2::3] = s, c, lever[:, 0]
+    jac[2, 2::3] = 1.0
+    jw = jac * sig.reshape(-1)
+    return np.array([xy[-1, 0], xy[-1, 1], psi[-1]]), jw @ jw.T
+
+
+def _covariance_5(odometry: ArrayLike, bearing_sigma_rad: float) -> np.ndarray:
+    """Covariance ``(5, 5)`` of ``[dx, dy, dpsi, theta_prev, theta_now]``."""
+    cov = np.zeros((5, 5))
+    cov[:3, :3] = odometry_covariance(odometry)
+    cov[3, 3] = cov[4, 4] = bearing_sigma_rad ** 2
+    return cov
+
+
+def point_covariance(tri: RayTriangulation, odometry: ArrayLike,
                      bearing_sigma_rad: float) -> np.ndarray:
     """First-order covariance ``J Sigma J^T`` of each triangulated point, shape ``(k, 2, 2)``.
 
-    The points of one step share the odometry, so they are correlated with each other; this is
-    each point's own (marginal) covariance, in the frame of pose ``t-1`` (m^2).
+    ``odometry`` is the odometry's 3 std. devs. or its 3x3 covariance. The points of one step
+    share the odometry, so they are correlated with each other; this is each point's own
+    (marginal) covariance, in the frame of pose ``t-1`` (m^2).
     """
+    cov = _covariance_5(odometry, bearing_sigma_rad)
     with np.errstate(invalid="ignore", over="ignore"):
-        j = tri.jacobian * measurement_sigmas(odometry_sigma, bearing_sigma_rad)
-        return np.einsum("kaz,kbz->kab", j, j)
+        return np.einsum("kaz,zy,kby->kab", tri.jacobian, cov, tri.jacobian)
 
 
 def range_jacobians(tri: RayTriangulation) -> tuple[np.ndarray, np.ndarray]:
@@ -183,13 +231,17 @@ def range_jacobians(tri: RayTriangulation) -> tuple[np.ndarray, np.ndarray]:
     return j1, j2
 
 
-def range_variances(tri: RayTriangulation, odometry_sigma: ArrayLike,
+def range_variances(tri: RayTriangulation, odometry: ArrayLike,
                     bearing_sigma_rad: float) -> tuple[np.ndarray, np.ndarray]:
-    """First-order variances (m^2) of the depths ``r1`` (from pose t-1) and ``r2`` (from t)."""
-    sig2 = measurement_sigmas(odometry_sigma, bearing_sigma_rad) ** 2
+    """First-order variances (m^2) of the depths ``r1`` (from pose t-1) and ``r2`` (from t).
+
+    ``odometry`` is the odometry's 3 std. devs. or its 3x3 covariance.
+    """
+    cov = _covariance_5(odometry, bearing_sigma_rad)
     with np.errstate(invalid="ignore", over="ignore"):
         j1, j2 = range_jacobians(tri)
-        return (j1 * j1) @ sig2, (j2 * j2) @ sig2
+        return (np.einsum("kz,zy,ky->k", j1, cov, j1),
+                np.einsum("kz,zy,ky->k", j2, cov, j2))
 
 
 def gate_points(tri: RayTriangulation, range_var_m2: np.ndarray | None = None, *,
@@ -239,6 +291,10 @@ class PairEstimates:
         First-order variance ``J Sigma J^T`` of the squared distance (eq. 2).
     offset_trace_m2 : ndarray of shape (P,)
         ``trace Cov(p_i - p_j)``: the first-order bias of ``|p_i - p_j|^2``.
+    translation_variance_m4 : ndarray of shape (P,)
+        The part of ``variance_m4`` due to the odometry translation ``(dx, dy)`` alone (it
+        scales like ``d^2`` under a change of scale; the rest, from the bearings and the
+        turn, like ``d^4`` for the distance's variance).
     jacobian : ndarray of shape (P, 7) or None
         ``d |p_i - p_j|^2 / d [dx, dy, dpsi, theta_i_prev, theta_i_now, theta_j_prev,
         theta_j_now]`` (only when asked for).
@@ -249,13 +305,14 @@ class PairEstimates:
     squared_distance_m2: np.ndarray
     variance_m4: np.ndarray
     offset_trace_m2: np.ndarray
+    translation_variance_m4: np.ndarray
     jacobian: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.first)
 
 
-def pair_squared_distances(tri: RayTriangulation, odometry_sigma: ArrayLike,
+def pair_squared_distances(tri: RayTriangulation, odometry: ArrayLike,
                            bearing_sigma_rad: float, *,
                            with_jacobian: bool = False) -> PairEstimates:
     """Squared distance and its first-order variance for every pair of ``tri``'s landmarks.
@@ -264,8 +321,9 @@ def pair_squared_distances(tri: RayTriangulation, odometry_sigma: ArrayLike,
     ----------
     tri : RayTriangulation
         The (gated) landmarks of one step, ``k`` of them.
-    odometry_sigma : array of shape (3,)
-        Std. devs. of ``[dx_m, dy_m, dpsi_rad]`` for this step.
+    odometry : array of shape (3,) or (3, 3)
+        Std. devs. of ``[dx_m, dy_m, dpsi_rad]`` for this step, or their covariance (e.g.
+        from :func:`compose_odometry` for a baseline of several steps).
     bearing_sigma_rad : float
     with_jacobian : bool
         Also return the ``(P, 7)`` Jacobian (tests; the variance never needs it).
@@ -276,7 +334,8 @@ def pair_squared_distances(tri: RayTriangulation, odometry_sigma: ArrayLike,
         ``P = k (k - 1) / 2`` pairs, in ``np.triu_indices(k, 1)`` order.
     """
     first, second = pair_indices(len(tri))
-    sig = measurement_sigmas(odometry_sigma, bearing_sigma_rad)
+    cov_odo = odometry_covariance(odometry)
+    sb2 = float(bearing_sigma_rad) ** 2
     p = tri.points_xy
     jac = tri.jacobian
     e = p[first] - p[second]                                   # (P, 2)
@@ -288,16 +347,19 @@ def pair_squared_distances(tri: RayTriangulation, odometry_sigma: ArrayLike,
     g_odo = 2.0 * np.einsum("pa,paz->pz", e, de_odo)            # (P, 3)
     g_i = 2.0 * np.einsum("pa,paz->pz", e, ji[:, :, 3:])        # (P, 2)
     g_j = -2.0 * np.einsum("pa,paz->pz", e, jj[:, :, 3:])       # (P, 2)
-    sig2 = sig * sig
-    var = (g_odo * g_odo) @ sig2[:3] + sig2[3] * (np.einsum("pz,pz->p", g_i, g_i)
-                                                  + np.einsum("pz,pz->p", g_j, g_j))
-    trace = (np.einsum("paz,paz->pz", de_odo, de_odo) @ sig2[:3]
-             + sig2[3] * (np.einsum("paz,paz->p", ji[:, :, 3:], ji[:, :, 3:])
-                          + np.einsum("paz,paz->p", jj[:, :, 3:], jj[:, :, 3:])))
+    var = np.einsum("pz,zy,py->p", g_odo, cov_odo, g_odo) \
+        + sb2 * (np.einsum("pz,pz->p", g_i, g_i) + np.einsum("pz,pz->p", g_j, g_j))
+    trace = (np.einsum("paz,zy,pay->p", de_odo, cov_odo, de_odo)
+             + sb2 * (np.einsum("paz,paz->p", ji[:, :, 3:], ji[:, :, 3:])
+                      + np.einsum("paz,paz->p", jj[:, :, 3:], jj[:, :, 3:])))
+    g_t = g_odo[:, :2]
+    tvar = np.einsum("pz,zy,py->p", g_t, cov_odo[:2, :2], g_t)
     full = np.concatenate([g_odo, g_i, g_j], axis=1) if with_jacobian else None
-    return PairEstimates(first.astype(np.int64), second.astype(np.int64), d2, var, trace, full)
+    return PairEstimates(first.astype(np.int64), second.astype(np.int64), d2, var, trace, tvar,
+                         full)
 
 
 __all__ = ["POINT_MEASUREMENTS", "PAIR_MEASUREMENTS", "RayTriangulation", "PairEstimates",
-           "pair_indices", "triangulate_rays", "measurement_sigmas", "point_covariance",
+           "pair_indices", "triangulate_rays", "odometry_covariance", "compose_odometry",
+           "point_covariance",
            "range_jacobians", "range_variances", "gate_points", "pair_squared_distances"]
