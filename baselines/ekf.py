@@ -1,0 +1,1066 @@
+"""Bearing-only EKF-SLAM on filterpy: the paper's BOSLAM-EKF baseline (section IV, Exp. 2).
+
+The paper compares BOM-STMDS with "BOSLAM-EKF" whose new landmarks are initialised by Bailey's
+*constrained initialisation* (T. Bailey, "Constrained initialisation for bearing-only SLAM",
+ICRA 2003). This module implements that filter, ``ekf``, and an undelayed alternative,
+``ekf-invdepth`` (Civera, Davison and Montiel, "Inverse depth parametrization for monocular
+SLAM", IEEE T-RO 2008, reduced to the plane).
+
+The filter
+    :class:`BearingEkf` wraps ``filterpy.kalman.ExtendedKalmanFilter``: filterpy runs every
+    predict and update. The state is ``[x_m, y_m, psi_rad]`` of the robot followed by blocks
+    (landmarks ``[x_m, y_m]``, pose clones ``[x_m, y_m, psi_rad]``, inverse-depth features
+    ``[x0_m, y0_m, theta_rad, rho_per_m]``). The state vector is 1-D, shape ``(n,)``.
+
+Motion (predict)
+    ``pose_t = pose_{t-1} ⊕ u`` with ``u = [dx, dy, dpsi]`` (:func:`bomgraph.geometry.compose`).
+    filterpy's ``predict`` is linear, so :class:`_OdometryEkf` overrides ``predict_x`` with the
+    nonlinear composition and ``F`` is set to its Jacobian ``dF/dx`` (identity outside the
+    pose). The odometry noise ``Sigma_u = diag(sigma_u**2)`` (``step.odometry_sigma``) enters
+    as ``Q = G Sigma_u G^T`` with the input Jacobian ``G = d(pose ⊕ u)/du = blockdiag(R(psi), 1)``.
+
+Bearing update
+    ``h = wrap(atan2(ly - y, lx - x) - psi)``, ``residual=bomgraph.angles.angle_residual``
+    (innovations straddling +-pi are small, never 2 pi). filterpy's ``update`` applies the
+    Joseph form ``P = (I-KH) P (I-KH)^T + K R K^T``. All bearings of one step to mapped
+    landmarks are **batched into one update**. Before it, each bearing is gated on its own
+    (individual compatibility): ``y_i^2 / (H_i P H_i^T + sigma^2)`` against the chi-square
+    1-dof quantile ``gate_probability``; rejected bearings are left out of the batch, so a
+    gated outlier leaves the state exactly as if it had not been measured.
+
+Constrained (delayed) initialisation, ``ekf``
+    A landmark seen for the first time is a *candidate*: its bearing ``z1`` is kept and the
+    current pose is cloned into the state (stochastic cloning: the clone is perfectly
+    correlated with the pose when made; all candidates first seen at one step share one
+    clone). At each later sighting ``z2`` the landmark is triangulated from the clone and the
+    current pose, ``l = g(pose_c, pose_r, z1, z2)`` (:func:`triangulate_two_bearings`), and
+    Bailey's Gaussianity test is applied: the linearised Gaussian ``N(g(mu), J Sigma J^T)`` is
+    compared with the unscented estimate of the same distribution by their Kullback-Leibler
+    divergence; below ``init_kl_max`` (and in front of both rays) the landmark enters the state
+    with ``P_lx = J_x P[x_c, r, :]``, ``P_ll = J_x P_cr J_x^T + J_z diag(sigma^2) J_z^T``, and
+    clones that no candidate needs any more are removed. A candidate whose rays cross behind the
+    robot at clear parallax, or that waited ``max_pending_steps``, is re-anchored at the current
+    sighting. Bearings of a candidate between its anchor and its initialisation are not used.
+
+Inverse depth, ``ekf-invdepth``
+    A first sighting enters the state at once as ``[x0, y0, theta, rho]`` (anchor = robot
+    position, ``theta = psi + z``, ``rho ~ N(rho_init, rho_sigma^2)``); it is converted to a
+    Euclidean ``[x, y]`` block once Civera's linearity index ``4 sigma_d / d |cos alpha|``
+    falls below ``linearity_max``. Features still in inverse depth are reported through the
+    same conversion by ``estimate()`` (those with ``rho <= 0`` are left out).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any, Callable
+
+import numpy as np
+from filterpy.kalman import ExtendedKalmanFilter
+from scipy.stats import chi2
+
+from bomgraph.angles import angle_residual, wrap_angle
+from bomgraph.errors import ConfigError
+from bomgraph.geometry import compose
+from bomgraph.mapper import MapEstimate
+from bomgraph.stream import Step, StreamHeader
+
+# --------------------------------------------------------------------------------------------
+# Models and their analytic Jacobians (vectorised kernels)
+# --------------------------------------------------------------------------------------------
+
+
+def motion_jacobians(pose: np.ndarray, odom: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Jacobians of ``pose ⊕ odom`` with respect to the pose and to the odometry.
+
+    Parameters
+    ----------
+    pose : array of shape (3,)
+        ``[x_m, y_m, psi_rad]`` before the move.
+    odom : array of shape (3,)
+        ``[dx_m, dy_m, dpsi_rad]`` in the frame of ``pose``.
+
+    Returns
+    -------
+    f_pose : ndarray of shape (3, 3)
+    g_odom : ndarray of shape (3, 3)
+        ``blockdiag(R(psi), 1)``.
+    """
+    c, s = math.cos(pose[2]), math.sin(pose[2])
+    dx, dy = float(odom[0]), float(odom[1])
+    f_pose = np.array([[1.0, 0.0, -s * dx - c * dy],
+                       [0.0, 1.0, c * dx - s * dy],
+                       [0.0, 0.0, 1.0]])
+    g_odom = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    return f_pose, g_odom
+
+
+def bearing_and_jacobian(poses: np.ndarray, points_xy: np.ndarray) -> tuple[np.ndarray,
+                                                                             np.ndarray]:
+    """Bearings from poses to points and their Jacobians.
+
+    Parameters
+    ----------
+    poses : array of shape (k, 3)
+    points_xy : array of shape (k, 2)
+
+    Returns
+    -------
+    bearing_rad : ndarray of shape (k,)
+        ``wrap(atan2(ly - y, lx - x) - psi)``.
+    jac : ndarray of shape (k, 5)
+        Derivatives with respect to ``[x, y, psi, lx, ly]``.
+    """
+    d = points_xy - poses[:, :2]
+    q = np.einsum("ki,ki->k", d, d)
+    b = wrap_angle(np.arctan2(d[:, 1], d[:, 0]) - poses[:, 2])
+    gx, gy = -d[:, 1] / q, d[:, 0] / q
+    jac = np.column_stack([-gx, -gy, -np.ones(len(q)), gx, gy])
+    return np.asarray(b).reshape(-1), jac
+
+
+def invdepth_bearing_and_jacobian(poses: np.ndarray,
+                                  features: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Bearings from poses to inverse-depth features and their Jacobians.
+
+    Parameters
+    ----------
+    poses : array of shape (k, 3)
+    features : array of shape (k, 4)
+        ``[x0_m, y0_m, theta_rad, rho_per_m]``: anchor, world azimuth, inverse depth.
+
+    Returns
+    -------
+    bearing_rad : ndarray of shape (k,)
+        ``wrap(atan2(v_y, v_x) - psi)`` with ``v = rho (a - p) + [cos theta, sin theta]``
+        (the direction to ``a + m / rho`` scaled by ``rho > 0``).
+    jac : ndarray of shape (k, 7)
+        Derivatives with respect to ``[x, y, psi, x0, y0, theta, rho]``.
+    """
+    a_minus_p = features[:, :2] - poses[:, :2]
+    rho = features[:, 3]
+    th = features[:, 2]
+    v = rho[:, None] * a_minus_p + np.column_stack([np.cos(th), np.sin(th)])
+    q = np.einsum("ki,ki->k", v, v)
+    g = np.column_stack([-v[:, 1], v[:, 0]]) / q[:, None]
+    b = wrap_angle(np.arctan2(v[:, 1], v[:, 0]) - poses[:, 2])
+    jac = np.empty((len(q), 7))
+    jac[:, 0:2] = -rho[:, None] * g
+    jac[:, 2] = -1.0
+    jac[:, 3:5] = rho[:, None] * g
+    jac[:, 5] = -g[:, 0] * np.sin(th) + g[:, 1] * np.cos(th)
+    jac[:, 6] = np.einsum("ki,ki->k", g, a_minus_p)
+    return np.asarray(b).reshape(-1), jac
+
+
+def invdepth_to_xy(features: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Euclidean points of inverse-depth features and the Jacobians of the conversion.
+
+    Parameters
+    ----------
+    features : array of shape (k, 4)
+        ``[x0_m, y0_m, theta_rad, rho_per_m]`` with ``rho != 0``.
+
+    Returns
+    -------
+    points_xy : ndarray of shape (k, 2)
+        ``a + [cos theta, sin theta] / rho``.
+    jac : ndarray of shape (k, 2, 4)
+    """
+    th, rho = features[:, 2], features[:, 3]
+    m = np.column_stack([np.cos(th), np.sin(th)])
+    pts = features[:, :2] + m / rho[:, None]
+    jac = np.zeros((len(rho), 2, 4))
+    jac[:, 0, 0] = jac[:, 1, 1] = 1.0
+    jac[:, :, 2] = np.column_stack([-np.sin(th), np.cos(th)]) / rho[:, None]
+    jac[:, :, 3] = -m / (rho * rho)[:, None]
+    return pts, jac
+
+
+def _triangulate_point(pose_a: np.ndarray, pose_b: np.ndarray, bearing_a: np.ndarray,
+                       bearing_b: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Intersection of two bearing rays, broadcasting over leading axes.
+
+    Returns the point ``(..., 2)``, the depth along ray a ``(...,)`` and ``sin(a_b - a_a)``.
+    """
+    a1 = pose_a[..., 2] + bearing_a
+    a2 = pose_b[..., 2] + bearing_b
+    c1, s1, c2, s2 = np.cos(a1), np.sin(a1), np.cos(a2), np.sin(a2)
+    dx = pose_b[..., 0] - pose_a[..., 0]
+    dy = pose_b[..., 1] - pose_a[..., 1]
+    s = c1 * s2 - s1 * c2
+    n = dx * s2 - dy * c2
+    with np.errstate(divide="ignore", invalid="ignore"):
+        r1 = n / s
+    pt = np.stack([pose_a[..., 0] + r1 * c1, pose_a[..., 1] + r1 * s1], -1)
+    return pt, r1, s
+
+
+def triangulate_two_bearings(pose_a: np.ndarray, pose_b: np.ndarray, bearing_a: np.ndarray,
+                             bearing_b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The point seen at ``bearing_a`` from ``pose_a`` and at ``bearing_b`` from ``pose_b``.
+
+    The rays are ``p_a + r_a d(a_a)`` with world angles ``a_a = psi_a + bearing_a`` (same for
+    b); the point is ``p_a + r_a d(a_a)`` with ``r_a = ((p_b - p_a) x d(a_b)) / sin(a_b - a_a)``.
+
+    Parameters
+    ----------
+    pose_a, pose_b : arrays of shape (m, 3)
+    bearing_a, bearing_b : arrays of shape (m,), radians relative to the headings
+
+    Returns
+    -------
+    points_xy : ndarray of shape (m, 2)
+        Infinite or NaN for parallel rays.
+    jac : ndarray of shape (m, 2, 8)
+        Derivatives with respect to ``[x_a, y_a, psi_a, x_b, y_b, psi_b, bearing_a,
+        bearing_b]``.
+    """
+    a1 = pose_a[:, 2] + bearing_a
+    a2 = pose_b[:, 2] + bearing_b
+    c1, s1, c2, s2 = np.cos(a1), np.sin(a1), np.cos(a2), np.sin(a2)
+    dx = pose_b[:, 0] - pose_a[:, 0]
+    dy = pose_b[:, 1] - pose_a[:, 1]
+    s = c1 * s2 - s1 * c2            # sin(a2 - a1)
+    cd = c1 * c2 + s1 * s2           # cos(a2 - a1)
+    n = dx * s2 - dy * c2            # (p_b - p_a) x d2
+    with np.errstate(divide="ignore", invalid="ignore"):
+        r1 = n / s
+        d1 = np.stack([c1, s1], -1)
+        w = np.stack([s2, -c2], -1) / s[:, None]
+        dr_da1 = n * cd / (s * s)
+        dr_da2 = (dx * c2 + dy * s2) / s - n * cd / (s * s)
+    pts = pose_a[:, :2] + r1[:, None] * d1
+    jac = np.zeros((len(s), 2, 8))
+    outer = d1[:, :, None] * w[:, None, :]
+    jac[:, :, 0:2] = np.eye(2) - outer
+    jac[:, :, 3:5] = outer
+    j_a1 = dr_da1[:, None] * d1 + r1[:, None] * np.stack([-s1, c1], -1)
+    j_a2 = dr_da2[:, None] * d1
+    jac[:, :, 2] = jac[:, :, 6] = j_a1
+    jac[:, :, 5] = jac[:, :, 7] = j_a2
+    return pts, jac
+
+
+def gaussian_kl_2d(mean_p: np.ndarray, cov_p: np.ndarray, mean_q: np.ndarray,
+                   cov_q: np.ndarray) -> np.ndarray:
+    """``KL(N_p || N_q)`` for 2-D Gaussians, vectorised; ``inf`` where a covariance is singular.
+
+    Parameters
+    ----------
+    mean_p, mean_q : arrays of shape (m, 2)
+    cov_p, cov_q : arrays of shape (m, 2, 2)
+
+    Returns
+    -------
+    ndarray of shape (m,), nats
+    """
+    det_p = cov_p[:, 0, 0] * cov_p[:, 1, 1] - cov_p[:, 0, 1] * cov_p[:, 1, 0]
+    det_q = cov_q[:, 0, 0] * cov_q[:, 1, 1] - cov_q[:, 0, 1] * cov_q[:, 1, 0]
+    out = np.full(len(det_p), np.inf)
+    ok = (det_p > 0) & (det_q > 0) & np.all(np.isfinite(mean_p), 1) \
+        & np.all(np.isfinite(mean_q), 1)
+    if np.any(ok):
+        q = cov_q[ok]
+        inv_q = np.stack([np.stack([q[:, 1, 1], -q[:, 0, 1]], -1),
+                          np.stack([-q[:, 1, 0], q[:, 0, 0]], -1)], -2) / det_q[ok, None, None]
+        d = mean_q[ok] - mean_p[ok]
+        tr = np.einsum("kij,kji->k", inv_q, cov_p[ok])
+        maha = np.einsum("ki,kij,kj->k", d, inv_q, d)
+        out[ok] = 0.5 * (tr + maha - 2.0 + np.log(det_q[ok] / det_p[ok]))
+    return out
+
+
+# --------------------------------------------------------------------------------------------
+# The filter: filterpy's EKF, wrapped so that it is built complete and resized consistently
+# --------------------------------------------------------------------------------------------
+
+
+class _OdometryEkf(ExtendedKalmanFilter):
+    """filterpy's EKF whose state prediction is the nonlinear odometry composition.
+
+    ``predict(u)`` calls :meth:`predict_x` (here: ``pose ⊕ u`` on ``x[:3]``, the rest of the
+    state is static) and then ``P = F P F^T + Q`` with ``F`` and ``Q`` set by the caller.
+    """
+
+    def predict_x(self, u: Any = 0) -> None:
+        x = self.x.copy()
+        x[:3] = compose(x[:3], u)
+        self.x = x
+
+
+class BearingEkf:
+    """A planar bearing-only EKF on filterpy with a state that grows and shrinks.
+
+    Parameters
+    ----------
+    pose0 : array of shape (3,)
+        Initial robot pose ``[x_m, y_m, psi_rad]``.
+    pose_cov0 : array of shape (3, 3)
+        Its covariance (zeros: the map frame is the first pose).
+    bearing_sigma_rad : float
+        Std. dev. of one bearing.
+
+    Notes
+    -----
+    filterpy's arrays whose size follows the state (``x``, ``P``, ``F``, ``Q``, ``_I``, ``K``,
+    ``x_prior``, ``x_post``, ``P_prior``, ``P_post``, ``dim_x``) are all resized together in
+    :meth:`_set_state`. ``B`` stays filterpy's scalar 0: the control enters through
+    ``predict_x``, not through a linear ``B u``. ``dim_z``, ``y``, ``S``, ``SI`` follow the
+    size of the last batch of bearings.
+    """
+
+    def __init__(self, pose0: np.ndarray, pose_cov0: np.ndarray,
+                 bearing_sigma_rad: float, observability_constrained: bool = False) -> None:
+        pose0 = np.asarray(pose0, dtype=float).reshape(3)
+        pose_cov0 = np.asarray(pose_cov0, dtype=float).reshape(3, 3)
+        if not (np.all(np.isfinite(pose0)) and np.all(np.isfinite(pose_cov0))):
+            raise ConfigError("BearingEkf: the initial pose and its covariance must be finite")
+        if not (math.isfinite(bearing_sigma_rad) and bearing_sigma_rad > 0):
+            raise ConfigError(f"BearingEkf: bearing_sigma_rad must be > 0, got "
+                              f"{bearing_sigma_rad}")
+        self.bearing_sigma_rad = float(bearing_sigma_rad)
+        self.kf = _OdometryEkf(dim_x=3, dim_z=1, dim_u=3)
+        self.kf.R = np.eye(1) * self.bearing_sigma_rad ** 2
+        self._is_angle = np.array([False, False, True])
+        self.observability_constrained = bool(observability_constrained)
+        # the unobservable directions of the linearised system (global translation and
+        # rotation), one row per state: [[1, 0, -y], [0, 1, x], [0, 0, 1]] for a pose
+        self.nullspace = np.array([[1.0, 0.0, -pose0[1]], [0.0, 1.0, pose0[0]], [0, 0, 1.0]])
+        self._set_state(np.array([pose0[0], pose0[1], float(wrap_angle(pose0[2]))]),
+                        0.5 * (pose_cov0 + pose_cov0.T))
+
+    # -- read access ------------------------------------------------------------------------
+    @property
+    def x(self) -> np.ndarray:
+        """The state, shape ``(n,)`` (a view of filterpy's; do not modify)."""
+        return self.kf.x
+
+    @property
+    def P(self) -> np.ndarray:  # noqa: N802 (the filter's own name)
+        """The covariance, shape ``(n, n)``."""
+        return self.kf.P
+
+    @property
+    def dim(self) -> int:
+        return int(self.kf.dim_x)
+
+    # -- structure --------------------------------------------------------------------------
+    def _set_state(self, x: np.ndarray, P: np.ndarray) -> None:  # noqa: N803
+        kf = self.kf
+        n = len(x)
+        kf.dim_x = n
+        kf.x = x
+        kf.P = P
+        kf.F = np.eye(n)
+        kf.Q = np.zeros((n, n))
+        kf._I = np.eye(n)
+        kf.K = np.zeros((n, kf.dim_z))
+        kf.x_prior = x.copy()
+        kf.x_post = x.copy()
+        kf.P_prior = P.copy()
+        kf.P_post = P.copy()
+
+    def _wrap(self) -> None:
+        x = self.kf.x
+        x[self._is_angle] = wrap_angle(x[self._is_angle])
+
+    def augment(self, value: np.ndarray, idx: np.ndarray, jac: np.ndarray,
+                noise_cov: np.ndarray, is_angle: np.ndarray) -> int:
+        """Append ``m`` states ``value = g(x[idx], w)`` with ``w`` independent of the state.
+
+        Parameters
+        ----------
+        value : array of shape (m,)
+        idx : int array of shape (k,)
+            The existing states ``g`` depends on.
+        jac : array of shape (m, k)
+            ``dg/dx[idx]``.
+        noise_cov : array of shape (m, m)
+            ``(dg/dw) Cov(w) (dg/dw)^T``.
+        is_angle : bool array of shape (m,)
+            Which new states are angles (wrapped after every update).
+
+        Returns
+        -------
+        int
+            The index of the first new state.
+        """
+        P = self.kf.P
+        n, m = self.dim, len(value)
+        cross = P[:, idx] @ jac.T
+        new_p = np.empty((n + m, n + m))
+        new_p[:n, :n] = P
+        new_p[:n, n:] = cross
+        new_p[n:, :n] = cross.T
+        blk = jac @ cross[idx] + noise_cov
+        new_p[n:, n:] = 0.5 * (blk + blk.T)
+        self._is_angle = np.concatenate([self._is_angle, np.asarray(is_angle, bool)])
+        self.nullspace = np.concatenate([self.nullspace, jac @ self.nullspace[idx]])
+        self._set_state(np.concatenate([self.kf.x, np.asarray(value, float)]), new_p)
+        self._wrap()
+        return n
+
+    def remove(self, idx: np.ndarray) -> None:
+        """Marginalise the states ``idx`` out (drop their rows and columns)."""
+        keep = np.ones(self.dim, bool)
+        keep[np.asarray(idx, dtype=np.int64)] = False
+        if np.any(~keep[:3]):
+            raise ConfigError("BearingEkf.remove: the robot pose (states 0..2) cannot be removed")
+        self._is_angle = self._is_angle[keep]
+        self.nullspace = self.nullspace[keep]
+        self._set_state(self.kf.x[keep], self.kf.P[np.ix_(keep, keep)])
+
+    # -- filtering --------------------------------------------------------------------------
+    def predict(self, odom: np.ndarray, odom_sigma: np.ndarray) -> None:
+        """filterpy's predict with the odometry model: ``F = dF/dx``, ``Q = G Sigma_u G^T``.
+
+        With ``observability_constrained`` the heading column of ``F`` is
+        ``J (p_{k+1|k} - a_k)`` where ``a_k`` is the position the nullspace's rotation
+        direction is anchored at (the previous prior, as in the first-estimates Jacobian),
+        so that ``F N_k`` is again the nullspace of a rigid motion at the new prior position.
+        ``N`` is propagated with the same ``F``.
+        """
+        kf = self.kf
+        odom = np.asarray(odom, float)
+        f_pose, g_odom = motion_jacobians(kf.x[:3], odom)
+        if self.observability_constrained:
+            anchor = np.array([self.nullspace[1, 2], -self.nullspace[0, 2]])
+            d = compose(kf.x[:3], odom)[:2] - anchor
+            f_pose[0, 2], f_pose[1, 2] = -d[1], d[0]
+        self.nullspace[:3] = f_pose @ self.nullspace[:3]
+        kf.F = np.eye(self.dim)
+        kf.F[:3, :3] = f_pose
+        kf.Q = np.zeros((self.dim, self.dim))
+        kf.Q[:3, :3] = (g_odom * np.asarray(odom_sigma, float) ** 2) @ g_odom.T
+        kf.predict(u=odom)
+        self._wrap()
+
+    def update(self, z_rad: np.ndarray, hx: Callable[[np.ndarray], np.ndarray],
+               jac: Callable[[np.ndarray], np.ndarray],
+               var_rad2: np.ndarray | None = None) -> None:
+        """One batched bearing update by filterpy (Joseph form, wrapped residual).
+
+        Parameters
+        ----------
+        z_rad : array of shape (k,)
+        hx : callable ``x (n,) -> (k,)`` predicted bearings
+        jac : callable ``x (n,) -> (k, n)`` their Jacobian
+        var_rad2 : array of shape (k,), optional
+            Variance of each bearing (default ``bearing_sigma_rad**2``); ``R = diag(var)``.
+        """
+        kf = self.kf
+        k = len(z_rad)
+        if var_rad2 is None:
+            var_rad2 = np.full(k, self.bearing_sigma_rad ** 2)
+        kf.dim_z = k
+        r = np.diag(np.asarray(var_rad2, float))
+        kf.R = r
+        kf.update(np.asarray(z_rad, float), HJacobian=jac, Hx=hx, R=r,
+                  residual=angle_residual)
+        kf.P = 0.5 * (kf.P + kf.P.T)
+        kf.P_post = kf.P.copy()
+        self._wrap()
+        kf.x_post = kf.x.copy()
+
+
+# --------------------------------------------------------------------------------------------
+# Mappers
+# --------------------------------------------------------------------------------------------
+
+_LM, _CLONE, _IDP = "lm", "clone", "idp"
+_SIZE = {_LM: 2, _CLONE: 3, _IDP: 4}
+
+
+def _check_common(gate_probability: float, initial_pose_sigma: tuple[float, float, float]
+                  ) -> None:
+    if not 0 < gate_probability <= 1:
+        raise ConfigError(f"gate_probability must be in (0, 1] (1 disables the gate), got "
+                          f"{gate_probability}")
+    if len(initial_pose_sigma) != 3 or not all(math.isfinite(s) and s >= 0
+                                               for s in initial_pose_sigma):
+        raise ConfigError("initial_pose_sigma must be 3 finite numbers >= 0 "
+                          "(sigma_x_m, sigma_y_m, sigma_psi_rad)")
+
+
+@dataclass(frozen=True)
+class EkfConfig:
+    """Options of ``ekf`` (constrained initialisation).
+
+    gate_probability : chi-square 1-dof probability of the per-bearing Mahalanobis gate
+        (threshold ``chi2.ppf(p, 1)``; 1 disables the gate).
+    init_kl_max : a candidate is initialised when the KL divergence (nats) between the
+        unscented and the linearised Gaussian of its two-ray triangulation is below this.
+    inconsistent_parallax_rad : rays crossing behind the robot at more than this parallax
+        make the candidate restart from the current sighting (an outlier anchor).
+    max_pending_steps : a candidate still not initialised after this many steps restarts.
+    initial_pose_sigma : std. dev. of the first pose (zeros anchor the map frame to it).
+    """
+
+    gate_probability: float = 0.999
+    init_kl_max: float = 0.01
+    inconsistent_parallax_rad: float = math.radians(15.0)
+    max_pending_steps: int = 30
+    initial_pose_sigma: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    second_order: bool = True
+    max_bearing_nonlinearity: float = 0.2
+    observability_constrained: bool = True
+    use_intermediate_bearings: bool = True
+
+    def __post_init__(self) -> None:
+        _check_common(self.gate_probability, self.initial_pose_sigma)
+        if not (self.init_kl_max > 0):
+            raise ConfigError(f"init_kl_max must be > 0, got {self.init_kl_max}")
+        if not 0 < self.inconsistent_parallax_rad < math.pi:
+            raise ConfigError("inconsistent_parallax_rad must be in (0, pi)")
+        if self.max_pending_steps < 1:
+            raise ConfigError(f"max_pending_steps must be >= 1, got {self.max_pending_steps}")
+
+
+@dataclass(frozen=True)
+class InverseDepthConfig:
+    """Options of ``ekf-invdepth`` (undelayed inverse-depth initialisation).
+
+    gate_probability, initial_pose_sigma : as in :class:`EkfConfig`.
+    rho_init_per_m, rho_sigma_per_m : prior inverse depth of a new feature and its std. dev.;
+        None derives them from the header's sensor range ``R`` (``1.5/R`` and ``0.75/R``, so
+        the 2-sigma interval covers depths from ``0.3 R`` to ``4 R``), or uses Civera's
+        ``0.1`` and ``0.5`` per metre when the range is unknown.
+    linearity_max : Civera's linearity index below which a feature becomes Euclidean.
+    """
+
+    gate_probability: float = 0.999
+    rho_init_per_m: float | None = None
+    rho_sigma_per_m: float | None = None
+    linearity_max: float = 0.1
+    initial_pose_sigma: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    second_order: bool = True
+    max_bearing_nonlinearity: float = 0.2
+    observability_constrained: bool = True
+
+    def __post_init__(self) -> None:
+        _check_common(self.gate_probability, self.initial_pose_sigma)
+        if self.rho_init_per_m is not None and not self.rho_init_per_m > 0:
+            raise ConfigError("rho_init_per_m must be > 0")
+        if self.rho_sigma_per_m is not None and not self.rho_sigma_per_m > 0:
+            raise ConfigError("rho_sigma_per_m must be > 0")
+        if not self.linearity_max > 0:
+            raise ConfigError("linearity_max must be > 0")
+
+
+class _EkfSlam:
+    """Shared machinery: state layout, predict, gated batch update, trajectory, estimate."""
+
+    def __init__(self, header: StreamHeader, start_pose: tuple[float, float, float],
+                 gate_probability: float, initial_pose_sigma: tuple[float, float, float],
+                 second_order: bool, max_bearing_nonlinearity: float,
+                 observability_constrained: bool) -> None:
+        self._header = header
+        self.filter = BearingEkf(np.asarray(start_pose, dtype=float),
+                                 np.diag(np.asarray(initial_pose_sigma, float) ** 2),
+                                 header.bearing_sigma_rad, observability_constrained)
+        self._gate = float(chi2.ppf(gate_probability, 1)) if gate_probability < 1 else np.inf
+        self._sizes: dict[tuple[str, int], int] = {}
+        self._offset: dict[tuple[str, int], int] = {}
+        self._last_t: int | None = None
+        self._pose_t: list[int] = []
+        self._poses: list[np.ndarray] = []
+        self._pose_covs: list[np.ndarray] = []
+        self.n_gated = 0
+        self.n_updates = 0
+        self.n_nonlinear = 0
+        self._max_nonlin = float(max_bearing_nonlinearity)
+        self._second = bool(second_order)
+
+    # -- layout -----------------------------------------------------------------------------
+    def _rebuild(self) -> None:
+        off = 3
+        self._offset = {}
+        for key, size in self._sizes.items():
+            self._offset[key] = off
+            off += size
+        if off != self.filter.dim:
+            raise RuntimeError("internal: state layout and filter size disagree")
+
+    def _add_blocks(self, keys: list[tuple[str, int]], value: np.ndarray, idx: np.ndarray,
+                    jac: np.ndarray, noise_cov: np.ndarray) -> None:
+        is_angle = np.zeros(len(value), bool)
+        pos = 0
+        for key in keys:
+            size = _SIZE[key[0]]
+            if key[0] in (_CLONE, _IDP):
+                is_angle[pos + 2] = True
+            pos += size
+        self.filter.augment(value, idx, jac, noise_cov, is_angle)
+        for key in keys:
+            self._sizes[key] = _SIZE[key[0]]
+        self._rebuild()
+
+    def _remove_blocks(self, keys: list[tuple[str, int]]) -> None:
+        if not keys:
+            return
+        idx = np.concatenate([self._offset[k] + np.arange(self._sizes[k]) for k in keys])
+        self.filter.remove(idx)
+        for k in keys:
+            del self._sizes[k]
+        self._rebuild()
+
+    def _block_index(self, offsets: np.ndarray, size: int) -> np.ndarray:
+        return np.asarray(offsets, np.int64)[:, None] + np.arange(size)
+
+    # -- measurement model ------------------------------------------------------------------
+    def _model(self, pose_off: np.ndarray, kinds: np.ndarray, offsets: np.ndarray
+               ) -> Callable[[np.ndarray], tuple[np.ndarray, np.ndarray, list[Any]]]:
+        """The bearing model for filterpy, memoised on ``x``.
+
+        Bearings are taken from the poses at ``pose_off`` (0: the robot, else a clone) to the
+        blocks at ``offsets`` of size ``kinds`` (2: Euclidean landmark, 4: inverse-depth
+        feature). The returned function maps ``x`` to ``h (k,)``, the dense Jacobian
+        ``H (k, n)`` and its nonzero part as ``[(row mask, columns (m, s), values (m, s))]``
+        per kind (OC-constrained when the filter is).
+        """
+        k = len(offsets)
+        groups = []
+        for size, fn in ((2, bearing_and_jacobian), (4, invdepth_bearing_and_jacobian)):
+            sel = kinds == size
+            if sel.any():
+                cols = np.concatenate([self._block_index(pose_off[sel], 3),
+                                       self._block_index(offsets[sel], size)], 1)
+                groups.append((sel, np.flatnonzero(sel)[:, None], cols, fn))
+        memo: dict[str, Any] = {}
+
+        def both(x: np.ndarray) -> tuple[np.ndarray, np.ndarray, list[Any]]:
+            if "x" in memo and np.array_equal(memo["x"], x):
+                return memo["h"], memo["H"], memo["parts"]
+            h = np.empty(k)
+            H = np.zeros((k, len(x)))
+            parts = []
+            for sel, rows, cols, fn in groups:
+                v = x[cols]
+                h[sel], j = fn(v[:, :3], v[:, 3:])
+                if self.filter.observability_constrained:
+                    j = self._constrain(j, cols)
+                H[rows, cols] = j
+                parts.append((sel, cols, j))
+            memo.update(x=x.copy(), h=h, H=H, parts=parts)
+            return h, H, parts
+
+        return both
+
+    def _constrain(self, jac: np.ndarray, cols: np.ndarray) -> np.ndarray:
+        """Jacobian rows that satisfy ``h N = 0`` (observability-constrained EKF).
+
+        ``N`` (n, 3) spans global translation and rotation of the linearised system
+        (:attr:`BearingEkf.nullspace`); keeping ``H N = 0`` at every step keeps them
+        unobservable, so the filter gains no spurious information about them (Huang, Mourikis
+        and Roumeliotis, IJRR 2010). A row to a Euclidean landmark keeps its direction and is
+        linearised at the closest point that satisfies the constraint: with ``u`` the unit
+        vector of the current ray and ``a_l``, ``a_p`` the positions the landmark's and the
+        pose's rows of ``N`` are anchored at, ``h_l = J u / L``, ``h_p = -h_l``,
+        ``h_psi = -1`` with ``L = u . (a_l - a_p)``. Other rows (inverse-depth features, or
+        ``L <= 0``) are projected, ``h <- h - (h N_S)(N_S^T N_S)^-1 N_S^T`` over their own
+        columns ``S``.
+
+        Parameters
+        ----------
+        jac : array of shape (m, s)
+            Rows over the columns ``cols`` (pose first, then the landmark block).
+        cols : int array of shape (m, s)
+
+        Returns
+        -------
+        ndarray of shape (m, s)
+        """
+        N = self.filter.nullspace
+        out = jac.copy()
+        project = np.ones(len(jac), bool)
+        if jac.shape[1] == 5:
+            h_l = jac[:, 3:5]                                    # J u / |r|
+            u = np.stack([h_l[:, 1], -h_l[:, 0]], 1)
+            u /= np.sqrt(np.einsum("ki,ki->k", u, u))[:, None]
+            a_l = np.stack([N[cols[:, 4], 2], -N[cols[:, 3], 2]], 1)
+            a_p = np.stack([N[cols[:, 1], 2], -N[cols[:, 0], 2]], 1)
+            length = np.einsum("ki,ki->k", u, a_l - a_p)
+            ok = length > 1e-6
+            new_l = np.stack([-u[ok, 1], u[ok, 0]], 1) / length[ok, None]
+            out[ok, 3:5] = new_l
+            out[ok, 0:2] = -new_l
+            project = ~ok
+        if project.any():
+            ns = N[cols[project]]                                # (m, s, 3)
+            h = jac[project]
+            gram = np.einsum("msi,msj->mij", ns, ns)
+            coef = np.linalg.solve(gram, np.einsum("ms,msi->mi", h, ns)[..., None])[..., 0]
+            out[project] = h - np.einsum("msi,mi->ms", ns, coef)
+        return out
+
+    def _gated_update(self, pose_off: np.ndarray, kinds: np.ndarray, offsets: np.ndarray,
+                      z: np.ndarray) -> None:
+        """Gate each bearing on its own NIS, then one batched filterpy update with the rest.
+
+        The NIS of bearing ``i`` is ``y_i^2 / (H_i P H_i^T + var_i)`` with the wrapped
+        innovation ``y_i`` and the variance of :meth:`_second_order`; it is compared with the
+        chi-square 1-dof quantile. Bearings past ``max_bearing_nonlinearity`` are not used.
+        """
+        var, index = self._second_order(pose_off, kinds, offsets)
+        usable = index <= self._max_nonlin
+        self.n_nonlinear += int(np.count_nonzero(~usable))
+        model = self._model(pose_off, kinds, offsets)
+        x, P = self.filter.x, self.filter.P
+        h, _, parts = model(x)
+        s = var.copy()
+        for sel, cols, j in parts:
+            s[sel] += np.einsum("mi,mij,mj->m", j, P[cols[:, :, None], cols[:, None, :]], j)
+        keep = np.asarray(angle_residual(z, h)) ** 2 / s <= self._gate
+        self.n_gated += int(np.count_nonzero(~keep & usable))
+        keep &= usable
+        if keep.any():
+            # filterpy evaluates hx and jac at this same x: the memo computes them once
+            self.filter.update(z[keep], lambda x: model(x)[0][keep],
+                               lambda x: model(x)[1][keep], var[keep])
+            self.n_updates += int(np.count_nonzero(keep))
+
+    def _second_order(self, pose_off: np.ndarray, kinds: np.ndarray, offsets: np.ndarray
+                      ) -> tuple[np.ndarray, np.ndarray]:
+        """Bearing variances with the second-order linearisation error; nonlinearity index.
+
+        For ``r = l - p`` with covariance ``C`` (``C_rr``, ``C_pp``, ``C_rp`` in the frame of
+        the ray: radial, perpendicular) the second-order term of ``atan2`` is
+        ``-d_r d_p / |r|^2``, of variance ``(C_rr C_pp + C_rp^2) / |r|^4``. With
+        ``second_order`` that variance is added to ``sigma^2`` (its mean ``-C_rp / |r|^2`` is
+        not applied: it would move a filter fed noise-free data off the truth). The index
+        ``(C_rr C_pp)^(1/4) / |r|`` measures how far the linearisation is to be trusted;
+        bearings above ``max_bearing_nonlinearity`` are not used. Euclidean landmarks only;
+        inverse-depth features get ``sigma^2`` and index 0.
+
+        Returns
+        -------
+        var_rad2 : ndarray of shape (k,)
+        nonlinearity : ndarray of shape (k,)
+            ``(C_rr C_pp)^(1/4) / |r|`` (0 for inverse-depth features).
+        """
+        var = np.full(len(offsets), self.filter.bearing_sigma_rad ** 2)
+        index = np.zeros(len(offsets))
+        iv = kinds == 4
+        if iv.any() and self._second:
+            x, P = self.filter.x, self.filter.P
+            f = x[self._block_index(offsets[iv], 4)]
+            dvec = f[:, :2] - x[self._block_index(pose_off[iv], 2)]
+            v = f[:, 3:4] * dvec + np.stack([np.cos(f[:, 2]), np.sin(f[:, 2])], 1)
+            vv = np.einsum("ki,ki->k", v, v)
+            cross = v[:, 0] * dvec[:, 1] - v[:, 1] * dvec[:, 0]
+            h_rr = -2.0 * cross * np.einsum("ki,ki->k", v, dvec) / (vv * vv)
+            var_rho = P[offsets[iv] + 3, offsets[iv] + 3]
+            var[iv] += 0.5 * (h_rr * var_rho) ** 2
+        xy = kinds == 2
+        if not xy.any():
+            return var, index
+        x, P = self.filter.x, self.filter.P
+        pi = self._block_index(pose_off[xy], 2)
+        li = self._block_index(offsets[xy], 2)
+        r = x[li] - x[pi]
+        d2 = np.einsum("ki,ki->k", r, r)
+        c = (P[li[:, :, None], li[:, None, :]] + P[pi[:, :, None], pi[:, None, :]]
+             - P[pi[:, :, None], li[:, None, :]] - P[li[:, :, None], pi[:, None, :]])
+        u = r / np.sqrt(d2)[:, None]                     # radial unit vector
+        v = np.column_stack([-u[:, 1], u[:, 0]])          # perpendicular
+        c_rr = np.einsum("ki,kij,kj->k", u, c, u)
+        c_pp = np.einsum("ki,kij,kj->k", v, c, v)
+        c_rp = np.einsum("ki,kij,kj->k", u, c, v)
+        prod = np.clip(c_rr * c_pp, 0, None)
+        if self._second:
+            var[xy] += (prod + c_rp ** 2) / (d2 * d2)
+        index[xy] = prod ** 0.25 / np.sqrt(d2)
+        return var, index
+
+    def _update_mapped(self, ids: np.ndarray, z: np.ndarray) -> np.ndarray:
+        """Gate and apply the bearings to landmarks in the state; returns the mask of those."""
+        in_state = np.zeros(len(ids), bool)
+        kinds = np.zeros(len(ids), np.int64)
+        offsets = np.zeros(len(ids), np.int64)
+        for n, i in enumerate(ids.tolist()):
+            for kind in (_LM, _IDP):
+                off = self._offset.get((kind, i))
+                if off is not None:
+                    in_state[n], kinds[n], offsets[n] = True, _SIZE[kind], off
+        if np.any(in_state):
+            self._gated_update(np.zeros(np.count_nonzero(in_state), np.int64),
+                               kinds[in_state], offsets[in_state], z[in_state])
+        return in_state
+
+    # -- the Mapper protocol ----------------------------------------------------------------
+    def step(self, step: Step) -> None:
+        """Predict with the step's odometry, update with its bearings, grow the map."""
+        if self._last_t is not None and step.t <= self._last_t:
+            raise ConfigError(f"steps must come in increasing t: got t = {step.t} after "
+                              f"t = {self._last_t}")
+        if step.odom is not None:
+            self.filter.predict(step.odom, step.odometry_sigma(self._header))
+        ids, z = step.landmark_ids, step.bearings_rad
+        if ids.size:
+            if len(np.unique(ids)) != ids.size:
+                raise ConfigError(f"step {step.t}: a landmark id appears twice")
+            in_state = self._update_mapped(ids, z)
+            self._new_sightings(step.t, ids[~in_state], z[~in_state])
+        self._last_t = step.t
+        self._pose_t.append(step.t)
+        self._poses.append(self.filter.x[:3].copy())
+        self._pose_covs.append(self.filter.P[:3, :3].copy())
+
+    def _new_sightings(self, t: int, ids: np.ndarray, z: np.ndarray) -> None:
+        raise NotImplementedError
+
+    def _landmarks(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
+        """Ids, positions ``(n, 2)`` and covariances ``(n, 2, 2)`` of the reportable landmarks."""
+        keys = [k for k in self._sizes if k[0] == _LM]
+        ids = np.array([k[1] for k in keys], np.int64)
+        bi = self._block_index(np.array([self._offset[k] for k in keys], np.int64), 2)
+        x, P = self.filter.x, self.filter.P
+        return ids, x[bi].reshape(-1, 2), P[bi[:, :, None], bi[:, None, :]].reshape(-1, 2, 2), {}
+
+    def estimate(self) -> MapEstimate:
+        """The filtered map, the filtered trajectory (every step) and their covariances."""
+        ids, xy, cov, info = self._landmarks()
+        order = np.argsort(ids)
+        info = dict(info)
+        info.update(state_dim=self.filter.dim, gated_bearings=self.n_gated,
+                    used_bearings=self.n_updates)
+        if not self._poses:
+            return MapEstimate.empty(reason="no steps yet", **info)
+        if ids.size == 0:
+            info["reason"] = "no landmark initialised yet"
+        return MapEstimate(ids[order], xy[order], pose_t=np.array(self._pose_t),
+                           poses=np.array(self._poses), landmark_cov=cov[order],
+                           pose_cov=np.array(self._pose_covs), info=info)
+
+
+class EkfMapper(_EkfSlam):
+    """Bearing-only EKF-SLAM with Bailey's constrained (delayed) initialisation (``ekf``).
+
+    Parameters
+    ----------
+    header : StreamHeader
+        Supplies the bearing and odometry sigmas.
+    start_pose : (x_m, y_m, psi_rad)
+        The first pose; the map is in this frame.
+    config : EkfConfig, optional
+        Or its fields as keyword options.
+    """
+
+    def __init__(self, header: StreamHeader, *, start_pose: tuple[float, float, float] =
+                 (0.0, 0.0, 0.0), config: EkfConfig | None = None, **options: Any) -> None:
+        self.config = config or EkfConfig(**options)
+        super().__init__(header, start_pose, self.config.gate_probability,
+                         self.config.initial_pose_sigma, self.config.second_order,
+                         self.config.max_bearing_nonlinearity,
+                         self.config.observability_constrained)
+        # id -> sightings [(step, bearing), ...]; the first is the anchor
+        self._candidates: dict[int, list[tuple[int, float]]] = {}
+        self.n_reanchored = 0
+
+    def _triangulation_test(self, clone_off: np.ndarray, z1: np.ndarray, z2: np.ndarray
+                            ) -> dict[str, np.ndarray]:
+        """Triangulate candidates from their clones and the current pose; Bailey's test."""
+        x, P = self.filter.x, self.filter.P
+        m = len(z1)
+        ci = self._block_index(clone_off, 3)
+        ui = np.concatenate([ci, np.broadcast_to(np.arange(3), (m, 3))], 1)   # (m, 6)
+        cov_u = np.zeros((m, 8, 8))
+        cov_u[:, :6, :6] = P[ui[:, :, None], ui[:, None, :]]
+        cov_u[:, 6, 6] = cov_u[:, 7, 7] = self.filter.bearing_sigma_rad ** 2
+        pose_c = x[ci]
+        pose_r = np.broadcast_to(x[:3], (m, 3))
+        pts, jac = triangulate_two_bearings(pose_c, pose_r, z1, z2)
+        cov_lin = jac @ cov_u @ jac.transpose(0, 2, 1)
+        # unscented estimate of the same distribution (symmetric sigma points, equal weights)
+        w, v = np.linalg.eigh(cov_u)
+        sq = v * np.sqrt(8.0 * np.clip(w, 0.0, None))[:, None, :]      # columns, sqrt(n) spread
+        mu = np.concatenate([pose_c, pose_r, z1[:, None], z2[:, None]], 1)      # (m, 8)
+        sig = np.concatenate([mu[:, None, :] + sq.transpose(0, 2, 1),
+                              mu[:, None, :] - sq.transpose(0, 2, 1)], 1)       # (m, 16, 8)
+        sp, _, _ = _triangulate_point(sig[..., 0:3], sig[..., 3:6], sig[..., 6], sig[..., 7])
+        with np.errstate(invalid="ignore", over="ignore"):
+            mean_u = sp.mean(1)
+            dev = sp - mean_u[:, None, :]
+            cov_ut = np.einsum("msi,msj->mij", dev, dev) / sp.shape[1]
+            kl = gaussian_kl_2d(mean_u, cov_ut, pts, cov_lin)
+        kl[~np.isfinite(kl)] = np.inf
+        # depth along both rays (in front of the robot at both sightings)
+        d1 = pts - pose_c[:, :2]
+        d2 = pts - pose_r[:, :2]
+        a1 = pose_c[:, 2] + z1
+        a2 = pose_r[:, 2] + z2
+        front = (np.einsum("mi,mi->m", d1, np.column_stack([np.cos(a1), np.sin(a1)])) > 0) \
+            & (np.einsum("mi,mi->m", d2, np.column_stack([np.cos(a2), np.sin(a2)])) > 0)
+        parallax = np.abs(angle_residual(a2, a1))
+        return {"points": pts, "jac": jac, "kl": kl, "front": front & np.isfinite(pts).all(1),
+                "parallax": parallax, "noise_cov": self.filter.bearing_sigma_rad ** 2
+                * (jac[:, :, 6:7] @ jac[:, :, 6:7].transpose(0, 2, 1)
+                   + jac[:, :, 7:8] @ jac[:, :, 7:8].transpose(0, 2, 1)),
+                "clone_index": ci}
+
+    def _initialise(self, ids: np.ndarray, test: dict[str, np.ndarray], sel: np.ndarray) -> None:
+        """Add the selected candidates' landmarks with their cross-covariances, then apply
+        their stored intermediate bearings (taken from the clones) in one batched update."""
+        m = int(np.count_nonzero(sel))
+        ci = test["clone_index"][sel]                         # (m, 3)
+        idx, inv = np.unique(np.concatenate([np.arange(3), ci.ravel()]), return_inverse=True)
+        pose_cols = inv[:3]
+        clone_cols = inv[3:].reshape(m, 3)
+        jac = test["jac"][sel]
+        g = np.zeros((2 * m, len(idx)))
+        rows = 2 * np.arange(m)[:, None] + np.arange(2)       # (m, 2)
+        g[rows[:, :, None], clone_cols[:, None, :]] += jac[:, :, 0:3]
+        g[rows[:, :, None], np.broadcast_to(pose_cols, (m, 3))[:, None, :]] += jac[:, :, 3:6]
+        noise = np.zeros((2 * m, 2 * m))
+        noise[rows[:, :, None], rows[:, None, :]] = test["noise_cov"][sel]
+        new_ids = ids[sel].tolist()
+        self._add_blocks([(_LM, i) for i in new_ids], test["points"][sel].ravel(), idx, g,
+                         noise)
+        later = [(i, ts, zs) for i in new_ids for ts, zs in self._candidates.pop(i)[1:]]
+        if later and self.config.use_intermediate_bearings:
+            self._gated_update(np.array([self._offset[(_CLONE, ts)] for _, ts, _ in later],
+                                        np.int64),
+                               np.full(len(later), 2, np.int64),
+                               np.array([self._offset[(_LM, i)] for i, _, _ in later],
+                                        np.int64),
+                               np.array([zs for _, _, zs in later]))
+
+    def _new_sightings(self, t: int, ids: np.ndarray, z: np.ndarray) -> None:
+        cand = np.array([i in self._candidates for i in ids.tolist()], bool)
+        restart = ~cand
+        extend = np.zeros(len(ids), bool)
+        if np.any(cand):
+            cid = ids[cand]
+            first = [self._candidates[i][0] for i in cid.tolist()]
+            anchor_t = np.array([f[0] for f in first], np.int64)
+            z1 = np.array([f[1] for f in first])
+            clone_off = np.array([self._offset[(_CLONE, int(a))] for a in anchor_t], np.int64)
+            test = self._triangulation_test(clone_off, z1, z[cand])
+            ready = test["front"] & (test["kl"] <= self.config.init_kl_max)
+            bad = (~test["front"] & (test["parallax"] > self.config.inconsistent_parallax_rad)) \
+                | ((t - anchor_t) >= self.config.max_pending_steps)
+            bad &= ~ready
+            self.n_reanchored += int(np.count_nonzero(bad))
+            if np.any(ready):
+                self._initialise(cid, test, ready)
+            pos = np.flatnonzero(cand)
+            restart[pos[bad]] = True
+            extend[pos[~bad & ~ready]] = True
+        for i, zi in zip(ids[restart].tolist(), z[restart].tolist()):
+            self._candidates[i] = [(t, zi)]
+        if self.config.use_intermediate_bearings:
+            for i, zi in zip(ids[extend].tolist(), z[extend].tolist()):
+                self._candidates[i].append((t, zi))
+        if np.any(restart | extend) and (_CLONE, t) not in self._sizes:
+            self._add_blocks([(_CLONE, t)], self.filter.x[:3].copy(), np.arange(3), np.eye(3),
+                             np.zeros((3, 3)))
+        used = {ts for sightings in self._candidates.values() for ts, _ in sightings}
+        self._remove_blocks([k for k in self._sizes if k[0] == _CLONE and k[1] not in used])
+
+    def _landmarks(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
+        ids, xy, cov, _ = super()._landmarks()
+        return ids, xy, cov, {"pending": sorted(self._candidates),
+                              "reanchored": self.n_reanchored}
+
+
+class InverseDepthEkfMapper(_EkfSlam):
+    """Bearing-only EKF-SLAM with undelayed inverse-depth features (``ekf-invdepth``).
+
+    Parameters
+    ----------
+    header : StreamHeader
+    start_pose : (x_m, y_m, psi_rad)
+    config : InverseDepthConfig, optional
+        Or its fields as keyword options.
+    """
+
+    def __init__(self, header: StreamHeader, *, start_pose: tuple[float, float, float] =
+                 (0.0, 0.0, 0.0), config: InverseDepthConfig | None = None,
+                 **options: Any) -> None:
+        self.config = config or InverseDepthConfig(**options)
+        super().__init__(header, start_pose, self.config.gate_probability,
+                         self.config.initial_pose_sigma, self.config.second_order,
+                         self.config.max_bearing_nonlinearity,
+                         self.config.observability_constrained)
+        rng_m = header.sensor_range_m
+        self.rho_init = self.config.rho_init_per_m or (1.5 / rng_m if rng_m else 0.1)
+        self.rho_sigma = self.config.rho_sigma_per_m or (0.75 / rng_m if rng_m else 0.5)
+        self.n_converted = 0
+
+    def _new_sightings(self, t: int, ids: np.ndarray, z: np.ndarray) -> None:
+        if ids.size:
+            m = ids.size
+            x = self.filter.x
+            value = np.column_stack([np.broadcast_to(x[:2], (m, 2)), wrap_angle(x[2] + z),
+                                     np.full(m, self.rho_init)]).ravel()
+            g = np.tile(np.vstack([np.eye(3), np.zeros((1, 3))]), (m, 1))      # (4m, 3)
+            noise = np.diag(np.tile([0.0, 0.0, self.filter.bearing_sigma_rad ** 2,
+                                     self.rho_sigma ** 2], m))
+            self._add_blocks([(_IDP, int(i)) for i in ids], value, np.arange(3), g, noise)
+        self._convert_linear()
+
+    def _idp_blocks(self) -> tuple[list[tuple[str, int]], np.ndarray]:
+        keys = [k for k in self._sizes if k[0] == _IDP]
+        bi = self._block_index(np.array([self._offset[k] for k in keys], np.int64), 4)
+        return keys, bi
+
+    def _convert_linear(self) -> None:
+        """Replace inverse-depth features whose linearity index is small by ``[x, y]``."""
+        keys, bi = self._idp_blocks()
+        if not keys:
+            return
+        x, P = self.filter.x, self.filter.P
+        f = x[bi]
+        rho = f[:, 3]
+        sig_rho = np.sqrt(P[bi[:, 3], bi[:, 3]])
+        ok = rho > 0
+        lin = np.full(len(keys), np.inf)
+        if np.any(ok):
+            pts, _ = invdepth_to_xy(f[ok])
+            d_vec = pts - x[:2]
+            d = np.linalg.norm(d_vec, axis=1)
+            m = np.column_stack([np.cos(f[ok, 2]), np.sin(f[ok, 2])])
+            cos_a = np.einsum("ki,ki->k", m, d_vec) / d
+            lin[ok] = 4.0 * (sig_rho[ok] / rho[ok] ** 2) / d * np.abs(cos_a)
+        sel = np.flatnonzero(lin < self.config.linearity_max)
+        if sel.size == 0:
+            return
+        pts, jac = invdepth_to_xy(f[sel])
+        m = sel.size
+        idx = bi[sel].ravel()
+        g = np.zeros((2 * m, 4 * m))
+        rows = 2 * np.arange(m)[:, None] + np.arange(2)
+        cols = 4 * np.arange(m)[:, None] + np.arange(4)
+        g[rows[:, :, None], cols[:, None, :]] = jac
+        old = [keys[s] for s in sel]
+        self._add_blocks([(_LM, k[1]) for k in old], pts.ravel(), idx, g,
+                         np.zeros((2 * m, 2 * m)))
+        self._remove_blocks(old)
+        self.n_converted += m
+
+    def _landmarks(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
+        ids, xy, cov, _ = super()._landmarks()
+        keys, bi = self._idp_blocks()
+        left_out: list[int] = []
+        if keys:
+            x, P = self.filter.x, self.filter.P
+            f = x[bi]
+            ok = f[:, 3] > 0
+            left_out = sorted(k[1] for k, o in zip(keys, ok) if not o)
+            if np.any(ok):
+                pts, jac = invdepth_to_xy(f[ok])
+                b = bi[ok]
+                c = jac @ P[b[:, :, None], b[:, None, :]] @ jac.transpose(0, 2, 1)
+                ids = np.concatenate([ids, [k[1] for k, o in zip(keys, ok) if o]]).astype(
+                    np.int64)
+                xy = np.concatenate([xy, pts])
+                cov = np.concatenate([cov, c])
+        return ids, xy, cov, {"inverse_depth": int(len(keys)), "left_out": left_out,
+                              "converted": self.n_converted}
+
+
+__all__ = ["BearingEkf", "EkfConfig", "EkfMapper", "InverseDepthConfig",
+           "InverseDepthEkfMapper", "bearing_and_jacobian", "invdepth_bearing_and_jacobian",
+           "invdepth_to_xy", "triangulate_two_bearings", "gaussian_kl_2d", "motion_jacobians"]

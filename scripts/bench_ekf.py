@@ -1,0 +1,183 @@
+"""Benchmark of the EKF baselines on the paper's setup (section IV-A, Exp. 2).
+
+25 runs (``bomgraph.sim.paper_design(seed)``: 5 layouts x 5 starts), 300 steps, N = 50,
+sensor range 1 m, sigma_l = 3 cm, sigma_phi = sigma_theta = 3 deg. For each method it reports
+
+* landmark MPE (after the paper's rigid alignment with reflection, no scale) and the error of
+  the current robot position at t = 50, 100, 200, 300: mean and median over the runs;
+* the robot-pose NEES averaged over the runs at every step, against the two-sided 95%
+  chi-square band for the average of ``n_runs`` 3-dof NEES values (the mapper is started at
+  the true first pose, so its frame is the truth's and no alignment enters the NEES);
+* the wall time of one run (all steps and the 31 map estimates).
+
+Usage::
+
+    python scripts/bench_ekf.py [--methods ekf ekf-invdepth] [--runs 25] [--steps 300]
+                                [--jobs 2] [--seed 0] [--out results/bench_ekf.json]
+                                [--option key=value ...]
+
+Prints a table and writes the numbers as JSON (``results/`` is git-ignored).
+"""
+
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("OMP_NUM_THREADS", "1")        # small matrices: one BLAS thread is fastest
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import argparse  # noqa: E402
+import ast  # noqa: E402
+import json  # noqa: E402
+import platform  # noqa: E402
+from pathlib import Path  # noqa: E402
+from typing import Any  # noqa: E402
+
+import numpy as np  # noqa: E402
+from joblib import Parallel, delayed  # noqa: E402
+from scipy.stats import chi2  # noqa: E402
+
+from bomgraph.angles import angle_residual  # noqa: E402
+from bomgraph.evaluate import error_table  # noqa: E402
+from bomgraph.mapper import create_mapper, run  # noqa: E402
+from bomgraph.sim import SimConfig, paper_design, simulate_run  # noqa: E402
+
+TIMES = (50, 100, 200, 300)
+
+
+def robot_nees(poses: np.ndarray, pose_cov: np.ndarray, true_poses: np.ndarray) -> np.ndarray:
+    """NEES ``e^T P^-1 e`` of ``[x, y, psi]`` per step (heading error wrapped), shape (T,).
+
+    NaN where the covariance is singular (the first steps: the first pose is known exactly and
+    the simulator's odometry has no lateral noise).
+    """
+    err = poses - true_poses
+    err[:, 2] = angle_residual(poses[:, 2], true_poses[:, 2])
+    out = np.full(len(err), np.nan)
+    ok = np.linalg.det(pose_cov) > 1e-30
+    out[ok] = np.einsum("ti,tij,tj->t", err[ok], np.linalg.inv(pose_cov[ok]), err[ok])
+    return out
+
+
+def one_run(method: str, spec_index: int, seed: int, n_steps: int,
+            options: dict[str, Any]) -> dict[str, Any]:
+    spec = paper_design(seed)[spec_index]
+    stream = simulate_run(spec, SimConfig(n_steps=n_steps))
+    mapper = create_mapper(method, stream.header, start_pose=tuple(stream.truth.poses[0]),
+                           **options)
+    result = run(mapper, stream.steps, checkpoint_every=10, method=method)
+    table = error_table(result, stream.truth)
+    final = result.final
+    nees = robot_nees(np.array(final.poses), np.array(final.pose_cov),
+                      stream.truth.poses[final.pose_t])
+    return {"run": spec.name, "t": table["t"].tolist(), "mpe_m": table["mpe_m"].tolist(),
+            "median_m": table["median_m"].tolist(), "robot_m": table["robot_last_m"].tolist(),
+            "n_mapped": table["n_mapped"].tolist(), "nees": nees.tolist(),
+            "total_s": result.total_s, "info": {k: v for k, v in final.info.items()
+                                                if isinstance(v, (int, float))}}
+
+
+def summarise(runs: list[dict[str, Any]], n_steps: int) -> dict[str, Any]:
+    t = np.array(runs[0]["t"])
+    mpe = np.array([r["mpe_m"] for r in runs])
+    rob = np.array([r["robot_m"] for r in runs])
+    nees = np.array([r["nees"] for r in runs])
+    n = len(runs)
+    lo, hi = chi2.ppf(0.025, 3 * n) / n, chi2.ppf(0.975, 3 * n) / n
+    avg = np.nanmean(nees, 0)
+    valid = np.isfinite(avg)
+    times = [x for x in TIMES if x <= n_steps] or [int(t[-1])]
+    cols = {x: int(np.flatnonzero(t == x)[0]) for x in times if np.any(t == x)}
+    return {
+        "n_runs": n,
+        "at": {str(x): {"mpe_mean_m": float(np.nanmean(mpe[:, c])),
+                        "mpe_median_m": float(np.nanmedian(mpe[:, c])),
+                        "robot_mean_m": float(np.nanmean(rob[:, c])),
+                        "robot_median_m": float(np.nanmedian(rob[:, c]))}
+               for x, c in cols.items()},
+        "nees": {"band95": [float(lo), float(hi)],
+                 "time_average": float(avg[valid].mean()),
+                 "fraction_in_band": float(np.mean((avg[valid] >= lo) & (avg[valid] <= hi))),
+                 "fraction_above_band": float(np.mean(avg[valid] > hi)),
+                 "by_window": {f"{a}-{a + 49}": float(np.nanmean(avg[a:a + 50]))
+                               for a in range(0, n_steps + 1, 50)},
+                 "per_step": [None if not np.isfinite(v) else float(v) for v in avg]},
+        "run_s": {"mean": float(np.mean([r["total_s"] for r in runs])),
+                  "median": float(np.median([r["total_s"] for r in runs])),
+                  "max": float(np.max([r["total_s"] for r in runs]))},
+    }
+
+
+def _json_safe(obj: Any) -> Any:
+    """NaN and inf become None (JSON has no NaN)."""
+    if isinstance(obj, dict):
+        return {k: _json_safe(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_json_safe(v) for v in obj]
+    if isinstance(obj, float) and not np.isfinite(obj):
+        return None
+    return obj
+
+
+def parse_options(pairs: list[str]) -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for p in pairs:
+        key, _, value = p.partition("=")
+        try:
+            out[key] = ast.literal_eval(value)
+        except (ValueError, SyntaxError):
+            out[key] = value
+    return out
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--methods", nargs="+", default=["ekf", "ekf-invdepth"])
+    ap.add_argument("--runs", type=int, default=25)
+    ap.add_argument("--steps", type=int, default=300)
+    ap.add_argument("--jobs", type=int, default=2)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--option", nargs="*", default=[], help="mapper option key=value")
+    ap.add_argument("--out", default="results/bench_ekf.json")
+    args = ap.parse_args()
+    options = parse_options(args.option)
+    n_runs = min(args.runs, len(paper_design(args.seed)))
+    report: dict[str, Any] = {"setup": {"design": "paper_design", "seed": args.seed,
+                                        "runs": n_runs, "steps": args.steps,
+                                        "options": options, "jobs": args.jobs,
+                                        "python": platform.python_version(),
+                                        "machine": platform.machine()},
+                              "methods": {}}
+    for method in args.methods:
+        runs = Parallel(n_jobs=args.jobs)(
+            delayed(one_run)(method, k, args.seed, args.steps, options) for k in range(n_runs))
+        report["methods"][method] = {"summary": summarise(runs, args.steps), "runs": runs}
+
+    print(f"paper setup, {n_runs} runs x {args.steps} steps, options {options or '{}'}")
+    head = f"{'method':<14}{'t':>5}{'MPE mean':>10}{'median':>9}{'robot mean':>12}{'median':>9}"
+    print(head)
+    for method, rep in report["methods"].items():
+        for t, row in rep["summary"]["at"].items():
+            print(f"{method:<14}{t:>5}{100 * row['mpe_mean_m']:>8.2f}cm"
+                  f"{100 * row['mpe_median_m']:>7.2f}cm{100 * row['robot_mean_m']:>10.2f}cm"
+                  f"{100 * row['robot_median_m']:>7.2f}cm")
+    print()
+    for method, rep in report["methods"].items():
+        s = rep["summary"]
+        nees, rs = s["nees"], s["run_s"]
+        print(f"{method:<14} robot NEES avg {nees['time_average']:.2f} "
+              f"(95% band for the mean of {n_runs}: {nees['band95'][0]:.2f}-"
+              f"{nees['band95'][1]:.2f}; in band {100 * nees['fraction_in_band']:.0f}% of "
+              f"steps, above {100 * nees['fraction_above_band']:.0f}%)")
+        print(f"{'':<14} by window: " + ", ".join(f"{k}: {v:.2f}"
+                                                  for k, v in nees["by_window"].items()))
+        print(f"{'':<14} wall time per run: mean {rs['mean']:.3f} s, median "
+              f"{rs['median']:.3f} s, max {rs['max']:.3f} s")
+    out = Path(args.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps(_json_safe(report), allow_nan=False))
+    print(f"\nwrote {out}")
+
+
+if __name__ == "__main__":
+    main()
