@@ -452,9 +452,8 @@ class BearingEkf:
             d = compose(kf.x[:3], odom)[:2] - anchor
             f_pose[0, 2], f_pose[1, 2] = -d[1], d[0]
         self.nullspace[:3] = f_pose @ self.nullspace[:3]
-        kf.F = np.eye(self.dim)
+        # F = I and Q = 0 outside the pose block (as _set_state made them; filterpy keeps them)
         kf.F[:3, :3] = f_pose
-        kf.Q = np.zeros((self.dim, self.dim))
         kf.Q[:3, :3] = (g_odom * np.asarray(odom_sigma, float) ** 2) @ g_odom.T
         kf.predict(u=odom)
         self._wrap()
