@@ -85,6 +85,11 @@ class IdIndex:
         """Dense indices of ``ids``; new ids are added (in order of first appearance) when
         ``add``, else reported as -1. Repeated ids are allowed."""
         ids = np.asarray(ids, dtype=np.int64).reshape(-1)
+        n = len(self._sorted)
+        pos = np.searchsorted(self._sorted, ids)
+        pos[pos >= n] = 0
+        if n and (self._sorted[pos] == ids).all():
+            return self._sorted_index[pos]
         if add and ids.size > 1:
             uniq, first_pos, inverse = np.unique(ids, return_index=True, return_inverse=True)
             if uniq.size < ids.size:
@@ -192,15 +197,20 @@ class DistanceStore:
 
         The pairs must be distinct within one call; the order inside a pair does not matter.
         """
-        lo = np.minimum(first, second).astype(np.int64)
-        hi = np.maximum(first, second).astype(np.int64)
+        lo = np.minimum(first, second)
+        hi = np.maximum(first, second)
         keys = (lo << _KEY_SHIFT) | hi
         n = len(self._keys)
-        pos = np.searchsorted(self._keys, keys)
-        found = pos < n
-        found[found] = self._keys[pos[found]] == keys[found]
-        out = np.empty(len(keys), np.int64)
-        out[found] = self._key_slot[pos[found]]
+        if n:
+            pos = np.searchsorted(self._keys, keys)
+            np.minimum(pos, n - 1, out=pos)
+            found = self._keys[pos] == keys
+            if found.all():
+                return self._key_slot[pos]
+            out = np.where(found, self._key_slot[pos], -1)
+        else:
+            found = np.zeros(len(keys), bool)
+            out = np.empty(len(keys), np.int64)
         if not found.all():
             new = ~found
             m = int(new.sum())

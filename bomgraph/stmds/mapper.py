@@ -82,7 +82,10 @@ class StmdsConfig:
         Warm start of SMACOF: the previous map (landmarks new to it placed by the
         classical-scaling map aligned onto it), the DMC-SPL classical-scaling map (the paper),
         or both, keeping the result with the lower stress ("best": a fold-over carried along
-        from an early map cannot persist).
+        from an early map cannot persist). "best" restarts from the classical-scaling map at
+        the first SMACOF estimate and every ``smacof_restart_every`` estimates after it.
+    smacof_restart_every : int
+        See ``smacof_init``.
     smacof_max_iter, smacof_tol, smacof_relaxation
         SMACOF iterations, relative stress tolerance, over-relaxation in (0, 2).
     min_degree : int
@@ -112,6 +115,7 @@ class StmdsConfig:
     max_relative_range_sigma: float = math.inf
     weights: str = "binary"
     smacof_init: str = "best"
+    smacof_restart_every: int = 5
     smacof_max_iter: int = 300
     smacof_tol: float = 1e-6
     smacof_relaxation: float = 1.0
@@ -143,6 +147,7 @@ class StmdsConfig:
         need(self.max_range_m is None or self.max_range_m > 0, "max_range_m must be > 0")
         need(self.max_relative_range_sigma > 0, "max_relative_range_sigma must be > 0")
         need(self.smacof_max_iter >= 0, "smacof_max_iter must be >= 0")
+        need(self.smacof_restart_every >= 1, "smacof_restart_every must be >= 1")
         need(self.smacof_tol >= 0, "smacof_tol must be >= 0")
         need(0 < self.smacof_relaxation < 2, "smacof_relaxation must be in (0, 2)")
         need(self.window >= 2, "window (p) must be >= 2")
@@ -156,6 +161,21 @@ class StmdsConfig:
             raise ConfigError(f"unknown BOM-STMDS option(s) {unknown}; known options: "
                               f"{sorted(names)}")
         return replace(base or cls(), **options)
+
+
+class _GrowingFlags:
+    """A boolean array indexed by dense landmark index that grows on assignment."""
+
+    def __init__(self) -> None:
+        self.array = np.zeros(64, bool)
+
+    def __setitem__(self, idx: np.ndarray, value: bool) -> None:
+        top = int(idx.max()) + 1 if idx.size else 0
+        if top > len(self.array):
+            grown = np.zeros(max(top, 2 * len(self.array)), bool)
+            grown[:len(self.array)] = self.array
+            self.array = grown
+        self.array[idx] = value
 
 
 class _PoseWindow:
@@ -265,9 +285,10 @@ class StmdsMapper:
         self._history: list[tuple] = []
         self._max_baseline = max(cfg.baselines)
         self._t = -1
-        self._n_steps = 0
         self._n_gated = 0
-        self._triangulated = np.zeros(0, bool)   # by dense index: ever passed the gates
+        self._triangulated = _GrowingFlags()      # by dense index: ever passed the gates
+        self._relative_gate = math.isfinite(cfg.max_relative_range_sigma)
+        self._n_smacof = 0                        # SMACOF estimates made so far
         self._n_triangulated = 0
         self._prev_xy = np.zeros((0, 2))   # previous map by dense landmark index (NaN: absent)
         self._window = _PoseWindow(cfg.window) if cfg.localise else None
@@ -281,12 +302,13 @@ class StmdsMapper:
     def step(self, step: Step) -> None:
         """Triangulate the landmarks seen ``k`` steps ago and now (``k`` in ``baselines``; the
         paper: ``t-1`` and ``t``) and fuse their pair distances."""
-        order = np.argsort(step.landmark_ids, kind="stable")
-        ids = step.landmark_ids[order]
-        brg = step.bearings_rad[order]
+        ids = step.landmark_ids
+        brg = step.bearings_rad
+        if ids.size > 1:
+            order = np.argsort(ids)
+            ids, brg = ids[order], brg[order]
         self._t = step.t
-        self._n_steps += 1
-        idx_now = self._ids.lookup(ids) if ids.size else np.zeros(0, np.int64)
+        idx_now = self._ids.lookup(ids)
         if self._window is not None:
             self._window.push(step.t, step.odom, idx_now, brg)
         hist = self._history
@@ -305,44 +327,41 @@ class StmdsMapper:
     def _triangulate(self, k: int, base: tuple, ids: np.ndarray, brg: np.ndarray,
                      idx_now: np.ndarray) -> None:
         """Sequential triangulation between the pose ``k`` steps back and now; fuse the pairs."""
-        prev_ids, prev_brg = base[0], base[1]
-        if prev_ids.size == 0:
+        prev_ids = base[0]
+        n_prev = prev_ids.size
+        if n_prev == 0:
             return
         pos = np.searchsorted(prev_ids, ids)
-        pos[pos >= prev_ids.size] = 0
+        pos[pos == n_prev] = 0
         common = prev_ids[pos] == ids
-        if not common.any():
-            return
         if k == 1:
             odom, odo_unc = self._history[-1][3], self._history[-1][4]
         else:
             recent = self._history[-k:]
             odom, odo_unc = compose_odometry([h[3] for h in recent], [h[4] for h in recent])
-        tri = triangulate_rays(odom, prev_brg[pos[common]], brg[common])
-        var_r1, var_r2 = range_variances(tri, odo_unc, self._bearing_sigma)
-        ok = gate_points(tri, var_r1, min_parallax_rad=self.config.min_parallax_rad,
-                         max_range_m=self._max_range,
-                         max_relative_range_sigma=self.config.max_relative_range_sigma)
-        idx = idx_now[common]
-        n_ok = int(ok.sum())
+        tri = triangulate_rays(odom, base[1][pos[common]], brg[common])
+        var_r1 = var_r2 = None
+        if self._window is not None or self._relative_gate:
+            var_r1, var_r2 = range_variances(tri, odo_unc, self._bearing_sigma)
+        ok = np.flatnonzero(gate_points(
+            tri, var_r1, min_parallax_rad=self.config.min_parallax_rad,
+            max_range_m=self._max_range,
+            max_relative_range_sigma=self.config.max_relative_range_sigma))
+        n_ok = ok.size
         self._n_triangulated += n_ok
-        self._n_gated += len(ok) - n_ok
-        if n_ok < len(ok):
-            tri = tri.subset(ok)
-            idx = idx[ok]
-            var_r1, var_r2 = var_r1[ok], var_r2[ok]
-        if len(self._triangulated) < len(self._ids):
-            grown = np.zeros(max(len(self._ids), 2 * len(self._triangulated)), bool)
-            grown[:len(self._triangulated)] = self._triangulated
-            self._triangulated = grown
-        self._triangulated[idx] = True
-        if self._window is not None:
-            last = len(self._window.t) - 1
-            self._window.add_ranges(last - k, idx, tri.range_prev_m, var_r1)
-            self._window.add_ranges(last, idx, tri.range_now_m, var_r2)
-        if len(tri) < 2:
+        self._n_gated += len(tri) - n_ok
+        if n_ok == 0:
             return
-        pairs = pair_squared_distances(tri, odo_unc, self._bearing_sigma)
+        idx = idx_now[common]
+        self._triangulated[idx[ok]] = True
+        if self._window is not None and var_r1 is not None and var_r2 is not None:
+            last = len(self._window.t) - 1
+            self._window.add_ranges(last - k, idx[ok], tri.range_prev_m[ok], var_r1[ok])
+            self._window.add_ranges(last, idx[ok], tri.range_now_m[ok], var_r2[ok])
+        if n_ok < 2:
+            return
+        pairs = pair_squared_distances(tri, odo_unc, self._bearing_sigma, select=ok,
+                                       with_translation=self._store.fusion == "predicted")
         self._store.add(idx[pairs.first], idx[pairs.second], pairs.squared_distance_m2,
                         pairs.variance_m4, pairs.translation_variance_m4)
 
@@ -374,8 +393,9 @@ class StmdsMapper:
         if not cfg.map_unobserved:
             seen = np.ones(n_nodes, bool)
             seen[:n_lm] = False
-            m_seen = min(len(self._triangulated), n_lm)
-            seen[:m_seen] = self._triangulated[:m_seen]
+            flags = self._triangulated.array
+            m_seen = min(len(flags), n_lm)
+            seen[:m_seen] = flags[:m_seen]
             live = seen[first] & seen[second]
             first, second, dist, var = first[live], second[live], dist[live], var[live]
         touched = prune_low_degree(n_nodes, first, second, cfg.min_degree)
@@ -407,19 +427,27 @@ class StmdsMapper:
         info["n_components"] = comp.n_components
         info["n_mapped_pairs"] = int(sel.sum())
 
-        use_smacof = cfg.method == "smacof" and self._t >= cfg.smacof_from_t
-        full = shortest_path_completion(n, ef, es, ed, keep_known=cfg.dmc_keep_known)
-        xy_cs, _ = classical_scaling(full * full)
+        use_smacof = cfg.method == "smacof" and self._t >= cfg.smacof_from_t and n >= 2
+        w = np.ones(len(ed)) if cfg.weights == "binary" else self._inverse_variance(ev)
+        warm = None
+        if use_smacof and cfg.smacof_init != "classical":
+            warm = self._previous_positions(kept_nodes)
+        restart = use_smacof and cfg.smacof_init == "best" and (
+            self._n_smacof % cfg.smacof_restart_every == 0)
+        xy_cs = None
+        if not use_smacof or cfg.smacof_init == "classical" or restart or warm is None \
+                or not np.isfinite(warm).all():
+            full = shortest_path_completion(n, ef, es, ed, keep_known=cfg.dmc_keep_known)
+            xy_cs, _ = classical_scaling(full * full)
+            if warm is not None and not np.isfinite(warm).all():
+                warm = self._complete_warm_start(warm, xy_cs)
         xy = xy_cs
         info["reconstruction"] = "classical-scaling"
-        w = np.ones(len(ed)) if cfg.weights == "binary" else self._inverse_variance(ev)
-        if use_smacof and n >= 2:
+        if use_smacof:
             inits = []
-            if cfg.smacof_init in ("best", "previous"):
-                warm = self._warm_start(kept_nodes, xy_cs)
-                if warm is not None:
-                    inits.append(("previous", warm))
-            if cfg.smacof_init == "classical" or not inits or cfg.smacof_init == "best":
+            if warm is not None:
+                inits.append(("previous", warm))
+            if xy_cs is not None and (restart or not inits):
                 inits.append(("classical", xy_cs))
             solver = LaplacianSolver(n, ef, es, w)
             best = None
@@ -430,9 +458,12 @@ class StmdsMapper:
                 if best is None or res.raw_stress < best[1].raw_stress:
                     best = (name, res)
             assert best is not None
+            self._n_smacof += 1
             xy = best[1].points
             info.update(reconstruction="smacof", smacof_iterations=best[1].n_iter,
-                        smacof_converged=best[1].converged, smacof_init=best[0])
+                        smacof_converged=best[1].converged, smacof_init=best[0],
+                        smacof_starts=[name for name, _ in inits])
+        assert xy is not None
         info["stress1"] = stress1(xy, ef, es, ed, w) if len(ed) else 0.0
         self._prev_xy = np.full((n_lm, 2), np.nan)
         self._prev_xy[kept_nodes[is_lm]] = xy[is_lm]
@@ -452,21 +483,23 @@ class StmdsMapper:
         w = 1.0 / np.maximum(var, 1e-300)
         return w / w.mean()
 
-    def _warm_start(self, kept_nodes: np.ndarray, xy_cs: np.ndarray) -> np.ndarray | None:
-        """The previous map where it has the node, else the CS map aligned onto it (None when
-        the previous map shares fewer than 3 nodes)."""
-        prev_all = np.full((len(kept_nodes), 2), np.nan)
+    def _previous_positions(self, kept_nodes: np.ndarray) -> np.ndarray | None:
+        """The previous map's positions of ``kept_nodes`` (NaN where it had none); None when
+        it shares fewer than 3 nodes."""
+        out = np.full((len(kept_nodes), 2), np.nan)
         inside = kept_nodes < len(self._prev_xy)
-        prev_all[inside] = self._prev_xy[kept_nodes[inside]]
-        have = np.isfinite(prev_all[:, 0])
-        if have.sum() < 3:
+        out[inside] = self._prev_xy[kept_nodes[inside]]
+        if np.isfinite(out[:, 0]).sum() < 3:
             return None
-        prev = prev_all[have]
-        if have.all():
-            return prev
-        al = align(xy_cs[have], prev, allow_reflection=True)
+        return out
+
+    @staticmethod
+    def _complete_warm_start(warm: np.ndarray, xy_cs: np.ndarray) -> np.ndarray:
+        """Nodes new to the previous map: the classical-scaling map aligned onto it."""
+        have = np.isfinite(warm[:, 0])
+        al = align(xy_cs[have], warm[have], allow_reflection=True)
         out = al.apply(xy_cs)
-        out[have] = prev
+        out[have] = warm[have]
         return out
 
     # ------------------------------------------------------------------------------ III-E

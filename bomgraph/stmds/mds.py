@@ -96,6 +96,10 @@ class LaplacianSolver:
     """Solves ``V y = b`` for the weighted Laplacian ``V`` of a connected graph (``b`` summing to
     zero), returning the centred solution ``V^+ b``; factorised once, reused.
 
+    Small graphs (``n <= dense_max``) invert ``M = V + 1 1^T / n`` once (for ``b`` orthogonal to
+    the ones, ``M^-1 b = V^+ b``); larger ones factorise the Laplacian with one vertex grounded
+    (sparse LU) and centre the result.
+
     Parameters
     ----------
     n : int
@@ -103,16 +107,26 @@ class LaplacianSolver:
         Edges (each once).
     weights : array of shape (P,)
         Positive edge weights.
+    dense_max : int
+        Largest ``n`` solved densely.
     """
 
     def __init__(self, n: int, first: np.ndarray, second: np.ndarray,
-                 weights: np.ndarray) -> None:
+                 weights: np.ndarray, dense_max: int = 300) -> None:
         self.n = n
+        self._minv: np.ndarray | None = None
+        self._lu = None
         if n <= 1:
-            self._lu = None
             return
         w = np.asarray(weights, float)
         deg = np.bincount(first, w, n) + np.bincount(second, w, n)
+        if n <= dense_max:
+            lap = np.zeros((n, n))
+            lap[first, second] = -w
+            lap[second, first] = -w
+            lap.flat[::n + 1] = deg
+            self._minv = np.linalg.inv(lap + 1.0 / n)
+            return
         rows = np.concatenate([first, second, np.arange(n)])
         cols = np.concatenate([second, first, np.arange(n)])
         vals = np.concatenate([-w, -w, deg])
@@ -120,11 +134,17 @@ class LaplacianSolver:
         self._lu = splu(lap[1:, 1:].tocsc())
 
     def solve(self, b: np.ndarray) -> np.ndarray:
-        """``V^+ b`` for ``b`` of shape (n, k) with zero column sums."""
+        """``V^+ b`` for ``b`` of shape (n,) or (n, k), real or complex, with zero (column) sums."""
+        if self._minv is not None:
+            return self._minv @ b
         if self._lu is None:
             return np.zeros_like(b)
         y = np.zeros_like(b)
-        y[1:] = self._lu.solve(np.ascontiguousarray(b[1:]))
+        if np.iscomplexobj(b):
+            y[1:] = (self._lu.solve(np.ascontiguousarray(b[1:].real))
+                     + 1j * self._lu.solve(np.ascontiguousarray(b[1:].imag)))
+        else:
+            y[1:] = self._lu.solve(np.ascontiguousarray(b[1:]))
         return y - y.mean(axis=0)
 
 
@@ -134,7 +154,7 @@ class SmacofResult:
 
     Attributes
     ----------
-    points : ndarray of shape (n, dim)
+    points : ndarray of shape (n, 2)
         Centred coordinates (m).
     stress1 : float
         Stress-1 of ``points``.
@@ -156,47 +176,56 @@ class SmacofResult:
     history: np.ndarray
 
 
-def _smacof_single(x: np.ndarray, first: np.ndarray, second: np.ndarray, delta: np.ndarray,
+def _smacof_single(z: np.ndarray, first: np.ndarray, second: np.ndarray, delta: np.ndarray,
                    weights: np.ndarray, solver: LaplacianSolver, max_iter: int, tol: float,
                    relaxation: float) -> tuple[np.ndarray, list[float], bool]:
-    """The SMACOF loop (one vectorised Guttman transform per iteration).
+    """The SMACOF loop on points as complex numbers ``x + i y`` (one vectorised Guttman
+    transform per iteration, no loop over pairs).
 
-    Returns the final points, the raw stress history (starting point first) and whether the
-    relative decrease fell below ``tol``. An iterate whose stress rose (only possible through
-    round-off at a stationary point) is not accepted.
+    ``B(X) X`` at vertex ``i`` is ``sum_j w_ij delta_ij / d_ij (z_i - z_j)``: one ``bincount``
+    over both ends of every edge, on the real and imaginary parts interleaved. Returns the
+    final points, the raw stress history (starting point first) and whether the relative
+    decrease fell below ``tol``. An iterate whose stress rose (only possible through round-off
+    at a stationary point) is not accepted.
     """
-    n, dim = x.shape
+    n = z.shape[0]
+    e = first.size
     wd = weights * delta
-    x = x - x.mean(axis=0)
-    diff = x[first] - x[second]
-    dist = np.sqrt(np.einsum("pa,pa->p", diff, diff))
+    # vertex index of each (edge end, real/imaginary part), matching the float view of
+    # concatenate((v, -v)): [2 first, 2 first + 1, ..., 2 second, 2 second + 1, ...]
+    ends = np.concatenate((first, second))
+    slot = np.empty(4 * e, np.int64)
+    slot[0::2] = 2 * ends
+    slot[1::2] = 2 * ends + 1
+    z = z - z.mean()
+    diff = z[first] - z[second]
+    dist = np.abs(diff)
     r = dist - delta
     s = float(np.dot(weights, r * r))
     history = [s]
-    bx = np.empty_like(x)
+    ratio = np.zeros(e)
     for _ in range(max_iter):
         if s == 0.0:
-            return x, history, True
-        with np.errstate(divide="ignore", invalid="ignore"):
-            ratio = np.where(dist > 0, wd / dist, 0.0)
-        c = ratio[:, None] * diff
-        for a in range(dim):
-            bx[:, a] = np.bincount(first, c[:, a], n) - np.bincount(second, c[:, a], n)
-        g = solver.solve(bx)
-        x_new = g if relaxation == 1.0 else x + relaxation * (g - x)
-        diff_new = x_new[first] - x_new[second]
-        dist_new = np.sqrt(np.einsum("pa,pa->p", diff_new, diff_new))
+            return z, history, True
+        np.divide(wd, dist, out=ratio, where=dist > 0)
+        v = ratio * diff
+        bz = np.bincount(slot, np.concatenate((v, -v)).view(np.float64),
+                         2 * n).view(np.complex128)
+        g = solver.solve(bz)
+        z_new = g if relaxation == 1.0 else z + relaxation * (g - z)
+        diff_new = z_new[first] - z_new[second]
+        dist_new = np.abs(diff_new)
         r = dist_new - delta
         s_new = float(np.dot(weights, r * r))
         if s_new > s:
-            return x, history, True
-        x, diff, dist = x_new, diff_new, dist_new
+            return z, history, True
+        z, diff, dist = z_new, diff_new, dist_new
         history.append(s_new)
         done = (s - s_new) <= tol * s
         s = s_new
         if done:
-            return x, history, True
-    return x, history, False
+            return z, history, True
+    return z, history, False
 
 
 def smacof(n: int, first: np.ndarray, second: np.ndarray, dissimilarity: np.ndarray, *,
@@ -213,7 +242,7 @@ def smacof(n: int, first: np.ndarray, second: np.ndarray, dissimilarity: np.ndar
         The known pairs (each once).
     dissimilarity : array of shape (P,)
         Target distances (m, not squared).
-    init : array of shape (n, dim)
+    init : array of shape (n, 2)
         Starting coordinates (e.g. classical scaling after DMC-SPL, or the previous map).
     weights : array of shape (P,), optional
         Positive weights; all ones (the paper's binary weights) if None.
@@ -235,8 +264,8 @@ def smacof(n: int, first: np.ndarray, second: np.ndarray, dissimilarity: np.ndar
     delta = np.asarray(dissimilarity, float)
     w = np.ones_like(delta) if weights is None else np.asarray(weights, float)
     x0 = np.array(init, dtype=float)
-    if x0.ndim != 2 or x0.shape[0] != n:
-        raise ConfigError(f"smacof: init must have shape (n={n}, dim), got {x0.shape}")
+    if x0.shape != (n, 2):
+        raise ConfigError(f"smacof: init must have shape (n={n}, 2), got {x0.shape}")
     if not (first.shape == second.shape == delta.shape == w.shape):
         raise ConfigError("smacof: first, second, dissimilarity and weights differ in length")
     if np.any(w <= 0) or not np.all(np.isfinite(w)):
@@ -247,8 +276,9 @@ def smacof(n: int, first: np.ndarray, second: np.ndarray, dissimilarity: np.ndar
         raise ConfigError("smacof: max_iter must be >= 0")
     if solver is None:
         solver = LaplacianSolver(n, first, second, w)
-    x, hist, conv = _smacof_single(x0, first, second, delta, w, solver, max_iter, tol,
-                                   relaxation)
+    z, hist, conv = _smacof_single(x0[:, 0] + 1j * x0[:, 1], first, second, delta, w, solver,
+                                   max_iter, tol, relaxation)
+    x = np.column_stack([z.real, z.imag])
     norm = float(np.dot(w, delta * delta))
     s1 = float(np.sqrt(hist[-1] / norm)) if norm > 0 else 0.0
     return SmacofResult(x, s1, hist[-1], len(hist) - 1, conv, np.array(hist))

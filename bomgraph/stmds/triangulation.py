@@ -31,12 +31,12 @@ relative first-order std. dev. of its depth ``sigma_r1 / r1`` is at most
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ..angles import wrap_angle
 from ..errors import ConfigError
 
 #: Column order of the per-landmark Jacobians.
@@ -61,7 +61,7 @@ def pair_indices(k: int) -> tuple[np.ndarray, np.ndarray]:
 
 @dataclass(frozen=True, eq=False)
 class RayTriangulation:
-    """Landmarks triangulated from two consecutive poses, in the frame of pose ``t-1``.
+    """Landmarks triangulated from two poses, in the frame of the first (pose ``t-1``).
 
     Attributes
     ----------
@@ -72,32 +72,51 @@ class RayTriangulation:
         Signed depth ``r1`` along ray 1 (distance from pose ``t-1`` when positive).
     range_now_m : ndarray of shape (k,)
         Signed depth ``r2`` along ray 2 (distance from pose ``t`` when positive).
-    parallax_rad : ndarray of shape (k,)
-        Angle between the two rays, in ``[0, pi]``.
-    jacobian : ndarray of shape (k, 2, 5)
-        ``d points_xy / d [dx, dy, dpsi, theta_prev, theta_now]``.
+    sin_parallax, cos_parallax : ndarrays of shape (k,)
+        ``sin(b - a)`` and ``cos(b - a)`` of the angle from ray 1 to ray 2.
+    range_jacobian : ndarray of shape (k, 5)
+        ``d r1 / d [dx, dy, dpsi, theta_prev, theta_now]``.
     ray_prev : ndarray of shape (k, 2)
-        Unit direction of ray 1.
+        Unit direction ``u_a`` of ray 1.
     ray_now : ndarray of shape (k, 2)
-        Unit direction of ray 2.
+        Unit direction ``u_b`` of ray 2.
+    jacobian_complex : ndarray of shape (k, 5), complex
+        ``d (x + i y) / d [dx, dy, dpsi, theta_prev, theta_now]``: the point Jacobian with the
+        plane written as complex numbers (``jacobian`` gives it as real ``(k, 2, 5)``).
     """
 
     points_xy: np.ndarray
     range_prev_m: np.ndarray
     range_now_m: np.ndarray
-    parallax_rad: np.ndarray
-    jacobian: np.ndarray
+    sin_parallax: np.ndarray
+    cos_parallax: np.ndarray
+    range_jacobian: np.ndarray
     ray_prev: np.ndarray
     ray_now: np.ndarray
+    jacobian_complex: np.ndarray
 
     def __len__(self) -> int:
         return len(self.points_xy)
 
+    @property
+    def parallax_rad(self) -> np.ndarray:
+        """Angle between the two rays, in ``[0, pi]``."""
+        return np.abs(np.arctan2(self.sin_parallax, self.cos_parallax))
+
+    @property
+    def jacobian(self) -> np.ndarray:
+        """``d points_xy / d [dx, dy, dpsi, theta_prev, theta_now]``, shape ``(k, 2, 5)``.
+
+        ``p = r1 u_a`` so ``dp = u_a dr1 + r1 u_a_perp da``.
+        """
+        return np.stack([self.jacobian_complex.real, self.jacobian_complex.imag], axis=1)
+
     def subset(self, mask: np.ndarray) -> "RayTriangulation":
         """The landmarks selected by a boolean mask or an index array."""
         return RayTriangulation(self.points_xy[mask], self.range_prev_m[mask],
-                                self.range_now_m[mask], self.parallax_rad[mask],
-                                self.jacobian[mask], self.ray_prev[mask], self.ray_now[mask])
+                                self.range_now_m[mask], self.sin_parallax[mask],
+                                self.cos_parallax[mask], self.range_jacobian[mask], self.ray_prev[mask],
+                                self.ray_now[mask])
 
 
 def triangulate_rays(odom: ArrayLike, bearing_prev_rad: ArrayLike,
@@ -114,43 +133,43 @@ def triangulate_rays(odom: ArrayLike, bearing_prev_rad: ArrayLike,
     Returns
     -------
     RayTriangulation
-        Points, signed depths, parallax and the analytic Jacobian. Parallel rays give
-        non-finite values (gate them with :func:`gate_points`); nothing raises.
+        Points, signed depths, parallax and the analytic Jacobian of the depth. Parallel rays
+        give non-finite values (gate them with :func:`gate_points`); nothing raises.
     """
-    dx, dy, dpsi = (float(v) for v in np.asarray(odom, dtype=float).reshape(3))
+    u = np.asarray(odom, dtype=float).reshape(3)
+    dx, dy, dpsi = float(u[0]), float(u[1]), float(u[2])
     a = np.asarray(bearing_prev_rad, dtype=float).reshape(-1)
-    b = dpsi + np.asarray(bearing_now_rad, dtype=float).reshape(-1)
+    b = np.asarray(bearing_now_rad, dtype=float).reshape(-1)
     if a.shape != b.shape:
         raise ConfigError(f"triangulate_rays: {a.size} bearings at t-1 but {b.size} at t")
-    ca, sa, cb, sb = np.cos(a), np.sin(a), np.cos(b), np.sin(b)
-    s = sb * ca - cb * sa          # sin(b - a)
-    c = cb * ca + sb * sa          # cos(b - a)
-    n1 = dx * sb - dy * cb
-    n2 = dx * sa - dy * ca
-    with np.errstate(divide="ignore", invalid="ignore"):
+    k = a.size
+    # Plane vectors as complex numbers (few, vectorised operations): u = exp(i angle),
+    # u_b conj(u_a) = cos(b - a) + i sin(b - a), and Im(conj(o) u) = o x u.
+    unit = np.exp(1j * np.concatenate((a, b + dpsi)))
+    ua, ub = unit[:k], unit[k:]
+    rel = ub * ua.conj()
+    s, c = rel.imag, rel.real                    # sin(b - a), cos(b - a)
+    o_conj = complex(dx, -dy)
+    ob = ub * o_conj                             # Im: dx sb - dy cb ; Re: dx cb + dy sb
+    # dp/dz = u_a (d r1/dz + i r1 [z = theta_prev]) as a complex number; its real factor is dr1
+    jac = np.zeros((k, 5), np.complex128)
+    dr1 = jac.real
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         inv_s = 1.0 / s
-        r1 = n1 * inv_s
-        r2 = n2 * inv_s
-        dr1_db = (dx * cb + dy * sb - r1 * c) * inv_s
-        dr1_da = r1 * c * inv_s
-        k = a.size
-        dr1 = np.empty((k, 5))
-        dr1[:, 0] = sb * inv_s
-        dr1[:, 1] = -cb * inv_s
-        dr1[:, 2] = dr1_db
-        dr1[:, 3] = dr1_da
-        dr1[:, 4] = dr1_db
-        jac = np.empty((k, 2, 5))
-        jac[:, 0, :] = ca[:, None] * dr1
-        jac[:, 1, :] = sa[:, None] * dr1
-        jac[:, 0, 3] -= r1 * sa
-        jac[:, 1, 3] += r1 * ca
-        pts = np.empty((k, 2))
-        pts[:, 0] = r1 * ca
-        pts[:, 1] = r1 * sa
-    parallax = np.abs(wrap_angle(b - a))
-    return RayTriangulation(pts, r1, r2, parallax, jac, np.column_stack([ca, sa]),
-                            np.column_stack([cb, sb]))
+        r1 = ob.imag * inv_s
+        r2 = (ua * o_conj).imag * inv_s
+        np.multiply(ub.imag, inv_s, out=dr1[:, 0])                   # d r1 / d dx
+        np.multiply(ub.real, -inv_s, out=dr1[:, 1])                  # d r1 / d dy
+        np.multiply(ob.real - r1 * c, inv_s, out=dr1[:, 2])          # d r1 / d b (= dpsi)
+        np.multiply(r1 * c, inv_s, out=dr1[:, 3])                    # d r1 / d a
+        dr1[:, 4] = dr1[:, 2]                                        # b = dpsi + theta_now
+        dr1 = dr1.copy()
+        jac.imag[:, 3] = r1
+        jac *= ua[:, None]
+        pts = ua * r1
+    return RayTriangulation(pts.view(np.float64).reshape(k, 2), r1, r2, s, c, dr1,
+                            ua.view(np.float64).reshape(k, 2), ub.view(np.float64).reshape(k, 2),
+                            jac)
 
 
 def odometry_covariance(odometry: ArrayLike) -> np.ndarray:
@@ -222,9 +241,10 @@ def point_covariance(tri: RayTriangulation, odometry: ArrayLike,
 def range_jacobians(tri: RayTriangulation) -> tuple[np.ndarray, np.ndarray]:
     """``d r1 / dz`` and ``d r2 / dz`` over ``[dx, dy, dpsi, theta_prev, theta_now]``, (k, 5) each.
 
-    ``r1 = u_a . p`` (since ``du_a`` is normal to ``u_a``) and ``r2 = u_b . (p - o)``.
+    ``r1`` is computed directly; ``r2 = u_b . (p - o)``, and ``(p - o) . du_b = 0`` because
+    ``p - o`` is parallel to ``u_b``.
     """
-    j1 = np.einsum("ka,kaz->kz", tri.ray_prev, tri.jacobian)
+    j1 = tri.range_jacobian.copy()
     j2 = np.einsum("ka,kaz->kz", tri.ray_now, tri.jacobian)
     j2[:, 0] -= tri.ray_now[:, 0]
     j2[:, 1] -= tri.ray_now[:, 1]
@@ -265,11 +285,12 @@ def gate_points(tri: RayTriangulation, range_var_m2: np.ndarray | None = None, *
     -------
     ndarray of shape (k,), bool
     """
-    par = tri.parallax_rad
+    # parallax in [min, pi - min]  <=>  sin(parallax) >= sin(min) (and > 0)
+    sin_par = np.abs(tri.sin_parallax)
     with np.errstate(invalid="ignore"):
-        ok = (par >= min_parallax_rad) & (par <= np.pi - min_parallax_rad) & (par > 0)
-        ok &= (tri.range_prev_m > 0) & (tri.range_now_m > 0)
-        ok &= (tri.range_prev_m <= max_range_m) & (tri.range_now_m <= max_range_m)
+        ok = sin_par >= max(math.sin(min_parallax_rad), 1e-15)
+        r1, r2 = tri.range_prev_m, tri.range_now_m
+        ok &= (r1 > 0) & (r2 > 0) & (r1 <= max_range_m) & (r2 <= max_range_m)
         if np.isfinite(max_relative_range_sigma):
             if range_var_m2 is None:
                 raise ConfigError("gate_points: the relative range gate needs range_var_m2")
@@ -289,10 +310,8 @@ class PairEstimates:
         ``|p_i - p_j|^2``.
     variance_m4 : ndarray of shape (P,)
         First-order variance ``J Sigma J^T`` of the squared distance (eq. 2).
-    offset_trace_m2 : ndarray of shape (P,)
-        ``trace Cov(p_i - p_j)``: the first-order bias of ``|p_i - p_j|^2``.
-    translation_variance_m4 : ndarray of shape (P,)
-        The part of ``variance_m4`` due to the odometry translation ``(dx, dy)`` alone (it
+    translation_variance_m4 : ndarray of shape (P,) or None
+        (When asked for.) The part of ``variance_m4`` due to the odometry translation ``(dx, dy)`` alone (it
         scales like ``d^2`` under a change of scale; the rest, from the bearings and the
         turn, like ``d^4`` for the distance's variance).
     jacobian : ndarray of shape (P, 7) or None
@@ -304,8 +323,7 @@ class PairEstimates:
     second: np.ndarray
     squared_distance_m2: np.ndarray
     variance_m4: np.ndarray
-    offset_trace_m2: np.ndarray
-    translation_variance_m4: np.ndarray
+    translation_variance_m4: np.ndarray | None = None
     jacobian: np.ndarray | None = None
 
     def __len__(self) -> int:
@@ -313,50 +331,64 @@ class PairEstimates:
 
 
 def pair_squared_distances(tri: RayTriangulation, odometry: ArrayLike,
-                           bearing_sigma_rad: float, *,
+                           bearing_sigma_rad: float, *, select: np.ndarray | None = None,
+                           with_translation: bool = False,
                            with_jacobian: bool = False) -> PairEstimates:
     """Squared distance and its first-order variance for every pair of ``tri``'s landmarks.
 
     Parameters
     ----------
     tri : RayTriangulation
-        The (gated) landmarks of one step, ``k`` of them.
+        The landmarks of one step, ``k`` of them.
     odometry : array of shape (3,) or (3, 3)
         Std. devs. of ``[dx_m, dy_m, dpsi_rad]`` for this step, or their covariance (e.g.
         from :func:`compose_odometry` for a baseline of several steps).
     bearing_sigma_rad : float
+    select : array of int, optional
+        Only pairs among these landmarks (e.g. those that passed :func:`gate_points`).
+    with_translation : bool
+        Also return the part of the variance due to the odometry translation.
     with_jacobian : bool
         Also return the ``(P, 7)`` Jacobian (tests; the variance never needs it).
 
     Returns
     -------
     PairEstimates
-        ``P = k (k - 1) / 2`` pairs, in ``np.triu_indices(k, 1)`` order.
+        The pairs ``(first, second)`` index ``tri``; in ``np.triu_indices`` order of ``select``.
     """
-    first, second = pair_indices(len(tri))
-    cov_odo = odometry_covariance(odometry)
+    if select is None:
+        first, second = pair_indices(len(tri))
+    else:
+        f, g = pair_indices(len(select))
+        first, second = select[f], select[g]
+    unc = np.asarray(odometry, dtype=float)
     sb2 = float(bearing_sigma_rad) ** 2
-    p = tri.points_xy
-    jac = tri.jacobian
-    e = p[first] - p[second]                                   # (P, 2)
-    d2 = np.einsum("pa,pa->p", e, e)
-    ji = jac[first]
-    jj = jac[second]
-    # d e / d odometry (shared by both landmarks) and / d own bearings.
-    de_odo = ji[:, :, :3] - jj[:, :, :3]                        # (P, 2, 3)
-    g_odo = 2.0 * np.einsum("pa,paz->pz", e, de_odo)            # (P, 3)
-    g_i = 2.0 * np.einsum("pa,paz->pz", e, ji[:, :, 3:])        # (P, 2)
-    g_j = -2.0 * np.einsum("pa,paz->pz", e, jj[:, :, 3:])       # (P, 2)
-    var = np.einsum("pz,zy,py->p", g_odo, cov_odo, g_odo) \
-        + sb2 * (np.einsum("pz,pz->p", g_i, g_i) + np.einsum("pz,pz->p", g_j, g_j))
-    trace = (np.einsum("paz,zy,pay->p", de_odo, cov_odo, de_odo)
-             + sb2 * (np.einsum("paz,paz->p", ji[:, :, 3:], ji[:, :, 3:])
-                      + np.einsum("paz,paz->p", jj[:, :, 3:], jj[:, :, 3:])))
-    g_t = g_odo[:, :2]
-    tvar = np.einsum("pz,zy,py->p", g_t, cov_odo[:2, :2], g_t)
-    full = np.concatenate([g_odo, g_i, g_j], axis=1) if with_jacobian else None
-    return PairEstimates(first.astype(np.int64), second.astype(np.int64), d2, var, trace, tvar,
-                         full)
+    # e . dp/dz = Re(e conj(dp/dz)) for the offset e = p_i - p_j (complex plane)
+    pts = np.ascontiguousarray(tri.points_xy).view(np.complex128)[:, 0]
+    jac_conj = tri.jacobian_complex.conj()                      # (k, 5)
+    e = pts[first] - pts[second]
+    d2 = (e * e.conj()).real
+    gi = (e[:, None] * jac_conj[first]).real                    # e . dp_i/dz, (P, 5)
+    gj = (e[:, None] * jac_conj[second]).real                   # e . dp_j/dz
+    # d |e|^2 / dz = 2 e . de/dz: the odometry moves both points, each bearing one of them
+    grad = np.concatenate((gi[:, :3] - gj[:, :3], gi[:, 3:], gj[:, 3:]), axis=1)
+    if unc.shape == (3,):                                       # independent components
+        var = (grad * grad) @ np.concatenate((4.0 * unc * unc, np.full(4, 4.0 * sb2)))
+        cov_odo = np.diag(unc * unc)
+    else:
+        cov7 = np.zeros((7, 7))
+        cov7[:3, :3] = cov_odo = odometry_covariance(unc)
+        cov7.flat[24::8] = sb2                                  # the four bearings
+        var = 4.0 * ((grad @ cov7) * grad).sum(axis=1)
+    tvar = None
+    if with_translation:
+        g_t = grad[:, :2]
+        tvar = 4.0 * ((g_t @ cov_odo[:2, :2]) * g_t).sum(axis=1)
+    full = None
+    if with_jacobian:
+        full = 2.0 * grad
+        full[:, 5:] *= -1.0
+    return PairEstimates(first, second, d2, var, tvar, full)
 
 
 __all__ = ["POINT_MEASUREMENTS", "PAIR_MEASUREMENTS", "RayTriangulation", "PairEstimates",
