@@ -14,6 +14,7 @@ machine; the script states the one it ran on.
 from __future__ import annotations
 
 import argparse
+import copy
 import json
 import math
 import os
@@ -90,10 +91,16 @@ def reconstruction(n: int, repeats: int, quick: bool, options: dict) -> dict:
             mapper.step(s)
         times = []
         for _ in range(repeats):
+            fresh = copy.deepcopy(mapper)      # the first map of this run: no warm start
             t0 = time.perf_counter()
-            est = mapper.estimate()
+            est = fresh.estimate()
             times.append(time.perf_counter() - t0)
+        mapper.estimate()
+        t0 = time.perf_counter()
+        mapper.estimate()                       # a later map, warm-started from the last
+        warm = time.perf_counter() - t0
         out[name] = {"estimate_s_median": float(np.median(times)), "n_mapped": len(est),
+                     "warm_estimate_s": warm,
                      "n_known_pairs": est.info.get("n_mapped_pairs"),
                      "smacof_iterations": est.info.get("smacof_iterations")}
         if name == "stmds-cs":
@@ -146,9 +153,10 @@ def main() -> None:
           f"target < 0.1 ms")
     report["reconstruction"] = r3 = reconstruction(args.n_big, 3, args.quick, options)
     for name in ("stmds-cs", "stmds-smacof"):
-        print(f"N = {args.n_big} reconstruction, {name}: {r3[name]['estimate_s_median']:.3f} s "
-              f"({r3[name]['n_mapped']} mapped, {r3[name]['n_known_pairs']} pairs); "
-              f"target < 0.5 s")
+        print(f"N = {args.n_big} reconstruction, {name}: first map "
+              f"{r3[name]['estimate_s_median']:.3f} s, a later warm-started one "
+              f"{r3[name]['warm_estimate_s']:.3f} s ({r3[name]['n_mapped']} mapped, "
+              f"{r3[name]['n_known_pairs']} pairs); target < 0.5 s")
     print("  parts: " + ", ".join(f"{k} {v:.3f} s" if isinstance(v, float) else f"{k} {v}"
                                   for k, v in r3["parts_s"].items()))
     RESULTS.mkdir(exist_ok=True)

@@ -184,3 +184,34 @@ def test_config_is_validated_and_options_are_checked() -> None:
     assert isinstance(m, StmdsMapper)
     assert (m.config.method, m.config.fusion, m.config.localise) == ("cs", "paper", False)
     assert StmdsConfig().smacof_from_t == 50 and StmdsConfig().window == 6
+
+
+@pytest.mark.parametrize("options", [
+    {"fusion": "paper"}, {"fusion": "fused"}, {"fusion": "relative"}, {"fusion": "predicted"},
+    {"preset": "improved"},
+    {"landmark_mds_above": 10, "n_pivots": 6},          # SMACOF started from landmark MDS
+    {"weights": "inverse-variance", "smacof_init": "classical", "smacof_relaxation": 1.0,
+     "smacof_max_iter": 3000},
+])
+def test_every_variant_is_exact_without_noise(options: dict, paper_noise_free: Stream) -> None:
+    est = run(create_mapper("stmds-smacof", paper_noise_free.header, **options),
+              paper_noise_free.steps).final
+    assert score_estimate(est, paper_noise_free.truth).mpe_m < 1e-9
+
+
+def test_window_triangulated_robot_ranges_are_exact_without_noise(all_in_view: Stream) -> None:
+    est = run(create_mapper("stmds-cs-loc", all_in_view.header, robot_ranges="window"),
+              all_in_view.steps).final
+    score = score_estimate(est, all_in_view.truth)
+    assert score.mpe_m < 1e-9 and score.robot_mean_m < 1e-9
+
+
+def test_presets_and_the_improved_config() -> None:
+    header = StreamHeader(bearing_sigma_rad=0.05, odometry_sigma=(0.03, 0.0, 0.05))
+    m = create_mapper("stmds-smacof", header, preset="improved", window=5)
+    assert m.config == StmdsConfig.improved(window=5)
+    assert m.config.baselines == (4,) and m.config.fusion == "relative"
+    with pytest.raises(ConfigError, match="preset"):
+        create_mapper("stmds-smacof", header, preset="fast")
+    with pytest.raises(ConfigError, match="baselines"):
+        StmdsConfig(baselines=(0,))

@@ -141,3 +141,46 @@ def test_smacof_checks_its_inputs() -> None:
                   init=np.zeros((1, 2))).points.shape == (1, 2)
     res = smacof(2, f, s, d, init=np.array([[0.0, 0.0], [0.5, 0.0]]))
     assert np.linalg.norm(res.points[0] - res.points[1]) == pytest.approx(1.0)
+
+
+def test_component_labels_match_scipy() -> None:
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    from bomgraph.stmds.completion import component_labels
+
+    rng = np.random.default_rng(7)
+    for n, e in ((1, 0), (30, 10), (60, 45), (200, 400)):
+        f = rng.integers(0, n, e)
+        s = rng.integers(0, n, e)
+        lab = component_labels(n, f, s)
+        g = coo_matrix((np.ones(e), (f, s)), shape=(n, n))
+        k, ref = connected_components(g, directed=False)
+        assert len(np.unique(lab)) == k
+        # same partition, and each label is the smallest vertex of its component
+        for c in range(k):
+            members = np.flatnonzero(ref == c)
+            assert np.all(lab[members] == members.min())
+
+
+def test_classical_scaling_of_a_large_map_uses_lanczos_and_is_exact() -> None:
+    x = _points(420, 8) * 4
+    d2 = ((x[:, None] - x[None]) ** 2).sum(-1)
+    est, ev = classical_scaling(d2)
+    assert ev[0] >= ev[1] > 0
+    assert _max_error_after_alignment(est, x) < 1e-9
+
+
+def test_landmark_mds_is_exact_for_euclidean_distances() -> None:
+    from bomgraph.stmds.completion import pivot_shortest_paths
+    from bomgraph.stmds.mds import landmark_scaling
+
+    x = _points(60, 9)
+    f, s, d = np.triu_indices(60, 1) + (None,)
+    d = np.linalg.norm(x[f] - x[s], axis=1)
+    pivots, rows = pivot_shortest_paths(60, f, s, d, 8)   # complete graph: paths = distances
+    assert len(np.unique(pivots)) == 8
+    np.testing.assert_allclose(rows, np.linalg.norm(x[pivots][:, None] - x[None], axis=2),
+                               atol=1e-12)
+    est = landmark_scaling(rows, pivots)
+    assert _max_error_after_alignment(est, x) < 1e-10

@@ -142,3 +142,46 @@ def test_a_step_with_no_parallax_gives_no_usable_point_and_no_warning() -> None:
         tri = triangulate_rays([0.1, 0.0, 0.0], np.zeros(3), np.zeros(3))
         assert not gate_points(tri).any()
 
+
+
+def test_compose_odometry_chains_increments_with_first_order_covariance() -> None:
+    from bomgraph.geometry import between, dead_reckon
+    from bomgraph.stmds.triangulation import compose_odometry
+
+    rng = np.random.default_rng(4)
+    odoms = np.column_stack([rng.uniform(0.1, 0.2, 5), rng.uniform(-0.02, 0.02, 5),
+                             rng.uniform(-0.4, 0.4, 5)])
+    sig = np.tile([0.03, 0.01, 0.05], (5, 1))
+    u, cov = compose_odometry(odoms, sig)
+    poses = dead_reckon(odoms)
+    np.testing.assert_allclose(u[:2], between(poses[0], poses[-1])[:2], atol=1e-12)
+    assert u[2] == pytest.approx(odoms[:, 2].sum())
+    num = _numeric_jacobian(lambda z: compose_odometry(z.reshape(5, 3), sig)[0],
+                            odoms.reshape(-1))
+    jw = num * sig.reshape(-1)
+    np.testing.assert_allclose(cov, jw @ jw.T, rtol=1e-6, atol=1e-12)
+
+
+def test_pair_variance_with_a_full_odometry_covariance_and_a_selection() -> None:
+    rng = np.random.default_rng(5)
+    a = rng.uniform(-1.0, 1.0, 6)
+    b = a + rng.uniform(0.2, 0.5, 6)
+    tri = triangulate_rays([0.3, 0.05, 0.1], a, b)
+    sig = np.array([0.03, 0.02, 0.05])
+    diag = pair_squared_distances(tri, sig, 0.05)
+    full = pair_squared_distances(tri, np.diag(sig ** 2), 0.05)
+    np.testing.assert_allclose(full.variance_m4, diag.variance_m4, rtol=1e-12)
+    # a correlated covariance: the variance is g^T C g with the numeric gradient
+    c = np.array([[9e-4, 2e-4, 1e-4], [2e-4, 4e-4, 0.0], [1e-4, 0.0, 2.5e-3]])
+    corr = pair_squared_distances(tri, c, 0.05, with_jacobian=True)
+    g = corr.jacobian
+    expect = np.einsum("pi,ij,pj->p", g[:, :3], c, g[:, :3]) + 0.05 ** 2 * (g[:, 3:] ** 2).sum(1)
+    np.testing.assert_allclose(corr.variance_m4, expect, rtol=1e-12)
+    # pairs among a selection index the full set and equal those of the subset
+    sel = np.array([0, 2, 5])
+    part = pair_squared_distances(tri, sig, 0.05, select=sel)
+    sub = pair_squared_distances(tri.subset(sel), sig, 0.05)
+    np.testing.assert_array_equal(part.first, sel[sub.first])
+    np.testing.assert_array_equal(part.second, sel[sub.second])
+    np.testing.assert_allclose(part.variance_m4, sub.variance_m4)
+    np.testing.assert_allclose(part.squared_distance_m2, sub.squared_distance_m2)

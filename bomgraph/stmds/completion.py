@@ -138,7 +138,9 @@ def shortest_path_completion(n: int, first: np.ndarray, second: np.ndarray,
         also shortens known pairs that violate the triangle inequality.
     """
     g = edge_graph(n, first, second, distance_m)
-    full = shortest_path(g, method="D", directed=False)
+    # the graph is stored symmetric, so the directed search gives the undirected answer
+    # without csgraph symmetrising it again (about a quarter faster)
+    full = shortest_path(g, method="D", directed=True)
     if keep_known and len(first):
         d = np.maximum(np.asarray(distance_m, float), _MIN_EDGE_M)
         full[first, second] = d
@@ -146,5 +148,35 @@ def shortest_path_completion(n: int, first: np.ndarray, second: np.ndarray,
     return full
 
 
-__all__ = ["edge_graph", "Component", "largest_component", "component_labels", "prune_low_degree",
+def pivot_shortest_paths(n: int, first: np.ndarray, second: np.ndarray,
+                         distance_m: np.ndarray, n_pivots: int) -> tuple[np.ndarray, np.ndarray]:
+    """Shortest path lengths from a spread-out set of pivots only (for landmark MDS).
+
+    Pivots are chosen by farthest-point sampling on the graph: the first is the vertex with
+    the largest summed length of its known pairs, each next one the vertex farthest (in path
+    length) from the pivots so far. ``n_pivots`` single-source Dijkstra searches instead of
+    ``n``. The graph must be connected.
+
+    Returns
+    -------
+    pivots : ndarray of shape (m,), int64
+    rows : ndarray of shape (m, n)
+        Path lengths from each pivot to every vertex.
+    """
+    g = edge_graph(n, first, second, distance_m)
+    m = min(int(n_pivots), n)
+    strength = np.bincount(first, distance_m, n) + np.bincount(second, distance_m, n)
+    pivots = np.zeros(m, np.int64)
+    rows = np.zeros((m, n))
+    pivots[0] = int(np.argmax(strength))
+    nearest = np.full(n, np.inf)
+    for k in range(m):                      # m single-source searches
+        rows[k] = shortest_path(g, method="D", directed=True, indices=int(pivots[k]))
+        np.minimum(nearest, rows[k], out=nearest)
+        if k + 1 < m:
+            pivots[k + 1] = int(np.argmax(nearest))
+    return pivots, rows
+
+
+__all__ = ["edge_graph", "pivot_shortest_paths", "Component", "largest_component", "component_labels", "prune_low_degree",
            "shortest_path_completion"]

@@ -2,7 +2,8 @@
 
 Classical scaling double-centres the squared distance matrix, ``B = -1/2 J D2 J`` with
 ``J = I - 11^T / n``, and takes the top two eigenpairs (``scipy.linalg.eigh`` with a subset of
-eigenvalues; negative eigenvalues are clipped to zero). It minimises Strain globally.
+eigenvalues, or Lanczos ``eigsh`` for large ``n``; negative eigenvalues are clipped to zero).
+It minimises Strain globally.
 
 Weighted SMACOF minimises the raw stress of eq. 6,
 ``sigma(X) = sum_{known i<j} w_ij (delta_ij - |x_i - x_j|)^2``, by iterative majorisation: the
@@ -24,9 +25,13 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.linalg
 from scipy.sparse import coo_matrix
+import scipy.sparse.linalg
 from scipy.sparse.linalg import splu
 
 from ..errors import ConfigError, DegenerateGeometryError
+
+
+_DENSE_EIG_MAX = 300   # above this many points classical scaling uses Lanczos (eigsh)
 
 
 def double_centre(squared_distance: np.ndarray) -> np.ndarray:
@@ -66,13 +71,57 @@ def classical_scaling(squared_distance: np.ndarray, dim: int = 2) -> tuple[np.nd
         return np.zeros((0, dim)), np.zeros(dim)
     b = double_centre(d2)
     k = min(dim, n)
-    vals, vecs = scipy.linalg.eigh(b, subset_by_index=[n - k, n - 1], check_finite=False)
-    vals, vecs = vals[::-1], vecs[:, ::-1]
+    if n > _DENSE_EIG_MAX:
+        # Lanczos (ARPACK) for the few top eigenpairs; a fixed start vector keeps it
+        # deterministic (the result does not depend on it beyond round-off)
+        v0 = np.cos(0.7 * np.arange(n)) + 0.5
+        vals, vecs = scipy.sparse.linalg.eigsh(b, k=k, which="LA", v0=v0)
+        order = np.argsort(vals)[::-1]
+        vals, vecs = vals[order], vecs[:, order]
+    else:
+        vals, vecs = scipy.linalg.eigh(b, subset_by_index=[n - k, n - 1], check_finite=False)
+        vals, vecs = vals[::-1], vecs[:, ::-1]
     pts = np.zeros((n, dim))
     pts[:, :k] = vecs * np.sqrt(np.maximum(vals, 0.0))
     ev = np.zeros(dim)
     ev[:k] = vals
     return pts, ev
+
+
+def landmark_scaling(pivot_rows: np.ndarray, pivots: np.ndarray,
+                     dim: int = 2) -> np.ndarray:
+    """Landmark MDS (de Silva and Tenenbaum, 2004): classical scaling of the pivots, then every
+    point placed from its squared distances to the pivots.
+
+    With ``D2_p`` the pivots' squared distances (column means ``mu``) and their classical
+    scaling ``B_p = V diag(lambda) V^T``, a point with squared distances ``delta`` to the pivots
+    goes to ``x = -1/2 diag(lambda)^(-1/2) V^T (delta - mu)``: exact for Euclidean distances,
+    the same map as classical scaling of the full matrix then.
+
+    Parameters
+    ----------
+    pivot_rows : array of shape (m, n)
+        Distances (not squared) from each pivot to every point; finite.
+    pivots : array of shape (m,)
+        The pivots' own point indices.
+
+    Returns
+    -------
+    ndarray of shape (n, dim)
+    """
+    d2 = np.asarray(pivot_rows, float) ** 2
+    d2_pp = d2[:, pivots]
+    d2_pp = 0.5 * (d2_pp + d2_pp.T)
+    b = double_centre(d2_pp)
+    m = len(pivots)
+    k = min(dim, m)
+    vals, vecs = scipy.linalg.eigh(b, subset_by_index=[m - k, m - 1])
+    vals, vecs = vals[::-1], vecs[:, ::-1]
+    scale = np.where(vals > 0, 1.0 / np.sqrt(np.maximum(vals, 1e-300)), 0.0)
+    mu = d2_pp.mean(axis=0)
+    pts = np.zeros((d2.shape[1], dim))
+    pts[:, :k] = -0.5 * ((d2 - mu[:, None]).T @ vecs) * scale
+    return pts - pts.mean(axis=0)
 
 
 def raw_stress(points: np.ndarray, first: np.ndarray, second: np.ndarray,
@@ -284,5 +333,5 @@ def smacof(n: int, first: np.ndarray, second: np.ndarray, dissimilarity: np.ndar
     return SmacofResult(x, s1, hist[-1], len(hist) - 1, conv, np.array(hist))
 
 
-__all__ = ["double_centre", "classical_scaling", "raw_stress", "stress1", "LaplacianSolver",
+__all__ = ["double_centre", "classical_scaling", "landmark_scaling", "raw_stress", "stress1", "LaplacianSolver",
            "SmacofResult", "smacof"]

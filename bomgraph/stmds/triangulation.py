@@ -115,8 +115,9 @@ class RayTriangulation:
         """The landmarks selected by a boolean mask or an index array."""
         return RayTriangulation(self.points_xy[mask], self.range_prev_m[mask],
                                 self.range_now_m[mask], self.sin_parallax[mask],
-                                self.cos_parallax[mask], self.range_jacobian[mask], self.ray_prev[mask],
-                                self.ray_now[mask])
+                                self.cos_parallax[mask], self.range_jacobian[mask],
+                                self.ray_prev[mask], self.ray_now[mask],
+                                self.jacobian_complex[mask])
 
 
 def triangulate_rays(odom: ArrayLike, bearing_prev_rad: ArrayLike,
