@@ -1,0 +1,324 @@
+"""Tests of the GTSAM baselines (baselines/factor_graph.py): the exact odometry factor, chi^2
+at the truth, landmark admission, LM convergence reporting, iSAM2 recovery, priors,
+covariances, and exact recovery without noise."""
+
+from __future__ import annotations
+
+import math
+
+import gtsam
+import numpy as np
+import pytest
+
+from baselines.factor_graph import (BatchMapper, BearingGraph, FactorGraphConfig, Isam2Mapper,
+                                    OracleMapper, insert_pose, landmark_key, odometry_factors,
+                                    pose_key, solve_lm, transformed_odometry_covariance)
+from bomgraph.errors import ConfigError, StreamFormatError
+from bomgraph.evaluate import score_estimate
+from bomgraph.geometry import compose
+from bomgraph.mapper import create_mapper, run
+from bomgraph.sim import SimConfig, make_priors, simulate, with_priors
+from bomgraph.stream import Step, Stream, Truth
+
+NOISE_FREE = SimConfig(n_steps=80, n_landmarks=20, noise_scale=0.0)
+SMALL = SimConfig(n_steps=100, n_landmarks=25)
+
+
+@pytest.fixture(scope="module")
+def noise_free() -> Stream:
+    return simulate(NOISE_FREE, np.random.default_rng(7))
+
+
+def _values_at_truth(stream: Stream, graph: BearingGraph, config: FactorGraphConfig
+                     ) -> gtsam.Values:
+    v = gtsam.Values()
+    poses = stream.truth.poses
+    for t, pose in enumerate(poses):
+        insert_pose(v, t, pose, poses[t - 1] if t else None, config)
+    for i, xy in zip(stream.truth.landmark_ids, stream.truth.landmarks_xy):
+        if int(i) in graph.landmark_ids:
+            v.insert(landmark_key(int(i)), gtsam.Point2(*xy))
+    return v
+
+
+def _graph_at_truth(stream: Stream, config: FactorGraphConfig
+                    ) -> tuple[gtsam.NonlinearFactorGraph, gtsam.NonlinearFactorGraph,
+                               gtsam.Values, BearingGraph]:
+    """All factors of ``stream`` (landmarks admitted on the true poses) and the truth as values;
+    the odometry factors apart."""
+    g = BearingGraph(stream.header, config, stream.truth.poses[0])
+    for st in stream.steps:
+        g.add_step(st)
+    g.admit(lambda ts: stream.truth.poses[ts])
+    new = g.take_new()
+    full = gtsam.NonlinearFactorGraph(new.core)
+    full.push_back(new.landmark)
+    odo = gtsam.NonlinearFactorGraph()
+    for t, st in enumerate(stream.steps[1:], start=1):
+        for f in odometry_factors(t, st.odom, st.odometry_sigma(stream.header), config):
+            odo.add(f)
+    return full, odo, _values_at_truth(stream, g, config), g
+
+
+# --------------------------------------------------------------------------------------------
+# The odometry factor
+# --------------------------------------------------------------------------------------------
+
+def test_split_factor_error_is_exactly_the_component_noise() -> None:
+    """At the truth, the split factors' chi^2 is the whitened component noise, to round-off."""
+    cfg = FactorGraphConfig()
+    sigma = np.array([0.03, 0.0, math.radians(3)])
+    a = np.array([0.4, -1.2, 2.9])
+    u_true = np.array([0.17, 0.0, -0.45])
+    b = compose(a, u_true)
+    noise = np.array([0.021, 0.0, -0.061])
+    factors = odometry_factors(5, u_true + noise, sigma, cfg)
+    v = gtsam.Values()
+    v.insert(pose_key(4), gtsam.Pose2(*a))
+    v.insert(pose_key(5), gtsam.Pose2(*b))
+    v.insert(gtsam.symbol("m", 5), gtsam.Pose2(b[0], b[1], a[2]))
+    chi2 = 2 * sum(f.error(v) for f in factors)
+    assert chi2 == pytest.approx((noise[0] / 0.03) ** 2 + (noise[2] / sigma[2]) ** 2, rel=1e-10)
+
+
+def test_transformed_covariance_is_the_jacobian_of_the_between_error() -> None:
+    """Numeric Jacobian of Logmap(Pose2(u + n)^-1 Pose2(u)) w.r.t. the component noise n at
+    n = 0 is -blockdiag(R(dpsi)^T, 1), so the covariance is J diag(s^2) J^T."""
+    u = np.array([0.15, 0.02, 0.4])
+    sigma = np.array([0.03, 0.01, 0.05])
+    base = gtsam.Pose2(*u)
+
+    def err(n: np.ndarray) -> np.ndarray:
+        return gtsam.Pose2.Logmap(gtsam.Pose2(*(u + n)).between(base))
+
+    h = 1e-7
+    jac = np.column_stack([(err(h * e) - err(-h * e)) / (2 * h) for e in np.eye(3)])
+    np.testing.assert_allclose(jac @ np.diag(sigma ** 2) @ jac.T,
+                               transformed_odometry_covariance(u, sigma), atol=1e-12)
+
+
+@pytest.fixture(scope="module")
+def noisy_runs() -> list[Stream]:
+    return [simulate(SMALL, np.random.default_rng(100 + k)) for k in range(4)]
+
+
+def test_chi2_per_dof_at_truth_is_one_with_the_split_model(noisy_runs: list[Stream]) -> None:
+    cfg = FactorGraphConfig()
+    chi2 = dof = chi2_odo = dof_odo = 0.0
+    for s in noisy_runs:
+        full, odo, v, g = _graph_at_truth(s, cfg)
+        n_odo = len(s.steps) - 1
+        chi2 += 2 * full.error(v)
+        dof += g.n_bearing_factors + 2 * n_odo   # dy is exactly 0 in the simulator
+        chi2_odo += 2 * odo.error(v)
+        dof_odo += 2 * n_odo
+    # ~5000 residuals: chi^2/dof has std. dev. ~0.02
+    assert 0.92 < chi2 / dof < 1.08
+    # ~800 odometry residuals: std. dev. ~0.05
+    assert 0.8 < chi2_odo / dof_odo < 1.2
+
+
+def test_chi2_at_truth_is_far_above_one_with_the_naive_diagonal(
+        noisy_runs: list[Stream]) -> None:
+    """Regression check: the naive (sdx, floor, sdpsi) diagonal in the after-turn frame."""
+    cfg = FactorGraphConfig(odometry_model="naive", sigma_floor_m=1e-3)
+    ratio = []
+    for s in noisy_runs:
+        _, odo, v, _ = _graph_at_truth(s, cfg)
+        ratio.append(2 * odo.error(v) / (2 * (len(s.steps) - 1)))
+    assert min(ratio) > 3.0
+
+
+# --------------------------------------------------------------------------------------------
+# Exact recovery, oracle
+# --------------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("name", ["gtsam-batch", "gtsam-isam2", "oracle"])
+def test_noise_free_exact_recovery(name: str, noise_free: Stream) -> None:
+    mapper = create_mapper(name, noise_free.header, truth=noise_free.truth)
+    est = run(mapper, noise_free.steps).final
+    score = score_estimate(est, noise_free.truth)
+    assert score.n_common == est.landmark_ids.size >= 18
+    assert score.max_m < 1e-6
+    assert score.robot_last_m < 1e-6
+    np.testing.assert_allclose(est.poses[0], [0.0, 0.0, 0.0], atol=1e-7)   # the map frame
+    assert est.info["converged"] is True
+
+
+def test_start_pose_sets_the_map_frame(noise_free: Stream) -> None:
+    start = (1.0, -2.0, 0.7)
+    est = run(BatchMapper(noise_free.header, start_pose=start), noise_free.steps[:30]).final
+    np.testing.assert_allclose(est.poses[0], start, atol=1e-7)
+    # without noise the frame is the truth's moved rigidly onto the start pose
+    al = score_estimate(est, noise_free.truth).alignment
+    assert not al.reflected
+    assert score_estimate(est, noise_free.truth).max_m < 1e-6
+
+
+def test_oracle_refuses_to_run_without_true_poses(noise_free: Stream) -> None:
+    with pytest.raises(ConfigError, match="true poses"):
+        OracleMapper(noise_free.header,
+                     truth=Truth(noise_free.truth.landmark_ids, noise_free.truth.landmarks_xy))
+
+
+# --------------------------------------------------------------------------------------------
+# Landmark admission
+# --------------------------------------------------------------------------------------------
+
+def _with_single_sighting(stream: Stream, lid: int, t: int, bearing: float) -> Stream:
+    steps = list(stream.steps)
+    s = steps[t]
+    steps[t] = Step(s.t, s.odom, np.append(s.landmark_ids, lid), np.append(s.bearings_rad,
+                                                                           bearing))
+    return Stream(stream.header, tuple(steps), stream.truth)
+
+
+@pytest.mark.parametrize("cls", [BatchMapper, Isam2Mapper])
+def test_a_landmark_seen_once_is_never_added(cls: type, noise_free: Stream) -> None:
+    stream = _with_single_sighting(noise_free, 999, 12, 0.4)
+    mapper = cls(stream.header)
+    result = run(mapper, stream.steps)
+    for c in result.checkpoints:
+        assert 999 not in c.estimate.landmark_ids
+    assert mapper.problem.pending()[999] == 1
+    # and the rest is unharmed
+    assert score_estimate(result.final, stream.truth).max_m < 1e-6
+
+
+def test_enter_refuses_a_landmark_with_one_bearing(noise_free: Stream) -> None:
+    g = BearingGraph(noise_free.header, FactorGraphConfig(), np.zeros(3))
+    g.add_step(_with_single_sighting(noise_free, 999, 0, 0.4).steps[0])
+    with pytest.raises(ConfigError, match="two"):
+        g.enter(999, np.array([1.0, 1.0]))
+
+
+def test_buffered_bearings_all_become_factors_on_entry(noise_free: Stream) -> None:
+    g = BearingGraph(noise_free.header, FactorGraphConfig(), noise_free.truth.poses[0])
+    for st in noise_free.steps[:20]:
+        g.add_step(st)
+    n_bearings = sum(len(st.landmark_ids) for st in noise_free.steps[:20])
+    g.admit(lambda ts: noise_free.truth.poses[ts])
+    pending = sum(g.pending().values())
+    assert g.n_bearing_factors + pending == n_bearings
+    assert g.n_bearing_factors > 0.8 * n_bearings
+
+
+def test_steps_out_of_order_are_refused(noise_free: Stream) -> None:
+    m = BatchMapper(noise_free.header)
+    m.step(noise_free.steps[0])
+    with pytest.raises(StreamFormatError, match="expected t = 1"):
+        m.step(noise_free.steps[2])
+    with pytest.raises(StreamFormatError, match="odometry"):
+        m.step(Step(1, None, np.zeros(0, np.int64), np.zeros(0)))
+
+
+def test_config_is_validated() -> None:
+    with pytest.raises(ConfigError, match="odometry_model"):
+        FactorGraphConfig(odometry_model="diagonal")
+    with pytest.raises(ConfigError, match="unknown factor-graph option"):
+        BatchMapper(simulate(SimConfig(n_steps=2), np.random.default_rng(0)).header,
+                    lambda_upper=3)
+
+
+# --------------------------------------------------------------------------------------------
+# LM convergence reporting
+# --------------------------------------------------------------------------------------------
+
+def _noisy_graph() -> tuple[gtsam.NonlinearFactorGraph, gtsam.Values, Stream]:
+    s = simulate(SimConfig(n_steps=40, n_landmarks=20), np.random.default_rng(11))
+    m = BatchMapper(s.header)
+    for st in s.steps:
+        m.step(st)
+    m._absorb()
+    return m.graph, m.values, s
+
+
+def test_lm_that_gives_up_is_not_reported_converged() -> None:
+    graph, start, _ = _noisy_graph()
+    # GTSAM's default lambda bound with undamped diagonal: LM gives up on the tight factors
+    cfg = FactorGraphConfig(lambda_upper_bound=1e-3, diagonal_damping=False, huber_k=None)
+    _, report = solve_lm(graph, start, cfg)
+    assert report.stop == "lambda_bound"
+    assert report.converged is False
+    assert report.predicted_decrease > cfg.decrease_tol
+    cfg = FactorGraphConfig(max_iterations=1, huber_k=None)
+    _, report = solve_lm(graph, start, cfg)
+    assert report.stop == "max_iterations" and report.converged is False
+    values, report = solve_lm(graph, start, FactorGraphConfig())
+    assert report.converged and report.stop == "tolerance"
+    assert report.final_error < report.initial_error
+    assert report.predicted_decrease < 1e-3
+
+
+# --------------------------------------------------------------------------------------------
+# iSAM2
+# --------------------------------------------------------------------------------------------
+
+def test_isam2_survives_a_failing_update(noise_free: Stream) -> None:
+    """A landmark with a single bearing makes the linear system indeterminate: the update
+    raises, the solver is rebuilt and the run continues to the exact answer."""
+    m = Isam2Mapper(noise_free.header)
+    for st in noise_free.steps[:30]:
+        m.step(st)
+    bad = gtsam.NonlinearFactorGraph()
+    bad.add(gtsam.BearingFactor2D(pose_key(29), landmark_key(999), gtsam.Rot2(0.3),
+                                  gtsam.noiseModel.Isotropic.Sigma(1, 0.05)))
+    val = gtsam.Values()
+    val.insert(landmark_key(999), gtsam.Point2(1.0, 1.0))
+    m.add_factors(bad, val)
+    for st in noise_free.steps[30:]:
+        m.step(st)
+    est = m.estimate()
+    assert est.info["update_failures"] >= 1 and est.info["rebuilds"] >= 1
+    assert "Indeterminate" in est.info["last_failure"]
+    assert est.info["dropped_external_factors"] == 1
+    assert 999 not in est.landmark_ids
+    score = score_estimate(est, noise_free.truth)
+    assert score.max_m < 1e-6 and score.robot_last_m < 1e-6
+
+
+def test_isam2_updates_only_with_new_factors(noise_free: Stream) -> None:
+    """Buffers are emptied after each update: iSAM2 holds each factor exactly once."""
+    m = Isam2Mapper(noise_free.header)
+    for st in noise_free.steps[:40]:
+        m.step(st)
+    held = m._isam.getFactorsUnsafe()
+    n_held = sum(1 for k in range(held.size()) if held.at(k) is not None)
+    assert n_held == m.accepted.size()
+    new = m.problem.take_new()
+    assert new.core.size() == 0 and new.landmark.size() == 0
+
+
+# --------------------------------------------------------------------------------------------
+# Priors, covariances
+# --------------------------------------------------------------------------------------------
+
+def test_priors_become_range_factors_and_lower_the_error() -> None:
+    cfg = SimConfig(n_steps=30, n_landmarks=20)
+    base, with_p = [], []
+    n_prior_factors = []
+    for k in range(3):
+        s = simulate(cfg, np.random.default_rng(300 + k))
+        sp = with_priors(s, make_priors(s.truth, 0.3, 0.01, np.random.default_rng(k)))
+        a = run(BatchMapper(s.header), s.steps).final
+        b = run(BatchMapper(sp.header), sp.steps).final
+        assert a.info["n_prior_factors"] == 0
+        ids = set(b.landmark_ids.tolist())
+        expected = sum(p.i in ids and p.j in ids for p in sp.header.priors)
+        assert b.info["n_prior_factors"] == expected > 0
+        assert b.info["n_factors"] == a.info["n_factors"] + expected
+        base.append(score_estimate(a, s.truth).mpe_m)
+        with_p.append(score_estimate(b, sp.truth).mpe_m)
+        n_prior_factors.append(expected)
+    assert np.mean(with_p) < 0.8 * np.mean(base)
+
+
+def test_marginal_covariances(noise_free: Stream) -> None:
+    est = run(BatchMapper(noise_free.header, covariances=True), noise_free.steps[:40]).final
+    assert est.landmark_cov.shape == (len(est), 2, 2)
+    assert est.pose_cov.shape == (len(est.poses), 3, 3)
+    np.testing.assert_allclose(est.landmark_cov, est.landmark_cov.transpose(0, 2, 1))
+    assert np.all(np.linalg.eigvalsh(est.landmark_cov) > 0)
+    # the first pose is the anchor: its covariance is the prior's, the last one is larger
+    assert np.all(np.diag(est.pose_cov[0]) < 1e-7)
+    assert np.trace(est.pose_cov[-1]) > 100 * np.trace(est.pose_cov[0])

@@ -1,0 +1,154 @@
+"""Tests of the hybrid (baselines/hybrid.py): resection, the trimmed alignment, and the mapper
+seeded from a map in another, possibly mirrored, frame."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from baselines.factor_graph import BatchMapper, OracleMapper
+from baselines.hybrid import (HybridConfig, HybridMapper, resect_pose, resection_jacobian,
+                              trimmed_align)
+from bomgraph.errors import ConfigError
+from bomgraph.evaluate import score_estimate
+from bomgraph.geometry import bearings_to
+from bomgraph.mapper import MapEstimate, run
+from bomgraph.sim import SimConfig, simulate
+from bomgraph.stream import Step, Stream, StreamHeader
+from bomgraph.triangulate import TriangulateMapper
+
+
+@pytest.fixture(scope="module")
+def noise_free() -> Stream:
+    return simulate(SimConfig(n_steps=80, n_landmarks=20, noise_scale=0.0),
+                    np.random.default_rng(31))
+
+
+@pytest.fixture(scope="module")
+def noisy() -> Stream:
+    return simulate(SimConfig(n_steps=100, n_landmarks=25), np.random.default_rng(32))
+
+
+# --------------------------------------------------------------------------------------------
+# Resection
+# --------------------------------------------------------------------------------------------
+
+def test_resection_is_exact_without_noise_from_a_bad_prior() -> None:
+    rng = np.random.default_rng(0)
+    lm = rng.uniform(-1, 1, (6, 2))
+    true = np.array([0.1, -0.2, 2.5])
+    b = bearings_to(true, lm)
+    # the prior is far off (heading by 2.9 rad) and nearly uninformative
+    prior = np.array([0.6, 0.4, 2.5 - 2.9])
+    pose, cost = resect_pose(lm, b, math.radians(3), prior, np.array([1e4, 1e4, 1e4]))
+    np.testing.assert_allclose(pose, true, atol=1e-9)
+    assert cost < 1e-6
+
+
+def test_resection_with_two_bearings_leans_on_the_prior() -> None:
+    lm = np.array([[1.0, 0.0], [0.0, 1.0]])
+    true = np.array([0.0, 0.0, 0.3])
+    b = bearings_to(true, lm)
+    pose, _ = resect_pose(lm, b, 0.01, true, np.array([0.01, 0.01, 0.01]))
+    np.testing.assert_allclose(pose, true, atol=1e-9)
+    pose, cost = resect_pose(np.zeros((0, 2)), np.zeros(0), 0.01, true, np.ones(3))
+    np.testing.assert_array_equal(pose, true)
+    assert cost == 0.0
+
+
+def test_resection_jacobian_matches_numeric() -> None:
+    rng = np.random.default_rng(1)
+    lm = rng.uniform(-1, 1, (5, 2))
+    pose = np.array([0.05, 0.1, -0.7])
+    h = 1e-7
+    num = np.column_stack([(bearings_to(pose + h * e, lm) - bearings_to(pose - h * e, lm))
+                           / (2 * h) for e in np.eye(3)])
+    np.testing.assert_allclose(resection_jacobian(pose, lm), num, atol=1e-6)
+
+
+def test_trimmed_align_recovers_a_mirror_and_ignores_an_outlier() -> None:
+    rng = np.random.default_rng(2)
+    src = rng.uniform(0, 2, (12, 2))
+    c, s = math.cos(0.8), math.sin(0.8)
+    r = np.array([[c, s], [s, -c]])                 # a reflection
+    dst = src @ r.T + np.array([3.0, -1.0])
+    dst[4] += [0.5, 0.5]                            # one landmark badly placed
+    al = trimmed_align(src, dst)
+    assert al.reflected
+    np.testing.assert_allclose(al.rotation, r, atol=1e-12)
+    np.testing.assert_allclose(np.delete(al.apply(src) - dst, 4, 0), 0, atol=1e-12)
+
+
+# --------------------------------------------------------------------------------------------
+# The mapper
+# --------------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("seed", ["triangulate", "stmds-smacof"])
+def test_noise_free_exact_recovery(seed: str, noise_free: Stream) -> None:
+    m = HybridMapper(noise_free.header, seed_method=seed)
+    result = run(m, noise_free.steps)
+    est = result.final
+    score = score_estimate(est, noise_free.truth)
+    assert score.n_common >= 18
+    assert score.max_m < 1e-6 and score.robot_last_m < 1e-6
+    assert est.info["converged"] is True
+    assert "seed" in est.info["starts"] and est.info["seed"] == "ok"
+
+
+class MirroredSeed:
+    """A real seed mapper (naive triangulation) whose map is mirrored and moved, as an MDS map
+    may come out."""
+
+    def __init__(self, header: StreamHeader) -> None:
+        self.inner = TriangulateMapper(header)
+
+    def step(self, step: Step) -> None:
+        self.inner.step(step)
+
+    def estimate(self) -> MapEstimate:
+        e = self.inner.estimate()
+        xy = np.column_stack([-e.landmarks_xy[:, 0] + 5.0, e.landmarks_xy[:, 1] - 2.0])
+        return MapEstimate(e.landmark_ids, xy)
+
+
+def test_a_mirrored_seed_map_is_aligned_and_reaches_the_oracle_minimum(noisy: Stream) -> None:
+    hybrid = HybridMapper(noisy.header, seed_mapper=MirroredSeed(noisy.header))
+    res = run(hybrid, noisy.steps)
+    oracle = run(OracleMapper(noisy.header, truth=noisy.truth), noisy.steps).final
+    est = res.final
+    assert est.info["seed_reflected"] is True
+    assert est.info["converged"] is True
+    np.testing.assert_array_equal(est.landmark_ids, oracle.landmark_ids)
+    assert est.info["cost"] <= oracle.info["cost"] * (1 + 1e-6)
+    mpe = score_estimate(est, noisy.truth).mpe_m
+    assert mpe <= 1.05 * score_estimate(oracle, noisy.truth).mpe_m
+    np.testing.assert_allclose(est.poses[0], [0.0, 0.0, 0.0], atol=1e-3)
+
+
+def test_seeded_start_alone_matches_batch(noisy: Stream) -> None:
+    """Without the warm start, every checkpoint is solved from the seed only."""
+    seeded = run(HybridMapper(noisy.header, seed_method="triangulate", warm_start=False),
+                 noisy.steps)
+    batch = run(BatchMapper(noisy.header), noisy.steps)
+    assert seeded.final.info["starts"] == ["seed"]
+    assert seeded.final.info["cost"] <= batch.final.info["cost"] * (1 + 1e-6)
+
+
+def test_options_are_split_between_the_two_configs(noisy: Stream) -> None:
+    m = HybridMapper(noisy.header, seed_method="triangulate", n_headings=36, huber_k=None)
+    assert m.hybrid.n_headings == 36 and m.config.huber_k is None
+    with pytest.raises(ConfigError, match="seed_method"):
+        HybridConfig(seed_method="hybrid")
+    with pytest.raises(ConfigError, match="unknown factor-graph option"):
+        HybridMapper(noisy.header, seed_method="triangulate", n_heading=3)
+
+
+def test_estimate_before_a_seed_map_falls_back_to_odometry(noisy: Stream) -> None:
+    m = HybridMapper(noisy.header, seed_method="triangulate")
+    assert len(m.estimate()) == 0
+    m.step(noisy.steps[0])
+    est = m.estimate()
+    assert isinstance(est, MapEstimate)
+    assert est.info["starts"] == ["warm"] and "seed map has 0 landmarks" in est.info["seed"]
