@@ -215,3 +215,15 @@ def test_presets_and_the_improved_config() -> None:
         create_mapper("stmds-smacof", header, preset="fast")
     with pytest.raises(ConfigError, match="baselines"):
         StmdsConfig(baselines=(0,))
+
+
+def test_landmarks_held_only_by_priors_are_left_out_unless_asked(noisy: Stream) -> None:
+    xy = {int(i): p for i, p in zip(noisy.truth.landmark_ids, noisy.truth.landmarks_xy)}
+    ghost = np.array([1.2, 1.3])                      # never observed
+    priors = tuple(Prior(999, i, float(np.linalg.norm(ghost - xy[i])), 0.01) for i in (0, 1, 2, 3))
+    header = StreamHeader(noisy.header.bearing_sigma_rad, noisy.header.odometry_sigma,
+                          noisy.header.sensor_range_m, priors)
+    default = run(create_mapper("stmds-smacof", header), noisy.steps).final
+    assert 999 not in default.landmark_ids
+    both = run(create_mapper("stmds-smacof", header, map_unobserved=True), noisy.steps).final
+    assert 999 in both.landmark_ids

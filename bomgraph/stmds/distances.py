@@ -58,6 +58,50 @@ _RULES: dict[str, tuple[int | None, str]] = {
     "predicted": (None, "inv")}
 FUSION_RULES = tuple(_RULES)
 
+def estimate_weights(rule: str, squared_distance_m2: np.ndarray,
+                     variance_m4: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Weights and averaged values of independent estimates under a fusion rule (no state).
+
+    ``"predicted"`` needs the running fused value; without it, it weighs like
+    ``"scale-free"``. Combine with :func:`fused_from_sums`.
+    """
+    m, domain = _RULES[rule]
+    if m is None:
+        m, domain = _RULES["scale-free"]
+    d2 = np.maximum(squared_distance_m2, _TINY)
+    var = np.maximum(variance_m4, _TINY)
+    w = d2 ** m / var if m else 1.0 / var
+    if domain == "d2":
+        return w, d2
+    d = np.sqrt(d2)
+    return w, (d if domain == "d" else 1.0 / d)
+
+
+def fused_from_sums(rule: str, sum_w: np.ndarray,
+                    sum_wx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Fused ``(distance_m, variance_m2)`` from the sums of :func:`estimate_weights`.
+
+    With weights ``w_k = d2_k^m / v_k`` each estimate's variance is modelled as
+    ``v_k (d2 / d2_k)^m`` and re-evaluated at the fused ``d2``; the fused variance of the
+    squared distance is then ``d2^m / sum w_k`` (eq. 3 when ``m = 0``) and that of the
+    distance ``d2^(m-1) / (4 sum w_k)``. The predicted rule weighs ``1/d`` by its inverse
+    variance, so ``var(d) = d^4 / sum w_k``.
+    """
+    m, domain = _RULES[rule]
+    sw = np.maximum(sum_w, _TINY)
+    x = sum_wx / sw
+    if domain == "d2":
+        d = np.sqrt(np.maximum(x, 0.0))
+    elif domain == "d":
+        d = np.maximum(x, 0.0)
+    else:
+        d = 1.0 / np.maximum(x, _TINY)
+    d2 = np.maximum(d * d, _TINY)
+    if m is None:
+        return d, d2 * d2 / sw
+    return d, d2 ** (m - 1) / (4.0 * sw)
+
+
 _KEY_SHIFT = np.int64(32)
 _TINY = 1e-300
 
@@ -248,11 +292,7 @@ class DistanceStore:
                 np.minimum(np.maximum(translation_var, 0.0) / (4.0 * d2), var_d)
             var_pred = np.maximum(sc2 * (a + (var_d - a) * sc2), _TINY)
             return pred ** 4 / var_pred, 1.0 / d
-        w = d2 ** m / var if m else 1.0 / var
-        if domain == "d2":
-            return w, d2
-        d = np.sqrt(d2)
-        return w, (d if domain == "d" else 1.0 / d)
+        return estimate_weights(self.fusion, d2, var)
 
     def add(self, first: np.ndarray, second: np.ndarray, squared_distance_m2: np.ndarray,
             variance_m4: np.ndarray, translation_variance_m4: np.ndarray | None = None) -> None:
@@ -309,27 +349,10 @@ class DistanceStore:
 
     # ---------------------------------------------------------------------------- reading
     def fused(self) -> tuple[np.ndarray, np.ndarray]:
-        """Fused ``(distance_m, variance_m2)`` of every slot, shape ``(n_pairs,)`` each.
-
-        With weights ``w_k = d2_k^m / v_k`` each estimate's variance is modelled as
-        ``v_k (d2 / d2_k)^m`` and re-evaluated at the fused ``d2``; the fused variance of the
-        squared distance is then ``d2^m / sum w_k`` (eq. 3 when ``m = 0``) and that of the
-        distance ``d2^(m-1) / (4 sum w_k)``.
-        """
+        """Fused ``(distance_m, variance_m2)`` of every slot, shape ``(n_pairs,)`` each (see
+        :func:`fused_from_sums`)."""
         n = self._n
-        m, domain = _RULES[self.fusion]
-        sw = np.maximum(self._sw[:n], _TINY)
-        x = self._sx[:n] / sw
-        if domain == "d2":
-            d = np.sqrt(np.maximum(x, 0.0))
-        elif domain == "d":
-            d = np.maximum(x, 0.0)
-        else:
-            d = 1.0 / np.maximum(x, _TINY)
-        d2 = np.maximum(d * d, _TINY)
-        if m is None:
-            return d, d2 * d2 / sw
-        return d, d2 ** (m - 1) / (4.0 * sw)
+        return fused_from_sums(self.fusion, self._sw[:n], self._sx[:n])
 
     def known(self) -> KnownPairs:
         """The pairs with a prior or at least ``min_count`` estimates, fused."""
@@ -340,4 +363,4 @@ class DistanceStore:
         return KnownPairs(self._a[idx], self._b[idx], d[idx], v[idx], self._count[idx])
 
 
-__all__ = ["FUSION_RULES", "IdIndex", "KnownPairs", "DistanceStore", "prior_squared"]
+__all__ = ["FUSION_RULES", "estimate_weights", "fused_from_sums", "IdIndex", "KnownPairs", "DistanceStore", "prior_squared"]

@@ -39,7 +39,8 @@ from ..mapper import MapEstimate
 from ..stream import Step, StreamHeader
 from .completion import (largest_component, pivot_shortest_paths, prune_low_degree,
                          shortest_path_completion)
-from .distances import FUSION_RULES, DistanceStore, IdIndex
+from .distances import (FUSION_RULES, DistanceStore, IdIndex, estimate_weights,
+                        fused_from_sums)
 from .mds import LaplacianSolver, classical_scaling, landmark_scaling, smacof, stress1
 from .triangulation import (compose_odometry, gate_points, pair_squared_distances,
                             range_variances, triangulate_rays)
@@ -103,8 +104,10 @@ class StmdsConfig:
         Landmarks need this many known distances (a ``min_degree``-core of the graph, see
         ``completion.prune_low_degree``) to be mapped; 3 locates a point in the plane.
     map_unobserved : bool
-        Also map landmarks known only through priors (never triangulated). Off by default: the
-        map covers what the robot has seen, priors only constrain it.
+        Also map landmarks held by priors alone. Off by default: a landmark is mapped once it
+        has ``min_degree`` triangulated distances (the map covers what the robot has measured)
+        and priors only constrain the mapped landmarks; early on, landmarks hung on a few
+        long prior edges are poorly determined and make the map worse, not better.
     dmc_keep_known : bool
         DMC-SPL replaces only the missing entries (True, the paper) or every entry by its
         shortest path (False, ISOMAP).
@@ -215,8 +218,9 @@ class _GrowingFlags:
 class _PoseWindow:
     """The last ``p`` poses: odometry between them, their bearings and robot-landmark sums."""
 
-    def __init__(self, size: int) -> None:
+    def __init__(self, size: int, fusion: str) -> None:
         self.size = size
+        self.fusion = fusion
         self.t: list[int] = []
         self.odom: list[np.ndarray] = []        # odom[k] leads from pose k-1 to pose k
         self.sigma: list[np.ndarray] = []       # its std. devs.
@@ -227,7 +231,7 @@ class _PoseWindow:
         self.rl_wd: list[np.ndarray] = []        # sum of d / var
 
     def reset(self) -> None:
-        self.__init__(self.size)  # type: ignore[misc]
+        self.__init__(self.size, self.fusion)  # type: ignore[misc]
 
     def push(self, t: int, odom: np.ndarray | None, sigma: np.ndarray | None, idx: np.ndarray,
              bearings: np.ndarray) -> None:
@@ -247,16 +251,24 @@ class _PoseWindow:
                 del lst[0]
 
     def add_ranges(self, k: int, idx: np.ndarray, dist: np.ndarray, var: np.ndarray) -> None:
-        """Fold robot-landmark distance estimates into pose ``k`` of the window."""
+        """Fold robot-landmark distance estimates into pose ``k`` of the window, weighted by
+        the same fusion rule as the landmark pairs (``var(r^2) = 4 r^2 var(r)``)."""
         if k < 0 or k >= len(self.t) or idx.size == 0:
             return
-        w = 1.0 / np.maximum(var, 1e-300)
+        r2 = dist * dist
+        w, x = estimate_weights(self.fusion, r2, 4.0 * r2 * var)
         old_i, old_w, old_wd = self.rl_idx[k], self.rl_w[k], self.rl_wd[k]
         all_i = np.concatenate([old_i, idx])
         uniq, inv = np.unique(all_i, return_inverse=True)
         self.rl_idx[k] = uniq
         self.rl_w[k] = np.bincount(inv, np.concatenate([old_w, w]), len(uniq))
-        self.rl_wd[k] = np.bincount(inv, np.concatenate([old_wd, w * dist]), len(uniq))
+        self.rl_wd[k] = np.bincount(inv, np.concatenate([old_wd, w * x]), len(uniq))
+
+    def ranges(self, k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Fused robot-landmark distances of pose ``k``: (landmark, distance_m, variance_m2)."""
+        d, v = fused_from_sums(self.fusion if self.fusion != "predicted" else "scale-free",
+                               self.rl_w[k], self.rl_wd[k])
+        return self.rl_idx[k], d, v
 
     def relative_poses(self) -> np.ndarray:
         """The window's poses dead-reckoned from its first one, shape ``(m, 3)``."""
@@ -403,7 +415,7 @@ class StmdsMapper:
         self._n_smacof = 0                        # SMACOF estimates made so far
         self._n_triangulated = 0
         self._prev_xy = np.zeros((0, 2))   # previous map by dense landmark index (NaN: absent)
-        self._window = _PoseWindow(cfg.window) if cfg.localise else None
+        self._window = _PoseWindow(cfg.window, cfg.fusion) if cfg.localise else None
         if header.priors:
             pi = self._ids.lookup(np.array([p.i for p in header.priors], np.int64))
             pj = self._ids.lookup(np.array([p.j for p in header.priors], np.int64))
@@ -494,10 +506,12 @@ class StmdsMapper:
         n_lm = len(self._ids)
         first, second = known.first, known.second
         dist, var = known.distance_m, known.variance_m2
+        measured = known.count >= cfg.min_count          # not a prior alone
         n_nodes = n_lm
         robot_nodes = np.zeros(0, np.int64)
         if self._window is not None and len(self._window.t) >= 1:
             first, second, dist, var, robot_nodes = self._extend(first, second, dist, var, n_lm)
+            measured = np.concatenate([measured, np.ones(len(first) - len(measured), bool)])
             n_nodes = n_lm + len(robot_nodes)
         if len(first) == 0:
             self._prev_xy = np.zeros((0, 2))
@@ -511,7 +525,13 @@ class StmdsMapper:
             seen[:m_seen] = flags[:m_seen]
             live = seen[first] & seen[second]
             first, second, dist, var = first[live], second[live], dist[live], var[live]
-        touched = prune_low_degree(n_nodes, first, second, cfg.min_degree)
+            measured = measured[live]
+            # which landmarks are mapped is decided by triangulated distances alone; priors
+            # then constrain the mapped ones (a landmark held only by priors is left out)
+            touched = prune_low_degree(n_nodes, first[measured], second[measured],
+                                       cfg.min_degree)
+        else:
+            touched = prune_low_degree(n_nodes, first, second, cfg.min_degree)
         live = touched[first] & touched[second]
         first, second, dist, var = first[live], second[live], dist[live], var[live]
         if len(first) == 0:
@@ -644,11 +664,11 @@ class StmdsMapper:
             parts_v.append(np.maximum(v, 1e-12))
         for k in range(m if self.config.robot_ranges == "pairwise" else 0):
             if win.rl_idx[k].size:
-                w = win.rl_w[k]
-                parts_f.append(win.rl_idx[k])
-                parts_s.append(np.full(win.rl_idx[k].size, robot_nodes[k]))
-                parts_d.append(win.rl_wd[k] / w)
-                parts_v.append(1.0 / w)
+                lm, d, v = win.ranges(k)
+                parts_f.append(lm)
+                parts_s.append(np.full(lm.size, robot_nodes[k]))
+                parts_d.append(d)
+                parts_v.append(v)
         return (np.concatenate(parts_f), np.concatenate(parts_s), np.concatenate(parts_d),
                 np.concatenate(parts_v), robot_nodes)
 
