@@ -184,3 +184,19 @@ def test_landmark_mds_is_exact_for_euclidean_distances() -> None:
                                atol=1e-12)
     est = landmark_scaling(rows, pivots)
     assert _max_error_after_alignment(est, x) < 1e-10
+
+
+def test_trilaterate_is_exact_and_refuses_undetermined_points() -> None:
+    from bomgraph.stmds.mds import trilaterate
+
+    anchors = _points(6, 10)
+    x = np.array([1.1, 0.7])
+    d = np.linalg.norm(anchors - x, axis=1)
+    np.testing.assert_allclose(trilaterate(anchors, d), x, atol=1e-12)
+    # noisy ranges: the Gauss-Newton refinement lowers the range residual
+    noisy = d + np.random.default_rng(11).normal(0, 0.02, 6)
+    est = trilaterate(anchors, noisy)
+    assert np.linalg.norm(est - x) < 0.06
+    assert trilaterate(anchors[:3], d[:3]) is None                 # needs 4 by default
+    line = np.column_stack([np.linspace(0, 2, 5), np.zeros(5)])
+    assert trilaterate(line, np.linalg.norm(line - x, axis=1)) is None

@@ -41,7 +41,8 @@ from .completion import (largest_component, pivot_shortest_paths, prune_low_degr
                          shortest_path_completion)
 from .distances import (FUSION_RULES, DistanceStore, IdIndex, estimate_weights,
                         fused_from_sums)
-from .mds import LaplacianSolver, classical_scaling, landmark_scaling, smacof, stress1
+from .mds import (LaplacianSolver, classical_scaling, landmark_scaling, smacof, stress1,
+                  trilaterate)
 from .triangulation import (compose_odometry, gate_points, pair_squared_distances,
                             range_variances, triangulate_rays)
 
@@ -119,6 +120,13 @@ class StmdsConfig:
         Robot-landmark distances from the sequential (two-pose) triangulations, fused per
         (pose, landmark) (the paper), or from one triangulation of each landmark over all the
         window's dead-reckoned poses (a longer baseline).
+    robot_placement : {"auto", "joint", "trilateration"}
+        "joint" (the paper): the robot positions are rows of the extended matrix, reconstructed
+        with the landmarks. "trilateration": the landmarks are mapped alone and each window
+        position is then placed against them from its ranges (linear least squares + Gauss-
+        Newton). "auto" is joint for Method 2 and trilateration for Method 1, where DMC-SPL
+        over the robot rows (most robot-landmark entries are missing) distorts the landmark
+        map (measured: landmark MPE 24.9 cm joint vs 12.4 cm without robots, 25 paper runs).
     """
 
     method: str = "smacof"
@@ -144,6 +152,7 @@ class StmdsConfig:
     localise: bool = False
     window: int = 6
     robot_ranges: str = "pairwise"
+    robot_placement: str = "auto"
 
     def __post_init__(self) -> None:
         def need(ok: bool, msg: str) -> None:
@@ -174,6 +183,8 @@ class StmdsConfig:
         need(self.smacof_tol >= 0, "smacof_tol must be >= 0")
         need(0 < self.smacof_relaxation < 2, "smacof_relaxation must be in (0, 2)")
         need(self.window >= 2, "window (p) must be >= 2")
+        need(self.robot_placement in ("auto", "joint", "trilateration"),
+             "robot_placement must be 'auto', 'joint' or 'trilateration'")
         need(self.robot_ranges in ("pairwise", "window"),
              f"robot_ranges must be 'pairwise' or 'window', got {self.robot_ranges!r}")
 
@@ -416,6 +427,9 @@ class StmdsMapper:
         self._n_triangulated = 0
         self._prev_xy = np.zeros((0, 2))   # previous map by dense landmark index (NaN: absent)
         self._window = _PoseWindow(cfg.window, cfg.fusion) if cfg.localise else None
+        self._robot_placement = cfg.robot_placement
+        if cfg.robot_placement == "auto":
+            self._robot_placement = "joint" if cfg.method == "smacof" else "trilateration"
         if header.priors:
             pi = self._ids.lookup(np.array([p.i for p in header.priors], np.int64))
             pj = self._ids.lookup(np.array([p.j for p in header.priors], np.int64))
@@ -509,7 +523,8 @@ class StmdsMapper:
         measured = known.count >= cfg.min_count          # not a prior alone
         n_nodes = n_lm
         robot_nodes = np.zeros(0, np.int64)
-        if self._window is not None and len(self._window.t) >= 1:
+        joint = self._window is not None and self._robot_placement == "joint"
+        if joint and len(self._window.t) >= 1:
             first, second, dist, var, robot_nodes = self._extend(first, second, dist, var, n_lm)
             measured = np.concatenate([measured, np.ones(len(first) - len(measured), bool)])
             n_nodes = n_lm + len(robot_nodes)
@@ -611,6 +626,11 @@ class StmdsMapper:
         lm_ids = self._ids.ids[lm_idx]
         lm_xy = xy[is_lm]
         pose_t = poses = None
+        if self._window is not None and not joint and len(self._window.t):
+            ks, robot_xy = self._trilaterate_window(lm_idx, lm_xy)
+            kept_nodes = np.concatenate([kept_nodes, n_lm + ks])
+            xy = np.concatenate([xy, robot_xy])
+            robot_nodes = n_lm + ks
         if self._window is not None and robot_nodes.size:
             lm_xy, pose_t, poses, reflected = self._poses(kept_nodes, xy, n_lm, lm_idx, lm_xy)
             info["reflected"] = reflected
@@ -671,6 +691,24 @@ class StmdsMapper:
                 parts_v.append(v)
         return (np.concatenate(parts_f), np.concatenate(parts_s), np.concatenate(parts_d),
                 np.concatenate(parts_v), robot_nodes)
+
+    def _trilaterate_window(self, lm_idx: np.ndarray, lm_xy: np.ndarray
+                            ) -> tuple[np.ndarray, np.ndarray]:
+        """Window positions placed against the mapped landmarks from their fused ranges."""
+        win = self._window
+        assert win is not None
+        where = np.full(len(self._ids), -1, np.int64)
+        where[lm_idx] = np.arange(len(lm_idx))
+        ks, pts = [], []
+        for k in range(len(win.t)):                       # at most `window` poses
+            lm, d, v = win.ranges(k)
+            row = where[lm]
+            use = row >= 0
+            x = trilaterate(lm_xy[row[use]], d[use], v[use])
+            if x is not None:
+                ks.append(k)
+                pts.append(x)
+        return np.array(ks, np.int64), np.array(pts).reshape(-1, 2)
 
     def _poses(self, kept_nodes: np.ndarray, xy: np.ndarray, n_lm: int, lm_idx: np.ndarray,
                lm_xy: np.ndarray) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None,

@@ -124,6 +124,56 @@ def landmark_scaling(pivot_rows: np.ndarray, pivots: np.ndarray,
     return pts - pts.mean(axis=0)
 
 
+def trilaterate(anchors_xy: np.ndarray, distance_m: np.ndarray,
+                variance_m2: np.ndarray | None = None, n_refine: int = 5,
+                min_anchors: int = 4) -> np.ndarray | None:
+    """A point from its distances to known points (least squares), or None if undetermined.
+
+    The squared-range equations ``|x|^2 - 2 a_i . x + |a_i|^2 = r_i^2`` are linear in
+    ``(x, y, |x|^2)``: solved by weighted least squares (weights ``1 / var(r^2)``; exact for
+    exact distances and anchors not on a line), then refined by Gauss-Newton steps on the
+    ranges themselves (weights ``1 / var(r)``), each kept only if it lowers the cost. Needs
+    ``min_anchors`` anchors (3 unknowns; one more gives redundancy against a bad range).
+
+    Parameters
+    ----------
+    anchors_xy : array of shape (m, 2)
+    distance_m : array of shape (m,)
+    variance_m2 : array of shape (m,), optional
+        Variances of the distances (equal if None).
+    """
+    a = np.asarray(anchors_xy, float).reshape(-1, 2)
+    r = np.asarray(distance_m, float).reshape(-1)
+    if len(a) < max(3, min_anchors):
+        return None
+    v = np.ones_like(r) if variance_m2 is None else np.maximum(np.asarray(variance_m2), 1e-300)
+    w_sq = 1.0 / (4.0 * np.maximum(r * r, 1e-12) * v)
+    lhs = np.column_stack([-2.0 * a, np.ones(len(a))]) * np.sqrt(w_sq)[:, None]
+    rhs = (r * r - (a * a).sum(axis=1)) * np.sqrt(w_sq)
+    sol, _, rank, _ = np.linalg.lstsq(lhs, rhs, rcond=None)
+    if rank < 3:
+        return None
+    x = sol[:2]
+    sw = 1.0 / np.sqrt(v)
+
+    def residual(p: np.ndarray) -> np.ndarray:
+        return (r - np.sqrt(((p - a) ** 2).sum(axis=1))) * sw
+
+    cost = float(np.sum(residual(x) ** 2))
+    for _ in range(n_refine):
+        off = x - a
+        d = np.sqrt((off * off).sum(axis=1))
+        if np.any(d == 0):
+            break
+        jac = (off / d[:, None]) * sw[:, None]
+        step, *_ = np.linalg.lstsq(jac, (r - d) * sw, rcond=None)
+        new_cost = float(np.sum(residual(x + step) ** 2))
+        if not new_cost < cost:
+            break
+        x, cost = x + step, new_cost
+    return x
+
+
 def raw_stress(points: np.ndarray, first: np.ndarray, second: np.ndarray,
                dissimilarity: np.ndarray, weights: np.ndarray) -> float:
     """Eq. 6: ``sum w (delta - |x_i - x_j|)^2`` over the listed pairs."""
@@ -333,5 +383,5 @@ def smacof(n: int, first: np.ndarray, second: np.ndarray, dissimilarity: np.ndar
     return SmacofResult(x, s1, hist[-1], len(hist) - 1, conv, np.array(hist))
 
 
-__all__ = ["double_centre", "classical_scaling", "landmark_scaling", "raw_stress", "stress1", "LaplacianSolver",
+__all__ = ["double_centre", "classical_scaling", "landmark_scaling", "trilaterate", "raw_stress", "stress1", "LaplacianSolver",
            "SmacofResult", "smacof"]
