@@ -26,7 +26,9 @@ def wrap_angle(angle_rad: ArrayLike) -> np.ndarray:
         Same shape as the input; ``-pi`` maps to ``+pi``.
     """
     a = np.asarray(angle_rad, dtype=float)
-    return np.pi - np.mod(np.pi - a, TWO_PI)[()]
+    w = np.pi - np.mod(np.pi - a, TWO_PI)
+    # rounding can land exactly on -pi (e.g. just above +pi); the interval is (-pi, pi]
+    return np.where(w <= -np.pi, w + TWO_PI, w)[()]
 
 
 def angle_residual(a_rad: ArrayLike, b_rad: ArrayLike) -> np.ndarray:

@@ -31,6 +31,13 @@ _PRIOR_KEYS = {"i", "j", "distance_m", "sigma_m"}
 _TRUTH_KEYS = {"landmarks", "poses"}
 
 
+def _numpy_to_json(v: Any) -> Any:
+    """numpy scalars and arrays as plain JSON values (for ``meta``)."""
+    if isinstance(v, (np.generic, np.ndarray)):
+        return v.tolist()
+    raise TypeError(f"Object of type {type(v).__name__} is not JSON serializable")
+
+
 def _frozen(a: np.ndarray) -> np.ndarray:
     a.setflags(write=False)
     return a
@@ -77,7 +84,26 @@ class StreamHeader:
         if len(sig) != 3 or not all(math.isfinite(s) and s >= 0 for s in sig):
             raise StreamFormatError("must be 3 finite numbers >= 0", key="odometry_sigma")
         object.__setattr__(self, "odometry_sigma", sig)
-        object.__setattr__(self, "priors", tuple(self.priors))
+        if self.sensor_range_m is not None and not (math.isfinite(self.sensor_range_m)
+                                                    and self.sensor_range_m > 0):
+            raise StreamFormatError("must be a finite number > 0 or None", key="sensor_range_m")
+        priors = tuple(self.priors)
+        for k, p in enumerate(priors):
+            if p.i == p.j or min(p.i, p.j) < 0:
+                raise StreamFormatError(f"prior joins landmarks {p.i} and {p.j}; need two "
+                                        f"different non-negative ids", key=f"priors[{k}]")
+            if not (math.isfinite(p.distance_m) and p.distance_m > 0
+                    and math.isfinite(p.sigma_m) and p.sigma_m > 0):
+                raise StreamFormatError("distance_m and sigma_m must be finite and > 0",
+                                        key=f"priors[{k}]")
+        object.__setattr__(self, "priors", priors)
+        try:  # meta must survive the file: normalise it to what JSON gives back
+            meta = json.loads(json.dumps(dict(self.meta), allow_nan=False,
+                                         default=_numpy_to_json))
+        except (TypeError, ValueError) as exc:
+            raise StreamFormatError(f"must be JSON-serialisable with finite numbers ({exc})",
+                                    key="meta") from None
+        object.__setattr__(self, "meta", meta)
 
 
 @dataclass(frozen=True, eq=False)
@@ -115,13 +141,25 @@ class Step:
         if ids.shape != brg.shape:
             raise StreamFormatError(f"step {self.t}: {ids.size} landmark ids but "
                                     f"{brg.size} bearings", key="bearings")
+        if not np.all(np.isfinite(brg)):
+            raise StreamFormatError(f"step {self.t}: bearings must be finite", key="bearings")
+        if np.any(ids < 0) or len(np.unique(ids)) != len(ids):
+            raise StreamFormatError(f"step {self.t}: landmark ids must be non-negative and "
+                                    f"unique within a step", key="bearings")
         object.__setattr__(self, "landmark_ids", ids)
         object.__setattr__(self, "bearings_rad", brg)
-        if self.odom is not None:
-            object.__setattr__(self, "odom", _frozen(np.array(self.odom, dtype=float)))
-        if self.odom_sigma is not None:
-            object.__setattr__(self, "odom_sigma",
-                               _frozen(np.array(self.odom_sigma, dtype=float)))
+        for key in ("odom", "odom_sigma"):
+            v = getattr(self, key)
+            if v is None:
+                continue
+            arr = np.array(v, dtype=float).reshape(-1)
+            if arr.shape != (3,) or not np.all(np.isfinite(arr)):
+                raise StreamFormatError(f"step {self.t}: must be 3 finite numbers", key=key)
+            if key == "odom_sigma" and np.any(arr < 0):
+                raise StreamFormatError(f"step {self.t}: sigmas must be >= 0", key=key)
+            object.__setattr__(self, key, _frozen(arr))
+        if self.time_s is not None and not math.isfinite(self.time_s):
+            raise StreamFormatError(f"step {self.t}: must be finite", key="time_s")
 
     def __eq__(self, other: object) -> bool:
         if not isinstance(other, Step):
@@ -163,11 +201,18 @@ class Truth:
         if ids.shape[0] != xy.shape[0]:
             raise StreamFormatError("landmark ids and positions differ in number",
                                     key="truth")
+        if len(np.unique(ids)) != len(ids) or np.any(ids < 0):
+            raise StreamFormatError("landmark ids must be unique and non-negative",
+                                    key="truth.landmarks")
+        if not np.all(np.isfinite(xy)):
+            raise StreamFormatError("landmark positions must be finite", key="truth.landmarks")
         object.__setattr__(self, "landmark_ids", ids)
         object.__setattr__(self, "landmarks_xy", xy)
         if self.poses is not None:
-            object.__setattr__(self, "poses",
-                               _frozen(np.array(self.poses, dtype=float).reshape(-1, 3)))
+            poses = np.array(self.poses, dtype=float).reshape(-1, 3)
+            if not np.all(np.isfinite(poses)):
+                raise StreamFormatError("poses must be finite", key="truth.poses")
+            object.__setattr__(self, "poses", _frozen(poses))
 
     def __eq__(self, other: object) -> bool:
         if not isinstance(other, Truth):
@@ -189,10 +234,15 @@ class Stream:
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "steps", tuple(self.steps))
+        if not self.steps:
+            raise StreamFormatError("a stream needs at least the step t = 0", key="t")
         for k, s in enumerate(self.steps):
             if s.t != k:
                 raise StreamFormatError(f"step {k} has t = {s.t}; steps must be 0, 1, 2, ...",
                                         key="t")
+            if (s.odom is None) != (k == 0):
+                raise StreamFormatError(f"step {k}: odom must be None at t = 0 and given after",
+                                        key="odom")
         if self.truth is not None and self.truth.poses is not None \
                 and len(self.truth.poses) != len(self.steps):
             raise StreamFormatError(f"{len(self.truth.poses)} truth poses for "
@@ -253,14 +303,30 @@ def _find_nonfinite(obj: Any, where: str) -> str | None:
     return None
 
 
+class _DuplicateKey(Exception):
+    pass
+
+
+def _no_duplicate_keys(pairs: list[tuple[str, Any]]) -> dict:
+    out: dict = {}
+    for k, v in pairs:
+        if k in out:
+            raise _DuplicateKey(k)
+        out[k] = v
+    return out
+
+
 def _parse_json_line(text: str, ctx: _Ctx) -> dict:
     if not text.strip():
         raise ctx.error(None, "blank line; the format has one JSON object per line and no "
                               "blank lines")
     try:
-        obj = json.loads(text, parse_constant=float)
-    except (json.JSONDecodeError, RecursionError) as exc:
-        msg = getattr(exc, "msg", "too deeply nested")
+        obj = json.loads(text, parse_constant=float, object_pairs_hook=_no_duplicate_keys)
+    except _DuplicateKey as exc:
+        raise ctx.error(str(exc), "appears twice in one object; a reader never drops data")
+    except (json.JSONDecodeError, RecursionError, ValueError) as exc:
+        msg = getattr(exc, "msg", None) or ("too deeply nested" if isinstance(exc, RecursionError)
+                                            else str(exc))
         raise ctx.error(None, f"not valid JSON ({msg})") from None
     if not isinstance(obj, dict):
         raise ctx.error(None, f"expected a JSON object, got {type(obj).__name__}")
@@ -283,7 +349,15 @@ def _is_id(v: Any) -> bool:
 
 
 def _is_num(v: Any) -> bool:
-    return isinstance(v, (int, float)) and not isinstance(v, bool)
+    """A JSON number that fits a float (huge integers do not)."""
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        return False
+    if isinstance(v, int):
+        try:
+            return math.isfinite(float(v))
+        except OverflowError:
+            return False
+    return True
 
 
 def _check_keys(obj: dict, allowed: set[str], ctx: _Ctx, what: str) -> None:
@@ -606,11 +680,20 @@ def write_stream(stream: Stream, path: str | os.PathLike[str]) -> None:
 
 def write_stream_parts(header: StreamHeader, steps: Iterable[Step],
                        path: str | os.PathLike[str], truth: Truth | None = None) -> None:
-    """Write a header and an iterable of steps (which may be a generator) to ``path``."""
-    with open(path, "w", encoding="utf-8", newline="\n") as fh:
-        fh.write(json.dumps(header_to_json(header, truth), allow_nan=False) + "\n")
-        for step in steps:
-            fh.write(json.dumps(step_to_json(step), allow_nan=False) + "\n")
+    """Write a header and an iterable of steps (which may be a generator) to ``path``.
+
+    The file appears only when complete (written beside it, then renamed)."""
+    tmp = f"{os.fspath(path)}.partial"
+    try:
+        with open(tmp, "w", encoding="utf-8", newline="\n") as fh:
+            fh.write(json.dumps(header_to_json(header, truth), allow_nan=False) + "\n")
+            for step in steps:
+                fh.write(json.dumps(step_to_json(step), allow_nan=False) + "\n")
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.remove(tmp)
+        raise
 
 
 def strip_truth(stream: Stream) -> tuple[StreamHeader, Sequence[Step]]:

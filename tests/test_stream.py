@@ -292,3 +292,52 @@ def test_huge_ids_are_refused_not_crashing(tmp_path: Path) -> None:
                         *STEPS], 1, "priors[0].i", "non-negative integer")
     _refusal(tmp_path, [{**H, "truth": {"landmarks": [[big, 0.0, 0.0]]}}, *STEPS], 1,
              "truth.landmarks[0]", "non-negative integer")
+
+
+def test_huge_numbers_long_numbers_and_duplicate_keys(tmp_path: Path) -> None:
+    huge = "9" * 400
+    _refusal(tmp_path, [H, f'{{"t": 0, "bearings": [[1, {huge}]]}}'], 2, "bearings[0]",
+             "[int, number]")
+    _refusal(tmp_path, [H, STEPS[0], f'{{"t": 1, "odom": [{huge}, 0, 0], "bearings": []}}'], 3,
+             "odom", "must be a number")
+    _refusal(tmp_path, [H, '{"t": 0, "bearings": [[1, ' + "1" * 5000 + ']]}'], 2, None,
+             "not valid JSON")
+    _refusal(tmp_path, [H, '{"t": 0, "bearings": [[1, 0.5]], "bearings": []}'], 2, "bearings",
+             "appears twice")
+
+
+def test_what_the_reader_refuses_cannot_be_built_or_written(tmp_path: Path) -> None:
+    h = StreamHeader(0.05, (0.03, 0.0, 0.05))
+    step0 = Step(0, None, np.array([1]), np.array([0.1]))
+    bad_builds = [
+        lambda: Stream(h, (Step(0, np.zeros(3), np.array([1]), np.array([0.1])),)),
+        lambda: Stream(h, (step0, Step(1, None, np.array([1]), np.array([0.1])))),
+        lambda: Step(1, np.zeros(2), np.array([1]), np.array([0.1])),
+        lambda: Step(0, None, np.array([1, 1]), np.array([0.1, 0.2])),
+        lambda: Step(0, None, np.array([-1]), np.array([0.1])),
+        lambda: Step(0, None, np.array([1]), np.array([np.nan])),
+        lambda: Step(1, np.zeros(3), np.array([1]), np.array([0.1]), odom_sigma=[0, -1, 0]),
+        lambda: StreamHeader(0.05, (0.03, 0.0, 0.05), priors=(Prior(2, 2, 1.0, 0.1),)),
+        lambda: StreamHeader(0.05, (0.03, 0.0, 0.05), priors=(Prior(1, 2, 1.0, 0.0),)),
+        lambda: StreamHeader(0.05, (0.03, 0.0, 0.05), sensor_range_m=-1.0),
+        lambda: StreamHeader(0.05, (0.03, 0.0, 0.05), meta={"x": object()}),
+        lambda: Truth(np.array([1, 1]), np.zeros((2, 2))),
+        lambda: Stream(h, ()),
+    ]
+    for k, build in enumerate(bad_builds):
+        with pytest.raises(StreamFormatError):
+            build()
+            pytest.fail(f"case {k} was accepted")
+    # meta is normalised to what the file gives back, so the round trip stays exact
+    s = Stream(StreamHeader(0.05, (0.03, 0.0, 0.05), meta={"a": (1, 2), "b": np.int64(3)}),
+               (step0,))
+    write_stream(s, tmp_path / "m.jsonl")
+    assert read_stream(tmp_path / "m.jsonl") == s
+
+
+def test_bearing_just_above_pi_round_trips(tmp_path: Path) -> None:
+    s = Stream(StreamHeader(0.05, (0.03, 0.0, 0.05)),
+               (Step(0, None, np.array([1]), np.array([np.nextafter(np.pi, 4)])),))
+    assert s.steps[0].bearings_rad[0] == np.pi
+    write_stream(s, tmp_path / "pi.jsonl")
+    assert read_stream(tmp_path / "pi.jsonl") == s
