@@ -144,7 +144,8 @@ def main() -> None:
               "options": options}
     report["full_run"] = r1 = full_run(args.repeats, options)
     print(f"full 300-step Method 2 run, {r1['n_map_updates']} map updates: median "
-          f"{r1['total_ms_median']:.1f} ms wall, {r1['total_cpu_ms_median']:.1f} ms CPU (steps {r1['steps_ms_median']:.1f} ms, estimates "
+          f"{r1['total_ms_median']:.1f} ms wall, {r1['total_cpu_ms_median']:.1f} ms CPU "
+          f"(steps {r1['steps_ms_median']:.1f} ms, estimates "
           f"{r1['estimates_ms_median']:.1f} ms = {r1['estimate_ms_each_median']:.2f} ms each); "
           f"target < 100 ms")
     report["per_step"] = r2 = per_step(args.repeats, options)

@@ -178,5 +178,5 @@ def pivot_shortest_paths(n: int, first: np.ndarray, second: np.ndarray,
     return pivots, rows
 
 
-__all__ = ["edge_graph", "pivot_shortest_paths", "Component", "largest_component", "component_labels", "prune_low_degree",
-           "shortest_path_completion"]
+__all__ = ["edge_graph", "pivot_shortest_paths", "Component", "largest_component",
+           "component_labels", "prune_low_degree", "shortest_path_completion"]

@@ -363,4 +363,5 @@ class DistanceStore:
         return KnownPairs(self._a[idx], self._b[idx], d[idx], v[idx], self._count[idx])
 
 
-__all__ = ["FUSION_RULES", "estimate_weights", "fused_from_sums", "IdIndex", "KnownPairs", "DistanceStore", "prior_squared"]
+__all__ = ["FUSION_RULES", "estimate_weights", "fused_from_sums", "IdIndex", "KnownPairs",
+           "DistanceStore", "prior_squared"]

@@ -1,26 +1,37 @@
 """BOM-STMDS as a Mapper: the online schedule of the paper (Algorithm 1, sections III-B to III-E).
 
-Every step: triangulate the landmarks seen at ``t-1`` and ``t`` (III-B), gate degenerate
-geometry, and fuse every pair's instantaneous squared distance into the distance store (III-C;
-priors from the stream header are the initial estimates). At every ``estimate()`` call: take
-the known pairs, keep the largest connected component of their graph, and reconstruct
-coordinates (III-D):
+Every step: triangulate the landmarks seen at ``t-1`` and ``t`` (III-B; ``baselines`` can
+also pair ``t-k`` with ``t`` over the chained odometry), gate degenerate geometry, and fuse
+every pair's instantaneous squared distance into the distance store (III-C; priors from the
+stream header are the initial estimates). At every ``estimate()`` call: take the known pairs
+(a prior, or ``min_count`` estimates), keep the landmarks with ``min_degree`` triangulated
+distances (the 3-core: a point in the plane needs three) in the largest connected piece
+(landmarks left out are named in ``info["left_out"]``), and reconstruct coordinates (III-D):
 
 * Method 1 (``method="cs"``): DMC-SPL (shortest paths on distances) + classical scaling.
 * Method 2 (``method="smacof"``): Method 1 while ``t < smacof_from_t`` (t = 10..40 with the
   paper's checkpoints), weighted SMACOF on the known pairs from ``t >= smacof_from_t`` (t = 50
   on), warm-started from the previous map (landmarks new to it are placed by the
-  classical-scaling map aligned onto the previous one) or from the classical-scaling map.
+  classical-scaling map aligned onto the previous one) and, every few maps, also from the
+  classical-scaling map, keeping the lower stress.
 
-Localisation (III-E, ``localise=True``): the matrix is extended with the last ``window``
-(the paper's p = 6) robot positions. Robot-robot distances come from dead reckoning the
-odometry inside the window; robot-landmark distances are the triangulation depths ``r1``
-(from pose ``t-1``) and ``r2`` (from pose ``t``), fused by inverse variance per (pose, landmark).
-A heading is then found for every pose in the window by resection: the circular mean of
+Localisation (III-E, ``localise=True``): the last ``window`` (the paper's p = 6) robot
+positions. Robot-robot distances come from dead reckoning the odometry inside the window;
+robot-landmark distances are the triangulation depths ``r1`` (from pose ``t-k``) and ``r2``
+(from pose ``t``), fused per (pose, landmark) with the same rule as the landmark pairs.
+Method 2 reconstructs them jointly with the landmarks (the paper's extended matrix, eq. 7);
+Method 1 by default maps the landmarks alone and then trilaterates each position against that
+map (``robot_placement``), because DMC-SPL over the sparse robot rows distorts the map. A
+heading is then found for every pose in the window by resection: the circular mean of
 ``atan2(landmark - robot) - bearing`` over the landmarks it saw. MDS cannot tell a map from its
 mirror image; the bearings can, so a localising mapper reflects its output when the mirrored
 resection fits the bearings better, and every pose is returned in a frame with the measured
 (counter-clockwise) bearing convention.
+
+``estimate().info`` reports: method, t, fusion, the numbers of stored / known / mapped pairs,
+of triangulated and gated landmarks, the landmarks left out, the number of components, the
+reconstruction used, SMACOF's iterations and start, Stress-1, and (localising) whether the
+frame was reflected.
 """
 
 from __future__ import annotations
@@ -713,40 +724,50 @@ class StmdsMapper:
     def _poses(self, kept_nodes: np.ndarray, xy: np.ndarray, n_lm: int, lm_idx: np.ndarray,
                lm_xy: np.ndarray) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None,
                                            bool]:
-        """Headings by resection; reflect the frame when the mirror image fits better."""
+        """Headings by resection; reflect the frame when the mirror image fits better.
+
+        Every bearing taken from a window pose to a mapped landmark gives a heading candidate
+        ``atan2(landmark - robot) - bearing`` (vectorised over all of them); a pose's heading
+        is the circular mean of its candidates. The spread of the candidates around their
+        means decides between the map and its mirror image.
+        """
         win = self._window
         assert win is not None
-        where = {int(k): j for j, k in enumerate(kept_nodes)}
-        rows = [(k, where[n_lm + k]) for k in range(len(win.t)) if (n_lm + k) in where]
-        if not rows:
+        m = len(win.t)
+        node_row = np.full(n_lm + m, -1, np.int64)
+        node_row[kept_nodes] = np.arange(len(kept_nodes))
+        robot_row = node_row[n_lm + np.arange(m)]
+        ks = np.flatnonzero(robot_row >= 0)
+        if ks.size == 0:
             return lm_xy, None, None, False
-        lm_pos = {int(i): j for j, i in enumerate(lm_idx)}
-        ks = np.array([r[0] for r in rows])
-        robot_xy = xy[[r[1] for r in rows]]
+        robot_xy = xy[robot_row[ks]]
+        lm_row = np.full(n_lm, -1, np.int64)
+        lm_row[lm_idx] = np.arange(len(lm_idx))
+        # all bearings of the kept poses to mapped landmarks: (pose slot, landmark row, bearing)
+        slot = np.concatenate([np.full(len(win.bearing_idx[k]), j) for j, k in enumerate(ks)])
+        lm = lm_row[np.concatenate([win.bearing_idx[k] for k in ks])]
+        brg = np.concatenate([win.bearings[k] for k in ks])
+        use = lm >= 0
+        slot, lm, brg = slot[use], lm[use], brg[use]
+        n_obs = np.bincount(slot, minlength=len(ks))
         best = None
         for sign in (1.0, -1.0):
             flip = np.array([1.0, sign])
-            psis, resid = [], 0.0
-            for row, k in enumerate(ks):
-                sel = [j for j, i in enumerate(win.bearing_idx[k]) if int(i) in lm_pos]
-                if not sel:
-                    psis.append(np.nan)
-                    continue
-                pts = lm_xy[[lm_pos[int(win.bearing_idx[k][j])] for j in sel]] * flip
-                r = robot_xy[row] * flip
-                direction = np.arctan2(pts[:, 1] - r[1], pts[:, 0] - r[0])
-                cand = direction - win.bearings[k][sel]
-                mean = math.atan2(np.sin(cand).mean(), np.cos(cand).mean())
-                psis.append(mean)
-                resid += float(np.sum(angle_residual(cand, mean) ** 2))
+            off = lm_xy[lm] * flip - robot_xy[slot] * flip
+            cand = np.arctan2(off[:, 1], off[:, 0]) - brg
+            with np.errstate(invalid="ignore"):
+                psi = np.arctan2(np.bincount(slot, np.sin(cand), len(ks)),
+                                 np.bincount(slot, np.cos(cand), len(ks)))
+            psi[n_obs == 0] = np.nan
+            resid = float(np.sum(angle_residual(cand, psi[slot]) ** 2))
             if best is None or resid < best[0]:
-                best = (resid, sign, np.array(psis))
+                best = (resid, sign, psi)
         assert best is not None
         _, sign, psi = best
         flip = np.array([1.0, sign])
         psi = self._fill_headings(ks, psi)
         poses = np.column_stack([robot_xy * flip, wrap_angle(psi)])
-        pose_t = np.array([win.t[k] for k in ks], np.int64)
+        pose_t = np.array(win.t, np.int64)[ks]
         good = np.isfinite(poses).all(axis=1)
         return lm_xy * flip, pose_t[good], poses[good], bool(sign < 0)
 

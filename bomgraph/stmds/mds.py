@@ -383,5 +383,5 @@ def smacof(n: int, first: np.ndarray, second: np.ndarray, dissimilarity: np.ndar
     return SmacofResult(x, s1, hist[-1], len(hist) - 1, conv, np.array(hist))
 
 
-__all__ = ["double_centre", "classical_scaling", "landmark_scaling", "trilaterate", "raw_stress", "stress1", "LaplacianSolver",
-           "SmacofResult", "smacof"]
+__all__ = ["double_centre", "classical_scaling", "landmark_scaling", "trilaterate",
+           "raw_stress", "stress1", "LaplacianSolver", "SmacofResult", "smacof"]

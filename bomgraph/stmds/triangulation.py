@@ -312,7 +312,8 @@ class PairEstimates:
     variance_m4 : ndarray of shape (P,)
         First-order variance ``J Sigma J^T`` of the squared distance (eq. 2).
     translation_variance_m4 : ndarray of shape (P,) or None
-        (When asked for.) The part of ``variance_m4`` due to the odometry translation ``(dx, dy)`` alone (it
+        (When asked for.) The part of ``variance_m4`` due to the odometry translation
+        ``(dx, dy)`` alone (it
         scales like ``d^2`` under a change of scale; the rest, from the bearings and the
         turn, like ``d^4`` for the distance's variance).
     jacobian : ndarray of shape (P, 7) or None
