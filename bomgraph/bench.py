@@ -23,7 +23,7 @@ from typing import Any, Callable, Iterable, Iterator, Mapping, Sequence
 
 import numpy as np
 
-from .errors import ConfigError, EvaluationError
+from .errors import ConfigError, TooFewLandmarksError
 from .evaluate import score_estimate
 from .mapper import MapEstimate, create_mapper, method_info, run
 from .sim import RunSpec, SimConfig, paper_design, simulate_run
@@ -50,6 +50,13 @@ class Arm:
     method: str
     options: Mapping[str, Any] = field(default_factory=dict)
     prior_fraction: float = 0.0
+
+    def __post_init__(self) -> None:
+        try:
+            json.dumps(dict(self.options), allow_nan=False)
+        except (TypeError, ValueError):
+            raise ConfigError(f"arm {self.label!r}: options must be plain JSON values (numbers, "
+                              f"strings, lists) so results can be cached and compared") from None
 
     def key(self) -> dict[str, Any]:
         return {"label": self.label, "method": self.method, "options": dict(self.options),
@@ -99,10 +106,24 @@ class DatasetSource:
         return _load_dataset(self.kind, self.path, self.robot, self.truth_path)
 
     def key(self) -> dict[str, Any]:
-        p = Path(self.path)
-        stamp = p.stat().st_mtime_ns if p.exists() else 0
-        return {"kind": self.kind, "path": str(p.resolve()), "robot": self.robot,
-                "truth": self.truth_path, "mtime": stamp}
+        return {"kind": self.kind, "path": str(Path(self.path).resolve()), "robot": self.robot,
+                "truth": self.truth_path, "files": _files_stamp(self.path, self.truth_path)}
+
+
+def _files_stamp(*paths: str | None) -> str:
+    """Size and modification time of every file under ``paths`` (a change invalidates the
+    cache)."""
+    h = hashlib.sha256()
+    for p in paths:
+        if p is None:
+            continue
+        root = Path(p)
+        files = sorted(root.rglob("*")) if root.is_dir() else [root]
+        for f in files:
+            if f.is_file():
+                st = f.stat()
+                h.update(f"{f}:{st.st_size}:{st.st_mtime_ns};".encode())
+    return h.hexdigest()[:16]
 
 
 @functools.lru_cache(maxsize=16)
@@ -164,7 +185,7 @@ class Task:
         blob = json.dumps({"arm": self.arm.key(), "source": self.source.key(),
                            "every": self.checkpoint_every, "v": CACHE_VERSION,
                            "code": code_fingerprint()},
-                          sort_keys=True, default=str)
+                          sort_keys=True)
         return hashlib.sha256(blob.encode()).hexdigest()[:20]
 
 
@@ -340,21 +361,11 @@ def run_task(task: Task) -> dict[str, Any]:
     except Exception as exc:  # a failing method is a result, reported with its reason
         out.update(ok=False, error=f"{type(exc).__name__}: {exc}")
         return out
-    rows = []
-    for c in result.checkpoints:
-        row: dict[str, Any] = {"t": c.t, "n_mapped": len(c.estimate), "estimate_s": c.estimate_s}
-        try:
-            s = score_estimate(c.estimate, truth)
-            row.update(mpe_m=s.mpe_m, rmse_m=s.rmse_m, median_m=s.median_m, max_m=s.max_m,
-                       n_common=s.n_common, robot_last_m=s.robot_last_m,
-                       robot_mean_m=s.robot_mean_m,
-                       nees_landmark=_landmark_nees(c.estimate, truth, s.alignment),
-                       nees_pose=_pose_nees(c.estimate, truth, s.alignment))
-        except EvaluationError:
-            row.update(mpe_m=math.nan, rmse_m=math.nan, median_m=math.nan, max_m=math.nan,
-                       n_common=0, robot_last_m=math.nan, robot_mean_m=math.nan,
-                       nees_landmark=math.nan, nees_pose=math.nan)
-        rows.append(row)
+    try:
+        rows = _score_checkpoints(result, truth)
+    except Exception as exc:  # an unscorable estimate is a failed run, with the reason
+        out.update(ok=False, error=f"scoring failed: {type(exc).__name__}: {exc}")
+        return out
     info = {k: _jsonable(v) for k, v in result.final.info.items()}
     final = result.final
     try:  # the final map and trajectory in the truth's frame, for the map figures
@@ -365,12 +376,32 @@ def run_task(task: Task) -> dict[str, Any]:
             "poses": ([] if final.poses is None else
                       [[int(t), float(x), float(y)] for t, (x, y)
                        in zip(final.pose_t, al.apply(final.poses[:, :2]))])}
-    except EvaluationError:
+    except TooFewLandmarksError:
         out["final_map"] = None
     out.update(ok=True, checkpoints=rows, total_s=result.total_s,
                step_median_s=float(np.median(result.step_s)),
                converged=info.get("converged"), info=info)
     return out
+
+
+def _score_checkpoints(result: Any, truth: Truth) -> list[dict[str, Any]]:
+    rows = []
+    for c in result.checkpoints:
+        row: dict[str, Any] = {"t": c.t, "n_mapped": len(c.estimate), "estimate_s": c.estimate_s}
+        try:
+            s = score_estimate(c.estimate, truth)
+            row.update(mpe_m=s.mpe_m, rmse_m=s.rmse_m, median_m=s.median_m, max_m=s.max_m,
+                       n_common=s.n_common, robot_last_m=s.robot_last_m,
+                       robot_mean_m=s.robot_mean_m,
+                       nees_landmark=_landmark_nees(c.estimate, truth, s.alignment),
+                       nees_pose=_pose_nees(c.estimate, truth, s.alignment))
+        except TooFewLandmarksError:
+            common = np.intersect1d(c.estimate.landmark_ids, truth.landmark_ids).size
+            row.update(mpe_m=math.nan, rmse_m=math.nan, median_m=math.nan, max_m=math.nan,
+                       n_common=int(common), robot_last_m=math.nan, robot_mean_m=math.nan,
+                       nees_landmark=math.nan, nees_pose=math.nan)
+        rows.append(row)
+    return rows
 
 
 # --------------------------------------------------------------------------------------------
@@ -511,9 +542,11 @@ def summarise(results: Sequence[Mapping[str, Any]],
                                                  if not r.get("ok")})}
         for t in sorted({*[t for t in times if t <= last_t], last_t} - {0}):
             v = np.array([_value_at(r, t, "mpe_m") for r in ok])
+            row[f"n_scored@{t}"] = int(np.sum(np.isfinite(v)))
             row[f"mpe_mean_m@{t}"] = float(np.nanmean(v)) if np.any(np.isfinite(v)) else math.nan
             row[f"mpe_median_m@{t}"] = float(np.nanmedian(v)) if np.any(np.isfinite(v)) else math.nan
-            row[f"mpe_std_m@{t}"] = float(np.nanstd(v)) if np.any(np.isfinite(v)) else math.nan
+            row[f"mpe_std_m@{t}"] = (float(np.nanstd(v, ddof=1)) if np.sum(np.isfinite(v)) > 1
+                                     else math.nan)
         robot = np.array([_value_at(r, last_t, "robot_last_m") for r in ok])
         row["robot_last_mean_m"] = float(np.nanmean(robot)) if np.any(np.isfinite(robot)) else math.nan
         rm = np.array([np.nanmean([c["robot_last_m"] for c in r["checkpoints"]])

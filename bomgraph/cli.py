@@ -17,6 +17,32 @@ import numpy as np
 from .errors import BomgraphError
 
 
+def _nonneg_int(text: str) -> int:
+    v = int(text)
+    if v < 0:
+        raise argparse.ArgumentTypeError(f"must be >= 0, got {v}")
+    return v
+
+
+def _jobs(text: str) -> int:
+    v = int(text)
+    if v == 0:
+        raise argparse.ArgumentTypeError("must be a number of processes >= 1, or -1 for one "
+                                         "per core")
+    return v
+
+
+def _finite_json(v: Any) -> Any:
+    """NaN and infinities as JSON null (strict JSON has no NaN)."""
+    if isinstance(v, float) and not math.isfinite(v):
+        return None
+    if isinstance(v, dict):
+        return {k: _finite_json(x) for k, x in v.items()}
+    if isinstance(v, (list, tuple)):
+        return [_finite_json(x) for x in v]
+    return v
+
+
 def _positive_int(text: str) -> int:
     v = int(text)
     if v < 1:
@@ -31,6 +57,8 @@ def _parse_options(pairs: Sequence[str]) -> dict[str, Any]:
         if "=" not in p:
             raise BomgraphError(f"--option takes key=value, got {p!r}")
         k, v = p.split("=", 1)
+        if not k:
+            raise BomgraphError(f"--option needs a name before '=', got {p!r}")
         try:
             out[k] = json.loads(v)
         except json.JSONDecodeError:
@@ -96,7 +124,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
         out = {"method": est.method, **score.as_dict()}
         if table is not None:
             out["checkpoints"] = {k: v.tolist() for k, v in table.items()}
-        print(json.dumps(out, allow_nan=True))
+        print(json.dumps(_finite_json(out), allow_nan=False))
         return 0
     print(f"method {est.method}: {score.n_common} of {score.n_truth} landmarks mapped "
           f"({score.n_mapped} in the estimate)")
@@ -135,7 +163,7 @@ def format_summary(summary: Sequence[dict]) -> str:
         times = sorted({int(k.split("@")[1]) for r in rows for k in r if k.startswith("mpe_mean_m@")})
         lines.append(f"\n== {exp} ==  landmark MPE [cm] mean/median±std at t; robot: error "
                      f"[cm] of the latest pose at the end; conv: converged runs; NEES: robot "
-                     f"pose; wall time per run")
+                     f"pose; wall time per run; [k/n]: only k of n runs had a map")
         head = f"{'arm':30s} {'runs':>4s} " + " ".join(f"{'t=' + str(t):>17s}" for t in times)
         head += f" {'robot':>7s} {'conv':>5s} {'NEES':>6s} {'wall s':>7s}  paper"
         lines.append(head)
@@ -144,7 +172,11 @@ def format_summary(summary: Sequence[dict]) -> str:
             for t in times:
                 m, md, sd = (r.get(f"mpe_mean_m@{t}"), r.get(f"mpe_median_m@{t}"),
                              r.get(f"mpe_std_m@{t}"))
-                cells.append(f"{_cm(m).strip()}/{_cm(md).strip()}±{_cm(sd).strip()}")
+                cell = f"{_cm(m).strip()}/{_cm(md).strip()}±{_cm(sd).strip()}"
+                scored, ran = r.get(f"n_scored@{t}", 0), r["runs"] - r["failed"]
+                if scored < ran:  # runs without a map yet are not averaged in: say so
+                    cell += f"[{scored}/{ran}]"
+                cells.append(cell)
             conv = r.get("converged_rate")
             conv_s = "  -  " if conv is None or not math.isfinite(conv) else f"{100 * conv:4.0f}%"
             nees = r.get("nees_pose_mean")
@@ -249,7 +281,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = p.add_subparsers(dest="command", required=True)
 
     s = sub.add_parser("simulate", help="simulate a run of the paper's world into a stream file")
-    s.add_argument("--seed", type=int, default=0)
+    s.add_argument("--seed", type=_nonneg_int, default=0)
     s.add_argument("--landmarks", type=_positive_int, default=50)
     s.add_argument("--steps", type=int, default=300, help="number of moves (default 300)")
     s.add_argument("--sensor-range", type=float, default=1.0, help="metres (default 1.0)")
@@ -290,8 +322,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="every method on the recorded datasets under DATA_DIR (e.g. "
                         "../shared/data) instead of the simulation")
     c.add_argument("--out", default="compare-results", help="output folder")
-    c.add_argument("--seed", type=int, default=0)
-    c.add_argument("--jobs", type=int, default=-1, help="local processes (-1: one per core)")
+    c.add_argument("--seed", type=_nonneg_int, default=0)
+    c.add_argument("--jobs", type=_jobs, default=-1, help="local processes (-1: one per core)")
     c.add_argument("--scheduler", default=None, metavar="ADDRESS",
                    help="run on an existing Dask distributed scheduler, e.g. tcp://host:8786")
     c.add_argument("--dask-local", type=int, default=0, metavar="N",

@@ -37,6 +37,10 @@ class EvaluationError(BomgraphError, ValueError):
     """An estimate cannot be scored against the truth (e.g. too few common landmarks)."""
 
 
+class TooFewLandmarksError(EvaluationError):
+    """Fewer than 3 landmarks are common to an estimate and the truth: no alignment exists."""
+
+
 class UnknownMethodError(BomgraphError, KeyError):
     """A method name is not in the registry."""
 

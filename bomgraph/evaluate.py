@@ -15,7 +15,7 @@ from typing import Sequence
 import numpy as np
 
 from .angles import angle_residual
-from .errors import EvaluationError
+from .errors import EvaluationError, TooFewLandmarksError
 from .mapper import MapEstimate, RunResult
 from .stream import Truth
 
@@ -58,10 +58,12 @@ def align(source_xy: np.ndarray, target_xy: np.ndarray, *, allow_reflection: boo
     """
     src = np.asarray(source_xy, dtype=float).reshape(-1, 2)
     dst = np.asarray(target_xy, dtype=float).reshape(-1, 2)
+    if not (np.all(np.isfinite(src)) and np.all(np.isfinite(dst))):
+        raise EvaluationError("align(): points must be finite")
     if src.shape != dst.shape:
         raise EvaluationError(f"align(): {len(src)} source points but {len(dst)} targets")
     if len(src) < 3:
-        raise EvaluationError(f"alignment needs at least 3 common landmarks, got {len(src)}")
+        raise TooFewLandmarksError(f"alignment needs at least 3 common landmarks, got {len(src)}")
     mu_s, mu_d = src.mean(0), dst.mean(0)
     a, b = src - mu_s, dst - mu_d
     u, sv, vt = np.linalg.svd(b.T @ a)
@@ -118,7 +120,7 @@ def score_estimate(estimate: MapEstimate, truth: Truth, *, allow_reflection: boo
     common, ie, it = np.intersect1d(estimate.landmark_ids, truth.landmark_ids,
                                     return_indices=True)
     if common.size < 3:
-        raise EvaluationError(f"the estimate shares {common.size} landmark(s) with the truth; "
+        raise TooFewLandmarksError(f"the estimate shares {common.size} landmark(s) with the truth; "
                               f"alignment needs at least 3")
     est_xy = estimate.landmarks_xy[ie]
     true_xy = truth.landmarks_xy[it]
@@ -160,7 +162,8 @@ ERROR_COLUMNS = ("t", "mpe_m", "rmse_m", "median_m", "max_m", "n_mapped", "n_com
 def error_table(result: RunResult | Sequence, truth: Truth) -> dict[str, np.ndarray]:
     """Errors at every checkpoint of a run, as columns (see ``ERROR_COLUMNS``).
 
-    A checkpoint whose map has fewer than 3 landmarks gets NaN errors (and its counts).
+    A checkpoint whose map shares fewer than 3 landmarks with the truth gets NaN errors (and its
+    counts); any other evaluation error is raised.
     """
     checkpoints = result.checkpoints if isinstance(result, RunResult) else tuple(result)
     rows = []
@@ -169,7 +172,7 @@ def error_table(result: RunResult | Sequence, truth: Truth) -> dict[str, np.ndar
             s = score_estimate(c.estimate, truth)
             rows.append((c.t, s.mpe_m, s.rmse_m, s.median_m, s.max_m, s.n_mapped, s.n_common,
                          s.robot_last_m, s.robot_mean_m))
-        except EvaluationError:
+        except TooFewLandmarksError:
             n = len(c.estimate)
             rows.append((c.t, np.nan, np.nan, np.nan, np.nan, n,
                           int(np.intersect1d(c.estimate.landmark_ids, truth.landmark_ids).size),

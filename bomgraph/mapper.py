@@ -24,10 +24,23 @@ from .errors import ConfigError, StreamFormatError, UnknownMethodError
 from .stream import Step, StreamHeader, Truth
 
 
-def _ro(a: np.ndarray | None, dtype: Any, shape_tail: tuple[int, ...]) -> np.ndarray | None:
+def _ro(a: np.ndarray | None, dtype: Any, shape_tail: tuple[int, ...],
+        name: str) -> np.ndarray | None:
     if a is None:
         return None
-    out = np.array(a, dtype=dtype).reshape((-1, *shape_tail))
+    raw = np.asarray(a)
+    if dtype is np.int64:
+        if raw.size and (not np.issubdtype(raw.dtype, np.number)
+                         or not np.all(np.isfinite(raw)) or np.any(raw != np.round(raw))):
+            raise ConfigError(f"MapEstimate: {name} must be integers")
+    try:
+        out = np.array(raw, dtype=dtype).reshape((-1, *shape_tail))
+    except ValueError:
+        raise ConfigError(f"MapEstimate: {name} must have shape (n, {', '.join(map(str, shape_tail))})"
+                          ) from None
+    if dtype is float and not np.all(np.isfinite(out)):
+        raise ConfigError(f"MapEstimate: {name} must be finite (a method must leave out what "
+                          f"it cannot estimate, not return NaN)")
     out.setflags(write=False)
     return out
 
@@ -59,16 +72,21 @@ class MapEstimate:
     info: Mapping[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
-        ids = _ro(self.landmark_ids, np.int64, ())
-        xy = _ro(self.landmarks_xy, float, (2,))
+        ids = _ro(self.landmark_ids, np.int64, (), "landmark_ids")
+        xy = _ro(self.landmarks_xy, float, (2,), "landmarks_xy")
         if ids.shape[0] != xy.shape[0]:
             raise ConfigError(f"MapEstimate: {ids.shape[0]} ids but {xy.shape[0]} positions")
+        if len(np.unique(ids)) != len(ids):
+            raise ConfigError("MapEstimate: a landmark id appears twice")
         object.__setattr__(self, "landmark_ids", ids)
         object.__setattr__(self, "landmarks_xy", xy)
-        object.__setattr__(self, "pose_t", _ro(self.pose_t, np.int64, ()))
-        object.__setattr__(self, "poses", _ro(self.poses, float, (3,)))
-        object.__setattr__(self, "landmark_cov", _ro(self.landmark_cov, float, (2, 2)))
-        object.__setattr__(self, "pose_cov", _ro(self.pose_cov, float, (3, 3)))
+        object.__setattr__(self, "pose_t", _ro(self.pose_t, np.int64, (), "pose_t"))
+        object.__setattr__(self, "poses", _ro(self.poses, float, (3,), "poses"))
+        object.__setattr__(self, "landmark_cov",
+                           _ro(self.landmark_cov, float, (2, 2), "landmark_cov"))
+        object.__setattr__(self, "pose_cov", _ro(self.pose_cov, float, (3, 3), "pose_cov"))
+        if self.pose_t is not None and len(np.unique(self.pose_t)) != len(self.pose_t):
+            raise ConfigError("MapEstimate: a pose step t appears twice")
         if (self.pose_t is None) != (self.poses is None):
             raise ConfigError("MapEstimate: pose_t and poses go together")
         if self.poses is not None and len(self.poses) != len(self.pose_t):
@@ -296,9 +314,12 @@ def create_mapper(name: str, header: StreamHeader, *, truth: Truth | None = None
         raise ConfigError(f"method {name!r} reads the ground truth (a benchmark bound); the "
                           f"stream has none")
     factory = method_factory(name)
-    if info.needs_truth:
-        return factory(header, truth=truth, **options)
-    return factory(header, **options)
+    try:
+        if info.needs_truth:
+            return factory(header, truth=truth, **options)
+        return factory(header, **options)
+    except TypeError as exc:  # an unknown option name or an option of the wrong type
+        raise ConfigError(f"method {name!r}: bad options {sorted(options)}: {exc}") from None
 
 
 # --------------------------------------------------------------------------------------------
@@ -342,59 +363,101 @@ class EstimateFile:
     timing_s: Mapping[str, float]
 
 
+_ESTIMATE_KEYS = {"format", "version", "method", "landmarks", "poses", "checkpoints",
+                  "timing_s"}
+_CHECKPOINT_KEYS = {"t", "landmarks", "poses"}
+
+
 def _parse_estimate_parts(obj: Mapping[str, Any], path: str, where: str) -> MapEstimate:
+    from .stream import _is_id, _is_num
+
     def bad(key: str, msg: str) -> StreamFormatError:
         return StreamFormatError(msg, path=path, key=f"{where}{key}")
 
     lms = obj.get("landmarks")
     if not isinstance(lms, list):
         raise bad("landmarks", "missing or not a list of [id, x_m, y_m]")
-    try:
-        lm = np.array(lms, dtype=float).reshape(-1, 3)
-    except (TypeError, ValueError):
-        raise bad("landmarks", "must be a list of [id, x_m, y_m]") from None
-    if lm.size and (not np.all(np.isfinite(lm)) or np.any(lm[:, 0] != np.round(lm[:, 0]))
-                    or np.any(lm[:, 0] < 0)):
-        raise bad("landmarks", "ids must be non-negative integers and positions finite")
-    if len(np.unique(lm[:, 0])) != len(lm):
+    ids, xy = [], []
+    for k, e in enumerate(lms):
+        if not (isinstance(e, list) and len(e) == 3 and _is_id(e[0]) and _is_num(e[1])
+                and _is_num(e[2])):
+            raise bad(f"landmarks[{k}]", f"must be [id, x_m, y_m] with a non-negative integer "
+                                         f"id, got {json.dumps(e)[:60]}")
+        ids.append(e[0])
+        xy.append((float(e[1]), float(e[2])))
+    if len(set(ids)) != len(ids):
         raise bad("landmarks", "a landmark id appears twice")
     pose_t = poses = None
     if obj.get("poses") is not None:
-        try:
-            p = np.array(obj["poses"], dtype=float).reshape(-1, 4)
-        except (TypeError, ValueError):
-            raise bad("poses", "must be a list of [t, x_m, y_m, psi_rad]") from None
-        if not np.all(np.isfinite(p)):
-            raise bad("poses", "must be finite")
-        pose_t, poses = p[:, 0].astype(np.int64), p[:, 1:]
-    return MapEstimate(lm[:, 0].astype(np.int64), lm[:, 1:], pose_t=pose_t, poses=poses)
+        if not isinstance(obj["poses"], list):
+            raise bad("poses", "must be a list of [t, x_m, y_m, psi_rad]")
+        ts, ps = [], []
+        for k, e in enumerate(obj["poses"]):
+            if not (isinstance(e, list) and len(e) == 4 and _is_id(e[0])
+                    and all(_is_num(v) for v in e[1:])):
+                raise bad(f"poses[{k}]", f"must be [t, x_m, y_m, psi_rad] with an integer "
+                                         f"t >= 0, got {json.dumps(e)[:60]}")
+            ts.append(e[0])
+            ps.append([float(v) for v in e[1:]])
+        if len(set(ts)) != len(ts):
+            raise bad("poses", "a step t appears twice")
+        pose_t, poses = np.array(ts, dtype=np.int64), np.array(ps).reshape(-1, 3)
+    return MapEstimate(np.array(ids, dtype=np.int64), np.array(xy).reshape(-1, 2),
+                       pose_t=pose_t, poses=poses)
 
 
 def read_estimate(path: str | os.PathLike[str]) -> EstimateFile:
-    """Read an estimate file written by ``bomgraph run``."""
+    """Read an estimate file written by ``bomgraph run`` (strictly: unknown keys, duplicate
+    keys and malformed entries are refused, naming the file and the key)."""
+    from .stream import _DuplicateKey, _is_id, _no_duplicate_keys
+
     path = str(path)
     try:
         with open(path, encoding="utf-8") as fh:
-            obj = json.load(fh)
+            obj = json.load(fh, object_pairs_hook=_no_duplicate_keys)
     except OSError as exc:
         raise StreamFormatError(f"cannot open: {exc.strerror}", path=path) from None
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise StreamFormatError(f"not a JSON estimate file ({exc})", path=path) from None
+    except _DuplicateKey as exc:
+        raise StreamFormatError("appears twice in one object", path=path, key=str(exc)) from None
+    except (json.JSONDecodeError, UnicodeDecodeError, RecursionError, ValueError) as exc:
+        raise StreamFormatError(f"not a JSON estimate file ({type(exc).__name__})",
+                                path=path) from None
     if not isinstance(obj, dict) or obj.get("format") != ESTIMATE_FORMAT:
         raise StreamFormatError(f"must be a JSON object with \"format\": \"{ESTIMATE_FORMAT}\"",
                                 path=path, key="format")
-    if obj.get("version") != 1:
+    version = obj.get("version")
+    if not (isinstance(version, int) and not isinstance(version, bool) and version == 1):
         raise StreamFormatError("unknown version; this reader knows version 1", path=path,
                                 key="version")
+    unknown = sorted(set(obj) - _ESTIMATE_KEYS)
+    if unknown:
+        raise StreamFormatError(f"unknown key; allowed: {', '.join(sorted(_ESTIMATE_KEYS))}",
+                                path=path, key=unknown[0])
+    if not isinstance(obj.get("method", ""), str):
+        raise StreamFormatError("must be a string", path=path, key="method")
     final = _parse_estimate_parts(obj, path, "")
+    raw_cps = obj.get("checkpoints") or []
+    if not isinstance(raw_cps, list):
+        raise StreamFormatError("must be a list of {t, landmarks, poses}", path=path,
+                                key="checkpoints")
     cps = []
-    for k, c in enumerate(obj.get("checkpoints") or []):
-        if not isinstance(c, dict) or not isinstance(c.get("t"), int):
-            raise StreamFormatError("each checkpoint needs an integer t", path=path,
+    for k, c in enumerate(raw_cps):
+        if not isinstance(c, dict) or not _is_id(c.get("t")):
+            raise StreamFormatError("each checkpoint needs an integer t >= 0", path=path,
+                                    key=f"checkpoints[{k}].t")
+        extra = sorted(set(c) - _CHECKPOINT_KEYS)
+        if extra:
+            raise StreamFormatError("unknown key in a checkpoint", path=path,
+                                    key=f"checkpoints[{k}].{extra[0]}")
+        if cps and c["t"] <= cps[-1].t:
+            raise StreamFormatError("checkpoints must be in increasing t", path=path,
                                     key=f"checkpoints[{k}].t")
         cps.append(Checkpoint(c["t"], _parse_estimate_parts(c, path, f"checkpoints[{k}]."),
                               0.0))
     timing = obj.get("timing_s") or {}
+    if not isinstance(timing, dict) or not all(
+            isinstance(v, (int, float)) and not isinstance(v, bool) for v in timing.values()):
+        raise StreamFormatError("must be an object of numbers", path=path, key="timing_s")
     return EstimateFile(str(obj.get("method", "")), final, tuple(cps), dict(timing))
 
 

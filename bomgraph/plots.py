@@ -88,10 +88,7 @@ def write_compare_figures(out_dir, experiments, results) -> list:
     """
     from pathlib import Path
 
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from matplotlib.figure import Figure  # no pyplot: the caller's backend is left alone
 
     from .bench import error_curves, example_estimate
     from .evaluate import score_estimate
@@ -107,7 +104,8 @@ def write_compare_figures(out_dir, experiments, results) -> list:
         rob = {arm: c for (e, arm), c in robot.items()
                if e == exp.name and np.any(np.isfinite(c[1]))}
         ncol = 2 if rob else 1
-        fig, axes = plt.subplots(1, ncol, figsize=(6.4 * ncol, 4.4), squeeze=False)
+        fig = Figure(figsize=(6.4 * ncol, 4.4))
+        axes = fig.subplots(1, ncol, squeeze=False)
         plot_error_vs_time_on_axes(axes[0, 0], curves,
                                    title=f"{exp.title}: landmarks ({len(exp.runs())} runs)")
         if rob:
@@ -116,11 +114,10 @@ def write_compare_figures(out_dir, experiments, results) -> list:
         fig.tight_layout()
         path = out / f"{exp.name}_error_vs_time.png"
         fig.savefig(path, dpi=120)
-        plt.close(fig)
         files.append(path)
     for exp in experiments:
         if exp.sources:
-            files += _write_source_maps(out, exp, results, plt)
+            files += _write_source_maps(out, exp, results, Figure)
     sim_exps = [e for e in experiments if not e.sources]
     if not sim_exps:
         return files
@@ -131,14 +128,14 @@ def write_compare_figures(out_dir, experiments, results) -> list:
         stream, est = example_estimate("stmds-smacof-loc", exp, t=t_show)
         al = score_estimate(est, stream.truth).alignment
         traj = np.arange(0, (t_show or exp.sim.n_steps) + 1)
-        fig, ax = plt.subplots(figsize=(6.0, 6.0))
+        fig = Figure(figsize=(6.0, 6.0))
+        ax = fig.subplots()
         plot_map_on_axes(ax, stream.truth, est, al, trajectory_t=traj,
                          title=f"stmds-smacof-loc, run {exp.runs()[0].name}, "
                                f"t = {t_show or exp.sim.n_steps}")
         fig.tight_layout()
         path = out / "example_map.png"
         fig.savefig(path, dpi=120)
-        plt.close(fig)
         files.append(path)
     except Exception as exc:  # the map figure is optional; say why it is missing
         (out / "example_map.txt").write_text(f"example map not drawn: {type(exc).__name__}: "
@@ -147,7 +144,7 @@ def write_compare_figures(out_dir, experiments, results) -> list:
     return files
 
 
-def _write_source_maps(out, exp, results, plt) -> list:
+def _write_source_maps(out, exp, results, Figure) -> list:
     """One figure per recorded source: every method's final map (aligned) over the truth."""
     files = []
     for src in exp.sources:
@@ -158,7 +155,8 @@ def _write_source_maps(out, exp, results, plt) -> list:
             continue
         ncol = min(n, 3)
         nrow = (n + ncol - 1) // ncol
-        fig, axes = plt.subplots(nrow, ncol, figsize=(4.6 * ncol, 4.4 * nrow), squeeze=False)
+        fig = Figure(figsize=(4.6 * ncol, 4.4 * nrow))
+        axes = fig.subplots(nrow, ncol, squeeze=False)
         pts = truth.landmarks_xy if truth.poses is None else np.vstack(
             [truth.landmarks_xy, truth.poses[:, :2]])
         lo, hi = pts.min(0) - 0.5, pts.max(0) + 0.5
@@ -191,6 +189,5 @@ def _write_source_maps(out, exp, results, plt) -> list:
         fig.tight_layout()
         path = out / f"{exp.name}_{src.name}_maps.png"
         fig.savefig(path, dpi=100)
-        plt.close(fig)
         files.append(path)
     return files

@@ -62,6 +62,10 @@ class SimConfig:
             if not ok:
                 raise ConfigError(f"SimConfig: {msg}")
 
+        for f in self.__dataclass_fields__:
+            v = getattr(self, f)
+            need(isinstance(v, (int, float)) and math.isfinite(v),
+                 f"{f} must be a finite number, got {v!r}")
         need(self.arena_m > 0, f"arena_m must be > 0, got {self.arena_m}")
         need(self.n_landmarks >= 1, f"n_landmarks must be >= 1, got {self.n_landmarks}")
         need(self.n_steps >= 0, f"n_steps must be >= 0, got {self.n_steps}")
@@ -134,7 +138,11 @@ def simulate_truth(config: SimConfig, rng: np.random.Generator,
         psi0 = float(rng.uniform(-math.pi, math.pi))
     else:
         xy0 = np.asarray(start_pose[:2], dtype=float)
-        psi0 = float(start_pose[2])
+        if not (np.all(np.isfinite(start_pose)) and np.all(xy0 >= 0)
+                and np.all(xy0 <= config.arena_m)):
+            raise ConfigError(f"start_pose {tuple(start_pose)} must be finite and inside the "
+                              f"{config.arena_m} m arena")
+        psi0 = float(wrap_angle(start_pose[2]))
     poses = np.empty((config.n_steps + 1, 3))
     motions = np.empty((config.n_steps, 2))
     xy, psi = xy0.copy(), psi0
@@ -279,9 +287,9 @@ def make_priors(truth: Truth, fraction: float, sigma_xy_m: float,
     ``sigma_xy_m`` in x and in y (the paper's 3 cm); the prior is the length of the noisy
     offset, with ``sigma_m = sigma_xy_m`` (the first-order std. dev. of that length).
     """
-    if not 0 < fraction <= 1:
+    if not (math.isfinite(fraction) and 0 < fraction <= 1):
         raise ConfigError(f"prior fraction must be in (0, 1], got {fraction}")
-    if sigma_xy_m <= 0:
+    if not (math.isfinite(sigma_xy_m) and sigma_xy_m > 0):
         raise ConfigError(f"prior sigma must be > 0, got {sigma_xy_m}")
     n = len(truth.landmark_ids)
     iu, ju = np.triu_indices(n, 1)

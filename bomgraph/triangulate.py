@@ -18,6 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .angles import angle_residual
 from .errors import ConfigError
 from .geometry import compose
 from .mapper import MapEstimate
@@ -74,6 +75,20 @@ def intersect_rays(origins_xy: np.ndarray, directions_rad: np.ndarray, *,
     return x[0], bool(ok[0])
 
 
+def origin_spread(points_xy: np.ndarray, origins: np.ndarray, owner: np.ndarray,
+                  n: int) -> np.ndarray:
+    """Per point, the angle spanned by its rays' origins seen from it, shape ``(n,)``."""
+    v = origins - points_xy[owner]
+    ang = np.arctan2(v[:, 1], v[:, 0])
+    mean = np.arctan2(np.bincount(owner, np.sin(ang), n), np.bincount(owner, np.cos(ang), n))
+    res = angle_residual(ang, mean[owner])
+    hi = np.full(n, -np.inf)
+    lo = np.full(n, np.inf)
+    np.maximum.at(hi, owner, np.nan_to_num(res, nan=-np.inf))
+    np.minimum.at(lo, owner, np.nan_to_num(res, nan=np.inf))
+    return np.where(hi >= lo, hi - lo, 0.0)
+
+
 def _solve(a: np.ndarray, b: np.ndarray, origins: np.ndarray, dirs: np.ndarray,
            min_parallax_rad: float, min_front_fraction: float,
            owner: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -81,6 +96,7 @@ def _solve(a: np.ndarray, b: np.ndarray, origins: np.ndarray, dirs: np.ndarray,
 
     ``origins``/``dirs`` are all rays, ``owner`` the landmark slot of each ray.
     """
+    # A necessary condition first (the normal matrix must be invertible) ...
     lam = parallax_eigenvalue(a)
     ok = lam >= 1.0 - math.cos(min_parallax_rad)
     x = np.full((len(a), 2), np.nan)
@@ -92,6 +108,9 @@ def _solve(a: np.ndarray, b: np.ndarray, origins: np.ndarray, dirs: np.ndarray,
         front = np.bincount(owner, weights=(depth > 0), minlength=len(a))
         total = np.bincount(owner, minlength=len(a))
         ok &= front >= min_front_fraction * total
+        # ... then the geometric parallax: the angle the ray origins span as seen from the
+        # solved point (many rays from one place, or noisy rays, do not make parallax).
+        ok &= origin_spread(x, origins, owner, len(a)) >= min_parallax_rad
     x[~ok] = np.nan
     return x, ok
 
@@ -128,6 +147,8 @@ class TriangulateMapper:
     def __init__(self, header: StreamHeader, *, start_pose: tuple[float, float, float] =
                  (0.0, 0.0, 0.0), config: TriangulateConfig | None = None,
                  **options: float) -> None:
+        if config is not None and options:
+            raise ConfigError("TriangulateMapper: pass either config or options, not both")
         self.config = config or TriangulateConfig(**options)
         self._header = header
         self._start = np.asarray(start_pose, dtype=float)

@@ -130,3 +130,33 @@ def test_triangulate_is_deterministic_and_rotation_invariant() -> None:
     np.testing.assert_array_equal(a.landmark_ids, b.landmark_ids)
     sa, sb = score_estimate(a, s.truth), score_estimate(b, s.truth)
     assert sa.mpe_m == pytest.approx(sb.mpe_m, abs=1e-9)
+
+
+@pytest.mark.parametrize("body,key", [
+    ('"landmarks": [[0, 1, 2, 3, 4, 5]]', "landmarks[0]"),
+    ('"landmarks": [["3", "1.5", "2.5"]]', "landmarks[0]"),
+    ('"landmarks": [[true, 1.5, 2.5]]', "landmarks[0]"),
+    ('"landmarks": [[1e30, 1.5, 2.5]]', "landmarks[0]"),
+    ('"landmarks": [], "poses": [[2.7, 0, 0, 0]]', "poses[0]"),
+    ('"landmarks": [], "poses": [[1, 0, 0, 0], [1, 0, 0, 0]]', "poses"),
+    ('"landmarks": [], "checkpionts": []', "checkpionts"),
+    ('"landmarks": [], "checkpoints": 5', "checkpoints"),
+    ('"landmarks": [], "checkpoints": [{"t": true, "landmarks": []}]', "checkpoints[0].t"),
+    ('"landmarks": [], "timing_s": [1, 2]', "timing_s"),
+    ('"landmarks": [], "landmarks": []', "landmarks"),
+])
+def test_estimate_reader_is_strict(tmp_path: Path, body: str, key: str) -> None:
+    p = tmp_path / "e.json"
+    p.write_text('{"format": "bomgraph-estimate", "version": 1, "method": "m", ' + body + "}")
+    with pytest.raises(StreamFormatError) as info:
+        read_estimate(p)
+    assert f"'{key}'" in str(info.value) and str(p) in str(info.value)
+
+
+def test_map_estimate_refuses_nan_duplicates_and_float_ids() -> None:
+    with pytest.raises(ConfigError, match="finite"):
+        MapEstimate(np.array([1, 2]), np.array([[0.0, np.nan], [1.0, 1.0]]))
+    with pytest.raises(ConfigError, match="twice"):
+        MapEstimate(np.array([1, 1]), np.zeros((2, 2)))
+    with pytest.raises(ConfigError, match="integers"):
+        MapEstimate(np.array([1.7, 2.0]), np.zeros((2, 2)))
