@@ -97,7 +97,9 @@ def cmd_run(args: argparse.Namespace) -> int:
     if method_info(args.method).needs_truth and not args.allow_truth:
         raise BomgraphError(f"method {args.method!r} reads the ground truth; it is a benchmark "
                             f"bound, not a mapper (pass --allow-truth to run it anyway)")
-    with StreamReader(args.stream) as reader:
+    from threadpoolctl import threadpool_limits
+
+    with StreamReader(args.stream) as reader, threadpool_limits(limits=1):
         mapper = create_mapper(args.method, reader.header, truth=reader.truth, **options)
         result = run(mapper, reader, checkpoint_every=args.checkpoint_every,
                      method=args.method)
