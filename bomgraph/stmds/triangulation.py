@@ -27,6 +27,19 @@ two rays lies in ``[min_parallax, pi - min_parallax]`` (eq. 1 blows up at zero p
 rays), both depths are at most ``max_range_m`` (e.g. a multiple of the sensor range) and the
 relative first-order std. dev. of its depth ``sigma_r1 / r1`` is at most
 ``max_relative_range_sigma``.
+
+Windowed triangulation (:func:`triangulate_window`, :func:`window_pair_squared_distances`,
+issue 8). A window holds ``W`` consecutive poses and the ``W - 1`` odometry increments between
+them. Every landmark seen from at least two of its poses is triangulated from the pair of its
+rays with the largest parallax that passes the gates, in the frame of the window's first pose
+(dead-reckoned from the increments). Two landmarks triangulated in the same window share the
+odometry chain, so the first-order variance of their squared distance is taken over all
+``3 (W - 1)`` increments (each with its own independent sigmas) and the four bearings used.
+The Jacobians are analytic (complex plane): with ``p = z_a + r1 u_a`` the intersection of the
+rays from poses ``a < b`` (positions ``z``, directions ``u = exp(i alpha)``), an increment
+``m`` (pose ``m-1`` to ``m``) moves the point rigidly (translation, or rotation about ``z_m``)
+when ``m <= a``, moves only the second ray when ``a < m <= b``, and does nothing after ``b``.
+With ``W = 2`` this is exactly eq. 1-2 above.
 """
 
 from __future__ import annotations
@@ -393,7 +406,199 @@ def pair_squared_distances(tri: RayTriangulation, odometry: ArrayLike,
     return PairEstimates(first, second, d2, var, tvar, full)
 
 
+@dataclass(frozen=True, eq=False)
+class WindowTriangulation:
+    """Landmarks triangulated inside a window of ``W`` poses, in the frame of its first pose.
+
+    Attributes
+    ----------
+    column : ndarray of shape (k,), int64
+        Column of each landmark in the ``bearings_rad`` matrix given to
+        :func:`triangulate_window`.
+    pose_first, pose_second : ndarrays of shape (k,), int64
+        Window poses ``a < b`` of the two rays used (the pair with the best parallax).
+    points_xy : ndarray of shape (k, 2)
+        Intersections (metres, frame of window pose 0).
+    range_prev_m, range_now_m : ndarrays of shape (k,)
+        Depths ``r1`` from pose ``a`` and ``r2`` from pose ``b``.
+    sin_parallax, cos_parallax : ndarrays of shape (k,)
+        ``sin`` and ``cos`` of the angle from ray ``a`` to ray ``b``.
+    jacobian_odometry : ndarray of shape (k, W - 1, 3), complex
+        ``d (x + i y) / d [dx, dy, dpsi]_m`` for the increments ``m = 1 .. W-1``.
+    jacobian_bearing : ndarray of shape (k, 2), complex
+        ``d (x + i y) / d [theta_a, theta_b]``.
+    """
+
+    column: np.ndarray
+    pose_first: np.ndarray
+    pose_second: np.ndarray
+    points_xy: np.ndarray
+    range_prev_m: np.ndarray
+    range_now_m: np.ndarray
+    sin_parallax: np.ndarray
+    cos_parallax: np.ndarray
+    jacobian_odometry: np.ndarray
+    jacobian_bearing: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.points_xy)
+
+    @property
+    def parallax_rad(self) -> np.ndarray:
+        """Angle between the two rays used, in ``[0, pi]``."""
+        return np.abs(np.arctan2(self.sin_parallax, self.cos_parallax))
+
+
+def _ray_intersections(z_a: np.ndarray, z_b: np.ndarray, ua: np.ndarray, ub: np.ndarray
+                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Depths ``r1, r2`` and ``sin, cos`` of the parallax of rays ``z_a + r1 ua``, ``z_b + r2 ub``
+    (complex arrays of one shape)."""
+    rel = ub * ua.conj()
+    s, c = rel.imag, rel.real
+    dconj = (z_b - z_a).conj()
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        inv_s = 1.0 / s
+        r1 = (dconj * ub).imag * inv_s
+        r2 = (dconj * ua).imag * inv_s
+    return r1, r2, s, c
+
+
+def triangulate_window(odoms: ArrayLike, bearings_rad: ArrayLike, *,
+                       min_parallax_rad: float = 0.0,
+                       max_range_m: float = np.inf) -> tuple[WindowTriangulation, int]:
+    """Triangulate every landmark of a window from its best-parallax pair of rays.
+
+    Parameters
+    ----------
+    odoms : array of shape (W - 1, 3)
+        Increments ``[dx_m, dy_m, dpsi_rad]`` between the window's consecutive poses.
+    bearings_rad : array of shape (W, n)
+        Bearing of landmark (column) ``j`` from window pose ``k``; NaN where not seen.
+    min_parallax_rad, max_range_m : float
+        The gates of :func:`gate_points` (parallax in ``[min, pi - min]``, both depths
+        positive and at most ``max_range_m``), applied to every candidate pair of rays.
+
+    Returns
+    -------
+    WindowTriangulation
+        The landmarks with at least one pair of rays that passes the gates (columns in
+        increasing order); among a landmark's passing pairs, the largest ``|sin(parallax)|``
+        (ties: the earliest pair) is used.
+    n_gated : int
+        Landmarks seen from two poses or more with no passing pair.
+    """
+    u = np.asarray(odoms, dtype=float).reshape(-1, 3)
+    brg = np.asarray(bearings_rad, dtype=float)
+    w = len(u) + 1
+    if brg.ndim != 2 or brg.shape[0] != w:
+        raise ConfigError(f"triangulate_window: bearings must be ({w}, n) for {w - 1} "
+                          f"increments, got shape {brg.shape}")
+    psi = np.concatenate([[0.0], np.cumsum(u[:, 2])])
+    heading = np.exp(1j * psi)
+    z = np.concatenate([[0.0], np.cumsum(heading[:-1] * (u[:, 0] + 1j * u[:, 1]))])
+    seen = np.isfinite(brg)
+    cand = np.flatnonzero(seen.sum(axis=0) >= 2)
+    a_all, b_all = np.triu_indices(w, 1)
+    ray = heading[:, None] * np.exp(1j * np.where(seen[:, cand], brg[:, cand], 0.0))
+    r1, r2, s, _ = _ray_intersections(z[a_all][:, None], z[b_all][:, None], ray[a_all],
+                                      ray[b_all])                    # (pairs of poses, n)
+    sin_par = np.abs(s)
+    with np.errstate(invalid="ignore"):
+        ok = seen[a_all][:, cand] & seen[b_all][:, cand]
+        ok &= sin_par >= max(math.sin(min_parallax_rad), 1e-15)
+        ok &= (r1 > 0) & (r2 > 0) & (r1 <= max_range_m) & (r2 <= max_range_m)
+    score = np.where(ok, sin_par, -1.0)
+    best = np.argmax(score, axis=0)
+    good = score[best, np.arange(cand.size)] >= 0
+    col = cand[good]
+    pick = best[good]
+    a, b = a_all[pick], b_all[pick]
+    tri = _window_points(u, psi, z, heading, a, b, brg[a, col], brg[b, col])
+    return WindowTriangulation(col, a, b, *tri), int(cand.size - col.size)
+
+
+def _window_points(u: np.ndarray, psi: np.ndarray, z: np.ndarray, heading: np.ndarray,
+                   a: np.ndarray, b: np.ndarray, theta_a: np.ndarray, theta_b: np.ndarray
+                   ) -> tuple[np.ndarray, ...]:
+    """Points, depths, parallax and analytic Jacobians for rays from poses ``a < b``."""
+    k, w1 = a.size, len(u)
+    ua = np.exp(1j * (psi[a] + theta_a))
+    ub = np.exp(1j * (psi[b] + theta_b))
+    za, zb = z[a], z[b]
+    r1, r2, s, c = _ray_intersections(za, zb, ua, ub)
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        inv_s = 1.0 / s
+        p = za + r1 * ua
+        d_alpha = ua * (r1 * c * inv_s + 1j * r1)                       # dp / d alpha
+        d_beta = ua * (((zb - za).conj() * ub).real - r1 * c) * inv_s   # dp / d beta
+        # g(v) = d r1 / d z_b . v = Im(conj(v) ub) / s, for v of shape (k, W-1)
+        m = np.arange(1, w1 + 1)
+        before = m[None, :] <= a[:, None]
+        mid = ~before & (m[None, :] <= b[:, None])
+        e = heading[:-1][None, :]                                       # R(psi_{m-1})
+        lever_b = zb[:, None] - z[1:][None, :]                          # z_b - z_m
+
+        def second_ray(v: np.ndarray) -> np.ndarray:
+            return ua[:, None] * ((v.conj() * ub[:, None]).imag * inv_s[:, None])
+
+        jac = np.zeros((k, w1, 3), np.complex128)
+        ex = np.broadcast_to(e, (k, w1))
+        jac[:, :, 0] = np.where(before, ex, np.where(mid, second_ray(ex), 0.0))
+        jac[:, :, 1] = np.where(before, 1j * ex, np.where(mid, second_ray(1j * ex), 0.0))
+        turn_before = 1j * (p[:, None] - z[1:][None, :])
+        turn_mid = second_ray(1j * lever_b) + d_beta[:, None]
+        jac[:, :, 2] = np.where(before, turn_before, np.where(mid, turn_mid, 0.0))
+    pts = np.column_stack([p.real, p.imag])
+    return (pts, r1, r2, s, c, jac, np.column_stack([d_alpha, d_beta]))
+
+
+def window_pair_squared_distances(tri: WindowTriangulation, odometry_sigmas: ArrayLike,
+                                  bearing_sigma_rad: float, *, select: np.ndarray | None = None,
+                                  with_jacobian: bool = False) -> PairEstimates:
+    """Squared distance and first-order variance of every pair of a window's landmarks.
+
+    Parameters
+    ----------
+    tri : WindowTriangulation
+    odometry_sigmas : array of shape (W - 1, 3)
+        Independent std. devs. of each increment's ``[dx_m, dy_m, dpsi_rad]``.
+    bearing_sigma_rad : float
+    select : array of int, optional
+        Only pairs among these landmarks of ``tri``.
+    with_jacobian : bool
+        Also return the ``(P, 3 (W-1) + 4)`` Jacobian over the increments (row-major by
+        increment) and ``[theta_i_a, theta_i_b, theta_j_a, theta_j_b]``.
+
+    Returns
+    -------
+    PairEstimates
+        As :func:`pair_squared_distances` (no translation part).
+    """
+    if select is None:
+        first, second = pair_indices(len(tri))
+    else:
+        f, g = pair_indices(len(select))
+        first, second = select[f], select[g]
+    sig = np.asarray(odometry_sigmas, dtype=float).reshape(-1, 3)
+    pts = np.ascontiguousarray(tri.points_xy).view(np.complex128)[:, 0]
+    e = pts[first] - pts[second]
+    d2 = (e * e.conj()).real
+    ec = e.conj()
+    # d |e|^2 / dz = 2 Re(conj(e) de/dz): the increments move both points, each bearing one
+    g_odo = (ec[:, None, None] * (tri.jacobian_odometry[first]
+                                  - tri.jacobian_odometry[second])).real      # (P, W-1, 3)
+    g_i = (ec[:, None] * tri.jacobian_bearing[first]).real                   # (P, 2)
+    g_j = -(ec[:, None] * tri.jacobian_bearing[second]).real
+    var = 4.0 * (np.einsum("pmc,mc->p", g_odo * g_odo, sig * sig)
+                 + float(bearing_sigma_rad) ** 2 * ((g_i * g_i).sum(1) + (g_j * g_j).sum(1)))
+    full = None
+    if with_jacobian:
+        full = 2.0 * np.concatenate([g_odo.reshape(len(e), -1), g_i, g_j], axis=1)
+    return PairEstimates(first, second, d2, var, None, full)
+
+
 __all__ = ["POINT_MEASUREMENTS", "PAIR_MEASUREMENTS", "RayTriangulation", "PairEstimates",
            "pair_indices", "triangulate_rays", "odometry_covariance", "compose_odometry",
            "point_covariance",
-           "range_jacobians", "range_variances", "gate_points", "pair_squared_distances"]
+           "range_jacobians", "range_variances", "gate_points", "pair_squared_distances",
+           "WindowTriangulation", "triangulate_window", "window_pair_squared_distances"]
