@@ -45,15 +45,18 @@ def test_noise_free_window_gives_exact_points_and_distances(w: int) -> None:
     assert np.all(pe.variance_m4 > 0)
 
 
-def test_best_parallax_pair_is_used() -> None:
+def test_the_passing_pair_furthest_apart_is_used() -> None:
     rng = np.random.default_rng(1)
     odoms, poses, pts, brg = _window_scene(rng, w=6)
     tri, _ = triangulate_window(odoms, brg)
     for k, j in enumerate(tri.column):
         views = np.flatnonzero(np.isfinite(brg[:, j]))
-        best = max(abs(math.sin(brg[b, j] + poses[b, 2] - brg[a, j] - poses[a, 2]))
-                   for a in views for b in views if a < b)
-        assert abs(tri.sin_parallax[k]) == pytest.approx(best, abs=1e-12)
+        assert (tri.pose_first[k], tri.pose_second[k]) == (views[0], views[-1])
+    # a gate refusing that pair refuses the landmark (no fall-back: it would select on noise)
+    far = brg.copy()
+    far[-1, 0] = far[0, 0] - poses[-1, 2] + poses[0, 2]   # parallel rays from poses 0, W-1
+    tri2, n_gated = triangulate_window(odoms, far, min_parallax_rad=math.radians(1.0))
+    assert 0 not in tri2.column and n_gated == 1
 
 
 def _numeric_jacobian(f, z: np.ndarray, eps: float = 1e-6) -> np.ndarray:

@@ -55,7 +55,8 @@ from .distances import (FUSION_RULES, DistanceStore, IdIndex, estimate_weights,
 from .mds import (LaplacianSolver, classical_scaling, landmark_scaling, smacof, stress1,
                   trilaterate)
 from .triangulation import (compose_odometry, gate_points, pair_squared_distances,
-                            range_variances, triangulate_rays)
+                            range_variances, triangulate_rays, triangulate_window,
+                            window_pair_squared_distances)
 
 METHODS = ("cs", "smacof")
 WEIGHTS = ("binary", "inverse-variance")
@@ -131,6 +132,28 @@ class StmdsConfig:
         Robot-landmark distances from the sequential (two-pose) triangulations, fused per
         (pose, landmark) (the paper), or from one triangulation of each landmark over all the
         window's dead-reckoned poses (a longer baseline).
+    tri_window : int or None
+        Windowed triangulation (issue 8), in place of ``baselines``: the steps are cut into
+        windows of ``tri_window`` poses, consecutive windows sharing their end pose (a new
+        window every ``tri_window - 1`` steps). In each window every landmark seen from two of
+        its poses or more is triangulated from its pair of rays with the largest parallax that
+        passes the gates (``min_parallax_rad``, the depth gate), in the frame of the window's
+        first pose, and every pair of landmarks of the window gives one squared distance with
+        its first-order variance over the whole odometry chain and the four bearings
+        (``triangulation.triangulate_window``). ``2`` is the paper's consecutive rule exactly;
+        ``None`` (default) uses ``baselines``. The per-step cost is bounded by the window.
+        Not combined with the relative depth gate nor with the pairwise robot ranges of
+        localisation (use ``robot_ranges="window"``).
+    tri_stride : int or None
+        Steps between windows (``None``: ``tri_window - 1``, windows that share only their end
+        pose). With the default no odometry reading is used twice and the fusion counts every
+        estimate once; the fused variance then matches a Monte Carlo of the estimator (test).
+        A shorter stride makes the windows overlap: every odometry reading (and most bearings)
+        enters ``c = ceil((tri_window - 1) / tri_stride)`` windows, so each estimate's variance
+        is inflated by ``c`` (the same information is not counted ``c`` times; with fully
+        correlated repeats this is exact, with partly correlated ones conservative). The
+        inflation scales all weights of a pair alike, so it changes the fused variance (and
+        inverse-variance SMACOF weights between pairs only through the count), not the mean.
     robot_placement : {"auto", "joint", "trilateration"}
         "joint" (the paper): the robot positions are rows of the extended matrix, reconstructed
         with the landmarks. "trilateration": the landmarks are mapped alone and each window
@@ -164,6 +187,8 @@ class StmdsConfig:
     window: int = 6
     robot_ranges: str = "pairwise"
     robot_placement: str = "auto"
+    tri_window: int | None = None
+    tri_stride: int | None = None
 
     def __post_init__(self) -> None:
         def need(ok: bool, msg: str) -> None:
@@ -198,6 +223,25 @@ class StmdsConfig:
              "robot_placement must be 'auto', 'joint' or 'trilateration'")
         need(self.robot_ranges in ("pairwise", "window"),
              f"robot_ranges must be 'pairwise' or 'window', got {self.robot_ranges!r}")
+        need(self.tri_stride is None or self.tri_window is not None,
+             "tri_stride needs tri_window")
+        if self.tri_window is not None:
+            need(int(self.tri_window) == self.tri_window and self.tri_window >= 2,
+                 f"tri_window must be an integer >= 2 (poses per window), got "
+                 f"{self.tri_window!r}")
+            object.__setattr__(self, "tri_window", int(self.tri_window))
+            need(self.baselines == (1,), "tri_window replaces baselines: leave baselines=(1,)")
+            if self.tri_stride is not None:
+                need(int(self.tri_stride) == self.tri_stride
+                     and 1 <= self.tri_stride <= self.tri_window - 1,
+                     f"tri_stride must be an integer in [1, tri_window - 1], got "
+                     f"{self.tri_stride!r}")
+                object.__setattr__(self, "tri_stride", int(self.tri_stride))
+            need(not math.isfinite(self.max_relative_range_sigma),
+                 "tri_window does not use the relative depth gate: leave "
+                 "max_relative_range_sigma=inf")
+            need(not self.localise or self.robot_ranges == "window",
+                 "with tri_window, localisation needs robot_ranges='window'")
 
     @classmethod
     def improved(cls, **overrides: Any) -> "StmdsConfig":
@@ -430,6 +474,11 @@ class StmdsMapper:
         # the last max(baselines) + 1 steps: (sorted ids, bearings, dense idx, odom, sigma)
         self._history: list[tuple] = []
         self._max_baseline = max(cfg.baselines)
+        # windowed triangulation: the steps of the current window, (ids, bearings, odom, sigma)
+        self._tri_window: list[tuple] = []
+        if cfg.tri_window is not None:
+            self._tri_stride = cfg.tri_stride or cfg.tri_window - 1
+            self._tri_inflation = float(math.ceil((cfg.tri_window - 1) / self._tri_stride))
         self._t = -1
         self._n_gated = 0
         self._triangulated = _GrowingFlags()      # by dense index: ever passed the gates
@@ -461,6 +510,9 @@ class StmdsMapper:
         if self._window is not None:
             self._window.push(step.t, step.odom, None if step.odom is None
                               else step.odometry_sigma(self.header), idx_now, brg)
+        if self.config.tri_window is not None:
+            self._window_step(step, ids, brg)
+            return
         hist = self._history
         if step.odom is None:
             hist.clear()
@@ -473,6 +525,45 @@ class StmdsMapper:
         for k in self.config.baselines:
             if len(hist) > k:
                 self._triangulate(k, hist[-1 - k], ids, brg, idx_now)
+
+    def _window_step(self, step: Step, ids: np.ndarray, brg: np.ndarray) -> None:
+        """Collect the step into the current window; triangulate the window once it is full
+        and start the next one ``tri_stride`` steps later."""
+        buf = self._tri_window
+        if step.odom is None:
+            buf.clear()
+        buf.append((ids, brg, step.odom,
+                    None if step.odom is None else step.odometry_sigma(self.header)))
+        if len(buf) < self.config.tri_window:
+            return
+        self._triangulate_window(buf)
+        del buf[:self._tri_stride]
+
+    def _triangulate_window(self, buf: list[tuple]) -> None:
+        """Windowed triangulation of the buffered steps; fuse the pairs of the window."""
+        all_ids = np.concatenate([b[0] for b in buf])
+        if all_ids.size < 2:
+            return
+        uniq, col = np.unique(all_ids, return_inverse=True)
+        brg = np.full((len(buf), uniq.size), np.nan)
+        row = np.repeat(np.arange(len(buf)), [b[0].size for b in buf])
+        brg[row, col] = np.concatenate([b[1] for b in buf])
+        odoms = np.array([b[2] for b in buf[1:]], float).reshape(-1, 3)
+        sig = np.array([b[3] for b in buf[1:]], float).reshape(-1, 3)
+        tri, n_gated = triangulate_window(odoms, brg, min_parallax_rad=self.config.min_parallax_rad,
+                                          max_range_m=self._max_range)
+        self._n_triangulated += len(tri)
+        self._n_gated += n_gated
+        if len(tri) == 0:
+            return
+        idx = self._ids.lookup(uniq[tri.column], add=False)
+        self._triangulated[idx] = True
+        if len(tri) < 2:
+            return
+        pairs = window_pair_squared_distances(tri, sig, self._bearing_sigma)
+        var = pairs.variance_m4 if self._tri_inflation == 1.0 else \
+            pairs.variance_m4 * self._tri_inflation
+        self._store.add(idx[pairs.first], idx[pairs.second], pairs.squared_distance_m2, var)
 
     def _triangulate(self, k: int, base: tuple, ids: np.ndarray, brg: np.ndarray,
                      idx_now: np.ndarray) -> None:

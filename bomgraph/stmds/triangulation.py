@@ -31,7 +31,7 @@ relative first-order std. dev. of its depth ``sigma_r1 / r1`` is at most
 Windowed triangulation (:func:`triangulate_window`, :func:`window_pair_squared_distances`,
 issue 8). A window holds ``W`` consecutive poses and the ``W - 1`` odometry increments between
 them. Every landmark seen from at least two of its poses is triangulated from the pair of its
-rays with the largest parallax that passes the gates, in the frame of the window's first pose
+rays furthest apart in the window (the longest baseline), if that pair passes the gates, in the frame of the window's first pose
 (dead-reckoned from the increments). Two landmarks triangulated in the same window share the
 odometry chain, so the first-order variance of their squared distance is taken over all
 ``3 (W - 1)`` increments (each with its own independent sigmas) and the four bearings used.
@@ -481,9 +481,12 @@ def triangulate_window(odoms: ArrayLike, bearings_rad: ArrayLike, *,
     Returns
     -------
     WindowTriangulation
-        The landmarks with at least one pair of rays that passes the gates (columns in
-        increasing order); among a landmark's passing pairs, the largest ``|sin(parallax)|``
-        (ties: the earliest pair) is used.
+        The landmarks whose pair of rays furthest apart in the window (largest ``b - a``,
+        ties: the earliest pair; chosen by which poses saw the landmark, not by the measured
+        values) passes the gates, in increasing column order. Choosing by the measured
+        parallax, or falling back to another pair when the gates refuse the first choice,
+        would pick the pairs whose noise widened the angle: depths biased short (measured:
+        Method 2 MPE about 3x worse with the largest measured parallax).
     n_gated : int
         Landmarks seen from two poses or more with no passing pair.
     """
@@ -502,14 +505,15 @@ def triangulate_window(odoms: ArrayLike, bearings_rad: ArrayLike, *,
     ray = heading[:, None] * np.exp(1j * np.where(seen[:, cand], brg[:, cand], 0.0))
     r1, r2, s, _ = _ray_intersections(z[a_all][:, None], z[b_all][:, None], ray[a_all],
                                       ray[b_all])                    # (pairs of poses, n)
-    sin_par = np.abs(s)
-    with np.errstate(invalid="ignore"):
-        ok = seen[a_all][:, cand] & seen[b_all][:, cand]
-        ok &= sin_par >= max(math.sin(min_parallax_rad), 1e-15)
-        ok &= (r1 > 0) & (r2 > 0) & (r1 <= max_range_m) & (r2 <= max_range_m)
-    score = np.where(ok, sin_par, -1.0)
+    both = seen[a_all][:, cand] & seen[b_all][:, cand]
+    # the pair furthest apart by visibility alone (ties: the earliest), then the gates
+    score = np.where(both, (b_all - a_all)[:, None] * float(w)
+                     + np.arange(len(a_all))[::-1, None] / len(a_all), -1.0)
     best = np.argmax(score, axis=0)
-    good = score[best, np.arange(cand.size)] >= 0
+    at = (best, np.arange(cand.size))
+    with np.errstate(invalid="ignore"):
+        good = np.abs(s[at]) >= max(math.sin(min_parallax_rad), 1e-15)
+        good &= (r1[at] > 0) & (r2[at] > 0) & (r1[at] <= max_range_m) & (r2[at] <= max_range_m)
     col = cand[good]
     pick = best[good]
     a, b = a_all[pick], b_all[pick]
