@@ -79,12 +79,10 @@ def _opts_label(options: dict) -> str:
 def bench_sim(runs: int, jobs: int, quick: bool) -> list[dict]:
     specs = paper_design(0)[:runs]
     grid: list[tuple[str, dict]] = [("stmds-smacof", {}), ("stmds-smacof", {"preset": "improved"})]
-    windows = (3, 4, 6) if quick else (2, 3, 4, 5, 6, 8, 10)
-    for w, fusion, mc, weights in itertools.product(
-            windows, ("relative", "scale-free"), (1, 2) if quick else (1, 2, 3),
-            ("binary", "inverse-variance")):
-        grid.append(("stmds-smacof", {"tri_window": w, "fusion": fusion, "min_count": mc,
-                                      "weights": weights}))
+    windows = (4, 6) if quick else (2, 4, 6, 8)
+    for w, stride, fusion in itertools.product(windows, (1, None), ("relative", "scale-free")):
+        grid.append(("stmds-smacof", {"tri_window": w, "tri_stride": stride, "fusion": fusion,
+                                      "min_count": 3, "weights": "inverse-variance"}))
     grid += [("stmds-cs", {}), ("stmds-cs", {"preset": "improved"}),
              ("stmds-cs", {"preset": "window"}), ("stmds-smacof", {"preset": "window"})]
     out = []
@@ -112,9 +110,10 @@ REAL = ("mrclam6-r1", "mrclam6-r2", "mrclam6-r3", "mrclam6-r4", "mrclam6-r5", "g
 def bench_real(jobs: int, quick: bool, gtsam: bool) -> list[dict]:
     grid: list[tuple[str, dict]] = [("stmds-smacof", {}), ("stmds-smacof", {"min_count": 1}),
                                     ("stmds-smacof", {"preset": "improved", "min_count": 1})]
-    windows = (6, 10, 16) if quick else (4, 6, 8, 10, 12, 16, 20)
-    for w, mc, par in itertools.product(windows, (1, 2), (1.0, 3.0)):
-        grid.append(("stmds-smacof", {"tri_window": w, "fusion": "relative", "min_count": mc,
+    windows = (6, 16) if quick else (6, 10, 16, 24)
+    for w, stride, par in itertools.product(windows, (1, None), (1.0, 5.0)):
+        grid.append(("stmds-smacof", {"tri_window": w, "tri_stride": stride,
+                                      "fusion": "scale-free", "min_count": 1,
                                       "min_parallax_rad": round(math.radians(par), 6),
                                       "weights": "inverse-variance"}))
     grid += [("stmds-cs", {"preset": "real"}), ("stmds-smacof", {"preset": "real"}),

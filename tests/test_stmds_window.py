@@ -135,3 +135,104 @@ def test_window_of_two_is_the_sequential_rule() -> None:
                                rtol=1e-12, atol=0)
     np.testing.assert_allclose(pe_win.variance_m4, pe_seq.variance_m4, rtol=1e-12, atol=0)
     np.testing.assert_allclose(pe_win.jacobian, pe_seq.jacobian, rtol=1e-12, atol=1e-15)
+
+
+def _fused_distance_monte_carlo(stride: int, n_mc: int = 1500):
+    """A fixed geometry: 17 poses along an arc, 3 landmarks seen from every pose; windows of
+    5 poses every ``stride`` steps, fused with the "relative" rule (the mapper's inflation for
+    overlapping windows). Returns the MC spread of the fused distances and their reported
+    first-order variances, shape (3,) each."""
+    from bomgraph.stmds.distances import DistanceStore
+
+    w, n_steps = 5, 16
+    odom = np.tile([0.15, 0.0, 0.06], (n_steps, 1))
+    poses = dead_reckon(odom)
+    pts = np.array([[0.9, 0.8], [1.4, 0.5], [0.7, 1.3]])
+    brg = np.stack([bearings_to(p, pts) for p in poses])
+    sig_odo = np.array([0.002, 0.001, 0.002])      # small: the first-order regime
+    sig_b = math.radians(0.15)
+    inflation = max(1, math.ceil((w - 1) / stride))
+    starts = range(0, n_steps - (w - 1), stride)
+    rng = np.random.default_rng(7)
+    fused, reported = [], []
+    for _ in range(n_mc):
+        u = odom + rng.normal(0.0, 1.0, odom.shape) * sig_odo
+        b = brg + rng.normal(0.0, sig_b, brg.shape)
+        store = DistanceStore("relative", 1)
+        for s0 in starts:
+            tri, _ = triangulate_window(u[s0:s0 + w - 1], b[s0:s0 + w])
+            pe = window_pair_squared_distances(tri, np.tile(sig_odo, (w - 1, 1)), sig_b)
+            store.add(pe.first, pe.second, pe.squared_distance_m2, pe.variance_m4 * inflation)
+        d, v = store.fused()
+        fused.append(d)
+        reported.append(v)
+    return np.var(np.array(fused), axis=0), np.mean(np.array(reported), axis=0)
+
+
+def test_fused_variance_of_disjoint_windows_matches_monte_carlo() -> None:
+    mc_var, first_order = _fused_distance_monte_carlo(stride=5)
+    np.testing.assert_allclose(first_order, mc_var, rtol=0.10)
+
+
+def test_windows_sharing_their_end_pose_give_a_conservative_variance() -> None:
+    # the shared bearings enter consecutive parallaxes with opposite signs
+    mc_var, first_order = _fused_distance_monte_carlo(stride=4, n_mc=600)
+    ratio = first_order / mc_var
+    assert np.all(ratio > 0.9) and np.all(ratio < 2.0), ratio
+
+
+def test_overlap_inflation_keeps_the_fused_variance_honest() -> None:
+    # windows every step share most of their measurements; without the inflation (x4 here)
+    # the fused variance would be too small by up to 4x; with it, it is conservative
+    # (measured 1.5-2.4x the actual spread on this geometry: the repeats are not fully
+    # correlated)
+    mc_var, first_order = _fused_distance_monte_carlo(stride=1, n_mc=600)
+    ratio = first_order / mc_var
+    assert np.all(ratio > 0.9) and np.all(ratio < 3.0), ratio
+
+
+# ------------------------------------------------------------------------------- the mapper
+from bomgraph.errors import ConfigError  # noqa: E402
+from bomgraph.evaluate import score_estimate  # noqa: E402
+from bomgraph.mapper import create_mapper, run  # noqa: E402
+from bomgraph.sim import SimConfig, simulate  # noqa: E402
+from bomgraph.stmds.mapper import StmdsConfig  # noqa: E402
+
+
+def test_mapper_with_window_two_equals_the_paper_rule() -> None:
+    s = simulate(SimConfig(n_landmarks=25, n_steps=100), np.random.default_rng(6))
+    paper = create_mapper("stmds-smacof", s.header)
+    win = create_mapper("stmds-smacof", s.header, tri_window=2)
+    est_p, est_w = run(paper, s.steps).final, run(win, s.steps).final
+    dp, vp = paper._store.fused()
+    dw, vw = win._store.fused()
+    assert len(dp) == len(dw) > 100
+    np.testing.assert_allclose(dw, dp, rtol=1e-12, atol=0)
+    np.testing.assert_allclose(vw, vp, rtol=1e-12, atol=0)
+    np.testing.assert_array_equal(est_w.landmark_ids, est_p.landmark_ids)
+    np.testing.assert_allclose(est_w.landmarks_xy, est_p.landmarks_xy, atol=1e-9)
+
+
+@pytest.mark.parametrize("options", [{"tri_window": 3}, {"tri_window": 7, "tri_stride": 7},
+                                     {"preset": "window"}, {"preset": "real"}])
+@pytest.mark.parametrize("name", ["stmds-cs", "stmds-smacof", "stmds-smacof-loc"])
+def test_noise_free_windowed_maps_are_exact(name: str, options: dict) -> None:
+    s = simulate(SimConfig(noise_scale=0.0, n_landmarks=20, n_steps=70, sensor_range_m=5.0),
+                 np.random.default_rng(3))
+    est = run(create_mapper(name, s.header, smacof_from_t=20, **options), s.steps).final
+    score = score_estimate(est, s.truth)
+    assert score.n_common == 20 and score.mpe_m < 1e-9
+
+
+def test_window_options_are_validated_and_presets_named() -> None:
+    header = simulate(SimConfig(n_steps=3), np.random.default_rng(0)).header
+    m = create_mapper("stmds-smacof", header, preset="real", min_count=2)
+    assert m.config.tri_window == 16 and m.config.tri_stride == 1 and m.config.min_count == 2
+    assert create_mapper("stmds-smacof-loc", header, preset="window").config.robot_ranges \
+        == "window"
+    for bad in ({"tri_window": 1}, {"tri_window": 2.5}, {"tri_stride": 2},
+                {"tri_window": 4, "tri_stride": 5}, {"tri_window": 4, "baselines": (4,)},
+                {"tri_window": 4, "max_relative_range_sigma": 0.5},
+                {"tri_window": 4, "localise": True}):
+        with pytest.raises(ConfigError):
+            StmdsConfig(**bad)
