@@ -29,6 +29,7 @@ from typing import Any, Sequence
 
 import gtsam
 import numpy as np
+from scipy import sparse
 
 from bomgraph.angles import angle_residual, wrap_angle
 from bomgraph.errors import BomgraphError, ConfigError
@@ -39,7 +40,8 @@ from bomgraph.stream import Step, StreamHeader
 from bomgraph.triangulate import intersect_rays, ray_normals
 
 from .factor_graph import (BatchMapper, FactorGraphConfig, _config, _estimate_from_values,
-                           insert_pose, landmark_key, landmarks_from_values, solve_lm)
+                           insert_pose, landmark_key, landmarks_from_values, poses_from_values,
+                           solve_lm)
 
 
 @dataclass(frozen=True)
@@ -68,9 +70,10 @@ class HybridConfig:
         Huber threshold (whitened) of the resection's bearing residuals.
     warm_start : bool
         Also run LM from the previous solution and keep the lower cost.
-    seed_huber : bool
-        Run the Huber pass (``FactorGraphConfig.huber_k``) from the seeded start too (the
-        warm start always gets it); the seed is usually close enough to skip it.
+    seed_huber, warm_huber : bool
+        Run the Huber pass (``FactorGraphConfig.huber_k``) before the plain one from the
+        seeded start / from the warm start. With two starts to choose from, neither needed it
+        on the paper setup; ``gtsam-batch`` (one start) does.
     """
 
     seed_method: str = "stmds-smacof"
@@ -78,10 +81,11 @@ class HybridConfig:
     align_trim: float = 3.0
     map_sigma_m: float = 0.03
     prior_sigma: tuple[float, float, float] = (0.02, 0.02, math.radians(2.0))
-    n_headings: int = 72
+    n_headings: int = 36
     resection_huber_k: float = 2.0
     warm_start: bool = True
     seed_huber: bool = False
+    warm_huber: bool = False
 
     def __post_init__(self) -> None:
         def need(ok: bool, msg: str) -> None:
@@ -103,99 +107,194 @@ class HybridConfig:
 # Resection
 # --------------------------------------------------------------------------------------------
 
-def _bearing_residuals(pose: np.ndarray, landmarks_xy: np.ndarray,
-                       bearings_rad: np.ndarray) -> np.ndarray:
-    d = landmarks_xy - pose[:2]
-    return angle_residual(np.arctan2(d[:, 1], d[:, 0]) - pose[2], bearings_rad)
-
-
 def resection_jacobian(pose: np.ndarray, landmarks_xy: np.ndarray) -> np.ndarray:
-    """Jacobian ``(k, 3)`` of the predicted bearings ``atan2(l - p) - psi`` w.r.t. the pose."""
-    d = landmarks_xy - pose[:2]
-    r2 = np.maximum((d * d).sum(1), 1e-18)
+    """Jacobian ``(k, 3)`` of the predicted bearings ``atan2(l - p) - psi`` w.r.t. the pose
+    ``[x, y, psi]`` (``pose`` of shape (3,) or one pose per landmark, (k, 3))."""
+    d = np.asarray(landmarks_xy, dtype=float) - np.asarray(pose, dtype=float)[..., :2]
+    r2 = np.maximum((d * d).sum(-1), 1e-18)
     return np.column_stack([d[:, 1] / r2, -d[:, 0] / r2, -np.ones(len(d))])
 
 
-def resect_pose(landmarks_xy: np.ndarray, bearings_rad: np.ndarray,
-                sigma_rad: np.ndarray | float, prior_pose: np.ndarray,
-                prior_sigma: np.ndarray, *, n_headings: int = 72, huber_k: float = 2.0,
-                iterations: int = 15) -> tuple[np.ndarray, float]:
-    """The robot pose that best explains bearings to known landmarks, with a pose prior.
+def _group_sum(owner: np.ndarray, values: np.ndarray, n: int) -> np.ndarray:
+    """Sum ``values`` (J, ...) over rows with the same ``owner`` (J,), shape (n, ...)."""
+    if len(owner) == 0:
+        return np.zeros((n, *values.shape[1:]))
+    m = sparse.csr_matrix((np.ones(len(owner)), (owner, np.arange(len(owner)))),
+                          shape=(n, len(owner)))
+    return np.asarray(m @ values.reshape(len(owner), -1)).reshape(n, *values.shape[1:])
 
-    Minimises ``sum_k rho(r_k / sigma_k) + |(pose - prior) / prior_sigma|^2`` (``r_k`` the
-    wrapped bearing residual, ``rho`` Huber): every heading of a grid gets its best position
-    in closed form (the weighted least-squares intersection of the lines through the
-    landmarks), the best grid point is polished by Gauss-Newton (IRLS for the Huber weights).
+
+def _huber_rho(r: np.ndarray, k: float) -> np.ndarray:
+    a = np.abs(r)
+    return np.where(a <= k, 0.5 * r * r, k * (a - 0.5 * k))
+
+
+def resect_poses(owner: np.ndarray, landmarks_xy: np.ndarray, bearings_rad: np.ndarray,
+                 sigma_rad: np.ndarray, n_poses: int, *,
+                 prior_poses: np.ndarray | None = None,
+                 prior_sigma: np.ndarray | None = None,
+                 initial_poses: np.ndarray | None = None, n_headings: int = 72,
+                 huber_k: float = 2.0, iterations: int = 10
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Robot poses that best explain bearings to known landmarks, all poses at once.
+
+    For each pose minimises ``sum_j 2 rho(r_j / sigma_j) + |(pose - prior) / prior_sigma|^2``
+    (``r_j`` the wrapped bearing residual, ``rho`` Huber): every heading of a grid gets its
+    best position in closed form (the least-squares intersection of the lines through the
+    landmarks along the bearings), the best grid point is polished by Gauss-Newton with
+    Huber (IRLS) weights, accepting only steps that lower the objective.
 
     Parameters
     ----------
-    landmarks_xy : array of shape (k, 2)
-        Known landmark positions (k may be 0: the prior is returned).
-    bearings_rad : array of shape (k,)
-        Bearings to them, relative to the robot heading.
-    sigma_rad : float or array of shape (k,)
-    prior_pose : array of shape (3,)
-    prior_sigma : array of shape (3,)
-        Std. dev. of the prior (metres, metres, radians), > 0.
+    owner : int array of shape (J,)
+        Which pose (0 .. n_poses-1) took each bearing.
+    landmarks_xy : array of shape (J, 2)
+        Known position of the landmark of each bearing.
+    bearings_rad, sigma_rad : arrays of shape (J,)
+        Bearings relative to the robot heading and their std. dev.
+    n_poses : int
+    prior_poses : array of shape (n_poses, 3), optional
+        A prior per pose (NaN rows: none).
+    prior_sigma : array of shape (n_poses, 3) or (3,), optional
+        Std. dev. of the priors (metres, metres, radians).
+    initial_poses : array of shape (n_poses, 3), optional
+        Starting points for Gauss-Newton; the heading grid is searched only for the rows that
+        have none (NaN).
     n_headings, huber_k, iterations : grid size, Huber threshold, Gauss-Newton iterations.
 
     Returns
     -------
-    pose : ndarray of shape (3,)
-    cost : float
-        Final value of the objective (the whitened chi^2 with Huber).
+    poses : ndarray of shape (n_poses, 3)
+        NaN where undetermined: fewer than 2 bearings without a prior.
+    cost : ndarray of shape (n_poses,)
+        The objective at the result (NaN where undetermined).
+    n_bearings : ndarray of shape (n_poses,)
     """
+    own = np.asarray(owner, dtype=np.int64).reshape(-1)
     lm = np.asarray(landmarks_xy, dtype=float).reshape(-1, 2)
     b = np.asarray(bearings_rad, dtype=float).reshape(-1)
-    prior = np.asarray(prior_pose, dtype=float).reshape(3)
-    ps = np.asarray(prior_sigma, dtype=float).reshape(3)
-    if len(lm) != len(b):
-        raise ConfigError(f"resect_pose: {len(lm)} landmarks but {len(b)} bearings")
-    if len(lm) == 0:
-        return prior.copy(), 0.0
     sig = np.broadcast_to(np.asarray(sigma_rad, dtype=float), b.shape)
+    if not (len(own) == len(lm) == len(b)):
+        raise ConfigError(f"resect_poses: {len(own)} owners, {len(lm)} landmarks, "
+                          f"{len(b)} bearings")
+    if own.size and (own.min() < 0 or own.max() >= n_poses):
+        raise ConfigError("resect_poses: owner indices must lie in 0 .. n_poses-1")
+    prior = (np.full((n_poses, 3), np.nan) if prior_poses is None
+             else np.asarray(prior_poses, dtype=float).reshape(n_poses, 3))
+    has_prior = np.all(np.isfinite(prior), axis=1)
+    ps = np.broadcast_to(np.asarray(1.0 if prior_sigma is None else prior_sigma, dtype=float),
+                         (n_poses, 3))
+    info = np.where(has_prior[:, None], 1.0 / ps ** 2, 0.0)            # (T, 3)
+    prior0 = np.where(has_prior[:, None], prior, 0.0)
+    n_b = np.bincount(own, minlength=n_poses)
+    valid = (n_b >= 2) | has_prior
 
-    def costs(poses: np.ndarray) -> np.ndarray:
-        """Objective for poses (m, 3), vectorised."""
-        d = lm[None, :, :] - poses[:, None, :2]
-        r = angle_residual(np.arctan2(d[..., 1], d[..., 0]) - poses[:, 2:3], b) / sig
-        a = np.abs(r)
-        rho = np.where(a <= huber_k, 0.5 * r * r, huber_k * (a - 0.5 * huber_k))
-        e = np.column_stack([poses[:, :2] - prior[:2],
-                             angle_residual(poses[:, 2], prior[2])]) / ps
-        return 2 * rho.sum(1) + (e * e).sum(1)
+    def objective(rows: np.ndarray, cands: np.ndarray) -> np.ndarray:
+        """The objective of candidates ``(R, H, 3)`` for poses ``rows`` (sorted), ``(R, H)``."""
+        mask = np.zeros(n_poses, bool)
+        mask[rows] = True
+        sel = mask[own]
+        o = np.searchsorted(rows, own[sel])
+        c = cands[o]
+        d = lm[sel][:, None, :] - c[..., :2]                            # (J', H, 2)
+        r = angle_residual(np.arctan2(d[..., 1], d[..., 0]) - c[..., 2],
+                           b[sel][:, None]) / sig[sel][:, None]
+        e = cands - prior0[rows][:, None, :]
+        e[..., 2] = angle_residual(cands[..., 2], prior0[rows][:, None, 2])
+        return (2 * _group_sum(o, _huber_rho(r, huber_k), len(rows))
+                + (e * e * info[rows][:, None, :]).sum(-1))
 
-    # grid over the heading: closed-form position for each
-    psi = prior[2] + np.linspace(-np.pi, np.pi, n_headings, endpoint=False)
-    rng = np.maximum(np.hypot(*(lm - prior[:2]).T), 1e-3)
-    w = 1.0 / (sig * rng) ** 2                                   # (k,)
-    n = ray_normals(psi[:, None] + b[None, :])                    # (H, k, 2, 2)
-    a = np.einsum("k,hkij->hij", w, n) + np.diag(1.0 / ps[:2] ** 2)
-    rhs = np.einsum("k,hkij,kj->hi", w, n, lm) + prior[:2] / ps[:2] ** 2
-    xy = np.linalg.solve(a, rhs[..., None])[..., 0]
-    cands = np.column_stack([xy, wrap_angle(psi)])
-    grid_costs = costs(cands)
-    pose = cands[int(np.argmin(grid_costs))].copy()
-    best = float(grid_costs.min())
-    # Gauss-Newton / IRLS polish
+    poses = np.zeros((n_poses, 3))
+    cost = np.full(n_poses, np.inf)
+    start = (np.full((n_poses, 3), np.nan) if initial_poses is None
+             else np.asarray(initial_poses, dtype=float).reshape(n_poses, 3))
+    given = np.all(np.isfinite(start), axis=1) & valid
+    if given.any():
+        poses[given] = start[given]
+        rows = np.flatnonzero(given)
+        cost[rows] = objective(rows, poses[rows, None, :])[:, 0]
+    grid = valid & ~given
+    if grid.any():
+        # grid over the heading: the best position for each in closed form
+        rows = np.flatnonzero(grid)
+        sel = grid[own]
+        g_own = np.searchsorted(rows, own[sel])
+        offsets = np.linspace(-np.pi, np.pi, n_headings, endpoint=False)
+        psi = prior0[rows, 2:3] + offsets[None, :]                       # (G, H)
+        n = ray_normals(psi[g_own] + b[sel][:, None])                    # (J', H, 2, 2)
+        w = 1.0 / sig[sel] ** 2
+        a = _group_sum(g_own, w[:, None, None, None] * n, len(rows))     # (G, H, 2, 2)
+        rhs = _group_sum(g_own, np.einsum("j,jhab,jb->jha", w, n, lm[sel]), len(rows))
+        a[..., 0, 0] += info[rows, None, 0]
+        a[..., 1, 1] += info[rows, None, 1]
+        rhs += (info[rows, :2] * prior0[rows, :2])[:, None, :]
+        det = a[..., 0, 0] * a[..., 1, 1] - a[..., 0, 1] * a[..., 1, 0]
+        ok = det > 1e-12 * np.maximum(a[..., 0, 0] + a[..., 1, 1], 1e-300) ** 2
+        safe = np.where(ok, det, 1.0)
+        xy = np.stack([(a[..., 1, 1] * rhs[..., 0] - a[..., 0, 1] * rhs[..., 1]) / safe,
+                       (a[..., 0, 0] * rhs[..., 1] - a[..., 1, 0] * rhs[..., 0]) / safe], -1)
+        cands = np.concatenate([xy, wrap_angle(psi)[..., None]], -1)    # (G, H, 3)
+        grid_cost = np.where(ok, objective(rows, cands), np.inf)
+        best = np.argmin(grid_cost, axis=1)
+        poses[rows] = cands[np.arange(len(rows)), best]
+        cost[rows] = grid_cost[np.arange(len(rows)), best]
+    valid &= np.isfinite(cost)
+    poses[~valid] = 0.0
+    # Gauss-Newton with IRLS weights, per pose, accepting only improving steps
+    active = valid.copy()
     for _ in range(iterations):
-        r = _bearing_residuals(pose, lm, b) / sig
+        idx = np.flatnonzero(active)
+        if idx.size == 0:
+            break
+        sel = active[own]
+        o, l_, b_, s_ = np.searchsorted(idx, own[sel]), lm[sel], b[sel], sig[sel]
+        p = poses[idx]
+        d = l_ - p[o, :2]
+        r = angle_residual(np.arctan2(d[:, 1], d[:, 0]) - p[o, 2], b_) / s_
         wr = np.where(np.abs(r) <= huber_k, 1.0, huber_k / np.maximum(np.abs(r), 1e-300))
-        j = resection_jacobian(pose, lm) / sig[:, None]
-        e = np.array([pose[0] - prior[0], pose[1] - prior[1],
-                      float(angle_residual(pose[2], prior[2]))]) / ps
-        h = j.T @ (wr[:, None] * j) + np.diag(1.0 / ps ** 2)
-        g = j.T @ (wr * r) + e / ps
-        step = -np.linalg.solve(h, g)
-        trial = pose + step
-        trial[2] = wrap_angle(trial[2])
-        c = float(costs(trial[None])[0])
-        if c > best:
+        jac = resection_jacobian(p[o], l_) / s_[:, None]
+        h = _group_sum(o, wr[:, None, None] * jac[:, :, None] * jac[:, None, :], len(idx))
+        g = _group_sum(o, (wr * r)[:, None] * jac, len(idx))
+        e = np.column_stack([p[:, :2] - prior0[idx, :2],
+                             angle_residual(p[:, 2], prior0[idx, 2])])
+        h[:, [0, 1, 2], [0, 1, 2]] += info[idx]
+        g += info[idx] * e
+        try:
+            step = -np.linalg.solve(h, g[..., None])[..., 0]
+        except np.linalg.LinAlgError:
             break
-        pose, gain, best = trial, best - c, c
-        if np.max(np.abs(step)) < 1e-10 or gain < 1e-10 * max(best, 1.0):
-            break
-    return pose, best
+        trial = p + step
+        trial[:, 2] = wrap_angle(trial[:, 2])
+        new_cost = objective(idx, trial[:, None, :])[:, 0]
+        better = new_cost < cost[idx]
+        gain = np.where(better, cost[idx] - new_cost, 0.0)
+        poses[idx[better]] = trial[better]
+        cost[idx[better]] = new_cost[better]
+        still = better & (np.max(np.abs(step), axis=1) >= 1e-10) \
+            & (gain > 1e-10 * np.maximum(cost[idx], 1.0))
+        active[idx[~still]] = False
+    poses[~valid] = np.nan
+    cost = np.where(valid, cost, np.nan)
+    return poses, cost, n_b
+
+
+def resect_pose(landmarks_xy: np.ndarray, bearings_rad: np.ndarray,
+                sigma_rad: np.ndarray | float, prior_pose: np.ndarray | None = None,
+                prior_sigma: np.ndarray | None = None, *, n_headings: int = 72,
+                huber_k: float = 2.0, iterations: int = 15) -> tuple[np.ndarray, float]:
+    """One pose by :func:`resect_poses`: returns ``(pose (3,), cost)``; NaN if undetermined.
+
+    ``landmarks_xy`` (k, 2), ``bearings_rad`` (k,), ``sigma_rad`` scalar or (k,),
+    ``prior_pose`` (3,) and ``prior_sigma`` (3,) optional.
+    """
+    lm = np.asarray(landmarks_xy, dtype=float).reshape(-1, 2)
+    poses, cost, _ = resect_poses(
+        np.zeros(len(lm), np.int64), lm, np.asarray(bearings_rad, dtype=float).reshape(-1),
+        np.broadcast_to(np.asarray(sigma_rad, dtype=float), (len(lm),)), 1,
+        prior_poses=None if prior_pose is None else np.asarray(prior_pose, float)[None],
+        prior_sigma=None if prior_sigma is None else np.asarray(prior_sigma, float)[None],
+        n_headings=n_headings, huber_k=huber_k, iterations=iterations)
+    return poses[0], float(cost[0])
 
 
 # --------------------------------------------------------------------------------------------
@@ -213,6 +312,12 @@ def trimmed_align(source_xy: np.ndarray, target_xy: np.ndarray, trim: float = 3.
     if 3 <= keep.sum() < len(keep):
         al = align(source_xy[keep], target_xy[keep], allow_reflection=True)
     return al
+
+
+def _inverse_increment(odom: np.ndarray) -> np.ndarray:
+    """The increment ``v`` with ``compose(compose(p, odom), v) = p``, shape (3,)."""
+    c, s = math.cos(float(odom[2])), math.sin(float(odom[2]))
+    return np.array([-c * odom[0] - s * odom[1], s * odom[0] - c * odom[1], -odom[2]])
 
 
 def _rigid_to(pose_from: np.ndarray, pose_to: np.ndarray
@@ -284,20 +389,20 @@ class HybridMapper(BatchMapper):
         odoms = np.array([o for o in self.problem.odoms[1:]]).reshape(-1, 3)
         return dead_reckon(odoms, self.problem.start_pose)
 
-    def _reference(self, seed_ids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Landmarks in the odometry frame to align the seed onto: the previous solution's,
-        else triangulated on the dead-reckoned early trajectory."""
+    def _reference(self, seed_ids: np.ndarray) -> tuple[np.ndarray, np.ndarray, bool]:
+        """Landmarks in the odometry frame to align the seed onto: the previous solution's
+        (then True), else triangulated on the dead-reckoned early trajectory."""
         if self._have_solution and self.problem.landmark_ids:
             ids = np.array(sorted(self.problem.landmark_ids), dtype=np.int64)
             common = np.intersect1d(ids, seed_ids)
             if common.size >= 3:
-                return common, landmarks_from_values(self.values, common)
+                return common, landmarks_from_values(self.values, common), True
         poses = self._dead_reckoned()
         for upto in (min(self.hybrid.align_steps, len(poses)), len(poses)):
             ids_out, xy_out = self._triangulate(poses[:upto], upto, seed_ids)
             if ids_out.size >= 3:
-                return ids_out, xy_out
-        return np.zeros(0, np.int64), np.zeros((0, 2))
+                return ids_out, xy_out, False
+        return np.zeros(0, np.int64), np.zeros((0, 2)), False
 
     def _triangulate(self, poses: np.ndarray, upto: int, only: np.ndarray
                      ) -> tuple[np.ndarray, np.ndarray]:
@@ -317,34 +422,60 @@ class HybridMapper(BatchMapper):
                 out_xy.append(xy)
         return np.array(out_ids, dtype=np.int64), np.array(out_xy).reshape(-1, 2)
 
-    def _resect_all(self, map_ids: np.ndarray, map_xy: np.ndarray) -> np.ndarray:
-        """Every pose by resection against the map, chained with the odometry prior."""
+    def _resect_all(self, map_ids: np.ndarray, map_xy: np.ndarray,
+                    start: np.ndarray | None = None) -> np.ndarray | None:
+        """Every pose by resection against the map, shape (T, 3), or None if none resects.
+
+        Pass 1 resects each pose with at least 3 mapped bearings on its own (from ``start``
+        (T, 3) if given; a pose whose fit is then poor, more than 9 per bearing, is redone
+        from the heading grid); pass 2 again with the odometry prediction from the pass-1
+        pose before it as a prior, bearings weighted by the map error at their range. Poses
+        left undetermined are chained from their neighbours by the odometry.
+        """
         cfg = self.hybrid
-        slot = {int(i): k for k, i in enumerate(map_ids)}
-        poses = np.empty((self.problem.n_steps, 3))
-        prev = None
+        n_t = self.problem.n_steps
+        owner = np.concatenate([np.full(len(i), t, np.int64)
+                                for t, i in enumerate(self._steps_ids)])
+        ids = np.concatenate(self._steps_ids)
+        brg = np.concatenate(self._steps_brg)
+        order = np.argsort(map_ids)
+        pos = np.clip(np.searchsorted(map_ids[order], ids), 0, len(map_ids) - 1)
+        have = map_ids[order][pos] == ids
+        own, lm, b = owner[have], map_xy[order][pos[have]], brg[have]
         sig_b = float(self.header.bearing_sigma_rad)
-        for t in range(self.problem.n_steps):
-            if t == 0:
-                pred = self.problem.start_pose
-                psig = np.asarray(cfg.prior_sigma)
-            else:
-                pred = compose(prev, self.problem.odoms[t])
-                psig = np.sqrt(np.asarray(cfg.prior_sigma) ** 2 + self._odom_sigma[t] ** 2)
-            ids = self._steps_ids[t]
-            k = np.array([slot.get(int(i), -1) for i in ids], dtype=np.int64)
-            have = k >= 0
-            if have.sum() >= 2:
-                lm = map_xy[k[have]]
-                rng = np.maximum(np.hypot(*(lm - pred[:2]).T), 0.05)
-                sig = np.sqrt(sig_b ** 2 + (cfg.map_sigma_m / rng) ** 2)
-                pose, _ = resect_pose(lm, self._steps_brg[t][have], sig, pred, psig,
-                                      n_headings=cfg.n_headings,
-                                      huber_k=cfg.resection_huber_k)
-            else:
-                pose = pred
-            poses[t] = pose
-            prev = pose
+        kw = dict(n_headings=cfg.n_headings, huber_k=cfg.resection_huber_k)
+        p1, c1, n_b = resect_poses(own, lm, b, np.full(len(b), sig_b), n_t,
+                                   initial_poses=start, **kw)
+        if start is not None:
+            poor = np.isfinite(c1) & (c1 > 9.0 * np.maximum(n_b, 1))
+            if poor.any():
+                q, _, _ = resect_poses(own, lm, b, np.full(len(b), sig_b), n_t,
+                                       initial_poses=np.where(poor[:, None], np.nan, p1), **kw)
+                p1[poor] = q[poor]
+        ok1 = (n_b >= 3) & np.all(np.isfinite(p1), axis=1)
+        prior = np.full((n_t, 3), np.nan)
+        odoms = np.array([np.zeros(3) if o is None else o for o in self.problem.odoms])
+        sigmas = np.array(self._odom_sigma)
+        prev_ok = np.flatnonzero(ok1[:-1]) + 1
+        prior[prev_ok] = compose(p1[prev_ok - 1], odoms[prev_ok])
+        prior_sigma = np.sqrt(np.asarray(cfg.prior_sigma) ** 2 + sigmas ** 2)
+        ref = np.where(ok1[:, None], p1, prior)[own, :2]
+        rng = np.hypot(*(lm - ref).T)
+        sig = np.where(np.isfinite(rng),
+                       np.sqrt(sig_b ** 2 + (cfg.map_sigma_m / np.maximum(rng, 0.05)) ** 2),
+                       2 * sig_b)
+        poses, _, _ = resect_poses(own, lm, b, sig, n_t, prior_poses=prior,
+                                   prior_sigma=prior_sigma,
+                                   initial_poses=np.where(ok1[:, None], p1, np.nan), **kw)
+        ok = np.all(np.isfinite(poses), axis=1) & ((n_b >= 3) | np.isfinite(prior[:, 0]))
+        if not ok.any():
+            return None
+        first = int(np.argmax(ok))
+        for t in range(first - 1, -1, -1):          # before the first: odometry backwards
+            poses[t] = compose(poses[t + 1], _inverse_increment(odoms[t + 1]))
+        for t in range(first + 1, n_t):             # gaps: odometry forwards
+            if not ok[t]:
+                poses[t] = compose(poses[t - 1], odoms[t])
         return poses
 
     def _seed(self) -> tuple[gtsam.Values | None, dict[str, Any]]:
@@ -355,13 +486,19 @@ class HybridMapper(BatchMapper):
             return None, {"seed": f"seed mapper failed: {exc}"}
         if len(seed) < 3:
             return None, {"seed": f"seed map has {len(seed)} landmarks (< 3)"}
-        ref_ids, ref_xy = self._reference(seed.landmark_ids)
+        ref_ids, ref_xy, in_solution_frame = self._reference(seed.landmark_ids)
         if ref_ids.size < 3:
             return None, {"seed": "fewer than 3 landmarks to align the seed map on"}
         _, i_seed, i_ref = np.intersect1d(seed.landmark_ids, ref_ids, return_indices=True)
         al = trimmed_align(seed.landmarks_xy[i_seed], ref_xy[i_ref], self.hybrid.align_trim)
         map_xy = al.apply(seed.landmarks_xy)
-        poses = self._resect_all(seed.landmark_ids, map_xy)
+        # in the previous solution's frame its poses (and the odometry predictions of the
+        # new ones) start the resection; otherwise a grid over the heading does
+        start = (poses_from_values(self.values, np.arange(self.problem.n_steps))
+                 if in_solution_frame else None)
+        poses = self._resect_all(seed.landmark_ids, map_xy, start)
+        if poses is None:
+            return None, {"seed": "no pose sees 3 landmarks of the seed map"}
         # the first pose defines the frame: move the whole start rigidly onto it
         r, c, ang = _rigid_to(poses[0], self.problem.start_pose)
         poses = np.column_stack([poses[:, :2] @ r.T + c, wrap_angle(poses[:, 2] + ang)])
@@ -403,9 +540,9 @@ class HybridMapper(BatchMapper):
                 if not warm.exists(landmark_key(lid)):
                     warm.insert(landmark_key(lid), self.values.atPoint2(landmark_key(lid)))
             starts.append(("warm", warm))
+        huber = {"seed": self.hybrid.seed_huber, "warm": self.hybrid.warm_huber}
         solved = [(name, *solve_lm(self.graph, start, self.config,
-                                   None if name == "seed" and not self.hybrid.seed_huber
-                                   else self.robust_graph))
+                                   self.robust_graph if huber[name] else None))
                   for name, start in starts]
         name, values, report = min(solved, key=lambda s: s[2].final_error)
         self.values = values
