@@ -798,6 +798,11 @@ class Isam2Mapper:
     just entered go back to the pending buffer (they retry with their next bearing); external
     factors of that update are dropped. Each event is counted in ``info``.
 
+    iSAM2 never iterates to convergence; ``info["converged"]`` says whether a Gauss-Newton
+    step on the whole graph at the current estimate would lower the error by less than
+    ``decrease_tol`` (computed at each ``estimate()``; ``checkpoint_updates`` extra updates
+    run before it).
+
     Parameters
     ----------
     header : StreamHeader
