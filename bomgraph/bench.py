@@ -274,6 +274,8 @@ def real_experiments(data_dir: str | os.PathLike[str],
     bearing-only g2o set (``data_dir`` is the shared data folder)."""
     root = Path(data_dir)
     arms = tuple(Arm(m, m) for m in methods)
+    if "stmds-smacof" in methods:  # the windowed variant made for recordings (issue 8)
+        arms += (Arm("stmds-smacof (real)", "stmds-smacof", {"preset": "real"}),)
     exps = {}
     if (root / "mrclam6").is_dir():
         exps["mrclam6"] = Experiment(
