@@ -56,11 +56,12 @@ from .mds import (LaplacianSolver, classical_scaling, landmark_scaling, smacof, 
                   trilaterate)
 from .triangulation import (compose_odometry, gate_points, pair_squared_distances,
                             range_variances, triangulate_rays, triangulate_window,
-                            window_pair_squared_distances)
+                            triangulate_window_lsq, window_pair_squared_distances)
 
 METHODS = ("cs", "smacof")
 WEIGHTS = ("binary", "inverse-variance")
 INITS = ("best", "previous", "classical")
+TRI_METHODS = ("pair", "lsq")
 
 
 @dataclass(frozen=True)
@@ -158,6 +159,14 @@ class StmdsConfig:
         correlated repeats this is exact, with partly correlated ones conservative). The
         inflation scales all weights of a pair alike, so it changes the fused variance (and
         inverse-variance SMACOF weights between pairs only through the count), not the mean.
+    tri_method : {"pair", "lsq"}
+        How ``tri_window`` triangulates a landmark: from its two rays furthest apart in the
+        window ("pair", :func:`~bomgraph.stmds.triangulation.triangulate_window`) or from all
+        its rays in the window by least squares on the bearings ("lsq",
+        :func:`~bomgraph.stmds.triangulation.triangulate_window_lsq`; the parallax gate is
+        then on the angular span of the rays, the depth gate on every ray). The variance of a
+        pair's squared distance is first order over every increment of the window and every
+        bearing used, in both cases.
     robot_placement : {"auto", "joint", "trilateration"}
         "joint" (the paper): the robot positions are rows of the extended matrix, reconstructed
         with the landmarks. "trilateration": the landmarks are mapped alone and each window
@@ -193,6 +202,7 @@ class StmdsConfig:
     robot_placement: str = "auto"
     tri_window: int | None = None
     tri_stride: int | None = None
+    tri_method: str = "pair"
 
     def __post_init__(self) -> None:
         def need(ok: bool, msg: str) -> None:
@@ -229,6 +239,10 @@ class StmdsConfig:
              f"robot_ranges must be 'pairwise' or 'window', got {self.robot_ranges!r}")
         need(self.tri_stride is None or self.tri_window is not None,
              "tri_stride needs tri_window")
+        need(self.tri_method in TRI_METHODS,
+             f"tri_method must be one of {TRI_METHODS}, got {self.tri_method!r}")
+        need(self.tri_method == "pair" or self.tri_window is not None,
+             "tri_method='lsq' needs tri_window")
         if self.tri_window is not None:
             need(int(self.tri_window) == self.tri_window and self.tri_window >= 2,
                  f"tri_window must be an integer >= 2 (poses per window), got "
@@ -555,8 +569,10 @@ class StmdsMapper:
         brg[row, col] = np.concatenate([b[1] for b in buf])
         odoms = np.array([b[2] for b in buf[1:]], float).reshape(-1, 3)
         sig = np.array([b[3] for b in buf[1:]], float).reshape(-1, 3)
-        tri, n_gated = triangulate_window(odoms, brg, min_parallax_rad=self.config.min_parallax_rad,
-                                          max_range_m=self._max_range)
+        kernel = triangulate_window_lsq if self.config.tri_method == "lsq" else \
+            triangulate_window
+        tri, n_gated = kernel(odoms, brg, min_parallax_rad=self.config.min_parallax_rad,
+                              max_range_m=self._max_range)
         self._n_triangulated += len(tri)
         self._n_gated += n_gated
         if len(tri) == 0:
