@@ -1,7 +1,9 @@
 """Windowed triangulation for BOM-STMDS (issue 8): choice of the window and thresholds.
 
 Measures the landmark MPE of Method 1 / Method 2 with ``tri_window=W`` against the paper's
-consecutive-step rule (the default, ``W = 2``) and the ``improved`` preset:
+consecutive-step rule (the default, ``W = 2``) and the ``improved`` preset, with each landmark
+triangulated from its two rays furthest apart in the window (``tri_method="pair"``) or from all
+its rays by least squares (``tri_method="lsq"``):
 
 * ``--sim``: the paper's 25 runs (``paper_design(0)``, 300 steps), MPE at t = 300 next to the
   paper's 4.78 / 2.87 cm, over a grid of W, fusion rule, ``min_count`` and SMACOF weights;
@@ -85,6 +87,11 @@ def bench_sim(runs: int, jobs: int, quick: bool) -> list[dict]:
                                       "min_count": 3, "weights": "inverse-variance"}))
     grid += [("stmds-cs", {}), ("stmds-cs", {"preset": "improved"}),
              ("stmds-cs", {"preset": "window"}), ("stmds-smacof", {"preset": "window"})]
+    # all rays of a landmark by least squares (tri_method="lsq") against the furthest pair
+    for w in ((6, 10) if quick else (4, 6, 8, 10, 14)):
+        grid.append(("stmds-smacof", {"preset": "window", "tri_method": "lsq",
+                                      "tri_window": w}))
+    grid.append(("stmds-cs", {"preset": "window", "tri_method": "lsq", "tri_window": 10}))
     out = []
     print(f"== paper settings, {len(specs)} runs, MPE at t = 300 ==", flush=True)
     for method, options in grid:
@@ -118,6 +125,9 @@ def bench_real(jobs: int, quick: bool, gtsam: bool) -> list[dict]:
                                       "weights": "inverse-variance"}))
     grid += [("stmds-cs", {"preset": "real"}), ("stmds-smacof", {"preset": "real"}),
              ("stmds-smacof", {"preset": "window"})]
+    for w, par in itertools.product((8, 16, 24), (1.0, 5.0)):
+        grid.append(("stmds-smacof", {"preset": "real", "tri_method": "lsq", "tri_window": w,
+                                      "min_parallax_rad": round(math.radians(par), 6)}))
     if gtsam:
         grid.append(("gtsam-batch", {}))
     out = []

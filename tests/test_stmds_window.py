@@ -10,7 +10,8 @@ import pytest
 
 from bomgraph.geometry import bearings_to, dead_reckon, to_local
 from bomgraph.stmds.triangulation import (pair_squared_distances, triangulate_rays,
-                                          triangulate_window, window_pair_squared_distances)
+                                          triangulate_window, triangulate_window_lsq,
+                                          window_pair_squared_distances)
 
 
 def _window_scene(rng: np.random.Generator, w: int = 6, n: int = 7):
@@ -137,7 +138,103 @@ def test_window_of_two_is_the_sequential_rule() -> None:
     np.testing.assert_allclose(pe_win.jacobian, pe_seq.jacobian, rtol=1e-12, atol=1e-15)
 
 
-def _fused_distance_monte_carlo(stride: int, n_mc: int = 1500):
+# ------------------------------------------------------------- least squares over all rays
+@pytest.mark.parametrize("w", [2, 3, 6, 12])
+def test_lsq_window_is_exact_on_noise_free_rays(w: int) -> None:
+    rng = np.random.default_rng(w)
+    odoms, poses, pts, brg = _window_scene(rng, w=w)
+    tri, n_gated = triangulate_window_lsq(odoms, brg)
+    assert n_gated == 0 and len(tri) == len(pts)
+    np.testing.assert_allclose(tri.points_xy, to_local(poses[0], pts), rtol=0, atol=1e-12)
+    assert tri.jacobian_bearing.shape == (len(pts), w)
+    assert np.all((tri.jacobian_bearing != 0) == np.isfinite(brg[:, tri.column].T))
+    pe = window_pair_squared_distances(tri, np.full((w - 1, 3), 0.01), 0.02)
+    true = np.sum((pts[pe.first] - pts[pe.second]) ** 2, axis=1)
+    np.testing.assert_allclose(pe.squared_distance_m2, true, rtol=0, atol=1e-12)
+    assert np.all(pe.variance_m4 > 0)
+
+
+def test_lsq_window_of_two_rays_is_the_pair_rule() -> None:
+    # two rays: the least-squares point is their intersection, with the same Jacobians
+    rng = np.random.default_rng(3)
+    odoms, _, _, brg = _window_scene(rng, w=2)
+    brg = brg + rng.normal(0.0, 0.03, brg.shape)
+    pair, _ = triangulate_window(odoms, brg)
+    lsq, _ = triangulate_window_lsq(odoms, brg)
+    np.testing.assert_array_equal(lsq.column, pair.column)
+    np.testing.assert_allclose(lsq.points_xy, pair.points_xy, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(lsq.jacobian_odometry, pair.jacobian_odometry, rtol=1e-8,
+                               atol=1e-9)
+    np.testing.assert_allclose(lsq.jacobian_bearing, pair.jacobian_bearing, rtol=1e-8,
+                               atol=1e-9)
+
+
+def test_lsq_window_jacobians_match_numeric_on_noisy_rays() -> None:
+    # noisy rays: nonzero residuals, so the implicit-function Jacobian needs the full Hessian
+    rng = np.random.default_rng(5)
+    w = 6
+    odoms, _, _, brg = _window_scene(rng, w=w)
+    brg[:, 1] = np.nan                            # two close rays: at the edge of a gate
+    brg = brg + rng.normal(0.0, 0.03, brg.shape)
+    tri, _ = triangulate_window_lsq(odoms, brg)
+    seen = np.isfinite(brg)
+    c = 3 * (w - 1)
+    k = len(tri)
+    assert k == 6
+
+    def points(z: np.ndarray) -> np.ndarray:
+        bb = brg.copy()
+        bb[seen] = z[c:]
+        t, _ = triangulate_window_lsq(z[:c].reshape(-1, 3), bb)
+        assert np.array_equal(t.column, tri.column)
+        return t.points_xy
+
+    z0 = np.concatenate([odoms.reshape(-1), brg[seen]])
+    num = _numeric_jacobian(lambda z: points(z).reshape(-1), z0)       # (2k, c + n_seen)
+    ana_odo = tri.jacobian_odometry.reshape(k, -1)
+    np.testing.assert_allclose(ana_odo.real, num[0::2, :c], atol=1e-7)
+    np.testing.assert_allclose(ana_odo.imag, num[1::2, :c], atol=1e-7)
+    # bearings, in the row-major order of brg[seen]
+    row_of = np.full(brg.shape[1], -1)
+    row_of[tri.column] = np.arange(k)
+    pose_s, col_s = np.nonzero(seen)
+    ana_b = np.zeros((2 * k, len(pose_s)))
+    used = row_of[col_s] >= 0
+    cols = np.flatnonzero(used)
+    jb = tri.jacobian_bearing[row_of[col_s[used]], pose_s[used]]
+    ana_b[2 * row_of[col_s[used]], cols] = jb.real
+    ana_b[2 * row_of[col_s[used]] + 1, cols] = jb.imag
+    np.testing.assert_allclose(ana_b, num[:, c:], atol=1e-7)
+    # the pair gradient: d|p_i - p_j|^2 through all increments and every bearing used
+    pe = window_pair_squared_distances(tri, np.full((w - 1, 3), 0.02), 0.01, with_jacobian=True)
+    for p in range(0, len(pe), 4):
+        i, j = pe.first[p], pe.second[p]
+        g = _numeric_jacobian(lambda z, i=i, j=j: np.array(np.sum(
+            (points(z)[i] - points(z)[j]) ** 2)), z0)
+        bi = pose_s[col_s == tri.column[i]], np.flatnonzero(col_s == tri.column[i])
+        bj = pose_s[col_s == tri.column[j]], np.flatnonzero(col_s == tri.column[j])
+        np.testing.assert_allclose(pe.jacobian[p, :c], g[:c], rtol=1e-6, atol=1e-8)
+        np.testing.assert_allclose(pe.jacobian[p, c + bi[0]], g[c + bi[1]], rtol=1e-6,
+                                   atol=1e-8)
+        np.testing.assert_allclose(pe.jacobian[p, c + w + bj[0]], g[c + bj[1]], rtol=1e-6,
+                                   atol=1e-8)
+        unseen = np.setdiff1d(np.arange(w), bi[0])
+        assert np.all(pe.jacobian[p, c + unseen] == 0)
+
+
+def test_lsq_window_gates_parallax_and_rays_behind() -> None:
+    rng = np.random.default_rng(1)
+    odoms, poses, pts, brg = _window_scene(rng, w=6)
+    par = brg.copy()
+    par[:, 0] = np.where(np.isfinite(par[:, 0]), par[0, 0] - poses[:, 2] + poses[0, 2],
+                         np.nan)                  # landmark 0: all its rays parallel
+    tri, n_gated = triangulate_window_lsq(odoms, par, min_parallax_rad=math.radians(1.0))
+    assert 0 not in tri.column and n_gated == 1
+    near, _ = triangulate_window_lsq(odoms, brg, max_range_m=0.1)
+    assert len(near) == 0
+
+
+def _fused_distance_monte_carlo(stride: int, n_mc: int = 1500, kernel=triangulate_window):
     """A fixed geometry: 17 poses along an arc, 3 landmarks seen from every pose; windows of
     5 poses every ``stride`` steps, fused with the "relative" rule (the mapper's inflation for
     overlapping windows). Returns the MC spread of the fused distances and their reported
@@ -160,7 +257,7 @@ def _fused_distance_monte_carlo(stride: int, n_mc: int = 1500):
         b = brg + rng.normal(0.0, sig_b, brg.shape)
         store = DistanceStore("relative", 1)
         for s0 in starts:
-            tri, _ = triangulate_window(u[s0:s0 + w - 1], b[s0:s0 + w])
+            tri, _ = kernel(u[s0:s0 + w - 1], b[s0:s0 + w])
             pe = window_pair_squared_distances(tri, np.tile(sig_odo, (w - 1, 1)), sig_b)
             store.add(pe.first, pe.second, pe.squared_distance_m2, pe.variance_m4 * inflation)
         d, v = store.fused()
@@ -171,6 +268,12 @@ def _fused_distance_monte_carlo(stride: int, n_mc: int = 1500):
 
 def test_fused_variance_of_disjoint_windows_matches_monte_carlo() -> None:
     mc_var, first_order = _fused_distance_monte_carlo(stride=5)
+    np.testing.assert_allclose(first_order, mc_var, rtol=0.10)
+
+
+def test_fused_lsq_variance_of_disjoint_windows_matches_monte_carlo() -> None:
+    mc_var, first_order = _fused_distance_monte_carlo(stride=5, n_mc=1000,
+                                                      kernel=triangulate_window_lsq)
     np.testing.assert_allclose(first_order, mc_var, rtol=0.10)
 
 
@@ -214,7 +317,8 @@ def test_mapper_with_window_two_equals_the_paper_rule() -> None:
 
 
 @pytest.mark.parametrize("options", [{"tri_window": 3}, {"tri_window": 7, "tri_stride": 7},
-                                     {"preset": "window"}, {"preset": "real"}])
+                                     {"preset": "window"}, {"preset": "real"},
+                                     {"preset": "window", "tri_method": "lsq"}])
 @pytest.mark.parametrize("name", ["stmds-cs", "stmds-smacof", "stmds-smacof-loc"])
 def test_noise_free_windowed_maps_are_exact(name: str, options: dict) -> None:
     s = simulate(SimConfig(noise_scale=0.0, n_landmarks=20, n_steps=70, sensor_range_m=5.0),
@@ -233,6 +337,7 @@ def test_window_options_are_validated_and_presets_named() -> None:
     for bad in ({"tri_window": 1}, {"tri_window": 2.5}, {"tri_stride": 2},
                 {"tri_window": 4, "tri_stride": 5}, {"tri_window": 4, "baselines": (4,)},
                 {"tri_window": 4, "max_relative_range_sigma": 0.5},
-                {"tri_window": 4, "localise": True}):
+                {"tri_window": 4, "localise": True}, {"tri_method": "lsq"},
+                {"tri_window": 4, "tri_method": "all"}):
         with pytest.raises(ConfigError):
             StmdsConfig(**bad)
