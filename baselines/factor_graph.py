@@ -168,7 +168,9 @@ class FactorGraphConfig:
              "isam2_factorization must be 'QR' or 'CHOLESKY'")
 
 
-def _config(config: FactorGraphConfig | None, options: dict[str, Any]) -> FactorGraphConfig:
+def config_from(config: FactorGraphConfig | None,
+                options: dict[str, Any]) -> FactorGraphConfig:
+    """``config``, or a :class:`FactorGraphConfig` built from ``options`` (not both)."""
     if config is not None and options:
         raise ConfigError(f"pass either config= or options, not both (got {sorted(options)})")
     try:
@@ -637,8 +639,11 @@ def _first_line(exc: BaseException) -> str:
     return text[:300] if text else type(exc).__name__
 
 
-def _estimate_from_values(graph: BearingGraph, values: gtsam.Values, solved: gtsam.NonlinearFactorGraph,
-                          info: dict[str, Any], covariances: bool) -> MapEstimate:
+def estimate_from_values(graph: BearingGraph, values: gtsam.Values,
+                         solved: gtsam.NonlinearFactorGraph, info: dict[str, Any],
+                         covariances: bool) -> MapEstimate:
+    """The MapEstimate of a solution: every pose, the landmarks in the graph (sorted by id),
+    ``info`` plus the graph's counts, and marginal covariances of ``solved`` if asked."""
     ids = np.array(sorted(graph.landmark_ids), dtype=np.int64)
     pose_t = np.arange(graph.n_steps, dtype=np.int64)
     poses = poses_from_values(values, pose_t)
@@ -682,7 +687,7 @@ class BatchMapper:
     def __init__(self, header: StreamHeader, *,
                  start_pose: Sequence[float] = (0.0, 0.0, 0.0),
                  config: FactorGraphConfig | None = None, **options: Any) -> None:
-        self.config = _config(config, options)
+        self.config = config_from(config, options)
         self.header = header
         self.problem = BearingGraph(header, self.config, np.asarray(start_pose, dtype=float))
         self.graph = gtsam.NonlinearFactorGraph()
@@ -701,7 +706,9 @@ class BatchMapper:
     def _pose_at(self, ts: np.ndarray) -> np.ndarray:
         return poses_from_values(self.values, ts)
 
-    def _absorb(self) -> NewFactors:
+    def absorb(self) -> NewFactors:
+        """Let in the landmarks now determined and move all new factors and landmark points
+        into ``graph`` / ``values`` (what ``estimate()`` does before solving)."""
         self.problem.admit(self._pose_at)
         new = self.problem.take_new()
         self.graph.push_back(new.core)
@@ -718,11 +725,11 @@ class BatchMapper:
     def estimate(self) -> MapEstimate:
         if self.problem.n_steps == 0:
             return MapEstimate.empty(reason="no steps yet")
-        self._absorb()
+        self.absorb()
         values, report = solve_lm(self.graph, self.initial_values(), self.config,
                                   self.robust_graph)
         self.values = values
-        return _estimate_from_values(self.problem, values, self.graph, report.as_info(),
+        return estimate_from_values(self.problem, values, self.graph, report.as_info(),
                                      self.config.covariances)
 
 
@@ -746,7 +753,7 @@ class OracleMapper(BatchMapper):
                  config: FactorGraphConfig | None = None, **options: Any) -> None:
         if truth is None or truth.poses is None:
             raise ConfigError("the oracle needs the true poses (truth.poses)")
-        cfg = _config(config, options)
+        cfg = config_from(config, options)
         super().__init__(header, start_pose=start_pose, config=replace(cfg, huber_k=None))
         p0 = truth.poses[0]
         s = np.asarray(start_pose, dtype=float)
@@ -815,7 +822,7 @@ class Isam2Mapper:
     def __init__(self, header: StreamHeader, *,
                  start_pose: Sequence[float] = (0.0, 0.0, 0.0),
                  config: FactorGraphConfig | None = None, **options: Any) -> None:
-        self.config = _config(config, options)
+        self.config = config_from(config, options)
         self.header = header
         self.problem = BearingGraph(header, self.config, np.asarray(start_pose, dtype=float))
         self.accepted = gtsam.NonlinearFactorGraph()   # every factor iSAM2 holds
@@ -922,7 +929,7 @@ class Isam2Mapper:
                 "dropped_external_factors": self.dropped_external}
         if self.failures:
             info["last_failure"] = self.failures[-1]
-        return _estimate_from_values(self.problem, self.estimate_values, self.accepted, info,
+        return estimate_from_values(self.problem, self.estimate_values, self.accepted, info,
                                      self.config.covariances)
 
 
@@ -945,4 +952,5 @@ __all__ = ["FactorGraphConfig", "BearingGraph", "NewFactors", "SolveReport", "Ba
            "Isam2Mapper", "OracleMapper", "odometry_factors", "transformed_odometry_covariance",
            "bearing_noise", "prior_factor", "solve_lm", "lm_params", "gauss_newton_check",
            "marginal_covariances", "pose_key", "mid_key", "landmark_key", "poses_from_values",
-           "landmarks_from_values", "insert_pose", "ODOMETRY_MODELS"]
+           "landmarks_from_values", "insert_pose", "config_from", "estimate_from_values",
+           "ODOMETRY_MODELS"]

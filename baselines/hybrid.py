@@ -44,7 +44,7 @@ from bomgraph.mapper import MapEstimate, Mapper, create_mapper
 from bomgraph.stream import Step, StreamHeader
 from bomgraph.triangulate import intersect_rays, ray_normals
 
-from .factor_graph import (BatchMapper, FactorGraphConfig, _config, _estimate_from_values,
+from .factor_graph import (BatchMapper, FactorGraphConfig, config_from, estimate_from_values,
                            insert_pose, landmark_key, landmarks_from_values, poses_from_values,
                            solve_lm)
 
@@ -369,7 +369,7 @@ class HybridMapper(BatchMapper):
             raise ConfigError(f"pass either hybrid= or its options, not both "
                               f"(got {sorted(hyb_opts)})")
         self.hybrid = hybrid or HybridConfig(**hyb_opts)
-        super().__init__(header, start_pose=start_pose, config=_config(config, options))
+        super().__init__(header, start_pose=start_pose, config=config_from(config, options))
         if seed_mapper is not None and seed_options:
             raise ConfigError("seed_options apply to seed_method; pass them to seed_mapper's "
                               "constructor instead")
@@ -529,7 +529,7 @@ class HybridMapper(BatchMapper):
         self._seed_map = {}
         seeded, info = self._seed()
         warm = gtsam.Values(self.values)
-        self._absorb()   # admission judged on the resected poses when seeded
+        self.absorb()   # admission judged on the resected poses when seeded
         self._resected = None
         starts: list[tuple[str, gtsam.Values]] = []
         if seeded is not None:
@@ -555,7 +555,7 @@ class HybridMapper(BatchMapper):
         info.update(report.as_info())
         info["start"] = name
         info["starts"] = [s for s, _ in starts]
-        return _estimate_from_values(self.problem, values, self.graph, info,
+        return estimate_from_values(self.problem, values, self.graph, info,
                                      self.config.covariances)
 
 

@@ -229,7 +229,7 @@ def _noisy_graph(**options: float) -> tuple[gtsam.NonlinearFactorGraph, gtsam.Va
     m = BatchMapper(s.header, **options)
     for st in s.steps:
         m.step(st)
-    m._absorb()
+    m.absorb()
     return m.graph, m.values
 
 
