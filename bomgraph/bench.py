@@ -449,7 +449,8 @@ class Executor:
 
 
 def _cache_path(cache_dir: Path, task: Task) -> Path:
-    return cache_dir / f"{task.experiment}-{task.key()}.json"
+    """One file per (arm, source, code): experiments that share an arm share its runs."""
+    return cache_dir / f"{task.key()}.json"
 
 
 def execute(tasks: Sequence[Task], executor: Executor = Executor(), *,
@@ -468,9 +469,11 @@ def execute(tasks: Sequence[Task], executor: Executor = Executor(), *,
             p = _cache_path(cache, t)
             if p.exists():
                 try:
-                    results[k] = json.loads(p.read_text())
+                    cached = json.loads(p.read_text())
                 except (json.JSONDecodeError, OSError):
-                    results[k] = None
+                    continue
+                cached.update(experiment=t.experiment, arm=t.arm.label)
+                results[k] = cached
     todo = [k for k, r in enumerate(results) if r is None]
     done = len(tasks) - len(todo)
     if progress:
