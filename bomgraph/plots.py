@@ -18,30 +18,40 @@ from .stream import Truth
 
 def plot_error_vs_time_on_axes(ax, curves: Mapping[str, tuple[np.ndarray, np.ndarray]], *,
                                ylabel: str = "landmark MPE [cm]", scale: float = 100.0,
-                               band: str = "iqr", title: str | None = None):
-    """Mean (line) and spread (band) of an error over time, one curve per label.
+                               band: str = "iqr", title: str | None = None,
+                               log: bool = True):
+    """Median (line) and spread (band) of an error over time, one curve per label.
 
     Parameters
     ----------
     curves : mapping label -> (t (k,), values (runs, k)) in metres
-    band : ``"iqr"`` (25-75 percentiles) or ``"std"`` (mean +- one std)
+    band : ``"iqr"`` (median, 25-75 percentiles: one diverged run cannot hide the others)
+        or ``"std"`` (mean +- one std)
+    log : logarithmic error axis (the methods differ by two orders of magnitude)
     """
-    for label, (t, vals) in curves.items():
+    for k, (label, (t, vals)) in enumerate(curves.items()):
         v = np.asarray(vals, dtype=float) * scale
         if not np.any(np.isfinite(v)):
             continue
         with warnings.catch_warnings():  # columns where no run has a map yet are NaN
             warnings.simplefilter("ignore", RuntimeWarning)
-            mean = np.nanmean(v, axis=0)
             if band == "std":
+                mean = np.nanmean(v, axis=0)
                 lo, hi = mean - np.nanstd(v, axis=0), mean + np.nanstd(v, axis=0)
             else:
+                mean = np.nanmedian(v, axis=0)
                 lo, hi = np.nanpercentile(v, 25, axis=0), np.nanpercentile(v, 75, axis=0)
-        (line,) = ax.plot(t, mean, label=label, lw=1.6)
+        # ten colours, then the same colours dashed: no two curves look alike
+        (line,) = ax.plot(t, mean, label=label, lw=1.6, color=f"C{k % 10}",
+                          ls="-" if k < 10 else "--")
         ax.fill_between(t, lo, hi, color=line.get_color(), alpha=0.18, lw=0)
     ax.set_xlabel("time step t")
-    ax.set_ylabel(ylabel)
-    ax.set_ylim(bottom=0)
+    stat = "median, band 25-75%" if band == "iqr" else "mean, band +-1 std"
+    ax.set_ylabel(f"{ylabel} ({stat})")
+    if log:
+        ax.set_yscale("log")
+    else:
+        ax.set_ylim(bottom=0)
     ax.grid(True, alpha=0.3)
     if title:
         ax.set_title(title)
