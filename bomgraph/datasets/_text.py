@@ -37,6 +37,14 @@ def dataset_error(path: str | os.PathLike[str], line: int | None, field: str | N
     return DatasetError(f"{where}: {message}")
 
 
+def checked_bearing_sigma(bearing_sigma_rad: float) -> float:
+    """A caller-given bearing sigma, refused unless finite and > 0."""
+    if not (math.isfinite(bearing_sigma_rad) and bearing_sigma_rad > 0):
+        raise DatasetError(f"bearing_sigma_rad must be a finite number > 0, got "
+                           f"{bearing_sigma_rad!r}")
+    return float(bearing_sigma_rad)
+
+
 def find_file(directory: str | os.PathLike[str], name: str) -> Path:
     """``directory/name`` or, failing that, ``directory/name.gz``.
 

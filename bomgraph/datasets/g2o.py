@@ -51,7 +51,7 @@ from ..angles import angle_residual
 from ..errors import DatasetError
 from ..geometry import between
 from ..stream import Step, Stream, StreamHeader, Truth
-from ._text import (chain_order, data_lines, dataset_error, file_label, parse_float,
+from ._text import (chain_order, checked_bearing_sigma, data_lines, dataset_error, file_label, parse_float,
                     parse_int, read_text)
 from .mrclam import bearing_residuals, robust_bearing_stats
 
@@ -236,10 +236,7 @@ def import_g2o(path: str | os.PathLike[str], *, truth_path: str | os.PathLike[st
         weights.append(w)
     w_arr = np.array(weights, dtype=float)
     if bearing_sigma_rad is not None:
-        if not (math.isfinite(bearing_sigma_rad) and bearing_sigma_rad > 0):
-            raise DatasetError(f"bearing_sigma_rad must be a finite number > 0, got "
-                               f"{bearing_sigma_rad!r}")
-        sigma_b = float(bearing_sigma_rad)
+        sigma_b = checked_bearing_sigma(bearing_sigma_rad)
         sigma_source = "given by the caller"
     elif w_arr.size:
         sigma_b = float(np.median(1.0 / np.sqrt(w_arr)))

@@ -38,7 +38,7 @@ import numpy as np
 
 from ..errors import DatasetError
 from ..stream import Step, Stream, StreamHeader
-from ._text import (chain_order, data_lines, dataset_error, file_label, parse_float,
+from ._text import (chain_order, checked_bearing_sigma, data_lines, dataset_error, file_label, parse_float,
                     parse_int, read_text)
 
 _RECORDS = {
@@ -158,10 +158,7 @@ def import_victoria(path: str | os.PathLike[str], *,
     sig_b_arr = np.array(sig_b)
 
     if bearing_sigma_rad is not None:
-        if not (math.isfinite(bearing_sigma_rad) and bearing_sigma_rad > 0):
-            raise DatasetError(f"bearing_sigma_rad must be a finite number > 0, got "
-                               f"{bearing_sigma_rad!r}")
-        sigma_b = float(bearing_sigma_rad)
+        sigma_b = checked_bearing_sigma(bearing_sigma_rad)
         source = "given by the caller"
     elif sig_b_arr.size:
         sigma_b = float(np.median(sig_b_arr))

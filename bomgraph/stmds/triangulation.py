@@ -73,8 +73,24 @@ def pair_indices(k: int) -> tuple[np.ndarray, np.ndarray]:
     return hit
 
 
+class _TwoRayResult:
+    """What the two-ray triangulation results share: length and parallax."""
+
+    points_xy: np.ndarray
+    sin_parallax: np.ndarray
+    cos_parallax: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.points_xy)
+
+    @property
+    def parallax_rad(self) -> np.ndarray:
+        """Angle between the two rays used, in ``[0, pi]``."""
+        return np.abs(np.arctan2(self.sin_parallax, self.cos_parallax))
+
+
 @dataclass(frozen=True, eq=False)
-class RayTriangulation:
+class RayTriangulation(_TwoRayResult):
     """Landmarks triangulated from two poses, in the frame of the first (pose ``t-1``).
 
     Attributes
@@ -109,13 +125,6 @@ class RayTriangulation:
     ray_now: np.ndarray
     jacobian_complex: np.ndarray
 
-    def __len__(self) -> int:
-        return len(self.points_xy)
-
-    @property
-    def parallax_rad(self) -> np.ndarray:
-        """Angle between the two rays, in ``[0, pi]``."""
-        return np.abs(np.arctan2(self.sin_parallax, self.cos_parallax))
 
     @property
     def jacobian(self) -> np.ndarray:
@@ -408,7 +417,7 @@ def pair_squared_distances(tri: RayTriangulation, odometry: ArrayLike,
 
 
 @dataclass(frozen=True, eq=False)
-class WindowTriangulation:
+class WindowTriangulation(_TwoRayResult):
     """Landmarks triangulated inside a window of ``W`` poses, in the frame of its first pose.
 
     Attributes
@@ -442,13 +451,6 @@ class WindowTriangulation:
     jacobian_odometry: np.ndarray
     jacobian_bearing: np.ndarray
 
-    def __len__(self) -> int:
-        return len(self.points_xy)
-
-    @property
-    def parallax_rad(self) -> np.ndarray:
-        """Angle between the two rays used, in ``[0, pi]``."""
-        return np.abs(np.arctan2(self.sin_parallax, self.cos_parallax))
 
 
 def _ray_intersections(z_a: np.ndarray, z_b: np.ndarray, ua: np.ndarray, ub: np.ndarray
