@@ -201,3 +201,85 @@ def _write_source_maps(out, exp, results, Figure) -> list:
         fig.savefig(path, dpi=100)
         files.append(path)
     return files
+
+
+def map_comparison_figure(estimates: Mapping[str, MapEstimate | None], *,
+                          reference: MapEstimate | None = None,
+                          alignments: Mapping[str, Alignment | None] | None = None,
+                          notes: Mapping[str, str] | None = None,
+                          title: str | None = None, ncol: int = 3):
+    """Maps of a recording without ground truth: one panel per method, on a reference map.
+
+    Each panel draws the reference landmarks (hollow triangles, e.g. the ``gtsam-batch``
+    map), then the method's landmarks and trajectory moved by its alignment onto that
+    reference. All panels share the reference's extent (plus a margin). A method whose
+    estimate is None failed: its panel says so with its note.
+
+    Parameters
+    ----------
+    estimates : mapping label -> MapEstimate or None (None: the method failed)
+    reference : MapEstimate, optional
+        The map every other one was aligned to (drawn in each panel).
+    alignments : mapping label -> Alignment or None, optional
+        Method frame -> reference frame (None or missing: drawn as estimated).
+    notes : mapping label -> str, optional
+        A line under each panel's title (numbers, or the reason of a failure).
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    import textwrap
+
+    from matplotlib.figure import Figure  # no pyplot: the caller's backend is left alone
+
+    alignments = alignments or {}
+    notes = notes or {}
+    n = max(len(estimates), 1)
+    ncol = max(1, min(ncol, n))
+    nrow = (n + ncol - 1) // ncol
+    fig = Figure(figsize=(4.4 * ncol, 4.2 * nrow))
+    axes = fig.subplots(nrow, ncol, squeeze=False)
+    lim = None
+    if reference is not None and len(reference):
+        pts = reference.landmarks_xy
+        if reference.poses is not None and len(reference.poses):
+            pts = np.vstack([pts, reference.poses[:, :2]])
+        lo, hi = pts.min(0), pts.max(0)
+        pad = 0.08 * float(np.max(hi - lo)) + 1e-9
+        lim = (lo - pad, hi + pad)
+    for ax, (label, est) in zip(axes.ravel(), estimates.items()):
+        if reference is not None and len(reference):
+            ax.plot(reference.landmarks_xy[:, 0], reference.landmarks_xy[:, 1], "k^", ms=4,
+                    mfc="none", mew=0.6, label="reference landmarks")
+        note = notes.get(label, "")
+        if est is None or not len(est):
+            head = "FAILED" if est is None else "NO MAP"
+            ax.text(0.5, 0.5, f"{head}\n{textwrap.fill(note, 40)}",
+                    transform=ax.transAxes, ha="center", va="center", color="tab:red",
+                    fontsize=8, wrap=True)
+            ax.set_title(label, fontsize=9)
+        else:
+            al = alignments.get(label) or Alignment(np.eye(2), np.zeros(2))
+            if est.poses is not None and len(est.poses):
+                p = al.apply(est.poses[:, :2])
+                ax.plot(p[:, 0], p[:, 1], "-", color="tab:blue", lw=0.6, label="trajectory")
+            xy = al.apply(est.landmarks_xy)
+            ax.plot(xy[:, 0], xy[:, 1], "o", color="tab:red", ms=2.5, label="landmarks")
+            ax.set_title(f"{label}\n{textwrap.shorten(note, 60)}" if note else label,
+                         fontsize=9)
+        if lim is not None:
+            ax.set_xlim(lim[0][0], lim[1][0])
+            ax.set_ylim(lim[0][1], lim[1][1])
+        ax.set_aspect("equal")
+        ax.set_xlabel("x [m]", fontsize=8)
+        ax.set_ylabel("y [m]", fontsize=8)
+        ax.tick_params(labelsize=7)
+        ax.grid(True, alpha=0.3)
+    axes.ravel()[0].legend(fontsize="x-small", loc="upper right")
+    for ax in axes.ravel()[n:]:
+        ax.set_visible(False)
+    if title:
+        fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    return fig
