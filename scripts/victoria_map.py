@@ -1,0 +1,350 @@
+"""Victoria Park (issue 7, part 3): every method's map of a recording without ground truth.
+
+    python scripts/victoria_map.py [--data FILE] [--out results/victoria] [--methods a,b,...]
+                                   [--steps N] [--checkpoint-every 100] [--bearing-sigma RAD]
+                                   [--max-seconds S]
+
+Imports GTSAM's ``victoria_park.txt`` (:func:`bomgraph.datasets.victoria.import_victoria`,
+bearings only), runs each method through the library (:func:`bomgraph.mapper.create_mapper`
+and :func:`bomgraph.mapper.run`), times it, and writes ``victoria_park_maps.png`` (each
+method's landmarks and trajectory over the ``gtsam-batch`` map), ``victoria_park.json`` and
+``victoria_park.csv``.
+
+There is no ground truth, so nothing here is an accuracy. Each map is aligned rigidly
+(rotation, translation, reflection allowed, no scale: :func:`bomgraph.evaluate.align` through
+:func:`bomgraph.evaluate.score_estimate`, with the ``gtsam-batch`` map in the place of the
+truth) onto the ``gtsam-batch`` map on the landmarks both hold, and the table gives the
+landmark disagreement after that alignment: AGREEMENT WITH GTSAM-BATCH, NOT ACCURACY.
+
+Checkpoints: ``--checkpoint-every`` (default 100). The GTSAM mappers (``gtsam-batch``,
+``hybrid``) let a landmark into their graph only at ``estimate()``, when its rays intersect
+on the current pose estimates; with a single estimate at the end those are 7000 steps of dead
+reckoning, the rays of a landmark seen again after a loop no longer meet, and ``gtsam-batch``
+kept 13 landmarks of 151 on the first 2000 steps instead of 56 (every 100 steps: the same 56
+landmarks and cost as iSAM2). Every method gets the same interval.
+
+A method that raises is reported as a failure with its reason; one that runs longer than
+``--max-seconds`` is stopped and reported with the step it reached and its time per step at
+the start and at the end (a time per step that grows with the number of steps is why such a
+method is unusable on the whole recording).
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import math
+import shutil
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Iterable, Iterator, Sequence
+
+import numpy as np
+
+from bomgraph.datasets.victoria import import_victoria
+from bomgraph.errors import BomgraphError, TooFewLandmarksError
+from bomgraph.evaluate import Alignment, score_estimate
+from bomgraph.mapper import MapEstimate, create_mapper, run
+from bomgraph.stream import Step, Stream, Truth
+
+ROOT = Path(__file__).resolve().parents[1]
+DATA = ROOT.parent / "shared" / "data" / "victoria_park" / "victoria_park.txt"
+REFERENCE = "gtsam-batch"
+FIGURE = "victoria_park_maps.png"
+
+
+@dataclass(frozen=True)
+class MethodSpec:
+    """A row of the table: a label, the registered method and its options."""
+
+    label: str
+    method: str
+    options: dict[str, Any] = field(default_factory=dict)
+
+
+#: The methods tried, in table order (the reference first).
+METHODS: dict[str, MethodSpec] = {s.label: s for s in [
+    MethodSpec("gtsam-batch", "gtsam-batch"),
+    MethodSpec("gtsam-isam2", "gtsam-isam2"),
+    MethodSpec("ekf", "ekf"),
+    MethodSpec("ekf-invdepth", "ekf-invdepth"),
+    MethodSpec("triangulate", "triangulate"),
+    MethodSpec("stmds-smacof", "stmds-smacof"),
+    MethodSpec("stmds-smacof-real", "stmds-smacof", {"preset": "real"}),
+    MethodSpec("hybrid", "hybrid"),
+]}
+
+
+class TimeBudgetExceeded(BomgraphError):
+    """A method ran longer than the time budget (raised from the step feed)."""
+
+
+@dataclass
+class Outcome:
+    """What one method did: its final map (None if it failed), timings, and why it failed.
+
+    ``step_wall_s[k]`` is the wall time from step ``k`` being handed to the method to step
+    ``k + 1`` being asked for (the step and any checkpoint estimate after it).
+    """
+
+    spec: MethodSpec
+    estimate: MapEstimate | None
+    wall_s: float
+    steps_done: int
+    step_wall_s: np.ndarray
+    error: str | None = None
+
+
+def _timed(steps: Sequence[Step], times: list[float], deadline: float | None) -> Iterator[Step]:
+    """Yield ``steps``, recording the clock at each hand-over; raise past ``deadline``."""
+    clock = time.perf_counter
+    for st in steps:
+        now = clock()
+        times.append(now)
+        if deadline is not None and now > deadline:
+            raise TimeBudgetExceeded(f"stopped at step {st.t} of {len(steps)}")
+        yield st
+    times.append(clock())
+
+
+def run_method(spec: MethodSpec, stream: Stream, *, checkpoint_every: int,
+               max_seconds: float | None = None) -> Outcome:
+    """Run one method on ``stream``; failures (exceptions, the time budget) become reasons."""
+    times: list[float] = []
+    t0 = time.perf_counter()
+    deadline = None if max_seconds is None else t0 + max_seconds
+    est = None
+    error = None
+    try:
+        mapper = create_mapper(spec.method, stream.header, **spec.options)
+        res = run(mapper, _timed(stream.steps, times, deadline),
+                  checkpoint_every=checkpoint_every, method=spec.label)
+        est = res.final
+        if not len(est):
+            error = f"empty map: {est.info.get('reason', 'no reason given')}"
+    except Exception as exc:  # every failure is reported with its reason, never hidden
+        error = f"{type(exc).__name__}: {' '.join(str(exc).split())[:300]}"
+    wall = time.perf_counter() - t0
+    step_wall = np.diff(np.array(times)) if len(times) > 1 else np.zeros(0)
+    return Outcome(spec, est, wall, max(len(times) - 1, 0), step_wall, error)
+
+
+def sightings(stream: Stream) -> dict[int, int]:
+    """How many steps saw each landmark."""
+    ids = np.concatenate([st.landmark_ids for st in stream.steps] or [np.zeros(0, np.int64)])
+    u, c = np.unique(ids, return_counts=True)
+    return dict(zip(u.tolist(), c.tolist()))
+
+
+def agreement(est: MapEstimate, reference: MapEstimate) -> dict[str, Any]:
+    """Landmark and trajectory disagreement of ``est`` with ``reference`` after the rigid
+    alignment (reflection allowed) of ``est``'s landmarks onto the reference's, in metres.
+
+    Raises
+    ------
+    EvaluationError
+        Fewer than 3 landmarks in common.
+    """
+    ref = Truth(reference.landmark_ids, reference.landmarks_xy, reference.poses)
+    sc = score_estimate(est, ref, allow_reflection=True, with_scale=False)
+    return {"n_common": sc.n_common, "rms_m": sc.rmse_m, "mean_m": sc.mpe_m,
+            "median_m": sc.median_m, "max_m": sc.max_m, "traj_mean_m": sc.robot_mean_m,
+            "reflected": sc.alignment.reflected, "alignment": sc.alignment,
+            "errors_m": dict(zip(sc.landmark_ids.tolist(), sc.errors_m.tolist()))}
+
+
+def _scalar_info(info: dict[str, Any]) -> dict[str, Any]:
+    return {k: v for k, v in info.items()
+            if isinstance(v, (bool, int, str)) or (isinstance(v, float) and math.isfinite(v))}
+
+
+def summarise(outcomes: Sequence[Outcome], n_steps: int) -> tuple[list[dict[str, Any]],
+                                                                   dict[str, Alignment]]:
+    """One row per method (JSON-ready) and the alignments onto the reference map."""
+    ref = next((o.estimate for o in outcomes
+                if o.spec.label == REFERENCE and o.error is None), None)
+    rows, alignments = [], {}
+    for o in outcomes:
+        tenth = max(1, len(o.step_wall_s) // 10)
+        row: dict[str, Any] = {
+            "method": o.spec.label, "registered": o.spec.method, "options": o.spec.options,
+            "ok": o.error is None, "error": o.error,
+            "landmarks": len(o.estimate) if o.estimate is not None else 0,
+            "wall_s": o.wall_s, "steps_done": o.steps_done, "steps": n_steps,
+            "ms_per_step_first_10pct": 1e3 * float(np.mean(o.step_wall_s[:tenth]))
+            if len(o.step_wall_s) else None,
+            "ms_per_step_last_10pct": 1e3 * float(np.mean(o.step_wall_s[-tenth:]))
+            if len(o.step_wall_s) else None,
+            "info": _scalar_info(dict(o.estimate.info)) if o.estimate is not None else {},
+        }
+        row["agreement_note"] = None
+        if o.estimate is not None and len(o.estimate) and ref is not None:
+            try:
+                a = agreement(o.estimate, ref)
+                alignments[o.spec.label] = a.pop("alignment")
+                row.update(a)
+            except TooFewLandmarksError:
+                common = np.intersect1d(o.estimate.landmark_ids, ref.landmark_ids).size
+                row["agreement_note"] = (f"only {common} landmark(s) in common with "
+                                         f"{REFERENCE}; alignment needs 3")
+        elif ref is None:
+            row["agreement_note"] = f"no {REFERENCE} map to compare with"
+        rows.append(row)
+    return rows, alignments
+
+
+def victoria_maps(stream: Stream, specs: Iterable[MethodSpec], out_dir: str | Path, *,
+                  checkpoint_every: int = 100, max_seconds: float | None = None,
+                  title: str = "Victoria Park", dpi: int = 110) -> dict[str, Any]:
+    """Run ``specs`` on ``stream``, compare each map with the ``gtsam-batch`` one, and write
+    the figure, JSON and CSV into ``out_dir``. Returns ``{"rows", "figure", "json", "csv"}``.
+
+    The reference ``gtsam-batch`` is run first (and added if missing) since every other map is
+    aligned to it.
+    """
+    from bomgraph.plots import map_comparison_figure
+
+    specs = list(specs)
+    if REFERENCE not in [s.label for s in specs]:
+        specs.insert(0, METHODS[REFERENCE])
+    specs.sort(key=lambda s: s.label != REFERENCE)
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    outcomes = [run_method(s, stream, checkpoint_every=checkpoint_every,
+                           max_seconds=max_seconds) for s in specs]
+    rows, alignments = summarise(outcomes, len(stream.steps))
+    seen = sightings(stream)
+
+    notes = {}
+    for r in rows:
+        if not r["ok"]:
+            notes[r["method"]] = r["error"]
+        elif r["method"] == REFERENCE:
+            notes[r["method"]] = f"{r['landmarks']} landmarks (reference), {r['wall_s']:.0f} s"
+        elif "rms_m" in r:
+            notes[r["method"]] = (f"{r['landmarks']} lm, RMS {r['rms_m']:.2f} m vs batch "
+                                  f"({r['n_common']} common), {r['wall_s']:.0f} s")
+        else:
+            notes[r["method"]] = f"{r['landmarks']} lm, {r['agreement_note']}"[:70]
+    ests = {o.spec.label: o.estimate for o in outcomes}
+    ref = ests.get(REFERENCE)
+    fig = map_comparison_figure(
+        ests, reference=ref if ref is not None and len(ref) else None, alignments=alignments,
+        notes=notes, title=f"{title}, {len(stream.steps)} steps: maps aligned onto "
+                           f"{REFERENCE} (triangles); no ground truth, agreement is not accuracy")
+    fig_path = out / FIGURE
+    fig.savefig(fig_path, dpi=dpi)
+
+    meta = {"data": stream.header.meta.get("files", {}), "steps": len(stream.steps),
+            "bearing_sigma_rad": stream.header.bearing_sigma_rad,
+            "odometry_sigma": list(stream.header.odometry_sigma),
+            "checkpoint_every": checkpoint_every, "max_seconds": max_seconds,
+            "landmarks_seen": len(seen),
+            "landmarks_seen_3_or_more": int(sum(c >= 3 for c in seen.values())),
+            "reference": REFERENCE,
+            "note": "agreement with gtsam-batch after rigid alignment (reflection allowed), "
+                    "not accuracy: the recording has no ground truth"}
+    json_path = out / "victoria_park.json"
+    with open(json_path, "w", encoding="utf-8") as fh:
+        json.dump({"meta": meta, "rows": _jsonable(rows)}, fh, indent=1, allow_nan=False)
+        fh.write("\n")
+    csv_path = out / "victoria_park.csv"
+    cols = ["method", "ok", "landmarks", "n_common", "rms_m", "mean_m", "median_m", "max_m",
+            "traj_mean_m", "reflected", "wall_s", "steps_done", "ms_per_step_first_10pct",
+            "ms_per_step_last_10pct", "error", "agreement_note"]
+    with open(csv_path, "w", newline="", encoding="utf-8") as fh:
+        w = csv.DictWriter(fh, fieldnames=cols, extrasaction="ignore")
+        w.writeheader()
+        for r in rows:
+            w.writerow({c: r.get(c) for c in cols})
+    return {"rows": rows, "meta": meta, "figure": fig_path, "json": json_path,
+            "csv": csv_path}
+
+
+def _jsonable(obj: Any) -> Any:
+    if isinstance(obj, dict):
+        return {str(k): _jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_jsonable(v) for v in obj]
+    if isinstance(obj, (np.integer,)):
+        return int(obj)
+    if isinstance(obj, (float, np.floating)):
+        return float(obj) if math.isfinite(obj) else None
+    if isinstance(obj, np.bool_):
+        return bool(obj)
+    return obj
+
+
+def format_table(rows: Sequence[dict[str, Any]]) -> str:
+    """The printed table."""
+    def f(v: Any, fmt: str) -> str:
+        return "-" if v is None or (isinstance(v, float) and not math.isfinite(v)) else \
+            format(v, fmt)
+
+    lines = ["AGREEMENT WITH GTSAM-BATCH, NOT ACCURACY (no ground truth; rigid alignment, "
+             "reflection allowed)",
+             f"{'method':<18} {'lm':>4} {'common':>6} {'RMS m':>7} {'mean m':>7} {'max m':>7} "
+             f"{'traj m':>7} {'wall s':>8} {'ms/step first/last 10%':>23}  failure / note"]
+    for r in rows:
+        ms = (f"{f(r['ms_per_step_first_10pct'], '.2f')}/"
+              f"{f(r['ms_per_step_last_10pct'], '.2f')}")
+        note = r["error"] or r.get("agreement_note") or ("reference" if r["method"] == REFERENCE
+                                                          else "")
+        if r.get("reflected"):
+            note = (note + "; " if note else "") + "aligned with a reflection"
+        lines.append(f"{r['method']:<18} {r['landmarks']:>4} {r.get('n_common', '-')!s:>6} "
+                     f"{f(r.get('rms_m'), '.3f'):>7} {f(r.get('mean_m'), '.3f'):>7} "
+                     f"{f(r.get('max_m'), '.3f'):>7} {f(r.get('traj_mean_m'), '.3f'):>7} "
+                     f"{r['wall_s']:>8.1f} {ms:>23}  {note}")
+    return "\n".join(lines)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--data", default=str(DATA), help="victoria_park.txt (GTSAM's format)")
+    ap.add_argument("--out", default="results/victoria", help="output folder")
+    ap.add_argument("--methods", default=",".join(METHODS),
+                    help=f"comma-separated, from: {', '.join(METHODS)}")
+    ap.add_argument("--steps", type=int, default=None, help="only the first N steps")
+    ap.add_argument("--checkpoint-every", type=int, default=100,
+                    help="estimate every N steps (module docstring: why not only at the end)")
+    ap.add_argument("--bearing-sigma", type=float, default=None,
+                    help="bearing sigma [rad] (default: the importer's header value)")
+    ap.add_argument("--max-seconds", type=float, default=None,
+                    help="stop a method after this wall time and report it as too slow")
+    ap.add_argument("--docs", action="store_true",
+                    help=f"also copy the figure to docs/{FIGURE}")
+    a = ap.parse_args(argv)
+    unknown = [m for m in a.methods.split(",") if m not in METHODS]
+    if unknown:
+        ap.error(f"unknown method(s) {unknown}; choose from {', '.join(METHODS)}")
+    stream = import_victoria(a.data, bearing_sigma_rad=a.bearing_sigma)
+    if a.steps is not None:
+        if a.steps < 2:
+            ap.error("--steps must be >= 2")
+        stream = Stream(stream.header, stream.steps[:a.steps], None)
+    res = victoria_maps(stream, [METHODS[m] for m in a.methods.split(",")], a.out,
+                        checkpoint_every=a.checkpoint_every, max_seconds=a.max_seconds)
+    m = res["meta"]
+    print(f"Victoria Park: {m['steps']} steps, {m['landmarks_seen']} landmarks seen "
+          f"({m['landmarks_seen_3_or_more']} at least 3 times), bearing sigma "
+          f"{m['bearing_sigma_rad']:.4f} rad, checkpoints every {m['checkpoint_every']} steps")
+    print(format_table(res["rows"]))
+    for r in res["rows"]:
+        info = r["info"]
+        if "converged" in info:
+            print(f"{r['method']}: converged={info['converged']} cost={info.get('cost')} "
+                  f"stop={info.get('stop', '-')}")
+    print(f"wrote {res['figure']}, {res['json']}, {res['csv']}")
+    if a.docs:
+        shutil.copyfile(res["figure"], ROOT / "docs" / FIGURE)
+        print(f"copied the figure to {ROOT / 'docs' / FIGURE}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
