@@ -44,6 +44,7 @@ from typing import Any, Iterable, Iterator, Sequence
 
 import numpy as np
 
+from bomgraph.angles import angle_residual
 from bomgraph.datasets.victoria import import_victoria
 from bomgraph.errors import BomgraphError, TooFewLandmarksError
 from bomgraph.evaluate import Alignment, score_estimate
@@ -139,6 +140,26 @@ def sightings(stream: Stream) -> dict[int, int]:
     return dict(zip(u.tolist(), c.tolist()))
 
 
+def bearing_residuals(est: MapEstimate, stream: Stream) -> np.ndarray:
+    """Measured minus predicted bearing [rad] of every measurement of a mapped landmark from
+    a pose the estimate holds: how well the map and trajectory explain the data, shape (m,).
+    A self-consistency check that needs no truth (compare with the bearing sigma)."""
+    if est.poses is None or not len(est.poses) or not len(est):
+        return np.zeros(0)
+    t = np.concatenate([np.full(len(st.landmark_ids), st.t) for st in stream.steps])
+    ids = np.concatenate([st.landmark_ids for st in stream.steps])
+    brg = np.concatenate([st.bearings_rad for st in stream.steps])
+    pose_row = {int(k): r for r, k in enumerate(est.pose_t)}
+    lm_row = {int(k): r for r, k in enumerate(est.landmark_ids)}
+    ok = np.array([int(a) in pose_row and int(b) in lm_row for a, b in zip(t, ids)], bool)
+    if not ok.any():
+        return np.zeros(0)
+    p = est.poses[[pose_row[int(a)] for a in t[ok]]]
+    q = est.landmarks_xy[[lm_row[int(b)] for b in ids[ok]]]
+    pred = angle_residual(np.arctan2(q[:, 1] - p[:, 1], q[:, 0] - p[:, 0]), p[:, 2])
+    return angle_residual(brg[ok], pred)
+
+
 def agreement(est: MapEstimate, reference: MapEstimate) -> dict[str, Any]:
     """Landmark and trajectory disagreement of ``est`` with ``reference`` after the rigid
     alignment (reflection allowed) of ``est``'s landmarks onto the reference's, in metres.
@@ -161,9 +182,10 @@ def _scalar_info(info: dict[str, Any]) -> dict[str, Any]:
             if isinstance(v, (bool, int, str)) or (isinstance(v, float) and math.isfinite(v))}
 
 
-def summarise(outcomes: Sequence[Outcome], n_steps: int) -> tuple[list[dict[str, Any]],
-                                                                   dict[str, Alignment]]:
+def summarise(outcomes: Sequence[Outcome], stream: Stream
+              ) -> tuple[list[dict[str, Any]], dict[str, Alignment]]:
     """One row per method (JSON-ready) and the alignments onto the reference map."""
+    n_steps = len(stream.steps)
     ref = next((o.estimate for o in outcomes
                 if o.spec.label == REFERENCE and o.error is None), None)
     rows, alignments = [], {}
@@ -181,6 +203,10 @@ def summarise(outcomes: Sequence[Outcome], n_steps: int) -> tuple[list[dict[str,
             "info": _scalar_info(dict(o.estimate.info)) if o.estimate is not None else {},
         }
         row["agreement_note"] = None
+        res = bearing_residuals(o.estimate, stream) if o.estimate is not None else np.zeros(0)
+        row["n_bearings_explained"] = int(res.size)
+        row["bearing_rms_rad"] = float(np.sqrt(np.mean(res ** 2))) if res.size else None
+        row["bearing_median_abs_rad"] = float(np.median(np.abs(res))) if res.size else None
         if o.estimate is not None and len(o.estimate) and ref is not None:
             try:
                 a = agreement(o.estimate, ref)
@@ -215,7 +241,7 @@ def victoria_maps(stream: Stream, specs: Iterable[MethodSpec], out_dir: str | Pa
     out.mkdir(parents=True, exist_ok=True)
     outcomes = [run_method(s, stream, checkpoint_every=checkpoint_every,
                            max_seconds=max_seconds) for s in specs]
-    rows, alignments = summarise(outcomes, len(stream.steps))
+    rows, alignments = summarise(outcomes, stream)
     seen = sightings(stream)
 
     notes = {}
@@ -253,7 +279,8 @@ def victoria_maps(stream: Stream, specs: Iterable[MethodSpec], out_dir: str | Pa
         fh.write("\n")
     csv_path = out / "victoria_park.csv"
     cols = ["method", "ok", "landmarks", "n_common", "rms_m", "mean_m", "median_m", "max_m",
-            "traj_mean_m", "reflected", "wall_s", "steps_done", "ms_per_step_first_10pct",
+            "traj_mean_m", "reflected", "bearing_rms_rad", "bearing_median_abs_rad",
+            "n_bearings_explained", "wall_s", "steps_done", "ms_per_step_first_10pct",
             "ms_per_step_last_10pct", "error", "agreement_note"]
     with open(csv_path, "w", newline="", encoding="utf-8") as fh:
         w = csv.DictWriter(fh, fieldnames=cols, extrasaction="ignore")
@@ -285,9 +312,11 @@ def format_table(rows: Sequence[dict[str, Any]]) -> str:
             format(v, fmt)
 
     lines = ["AGREEMENT WITH GTSAM-BATCH, NOT ACCURACY (no ground truth; rigid alignment, "
-             "reflection allowed)",
+             "reflection allowed); brg rms: RMS bearing residual [rad] of the method's own "
+             "map and trajectory over the bearings they cover",
              f"{'method':<18} {'lm':>4} {'common':>6} {'RMS m':>7} {'mean m':>7} {'max m':>7} "
-             f"{'traj m':>7} {'wall s':>8} {'ms/step first/last 10%':>23}  failure / note"]
+             f"{'traj m':>7} {'brg rms':>7} {'wall s':>8} {'ms/step first/last 10%':>23}  "
+             f"failure / note"]
     for r in rows:
         ms = (f"{f(r['ms_per_step_first_10pct'], '.2f')}/"
               f"{f(r['ms_per_step_last_10pct'], '.2f')}")
@@ -298,6 +327,7 @@ def format_table(rows: Sequence[dict[str, Any]]) -> str:
         lines.append(f"{r['method']:<18} {r['landmarks']:>4} {r.get('n_common', '-')!s:>6} "
                      f"{f(r.get('rms_m'), '.3f'):>7} {f(r.get('mean_m'), '.3f'):>7} "
                      f"{f(r.get('max_m'), '.3f'):>7} {f(r.get('traj_mean_m'), '.3f'):>7} "
+                     f"{f(r.get('bearing_rms_rad'), '.4f'):>7} "
                      f"{r['wall_s']:>8.1f} {ms:>23}  {note}")
     return "\n".join(lines)
 
