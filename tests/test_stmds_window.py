@@ -318,20 +318,40 @@ def test_mapper_with_window_two_equals_the_paper_rule() -> None:
 
 @pytest.mark.parametrize("options", [{"tri_window": 3}, {"tri_window": 7, "tri_stride": 7},
                                      {"preset": "window"}, {"preset": "real"},
-                                     {"preset": "window", "tri_method": "lsq"}])
+                                     {"preset": "window", "tri_method": "lsq"},
+                                     {"tri_window": 8, "tri_method": "ba"},
+                                     {"tri_window": 9, "tri_stride": 3, "tri_method": "ba",
+                                      "tri_grow": 2}])
 @pytest.mark.parametrize("name", ["stmds-cs", "stmds-smacof", "stmds-smacof-loc"])
 def test_noise_free_windowed_maps_are_exact(name: str, options: dict) -> None:
-    s = simulate(SimConfig(noise_scale=0.0, n_landmarks=20, n_steps=70, sensor_range_m=5.0),
-                 np.random.default_rng(3))
-    est = run(create_mapper(name, s.header, smacof_from_t=20, **options), s.steps).final
+    # the "real" preset's windows are 60 steps long: the run must hold a few of them
+    n_steps = 130 if options.get("preset") == "real" else 70
+    s = simulate(SimConfig(noise_scale=0.0, n_landmarks=20, n_steps=n_steps,
+                           sensor_range_m=5.0), np.random.default_rng(3))
+    mapper = create_mapper(name, s.header, smacof_from_t=20, **options)
+    est = run(mapper, s.steps).final
     score = score_estimate(est, s.truth)
-    assert score.n_common == 20 and score.mpe_m < 1e-9
+    # every fused distance is exact ...
+    known = mapper._store.known()
+    ids = mapper._ids.ids
+    order = np.argsort(s.truth.landmark_ids)
+    xy = s.truth.landmarks_xy[order]
+    a = np.searchsorted(s.truth.landmark_ids[order], ids[known.first])
+    b = np.searchsorted(s.truth.landmark_ids[order], ids[known.second])
+    np.testing.assert_allclose(known.distance_m, np.linalg.norm(xy[a] - xy[b], axis=1),
+                               rtol=0, atol=1e-9)
+    # ... and so is the map, except Method 1 with missing pairs: its shortest paths
+    # overestimate them (the paper's DMC-SPL), so it is only close
+    complete = len(known) == 20 * 19 // 2
+    assert score.n_common == 20
+    assert score.mpe_m < (1e-9 if complete or name != "stmds-cs" else 1e-2)
 
 
 def test_window_options_are_validated_and_presets_named() -> None:
     header = simulate(SimConfig(n_steps=3), np.random.default_rng(0)).header
     m = create_mapper("stmds-smacof", header, preset="real", min_count=2)
-    assert m.config.tri_window == 16 and m.config.tri_stride == 1 and m.config.min_count == 2
+    assert m.config.tri_window == 60 and m.config.tri_stride == 10 and m.config.min_count == 2
+    assert m.config.tri_method == "ba"
     assert create_mapper("stmds-smacof-loc", header, preset="window").config.robot_ranges \
         == "window"
     for bad in ({"tri_window": 1}, {"tri_window": 2.5}, {"tri_stride": 2},

@@ -48,6 +48,7 @@ from ..evaluate import align
 from ..geometry import dead_reckon
 from ..mapper import MapEstimate
 from ..stream import Step, StreamHeader
+from .bundle import WindowBundle, bundle_adjust_window, bundle_pair_squared_distances
 from .completion import (largest_component, pivot_shortest_paths, prune_low_degree,
                          shortest_path_completion)
 from .distances import (FUSION_RULES, DistanceStore, IdIndex, estimate_weights,
@@ -61,7 +62,7 @@ from .triangulation import (compose_odometry, gate_points, pair_squared_distance
 METHODS = ("cs", "smacof")
 WEIGHTS = ("binary", "inverse-variance")
 INITS = ("best", "previous", "classical")
-TRI_METHODS = ("pair", "lsq")
+TRI_METHODS = ("pair", "lsq", "ba")
 
 
 @dataclass(frozen=True)
@@ -166,7 +167,24 @@ class StmdsConfig:
         :func:`~bomgraph.stmds.triangulation.triangulate_window_lsq`; the parallax gate is
         then on the angular span of the rays, the depth gate on every ray). The variance of a
         pair's squared distance is first order over every increment of the window and every
-        bearing used, in both cases.
+        bearing used, in both cases. "ba": the window's poses are estimated with its
+        landmarks from the odometry and every bearing of the window (a local bundle
+        adjustment, :func:`~bomgraph.stmds.bundle.bundle_adjust_window`), so the bearings
+        correct the odometry's heading drift inside the window; the variance of a pair is that
+        of the joint estimate (shared poses included); gross bearing outliers are dropped
+        (``tri_outlier_sigma``).
+    tri_outlier_sigma : float or None
+        ``tri_method="ba"``: rays whose residual exceeds this many bearing std. devs. are
+        dropped (the worst first, the window solved again); None keeps every ray.
+    tri_grow : int
+        ``tri_method="ba"``: the window is solved on prefixes growing by this many poses, each
+        started from the one before (one solve from the whole odometry chain of a long window
+        falls into wrong minima when the drift exceeds the parallax). Consecutive windows
+        start from each other's solution for the poses they share.
+    tri_min_depth_m : float
+        ``tri_method="ba"``: landmarks estimated closer than this to a pose that saw them are
+        refused (a landmark straight ahead has nearly collinear rays along which the fit can
+        slide it onto the path).
     robot_placement : {"auto", "joint", "trilateration"}
         "joint" (the paper): the robot positions are rows of the extended matrix, reconstructed
         with the landmarks. "trilateration": the landmarks are mapped alone and each window
@@ -203,6 +221,9 @@ class StmdsConfig:
     tri_window: int | None = None
     tri_stride: int | None = None
     tri_method: str = "pair"
+    tri_outlier_sigma: float | None = 4.0
+    tri_min_depth_m: float = 0.05
+    tri_grow: int = 5
 
     def __post_init__(self) -> None:
         def need(ok: bool, msg: str) -> None:
@@ -242,7 +263,12 @@ class StmdsConfig:
         need(self.tri_method in TRI_METHODS,
              f"tri_method must be one of {TRI_METHODS}, got {self.tri_method!r}")
         need(self.tri_method == "pair" or self.tri_window is not None,
-             "tri_method='lsq' needs tri_window")
+             f"tri_method={self.tri_method!r} needs tri_window")
+        need(self.tri_min_depth_m >= 0, "tri_min_depth_m must be >= 0")
+        need(int(self.tri_grow) == self.tri_grow and self.tri_grow >= 1,
+             "tri_grow must be an integer >= 1")
+        need(self.tri_outlier_sigma is None or self.tri_outlier_sigma > 0,
+             "tri_outlier_sigma must be > 0 or None")
         if self.tri_window is not None:
             need(int(self.tri_window) == self.tri_window and self.tri_window >= 2,
                  f"tri_window must be an integer >= 2 (poses per window), got "
@@ -494,12 +520,14 @@ class StmdsMapper:
         self._max_baseline = max(cfg.baselines)
         # windowed triangulation: the steps of the current window, (ids, bearings, odom, sigma)
         self._tri_window: list[tuple] = []
+        self._prev_bundle: tuple | None = None    # tri_method="ba": (t, poses, ids, xy)
         if cfg.tri_window is not None:
             self._tri_stride = cfg.tri_stride or cfg.tri_window - 1
             self._tri_inflation = float(max(1, math.ceil((cfg.tri_window - 1)
                                                          / self._tri_stride)))
         self._t = -1
         self._n_gated = 0
+        self._n_outliers = 0                      # rays dropped by the window bundle
         self._triangulated = _GrowingFlags()      # by dense index: ever passed the gates
         self._relative_gate = math.isfinite(cfg.max_relative_range_sigma)
         self._n_smacof = 0                        # SMACOF estimates made so far
@@ -551,8 +579,9 @@ class StmdsMapper:
         buf = self._tri_window
         if step.odom is None:
             buf.clear()
+            self._prev_bundle = None
         buf.append((ids, brg, step.odom,
-                    None if step.odom is None else step.odometry_sigma(self.header)))
+                    None if step.odom is None else step.odometry_sigma(self.header), step.t))
         if len(buf) < self.config.tri_window:
             return
         self._triangulate_window(buf)
@@ -569,10 +598,23 @@ class StmdsMapper:
         brg[row, col] = np.concatenate([b[1] for b in buf])
         odoms = np.array([b[2] for b in buf[1:]], float).reshape(-1, 3)
         sig = np.array([b[3] for b in buf[1:]], float).reshape(-1, 3)
-        kernel = triangulate_window_lsq if self.config.tri_method == "lsq" else \
-            triangulate_window
-        tri, n_gated = kernel(odoms, brg, min_parallax_rad=self.config.min_parallax_rad,
-                              max_range_m=self._max_range)
+        if self.config.tri_method == "ba":
+            ts = np.array([b[4] for b in buf], np.int64)
+            init_poses, init_points, n_shared = self._warm_start(ts, uniq, odoms)
+            tri, n_gated = bundle_adjust_window(
+                odoms, sig, brg, self._bearing_sigma, min_parallax_rad=self.config.min_parallax_rad,
+                max_range_m=self._max_range, min_depth_m=self.config.tri_min_depth_m,
+                outlier_sigma=self.config.tri_outlier_sigma, initial_poses=init_poses,
+                initial_points=init_points, initial_prefix=n_shared,
+                grow=self.config.tri_grow)
+            self._n_outliers += tri.n_outliers
+            self._prev_bundle = (ts, tri.poses, uniq[tri.column], tri.points_xy) if len(tri) \
+                else None
+        else:
+            kernel = triangulate_window_lsq if self.config.tri_method == "lsq" else \
+                triangulate_window
+            tri, n_gated = kernel(odoms, brg, min_parallax_rad=self.config.min_parallax_rad,
+                                  max_range_m=self._max_range)
         self._n_triangulated += len(tri)
         self._n_gated += n_gated
         if len(tri) == 0:
@@ -581,10 +623,35 @@ class StmdsMapper:
         self._triangulated[idx] = True
         if len(tri) < 2:
             return
-        pairs = window_pair_squared_distances(tri, sig, self._bearing_sigma)
+        if isinstance(tri, WindowBundle):
+            pairs = bundle_pair_squared_distances(tri)
+        else:
+            pairs = window_pair_squared_distances(tri, sig, self._bearing_sigma)
         var = pairs.variance_m4 if self._tri_inflation == 1.0 else \
             pairs.variance_m4 * self._tri_inflation
         self._store.add(idx[pairs.first], idx[pairs.second], pairs.squared_distance_m2, var)
+
+    def _warm_start(self, ts: np.ndarray, uniq: np.ndarray, odoms: np.ndarray
+                    ) -> tuple[np.ndarray | None, np.ndarray | None, int]:
+        """Start of a window's bundle from the previous window's solution: the poses both
+        windows hold, continued by the odometry, and the landmarks it mapped (in its frame)."""
+        prev = self._prev_bundle
+        if prev is None:
+            return None, None, 1
+        p_t, p_poses, p_ids, p_xy = prev
+        shared = np.isin(ts, p_t)
+        if not shared[0]:
+            return None, None, 1
+        poses = np.empty((len(ts), 3))
+        n_shared = int(np.argmin(shared)) if not shared.all() else len(ts)
+        poses[:n_shared] = p_poses[np.searchsorted(p_t, ts[:n_shared])]
+        if n_shared < len(ts):
+            poses[n_shared - 1:] = dead_reckon(odoms[n_shared - 1:], poses[n_shared - 1])
+        points = np.full((len(uniq), 2), np.nan)
+        pos = np.searchsorted(p_ids, uniq).clip(0, max(len(p_ids) - 1, 0))
+        hit = p_ids[pos] == uniq if len(p_ids) else np.zeros(len(uniq), bool)
+        points[hit] = p_xy[pos[hit]]
+        return poses, points, n_shared
 
     def _triangulate(self, k: int, base: tuple, ids: np.ndarray, brg: np.ndarray,
                      idx_now: np.ndarray) -> None:
@@ -632,7 +699,8 @@ class StmdsMapper:
         cfg = self.config
         return {"method": f"stmds-{cfg.method}" + ("-loc" if cfg.localise else ""),
                 "t": self._t, "fusion": cfg.fusion, "n_pairs_stored": len(self._store),
-                "n_triangulated": self._n_triangulated, "n_gated": self._n_gated}
+                "n_triangulated": self._n_triangulated, "n_gated": self._n_gated,
+                "n_outlier_rays": self._n_outliers}
 
     def estimate(self) -> MapEstimate:
         """The map now (and the window's poses when localising); never raises for lack of data."""
@@ -909,7 +977,7 @@ PRESETS = ("paper", "improved", "window", "real")
 WINDOW_PRESETS: dict[str, dict[str, Any]] = {
     "window": {"tri_window": 6, "tri_stride": 1, "fusion": "scale-free",
                "weights": "inverse-variance", "min_count": 3, "max_range_factor": 1.3},
-    "real": {"tri_window": 16, "tri_stride": 1, "fusion": "scale-free",
+    "real": {"tri_window": 60, "tri_stride": 10, "tri_method": "ba", "fusion": "scale-free",
              "weights": "inverse-variance", "min_count": 1},
 }
 

@@ -578,6 +578,30 @@ def _window_chain_jacobians(u: np.ndarray, z: np.ndarray, heading: np.ndarray
     return dz, dpsi
 
 
+def effective_parallax(direction_rad: np.ndarray, owner: np.ndarray, n: int) -> np.ndarray:
+    """Parallax of several rays per point: ``arccos |mean exp(2 i alpha)|`` in ``[0, pi/2]``.
+
+    For two rays at angle ``gamma`` it is ``min(gamma, pi - gamma)`` (the two-ray gate of the
+    paper); for many rays it measures how well they fix the point in every direction (the
+    smallest eigenvalue of ``mean(I - u u^T)`` is ``(1 - |mean exp(2 i alpha)|) / 2``), so rays
+    from all around a landmark give ``pi / 2``, not a span past ``pi``.
+
+    Parameters
+    ----------
+    direction_rad : array of shape (R,)
+        World direction of each ray.
+    owner : int array of shape (R,)
+        Point of each ray, in ``0 .. n-1``.
+    n : int
+        Number of points.
+    """
+    e2 = np.exp(2j * np.asarray(direction_rad, dtype=float))
+    count = np.bincount(owner, minlength=n)
+    mean = (np.bincount(owner, e2.real, n) + 1j * np.bincount(owner, e2.imag, n)) \
+        / np.maximum(count, 1)
+    return np.arccos(np.clip(np.abs(mean), 0.0, 1.0))
+
+
 def triangulate_window_lsq(odoms: ArrayLike, bearings_rad: ArrayLike, *,
                            min_parallax_rad: float = 0.0, max_range_m: float = np.inf,
                            max_iter: int = 20, tol_m: float = 1e-13
@@ -604,9 +628,9 @@ def triangulate_window_lsq(odoms: ArrayLike, bearings_rad: ArrayLike, *,
     bearings_rad : array of shape (W, n)
         Bearing of landmark (column) ``j`` from window pose ``k``; NaN where not seen.
     min_parallax_rad, max_range_m : float
-        Gates: the angular span of the landmark's ray directions must lie in
-        ``[min_parallax, pi - min_parallax]`` and the point must be in front of every ray at a
-        depth of at most ``max_range_m``.
+        Gates: the landmark's :func:`effective_parallax` must be at least ``min_parallax``
+        (for two rays: the angle between them in ``[min_parallax, pi - min_parallax]``) and
+        the point must be in front of every ray at a depth of at most ``max_range_m``.
     max_iter : int
         Gauss-Newton iterations at most.
     tol_m : float
@@ -675,17 +699,15 @@ def triangulate_window_lsq(odoms: ArrayLike, bearings_rad: ArrayLike, *,
             done |= small | ~np.isfinite(step)
             if done.all():
                 break
-        # gates: span of the ray directions, in front of every ray, depth
+        # gates: parallax of the ray directions, in front of every ray, depth
         d = p[owner] - zr
-        rel = angle_residual(alpha, alpha[start][owner])   # directions from the first ray
-        span = (np.maximum.reduceat(rel, start) - np.minimum.reduceat(rel, start)) if nc \
-            else np.zeros(0)
+        span = effective_parallax(alpha, owner, nc)
         depth = (d * ray.conj()).real
         bad_ray = ~((depth > 0) & (depth <= max_range_m))
         good = np.isfinite(p) & (np.add.reduceat(bad_ray.astype(np.int64), start) == 0 if nc
                                  else np.zeros(0, bool))
         lo = max(min_parallax_rad, 1e-15)
-        good &= (span >= lo) & (span <= math.pi - lo)
+        good &= span >= lo
         converged = small if max_iter > 0 else np.ones(nc, bool)
         good &= converged
     keep = good[owner]
@@ -783,4 +805,5 @@ __all__ = ["POINT_MEASUREMENTS", "PAIR_MEASUREMENTS", "RayTriangulation", "PairE
            "point_covariance",
            "range_jacobians", "range_variances", "gate_points", "pair_squared_distances",
            "WindowTriangulation", "triangulate_window", "triangulate_window_lsq",
+           "effective_parallax",
            "window_pair_squared_distances"]

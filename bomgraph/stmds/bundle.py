@@ -1,0 +1,418 @@
+"""Windowed triangulation by local bundle adjustment (issue 8, ``tri_method="ba"``).
+
+The paper (Sec. III-A) triangulates every landmark from two consecutive poses placed by the
+odometry alone. On recordings with small steps and a narrow view the heading drift of the
+odometry inside a window is as large as the parallax, so a landmark placed from odometry-fixed
+poses carries that drift into every distance. Here the poses of the window are estimated with
+the landmarks: the window's ``W`` poses (the first one fixed at the origin, which fixes the
+gauge) and every landmark seen from two of its poses or more minimise
+
+    sum_m || between(x_{m-1}, x_m) - u_m ||^2_{Sigma_u}
+      + sum_(k, l) angle_residual(atan2(p_l - z_k) - psi_k, theta_kl)^2 / sigma^2,
+
+the maximum-likelihood problem of the window alone (Levenberg-Marquardt, dense: a window has
+at most a few hundred unknowns). It starts from :func:`triangulation.triangulate_window_lsq`
+(odometry poses, all rays of each landmark), so the gates of that function apply to the start;
+rays whose whitened residual exceeds ``outlier_sigma`` are dropped one at a time (the worst
+first) and the window solved again, so a gross bearing outlier cannot bend the window.
+
+The joint covariance of the window's landmarks is the landmark block of ``(J^T J)^-1`` (first
+order, exact for the MLE of a linear model); the variance of a pair's squared distance follows
+with the cross-covariance of the two points, which carries the shared poses and bearings:
+``var(d^2) = 4 e^T (C_ii + C_jj - C_ij - C_ji) e``, ``e = p_i - p_j``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from ..angles import angle_residual
+from ..errors import ConfigError
+from ..geometry import between, dead_reckon, to_local
+from .triangulation import (PairEstimates, effective_parallax, pair_indices,
+                            triangulate_window_lsq)
+
+#: Odometry std. devs. below this (m or rad) are raised to it: a zero std. dev. (the paper's
+#: simulator has no lateral slip, ``sigma_dy = 0``) would be an infinite weight.
+SIGMA_FLOOR = 1e-6
+
+
+@dataclass(frozen=True)
+class WindowBundle:
+    """The landmarks of one window after local bundle adjustment.
+
+    Attributes
+    ----------
+    column : ndarray of shape (k,), int64
+        Column of each landmark in the ``bearings_rad`` matrix.
+    points_xy : ndarray of shape (k, 2)
+        Positions in metres in the frame of the window's first pose.
+    covariance_m2 : ndarray of shape (2k, 2k)
+        Joint covariance of the points (x0, y0, x1, y1, ...).
+    poses : ndarray of shape (W, 3)
+        The window's poses ``(x_m, y_m, psi_rad)``; the first is the origin.
+    n_rays : ndarray of shape (k,), int64
+        Rays of each landmark kept by the fit.
+    n_outliers : int
+        Rays dropped by the outlier test.
+    converged : bool
+        The last Levenberg-Marquardt solve met its tolerance.
+    """
+
+    column: np.ndarray
+    points_xy: np.ndarray
+    covariance_m2: np.ndarray
+    poses: np.ndarray
+    n_rays: np.ndarray
+    n_outliers: int
+    converged: bool
+
+    def __len__(self) -> int:
+        return len(self.column)
+
+
+def _between_residuals(poses: np.ndarray, odoms: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Odometry residuals ``between(x_{m-1}, x_m) - u_m`` and their Jacobians.
+
+    Returns ``(res (M, 3), d res / d x_{m-1} (M, 3, 3), d res / d x_m (M, 3, 3))``.
+    """
+    a, b = poses[:-1], poses[1:]
+    c, s = np.cos(a[:, 2]), np.sin(a[:, 2])
+    dx, dy = b[:, 0] - a[:, 0], b[:, 1] - a[:, 1]
+    res = np.column_stack([c * dx + s * dy - odoms[:, 0], -s * dx + c * dy - odoms[:, 1],
+                           angle_residual(b[:, 2] - a[:, 2], odoms[:, 2])])
+    m = len(a)
+    jb = np.zeros((m, 3, 3))
+    jb[:, 0, 0], jb[:, 0, 1], jb[:, 1, 0], jb[:, 1, 1], jb[:, 2, 2] = c, s, -s, c, 1.0
+    ja = -jb
+    ja[:, 0, 2] = -s * dx + c * dy
+    ja[:, 1, 2] = -c * dx - s * dy
+    return res, ja, jb
+
+
+def _bearing_residuals(poses: np.ndarray, points: np.ndarray, k: np.ndarray, lm: np.ndarray,
+                       theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Bearing residuals and ``d res / d (p_l)`` (``d / d z_k`` is its negative,
+    ``d / d psi_k = -1``)."""
+    d = points[lm] - poses[k, :2]
+    r2 = np.einsum("ra,ra->r", d, d)
+    res = angle_residual(np.arctan2(d[:, 1], d[:, 0]) - poses[k, 2], theta)
+    dp = np.column_stack([-d[:, 1], d[:, 0]]) / r2[:, None]
+    return res, dp
+
+
+class _Problem:
+    """One window's least-squares problem over poses 1..W-1 and the landmarks."""
+
+    def __init__(self, odoms: np.ndarray, sigmas: np.ndarray, bearing_sigma_rad: float,
+                 k: np.ndarray, lm: np.ndarray, theta: np.ndarray, n_lm: int) -> None:
+        self.odoms = odoms
+        self.w_odo = 1.0 / np.maximum(sigmas, SIGMA_FLOOR)          # (M, 3)
+        self.w_b = 1.0 / bearing_sigma_rad
+        self.k, self.lm, self.theta = k, lm, theta
+        self.n_pose_vars = 3 * len(odoms)
+        self.n = self.n_pose_vars + 2 * n_lm
+        m = len(odoms)
+        self.rows = 3 * m + len(k)
+        # column of each pose's variables (-1: pose 0 is fixed)
+        self.pose_col = np.concatenate([[-1], 3 * np.arange(m)])
+
+    def cost(self, poses: np.ndarray, points: np.ndarray) -> float:
+        ro = _between_residuals(poses, self.odoms)[0] * self.w_odo
+        rb = _bearing_residuals(poses, points, self.k, self.lm, self.theta)[0] * self.w_b
+        return float(np.sum(ro * ro) + np.sum(rb * rb))
+
+    def linearise(self, poses: np.ndarray, points: np.ndarray
+                  ) -> tuple[np.ndarray, np.ndarray]:
+        """Whitened residual vector and dense Jacobian, shape ``(rows,)`` and ``(rows, n)``."""
+        m = len(self.odoms)
+        ro, ja, jb = _between_residuals(poses, self.odoms)
+        rb, dp = _bearing_residuals(poses, points, self.k, self.lm, self.theta)
+        jac = np.zeros((self.rows, self.n))
+        odo_rows = np.arange(3 * m).reshape(m, 3)
+        wo = self.w_odo[:, :, None]
+        for j in range(3):                    # the three variables of the pose before / after
+            jac[odo_rows[1:], (3 * np.arange(m - 1) + j)[:, None]] = (ja[1:, :, j:j + 1]
+                                                                     * wo[1:])[..., 0]
+            jac[odo_rows, (3 * np.arange(m) + j)[:, None]] = (jb[:, :, j:j + 1] * wo)[..., 0]
+        rows = 3 * m + np.arange(len(self.k))
+        pc = self.pose_col[self.k]
+        seen_from_var = pc >= 0
+        r_v, c_v = rows[seen_from_var], pc[seen_from_var]
+        jac[r_v, c_v] = -dp[seen_from_var, 0] * self.w_b
+        jac[r_v, c_v + 1] = -dp[seen_from_var, 1] * self.w_b
+        jac[r_v, c_v + 2] = -self.w_b
+        lc = self.n_pose_vars + 2 * self.lm
+        jac[rows, lc] = dp[:, 0] * self.w_b
+        jac[rows, lc + 1] = dp[:, 1] * self.w_b
+        res = np.concatenate([(ro * self.w_odo).ravel(), rb * self.w_b])
+        return res, jac
+
+    def unpack(self, poses: np.ndarray, points: np.ndarray, delta: np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray]:
+        new_poses = poses.copy()
+        new_poses[1:] += delta[:self.n_pose_vars].reshape(-1, 3)
+        return new_poses, points + delta[self.n_pose_vars:].reshape(-1, 2)
+
+
+def _levenberg_marquardt(prob: _Problem, poses: np.ndarray, points: np.ndarray,
+                         max_iter: int, tol: float
+                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray, bool]:
+    """Minimise the window's cost; returns poses, points, ``J^T J`` at the end, converged."""
+    lam = 1e-6
+    res, jac = prob.linearise(poses, points)
+    cost = float(res @ res)
+    converged = False
+    for _ in range(max_iter):
+        h = jac.T @ jac
+        g = jac.T @ res
+        step_ok = False
+        while lam < 1e10:
+            a = h + lam * np.diag(np.maximum(np.diag(h), 1e-12))
+            try:
+                delta = -np.linalg.solve(a, g)
+            except np.linalg.LinAlgError:
+                lam *= 10.0
+                continue
+            cand_poses, cand_points = prob.unpack(poses, points, delta)
+            cand_cost = prob.cost(cand_poses, cand_points)
+            if cand_cost <= cost:
+                step_ok = True
+                break
+            lam *= 10.0
+        if not step_ok:
+            converged = True                  # no descent direction left at this precision
+            break
+        poses, points = cand_poses, cand_points
+        small = cost - cand_cost <= tol * max(cost, 1e-300)
+        cost = cand_cost
+        lam = max(lam / 10.0, 1e-12)
+        res, jac = prob.linearise(poses, points)
+        if small:
+            converged = True
+            break
+    return poses, points, jac.T @ jac, converged
+
+
+def bundle_adjust_window(odoms: ArrayLike, odometry_sigmas: ArrayLike, bearings_rad: ArrayLike,
+                         bearing_sigma_rad: float, *, min_parallax_rad: float = 0.0,
+                         max_range_m: float = np.inf, min_depth_m: float = 0.05,
+                         outlier_sigma: float | None = 4.0,
+                         initial_poses: ArrayLike | None = None,
+                         initial_points: ArrayLike | None = None, initial_prefix: int = 1,
+                         grow: int = 5,
+                         max_outliers: int = 10, max_iter: int = 30, tol: float = 1e-12
+                         ) -> tuple[WindowBundle, int]:
+    """Jointly estimate a window's poses and landmarks from its odometry and bearings.
+
+    Parameters
+    ----------
+    odoms, odometry_sigmas : arrays of shape (W - 1, 3)
+        Increments ``[dx_m, dy_m, dpsi_rad]`` between consecutive window poses and their
+        independent std. devs.
+    bearings_rad : array of shape (W, n)
+        Bearing of landmark (column) ``j`` from window pose ``k``; NaN where not seen.
+    bearing_sigma_rad : float
+    min_parallax_rad, max_range_m : float
+        Gates of the starting triangulation (:func:`triangulate_window_lsq`) and, on the
+        adjusted poses, of the result: the effective parallax of a landmark's kept rays must
+        be at least ``min_parallax`` and the point must be in front of every kept ray at a
+        depth of at most ``max_range_m``.
+    min_depth_m : float
+        Landmarks closer than this to a pose that saw them are refused after the fit. A
+        landmark straight ahead of a robot driving at it has rays that are nearly one line;
+        the fit can slide it along them onto the path, where the bearing model is singular.
+    outlier_sigma : float or None
+        Rays with ``|residual| > outlier_sigma * sigma`` are dropped, the worst first, and the
+        window solved again (None: keep every ray).
+    max_outliers : int
+        At most this many rays are dropped per window.
+    initial_poses : array of shape (W, 3), optional
+        Start of the poses (any frame; e.g. the previous window's solution for the poses it
+        shares, continued by the odometry). Default: the odometry chain.
+    initial_points : array of shape (n, 2), optional
+        Start of the landmarks in the frame of ``initial_poses`` (NaN: none); those not given
+        start from :func:`triangulate_window_lsq` on the starting poses.
+    initial_prefix : int
+        With ``initial_poses``: its first ``initial_prefix`` poses are already a solution (the
+        poses shared with the previous window); the others are continued by the odometry.
+    grow : int
+        The window is solved on growing prefixes of its poses, ``grow`` poses more each time,
+        every one started from the solution of the one before and new poses continued by the
+        odometry from it. Over a long window the odometry drifts by more than the parallax and
+        one solve from the whole odometry chain falls into a wrong minimum; short increments
+        keep every start close. ``grow >= W`` is a single solve.
+    max_iter, tol : Levenberg-Marquardt iterations and relative cost decrease to stop at.
+
+    Returns
+    -------
+    WindowBundle, int
+        The landmarks that pass the gates, and the number refused (by the start or after the
+        fit, including landmarks left with fewer than two rays).
+    """
+    u = np.asarray(odoms, dtype=float).reshape(-1, 3)
+    sig = np.asarray(odometry_sigmas, dtype=float).reshape(-1, 3)
+    brg = np.array(bearings_rad, dtype=float)          # a copy: dropped rays become NaN
+    n_win = len(u) + 1
+    n_col = brg.shape[1]
+    if grow < 1:
+        raise ConfigError(f"grow must be >= 1, got {grow}")
+    points = np.full((n_col, 2), np.nan)
+    if initial_poses is None:
+        poses = dead_reckon(u)
+    else:
+        given = np.asarray(initial_poses, dtype=float)
+        if given.shape != (n_win, 3) or not np.all(np.isfinite(given)):
+            raise ConfigError(f"initial_poses must be finite with shape ({n_win}, 3), got "
+                              f"{given.shape}")
+        poses = between(given[0], given)              # in the frame of the first pose
+        if initial_points is not None:
+            warm = np.asarray(initial_points, dtype=float)
+            if warm.shape != (n_col, 2):
+                raise ConfigError(f"initial_points must have shape ({n_col}, 2), got "
+                                  f"{warm.shape}")
+            points = to_local(given[0], warm)
+    two_rays = np.isfinite(brg).sum(axis=0) >= 2
+    # prefixes of the window solved in turn, each started from the one before
+    first = max(2, min(n_win, initial_prefix if initial_poses is not None else grow + 1))
+    ends = list(range(first, n_win, grow)) + [n_win]
+    solved = 1 if initial_poses is None else max(1, min(initial_prefix, n_win))
+    n_outliers = 0
+    result = None
+    for end in ends:
+        if end > solved:     # continue the poses not solved yet by the odometry
+            poses[solved - 1:] = dead_reckon(u[solved - 1:], poses[solved - 1])
+        seen = np.isfinite(brg[:end]).sum(axis=0) >= 2
+        need = np.flatnonzero(seen & ~np.isfinite(points).all(axis=1))
+        if need.size:        # new landmarks: all their rays from the poses as they stand
+            start, _ = triangulate_window_lsq(between(poses[:end - 1], poses[1:end]),
+                                              brg[:end, need], min_parallax_rad=min_parallax_rad,
+                                              max_range_m=max_range_m)
+            points[need[start.column]] = start.points_xy
+        column = np.flatnonzero(seen & np.isfinite(points).all(axis=1))
+        result = _fit(u[:end - 1], sig[:end - 1], float(bearing_sigma_rad), brg[:end],
+                      poses[:end], column, points[column], min_parallax_rad, max_range_m,
+                      min_depth_m, outlier_sigma, max_outliers - n_outliers, max_iter, tol)
+        fit_poses, fit_column, fit_points, dropped, _, _ = result
+        poses[:end] = fit_poses
+        points[:] = np.nan
+        points[fit_column] = fit_points
+        brg[dropped[0], dropped[1]] = np.nan
+        n_outliers += len(dropped[0])
+        solved = end
+    assert result is not None
+    _, column, points_xy, _, cov, converged = result
+    n_gated = int(np.count_nonzero(two_rays)) - len(column)
+    if cov is None:                       # numerically singular: refuse the whole window
+        return _empty(poses, n_outliers), n_gated + len(column)
+    n_rays = np.isfinite(brg[:, column]).sum(axis=0).astype(np.int64)
+    return WindowBundle(column, points_xy, cov, poses, n_rays, n_outliers, converged), n_gated
+
+
+def _fit(u: np.ndarray, sig: np.ndarray, bearing_sigma_rad: float, brg: np.ndarray,
+         poses: np.ndarray, column: np.ndarray, points: np.ndarray, min_parallax_rad: float,
+         max_range_m: float, min_depth_m: float, outlier_sigma: float | None,
+         max_outliers: int, max_iter: int, tol: float) -> tuple:
+    """Levenberg-Marquardt on one prefix, dropping outlier rays (the worst first) and the
+    landmarks that fail the gates, until neither happens.
+
+    Returns ``(poses, column, points, (dropped pose, dropped column), covariance or None,
+    converged)``.
+    """
+    sub = brg[:, column]
+    k, lm = np.nonzero(np.isfinite(sub))
+    theta = sub[k, lm]
+    drop_k: list[int] = []
+    drop_c: list[int] = []
+    n_lm = len(column)
+    while True:
+        if n_lm == 0:
+            return (poses, column, points, (np.array(drop_k, np.int64),
+                                            np.array(drop_c, np.int64)), None, False)
+        prob = _Problem(u, sig, bearing_sigma_rad, k, lm, theta, n_lm)
+        poses, points, info, converged = _levenberg_marquardt(prob, poses, points, max_iter,
+                                                               tol)
+        res_rad = _bearing_residuals(poses, points, k, lm, theta)[0]
+        res = np.abs(res_rad) / bearing_sigma_rad
+        worst = int(np.argmax(res)) if res.size else -1
+        keep = None
+        if (outlier_sigma is not None and worst >= 0 and res[worst] > outlier_sigma
+                and len(drop_k) < max_outliers):
+            keep = np.ones(len(k), bool)
+            keep[worst] = False
+            drop_k.append(int(k[worst]))
+            drop_c.append(int(column[lm[worst]]))
+        ok = _gates(poses, points, k, lm, res_rad, keep, n_lm, min_parallax_rad,
+                    max_range_m, min_depth_m)
+        if keep is None and ok.all():
+            break
+        if keep is None:
+            keep = np.ones(len(k), bool)
+        keep &= ok[lm]
+        new_index = np.cumsum(ok) - 1
+        column, points = column[ok], points[ok]
+        k, lm, theta = k[keep], new_index[lm[keep]], theta[keep]
+        n_lm = len(column)
+    cov = _landmark_covariance(info, prob.n_pose_vars)
+    return (poses, column, points, (np.array(drop_k, np.int64), np.array(drop_c, np.int64)),
+            cov, converged)
+
+
+def _gates(poses: np.ndarray, points: np.ndarray, k: np.ndarray, lm: np.ndarray,
+           res_rad: np.ndarray, keep: np.ndarray | None, n_lm: int, min_parallax_rad: float,
+           max_range_m: float, min_depth_m: float) -> np.ndarray:
+    """Landmarks with two kept rays or more, in front of each (the ray's bearing points at
+    the estimate: a residual under pi / 2) at ``min_depth_m`` to ``max_range_m`` deep, whose rays have
+    :func:`~bomgraph.stmds.triangulation.effective_parallax` ``>= min_parallax``."""
+    if keep is not None:
+        k, lm, res_rad = k[keep], lm[keep], res_rad[keep]
+    d = points[lm] - poses[k, :2]
+    ang = np.arctan2(d[:, 1], d[:, 0])
+    depth = np.hypot(d[:, 0], d[:, 1])
+    count = np.bincount(lm, minlength=n_lm)
+    bad = (depth > max_range_m) | (depth < min_depth_m) | (np.abs(res_rad) >= math.pi / 2)
+    far = np.bincount(lm, bad, minlength=n_lm) > 0
+    parallax = effective_parallax(ang, lm, n_lm)
+    return (count >= 2) & ~far & (parallax >= max(min_parallax_rad, 1e-15))
+
+
+def _landmark_covariance(info: np.ndarray, n_pose_vars: int) -> np.ndarray | None:
+    """Landmark block of ``info^-1`` (Jacobi-scaled for conditioning), None if singular."""
+    scale = 1.0 / np.sqrt(np.maximum(np.diag(info), 1e-300))
+    try:
+        inv = np.linalg.inv(info * scale[:, None] * scale[None, :])
+    except np.linalg.LinAlgError:
+        return None
+    cov = (inv * scale[:, None] * scale[None, :])[n_pose_vars:, n_pose_vars:]
+    if not np.all(np.isfinite(cov)) or np.any(np.diag(cov) <= 0):
+        return None
+    return cov
+
+
+def _empty(poses: np.ndarray, n_outliers: int) -> WindowBundle:
+    return WindowBundle(np.zeros(0, np.int64), np.zeros((0, 2)), np.zeros((0, 0)), poses,
+                        np.zeros(0, np.int64), n_outliers, False)
+
+
+def bundle_pair_squared_distances(bundle: WindowBundle) -> PairEstimates:
+    """Squared distance and first-order variance of every pair of a window's landmarks.
+
+    ``var(d_ij^2) = 4 e^T (C_ii + C_jj - C_ij - C_ji) e`` with ``e = p_i - p_j`` and ``C`` the
+    joint covariance of the bundle (shared poses and bearings included).
+    """
+    first, second = pair_indices(len(bundle))
+    e = bundle.points_xy[first] - bundle.points_xy[second]
+    n = len(bundle)
+    blocks = bundle.covariance_m2.reshape(n, 2, n, 2).transpose(0, 2, 1, 3)
+    d = (blocks[first, first] + blocks[second, second] - blocks[first, second]
+         - blocks[second, first])
+    var = 4.0 * np.einsum("pa,pab,pb->p", e, d, e)
+    return PairEstimates(first, second, np.einsum("pa,pa->p", e, e), var, None, None)
+
+
+__all__ = ["SIGMA_FLOOR", "WindowBundle", "bundle_adjust_window",
+           "bundle_pair_squared_distances"]
