@@ -529,6 +529,12 @@ class HybridMapper(BatchMapper):
         self._seed_map = {}
         seeded, info = self._seed()
         warm = gtsam.Values(self.values)
+        if seeded is not None:
+            # the seed map places the landmarks the rays alone do not yet determine (too
+            # little parallax on the resected poses): they enter at their seed position
+            for lid, n_rays in self.problem.pending().items():
+                if n_rays >= 2 and lid in self._seed_map:
+                    self.problem.enter(lid, self._seed_map[lid])
         self.absorb()   # admission judged on the resected poses when seeded
         self._resected = None
         starts: list[tuple[str, gtsam.Values]] = []
