@@ -190,6 +190,35 @@ def format_summary(summary: Sequence[dict]) -> str:
     return "\n".join(lines)
 
 
+def format_by_run(rows: Sequence[dict]) -> str:
+    """Final landmark MPE [cm] (landmarks mapped) per arm and run, one block per experiment."""
+    lines = []
+    by_exp: dict[str, list[dict]] = {}
+    for row in rows:
+        by_exp.setdefault(row["experiment"], []).append(row)
+    for exp, rs in by_exp.items():
+        runs = list(dict.fromkeys(r["run"] for r in rs))
+        arms = list(dict.fromkeys(r["arm"] for r in rs))
+        cell = {(r["arm"], r["run"]): r for r in rs}
+        lines.append(f"\n== {exp}, final map per run ==  landmark MPE [cm] (landmarks mapped); "
+                     f"'no map': fewer than 3 landmarks; FAILED: the run raised")
+        lines.append(f"{'arm':30s} " + " ".join(f"{r[-14:]:>14s}" for r in runs))
+        for arm in arms:
+            cells = []
+            for run_name in runs:
+                r = cell.get((arm, run_name))
+                if r is None:
+                    cells.append("")
+                elif not r["ok"]:
+                    cells.append("FAILED")
+                elif not math.isfinite(r["mpe_m"]):
+                    cells.append(f"no map ({r['n_mapped']})")
+                else:
+                    cells.append(f"{100 * r['mpe_m']:.1f} ({r['n_mapped']})")
+            lines.append(f"{arm[:30]:30s} " + " ".join(f"{c:>14s}" for c in cells))
+    return "\n".join(lines)
+
+
 def cmd_compare(args: argparse.Namespace) -> int:
     from .bench import Executor, compare, paper_experiments
 
@@ -229,6 +258,10 @@ def cmd_compare(args: argparse.Namespace) -> int:
         if bar is not None:
             bar.close()
     print(format_summary(result.summary))
+    if args.real:
+        from .bench import final_by_run
+
+        print(format_by_run(final_by_run(result.results)))
     print(f"\n{len(result.results)} runs in {result.wall_s:.1f} s; wrote "
           f"{', '.join(result.files)}")
     return 0

@@ -8,8 +8,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bomgraph.bench import (Arm, Executor, Experiment, compare, execute, paper_experiments,
-                            run_task, strip_timings, summarise)
+from bomgraph.bench import (REAL_VARIANTS, Arm, Executor, Experiment, compare, execute,
+                            final_by_run, paper_experiments, real_experiments, run_task,
+                            strip_timings, summarise)
+from bomgraph.cli import format_by_run
 from bomgraph.errors import ConfigError
 from bomgraph.sim import SimConfig
 
@@ -48,6 +50,31 @@ def test_a_failing_method_is_reported_not_dropped() -> None:
     assert all(not r["ok"] and "min_parallax_rad" in r["error"] for r in bad)
     rows = {r["arm"]: r for r in summarise(results)}
     assert rows["bad"]["failed"] == 4 and rows["tri"]["failed"] == 0
+    # the per-run table names each failure and each run's own final score
+    per_run = final_by_run(results)
+    assert len(per_run) == 8
+    assert all(not r["ok"] and "min_parallax_rad" in r["error"] for r in per_run
+               if r["arm"] == "bad")
+    tri = [r for r in per_run if r["arm"] == "tri"]
+    assert all(r["t"] == 40 and 0 < r["mpe_m"] < 1.0 and r["n_mapped"] >= 3 for r in tri)
+    text = format_by_run(per_run)
+    bad_line = next(line for line in text.splitlines() if line.startswith("bad "))
+    assert bad_line.split()[1:] == ["FAILED"] * 4
+    assert f"{100 * tri[0]['mpe_m']:.1f} ({tri[0]['n_mapped']})" in text
+
+
+def test_real_experiments_hold_every_method_and_its_real_variant(tmp_path: Path) -> None:
+    for d in ("mrclam6", "bearing_only_sim_g2o"):
+        (tmp_path / d).mkdir()
+    exps = real_experiments(tmp_path)
+    assert set(exps) == {"mrclam6", "g2o"} and len(exps["mrclam6"].sources) == 5
+    labels = {a.label: a for a in exps["mrclam6"].arms}
+    for method, (label, options) in REAL_VARIANTS.items():
+        assert method in labels and labels[label].method == method
+        assert dict(labels[label].options) == options
+    assert {"ekf-invdepth", "gtsam-isam2", "oracle"} <= set(labels)
+    with pytest.raises(ConfigError, match="no dataset folders"):
+        real_experiments(tmp_path / "nothing")
 
 
 def test_serial_processes_and_dask_give_identical_results() -> None:
