@@ -12,7 +12,7 @@ its rays by least squares (``tri_method="lsq"``):
   ``--gtsam`` also ``gtsam-batch`` on the same recordings, for the 3x target.
 
 Usage: ``python scripts/bench_stmds_window.py [--sim] [--real] [--gtsam] [--runs 25]
-[--jobs 2] [--quick]``. Results are printed and saved to ``results/bench_stmds_window.json``.
+[--jobs 2] [--quick] [--ba-only]``. Results are printed and saved to ``results/bench_stmds_window.json``.
 """
 
 from __future__ import annotations
@@ -92,6 +92,10 @@ def bench_sim(runs: int, jobs: int, quick: bool) -> list[dict]:
         grid.append(("stmds-smacof", {"preset": "window", "tri_method": "lsq",
                                       "tri_window": w}))
     grid.append(("stmds-cs", {"preset": "window", "tri_method": "lsq", "tri_window": 10}))
+    # local bundle adjustment in the window (poses estimated with the landmarks)
+    for w, stride in ((10, None), (10, 3)):
+        grid.append(("stmds-smacof", {"preset": "window", "tri_method": "ba", "tri_window": w,
+                                      "tri_stride": stride}))
     out = []
     print(f"== paper settings, {len(specs)} runs, MPE at t = 300 ==", flush=True)
     for method, options in grid:
@@ -114,7 +118,24 @@ def bench_sim(runs: int, jobs: int, quick: bool) -> list[dict]:
 REAL = ("mrclam6-r1", "mrclam6-r2", "mrclam6-r3", "mrclam6-r4", "mrclam6-r5", "g2o")
 
 
-def bench_real(jobs: int, quick: bool, gtsam: bool) -> list[dict]:
+def ba_grid(quick: bool) -> list[tuple[str, dict]]:
+    """Windowed bundle adjustment (``tri_method="ba"``, the kernel of the "real" preset):
+    window length, stride, the growing solve and the outlier test."""
+    grid: list[tuple[str, dict]] = []
+    for w, stride in itertools.product((40, 60) if quick else (24, 40, 60, 80), (10, 20)):
+        grid.append(("stmds-smacof", {"preset": "real", "tri_window": w, "tri_stride": stride}))
+    grid += [("stmds-smacof", {"preset": "real", "tri_grow": 60}),       # one solve per window
+             ("stmds-smacof", {"preset": "real", "tri_grow": 5}),
+             ("stmds-smacof", {"preset": "real", "tri_grow": 10}),
+             ("stmds-smacof", {"preset": "real", "tri_outlier_sigma": None}),
+             ("stmds-smacof", {"preset": "real", "tri_window": 60, "tri_stride": 60}),
+             ("stmds-cs", {"preset": "real"}), ("stmds-smacof-loc", {"preset": "real"})]
+    return grid
+
+
+def bench_real(jobs: int, quick: bool, gtsam: bool, ba_only: bool = False) -> list[dict]:
+    if ba_only:
+        return _real_grid(ba_grid(quick) + ([("gtsam-batch", {})] if gtsam else []), jobs)
     grid: list[tuple[str, dict]] = [("stmds-smacof", {}), ("stmds-smacof", {"min_count": 1}),
                                     ("stmds-smacof", {"preset": "improved", "min_count": 1})]
     windows = (6, 16) if quick else (6, 10, 16, 24)
@@ -128,8 +149,13 @@ def bench_real(jobs: int, quick: bool, gtsam: bool) -> list[dict]:
     for w, par in itertools.product((8, 16, 24), (1.0, 5.0)):
         grid.append(("stmds-smacof", {"preset": "real", "tri_method": "lsq", "tri_window": w,
                                       "min_parallax_rad": round(math.radians(par), 6)}))
+    grid += ba_grid(quick)
     if gtsam:
         grid.append(("gtsam-batch", {}))
+    return _real_grid(grid, jobs)
+
+
+def _real_grid(grid: list[tuple[str, dict]], jobs: int) -> list[dict]:
     out = []
     print("== real data: final map, mapped landmarks and MPE (cm) ==", flush=True)
     print(f"{'':<84s}" + "".join(f"{n:>16s}" for n in REAL))
@@ -153,6 +179,8 @@ def main() -> None:
     ap.add_argument("--runs", type=int, default=25)
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--quick", action="store_true", help="a smaller grid")
+    ap.add_argument("--ba-only", action="store_true",
+                    help="with --real: only the window bundle adjustment grid")
     ap.add_argument("--out", default=str(RESULTS / "bench_stmds_window.json"))
     args = ap.parse_args()
     if not (args.sim or args.real):
@@ -162,7 +190,7 @@ def main() -> None:
         result["sim"] = bench_sim(args.runs, args.jobs, args.quick)
     if args.real:
         if (DATA / "mrclam6").is_dir():
-            result["real"] = bench_real(args.jobs, args.quick, args.gtsam)
+            result["real"] = bench_real(args.jobs, args.quick, args.gtsam, args.ba_only)
         else:
             print(f"no real data under {DATA}; skipped")
     path = Path(args.out)

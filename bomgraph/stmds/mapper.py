@@ -977,8 +977,8 @@ PRESETS = ("paper", "improved", "window", "real")
 WINDOW_PRESETS: dict[str, dict[str, Any]] = {
     "window": {"tri_window": 6, "tri_stride": 1, "fusion": "scale-free",
                "weights": "inverse-variance", "min_count": 3, "max_range_factor": 1.3},
-    "real": {"tri_window": 60, "tri_stride": 10, "tri_method": "ba", "fusion": "scale-free",
-             "weights": "inverse-variance", "min_count": 1},
+    "real": {"tri_window": 60, "tri_stride": 10, "tri_method": "ba", "tri_grow": 3,
+             "fusion": "scale-free", "weights": "inverse-variance", "min_count": 1},
 }
 
 
