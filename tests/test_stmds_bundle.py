@@ -280,17 +280,12 @@ def test_a_gross_bearing_outlier_is_dropped(grow: int) -> None:
     assert moved_kept > 0.05 and moved_kept > 5 * moved_dropped, (moved_kept, moved_dropped)
 
 
-# Known failure (reported, issue 8): the outlier test ranks rays by their raw residual. A ray
-# at the newest pose of a prefix (here pose 5, the last of the first prefix with grow=5) or of
-# the window (pose 7) has a large leverage: that pose's heading and the landmark absorb most of
-# its error, so good rays of the same landmark show larger residuals and are dropped first
-# (permanently: later prefixes never see them again); at pose 7 the outlier is even kept and
-# the landmark moved to fit it. Measured over 4 noise seeds x 5 landmarks x +-0.5 rad: 10 of
-# 40 outliers at pose 5 and 4 of 40 at pose 7 cost 3 or 4 rays instead of 1. Ranking by the
-# standardised residual r / (sigma sqrt(1 - h)), h the leverage of the ray from the whitened
-# J (J^T J)^-1 J^T, dropped exactly the outlier in all 240 cases (poses 3, 5, 7; grow 5, 8).
-@pytest.mark.xfail(strict=True, reason="bundle.py _fit: outlier test on raw residuals drops "
-                   "good rays when the outlier has high leverage (newest pose)")
+# A ray at the newest pose of a prefix (here pose 5, the last of the first prefix with grow=5)
+# or of the window (pose 7) has a large leverage: that pose's heading and the landmark absorb
+# most of its error. Ranked by raw residuals, good rays of the same landmark showed larger
+# residuals and were dropped first (measured: 10 of 40 outliers at pose 5 and 4 of 40 at pose 7
+# cost 3-4 rays, and at pose 7 the outlier was kept). The standardised residual
+# r / (sigma sqrt(1 - h)), h the ray's leverage, drops exactly the outlier.
 @pytest.mark.parametrize("pose", [5, 7])
 def test_an_outlier_at_the_newest_pose_is_the_ray_dropped(pose: int) -> None:
     u, sig, brg = _noisy_window(3)

@@ -13,8 +13,9 @@ gauge) and every landmark seen from two of its poses or more minimise
 the maximum-likelihood problem of the window alone (Levenberg-Marquardt, dense: a window has
 at most a few hundred unknowns). It starts from :func:`triangulation.triangulate_window_lsq`
 (odometry poses, all rays of each landmark), so the gates of that function apply to the start;
-rays whose whitened residual exceeds ``outlier_sigma`` are dropped one at a time (the worst
-first) and the window solved again, so a gross bearing outlier cannot bend the window.
+rays whose standardised residual (whitened, divided by ``sqrt(1 - leverage)``) exceeds
+``outlier_sigma`` are dropped one at a time (the worst first) and the window solved again,
+so a gross bearing outlier cannot bend the window.
 
 The joint covariance of the window's landmarks is the landmark block of ``(J^T J)^-1`` (first
 order, exact for the MLE of a linear model); the variance of a pair's squared distance follows
@@ -340,6 +341,16 @@ def _fit(u: np.ndarray, sig: np.ndarray, bearing_sigma_rad: float, brg: np.ndarr
                                                                tol)
         res_rad = _bearing_residuals(poses, points, k, lm, theta)[0]
         res = np.abs(res_rad) / bearing_sigma_rad
+        if outlier_sigma is not None and res.size:
+            # standardised residuals r / (sigma sqrt(1 - h)), h the ray's leverage: a ray at
+            # the newest pose is mostly absorbed by that pose's heading, so its raw residual
+            # understates it and good rays of the same landmark would be dropped first
+            jb = prob.linearise(poses, points)[1][prob.rows - len(k):]
+            try:
+                h = np.einsum("ri,ri->r", jb, np.linalg.solve(info, jb.T).T)
+            except np.linalg.LinAlgError:
+                h = np.zeros(len(k))
+            res = res / np.sqrt(np.clip(1.0 - h, 1e-6, 1.0))
         worst = int(np.argmax(res)) if res.size else -1
         keep = None
         if (outlier_sigma is not None and worst >= 0 and res[worst] > outlier_sigma
