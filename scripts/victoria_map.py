@@ -40,7 +40,7 @@ import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Iterable, Iterator, Sequence
+from typing import Any, Callable, Iterable, Iterator, Sequence
 
 import numpy as np
 
@@ -224,7 +224,8 @@ def summarise(outcomes: Sequence[Outcome], stream: Stream
 
 def victoria_maps(stream: Stream, specs: Iterable[MethodSpec], out_dir: str | Path, *,
                   checkpoint_every: int = 100, max_seconds: float | None = None,
-                  title: str = "Victoria Park", dpi: int = 110) -> dict[str, Any]:
+                  title: str = "Victoria Park", dpi: int = 110,
+                  progress: Callable[[str], None] | None = None) -> dict[str, Any]:
     """Run ``specs`` on ``stream``, compare each map with the ``gtsam-batch`` one, and write
     the figure, JSON and CSV into ``out_dir``. Returns ``{"rows", "figure", "json", "csv"}``.
 
@@ -239,8 +240,15 @@ def victoria_maps(stream: Stream, specs: Iterable[MethodSpec], out_dir: str | Pa
     specs.sort(key=lambda s: s.label != REFERENCE)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    outcomes = [run_method(s, stream, checkpoint_every=checkpoint_every,
-                           max_seconds=max_seconds) for s in specs]
+    outcomes = []
+    for s in specs:
+        outcomes.append(run_method(s, stream, checkpoint_every=checkpoint_every,
+                                   max_seconds=max_seconds))
+        if progress is not None:
+            o = outcomes[-1]
+            progress(f"{s.label}: {o.wall_s:.1f} s, "
+                     f"{len(o.estimate) if o.estimate is not None else 0} landmarks"
+                     f"{', ' + o.error if o.error else ''}")
     rows, alignments = summarise(outcomes, stream)
     seen = sightings(stream)
 
@@ -358,7 +366,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             ap.error("--steps must be >= 2")
         stream = Stream(stream.header, stream.steps[:a.steps], None)
     res = victoria_maps(stream, [METHODS[m] for m in a.methods.split(",")], a.out,
-                        checkpoint_every=a.checkpoint_every, max_seconds=a.max_seconds)
+                        checkpoint_every=a.checkpoint_every, max_seconds=a.max_seconds,
+                        progress=lambda msg: print(msg, file=sys.stderr, flush=True))
     m = res["meta"]
     print(f"Victoria Park: {m['steps']} steps, {m['landmarks_seen']} landmarks seen "
           f"({m['landmarks_seen_3_or_more']} at least 3 times), bearing sigma "
