@@ -329,3 +329,54 @@ def test_marginal_covariances(noise_free: Stream) -> None:
     floor = FactorGraphConfig().sigma_floor_m
     np.testing.assert_allclose(np.diag(est.pose_cov[0]), floor ** 2, rtol=1e-3)
     assert np.trace(est.pose_cov[-1]) > 100 * np.trace(est.pose_cov[0])
+
+
+def _with_outliers(stream: Stream, odometry_step: int | None, bearing_step: int | None
+                   ) -> Stream:
+    """The stream with one step's odometry 0.4 m / 0.5 rad off (a collision) and/or one
+    bearing 1.5 rad off."""
+    steps = list(stream.steps)
+    if odometry_step is not None:
+        st = steps[odometry_step]
+        steps[odometry_step] = Step(st.t, st.odom + np.array([0.4, 0.0, 0.5]), st.landmark_ids,
+                                    st.bearings_rad, st.odom_sigma, st.time_s)
+    if bearing_step is not None:
+        st = steps[bearing_step]
+        brg = st.bearings_rad.copy()
+        brg[0] = brg[0] + 1.5
+        steps[bearing_step] = Step(st.t, st.odom, st.landmark_ids, brg, st.odom_sigma,
+                                   st.time_s)
+    return Stream(stream.header, steps, stream.truth)
+
+
+def _batch_mpe(stream: Stream, **options: float) -> float:
+    est = run(BatchMapper(stream.header, **options), stream.steps, checkpoint_every=50).final
+    return score_estimate(est, stream.truth).mpe_m
+
+
+def test_robust_odometry_absorbs_a_collision() -> None:
+    clean = simulate(SMALL, np.random.default_rng(21))
+    bumped = _with_outliers(clean, odometry_step=50, bearing_step=None)
+    gaussian = _batch_mpe(bumped)
+    robust = _batch_mpe(bumped, odometry_cauchy_k=3.0)
+    reference = _batch_mpe(clean)
+    assert robust < 0.5 * gaussian
+    assert robust < 2.0 * reference + 0.005
+
+
+def test_robust_bearings_keep_a_gross_outlier_from_bending_the_map() -> None:
+    clean = simulate(SMALL, np.random.default_rng(22))
+    bad = _with_outliers(clean, odometry_step=50, bearing_step=70)
+    odometry_only = _batch_mpe(bad, odometry_cauchy_k=3.0)
+    both = _batch_mpe(bad, odometry_cauchy_k=3.0, bearing_cauchy_k=3.0)
+    assert both < odometry_only
+    assert both < 2.0 * _batch_mpe(clean) + 0.005
+
+
+def test_robust_kernels_are_validated_and_keep_noise_free_data_exact(noise_free: Stream) -> None:
+    for bad in ({"odometry_cauchy_k": 0.0}, {"bearing_cauchy_k": -1.0}):
+        with pytest.raises(ConfigError):
+            FactorGraphConfig(**bad)
+    est = run(BatchMapper(noise_free.header, odometry_cauchy_k=3.0, bearing_cauchy_k=3.0),
+              noise_free.steps).final
+    assert score_estimate(est, noise_free.truth).mpe_m < 1e-6
