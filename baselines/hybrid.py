@@ -29,7 +29,7 @@ the resected poses.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, fields, replace
 from typing import Any, Sequence
 
 import gtsam
@@ -521,6 +521,18 @@ class HybridMapper(BatchMapper):
             return self._resected[np.asarray(ts, dtype=np.int64)]
         return super()._pose_at(ts)
 
+    def _out_of_reach(self, values: gtsam.Values) -> np.ndarray:
+        """Ids of the landmarks farther than ``range_gate * sensor_range_m`` from every pose
+        (none when the header has no sensor range)."""
+        rng = self.header.sensor_range_m
+        ids = np.array(self.problem.landmark_ids, np.int64)
+        if rng is None or not ids.size or self.problem.n_steps == 0:
+            return np.zeros(0, np.int64)
+        xy = landmarks_from_values(values, ids)
+        poses = poses_from_values(values, np.arange(self.problem.n_steps))[:, :2]
+        d2 = ((xy[:, None, :] - poses[None, :, :]) ** 2).sum(axis=2).min(axis=1)
+        return ids[d2 > (self.config.range_gate * rng) ** 2]
+
     # -- estimate -------------------------------------------------------------------------
     def estimate(self) -> MapEstimate:
         if self.problem.n_steps == 0:
@@ -555,14 +567,35 @@ class HybridMapper(BatchMapper):
         solved = [(name, *solve_lm(self.graph, start, self.config,
                                    self.robust_graph if huber[name] else None))
                   for name, start in starts]
-        name, values, report = min(solved, key=lambda s: s[2].final_error)
+        # a start whose solution puts landmarks out of the sensor's reach of every pose (a
+        # weakly seen landmark slid far along its rays: a converged but wrong minimum) loses
+        # to one that does not, whatever the costs
+        name, values, report = min(solved, key=lambda s: (self._out_of_reach(s[1]).size > 0,
+                                                           s[2].final_error))
         self.values = values
         self._have_solution = True
         info.update(report.as_info())
         info["start"] = name
         info["starts"] = [s for s, _ in starts]
-        return estimate_from_values(self.problem, values, self.graph, info,
-                                     self.config.covariances)
+        est = estimate_from_values(self.problem, values, self.graph, info,
+                                   self.config.covariances)
+        far = self._out_of_reach(values)
+        if far.size:
+            # still there in the best solution: not determined yet (too little parallax);
+            # left out of the map, and moved back to their seed position (if any) for the
+            # next warm start
+            for lid in far.tolist():
+                if lid in self._seed_map:
+                    xy = self._seed_map[lid]
+                    self.values.update(landmark_key(lid), gtsam.Point2(float(xy[0]),
+                                                                       float(xy[1])))
+            keep = ~np.isin(est.landmark_ids, far)
+            est = replace(est, landmark_ids=est.landmark_ids[keep],
+                          landmarks_xy=est.landmarks_xy[keep],
+                          landmark_cov=None if est.landmark_cov is None
+                          else est.landmark_cov[keep],
+                          info={**est.info, "out_of_reach": far.tolist()})
+        return est
 
 
 __all__ = ["HybridConfig", "HybridMapper", "resect_pose", "resection_jacobian",
