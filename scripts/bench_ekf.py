@@ -134,7 +134,10 @@ def parse_options(pairs: list[str]) -> dict[str, Any]:
         try:
             out[key] = ast.literal_eval(value)
         except (ValueError, SyntaxError):
-            out[key] = value
+            try:
+                out[key] = float(value)      # inf, nan
+            except ValueError:
+                out[key] = value
     return out
 
 
