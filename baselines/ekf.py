@@ -1386,6 +1386,7 @@ class InverseDepthEkfMapper(_EkfSlam):
                               "converted": self.n_converted}
 
 
-__all__ = ["BearingEkf", "EkfConfig", "EkfMapper", "InverseDepthConfig",
-           "InverseDepthEkfMapper", "bearing_and_jacobian", "invdepth_bearing_and_jacobian",
-           "invdepth_to_xy", "triangulate_two_bearings", "gaussian_kl_2d", "motion_jacobians"]
+__all__ = ["BearingEkf", "EKF_PRESETS", "EkfConfig", "EkfMapper", "INVDEPTH_PRESETS",
+           "InverseDepthConfig", "InverseDepthEkfMapper", "bearing_and_jacobian",
+           "invdepth_bearing_and_jacobian", "invdepth_conversion_kl", "invdepth_to_xy",
+           "ray_covariance", "triangulate_two_bearings", "gaussian_kl_2d", "motion_jacobians"]
