@@ -16,7 +16,9 @@ Usage::
                                 [--jobs 2] [--seed 0] [--out results/bench_ekf.json]
                                 [--option key=value ...]
 
-Prints a table and writes the numbers as JSON (``results/`` is git-ignored).
+``--option preset=real`` runs the presets made for recordings (``baselines.ekf.EKF_PRESETS``);
+``inf`` is accepted as a number. Prints a table and writes the numbers as JSON (``results/`` is
+git-ignored).
 """
 
 from __future__ import annotations
