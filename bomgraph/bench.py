@@ -280,6 +280,8 @@ REAL_VARIANTS: dict[str, tuple[str, dict[str, Any]]] = {
     "stmds-cs": ("stmds-cs (real)", {"preset": "real"}),
     "stmds-smacof": ("stmds-smacof (real)", {"preset": "real"}),
     "stmds-smacof-loc": ("stmds-smacof-loc (real)", {"preset": "real"}),
+    "ekf": ("ekf (real)", {"preset": "real"}),
+    "ekf-invdepth": ("ekf-invdepth (real)", {"preset": "real"}),
     "gtsam-batch": ("gtsam-batch (robust)", dict(ROBUST_GRAPH)),
     "gtsam-isam2": ("gtsam-isam2 (robust)", dict(ROBUST_GRAPH)),
     "hybrid": ("hybrid (real seed, robust)", {"seed_options": {"preset": "real"},
