@@ -225,6 +225,8 @@ def paper_experiments(*, quick: bool = False, seed: int = 0) -> dict[str, Experi
     size = dict(n_layouts=2, n_starts=1) if quick else {}
     imp = {"preset": "improved"}
     wls = {"preset": "window", "tri_method": "lsq", "tri_window": 10}  # issue 8
+    # local bundle adjustment in 10-pose windows, a new window every 3 steps (issue 8)
+    wba = {"preset": "window", "tri_method": "ba", "tri_window": 10, "tri_stride": 3}
     exps = [
         Experiment("exp1", "Exp. 1: mapping without localisation", (
             Arm("stmds-cs", "stmds-cs"),
@@ -234,6 +236,7 @@ def paper_experiments(*, quick: bool = False, seed: int = 0) -> dict[str, Experi
             Arm("stmds-cs (improved)", "stmds-cs", imp),
             Arm("stmds-smacof (improved)", "stmds-smacof", imp),
             Arm("stmds-smacof (window lsq)", "stmds-smacof", wls),
+            Arm("stmds-smacof (window ba)", "stmds-smacof", wba),
         ), sim, seed, **size),
         Experiment("exp2", "Exp. 2: simultaneous localisation and mapping", (
             Arm("stmds-cs-loc", "stmds-cs-loc"),
@@ -256,6 +259,7 @@ def paper_experiments(*, quick: bool = False, seed: int = 0) -> dict[str, Experi
             Arm("stmds-smacof", "stmds-smacof"),
             Arm("stmds-smacof (improved)", "stmds-smacof", imp),
             Arm("stmds-smacof (window lsq)", "stmds-smacof", wls),
+            Arm("stmds-smacof (window ba)", "stmds-smacof", wba),
             Arm("stmds-smacof-loc (improved)", "stmds-smacof-loc", imp),
             Arm("ekf", "ekf"),
             Arm("gtsam-batch", "gtsam-batch"),
