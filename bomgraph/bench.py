@@ -287,7 +287,6 @@ REAL_VARIANTS: dict[str, tuple[str, dict[str, Any]]] = {
     "ekf": ("ekf (real)", {"preset": "real"}),
     "ekf-invdepth": ("ekf-invdepth (real)", {"preset": "real"}),
     "gtsam-batch": ("gtsam-batch (robust)", dict(ROBUST_GRAPH)),
-    "gtsam-isam2": ("gtsam-isam2 (robust)", dict(ROBUST_GRAPH)),
     "hybrid": ("hybrid (real seed, robust)", {"seed_options": {"preset": "real"},
                                               **ROBUST_GRAPH}),
     "oracle": ("oracle (robust)", dict(ROBUST_GRAPH)),
