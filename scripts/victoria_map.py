@@ -76,6 +76,7 @@ METHODS: dict[str, MethodSpec] = {s.label: s for s in [
     MethodSpec("stmds-smacof", "stmds-smacof"),
     MethodSpec("stmds-smacof-real", "stmds-smacof", {"preset": "real"}),
     MethodSpec("hybrid", "hybrid"),
+    MethodSpec("hybrid-real", "hybrid", {"seed_options": {"preset": "real"}}),
 ]}
 
 
@@ -377,7 +378,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         info = r["info"]
         if "converged" in info:
             print(f"{r['method']}: converged={info['converged']} cost={info.get('cost')} "
-                  f"stop={info.get('stop', '-')}")
+                  f"stop={info.get('stop', '-')}"
+                  + (f" seed: {info['seed']}" if "seed" in info else ""))
     print(f"wrote {res['figure']}, {res['json']}, {res['csv']}")
     if a.docs:
         shutil.copyfile(res["figure"], ROOT / "docs" / FIGURE)
