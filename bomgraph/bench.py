@@ -280,16 +280,17 @@ ROBUST_GRAPH: dict[str, Any] = {"odometry_cauchy_k": 3.0, "bearing_cauchy_k": 3.
 
 #: Arms added to the real-data experiments: the variants made for recordings (issues 7, 8),
 #: each next to the paper's configuration of the same method.
-REAL_VARIANTS: dict[str, tuple[str, dict[str, Any]]] = {
-    "stmds-cs": ("stmds-cs (real)", {"preset": "real"}),
-    "stmds-smacof": ("stmds-smacof (real)", {"preset": "real"}),
-    "stmds-smacof-loc": ("stmds-smacof-loc (real)", {"preset": "real"}),
-    "ekf": ("ekf (real)", {"preset": "real"}),
-    "ekf-invdepth": ("ekf-invdepth (real)", {"preset": "real"}),
-    "gtsam-batch": ("gtsam-batch (robust)", dict(ROBUST_GRAPH)),
-    "hybrid": ("hybrid (real seed, robust)", {"seed_options": {"preset": "real"},
-                                              **ROBUST_GRAPH}),
-    "oracle": ("oracle (robust)", dict(ROBUST_GRAPH)),
+REAL_VARIANTS: dict[str, tuple[tuple[str, dict[str, Any]], ...]] = {
+    "stmds-cs": (("stmds-cs (real)", {"preset": "real"}),),
+    "stmds-smacof": (("stmds-smacof (real)", {"preset": "real"}),),
+    "stmds-smacof-loc": (("stmds-smacof-loc (real)", {"preset": "real"}),),
+    "ekf": (("ekf (real)", {"preset": "real"}),),
+    "ekf-invdepth": (("ekf-invdepth (real)", {"preset": "real"}),),
+    "gtsam-batch": (("gtsam-batch (robust)", dict(ROBUST_GRAPH)),),
+    "hybrid": (("hybrid (real seed)", {"seed_options": {"preset": "real"}}),
+               ("hybrid (real seed, robust)", {"seed_options": {"preset": "real"},
+                                               **ROBUST_GRAPH})),
+    "oracle": (("oracle (robust)", dict(ROBUST_GRAPH)),),
 }
 
 
@@ -303,9 +304,7 @@ def real_experiments(data_dir: str | os.PathLike[str],
     arms: tuple[Arm, ...] = ()
     for m in methods:
         arms += (Arm(m, m),)
-        if m in REAL_VARIANTS:
-            label, options = REAL_VARIANTS[m]
-            arms += (Arm(label, m, options),)
+        arms += tuple(Arm(label, m, options) for label, options in REAL_VARIANTS.get(m, ()))
     exps = {}
     if (root / "mrclam6").is_dir():
         exps["mrclam6"] = Experiment(

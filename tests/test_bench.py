@@ -69,9 +69,10 @@ def test_real_experiments_hold_every_method_and_its_real_variant(tmp_path: Path)
     exps = real_experiments(tmp_path)
     assert set(exps) == {"mrclam6", "g2o"} and len(exps["mrclam6"].sources) == 5
     labels = {a.label: a for a in exps["mrclam6"].arms}
-    for method, (label, options) in REAL_VARIANTS.items():
-        assert method in labels and labels[label].method == method
-        assert dict(labels[label].options) == options
+    for method, variants in REAL_VARIANTS.items():
+        for label, options in variants:
+            assert method in labels and labels[label].method == method
+            assert dict(labels[label].options) == options
     assert {"ekf-invdepth", "gtsam-isam2", "oracle"} <= set(labels)
     with pytest.raises(ConfigError, match="no dataset folders"):
         real_experiments(tmp_path / "nothing")
