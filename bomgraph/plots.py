@@ -257,7 +257,7 @@ def map_comparison_figure(estimates: Mapping[str, MapEstimate | None], *,
             head = "FAILED" if est is None else "NO MAP"
             ax.text(0.5, 0.5, f"{head}\n{textwrap.fill(note, 40)}",
                     transform=ax.transAxes, ha="center", va="center", color="tab:red",
-                    fontsize=8, wrap=True)
+                    fontsize=8, bbox={"fc": "white", "ec": "none", "alpha": 0.85})
             ax.set_title(label, fontsize=9)
         else:
             al = alignments.get(label) or Alignment(np.eye(2), np.zeros(2))
@@ -281,5 +281,5 @@ def map_comparison_figure(estimates: Mapping[str, MapEstimate | None], *,
         ax.set_visible(False)
     if title:
         fig.suptitle(title, fontsize=10)
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, 0, 1, 1 - (0.4 / (4.2 * nrow) if title else 0)))
     return fig
