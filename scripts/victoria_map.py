@@ -8,7 +8,8 @@ Imports GTSAM's ``victoria_park.txt`` (:func:`bomgraph.datasets.victoria.import_
 bearings only), runs each method through the library (:func:`bomgraph.mapper.create_mapper`
 and :func:`bomgraph.mapper.run`), times it, and writes ``victoria_park_maps.png`` (each
 method's landmarks and trajectory over the ``gtsam-batch`` map), ``victoria_park.json`` and
-``victoria_park.csv``.
+``victoria_park.csv``, and each method's final map and trajectory as an estimate file in
+``estimates/``.
 
 There is no ground truth, so nothing here is an accuracy. Each map is aligned rigidly
 (rotation, translation, reflection allowed, no scale: :func:`bomgraph.evaluate.align` through
@@ -55,7 +56,7 @@ from bomgraph.angles import angle_residual
 from bomgraph.datasets.victoria import import_victoria
 from bomgraph.errors import BomgraphError, TooFewLandmarksError
 from bomgraph.evaluate import Alignment, score_estimate
-from bomgraph.mapper import MapEstimate, create_mapper, run
+from bomgraph.mapper import MapEstimate, RunResult, create_mapper, run, write_estimate
 from bomgraph.stream import Step, Stream, Truth
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -107,6 +108,7 @@ class Outcome:
     steps_done: int
     step_wall_s: np.ndarray
     error: str | None = None
+    result: RunResult | None = None
 
 
 def _timed(steps: Sequence[Step], times: list[float], deadline: float | None) -> Iterator[Step]:
@@ -127,7 +129,7 @@ def run_method(spec: MethodSpec, stream: Stream, *, checkpoint_every: int,
     times: list[float] = []
     t0 = time.perf_counter()
     deadline = None if max_seconds is None else t0 + max_seconds
-    est = None
+    est = res = None
     error = None
     try:
         mapper = create_mapper(spec.method, stream.header, **spec.options)
@@ -140,7 +142,7 @@ def run_method(spec: MethodSpec, stream: Stream, *, checkpoint_every: int,
         error = f"{type(exc).__name__}: {' '.join(str(exc).split())[:300]}"
     wall = time.perf_counter() - t0
     step_wall = np.diff(np.array(times)) if len(times) > 1 else np.zeros(0)
-    return Outcome(spec, est, wall, max(len(times) - 1, 0), step_wall, error)
+    return Outcome(spec, est, wall, max(len(times) - 1, 0), step_wall, error, res)
 
 
 def sightings(stream: Stream) -> dict[int, int]:
@@ -260,6 +262,12 @@ def victoria_maps(stream: Stream, specs: Iterable[MethodSpec], out_dir: str | Pa
                      f"{len(o.estimate) if o.estimate is not None else 0} landmarks"
                      f"{', ' + o.error if o.error else ''}")
     rows, alignments = summarise(outcomes, stream)
+    (out / "estimates").mkdir(exist_ok=True)
+    for o in outcomes:   # the maps themselves, to be read back with bomgraph.mapper.read_estimate
+        if o.result is not None:   # the final checkpoint only (all of them: ~20 MB each)
+            r = o.result
+            write_estimate(RunResult(r.method, r.checkpoints[-1:], r.step_s, r.total_s),
+                           out / "estimates" / f"{o.spec.label}.json")
     seen = sightings(stream)
 
     notes = {}
