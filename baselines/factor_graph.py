@@ -29,7 +29,7 @@ so it needs a floor near 1 mm). ``"naive"`` is the wrong diagonal, kept as a reg
 Zero sigmas are clamped to ``sigma_floor_m`` / ``sigma_floor_rad``.
 
 **Landmarks** enter the graph only once at least two of their bearings intersect with enough
-parallax (:func:`bomgraph.triangulate.intersect_rays` on the current pose estimates, inside the
+parallax (:func:`bomgraph.geometry.intersect_rays` on the current pose estimates, inside the
 sensor range if the header gives one); until then their bearings are buffered, and all of them
 become factors when the landmark enters. A landmark seen once never enters (one bearing leaves
 it indeterminate and breaks iSAM2).
@@ -52,7 +52,7 @@ from bomgraph.errors import ConfigError, StreamFormatError
 from bomgraph.geometry import compose
 from bomgraph.mapper import MapEstimate
 from bomgraph.stream import Prior, Step, StreamHeader, Truth
-from bomgraph.triangulate import intersect_rays
+from bomgraph.geometry import intersect_rays
 
 ODOMETRY_MODELS = ("split", "transformed", "naive")
 

@@ -42,7 +42,7 @@ from bomgraph.evaluate import Alignment, align
 from bomgraph.geometry import compose, dead_reckon
 from bomgraph.mapper import MapEstimate, Mapper, create_mapper
 from bomgraph.stream import Step, StreamHeader
-from bomgraph.triangulate import intersect_rays, ray_normals
+from bomgraph.geometry import intersect_rays, ray_normals
 
 from .factor_graph import (BatchMapper, FactorGraphConfig, config_from, estimate_from_values,
                            insert_pose, landmark_key, landmarks_from_values, poses_from_values,

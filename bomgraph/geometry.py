@@ -1,17 +1,28 @@
-"""Planar pose algebra shared by every method: composition, dead reckoning, frames.
+"""Planar geometry shared by every method: SE(2) algebra, the odometry chain, and the one
+least-squares ray-intersection kernel with its parallax measures.
 
 A pose is ``[x_m, y_m, psi_rad]``; an odometry increment ``[dx_m, dy_m, dpsi_rad]`` is the
 motion from pose ``t-1`` to pose ``t`` expressed in the frame of pose ``t-1`` (STREAM_FORMAT.md):
 ``xy_t = xy_{t-1} + R(psi_{t-1}) [dx, dy]``, ``psi_t = psi_{t-1} + dpsi``. This is GTSAM's
 ``Pose2.compose``; the paper's move-then-turn model is the increment ``[l, 0, phi]``.
+
+Rays: each bearing taken from pose ``p`` is a ray from ``p[:2]`` in world direction
+``p[2] + bearing``. A point's least-squares intersection minimises the summed squared
+perpendicular distances to its rays, ``sum_k (I - d_k d_k^T)(x - o_k) = 0``. The normal matrix
+``A = sum_k (I - d_k d_k^T)`` has smallest eigenvalue ``1 - |cos(alpha)|`` for two rays at
+angle ``alpha``: that eigenvalue, the angle the ray origins span seen from the point, and the
+:func:`effective_parallax` of many rays are the parallax measures every method gates on.
 """
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 from numpy.typing import ArrayLike
 
 from .angles import angle_residual, wrap_angle
+from .errors import ConfigError
 
 
 def rotation(psi_rad: ArrayLike) -> np.ndarray:
@@ -40,27 +51,58 @@ def between(pose_a: ArrayLike, pose_b: ArrayLike) -> np.ndarray:
                      angle_residual(b[..., 2], a[..., 2])], -1)
 
 
+def chain_odometry(odoms: ArrayLike, start_pose: ArrayLike | None = None
+                   ) -> tuple[np.ndarray, np.ndarray]:
+    """Chain odometry increments: the one odometry chain of bomgraph (no Python loop).
+
+    Parameters
+    ----------
+    odoms : array of shape (T, 3)
+        Increments ``[dx_m, dy_m, dpsi_rad]`` for steps 1..T.
+    start_pose : array of shape (3,), optional
+        The pose the chain starts from; ``None`` chains in the frame of the first pose (the
+        same numbers as a zero start pose, without adding zeros).
+
+    Returns
+    -------
+    xy_m : ndarray of shape (T + 1, 2)
+        Positions of poses 0..T.
+    psi_rad : ndarray of shape (T + 1,)
+        Headings of poses 0..T, cumulative (not wrapped).
+    """
+    u = np.asarray(odoms, dtype=float).reshape(-1, 3)
+    psi = np.concatenate([[0.0], np.cumsum(u[:, 2])])
+    if start_pose is not None:
+        p0 = np.asarray(start_pose, dtype=float)
+        psi = p0[2] + psi
+    c, s = np.cos(psi[:-1]), np.sin(psi[:-1])
+    dxy = np.stack([c * u[:, 0] - s * u[:, 1], s * u[:, 0] + c * u[:, 1]], -1)
+    xy = np.concatenate([np.zeros((1, 2)), np.cumsum(dxy, axis=0)])
+    if start_pose is not None:
+        xy = p0[:2] + xy
+    return xy, psi
+
+
 def dead_reckon(odoms: ArrayLike, start_pose: ArrayLike = (0.0, 0.0, 0.0)) -> np.ndarray:
-    """Chain odometry increments from ``start_pose``.
+    """Poses ``(T + 1, 3)`` chained from ``start_pose`` by :func:`chain_odometry`, headings
+    wrapped.
 
     Parameters
     ----------
     odoms : array of shape (T, 3)
         Increments ``[dx_m, dy_m, dpsi_rad]`` for steps 1..T.
     start_pose : array of shape (3,)
-
-    Returns
-    -------
-    ndarray of shape (T + 1, 3)
-        Poses 0..T (headings wrapped), computed without a Python loop.
     """
-    u = np.asarray(odoms, dtype=float).reshape(-1, 3)
-    p0 = np.asarray(start_pose, dtype=float)
-    psi = p0[2] + np.concatenate([[0.0], np.cumsum(u[:, 2])])
-    c, s = np.cos(psi[:-1]), np.sin(psi[:-1])
-    dxy = np.stack([c * u[:, 0] - s * u[:, 1], s * u[:, 0] + c * u[:, 1]], -1)
-    xy = p0[:2] + np.concatenate([np.zeros((1, 2)), np.cumsum(dxy, axis=0)])
+    xy, psi = chain_odometry(odoms, start_pose)
     return np.column_stack([xy, wrap_angle(psi)])
+
+
+def inverse(pose: ArrayLike) -> np.ndarray:
+    """``pose^-1`` for arrays of shape ``(..., 3)``: ``compose(pose, inverse(pose)) = 0``."""
+    p = np.asarray(pose, dtype=float)
+    c, s = np.cos(p[..., 2]), np.sin(p[..., 2])
+    return np.stack([-c * p[..., 0] - s * p[..., 1], s * p[..., 0] - c * p[..., 1],
+                     wrap_angle(-p[..., 2])], -1)
 
 
 def to_world(pose: ArrayLike, points_local_xy: ArrayLike) -> np.ndarray:
@@ -82,3 +124,140 @@ def bearings_to(pose: ArrayLike, points_world_xy: ArrayLike) -> np.ndarray:
     p = np.asarray(pose, dtype=float)
     q = np.asarray(points_world_xy, dtype=float).reshape(-1, 2)
     return angle_residual(np.arctan2(q[:, 1] - p[1], q[:, 0] - p[0]), p[2])
+
+
+# --------------------------------------------------------------------------------------------
+# Rays
+# --------------------------------------------------------------------------------------------
+
+def ray_normals(directions_rad: np.ndarray) -> np.ndarray:
+    """``I - d d^T`` for world ray directions, shape ``(k, 2, 2)``."""
+    c, s = np.cos(directions_rad), np.sin(directions_rad)
+    return np.stack([np.stack([s * s, -s * c], -1), np.stack([-s * c, c * c], -1)], -2)
+
+
+def parallax_eigenvalue(a: np.ndarray) -> np.ndarray:
+    """Smallest eigenvalue of symmetric 2x2 matrices ``(..., 2, 2)`` (closed form)."""
+    tr = a[..., 0, 0] + a[..., 1, 1]
+    det = a[..., 0, 0] * a[..., 1, 1] - a[..., 0, 1] * a[..., 1, 0]
+    return tr / 2 - np.sqrt(np.maximum(tr * tr / 4 - det, 0.0))
+
+
+def intersect_rays(origins_xy: np.ndarray, directions_rad: np.ndarray, *,
+                   min_parallax_rad: float = math.radians(2.0),
+                   min_front_fraction: float = 1.0) -> tuple[np.ndarray, bool]:
+    """Least-squares intersection of rays.
+
+    Parameters
+    ----------
+    origins_xy : array of shape (k, 2)
+        Ray origins (robot positions), world frame.
+    directions_rad : array of shape (k,)
+        World directions (robot heading + bearing).
+    min_parallax_rad : float
+        Two rays at this angle are the least that counts as determined.
+    min_front_fraction : float
+        The fraction of rays the point must lie in front of (1.0: all of them).
+
+    Returns
+    -------
+    point_xy : ndarray of shape (2,)
+        NaN when not determined.
+    ok : bool
+        False with fewer than 2 rays, too little parallax, or the point behind too many rays.
+    """
+    o = np.asarray(origins_xy, dtype=float).reshape(-1, 2)
+    d = np.asarray(directions_rad, dtype=float).reshape(-1)
+    if len(o) != len(d):
+        raise ConfigError(f"intersect_rays: {len(o)} origins but {len(d)} directions")
+    if len(o) < 2:
+        return np.full(2, np.nan), False
+    n = ray_normals(d)
+    a = n.sum(0)
+    b = np.einsum("kij,kj->i", n, o)
+    x, ok = solve_ray_normal_equations(a[None], b[None], o, d, min_parallax_rad, min_front_fraction,
+                   np.zeros(len(o), np.int64))
+    return x[0], bool(ok[0])
+
+
+def origin_spread(points_xy: np.ndarray, origins: np.ndarray, owner: np.ndarray,
+                  n: int) -> np.ndarray:
+    """Per point, the angle spanned by its rays' origins seen from it, shape ``(n,)``."""
+    v = origins - points_xy[owner]
+    ang = np.arctan2(v[:, 1], v[:, 0])
+    mean = np.arctan2(np.bincount(owner, np.sin(ang), n), np.bincount(owner, np.cos(ang), n))
+    res = angle_residual(ang, mean[owner])
+    hi = np.full(n, -np.inf)
+    lo = np.full(n, np.inf)
+    np.maximum.at(hi, owner, np.nan_to_num(res, nan=-np.inf))
+    np.minimum.at(lo, owner, np.nan_to_num(res, nan=np.inf))
+    return np.where(hi >= lo, hi - lo, 0.0)
+
+
+def solve_ray_normal_equations(a: np.ndarray, b: np.ndarray, origins: np.ndarray, dirs: np.ndarray,
+           min_parallax_rad: float, min_front_fraction: float,
+           owner: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Solve the ray normal equations ``a[m] x = b[m]`` of m points, then gate them.
+
+    Parameters
+    ----------
+    a : array of shape (m, 2, 2)
+        Summed :func:`ray_normals` of each point's rays.
+    b : array of shape (m, 2)
+        Summed ``(I - d d^T) o`` of each point's rays.
+    origins : array of shape (R, 2)
+        Every ray's origin (world frame, metres).
+    dirs : array of shape (R,)
+        Every ray's world direction, radians.
+    min_parallax_rad, min_front_fraction : float
+        The gates of :func:`intersect_rays`.
+    owner : int array of shape (R,)
+        The point (``0 .. m-1``) of each ray.
+
+    Returns
+    -------
+    points_xy : ndarray of shape (m, 2)
+        NaN where a gate refused the point.
+    ok : bool ndarray of shape (m,)
+    """
+    # A necessary condition first (the normal matrix must be invertible) ...
+    lam = parallax_eigenvalue(a)
+    ok = lam >= 1.0 - math.cos(min_parallax_rad)
+    x = np.full((len(a), 2), np.nan)
+    if np.any(ok):
+        x[ok] = np.linalg.solve(a[ok], b[ok][..., None])[..., 0]
+    if origins.size:
+        depth = np.einsum("kj,kj->k", x[owner] - origins,
+                          np.column_stack([np.cos(dirs), np.sin(dirs)]))
+        front = np.bincount(owner, weights=(depth > 0), minlength=len(a))
+        total = np.bincount(owner, minlength=len(a))
+        ok &= front >= min_front_fraction * total
+        # ... then the geometric parallax: the angle the ray origins span as seen from the
+        # solved point (many rays from one place, or noisy rays, do not make parallax).
+        ok &= origin_spread(x, origins, owner, len(a)) >= min_parallax_rad
+    x[~ok] = np.nan
+    return x, ok
+
+
+def effective_parallax(direction_rad: np.ndarray, owner: np.ndarray, n: int) -> np.ndarray:
+    """Parallax of several rays per point: ``arccos |mean exp(2 i alpha)|`` in ``[0, pi/2]``.
+
+    For two rays at angle ``gamma`` it is ``min(gamma, pi - gamma)`` (the two-ray gate of the
+    paper); for many rays it measures how well they fix the point in every direction (the
+    smallest eigenvalue of ``mean(I - u u^T)`` is ``(1 - |mean exp(2 i alpha)|) / 2``), so rays
+    from all around a landmark give ``pi / 2``, not a span past ``pi``.
+
+    Parameters
+    ----------
+    direction_rad : array of shape (R,)
+        World direction of each ray.
+    owner : int array of shape (R,)
+        Point of each ray, in ``0 .. n-1``.
+    n : int
+        Number of points.
+    """
+    e2 = np.exp(2j * np.asarray(direction_rad, dtype=float))
+    count = np.bincount(owner, minlength=n)
+    mean = (np.bincount(owner, e2.real, n) + 1j * np.bincount(owner, e2.imag, n)) \
+        / np.maximum(count, 1)
+    return np.arccos(np.clip(np.abs(mean), 0.0, 1.0))

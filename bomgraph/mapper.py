@@ -252,7 +252,7 @@ def register_method(name: str, target: str, description: str, *,
 
 
 for _name, _target, _desc, _truth in [
-    ("triangulate", "bomgraph.triangulate:TriangulateMapper",
+    ("triangulate", "baselines.triangulate:TriangulateMapper",
      "dead reckoning + least-squares ray intersection (the naive baseline)", False),
     ("stmds-cs", "bomgraph.stmds.mapper:make_stmds_cs",
      "BOM-STMDS Method 1: DMC-SPL + classical scaling", False),

@@ -17,7 +17,7 @@ from bomgraph.geometry import bearings_to
 from bomgraph.mapper import MapEstimate, create_mapper, run
 from bomgraph.sim import SimConfig, simulate
 from bomgraph.stream import Step, Stream, StreamHeader
-from bomgraph.triangulate import TriangulateMapper
+from baselines.triangulate import TriangulateMapper
 
 
 @pytest.fixture(scope="module")

@@ -19,7 +19,7 @@ from bomgraph.sim import SimConfig, simulate
 from bomgraph.stmds.bundle import (WindowBundle, _Problem, bundle_adjust_window,
                                    bundle_pair_squared_distances)
 from bomgraph.stmds.mapper import StmdsConfig
-from bomgraph.stmds.triangulation import effective_parallax
+from bomgraph.geometry import effective_parallax
 
 DEG = math.pi / 180.0
 

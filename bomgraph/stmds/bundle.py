@@ -33,8 +33,8 @@ from numpy.typing import ArrayLike
 
 from ..angles import angle_residual
 from ..errors import ConfigError
-from ..geometry import between, dead_reckon, to_local
-from .triangulation import (PairEstimates, effective_parallax, pair_indices,
+from ..geometry import between, dead_reckon, effective_parallax, to_local
+from .triangulation import (PairEstimates, pair_indices,
                             triangulate_window_lsq)
 
 #: Odometry std. devs. below this (m or rad) are raised to it: a zero std. dev. (the paper's
@@ -380,7 +380,7 @@ def _gates(poses: np.ndarray, points: np.ndarray, k: np.ndarray, lm: np.ndarray,
            max_range_m: float, min_depth_m: float) -> np.ndarray:
     """Landmarks with two kept rays or more, in front of each (the ray's bearing points at
     the estimate: a residual under pi / 2) at ``min_depth_m`` to ``max_range_m`` deep, whose rays have
-    :func:`~bomgraph.stmds.triangulation.effective_parallax` ``>= min_parallax``."""
+    :func:`~bomgraph.geometry.effective_parallax` ``>= min_parallax``."""
     if keep is not None:
         k, lm, res_rad = k[keep], lm[keep], res_rad[keep]
     d = points[lm] - poses[k, :2]

@@ -52,6 +52,7 @@ from numpy.typing import ArrayLike
 
 from ..angles import angle_residual
 from ..errors import ConfigError
+from ..geometry import effective_parallax
 
 #: Column order of the per-landmark Jacobians.
 POINT_MEASUREMENTS = ("dx_m", "dy_m", "dpsi_rad", "theta_prev_rad", "theta_now_rad")
@@ -578,30 +579,6 @@ def _window_chain_jacobians(u: np.ndarray, z: np.ndarray, heading: np.ndarray
     return dz, dpsi
 
 
-def effective_parallax(direction_rad: np.ndarray, owner: np.ndarray, n: int) -> np.ndarray:
-    """Parallax of several rays per point: ``arccos |mean exp(2 i alpha)|`` in ``[0, pi/2]``.
-
-    For two rays at angle ``gamma`` it is ``min(gamma, pi - gamma)`` (the two-ray gate of the
-    paper); for many rays it measures how well they fix the point in every direction (the
-    smallest eigenvalue of ``mean(I - u u^T)`` is ``(1 - |mean exp(2 i alpha)|) / 2``), so rays
-    from all around a landmark give ``pi / 2``, not a span past ``pi``.
-
-    Parameters
-    ----------
-    direction_rad : array of shape (R,)
-        World direction of each ray.
-    owner : int array of shape (R,)
-        Point of each ray, in ``0 .. n-1``.
-    n : int
-        Number of points.
-    """
-    e2 = np.exp(2j * np.asarray(direction_rad, dtype=float))
-    count = np.bincount(owner, minlength=n)
-    mean = (np.bincount(owner, e2.real, n) + 1j * np.bincount(owner, e2.imag, n)) \
-        / np.maximum(count, 1)
-    return np.arccos(np.clip(np.abs(mean), 0.0, 1.0))
-
-
 def triangulate_window_lsq(odoms: ArrayLike, bearings_rad: ArrayLike, *,
                            min_parallax_rad: float = 0.0, max_range_m: float = np.inf,
                            max_iter: int = 20, tol_m: float = 1e-13
@@ -805,5 +782,4 @@ __all__ = ["POINT_MEASUREMENTS", "PAIR_MEASUREMENTS", "RayTriangulation", "PairE
            "point_covariance",
            "range_jacobians", "range_variances", "gate_points", "pair_squared_distances",
            "WindowTriangulation", "triangulate_window", "triangulate_window_lsq",
-           "effective_parallax",
            "window_pair_squared_distances"]

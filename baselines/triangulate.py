@@ -1,0 +1,105 @@
+"""The naive baseline ``triangulate``: dead reckoning plus least-squares ray intersection.
+
+Each landmark is the least-squares intersection of its rays
+(:func:`bomgraph.geometry.intersect_rays`), gated by parallax and ray depth.
+
+``TriangulateMapper`` dead-reckons the poses from odometry and keeps the two 2x2 / 2-vector
+sums per landmark, so each step costs O(bearings) and the estimate O(landmarks).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from bomgraph.errors import ConfigError
+from bomgraph.geometry import compose, ray_normals, solve_ray_normal_equations
+from bomgraph.mapper import MapEstimate
+from bomgraph.stream import Step, StreamHeader
+
+
+@dataclass(frozen=True)
+class TriangulateConfig:
+    """Options of the naive baseline.
+
+    min_parallax_rad : a landmark is mapped once its rays span at least this angle.
+    min_front_fraction : the point must lie in front of this fraction of its rays (dead
+        reckoning drifts over a long run, so not all of them).
+    """
+
+    min_parallax_rad: float = math.radians(2.0)
+    min_front_fraction: float = 0.5
+
+    def __post_init__(self) -> None:
+        if not 0 < self.min_parallax_rad < math.pi / 2:
+            raise ConfigError("min_parallax_rad must be in (0, pi/2)")
+        if not 0 <= self.min_front_fraction <= 1:
+            raise ConfigError("min_front_fraction must be in [0, 1]")
+
+
+class TriangulateMapper:
+    """Dead-reckoned poses + least-squares ray intersection per landmark.
+
+    Parameters
+    ----------
+    header : StreamHeader
+    start_pose : (x_m, y_m, psi_rad)
+        The frame of the map; the first pose by default is the origin.
+    """
+
+    def __init__(self, header: StreamHeader, *, start_pose: tuple[float, float, float] =
+                 (0.0, 0.0, 0.0), config: TriangulateConfig | None = None,
+                 **options: float) -> None:
+        if config is not None and options:
+            raise ConfigError("TriangulateMapper: pass either config or options, not both")
+        self.config = config or TriangulateConfig(**options)
+        self._header = header
+        self._start = np.asarray(start_pose, dtype=float)
+        self._pose = self._start.copy()
+        self._poses: list[np.ndarray] = []
+        self._slot: dict[int, int] = {}
+        self._a = np.zeros((0, 2, 2))
+        self._b = np.zeros((0, 2))
+        self._ray_origin: list[np.ndarray] = []
+        self._ray_dir: list[np.ndarray] = []
+        self._ray_owner: list[np.ndarray] = []
+
+    def _slots(self, ids: np.ndarray) -> np.ndarray:
+        new = [int(i) for i in ids if int(i) not in self._slot]
+        for i in new:
+            self._slot[i] = len(self._slot)
+        if new:
+            self._a = np.concatenate([self._a, np.zeros((len(new), 2, 2))])
+            self._b = np.concatenate([self._b, np.zeros((len(new), 2))])
+        return np.array([self._slot[int(i)] for i in ids], dtype=np.int64)
+
+    def step(self, step: Step) -> None:
+        if step.odom is not None:
+            self._pose = compose(self._pose, step.odom)
+        self._poses.append(self._pose)
+        if step.landmark_ids.size == 0:
+            return
+        slots = self._slots(step.landmark_ids)
+        dirs = self._pose[2] + step.bearings_rad
+        n = ray_normals(dirs)
+        np.add.at(self._a, slots, n)
+        np.add.at(self._b, slots, n @ self._pose[:2])
+        self._ray_origin.append(np.broadcast_to(self._pose[:2], (len(slots), 2)))
+        self._ray_dir.append(dirs)
+        self._ray_owner.append(slots)
+
+    def estimate(self) -> MapEstimate:
+        ids = np.array(sorted(self._slot, key=self._slot.get), dtype=np.int64)
+        poses = np.array(self._poses).reshape(-1, 3)
+        pose_t = np.arange(len(poses))
+        if ids.size == 0:
+            return MapEstimate(ids, np.zeros((0, 2)), pose_t=pose_t, poses=poses,
+                               info={"left_out": []})
+        x, ok = solve_ray_normal_equations(self._a, self._b, np.concatenate(self._ray_origin),
+                       np.concatenate(self._ray_dir), self.config.min_parallax_rad,
+                       self.config.min_front_fraction, np.concatenate(self._ray_owner))
+        order = np.argsort(ids[ok])
+        return MapEstimate(ids[ok][order], x[ok][order], pose_t=pose_t, poses=poses,
+                           info={"left_out": sorted(int(i) for i in ids[~ok])})

@@ -1,0 +1,180 @@
+"""Check that a refactoring changed no result: every method and every named preset on a fixed
+set of streams, each run's estimates hashed bit for bit and compared with a reference file.
+
+The streams: three runs of the paper's design (seed 0, layouts 0-2, start 0; Exp. 3 priors on
+the first for the priors task), MRCLAM6 robot 3 and the bearing-only g2o set (both read from the
+shared data folder). Every checkpoint of every task (map every 10 steps) is hashed: landmark
+ids and coordinates, pose steps and poses, and the covariances, as raw float64 bytes. Timings
+and the free-form ``info`` are left out.
+
+Usage::
+
+    python scripts/check_identical.py --write        # make the reference (before a change)
+    python scripts/check_identical.py                # compare against it (after)
+    python scripts/check_identical.py --only hybrid  # tasks whose label contains 'hybrid'
+
+Exit status 0 when every task matches, 1 otherwise; the table shows each task's final MPE
+before and after where they differ.
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import json
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+REFERENCE = ROOT / "tests" / "data" / "identical_reference.json"
+DATA = ROOT.parent / "shared" / "data"
+
+#: (label, method, options). Options name presets wherever a preset exists.
+CONFIGS: list[tuple[str, str, dict[str, Any]]] = [
+    ("triangulate", "triangulate", {}),
+    ("stmds-cs", "stmds-cs", {}),
+    ("stmds-cs@paper-fusion", "stmds-cs", {"fusion": "paper"}),
+    ("stmds-cs@improved", "stmds-cs", {"preset": "improved"}),
+    ("stmds-cs@real", "stmds-cs", {"preset": "real"}),
+    ("stmds-smacof", "stmds-smacof", {}),
+    ("stmds-smacof@paper-fusion", "stmds-smacof", {"fusion": "paper"}),
+    ("stmds-smacof@improved", "stmds-smacof", {"preset": "improved"}),
+    ("stmds-smacof@window", "stmds-smacof", {"preset": "window"}),
+    ("stmds-smacof@window-lsq", "stmds-smacof",
+     {"preset": "window", "tri_method": "lsq", "tri_window": 10}),
+    ("stmds-smacof@window-ba", "stmds-smacof",
+     {"preset": "window", "tri_method": "ba", "tri_window": 10, "tri_stride": 3}),
+    ("stmds-smacof@real", "stmds-smacof", {"preset": "real"}),
+    ("stmds-cs-loc", "stmds-cs-loc", {}),
+    ("stmds-smacof-loc", "stmds-smacof-loc", {}),
+    ("stmds-smacof-loc@improved", "stmds-smacof-loc", {"preset": "improved"}),
+    ("stmds-smacof-loc@real", "stmds-smacof-loc", {"preset": "real"}),
+    ("ekf", "ekf", {}),
+    ("ekf@real", "ekf", {"preset": "real"}),
+    ("ekf-invdepth", "ekf-invdepth", {}),
+    ("ekf-invdepth@real", "ekf-invdepth", {"preset": "real"}),
+    ("gtsam-batch", "gtsam-batch", {}),
+    ("gtsam-batch@robust", "gtsam-batch", {"odometry_cauchy_k": 3.0, "bearing_cauchy_k": 3.0}),
+    ("gtsam-isam2", "gtsam-isam2", {}),
+    ("hybrid", "hybrid", {}),
+    ("hybrid@real-seed", "hybrid", {"seed_options": {"preset": "real"}}),
+    ("hybrid@real-seed-robust", "hybrid", {"seed_options": {"preset": "real"},
+                                           "odometry_cauchy_k": 3.0, "bearing_cauchy_k": 3.0}),
+    ("oracle", "oracle", {}),
+    ("oracle@robust", "oracle", {"odometry_cauchy_k": 3.0, "bearing_cauchy_k": 3.0}),
+]
+
+STREAMS = ("sim-l0", "sim-l1", "sim-l2", "mrclam6-r3", "g2o")
+
+
+def load_stream(name: str, prior_fraction: float = 0.0):
+    from bomgraph.sim import RunSpec, SimConfig, simulate_run
+
+    if name.startswith("sim-l"):
+        return simulate_run(RunSpec(0, int(name[5:]), 0), SimConfig(),
+                            prior_fraction=prior_fraction)
+    from bomgraph import datasets
+
+    if name == "mrclam6-r3":
+        return datasets.import_mrclam(str(DATA / "mrclam6"), 3)
+    g2o = DATA / "bearing_only_sim_g2o"
+    return datasets.import_g2o(str(g2o / "slam2D_bearing_only_initial_guess.g2o"),
+                               truth_path=str(g2o / "slam2D_bearing_only_ground_truth.g2o"))
+
+
+def tasks() -> list[tuple[str, str, str, dict[str, Any], float]]:
+    out = [(f"{label} | {s}", s, method, opts, 0.0)
+           for label, method, opts in CONFIGS for s in STREAMS]
+    out.append(("stmds-smacof+priors | sim-l0", "sim-l0", "stmds-smacof", {}, 0.1))
+    out.append(("stmds-smacof@improved+priors | sim-l0", "sim-l0", "stmds-smacof",
+                {"preset": "improved"}, 0.1))
+    return out
+
+
+def _digest(result) -> str:
+    h = hashlib.sha256()
+    for cp in result.checkpoints:
+        est = cp.estimate
+        h.update(str(cp.t).encode())
+        for a in (est.landmark_ids, est.landmarks_xy, est.pose_t, est.poses,
+                  est.landmark_cov, est.pose_cov):
+            if a is None:
+                h.update(b"none")
+            else:
+                arr = np.ascontiguousarray(a)
+                h.update(str(arr.shape).encode())
+                h.update(arr.astype(np.int64 if arr.dtype.kind in "iu" else np.float64).tobytes())
+    return h.hexdigest()
+
+
+def run_one(task: tuple[str, str, str, dict[str, Any], float]) -> dict[str, Any]:
+    from threadpoolctl import threadpool_limits
+
+    from bomgraph.evaluate import score_estimate
+    from bomgraph.mapper import create_mapper, method_info, run
+
+    label, stream_name, method, options, prior_fraction = task
+    with threadpool_limits(limits=1):
+        stream = load_stream(stream_name, prior_fraction)
+        truth = stream.truth if method_info(method).needs_truth else None
+        t0 = time.perf_counter()
+        try:
+            mapper = create_mapper(method, stream.header, truth=truth, **options)
+            result = run(mapper, stream.steps, checkpoint_every=10)
+        except Exception as exc:  # a failure is a result to compare too
+            return {"label": label, "digest": f"error: {type(exc).__name__}: {exc}",
+                    "mpe_m": None, "n": 0, "seconds": time.perf_counter() - t0}
+        try:
+            mpe = float(score_estimate(result.final, stream.truth).mpe_m)
+        except Exception as exc:  # too few landmarks to align
+            mpe = f"{type(exc).__name__}"
+        return {"label": label, "digest": _digest(result), "mpe_m": mpe,
+                "n": len(result.final), "seconds": time.perf_counter() - t0}
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--write", action="store_true", help="write the reference file")
+    ap.add_argument("--only", default="", help="run only tasks whose label contains this")
+    ap.add_argument("--jobs", type=int, default=2, help="worker processes (default 2)")
+    ap.add_argument("--reference", type=Path, default=REFERENCE, help="the reference file")
+    args = ap.parse_args(argv)
+
+    from joblib import Parallel, delayed
+
+    todo = [t for t in tasks() if args.only in t[0]]
+    t0 = time.perf_counter()
+    rows = Parallel(n_jobs=args.jobs)(delayed(run_one)(t) for t in todo)
+    wall = time.perf_counter() - t0
+    if args.write:
+        ref = {} if not args.reference.exists() or not args.only else \
+            json.loads(args.reference.read_text())
+        ref.update({r["label"]: {"digest": r["digest"], "mpe_m": r["mpe_m"], "n": r["n"]}
+                    for r in rows})
+        args.reference.parent.mkdir(parents=True, exist_ok=True)
+        args.reference.write_text(json.dumps(dict(sorted(ref.items())), indent=1) + "\n")
+        print(f"wrote {len(rows)} tasks to {args.reference} in {wall:.0f} s")
+        return 0
+    ref = json.loads(args.reference.read_text())
+    bad = 0
+    for r in rows:
+        want = ref.get(r["label"])
+        if want is None:
+            print(f"NEW       {r['label']}: not in the reference")
+            bad += 1
+        elif want["digest"] != r["digest"]:
+            bad += 1
+            print(f"DIFFERENT {r['label']}: MPE {want['mpe_m']} -> {r['mpe_m']} m, "
+                  f"n {want['n']} -> {r['n']}" + (f" ({r['digest']})"
+                                                  if r["digest"].startswith("error") else ""))
+    print(f"{len(rows) - bad} of {len(rows)} tasks identical to the reference, bit for bit "
+          f"({wall:.0f} s)")
+    return 0 if bad == 0 else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
