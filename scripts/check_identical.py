@@ -22,6 +22,7 @@ from __future__ import annotations
 import argparse
 import hashlib
 import json
+import os
 import sys
 import time
 from pathlib import Path
@@ -31,7 +32,8 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 REFERENCE = ROOT / "tests" / "data" / "identical_reference.json"
-DATA = ROOT.parent / "shared" / "data"
+#: The shared data folder (``BOMGRAPH_DATA`` overrides it, e.g. for a checkout elsewhere).
+DATA = Path(os.environ.get("BOMGRAPH_DATA", ROOT.parent / "shared" / "data"))
 
 #: (label, method, options). Options name presets wherever a preset exists.
 CONFIGS: list[tuple[str, str, dict[str, Any]]] = [
