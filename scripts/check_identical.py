@@ -60,14 +60,13 @@ CONFIGS: list[tuple[str, str, dict[str, Any]]] = [
     ("ekf-invdepth", "ekf-invdepth", {}),
     ("ekf-invdepth@real", "ekf-invdepth", {"preset": "real"}),
     ("gtsam-batch", "gtsam-batch", {}),
-    ("gtsam-batch@robust", "gtsam-batch", {"odometry_cauchy_k": 3.0, "bearing_cauchy_k": 3.0}),
+    ("gtsam-batch@robust", "gtsam-batch", {"preset": "robust"}),
     ("gtsam-isam2", "gtsam-isam2", {}),
     ("hybrid", "hybrid", {}),
-    ("hybrid@real-seed", "hybrid", {"seed_options": {"preset": "real"}}),
-    ("hybrid@real-seed-robust", "hybrid", {"seed_options": {"preset": "real"},
-                                           "odometry_cauchy_k": 3.0, "bearing_cauchy_k": 3.0}),
+    ("hybrid@real-seed", "hybrid", {"preset": "real-seed"}),
+    ("hybrid@real-seed-robust", "hybrid", {"preset": "real-seed-robust"}),
     ("oracle", "oracle", {}),
-    ("oracle@robust", "oracle", {"odometry_cauchy_k": 3.0, "bearing_cauchy_k": 3.0}),
+    ("oracle@robust", "oracle", {"preset": "robust"}),
 ]
 
 STREAMS = ("sim-l0", "sim-l1", "sim-l2", "mrclam6-r3", "g2o")

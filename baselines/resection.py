@@ -1,0 +1,295 @@
+"""Pose resection against a known map: robot poses from bearings to mapped landmarks.
+
+Used by :mod:`baselines.hybrid` to turn the BOM-STMDS map (the paper, sections III-B to III-D)
+into a start for every pose of the factor graph. Pure functions on arrays: no mapper state.
+
+* :func:`resect_poses`: every pose at once, each from its own bearings (and an optional prior),
+  by a heading grid with the best position per heading in closed form, then Gauss-Newton with
+  Huber (IRLS) weights;
+* :func:`resect_pose`: one pose;
+* :func:`resect_trajectory`: a whole trajectory in two passes (alone, then with the odometry
+  prediction from the pose before as a prior), gaps and the start chained by the odometry.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Sequence
+
+import numpy as np
+from scipy import sparse
+
+from bomgraph.angles import angle_residual, wrap_angle
+from bomgraph.errors import ConfigError
+from bomgraph.geometry import compose, inverse, ray_normals
+
+
+def resection_jacobian(pose: np.ndarray, landmarks_xy: np.ndarray) -> np.ndarray:
+    """Jacobian ``(k, 3)`` of the predicted bearings ``atan2(l - p) - psi`` w.r.t. the pose
+    ``[x, y, psi]`` (``pose`` of shape (3,) or one pose per landmark, (k, 3))."""
+    d = np.asarray(landmarks_xy, dtype=float) - np.asarray(pose, dtype=float)[..., :2]
+    r2 = np.maximum((d * d).sum(-1), 1e-18)
+    return np.column_stack([d[:, 1] / r2, -d[:, 0] / r2, -np.ones(len(d))])
+
+
+def _group_sum(owner: np.ndarray, values: np.ndarray, n: int) -> np.ndarray:
+    """Sum ``values`` (J, ...) over rows with the same ``owner`` (J,), shape (n, ...)."""
+    if len(owner) == 0:
+        return np.zeros((n, *values.shape[1:]))
+    m = sparse.csr_matrix((np.ones(len(owner)), (owner, np.arange(len(owner)))),
+                          shape=(n, len(owner)))
+    return np.asarray(m @ values.reshape(len(owner), -1)).reshape(n, *values.shape[1:])
+
+
+def _huber_rho(r: np.ndarray, k: float) -> np.ndarray:
+    a = np.abs(r)
+    return np.where(a <= k, 0.5 * r * r, k * (a - 0.5 * k))
+
+
+def resect_poses(owner: np.ndarray, landmarks_xy: np.ndarray, bearings_rad: np.ndarray,
+                 sigma_rad: np.ndarray, n_poses: int, *,
+                 prior_poses: np.ndarray | None = None,
+                 prior_sigma: np.ndarray | None = None,
+                 initial_poses: np.ndarray | None = None, n_headings: int = 72,
+                 huber_k: float = 2.0, iterations: int = 10
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Robot poses that best explain bearings to known landmarks, all poses at once.
+
+    For each pose minimises ``sum_j 2 rho(r_j / sigma_j) + |(pose - prior) / prior_sigma|^2``
+    (``r_j`` the wrapped bearing residual, ``rho`` Huber): every heading of a grid gets its
+    best position in closed form (the least-squares intersection of the lines through the
+    landmarks along the bearings), the best grid point is polished by Gauss-Newton with
+    Huber (IRLS) weights, accepting only steps that lower the objective.
+
+    Parameters
+    ----------
+    owner : int array of shape (J,)
+        Which pose (0 .. n_poses-1) took each bearing.
+    landmarks_xy : array of shape (J, 2)
+        Known position of the landmark of each bearing.
+    bearings_rad, sigma_rad : arrays of shape (J,)
+        Bearings relative to the robot heading and their std. dev.
+    n_poses : int
+    prior_poses : array of shape (n_poses, 3), optional
+        A prior per pose (NaN rows: none).
+    prior_sigma : array of shape (n_poses, 3) or (3,), optional
+        Std. dev. of the priors (metres, metres, radians).
+    initial_poses : array of shape (n_poses, 3), optional
+        Starting points for Gauss-Newton; the heading grid is searched only for the rows that
+        have none (NaN).
+    n_headings, huber_k, iterations : grid size, Huber threshold, Gauss-Newton iterations.
+
+    Returns
+    -------
+    poses : ndarray of shape (n_poses, 3)
+        NaN where undetermined: fewer than 2 bearings without a prior.
+    cost : ndarray of shape (n_poses,)
+        The objective at the result (NaN where undetermined).
+    n_bearings : ndarray of shape (n_poses,)
+    """
+    own = np.asarray(owner, dtype=np.int64).reshape(-1)
+    lm = np.asarray(landmarks_xy, dtype=float).reshape(-1, 2)
+    b = np.asarray(bearings_rad, dtype=float).reshape(-1)
+    sig = np.broadcast_to(np.asarray(sigma_rad, dtype=float), b.shape)
+    if not (len(own) == len(lm) == len(b)):
+        raise ConfigError(f"resect_poses: {len(own)} owners, {len(lm)} landmarks, "
+                          f"{len(b)} bearings")
+    if own.size and (own.min() < 0 or own.max() >= n_poses):
+        raise ConfigError("resect_poses: owner indices must lie in 0 .. n_poses-1")
+    prior = (np.full((n_poses, 3), np.nan) if prior_poses is None
+             else np.asarray(prior_poses, dtype=float).reshape(n_poses, 3))
+    has_prior = np.all(np.isfinite(prior), axis=1)
+    ps = np.broadcast_to(np.asarray(1.0 if prior_sigma is None else prior_sigma, dtype=float),
+                         (n_poses, 3))
+    info = np.where(has_prior[:, None], 1.0 / ps ** 2, 0.0)            # (T, 3)
+    prior0 = np.where(has_prior[:, None], prior, 0.0)
+    n_b = np.bincount(own, minlength=n_poses)
+    valid = (n_b >= 2) | has_prior
+
+    def objective(rows: np.ndarray, cands: np.ndarray) -> np.ndarray:
+        """The objective of candidates ``(R, H, 3)`` for poses ``rows`` (sorted), ``(R, H)``."""
+        mask = np.zeros(n_poses, bool)
+        mask[rows] = True
+        sel = mask[own]
+        o = np.searchsorted(rows, own[sel])
+        c = cands[o]
+        d = lm[sel][:, None, :] - c[..., :2]                            # (J', H, 2)
+        r = angle_residual(np.arctan2(d[..., 1], d[..., 0]) - c[..., 2],
+                           b[sel][:, None]) / sig[sel][:, None]
+        e = cands - prior0[rows][:, None, :]
+        e[..., 2] = angle_residual(cands[..., 2], prior0[rows][:, None, 2])
+        return (2 * _group_sum(o, _huber_rho(r, huber_k), len(rows))
+                + (e * e * info[rows][:, None, :]).sum(-1))
+
+    poses = np.zeros((n_poses, 3))
+    cost = np.full(n_poses, np.inf)
+    start = (np.full((n_poses, 3), np.nan) if initial_poses is None
+             else np.asarray(initial_poses, dtype=float).reshape(n_poses, 3))
+    given = np.all(np.isfinite(start), axis=1) & valid
+    if given.any():
+        poses[given] = start[given]
+        rows = np.flatnonzero(given)
+        cost[rows] = objective(rows, poses[rows, None, :])[:, 0]
+    grid = valid & ~given
+    if grid.any():
+        # grid over the heading: the best position for each in closed form
+        rows = np.flatnonzero(grid)
+        sel = grid[own]
+        g_own = np.searchsorted(rows, own[sel])
+        offsets = np.linspace(-np.pi, np.pi, n_headings, endpoint=False)
+        psi = prior0[rows, 2:3] + offsets[None, :]                       # (G, H)
+        n = ray_normals(psi[g_own] + b[sel][:, None])                    # (J', H, 2, 2)
+        w = 1.0 / sig[sel] ** 2
+        a = _group_sum(g_own, w[:, None, None, None] * n, len(rows))     # (G, H, 2, 2)
+        rhs = _group_sum(g_own, np.einsum("j,jhab,jb->jha", w, n, lm[sel]), len(rows))
+        a[..., 0, 0] += info[rows, None, 0]
+        a[..., 1, 1] += info[rows, None, 1]
+        rhs += (info[rows, :2] * prior0[rows, :2])[:, None, :]
+        det = a[..., 0, 0] * a[..., 1, 1] - a[..., 0, 1] * a[..., 1, 0]
+        ok = det > 1e-12 * np.maximum(a[..., 0, 0] + a[..., 1, 1], 1e-300) ** 2
+        safe = np.where(ok, det, 1.0)
+        xy = np.stack([(a[..., 1, 1] * rhs[..., 0] - a[..., 0, 1] * rhs[..., 1]) / safe,
+                       (a[..., 0, 0] * rhs[..., 1] - a[..., 1, 0] * rhs[..., 0]) / safe], -1)
+        cands = np.concatenate([xy, wrap_angle(psi)[..., None]], -1)    # (G, H, 3)
+        grid_cost = np.where(ok, objective(rows, cands), np.inf)
+        best = np.argmin(grid_cost, axis=1)
+        poses[rows] = cands[np.arange(len(rows)), best]
+        cost[rows] = grid_cost[np.arange(len(rows)), best]
+    valid &= np.isfinite(cost)
+    poses[~valid] = 0.0
+    # Gauss-Newton with IRLS weights, per pose, accepting only improving steps
+    active = valid.copy()
+    for _ in range(iterations):
+        idx = np.flatnonzero(active)
+        if idx.size == 0:
+            break
+        sel = active[own]
+        o, l_, b_, s_ = np.searchsorted(idx, own[sel]), lm[sel], b[sel], sig[sel]
+        p = poses[idx]
+        d = l_ - p[o, :2]
+        r = angle_residual(np.arctan2(d[:, 1], d[:, 0]) - p[o, 2], b_) / s_
+        wr = np.where(np.abs(r) <= huber_k, 1.0, huber_k / np.maximum(np.abs(r), 1e-300))
+        jac = resection_jacobian(p[o], l_) / s_[:, None]
+        h = _group_sum(o, wr[:, None, None] * jac[:, :, None] * jac[:, None, :], len(idx))
+        g = _group_sum(o, (wr * r)[:, None] * jac, len(idx))
+        e = np.column_stack([p[:, :2] - prior0[idx, :2],
+                             angle_residual(p[:, 2], prior0[idx, 2])])
+        h[:, [0, 1, 2], [0, 1, 2]] += info[idx]
+        g += info[idx] * e
+        try:
+            step = -np.linalg.solve(h, g[..., None])[..., 0]
+        except np.linalg.LinAlgError:
+            break
+        trial = p + step
+        trial[:, 2] = wrap_angle(trial[:, 2])
+        new_cost = objective(idx, trial[:, None, :])[:, 0]
+        better = new_cost < cost[idx]
+        gain = np.where(better, cost[idx] - new_cost, 0.0)
+        poses[idx[better]] = trial[better]
+        cost[idx[better]] = new_cost[better]
+        still = better & (np.max(np.abs(step), axis=1) >= 1e-10) \
+            & (gain > 1e-10 * np.maximum(cost[idx], 1.0))
+        active[idx[~still]] = False
+    poses[~valid] = np.nan
+    cost = np.where(valid, cost, np.nan)
+    return poses, cost, n_b
+
+
+def resect_pose(landmarks_xy: np.ndarray, bearings_rad: np.ndarray,
+                sigma_rad: np.ndarray | float, prior_pose: np.ndarray | None = None,
+                prior_sigma: np.ndarray | None = None, *, n_headings: int = 72,
+                huber_k: float = 2.0, iterations: int = 15) -> tuple[np.ndarray, float]:
+    """One pose by :func:`resect_poses`: returns ``(pose (3,), cost)``; NaN if undetermined.
+
+    ``landmarks_xy`` (k, 2), ``bearings_rad`` (k,), ``sigma_rad`` scalar or (k,),
+    ``prior_pose`` (3,) and ``prior_sigma`` (3,) optional.
+    """
+    lm = np.asarray(landmarks_xy, dtype=float).reshape(-1, 2)
+    poses, cost, _ = resect_poses(
+        np.zeros(len(lm), np.int64), lm, np.asarray(bearings_rad, dtype=float).reshape(-1),
+        np.broadcast_to(np.asarray(sigma_rad, dtype=float), (len(lm),)), 1,
+        prior_poses=None if prior_pose is None else np.asarray(prior_pose, float)[None],
+        prior_sigma=None if prior_sigma is None else np.asarray(prior_sigma, float)[None],
+        n_headings=n_headings, huber_k=huber_k, iterations=iterations)
+    return poses[0], float(cost[0])
+
+
+def resect_trajectory(owner: np.ndarray, landmark_ids: np.ndarray, bearings_rad: np.ndarray,
+                      bearing_sigma_rad: float, map_ids: np.ndarray, map_xy: np.ndarray,
+                      odoms: np.ndarray, odometry_sigma: np.ndarray, *,
+                      start: np.ndarray | None = None, n_headings: int = 36,
+                      huber_k: float = 2.0, map_sigma_m: float = 0.03,
+                      prior_sigma: Sequence[float] = (0.02, 0.02, math.radians(2.0))
+                      ) -> np.ndarray | None:
+    """Every pose of a trajectory by resection against a map, shape (T, 3), or None if no
+    pose resects.
+
+    Pass 1 resects each pose with at least 3 mapped bearings on its own (from ``start`` if
+    given; a pose whose fit is then poor, more than 9 per bearing, is redone from the heading
+    grid); pass 2 again with the odometry prediction from the pass-1 pose before it as a prior
+    (std. dev. ``prior_sigma`` and the step's odometry sigma in quadrature), each bearing's
+    std. dev. ``sqrt(sigma^2 + (map_sigma_m / r)^2)`` at its range ``r`` (the map's error).
+    Poses left undetermined are chained from their neighbours by the odometry.
+
+    Parameters
+    ----------
+    owner, landmark_ids, bearings_rad : arrays of shape (J,)
+        Every bearing of the stream: the step (0 .. T-1) that took it, its landmark, its value
+        relative to the robot heading (radians).
+    bearing_sigma_rad : float
+    map_ids : int array of shape (n,), map_xy : array of shape (n, 2)
+        The map (metres); bearings to landmarks not in it are ignored.
+    odoms : array of shape (T, 3)
+        Row ``t`` is the increment ``[dx_m, dy_m, dpsi_rad]`` from pose ``t-1`` to ``t`` (row 0
+        unused).
+    odometry_sigma : array of shape (T, 3)
+        Std. dev. of each row of ``odoms``.
+    start : array of shape (T, 3), optional
+        Starting poses of pass 1 (else the heading grid).
+    n_headings, huber_k : heading grid size and Huber threshold of :func:`resect_poses`.
+    map_sigma_m : float
+    prior_sigma : (m, m, rad)
+    """
+    n_t = len(odoms)
+    ids = np.asarray(landmark_ids)
+    order = np.argsort(map_ids)
+    pos = np.clip(np.searchsorted(map_ids[order], ids), 0, len(map_ids) - 1)
+    have = map_ids[order][pos] == ids
+    own, lm, b = owner[have], map_xy[order][pos[have]], bearings_rad[have]
+    sig_b = float(bearing_sigma_rad)
+    kw = dict(n_headings=n_headings, huber_k=huber_k)
+    p1, c1, n_b = resect_poses(own, lm, b, np.full(len(b), sig_b), n_t,
+                               initial_poses=start, **kw)
+    if start is not None:
+        poor = np.isfinite(c1) & (c1 > 9.0 * np.maximum(n_b, 1))
+        if poor.any():
+            q, _, _ = resect_poses(own, lm, b, np.full(len(b), sig_b), n_t,
+                                   initial_poses=np.where(poor[:, None], np.nan, p1), **kw)
+            p1[poor] = q[poor]
+    ok1 = (n_b >= 3) & np.all(np.isfinite(p1), axis=1)
+    prior = np.full((n_t, 3), np.nan)
+    prev_ok = np.flatnonzero(ok1[:-1]) + 1
+    prior[prev_ok] = compose(p1[prev_ok - 1], odoms[prev_ok])
+    prior_sig = np.sqrt(np.asarray(prior_sigma) ** 2 + odometry_sigma ** 2)
+    ref = np.where(ok1[:, None], p1, prior)[own, :2]
+    rng = np.hypot(*(lm - ref).T)
+    sig = np.where(np.isfinite(rng),
+                   np.sqrt(sig_b ** 2 + (map_sigma_m / np.maximum(rng, 0.05)) ** 2),
+                   2 * sig_b)
+    poses, _, _ = resect_poses(own, lm, b, sig, n_t, prior_poses=prior, prior_sigma=prior_sig,
+                               initial_poses=np.where(ok1[:, None], p1, np.nan), **kw)
+    ok = np.all(np.isfinite(poses), axis=1) & ((n_b >= 3) | np.isfinite(prior[:, 0]))
+    if not ok.any():
+        return None
+    first = int(np.argmax(ok))
+    for t in range(first - 1, -1, -1):          # before the first: odometry backwards
+        back = inverse(odoms[t + 1])
+        back[2] = -odoms[t + 1, 2]              # unwrapped (compose wraps): keeps the bits
+        poses[t] = compose(poses[t + 1], back)
+    for t in range(first + 1, n_t):             # gaps: odometry forwards
+        if not ok[t]:
+            poses[t] = compose(poses[t - 1], odoms[t])
+    return poses
+
+
+__all__ = ["resect_poses", "resect_pose", "resect_trajectory", "resection_jacobian"]
