@@ -1,5 +1,5 @@
-"""Tests of the hybrid (baselines/hybrid.py): resection, the trimmed alignment, and the mapper
-seeded from a map in another, possibly mirrored, frame."""
+"""Tests of the hybrid (baselines/hybrid.py): the trimmed alignment, the presets, and the
+mapper seeded from a map in another, possibly mirrored, frame."""
 
 from __future__ import annotations
 
@@ -9,11 +9,9 @@ import numpy as np
 import pytest
 
 from baselines.factor_graph import BatchMapper, OracleMapper
-from baselines.hybrid import (HybridConfig, HybridMapper, resect_pose, resection_jacobian,
-                              trimmed_align)
+from baselines.hybrid import HybridConfig, HybridMapper, trimmed_align
 from bomgraph.errors import ConfigError
 from bomgraph.evaluate import score_estimate
-from bomgraph.geometry import bearings_to
 from bomgraph.mapper import MapEstimate, create_mapper, run
 from bomgraph.sim import SimConfig, simulate
 from bomgraph.stream import Step, Stream, StreamHeader
@@ -32,44 +30,8 @@ def noisy() -> Stream:
 
 
 # --------------------------------------------------------------------------------------------
-# Resection
+# Alignment
 # --------------------------------------------------------------------------------------------
-
-def test_resection_is_exact_without_noise_from_a_bad_prior() -> None:
-    rng = np.random.default_rng(0)
-    lm = rng.uniform(-1, 1, (6, 2))
-    true = np.array([0.1, -0.2, 2.5])
-    b = bearings_to(true, lm)
-    # the prior is far off (heading by 2.9 rad) and nearly uninformative
-    prior = np.array([0.6, 0.4, 2.5 - 2.9])
-    pose, cost = resect_pose(lm, b, math.radians(3), prior, np.array([1e4, 1e4, 1e4]))
-    np.testing.assert_allclose(pose, true, atol=1e-9)
-    assert cost < 1e-6
-
-
-def test_resection_with_two_bearings_leans_on_the_prior() -> None:
-    lm = np.array([[1.0, 0.0], [0.0, 1.0]])
-    true = np.array([0.0, 0.0, 0.3])
-    b = bearings_to(true, lm)
-    pose, _ = resect_pose(lm, b, 0.01, true, np.array([0.01, 0.01, 0.01]))
-    np.testing.assert_allclose(pose, true, atol=1e-9)
-    pose, cost = resect_pose(np.zeros((0, 2)), np.zeros(0), 0.01, true, np.ones(3))
-    np.testing.assert_allclose(pose, true, atol=1e-12)
-    assert cost < 1e-20
-    # one bearing and no prior: undetermined
-    pose, cost = resect_pose(lm[:1], b[:1], 0.01)
-    assert np.all(np.isnan(pose)) and math.isnan(cost)
-
-
-def test_resection_jacobian_matches_numeric() -> None:
-    rng = np.random.default_rng(1)
-    lm = rng.uniform(-1, 1, (5, 2))
-    pose = np.array([0.05, 0.1, -0.7])
-    h = 1e-7
-    num = np.column_stack([(bearings_to(pose + h * e, lm) - bearings_to(pose - h * e, lm))
-                           / (2 * h) for e in np.eye(3)])
-    np.testing.assert_allclose(resection_jacobian(pose, lm), num, atol=1e-6)
-
 
 def test_trimmed_align_recovers_a_mirror_and_ignores_an_outlier() -> None:
     rng = np.random.default_rng(2)
@@ -139,12 +101,20 @@ def test_seeded_start_alone_matches_batch(noisy: Stream) -> None:
     assert seeded.final.info["cost"] <= batch.final.info["cost"] * (1 + 1e-6)
 
 
-def test_options_are_split_between_the_two_configs(noisy: Stream) -> None:
-    m = HybridMapper(noisy.header, seed_method="triangulate", n_headings=36, huber_k=None)
-    assert m.hybrid.n_headings == 36 and m.config.huber_k is None
+def test_presets_and_options_make_one_config(noisy: Stream) -> None:
+    m = HybridMapper(noisy.header, seed_method="triangulate", n_headings=12, max_iterations=50)
+    assert m.config.n_headings == 12 and m.config.max_iterations == 50
+    assert m.config.huber_k is None
+    both = HybridConfig.preset("real-seed-robust")
+    assert both.seed_options == {"preset": "real"}
+    assert both.odometry_cauchy_k == both.bearing_cauchy_k == 3.0
+    assert HybridConfig.preset("robust").seed_options is None
+    assert HybridConfig.preset("real-seed").odometry_cauchy_k is None
     with pytest.raises(ConfigError, match="seed_method"):
         HybridConfig(seed_method="hybrid")
-    with pytest.raises(ConfigError, match="unknown factor-graph option"):
+    with pytest.raises(ConfigError, match="huber_k"):
+        HybridConfig(huber_k=1.345)
+    with pytest.raises(ConfigError, match="unknown option"):
         HybridMapper(noisy.header, seed_method="triangulate", n_heading=3)
 
 

@@ -1,21 +1,17 @@
-"""Tests of the GTSAM baselines (baselines/factor_graph.py): the exact odometry factor, chi^2
-at the truth, landmark admission, LM convergence reporting, iSAM2 recovery, priors,
-covariances, and exact recovery without noise."""
+"""Tests of the GTSAM solvers and mappers (baselines/factor_graph.py): LM convergence
+reporting, iSAM2 recovery, priors, covariances, robust kernels, presets and exact recovery
+without noise."""
 
 from __future__ import annotations
-
-import math
 
 import gtsam
 import numpy as np
 import pytest
 
-from baselines.factor_graph import (BatchMapper, BearingGraph, FactorGraphConfig, Isam2Mapper,
-                                    OracleMapper, insert_pose, landmark_key, odometry_factors,
-                                    pose_key, solve_lm, transformed_odometry_covariance)
+from baselines.bearing_graph import FactorGraphConfig, landmark_key, pose_key
+from baselines.factor_graph import BatchMapper, Isam2Mapper, OracleMapper, solve_lm
 from bomgraph.errors import ConfigError, StreamFormatError
 from bomgraph.evaluate import score_estimate
-from bomgraph.geometry import compose
 from bomgraph.mapper import create_mapper, run
 from bomgraph.sim import SimConfig, make_priors, simulate, with_priors
 from bomgraph.stream import Step, Stream, Truth
@@ -27,106 +23,6 @@ SMALL = SimConfig(n_steps=100, n_landmarks=25)
 @pytest.fixture(scope="module")
 def noise_free() -> Stream:
     return simulate(NOISE_FREE, np.random.default_rng(7))
-
-
-def _values_at_truth(stream: Stream, graph: BearingGraph, config: FactorGraphConfig
-                     ) -> gtsam.Values:
-    v = gtsam.Values()
-    poses = stream.truth.poses
-    for t, pose in enumerate(poses):
-        insert_pose(v, t, pose, poses[t - 1] if t else None, config)
-    for i, xy in zip(stream.truth.landmark_ids, stream.truth.landmarks_xy):
-        if int(i) in graph.landmark_ids:
-            v.insert(landmark_key(int(i)), gtsam.Point2(*xy))
-    return v
-
-
-def _graph_at_truth(stream: Stream, config: FactorGraphConfig
-                    ) -> tuple[gtsam.NonlinearFactorGraph, gtsam.NonlinearFactorGraph,
-                               gtsam.Values, BearingGraph]:
-    """All factors of ``stream`` (landmarks admitted on the true poses) and the truth as values;
-    the odometry factors apart."""
-    g = BearingGraph(stream.header, config, stream.truth.poses[0])
-    for st in stream.steps:
-        g.add_step(st)
-    g.admit(lambda ts: stream.truth.poses[ts])
-    new = g.take_new()
-    full = gtsam.NonlinearFactorGraph(new.core)
-    full.push_back(new.landmark)
-    odo = gtsam.NonlinearFactorGraph()
-    for t, st in enumerate(stream.steps[1:], start=1):
-        for f in odometry_factors(t, st.odom, st.odometry_sigma(stream.header), config):
-            odo.add(f)
-    return full, odo, _values_at_truth(stream, g, config), g
-
-
-# --------------------------------------------------------------------------------------------
-# The odometry factor
-# --------------------------------------------------------------------------------------------
-
-def test_split_factor_error_is_exactly_the_component_noise() -> None:
-    """At the truth, the split factors' chi^2 is the whitened component noise, to round-off."""
-    cfg = FactorGraphConfig()
-    sigma = np.array([0.03, 0.0, math.radians(3)])
-    a = np.array([0.4, -1.2, 2.9])
-    u_true = np.array([0.17, 0.0, -0.45])
-    b = compose(a, u_true)
-    noise = np.array([0.021, 0.0, -0.061])
-    factors = odometry_factors(5, u_true + noise, sigma, cfg)
-    v = gtsam.Values()
-    v.insert(pose_key(4), gtsam.Pose2(*a))
-    v.insert(pose_key(5), gtsam.Pose2(*b))
-    v.insert(gtsam.symbol("m", 5), gtsam.Pose2(b[0], b[1], a[2]))
-    chi2 = 2 * sum(f.error(v) for f in factors)
-    assert chi2 == pytest.approx((noise[0] / 0.03) ** 2 + (noise[2] / sigma[2]) ** 2, rel=1e-10)
-
-
-def test_transformed_covariance_is_the_jacobian_of_the_between_error() -> None:
-    """Numeric Jacobian of Logmap(Pose2(u + n)^-1 Pose2(u)) w.r.t. the component noise n at
-    n = 0 is -blockdiag(R(dpsi)^T, 1), so the covariance is J diag(s^2) J^T."""
-    u = np.array([0.15, 0.02, 0.4])
-    sigma = np.array([0.03, 0.01, 0.05])
-    base = gtsam.Pose2(*u)
-
-    def err(n: np.ndarray) -> np.ndarray:
-        return gtsam.Pose2.Logmap(gtsam.Pose2(*(u + n)).between(base))
-
-    h = 1e-7
-    jac = np.column_stack([(err(h * e) - err(-h * e)) / (2 * h) for e in np.eye(3)])
-    np.testing.assert_allclose(jac @ np.diag(sigma ** 2) @ jac.T,
-                               transformed_odometry_covariance(u, sigma), atol=1e-12)
-
-
-@pytest.fixture(scope="module")
-def noisy_runs() -> list[Stream]:
-    return [simulate(SMALL, np.random.default_rng(100 + k)) for k in range(4)]
-
-
-def test_chi2_per_dof_at_truth_is_one_with_the_split_model(noisy_runs: list[Stream]) -> None:
-    cfg = FactorGraphConfig()
-    chi2 = dof = chi2_odo = dof_odo = 0.0
-    for s in noisy_runs:
-        full, odo, v, g = _graph_at_truth(s, cfg)
-        n_odo = len(s.steps) - 1
-        chi2 += 2 * full.error(v)
-        dof += g.n_bearing_factors + 2 * n_odo   # dy is exactly 0 in the simulator
-        chi2_odo += 2 * odo.error(v)
-        dof_odo += 2 * n_odo
-    # ~5000 residuals: chi^2/dof has std. dev. ~0.02
-    assert 0.92 < chi2 / dof < 1.08
-    # ~800 odometry residuals: std. dev. ~0.05
-    assert 0.8 < chi2_odo / dof_odo < 1.2
-
-
-def test_chi2_at_truth_is_far_above_one_with_the_naive_diagonal(
-        noisy_runs: list[Stream]) -> None:
-    """Regression check: the naive (sdx, floor, sdpsi) diagonal in the after-turn frame."""
-    cfg = FactorGraphConfig(odometry_model="naive", sigma_floor_m=1e-3)
-    ratio = []
-    for s in noisy_runs:
-        _, odo, v, _ = _graph_at_truth(s, cfg)
-        ratio.append(2 * odo.error(v) / (2 * (len(s.steps) - 1)))
-    assert min(ratio) > 3.0
 
 
 # --------------------------------------------------------------------------------------------
@@ -162,7 +58,7 @@ def test_oracle_refuses_to_run_without_true_poses(noise_free: Stream) -> None:
 
 
 # --------------------------------------------------------------------------------------------
-# Landmark admission
+# Landmark admission in the mappers
 # --------------------------------------------------------------------------------------------
 
 def _with_single_sighting(stream: Stream, lid: int, t: int, bearing: float) -> Stream:
@@ -180,27 +76,10 @@ def test_a_landmark_seen_once_is_never_added(cls: type, noise_free: Stream) -> N
     result = run(mapper, stream.steps)
     for c in result.checkpoints:
         assert 999 not in c.estimate.landmark_ids
-    assert mapper.problem.pending()[999] == 1
+    problem = mapper.problem if cls is Isam2Mapper else mapper.state.problem
+    assert problem.pending()[999] == 1
     # and the rest is unharmed
     assert score_estimate(result.final, stream.truth).max_m < 1e-6
-
-
-def test_enter_refuses_a_landmark_with_one_bearing(noise_free: Stream) -> None:
-    g = BearingGraph(noise_free.header, FactorGraphConfig(), np.zeros(3))
-    g.add_step(_with_single_sighting(noise_free, 999, 0, 0.4).steps[0])
-    with pytest.raises(ConfigError, match="two"):
-        g.enter(999, np.array([1.0, 1.0]))
-
-
-def test_buffered_bearings_all_become_factors_on_entry(noise_free: Stream) -> None:
-    g = BearingGraph(noise_free.header, FactorGraphConfig(), noise_free.truth.poses[0])
-    for st in noise_free.steps[:20]:
-        g.add_step(st)
-    n_bearings = sum(len(st.landmark_ids) for st in noise_free.steps[:20])
-    g.admit(lambda ts: noise_free.truth.poses[ts])
-    pending = sum(g.pending().values())
-    assert g.n_bearing_factors + pending == n_bearings
-    assert g.n_bearing_factors > 0.8 * n_bearings
 
 
 def test_steps_out_of_order_are_refused(noise_free: Stream) -> None:
@@ -212,12 +91,17 @@ def test_steps_out_of_order_are_refused(noise_free: Stream) -> None:
         m.step(Step(1, None, np.zeros(0, np.int64), np.zeros(0)))
 
 
-def test_config_is_validated() -> None:
-    with pytest.raises(ConfigError, match="odometry_model"):
-        FactorGraphConfig(odometry_model="diagonal")
-    with pytest.raises(ConfigError, match="unknown factor-graph option"):
-        BatchMapper(simulate(SimConfig(n_steps=2), np.random.default_rng(0)).header,
-                    lambda_upper=3)
+def test_factories_resolve_config_and_presets(noise_free: Stream) -> None:
+    header = noise_free.header
+    assert BatchMapper(header, preset="robust").config == FactorGraphConfig.preset("robust")
+    assert OracleMapper(header, truth=noise_free.truth,
+                        preset="robust").config.odometry_cauchy_k == 3.0
+    cfg = FactorGraphConfig(max_iterations=5)
+    assert BatchMapper(header, config=cfg).config is cfg
+    with pytest.raises(ConfigError, match="not both"):
+        BatchMapper(header, config=cfg, max_iterations=3)
+    with pytest.raises(ConfigError, match="unknown option"):
+        BatchMapper(header, lambda_upper=3)
 
 
 # --------------------------------------------------------------------------------------------
@@ -229,8 +113,8 @@ def _noisy_graph(**options: float) -> tuple[gtsam.NonlinearFactorGraph, gtsam.Va
     m = BatchMapper(s.header, **options)
     for st in s.steps:
         m.step(st)
-    m.absorb()
-    return m.graph, m.values
+    m.state.absorb()
+    return m.state.graph, m.state.values
 
 
 def test_lm_that_gives_up_is_not_reported_converged() -> None:
