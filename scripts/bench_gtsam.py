@@ -27,7 +27,8 @@ values below 2 and 3 are expected from a consistent estimate).
 Usage::
 
     python scripts/bench_gtsam.py [--runs 25] [--steps 300] [--jobs 2] [--seed 0]
-        [--methods gtsam-batch gtsam-isam2 hybrid oracle] [--option METHOD:key=value ...]
+        [--methods gtsam-batch gtsam-isam2 hybrid oracle] [--preset METHOD:NAME ...]
+        [--option METHOD:key=value ...]
         [--nees] [--out results/bench_gtsam.json] [--cache results/cache_gtsam]
 
 Prints a table and writes the numbers as JSON (``results/`` is git-ignored). Finished runs are
@@ -42,7 +43,6 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import argparse  # noqa: E402
-import ast  # noqa: E402
 import json  # noqa: E402
 import math  # noqa: E402
 import platform  # noqa: E402
@@ -54,26 +54,27 @@ from typing import Any, Mapping, Sequence  # noqa: E402
 import numpy as np  # noqa: E402
 
 from bomgraph.bench import Arm, Executor, SimSource, Task, execute  # noqa: E402
+from bomgraph.jsonio import jsonable, parse_options  # noqa: E402
 from bomgraph.sim import SimConfig, paper_design  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 LM_METHODS = ("oracle", "gtsam-batch", "hybrid")
 
 
-def parse_options(items: Sequence[str]) -> dict[str, dict[str, Any]]:
-    """``METHOD:key=value`` (value a Python literal, else a string) -> {method: {key: value}}."""
+def method_options(items: Sequence[str], presets: Sequence[str]) -> dict[str, dict[str, Any]]:
+    """``--option METHOD:key=value`` (values by :func:`bomgraph.jsonio.parse_options`) and
+    ``--preset METHOD:NAME`` -> {method: {key: value, "preset": NAME}}."""
     out: dict[str, dict[str, Any]] = {}
     for item in items:
-        try:
-            method, kv = item.split(":", 1)
-            key, raw = kv.split("=", 1)
-        except ValueError:
-            raise SystemExit(f"--option wants METHOD:key=value, got {item!r}") from None
-        try:
-            value = ast.literal_eval(raw)
-        except (ValueError, SyntaxError):
-            value = raw
-        out.setdefault(method, {})[key] = value
+        method, sep, kv = item.partition(":")
+        if not sep:
+            raise SystemExit(f"--option wants METHOD:key=value, got {item!r}")
+        out.setdefault(method, {}).update(parse_options([kv]))
+    for item in presets:
+        method, sep, name = item.partition(":")
+        if not sep or not name:
+            raise SystemExit(f"--preset wants METHOD:NAME, got {item!r}")
+        out.setdefault(method, {})["preset"] = name
     return out
 
 
@@ -185,7 +186,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--steps", type=int, default=300)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--jobs", type=int, default=2)
-    ap.add_argument("--option", action="append", default=[], metavar="METHOD:key=value")
+    ap.add_argument("--option", action="append", default=[], metavar="METHOD:key=value",
+                    help="a config field of one method (JSON values, inf allowed)")
+    ap.add_argument("--preset", action="append", default=[], metavar="METHOD:NAME",
+                    help="a named preset of one method, e.g. gtsam-batch:robust")
     ap.add_argument("--nees", action="store_true", help="add an oracle arm with covariances")
     ap.add_argument("--cost-tol", type=float, default=0.01,
                     help="cost difference (chi^2 / 2) still counted as the same minimum")
@@ -194,7 +198,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = ap.parse_args(argv)
     if "oracle" not in args.methods:
         args.methods.append("oracle")           # the bound needs it
-    options = parse_options(args.option)
+    options = method_options(args.option, args.preset)
     arms = [Arm(m, m, options.get(m, {})) for m in args.methods]
     if args.nees:
         arms.append(Arm("oracle+cov", "oracle", {**options.get("oracle", {}),
@@ -226,11 +230,11 @@ def main(argv: Sequence[str] | None = None) -> int:
                 "total_s": r.get("total_s"), "step_median_s": r.get("step_median_s"),
                 "mpe_curve_m": [c.get("mpe_m") for c in r.get("checkpoints", [])],
                 "error": r.get("error")} for r in rows]
-    out.write_text(json.dumps({
+    out.write_text(json.dumps(jsonable({
         "setup": {"runs": len(specs), "steps": args.steps, "seed": args.seed,
                   "jobs": args.jobs, "options": options, "cost_tol": args.cost_tol,
                   "machine": platform.platform(), "python": platform.python_version()},
-        "bound": bound, "summary": table, "runs": per_run}, indent=1, allow_nan=True))
+        "bound": bound, "summary": table, "runs": per_run}), indent=1, allow_nan=False))
     print(f"saved {out}")
     return 0
 
