@@ -407,6 +407,8 @@ class Isam2Mapper:
         self.withdrawn: list[int] = []
 
     def _new_isam(self) -> gtsam.ISAM2:
+        """A fresh iSAM2: Cholesky, and Powell's dogleg instead of Gauss-Newton (a trust region:
+        plain Gauss-Newton diverged on early, weakly constrained landmarks)."""
         p = gtsam.ISAM2Params()
         p.setRelinearizeThreshold(self.config.relinearize_threshold)
         p.relinearizeSkip = self.config.relinearize_skip
