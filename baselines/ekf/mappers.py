@@ -244,7 +244,8 @@ class _EkfSlam:
         """Gate each bearing on its own NIS, then one batched filterpy update with the rest.
 
         The NIS of bearing ``i`` is ``y_i^2 / (H_i P H_i^T + var_i)`` with the wrapped
-        innovation ``y_i`` and the variance of :func:`~baselines.ekf.models.second_order_variance`; it is compared with the
+        innovation ``y_i`` and the variance ``var_i`` of
+        :func:`~baselines.ekf.models.second_order_variance`; it is compared with the
         chi-square 1-dof quantile. Bearings past ``max_bearing_nonlinearity`` are not used.
         With ``iterations > 1`` the iterates of the iterated update use the model's own
         Jacobians and only the last step the observability-constrained ones.
