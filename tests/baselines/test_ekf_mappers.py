@@ -25,7 +25,7 @@ from baselines.ekf import EkfConfig, EkfMapper, InverseDepthConfig, InverseDepth
 from bomgraph.angles import angle_residual, wrap_angle
 from bomgraph.errors import ConfigError
 from bomgraph.evaluate import score_estimate
-from bomgraph.geometry import bearings_to, compose
+from bomgraph.geometry import bearings_to, compose, rotation
 from bomgraph.mapper import Mapper, create_mapper, run
 from bomgraph.sim import SimConfig, simulate
 from bomgraph.stream import Step, StreamHeader
@@ -165,8 +165,7 @@ def test_map_is_equivariant_under_the_start_frame() -> None:
     a = run(EkfMapper(s.header), s.steps).final
     b = run(EkfMapper(s.header, start_pose=start), s.steps).final
     np.testing.assert_array_equal(a.landmark_ids, b.landmark_ids)
-    c, sn = math.cos(start[2]), math.sin(start[2])
-    rot = np.array([[c, -sn], [sn, c]])
+    rot = rotation(start[2])
     np.testing.assert_allclose(b.landmarks_xy, a.landmarks_xy @ rot.T + start[:2], atol=1e-8)
     np.testing.assert_allclose(b.landmark_cov, rot @ a.landmark_cov @ rot.T, atol=1e-10)
     np.testing.assert_allclose(b.poses[:, :2], a.poses[:, :2] @ rot.T + start[:2], atol=1e-8)
