@@ -16,9 +16,10 @@ Usage::
                                 [--jobs 2] [--seed 0] [--out results/bench_ekf.json]
                                 [--option key=value ...]
 
-``--option preset=real`` runs the presets made for recordings (``baselines.ekf.EKF_PRESETS``);
-``inf`` is accepted as a number. Prints a table and writes the numbers as JSON (``results/`` is
-git-ignored).
+``--option preset=real`` runs the presets made for recordings (``EkfConfig.PRESETS``);
+options are parsed by ``bomgraph.jsonio.parse_options`` (``inf`` is a number). Prints a table and
+writes the numbers as JSON (``results/`` is git-ignored). docs/measurements-ekf.md holds what it
+measured.
 """
 
 from __future__ import annotations
@@ -29,7 +30,6 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")        # small matrices: one BLAS 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import argparse  # noqa: E402
-import ast  # noqa: E402
 import json  # noqa: E402
 import platform  # noqa: E402
 import time  # noqa: E402
@@ -41,25 +41,31 @@ import numpy as np  # noqa: E402
 from joblib import Parallel, delayed  # noqa: E402
 from scipy.stats import chi2  # noqa: E402
 
-from bomgraph.angles import angle_residual  # noqa: E402
-from bomgraph.evaluate import error_table  # noqa: E402
-from bomgraph.mapper import create_mapper, run  # noqa: E402
+from bomgraph.evaluate import Alignment, error_table, pose_nees  # noqa: E402
+from bomgraph.jsonio import jsonable, parse_options  # noqa: E402
+from bomgraph.mapper import MapEstimate, create_mapper, run  # noqa: E402
+from bomgraph.stream import Truth  # noqa: E402
 from bomgraph.sim import SimConfig, paper_design, simulate_run  # noqa: E402
 
 TIMES = (50, 100, 200, 300)
 
 
-def robot_nees(poses: np.ndarray, pose_cov: np.ndarray, true_poses: np.ndarray) -> np.ndarray:
-    """NEES ``e^T P^-1 e`` of ``[x, y, psi]`` per step (heading error wrapped), shape (T,).
+#: The mapper starts at the true first pose: its frame is the truth's, no alignment enters.
+IDENTITY = Alignment(np.eye(2), np.zeros(2))
+
+
+def robot_nees(estimate: MapEstimate, truth: Truth) -> np.ndarray:
+    """NEES of the filtered pose at every step (``bomgraph.evaluate.pose_nees``), shape (T,).
 
     NaN where the covariance is singular (the first steps: the first pose is known exactly and
     the simulator's odometry has no lateral noise).
     """
-    err = poses - true_poses
-    err[:, 2] = angle_residual(poses[:, 2], true_poses[:, 2])
-    out = np.full(len(err), np.nan)
-    ok = np.linalg.det(pose_cov) > 1e-30
-    out[ok] = np.einsum("ti,tij,tj->t", err[ok], np.linalg.inv(pose_cov[ok]), err[ok])
+    out = np.full(len(estimate.pose_t), np.nan)
+    no_map = np.zeros(0, np.int64), np.zeros((0, 2))
+    for k in np.flatnonzero(np.linalg.det(estimate.pose_cov) > 1e-30):
+        at_k = MapEstimate(*no_map, pose_t=estimate.pose_t[k:k + 1],
+                           poses=estimate.poses[k:k + 1], pose_cov=estimate.pose_cov[k:k + 1])
+        out[k] = pose_nees(at_k, truth, IDENTITY)
     return out
 
 
@@ -74,8 +80,7 @@ def one_run(method: str, spec_index: int, seed: int, n_steps: int,
     cpu_s = time.process_time() - cpu0
     table = error_table(result, stream.truth)
     final = result.final
-    nees = robot_nees(np.array(final.poses), np.array(final.pose_cov),
-                      stream.truth.poses[final.pose_t])
+    nees = robot_nees(final, stream.truth)
     return {"run": spec.name, "t": table["t"].tolist(), "mpe_m": table["mpe_m"].tolist(),
             "median_m": table["median_m"].tolist(), "robot_m": table["robot_last_m"].tolist(),
             "n_mapped": table["n_mapped"].tolist(), "nees": nees.tolist(),
@@ -109,38 +114,13 @@ def summarise(runs: list[dict[str, Any]], n_steps: int) -> dict[str, Any]:
                  "fraction_above_band": float(np.mean(avg[valid] > hi)),
                  "by_window": {f"{a}-{min(a + 49, n_steps)}": float(np.nanmean(avg[a:a + 50]))
                                for a in range(0, n_steps, 50)},
-                 "per_step": [None if not np.isfinite(v) else float(v) for v in avg]},
+                 "per_step": avg.tolist()},
         "run_s": {"mean": float(np.mean([r["total_s"] for r in runs])),
                   "median": float(np.median([r["total_s"] for r in runs])),
                   "max": float(np.max([r["total_s"] for r in runs])),
                   "cpu_mean": float(np.mean([r["cpu_s"] for r in runs])),
                   "cpu_median": float(np.median([r["cpu_s"] for r in runs]))},
     }
-
-
-def _json_safe(obj: Any) -> Any:
-    """NaN and inf become None (JSON has no NaN)."""
-    if isinstance(obj, dict):
-        return {k: _json_safe(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_json_safe(v) for v in obj]
-    if isinstance(obj, float) and not np.isfinite(obj):
-        return None
-    return obj
-
-
-def parse_options(pairs: list[str]) -> dict[str, Any]:
-    out: dict[str, Any] = {}
-    for p in pairs:
-        key, _, value = p.partition("=")
-        try:
-            out[key] = ast.literal_eval(value)
-        except (ValueError, SyntaxError):
-            try:
-                out[key] = float(value)      # inf, nan
-            except ValueError:
-                out[key] = value
-    return out
 
 
 def main() -> None:
@@ -192,7 +172,7 @@ def main() -> None:
               f"the runs {report['setup']['load_average']})")
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps(_json_safe(report), allow_nan=False))
+    out.write_text(json.dumps(jsonable(report), allow_nan=False))
     print(f"\nwrote {out}")
 
 

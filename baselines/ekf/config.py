@@ -1,0 +1,142 @@
+"""Configurations of the EKF baselines ``ekf`` and ``ekf-invdepth`` (paper section IV, Exp. 2).
+
+:class:`BearingEkfConfig` holds the fields both filters share; :class:`EkfConfig` (Bailey's
+constrained initialisation) and :class:`InverseDepthConfig` (Civera's undelayed inverse depth)
+add their own. Each names its presets in one ``PRESETS`` dict (:class:`bomgraph.config.Presets`):
+``"paper"``, the defaults, reproduce the paper's setup; ``"real"`` is for recordings (MRCLAM6,
+the g2o set): every bearing used whatever its nonlinearity index (after a blind turn the
+bearings to mapped landmarks are the ones that bring the heading back), two iterations of the
+update, restarts after three gated bearings in a row, and for ``ekf`` inverse-depth
+candidates. The measurements behind them are in docs/measurements-ekf.md.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any, ClassVar, Mapping
+
+import numpy as np
+
+from bomgraph.config import Presets
+from bomgraph.errors import ConfigError
+
+
+@dataclass(frozen=True)
+class BearingEkfConfig(Presets):
+    """The fields both EKF baselines share.
+
+    gate_probability : chi-square 1-dof probability of the per-bearing Mahalanobis gate
+        (threshold ``chi2.ppf(p, 1)``; 1 disables the gate). Gated bearings are counted in
+        ``info["gated_bearings"]``.
+    initial_pose_sigma : std. dev. ``(sigma_x_m, sigma_y_m, sigma_psi_rad)`` of the first pose
+        (zeros anchor the map frame to it).
+    max_bearing_nonlinearity : bearings with a larger nonlinearity index
+        ``(C_rr C_pp)^(1/4) / |r|`` (:func:`~baselines.ekf.models.second_order_variance`) are
+        not used (``inf``: all are); counted in ``info["nonlinear_bearings"]``.
+    rho_init_per_m, rho_sigma_per_m : prior inverse depth of a new inverse-depth feature and
+        its std. dev., 1/m; None derives them from the header's sensor range ``R``: ``2/R``
+        and ``1/R``, so the 2-sigma interval runs from infinity (Civera's rule) to ``R/4``;
+        Civera's ``0.1`` and ``0.5`` per metre when the range is unknown.
+    iterations : 1: the EKF update; more: the iterated EKF
+        (:meth:`~baselines.ekf.filter.BearingEkf.update`).
+    restart_after_gated : an inverse-depth feature whose bearings fail the gate this many
+        times in a row is dropped and started again from the current sighting (its first
+        bearing was an outlier); counted in ``info["restarted"]``. None: never.
+    """
+
+    gate_probability: float = 0.999
+    initial_pose_sigma: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    max_bearing_nonlinearity: float = 0.2
+    rho_init_per_m: float | None = None
+    rho_sigma_per_m: float | None = None
+    iterations: int = 1
+    restart_after_gated: int | None = None
+
+    def __post_init__(self) -> None:
+        if not 0 < self.gate_probability <= 1:
+            raise ConfigError(f"gate_probability must be in (0, 1] (1 disables the gate), got "
+                              f"{self.gate_probability}")
+        if len(self.initial_pose_sigma) != 3 or not all(
+                math.isfinite(s) and s >= 0 for s in self.initial_pose_sigma):
+            raise ConfigError("initial_pose_sigma must be 3 finite numbers >= 0 "
+                              "(sigma_x_m, sigma_y_m, sigma_psi_rad)")
+        if not self.max_bearing_nonlinearity > 0:
+            raise ConfigError(f"max_bearing_nonlinearity must be > 0 (inf: no limit), got "
+                              f"{self.max_bearing_nonlinearity}")
+        for name in ("rho_init_per_m", "rho_sigma_per_m"):
+            value = getattr(self, name)
+            if value is not None and not (math.isfinite(value) and value > 0):
+                raise ConfigError(f"{name} must be a finite number > 0 or None (from the "
+                                  f"sensor range), got {value}")
+        for name in ("iterations", "restart_after_gated"):
+            value = getattr(self, name)
+            if not ((value is None and name == "restart_after_gated")
+                    or (isinstance(value, (int, np.integer)) and value >= 1)):
+                raise ConfigError(f"{name} must be an integer >= 1, got {value!r}")
+
+
+#: The overrides of the ``"real"`` preset both filters share.
+_REAL = {"max_bearing_nonlinearity": math.inf, "iterations": 2, "restart_after_gated": 3}
+
+
+@dataclass(frozen=True)
+class EkfConfig(BearingEkfConfig):
+    """Options of ``ekf`` (Bailey's constrained initialisation), beside the shared ones.
+
+    init_kl_max : a candidate is initialised when the KL divergence (nats) between the
+        unscented and the linearised Gaussian of its Euclidean estimate is below this
+        (Bailey's test: of the two-ray triangulation, or with ``candidates="inverse-depth"``
+        of the feature's conversion to ``[x, y]``).
+    inconsistent_parallax_rad : rays crossing behind the robot at more than this parallax
+        make the candidate restart from the current sighting (an outlier anchor).
+    max_pending_steps : a candidate still not initialised after this many steps restarts.
+    candidates : ``"clones"`` (Bailey: a pose clone per sighting, the bearings wait until the
+        candidate is initialised) or ``"inverse-depth"`` (the candidate is an inverse-depth
+        feature, as in ``ekf-invdepth``, updated by every bearing at once; it joins the map
+        as ``[x, y]`` when Bailey's test passes on its conversion).
+    """
+
+    PRESETS: ClassVar[Mapping[str, Mapping[str, Any]]] = {
+        "paper": {},
+        "real": {"candidates": "inverse-depth", **_REAL},
+    }
+
+    init_kl_max: float = 0.01
+    inconsistent_parallax_rad: float = math.radians(15.0)
+    max_pending_steps: int = 30
+    candidates: str = "clones"
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if not (self.init_kl_max > 0):
+            raise ConfigError(f"init_kl_max must be > 0, got {self.init_kl_max}")
+        if not 0 < self.inconsistent_parallax_rad < math.pi:
+            raise ConfigError("inconsistent_parallax_rad must be in (0, pi)")
+        if self.max_pending_steps < 1:
+            raise ConfigError(f"max_pending_steps must be >= 1, got {self.max_pending_steps}")
+        if self.candidates not in ("clones", "inverse-depth"):
+            raise ConfigError(f"candidates must be 'clones' (Bailey: pose clones, the bearings "
+                              f"wait) or 'inverse-depth' (updated at once, made Euclidean when "
+                              f"Gaussian), got {self.candidates!r}")
+
+
+@dataclass(frozen=True)
+class InverseDepthConfig(BearingEkfConfig):
+    """Options of ``ekf-invdepth`` (undelayed inverse depth), beside the shared ones.
+
+    linearity_max : Civera's linearity index ``4 sigma_d / d |cos alpha|`` below which a
+        feature becomes Euclidean.
+    """
+
+    PRESETS: ClassVar[Mapping[str, Mapping[str, Any]]] = {"paper": {}, "real": dict(_REAL)}
+
+    linearity_max: float = 0.1
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if not self.linearity_max > 0:
+            raise ConfigError("linearity_max must be > 0")
+
+
+__all__ = ["BearingEkfConfig", "EkfConfig", "InverseDepthConfig"]

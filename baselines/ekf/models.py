@@ -1,0 +1,396 @@
+"""The bearing-only EKF's models and their analytic Jacobians (paper section IV, Exp. 2).
+
+Vectorised kernels on arrays; nothing here holds state.
+
+- Motion: ``pose_t = pose_{t-1} ⊕ u`` (:func:`bomgraph.geometry.compose`), ``u = [dx_m,
+  dy_m, dpsi_rad]``; :func:`motion_jacobians` gives ``dF/dx`` and the input Jacobian
+  ``G = d(pose ⊕ u)/du = blockdiag(R(psi), 1)``.
+- Bearing to a Euclidean landmark ``[x_m, y_m]``: ``h = wrap(atan2(ly - y, lx - x) - psi)``
+  (:func:`bearing_and_jacobian`); to an inverse-depth feature ``[x0_m, y0_m, theta_rad,
+  rho_per_m]`` (Civera, Davison and Montiel, IEEE T-RO 2008, in the plane):
+  :func:`invdepth_bearing_and_jacobian`, converted to ``[x, y]`` by :func:`invdepth_to_xy`.
+- The second-order variance of a bearing and its nonlinearity index
+  (:func:`second_order_variance`), from the landmark's covariance in the robot's ray frame
+  (:func:`ray_covariance`).
+- Bailey's Gaussianity test (T. Bailey, "Constrained initialisation for bearing-only SLAM",
+  ICRA 2003): the Kullback-Leibler divergence (:func:`gaussian_kl_2d`) between the unscented
+  and the linearised Gaussian of a landmark made from two rays (:func:`triangulation_kl`,
+  :func:`triangulate_two_bearings`) or from an inverse-depth feature
+  (:func:`invdepth_conversion_kl`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from bomgraph.angles import wrap_angle
+from bomgraph.geometry import rotation
+
+
+def motion_jacobians(pose: np.ndarray, odom: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Jacobians of ``pose ⊕ odom`` with respect to the pose and to the odometry.
+
+    Parameters
+    ----------
+    pose : array of shape (3,)
+        ``[x_m, y_m, psi_rad]`` before the move.
+    odom : array of shape (3,)
+        ``[dx_m, dy_m, dpsi_rad]`` in the frame of ``pose``.
+
+    Returns
+    -------
+    f_pose : ndarray of shape (3, 3)
+    g_odom : ndarray of shape (3, 3)
+        ``blockdiag(R(psi), 1)``.
+    """
+    rot = rotation(float(pose[2]))
+    c, s = float(rot[0, 0]), float(rot[1, 0])
+    dx, dy = float(odom[0]), float(odom[1])
+    f_pose = np.array([[1.0, 0.0, -s * dx - c * dy],
+                       [0.0, 1.0, c * dx - s * dy],
+                       [0.0, 0.0, 1.0]])
+    g_odom = np.eye(3)
+    g_odom[:2, :2] = rot
+    return f_pose, g_odom
+
+
+def bearing_and_jacobian(poses: np.ndarray, points_xy: np.ndarray) -> tuple[np.ndarray,
+                                                                             np.ndarray]:
+    """Bearings from poses to points and their Jacobians.
+
+    Parameters
+    ----------
+    poses : array of shape (k, 3)
+    points_xy : array of shape (k, 2)
+
+    Returns
+    -------
+    bearing_rad : ndarray of shape (k,)
+        ``wrap(atan2(ly - y, lx - x) - psi)``.
+    jac : ndarray of shape (k, 5)
+        Derivatives with respect to ``[x, y, psi, lx, ly]``.
+    """
+    d = points_xy - poses[:, :2]
+    q = np.einsum("ki,ki->k", d, d)
+    b = wrap_angle(np.arctan2(d[:, 1], d[:, 0]) - poses[:, 2])
+    gx, gy = -d[:, 1] / q, d[:, 0] / q
+    jac = np.column_stack([-gx, -gy, -np.ones(len(q)), gx, gy])
+    return np.asarray(b).reshape(-1), jac
+
+
+def invdepth_bearing_and_jacobian(poses: np.ndarray,
+                                  features: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Bearings from poses to inverse-depth features and their Jacobians.
+
+    Parameters
+    ----------
+    poses : array of shape (k, 3)
+    features : array of shape (k, 4)
+        ``[x0_m, y0_m, theta_rad, rho_per_m]``: anchor, world azimuth, inverse depth.
+
+    Returns
+    -------
+    bearing_rad : ndarray of shape (k,)
+        ``wrap(atan2(v_y, v_x) - psi)`` with ``v = rho (a - p) + [cos theta, sin theta]``
+        (the direction to ``a + m / rho`` scaled by ``rho > 0``).
+    jac : ndarray of shape (k, 7)
+        Derivatives with respect to ``[x, y, psi, x0, y0, theta, rho]``.
+    """
+    a_minus_p = features[:, :2] - poses[:, :2]
+    rho = features[:, 3]
+    th = features[:, 2]
+    v = rho[:, None] * a_minus_p + np.column_stack([np.cos(th), np.sin(th)])
+    q = np.einsum("ki,ki->k", v, v)
+    g = np.column_stack([-v[:, 1], v[:, 0]]) / q[:, None]
+    b = wrap_angle(np.arctan2(v[:, 1], v[:, 0]) - poses[:, 2])
+    jac = np.empty((len(q), 7))
+    jac[:, 0:2] = -rho[:, None] * g
+    jac[:, 2] = -1.0
+    jac[:, 3:5] = rho[:, None] * g
+    jac[:, 5] = -g[:, 0] * np.sin(th) + g[:, 1] * np.cos(th)
+    jac[:, 6] = np.einsum("ki,ki->k", g, a_minus_p)
+    return np.asarray(b).reshape(-1), jac
+
+
+def invdepth_to_xy(features: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Euclidean points of inverse-depth features and the Jacobians of the conversion.
+
+    Parameters
+    ----------
+    features : array of shape (k, 4)
+        ``[x0_m, y0_m, theta_rad, rho_per_m]`` with ``rho != 0``.
+
+    Returns
+    -------
+    points_xy : ndarray of shape (k, 2)
+        ``a + [cos theta, sin theta] / rho``.
+    jac : ndarray of shape (k, 2, 4)
+    """
+    th, rho = features[:, 2], features[:, 3]
+    m = np.column_stack([np.cos(th), np.sin(th)])
+    pts = features[:, :2] + m / rho[:, None]
+    jac = np.zeros((len(rho), 2, 4))
+    jac[:, 0, 0] = jac[:, 1, 1] = 1.0
+    jac[:, :, 2] = np.column_stack([-np.sin(th), np.cos(th)]) / rho[:, None]
+    jac[:, :, 3] = -m / (rho * rho)[:, None]
+    return pts, jac
+
+
+def _two_ray_point(pose_a: np.ndarray, pose_b: np.ndarray, bearing_a: np.ndarray,
+                   bearing_b: np.ndarray) -> tuple[np.ndarray, tuple[np.ndarray, ...]]:
+    """Intersection of two bearing rays, broadcasting over leading axes.
+
+    The one place of the two-ray arithmetic (:func:`triangulate_two_bearings` and the sigma
+    points of :func:`triangulation_kl`). It is not :func:`bomgraph.geometry.intersect_rays`:
+    that solves the least-squares normal equations, which for two rays gives the same point
+    in other floating-point operations (different last bits), and it has no Jacobian.
+
+    Returns the point ``(..., 2)`` (infinite or NaN for parallel rays) and the terms
+    ``(c1, s1, c2, s2, dx, dy, s, n, r1)`` the Jacobian reuses: the world directions' cosines
+    and sines, ``p_b - p_a``, ``s = sin(a2 - a1)``, ``n = (p_b - p_a) x d2`` and the depth
+    ``r1 = n / s`` along ray a.
+    """
+    a1 = pose_a[..., 2] + bearing_a
+    a2 = pose_b[..., 2] + bearing_b
+    c1, s1, c2, s2 = np.cos(a1), np.sin(a1), np.cos(a2), np.sin(a2)
+    dx = pose_b[..., 0] - pose_a[..., 0]
+    dy = pose_b[..., 1] - pose_a[..., 1]
+    s = c1 * s2 - s1 * c2            # sin(a2 - a1)
+    n = dx * s2 - dy * c2            # (p_b - p_a) x d2
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        r1 = n / s
+        pt = np.stack([pose_a[..., 0] + r1 * c1, pose_a[..., 1] + r1 * s1], -1)
+    return pt, (c1, s1, c2, s2, dx, dy, s, n, r1)
+
+
+def triangulate_two_bearings(pose_a: np.ndarray, pose_b: np.ndarray, bearing_a: np.ndarray,
+                             bearing_b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The point seen at ``bearing_a`` from ``pose_a`` and at ``bearing_b`` from ``pose_b``.
+
+    The rays are ``p_a + r_a d(a_a)`` with world angles ``a_a = psi_a + bearing_a`` (same for
+    b); the point is ``p_a + r_a d(a_a)`` with ``r_a = ((p_b - p_a) x d(a_b)) / sin(a_b - a_a)``.
+
+    Parameters
+    ----------
+    pose_a, pose_b : arrays of shape (m, 3)
+    bearing_a, bearing_b : arrays of shape (m,), radians relative to the headings
+
+    Returns
+    -------
+    points_xy : ndarray of shape (m, 2)
+        Infinite or NaN for parallel rays.
+    jac : ndarray of shape (m, 2, 8)
+        Derivatives with respect to ``[x_a, y_a, psi_a, x_b, y_b, psi_b, bearing_a,
+        bearing_b]``.
+    """
+    pts, (c1, s1, c2, s2, dx, dy, s, n, r1) = _two_ray_point(pose_a, pose_b, bearing_a,
+                                                             bearing_b)
+    cd = c1 * c2 + s1 * s2           # cos(a2 - a1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        d1 = np.stack([c1, s1], -1)
+        w = np.stack([s2, -c2], -1) / s[:, None]
+        dr_da1 = n * cd / (s * s)
+        dr_da2 = (dx * c2 + dy * s2) / s - n * cd / (s * s)
+    jac = np.zeros((len(s), 2, 8))
+    outer = d1[:, :, None] * w[:, None, :]
+    jac[:, :, 0:2] = np.eye(2) - outer
+    jac[:, :, 3:5] = outer
+    j_a1 = dr_da1[:, None] * d1 + r1[:, None] * np.stack([-s1, c1], -1)
+    j_a2 = dr_da2[:, None] * d1
+    jac[:, :, 2] = jac[:, :, 6] = j_a1
+    jac[:, :, 5] = jac[:, :, 7] = j_a2
+    return pts, jac
+
+
+def _sigma_points(mean: np.ndarray, cov: np.ndarray) -> np.ndarray:
+    """The ``2 d`` symmetric sigma points ``mean +- sqrt(d) (columns of cov^(1/2))`` of m
+    Gaussians of dimension d (equal weights), shape ``(m, 2 d, d)``."""
+    w, v = np.linalg.eigh(cov)
+    sq = (v * np.sqrt(float(mean.shape[1]) * np.clip(w, 0.0, None))[:, None, :]
+          ).transpose(0, 2, 1)                                           # rows
+    return np.concatenate([mean[:, None, :] + sq, mean[:, None, :] - sq], 1)
+
+
+def _sample_moments(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Mean ``(m, 2)`` and covariance ``(m, 2, 2)`` of equally weighted points ``(m, s, 2)``."""
+    mean = points.mean(1)
+    dev = points - mean[:, None, :]
+    return mean, np.einsum("msi,msj->mij", dev, dev) / points.shape[1]
+
+
+def triangulation_kl(inputs: np.ndarray, cov: np.ndarray
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Bailey's Gaussianity test of the landmark triangulated from two rays.
+
+    ``KL(N_ut || N_lin)`` between the unscented estimate of the distribution of
+    :func:`triangulate_two_bearings` (16 symmetric sigma points, equal weights) and its
+    linearisation ``N(g(mu), J cov J^T)``.
+
+    Parameters
+    ----------
+    inputs : array of shape (m, 8)
+        ``[x_a, y_a, psi_a, x_b, y_b, psi_b, bearing_a, bearing_b]`` (m, rad).
+    cov : array of shape (m, 8, 8)
+        Their covariance.
+
+    Returns
+    -------
+    points_xy : ndarray of shape (m, 2)
+    jac : ndarray of shape (m, 2, 8)
+    kl : ndarray of shape (m,), nats
+        ``inf`` where it is not finite.
+    """
+    pts, jac = triangulate_two_bearings(inputs[:, 0:3], inputs[:, 3:6], inputs[:, 6],
+                                        inputs[:, 7])
+    cov_lin = jac @ cov @ jac.transpose(0, 2, 1)
+    sig = _sigma_points(inputs, cov)                                      # (m, 16, 8)
+    sp, _ = _two_ray_point(sig[..., 0:3], sig[..., 3:6], sig[..., 6], sig[..., 7])
+    with np.errstate(invalid="ignore", over="ignore"):
+        mean_u, cov_ut = _sample_moments(sp)
+        kl = gaussian_kl_2d(mean_u, cov_ut, pts, cov_lin)
+    kl[~np.isfinite(kl)] = np.inf
+    return pts, jac, kl
+
+
+def invdepth_conversion_kl(features: np.ndarray, covs: np.ndarray) -> np.ndarray:
+    """Bailey's Gaussianity test for the Euclidean form of inverse-depth features.
+
+    ``KL(N_ut || N_lin)`` between the unscented estimate of the distribution of
+    ``invdepth_to_xy(f)`` for ``f ~ N(features, covs)`` (8 symmetric sigma points, equal
+    weights) and its linearisation ``N(g(f), J covs J^T)``.
+
+    Parameters
+    ----------
+    features : array of shape (m, 4)
+        ``[x0_m, y0_m, theta_rad, rho_per_m]``.
+    covs : array of shape (m, 4, 4)
+
+    Returns
+    -------
+    ndarray of shape (m,), nats
+        ``inf`` where a sigma point has ``rho <= 0`` (the distribution reaches infinity).
+    """
+    m = len(features)
+    pts, jac = invdepth_to_xy(features)
+    cov_lin = jac @ covs @ jac.transpose(0, 2, 1)
+    sig = _sigma_points(features, covs)                                   # (m, 8, 4)
+    out = np.full(m, np.inf)
+    ok = np.all(sig[:, :, 3] > 0, axis=1)
+    if np.any(ok):
+        sp = invdepth_to_xy(sig[ok].reshape(-1, 4))[0].reshape(-1, 8, 2)
+        mean_u, cov_ut = _sample_moments(sp)
+        out[ok] = gaussian_kl_2d(mean_u, cov_ut, pts[ok], cov_lin[ok])
+    return out
+
+
+def ray_covariance(values: np.ndarray, block: np.ndarray
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Covariance of a landmark as the robot sees it, in the frame of the ray between them.
+
+    The covariance of ``R(psi)^T r`` for ``r = l - p``: its perpendicular part
+    ``w.(l - p) - |r| psi`` also varies with the heading, so a rotation of the map and the
+    robot together (which leaves every bearing unchanged) does not count.
+
+    Parameters
+    ----------
+    values : array of shape (m, 5)
+        ``[x_m, y_m, psi_rad, lx_m, ly_m]``: pose and landmark.
+    block : array of shape (m, 5, 5)
+        Their joint covariance.
+
+    Returns
+    -------
+    d2 : ndarray of shape (m,)
+        ``|r|^2``, m^2.
+    c_rr, c_pp, c_rp : ndarrays of shape (m,)
+        Radial and perpendicular variances and their covariance, m^2.
+    """
+    r = values[:, 3:5] - values[:, 0:2]
+    d2 = np.einsum("ki,ki->k", r, r)
+    u = r / np.sqrt(d2)[:, None]                      # radial unit vector
+    w = np.stack([-u[:, 1], u[:, 0]], 1)               # perpendicular
+    zero = np.zeros((len(d2), 1))
+    j_r = np.concatenate([-u, zero, u], 1)
+    j_p = np.concatenate([-w, -np.sqrt(d2)[:, None], w], 1)
+    c_rr = np.einsum("ki,kij,kj->k", j_r, block, j_r)
+    c_pp = np.einsum("ki,kij,kj->k", j_p, block, j_p)
+    c_rp = np.einsum("ki,kij,kj->k", j_r, block, j_p)
+    return d2, c_rr, c_pp, c_rp
+
+
+def second_order_variance(values: np.ndarray, block: np.ndarray, bearing_sigma_rad: float
+                          ) -> tuple[np.ndarray, np.ndarray]:
+    """Bearing variances with the second-order linearisation error; nonlinearity index.
+
+    Euclidean landmark: for ``r = l - p`` with covariance ``C`` (``C_rr``, ``C_pp``, ``C_rp``
+    in the robot's ray frame, :func:`ray_covariance`) the second-order term of ``atan2`` is
+    ``-d_r d_p / |r|^2``, of variance ``(C_rr C_pp + C_rp^2) / |r|^4``; the index
+    ``(C_rr C_pp)^(1/4) / |r|`` measures how far the linearisation is to be trusted.
+    Inverse-depth feature: the second-order term in ``rho``, ``h_rho_rho d_rho^2 / 2`` with
+    ``h_rho_rho = -2 (v x d)(v . d) / |v|^4`` (``d = a - p``, ``v = rho d + m``), of variance
+    ``(h_rho_rho var_rho)^2 / 2``; index 0. The variance is added to ``sigma^2``; the mean of
+    the term is not (it would move a filter fed noise-free data off the truth).
+
+    Parameters
+    ----------
+    values : array of shape (m, 5) or (m, 7)
+        Pose ``[x, y, psi]`` then the landmark (``[lx, ly]``) or feature block.
+    block : array of shape (m, s, s)
+        Their covariance.
+    bearing_sigma_rad : float
+
+    Returns
+    -------
+    var_rad2 : ndarray of shape (m,)
+    nonlinearity : ndarray of shape (m,)
+    """
+    m = len(values)
+    var = np.full(m, bearing_sigma_rad ** 2)
+    if values.shape[1] == 7:
+        dvec = values[:, 3:5] - values[:, 0:2]
+        rho, th = values[:, 6], values[:, 5]
+        v = rho[:, None] * dvec + np.stack([np.cos(th), np.sin(th)], 1)
+        vv = np.einsum("ki,ki->k", v, v)
+        cross = v[:, 0] * dvec[:, 1] - v[:, 1] * dvec[:, 0]
+        h_rr = -2.0 * cross * np.einsum("ki,ki->k", v, dvec) / (vv * vv)
+        var += 0.5 * (h_rr * block[:, 6, 6]) ** 2
+        return var, np.zeros(m)
+    d2, c_rr, c_pp, c_rp = ray_covariance(values, block)
+    prod = np.clip(c_rr * c_pp, 0, None)
+    var += (prod + c_rp ** 2) / (d2 * d2)
+    return var, prod ** 0.25 / np.sqrt(d2)
+
+
+def gaussian_kl_2d(mean_p: np.ndarray, cov_p: np.ndarray, mean_q: np.ndarray,
+                   cov_q: np.ndarray) -> np.ndarray:
+    """``KL(N_p || N_q)`` for 2-D Gaussians, vectorised; ``inf`` where a covariance is singular.
+
+    Parameters
+    ----------
+    mean_p, mean_q : arrays of shape (m, 2)
+    cov_p, cov_q : arrays of shape (m, 2, 2)
+
+    Returns
+    -------
+    ndarray of shape (m,), nats
+    """
+    det_p = cov_p[:, 0, 0] * cov_p[:, 1, 1] - cov_p[:, 0, 1] * cov_p[:, 1, 0]
+    det_q = cov_q[:, 0, 0] * cov_q[:, 1, 1] - cov_q[:, 0, 1] * cov_q[:, 1, 0]
+    out = np.full(len(det_p), np.inf)
+    ok = (det_p > 0) & (det_q > 0) & np.all(np.isfinite(mean_p), 1) \
+        & np.all(np.isfinite(mean_q), 1)
+    if np.any(ok):
+        q = cov_q[ok]
+        inv_q = np.stack([np.stack([q[:, 1, 1], -q[:, 0, 1]], -1),
+                          np.stack([-q[:, 1, 0], q[:, 0, 0]], -1)], -2) / det_q[ok, None, None]
+        d = mean_q[ok] - mean_p[ok]
+        tr = np.einsum("kij,kji->k", inv_q, cov_p[ok])
+        maha = np.einsum("ki,kij,kj->k", d, inv_q, d)
+        out[ok] = 0.5 * (tr + maha - 2.0 + np.log(det_q[ok] / det_p[ok]))
+    return out
+
+
+
+__all__ = ["bearing_and_jacobian", "gaussian_kl_2d", "invdepth_bearing_and_jacobian",
+           "invdepth_conversion_kl", "invdepth_to_xy", "motion_jacobians", "ray_covariance",
+           "second_order_variance", "triangulate_two_bearings", "triangulation_kl"]
