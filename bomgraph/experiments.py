@@ -271,10 +271,10 @@ def real_experiments(data_dir: str | os.PathLike[str],
     """Every method on the recordings with ground truth: MRCLAM6 robots 1-5 and the
     bearing-only g2o set (``data_dir`` is the shared data folder). Each method runs with its
     defaults (the paper's configuration) and, where one exists, with the variant for
-    recordings (:data:`REAL_VARIANTS`)."""
+    recordings (:data:`REAL_VARIANTS`). ``methods`` defaults to :func:`real_methods`."""
     root = Path(data_dir)
     arms: tuple[Arm, ...] = ()
-    for m in methods:
+    for m in (real_methods() if methods is None else methods):
         arms += (Arm(m, m),)
         arms += tuple(Arm(label, m, options) for label, options in REAL_VARIANTS.get(m, ()))
     exps = {}
