@@ -39,6 +39,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import shutil
 import sys
 import time
@@ -59,7 +60,9 @@ from bomgraph.report import write_csv
 from bomgraph.stream import Step, Stream, Truth
 
 ROOT = Path(__file__).resolve().parents[1]
-DATA = ROOT.parent / "shared" / "data" / "victoria_park" / "victoria_park.txt"
+#: The shared data folder (``BOMGRAPH_DATA`` overrides it, as for scripts/check_identical.py).
+DATA = (Path(os.environ.get("BOMGRAPH_DATA", ROOT.parent / "shared" / "data"))
+        / "victoria_park" / "victoria_park.txt")
 REFERENCE = "gtsam-batch"
 FIGURE = "victoria_park_maps.png"
 
