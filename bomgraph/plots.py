@@ -11,17 +11,38 @@ from __future__ import annotations
 
 import warnings
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Mapping, Sequence
+from typing import Mapping, Protocol, Sequence
 
 import numpy as np
 
-if TYPE_CHECKING:  # types only: plots imports no mapper, dataset or scorer at run time
-    from .evaluate import Alignment
-    from .mapper import MapEstimate
-    from .stream import Truth
+
+# What the figures read of the library's types, so that plots imports none of them (no mapper,
+# scorer or dataset): bomgraph.mapper.MapEstimate, bomgraph.stream.Truth and
+# bomgraph.evaluate.Alignment satisfy these.
+
+class TruthLike(Protocol):
+    """True landmarks ``(n,)`` ids and ``(n, 2)`` metres; poses ``(T+1, 3)`` or None."""
+
+    landmark_ids: np.ndarray
+    landmarks_xy: np.ndarray
+    poses: np.ndarray | None
 
 
-def _moved(alignment: "Alignment | None", points_xy: np.ndarray) -> np.ndarray:
+class EstimateLike(TruthLike, Protocol):
+    """An estimated map (as :class:`TruthLike`) with the steps ``pose_t`` of its poses."""
+
+    pose_t: np.ndarray
+
+    def __len__(self) -> int: ...
+
+
+class AlignmentLike(Protocol):
+    """A transform of ``(n, 2)`` points into the frame of the figure."""
+
+    def apply(self, points_xy: np.ndarray) -> np.ndarray: ...
+
+
+def _moved(alignment: AlignmentLike | None, points_xy: np.ndarray) -> np.ndarray:
     """``(n, 2)`` points through ``alignment`` (None: as they are)."""
     return np.asarray(points_xy, dtype=float) if alignment is None else alignment.apply(points_xy)
 
@@ -69,8 +90,8 @@ def plot_error_vs_time_on_axes(ax, curves: Mapping[str, tuple[np.ndarray, np.nda
     return ax
 
 
-def plot_map_on_axes(ax, truth: Truth, estimate: MapEstimate | None = None,
-                     alignment: Alignment | None = None, *, title: str | None = None,
+def plot_map_on_axes(ax, truth: TruthLike, estimate: EstimateLike | None = None,
+                     alignment: AlignmentLike | None = None, *, title: str | None = None,
                      trajectory_t: Sequence[int] | None = None):
     """True landmarks and trajectory, and an aligned estimate with error lines (fig. 3/5)."""
     ax.plot(truth.landmarks_xy[:, 0], truth.landmarks_xy[:, 1], "k^", ms=6, mfc="none",
@@ -126,8 +147,8 @@ def error_vs_time_figure(curves: Mapping[str, tuple[np.ndarray, np.ndarray]], *,
     return fig
 
 
-def map_figure(truth: "Truth", estimate: "MapEstimate | None" = None,
-               alignment: "Alignment | None" = None, *, title: str | None = None,
+def map_figure(truth: TruthLike, estimate: EstimateLike | None = None,
+               alignment: AlignmentLike | None = None, *, title: str | None = None,
                trajectory_t: Sequence[int] | None = None):
     """One map (paper fig. 3 and 5): :func:`plot_map_on_axes` on a 6 x 6 inch figure."""
     fig = _figure(figsize=(6.0, 6.0))
@@ -153,7 +174,7 @@ class MapPanel:
     mpe_m: float = float("nan")
 
 
-def final_maps_figure(truth: "Truth", panels: Sequence[MapPanel], *, title: str):
+def final_maps_figure(truth: TruthLike, panels: Sequence[MapPanel], *, title: str):
     """Every method's final map over the truth of one recording, three panels a row, all on
     the truth's extent (plus 0.5 m).
 
@@ -197,9 +218,9 @@ def final_maps_figure(truth: "Truth", panels: Sequence[MapPanel], *, title: str)
     return fig
 
 
-def map_comparison_figure(estimates: Mapping[str, MapEstimate | None], *,
-                          reference: MapEstimate | None = None,
-                          alignments: Mapping[str, Alignment | None] | None = None,
+def map_comparison_figure(estimates: Mapping[str, EstimateLike | None], *,
+                          reference: EstimateLike | None = None,
+                          alignments: Mapping[str, AlignmentLike | None] | None = None,
                           notes: Mapping[str, str] | None = None,
                           title: str | None = None, ncol: int = 3):
     """Maps of a recording without ground truth: one panel per method, on a reference map.
