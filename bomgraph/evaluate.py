@@ -243,8 +243,9 @@ def pose_nees(estimate: MapEstimate, truth: Truth, alignment: Alignment) -> floa
     """NEES ``e^T P^-1 e`` of the latest estimated pose (x, y, psi) in the aligned frame.
 
     The error is ``(dx [m], dy [m], dpsi [rad])``; the 3x3 pose covariance is transformed by
-    ``diag(R, det R)`` of the alignment (a reflection negates the heading). NaN when the estimate has no poses or
-    no pose covariances, the truth has no poses, or the covariance is singular.
+    ``diag(R, det R)`` of the alignment (a reflection negates the heading). NaN when the
+    estimate has no poses or no pose covariances, the truth has no poses, or the covariance is
+    singular.
     """
     if (estimate.pose_cov is None or estimate.poses is None or truth.poses is None
             or not len(estimate.poses)):

@@ -33,6 +33,20 @@ from .stream import read_stream
 REPORT_TIMES = (50, 100, 200, 300)
 
 
+def _group(rows: Sequence[Mapping[str, Any]], *keys: str
+           ) -> dict[tuple[Any, ...], list[Mapping[str, Any]]]:
+    """``rows`` by the values of ``keys``, groups and rows in order of appearance."""
+    out: dict[tuple[Any, ...], list[Mapping[str, Any]]] = {}
+    for r in rows:
+        out.setdefault(tuple(r[k] for k in keys), []).append(r)
+    return out
+
+
+def _finite_stat(stat: Callable[[np.ndarray], Any], values: np.ndarray) -> float:
+    """``stat`` (a NaN-ignoring reduction) of ``values``, or NaN when none is finite."""
+    return float(stat(values)) if np.any(np.isfinite(values)) else math.nan
+
+
 def _value_at(res: Mapping[str, Any], t: int, key: str) -> float:
     """The metric at checkpoint ``t`` (the last checkpoint at or before ``t``)."""
     best = math.nan
@@ -47,9 +61,7 @@ def summarise(results: Sequence[Mapping[str, Any]],
               times: Sequence[int] = REPORT_TIMES) -> list[dict[str, Any]]:
     """One row per (experiment, arm): MPE at ``times`` (mean, median, std), robot error,
     convergence, NEES, wall time. Failed runs are counted, not hidden."""
-    groups: dict[tuple[str, str], list[Mapping[str, Any]]] = {}
-    for r in results:
-        groups.setdefault((r["experiment"], r["arm"]), []).append(r)
+    groups = _group(results, "experiment", "arm")
     exp_last: dict[str, int] = {}
     for r in results:
         if r.get("ok") and r["checkpoints"]:
@@ -66,22 +78,22 @@ def summarise(results: Sequence[Mapping[str, Any]],
         for t in sorted({*[t for t in times if t <= last_t], last_t} - {0}):
             v = np.array([_value_at(r, t, "mpe_m") for r in ok])
             row[f"n_scored@{t}"] = int(np.sum(np.isfinite(v)))
-            row[f"mpe_mean_m@{t}"] = float(np.nanmean(v)) if np.any(np.isfinite(v)) else math.nan
-            row[f"mpe_median_m@{t}"] = float(np.nanmedian(v)) if np.any(np.isfinite(v)) else math.nan
+            row[f"mpe_mean_m@{t}"] = _finite_stat(np.nanmean, v)
+            row[f"mpe_median_m@{t}"] = _finite_stat(np.nanmedian, v)
             row[f"mpe_std_m@{t}"] = (float(np.nanstd(v, ddof=1)) if np.sum(np.isfinite(v)) > 1
                                      else math.nan)
         robot = np.array([_value_at(r, last_t, "robot_last_m") for r in ok])
-        row["robot_last_mean_m"] = float(np.nanmean(robot)) if np.any(np.isfinite(robot)) else math.nan
+        row["robot_last_mean_m"] = _finite_stat(np.nanmean, robot)
         rm = np.array([np.nanmean([c["robot_last_m"] for c in r["checkpoints"]])
                        if any(np.isfinite(c["robot_last_m"]) for c in r["checkpoints"])
                        else math.nan for r in ok])
-        row["robot_over_time_mean_m"] = float(np.nanmean(rm)) if np.any(np.isfinite(rm)) else math.nan
+        row["robot_over_time_mean_m"] = _finite_stat(np.nanmean, rm)
         conv = [r.get("converged") for r in ok if r.get("converged") is not None]
         row["converged_rate"] = float(np.mean(conv)) if conv else math.nan
         nees = np.array([_value_at(r, last_t, "nees_pose") for r in ok])
-        row["nees_pose_mean"] = float(np.nanmean(nees)) if np.any(np.isfinite(nees)) else math.nan
+        row["nees_pose_mean"] = _finite_stat(np.nanmean, nees)
         nl = np.array([_value_at(r, last_t, "nees_landmark") for r in ok])
-        row["nees_landmark_mean"] = float(np.nanmean(nl)) if np.any(np.isfinite(nl)) else math.nan
+        row["nees_landmark_mean"] = _finite_stat(np.nanmean, nl)
         wall = np.array([r["total_s"] for r in ok])
         row["wall_s_mean"] = float(wall.mean()) if wall.size else math.nan
         row["paper"] = PAPER_REPORTED.get((exp, arm), "")
@@ -114,11 +126,7 @@ def error_curves(results: Sequence[Mapping[str, Any]], metric: str = "mpe_m"
                  ) -> dict[tuple[str, str], tuple[np.ndarray, np.ndarray]]:
     """Per (experiment, arm): checkpoint times ``(k,)`` and the metric ``(runs, k)``."""
     out: dict[tuple[str, str], tuple[np.ndarray, np.ndarray]] = {}
-    groups: dict[tuple[str, str], list[Mapping[str, Any]]] = {}
-    for r in results:
-        if r.get("ok"):
-            groups.setdefault((r["experiment"], r["arm"]), []).append(r)
-    for key, rs in groups.items():
+    for key, rs in _group([r for r in results if r.get("ok")], "experiment", "arm").items():
         ts = np.array([c["t"] for c in rs[0]["checkpoints"]])
         vals = np.array([[_value_at(r, t, metric) for t in ts] for r in rs])
         out[key] = (ts, vals)
@@ -146,11 +154,9 @@ def _cm(v: float | None) -> str:
 def format_summary(summary: Sequence[dict]) -> str:
     """The comparison table as text: one block per experiment, one row per arm."""
     lines = []
-    by_exp: dict[str, list[dict]] = {}
-    for row in summary:
-        by_exp.setdefault(row["experiment"], []).append(row)
-    for exp, rows in by_exp.items():
-        times = sorted({int(k.split("@")[1]) for r in rows for k in r if k.startswith("mpe_mean_m@")})
+    for (exp,), rows in _group(summary, "experiment").items():
+        times = sorted({int(k.split("@")[1]) for r in rows for k in r
+                        if k.startswith("mpe_mean_m@")})
         lines.append(f"\n== {exp} ==  landmark MPE [cm] mean/median±std at t; robot: error "
                      f"[cm] of the latest pose at the end; conv: converged runs; NEES: robot "
                      f"pose; wall time per run; [k/n]: only k of n runs had a map")
@@ -172,7 +178,8 @@ def format_summary(summary: Sequence[dict]) -> str:
             nees = r.get("nees_pose_mean")
             nees_s = "   -  " if nees is None or not math.isfinite(nees) else f"{nees:6.2f}"
             fail = f"  FAILED {r['failed']}: {'; '.join(r['errors'])[:120]}" if r["failed"] else ""
-            lines.append(f"{r['arm'][:30]:30s} {r['runs']:4d} " + " ".join(f"{c:>17s}" for c in cells)
+            lines.append(f"{r['arm'][:30]:30s} {r['runs']:4d} "
+                         + " ".join(f"{c:>17s}" for c in cells)
                          + f" {_cm(r.get('robot_last_mean_m')):>7s} {conv_s:>5s} {nees_s:>6s}"
                          f" {r.get('wall_s_mean', float('nan')):7.3f}  {r.get('paper', '')}{fail}")
     return "\n".join(lines)
@@ -181,10 +188,7 @@ def format_summary(summary: Sequence[dict]) -> str:
 def format_by_run(rows: Sequence[dict]) -> str:
     """Final landmark MPE [cm] (landmarks mapped) per arm and run, one block per experiment."""
     lines = []
-    by_exp: dict[str, list[dict]] = {}
-    for row in rows:
-        by_exp.setdefault(row["experiment"], []).append(row)
-    for exp, rs in by_exp.items():
+    for (exp,), rs in _group(rows, "experiment").items():
         runs = list(dict.fromkeys(r["run"] for r in rs))
         arms = list(dict.fromkeys(r["arm"] for r in rs))
         cell = {(r["arm"], r["run"]): r for r in rs}
