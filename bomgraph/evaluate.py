@@ -5,6 +5,11 @@ transform that minimises the summed squared landmark errors: rotation, translati
 reflection, without scale (the paper's choice; a similarity transform is an option). The mean
 position error (MPE) is the mean Euclidean landmark error after it. Robot positions are scored
 under the same landmark-derived transform. Nothing here mutates its inputs.
+
+All scoring lives here: :func:`score_estimate` (one map), :func:`score_checkpoints` (every
+checkpoint of a run, as typed :class:`CheckpointScore` rows; the runner stores them),
+:func:`error_table` (the same as columns), and the consistency measures
+:func:`landmark_nees` and :func:`pose_nees` (NEES in the aligned frame).
 """
 
 from __future__ import annotations
