@@ -32,38 +32,11 @@ def _jobs(text: str) -> int:
     return v
 
 
-def _finite_json(v: Any) -> Any:
-    """NaN and infinities as JSON null (strict JSON has no NaN)."""
-    if isinstance(v, float) and not math.isfinite(v):
-        return None
-    if isinstance(v, dict):
-        return {k: _finite_json(x) for k, x in v.items()}
-    if isinstance(v, (list, tuple)):
-        return [_finite_json(x) for x in v]
-    return v
-
-
 def _positive_int(text: str) -> int:
     v = int(text)
     if v < 1:
         raise argparse.ArgumentTypeError(f"must be >= 1, got {v}")
     return v
-
-
-def _parse_options(pairs: Sequence[str]) -> dict[str, Any]:
-    """``key=value`` pairs for a method's options; values parsed as JSON when they can be."""
-    out: dict[str, Any] = {}
-    for p in pairs:
-        if "=" not in p:
-            raise BomgraphError(f"--option takes key=value, got {p!r}")
-        k, v = p.split("=", 1)
-        if not k:
-            raise BomgraphError(f"--option needs a name before '=', got {p!r}")
-        try:
-            out[k] = json.loads(v)
-        except json.JSONDecodeError:
-            out[k] = v
-    return out
 
 
 # --------------------------------------------------------------------------------------------
@@ -90,55 +63,27 @@ def cmd_simulate(args: argparse.Namespace) -> int:
 
 
 def cmd_run(args: argparse.Namespace) -> int:
-    from .mapper import create_mapper, method_info, run, write_estimate
-    from .stream import StreamReader
+    from .bench import run_file
+    from .jsonio import parse_options
+    from .mapper import write_estimate
 
-    options = _parse_options(args.option)
-    if method_info(args.method).needs_truth and not args.allow_truth:
-        raise BomgraphError(f"method {args.method!r} reads the ground truth; it is a benchmark "
-                            f"bound, not a mapper (pass --allow-truth to run it anyway)")
-    from threadpoolctl import threadpool_limits
-
-    with StreamReader(args.stream) as reader, threadpool_limits(limits=1):
-        mapper = create_mapper(args.method, reader.header, truth=reader.truth, **options)
-        result = run(mapper, reader, checkpoint_every=args.checkpoint_every,
-                     method=args.method)
+    result = run_file(args.stream, args.method, parse_options(args.option),
+                      checkpoint_every=args.checkpoint_every, allow_truth=args.allow_truth)
     write_estimate(result, args.out)
-    est = result.final
-    print(f"{args.method}: {len(est)} landmarks mapped at t = {result.checkpoints[-1].t} "
-          f"in {result.total_s:.3f} s; wrote {args.out}")
+    print(f"{args.method}: {len(result.final)} landmarks mapped at t = "
+          f"{result.checkpoints[-1].t} in {result.total_s:.3f} s; wrote {args.out}")
     return 0
 
 
 def cmd_evaluate(args: argparse.Namespace) -> int:
-    from .evaluate import error_table, score_estimate
-    from .mapper import read_estimate
-    from .stream import read_stream
+    from .jsonio import jsonable
+    from .report import evaluate_files, format_evaluation
 
-    est = read_estimate(args.estimate)
-    stream = read_stream(args.stream)
-    if stream.truth is None:
-        raise BomgraphError(f"{args.stream}: the stream has no ground truth to evaluate "
-                            f"against")
-    score = score_estimate(est.final, stream.truth, with_scale=args.similarity)
-    table = error_table(est.checkpoints, stream.truth) if est.checkpoints else None
+    ev = evaluate_files(args.estimate, args.stream, with_scale=args.similarity)
     if args.json:
-        out = {"method": est.method, **score.as_dict()}
-        if table is not None:
-            out["checkpoints"] = {k: v.tolist() for k, v in table.items()}
-        print(json.dumps(_finite_json(out), allow_nan=False))
-        return 0
-    print(f"method {est.method}: {score.n_common} of {score.n_truth} landmarks mapped "
-          f"({score.n_mapped} in the estimate)")
-    print(f"  landmark MPE {100 * score.mpe_m:.2f} cm, RMSE {100 * score.rmse_m:.2f} cm, "
-          f"median {100 * score.median_m:.2f} cm, max {100 * score.max_m:.2f} cm")
-    if score.n_poses:
-        print(f"  robot position error: last {100 * score.robot_last_m:.2f} cm, mean over "
-              f"{score.n_poses} poses {100 * score.robot_mean_m:.2f} cm")
-    if table is not None and len(table["t"]) > 1:
-        print("  t      MPE [cm]  mapped")
-        for t, m, n in zip(table["t"], table["mpe_m"], table["n_mapped"]):
-            print(f"  {t:<6d} {100 * m:8.2f}  {n:6d}")
+        print(json.dumps(jsonable(ev.as_dict()), allow_nan=False))
+    else:
+        print(format_evaluation(ev))
     return 0
 
 
@@ -151,93 +96,15 @@ def cmd_methods(args: argparse.Namespace) -> int:
     return 0
 
 
-def _cm(v: float) -> str:
-    return "   -  " if v is None or not math.isfinite(v) else f"{100 * v:6.2f}"
-
-
-def format_summary(summary: Sequence[dict]) -> str:
-    """The comparison table as text: one block per experiment, one row per arm."""
-    lines = []
-    by_exp: dict[str, list[dict]] = {}
-    for row in summary:
-        by_exp.setdefault(row["experiment"], []).append(row)
-    for exp, rows in by_exp.items():
-        times = sorted({int(k.split("@")[1]) for r in rows for k in r if k.startswith("mpe_mean_m@")})
-        lines.append(f"\n== {exp} ==  landmark MPE [cm] mean/median±std at t; robot: error "
-                     f"[cm] of the latest pose at the end; conv: converged runs; NEES: robot "
-                     f"pose; wall time per run; [k/n]: only k of n runs had a map")
-        head = f"{'arm':30s} {'runs':>4s} " + " ".join(f"{'t=' + str(t):>17s}" for t in times)
-        head += f" {'robot':>7s} {'conv':>5s} {'NEES':>6s} {'wall s':>7s}  paper"
-        lines.append(head)
-        for r in rows:
-            cells = []
-            for t in times:
-                m, md, sd = (r.get(f"mpe_mean_m@{t}"), r.get(f"mpe_median_m@{t}"),
-                             r.get(f"mpe_std_m@{t}"))
-                cell = f"{_cm(m).strip()}/{_cm(md).strip()}±{_cm(sd).strip()}"
-                scored, ran = r.get(f"n_scored@{t}", 0), r["runs"] - r["failed"]
-                if scored < ran:  # runs without a map yet are not averaged in: say so
-                    cell += f"[{scored}/{ran}]"
-                cells.append(cell)
-            conv = r.get("converged_rate")
-            conv_s = "  -  " if conv is None or not math.isfinite(conv) else f"{100 * conv:4.0f}%"
-            nees = r.get("nees_pose_mean")
-            nees_s = "   -  " if nees is None or not math.isfinite(nees) else f"{nees:6.2f}"
-            fail = f"  FAILED {r['failed']}: {'; '.join(r['errors'])[:120]}" if r["failed"] else ""
-            lines.append(f"{r['arm'][:30]:30s} {r['runs']:4d} " + " ".join(f"{c:>17s}" for c in cells)
-                         + f" {_cm(r.get('robot_last_mean_m')):>7s} {conv_s:>5s} {nees_s:>6s}"
-                         f" {r.get('wall_s_mean', float('nan')):7.3f}  {r.get('paper', '')}{fail}")
-    return "\n".join(lines)
-
-
-def format_by_run(rows: Sequence[dict]) -> str:
-    """Final landmark MPE [cm] (landmarks mapped) per arm and run, one block per experiment."""
-    lines = []
-    by_exp: dict[str, list[dict]] = {}
-    for row in rows:
-        by_exp.setdefault(row["experiment"], []).append(row)
-    for exp, rs in by_exp.items():
-        runs = list(dict.fromkeys(r["run"] for r in rs))
-        arms = list(dict.fromkeys(r["arm"] for r in rs))
-        cell = {(r["arm"], r["run"]): r for r in rs}
-        lines.append(f"\n== {exp}, final map per run ==  landmark MPE [cm] (landmarks mapped); "
-                     f"'no map': fewer than 3 landmarks; FAILED: the run raised")
-        lines.append(f"{'arm':30s} " + " ".join(f"{r[-14:]:>14s}" for r in runs))
-        for arm in arms:
-            cells = []
-            for run_name in runs:
-                r = cell.get((arm, run_name))
-                if r is None:
-                    cells.append("")
-                elif not r["ok"]:
-                    cells.append("FAILED")
-                elif not math.isfinite(r["mpe_m"]):
-                    cells.append(f"no map ({r['n_mapped']})")
-                else:
-                    cells.append(f"{100 * r['mpe_m']:.1f} ({r['n_mapped']})")
-            lines.append(f"{arm[:30]:30s} " + " ".join(f"{c:>14s}" for c in cells))
-    return "\n".join(lines)
-
-
 def cmd_compare(args: argparse.Namespace) -> int:
-    from .bench import Executor, compare, paper_experiments
+    from .bench import Executor
+    from .experiments import paper_experiments, real_experiments, select
+    from .report import compare, final_by_run, format_by_run, format_summary
 
-    if args.real:
-        from .bench import real_experiments
-
-        exps = real_experiments(args.real)
-    else:
-        exps = paper_experiments(quick=args.quick, seed=args.seed)
-    names = args.experiments.split(",") if args.experiments else list(exps)
-    unknown = [n for n in names if n not in exps]
-    if unknown:
-        raise BomgraphError(f"unknown experiment(s) {unknown}; choose from {list(exps)}")
-    if args.scheduler or args.dask_local:
-        executor = Executor("dask", scheduler=args.scheduler, dask_local=args.dask_local or 0)
-    elif args.jobs == 1:
-        executor = Executor("serial")
-    else:
-        executor = Executor("processes", n_jobs=args.jobs)
+    exps = (real_experiments(args.real) if args.real
+            else paper_experiments(quick=args.quick, seed=args.seed))
+    chosen = select(exps, args.experiments.split(",") if args.experiments else ())
+    executor = Executor.choose(args.jobs, args.scheduler, args.dask_local)
     bar = None
     if not args.no_progress:
         from tqdm import tqdm
@@ -251,16 +118,13 @@ def cmd_compare(args: argparse.Namespace) -> int:
             bar.refresh()
 
     try:
-        result = compare([exps[n] for n in names], args.out, executor=executor,
-                         use_cache=not args.no_cache, figures=not args.no_figures,
-                         progress=progress)
+        result = compare(chosen, args.out, executor=executor, use_cache=not args.no_cache,
+                         figures=not args.no_figures, progress=progress)
     finally:
         if bar is not None:
             bar.close()
     print(format_summary(result.summary))
     if args.real:
-        from .bench import final_by_run
-
         print(format_by_run(final_by_run(result.results)))
     print(f"\n{len(result.results)} runs in {result.wall_s:.1f} s; wrote "
           f"{', '.join(result.files)}")

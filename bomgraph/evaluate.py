@@ -5,10 +5,16 @@ transform that minimises the summed squared landmark errors: rotation, translati
 reflection, without scale (the paper's choice; a similarity transform is an option). The mean
 position error (MPE) is the mean Euclidean landmark error after it. Robot positions are scored
 under the same landmark-derived transform. Nothing here mutates its inputs.
+
+All scoring lives here: :func:`score_estimate` (one map), :func:`score_checkpoints` (every
+checkpoint of a run, as typed :class:`CheckpointScore` rows; the runner stores them),
+:func:`error_table` (the same as columns), and the consistency measures
+:func:`landmark_nees` and :func:`pose_nees` (NEES in the aligned frame).
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Sequence
 
@@ -16,7 +22,7 @@ import numpy as np
 
 from .angles import angle_residual
 from .errors import EvaluationError, TooFewLandmarksError
-from .mapper import MapEstimate, RunResult
+from .mapper import Checkpoint, MapEstimate, RunResult
 from .stream import Truth
 
 
@@ -147,37 +153,66 @@ def score_estimate(estimate: MapEstimate, truth: Truth, *, allow_reflection: boo
                     landmark_ids=common, errors_m=err, alignment=al)
 
 
-def heading_errors(estimate: MapEstimate, truth: Truth, alignment: Alignment) -> np.ndarray:
-    """Heading errors (rad) of the estimated poses under ``alignment``."""
-    if estimate.poses is None or truth.poses is None:
-        return np.zeros(0)
-    p = alignment.apply_poses(estimate.poses)
-    return np.asarray(angle_residual(p[:, 2], truth.poses[estimate.pose_t, 2]))
+@dataclass(frozen=True)
+class CheckpointScore:
+    """The scores of one checkpoint of a run (metres; NEES dimensionless).
+
+    The errors are NaN when the map shares fewer than 3 landmarks with the truth (the counts
+    are still given); ``robot_*`` are NaN without poses; ``nees_landmark`` (the mean over the
+    common landmarks) and ``nees_pose`` (the latest pose) are NaN without covariances.
+    """
+
+    t: int
+    n_mapped: int
+    estimate_s: float
+    mpe_m: float
+    rmse_m: float
+    median_m: float
+    max_m: float
+    n_common: int
+    robot_last_m: float
+    robot_mean_m: float
+    nees_landmark: float
+    nees_pose: float
+
+
+def score_checkpoints(result: RunResult | Sequence[Checkpoint], truth: Truth, *,
+                      nees: bool = True) -> list[CheckpointScore]:
+    """Score every checkpoint of a run (or a sequence of checkpoints) against ``truth``.
+
+    A checkpoint whose map shares fewer than 3 landmarks with the truth gets NaN errors (and
+    its counts); any other evaluation error is raised. ``nees=False`` leaves the NEES NaN.
+    """
+    checkpoints = result.checkpoints if isinstance(result, RunResult) else tuple(result)
+    return [_score_checkpoint(c, truth, nees) for c in checkpoints]
+
+
+def _score_checkpoint(c: Checkpoint, truth: Truth, nees: bool) -> CheckpointScore:
+    nan = math.nan
+    try:
+        s = score_estimate(c.estimate, truth)
+    except TooFewLandmarksError:
+        common = np.intersect1d(c.estimate.landmark_ids, truth.landmark_ids).size
+        return CheckpointScore(c.t, len(c.estimate), c.estimate_s, nan, nan, nan, nan,
+                               int(common), nan, nan, nan, nan)
+    nl = np_ = nan
+    if nees:
+        nl, np_ = _mean_landmark_nees(c.estimate, truth, s.alignment), pose_nees(
+            c.estimate, truth, s.alignment)
+    return CheckpointScore(c.t, len(c.estimate), c.estimate_s, s.mpe_m, s.rmse_m, s.median_m,
+                           s.max_m, s.n_common, s.robot_last_m, s.robot_mean_m, nl, np_)
 
 
 ERROR_COLUMNS = ("t", "mpe_m", "rmse_m", "median_m", "max_m", "n_mapped", "n_common",
                  "robot_last_m", "robot_mean_m")
 
 
-def error_table(result: RunResult | Sequence, truth: Truth) -> dict[str, np.ndarray]:
-    """Errors at every checkpoint of a run, as columns (see ``ERROR_COLUMNS``).
-
-    A checkpoint whose map shares fewer than 3 landmarks with the truth gets NaN errors (and its
-    counts); any other evaluation error is raised.
-    """
-    checkpoints = result.checkpoints if isinstance(result, RunResult) else tuple(result)
-    rows = []
-    for c in checkpoints:
-        try:
-            s = score_estimate(c.estimate, truth)
-            rows.append((c.t, s.mpe_m, s.rmse_m, s.median_m, s.max_m, s.n_mapped, s.n_common,
-                         s.robot_last_m, s.robot_mean_m))
-        except TooFewLandmarksError:
-            n = len(c.estimate)
-            rows.append((c.t, np.nan, np.nan, np.nan, np.nan, n,
-                          int(np.intersect1d(c.estimate.landmark_ids, truth.landmark_ids).size),
-                          np.nan, np.nan))
-    arr = np.array(rows, dtype=float).reshape(-1, len(ERROR_COLUMNS))
+def error_table(result: RunResult | Sequence[Checkpoint], truth: Truth) -> dict[str, np.ndarray]:
+    """Errors at every checkpoint of a run, as columns (see ``ERROR_COLUMNS``): the rows of
+    :func:`score_checkpoints` without the NEES, integer columns as int64."""
+    rows = score_checkpoints(result, truth, nees=False)
+    arr = np.array([[getattr(r, name) for name in ERROR_COLUMNS] for r in rows],
+                   dtype=float).reshape(-1, len(ERROR_COLUMNS))
     return {name: (arr[:, k].astype(np.int64) if name in ("t", "n_mapped", "n_common")
                    else arr[:, k]) for k, name in enumerate(ERROR_COLUMNS)}
 
@@ -187,6 +222,7 @@ def landmark_nees(estimate: MapEstimate, truth: Truth, alignment: Alignment) -> 
 
     The covariance is rotated with the alignment; values are only meaningful when the method's
     frame is anchored like the truth's (a rigid alignment of a consistent estimate).
+    Returns shape ``(n_common,)``.
     """
     if estimate.landmark_cov is None:
         raise EvaluationError("the estimate has no landmark covariances")
@@ -196,3 +232,42 @@ def landmark_nees(estimate: MapEstimate, truth: Truth, alignment: Alignment) -> 
     r = alignment.rotation
     cov = r @ estimate.landmark_cov[ie] @ r.T
     return np.einsum("ni,nij,nj->n", e, np.linalg.inv(cov), e)
+
+
+def _mean_landmark_nees(estimate: MapEstimate, truth: Truth, alignment: Alignment) -> float:
+    """The mean of :func:`landmark_nees`, NaN without covariances or with a singular one."""
+    if estimate.landmark_cov is None:
+        return math.nan
+    try:
+        return float(np.mean(landmark_nees(estimate, truth, alignment)))
+    except np.linalg.LinAlgError:
+        return math.nan
+
+
+def pose_nees(estimate: MapEstimate, truth: Truth, alignment: Alignment) -> float:
+    """NEES ``e^T P^-1 e`` of the latest estimated pose (x, y, psi) in the aligned frame.
+
+    The error is ``(dx [m], dy [m], dpsi [rad])``; the 3x3 pose covariance is transformed by
+    ``diag(R, det R)`` of the alignment (a reflection negates the heading). NaN when the
+    estimate has no poses or no pose covariances, the truth has no poses, or the covariance is
+    singular.
+    """
+    if (estimate.pose_cov is None or estimate.poses is None or truth.poses is None
+            or not len(estimate.poses)):
+        return math.nan
+    k = int(np.argmax(estimate.pose_t))
+    p = alignment.apply_poses(estimate.poses[k:k + 1])[0]
+    true = truth.poses[estimate.pose_t[k]]
+    e = np.array([p[0] - true[0], p[1] - true[1], float(angle_residual(p[2], true[2]))])
+    t = np.eye(3)
+    t[:2, :2] = alignment.rotation
+    t[2, 2] = np.linalg.det(alignment.rotation)
+    cov = t @ estimate.pose_cov[k] @ t.T
+    try:
+        return float(e @ np.linalg.solve(cov, e))
+    except np.linalg.LinAlgError:
+        return math.nan
+
+
+__all__ = ["Alignment", "align", "MapScore", "score_estimate", "CheckpointScore",
+           "score_checkpoints", "ERROR_COLUMNS", "error_table", "landmark_nees", "pose_nees"]

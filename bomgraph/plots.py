@@ -1,5 +1,8 @@
-"""Figures: ``plot_*_on_axes(ax, ...)`` functions. matplotlib is imported only here and in the
-CLI. Each function draws on the axes it is given and returns them; it never shows or saves.
+"""Figures: ``plot_*_on_axes(ax, ...)`` functions that draw on the axes they are given and
+return them, and ``*_figure`` builders that return a ``matplotlib.figure.Figure``. They take
+arrays and estimates only: nothing here runs a mapper, reads a dataset or scores a map
+(:mod:`bomgraph.report` does that and writes the files). matplotlib is imported only here; no
+pyplot, so the caller's backend is left alone; nothing is shown or saved.
 
 The paper's figures: fig. 3/5 (map and trajectory), fig. 4/6/7/8 (errors against time).
 """
@@ -7,13 +10,41 @@ The paper's figures: fig. 3/5 (map and trajectory), fig. 4/6/7/8 (errors against
 from __future__ import annotations
 
 import warnings
-from typing import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Mapping, Protocol, Sequence
 
 import numpy as np
 
-from .evaluate import Alignment
-from .mapper import MapEstimate
-from .stream import Truth
+
+# What the figures read of the library's types, so that plots imports none of them (no mapper,
+# scorer or dataset): bomgraph.mapper.MapEstimate, bomgraph.stream.Truth and
+# bomgraph.evaluate.Alignment satisfy these.
+
+class TruthLike(Protocol):
+    """True landmarks ``(n,)`` ids and ``(n, 2)`` metres; poses ``(T+1, 3)`` or None."""
+
+    landmark_ids: np.ndarray
+    landmarks_xy: np.ndarray
+    poses: np.ndarray | None
+
+
+class EstimateLike(TruthLike, Protocol):
+    """An estimated map (as :class:`TruthLike`) with the steps ``pose_t`` of its poses."""
+
+    pose_t: np.ndarray
+
+    def __len__(self) -> int: ...
+
+
+class AlignmentLike(Protocol):
+    """A transform of ``(n, 2)`` points into the frame of the figure."""
+
+    def apply(self, points_xy: np.ndarray) -> np.ndarray: ...
+
+
+def _moved(alignment: AlignmentLike | None, points_xy: np.ndarray) -> np.ndarray:
+    """``(n, 2)`` points through ``alignment`` (None: as they are)."""
+    return np.asarray(points_xy, dtype=float) if alignment is None else alignment.apply(points_xy)
 
 
 def plot_error_vs_time_on_axes(ax, curves: Mapping[str, tuple[np.ndarray, np.ndarray]], *,
@@ -59,8 +90,8 @@ def plot_error_vs_time_on_axes(ax, curves: Mapping[str, tuple[np.ndarray, np.nda
     return ax
 
 
-def plot_map_on_axes(ax, truth: Truth, estimate: MapEstimate | None = None,
-                     alignment: Alignment | None = None, *, title: str | None = None,
+def plot_map_on_axes(ax, truth: TruthLike, estimate: EstimateLike | None = None,
+                     alignment: AlignmentLike | None = None, *, title: str | None = None,
                      trajectory_t: Sequence[int] | None = None):
     """True landmarks and trajectory, and an aligned estimate with error lines (fig. 3/5)."""
     ax.plot(truth.landmarks_xy[:, 0], truth.landmarks_xy[:, 1], "k^", ms=6, mfc="none",
@@ -69,15 +100,14 @@ def plot_map_on_axes(ax, truth: Truth, estimate: MapEstimate | None = None,
         sel = truth.poses if trajectory_t is None else truth.poses[np.asarray(trajectory_t)]
         ax.plot(sel[:, 0], sel[:, 1], "k--", lw=0.9, label="true trajectory")
     if estimate is not None and len(estimate):
-        al = alignment or Alignment(np.eye(2), np.zeros(2))
-        xy = al.apply(estimate.landmarks_xy)
+        xy = _moved(alignment, estimate.landmarks_xy)
         ax.plot(xy[:, 0], xy[:, 1], "o", color="tab:red", ms=4, label="estimated landmarks")
         common, ie, it = np.intersect1d(estimate.landmark_ids, truth.landmark_ids,
                                         return_indices=True)
         for a, b in zip(xy[ie], truth.landmarks_xy[it]):
             ax.plot([a[0], b[0]], [a[1], b[1]], "-", color="tab:red", lw=0.7)
         if estimate.poses is not None and len(estimate.poses):
-            p = al.apply(estimate.poses[:, :2])
+            p = _moved(alignment, estimate.poses[:, :2])
             ax.plot(p[:, 0], p[:, 1], "-", color="tab:blue", lw=1.2,
                     label="estimated trajectory")
     ax.set_aspect("equal")
@@ -90,122 +120,107 @@ def plot_map_on_axes(ax, truth: Truth, estimate: MapEstimate | None = None,
     return ax
 
 
-def write_compare_figures(out_dir, experiments, results) -> list:
-    """The comparison's figures as PNG files in ``out_dir``; returns their paths.
-
-    One error-against-time figure per experiment (landmark MPE; robot error too for Exp. 2,
-    the paper's figs. 4, 6, 7, 8) and an example map with trajectory (figs. 3 and 5).
-    """
-    from pathlib import Path
-
+def _figure(**kw):
     from matplotlib.figure import Figure  # no pyplot: the caller's backend is left alone
 
-    from .bench import error_curves, example_estimate
-    from .evaluate import score_estimate
+    return Figure(**kw)
 
-    out = Path(out_dir)
-    files = []
-    mpe = error_curves(results, "mpe_m")
-    robot = error_curves(results, "robot_last_m")
-    for exp in experiments:
-        curves = {arm: c for (e, arm), c in mpe.items() if e == exp.name}
-        if not curves:
+
+def error_vs_time_figure(curves: Mapping[str, tuple[np.ndarray, np.ndarray]], *,
+                         title: str,
+                         robot_curves: Mapping[str, tuple[np.ndarray, np.ndarray]] | None = None):
+    """Landmark MPE against time (and the robot error beside it when ``robot_curves`` holds
+    any), the paper's figs. 4, 6, 7, 8. Curves as in :func:`plot_error_vs_time_on_axes`.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    ncol = 2 if robot_curves else 1
+    fig = _figure(figsize=(6.4 * ncol, 4.4))
+    axes = fig.subplots(1, ncol, squeeze=False)
+    plot_error_vs_time_on_axes(axes[0, 0], curves, title=title)
+    if robot_curves:
+        plot_error_vs_time_on_axes(axes[0, 1], robot_curves, ylabel="robot position error [cm]",
+                                   title="robot position (latest pose)")
+    fig.tight_layout()
+    return fig
+
+
+def map_figure(truth: TruthLike, estimate: EstimateLike | None = None,
+               alignment: AlignmentLike | None = None, *, title: str | None = None,
+               trajectory_t: Sequence[int] | None = None):
+    """One map (paper fig. 3 and 5): :func:`plot_map_on_axes` on a 6 x 6 inch figure."""
+    fig = _figure(figsize=(6.0, 6.0))
+    plot_map_on_axes(fig.subplots(), truth, estimate, alignment, title=title,
+                     trajectory_t=trajectory_t)
+    fig.tight_layout()
+    return fig
+
+
+@dataclass(frozen=True)
+class MapPanel:
+    """One panel of :func:`final_maps_figure`: a method's final map in the truth's frame.
+
+    ``landmarks`` is ``(n, 3)`` rows ``(id, x [m], y [m])`` and ``poses`` ``(m, 3)`` rows
+    ``(t, x [m], y [m])``, both already aligned to the truth; ``landmarks`` None means no map,
+    with ``failure`` saying why. ``mpe_m`` (NaN: unknown) goes into the title.
+    """
+
+    label: str
+    landmarks: np.ndarray | None
+    poses: np.ndarray | None = None
+    failure: str = ""
+    mpe_m: float = float("nan")
+
+
+def final_maps_figure(truth: TruthLike, panels: Sequence[MapPanel], *, title: str):
+    """Every method's final map over the truth of one recording, three panels a row, all on
+    the truth's extent (plus 0.5 m).
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    n = len(panels)
+    ncol = min(n, 3)
+    nrow = (n + ncol - 1) // ncol
+    fig = _figure(figsize=(4.6 * ncol, 4.4 * nrow))
+    axes = fig.subplots(nrow, ncol, squeeze=False)
+    pts = truth.landmarks_xy if truth.poses is None else np.vstack(
+        [truth.landmarks_xy, truth.poses[:, :2]])
+    lo, hi = pts.min(0) - 0.5, pts.max(0) + 0.5
+    ids = dict(zip(truth.landmark_ids.tolist(), truth.landmarks_xy))
+    for ax, panel in zip(axes.ravel(), panels):
+        plot_map_on_axes(ax, truth, title=panel.label)
+        ax.set_xlim(lo[0], hi[0])
+        ax.set_ylim(lo[1], hi[1])
+        if panel.landmarks is None:
+            ax.text(0.5, 0.5, f"FAILED\n{panel.failure[:60]}", transform=ax.transAxes,
+                    ha="center", va="center", color="tab:red", fontsize=8, wrap=True)
             continue
-        rob = {arm: c for (e, arm), c in robot.items()
-               if e == exp.name and np.any(np.isfinite(c[1]))}
-        ncol = 2 if rob else 1
-        fig = Figure(figsize=(6.4 * ncol, 4.4))
-        axes = fig.subplots(1, ncol, squeeze=False)
-        plot_error_vs_time_on_axes(axes[0, 0], curves,
-                                   title=f"{exp.title}: landmarks ({len(exp.runs())} runs)")
-        if rob:
-            plot_error_vs_time_on_axes(axes[0, 1], rob, ylabel="robot position error [cm]",
-                                       title="robot position (latest pose)")
-        fig.tight_layout()
-        path = out / f"{exp.name}_error_vs_time.png"
-        fig.savefig(path, dpi=120)
-        files.append(path)
-    for exp in experiments:
-        if exp.sources:
-            files += _write_source_maps(out, exp, results, Figure)
-    sim_exps = [e for e in experiments if not e.sources]
-    if not sim_exps:
-        return files
-    # Example map (fig. 5: Method 2 with localisation at t = 100; fig. 3: the truth)
-    exp = sim_exps[0]
-    try:
-        t_show = 100 if exp.sim.n_steps >= 100 else None
-        stream, est = example_estimate("stmds-smacof-loc", exp, t=t_show)
-        al = score_estimate(est, stream.truth).alignment
-        traj = np.arange(0, (t_show or exp.sim.n_steps) + 1)
-        fig = Figure(figsize=(6.0, 6.0))
-        ax = fig.subplots()
-        plot_map_on_axes(ax, stream.truth, est, al, trajectory_t=traj,
-                         title=f"stmds-smacof-loc, run {exp.runs()[0].name}, "
-                               f"t = {t_show or exp.sim.n_steps}")
-        fig.tight_layout()
-        path = out / "example_map.png"
-        fig.savefig(path, dpi=120)
-        files.append(path)
-    except Exception as exc:  # the map figure is optional; say why it is missing
-        (out / "example_map.txt").write_text(f"example map not drawn: {type(exc).__name__}: "
-                                             f"{exc}\n")
-        files.append(out / "example_map.txt")
-    return files
+        lm = np.asarray(panel.landmarks, dtype=float).reshape(-1, 3)
+        ax.plot(lm[:, 1], lm[:, 2], "o", color="tab:red", ms=4, label="estimate")
+        for i, x, y in lm:
+            if int(i) in ids:
+                tx, ty = ids[int(i)]
+                ax.plot([x, tx], [y, ty], "-", color="tab:red", lw=0.7)
+        if panel.poses is not None and len(panel.poses):
+            p = np.asarray(panel.poses, dtype=float)
+            ax.plot(p[:, 1], p[:, 2], "-", color="tab:blue", lw=0.9, label="est. trajectory")
+        mpe = panel.mpe_m
+        ax.set_title(f"{panel.label}: MPE {100 * mpe:.1f} cm" if mpe == mpe else panel.label)
+        ax.legend(fontsize="x-small", loc="upper right")
+    for ax in axes.ravel()[n:]:
+        ax.set_visible(False)
+    fig.suptitle(title)
+    fig.tight_layout()
+    return fig
 
 
-def _write_source_maps(out, exp, results, Figure) -> list:
-    """One figure per recorded source: every method's final map (aligned) over the truth."""
-    files = []
-    for src in exp.sources:
-        truth = src.stream().truth
-        rs = [r for r in results if r["experiment"] == exp.name and r["run"] == src.name]
-        n = len(rs)
-        if not n or truth is None:
-            continue
-        ncol = min(n, 3)
-        nrow = (n + ncol - 1) // ncol
-        fig = Figure(figsize=(4.6 * ncol, 4.4 * nrow))
-        axes = fig.subplots(nrow, ncol, squeeze=False)
-        pts = truth.landmarks_xy if truth.poses is None else np.vstack(
-            [truth.landmarks_xy, truth.poses[:, :2]])
-        lo, hi = pts.min(0) - 0.5, pts.max(0) + 0.5
-        for ax, r in zip(axes.ravel(), rs):
-            plot_map_on_axes(ax, truth, title=f"{r['arm']}")
-            ax.set_xlim(lo[0], hi[0])
-            ax.set_ylim(lo[1], hi[1])
-            fm = r.get("final_map")
-            if not r.get("ok") or not fm:
-                reason = r.get("error", "no map (fewer than 3 landmarks)")
-                ax.text(0.5, 0.5, f"FAILED\n{reason[:60]}", transform=ax.transAxes,
-                        ha="center", va="center", color="tab:red", fontsize=8, wrap=True)
-                continue
-            lm = np.array(fm["landmarks"], dtype=float).reshape(-1, 3)
-            ax.plot(lm[:, 1], lm[:, 2], "o", color="tab:red", ms=4, label="estimate")
-            ids = dict(zip(truth.landmark_ids.tolist(), truth.landmarks_xy))
-            for i, x, y in lm:
-                if int(i) in ids:
-                    tx, ty = ids[int(i)]
-                    ax.plot([x, tx], [y, ty], "-", color="tab:red", lw=0.7)
-            if fm["poses"]:
-                p = np.array(fm["poses"], dtype=float)
-                ax.plot(p[:, 1], p[:, 2], "-", color="tab:blue", lw=0.9, label="est. trajectory")
-            mpe = r["checkpoints"][-1].get("mpe_m")
-            ax.set_title(f"{r['arm']}: MPE {100 * mpe:.1f} cm" if mpe == mpe else r["arm"])
-            ax.legend(fontsize="x-small", loc="upper right")
-        for ax in axes.ravel()[n:]:
-            ax.set_visible(False)
-        fig.suptitle(f"{exp.title}: {src.name}")
-        fig.tight_layout()
-        path = out / f"{exp.name}_{src.name}_maps.png"
-        fig.savefig(path, dpi=100)
-        files.append(path)
-    return files
-
-
-def map_comparison_figure(estimates: Mapping[str, MapEstimate | None], *,
-                          reference: MapEstimate | None = None,
-                          alignments: Mapping[str, Alignment | None] | None = None,
+def map_comparison_figure(estimates: Mapping[str, EstimateLike | None], *,
+                          reference: EstimateLike | None = None,
+                          alignments: Mapping[str, AlignmentLike | None] | None = None,
                           notes: Mapping[str, str] | None = None,
                           title: str | None = None, ncol: int = 3):
     """Maps of a recording without ground truth: one panel per method, on a reference map.
@@ -231,14 +246,12 @@ def map_comparison_figure(estimates: Mapping[str, MapEstimate | None], *,
     """
     import textwrap
 
-    from matplotlib.figure import Figure  # no pyplot: the caller's backend is left alone
-
     alignments = alignments or {}
     notes = notes or {}
     n = max(len(estimates), 1)
     ncol = max(1, min(ncol, n))
     nrow = (n + ncol - 1) // ncol
-    fig = Figure(figsize=(4.4 * ncol, 4.2 * nrow))
+    fig = _figure(figsize=(4.4 * ncol, 4.2 * nrow))
     axes = fig.subplots(nrow, ncol, squeeze=False)
     lim = None
     if reference is not None and len(reference):
@@ -260,11 +273,11 @@ def map_comparison_figure(estimates: Mapping[str, MapEstimate | None], *,
                     fontsize=8, bbox={"fc": "white", "ec": "none", "alpha": 0.85})
             ax.set_title(label, fontsize=9)
         else:
-            al = alignments.get(label) or Alignment(np.eye(2), np.zeros(2))
+            al = alignments.get(label)
             if est.poses is not None and len(est.poses):
-                p = al.apply(est.poses[:, :2])
+                p = _moved(al, est.poses[:, :2])
                 ax.plot(p[:, 0], p[:, 1], "-", color="tab:blue", lw=0.6, label="trajectory")
-            xy = al.apply(est.landmarks_xy)
+            xy = _moved(al, est.landmarks_xy)
             ax.plot(xy[:, 0], xy[:, 1], "o", color="tab:red", ms=2.5, label="landmarks")
             ax.set_title(f"{label}\n{textwrap.shorten(note, 60)}" if note else label,
                          fontsize=9)
@@ -283,3 +296,7 @@ def map_comparison_figure(estimates: Mapping[str, MapEstimate | None], *,
         fig.suptitle(title, fontsize=10)
     fig.tight_layout(rect=(0, 0, 1, 1 - (0.4 / (4.2 * nrow) if title else 0)))
     return fig
+
+
+__all__ = ["plot_error_vs_time_on_axes", "plot_map_on_axes", "error_vs_time_figure",
+           "map_figure", "MapPanel", "final_maps_figure", "map_comparison_figure"]

@@ -53,7 +53,8 @@ from typing import Any, Mapping, Sequence  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from bomgraph.bench import Arm, Executor, SimSource, Task, execute  # noqa: E402
+from bomgraph.bench import Executor, execute  # noqa: E402
+from bomgraph.experiments import Arm, SimSource, Task  # noqa: E402
 from bomgraph.jsonio import jsonable, parse_options  # noqa: E402
 from bomgraph.sim import SimConfig, paper_design  # noqa: E402
 

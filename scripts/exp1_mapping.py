@@ -2,8 +2,9 @@
 
     python scripts/exp1_mapping.py [--quick] [--out results/exp1] [--jobs N]
 
-A thin call into the library: `bomgraph.bench.compare` with the experiment of
-`bomgraph.bench.paper_experiments`; prints the table, writes JSON, CSV and PNG figures.
+A thin call into the library (`bomgraph compare`): `bomgraph.report.compare` with the
+experiment of `bomgraph.experiments.paper_experiments`; prints the table, writes JSON, CSV and
+PNG figures.
 """
 
 from __future__ import annotations

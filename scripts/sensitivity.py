@@ -14,7 +14,9 @@ import json
 from dataclasses import replace
 from pathlib import Path
 
-from bomgraph.bench import Arm, Executor, Experiment, execute, summarise
+from bomgraph.bench import Executor, execute
+from bomgraph.experiments import Arm, Experiment
+from bomgraph.report import summarise
 from bomgraph.sim import SimConfig
 
 PAPER = {"stmds-cs": 0.0478, "stmds-smacof": 0.0287}

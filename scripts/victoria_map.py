@@ -5,8 +5,9 @@
                                    [--max-seconds S]
 
 Imports GTSAM's ``victoria_park.txt`` (:func:`bomgraph.datasets.victoria.import_victoria`,
-bearings only), runs each method through the library (:func:`bomgraph.mapper.create_mapper`
-and :func:`bomgraph.mapper.run`), times it, and writes ``victoria_park_maps.png`` (each
+bearings only), runs each method (a :class:`bomgraph.experiments.Arm`: a method and a named
+preset) through the library (:func:`bomgraph.mapper.create_mapper` and
+:func:`bomgraph.mapper.run`), times it, and writes ``victoria_park_maps.png`` (each
 method's landmarks and trajectory over the ``gtsam-batch`` map), ``victoria_park.json`` and
 ``victoria_park.csv``, and each method's final map and trajectory as an estimate file in
 ``estimates/``.
@@ -19,17 +20,13 @@ landmark disagreement after that alignment: AGREEMENT WITH GTSAM-BATCH, NOT ACCU
 
 Checkpoints: ``--checkpoint-every`` (default 100). The GTSAM mappers (``gtsam-batch``,
 ``hybrid``) let a landmark into their graph only at ``estimate()``, when its rays intersect
-on the current pose estimates; with a single estimate at the end those are 7000 steps of dead
-reckoning, the rays of a landmark seen again after a loop no longer meet, and ``gtsam-batch``
-kept 13 landmarks of 151 on the first 2000 steps instead of 56 (every 100 steps: the same 56
-landmarks and cost as iSAM2). Every method gets the same interval.
+on the current pose estimates; with a single estimate at the end those are thousands of steps
+of dead reckoning, and the rays of a landmark seen again after a loop no longer meet. Every
+method gets the same interval.
 
-Bearing sigma: the importer's header value (0.050 rad, the file's point covariance
-propagated to the bearing, median) unless ``--bearing-sigma`` is given. GTSAM's own example
-uses 0.2 rad. Both converged with ``gtsam-batch`` on the first 2000 steps (0.050: 56
-landmarks, RMS bearing residual 0.028 rad; 0.2: 54 landmarks, 0.074 rad, the two maps 2.5 m
-RMS apart): the bearings are explained better than either sigma assumes, and 0.2 lets the
-odometry pull the map.
+Bearing sigma: the importer's header value (the file's point covariance propagated to the
+bearing, median) unless ``--bearing-sigma`` is given; GTSAM's own example uses 0.2 rad.
+What both give is in docs/measurements-top.md.
 
 A method that raises is reported as a failure with its reason; one that runs longer than
 ``--max-seconds`` is stopped and reported with the step it reached and its time per step at
@@ -40,15 +37,15 @@ method is unusable on the whole recording).
 from __future__ import annotations
 
 import argparse
-import csv
 import json
 import math
+import os
 import shutil
 import sys
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, Iterable, Iterator, Sequence
+from typing import Any, Callable, Iterable, Iterator, Mapping, Sequence
 
 import numpy as np
 
@@ -56,37 +53,33 @@ from bomgraph.angles import angle_residual
 from bomgraph.datasets.victoria import import_victoria
 from bomgraph.errors import BomgraphError, TooFewLandmarksError
 from bomgraph.evaluate import Alignment, score_estimate
+from bomgraph.experiments import Arm
+from bomgraph.jsonio import jsonable
 from bomgraph.mapper import MapEstimate, RunResult, create_mapper, run, write_estimate
+from bomgraph.report import write_csv
 from bomgraph.stream import Step, Stream, Truth
 
 ROOT = Path(__file__).resolve().parents[1]
-DATA = ROOT.parent / "shared" / "data" / "victoria_park" / "victoria_park.txt"
+#: The shared data folder (``BOMGRAPH_DATA`` overrides it, as for scripts/check_identical.py).
+DATA = (Path(os.environ.get("BOMGRAPH_DATA", ROOT.parent / "shared" / "data"))
+        / "victoria_park" / "victoria_park.txt")
 REFERENCE = "gtsam-batch"
 FIGURE = "victoria_park_maps.png"
 
 
-@dataclass(frozen=True)
-class MethodSpec:
-    """A row of the table: a label, the registered method and its options."""
-
-    label: str
-    method: str
-    options: dict[str, Any] = field(default_factory=dict)
-
-
 #: The methods tried, in table order (the reference first).
-METHODS: dict[str, MethodSpec] = {s.label: s for s in [
-    MethodSpec("gtsam-batch", "gtsam-batch"),
-    MethodSpec("gtsam-isam2", "gtsam-isam2"),
-    MethodSpec("ekf", "ekf"),
-    MethodSpec("ekf-real", "ekf", {"preset": "real"}),
-    MethodSpec("ekf-invdepth", "ekf-invdepth"),
-    MethodSpec("ekf-invdepth-real", "ekf-invdepth", {"preset": "real"}),
-    MethodSpec("triangulate", "triangulate"),
-    MethodSpec("stmds-smacof", "stmds-smacof"),
-    MethodSpec("stmds-smacof-real", "stmds-smacof", {"preset": "real"}),
-    MethodSpec("hybrid", "hybrid"),
-    MethodSpec("hybrid-real", "hybrid", {"seed_options": {"preset": "real"}}),
+METHODS: dict[str, Arm] = {s.label: s for s in [
+    Arm("gtsam-batch", "gtsam-batch"),
+    Arm("gtsam-isam2", "gtsam-isam2"),
+    Arm("ekf", "ekf"),
+    Arm("ekf-real", "ekf", {"preset": "real"}),
+    Arm("ekf-invdepth", "ekf-invdepth"),
+    Arm("ekf-invdepth-real", "ekf-invdepth", {"preset": "real"}),
+    Arm("triangulate", "triangulate"),
+    Arm("stmds-smacof", "stmds-smacof"),
+    Arm("stmds-smacof-real", "stmds-smacof", {"preset": "real"}),
+    Arm("hybrid", "hybrid"),
+    Arm("hybrid-real", "hybrid", {"preset": "real-seed"}),
 ]}
 
 
@@ -102,7 +95,7 @@ class Outcome:
     ``k + 1`` being asked for (the step and any checkpoint estimate after it).
     """
 
-    spec: MethodSpec
+    spec: Arm
     estimate: MapEstimate | None
     wall_s: float
     steps_done: int
@@ -123,7 +116,7 @@ def _timed(steps: Sequence[Step], times: list[float], deadline: float | None) ->
     times.append(clock())
 
 
-def run_method(spec: MethodSpec, stream: Stream, *, checkpoint_every: int,
+def run_method(spec: Arm, stream: Stream, *, checkpoint_every: int,
                max_seconds: float | None = None) -> Outcome:
     """Run one method on ``stream``; failures (exceptions, the time budget) become reasons."""
     times: list[float] = []
@@ -189,9 +182,9 @@ def agreement(est: MapEstimate, reference: MapEstimate) -> dict[str, Any]:
             "errors_m": dict(zip(sc.landmark_ids.tolist(), sc.errors_m.tolist()))}
 
 
-def _scalar_info(info: dict[str, Any]) -> dict[str, Any]:
-    return {k: v for k, v in info.items()
-            if isinstance(v, (bool, int, str)) or (isinstance(v, float) and math.isfinite(v))}
+def _scalar_info(info: Mapping[str, Any]) -> dict[str, Any]:
+    """The diagnostics that are single finite values (lists, maps and NaN left out)."""
+    return {k: v for k, v in jsonable(info).items() if not isinstance(v, (list, dict, type(None)))}
 
 
 def summarise(outcomes: Sequence[Outcome], stream: Stream
@@ -234,7 +227,7 @@ def summarise(outcomes: Sequence[Outcome], stream: Stream
     return rows, alignments
 
 
-def victoria_maps(stream: Stream, specs: Iterable[MethodSpec], out_dir: str | Path, *,
+def victoria_maps(stream: Stream, specs: Iterable[Arm], out_dir: str | Path, *,
                   checkpoint_every: int = 100, max_seconds: float | None = None,
                   title: str = "Victoria Park", dpi: int = 110,
                   progress: Callable[[str], None] | None = None) -> dict[str, Any]:
@@ -301,34 +294,16 @@ def victoria_maps(stream: Stream, specs: Iterable[MethodSpec], out_dir: str | Pa
                     "not accuracy: the recording has no ground truth"}
     json_path = out / "victoria_park.json"
     with open(json_path, "w", encoding="utf-8") as fh:
-        json.dump({"meta": meta, "rows": _jsonable(rows)}, fh, indent=1, allow_nan=False)
+        json.dump({"meta": meta, "rows": jsonable(rows)}, fh, indent=1, allow_nan=False)
         fh.write("\n")
     csv_path = out / "victoria_park.csv"
     cols = ["method", "ok", "landmarks", "n_common", "rms_m", "mean_m", "median_m", "max_m",
             "traj_mean_m", "reflected", "bearing_rms_rad", "bearing_median_abs_rad",
             "n_bearings_explained", "wall_s", "steps_done", "ms_per_step_first_10pct",
             "ms_per_step_last_10pct", "error", "agreement_note"]
-    with open(csv_path, "w", newline="", encoding="utf-8") as fh:
-        w = csv.DictWriter(fh, fieldnames=cols, extrasaction="ignore")
-        w.writeheader()
-        for r in rows:
-            w.writerow({c: r.get(c) for c in cols})
+    write_csv(csv_path, [{c: r.get(c) for c in cols} for r in rows], cols)
     return {"rows": rows, "meta": meta, "figure": fig_path, "json": json_path,
             "csv": csv_path}
-
-
-def _jsonable(obj: Any) -> Any:
-    if isinstance(obj, dict):
-        return {str(k): _jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_jsonable(v) for v in obj]
-    if isinstance(obj, (np.integer,)):
-        return int(obj)
-    if isinstance(obj, (float, np.floating)):
-        return float(obj) if math.isfinite(obj) else None
-    if isinstance(obj, np.bool_):
-        return bool(obj)
-    return obj
 
 
 def format_table(rows: Sequence[dict[str, Any]]) -> str:

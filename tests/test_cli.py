@@ -47,3 +47,19 @@ def test_user_errors_print_one_line_and_exit_2(tmp_path: Path) -> None:
     proc = subprocess.run([sys.executable, "-m", "bomgraph.cli", "run", str(bad), "--method",
                            "nope", "--out", "x"], capture_output=True, text=True)
     assert proc.returncode == 2 and "unknown method" in proc.stderr
+
+
+def test_option_errors_are_user_errors(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    """--option goes through bomgraph.jsonio.parse_options: inf is a number (refused here by
+    the method's own range check), a pair without '=' is refused; both exit 2, one line."""
+    run_file = tmp_path / "run.jsonl"
+    assert main(["simulate", "--steps", "20", "--out", str(run_file)]) == 0
+    capsys.readouterr()
+    for opt, msg in (("min_parallax_rad=inf", "min_parallax_rad"), ("foo", "key=value")):
+        assert main(["run", str(run_file), "--method", "triangulate", "--option", opt,
+                     "--out", str(tmp_path / "e.json")]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and msg in err[0]
+    assert main(["compare", "--quick", "--experiments", "exp9", "--out",
+                 str(tmp_path / "c")]) == 2
+    assert "unknown experiment" in capsys.readouterr().err

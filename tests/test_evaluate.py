@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from bomgraph.errors import EvaluationError
-from bomgraph.evaluate import align, error_table, landmark_nees, score_estimate
+from bomgraph.evaluate import (CheckpointScore, align, error_table, landmark_nees, pose_nees,
+                               score_checkpoints, score_estimate)
 from bomgraph.mapper import Checkpoint, MapEstimate, RunResult
 from bomgraph.stream import Truth
 
@@ -110,3 +111,43 @@ def test_landmark_nees_is_chi2_for_consistent_errors() -> None:
     est = MapEstimate(np.arange(n), est_xy, landmark_cov=np.broadcast_to(cov, (n, 2, 2)))
     s = score_estimate(est, truth)
     assert landmark_nees(est, truth, s.alignment).mean() == pytest.approx(2.0, rel=0.06)
+
+
+def test_score_checkpoints_gives_typed_rows(truth: Truth) -> None:
+    cps = (Checkpoint(10, MapEstimate.empty(), 0.5),
+           Checkpoint(20, MapEstimate(truth.landmark_ids[:5], truth.landmarks_xy[:5] + [0.1, 0],
+                                      pose_t=np.array([3, 7]), poses=truth.poses[[3, 7]]), 0.25))
+    rows = score_checkpoints(RunResult("x", cps, np.zeros(21), 0.0), truth)
+    assert all(isinstance(r, CheckpointScore) for r in rows)
+    first, second = rows
+    assert (first.t, first.n_mapped, first.n_common, first.estimate_s) == (10, 0, 0, 0.5)
+    assert np.isnan(first.mpe_m) and np.isnan(first.nees_pose)
+    assert (second.t, second.n_mapped, second.n_common) == (20, 5, 5)
+    # the map is shifted by 0.1 m and the poses are not: after alignment they are 0.1 m off
+    assert second.mpe_m < 1e-12 and second.robot_last_m == pytest.approx(0.1)
+    assert np.isnan(second.nees_landmark) and np.isnan(second.nees_pose)   # no covariances
+    table = error_table(cps, truth)
+    assert table["mpe_m"][1] == second.mpe_m and table["n_common"].tolist() == [0, 5]
+
+
+def test_pose_nees_of_a_hand_computed_error() -> None:
+    """A latest-pose error (0.1 m, -0.2 m, 0.05 rad) under diag(0.01, 0.04, 0.0025) gives
+    NEES 1 + 1 + 1 = 3, whichever rigid transform (a reflection too) aligns the frames."""
+    lm = np.array([[0.0, 0.0], [2.0, 0.0], [0.0, 3.0], [1.0, 1.0]])
+    truth = Truth(np.arange(4), lm, np.array([[0.0, 0.0, 0.0], [1.0, 1.0, 0.3]]))
+    err = np.array([0.1, -0.2, 0.05])
+    cov = np.diag([0.01, 0.04, 0.0025])
+    for r in (_rot(0.7), _rot(0.7) @ np.diag([1.0, -1.0])):
+        t = np.array([0.4, -2.0])
+        p = truth.poses[1] + err
+        # the estimate in a frame x_est = R^T (x - t); the heading turns (and flips) with R
+        h = np.array([np.cos(p[2]), np.sin(p[2])]) @ r
+        est_pose = np.array([*((p[:2] - t) @ r), np.arctan2(h[1], h[0])])
+        tr = np.eye(3)
+        tr[:2, :2], tr[2, 2] = r, np.linalg.det(r)
+        est = MapEstimate(np.arange(4), (lm - t) @ r, pose_t=np.array([1]),
+                          poses=est_pose[None], pose_cov=(tr.T @ cov @ tr)[None])
+        s = score_estimate(est, truth)
+        assert pose_nees(est, truth, s.alignment) == pytest.approx(3.0, rel=1e-9)
+    no_cov = MapEstimate(np.arange(4), lm, pose_t=np.array([1]), poses=truth.poses[1:])
+    assert np.isnan(pose_nees(no_cov, truth, score_estimate(no_cov, truth).alignment))

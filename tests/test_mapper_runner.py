@@ -65,6 +65,7 @@ def test_bomgraph_does_not_import_baselines() -> None:
     import subprocess
     import sys
     code = ("import sys, bomgraph, bomgraph.cli, bomgraph.mapper, bomgraph.sim, "
+            "bomgraph.experiments, bomgraph.bench, bomgraph.report, bomgraph.plots, "
             "bomgraph.evaluate, bomgraph.geometry, bomgraph.stmds.mapper; "
             "print(any(m == 'baselines' or m.startswith('baselines.') for m in sys.modules))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,

@@ -11,6 +11,7 @@ from __future__ import annotations
 import csv
 import importlib.util
 import json
+import os
 import sys
 from pathlib import Path
 
@@ -21,10 +22,10 @@ from bomgraph.datasets.victoria import import_victoria
 from bomgraph.stream import Stream
 
 ROOT = Path(__file__).resolve().parents[1]
-DATA = ROOT.parent / "shared" / "data"
+DATA = Path(os.environ.get("BOMGRAPH_DATA", ROOT.parent / "shared" / "data"))
 VICTORIA = DATA / "victoria_park" / "victoria_park.txt"
 
-pytestmark = pytest.mark.skipif(not DATA.is_dir(), reason="../shared/data is absent")
+pytestmark = pytest.mark.skipif(not DATA.is_dir(), reason="no data folder (../shared/data or $BOMGRAPH_DATA)")
 
 
 def _script():

@@ -1,0 +1,407 @@
+"""Reports of the comparison (paper section IV): summaries and tables of the runner's
+results, CSV/JSON files, the figures, and :func:`compare`, which runs experiments and writes
+all of it.
+
+Data flows one way: :mod:`bomgraph.experiments` (what to run) -> :mod:`bomgraph.bench` (run
+and score) -> here (summarise, write) -> :mod:`bomgraph.plots` (draw arrays).
+A result is the dict of :func:`bomgraph.bench.run_task`; its ``checkpoints`` are the rows of
+:func:`bomgraph.evaluate.score_checkpoints` as dicts.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import os
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable, Mapping, Sequence
+
+import numpy as np
+
+from .bench import Executor, execute, run_example
+from .errors import EvaluationError
+from .evaluate import MapScore, error_table, score_estimate
+from .experiments import PAPER_REPORTED, Experiment
+from .mapper import read_estimate
+from .plots import MapPanel, error_vs_time_figure, final_maps_figure, map_figure
+from .stream import read_stream
+
+#: The checkpoints the summary reports (and the last one of each experiment).
+REPORT_TIMES = (50, 100, 200, 300)
+
+
+def _group(rows: Sequence[Mapping[str, Any]], *keys: str
+           ) -> dict[tuple[Any, ...], list[Mapping[str, Any]]]:
+    """``rows`` by the values of ``keys``, groups and rows in order of appearance."""
+    out: dict[tuple[Any, ...], list[Mapping[str, Any]]] = {}
+    for r in rows:
+        out.setdefault(tuple(r[k] for k in keys), []).append(r)
+    return out
+
+
+def _finite_stat(stat: Callable[[np.ndarray], Any], values: np.ndarray) -> float:
+    """``stat`` (a NaN-ignoring reduction) of ``values``, or NaN when none is finite."""
+    return float(stat(values)) if np.any(np.isfinite(values)) else math.nan
+
+
+def _value_at(res: Mapping[str, Any], t: int, key: str) -> float:
+    """The metric at checkpoint ``t`` (the last checkpoint at or before ``t``)."""
+    best = math.nan
+    for row in res.get("checkpoints", []):
+        if row["t"] <= t:
+            v = row.get(key)
+            best = math.nan if v is None else float(v)
+    return best
+
+
+def summarise(results: Sequence[Mapping[str, Any]],
+              times: Sequence[int] = REPORT_TIMES) -> list[dict[str, Any]]:
+    """One row per (experiment, arm): MPE at ``times`` (mean, median, std), robot error,
+    convergence, NEES, wall time. Failed runs are counted, not hidden."""
+    groups = _group(results, "experiment", "arm")
+    exp_last: dict[str, int] = {}
+    for r in results:
+        if r.get("ok") and r["checkpoints"]:
+            exp_last[r["experiment"]] = max(exp_last.get(r["experiment"], 0),
+                                            r["checkpoints"][-1]["t"])
+    rows = []
+    for (exp, arm), rs in groups.items():
+        ok = [r for r in rs if r.get("ok")]
+        last_t = exp_last.get(exp, 0)
+        row: dict[str, Any] = {"experiment": exp, "arm": arm, "method": rs[0]["method"],
+                               "runs": len(rs), "failed": len(rs) - len(ok),
+                               "errors": sorted({r.get("error", "") for r in rs
+                                                 if not r.get("ok")})}
+        for t in sorted({*[t for t in times if t <= last_t], last_t} - {0}):
+            v = np.array([_value_at(r, t, "mpe_m") for r in ok])
+            row[f"n_scored@{t}"] = int(np.sum(np.isfinite(v)))
+            row[f"mpe_mean_m@{t}"] = _finite_stat(np.nanmean, v)
+            row[f"mpe_median_m@{t}"] = _finite_stat(np.nanmedian, v)
+            row[f"mpe_std_m@{t}"] = (float(np.nanstd(v, ddof=1)) if np.sum(np.isfinite(v)) > 1
+                                     else math.nan)
+        robot = np.array([_value_at(r, last_t, "robot_last_m") for r in ok])
+        row["robot_last_mean_m"] = _finite_stat(np.nanmean, robot)
+        rm = np.array([np.nanmean([c["robot_last_m"] for c in r["checkpoints"]])
+                       if any(np.isfinite(c["robot_last_m"]) for c in r["checkpoints"])
+                       else math.nan for r in ok])
+        row["robot_over_time_mean_m"] = _finite_stat(np.nanmean, rm)
+        conv = [r.get("converged") for r in ok if r.get("converged") is not None]
+        row["converged_rate"] = float(np.mean(conv)) if conv else math.nan
+        nees = np.array([_value_at(r, last_t, "nees_pose") for r in ok])
+        row["nees_pose_mean"] = _finite_stat(np.nanmean, nees)
+        nl = np.array([_value_at(r, last_t, "nees_landmark") for r in ok])
+        row["nees_landmark_mean"] = _finite_stat(np.nanmean, nl)
+        wall = np.array([r["total_s"] for r in ok])
+        row["wall_s_mean"] = float(wall.mean()) if wall.size else math.nan
+        row["paper"] = PAPER_REPORTED.get((exp, arm), "")
+        row["last_t"] = last_t
+        rows.append(row)
+    return rows
+
+
+def final_by_run(results: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
+    """One row per run: the final checkpoint's landmark MPE, landmarks mapped and robot error,
+    or the failure. For experiments whose runs are different recordings (the real data), where
+    a mean over runs hides which recording a method fails on."""
+    rows = []
+    for r in results:
+        row: dict[str, Any] = {"experiment": r["experiment"], "arm": r["arm"], "run": r["run"],
+                               "ok": bool(r.get("ok")), "error": r.get("error", "")}
+        last = r["checkpoints"][-1] if r.get("ok") and r.get("checkpoints") else {}
+        row["t"] = last.get("t", math.nan)
+        row["n_mapped"] = last.get("n_mapped", 0)
+        for key in ("mpe_m", "robot_last_m"):
+            v = last.get(key)
+            row[key] = math.nan if v is None else float(v)
+        row["converged"] = r.get("converged")
+        row["total_s"] = r.get("total_s", math.nan)
+        rows.append(row)
+    return rows
+
+
+def error_curves(results: Sequence[Mapping[str, Any]], metric: str = "mpe_m"
+                 ) -> dict[tuple[str, str], tuple[np.ndarray, np.ndarray]]:
+    """Per (experiment, arm): checkpoint times ``(k,)`` and the metric ``(runs, k)``."""
+    out: dict[tuple[str, str], tuple[np.ndarray, np.ndarray]] = {}
+    for key, rs in _group([r for r in results if r.get("ok")], "experiment", "arm").items():
+        ts = np.array([c["t"] for c in rs[0]["checkpoints"]])
+        vals = np.array([[_value_at(r, t, metric) for t in ts] for r in rs])
+        out[key] = (ts, vals)
+    return out
+
+
+def results_to_csv_rows(results: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
+    """Long format: one row per (experiment, arm, run, checkpoint)."""
+    rows = []
+    for r in results:
+        if not r.get("ok"):
+            rows.append({"experiment": r["experiment"], "arm": r["arm"], "run": r["run"],
+                         "ok": False, "error": r.get("error", "")})
+            continue
+        for c in r["checkpoints"]:
+            rows.append({"experiment": r["experiment"], "arm": r["arm"], "run": r["run"],
+                         "ok": True, "error": "", **c})
+    return rows
+
+
+def _cm(v: float | None) -> str:
+    return "   -  " if v is None or not math.isfinite(v) else f"{100 * v:6.2f}"
+
+
+def format_summary(summary: Sequence[dict]) -> str:
+    """The comparison table as text: one block per experiment, one row per arm."""
+    lines = []
+    for (exp,), rows in _group(summary, "experiment").items():
+        times = sorted({int(k.split("@")[1]) for r in rows for k in r
+                        if k.startswith("mpe_mean_m@")})
+        lines.append(f"\n== {exp} ==  landmark MPE [cm] mean/median±std at t; robot: error "
+                     f"[cm] of the latest pose at the end; conv: converged runs; NEES: robot "
+                     f"pose; wall time per run; [k/n]: only k of n runs had a map")
+        head = f"{'arm':30s} {'runs':>4s} " + " ".join(f"{'t=' + str(t):>17s}" for t in times)
+        head += f" {'robot':>7s} {'conv':>5s} {'NEES':>6s} {'wall s':>7s}  paper"
+        lines.append(head)
+        for r in rows:
+            cells = []
+            for t in times:
+                m, md, sd = (r.get(f"mpe_mean_m@{t}"), r.get(f"mpe_median_m@{t}"),
+                             r.get(f"mpe_std_m@{t}"))
+                cell = f"{_cm(m).strip()}/{_cm(md).strip()}±{_cm(sd).strip()}"
+                scored, ran = r.get(f"n_scored@{t}", 0), r["runs"] - r["failed"]
+                if scored < ran:  # runs without a map yet are not averaged in: say so
+                    cell += f"[{scored}/{ran}]"
+                cells.append(cell)
+            conv = r.get("converged_rate")
+            conv_s = "  -  " if conv is None or not math.isfinite(conv) else f"{100 * conv:4.0f}%"
+            nees = r.get("nees_pose_mean")
+            nees_s = "   -  " if nees is None or not math.isfinite(nees) else f"{nees:6.2f}"
+            fail = f"  FAILED {r['failed']}: {'; '.join(r['errors'])[:120]}" if r["failed"] else ""
+            lines.append(f"{r['arm'][:30]:30s} {r['runs']:4d} "
+                         + " ".join(f"{c:>17s}" for c in cells)
+                         + f" {_cm(r.get('robot_last_mean_m')):>7s} {conv_s:>5s} {nees_s:>6s}"
+                         f" {r.get('wall_s_mean', float('nan')):7.3f}  {r.get('paper', '')}{fail}")
+    return "\n".join(lines)
+
+
+def format_by_run(rows: Sequence[dict]) -> str:
+    """Final landmark MPE [cm] (landmarks mapped) per arm and run, one block per experiment."""
+    lines = []
+    for (exp,), rs in _group(rows, "experiment").items():
+        runs = list(dict.fromkeys(r["run"] for r in rs))
+        arms = list(dict.fromkeys(r["arm"] for r in rs))
+        cell = {(r["arm"], r["run"]): r for r in rs}
+        lines.append(f"\n== {exp}, final map per run ==  landmark MPE [cm] (landmarks mapped); "
+                     f"'no map': fewer than 3 landmarks; FAILED: the run raised")
+        lines.append(f"{'arm':30s} " + " ".join(f"{r[-14:]:>14s}" for r in runs))
+        for arm in arms:
+            cells = []
+            for run_name in runs:
+                r = cell.get((arm, run_name))
+                if r is None:
+                    cells.append("")
+                elif not r["ok"]:
+                    cells.append("FAILED")
+                elif not math.isfinite(r["mpe_m"]):
+                    cells.append(f"no map ({r['n_mapped']})")
+                else:
+                    cells.append(f"{100 * r['mpe_m']:.1f} ({r['n_mapped']})")
+            lines.append(f"{arm[:30]:30s} " + " ".join(f"{c:>14s}" for c in cells))
+    return "\n".join(lines)
+
+
+@dataclass(frozen=True)
+class CompareResult:
+    """What :func:`compare` produced: raw results, the summary table and the files written."""
+
+    results: tuple[dict[str, Any], ...]
+    summary: tuple[dict[str, Any], ...]
+    files: tuple[str, ...]
+    wall_s: float
+
+
+def write_csv(path: str | os.PathLike[str], rows: Sequence[Mapping[str, Any]],
+              columns: Sequence[str] | None = None) -> None:
+    """``rows`` as a CSV file: ``columns`` (default: every key, in order of appearance; keys
+    outside ``columns`` are left out); list values joined with ``;``."""
+    cols: list[str] = list(columns or ())
+    if columns is None:
+        for r in rows:
+            for k in r:
+                if k not in cols:
+                    cols.append(k)
+    with open(path, "w", newline="", encoding="utf-8") as fh:
+        w = csv.DictWriter(fh, fieldnames=cols, extrasaction="ignore")
+        w.writeheader()
+        for r in rows:
+            w.writerow({k: (";".join(map(str, v)) if isinstance(v, list) else v)
+                        for k, v in r.items()})
+
+
+def compare(experiments: Sequence[Experiment], out_dir: str | os.PathLike[str], *,
+            executor: Executor = Executor(), use_cache: bool = True, figures: bool = True,
+            progress: Callable[[int, int], None] | None = None) -> CompareResult:
+    """Run ``experiments``, write ``results.json``, ``results.csv``, ``summary.csv`` and the
+    figures (PNG) into ``out_dir``, and return the summary.
+
+    Finished runs are cached in ``out_dir/cache`` so an interrupted sweep resumes.
+    """
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    start = time.perf_counter()
+    tasks = [t for e in experiments for t in e.tasks()]
+    results = execute(tasks, executor, cache_dir=out / "cache" if use_cache else None,
+                      progress=progress)
+    summary = summarise(results)
+    wall = time.perf_counter() - start
+    files = [out / "results.json", out / "results.csv", out / "summary.csv"]
+    (out / "results.json").write_text(json.dumps(
+        {"experiments": [{"name": e.name, "title": e.title,
+                          "arms": [a.key() for a in e.arms], "seed": e.seed,
+                          "runs": len(e.runs()), "n_steps": e.sim.n_steps}
+                         for e in experiments],
+         "summary": summary, "results": results, "wall_s": wall}, allow_nan=True, indent=1))
+    write_csv(out / "results.csv", results_to_csv_rows(results))
+    write_csv(out / "summary.csv", summary)
+    write_csv(out / "final_by_run.csv", final_by_run(results))
+    files.append(out / "final_by_run.csv")
+    if figures:
+        files += write_compare_figures(out, experiments, results)
+    return CompareResult(tuple(results), tuple(summary), tuple(str(f) for f in files), wall)
+
+
+@dataclass(frozen=True)
+class FileEvaluation:
+    """An estimate file scored against a stream file's truth: the final map's score and, when
+    the file holds checkpoints, :func:`bomgraph.evaluate.error_table` over them."""
+
+    method: str
+    score: MapScore
+    table: dict[str, np.ndarray] | None
+
+    def as_dict(self) -> dict[str, Any]:
+        out: dict[str, Any] = {"method": self.method, **self.score.as_dict()}
+        if self.table is not None:
+            out["checkpoints"] = {k: v.tolist() for k, v in self.table.items()}
+        return out
+
+
+def evaluate_files(estimate_path: str | os.PathLike[str], stream_path: str | os.PathLike[str],
+                   *, with_scale: bool = False) -> FileEvaluation:
+    """Score an estimate file against the ground truth of a stream file.
+
+    Raises
+    ------
+    EvaluationError
+        The stream has no ground truth, or the map shares fewer than 3 landmarks with it.
+    """
+    est = read_estimate(estimate_path)
+    stream = read_stream(stream_path)
+    if stream.truth is None:
+        raise EvaluationError(f"{stream_path}: the stream has no ground truth to evaluate "
+                              f"against")
+    score = score_estimate(est.final, stream.truth, with_scale=with_scale)
+    table = error_table(est.checkpoints, stream.truth) if est.checkpoints else None
+    return FileEvaluation(est.method, score, table)
+
+
+def format_evaluation(ev: FileEvaluation) -> str:
+    """The evaluation as text: counts, landmark errors [cm], robot errors, the MPE per
+    checkpoint."""
+    s = ev.score
+    lines = [f"method {ev.method}: {s.n_common} of {s.n_truth} landmarks mapped "
+             f"({s.n_mapped} in the estimate)",
+             f"  landmark MPE {100 * s.mpe_m:.2f} cm, RMSE {100 * s.rmse_m:.2f} cm, "
+             f"median {100 * s.median_m:.2f} cm, max {100 * s.max_m:.2f} cm"]
+    if s.n_poses:
+        lines.append(f"  robot position error: last {100 * s.robot_last_m:.2f} cm, mean over "
+                     f"{s.n_poses} poses {100 * s.robot_mean_m:.2f} cm")
+    if ev.table is not None and len(ev.table["t"]) > 1:
+        lines.append("  t      MPE [cm]  mapped")
+        for t, m, n in zip(ev.table["t"], ev.table["mpe_m"], ev.table["n_mapped"]):
+            lines.append(f"  {t:<6d} {100 * m:8.2f}  {n:6d}")
+    return "\n".join(lines)
+
+
+def write_compare_figures(out_dir: str | os.PathLike[str], experiments: Sequence[Experiment],
+                          results: Sequence[Mapping[str, Any]]) -> list[Path]:
+    """The comparison's figures as PNG files in ``out_dir``; returns their paths.
+
+    One error-against-time figure per experiment (landmark MPE; robot error too for Exp. 2,
+    the paper's figs. 4, 6, 7, 8), one figure of every method's final map per recording, and
+    an example map with trajectory of the first simulated experiment (figs. 3 and 5:
+    ``stmds-smacof-loc`` at t = 100, run again by :func:`bomgraph.bench.run_example`).
+    """
+    out = Path(out_dir)
+    files = []
+    mpe = error_curves(results, "mpe_m")
+    robot = error_curves(results, "robot_last_m")
+    for exp in experiments:
+        curves = {arm: c for (e, arm), c in mpe.items() if e == exp.name}
+        if not curves:
+            continue
+        rob = {arm: c for (e, arm), c in robot.items()
+               if e == exp.name and np.any(np.isfinite(c[1]))}
+        fig = error_vs_time_figure(curves, robot_curves=rob,
+                                   title=f"{exp.title}: landmarks ({len(exp.runs())} runs)")
+        path = out / f"{exp.name}_error_vs_time.png"
+        fig.savefig(path, dpi=120)
+        files.append(path)
+    for exp in experiments:
+        if exp.sources:
+            files += _write_source_maps(out, exp, results)
+    sim_exps = [e for e in experiments if not e.sources]
+    if not sim_exps:
+        return files
+    # Example map (fig. 5: Method 2 with localisation at t = 100; fig. 3: the truth)
+    exp = sim_exps[0]
+    try:
+        t_show = 100 if exp.sim.n_steps >= 100 else None
+        stream, est = run_example("stmds-smacof-loc", exp, t=t_show)
+        al = score_estimate(est, stream.truth).alignment
+        traj = np.arange(0, (t_show or exp.sim.n_steps) + 1)
+        fig = map_figure(stream.truth, est, al, trajectory_t=traj,
+                         title=f"stmds-smacof-loc, run {exp.runs()[0].name}, "
+                               f"t = {t_show or exp.sim.n_steps}")
+        path = out / "example_map.png"
+        fig.savefig(path, dpi=120)
+        files.append(path)
+    except Exception as exc:  # the map figure is optional; say why it is missing
+        (out / "example_map.txt").write_text(f"example map not drawn: {type(exc).__name__}: "
+                                             f"{exc}\n")
+        files.append(out / "example_map.txt")
+    return files
+
+
+def _write_source_maps(out: Path, exp: Experiment,
+                       results: Sequence[Mapping[str, Any]]) -> list[Path]:
+    """One figure per recorded source: every method's final map (aligned) over the truth."""
+    files = []
+    for src in exp.sources:
+        truth = src.stream().truth
+        rs = [r for r in results if r["experiment"] == exp.name and r["run"] == src.name]
+        if not rs or truth is None:
+            continue
+        fig = final_maps_figure(truth, [_map_panel(r) for r in rs],
+                                title=f"{exp.title}: {src.name}")
+        path = out / f"{exp.name}_{src.name}_maps.png"
+        fig.savefig(path, dpi=100)
+        files.append(path)
+    return files
+
+
+def _map_panel(r: Mapping[str, Any]) -> MapPanel:
+    """A task result's final map (``run_task``'s ``final_map``) as a figure panel."""
+    fm = r.get("final_map")
+    if not r.get("ok") or not fm:
+        return MapPanel(r["arm"], None, failure=r.get("error", "no map (fewer than 3 landmarks)"))
+    mpe = r["checkpoints"][-1].get("mpe_m")
+    return MapPanel(r["arm"], np.array(fm["landmarks"], dtype=float).reshape(-1, 3),
+                    np.array(fm["poses"], dtype=float).reshape(-1, 3),
+                    mpe_m=math.nan if mpe is None else float(mpe))
+
+
+__all__ = ["REPORT_TIMES", "summarise", "final_by_run", "error_curves", "results_to_csv_rows",
+           "format_summary", "format_by_run", "write_csv", "CompareResult", "compare",
+           "write_compare_figures", "FileEvaluation", "evaluate_files", "format_evaluation"]

@@ -1,0 +1,72 @@
+"""Experiments as data: the paper's design, the real-data arms, arms that name presets."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from bomgraph.errors import ConfigError
+from bomgraph.experiments import (REAL_SKIPPED, REAL_VARIANTS, Arm, paper_experiments,
+                                  real_experiments, real_methods, select)
+from bomgraph.mapper import available_methods
+from bomgraph.sim import SimConfig
+
+
+def test_paper_experiments_have_the_papers_design() -> None:
+    exps = paper_experiments()
+    assert set(exps) == {"exp1", "exp2", "exp3", "all"}
+    assert all(len(e.runs()) == 25 and e.sim == SimConfig() for e in exps.values())
+    assert {a.method for a in exps["exp2"].arms} >= {"stmds-cs-loc", "stmds-smacof-loc", "ekf",
+                                                     "gtsam-batch", "gtsam-isam2", "hybrid"}
+    assert any(a.prior_fraction == 0.1 for a in exps["exp3"].arms)
+    quick = paper_experiments(quick=True)
+    assert all(len(e.runs()) == 2 for e in quick.values())
+
+
+def test_arms_name_presets_only() -> None:
+    """No hand-written option dicts: an arm's options are a preset name (or the paper's
+    fusion rule, which has no preset of its own)."""
+    for exp in paper_experiments().values():
+        for arm in exp.arms:
+            assert set(arm.options) <= {"preset", "fusion"}, arm
+    labels = {a.label: a for a in paper_experiments()["all"].arms}
+    assert dict(labels["stmds-smacof (window ba)"].options) == {"preset": "window-ba"}
+    assert dict(labels["stmds-smacof (window lsq)"].options) == {"preset": "window-lsq"}
+
+
+def test_real_experiments_hold_every_method_and_its_real_variant(tmp_path: Path) -> None:
+    for d in ("mrclam6", "bearing_only_sim_g2o"):
+        (tmp_path / d).mkdir()
+    exps = real_experiments(tmp_path)
+    assert set(exps) == {"mrclam6", "g2o"} and len(exps["mrclam6"].sources) == 5
+    labels = {a.label: a for a in exps["mrclam6"].arms}
+    for method, variants in REAL_VARIANTS.items():
+        for label, options in variants:
+            assert method in labels and labels[label].method == method
+            assert dict(labels[label].options) == options
+            assert set(options) == {"preset"}
+    assert {"ekf-invdepth", "gtsam-isam2", "oracle"} <= set(labels)
+    with pytest.raises(ConfigError, match="no dataset folders"):
+        real_experiments(tmp_path / "nothing")
+
+
+def test_real_methods_are_the_registry_less_the_skipped() -> None:
+    names = [m.name for m in available_methods()]
+    assert real_methods() == [n for n in names if n not in REAL_SKIPPED]
+    assert real_methods() == ["triangulate", "stmds-cs", "stmds-smacof", "stmds-smacof-loc",
+                              "ekf", "ekf-invdepth", "gtsam-batch", "gtsam-isam2", "hybrid",
+                              "oracle"]
+
+
+def test_select_keeps_the_order_and_names_unknown_experiments() -> None:
+    exps = paper_experiments(quick=True)
+    assert [e.name for e in select(exps, ["exp3", "exp1"])] == ["exp3", "exp1"]
+    assert [e.name for e in select(exps)] == list(exps)
+    with pytest.raises(ConfigError, match="unknown experiment"):
+        select(exps, ["exp9"])
+
+
+def test_arm_options_must_be_plain_json() -> None:
+    with pytest.raises(ConfigError, match="plain JSON"):
+        Arm("bad", "triangulate", {"x": object()})

@@ -1,0 +1,63 @@
+"""Reports: summaries, the per-run table, the files and figures of compare, file evaluation."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from bomgraph.bench import Executor, execute
+from bomgraph.experiments import Arm, Experiment
+from bomgraph.report import (compare, error_curves, final_by_run, format_by_run,
+                             format_summary, results_to_csv_rows, summarise)
+from bomgraph.sim import SimConfig
+
+SMALL = SimConfig(n_steps=40, n_landmarks=20)
+
+
+def _exp(arms: tuple[Arm, ...]) -> Experiment:
+    return Experiment("t", "test", arms, SMALL, seed=3, n_layouts=2, n_starts=2)
+
+
+def test_a_failing_method_is_reported_not_dropped() -> None:
+    exp = _exp((Arm("tri", "triangulate"), Arm("bad", "triangulate",
+                                                {"min_parallax_rad": -1.0})))
+    results = execute(exp.tasks(), Executor("serial"))
+    assert len(results) == 8
+    bad = [r for r in results if r["arm"] == "bad"]
+    assert all(not r["ok"] and "min_parallax_rad" in r["error"] for r in bad)
+    rows = {r["arm"]: r for r in summarise(results)}
+    assert rows["bad"]["failed"] == 4 and rows["tri"]["failed"] == 0
+    # the per-run table names each failure and each run's own final score
+    per_run = final_by_run(results)
+    assert len(per_run) == 8
+    assert all(not r["ok"] and "min_parallax_rad" in r["error"] for r in per_run
+               if r["arm"] == "bad")
+    tri = [r for r in per_run if r["arm"] == "tri"]
+    assert all(r["t"] == 40 and 0 < r["mpe_m"] < 1.0 and r["n_mapped"] >= 3 for r in tri)
+    text = format_by_run(per_run)
+    bad_line = next(line for line in text.splitlines() if line.startswith("bad "))
+    assert bad_line.split()[1:] == ["FAILED"] * 4
+    assert f"{100 * tri[0]['mpe_m']:.1f} ({tri[0]['n_mapped']})" in text
+    summary_text = format_summary(summarise(results))
+    assert "FAILED 4" in summary_text and "== t ==" in summary_text
+
+
+def test_error_curves_and_long_rows() -> None:
+    results = execute(_exp((Arm("tri", "triangulate"),)).tasks(), Executor("serial"))
+    (t, vals), = error_curves(results).values()
+    assert t.tolist() == [10, 20, 30, 40] and vals.shape == (4, 4)
+    assert np.all(np.isfinite(vals[:, -1]))
+    rows = results_to_csv_rows(results)
+    assert len(rows) == 16 and all(r["ok"] for r in rows)
+
+
+def test_compare_writes_tables_and_figures(tmp_path: Path) -> None:
+    exp = _exp((Arm("tri", "triangulate"),))
+    res = compare([exp], tmp_path, executor=Executor("serial"))
+    for name in ("results.json", "results.csv", "summary.csv", "t_error_vs_time.png"):
+        assert (tmp_path / name).exists(), name
+    assert res.summary[0]["runs"] == 4
+    assert (tmp_path / "t_error_vs_time.png").stat().st_size > 10_000
+    assert (tmp_path / "example_map.png").exists() or (tmp_path / "example_map.txt").exists()
+    assert (tmp_path / "final_by_run.csv").exists()
