@@ -7,7 +7,8 @@ baselines, all reading one measurement stream and scored by one Procrustes evalu
 from .errors import (BomgraphError, ConfigError, DatasetError, DegenerateGeometryError,
                      EvaluationError, StreamFormatError, UnknownMethodError)
 from .mapper import MapEstimate, Mapper, RunResult, create_mapper, run
-from .stream import Prior, Step, Stream, StreamHeader, Truth, read_stream, write_stream
+from .stream import Prior, Step, Stream, StreamHeader, Truth
+from .stream_file import read_stream, write_stream
 
 __version__ = "0.1.0"
 

@@ -28,7 +28,8 @@ from .evaluate import score_checkpoints, score_estimate
 from .experiments import Experiment, SimSource, Task
 from .jsonio import jsonable
 from .mapper import MapEstimate, RunResult, create_mapper, method_info, run
-from .stream import Stream, StreamReader
+from .stream import Stream
+from .stream_file import StreamReader
 
 #: Bump to invalidate every cached result (the code fingerprint covers code changes).
 CACHE_VERSION = 1

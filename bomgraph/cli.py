@@ -45,7 +45,7 @@ def _positive_int(text: str) -> int:
 
 def cmd_simulate(args: argparse.Namespace) -> int:
     from .sim import SimConfig, make_priors, simulate, with_priors
-    from .stream import write_stream
+    from .stream_file import write_stream
 
     config = SimConfig(n_landmarks=args.landmarks, n_steps=args.steps,
                        sensor_range_m=args.sensor_range, noise_scale=args.noise_scale,
@@ -65,7 +65,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
 def cmd_run(args: argparse.Namespace) -> int:
     from .bench import run_file
     from .jsonio import parse_options
-    from .mapper import write_estimate
+    from .estimate_file import write_estimate
 
     result = run_file(args.stream, args.method, parse_options(args.option),
                       checkpoint_every=args.checkpoint_every, allow_truth=args.allow_truth)
@@ -132,7 +132,7 @@ def cmd_compare(args: argparse.Namespace) -> int:
 
 
 def _report_import(stream: Any, out: str) -> int:
-    from .stream import write_stream
+    from .stream_file import write_stream
 
     write_stream(stream, out)
     n_brg = sum(len(st.landmark_ids) for st in stream.steps)

@@ -1,7 +1,12 @@
 """Strict JSON helpers shared by the stream, the estimate file, the cache and the CLI.
 
 - :func:`jsonable`: the one sanitiser that turns numpy values, tuples and non-finite floats
-  into plain JSON values (non-finite floats become ``null``: strict JSON has no NaN).
+  into plain JSON values (non-finite floats become ``null``: strict JSON has no NaN; with
+  ``strict=True`` they, and objects JSON cannot hold, are refused instead).
+- Strict reading: :func:`loads_strict` parses one JSON text refusing duplicate keys
+  (:class:`DuplicateKeyError`); :func:`find_nonfinite` names the first NaN/Infinity in parsed
+  data; :func:`is_int`, :func:`is_id`, :func:`is_num` test JSON values without accepting
+  booleans as numbers; :func:`decode_utf8` turns a raw line into text.
 - :func:`parse_option_value` / :func:`parse_options`: the one parser of ``key=value`` method
   options (from ``--option`` and from scripts). Values are JSON where they parse as JSON;
   ``inf``, ``+inf``, ``-inf``, ``Infinity`` and ``-Infinity`` are infinities; anything else is
@@ -22,29 +27,117 @@ _INFINITIES = {"inf": math.inf, "+inf": math.inf, "infinity": math.inf, "+infini
                "-inf": -math.inf, "-infinity": -math.inf}
 
 
-def jsonable(value: Any, *, max_items: int | None = None) -> Any:
+def jsonable(value: Any, *, max_items: int | None = None, strict: bool = False) -> Any:
     """``value`` as plain JSON data.
 
     Numpy scalars become Python numbers, arrays/tuples/lists become lists, mappings become
     dicts with string keys, non-finite floats become ``None``. A sequence longer than
     ``max_items`` (when given) and any other object become ``None``.
+
+    With ``strict=True`` a non-finite float raises ``ValueError`` and an object JSON cannot
+    hold raises ``TypeError`` (for data that must survive a file unchanged, e.g. stream meta).
     """
-    if value is None or isinstance(value, str):
+    if value is None:
         return value
+    if isinstance(value, str):
+        return str(value)
     if isinstance(value, (bool, np.bool_)):
         return bool(value)
     if isinstance(value, (int, np.integer)):
         return int(value)
     if isinstance(value, (float, np.floating)):
         v = float(value)
-        return v if math.isfinite(v) else None
+        if math.isfinite(v):
+            return v
+        if strict:
+            raise ValueError(f"non-finite number {v} is not allowed")
+        return None
     if isinstance(value, Mapping):
-        return {str(k): jsonable(v, max_items=max_items) for k, v in value.items()}
+        return {str(k): jsonable(v, max_items=max_items, strict=strict)
+                for k, v in value.items()}
     if isinstance(value, (list, tuple, np.ndarray)):
         if max_items is not None and len(value) > max_items:
             return None
-        return [jsonable(v, max_items=max_items) for v in value]
+        return [jsonable(v, max_items=max_items, strict=strict) for v in value]
+    if strict:
+        raise TypeError(f"Object of type {type(value).__name__} is not JSON serializable")
     return None
+
+
+# --------------------------------------------------------------------------------------------
+# Strict reading
+# --------------------------------------------------------------------------------------------
+
+MAX_ID = int(np.iinfo(np.int64).max)
+"""The largest landmark id or step index a file may carry (fits int64)."""
+
+
+def is_int(v: Any) -> bool:
+    """A JSON integer (``True``/``False`` are not integers here)."""
+    return isinstance(v, int) and not isinstance(v, bool)
+
+
+def is_id(v: Any) -> bool:
+    """A landmark id or step index: a JSON integer in ``[0, MAX_ID]``."""
+    return is_int(v) and 0 <= v <= MAX_ID
+
+
+def is_num(v: Any) -> bool:
+    """A JSON number that fits a float (booleans and huge integers do not)."""
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        return False
+    if isinstance(v, int):
+        try:
+            return math.isfinite(float(v))
+        except OverflowError:
+            return False
+    return True
+
+
+class DuplicateKeyError(Exception):
+    """A key appears twice in one JSON object; ``args[0]`` is the key."""
+
+
+def no_duplicate_keys(pairs: list[tuple[str, Any]]) -> dict:
+    """``object_pairs_hook`` for :mod:`json` that refuses a repeated key."""
+    out: dict = {}
+    for k, v in pairs:
+        if k in out:
+            raise DuplicateKeyError(k)
+        out[k] = v
+    return out
+
+
+def loads_strict(text: str) -> Any:
+    """``json.loads`` that raises :class:`DuplicateKeyError` on a repeated key.
+
+    ``NaN``/``Infinity`` parse as floats so that :func:`find_nonfinite` can name where they
+    are (the caller refuses them with the key).
+    """
+    return json.loads(text, parse_constant=float, object_pairs_hook=no_duplicate_keys)
+
+
+def find_nonfinite(obj: Any, where: str = "") -> str | None:
+    """The path (``a.b[2]``) of the first non-finite float in parsed JSON data, or None.
+
+    Walks the data with an explicit stack, so any nesting depth the JSON parser accepted is
+    checked without recursion."""
+    stack: list[tuple[Any, str]] = [(obj, where)]
+    while stack:
+        node, at = stack.pop()
+        if isinstance(node, float):
+            if not math.isfinite(node):
+                return at
+        elif isinstance(node, dict):
+            stack.extend(reversed([(v, f"{at}.{k}" if at else str(k)) for k, v in node.items()]))
+        elif isinstance(node, list):
+            stack.extend(reversed([(v, f"{at}[{k}]") for k, v in enumerate(node)]))
+    return None
+
+
+def decode_utf8(raw: bytes) -> str:
+    """One raw line as text; ``UnicodeDecodeError`` says at which byte it is not UTF-8."""
+    return raw.decode("utf-8")
 
 
 def parse_option_value(text: str) -> Any:
@@ -79,4 +172,5 @@ def parse_options(pairs: Sequence[str]) -> dict[str, Any]:
     return out
 
 
-__all__ = ["jsonable", "parse_option_value", "parse_options"]
+__all__ = ["jsonable", "parse_option_value", "parse_options", "MAX_ID", "is_int", "is_id",
+           "is_num", "DuplicateKeyError", "no_duplicate_keys", "loads_strict", "find_nonfinite"]

@@ -12,15 +12,13 @@ use, so ``bomgraph`` names the ``baselines`` methods without importing them.
 from __future__ import annotations
 
 import importlib
-import json
-import os
 import time
 from dataclasses import dataclass, field
 from typing import Any, Callable, Iterable, Mapping, Protocol, runtime_checkable
 
 import numpy as np
 
-from .errors import ConfigError, StreamFormatError, UnknownMethodError
+from .errors import ConfigError, UnknownMethodError
 from .stream import Step, StreamHeader, Truth
 
 
@@ -190,7 +188,7 @@ def run(mapper: Mapper, steps: Iterable[Step], *, checkpoint_every: int = 10,
     ----------
     mapper : Mapper
     steps : iterable of Step
-        May be a lazy :class:`~bomgraph.stream.StreamReader`.
+        May be a lazy :class:`~bomgraph.stream_file.StreamReader`.
     checkpoint_every : int
         The paper maps every 10 steps (t = 10, 20, ...); the final step is always a checkpoint.
     method : str, optional
@@ -322,146 +320,6 @@ def create_mapper(name: str, header: StreamHeader, *, truth: Truth | None = None
         raise ConfigError(f"method {name!r}: bad options {sorted(options)}: {exc}") from None
 
 
-# --------------------------------------------------------------------------------------------
-# The estimate file (STREAM_FORMAT.md, last section)
-# --------------------------------------------------------------------------------------------
-
-ESTIMATE_FORMAT = "bomgraph-estimate"
-
-
-def _estimate_parts(est: MapEstimate) -> dict[str, Any]:
-    out: dict[str, Any] = {"landmarks": [[int(i), float(x), float(y)] for i, (x, y)
-                                         in zip(est.landmark_ids, est.landmarks_xy)]}
-    if est.poses is not None:
-        out["poses"] = [[int(t), float(p[0]), float(p[1]), float(p[2])]
-                        for t, p in zip(est.pose_t, est.poses)]
-    return out
-
-
-def estimate_to_json(result: RunResult) -> dict[str, Any]:
-    """The estimate file of a run: the final map, every checkpoint and the timings."""
-    obj: dict[str, Any] = {"format": ESTIMATE_FORMAT, "version": 1, "method": result.method}
-    obj.update(_estimate_parts(result.final))
-    obj["checkpoints"] = [{"t": c.t, **_estimate_parts(c.estimate)} for c in result.checkpoints]
-    obj["timing_s"] = result.timing()
-    return obj
-
-
-def write_estimate(result: RunResult, path: str | os.PathLike[str]) -> None:
-    with open(path, "w", encoding="utf-8") as fh:
-        json.dump(estimate_to_json(result), fh, allow_nan=False)
-        fh.write("\n")
-
-
-@dataclass(frozen=True)
-class EstimateFile:
-    """An estimate file read back: the final map and the checkpoints."""
-
-    method: str
-    final: MapEstimate
-    checkpoints: tuple[Checkpoint, ...]
-    timing_s: Mapping[str, float]
-
-
-_ESTIMATE_KEYS = {"format", "version", "method", "landmarks", "poses", "checkpoints",
-                  "timing_s"}
-_CHECKPOINT_KEYS = {"t", "landmarks", "poses"}
-
-
-def _parse_estimate_parts(obj: Mapping[str, Any], path: str, where: str) -> MapEstimate:
-    from .stream import _is_id, _is_num
-
-    def bad(key: str, msg: str) -> StreamFormatError:
-        return StreamFormatError(msg, path=path, key=f"{where}{key}")
-
-    lms = obj.get("landmarks")
-    if not isinstance(lms, list):
-        raise bad("landmarks", "missing or not a list of [id, x_m, y_m]")
-    ids, xy = [], []
-    for k, e in enumerate(lms):
-        if not (isinstance(e, list) and len(e) == 3 and _is_id(e[0]) and _is_num(e[1])
-                and _is_num(e[2])):
-            raise bad(f"landmarks[{k}]", f"must be [id, x_m, y_m] with a non-negative integer "
-                                         f"id, got {json.dumps(e)[:60]}")
-        ids.append(e[0])
-        xy.append((float(e[1]), float(e[2])))
-    if len(set(ids)) != len(ids):
-        raise bad("landmarks", "a landmark id appears twice")
-    pose_t = poses = None
-    if obj.get("poses") is not None:
-        if not isinstance(obj["poses"], list):
-            raise bad("poses", "must be a list of [t, x_m, y_m, psi_rad]")
-        ts, ps = [], []
-        for k, e in enumerate(obj["poses"]):
-            if not (isinstance(e, list) and len(e) == 4 and _is_id(e[0])
-                    and all(_is_num(v) for v in e[1:])):
-                raise bad(f"poses[{k}]", f"must be [t, x_m, y_m, psi_rad] with an integer "
-                                         f"t >= 0, got {json.dumps(e)[:60]}")
-            ts.append(e[0])
-            ps.append([float(v) for v in e[1:]])
-        if len(set(ts)) != len(ts):
-            raise bad("poses", "a step t appears twice")
-        pose_t, poses = np.array(ts, dtype=np.int64), np.array(ps).reshape(-1, 3)
-    return MapEstimate(np.array(ids, dtype=np.int64), np.array(xy).reshape(-1, 2),
-                       pose_t=pose_t, poses=poses)
-
-
-def read_estimate(path: str | os.PathLike[str]) -> EstimateFile:
-    """Read an estimate file written by ``bomgraph run`` (strictly: unknown keys, duplicate
-    keys and malformed entries are refused, naming the file and the key)."""
-    from .stream import _DuplicateKey, _is_id, _no_duplicate_keys
-
-    path = str(path)
-    try:
-        with open(path, encoding="utf-8") as fh:
-            obj = json.load(fh, object_pairs_hook=_no_duplicate_keys)
-    except OSError as exc:
-        raise StreamFormatError(f"cannot open: {exc.strerror}", path=path) from None
-    except _DuplicateKey as exc:
-        raise StreamFormatError("appears twice in one object", path=path, key=str(exc)) from None
-    except (json.JSONDecodeError, UnicodeDecodeError, RecursionError, ValueError) as exc:
-        raise StreamFormatError(f"not a JSON estimate file ({type(exc).__name__})",
-                                path=path) from None
-    if not isinstance(obj, dict) or obj.get("format") != ESTIMATE_FORMAT:
-        raise StreamFormatError(f"must be a JSON object with \"format\": \"{ESTIMATE_FORMAT}\"",
-                                path=path, key="format")
-    version = obj.get("version")
-    if not (isinstance(version, int) and not isinstance(version, bool) and version == 1):
-        raise StreamFormatError("unknown version; this reader knows version 1", path=path,
-                                key="version")
-    unknown = sorted(set(obj) - _ESTIMATE_KEYS)
-    if unknown:
-        raise StreamFormatError(f"unknown key; allowed: {', '.join(sorted(_ESTIMATE_KEYS))}",
-                                path=path, key=unknown[0])
-    if not isinstance(obj.get("method", ""), str):
-        raise StreamFormatError("must be a string", path=path, key="method")
-    final = _parse_estimate_parts(obj, path, "")
-    raw_cps = obj.get("checkpoints") or []
-    if not isinstance(raw_cps, list):
-        raise StreamFormatError("must be a list of {t, landmarks, poses}", path=path,
-                                key="checkpoints")
-    cps = []
-    for k, c in enumerate(raw_cps):
-        if not isinstance(c, dict) or not _is_id(c.get("t")):
-            raise StreamFormatError("each checkpoint needs an integer t >= 0", path=path,
-                                    key=f"checkpoints[{k}].t")
-        extra = sorted(set(c) - _CHECKPOINT_KEYS)
-        if extra:
-            raise StreamFormatError("unknown key in a checkpoint", path=path,
-                                    key=f"checkpoints[{k}].{extra[0]}")
-        if cps and c["t"] <= cps[-1].t:
-            raise StreamFormatError("checkpoints must be in increasing t", path=path,
-                                    key=f"checkpoints[{k}].t")
-        cps.append(Checkpoint(c["t"], _parse_estimate_parts(c, path, f"checkpoints[{k}]."),
-                              0.0))
-    timing = obj.get("timing_s") or {}
-    if not isinstance(timing, dict) or not all(
-            isinstance(v, (int, float)) and not isinstance(v, bool) for v in timing.values()):
-        raise StreamFormatError("must be an object of numbers", path=path, key="timing_s")
-    return EstimateFile(str(obj.get("method", "")), final, tuple(cps), dict(timing))
-
-
 __all__ = ["MapEstimate", "Mapper", "Checkpoint", "RunResult", "run", "checkpoint_times",
            "MethodInfo", "register_method", "available_methods", "method_info",
-           "method_factory", "create_mapper", "estimate_to_json", "write_estimate",
-           "read_estimate", "EstimateFile"]
+           "method_factory", "create_mapper"]

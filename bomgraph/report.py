@@ -25,9 +25,9 @@ from .bench import Executor, execute, run_example
 from .errors import EvaluationError
 from .evaluate import MapScore, error_table, score_estimate
 from .experiments import PAPER_REPORTED, Experiment
-from .mapper import read_estimate
+from .estimate_file import read_estimate
 from .plots import MapPanel, error_vs_time_figure, final_maps_figure, map_figure
-from .stream import read_stream
+from .stream_file import read_stream
 
 #: The checkpoints the summary reports (and the last one of each experiment).
 REPORT_TIMES = (50, 100, 200, 300)

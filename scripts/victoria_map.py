@@ -55,7 +55,8 @@ from bomgraph.errors import BomgraphError, TooFewLandmarksError
 from bomgraph.evaluate import Alignment, score_estimate
 from bomgraph.experiments import Arm
 from bomgraph.jsonio import jsonable
-from bomgraph.mapper import MapEstimate, RunResult, create_mapper, run, write_estimate
+from bomgraph.estimate_file import write_estimate
+from bomgraph.mapper import MapEstimate, RunResult, create_mapper, run
 from bomgraph.report import write_csv
 from bomgraph.stream import Step, Stream, Truth
 
@@ -256,7 +257,7 @@ def victoria_maps(stream: Stream, specs: Iterable[Arm], out_dir: str | Path, *,
                      f"{', ' + o.error if o.error else ''}")
     rows, alignments = summarise(outcomes, stream)
     (out / "estimates").mkdir(exist_ok=True)
-    for o in outcomes:   # the maps themselves, to be read back with bomgraph.mapper.read_estimate
+    for o in outcomes:   # the maps themselves, to be read back with bomgraph.estimate_file.read_estimate
         if o.result is not None:   # the final checkpoint only (all of them: ~20 MB each)
             r = o.result
             write_estimate(RunResult(r.method, r.checkpoints[-1:], r.step_s, r.total_s),

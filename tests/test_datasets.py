@@ -26,7 +26,7 @@ from bomgraph.datasets.victoria import import_victoria
 from bomgraph.errors import ConfigError, DatasetError
 from bomgraph.geometry import between, bearings_to
 from bomgraph.sim import SimConfig, simulate
-from bomgraph.stream import read_stream, write_stream
+from bomgraph.stream_file import read_stream, write_stream
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 needs_data = pytest.mark.skipif(not DATA.is_dir(), reason=f"no shared data at {DATA}")

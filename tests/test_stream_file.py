@@ -12,8 +12,8 @@ from hypothesis import strategies as st
 
 from bomgraph.errors import StreamFormatError
 from bomgraph.sim import SimConfig, paper_design, simulate_run
-from bomgraph.stream import (Prior, Step, Stream, StreamHeader, StreamReader, Truth,
-                             read_stream, write_stream)
+from bomgraph.stream import Prior, Step, Stream, StreamHeader, Truth
+from bomgraph.stream_file import StreamReader, read_stream, write_stream
 
 HEADER = {"format": "bomgraph-stream", "version": 1, "bearing_sigma_rad": 0.0524,
           "odometry_sigma": [0.03, 0.0, 0.0524], "sensor_range_m": 1.0,

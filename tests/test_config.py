@@ -1,0 +1,49 @@
+"""The one preset mechanism: Presets.preset and resolve."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import ClassVar
+
+import pytest
+
+from bomgraph.config import Presets, resolve
+from bomgraph.errors import ConfigError
+
+
+@dataclass(frozen=True)
+class Toy(Presets):
+    a: int = 1
+    b: float = 2.0
+
+    PRESETS: ClassVar = {"paper": {}, "big": {"a": 10}}
+
+    def __post_init__(self) -> None:
+        if not self.a > 0:
+            raise ConfigError("a must be > 0")
+
+
+def test_presets_apply_overrides_and_refuse_unknowns() -> None:
+    assert Toy.preset() == Toy()
+    assert Toy.preset("big") == Toy(a=10)
+    assert Toy.preset("big", b=3.0) == Toy(a=10, b=3.0)
+    assert Toy.preset_names() == ("paper", "big")
+    with pytest.raises(ConfigError, match="unknown Toy preset 'huge'"):
+        Toy.preset("huge")
+    with pytest.raises(ConfigError, match="unknown option.*c.*valid options: a, b"):
+        Toy.preset(c=1)
+    with pytest.raises(ConfigError, match="bad option value"):
+        Toy.preset(a="abc")  # '>' between str and int: a TypeError becomes a ConfigError
+
+
+def test_resolve_takes_a_config_alone_or_a_preset_with_options() -> None:
+    cfg = Toy(a=5)
+    assert resolve(Toy, cfg) is cfg
+    assert resolve(Toy, None, "big", {"b": 1.0}) == Toy(a=10, b=1.0)
+    assert resolve(Toy, None, None, {}) == Toy()
+    with pytest.raises(ConfigError, match="not both"):
+        resolve(Toy, cfg, "big")
+    with pytest.raises(ConfigError, match="not both"):
+        resolve(Toy, cfg, None, {"a": 2})
+    with pytest.raises(ConfigError, match="must be a Toy"):
+        resolve(Toy, object())  # type: ignore[arg-type]

@@ -1,0 +1,50 @@
+"""The shared JSON helpers: the sanitiser, strict reading, the option parser."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from bomgraph.errors import ConfigError
+from bomgraph.jsonio import (DuplicateKeyError, find_nonfinite, is_id, is_num, jsonable,
+                             loads_strict, parse_option_value, parse_options)
+
+
+def test_jsonable_plain_values_numpy_and_non_finite() -> None:
+    got = jsonable({"a": np.float64(1.5), "b": np.int64(3), "c": (1, np.nan), 4: np.array([2.0]),
+                    "d": np.bool_(True), "e": object()})
+    assert got == {"a": 1.5, "b": 3, "c": [1, None], "4": [2.0], "d": True, "e": None}
+    assert jsonable([1, 2, 3], max_items=2) is None
+    with pytest.raises(ValueError):
+        jsonable({"x": math.inf}, strict=True)
+    with pytest.raises(TypeError):
+        jsonable({"x": object()}, strict=True)
+
+
+def test_strict_reading_refuses_duplicates_and_finds_non_finite() -> None:
+    with pytest.raises(DuplicateKeyError):
+        loads_strict('{"a": 1, "a": 2}')
+    assert find_nonfinite(loads_strict('{"a": [1, {"b": NaN}]}')) == "a[1].b"
+    assert find_nonfinite({"a": [1.0, 2.0]}) is None
+    deep: list = [math.inf]
+    for _ in range(5000):  # deeper than the interpreter's recursion limit
+        deep = [deep]
+    assert find_nonfinite(deep) is not None
+    assert is_id(2**63 - 1) and not is_id(2**63) and not is_id(True) and not is_id(-1)
+    assert is_num(1e300) and not is_num(10**400) and not is_num(False)
+
+
+def test_option_parser_accepts_infinity_and_refuses_nan() -> None:
+    got = parse_options(["a=inf", "b=-Infinity", "c=3", "d=abc", "e=[1, 2]", "f=null",
+                         "g=1e-3", "h=true"])
+    assert got == {"a": math.inf, "b": -math.inf, "c": 3, "d": "abc", "e": [1, 2], "f": None,
+                   "g": 1e-3, "h": True}
+    assert parse_option_value("Infinity") == math.inf
+    for bad in ("nan", "NaN"):
+        with pytest.raises(ConfigError, match="NaN"):
+            parse_option_value(bad)
+    for bad in ("novalue", "=3"):
+        with pytest.raises(ConfigError):
+            parse_options([bad])
