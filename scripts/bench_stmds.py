@@ -6,7 +6,7 @@ at t = 300 next to the paper's 4.78 / 2.87 cm, for
 
 * ``literal``: the paper read literally (eq. 3-4 with ``fusion="paper"``);
 * ``default``: the paper's method with the corrected fusion rule (the mapper's defaults);
-* ``improved``: the best variant measured (``StmdsConfig.improved()``: 4-step triangulation
+* ``improved``: the best variant measured (preset ``"improved"``: 4-step triangulation
   baseline, ``"relative"`` fusion, inverse-variance SMACOF weights, a 1.3 x range gate);
 
 then every fusion rule for Method 2 at the paper's triangulation and at the improved settings,
@@ -32,6 +32,7 @@ from joblib import Parallel, delayed
 from bomgraph.evaluate import error_table
 from bomgraph.mapper import create_mapper, run
 from bomgraph.sim import SimConfig, paper_design, simulate_run
+from bomgraph.stmds.distances import FUSION_RULES
 
 RESULTS = Path(__file__).resolve().parents[1] / "results"
 PAPER = {"stmds-cs": 4.78, "stmds-smacof": 2.87}
@@ -42,7 +43,6 @@ VARIANTS = {
     "default": {},
     "improved": {"preset": "improved"},
 }
-FUSION_RULES = ("paper", "fused", "relative", "scale-free", "predicted")
 
 
 def one_run(spec, method: str, options: dict, sim: SimConfig, prior_fraction: float) -> dict:

@@ -424,7 +424,7 @@ def bundle_pair_squared_distances(bundle: WindowBundle) -> PairEstimates:
     d = (blocks[first, first] + blocks[second, second] - blocks[first, second]
          - blocks[second, first])
     var = 4.0 * np.einsum("pa,pab,pb->p", e, d, e)
-    return PairEstimates(first, second, np.einsum("pa,pa->p", e, e), var, None, None)
+    return PairEstimates(first, second, np.einsum("pa,pa->p", e, e), var, None)
 
 
 __all__ = ["SIGMA_FLOOR", "WindowBundle", "bundle_adjust_window",

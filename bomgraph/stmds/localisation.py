@@ -81,8 +81,7 @@ class RobotPoses:
 
     def ranges(self, k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Fused robot-landmark distances of pose ``k``: (landmark, distance_m, variance_m2)."""
-        d, v = fused_from_sums(self.fusion if self.fusion != "predicted" else "scale-free",
-                               self.rl_w[k], self.rl_wd[k])
+        d, v = fused_from_sums(self.fusion, self.rl_w[k], self.rl_wd[k])
         return self.rl_idx[k], d, v
 
     def relative_poses(self) -> np.ndarray:

@@ -252,10 +252,9 @@ class StmdsMapper:
             self._robots.add_ranges(last, idx[ok], tri.range_now_m[ok], var_r2[ok])
         if n_ok < 2:
             return
-        pairs = pair_squared_distances(tri, odo_unc, self._bearing_sigma, select=ok,
-                                       with_translation=self._store.fusion == "predicted")
+        pairs = pair_squared_distances(tri, odo_unc, self._bearing_sigma, select=ok)
         self._store.add(idx[pairs.first], idx[pairs.second], pairs.squared_distance_m2,
-                        pairs.variance_m4, pairs.translation_variance_m4)
+                        pairs.variance_m4)
 
     # ------------------------------------------------------------------------------ map
     def _base_info(self) -> dict[str, Any]:

@@ -319,11 +319,6 @@ class PairEstimates:
         ``|p_i - p_j|^2``.
     variance_m4 : ndarray of shape (P,)
         First-order variance ``J Sigma J^T`` of the squared distance (eq. 2).
-    translation_variance_m4 : ndarray of shape (P,) or None
-        (When asked for.) The part of ``variance_m4`` due to the odometry translation
-        ``(dx, dy)`` alone (it
-        scales like ``d^2`` under a change of scale; the rest, from the bearings and the
-        turn, like ``d^4`` for the distance's variance).
     jacobian : ndarray of shape (P, 7) or None
         ``d |p_i - p_j|^2 / d [dx, dy, dpsi, theta_i_prev, theta_i_now, theta_j_prev,
         theta_j_now]`` (only when asked for).
@@ -333,7 +328,6 @@ class PairEstimates:
     second: np.ndarray
     squared_distance_m2: np.ndarray
     variance_m4: np.ndarray
-    translation_variance_m4: np.ndarray | None = None
     jacobian: np.ndarray | None = None
 
     def __len__(self) -> int:
@@ -342,7 +336,6 @@ class PairEstimates:
 
 def pair_squared_distances(tri: RayTriangulation, odometry: ArrayLike,
                            bearing_sigma_rad: float, *, select: np.ndarray | None = None,
-                           with_translation: bool = False,
                            with_jacobian: bool = False) -> PairEstimates:
     """Squared distance and its first-order variance for every pair of ``tri``'s landmarks.
 
@@ -356,8 +349,6 @@ def pair_squared_distances(tri: RayTriangulation, odometry: ArrayLike,
     bearing_sigma_rad : float
     select : array of int, optional
         Only pairs among these landmarks (e.g. those that passed :func:`gate_points`).
-    with_translation : bool
-        Also return the part of the variance due to the odometry translation.
     with_jacobian : bool
         Also return the ``(P, 7)`` Jacobian (tests; the variance never needs it).
 
@@ -384,21 +375,16 @@ def pair_squared_distances(tri: RayTriangulation, odometry: ArrayLike,
     grad = np.concatenate((gi[:, :3] - gj[:, :3], gi[:, 3:], gj[:, 3:]), axis=1)
     if unc.shape == (3,):                                       # independent components
         var = (grad * grad) @ np.concatenate((4.0 * unc * unc, np.full(4, 4.0 * sb2)))
-        cov_odo = np.diag(unc * unc)
     else:
         cov7 = np.zeros((7, 7))
-        cov7[:3, :3] = cov_odo = odometry_covariance(unc)
+        cov7[:3, :3] = odometry_covariance(unc)
         cov7.flat[24::8] = sb2                                  # the four bearings
         var = 4.0 * ((grad @ cov7) * grad).sum(axis=1)
-    tvar = None
-    if with_translation:
-        g_t = grad[:, :2]
-        tvar = 4.0 * ((g_t @ cov_odo[:2, :2]) * g_t).sum(axis=1)
     full = None
     if with_jacobian:
         full = 2.0 * grad
         full[:, 5:] *= -1.0
-    return PairEstimates(first, second, d2, var, tvar, full)
+    return PairEstimates(first, second, d2, var, full)
 
 
 __all__ = ["POINT_MEASUREMENTS", "PAIR_MEASUREMENTS", "RayTriangulation", "PairEstimates",

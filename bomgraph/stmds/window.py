@@ -362,7 +362,7 @@ def window_pair_squared_distances(tri: WindowTriangulation, odometry_sigmas: Arr
     Returns
     -------
     PairEstimates
-        As :func:`pair_squared_distances` (no translation part).
+        As :func:`~bomgraph.stmds.triangulation.pair_squared_distances`.
     """
     if select is None:
         first, second = pair_indices(len(tri))
@@ -384,7 +384,7 @@ def window_pair_squared_distances(tri: WindowTriangulation, odometry_sigmas: Arr
     full = None
     if with_jacobian:
         full = 2.0 * np.concatenate([g_odo.reshape(len(e), -1), g_i, g_j], axis=1)
-    return PairEstimates(first, second, d2, var, None, full)
+    return PairEstimates(first, second, d2, var, full)
 
 
 

@@ -187,7 +187,7 @@ def test_config_is_validated_and_options_are_checked() -> None:
 
 
 @pytest.mark.parametrize("options", [
-    {"fusion": "paper"}, {"fusion": "fused"}, {"fusion": "relative"}, {"fusion": "predicted"},
+    {"fusion": "paper"}, {"fusion": "relative"},
     {"preset": "improved"},
     {"landmark_mds_above": 10, "n_pivots": 6},          # SMACOF started from landmark MDS
     {"weights": "inverse-variance", "smacof_init": "classical", "smacof_relaxation": 1.0,
