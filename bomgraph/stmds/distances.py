@@ -19,7 +19,7 @@ under the model ``v_k(d) = v_k (d^2 / d2_k)^m``.
 
 ``"paper"`` (m = 0, averages ``d2``)
     Eq. 3-4 literally: ``d2 = sum d2_k / v_k / sum 1 / v_k``, ``var(d2) = 1 / sum 1 / v_k``.
-    Collapses: fused distances come out tens of centimetres short.
+    Collapses: fused distances come out short (``docs/measurements-stmds.md``).
 ``"relative"`` (m = 2, averages ``d``)
     Weights are the inverse *relative* variances ``d2_k / var_k(d)``, invariant to a common
     scale error of the step (the odometry length). Close to unbiased once the triangulation

@@ -100,8 +100,8 @@ def triangulate_window(odoms: ArrayLike, bearings_rad: ArrayLike, *,
         ties: the earliest pair; chosen by which poses saw the landmark, not by the measured
         values) passes the gates, in increasing column order. Choosing by the measured
         parallax, or falling back to another pair when the gates refuse the first choice,
-        would pick the pairs whose noise widened the angle: depths biased short (measured:
-        Method 2 MPE about 3x worse with the largest measured parallax).
+        would pick the pairs whose noise widened the angle: depths biased short
+        (``docs/measurements-stmds.md``).
     n_gated : int
         Landmarks seen from two poses or more with no passing pair.
     """
