@@ -60,6 +60,14 @@ def pair_indices(k: int) -> tuple[np.ndarray, np.ndarray]:
     return hit
 
 
+def select_pairs(k: int, select: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """All pairs ``first < second`` of ``k`` items, or of the items ``select`` (index array)."""
+    if select is None:
+        return pair_indices(k)
+    f, g = pair_indices(len(select))
+    return select[f], select[g]
+
+
 class _TwoRayResult:
     """What the two-ray triangulation results share: length and parallax."""
 
@@ -357,11 +365,7 @@ def pair_squared_distances(tri: RayTriangulation, odometry: ArrayLike,
     PairEstimates
         The pairs ``(first, second)`` index ``tri``; in ``np.triu_indices`` order of ``select``.
     """
-    if select is None:
-        first, second = pair_indices(len(tri))
-    else:
-        f, g = pair_indices(len(select))
-        first, second = select[f], select[g]
+    first, second = select_pairs(len(tri), select)
     unc = np.asarray(odometry, dtype=float)
     sb2 = float(bearing_sigma_rad) ** 2
     # e . dp/dz = Re(e conj(dp/dz)) for the offset e = p_i - p_j (complex plane)
@@ -388,6 +392,6 @@ def pair_squared_distances(tri: RayTriangulation, odometry: ArrayLike,
 
 
 __all__ = ["POINT_MEASUREMENTS", "PAIR_MEASUREMENTS", "RayTriangulation", "PairEstimates",
-           "pair_indices", "triangulate_rays", "odometry_covariance", "compose_odometry",
+           "pair_indices", "select_pairs", "triangulate_rays", "odometry_covariance", "compose_odometry",
            "point_covariance", "range_jacobians", "range_variances", "gate_points",
            "pair_squared_distances"]

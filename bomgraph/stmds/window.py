@@ -24,7 +24,7 @@ from numpy.typing import ArrayLike
 from ..angles import angle_residual
 from ..errors import ConfigError
 from ..geometry import effective_parallax
-from .triangulation import PairEstimates, _TwoRayResult, pair_indices
+from .triangulation import PairEstimates, _TwoRayResult, select_pairs
 
 
 @dataclass(frozen=True, eq=False)
@@ -78,6 +78,26 @@ def _ray_intersections(z_a: np.ndarray, z_b: np.ndarray, ua: np.ndarray, ub: np.
     return r1, r2, s, c
 
 
+def _window_chain(odoms: ArrayLike, bearings_rad: ArrayLike, caller: str
+                  ) -> tuple[np.ndarray, np.ndarray, int, np.ndarray, np.ndarray, np.ndarray]:
+    """The window's odometry chain in the complex plane, from its first pose.
+
+    Returns ``(odoms (W-1, 3), bearings (W, n), W, psi (W,), heading = exp(i psi) (W,),
+    z (W,) positions as x + i y)``. (Complex arithmetic, not ``geometry.chain_odometry``:
+    the complex product rounds differently in the last bit, and the numbers must not change.)
+    """
+    u = np.asarray(odoms, dtype=float).reshape(-1, 3)
+    brg = np.asarray(bearings_rad, dtype=float)
+    w = len(u) + 1
+    if brg.ndim != 2 or brg.shape[0] != w:
+        raise ConfigError(f"{caller}: bearings must be ({w}, n) for {w - 1} "
+                          f"increments, got shape {brg.shape}")
+    psi = np.concatenate([[0.0], np.cumsum(u[:, 2])])
+    heading = np.exp(1j * psi)
+    z = np.concatenate([[0.0], np.cumsum(heading[:-1] * (u[:, 0] + 1j * u[:, 1]))])
+    return u, brg, w, psi, heading, z
+
+
 def triangulate_window(odoms: ArrayLike, bearings_rad: ArrayLike, *,
                        min_parallax_rad: float = 0.0,
                        max_range_m: float = np.inf) -> tuple[WindowTriangulation, int]:
@@ -105,15 +125,7 @@ def triangulate_window(odoms: ArrayLike, bearings_rad: ArrayLike, *,
     n_gated : int
         Landmarks seen from two poses or more with no passing pair.
     """
-    u = np.asarray(odoms, dtype=float).reshape(-1, 3)
-    brg = np.asarray(bearings_rad, dtype=float)
-    w = len(u) + 1
-    if brg.ndim != 2 or brg.shape[0] != w:
-        raise ConfigError(f"triangulate_window: bearings must be ({w}, n) for {w - 1} "
-                          f"increments, got shape {brg.shape}")
-    psi = np.concatenate([[0.0], np.cumsum(u[:, 2])])
-    heading = np.exp(1j * psi)
-    z = np.concatenate([[0.0], np.cumsum(heading[:-1] * (u[:, 0] + 1j * u[:, 1]))])
+    u, brg, w, psi, heading, z = _window_chain(odoms, bearings_rad, "triangulate_window")
     seen = np.isfinite(brg)
     cand = np.flatnonzero(seen.sum(axis=0) >= 2)
     a_all, b_all = np.triu_indices(w, 1)
@@ -234,15 +246,7 @@ def triangulate_window_lsq(odoms: ArrayLike, bearings_rad: ArrayLike, *,
     n_gated : int
         Landmarks seen from two poses or more that failed a gate (or did not converge).
     """
-    u = np.asarray(odoms, dtype=float).reshape(-1, 3)
-    brg = np.asarray(bearings_rad, dtype=float)
-    w = len(u) + 1
-    if brg.ndim != 2 or brg.shape[0] != w:
-        raise ConfigError(f"triangulate_window_lsq: bearings must be ({w}, n) for {w - 1} "
-                          f"increments, got shape {brg.shape}")
-    psi = np.concatenate([[0.0], np.cumsum(u[:, 2])])
-    heading = np.exp(1j * psi)
-    z = np.concatenate([[0.0], np.cumsum(heading[:-1] * (u[:, 0] + 1j * u[:, 1]))])
+    u, brg, w, psi, heading, z = _window_chain(odoms, bearings_rad, "triangulate_window_lsq")
     seen = np.isfinite(brg)
     cand = np.flatnonzero(seen.sum(axis=0) >= 2)
     nc = cand.size
@@ -364,11 +368,7 @@ def window_pair_squared_distances(tri: WindowTriangulation, odometry_sigmas: Arr
     PairEstimates
         As :func:`~bomgraph.stmds.triangulation.pair_squared_distances`.
     """
-    if select is None:
-        first, second = pair_indices(len(tri))
-    else:
-        f, g = pair_indices(len(select))
-        first, second = select[f], select[g]
+    first, second = select_pairs(len(tri), select)
     sig = np.asarray(odometry_sigmas, dtype=float).reshape(-1, 3)
     pts = np.ascontiguousarray(tri.points_xy).view(np.complex128)[:, 0]
     e = pts[first] - pts[second]
