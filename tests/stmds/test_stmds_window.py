@@ -12,6 +12,7 @@ from bomgraph.geometry import bearings_to, dead_reckon, to_local
 from bomgraph.stmds.triangulation import pair_squared_distances, triangulate_rays
 from bomgraph.stmds.window import (triangulate_window, triangulate_window_lsq,
                                    window_pair_squared_distances)
+from test_stmds_triangulation import _numeric_jacobian  # the central-difference helper
 
 
 def _window_scene(rng: np.random.Generator, w: int = 6, n: int = 7):
@@ -58,15 +59,6 @@ def test_the_passing_pair_furthest_apart_is_used() -> None:
     far[-1, 0] = far[0, 0] - poses[-1, 2] + poses[0, 2]   # parallel rays from poses 0, W-1
     tri2, n_gated = triangulate_window(odoms, far, min_parallax_rad=math.radians(1.0))
     assert 0 not in tri2.column and n_gated == 1
-
-
-def _numeric_jacobian(f, z: np.ndarray, eps: float = 1e-6) -> np.ndarray:
-    cols = []
-    for k in range(len(z)):
-        dz = np.zeros_like(z)
-        dz[k] = eps
-        cols.append((f(z + dz) - f(z - dz)) / (2 * eps))
-    return np.stack(cols, axis=-1)
 
 
 def test_window_point_and_pair_jacobians_match_numeric() -> None:
