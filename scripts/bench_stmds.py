@@ -6,7 +6,7 @@ at t = 300 next to the paper's 4.78 / 2.87 cm, for
 
 * ``literal``: the paper read literally (eq. 3-4 with ``fusion="paper"``);
 * ``default``: the paper's method with the corrected fusion rule (the mapper's defaults);
-* ``improved``: the best variant measured (``StmdsConfig.improved()``: 4-step triangulation
+* ``improved``: the best variant measured (preset ``"improved"``: 4-step triangulation
   baseline, ``"relative"`` fusion, inverse-variance SMACOF weights, a 1.3 x range gate);
 
 then every fusion rule for Method 2 at the paper's triangulation and at the improved settings,
@@ -30,8 +30,10 @@ import numpy as np
 from joblib import Parallel, delayed
 
 from bomgraph.evaluate import error_table
+from bomgraph.jsonio import jsonable
 from bomgraph.mapper import create_mapper, run
 from bomgraph.sim import SimConfig, paper_design, simulate_run
+from bomgraph.stmds.distances import FUSION_RULES
 
 RESULTS = Path(__file__).resolve().parents[1] / "results"
 PAPER = {"stmds-cs": 4.78, "stmds-smacof": 2.87}
@@ -42,7 +44,6 @@ VARIANTS = {
     "default": {},
     "improved": {"preset": "improved"},
 }
-FUSION_RULES = ("paper", "fused", "relative", "scale-free", "predicted")
 
 
 def one_run(spec, method: str, options: dict, sim: SimConfig, prior_fraction: float) -> dict:
@@ -63,8 +64,7 @@ def experiment(name: str, method: str, options: dict, specs: list, jobs: int,
     mpe = np.array([r["mpe_m"] for r in runs])
     robot = np.array([r["robot_last_m"] for r in runs])
     t = runs[0]["t"]
-    out = {"name": name, "method": method, "options": {k: (list(v) if isinstance(v, tuple)
-                                                            else v) for k, v in options.items()},
+    out = {"name": name, "method": method, "options": jsonable(options),
            "n_runs": len(runs), "t": t,
            "mpe_cm_mean_curve": (100 * np.nanmean(mpe, axis=0)).round(3).tolist(),
            "mpe_cm_t300_mean": float(100 * np.nanmean(mpe[:, -1])),
@@ -137,8 +137,8 @@ def main() -> None:
                       + " ".join(f"{v:.1f}" for v in res["mpe_cm_mean_curve"]))
     RESULTS.mkdir(exist_ok=True)
     path = RESULTS / "bench_stmds.json"
-    path.write_text(json.dumps({"paper": PAPER, "paper_robot_bound_cm": PAPER_ROBOT_BOUND,
-                                "results": results}, indent=1))
+    path.write_text(json.dumps(jsonable({"paper": PAPER, "paper_robot_bound_cm": PAPER_ROBOT_BOUND,
+                                         "results": results}), indent=1))
     print(f"saved {path}")
 
     if args.sensitivity:
@@ -158,7 +158,7 @@ def main() -> None:
                     sens.append(res)
                     print(line(res, PAPER[method]), flush=True)
         spath = RESULTS / "bench_stmds_sensitivity.json"
-        spath.write_text(json.dumps({"paper": PAPER, "results": sens}, indent=1))
+        spath.write_text(json.dumps(jsonable({"paper": PAPER, "results": sens}), indent=1))
         print(f"saved {spath}")
 
 

@@ -29,6 +29,7 @@ os.environ.setdefault("MKL_NUM_THREADS", "1")
 import numpy as np  # noqa: E402
 
 from bomgraph.evaluate import score_estimate  # noqa: E402
+from bomgraph.jsonio import jsonable, parse_options  # noqa: E402
 from bomgraph.mapper import create_mapper, run  # noqa: E402
 from bomgraph.sim import SimConfig, paper_design, simulate, simulate_run  # noqa: E402
 from bomgraph.stmds.completion import shortest_path_completion  # noqa: E402
@@ -134,10 +135,10 @@ def main() -> None:
     ap.add_argument("--repeats", type=int, default=7)
     ap.add_argument("--n-big", type=int, default=1000)
     ap.add_argument("--quick", action="store_true", help="fewer steps in the big world")
-    ap.add_argument("--options", default="{}", help="mapper options as a Python dict literal")
+    ap.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
+                    help="a mapper option, e.g. preset=window-ba (repeatable)")
     args = ap.parse_args()
-    import ast
-    options = ast.literal_eval(args.options)
+    options = parse_options(args.option)
     print(f"load average (1 min) {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores: wall "
           f"times on a busy machine are inflated; CPU times are reported beside them")
     report = {"machine": {"python": platform.python_version(), "cpu": platform.processor()
@@ -165,7 +166,7 @@ def main() -> None:
                                   for k, v in r3["parts_s"].items()))
     RESULTS.mkdir(exist_ok=True)
     path = RESULTS / "bench_stmds_speed.json"
-    path.write_text(json.dumps(report, indent=2))
+    path.write_text(json.dumps(jsonable(report), indent=2))
     print(f"saved {path}")
 
 

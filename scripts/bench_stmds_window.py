@@ -29,6 +29,7 @@ from joblib import Parallel, delayed
 
 from bomgraph.errors import BomgraphError
 from bomgraph.evaluate import error_table, score_estimate
+from bomgraph.jsonio import jsonable
 from bomgraph.mapper import create_mapper, run
 from bomgraph.sim import SimConfig, paper_design, simulate_run
 
@@ -91,11 +92,10 @@ def bench_sim(runs: int, jobs: int, quick: bool) -> list[dict]:
     for w in ((6, 10) if quick else (4, 6, 8, 10, 14)):
         grid.append(("stmds-smacof", {"preset": "window", "tri_method": "lsq",
                                       "tri_window": w}))
-    grid.append(("stmds-cs", {"preset": "window", "tri_method": "lsq", "tri_window": 10}))
+    grid.append(("stmds-cs", {"preset": "window-lsq"}))
     # local bundle adjustment in the window (poses estimated with the landmarks)
-    for w, stride in ((10, None), (10, 3)):
-        grid.append(("stmds-smacof", {"preset": "window", "tri_method": "ba", "tri_window": w,
-                                      "tri_stride": stride}))
+    grid += [("stmds-smacof", {"preset": "window-ba", "tri_stride": None}),
+             ("stmds-smacof", {"preset": "window-ba"})]
     out = []
     print(f"== paper settings, {len(specs)} runs, MPE at t = 300 ==", flush=True)
     for method, options in grid:
@@ -195,7 +195,7 @@ def main() -> None:
             print(f"no real data under {DATA}; skipped")
     path = Path(args.out)
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(result, indent=1))
+    path.write_text(json.dumps(jsonable(result), indent=1))
     print(f"saved {path}")
 
 

@@ -24,13 +24,14 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 import numpy as np  # noqa: E402
 
 from bomgraph.mapper import create_mapper  # noqa: E402
+from bomgraph.jsonio import jsonable  # noqa: E402
 from bomgraph.sim import SimConfig, simulate  # noqa: E402
 
 DEFAULT_OPTIONS = (
-    {"preset": "window", "tri_method": "ba", "tri_window": 10, "tri_stride": 3},
-    {"preset": "window", "tri_method": "ba", "tri_window": 10, "tri_stride": 1},
-    {"preset": "window", "tri_method": "lsq", "tri_window": 10},
-    {"preset": "real", "tri_window": 60, "tri_stride": 10},
+    {"preset": "window-ba"},
+    {"preset": "window-ba", "tri_stride": 1},
+    {"preset": "window-lsq"},
+    {"preset": "real"},
 )
 
 
@@ -65,7 +66,7 @@ def main() -> None:
         print(f"{json.dumps(options):<80s} " + " ".join(f"{b:6.2f}" for b in row["block_ms"])
               + f"  ({row['pairs_stored']} pairs stored)", flush=True)
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
-    Path(args.out).write_text(json.dumps({"rows": rows}, indent=1))
+    Path(args.out).write_text(json.dumps(jsonable({"rows": rows}), indent=1))
     print(f"saved {args.out}")
 
 

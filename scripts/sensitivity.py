@@ -18,6 +18,7 @@ from bomgraph.bench import Executor, execute
 from bomgraph.experiments import Arm, Experiment
 from bomgraph.report import summarise
 from bomgraph.sim import SimConfig
+from bomgraph.jsonio import jsonable
 
 PAPER = {"stmds-cs": 0.0478, "stmds-smacof": 0.0287}
 
@@ -50,7 +51,7 @@ def main() -> None:
     print("paper            " + "  ".join(f"{m}: {100 * PAPER[m]:6.2f} cm" for m in methods
                                           if m in PAPER))
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
-    Path(args.out).write_text(json.dumps({"table": table, "paper": PAPER}, indent=1))
+    Path(args.out).write_text(json.dumps(jsonable({"table": table, "paper": PAPER}), indent=1))
 
 
 if __name__ == "__main__":

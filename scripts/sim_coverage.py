@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from bomgraph.sim import SimConfig, paper_design, simulate_run
+from bomgraph.jsonio import jsonable
 
 
 def first_all_seen(seed: int, config: SimConfig) -> list[int | None]:
@@ -44,7 +45,7 @@ def main() -> None:
     print(f"runs with every landmark seen by t = 50: {summary['runs_all_seen_by_50']} of 25; "
           f"median first time {summary['median']:.0f}, worst {summary['worst']:.0f}")
     Path("results").mkdir(exist_ok=True)
-    Path("results/sim_coverage.json").write_text(json.dumps(summary, indent=1))
+    Path("results/sim_coverage.json").write_text(json.dumps(jsonable(summary), indent=1))
 
 
 if __name__ == "__main__":

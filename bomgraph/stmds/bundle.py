@@ -34,8 +34,8 @@ from numpy.typing import ArrayLike
 from ..angles import angle_residual
 from ..errors import ConfigError
 from ..geometry import between, dead_reckon, effective_parallax, to_local
-from .triangulation import (PairEstimates, pair_indices,
-                            triangulate_window_lsq)
+from .triangulation import PairEstimates, pair_indices
+from .window import triangulate_window_lsq
 
 #: Odometry std. devs. below this (m or rad) are raised to it: a zero std. dev. (the paper's
 #: simulator has no lateral slip, ``sigma_dy = 0``) would be an infinite weight, and a tiny one
@@ -424,7 +424,7 @@ def bundle_pair_squared_distances(bundle: WindowBundle) -> PairEstimates:
     d = (blocks[first, first] + blocks[second, second] - blocks[first, second]
          - blocks[second, first])
     var = 4.0 * np.einsum("pa,pab,pb->p", e, d, e)
-    return PairEstimates(first, second, np.einsum("pa,pa->p", e, e), var, None, None)
+    return PairEstimates(first, second, np.einsum("pa,pa->p", e, e), var, None)
 
 
 __all__ = ["SIGMA_FLOOR", "WindowBundle", "bundle_adjust_window",

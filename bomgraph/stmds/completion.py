@@ -118,8 +118,11 @@ def prune_low_degree(n: int, first: np.ndarray, second: np.ndarray,
 
 
 def shortest_path_completion(n: int, first: np.ndarray, second: np.ndarray,
-                             distance_m: np.ndarray, *, keep_known: bool = True) -> np.ndarray:
+                             distance_m: np.ndarray) -> np.ndarray:
     """The distance matrix with missing entries completed by shortest paths (DMC-SPL).
+
+    Known pairs keep their fused distance (the paper); only missing entries take the shortest
+    path length.
 
     Returns a dense symmetric ``(n, n)`` array of distances (zero diagonal, ``inf`` where no
     path exists).
@@ -132,16 +135,12 @@ def shortest_path_completion(n: int, first: np.ndarray, second: np.ndarray,
         Edges (dense indices).
     distance_m : array of shape (P,)
         Edge lengths (distances, not squared).
-    keep_known : bool
-        True (the paper): known pairs keep their fused distance and only missing entries take
-        the shortest path length. False: every entry is a shortest path length (ISOMAP), which
-        also shortens known pairs that violate the triangle inequality.
     """
     g = edge_graph(n, first, second, distance_m)
     # the graph is stored symmetric, so the directed search gives the undirected answer
     # without csgraph symmetrising it again (about a quarter faster)
     full = shortest_path(g, method="D", directed=True)
-    if keep_known and len(first):
+    if len(first):
         d = np.maximum(np.asarray(distance_m, float), _MIN_EDGE_M)
         full[first, second] = d
         full[second, first] = d

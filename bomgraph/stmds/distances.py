@@ -19,25 +19,16 @@ under the model ``v_k(d) = v_k (d^2 / d2_k)^m``.
 
 ``"paper"`` (m = 0, averages ``d2``)
     Eq. 3-4 literally: ``d2 = sum d2_k / v_k / sum 1 / v_k``, ``var(d2) = 1 / sum 1 / v_k``.
-    Collapses: fused distances come out tens of centimetres short.
-``"fused"`` (m = 1, averages ``d2``)
-    Eq. 3-4 with ``var(d2) = 4 d2 var(d)`` re-evaluated at the fused distance (the ``4 d2``
-    factor cancels). Still short.
+    Collapses: fused distances come out short (``docs/measurements-stmds.md``).
 ``"relative"`` (m = 2, averages ``d``)
     Weights are the inverse *relative* variances ``d2_k / var_k(d)``, invariant to a common
     scale error of the step (the odometry length). Close to unbiased once the triangulation
-    baseline is long enough to make the parallax well determined (``baselines=(4,)``).
+    baseline is long enough to make the parallax well determined (``baseline_steps=(4,)``).
 ``"scale-free"`` (m = 3, averages ``1 / d``)
     Weights invariant to the parallax-type scale error as well; averaging ``1 / d`` (linear in
-    the parallax) avoids the upward bias of ``1 / sin(parallax)``. The best rule for the
-    paper's consecutive-step triangulation, and the default.
-``"predicted"`` (averages ``1 / d``)
-    Kalman style: each new estimate's variance is evaluated at the pair's current fused
-    distance (the prediction) rather than at its own value, splitting it into the part from
-    the odometry translation (scales like ``d^2``) and the rest (like ``d^4``). The weights are
-    independent of the new estimate's noise; the estimates' own nonlinear bias remains.
+    the parallax) avoids the upward bias of ``1 / sin(parallax)``. The default.
 
-The benchmark (``scripts/bench_stmds.py``) measures all of them. A prior ``(d, s)`` (distance
+The benchmark (``scripts/bench_stmds.py``) measures them (``docs/measurements-stmds.md``). A prior ``(d, s)`` (distance
 and std. dev., metres) enters every rule as one more estimate: ``d2 = d^2`` with
 ``var(d2) = (2 d s)^2 + 2 s^4`` (the exact variance of the square of a Gaussian). A pair counts
 as *known* once it has a prior or at least ``min_count`` instantaneous estimates.
@@ -52,22 +43,19 @@ from numpy.typing import ArrayLike
 
 from ..errors import ConfigError
 
-# rule -> (exponent m of the weight d2^m / var(d2), the quantity averaged); None: predicted
-_RULES: dict[str, tuple[int | None, str]] = {
-    "paper": (0, "d2"), "fused": (1, "d2"), "relative": (2, "d"), "scale-free": (3, "inv"),
-    "predicted": (None, "inv")}
+# rule -> (exponent m of the weight d2^m / var(d2), the quantity averaged)
+_RULES: dict[str, tuple[int, str]] = {
+    "paper": (0, "d2"), "relative": (2, "d"), "scale-free": (3, "inv")}
 FUSION_RULES = tuple(_RULES)
+
 
 def estimate_weights(rule: str, squared_distance_m2: np.ndarray,
                      variance_m4: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Weights and averaged values of independent estimates under a fusion rule (no state).
 
-    ``"predicted"`` needs the running fused value; without it, it weighs like
-    ``"scale-free"``. Combine with :func:`fused_from_sums`.
+    Combine with :func:`fused_from_sums`.
     """
     m, domain = _RULES[rule]
-    if m is None:
-        m, domain = _RULES["scale-free"]
     d2 = np.maximum(squared_distance_m2, _TINY)
     var = np.maximum(variance_m4, _TINY)
     w = d2 ** m / var if m else 1.0 / var
@@ -84,8 +72,7 @@ def fused_from_sums(rule: str, sum_w: np.ndarray,
     With weights ``w_k = d2_k^m / v_k`` each estimate's variance is modelled as
     ``v_k (d2 / d2_k)^m`` and re-evaluated at the fused ``d2``; the fused variance of the
     squared distance is then ``d2^m / sum w_k`` (eq. 3 when ``m = 0``) and that of the
-    distance ``d2^(m-1) / (4 sum w_k)``. The predicted rule weighs ``1/d`` by its inverse
-    variance, so ``var(d) = d^4 / sum w_k``.
+    distance ``d2^(m-1) / (4 sum w_k)``.
     """
     m, domain = _RULES[rule]
     sw = np.maximum(sum_w, _TINY)
@@ -97,8 +84,6 @@ def fused_from_sums(rule: str, sum_w: np.ndarray,
     else:
         d = 1.0 / np.maximum(x, _TINY)
     d2 = np.maximum(d * d, _TINY)
-    if m is None:
-        return d, d2 * d2 / sw
     return d, d2 ** (m - 1) / (4.0 * sw)
 
 
@@ -271,31 +256,8 @@ class DistanceStore:
         return out
 
     # ---------------------------------------------------------------------------- updates
-    def _weigh(self, d2: np.ndarray, var: np.ndarray, translation_var: np.ndarray | None,
-               slot: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
-        """Per-estimate weights and the values averaged (``d2``, ``d`` or ``1/d`` by rule)."""
-        m, domain = _RULES[self.fusion]
-        d2 = np.maximum(d2, _TINY)
-        var = np.maximum(var, _TINY)
-        if m is None:
-            d = np.sqrt(d2)
-            pred = d
-            if slot is not None:
-                sw = self._sw[slot]
-                has = sw > 0
-                if has.any():
-                    pred = d.copy()
-                    pred[has] = sw[has] / np.maximum(self._sx[slot[has]], _TINY)
-            sc2 = (pred * pred) / d2
-            var_d = var / (4.0 * d2)
-            a = np.zeros_like(var_d) if translation_var is None else \
-                np.minimum(np.maximum(translation_var, 0.0) / (4.0 * d2), var_d)
-            var_pred = np.maximum(sc2 * (a + (var_d - a) * sc2), _TINY)
-            return pred ** 4 / var_pred, 1.0 / d
-        return estimate_weights(self.fusion, d2, var)
-
     def add(self, first: np.ndarray, second: np.ndarray, squared_distance_m2: np.ndarray,
-            variance_m4: np.ndarray, translation_variance_m4: np.ndarray | None = None) -> None:
+            variance_m4: np.ndarray) -> None:
         """Fuse one step's instantaneous estimates (pairs distinct within the call).
 
         Parameters
@@ -304,14 +266,12 @@ class DistanceStore:
             Dense landmark indices of each pair.
         squared_distance_m2, variance_m4 : arrays of shape (P,)
             Instantaneous squared distances and their first-order variances (eq. 2).
-        translation_variance_m4 : array of shape (P,), optional
-            The part of ``variance_m4`` due to the odometry translation (``"predicted"`` only).
         """
         if len(first) == 0:
             return
         slot = self.slots(first, second)
-        w, x = self._weigh(np.asarray(squared_distance_m2, float),
-                           np.asarray(variance_m4, float), translation_variance_m4, slot)
+        w, x = estimate_weights(self.fusion, np.asarray(squared_distance_m2, float),
+                                np.asarray(variance_m4, float))
         self._sw[slot] += w
         self._sx[slot] += w * x
         self._count[slot] += 1
@@ -342,7 +302,7 @@ class DistanceStore:
         for r in range(int(counts.max()) if len(counts) else 0):
             sel = rank == r
             slot = self.slots(lo[sel], hi[sel])
-            w, x = self._weigh(d2[sel], var[sel], None, None)
+            w, x = estimate_weights(self.fusion, d2[sel], var[sel])
             self._sw[slot] += w
             self._sx[slot] += w * x
             self._prior[slot] = True

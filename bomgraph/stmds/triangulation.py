@@ -27,19 +27,6 @@ two rays lies in ``[min_parallax, pi - min_parallax]`` (eq. 1 blows up at zero p
 rays), both depths are at most ``max_range_m`` (e.g. a multiple of the sensor range) and the
 relative first-order std. dev. of its depth ``sigma_r1 / r1`` is at most
 ``max_relative_range_sigma``.
-
-Windowed triangulation (:func:`triangulate_window`, :func:`window_pair_squared_distances`,
-issue 8). A window holds ``W`` consecutive poses and the ``W - 1`` odometry increments between
-them. Every landmark seen from at least two of its poses is triangulated from the pair of its
-rays furthest apart in the window (the longest baseline), if that pair passes the gates, in the frame of the window's first pose
-(dead-reckoned from the increments). Two landmarks triangulated in the same window share the
-odometry chain, so the first-order variance of their squared distance is taken over all
-``3 (W - 1)`` increments (each with its own independent sigmas) and the four bearings used.
-The Jacobians are analytic (complex plane): with ``p = z_a + r1 u_a`` the intersection of the
-rays from poses ``a < b`` (positions ``z``, directions ``u = exp(i alpha)``), an increment
-``m`` (pose ``m-1`` to ``m``) moves the point rigidly (translation, or rotation about ``z_m``)
-when ``m <= a``, moves only the second ray when ``a < m <= b``, and does nothing after ``b``.
-With ``W = 2`` this is exactly eq. 1-2 above.
 """
 
 from __future__ import annotations
@@ -50,9 +37,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ..angles import angle_residual
 from ..errors import ConfigError
-from ..geometry import effective_parallax
+from ..geometry import chain_odometry
 
 #: Column order of the per-landmark Jacobians.
 POINT_MEASUREMENTS = ("dx_m", "dy_m", "dpsi_rad", "theta_prev_rad", "theta_now_rad")
@@ -72,6 +58,14 @@ def pair_indices(k: int) -> tuple[np.ndarray, np.ndarray]:
         j.setflags(write=False)
         hit = _TRIU_CACHE[k] = (i, j)
     return hit
+
+
+def select_pairs(k: int, select: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """All pairs ``first < second`` of ``k`` items, or of the items ``select`` (index array)."""
+    if select is None:
+        return pair_indices(k)
+    f, g = pair_indices(len(select))
+    return select[f], select[g]
 
 
 class _TwoRayResult:
@@ -228,10 +222,8 @@ def compose_odometry(odoms: ArrayLike, sigmas: ArrayLike) -> tuple[np.ndarray, n
     """
     u = np.asarray(odoms, dtype=float).reshape(-1, 3)
     sig = np.asarray(sigmas, dtype=float).reshape(-1, 3)
-    psi = np.concatenate([[0.0], np.cumsum(u[:, 2])])
+    xy, psi = chain_odometry(u)
     c, s = np.cos(psi[:-1]), np.sin(psi[:-1])
-    step = np.column_stack([c * u[:, 0] - s * u[:, 1], s * u[:, 0] + c * u[:, 1]])
-    xy = np.concatenate([np.zeros((1, 2)), np.cumsum(step, axis=0)])
     k = len(u)
     lever = xy[-1] - xy[1:]                       # (K, 2): end minus pose after motion k
     jac = np.zeros((3, 3 * k))
@@ -335,11 +327,6 @@ class PairEstimates:
         ``|p_i - p_j|^2``.
     variance_m4 : ndarray of shape (P,)
         First-order variance ``J Sigma J^T`` of the squared distance (eq. 2).
-    translation_variance_m4 : ndarray of shape (P,) or None
-        (When asked for.) The part of ``variance_m4`` due to the odometry translation
-        ``(dx, dy)`` alone (it
-        scales like ``d^2`` under a change of scale; the rest, from the bearings and the
-        turn, like ``d^4`` for the distance's variance).
     jacobian : ndarray of shape (P, 7) or None
         ``d |p_i - p_j|^2 / d [dx, dy, dpsi, theta_i_prev, theta_i_now, theta_j_prev,
         theta_j_now]`` (only when asked for).
@@ -349,7 +336,6 @@ class PairEstimates:
     second: np.ndarray
     squared_distance_m2: np.ndarray
     variance_m4: np.ndarray
-    translation_variance_m4: np.ndarray | None = None
     jacobian: np.ndarray | None = None
 
     def __len__(self) -> int:
@@ -358,7 +344,6 @@ class PairEstimates:
 
 def pair_squared_distances(tri: RayTriangulation, odometry: ArrayLike,
                            bearing_sigma_rad: float, *, select: np.ndarray | None = None,
-                           with_translation: bool = False,
                            with_jacobian: bool = False) -> PairEstimates:
     """Squared distance and its first-order variance for every pair of ``tri``'s landmarks.
 
@@ -372,8 +357,6 @@ def pair_squared_distances(tri: RayTriangulation, odometry: ArrayLike,
     bearing_sigma_rad : float
     select : array of int, optional
         Only pairs among these landmarks (e.g. those that passed :func:`gate_points`).
-    with_translation : bool
-        Also return the part of the variance due to the odometry translation.
     with_jacobian : bool
         Also return the ``(P, 7)`` Jacobian (tests; the variance never needs it).
 
@@ -382,11 +365,7 @@ def pair_squared_distances(tri: RayTriangulation, odometry: ArrayLike,
     PairEstimates
         The pairs ``(first, second)`` index ``tri``; in ``np.triu_indices`` order of ``select``.
     """
-    if select is None:
-        first, second = pair_indices(len(tri))
-    else:
-        f, g = pair_indices(len(select))
-        first, second = select[f], select[g]
+    first, second = select_pairs(len(tri), select)
     unc = np.asarray(odometry, dtype=float)
     sb2 = float(bearing_sigma_rad) ** 2
     # e . dp/dz = Re(e conj(dp/dz)) for the offset e = p_i - p_j (complex plane)
@@ -400,386 +379,19 @@ def pair_squared_distances(tri: RayTriangulation, odometry: ArrayLike,
     grad = np.concatenate((gi[:, :3] - gj[:, :3], gi[:, 3:], gj[:, 3:]), axis=1)
     if unc.shape == (3,):                                       # independent components
         var = (grad * grad) @ np.concatenate((4.0 * unc * unc, np.full(4, 4.0 * sb2)))
-        cov_odo = np.diag(unc * unc)
     else:
         cov7 = np.zeros((7, 7))
-        cov7[:3, :3] = cov_odo = odometry_covariance(unc)
+        cov7[:3, :3] = odometry_covariance(unc)
         cov7.flat[24::8] = sb2                                  # the four bearings
         var = 4.0 * ((grad @ cov7) * grad).sum(axis=1)
-    tvar = None
-    if with_translation:
-        g_t = grad[:, :2]
-        tvar = 4.0 * ((g_t @ cov_odo[:2, :2]) * g_t).sum(axis=1)
     full = None
     if with_jacobian:
         full = 2.0 * grad
         full[:, 5:] *= -1.0
-    return PairEstimates(first, second, d2, var, tvar, full)
-
-
-@dataclass(frozen=True, eq=False)
-class WindowTriangulation(_TwoRayResult):
-    """Landmarks triangulated inside a window of ``W`` poses, in the frame of its first pose.
-
-    Attributes
-    ----------
-    column : ndarray of shape (k,), int64
-        Column of each landmark in the ``bearings_rad`` matrix given to
-        :func:`triangulate_window`.
-    pose_first, pose_second : ndarrays of shape (k,), int64
-        Window poses ``a < b`` of the two rays used (the pair with the best parallax).
-    points_xy : ndarray of shape (k, 2)
-        Intersections (metres, frame of window pose 0).
-    range_prev_m, range_now_m : ndarrays of shape (k,)
-        Depths ``r1`` from pose ``a`` and ``r2`` from pose ``b``.
-    sin_parallax, cos_parallax : ndarrays of shape (k,)
-        ``sin`` and ``cos`` of the angle from ray ``a`` to ray ``b``.
-    jacobian_odometry : ndarray of shape (k, W - 1, 3), complex
-        ``d (x + i y) / d [dx, dy, dpsi]_m`` for the increments ``m = 1 .. W-1``.
-    jacobian_bearing : ndarray of shape (k, 2) or (k, W), complex
-        ``d (x + i y) / d [theta_a, theta_b]`` (:func:`triangulate_window`), or wrt the
-        bearing from every window pose, 0 where not seen (:func:`triangulate_window_lsq`).
-    """
-
-    column: np.ndarray
-    pose_first: np.ndarray
-    pose_second: np.ndarray
-    points_xy: np.ndarray
-    range_prev_m: np.ndarray
-    range_now_m: np.ndarray
-    sin_parallax: np.ndarray
-    cos_parallax: np.ndarray
-    jacobian_odometry: np.ndarray
-    jacobian_bearing: np.ndarray
-
-
-
-def _ray_intersections(z_a: np.ndarray, z_b: np.ndarray, ua: np.ndarray, ub: np.ndarray
-                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Depths ``r1, r2`` and ``sin, cos`` of the parallax of rays ``z_a + r1 ua``, ``z_b + r2 ub``
-    (complex arrays of one shape)."""
-    rel = ub * ua.conj()
-    s, c = rel.imag, rel.real
-    dconj = (z_b - z_a).conj()
-    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        inv_s = 1.0 / s
-        r1 = (dconj * ub).imag * inv_s
-        r2 = (dconj * ua).imag * inv_s
-    return r1, r2, s, c
-
-
-def triangulate_window(odoms: ArrayLike, bearings_rad: ArrayLike, *,
-                       min_parallax_rad: float = 0.0,
-                       max_range_m: float = np.inf) -> tuple[WindowTriangulation, int]:
-    """Triangulate every landmark of a window from its best-parallax pair of rays.
-
-    Parameters
-    ----------
-    odoms : array of shape (W - 1, 3)
-        Increments ``[dx_m, dy_m, dpsi_rad]`` between the window's consecutive poses.
-    bearings_rad : array of shape (W, n)
-        Bearing of landmark (column) ``j`` from window pose ``k``; NaN where not seen.
-    min_parallax_rad, max_range_m : float
-        The gates of :func:`gate_points` (parallax in ``[min, pi - min]``, both depths
-        positive and at most ``max_range_m``), applied to every candidate pair of rays.
-
-    Returns
-    -------
-    WindowTriangulation
-        The landmarks whose pair of rays furthest apart in the window (largest ``b - a``,
-        ties: the earliest pair; chosen by which poses saw the landmark, not by the measured
-        values) passes the gates, in increasing column order. Choosing by the measured
-        parallax, or falling back to another pair when the gates refuse the first choice,
-        would pick the pairs whose noise widened the angle: depths biased short (measured:
-        Method 2 MPE about 3x worse with the largest measured parallax).
-    n_gated : int
-        Landmarks seen from two poses or more with no passing pair.
-    """
-    u = np.asarray(odoms, dtype=float).reshape(-1, 3)
-    brg = np.asarray(bearings_rad, dtype=float)
-    w = len(u) + 1
-    if brg.ndim != 2 or brg.shape[0] != w:
-        raise ConfigError(f"triangulate_window: bearings must be ({w}, n) for {w - 1} "
-                          f"increments, got shape {brg.shape}")
-    psi = np.concatenate([[0.0], np.cumsum(u[:, 2])])
-    heading = np.exp(1j * psi)
-    z = np.concatenate([[0.0], np.cumsum(heading[:-1] * (u[:, 0] + 1j * u[:, 1]))])
-    seen = np.isfinite(brg)
-    cand = np.flatnonzero(seen.sum(axis=0) >= 2)
-    a_all, b_all = np.triu_indices(w, 1)
-    ray = heading[:, None] * np.exp(1j * np.where(seen[:, cand], brg[:, cand], 0.0))
-    r1, r2, s, _ = _ray_intersections(z[a_all][:, None], z[b_all][:, None], ray[a_all],
-                                      ray[b_all])                    # (pairs of poses, n)
-    both = seen[a_all][:, cand] & seen[b_all][:, cand]
-    # the pair furthest apart by visibility alone (ties: the earliest), then the gates
-    score = np.where(both, (b_all - a_all)[:, None] * float(w)
-                     + np.arange(len(a_all))[::-1, None] / len(a_all), -1.0)
-    best = np.argmax(score, axis=0)
-    at = (best, np.arange(cand.size))
-    with np.errstate(invalid="ignore"):
-        good = np.abs(s[at]) >= max(math.sin(min_parallax_rad), 1e-15)
-        good &= (r1[at] > 0) & (r2[at] > 0) & (r1[at] <= max_range_m) & (r2[at] <= max_range_m)
-    col = cand[good]
-    pick = best[good]
-    a, b = a_all[pick], b_all[pick]
-    tri = _window_points(u, psi, z, heading, a, b, brg[a, col], brg[b, col])
-    return WindowTriangulation(col, a, b, *tri), int(cand.size - col.size)
-
-
-def _window_points(u: np.ndarray, psi: np.ndarray, z: np.ndarray, heading: np.ndarray,
-                   a: np.ndarray, b: np.ndarray, theta_a: np.ndarray, theta_b: np.ndarray
-                   ) -> tuple[np.ndarray, ...]:
-    """Points, depths, parallax and analytic Jacobians for rays from poses ``a < b``."""
-    k, w1 = a.size, len(u)
-    ua = np.exp(1j * (psi[a] + theta_a))
-    ub = np.exp(1j * (psi[b] + theta_b))
-    za, zb = z[a], z[b]
-    r1, r2, s, c = _ray_intersections(za, zb, ua, ub)
-    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        inv_s = 1.0 / s
-        p = za + r1 * ua
-        d_alpha = ua * (r1 * c * inv_s + 1j * r1)                       # dp / d alpha
-        d_beta = ua * (((zb - za).conj() * ub).real - r1 * c) * inv_s   # dp / d beta
-        # g(v) = d r1 / d z_b . v = Im(conj(v) ub) / s, for v of shape (k, W-1)
-        m = np.arange(1, w1 + 1)
-        before = m[None, :] <= a[:, None]
-        mid = ~before & (m[None, :] <= b[:, None])
-        e = heading[:-1][None, :]                                       # R(psi_{m-1})
-        lever_b = zb[:, None] - z[1:][None, :]                          # z_b - z_m
-
-        def second_ray(v: np.ndarray) -> np.ndarray:
-            return ua[:, None] * ((v.conj() * ub[:, None]).imag * inv_s[:, None])
-
-        jac = np.zeros((k, w1, 3), np.complex128)
-        ex = np.broadcast_to(e, (k, w1))
-        jac[:, :, 0] = np.where(before, ex, np.where(mid, second_ray(ex), 0.0))
-        jac[:, :, 1] = np.where(before, 1j * ex, np.where(mid, second_ray(1j * ex), 0.0))
-        turn_before = 1j * (p[:, None] - z[1:][None, :])
-        turn_mid = second_ray(1j * lever_b) + d_beta[:, None]
-        jac[:, :, 2] = np.where(before, turn_before, np.where(mid, turn_mid, 0.0))
-    pts = np.column_stack([p.real, p.imag])
-    return (pts, r1, r2, s, c, jac, np.column_stack([d_alpha, d_beta]))
-
-
-def _window_chain_jacobians(u: np.ndarray, z: np.ndarray, heading: np.ndarray
-                            ) -> tuple[np.ndarray, np.ndarray]:
-    """``d z_k / d [dx, dy, dpsi]_m`` (complex, shape ``(W, W-1, 3)``) and ``d psi_k / d ...``
-    (real, same shape) of the dead-reckoned window poses ``k`` wrt the increments ``m``."""
-    w1 = len(u)
-    w = w1 + 1
-    k = np.arange(w)[:, None]
-    m = np.arange(1, w1 + 1)[None, :]
-    upto = m <= k                                                    # increment m moves pose k
-    dz = np.zeros((w, w1, 3), np.complex128)
-    dz[:, :, 0] = np.where(upto, heading[:-1][None, :], 0.0)
-    dz[:, :, 1] = np.where(upto, 1j * heading[:-1][None, :], 0.0)
-    dz[:, :, 2] = np.where(upto, 1j * (z[:, None] - z[1:][None, :]), 0.0)
-    dpsi = np.zeros((w, w1, 3))
-    dpsi[:, :, 2] = upto
-    return dz, dpsi
-
-
-def triangulate_window_lsq(odoms: ArrayLike, bearings_rad: ArrayLike, *,
-                           min_parallax_rad: float = 0.0, max_range_m: float = np.inf,
-                           max_iter: int = 20, tol_m: float = 1e-13
-                           ) -> tuple[WindowTriangulation, int]:
-    """Triangulate every landmark of a window from ALL its rays (least squares on the bearings).
-
-    The window's poses are dead-reckoned from its first one (``z_k``, heading ``psi_k``); a
-    landmark seen from poses ``K`` is the point ``p`` minimising
-    ``sum_{k in K} angle_residual(atan2(p - z_k), psi_k + theta_k)^2`` (maximum likelihood for
-    equal, independent bearing noise with the poses held at the odometry chain), started from
-    the linear intersection (normals weighted by ``1 / range^2``) and refined by Gauss-Newton.
-    The Jacobian of the estimate wrt every increment and every bearing of the landmark comes
-    from the stationarity condition ``g = sum_k res_k q_k = 0`` (``q_k`` the gradient of the
-    ray's angle) by the implicit function theorem, with the full Hessian
-    ``H = sum_k (q_k q_k^T + res_k D q_k)``:
-    ``dp = H^-1 sum_k (H_k dz_k + q_k d alpha_k)``, ``alpha_k = psi_k + theta_k``. It is
-    exact at the computed optimum (noisy rays included), and with two rays the estimate and its
-    Jacobian are those of :func:`triangulate_window`.
-
-    Parameters
-    ----------
-    odoms : array of shape (W - 1, 3)
-        Increments ``[dx_m, dy_m, dpsi_rad]`` between the window's consecutive poses.
-    bearings_rad : array of shape (W, n)
-        Bearing of landmark (column) ``j`` from window pose ``k``; NaN where not seen.
-    min_parallax_rad, max_range_m : float
-        Gates: the landmark's :func:`effective_parallax` must be at least ``min_parallax``
-        (for two rays: the angle between them in ``[min_parallax, pi - min_parallax]``) and
-        the point must be in front of every ray at a depth of at most ``max_range_m``.
-    max_iter : int
-        Gauss-Newton iterations at most.
-    tol_m : float
-        Stop when every step is below ``tol_m`` times the point's distance (relative).
-
-    Returns
-    -------
-    WindowTriangulation
-        ``pose_first`` / ``pose_second`` are the first and last poses that saw the landmark,
-        ``range_prev_m`` / ``range_now_m`` the depths from them, ``sin_parallax`` /
-        ``cos_parallax`` those of the angular span of its rays; ``jacobian_bearing`` has shape
-        ``(k, W)``: ``d (x + i y) / d theta`` of the bearing from each window pose (0 where the
-        landmark was not seen).
-    n_gated : int
-        Landmarks seen from two poses or more that failed a gate (or did not converge).
-    """
-    u = np.asarray(odoms, dtype=float).reshape(-1, 3)
-    brg = np.asarray(bearings_rad, dtype=float)
-    w = len(u) + 1
-    if brg.ndim != 2 or brg.shape[0] != w:
-        raise ConfigError(f"triangulate_window_lsq: bearings must be ({w}, n) for {w - 1} "
-                          f"increments, got shape {brg.shape}")
-    psi = np.concatenate([[0.0], np.cumsum(u[:, 2])])
-    heading = np.exp(1j * psi)
-    z = np.concatenate([[0.0], np.cumsum(heading[:-1] * (u[:, 0] + 1j * u[:, 1]))])
-    seen = np.isfinite(brg)
-    cand = np.flatnonzero(seen.sum(axis=0) >= 2)
-    nc = cand.size
-    # the rays, grouped by landmark (owner-major order), poses increasing within a landmark
-    owner, pose = np.nonzero(seen[:, cand].T)
-    start = np.flatnonzero(np.r_[True, owner[1:] != owner[:-1]]) if owner.size else \
-        np.zeros(0, np.int64)
-    alpha = psi[pose] + brg[pose, cand[owner]]
-    ray = np.exp(1j * alpha)
-    zr = z[pose]
-
-    def bsum(x: np.ndarray) -> np.ndarray:
-        return np.add.reduceat(x, start, axis=0) if x.size else np.zeros((0,) + x.shape[1:])
-
-    # linear intersection: sum w (I - u u^T)(p - z) = 0, first unweighted, then w = 1 / r^2
-    nxx, nxy, nyy = ray.imag ** 2, -ray.real * ray.imag, ray.real ** 2
-    wgt = np.ones(owner.size)
-    p = np.full(nc, np.nan + 0j)
-    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        for _ in range(2):
-            axx, axy, ayy = bsum(wgt * nxx), bsum(wgt * nxy), bsum(wgt * nyy)
-            bx = bsum(wgt * (nxx * zr.real + nxy * zr.imag))
-            by = bsum(wgt * (nxy * zr.real + nyy * zr.imag))
-            det = axx * ayy - axy * axy
-            p = ((ayy * bx - axy * by) + 1j * (axx * by - axy * bx)) / det
-            wgt = 1.0 / np.maximum(np.abs(p[owner] - zr) ** 2, 1e-12)
-        # Gauss-Newton on the bearing residuals
-        done = ~np.isfinite(p)
-        for _ in range(max_iter):
-            d = p[owner] - zr
-            rho2 = (d * d.conj()).real
-            q = 1j * d / rho2                               # gradient of the ray's angle
-            res = angle_residual(np.angle(d), alpha)
-            nxx, nxy, nyy = bsum(q.real ** 2), bsum(q.real * q.imag), bsum(q.imag ** 2)
-            gx, gy = bsum(res * q.real), bsum(res * q.imag)
-            det = nxx * nyy - nxy * nxy
-            step = -((nyy * gx - nxy * gy) + 1j * (nxx * gy - nxy * gx)) / det
-            step[done] = 0.0
-            p = p + step
-            small = np.abs(step) <= tol_m * np.maximum(np.abs(p), 1.0)
-            done |= small | ~np.isfinite(step)
-            if done.all():
-                break
-        # gates: parallax of the ray directions, in front of every ray, depth
-        d = p[owner] - zr
-        span = effective_parallax(alpha, owner, nc)
-        depth = (d * ray.conj()).real
-        bad_ray = ~((depth > 0) & (depth <= max_range_m))
-        good = np.isfinite(p) & (np.add.reduceat(bad_ray.astype(np.int64), start) == 0 if nc
-                                 else np.zeros(0, bool))
-        lo = max(min_parallax_rad, 1e-15)
-        good &= span >= lo
-        converged = small if max_iter > 0 else np.ones(nc, bool)
-        good &= converged
-    keep = good[owner]
-    # Jacobians at the optimum (implicit function theorem), rays of the kept landmarks only
-    kept = np.flatnonzero(good)
-    remap = np.full(nc, -1, np.int64)
-    remap[kept] = np.arange(kept.size)
-    o, k_pose, d, a_ray = remap[owner[keep]], pose[keep], d[keep], alpha[keep]
-    st = np.flatnonzero(np.r_[True, o[1:] != o[:-1]]) if o.size else np.zeros(0, np.int64)
-    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        rho2 = (d * d.conj()).real
-        q = 1j * d / rho2
-        res = angle_residual(np.angle(d), a_ray)
-        x, y = d.real, d.imag
-        rho4 = rho2 * rho2
-        hk = np.empty((o.size, 2, 2))                       # per ray: q q^T + res D q
-        hk[:, 0, 0] = q.real ** 2 + res * 2 * x * y / rho4
-        hk[:, 1, 1] = q.imag ** 2 - res * 2 * x * y / rho4
-        hk[:, 0, 1] = hk[:, 1, 0] = q.real * q.imag + res * (y * y - x * x) / rho4
-        h = np.add.reduceat(hk, st, axis=0) if o.size else np.zeros((0, 2, 2))
-        hinv = np.linalg.inv(h) if len(h) else h
-        dz, dpsi = _window_chain_jacobians(u, z, heading)
-        c = 3 * (w - 1)
-        dz_r = np.stack([dz.real.reshape(w, c), dz.imag.reshape(w, c)], axis=1)  # (W, 2, C)
-        qv = np.column_stack([q.real, q.imag])
-        m_ray = hk @ dz_r[k_pose] + qv[:, :, None] * dpsi.reshape(w, c)[k_pose][:, None, :]
-        m_sum = np.add.reduceat(m_ray, st, axis=0) if o.size else np.zeros((0, 2, c))
-        j_odo = hinv @ m_sum                                                # (k, 2, C)
-        j_b = np.einsum("rab,rb->ra", hinv[o], qv)                          # (R, 2)
-    jac_odo = (j_odo[:, 0, :] + 1j * j_odo[:, 1, :]).reshape(kept.size, w - 1, 3)
-    jac_b = np.zeros((kept.size, w), np.complex128)
-    jac_b[o, k_pose] = j_b[:, 0] + 1j * j_b[:, 1]
-    # first and last ray of each kept landmark
-    last = np.append(st[1:], o.size) - 1 if st.size else st
-    a_idx, b_idx = k_pose[st], k_pose[last]
-    pk = p[kept]
-    depth_k = (d * np.exp(-1j * a_ray)).real
-    span_k = span[kept]
-    tri = WindowTriangulation(cand[kept], a_idx, b_idx, np.column_stack([pk.real, pk.imag]),
-                              depth_k[st], depth_k[last], np.sin(span_k), np.cos(span_k),
-                              jac_odo, jac_b)
-    return tri, int(nc - kept.size)
-
-
-def window_pair_squared_distances(tri: WindowTriangulation, odometry_sigmas: ArrayLike,
-                                  bearing_sigma_rad: float, *, select: np.ndarray | None = None,
-                                  with_jacobian: bool = False) -> PairEstimates:
-    """Squared distance and first-order variance of every pair of a window's landmarks.
-
-    Parameters
-    ----------
-    tri : WindowTriangulation
-    odometry_sigmas : array of shape (W - 1, 3)
-        Independent std. devs. of each increment's ``[dx_m, dy_m, dpsi_rad]``.
-    bearing_sigma_rad : float
-    select : array of int, optional
-        Only pairs among these landmarks of ``tri``.
-    with_jacobian : bool
-        Also return the ``(P, 3 (W-1) + 2 V)`` Jacobian over the increments (row-major by
-        increment) and the bearings of ``i`` then of ``j``: ``V = 2``,
-        ``[theta_i_a, theta_i_b, theta_j_a, theta_j_b]`` for :func:`triangulate_window`;
-        ``V = W``, the bearing from every window pose (0 where not seen), for
-        :func:`triangulate_window_lsq`.
-
-    Returns
-    -------
-    PairEstimates
-        As :func:`pair_squared_distances` (no translation part).
-    """
-    if select is None:
-        first, second = pair_indices(len(tri))
-    else:
-        f, g = pair_indices(len(select))
-        first, second = select[f], select[g]
-    sig = np.asarray(odometry_sigmas, dtype=float).reshape(-1, 3)
-    pts = np.ascontiguousarray(tri.points_xy).view(np.complex128)[:, 0]
-    e = pts[first] - pts[second]
-    d2 = (e * e.conj()).real
-    ec = e.conj()
-    # d |e|^2 / dz = 2 Re(conj(e) de/dz): the increments move both points, each bearing one
-    g_odo = (ec[:, None, None] * (tri.jacobian_odometry[first]
-                                  - tri.jacobian_odometry[second])).real      # (P, W-1, 3)
-    g_i = (ec[:, None] * tri.jacobian_bearing[first]).real                   # (P, 2)
-    g_j = -(ec[:, None] * tri.jacobian_bearing[second]).real
-    var = 4.0 * (np.einsum("pmc,mc->p", g_odo * g_odo, sig * sig)
-                 + float(bearing_sigma_rad) ** 2 * ((g_i * g_i).sum(1) + (g_j * g_j).sum(1)))
-    full = None
-    if with_jacobian:
-        full = 2.0 * np.concatenate([g_odo.reshape(len(e), -1), g_i, g_j], axis=1)
-    return PairEstimates(first, second, d2, var, None, full)
+    return PairEstimates(first, second, d2, var, full)
 
 
 __all__ = ["POINT_MEASUREMENTS", "PAIR_MEASUREMENTS", "RayTriangulation", "PairEstimates",
-           "pair_indices", "triangulate_rays", "odometry_covariance", "compose_odometry",
-           "point_covariance",
-           "range_jacobians", "range_variances", "gate_points", "pair_squared_distances",
-           "WindowTriangulation", "triangulate_window", "triangulate_window_lsq",
-           "window_pair_squared_distances"]
+           "pair_indices", "select_pairs", "triangulate_rays", "odometry_covariance", "compose_odometry",
+           "point_covariance", "range_jacobians", "range_variances", "gate_points",
+           "pair_squared_distances"]

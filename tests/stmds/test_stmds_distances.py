@@ -36,7 +36,7 @@ def test_paper_rule_is_eq_3_and_4() -> None:
 
 
 def test_storage_grows_with_observed_pairs_and_ignores_pair_order() -> None:
-    store = DistanceStore("fused")
+    store = DistanceStore("relative")
     store.add(np.array([3, 0, 5]), np.array([1, 9, 2]), np.ones(3), np.ones(3))
     store.add(np.array([1, 2]), np.array([3, 7]), np.ones(2), np.ones(2))
     assert len(store) == 4

@@ -60,10 +60,9 @@ def test_dmc_spl_uses_distances_not_squares_and_keeps_known_entries() -> None:
                                     np.array([3.0, 4.0]))
     assert full[0, 2] == full[2, 0] == 7.0
     assert np.isinf(full[0, 3]) and full[3, 3] == 0
-    # a known pair longer than a path: kept (the paper) or shortened (ISOMAP)
+    # a known pair longer than a path keeps its distance (the paper)
     f, s, d = np.array([0, 1, 0]), np.array([1, 2, 2]), np.array([1.0, 1.0, 5.0])
     assert shortest_path_completion(3, f, s, d)[0, 2] == 5.0
-    assert shortest_path_completion(3, f, s, d, keep_known=False)[0, 2] == 2.0
 
 
 def test_largest_component_reports_the_left_out_vertices() -> None:

@@ -79,7 +79,7 @@ def test_pair_jacobian_and_variance_match_numeric() -> None:
     sig_odo = np.array([0.03, 0.01, 0.05])
     sig_b = 0.04
     tri = triangulate_rays(odom, a, b)
-    pe = pair_squared_distances(tri, sig_odo, sig_b, with_jacobian=True, with_translation=True)
+    pe = pair_squared_distances(tri, sig_odo, sig_b, with_jacobian=True)
     assert len(pe) == 6
     for p in range(len(pe)):
         i, j = pe.first[p], pe.second[p]
@@ -94,9 +94,6 @@ def test_pair_jacobian_and_variance_match_numeric() -> None:
         np.testing.assert_allclose(pe.jacobian[p], num, rtol=1e-6, atol=1e-8)
         sigma = np.r_[sig_odo, [sig_b] * 4]
         assert pe.variance_m4[p] == pytest.approx(float(np.sum((num * sigma) ** 2)), rel=1e-6)
-        # the translation part of the variance (what the "predicted" fusion rule rescales)
-        assert pe.translation_variance_m4[p] == pytest.approx(
-            float(np.sum((num[:2] * sigma[:2]) ** 2)), rel=1e-6)
 
 
 def test_point_covariance_and_range_variances_are_j_sigma_jt() -> None:

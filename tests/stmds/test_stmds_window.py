@@ -9,9 +9,10 @@ import numpy as np
 import pytest
 
 from bomgraph.geometry import bearings_to, dead_reckon, to_local
-from bomgraph.stmds.triangulation import (pair_squared_distances, triangulate_rays,
-                                          triangulate_window, triangulate_window_lsq,
-                                          window_pair_squared_distances)
+from bomgraph.stmds.triangulation import pair_squared_distances, triangulate_rays
+from bomgraph.stmds.window import (triangulate_window, triangulate_window_lsq,
+                                   window_pair_squared_distances)
+from test_stmds_triangulation import _numeric_jacobian  # the central-difference helper
 
 
 def _window_scene(rng: np.random.Generator, w: int = 6, n: int = 7):
@@ -58,15 +59,6 @@ def test_the_passing_pair_furthest_apart_is_used() -> None:
     far[-1, 0] = far[0, 0] - poses[-1, 2] + poses[0, 2]   # parallel rays from poses 0, W-1
     tri2, n_gated = triangulate_window(odoms, far, min_parallax_rad=math.radians(1.0))
     assert 0 not in tri2.column and n_gated == 1
-
-
-def _numeric_jacobian(f, z: np.ndarray, eps: float = 1e-6) -> np.ndarray:
-    cols = []
-    for k in range(len(z)):
-        dz = np.zeros_like(z)
-        dz[k] = eps
-        cols.append((f(z + dz) - f(z - dz)) / (2 * eps))
-    return np.stack(cols, axis=-1)
 
 
 def test_window_point_and_pair_jacobians_match_numeric() -> None:
@@ -328,6 +320,8 @@ def test_noise_free_windowed_maps_are_exact(name: str, options: dict) -> None:
     n_steps = 130 if options.get("preset") == "real" else 70
     s = simulate(SimConfig(noise_scale=0.0, n_landmarks=20, n_steps=n_steps,
                            sensor_range_m=5.0), np.random.default_rng(3))
+    if name.endswith("-loc") and "preset" not in options:
+        options = {**options, "robot_ranges": "all-poses"}
     mapper = create_mapper(name, s.header, smacof_from_t=20, **options)
     est = run(mapper, s.steps).final
     score = score_estimate(est, s.truth)
@@ -353,9 +347,9 @@ def test_window_options_are_validated_and_presets_named() -> None:
     assert m.config.tri_window == 60 and m.config.tri_stride == 10 and m.config.min_count == 2
     assert m.config.tri_method == "ba"
     assert create_mapper("stmds-smacof-loc", header, preset="window").config.robot_ranges \
-        == "window"
+        == "all-poses"
     for bad in ({"tri_window": 1}, {"tri_window": 2.5}, {"tri_stride": 2},
-                {"tri_window": 4, "tri_stride": 5}, {"tri_window": 4, "baselines": (4,)},
+                {"tri_window": 4, "tri_stride": 5}, {"tri_window": 4, "baseline_steps": (4,)},
                 {"tri_window": 4, "max_relative_range_sigma": 0.5},
                 {"tri_window": 4, "localise": True}, {"tri_method": "lsq"},
                 {"tri_window": 4, "tri_method": "all"}):

@@ -178,16 +178,16 @@ def test_config_is_validated_and_options_are_checked() -> None:
     header = StreamHeader(bearing_sigma_rad=0.05, odometry_sigma=(0.03, 0.0, 0.05))
     with pytest.raises(ConfigError, match="fusion"):
         StmdsConfig(fusion="nope")
-    with pytest.raises(ConfigError, match="unknown BOM-STMDS option"):
+    with pytest.raises(ConfigError, match="unknown option"):
         create_mapper("stmds-smacof", header, not_an_option=1)
-    m = create_mapper("stmds-cs", header, fusion="paper", window=4)
+    m = create_mapper("stmds-cs", header, fusion="paper", n_robot_poses=4)
     assert isinstance(m, StmdsMapper)
     assert (m.config.method, m.config.fusion, m.config.localise) == ("cs", "paper", False)
-    assert StmdsConfig().smacof_from_t == 50 and StmdsConfig().window == 6
+    assert StmdsConfig().smacof_from_t == 50 and StmdsConfig().n_robot_poses == 6
 
 
 @pytest.mark.parametrize("options", [
-    {"fusion": "paper"}, {"fusion": "fused"}, {"fusion": "relative"}, {"fusion": "predicted"},
+    {"fusion": "paper"}, {"fusion": "relative"},
     {"preset": "improved"},
     {"landmark_mds_above": 10, "n_pivots": 6},          # SMACOF started from landmark MDS
     {"weights": "inverse-variance", "smacof_init": "classical", "smacof_relaxation": 1.0,
@@ -200,7 +200,7 @@ def test_every_variant_is_exact_without_noise(options: dict, paper_noise_free: S
 
 
 def test_window_triangulated_robot_ranges_are_exact_without_noise(all_in_view: Stream) -> None:
-    est = run(create_mapper("stmds-cs-loc", all_in_view.header, robot_ranges="window"),
+    est = run(create_mapper("stmds-cs-loc", all_in_view.header, robot_ranges="all-poses"),
               all_in_view.steps).final
     score = score_estimate(est, all_in_view.truth)
     assert score.mpe_m < 1e-9 and score.robot_mean_m < 1e-9
@@ -208,13 +208,13 @@ def test_window_triangulated_robot_ranges_are_exact_without_noise(all_in_view: S
 
 def test_presets_and_the_improved_config() -> None:
     header = StreamHeader(bearing_sigma_rad=0.05, odometry_sigma=(0.03, 0.0, 0.05))
-    m = create_mapper("stmds-smacof", header, preset="improved", window=5)
-    assert m.config == StmdsConfig.improved(window=5)
-    assert m.config.baselines == (4,) and m.config.fusion == "relative"
+    m = create_mapper("stmds-smacof", header, preset="improved", n_robot_poses=5)
+    assert m.config == StmdsConfig.preset("improved", n_robot_poses=5)
+    assert m.config.baseline_steps == (4,) and m.config.fusion == "relative"
     with pytest.raises(ConfigError, match="preset"):
         create_mapper("stmds-smacof", header, preset="fast")
-    with pytest.raises(ConfigError, match="baselines"):
-        StmdsConfig(baselines=(0,))
+    with pytest.raises(ConfigError, match="baseline_steps"):
+        StmdsConfig(baseline_steps=(0,))
 
 
 def test_landmarks_held_only_by_priors_are_left_out_unless_asked(noisy: Stream) -> None:

@@ -1,0 +1,222 @@
+"""Options of BOM-STMDS (paper section III) and its named presets.
+
+One frozen, flat dataclass: every field is an option name a user passes as ``--option
+name=value`` (or a factory keyword), so nesting the fields in groups would only add a second
+spelling of each. The defaults reproduce the paper (with the corrected fusion rule);
+:data:`StmdsConfig.PRESETS` names every other variant the experiments and the README use.
+Measured numbers behind the choices are in ``docs/measurements-stmds.md``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any, ClassVar, Mapping
+
+from ..config import Presets
+from ..errors import ConfigError
+from .distances import FUSION_RULES
+
+METHODS = ("cs", "smacof")
+WEIGHTS = ("binary", "inverse-variance")
+INITS = ("best", "previous", "classical")
+TRI_METHODS = ("pair", "lsq", "ba")
+ROBOT_RANGES = ("pairwise", "all-poses")
+
+#: Windowed triangulation on the paper's simulation (``scripts/bench_stmds_window.py``).
+_WINDOW: dict[str, Any] = {"tri_window": 6, "tri_stride": 1, "fusion": "scale-free",
+                           "weights": "inverse-variance", "min_count": 3,
+                           "max_range_factor": 1.3, "robot_ranges": "all-poses"}
+
+
+@dataclass(frozen=True)
+class StmdsConfig(Presets):
+    """Options of BOM-STMDS; the defaults are the paper's (with the corrected fusion rule).
+
+    Attributes
+    ----------
+    method : {"cs", "smacof"}
+        Method 1 (DMC-SPL + classical scaling, III-D.1) or Method 2 (weighted SMACOF from
+        ``smacof_from_t``, III-D.2). Method 1 places the robot positions by trilateration
+        against the landmark map, Method 2 reconstructs them jointly (eq. 7).
+    smacof_from_t : int
+        First step at which Method 2 uses SMACOF (the paper: 50; classical scaling before).
+    fusion : str
+        Distance fusion rule (III-C), one of ``distances.FUSION_RULES``: ``"paper"`` is eq. 3-4
+        taken literally, ``"relative"`` and ``"scale-free"`` (the default) the corrected rules.
+    min_count : int
+        Instantaneous estimates a pair needs (without a prior) to count as known.
+    baseline_steps : tuple of int
+        Step gaps ``k`` to triangulate over (III-B): the pose ``k`` steps back and now, with the
+        chained odometry and its covariance. The paper uses consecutive steps, ``(1,)``.
+    min_parallax_rad : float
+        Gate: least angle between a landmark's two rays (radians).
+    max_range_factor : float
+        Gate: largest depth as a multiple of the header's ``sensor_range_m`` (ignored when the
+        header has none, unless ``max_range_m`` is given).
+    max_range_m : float or None
+        Gate: largest depth in metres (overrides ``max_range_factor``).
+    max_relative_range_sigma : float
+        Gate: largest first-order relative std. dev. of a landmark's depth (``inf``: off).
+    weights : {"binary", "inverse-variance"}
+        SMACOF weights: 1 for every known pair (the paper) or 1 / variance of the fused
+        distance (normalised to mean 1).
+    smacof_init : {"best", "previous", "classical"}
+        Warm start of SMACOF: the previous map (landmarks new to it placed by the
+        classical-scaling map aligned onto it), the DMC-SPL classical-scaling map (the paper),
+        or both, keeping the lower stress ("best"; the classical start is tried at the first
+        SMACOF estimate and every ``reconstruct.RESTART_EVERY`` estimates after it).
+    landmark_mds_above : int
+        Method 2 maps with more landmarks than this start SMACOF from landmark MDS (shortest
+        paths from ``n_pivots`` pivots only) instead of the full DMC-SPL + classical scaling.
+    n_pivots : int
+        Pivots of landmark MDS.
+    smacof_max_iter, smacof_tol, smacof_relaxation
+        SMACOF iterations, relative stress tolerance, over-relaxation in (0, 2) (de Leeuw and
+        Heiser: the same stationary points in about half the iterations; 1.0 is the textbook
+        Guttman step).
+    min_degree : int
+        Landmarks need this many known distances (a ``min_degree``-core of the graph) to be
+        mapped; 3 locates a point in the plane.
+    map_unobserved : bool
+        Also map landmarks held by priors alone (off: priors only constrain the landmarks the
+        robot has triangulated).
+    localise : bool
+        Extend the matrix with the last ``n_robot_poses`` robot positions (III-E), return poses.
+    n_robot_poses : int
+        The paper's p (6): robot positions in the localisation.
+    robot_ranges : {"pairwise", "all-poses"}
+        Robot-landmark distances from the two-pose triangulations, fused per (pose, landmark)
+        (the paper), or from one triangulation of each landmark over all ``n_robot_poses``
+        dead-reckoned poses. Windowed triangulation (``tri_window``) needs ``"all-poses"``.
+    tri_window : int or None
+        Windowed triangulation in place of ``baseline_steps``: windows of ``tri_window`` poses
+        (``window.triangulate_window``), every pair of a window's landmarks gives one squared
+        distance with its first-order variance over the whole odometry chain and the bearings.
+        ``2`` is the paper's consecutive rule exactly; ``None`` (default) uses
+        ``baseline_steps``. Not combined with the relative depth gate.
+    tri_stride : int or None
+        Steps between windows; ``None``: ``tri_window - 1`` (windows share their end pose).
+        With overlapping windows every reading enters ``c = ceil((tri_window - 1) /
+        tri_stride)`` windows and each estimate's variance is inflated by ``c``.
+    tri_method : {"pair", "lsq", "ba"}
+        How a window triangulates a landmark: its two rays furthest apart ("pair"), all its
+        rays by least squares on the bearings ("lsq", ``window.triangulate_window_lsq``), or a
+        local bundle adjustment of the window's poses and landmarks ("ba",
+        ``bundle.bundle_adjust_window``).
+    tri_outlier_sigma : float or None
+        ``tri_method="ba"``: rays whose residual exceeds this many bearing std. devs. are
+        dropped (the worst first, the window solved again); None keeps every ray.
+    tri_grow : int
+        ``tri_method="ba"``: the window is solved on prefixes growing by this many poses.
+    tri_min_depth_m : float
+        ``tri_method="ba"``: landmarks closer than this (metres) to a pose that saw them are
+        refused.
+    """
+
+    #: name -> field overrides; "paper" is the defaults.
+    PRESETS: ClassVar[Mapping[str, Mapping[str, Any]]] = {
+        "paper": {},
+        # 4-step triangulation, the "relative" rule, inverse-variance weights, 1.3 x range gate
+        "improved": {"baseline_steps": (4,), "fusion": "relative",
+                     "weights": "inverse-variance", "max_range_factor": 1.3},
+        "window": _WINDOW,
+        "window-lsq": {**_WINDOW, "tri_method": "lsq", "tri_window": 10},
+        # the README's best row
+        "window-ba": {**_WINDOW, "tri_method": "ba", "tri_window": 10, "tri_stride": 3},
+        # recordings with a narrow view and small steps (MRCLAM6, the g2o set)
+        "real": {"tri_window": 60, "tri_stride": 10, "tri_method": "ba", "tri_grow": 3,
+                 "fusion": "scale-free", "weights": "inverse-variance", "min_count": 1,
+                 "robot_ranges": "all-poses"},
+    }
+
+    method: str = "smacof"
+    smacof_from_t: int = 50
+    fusion: str = "scale-free"
+    min_count: int = 5
+    min_degree: int = 3
+    baseline_steps: tuple[int, ...] = (1,)
+    min_parallax_rad: float = math.radians(1.0)
+    max_range_factor: float = 2.0
+    max_range_m: float | None = None
+    max_relative_range_sigma: float = math.inf
+    weights: str = "binary"
+    smacof_init: str = "best"
+    landmark_mds_above: int = 300
+    n_pivots: int = 50
+    smacof_max_iter: int = 300
+    smacof_tol: float = 1e-5
+    smacof_relaxation: float = 1.8
+    map_unobserved: bool = False
+    localise: bool = False
+    n_robot_poses: int = 6
+    robot_ranges: str = "pairwise"
+    tri_window: int | None = None
+    tri_stride: int | None = None
+    tri_method: str = "pair"
+    tri_outlier_sigma: float | None = 4.0
+    tri_min_depth_m: float = 0.05
+    tri_grow: int = 5
+
+    def __post_init__(self) -> None:
+        def need(ok: bool, msg: str) -> None:
+            if not ok:
+                raise ConfigError(f"StmdsConfig: {msg}")
+
+        need(self.method in METHODS, f"method must be one of {METHODS}, got {self.method!r}")
+        need(self.fusion in FUSION_RULES,
+             f"fusion must be one of {FUSION_RULES}, got {self.fusion!r}")
+        need(self.weights in WEIGHTS, f"weights must be one of {WEIGHTS}, got {self.weights!r}")
+        need(self.smacof_init in INITS,
+             f"smacof_init must be one of {INITS}, got {self.smacof_init!r}")
+        need(self.smacof_from_t >= 0, "smacof_from_t must be >= 0")
+        need(self.min_count >= 1, "min_count must be >= 1")
+        need(self.min_degree >= 1, "min_degree must be >= 1")
+        object.__setattr__(self, "baseline_steps", tuple(int(k) for k in self.baseline_steps))
+        need(len(self.baseline_steps) >= 1 and all(k >= 1 for k in self.baseline_steps)
+             and len(set(self.baseline_steps)) == len(self.baseline_steps),
+             "baseline_steps must be distinct step gaps >= 1, e.g. (1,) or (5,)")
+        need(0 <= self.min_parallax_rad < math.pi / 2, "min_parallax_rad must be in [0, pi/2)")
+        need(self.max_range_factor > 0, "max_range_factor must be > 0")
+        need(self.max_range_m is None or self.max_range_m > 0, "max_range_m must be > 0")
+        need(self.max_relative_range_sigma > 0, "max_relative_range_sigma must be > 0")
+        need(self.smacof_max_iter >= 0, "smacof_max_iter must be >= 0")
+        need(self.landmark_mds_above >= 3, "landmark_mds_above must be >= 3")
+        need(self.n_pivots >= 3, "n_pivots must be >= 3")
+        need(self.smacof_tol >= 0, "smacof_tol must be >= 0")
+        need(0 < self.smacof_relaxation < 2, "smacof_relaxation must be in (0, 2)")
+        need(self.n_robot_poses >= 2, "n_robot_poses (p) must be >= 2")
+        need(self.robot_ranges in ROBOT_RANGES,
+             f"robot_ranges must be one of {ROBOT_RANGES}, got {self.robot_ranges!r}")
+        need(self.tri_stride is None or self.tri_window is not None,
+             "tri_stride needs tri_window")
+        need(self.tri_method in TRI_METHODS,
+             f"tri_method must be one of {TRI_METHODS}, got {self.tri_method!r}")
+        need(self.tri_method == "pair" or self.tri_window is not None,
+             f"tri_method={self.tri_method!r} needs tri_window")
+        need(self.tri_min_depth_m >= 0, "tri_min_depth_m must be >= 0")
+        need(int(self.tri_grow) == self.tri_grow and self.tri_grow >= 1,
+             "tri_grow must be an integer >= 1")
+        need(self.tri_outlier_sigma is None or self.tri_outlier_sigma > 0,
+             "tri_outlier_sigma must be > 0 or None")
+        if self.tri_window is not None:
+            need(int(self.tri_window) == self.tri_window and self.tri_window >= 2,
+                 f"tri_window must be an integer >= 2 (poses per window), got "
+                 f"{self.tri_window!r}")
+            object.__setattr__(self, "tri_window", int(self.tri_window))
+            need(self.baseline_steps == (1,),
+                 "tri_window replaces baseline_steps: leave baseline_steps=(1,)")
+            if self.tri_stride is not None:
+                need(int(self.tri_stride) == self.tri_stride
+                     and 1 <= self.tri_stride <= self.tri_window,
+                     f"tri_stride must be an integer in [1, tri_window], got "
+                     f"{self.tri_stride!r}")
+                object.__setattr__(self, "tri_stride", int(self.tri_stride))
+            need(not math.isfinite(self.max_relative_range_sigma),
+                 "tri_window does not use the relative depth gate: leave "
+                 "max_relative_range_sigma=inf")
+            need(not self.localise or self.robot_ranges == "all-poses",
+                 "with tri_window, localisation needs robot_ranges='all-poses'")
+
+
+__all__ = ["StmdsConfig", "METHODS", "WEIGHTS", "INITS", "TRI_METHODS", "ROBOT_RANGES"]

@@ -1,0 +1,205 @@
+"""Coordinates from the known pairs (paper section III-D): the pure step of every estimate.
+
+Given the fused pairs of nodes (landmarks ``0 .. n_landmarks-1``, then any robot positions,
+eq. 7) :func:`reconstruct` keeps the nodes with ``min_degree`` triangulated distances (the
+3-core: a point in the plane needs three) in the largest connected piece, and maps them:
+
+* Method 1 (``method="cs"``): DMC-SPL (shortest paths on distances, III-D.1) + classical
+  scaling.
+* Method 2 (``method="smacof"``): Method 1 while ``t < smacof_from_t``, weighted SMACOF
+  (III-D.2, eq. 6) on the known pairs from then on, warm-started from the previous map
+  (nodes new to it placed by the classical-scaling map aligned onto it) and, every
+  :data:`RESTART_EVERY` SMACOF estimates, also from the classical-scaling map, keeping the
+  lower stress. Large maps start from landmark MDS (pivot shortest paths) instead.
+
+No state is kept here: the previous map and the number of SMACOF estimates made so far come in
+as arguments and the caller keeps what comes out.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from ..evaluate import align
+from .completion import (largest_component, pivot_shortest_paths, prune_low_degree,
+                         shortest_path_completion)
+from .config import StmdsConfig
+from .mds import LaplacianSolver, classical_scaling, landmark_scaling, smacof, stress1
+
+#: "best" SMACOF starts also try the classical-scaling map every this many SMACOF estimates.
+RESTART_EVERY = 5
+
+
+@dataclass(frozen=True, eq=False)
+class Reconstruction:
+    """The mapped nodes of one estimate.
+
+    Attributes
+    ----------
+    nodes : ndarray of shape (n,), int64
+        Node indices mapped (landmarks ``< n_landmarks``, robot positions after them).
+    points_xy : ndarray of shape (n, 2)
+        Their coordinates (metres, an arbitrary frame: MDS fixes the shape, not the pose).
+    left_out : ndarray of shape (m,), int64
+        Nodes with known pairs that were not mapped (outside the core or the largest piece).
+    used_smacof : bool
+        SMACOF ran (the caller counts these for :data:`RESTART_EVERY`).
+    info : dict
+        ``n_components``, ``n_mapped_pairs``, ``reconstruction``, SMACOF's iterations, start
+        and starts tried, ``stress1``; or ``reason`` when nothing could be mapped.
+    """
+
+    nodes: np.ndarray
+    points_xy: np.ndarray
+    left_out: np.ndarray
+    used_smacof: bool = False
+    info: dict[str, Any] = field(default_factory=dict)
+
+
+def _empty(reason: str, left_out: np.ndarray | None = None) -> Reconstruction:
+    return Reconstruction(np.zeros(0, np.int64), np.zeros((0, 2)),
+                          np.zeros(0, np.int64) if left_out is None else left_out,
+                          info={"reason": reason})
+
+
+def reconstruct(config: StmdsConfig, n_nodes: int, n_landmarks: int, first: np.ndarray,
+                second: np.ndarray, distance_m: np.ndarray, variance_m2: np.ndarray,
+                measured: np.ndarray, triangulated: np.ndarray, *, t: int,
+                n_smacof: int, previous_xy: np.ndarray) -> Reconstruction:
+    """Map the known pairs.
+
+    Parameters
+    ----------
+    config : StmdsConfig
+    n_nodes, n_landmarks : int
+        Nodes in all (landmarks first) and landmarks.
+    first, second : int arrays of shape (P,)
+        The nodes of each known pair.
+    distance_m, variance_m2 : arrays of shape (P,)
+        Fused distances and their variances.
+    measured : bool array of shape (P,)
+        The pair has triangulated estimates (not a prior alone).
+    triangulated : bool array
+        By landmark index: the landmark ever passed the triangulation gates (may be shorter or
+        longer than ``n_landmarks``).
+    t : int
+        The current step (Method 2 uses SMACOF from ``config.smacof_from_t``).
+    n_smacof : int
+        SMACOF estimates made before this one.
+    previous_xy : array of shape (n_prev, 2)
+        The previous map by landmark index, NaN where absent.
+    """
+    cfg = config
+    n_lm = n_landmarks
+    if len(first) == 0:
+        return _empty("no known pair of landmarks yet")
+    if not cfg.map_unobserved:
+        seen = np.ones(n_nodes, bool)
+        seen[:n_lm] = False
+        m_seen = min(len(triangulated), n_lm)
+        seen[:m_seen] = triangulated[:m_seen]
+        live = seen[first] & seen[second]
+        first, second = first[live], second[live]
+        distance_m, variance_m2, measured = distance_m[live], variance_m2[live], measured[live]
+        # which landmarks are mapped is decided by triangulated distances alone; priors
+        # then constrain the mapped ones (a landmark held only by priors is left out)
+        touched = prune_low_degree(n_nodes, first[measured], second[measured], cfg.min_degree)
+    else:
+        touched = prune_low_degree(n_nodes, first, second, cfg.min_degree)
+    live = touched[first] & touched[second]
+    first, second = first[live], second[live]
+    dist, var = distance_m[live], variance_m2[live]
+    if len(first) == 0:
+        return _empty(f"no landmarks with {cfg.min_degree} known distances yet")
+    nodes = np.flatnonzero(touched)
+    local = np.full(n_nodes, -1, np.int64)
+    local[nodes] = np.arange(len(nodes))
+    lf, ls = local[first], local[second]
+    # the component with the most landmarks (robot positions do not count)
+    comp = largest_component(len(nodes), lf, ls, (nodes < n_lm).astype(float))
+    keep = np.zeros(len(nodes), bool)
+    keep[comp.kept] = True
+    sel = keep[lf] & keep[ls]
+    kept_nodes = nodes[comp.kept]
+    renum = np.full(len(nodes), -1, np.int64)
+    renum[comp.kept] = np.arange(len(comp.kept))
+    ef, es = renum[lf[sel]], renum[ls[sel]]
+    ed, ev = dist[sel], var[sel]
+    n = len(kept_nodes)
+    left = np.concatenate([nodes[comp.left_out], np.flatnonzero(~touched)])
+    info: dict[str, Any] = {"n_components": comp.n_components,
+                            "n_mapped_pairs": int(sel.sum())}
+
+    use_smacof = cfg.method == "smacof" and t >= cfg.smacof_from_t and n >= 2
+    w = np.ones(len(ed)) if cfg.weights == "binary" else _inverse_variance(ev)
+    warm = None
+    if use_smacof and cfg.smacof_init != "classical":
+        warm = _previous_positions(previous_xy, kept_nodes)
+    restart = use_smacof and cfg.smacof_init == "best" and n_smacof % RESTART_EVERY == 0
+    xy_cs = None
+    if not use_smacof or cfg.smacof_init == "classical" or restart or warm is None \
+            or not np.isfinite(warm).all():
+        if use_smacof and n > cfg.landmark_mds_above:
+            # only a starting point for SMACOF: landmark MDS on pivot shortest paths
+            pivots, rows = pivot_shortest_paths(n, ef, es, ed, cfg.n_pivots)
+            xy_cs = landmark_scaling(rows, pivots)
+            info["init_completion"] = f"landmark MDS, {len(pivots)} pivots"
+        else:
+            full = shortest_path_completion(n, ef, es, ed)
+            xy_cs, _ = classical_scaling(full * full)
+        if warm is not None and not np.isfinite(warm).all():
+            warm = _complete_warm_start(warm, xy_cs)
+    xy = xy_cs
+    info["reconstruction"] = "classical-scaling"
+    if use_smacof:
+        inits = []
+        if warm is not None:
+            inits.append(("previous", warm))
+        if xy_cs is not None and (restart or not inits):
+            inits.append(("classical", xy_cs))
+        solver = LaplacianSolver(n, ef, es, w)
+        best = None
+        for name, init in inits:
+            res = smacof(n, ef, es, ed, init=init, weights=w, max_iter=cfg.smacof_max_iter,
+                         tol=cfg.smacof_tol, relaxation=cfg.smacof_relaxation, solver=solver)
+            if best is None or res.raw_stress < best[1].raw_stress:
+                best = (name, res)
+        assert best is not None
+        xy = best[1].points
+        info.update(reconstruction="smacof", smacof_iterations=best[1].n_iter,
+                    smacof_converged=best[1].converged, smacof_init=best[0],
+                    smacof_starts=[name for name, _ in inits])
+    assert xy is not None
+    info["stress1"] = stress1(xy, ef, es, ed, w) if len(ed) else 0.0
+    return Reconstruction(kept_nodes, xy, left, use_smacof, info)
+
+
+def _inverse_variance(var: np.ndarray) -> np.ndarray:
+    w = 1.0 / np.maximum(var, 1e-300)
+    return w / w.mean()
+
+
+def _previous_positions(previous_xy: np.ndarray, kept_nodes: np.ndarray) -> np.ndarray | None:
+    """The previous map's positions of ``kept_nodes`` (NaN where it had none); None when it
+    shares fewer than 3 nodes."""
+    out = np.full((len(kept_nodes), 2), np.nan)
+    inside = kept_nodes < len(previous_xy)
+    out[inside] = previous_xy[kept_nodes[inside]]
+    if np.isfinite(out[:, 0]).sum() < 3:
+        return None
+    return out
+
+
+def _complete_warm_start(warm: np.ndarray, xy_cs: np.ndarray) -> np.ndarray:
+    """Nodes new to the previous map: the classical-scaling map aligned onto it."""
+    have = np.isfinite(warm[:, 0])
+    al = align(xy_cs[have], warm[have], allow_reflection=True)
+    out = al.apply(xy_cs)
+    out[have] = warm[have]
+    return out
+
+
+__all__ = ["RESTART_EVERY", "Reconstruction", "reconstruct"]
