@@ -44,7 +44,7 @@ from typing import Any, Callable, ClassVar, Mapping, Sequence
 import gtsam
 import numpy as np
 
-from bomgraph.config import Presets
+from bomgraph.config import Presets, requirement
 from bomgraph.errors import ConfigError, StreamFormatError
 from bomgraph.geometry import compose, intersect_rays
 from bomgraph.stream import Prior, Step, StreamHeader
@@ -146,9 +146,7 @@ class FactorGraphConfig(Presets):
     checkpoint_updates: int = 2
 
     def __post_init__(self) -> None:
-        def need(ok: bool, msg: str) -> None:
-            if not ok:
-                raise ConfigError(f"{type(self).__name__}: {msg}")
+        need = requirement(type(self).__name__)
 
         need(self.sigma_floor_m > 0 and self.sigma_floor_rad > 0, "sigma floors must be > 0")
         need(0 < self.min_parallax_rad < math.pi / 2, "min_parallax_rad must be in (0, pi/2)")

@@ -32,7 +32,7 @@ import gtsam
 import numpy as np
 
 from bomgraph.angles import angle_residual, wrap_angle
-from bomgraph.config import resolve
+from bomgraph.config import requirement, resolve
 from bomgraph.errors import BomgraphError, ConfigError
 from bomgraph.evaluate import Alignment, align
 from bomgraph.geometry import dead_reckon, intersect_rays, rotation
@@ -106,9 +106,7 @@ class HybridConfig(FactorGraphConfig):
     def __post_init__(self) -> None:
         super().__post_init__()
 
-        def need(ok: bool, msg: str) -> None:
-            if not ok:
-                raise ConfigError(f"HybridConfig: {msg}")
+        need = requirement("HybridConfig")
 
         need(self.huber_k is None, "the hybrid runs no Huber pass; huber_k must be None")
         need(isinstance(self.seed_method, str) and self.seed_method not in ("hybrid", "oracle"),

@@ -10,7 +10,7 @@ configuration: a ready config alone, or a preset name plus options, never both.
 from __future__ import annotations
 
 import dataclasses
-from typing import Any, ClassVar, Mapping, TypeVar
+from typing import Any, Callable, ClassVar, Mapping, TypeVar
 
 from .errors import ConfigError
 
@@ -45,6 +45,17 @@ class Presets:
             raise ConfigError(f"{cls.__name__}: bad option value: {exc}") from None
 
 
+def requirement(owner: str) -> Callable[[bool, str], None]:
+    """The ``need(ok, message)`` check of a config's ``__post_init__``: it raises
+    ``ConfigError("<owner>: <message>")`` when ``ok`` is false."""
+
+    def need(ok: bool, message: str) -> None:
+        if not ok:
+            raise ConfigError(f"{owner}: {message}")
+
+    return need
+
+
 def resolve(cls: type[C], config: C | None = None, preset: str | None = None,
             options: Mapping[str, Any] | None = None) -> C:
     """The configuration a method factory runs with.
@@ -64,4 +75,4 @@ def resolve(cls: type[C], config: C | None = None, preset: str | None = None,
     return cls.preset(preset or "paper", **options)
 
 
-__all__ = ["Presets", "resolve"]
+__all__ = ["Presets", "requirement", "resolve"]

@@ -23,6 +23,7 @@ from typing import Sequence
 import numpy as np
 
 from .angles import angle_residual, wrap_angle
+from .config import requirement
 from .errors import ConfigError
 from .geometry import bearings_to
 from .stream import Prior, Step, Stream, StreamHeader, Truth
@@ -58,9 +59,7 @@ class SimConfig:
     wrong_association_rate: float = 0.0
 
     def __post_init__(self) -> None:
-        def need(ok: bool, msg: str) -> None:
-            if not ok:
-                raise ConfigError(f"SimConfig: {msg}")
+        need = requirement("SimConfig")
 
         for f in self.__dataclass_fields__:
             v = getattr(self, f)

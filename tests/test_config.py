@@ -47,3 +47,12 @@ def test_resolve_takes_a_config_alone_or_a_preset_with_options() -> None:
         resolve(Toy, cfg, None, {"a": 2})
     with pytest.raises(ConfigError, match="must be a Toy"):
         resolve(Toy, object())  # type: ignore[arg-type]
+
+
+def test_requirement_names_its_owner() -> None:
+    from bomgraph.config import requirement
+
+    need = requirement("Toy")
+    need(True, "never raised")
+    with pytest.raises(ConfigError, match="^Toy: a must be > 0$"):
+        need(False, "a must be > 0")

@@ -13,8 +13,7 @@ import math
 from dataclasses import dataclass
 from typing import Any, ClassVar, Mapping
 
-from ..config import Presets
-from ..errors import ConfigError
+from ..config import Presets, requirement
 from .distances import FUSION_RULES
 
 METHODS = ("cs", "smacof")
@@ -159,9 +158,7 @@ class StmdsConfig(Presets):
     tri_grow: int = 5
 
     def __post_init__(self) -> None:
-        def need(ok: bool, msg: str) -> None:
-            if not ok:
-                raise ConfigError(f"StmdsConfig: {msg}")
+        need = requirement("StmdsConfig")
 
         need(self.method in METHODS, f"method must be one of {METHODS}, got {self.method!r}")
         need(self.fusion in FUSION_RULES,
