@@ -14,15 +14,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from bomgraph.errors import ConfigError
+from bomgraph.config import Presets, requirement, resolve
 from bomgraph.geometry import compose, ray_normals, solve_ray_normal_equations
 from bomgraph.mapper import MapEstimate
 from bomgraph.stream import Step, StreamHeader
 
 
 @dataclass(frozen=True)
-class TriangulateConfig:
-    """Options of the naive baseline.
+class TriangulateConfig(Presets):
+    """Options of the naive baseline (one preset, ``paper``: the defaults).
 
     min_parallax_rad : a landmark is mapped once its rays span at least this angle.
     min_front_fraction : the point must lie in front of this fraction of its rays (dead
@@ -33,10 +33,9 @@ class TriangulateConfig:
     min_front_fraction: float = 0.5
 
     def __post_init__(self) -> None:
-        if not 0 < self.min_parallax_rad < math.pi / 2:
-            raise ConfigError("min_parallax_rad must be in (0, pi/2)")
-        if not 0 <= self.min_front_fraction <= 1:
-            raise ConfigError("min_front_fraction must be in [0, 1]")
+        need = requirement("TriangulateConfig")
+        need(0 < self.min_parallax_rad < math.pi / 2, "min_parallax_rad must be in (0, pi/2)")
+        need(0 <= self.min_front_fraction <= 1, "min_front_fraction must be in [0, 1]")
 
 
 class TriangulateMapper:
@@ -51,10 +50,8 @@ class TriangulateMapper:
 
     def __init__(self, header: StreamHeader, *, start_pose: tuple[float, float, float] =
                  (0.0, 0.0, 0.0), config: TriangulateConfig | None = None,
-                 **options: float) -> None:
-        if config is not None and options:
-            raise ConfigError("TriangulateMapper: pass either config or options, not both")
-        self.config = config or TriangulateConfig(**options)
+                 preset: str | None = None, **options: float) -> None:
+        self.config = resolve(TriangulateConfig, config, preset, options)
         self._header = header
         self._start = np.asarray(start_pose, dtype=float)
         self._pose = self._start.copy()
