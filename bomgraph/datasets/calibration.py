@@ -12,7 +12,8 @@ Used by the importers (``mrclam.py``, ``g2o.py``) and ``scripts/inspect_datasets
   (``l``, ``dpsi``: the step's odometry length and whole turn). :func:`fit_odometry_sigma` fits
   ``(a, b, c)`` by maximum likelihood (started from a non-negative least-squares fit of
   ``e^2``), excludes steps beyond 5 fitted sigmas and fits once more;
-  :func:`odometry_sigma_model` evaluates the model.
+  :func:`odometry_sigma_model` evaluates the model; :func:`calibrate_odometry` does both
+  for a keyframed run against its truth poses.
 """
 
 from __future__ import annotations
@@ -24,6 +25,7 @@ from scipy.optimize import minimize, nnls
 
 from ..angles import angle_residual
 from ..errors import DatasetError
+from ..geometry import between
 from ..stream import Stream
 
 GROSS_OUTLIER_RAD = 0.2
@@ -93,7 +95,8 @@ def robust_bearing_stats(residual_rad: np.ndarray) -> dict[str, Any]:
     -------
     dict
         ``n``, ``bias_rad`` (median), ``spread_rad`` (1.4826 MAD), ``n_outliers``
-        (``|r - median| > OUTLIER_MADS * max(spread, MIN_BEARING_SIGMA_RAD)``), ``outlier_rate``, ``n_gross`` (``|r| >
+        (``|r - median| > OUTLIER_MADS * max(spread, MIN_BEARING_SIGMA_RAD)``),
+        ``outlier_rate``, ``n_gross`` (``|r| >
         GROSS_OUTLIER_RAD``), ``inlier_std_rad`` (about the inlier mean), ``sigma_rad`` (RMS of
         inliers about zero: bias included; at least ``MIN_BEARING_SIGMA_RAD``),
         ``max_abs_rad``.
@@ -187,5 +190,45 @@ def _fit_variance(reg2: np.ndarray, e2: np.ndarray) -> np.ndarray:
     return np.sqrt(np.maximum(theta, 0.0))
 
 
+def calibrate_odometry(odoms: np.ndarray, regress: np.ndarray, truth_poses: np.ndarray,
+                       min_distance_m: float, min_turn_rad: float) -> tuple[np.ndarray, dict]:
+    """Fit the odometry sigma model of a keyframed run against its truth poses.
+
+    Parameters
+    ----------
+    odoms : ndarray of shape (T, 3)
+        ``[dx_m, dy_m, dpsi_rad]`` per step (heading wrapped).
+    regress : ndarray of shape (T, 3)
+        The model's regressors: ``odoms`` with the whole (unwrapped) turn as third column.
+    truth_poses : ndarray of shape (T + 1, 3)
+    min_distance_m, min_turn_rad : float
+        Steps longer (turning more) than half of these give the length (turn) ratios.
+
+    Returns
+    -------
+    model : ndarray of shape (3, 3)
+        :func:`fit_odometry_sigma` of the errors ``odom - between(truth_{t-1}, truth_t)``.
+    info : dict
+        The fit's info plus ``length_ratio_truth_over_odometry``,
+        ``turn_ratio_truth_over_odometry`` (medians, None without such steps), ``rms_error``.
+    """
+    true_inc = between(truth_poses[:-1], truth_poses[1:])
+    err = odoms - true_inc
+    err[:, 2] = angle_residual(odoms[:, 2], true_inc[:, 2])
+    model, info = fit_odometry_sigma(regress, err)
+    lo = np.hypot(odoms[:, 0], odoms[:, 1])
+    lt = np.hypot(true_inc[:, 0], true_inc[:, 1])
+    moving = lo > 0.5 * min_distance_m
+    turning = np.abs(odoms[:, 2]) > 0.5 * min_turn_rad
+    info["length_ratio_truth_over_odometry"] = (
+        float(np.median(lt[moving] / lo[moving])) if moving.any() else None)
+    info["turn_ratio_truth_over_odometry"] = (
+        float(np.median(true_inc[turning, 2] / odoms[turning, 2])) if turning.any()
+        else None)
+    info["rms_error"] = [float(v) for v in np.sqrt(np.mean(err ** 2, axis=0))]
+    return model, info
+
+
 __all__ = ["bearing_residuals", "robust_bearing_stats", "odometry_sigma_model",
-           "fit_odometry_sigma", "GROSS_OUTLIER_RAD", "OUTLIER_MADS", "MIN_BEARING_SIGMA_RAD"]
+           "fit_odometry_sigma", "calibrate_odometry", "GROSS_OUTLIER_RAD", "OUTLIER_MADS",
+           "MIN_BEARING_SIGMA_RAD"]

@@ -1,9 +1,8 @@
 """UTIAS MRCLAM recordings -> a bearing-only :class:`~bomgraph.stream.Stream` of keyframes.
 
-The paper (section IV) needs parallax between consecutive poses (its robot moves 10-20 cm a
-step); an MRCLAM camera reports bursts of detections at about 4 Hz a few centimetres apart.
-:func:`import_mrclam` turns one robot's recording (``shared/data/mrclam*/SOURCE.md``) into
-keyframes (the numbers match the comments in its body):
+The paper (section IV) needs parallax between consecutive poses; an MRCLAM camera reports
+bursts of detections a few centimetres apart, so :func:`import_mrclam` turns one robot's
+recording (``shared/data/mrclam*/SOURCE.md``) into keyframes (numbered as in its body):
 
 1. **Rows.** Barcodes map to subjects; subjects 1-5 are robots, unknown barcodes false
    detections (both dropped); subjects in ``Landmark_Groundtruth.dat`` are landmarks (id =
@@ -12,20 +11,17 @@ keyframes (the numbers match the comments in its body):
 2. **Time window.** Detections outside the odometry or the robot's truth, or in a truth gap
    longer than ``max_truth_gap_s``, are dropped and counted, so every step has a true pose.
 3. **Bursts; 4. keyframes.** Detections at most ``burst_gap_s`` apart are one burst. The
-   velocity commands, delayed by ``command_delay_s``, are held and integrated along arcs into a
-   dead-reckoned pose ``P(t)``. Burst 0 is keyframe 0; a later burst is the next keyframe once
-   ``P`` moved ``min_distance_m`` or turned ``min_turn_rad`` (odometry only, never truth).
-   Step ``t``'s odometry is ``between(P(t_{t-1}), P(t_t))``.
+   velocity commands, delayed by ``command_delay_s``, are held and integrated along arcs into
+   ``P(t)``. Burst 0 is keyframe 0; a later burst is the next once ``P`` moved ``min_distance_m``
+   or turned ``min_turn_rad``. Step ``t``'s odometry is ``between(P(t_{t-1}), P(t_t))``.
 5. **Attachment.** A detection goes to the keyframe nearest in time within ``attach_window_s``,
    its bearing re-expressed by the odometry turn ``b + (psi(t_m) - psi(t_k))``; a landmark
-   seen twice for one keyframe keeps the detection closest in time. Truth poses at keyframes
-   are interpolated (:func:`interpolate_poses`).
-7. **Calibration** (``calibrate=True``, needs the robot's truth; :mod:`.calibration`):
+   seen twice for one keyframe keeps the detection closest in time.
+6. **Calibration** (``calibrate=True``, needs the robot's truth; :mod:`.calibration`):
    per-step ``odom_sigma`` from the fitted model, header sigmas the median; the bearing sigma
    is the robust inlier RMS (bias included; outliers stay in the stream).
-   ``meta["raw_bearing_check"]`` gives the statistics of every raw detection. Otherwise the
-   sigmas are :data:`DEFAULT_ODOMETRY_MODEL` and :data:`DEFAULT_BEARING_SIGMA_RAD`. Measured
-   reasons for the default thresholds: ``docs/measurements-io.md``.
+   ``meta["raw_bearing_check"]``: the same for every raw detection. Otherwise the sigmas are
+   the ``DEFAULT_*`` below. Why the default thresholds: ``docs/measurements-io.md``.
 """
 
 from __future__ import annotations
@@ -43,21 +39,19 @@ from ..errors import ConfigError, DatasetError
 from ..geometry import between
 from ..stream import Step, Stream, StreamHeader, Truth
 from ._text import dataset_error, file_label, find_file, has_file, read_table
-from .calibration import (bearing_residuals, fit_odometry_sigma, odometry_sigma_model,
+from .calibration import (bearing_residuals, calibrate_odometry, odometry_sigma_model,
                           robust_bearing_stats)
 
 ROBOT_SUBJECTS = (1, 2, 3, 4, 5)
 """Subject numbers of the five robots (dataset rule, SOURCE.md quirk 1)."""
 
 DEFAULT_BEARING_SIGMA_RAD = 0.0160
-"""Bearing sigma used when not calibrating: the pooled calibration over mrclam6 robots 1-5
-with the default :class:`KeyframeConfig` (``python scripts/inspect_datasets.py``)."""
+"""Bearing sigma used when not calibrating (fitted on mrclam6, docs/measurements-io.md)."""
 
 DEFAULT_ODOMETRY_MODEL = ((0.0001, 0.0664, 0.0688),   # dx:   a [m], b [m/m], c [m/rad]
                           (0.0048, 0.0634, 0.0016),   # dy
                           (0.0282, 0.0936, 0.1361))   # dpsi: a [rad], b [rad/m], c [rad/rad]
-"""``(a, b, c)`` per component of the odometry sigma model used when not calibrating: the
-pooled fit over mrclam6 robots 1-5 with the default :class:`KeyframeConfig`."""
+"""``(a, b, c)`` per component of the odometry sigma model used when not calibrating."""
 
 
 @dataclass(frozen=True)
@@ -526,22 +520,10 @@ def import_mrclam(data_dir: str | os.PathLike[str], robot: int, *,
         truth_poses = interpolate_poses(
             gt["time_s"], np.column_stack([gt["x_m"], gt["y_m"], gt["psi_rad"]]), kf_t)
 
-    # 7. calibration --------------------------------------------------------------------------
+    # 6. calibration --------------------------------------------------------------------------
     if calibrate and truth_poses is not None:  # calibrate without truth was refused above
-        true_inc = between(truth_poses[:-1], truth_poses[1:])
-        err = odoms - true_inc
-        err[:, 2] = angle_residual(odoms[:, 2], true_inc[:, 2])
-        model, odo_info = fit_odometry_sigma(regress, err)
-        lo = np.hypot(odoms[:, 0], odoms[:, 1])
-        lt = np.hypot(true_inc[:, 0], true_inc[:, 1])
-        moving = lo > 0.5 * keyframe.min_distance_m
-        turning = np.abs(odoms[:, 2]) > 0.5 * keyframe.min_turn_rad
-        odo_info["length_ratio_truth_over_odometry"] = (
-            float(np.median(lt[moving] / lo[moving])) if moving.any() else None)
-        odo_info["turn_ratio_truth_over_odometry"] = (
-            float(np.median(true_inc[turning, 2] / odoms[turning, 2])) if turning.any()
-            else None)
-        odo_info["rms_error"] = [float(v) for v in np.sqrt(np.mean(err ** 2, axis=0))]
+        model, odo_info = calibrate_odometry(odoms, regress, truth_poses,
+                                             keyframe.min_distance_m, keyframe.min_turn_rad)
     else:
         model = np.asarray(DEFAULT_ODOMETRY_MODEL, dtype=float)
         odo_info = {"source": "DEFAULT_ODOMETRY_MODEL (mrclam6 robots 1-5, default keyframes)"}
