@@ -26,10 +26,10 @@ import numpy as np
 
 from bomgraph.angles import angle_residual
 from bomgraph.datasets.g2o import import_g2o
-from bomgraph.datasets.mrclam import (KeyframeConfig, bearing_residuals, fit_odometry_sigma,
-                                      import_mrclam, integrate_odometry, odometry_poses_at,
-                                      odometry_sigma_model, read_mrclam_robot,
-                                      robust_bearing_stats)
+from bomgraph.datasets.calibration import (bearing_residuals, fit_odometry_sigma,
+                                           odometry_sigma_model, robust_bearing_stats)
+from bomgraph.datasets.mrclam import (KeyframeConfig, import_mrclam, integrate_odometry,
+                                      odometry_poses_at, read_mrclam_robot)
 from bomgraph.datasets.victoria import import_victoria
 from bomgraph.geometry import between
 from bomgraph.stream import Stream

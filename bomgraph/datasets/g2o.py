@@ -53,7 +53,7 @@ from ..geometry import between
 from ..stream import Step, Stream, StreamHeader, Truth
 from ._text import (chain_order, checked_bearing_sigma, data_lines, dataset_error, file_label, parse_float,
                     parse_int, read_text)
-from .mrclam import bearing_residuals, robust_bearing_stats
+from .calibration import bearing_residuals, robust_bearing_stats
 
 _RECORDS = {
     "VERTEX_SE2": ["id", "x", "y", "theta"],

@@ -1,86 +1,27 @@
 """UTIAS MRCLAM recordings -> a bearing-only :class:`~bomgraph.stream.Stream` of keyframes.
 
-The paper (section IV) works on steps with parallax between consecutive poses: the simulated
-robot moves 10-20 cm per step. An MRCLAM robot moves at most 9 cm/s and its camera reports
-bursts of detections at about 4 Hz, so consecutive bursts are only a few centimetres apart.
-This importer turns one robot's recording (``shared/data/mrclam*/SOURCE.md``) into keyframes:
+The paper (section IV) needs parallax between consecutive poses; an MRCLAM camera reports
+bursts of detections a few centimetres apart, so :func:`import_mrclam` turns one robot's
+recording (``shared/data/mrclam*/SOURCE.md``) into keyframes (numbered as in its body):
 
-1. **Rows.** ``Barcodes.dat`` maps the barcode column of ``RobotN_Measurement.dat`` to
-   subjects. By the dataset's rule subjects 1-5 are robots (their sightings are dropped) and
-   barcodes absent from the table are false detections (dropped); only subjects listed in
-   ``Landmark_Groundtruth.dat`` are landmarks, and the subject number is the landmark id.
-   Every dropped row is counted in ``meta["rows"]``; nothing vanishes silently. Ranges are
-   dropped (bearing-only); ``keep_ranges=True`` keeps them in ``meta["ranges_m"]``.
-2. **Odometry.** The logged velocity commands ``(v, w)`` are held from one odometry time to
-   the next (zero-order hold) and integrated exactly along circular arcs over the real time
-   differences, which gives a continuous dead-reckoned pose ``P(t)``. The commands take effect
-   ``command_delay_s`` (default 0.2 s) after their time stamp: on mrclam6 that lowers the
-   keyframe heading error from 0.094 to 0.080 rad RMS (mean over robots; delay 0, 0.1, 0.2,
-   0.3 s give 0.094, 0.085, 0.080, 0.081).
-3. **Bursts.** Detections whose timestamps differ by at most ``burst_gap_s`` form one burst
-   (the camera writes one frame's detections with up to 1 ms spread).
-4. **Keyframes.** The first burst is keyframe 0; a later burst becomes the next keyframe as
-   soon as the dead-reckoned motion since the previous keyframe reaches ``min_distance_m`` or
-   turns by ``min_turn_rad``. Keyframes are chosen from the odometry only, never from truth.
-   The odometry of step ``t`` is ``between(P(t_{t-1}), P(t_t))`` (``[dx, dy, dpsi]`` in the
-   frame of keyframe ``t-1``).
-5. **Attachment.** Each detection goes to the keyframe nearest in time if it is within
-   ``attach_window_s``; its bearing is re-expressed for the heading change the odometry shows
-   between the detection and the keyframe, ``b + (psi(t_m) - psi(t_k))``, which is exact for
-   rotation and needs no range. The translation in between (at most 9 cm/s times the window)
-   is neglected; it is part of the calibrated bearing sigma. If a landmark is detected more
-   than once for one keyframe, the detection closest in time is kept and the others are
-   counted in ``meta["rows"]["duplicate_in_keyframe"]``.
-6. **Truth.** The ground-truth pose at each keyframe time is interpolated linearly in x, y and
-   along the shorter arc in heading (:func:`interpolate_poses`). Keyframes exist only where
-   the robot's ground truth exists (bursts outside it, or inside a gap in it longer than
-   ``max_truth_gap_s``, are dropped and counted), so every step has a true pose.
-7. **Calibration** (``calibrate=True``, needs the robot's ground truth).
-
-   *Odometry.* Per step, the error ``e = odom - between(truth_{t-1}, truth_t)`` (heading by
-   :func:`~bomgraph.angles.angle_residual`) is modelled per component ``j`` as zero-mean
-   Gaussian with variance ``a_j^2 + (b_j l)^2 + (c_j |dpsi|)^2``, where ``l`` and ``dpsi`` are
-   the step's odometry length and whole (unwrapped) turn. ``(a, b, c)`` are fitted by maximum likelihood
-   (started from a non-negative least-squares fit of ``e^2``); steps whose error exceeds 5
-   fitted sigmas are excluded and the fit repeated once. Each step's ``odom_sigma`` is the
-   model evaluated at its odometry; the header's ``odometry_sigma`` is the per-component median
-   of those.
-
-   *Bearings.* Residuals ``r = angle_residual(bearing, predicted from truth pose and truth
-   landmark)`` for every bearing in the stream. Location ``m = median(r)`` (the per-robot
-   bias), spread ``s = 1.4826 MAD(r)``; outliers are ``|r - m| > 5 s``. The header's
-   ``bearing_sigma_rad`` is the RMS of the inlier residuals about zero, so the bias (which no
-   mapper can remove) counts as error. Bias, spread, outlier and gross (> 0.2 rad) counts go to
-   ``meta["bearing_calibration"]``. Outliers stay in the stream: methods must cope with them.
-
-   Whenever the robot's ground truth exists, the same statistics of every landmark detection
-   at its own time (before keyframing, against the truth interpolated there) and the raw
-   bearing range (the camera's field of view) go to ``meta["raw_bearing_check"]``: the
-   sensor's quirks (bias, outliers, field of view) independent of the keyframing.
-
-   Without calibration (``calibrate=False``, e.g. ``mrclam1``, which has no robot ground
-   truth) the sigmas are :data:`DEFAULT_ODOMETRY_MODEL` and :data:`DEFAULT_BEARING_SIGMA_RAD`,
-   measured on ``mrclam6`` robots 1-5 with the default keyframing (scripts/inspect_datasets.py).
-
-``header.sensor_range_m`` is the largest range measured among the kept detections (the ranges
-themselves are not in the stream).
-
-**Default thresholds** (``python scripts/inspect_datasets.py --sweep``: mrclam6 robots 1-5,
-command delay 0.2 s). Landmarks are 3.7 m away (median) and mostly ahead in a +-0.6 rad field
-of view, so the parallax between consecutive keyframes is small whatever the threshold (median
-about 0.8 deg at 0.3 m / 0.3 rad). The depth information of consecutive-keyframe
-triangulations, ``sum (parallax / sigma)^2``, stays between about 7,900 and 11,000 with no trend
-for distance thresholds from 0.05 m to 1.0 m, while the number of keyframes falls from 3,172 to
-297. Below 0.3 m the number of shared landmarks with more than 2 deg of parallax falls (142 at
-0.3 m, 94 at 0.2 m, 33 at 0.1 m, 0.3 s window). So 0.3 m is the smallest distance that keeps
-the parallax, and it gives filters and smoothers the most steps (689 over the five robots).
-0.3 rad of turn keeps three quarters of the 1.2 rad field of view shared between keyframes.
-Attachment windows of 0, 0.3 and 0.6 s (0, 1 and 2 bursts either side) keep 1,196, 1,639 and
-1,955 bearings, with residual spreads of 0.0105, 0.0107 and 0.0113 rad and calibrated sigmas
-of 0.0153, 0.0157 and 0.0165 rad; 0.6 s is the default (63 % more bearings for 8 % more
-sigma; the neglected translation is at most 5.4 cm). Re-expressing attached bearings by the
-odometry turn matters: without it the 0.6 s window gives a spread of 0.0133 and a sigma of
-0.0201 rad. Re-expressed bearings may lie slightly outside the camera's field of view.
+1. **Rows.** Barcodes map to subjects; subjects 1-5 are robots, unknown barcodes false
+   detections (both dropped); subjects in ``Landmark_Groundtruth.dat`` are landmarks (id =
+   subject). Every dropped row is counted in ``meta["rows"]``. Ranges are dropped
+   (``keep_ranges=True`` keeps them in ``meta["ranges_m"]``; ``sensor_range_m`` is the largest).
+2. **Time window.** Detections outside the odometry or the robot's truth, or in a truth gap
+   longer than ``max_truth_gap_s``, are dropped and counted, so every step has a true pose.
+3. **Bursts; 4. keyframes.** Detections at most ``burst_gap_s`` apart are one burst. The
+   velocity commands, delayed by ``command_delay_s``, are held and integrated along arcs into
+   ``P(t)``. Burst 0 is keyframe 0; a later burst is the next once ``P`` moved ``min_distance_m``
+   or turned ``min_turn_rad``. Step ``t``'s odometry is ``between(P(t_{t-1}), P(t_t))``.
+5. **Attachment.** A detection goes to the keyframe nearest in time within ``attach_window_s``,
+   its bearing re-expressed by the odometry turn ``b + (psi(t_m) - psi(t_k))``; a landmark
+   seen twice for one keyframe keeps the detection closest in time.
+6. **Calibration** (``calibrate=True``, needs the robot's truth; :mod:`.calibration`):
+   per-step ``odom_sigma`` from the fitted model, header sigmas the median; the bearing sigma
+   is the robust inlier RMS (bias included; outliers stay in the stream).
+   ``meta["raw_bearing_check"]``: the same for every raw detection. Otherwise the sigmas are
+   the ``DEFAULT_*`` below. Why the default thresholds: ``docs/measurements-io.md``.
 """
 
 from __future__ import annotations
@@ -92,44 +33,30 @@ from pathlib import Path
 from typing import Any, Mapping
 
 import numpy as np
-from scipy.optimize import minimize, nnls
 
 from ..angles import angle_residual, wrap_angle
 from ..errors import ConfigError, DatasetError
 from ..geometry import between
 from ..stream import Step, Stream, StreamHeader, Truth
 from ._text import dataset_error, file_label, find_file, has_file, read_table
+from .calibration import (bearing_residuals, calibrate_odometry, odometry_sigma_model,
+                          robust_bearing_stats)
 
 ROBOT_SUBJECTS = (1, 2, 3, 4, 5)
 """Subject numbers of the five robots (dataset rule, SOURCE.md quirk 1)."""
 
-GROSS_OUTLIER_RAD = 0.2
-"""A bearing residual beyond this is a gross outlier (SOURCE.md quirk 5)."""
-
-OUTLIER_MADS = 5.0
-"""Residuals farther than this many robust sigmas from the median are outliers."""
-
 DEFAULT_BEARING_SIGMA_RAD = 0.0160
-"""Bearing sigma used when not calibrating: the pooled calibration over mrclam6 robots 1-5
-with the default :class:`KeyframeConfig` (``python scripts/inspect_datasets.py``)."""
+"""Bearing sigma used when not calibrating (fitted on mrclam6, docs/measurements-io.md)."""
 
 DEFAULT_ODOMETRY_MODEL = ((0.0001, 0.0664, 0.0688),   # dx:   a [m], b [m/m], c [m/rad]
                           (0.0048, 0.0634, 0.0016),   # dy
                           (0.0282, 0.0936, 0.1361))   # dpsi: a [rad], b [rad/m], c [rad/rad]
-"""``(a, b, c)`` per component of the odometry sigma model used when not calibrating: the
-pooled fit over mrclam6 robots 1-5 with the default :class:`KeyframeConfig`."""
-
-_MIN_SIGMA_FLOOR = 1e-4
-"""Lower bound on the model's constant term ``a`` (a zero sigma would be infinite weight)."""
-
-MIN_BEARING_SIGMA_RAD = 1e-4
-"""Lower bound on a calibrated bearing sigma (noise-free input would give 0, not a valid
-stream header)."""
+"""``(a, b, c)`` per component of the odometry sigma model used when not calibrating."""
 
 
 @dataclass(frozen=True)
 class KeyframeConfig:
-    """How detections are grouped into keyframes (module docstring, steps 3-5).
+    """How detections are grouped into keyframes (module docstring, steps 2-5).
 
     Attributes
     ----------
@@ -449,156 +376,6 @@ def select_keyframes(poses: np.ndarray, min_distance_m: float,
 
 
 # --------------------------------------------------------------------------------------------
-# Calibration helpers (also used by the g2o importer and scripts/inspect_datasets.py)
-# --------------------------------------------------------------------------------------------
-
-def bearing_residuals(stream: Stream) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Residuals of every bearing in a stream against its truth poses and landmarks.
-
-    Parameters
-    ----------
-    stream : Stream
-        Must carry truth poses and the truth positions of every landmark observed.
-
-    Returns
-    -------
-    residual_rad : ndarray of shape (m,)
-        ``angle_residual(measured, predicted)``.
-    step_t : ndarray of shape (m,), int64
-        The step of each bearing.
-    landmark_ids : ndarray of shape (m,), int64
-    """
-    truth = stream.truth
-    if truth is None or truth.poses is None:
-        raise DatasetError("bearing residuals need truth poses; this stream has none")
-    counts = np.array([len(s.landmark_ids) for s in stream.steps], dtype=np.int64)
-    if counts.sum() == 0:
-        z = np.zeros(0)
-        return z, z.astype(np.int64), z.astype(np.int64)
-    step_t = np.repeat(np.arange(len(stream.steps)), counts)
-    ids = np.concatenate([s.landmark_ids for s in stream.steps])
-    meas = np.concatenate([s.bearings_rad for s in stream.steps])
-    order = np.argsort(truth.landmark_ids)
-    pos = np.searchsorted(truth.landmark_ids, ids, sorter=order)
-    pos = np.clip(pos, 0, len(order) - 1)
-    idx = order[pos]
-    missing = truth.landmark_ids[idx] != ids
-    if missing.any():
-        raise DatasetError(f"landmark {int(ids[missing][0])} is observed but has no truth "
-                           f"position")
-    pose = truth.poses[step_t]
-    lxy = truth.landmarks_xy[idx]
-    pred = angle_residual(np.arctan2(lxy[:, 1] - pose[:, 1], lxy[:, 0] - pose[:, 0]),
-                          pose[:, 2])
-    return angle_residual(meas, pred), step_t, ids
-
-
-def robust_bearing_stats(residual_rad: np.ndarray) -> dict[str, Any]:
-    """Bias, robust spread, outliers and the resulting bearing sigma of residuals.
-
-    Parameters
-    ----------
-    residual_rad : ndarray of shape (m,)
-
-    Returns
-    -------
-    dict
-        ``n``, ``bias_rad`` (median), ``spread_rad`` (1.4826 MAD), ``n_outliers``
-        (``|r - median| > OUTLIER_MADS * max(spread, MIN_BEARING_SIGMA_RAD)``), ``outlier_rate``, ``n_gross`` (``|r| >
-        GROSS_OUTLIER_RAD``), ``inlier_std_rad`` (about the inlier mean), ``sigma_rad`` (RMS of
-        inliers about zero: bias included; at least ``MIN_BEARING_SIGMA_RAD``),
-        ``max_abs_rad``.
-    """
-    r = np.asarray(residual_rad, dtype=float)
-    if r.size < 2:
-        raise DatasetError(f"need at least 2 bearing residuals to calibrate, got {r.size}")
-    med = float(np.median(r))
-    spread = 1.4826 * float(np.median(np.abs(r - med)))
-    out = np.abs(r - med) > OUTLIER_MADS * max(spread, MIN_BEARING_SIGMA_RAD)
-    inl = r[~out]
-    return {"n": int(r.size), "bias_rad": med, "spread_rad": spread,
-            "n_outliers": int(out.sum()), "outlier_rate": float(out.mean()),
-            "n_gross": int((np.abs(r) > GROSS_OUTLIER_RAD).sum()),
-            "inlier_std_rad": float(np.std(inl)),
-            "sigma_rad": max(float(np.sqrt(np.mean(inl ** 2))), MIN_BEARING_SIGMA_RAD),
-            "max_abs_rad": float(np.max(np.abs(r)))}
-
-
-def odometry_sigma_model(model: np.ndarray, odoms: np.ndarray) -> np.ndarray:
-    """Evaluate the sigma model ``sqrt(a^2 + (b l)^2 + (c |dpsi|)^2)`` per component.
-
-    Parameters
-    ----------
-    model : array of shape (3, 3)
-        Row j = ``(a_j, b_j, c_j)`` for component j of ``[dx, dy, dpsi]``.
-    odoms : array of shape (T, 3)
-
-    Returns
-    -------
-    ndarray of shape (T, 3)
-    """
-    m = np.asarray(model, dtype=float)
-    u = np.asarray(odoms, dtype=float).reshape(-1, 3)
-    reg = np.column_stack([np.ones(len(u)), np.hypot(u[:, 0], u[:, 1]), np.abs(u[:, 2])])
-    return np.sqrt((reg ** 2) @ (m ** 2).T)
-
-
-def fit_odometry_sigma(odoms: np.ndarray, errors: np.ndarray) -> tuple[np.ndarray, dict]:
-    """Fit the odometry sigma model to observed increment errors (maximum likelihood).
-
-    Parameters
-    ----------
-    odoms : ndarray of shape (T, 3)
-        The odometry increments (regressors: ``l = |(dx, dy)|`` and ``|dpsi|``).
-    errors : ndarray of shape (T, 3)
-        ``odom - true increment`` per step (heading wrapped).
-
-    Returns
-    -------
-    model : ndarray of shape (3, 3)
-        Row j = ``(a_j, b_j, c_j)``; ``a_j >= 1e-4``.
-    info : dict
-        ``n_steps``, ``n_excluded`` (errors beyond 5 fitted sigmas, excluded from the refit),
-        ``mean_error`` per component.
-    """
-    u = np.asarray(odoms, dtype=float).reshape(-1, 3)
-    e = np.asarray(errors, dtype=float).reshape(-1, 3)
-    if len(u) < 6:
-        raise DatasetError(f"need at least 6 steps to calibrate the odometry sigma, got "
-                           f"{len(u)}; use smaller keyframe thresholds or calibrate=False")
-    reg2 = np.column_stack([np.ones(len(u)), np.hypot(u[:, 0], u[:, 1]) ** 2, u[:, 2] ** 2])
-    model = np.zeros((3, 3))
-    keep = np.ones(len(u), dtype=bool)
-    for _ in range(2):
-        for j in range(3):
-            model[j] = _fit_variance(reg2[keep], e[keep, j] ** 2)
-        z = np.abs(e) / odometry_sigma_model(model, u)
-        keep = np.all(z <= 5.0, axis=1)
-    return model, {"n_steps": int(len(u)), "n_excluded": int((~keep).sum()),
-                   "mean_error": [float(v) for v in e[keep].mean(axis=0)]}
-
-
-def _fit_variance(reg2: np.ndarray, e2: np.ndarray) -> np.ndarray:
-    """``(a, b, c) >= 0`` maximising the Gaussian likelihood with var = reg2 @ (a,b,c)^2."""
-    floor2 = _MIN_SIGMA_FLOOR ** 2
-    start, _ = nnls(reg2, e2)
-    start = np.maximum(start, [floor2, 0.0, 0.0])
-    scale = np.maximum(start, floor2)
-
-    def nll(p: np.ndarray) -> tuple[float, np.ndarray]:
-        theta = p * scale
-        var = reg2 @ theta
-        val = float(np.sum(np.log(var) + e2 / var))
-        grad = (reg2 * (1.0 / var - e2 / var ** 2)[:, None]).sum(axis=0) * scale
-        return val, grad
-
-    res = minimize(nll, start / scale, jac=True, method="L-BFGS-B",
-                   bounds=[(floor2 / scale[0], None), (0.0, None), (0.0, None)])
-    theta = (res.x if res.success or res.fun <= nll(start / scale)[0] else start / scale) * scale
-    return np.sqrt(np.maximum(theta, 0.0))
-
-
-# --------------------------------------------------------------------------------------------
 # The importer
 # --------------------------------------------------------------------------------------------
 
@@ -743,22 +520,10 @@ def import_mrclam(data_dir: str | os.PathLike[str], robot: int, *,
         truth_poses = interpolate_poses(
             gt["time_s"], np.column_stack([gt["x_m"], gt["y_m"], gt["psi_rad"]]), kf_t)
 
-    # 7. calibration --------------------------------------------------------------------------
+    # 6. calibration --------------------------------------------------------------------------
     if calibrate and truth_poses is not None:  # calibrate without truth was refused above
-        true_inc = between(truth_poses[:-1], truth_poses[1:])
-        err = odoms - true_inc
-        err[:, 2] = angle_residual(odoms[:, 2], true_inc[:, 2])
-        model, odo_info = fit_odometry_sigma(regress, err)
-        lo = np.hypot(odoms[:, 0], odoms[:, 1])
-        lt = np.hypot(true_inc[:, 0], true_inc[:, 1])
-        moving = lo > 0.5 * keyframe.min_distance_m
-        turning = np.abs(odoms[:, 2]) > 0.5 * keyframe.min_turn_rad
-        odo_info["length_ratio_truth_over_odometry"] = (
-            float(np.median(lt[moving] / lo[moving])) if moving.any() else None)
-        odo_info["turn_ratio_truth_over_odometry"] = (
-            float(np.median(true_inc[turning, 2] / odoms[turning, 2])) if turning.any()
-            else None)
-        odo_info["rms_error"] = [float(v) for v in np.sqrt(np.mean(err ** 2, axis=0))]
+        model, odo_info = calibrate_odometry(odoms, regress, truth_poses,
+                                             keyframe.min_distance_m, keyframe.min_turn_rad)
     else:
         model = np.asarray(DEFAULT_ODOMETRY_MODEL, dtype=float)
         odo_info = {"source": "DEFAULT_ODOMETRY_MODEL (mrclam6 robots 1-5, default keyframes)"}
@@ -830,7 +595,5 @@ def import_mrclam(data_dir: str | os.PathLike[str], robot: int, *,
 
 
 __all__ = ["KeyframeConfig", "MrclamRobotData", "read_mrclam_robot", "integrate_odometry",
-           "odometry_poses_at", "interpolate_poses", "select_keyframes", "bearing_residuals",
-           "robust_bearing_stats", "odometry_sigma_model", "fit_odometry_sigma",
-           "import_mrclam", "ROBOT_SUBJECTS", "GROSS_OUTLIER_RAD", "OUTLIER_MADS",
-           "DEFAULT_BEARING_SIGMA_RAD", "DEFAULT_ODOMETRY_MODEL", "MIN_BEARING_SIGMA_RAD"]
+           "odometry_poses_at", "interpolate_poses", "select_keyframes", "import_mrclam",
+           "ROBOT_SUBJECTS", "DEFAULT_BEARING_SIGMA_RAD", "DEFAULT_ODOMETRY_MODEL"]

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import gzip
 import math
+import os
 from pathlib import Path
 
 import numpy as np
@@ -16,19 +17,20 @@ import pytest
 
 from bomgraph.angles import TWO_PI, angle_residual, wrap_angle
 from bomgraph.datasets._text import chain_order
+from bomgraph.datasets.calibration import (bearing_residuals, fit_odometry_sigma,
+                                           odometry_sigma_model, robust_bearing_stats)
 from bomgraph.datasets.g2o import import_g2o, odometry_sigma_from_information
-from bomgraph.datasets.mrclam import (DEFAULT_BEARING_SIGMA_RAD, KeyframeConfig,
-                                      bearing_residuals, fit_odometry_sigma,
-                                      import_mrclam, integrate_odometry, interpolate_poses,
-                                      odometry_poses_at, odometry_sigma_model,
-                                      robust_bearing_stats, select_keyframes)
+from bomgraph.datasets.mrclam import (DEFAULT_BEARING_SIGMA_RAD, KeyframeConfig, import_mrclam,
+                                      integrate_odometry, interpolate_poses, odometry_poses_at,
+                                      select_keyframes)
 from bomgraph.datasets.victoria import import_victoria
 from bomgraph.errors import ConfigError, DatasetError
 from bomgraph.geometry import between, bearings_to
 from bomgraph.sim import SimConfig, simulate
 from bomgraph.stream_file import read_stream, write_stream
 
-DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
+DATA = Path(os.environ.get("BOMGRAPH_DATA",
+                          Path(__file__).resolve().parents[3] / "shared" / "data"))
 needs_data = pytest.mark.skipif(not DATA.is_dir(), reason=f"no shared data at {DATA}")
 
 EXACT = dict(command_delay_s=0.0, attach_window_s=0.0)
