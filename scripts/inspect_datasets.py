@@ -190,7 +190,7 @@ def inspect_victoria(data: Path, out: dict) -> None:
     s = import_victoria(data / "victoria_park" / "victoria_park.txt")
     k = np.array([len(st.landmark_ids) for st in s.steps])
     m = s.header.meta
-    print(f"== Victoria Park")
+    print("== Victoria Park")
     print(f"  {len(s.steps)} steps, {k.sum()} bearings, {len(s.landmark_ids())} landmarks; "
           f"steps with bearings {(k > 0).sum()}, per such step {k[k > 0].mean():.2f}")
     print(f"  header: bearing_sigma_rad {s.header.bearing_sigma_rad:.4f} "

@@ -48,7 +48,6 @@ from typing import Any
 import numpy as np
 
 from ..angles import angle_residual
-from ..errors import DatasetError
 from ..geometry import between
 from ..stream import Step, Stream, StreamHeader, Truth
 from ._text import (chain_order, checked_bearing_sigma, data_lines, dataset_error, file_label, parse_float,

@@ -35,6 +35,7 @@ from typing import Any, Mapping
 import numpy as np
 
 from ..angles import angle_residual, wrap_angle
+from ..config import requirement
 from ..errors import ConfigError, DatasetError
 from ..geometry import between
 from ..stream import Step, Stream, StreamHeader, Truth
@@ -86,9 +87,7 @@ class KeyframeConfig:
     command_delay_s: float = 0.2
 
     def __post_init__(self) -> None:
-        def need(ok: bool, msg: str) -> None:
-            if not ok:
-                raise ConfigError(f"KeyframeConfig: {msg}")
+        need = requirement("KeyframeConfig")
 
         for name in ("min_distance_m", "min_turn_rad", "burst_gap_s", "attach_window_s",
                      "max_truth_gap_s", "command_delay_s"):

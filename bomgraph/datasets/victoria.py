@@ -36,7 +36,6 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import DatasetError
 from ..stream import Step, Stream, StreamHeader
 from ._text import (chain_order, checked_bearing_sigma, data_lines, dataset_error, file_label, parse_float,
                     parse_int, read_text)
