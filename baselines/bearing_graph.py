@@ -32,7 +32,7 @@ sensor range if the header gives one); until then their bearings are buffered, a
 become factors when the landmark enters. A landmark seen once never enters (one bearing leaves
 it indeterminate and breaks iSAM2).
 
-Measured effects of the settings: ``docs/measurements-graphs.md``.
+Measured effects of the settings: ``docs/measurements.md``.
 """
 
 from __future__ import annotations

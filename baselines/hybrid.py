@@ -19,7 +19,7 @@ The mapper holds a :class:`~baselines.factor_graph.BatchState` (the graph and it
 the seed mapper; the resected poses are handed to the graph's landmark admission explicitly.
 Landmarks enter by the same rule as in the other GTSAM mappers (so the graphs and their costs
 compare); their start is the aligned seed position, else the ray intersection on the resected
-poses. Measured effects: ``docs/measurements-graphs.md``.
+poses. Measured effects: ``docs/measurements.md``.
 """
 
 from __future__ import annotations

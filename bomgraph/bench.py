@@ -68,7 +68,7 @@ def run_task(task: Task) -> dict[str, Any]:
     A method that raises is recorded as a failure with the reason, never dropped. The task
     runs with single-threaded BLAS: the matrices are small, parallelism is across tasks, and
     multithreaded BLAS on small matrices stalls on a loaded machine
-    (docs/measurements-top.md).
+    (docs/measurements.md).
     """
     from threadpoolctl import threadpool_limits
 

@@ -18,7 +18,7 @@ Usage::
 
 ``--option preset=real`` runs the presets made for recordings (``EkfConfig.PRESETS``);
 options are parsed by ``bomgraph.jsonio.parse_options`` (``inf`` is a number). Prints a table and
-writes the numbers as JSON (``results/`` is git-ignored). docs/measurements-ekf.md holds what it
+writes the numbers as JSON (``results/`` is git-ignored). docs/measurements.md holds what it
 measured.
 """
 

@@ -26,7 +26,7 @@ method gets the same interval.
 
 Bearing sigma: the importer's header value (the file's point covariance propagated to the
 bearing, median) unless ``--bearing-sigma`` is given; GTSAM's own example uses 0.2 rad.
-What both give is in docs/measurements-top.md.
+What both give is in docs/measurements.md.
 
 A method that raises is reported as a failure with its reason; one that runs longer than
 ``--max-seconds`` is stopped and reported with the step it reached and its time per step at

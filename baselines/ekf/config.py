@@ -7,7 +7,7 @@ add their own. Each names its presets in one ``PRESETS`` dict (:class:`bomgraph.
 the g2o set): every bearing used whatever its nonlinearity index (after a blind turn the
 bearings to mapped landmarks are the ones that bring the heading back), two iterations of the
 update, restarts after three gated bearings in a row, and for ``ekf`` inverse-depth
-candidates. The measurements behind them are in docs/measurements-ekf.md.
+candidates. The measurements behind them are in docs/measurements.md.
 """
 
 from __future__ import annotations

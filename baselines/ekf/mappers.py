@@ -5,7 +5,7 @@ The paper compares BOM-STMDS with "BOSLAM-EKF", whose new landmarks are initiali
 :class:`InverseDepthEkfMapper`, ``ekf-invdepth``, is an undelayed alternative (Civera, Davison
 and Montiel, IEEE T-RO 2008, reduced to the plane). Both run on :class:`~baselines.ekf.filter.
 BearingEkf` (filterpy); the models are in :mod:`baselines.ekf.models`, the options in
-:mod:`baselines.ekf.config`, measured numbers in docs/measurements-ekf.md.
+:mod:`baselines.ekf.config`, measured numbers in docs/measurements.md.
 
 Each step: predict with the odometry; gate each bearing to a mapped landmark on its own
 (individual compatibility, ``y_i^2 / (H_i P H_i^T + var_i)`` against the chi-square 1-dof

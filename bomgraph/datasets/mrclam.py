@@ -21,7 +21,7 @@ recording (``shared/data/mrclam*/SOURCE.md``) into keyframes (numbered as in its
    per-step ``odom_sigma`` from the fitted model, header sigmas the median; the bearing sigma
    is the robust inlier RMS (bias included; outliers stay in the stream).
    ``meta["raw_bearing_check"]``: the same for every raw detection. Otherwise the sigmas are
-   the ``DEFAULT_*`` below. Why the default thresholds: ``docs/measurements-io.md``.
+   the ``DEFAULT_*`` below. Why the default thresholds: ``docs/measurements.md``.
 """
 
 from __future__ import annotations
@@ -47,7 +47,7 @@ ROBOT_SUBJECTS = (1, 2, 3, 4, 5)
 """Subject numbers of the five robots (dataset rule, SOURCE.md quirk 1)."""
 
 DEFAULT_BEARING_SIGMA_RAD = 0.0160
-"""Bearing sigma used when not calibrating (fitted on mrclam6, docs/measurements-io.md)."""
+"""Bearing sigma used when not calibrating (fitted on mrclam6, docs/measurements.md)."""
 
 DEFAULT_ODOMETRY_MODEL = ((0.0001, 0.0664, 0.0688),   # dx:   a [m], b [m/m], c [m/rad]
                           (0.0048, 0.0634, 0.0016),   # dy

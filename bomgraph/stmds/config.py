@@ -4,7 +4,7 @@ One frozen, flat dataclass: every field is an option name a user passes as ``--o
 name=value`` (or a factory keyword), so nesting the fields in groups would only add a second
 spelling of each. The defaults reproduce the paper (with the corrected fusion rule);
 :data:`StmdsConfig.PRESETS` names every other variant the experiments and the README use.
-Measured numbers behind the choices are in ``docs/measurements-stmds.md``.
+Measured numbers behind the choices are in ``docs/measurements.md``.
 """
 
 from __future__ import annotations

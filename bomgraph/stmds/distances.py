@@ -19,7 +19,7 @@ under the model ``v_k(d) = v_k (d^2 / d2_k)^m``.
 
 ``"paper"`` (m = 0, averages ``d2``)
     Eq. 3-4 literally: ``d2 = sum d2_k / v_k / sum 1 / v_k``, ``var(d2) = 1 / sum 1 / v_k``.
-    Collapses: fused distances come out short (``docs/measurements-stmds.md``).
+    Collapses: fused distances come out short (``docs/measurements.md``).
 ``"relative"`` (m = 2, averages ``d``)
     Weights are the inverse *relative* variances ``d2_k / var_k(d)``, invariant to a common
     scale error of the step (the odometry length). Close to unbiased once the triangulation
@@ -28,7 +28,7 @@ under the model ``v_k(d) = v_k (d^2 / d2_k)^m``.
     Weights invariant to the parallax-type scale error as well; averaging ``1 / d`` (linear in
     the parallax) avoids the upward bias of ``1 / sin(parallax)``. The default.
 
-The benchmark (``scripts/bench_stmds.py``) measures them (``docs/measurements-stmds.md``). A prior ``(d, s)`` (distance
+The benchmark (``scripts/bench_stmds.py``) measures them (``docs/measurements.md``). A prior ``(d, s)`` (distance
 and std. dev., metres) enters every rule as one more estimate: ``d2 = d^2`` with
 ``var(d2) = (2 d s)^2 + 2 s^4`` (the exact variance of the square of a Gaussian). A pair counts
 as *known* once it has a prior or at least ``min_count`` instantaneous estimates.

@@ -121,7 +121,7 @@ def triangulate_window(odoms: ArrayLike, bearings_rad: ArrayLike, *,
         values) passes the gates, in increasing column order. Choosing by the measured
         parallax, or falling back to another pair when the gates refuse the first choice,
         would pick the pairs whose noise widened the angle: depths biased short
-        (``docs/measurements-stmds.md``).
+        (``docs/measurements.md``).
     n_gated : int
         Landmarks seen from two poses or more with no passing pair.
     """

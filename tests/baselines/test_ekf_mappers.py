@@ -295,7 +295,7 @@ def test_an_outlier_first_sighting_is_started_again(seed: int) -> None:
 @pytest.mark.parametrize("method", ["ekf", "ekf-invdepth"])
 def test_real_preset_maps_mrclam6(method: str, robot: int) -> None:
     # Robot 5 has the gross bearing outliers. With the paper preset ``ekf`` maps 0 and 3
-    # landmarks of these robots (docs/measurements-ekf.md); measured with "real": 7.2 / 8.9 cm
+    # landmarks of these robots (docs/measurements.md); measured with "real": 7.2 / 8.9 cm
     # (ekf), 6.7 / 7.1 cm (ekf-invdepth), gtsam-batch 7.2 / 74.3 cm.
     from bomgraph.datasets import import_mrclam
 
