@@ -1,0 +1,96 @@
+"""The layout of the house (issue 12): one job per file, data flowing one way.
+
+Read from the source with ``ast``, counting imports inside functions too: no import cycle
+among the modules of ``bomgraph`` and ``baselines``, ``bomgraph`` never imports ``baselines``,
+``plots`` imports no other bomgraph module, and no file is over 600 lines.
+"""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+PACKAGES = ("bomgraph", "baselines")
+MAX_LINES = 600
+
+
+def _modules() -> dict[str, Path]:
+    out = {}
+    for pkg in PACKAGES:
+        for f in sorted((ROOT / pkg).rglob("*.py")):
+            parts = list(f.relative_to(ROOT).with_suffix("").parts)
+            if parts[-1] == "__init__":
+                parts = parts[:-1]
+            out[".".join(parts)] = f
+    return out
+
+
+def _imports(name: str, path: Path, known: set[str]) -> set[str]:
+    """Every project module ``name`` imports, at the top or inside functions."""
+    is_pkg = path.name == "__init__.py"
+    base = name.split(".") if is_pkg else name.split(".")[:-1]
+    found: set[str] = set()
+    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        targets: list[str] = []
+        if isinstance(node, ast.Import):
+            targets = [a.name for a in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            mod = node.module or ""
+            if node.level:
+                anchor = base[:len(base) - node.level + 1]
+                mod = ".".join(anchor + ([mod] if mod else []))
+            targets = [mod] + [f"{mod}.{a.name}" for a in node.names]
+        for t in targets:
+            while t and t not in known:
+                t = t.rpartition(".")[0]
+            if t and t != name:
+                found.add(t)
+    return found
+
+
+def _graph() -> dict[str, set[str]]:
+    mods = _modules()
+    return {m: _imports(m, p, set(mods)) for m, p in mods.items()}
+
+
+def test_no_file_is_over_600_lines() -> None:
+    long = {m: len(p.read_text().splitlines()) for m, p in _modules().items()}
+    assert {m: n for m, n in long.items() if n > MAX_LINES} == {}
+
+
+def test_bomgraph_never_imports_baselines() -> None:
+    bad = {m: sorted(d for d in deps if d.startswith("baselines"))
+           for m, deps in _graph().items() if m.startswith("bomgraph")}
+    assert {m: d for m, d in bad.items() if d} == {}
+
+
+def test_plots_import_no_other_bomgraph_module() -> None:
+    assert _graph()["bomgraph.plots"] == set()
+
+
+def test_no_import_cycle() -> None:
+    graph = _graph()
+    # a package's __init__ re-exporting its modules is its face, not an arrow back up
+    edges = {m: {d for d in deps if not m.startswith(d + ".")} for m, deps in graph.items()}
+    state: dict[str, int] = {}
+    stack: list[str] = []
+
+    def visit(m: str) -> list[str] | None:
+        state[m] = 1
+        stack.append(m)
+        for d in sorted(edges[m]):
+            if state.get(d) == 1:
+                return stack[stack.index(d):] + [d]
+            if d not in state:
+                cycle = visit(d)
+                if cycle:
+                    return cycle
+        stack.pop()
+        state[m] = 2
+        return None
+
+    for m in sorted(edges):
+        if m not in state:
+            cycle = visit(m)
+            assert cycle is None, " -> ".join(cycle)
