@@ -11,13 +11,15 @@ MRCLAM1 (no robot truth), the bearing-only g2o set and Victoria Park.
     python scripts/inspect_datasets.py --sweep         # + keyframe-threshold and delay sweeps
     python scripts/inspect_datasets.py --json out.json # also save the numbers
 
-The sweeps are the measurements behind the defaults of ``KeyframeConfig``.
+The sweeps are the measurements behind the defaults of ``KeyframeConfig``
+(docs/measurements.md). ``BOMGRAPH_DATA`` sets the default data folder.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 from pathlib import Path
 from typing import Any
@@ -27,14 +29,16 @@ import numpy as np
 from bomgraph.angles import angle_residual
 from bomgraph.datasets.g2o import import_g2o
 from bomgraph.datasets.calibration import (bearing_residuals, fit_odometry_sigma,
-                                           odometry_sigma_model, robust_bearing_stats)
+                                           odometry_errors, odometry_sigma_model,
+                                           robust_bearing_stats)
 from bomgraph.datasets.mrclam import (KeyframeConfig, import_mrclam, integrate_odometry,
                                       odometry_poses_at, read_mrclam_robot)
 from bomgraph.datasets.victoria import import_victoria
-from bomgraph.geometry import between
+from bomgraph.jsonio import jsonable
 from bomgraph.stream import Stream
 
-DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
+DATA = Path(os.environ.get("BOMGRAPH_DATA",
+                          Path(__file__).resolve().parents[2] / "shared" / "data"))
 
 
 def consecutive_parallax(stream: Stream) -> tuple[np.ndarray, np.ndarray]:
@@ -71,9 +75,7 @@ def step_odometry_errors(stream: Stream, data_dir: Path, robot: int,
     raw odometry at the keyframe times, as the importer does.
     """
     odoms = np.array([s.odom for s in stream.steps[1:]])
-    inc = between(stream.truth.poses[:-1], stream.truth.poses[1:])
-    err = odoms - inc
-    err[:, 2] = angle_residual(odoms[:, 2], inc[:, 2])
+    err, _ = odometry_errors(odoms, stream.truth.poses)
     od = read_mrclam_robot(data_dir, robot).odometry
     t = od["time_s"] + keyframe.command_delay_s
     poses = integrate_odometry(t, od["v_mps"], od["w_radps"])
@@ -264,7 +266,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.sweep:
         sweep(args.data, out)
     if args.json:
-        args.json.write_text(json.dumps(out, indent=1, default=float))
+        args.json.write_text(json.dumps(jsonable(out), indent=1))
         print(f"wrote {args.json}")
     return 0
 

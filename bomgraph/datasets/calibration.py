@@ -190,6 +190,27 @@ def _fit_variance(reg2: np.ndarray, e2: np.ndarray) -> np.ndarray:
     return np.sqrt(np.maximum(theta, 0.0))
 
 
+def odometry_errors(odoms: np.ndarray, truth_poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Errors of odometry increments against consecutive truth poses.
+
+    Parameters
+    ----------
+    odoms : ndarray of shape (T, 3)
+        ``[dx_m, dy_m, dpsi_rad]`` from pose t to t+1 in the frame of pose t.
+    truth_poses : ndarray of shape (T + 1, 3)
+
+    Returns
+    -------
+    errors : ndarray of shape (T, 3)
+        ``odoms - true increment``, heading by :func:`~bomgraph.angles.angle_residual`.
+    true_increments : ndarray of shape (T, 3)
+    """
+    true_inc = between(truth_poses[:-1], truth_poses[1:])
+    err = odoms - true_inc
+    err[:, 2] = angle_residual(odoms[:, 2], true_inc[:, 2])
+    return err, true_inc
+
+
 def calibrate_odometry(odoms: np.ndarray, regress: np.ndarray, truth_poses: np.ndarray,
                        min_distance_m: float, min_turn_rad: float) -> tuple[np.ndarray, dict]:
     """Fit the odometry sigma model of a keyframed run against its truth poses.
@@ -212,9 +233,7 @@ def calibrate_odometry(odoms: np.ndarray, regress: np.ndarray, truth_poses: np.n
         The fit's info plus ``length_ratio_truth_over_odometry``,
         ``turn_ratio_truth_over_odometry`` (medians, None without such steps), ``rms_error``.
     """
-    true_inc = between(truth_poses[:-1], truth_poses[1:])
-    err = odoms - true_inc
-    err[:, 2] = angle_residual(odoms[:, 2], true_inc[:, 2])
+    err, true_inc = odometry_errors(odoms, truth_poses)
     model, info = fit_odometry_sigma(regress, err)
     lo = np.hypot(odoms[:, 0], odoms[:, 1])
     lt = np.hypot(true_inc[:, 0], true_inc[:, 1])
@@ -229,6 +248,6 @@ def calibrate_odometry(odoms: np.ndarray, regress: np.ndarray, truth_poses: np.n
     return model, info
 
 
-__all__ = ["bearing_residuals", "robust_bearing_stats", "odometry_sigma_model",
+__all__ = ["bearing_residuals", "robust_bearing_stats", "odometry_errors", "odometry_sigma_model",
            "fit_odometry_sigma", "calibrate_odometry", "GROSS_OUTLIER_RAD", "OUTLIER_MADS",
            "MIN_BEARING_SIGMA_RAD"]

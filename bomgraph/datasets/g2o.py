@@ -47,12 +47,10 @@ from typing import Any
 
 import numpy as np
 
-from ..angles import angle_residual
-from ..geometry import between
 from ..stream import Step, Stream, StreamHeader, Truth
-from ._text import (chain_order, checked_bearing_sigma, data_lines, dataset_error, file_label, parse_float,
-                    parse_int, read_text)
-from .calibration import bearing_residuals, robust_bearing_stats
+from ._text import (chain_order, checked_bearing_sigma, data_lines, dataset_error, file_label,
+                    parse_float, parse_int, read_text)
+from .calibration import bearing_residuals, odometry_errors, robust_bearing_stats
 
 _RECORDS = {
     "VERTEX_SE2": ["id", "x", "y", "theta"],
@@ -294,9 +292,7 @@ def import_g2o(path: str | os.PathLike[str], *, truth_path: str | os.PathLike[st
         if r.size >= 2:
             check["bearing"] = robust_bearing_stats(r)
         if len(order) > 1:
-            inc = between(truth.poses[:-1], truth.poses[1:])
-            err = odoms - inc
-            err[:, 2] = angle_residual(odoms[:, 2], inc[:, 2])
+            err, _ = odometry_errors(odoms, truth.poses)
             check["odometry_rms_error"] = [float(v) for v in np.sqrt(np.mean(err ** 2, axis=0))]
             check["odometry_mean_error"] = [float(v) for v in err.mean(axis=0)]
         meta["truth_check"] = check

@@ -30,7 +30,7 @@ import math
 import os
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any, Callable
 
 import numpy as np
 
@@ -39,12 +39,9 @@ from ..config import requirement
 from ..errors import ConfigError, DatasetError
 from ..geometry import between
 from ..stream import Step, Stream, StreamHeader, Truth
-from ._text import dataset_error, file_label, find_file, has_file, read_table
 from .calibration import (bearing_residuals, calibrate_odometry, odometry_sigma_model,
                           robust_bearing_stats)
-
-ROBOT_SUBJECTS = (1, 2, 3, 4, 5)
-"""Subject numbers of the five robots (dataset rule, SOURCE.md quirk 1)."""
+from .mrclam_files import ROBOT_SUBJECTS, MrclamRobotData, read_mrclam_robot
 
 DEFAULT_BEARING_SIGMA_RAD = 0.0160
 """Bearing sigma used when not calibrating (fitted on mrclam6, docs/measurements.md)."""
@@ -99,139 +96,6 @@ class KeyframeConfig:
              "keyframe with no parallax); set at least one > 0")
         need(self.min_turn_rad < math.pi, "min_turn_rad must be < pi")
         need(self.max_truth_gap_s > 0, "max_truth_gap_s must be > 0")
-
-
-# --------------------------------------------------------------------------------------------
-# Reading the files
-# --------------------------------------------------------------------------------------------
-
-@dataclass(frozen=True)
-class MrclamRobotData:
-    """The raw tables of one robot, as read (times in Unix seconds).
-
-    Attributes
-    ----------
-    barcode_subject : dict of int to int
-        Barcode number -> subject number.
-    landmark_ids : ndarray of shape (n,), int64
-    landmarks_xy : ndarray of shape (n, 2)
-    odometry : dict with "time_s", "v_mps", "w_radps", each (k,)
-    measurements : dict with "time_s", "barcode", "range_m", "bearing_rad", each (m,)
-    groundtruth : dict with "time_s", "x_m", "y_m", "psi_rad", each (g,), or None
-    files : dict of role -> file name
-    """
-
-    barcode_subject: Mapping[int, int]
-    landmark_ids: np.ndarray
-    landmarks_xy: np.ndarray
-    odometry: Mapping[str, np.ndarray]
-    measurements: Mapping[str, np.ndarray]
-    groundtruth: Mapping[str, np.ndarray] | None
-    files: Mapping[str, str]
-
-
-def _check_sorted(path: Path, time_s: np.ndarray, lines: np.ndarray) -> None:
-    bad = np.flatnonzero(np.diff(time_s) < 0)
-    if bad.size:
-        k = int(bad[0]) + 1
-        raise dataset_error(path, int(lines[k]), "time",
-                            f"time {time_s[k]:.3f} is earlier than the previous row's "
-                            f"{time_s[k - 1]:.3f}; rows must be in time order (sort the file)")
-
-
-def read_mrclam_robot(data_dir: str | os.PathLike[str], robot: int) -> MrclamRobotData:
-    """Read the files of one MRCLAM robot (``.dat`` or ``.dat.gz``).
-
-    Parameters
-    ----------
-    data_dir : path-like
-        The dataset folder (e.g. ``shared/data/mrclam6``).
-    robot : int
-        1..5.
-
-    Returns
-    -------
-    MrclamRobotData
-        ``groundtruth`` is None when ``RobotN_Groundtruth.dat`` is absent (mrclam1).
-
-    Raises
-    ------
-    DatasetError
-        On a missing file or a malformed line (naming file, line and field).
-    """
-    if isinstance(robot, bool) or not isinstance(robot, (int, np.integer)) \
-            or robot not in ROBOT_SUBJECTS:
-        raise DatasetError(f"robot must be one of 1, 2, 3, 4, 5, got {robot!r}")
-    d = Path(data_dir)
-    if not d.is_dir():
-        raise DatasetError(f"{d}: not a directory; pass the MRCLAM dataset folder")
-    files: dict[str, str] = {}
-
-    p = find_file(d, "Barcodes.dat")
-    files["barcodes"] = file_label(p)
-    bc, bc_lines = read_table(p, [("subject", "int"), ("barcode", "int")])
-    seen: dict[int, int] = {}
-    for k, (s, b) in enumerate(zip(bc["subject"].tolist(), bc["barcode"].tolist())):
-        if b in seen:
-            raise dataset_error(p, int(bc_lines[k]), "barcode",
-                                f"barcode {b} is listed twice (subjects {seen[b]} and {s}); "
-                                f"each barcode must name one subject")
-        seen[b] = s
-
-    p = find_file(d, "Landmark_Groundtruth.dat")
-    files["landmarks"] = file_label(p)
-    lm, lm_lines = read_table(p, [("subject", "int"), ("x", "float"), ("y", "float"),
-                                  ("x_std", "float"), ("y_std", "float")])
-    ids = lm["subject"]
-    _, first_index = np.unique(ids, return_index=True)
-    dup = np.setdiff1d(np.arange(ids.size), first_index)
-    if dup.size:
-        k = int(dup[0])
-        raise dataset_error(p, int(lm_lines[k]), "subject",
-                            f"landmark {int(ids[k])} is listed twice; keep one row")
-    robots_in_lm = np.isin(ids, ROBOT_SUBJECTS)
-    if robots_in_lm.any():
-        k = int(np.flatnonzero(robots_in_lm)[0])
-        raise dataset_error(p, int(lm_lines[k]), "subject",
-                            f"subject {int(ids[k])} is a robot (1-5), not a landmark")
-
-    p = find_file(d, f"Robot{robot}_Odometry.dat")
-    files["odometry"] = file_label(p)
-    od, od_lines = read_table(p, [("time", "float"), ("v", "float"), ("w", "float")])
-    if od["time"].size < 2:
-        raise DatasetError(f"{p}: needs at least 2 odometry rows to integrate, got "
-                           f"{od['time'].size}")
-    _check_sorted(p, od["time"], od_lines)
-
-    p = find_file(d, f"Robot{robot}_Measurement.dat")
-    files["measurements"] = file_label(p)
-    me, me_lines = read_table(p, [("time", "float"), ("barcode", "int"), ("range", "float"),
-                                  ("bearing", "float")])
-    _check_sorted(p, me["time"], me_lines)
-    neg = np.flatnonzero(me["range"] < 0)
-    if neg.size:
-        k = int(neg[0])
-        raise dataset_error(p, int(me_lines[k]), "range",
-                            f"negative range {me['range'][k]}; fix or delete this line")
-
-    gt = None
-    if has_file(d, f"Robot{robot}_Groundtruth.dat"):
-        p = find_file(d, f"Robot{robot}_Groundtruth.dat")
-        files["groundtruth"] = file_label(p)
-        g, g_lines = read_table(p, [("time", "float"), ("x", "float"), ("y", "float"),
-                                    ("heading", "float")])
-        if g["time"].size < 2:
-            raise DatasetError(f"{p}: needs at least 2 ground-truth rows to interpolate")
-        _check_sorted(p, g["time"], g_lines)
-        gt = {"time_s": g["time"], "x_m": g["x"], "y_m": g["y"], "psi_rad": g["heading"]}
-
-    return MrclamRobotData(
-        barcode_subject=seen, landmark_ids=ids,
-        landmarks_xy=np.column_stack([lm["x"], lm["y"]]),
-        odometry={"time_s": od["time"], "v_mps": od["v"], "w_radps": od["w"]},
-        measurements={"time_s": me["time"], "barcode": me["barcode"], "range_m": me["range"],
-                      "bearing_rad": me["bearing"]},
-        groundtruth=gt, files=files)
 
 
 # --------------------------------------------------------------------------------------------
@@ -375,8 +239,129 @@ def select_keyframes(poses: np.ndarray, min_distance_m: float,
 
 
 # --------------------------------------------------------------------------------------------
-# The importer
+# The importer, step by step (module docstring)
 # --------------------------------------------------------------------------------------------
+
+_Rows = dict[str, Any]
+
+
+def _classify_rows(raw: MrclamRobotData, odo_time_s: np.ndarray, keyframe: KeyframeConfig
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, _Rows]:
+    """Steps 1-2: which measurement rows are usable landmark detections.
+
+    Returns
+    -------
+    subject : ndarray of shape (n_rows,), int64
+        Subject of each row (-1 for an unknown barcode).
+    use : ndarray of shape (n_rows,), bool
+        Landmark detections inside the odometry (and ground-truth) span, outside truth gaps.
+    idx : ndarray of shape (m,), int64
+        ``flatnonzero(use)``.
+    rows : dict
+        The counts of ``meta["rows"]`` so far.
+    """
+    me, gt = raw.measurements, raw.groundtruth
+    n_rows = int(me["time_s"].size)
+    barcodes = me["barcode"]
+    known = np.array([b in raw.barcode_subject for b in barcodes.tolist()], dtype=bool)
+    subject = np.array([raw.barcode_subject.get(b, -1) for b in barcodes.tolist()],
+                       dtype=np.int64)
+    is_robot = known & np.isin(subject, ROBOT_SUBJECTS)
+    is_landmark = known & np.isin(subject, raw.landmark_ids)
+    is_other = known & ~is_robot & ~is_landmark
+    rows: _Rows = {
+        "total": n_rows,
+        "robot_sightings": int(is_robot.sum()),
+        "unknown_barcode": int((~known).sum()),
+        "unknown_barcode_values": sorted(set(barcodes[~known].tolist())),
+        "subject_without_landmark_truth": int(is_other.sum()),
+    }
+    t_m = me["time_s"]
+    in_time = (t_m >= odo_time_s[0]) & (t_m <= odo_time_s[-1])
+    in_gap = np.zeros(n_rows, dtype=bool)
+    if gt is not None:
+        tg = gt["time_s"]
+        in_time &= (t_m >= tg[0]) & (t_m <= tg[-1])
+        k = np.clip(np.searchsorted(tg, t_m, side="right") - 1, 0, len(tg) - 2)
+        in_gap = in_time & ((tg[k + 1] - tg[k]) > keyframe.max_truth_gap_s)
+    use = is_landmark & in_time & ~in_gap
+    rows["outside_time_span"] = int((is_landmark & ~in_time).sum())
+    rows["in_truth_gap"] = int((is_landmark & in_gap).sum())
+    return subject, use, np.flatnonzero(use), rows
+
+
+def _select_keyframes(tu: np.ndarray, odo_at: Callable[[np.ndarray], np.ndarray],
+                      keyframe: KeyframeConfig
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Steps 3-4: bursts of the detection times ``tu`` (m,) and the keyframes among them.
+
+    Returns ``burst_of`` (m,) burst index per detection, ``burst_t`` (n_bursts,),
+    ``kf_burst`` (K,) the bursts that are keyframes, ``kf_t`` (K,) their times.
+    """
+    new_burst = np.concatenate([[True], np.diff(tu) > keyframe.burst_gap_s])
+    burst_of = np.cumsum(new_burst) - 1
+    burst_t = tu[new_burst]
+    kf_burst = select_keyframes(odo_at(burst_t), keyframe.min_distance_m,
+                                keyframe.min_turn_rad)
+    return burst_of, burst_t, kf_burst, burst_t[kf_burst]
+
+
+def _attach_detections(tu: np.ndarray, burst_of: np.ndarray, burst_t: np.ndarray,
+                       kf_burst: np.ndarray, kf_t: np.ndarray,
+                       psi_shift: Callable[[np.ndarray], np.ndarray] | None,
+                       ids: np.ndarray, bearing: np.ndarray, range_m: np.ndarray,
+                       keyframe: KeyframeConfig, rows: _Rows
+                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Step 5: attach detections (m,) to keyframes, one per landmark and keyframe.
+
+    ``psi_shift(near)`` gives, for the keyframe index of each detection, the heading change
+    ``psi(t_m) - psi(t_k)`` [rad] added to its bearing (None: bearings are not re-expressed).
+    Returns ``(step, landmark_id, bearing_rad, range_m)`` of the kept detections, sorted by
+    step, the detection closest in time winning; adds the counts to ``rows``.
+    """
+    j = np.clip(np.searchsorted(kf_t, tu), 1, max(len(kf_t) - 1, 1))
+    if len(kf_t) == 1:
+        near = np.zeros(tu.size, dtype=np.int64)
+    else:
+        near = np.where(np.abs(tu - kf_t[j - 1]) <= np.abs(tu - kf_t[j]), j - 1, j)
+    # A keyframe's own burst is always attached to it (its spread is below burst_gap_s).
+    own = np.isin(burst_of, kf_burst)
+    near = np.where(own, np.searchsorted(kf_t, burst_t[burst_of]), near)
+    dt = tu - kf_t[near]
+    attached = own | (np.abs(dt) <= keyframe.attach_window_s)
+    rows["between_keyframes"] = int((~attached).sum())
+    if psi_shift is not None:
+        bearing = bearing + psi_shift(near)
+    a_step = near[attached]
+    a_id = ids[attached]
+    a_brg = wrap_angle(bearing[attached])
+    a_rng = range_m[attached]
+    a_dt = np.abs(dt[attached])
+    order = np.lexsort((np.arange(a_step.size), a_dt, a_id, a_step))
+    a_step, a_id, a_brg, a_rng = a_step[order], a_id[order], a_brg[order], a_rng[order]
+    first = np.concatenate([[True], (np.diff(a_step) != 0) | (np.diff(a_id) != 0)])
+    rows["duplicate_in_keyframe"] = int((~first).sum())
+    rows["kept"] = int(first.sum())
+    return a_step[first], a_id[first], a_brg[first], a_rng[first]
+
+
+def _raw_bearing_check(raw: MrclamRobotData, subject: np.ndarray,
+                       det: np.ndarray) -> dict[str, Any] | None:
+    """Step 6, the sensor before keyframing: every usable detection (mask ``det``) against the
+    truth interpolated at its own time; None with fewer than 2 detections."""
+    gt, me = raw.groundtruth, raw.measurements
+    det_pose = interpolate_poses(gt["time_s"],
+                                 np.column_stack([gt["x_m"], gt["y_m"], gt["psi_rad"]]),
+                                 me["time_s"][det])
+    det_xy = raw.landmarks_xy[np.searchsorted(raw.landmark_ids, subject[det],
+                                              sorter=np.argsort(raw.landmark_ids))]
+    if det.sum() < 2:
+        return None
+    det_r = angle_residual(me["bearing_rad"][det], np.arctan2(
+        det_xy[:, 1] - det_pose[:, 1], det_xy[:, 0] - det_pose[:, 0]) - det_pose[:, 2])
+    return {**robust_bearing_stats(det_r), "fov_rad": [float(me["bearing_rad"][det].min()),
+                                                       float(me["bearing_rad"][det].max())]}
+
 
 def import_mrclam(data_dir: str | os.PathLike[str], robot: int, *,
                   keyframe: KeyframeConfig = KeyframeConfig(), keep_ranges: bool = False,
@@ -411,6 +396,7 @@ def import_mrclam(data_dir: str | os.PathLike[str], robot: int, *,
     """
     if not isinstance(keyframe, KeyframeConfig):
         raise ConfigError(f"keyframe must be a KeyframeConfig, got {type(keyframe).__name__}")
+    # 1-2. rows and time window ------------------------------------------------------------
     raw = read_mrclam_robot(data_dir, robot)
     gt = raw.groundtruth
     if calibrate and gt is None:
@@ -420,93 +406,36 @@ def import_mrclam(data_dir: str | os.PathLike[str], robot: int, *,
     me = raw.measurements
     od = dict(raw.odometry)
     od["time_s"] = od["time_s"] + keyframe.command_delay_s
-    n_rows = int(me["time_s"].size)
-
-    # 1. classify rows -------------------------------------------------------------------
-    barcodes = me["barcode"]
-    known = np.array([b in raw.barcode_subject for b in barcodes.tolist()], dtype=bool)
-    subject = np.array([raw.barcode_subject.get(b, -1) for b in barcodes.tolist()],
-                       dtype=np.int64)
-    is_robot = known & np.isin(subject, ROBOT_SUBJECTS)
-    is_landmark = known & np.isin(subject, raw.landmark_ids)
-    is_other = known & ~is_robot & ~is_landmark
-    rows: dict[str, Any] = {
-        "total": n_rows,
-        "robot_sightings": int(is_robot.sum()),
-        "unknown_barcode": int((~known).sum()),
-        "unknown_barcode_values": sorted(set(barcodes[~known].tolist())),
-        "subject_without_landmark_truth": int(is_other.sum()),
-    }
-
-    # 2. time window: odometry span, and ground-truth span / gaps --------------------------
-    t_m = me["time_s"]
-    in_odo = (t_m >= od["time_s"][0]) & (t_m <= od["time_s"][-1])
-    in_time = in_odo.copy()
-    in_gap = np.zeros(n_rows, dtype=bool)
-    if gt is not None:
-        tg = gt["time_s"]
-        in_time &= (t_m >= tg[0]) & (t_m <= tg[-1])
-        k = np.clip(np.searchsorted(tg, t_m, side="right") - 1, 0, len(tg) - 2)
-        in_gap = in_time & ((tg[k + 1] - tg[k]) > keyframe.max_truth_gap_s)
-    use = is_landmark & in_time & ~in_gap
-    rows["outside_time_span"] = int((is_landmark & ~in_time).sum())
-    rows["in_truth_gap"] = int((is_landmark & in_gap).sum())
-    idx = np.flatnonzero(use)
+    subject, use, idx, rows = _classify_rows(raw, od["time_s"], keyframe)
     if idx.size == 0:
         raise DatasetError(f"{Path(data_dir)}: robot {robot} has no landmark detection inside "
                            f"its odometry{' and ground-truth' if gt is not None else ''} time "
                            f"span; nothing to import")
 
-    # 3. bursts; 4. keyframes ---------------------------------------------------------------
-    tu = t_m[idx]
-    new_burst = np.concatenate([[True], np.diff(tu) > keyframe.burst_gap_s])
-    burst_of = np.cumsum(new_burst) - 1
-    burst_t = tu[new_burst]
+    # 3-4. odometry, bursts, keyframes ------------------------------------------------------
     odo_poses = integrate_odometry(od["time_s"], od["v_mps"], od["w_radps"])
 
     def odo_at(q: np.ndarray) -> np.ndarray:
         return odometry_poses_at(od["time_s"], od["v_mps"], od["w_radps"], odo_poses, q)
 
-    kf_burst = select_keyframes(odo_at(burst_t), keyframe.min_distance_m,
-                                keyframe.min_turn_rad)
-    kf_t = burst_t[kf_burst]
+    tu = me["time_s"][idx]
+    burst_of, burst_t, kf_burst, kf_t = _select_keyframes(tu, odo_at, keyframe)
     kf_pose = odo_at(kf_t)
 
-    # 5. attach detections to the nearest keyframe in time -----------------------------------
-    j = np.clip(np.searchsorted(kf_t, tu), 1, max(len(kf_t) - 1, 1))
-    if len(kf_t) == 1:
-        near = np.zeros(tu.size, dtype=np.int64)
-    else:
-        near = np.where(np.abs(tu - kf_t[j - 1]) <= np.abs(tu - kf_t[j]), j - 1, j)
-    # A keyframe's own burst is always attached to it (its spread is below burst_gap_s).
-    own = np.isin(burst_of, kf_burst)
-    near = np.where(own, np.searchsorted(kf_t, burst_t[burst_of]), near)
-    dt = tu - kf_t[near]
-    attached = own | (np.abs(dt) <= keyframe.attach_window_s)
-    rows["between_keyframes"] = int((~attached).sum())
-    bearing = me["bearing_rad"][idx].copy()
-    if keyframe.rotate_bearings:
-        bearing = bearing + (odo_at(tu)[:, 2] - kf_pose[near, 2])
-    a_step = near[attached]
-    a_id = subject[idx][attached]
-    a_brg = wrap_angle(bearing[attached])
-    a_rng = me["range_m"][idx][attached]
-    a_dt = np.abs(dt[attached])
-    # one landmark at most once per keyframe: keep the detection closest in time
-    order = np.lexsort((np.arange(a_step.size), a_dt, a_id, a_step))
-    a_step, a_id, a_brg, a_rng = a_step[order], a_id[order], a_brg[order], a_rng[order]
-    first = np.concatenate([[True], (np.diff(a_step) != 0) | (np.diff(a_id) != 0)])
-    rows["duplicate_in_keyframe"] = int((~first).sum())
-    a_step, a_id, a_brg, a_rng = a_step[first], a_id[first], a_brg[first], a_rng[first]
-    rows["kept"] = int(a_step.size)
-    accounted = (rows["robot_sightings"] + rows["unknown_barcode"]
-                 + rows["subject_without_landmark_truth"] + rows["outside_time_span"]
-                 + rows["in_truth_gap"] + rows["between_keyframes"]
-                 + rows["duplicate_in_keyframe"] + rows["kept"])
-    if accounted != n_rows:  # an internal invariant, not user input
-        raise RuntimeError(f"row accounting broken: {accounted} != {n_rows}")
+    # 5. attach detections ------------------------------------------------------------------
+    psi_shift = ((lambda near: odo_at(tu)[:, 2] - kf_pose[near, 2])
+                 if keyframe.rotate_bearings else None)
+    a_step, a_id, a_brg, a_rng = _attach_detections(
+        tu, burst_of, burst_t, kf_burst, kf_t, psi_shift, subject[idx],
+        me["bearing_rad"][idx].copy(), me["range_m"][idx], keyframe, rows)
+    accounted = sum(rows[k] for k in ("robot_sightings", "unknown_barcode",
+                                      "subject_without_landmark_truth", "outside_time_span",
+                                      "in_truth_gap", "between_keyframes",
+                                      "duplicate_in_keyframe", "kept"))
+    if accounted != rows["total"]:  # an internal invariant, not user input
+        raise RuntimeError(f"row accounting broken: {accounted} != {rows['total']}")
 
-    # steps -----------------------------------------------------------------------------------
+    # steps and truth ----------------------------------------------------------------------
     n_kf = len(kf_t)
     odoms = between(kf_pose[:-1], kf_pose[1:]) if n_kf > 1 else np.zeros((0, 3))
     # the sigma model's regressors: length and the whole (unwrapped) turn, which exceeds pi
@@ -519,7 +448,7 @@ def import_mrclam(data_dir: str | os.PathLike[str], robot: int, *,
         truth_poses = interpolate_poses(
             gt["time_s"], np.column_stack([gt["x_m"], gt["y_m"], gt["psi_rad"]]), kf_t)
 
-    # 6. calibration --------------------------------------------------------------------------
+    # 6. calibration ------------------------------------------------------------------------
     if calibrate and truth_poses is not None:  # calibrate without truth was refused above
         model, odo_info = calibrate_odometry(odoms, regress, truth_poses,
                                              keyframe.min_distance_m, keyframe.min_turn_rad)
@@ -527,14 +456,11 @@ def import_mrclam(data_dir: str | os.PathLike[str], robot: int, *,
         model = np.asarray(DEFAULT_ODOMETRY_MODEL, dtype=float)
         odo_info = {"source": "DEFAULT_ODOMETRY_MODEL (mrclam6 robots 1-5, default keyframes)"}
     step_sigma = odometry_sigma_model(model, regress)
-
-    steps = []
-    for t in range(n_kf):
-        sl = slice(bounds[t], bounds[t + 1])
-        steps.append(Step(t=t, odom=None if t == 0 else odoms[t - 1],
-                          landmark_ids=a_id[sl], bearings_rad=a_brg[sl],
-                          odom_sigma=None if t == 0 else step_sigma[t - 1],
-                          time_s=float(kf_t[t])))
+    steps = tuple(Step(t=t, odom=None if t == 0 else odoms[t - 1],
+                       landmark_ids=a_id[bounds[t]:bounds[t + 1]],
+                       bearings_rad=a_brg[bounds[t]:bounds[t + 1]],
+                       odom_sigma=None if t == 0 else step_sigma[t - 1], time_s=float(kf_t[t]))
+                  for t in range(n_kf))
     truth = Truth(raw.landmark_ids, raw.landmarks_xy, truth_poses)
     header_odo = (tuple(float(v) for v in np.median(step_sigma, axis=0)) if n_kf > 1
                   else tuple(float(v) for v in model[:, 0]))
@@ -562,24 +488,12 @@ def import_mrclam(data_dir: str | os.PathLike[str], robot: int, *,
         tg = gt["time_s"]
         k = np.clip(np.searchsorted(tg, kf_t, side="right") - 1, 0, len(tg) - 2)
         meta["truth_max_bracket_s"] = float(np.max(tg[k + 1] - tg[k]))
-        # the sensor's own quirks, before keyframing: every landmark detection inside the
-        # truth span against the truth interpolated at its own time
-        det = is_landmark & in_time & ~in_gap
-        det_pose = interpolate_poses(tg, np.column_stack([gt["x_m"], gt["y_m"], gt["psi_rad"]]),
-                                     t_m[det])
-        det_xy = raw.landmarks_xy[np.searchsorted(raw.landmark_ids, subject[det],
-                                                  sorter=np.argsort(raw.landmark_ids))]
-        if det.sum() >= 2:
-            det_r = angle_residual(me["bearing_rad"][det], np.arctan2(
-                det_xy[:, 1] - det_pose[:, 1], det_xy[:, 0] - det_pose[:, 0]) - det_pose[:, 2])
-            meta["raw_bearing_check"] = {
-                **robust_bearing_stats(det_r),
-                "fov_rad": [float(me["bearing_rad"][det].min()),
-                            float(me["bearing_rad"][det].max())]}
+        check = _raw_bearing_check(raw, subject, use)
+        if check is not None:
+            meta["raw_bearing_check"] = check
     if calibrate and truth_poses is not None:
-        stream0 = Stream(StreamHeader(1.0, header_odo), tuple(steps), truth)
-        r, _, _ = bearing_residuals(stream0)
-        stats = robust_bearing_stats(r)
+        stats = robust_bearing_stats(bearing_residuals(
+            Stream(StreamHeader(1.0, header_odo), steps, truth))[0])
         bearing_sigma = stats["sigma_rad"]
         meta["bearing_calibration"] = stats
     else:
@@ -590,7 +504,7 @@ def import_mrclam(data_dir: str | os.PathLike[str], robot: int, *,
         meta["ranges_m"] = [[int(s), int(i), float(r)] for s, i, r in zip(a_step, a_id, a_rng)]
     header = StreamHeader(bearing_sigma_rad=float(bearing_sigma), odometry_sigma=header_odo,
                           sensor_range_m=sensor_range, meta=meta)
-    return Stream(header, tuple(steps), truth)
+    return Stream(header, steps, truth)
 
 
 __all__ = ["KeyframeConfig", "MrclamRobotData", "read_mrclam_robot", "integrate_odometry",

@@ -37,8 +37,8 @@ from typing import Any
 import numpy as np
 
 from ..stream import Step, Stream, StreamHeader
-from ._text import (chain_order, checked_bearing_sigma, data_lines, dataset_error, file_label, parse_float,
-                    parse_int, read_text)
+from ._text import (chain_order, checked_bearing_sigma, data_lines, dataset_error, file_label,
+                    parse_float, parse_int, read_text)
 
 _RECORDS = {
     "ODOMETRY": ["i", "j", "dx", "dy", "dtheta", "c_xx", "c_xy", "c_xth", "c_yy", "c_yth",

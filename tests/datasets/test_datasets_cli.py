@@ -1,0 +1,30 @@
+"""The ``bomgraph import`` commands for the three formats."""
+
+from __future__ import annotations
+
+from dataset_excerpts import VICTORIA, make_mrclam, sim_stream, write_g2o  # noqa: F401
+
+from bomgraph.datasets.mrclam import import_mrclam
+from bomgraph.stream_file import read_stream
+
+
+def test_cli_import_commands(tmp_path, sim_stream, capsys):
+    from bomgraph.cli import main
+
+    make_mrclam(tmp_path / "m")
+    assert main(["import", "mrclam", str(tmp_path / "m"), "--robot", "1", "--out",
+                 str(tmp_path / "m.jsonl")]) == 0
+    assert read_stream(tmp_path / "m.jsonl") == import_mrclam(tmp_path / "m", 1)
+    write_g2o(tmp_path / "a.g2o", sim_stream)
+    assert main(["import", "g2o", str(tmp_path / "a.g2o"), "--truth", str(tmp_path / "a.g2o"),
+                 "--out", str(tmp_path / "g.jsonl")]) == 0
+    assert read_stream(tmp_path / "g.jsonl").truth == sim_stream.truth
+    (tmp_path / "v.txt").write_text(VICTORIA)
+    assert main(["import", "victoria", str(tmp_path / "v.txt"), "--out",
+                 str(tmp_path / "v.jsonl")]) == 0
+    assert "4 steps, 3 bearings, 2 landmarks" in capsys.readouterr().out
+    (tmp_path / "v.txt").write_text(VICTORIA + "LANDMARK 3 6 1.0 oops 0.4 0 0.4\n")
+    assert main(["import", "victoria", str(tmp_path / "v.txt"), "--out",
+                 str(tmp_path / "x.jsonl")]) == 2
+    err = capsys.readouterr().err
+    assert "v.txt, line 7: field 'y'" in err and not (tmp_path / "x.jsonl").exists()
