@@ -18,14 +18,17 @@ rotation about ``z`` only:
 ``g2o``
     The problem (the stream's odometry and bearings) with the estimate as the vertex values:
     ``VERTEX_SE2`` per step, ``VERTEX_XY`` per estimated landmark, ``FIX`` on the first pose,
-    ``EDGE_SE2`` per odometry step with the information ``J diag(1/sigma^2) J^T``,
+    ``EDGE_SE2`` per odometry step with the information ``J^T diag(1/sigma^2) J``,
     ``J = diag(R(dth), 1)`` (the inverse of the importer's mapping,
     :func:`bomgraph.datasets.g2o.odometry_sigma_from_information`), and
     ``EDGE_BEARING_SE2_XY`` per bearing with information ``1 / sigma_b^2``. Landmark vertex ids
     are the landmark ids; pose vertex ids are ``max landmark id + 1 + t``. The importer
     (:func:`bomgraph.datasets.import_g2o`) reads the file back to the same steps. A landmark that
     is observed but not in the estimate gets no vertex (its edges stay; a comment line lists
-    it). Needs an estimate pose at every step and every odometry sigma > 0.
+    it). Needs an estimate pose at every step. An odometry sigma of 0 (the simulator's
+    ``sigma_dy``: its robot moves straight, then turns) has no finite information; it is written
+    as :data:`ZERO_SIGMA_FLOOR` (1e-4 m or rad, information 1e8) and a comment line says so, so
+    the importer reads that floor back where the stream had 0.
 
 Formats without landmarks (tum, kitti) refuse an estimate without poses; the numbers are written
 with ``repr`` precision, so they read back exactly. Writing is atomic (a temporary file beside
@@ -49,6 +52,7 @@ from .stream import Stream
 
 
 FORMATS = ("tum", "kitti", "csv", "g2o")
+ZERO_SIGMA_FLOOR = 1e-4
 
 
 class ExportError(BomgraphError, ValueError):
@@ -151,11 +155,12 @@ def odometry_information(dth_rad: float, sigma: np.ndarray) -> np.ndarray:
     """g2o ``EDGE_SE2`` information for independent ``[dx, dy, dpsi]`` sigmas (all > 0).
 
     The inverse of :func:`bomgraph.datasets.g2o.odometry_sigma_from_information`:
-    ``Omega = J diag(1/sigma^2) J^T`` with ``J = diag(R(dth), 1)`` (J is orthogonal).
+    ``Omega = J^T diag(1/sigma^2) J`` with ``J = diag(R(dth), 1)``, so that
+    ``J Omega^-1 J^T = diag(sigma^2)`` (J is orthogonal).
     """
     c, s = math.cos(dth_rad), math.sin(dth_rad)
     jac = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-    return jac @ np.diag(1.0 / np.asarray(sigma, dtype=float) ** 2) @ jac.T
+    return jac.T @ np.diag(1.0 / np.asarray(sigma, dtype=float) ** 2) @ jac
 
 
 def to_g2o(src: ExportSource, stream: Stream) -> str:
@@ -184,12 +189,16 @@ def to_g2o(src: ExportSource, stream: Stream) -> str:
         lines.append(f"VERTEX_XY {i} {_r(lm[i][0])} {_r(lm[i][1])}")
     lines.append(f"FIX {base}")
     w_b = 1.0 / stream.header.bearing_sigma_rad ** 2
+    floored = False
     for step in stream.steps:
         if step.odom is not None:
             sig = step.odometry_sigma(stream.header)
             if np.any(sig <= 0):
-                raise ExportError(f"step {step.t}: odometry sigma {list(map(float, sig))} has "
-                                  f"a zero; g2o needs a positive definite information matrix")
+                sig = np.where(sig > 0, sig, ZERO_SIGMA_FLOOR)
+                if not floored:
+                    lines.insert(1, f"# odometry sigmas of 0 written as {ZERO_SIGMA_FLOOR!r} "
+                                    f"(g2o needs a positive definite information matrix)")
+                    floored = True
             info = odometry_information(float(step.odom[2]), sig)
             upper = [info[0, 0], info[0, 1], info[0, 2], info[1, 1], info[1, 2], info[2, 2]]
             lines.append(f"EDGE_SE2 {base + step.t - 1} {base + step.t} "
@@ -238,5 +247,5 @@ def write_text_atomic(text: str, path: str | os.PathLike[str],
         raise
 
 
-__all__ = ["FORMATS", "CSV_HEADER", "ExportError", "ExportSource", "export_text", "to_tum",
+__all__ = ["FORMATS", "ZERO_SIGMA_FLOOR", "CSV_HEADER", "ExportError", "ExportSource", "export_text", "to_tum",
            "to_kitti", "to_csv", "to_g2o", "odometry_information", "write_text_atomic"]
