@@ -89,11 +89,14 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
 
 def cmd_export(args: argparse.Namespace) -> int:
     from .estimate_file import read_estimate
+    from .errors import ExportError
     from .export import ExportSource, export_text, write_text_atomic
     from .stream_file import read_stream
 
     if (args.estimate is None) == (args.truth is None):
-        raise BomgraphError("give an estimate file EST, or --truth STREAM (not both)")
+        raise ExportError("give an estimate file EST, or --truth STREAM (not both)")
+    if args.truth is not None and args.stream is not None:
+        raise ExportError("--truth STREAM is the stream already; drop --stream")
     stream_path = args.truth if args.truth is not None else args.stream
     stream = None if stream_path is None else read_stream(stream_path)
     src = (ExportSource.from_truth(stream) if args.truth is not None  # type: ignore[arg-type]

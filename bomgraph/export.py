@@ -46,17 +46,13 @@ from typing import Sequence
 
 import numpy as np
 
-from .errors import BomgraphError, ConfigError
+from .errors import ConfigError, ExportError
 from .mapper import MapEstimate
 from .stream import Stream
 
 
 FORMATS = ("tum", "kitti", "csv", "g2o")
 ZERO_SIGMA_FLOOR = 1e-4
-
-
-class ExportError(BomgraphError, ValueError):
-    """An export that cannot be written as asked (missing poses, a format that needs more)."""
 
 
 @dataclass(frozen=True)

@@ -193,8 +193,10 @@ def test_cli_export_refusals_and_stdout(tmp_path: Path, stream: Stream,
                  "--out", str(s_path)]) == 2
     assert main(["export", str(est), "--format", "g2o", "--out", str(tmp_path / "x")]) == 2
     assert main(["export", "--format", "tum", "--out", str(tmp_path / "x")]) == 2
+    assert main(["export", "--truth", str(s_path), "--stream", str(s_path), "--format", "tum",
+                 "--out", str(tmp_path / "x")]) == 2
     err = capsys.readouterr().err.splitlines()
-    assert len(err) == 4 and all(ln.startswith("bomgraph: error: ") for ln in err)
+    assert len(err) == 5 and all(ln.startswith("bomgraph: error: ") for ln in err)
     assert "refusing to overwrite" in err[0] and "--stream" in err[2]
     assert est.read_bytes() == before and not (tmp_path / "x").exists()
 
