@@ -87,6 +87,31 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_export(args: argparse.Namespace) -> int:
+    from .estimate_file import read_estimate
+    from .errors import ExportError
+    from .export import ExportSource, export_text, write_text_atomic
+    from .stream_file import read_stream
+
+    if (args.estimate is None) == (args.truth is None):
+        raise ExportError("give an estimate file EST, or --truth STREAM (not both)")
+    if args.truth is not None and args.stream is not None:
+        raise ExportError("--truth STREAM is the stream already; drop --stream")
+    stream_path = args.truth if args.truth is not None else args.stream
+    stream = None if stream_path is None else read_stream(stream_path)
+    src = (ExportSource.from_truth(stream) if args.truth is not None  # type: ignore[arg-type]
+           else ExportSource.from_estimate(read_estimate(args.estimate).final))
+    text = export_text(src, args.format, stream)
+    if args.out == "-":
+        sys.stdout.write(text)
+        return 0
+    write_text_atomic(text, args.out, [p for p in (args.estimate, stream_path) if p])
+    print(f"wrote {args.out} ({args.format}): "
+          f"{0 if src.poses is None else len(src.poses)} poses, {len(src.landmark_ids)} "
+          f"landmarks")
+    return 0
+
+
 def cmd_methods(args: argparse.Namespace) -> int:
     from .mapper import available_methods
 
@@ -259,6 +284,19 @@ def build_parser() -> argparse.ArgumentParser:
                     help="radians (default: median propagated point covariance)")
     iv.add_argument("--out", required=True)
     iv.set_defaults(func=cmd_import_victoria)
+
+    x = sub.add_parser("export", help="write an estimate (or a stream's truth) as TUM, KITTI, "
+                       "CSV or g2o")
+    x.add_argument("estimate", nargs="?", default=None, help="an estimate file from `run`")
+    x.add_argument("--stream", default=None, help="the estimate's stream: time stamps for "
+                   "tum/csv, the measurements for g2o")
+    x.add_argument("--truth", default=None, metavar="STREAM",
+                   help="export this stream's ground truth instead of an estimate")
+    x.add_argument("--format", required=True, choices=("tum", "kitti", "csv", "g2o"),
+                   help="tum: t x y z qx qy qz qw; kitti: 3x4 rows; csv: one file with a kind "
+                        "column; g2o: the problem with the estimate as values")
+    x.add_argument("--out", required=True, help="output file, or - for stdout")
+    x.set_defaults(func=cmd_export)
 
     m = sub.add_parser("methods", help="list the available methods")
     m.set_defaults(func=cmd_methods)

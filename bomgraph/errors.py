@@ -54,3 +54,8 @@ class DatasetError(BomgraphError, ValueError):
 
 class DegenerateGeometryError(BomgraphError, ValueError):
     """The geometry does not determine the quantity asked for (no parallax, too few points)."""
+
+
+class ExportError(BomgraphError, ValueError):
+    """An export that cannot be written as asked (no poses for a pose format, no stream for
+    g2o, an output that is one of the inputs)."""

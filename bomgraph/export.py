@@ -1,0 +1,247 @@
+"""Estimates and truth out of bomgraph: TUM, KITTI, CSV and g2o text (issue 17, point 1).
+
+The formats, for a planar pose ``[x_m, y_m, psi_rad]`` lifted to 3-D with ``z = 0`` and a
+rotation about ``z`` only:
+
+``tum``
+    One line per pose, ``t x y z qx qy qz qw`` with ``q = (0, 0, sin(psi/2), cos(psi/2))``
+    (the TUM RGB-D benchmark's trajectory format, which ``evo_ape tum`` reads). ``t`` is the
+    step's ``time_s`` when every step of the stream has one, else the step index ``t``.
+``kitti``
+    One line per pose, the first three rows of the 4x4 ``T_world_robot`` row-major:
+    ``r00 r01 r02 x r10 r11 r12 y r20 r21 r22 z``. KITTI has no time column: lines are the poses
+    in step order.
+``csv``
+    ONE file with a ``kind`` column: header ``kind,id,x_m,y_m,psi_rad,time_s``; ``pose`` rows
+    (``id`` = step ``t``, ``time_s`` empty when the stream has none), then ``landmark`` rows
+    (``psi_rad`` and ``time_s`` empty). An estimate without poses gives landmark rows only.
+``g2o``
+    The problem (the stream's odometry and bearings) with the estimate as the vertex values:
+    ``VERTEX_SE2`` per step, ``VERTEX_XY`` per estimated landmark, ``FIX`` on the first pose,
+    ``EDGE_SE2`` per odometry step with the information ``J^T diag(1/sigma^2) J``,
+    ``J = diag(R(dth), 1)`` (the inverse of the importer's mapping,
+    :func:`bomgraph.datasets.g2o.odometry_sigma_from_information`), and
+    ``EDGE_BEARING_SE2_XY`` per bearing with information ``1 / sigma_b^2``. Landmark vertex ids
+    are the landmark ids; pose vertex ids are ``max landmark id + 1 + t``. The importer
+    (:func:`bomgraph.datasets.import_g2o`) reads the file back to the same steps. A landmark that
+    is observed but not in the estimate gets no vertex (its edges stay; a comment line lists
+    it). Needs an estimate pose at every step. An odometry sigma of 0 (the simulator's
+    ``sigma_dy``: its robot moves straight, then turns) has no finite information; it is written
+    as :data:`ZERO_SIGMA_FLOOR` (1e-4 m or rad, information 1e8) and a comment line says so, so
+    the importer reads that floor back where the stream had 0.
+
+Formats without landmarks (tum, kitti) refuse an estimate without poses; the numbers are written
+with ``repr`` precision, so they read back exactly. Writing is atomic (a temporary file beside
+the output, then a rename) and refuses to overwrite one of the inputs; ``-`` is left to the
+caller (stdout).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import tempfile
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+
+from .errors import ConfigError, ExportError
+from .mapper import MapEstimate
+from .stream import Stream
+
+
+FORMATS = ("tum", "kitti", "csv", "g2o")
+ZERO_SIGMA_FLOOR = 1e-4
+
+
+@dataclass(frozen=True)
+class ExportSource:
+    """What one export writes: ids and values in bomgraph's frame.
+
+    Attributes
+    ----------
+    landmark_ids : ndarray of shape (n,), int64
+    landmarks_xy : ndarray of shape (n, 2), metres
+    pose_t : ndarray of shape (m,), int64, or None
+    poses : ndarray of shape (m, 3), ``[x_m, y_m, psi_rad]``, or None
+    """
+
+    landmark_ids: np.ndarray
+    landmarks_xy: np.ndarray
+    pose_t: np.ndarray | None = None
+    poses: np.ndarray | None = None
+
+    @classmethod
+    def from_estimate(cls, est: MapEstimate) -> "ExportSource":
+        return cls(est.landmark_ids, est.landmarks_xy, est.pose_t, est.poses)
+
+    @classmethod
+    def from_truth(cls, stream: Stream) -> "ExportSource":
+        """The stream's ground truth (poses at every step when the truth has them)."""
+        if stream.truth is None:
+            raise ExportError("the stream has no truth to export")
+        tr = stream.truth
+        pose_t = None if tr.poses is None else np.arange(len(tr.poses), dtype=np.int64)
+        return cls(tr.landmark_ids, tr.landmarks_xy, pose_t, tr.poses)
+
+
+def _r(v: float) -> str:
+    return repr(float(v))
+
+
+def _times(pose_t: np.ndarray, stream: Stream | None) -> list[float | None]:
+    if stream is None or any(s.time_s is None for s in stream.steps):
+        return [None] * len(pose_t)
+    if np.any(pose_t >= len(stream.steps)):
+        raise ExportError(f"the estimate has a pose at step {int(pose_t.max())} but the stream "
+                          f"has {len(stream.steps)} steps; is it the estimate's stream?")
+    return [float(stream.steps[int(t)].time_s) for t in pose_t]  # type: ignore[arg-type]
+
+
+def _need_poses(src: ExportSource, fmt: str) -> tuple[np.ndarray, np.ndarray]:
+    if src.poses is None or src.pose_t is None or len(src.poses) == 0:
+        raise ExportError(f"{fmt} holds robot poses and this estimate has none (the method maps "
+                          f"landmarks only); use --format csv for its landmarks")
+    order = np.argsort(src.pose_t, kind="stable")
+    return src.pose_t[order], src.poses[order]
+
+
+def to_tum(src: ExportSource, stream: Stream | None = None) -> str:
+    """TUM lines ``t x y z qx qy qz qw`` (module docstring), one per pose in step order."""
+    pose_t, poses = _need_poses(src, "tum")
+    times = _times(pose_t, stream)
+    lines = ["# bomgraph export: t x y z qx qy qz qw (z = 0, rotation about z; t = "
+             + ("time_s" if times and times[0] is not None else "step index") + ")"]
+    for t, ts, (x, y, psi) in zip(pose_t, times, poses):
+        stamp = _r(ts) if ts is not None else _r(t)
+        lines.append(" ".join([stamp, _r(x), _r(y), "0.0", "0.0", "0.0",
+                               _r(math.sin(psi / 2)), _r(math.cos(psi / 2))]))
+    return "\n".join(lines) + "\n"
+
+
+def to_kitti(src: ExportSource) -> str:
+    """KITTI lines: the 3x4 ``[R | t]`` of each pose row-major, in step order."""
+    _, poses = _need_poses(src, "kitti")
+    lines = []
+    for x, y, psi in poses:
+        c, s = math.cos(psi), math.sin(psi)
+        row = [c, -s, 0.0, x, s, c, 0.0, y, 0.0, 0.0, 1.0, 0.0]
+        lines.append(" ".join(_r(v) for v in row))
+    return "\n".join(lines) + ("\n" if lines else "")
+
+
+CSV_HEADER = "kind,id,x_m,y_m,psi_rad,time_s"
+
+
+def to_csv(src: ExportSource, stream: Stream | None = None) -> str:
+    """One CSV with a ``kind`` column (``pose`` rows, then ``landmark`` rows)."""
+    lines = [CSV_HEADER]
+    if src.poses is not None and src.pose_t is not None:
+        pose_t, poses = _need_poses(src, "csv")
+        for t, ts, (x, y, psi) in zip(pose_t, _times(pose_t, stream), poses):
+            lines.append(f"pose,{int(t)},{_r(x)},{_r(y)},{_r(psi)},"
+                         f"{'' if ts is None else _r(ts)}")
+    for i, (x, y) in zip(src.landmark_ids, src.landmarks_xy):
+        lines.append(f"landmark,{int(i)},{_r(x)},{_r(y)},,")
+    return "\n".join(lines) + "\n"
+
+
+def odometry_information(dth_rad: float, sigma: np.ndarray) -> np.ndarray:
+    """g2o ``EDGE_SE2`` information for independent ``[dx, dy, dpsi]`` sigmas (all > 0).
+
+    The inverse of :func:`bomgraph.datasets.g2o.odometry_sigma_from_information`:
+    ``Omega = J^T diag(1/sigma^2) J`` with ``J = diag(R(dth), 1)``, so that
+    ``J Omega^-1 J^T = diag(sigma^2)`` (J is orthogonal).
+    """
+    c, s = math.cos(dth_rad), math.sin(dth_rad)
+    jac = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    return jac.T @ np.diag(1.0 / np.asarray(sigma, dtype=float) ** 2) @ jac
+
+
+def to_g2o(src: ExportSource, stream: Stream) -> str:
+    """The stream's problem with ``src`` as the vertex values (module docstring)."""
+    pose_t, poses = _need_poses(src, "g2o")
+    n = len(stream.steps)
+    by_t = {int(t): p for t, p in zip(pose_t, poses)}
+    missing = [t for t in range(n) if t not in by_t]
+    if missing:
+        raise ExportError(f"g2o needs a pose vertex at every step; the estimate has none at "
+                          f"{len(missing)} of {n} steps (first t = {missing[0]})")
+    observed = stream.landmark_ids()
+    all_ids = np.concatenate([observed, src.landmark_ids]).astype(np.int64)
+    base = int(all_ids.max()) + 1 if all_ids.size else 0
+    lm = {int(i): xy for i, xy in zip(src.landmark_ids, src.landmarks_xy)}
+    lines = ["# bomgraph export: bearing-only 2-D SLAM problem with the estimate as vertex "
+             f"values; pose vertex id = {base} + t"]
+    unmapped = [int(i) for i in observed if int(i) not in lm]
+    if unmapped:
+        lines.append(f"# observed landmarks without an estimate (no VERTEX_XY): "
+                     f"{' '.join(str(i) for i in unmapped)}")
+    for t in range(n):
+        x, y, psi = by_t[t]
+        lines.append(f"VERTEX_SE2 {base + t} {_r(x)} {_r(y)} {_r(psi)}")
+    for i in sorted(lm):
+        lines.append(f"VERTEX_XY {i} {_r(lm[i][0])} {_r(lm[i][1])}")
+    lines.append(f"FIX {base}")
+    w_b = 1.0 / stream.header.bearing_sigma_rad ** 2
+    floored = False
+    for step in stream.steps:
+        if step.odom is not None:
+            sig = step.odometry_sigma(stream.header)
+            if np.any(sig <= 0):
+                sig = np.where(sig > 0, sig, ZERO_SIGMA_FLOOR)
+                if not floored:
+                    lines.insert(1, f"# odometry sigmas of 0 written as {ZERO_SIGMA_FLOOR!r} "
+                                    f"(g2o needs a positive definite information matrix)")
+                    floored = True
+            info = odometry_information(float(step.odom[2]), sig)
+            upper = [info[0, 0], info[0, 1], info[0, 2], info[1, 1], info[1, 2], info[2, 2]]
+            lines.append(f"EDGE_SE2 {base + step.t - 1} {base + step.t} "
+                         + " ".join(_r(v) for v in step.odom) + " "
+                         + " ".join(_r(v) for v in upper))
+        for lid, brg in zip(step.landmark_ids, step.bearings_rad):
+            lines.append(f"EDGE_BEARING_SE2_XY {base + step.t} {int(lid)} {_r(brg)} {_r(w_b)}")
+    return "\n".join(lines) + "\n"
+
+
+def export_text(src: ExportSource, fmt: str, stream: Stream | None = None) -> str:
+    """The text of ``src`` in format ``fmt`` (one of :data:`FORMATS`)."""
+    if fmt == "tum":
+        return to_tum(src, stream)
+    if fmt == "kitti":
+        return to_kitti(src)
+    if fmt == "csv":
+        return to_csv(src, stream)
+    if fmt == "g2o":
+        if stream is None:
+            raise ExportError("g2o holds the measurements too: give the stream (--stream)")
+        return to_g2o(src, stream)
+    raise ConfigError(f"unknown export format {fmt!r}; choose one of {', '.join(FORMATS)}")
+
+
+def write_text_atomic(text: str, path: str | os.PathLike[str],
+                      inputs: Sequence[str | os.PathLike[str]] = ()) -> None:
+    """Write ``text`` to ``path`` through a temporary file beside it, refusing an input file."""
+    target = os.path.realpath(path)
+    for inp in inputs:
+        if os.path.realpath(inp) == target:
+            raise ExportError(f"{os.fspath(path)} is an input of this export; refusing to "
+                              f"overwrite it: choose another --out")
+    folder = os.path.dirname(target)
+    fd, tmp = tempfile.mkstemp(prefix=".bomgraph-export-", suffix=".partial", dir=folder)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8", newline="\n") as fh:
+            fh.write(text)
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o666 & ~umask)  # mkstemp's 0600 would outlive the rename
+        os.replace(tmp, target)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.remove(tmp)
+        raise
+
+
+__all__ = ["FORMATS", "ZERO_SIGMA_FLOOR", "CSV_HEADER", "ExportError", "ExportSource", "export_text", "to_tum",
+           "to_kitti", "to_csv", "to_g2o", "odometry_information", "write_text_atomic"]

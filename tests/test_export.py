@@ -1,0 +1,213 @@
+"""bomgraph.export: TUM, KITTI, CSV and g2o files read back to the numbers written."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from bomgraph.angles import angle_residual
+from bomgraph.cli import main
+from bomgraph.datasets import import_g2o
+from bomgraph.datasets.g2o import _G2oFile
+from bomgraph.export import (CSV_HEADER, ZERO_SIGMA_FLOOR, ExportError, ExportSource, export_text,
+                             write_text_atomic)
+from bomgraph.mapper import MapEstimate
+from bomgraph.sim import SimConfig, simulate
+from bomgraph.stream import Stream
+from bomgraph.stream_file import write_stream
+
+
+@pytest.fixture(scope="module")
+def stream() -> Stream:
+    return simulate(SimConfig(n_landmarks=15, n_steps=40), np.random.default_rng(7))
+
+
+@pytest.fixture(scope="module")
+def estimate(stream: Stream) -> MapEstimate:
+    """The truth, perturbed and rotated (a made-up estimate with every pose and a few
+    landmarks left out), headings beyond (-pi, pi] included."""
+    rng = np.random.default_rng(1)
+    tr = stream.truth
+    keep = np.arange(len(tr.landmark_ids)) % 4 != 0
+    poses = tr.poses + rng.normal(0, 0.02, tr.poses.shape)
+    poses[::7, 2] += 2 * math.pi
+    return MapEstimate(tr.landmark_ids[keep], tr.landmarks_xy[keep] + 0.01,
+                       pose_t=np.arange(len(poses)), poses=poses)
+
+
+def _with_times(stream: Stream) -> Stream:
+    steps = tuple(dataclasses.replace(s, time_s=1000.0 + 0.37 * s.t) for s in stream.steps)
+    return Stream(stream.header, steps, stream.truth)
+
+
+def _parse_tum(text: str) -> np.ndarray:
+    rows = [[float(v) for v in ln.split()] for ln in text.splitlines()
+            if ln.strip() and not ln.startswith("#")]
+    return np.array(rows)
+
+
+def _yaw(q_xyzw: np.ndarray) -> np.ndarray:
+    return 2.0 * np.arctan2(q_xyzw[:, 2], q_xyzw[:, 3])
+
+
+def test_tum_parses_back_to_the_poses(stream: Stream, estimate: MapEstimate) -> None:
+    timed = _with_times(stream)
+    for s, times in ((stream, np.arange(len(stream.steps), dtype=float)),
+                     (timed, 1000.0 + 0.37 * np.arange(len(stream.steps)))):
+        rows = _parse_tum(export_text(ExportSource.from_estimate(estimate), "tum", s))
+        assert rows.shape == (len(estimate.poses), 8)
+        np.testing.assert_allclose(rows[:, 0], times, rtol=0, atol=1e-9)
+        np.testing.assert_allclose(rows[:, 1:3], estimate.poses[:, :2], rtol=0, atol=1e-9)
+        assert np.all(rows[:, 3:6] == 0.0)  # z, qx, qy
+        np.testing.assert_allclose(np.linalg.norm(rows[:, 4:8], axis=1), 1.0, atol=1e-12)
+        dyaw = angle_residual(_yaw(rows[:, 4:8]), estimate.poses[:, 2])
+        assert np.max(np.abs(dyaw)) < 1e-9
+
+
+def test_tum_is_what_evo_reads(tmp_path: Path, stream: Stream, estimate: MapEstimate) -> None:
+    path = tmp_path / "est.tum"
+    path.write_text(export_text(ExportSource.from_estimate(estimate), "tum", _with_times(stream)))
+    try:
+        from evo.tools.file_interface import read_tum_trajectory_file
+    except ImportError:  # the TUM spec: '#' comments, 8 numbers a line, unit quaternion
+        lines = [ln for ln in path.read_text().splitlines() if not ln.startswith("#")]
+        rows = np.array([[float(v) for v in ln.split(" ")] for ln in lines])
+        assert rows.shape[1] == 8 and np.all(np.diff(rows[:, 0]) > 0)
+        np.testing.assert_allclose(np.linalg.norm(rows[:, 4:], axis=1), 1.0, atol=1e-12)
+        return
+    traj = read_tum_trajectory_file(str(path))
+    np.testing.assert_allclose(traj.timestamps, 1000.0 + 0.37 * np.arange(len(stream.steps)),
+                               atol=1e-9, rtol=0)
+    np.testing.assert_allclose(traj.positions_xyz[:, :2], estimate.poses[:, :2], atol=1e-9,
+                               rtol=0)
+    np.testing.assert_allclose(traj.positions_xyz[:, 2], 0.0, atol=0)
+    wxyz = traj.orientations_quat_wxyz
+    yaw = 2.0 * np.arctan2(wxyz[:, 3], wxyz[:, 0])
+    assert np.max(np.abs(angle_residual(yaw, estimate.poses[:, 2]))) < 1e-9
+
+
+def test_kitti_round_trip(estimate: MapEstimate) -> None:
+    text = export_text(ExportSource.from_estimate(estimate), "kitti")
+    m = np.array([[float(v) for v in ln.split()] for ln in text.splitlines()]).reshape(-1, 3, 4)
+    np.testing.assert_allclose(m[:, :2, 3], estimate.poses[:, :2], rtol=0, atol=1e-12)
+    assert np.all(m[:, 2] == [0.0, 0.0, 1.0, 0.0])
+    np.testing.assert_allclose(m[:, :3, :3] @ m[:, :3, :3].transpose(0, 2, 1),
+                               np.broadcast_to(np.eye(3), m[:, :3, :3].shape), atol=1e-12)
+    yaw = np.arctan2(m[:, 1, 0], m[:, 0, 0])
+    assert np.max(np.abs(angle_residual(yaw, estimate.poses[:, 2]))) < 1e-12
+
+
+def test_csv_round_trip(stream: Stream, estimate: MapEstimate) -> None:
+    import csv
+    import io
+
+    text = export_text(ExportSource.from_estimate(estimate), "csv", _with_times(stream))
+    rows = list(csv.DictReader(io.StringIO(text)))
+    assert text.splitlines()[0] == CSV_HEADER
+    poses = [r for r in rows if r["kind"] == "pose"]
+    lms = [r for r in rows if r["kind"] == "landmark"]
+    assert len(poses) + len(lms) == len(rows)
+    got = np.array([[float(r[k]) for k in ("x_m", "y_m", "psi_rad")] for r in poses])
+    assert np.array_equal([int(r["id"]) for r in poses], estimate.pose_t)
+    assert np.array_equal(got, estimate.poses)  # repr precision: exact
+    assert [float(r["time_s"]) for r in poses] == [1000.0 + 0.37 * t for t in estimate.pose_t]
+    assert np.array_equal([int(r["id"]) for r in lms], estimate.landmark_ids)
+    assert np.array_equal([[float(r["x_m"]), float(r["y_m"])] for r in lms],
+                          estimate.landmarks_xy)
+    assert all(r["psi_rad"] == "" and r["time_s"] == "" for r in lms)
+    # landmarks only: still a csv, while tum and kitti refuse
+    lm_only = ExportSource(estimate.landmark_ids, estimate.landmarks_xy)
+    assert {r.split(",")[0] for r in export_text(lm_only, "csv").splitlines()[1:]} == {"landmark"}
+    for fmt in ("tum", "kitti", "g2o"):
+        with pytest.raises(ExportError, match="none"):
+            export_text(lm_only, fmt, stream)
+
+
+@pytest.mark.parametrize("per_step_sigma", [False, True])
+def test_g2o_round_trip_through_the_importer(tmp_path: Path, stream: Stream,
+                                             estimate: MapEstimate, per_step_sigma: bool) -> None:
+    if per_step_sigma:  # each step its own sigmas: the importer keeps them per step
+        steps = tuple(s if s.odom is None else dataclasses.replace(
+            s, odom_sigma=np.array([0.01, 0.02, 0.03]) * (1 + 0.1 * s.t)) for s in stream.steps)
+        stream = Stream(stream.header, steps, stream.truth)
+    path = tmp_path / "p.g2o"
+    path.write_text(export_text(ExportSource.from_estimate(estimate), "g2o", stream))
+    back = import_g2o(path)
+    assert len(back.steps) == len(stream.steps)
+    for a, b in zip(stream.steps, back.steps):
+        assert np.array_equal(a.landmark_ids, b.landmark_ids)
+        assert np.array_equal(a.bearings_rad, b.bearings_rad)  # exact
+        assert (a.odom is None) == (b.odom is None)
+        if a.odom is not None:
+            assert np.array_equal(a.odom, b.odom)
+            # sigmas go through the information matrix and back: equal up to rounding; the
+            # simulator's sigma_dy = 0 comes back as the documented floor
+            want = a.odometry_sigma(stream.header)
+            np.testing.assert_allclose(b.odometry_sigma(back.header),
+                                       np.where(want > 0, want, ZERO_SIGMA_FLOOR), rtol=1e-9)
+    assert (back.steps[1].odom_sigma is not None) == per_step_sigma
+    assert back.header.bearing_sigma_rad == pytest.approx(stream.header.bearing_sigma_rad,
+                                                          rel=1e-12)
+    # the estimate: the vertices, which the importer counts and this reader gives
+    g = _G2oFile(path)
+    order = back.header.meta["pose_ids"]
+    assert np.array_equal(np.array([g.poses[p][0] for p in order]), estimate.poses)
+    assert sorted(g.landmarks) == sorted(estimate.landmark_ids.tolist())
+    for i, xy in zip(estimate.landmark_ids, estimate.landmarks_xy):
+        assert np.array_equal(g.landmarks[int(i)][0], xy)
+    assert back.header.meta["fixed_steps"] == [0]
+
+
+def test_truth_export_matches_the_stream(tmp_path: Path, stream: Stream) -> None:
+    s_path, out = tmp_path / "s.jsonl", tmp_path / "truth.tum"
+    write_stream(stream, s_path)
+    assert main(["export", "--truth", str(s_path), "--format", "tum", "--out", str(out)]) == 0
+    rows = _parse_tum(out.read_text())
+    np.testing.assert_allclose(rows[:, 1:3], stream.truth.poses[:, :2], rtol=0, atol=1e-9)
+    assert np.max(np.abs(angle_residual(_yaw(rows[:, 4:8]), stream.truth.poses[:, 2]))) < 1e-9
+    # the truth as g2o values, read back through the importer as its own truth
+    g2o = tmp_path / "truth.g2o"
+    assert main(["export", "--truth", str(s_path), "--format", "g2o", "--out", str(g2o)]) == 0
+    back = import_g2o(g2o, truth_path=g2o)
+    assert np.array_equal(back.truth.poses, stream.truth.poses)
+    assert np.array_equal(back.truth.landmark_ids, stream.truth.landmark_ids)
+    assert np.array_equal(back.truth.landmarks_xy, stream.truth.landmarks_xy)
+
+
+def test_cli_export_refusals_and_stdout(tmp_path: Path, stream: Stream,
+                                        capsys: pytest.CaptureFixture) -> None:
+    s_path, est = tmp_path / "s.jsonl", tmp_path / "e.json"
+    write_stream(stream, s_path)
+    assert main(["run", str(s_path), "--method", "triangulate", "--out", str(est)]) == 0
+    capsys.readouterr()
+    assert main(["export", str(est), "--format", "kitti", "--out", "-"]) == 0
+    assert len(capsys.readouterr().out.splitlines()) == len(stream.steps)
+    before = est.read_bytes()
+    assert main(["export", str(est), "--format", "tum", "--out", str(est)]) == 2
+    assert main(["export", str(est), "--stream", str(s_path), "--format", "csv",
+                 "--out", str(s_path)]) == 2
+    assert main(["export", str(est), "--format", "g2o", "--out", str(tmp_path / "x")]) == 2
+    assert main(["export", "--format", "tum", "--out", str(tmp_path / "x")]) == 2
+    assert main(["export", "--truth", str(s_path), "--stream", str(s_path), "--format", "tum",
+                 "--out", str(tmp_path / "x")]) == 2
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 5 and all(ln.startswith("bomgraph: error: ") for ln in err)
+    assert "refusing to overwrite" in err[0] and "--stream" in err[2]
+    assert est.read_bytes() == before and not (tmp_path / "x").exists()
+
+
+def test_write_is_atomic(tmp_path: Path) -> None:
+    out = tmp_path / "o.txt"
+    out.write_text("old\n")
+
+    with pytest.raises(TypeError):
+        write_text_atomic(123, out)  # type: ignore[arg-type]
+    assert out.read_text() == "old\n"
+    assert os.listdir(tmp_path) == ["o.txt"]  # no temporary file left beside it
+    write_text_atomic("new\n", out)
+    assert out.read_text() == "new\n" and os.listdir(tmp_path) == ["o.txt"]
