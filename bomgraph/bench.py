@@ -28,7 +28,7 @@ from .evaluate import score_checkpoints, score_estimate
 from .experiments import Experiment, SimSource, Task
 from .jsonio import jsonable
 from .mapper import MapEstimate, RunResult, create_mapper, method_info, run
-from .stream import Stream
+from .stream import Step, Stream
 from .stream_file import StreamReader
 
 #: Bump to invalidate every cached result (the code fingerprint covers code changes).
@@ -249,9 +249,10 @@ def strip_timings(results: Iterable[Mapping[str, Any]]) -> list[dict[str, Any]]:
 
 def run_file(stream_path: str | os.PathLike[str], method: str,
              options: Mapping[str, Any] | None = None, *, checkpoint_every: int = 10,
-             allow_truth: bool = False) -> RunResult:
+             allow_truth: bool = False,
+             progress: Callable[[int], None] | None = None) -> RunResult:
     """Run ``method`` with ``options`` over a stream file, read step by step (single-threaded
-    BLAS, as :func:`run_task`).
+    BLAS, as :func:`run_task`). ``progress(t)`` is called after each step is read.
 
     Raises
     ------
@@ -265,7 +266,24 @@ def run_file(stream_path: str | os.PathLike[str], method: str,
                           f"bound, not a mapper (pass --allow-truth to run it anyway)")
     with StreamReader(stream_path) as reader, threadpool_limits(limits=1):
         mapper = create_mapper(method, reader.header, truth=reader.truth, **dict(options or {}))
-        return run(mapper, reader, checkpoint_every=checkpoint_every, method=method)
+        steps: Iterable[Step] = reader if progress is None else _reporting(reader, progress)
+        return run(mapper, steps, checkpoint_every=checkpoint_every, method=method)
+
+
+def _reporting(steps: Iterable[Step], progress: Callable[[int], None]) -> Iterator[Step]:
+    for st in steps:
+        yield st
+        progress(st.t)
+
+
+def count_steps(stream_path: str | os.PathLike[str]) -> int:
+    """The number of step lines of a stream file (its lines after the header), without
+    parsing them: for a progress bar's total."""
+    n = 0
+    with open(stream_path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            n += block.count(b"\n")
+    return max(n - 1, 0)
 
 
 def run_example(method: str, experiment: Experiment, *, run_index: int = 0,
@@ -281,4 +299,4 @@ def run_example(method: str, experiment: Experiment, *, run_index: int = 0,
 
 
 __all__ = ["Executor", "run_task", "execute", "task_key", "code_fingerprint", "strip_timings",
-           "run_file", "run_example", "CACHE_VERSION"]
+           "run_file", "count_steps", "run_example", "CACHE_VERSION"]
