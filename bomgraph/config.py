@@ -46,7 +46,7 @@ class Presets:
         for key, value in overrides.items():
             problem = _type_problem(hints.get(key), value)
             if problem:
-                raise ConfigError(f"{cls.__name__}: option {key}={value!r}: {problem}")
+                raise ConfigError(f"{cls.__name__}: bad option value {key}={value!r}: {problem}")
         values = {**cls.PRESETS[name], **overrides}
         try:
             return cls(**values)
