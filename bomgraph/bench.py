@@ -16,6 +16,7 @@ from __future__ import annotations
 import functools
 import hashlib
 import json
+import logging
 import os
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -32,6 +33,7 @@ from .stream import Step, Stream
 from .stream_file import StreamReader
 
 #: Bump to invalidate every cached result (the code fingerprint covers code changes).
+_log = logging.getLogger(__name__)
 CACHE_VERSION = 1
 
 
@@ -267,7 +269,18 @@ def run_file(stream_path: str | os.PathLike[str], method: str,
     with StreamReader(stream_path) as reader, threadpool_limits(limits=1):
         mapper = create_mapper(method, reader.header, truth=reader.truth, **dict(options or {}))
         steps: Iterable[Step] = reader if progress is None else _reporting(reader, progress)
-        return run(mapper, steps, checkpoint_every=checkpoint_every, method=method)
+        _log.info("running %s on %s", method, stream_path)
+        result = run(mapper, steps, checkpoint_every=checkpoint_every, method=method)
+    _log.info("%s: %d checkpoints, %d landmarks at t = %d, %.3f s", method,
+              len(result.checkpoints), len(result.final), result.checkpoints[-1].t,
+              result.total_s)
+    if len(result.final) == 0:
+        _log.warning("%s mapped no landmark by t = %d (too few steps or too little parallax?)",
+                     method, result.checkpoints[-1].t)
+    if result.final.info.get("converged") is False:
+        _log.warning("%s: the final solve did not converge (%s)", method,
+                     result.final.info.get("stop", "see the estimate's info"))
+    return result
 
 
 def _reporting(steps: Iterable[Step], progress: Callable[[int], None]) -> Iterator[Step]:

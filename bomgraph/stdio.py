@@ -44,11 +44,8 @@ def input_path(path: str) -> Iterator[str]:
         spooled = os.path.join(tmp, "stdin")
         with open(spooled, "wb") as fh:
             shutil.copyfileobj(sys.stdin.buffer, fh)
-        _SPOOLED[spooled] = "<stdin>"
-        try:
-            yield spooled
-        finally:
-            _SPOOLED.pop(spooled, None)
+        _SPOOLED[spooled] = "<stdin>"  # kept: the message may be printed after the cleanup
+        yield spooled
 
 
 def write_output(path: str, write: Callable[[str], None]) -> None:
