@@ -456,7 +456,10 @@ def _stdout_closed() -> int:
 
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
+    try:
+        args = parser.parse_args(argv)
+    except BrokenPipeError:  # `bomgraph --help | head -1`
+        return _stdout_closed()
     configure_logging(getattr(args, "verbose", 0), getattr(args, "quiet", False))
     if hasattr(signal, "SIGTERM"):
         signal.signal(signal.SIGTERM, _on_sigterm)

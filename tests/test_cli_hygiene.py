@@ -102,6 +102,18 @@ def test_a_closed_pipe_ends_quietly(args: list[str]) -> None:
     assert proc.stderr == b""
 
 
+def test_a_closed_pipe_mid_estimate_ends_quietly(tmp_path: Path) -> None:
+    """An estimate far larger than a pipe's buffer, read one byte of: the write really fails."""
+    long = tmp_path / "long.jsonl"
+    assert bomgraph("simulate", "--steps", "1500", "--landmarks", "30", "--out",
+                    str(long)).returncode == 0
+    cmd = f"{sys.executable} -m bomgraph run {long} --method triangulate --checkpoint-every 1 " \
+          f"--out - | head -c 1 >/dev/null; echo ${{PIPESTATUS[0]}}"
+    proc = subprocess.run(["bash", "-c", cmd], capture_output=True, env=ENV, timeout=300)
+    assert proc.stdout.decode().strip() in ("0", "141"), proc.stderr
+    assert proc.stderr == b""
+
+
 def test_json_on_methods_and_run(tmp_path: Path, stream: Path) -> None:
     listed = json.loads(bomgraph("methods", "--json").stdout)
     assert {m["name"] for m in listed} >= {"triangulate", "stmds-smacof", "oracle"}
