@@ -11,10 +11,13 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import numbers
 import re
 import types
 import typing
 from typing import Any, Callable, ClassVar, Mapping, NamedTuple, TypeVar
+
+import numpy as np
 
 from .errors import ConfigError
 
@@ -79,12 +82,12 @@ def _type_problem(annotation: Any, value: Any) -> str | None:
                 return f"each item {problem[5:] if problem.startswith('must ') else problem}"
         return None
     if annotation is bool:
-        return None if isinstance(value, bool) else "must be true or false"
+        return None if isinstance(value, (bool, np.bool_)) else "must be true or false"
     if annotation is int:
-        ok = isinstance(value, int) and not isinstance(value, bool)
+        ok = isinstance(value, numbers.Integral) and not isinstance(value, bool)
         return None if ok else "must be an integer"
     if annotation is float:
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
+        if isinstance(value, bool) or not isinstance(value, numbers.Real):
             return "must be a number"
         return "must be a number, not NaN" if math.isnan(value) else None
     if annotation is str:
