@@ -111,8 +111,23 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     return 0
 
 
+def _step_bar(stream_path: str, method: str, force: bool | None) -> Any:
+    """A tqdm bar over the stream's steps: always with ``--progress``, never with
+    ``--no-progress``, else when stderr is a terminal and the stream is long."""
+    if force is False or (force is None and not sys.stderr.isatty()):
+        return None
+    from .bench import count_steps
+
+    total = count_steps(stream_path)
+    if not force and total < PROGRESS_MIN_STEPS:
+        return None
+    from tqdm import tqdm
+
+    return tqdm(total=total, unit="step", desc=method, file=sys.stderr)
+
+
 def cmd_run(args: argparse.Namespace) -> int:
-    from .bench import count_steps, run_file
+    from .bench import run_file
     from .estimate_file import write_estimate
     from .jsonio import parse_options
     from .stdio import STDIO, check_output_path, input_path, write_output
@@ -120,23 +135,12 @@ def cmd_run(args: argparse.Namespace) -> int:
     options = parse_options(args.option)
     check_output_path(args.out, inputs=(args.stream,))
     with input_path(args.stream) as stream_path:
-        bar = None
-        if args.progress or (args.progress is None and sys.stderr.isatty()):
-            total = count_steps(stream_path)
-            if args.progress or total >= PROGRESS_MIN_STEPS:
-                from tqdm import tqdm
-
-                bar = tqdm(total=total, unit="step", desc=args.method, file=sys.stderr)
-
-        def progress(t: int) -> None:
-            if bar is not None:
-                bar.update(t + 1 - bar.n)
-
+        bar = _step_bar(stream_path, args.method, args.progress)
+        progress = None if bar is None else (lambda t: bar.update(t + 1 - bar.n))
         try:
             result = run_file(stream_path, args.method, options,
                               checkpoint_every=args.checkpoint_every,
-                              allow_truth=args.allow_truth,
-                              progress=progress if bar is not None else None)
+                              allow_truth=args.allow_truth, progress=progress)
         finally:
             if bar is not None:
                 bar.close()
