@@ -16,6 +16,7 @@ from __future__ import annotations
 import functools
 import hashlib
 import json
+import logging
 import os
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -28,10 +29,11 @@ from .evaluate import score_checkpoints, score_estimate
 from .experiments import Experiment, SimSource, Task
 from .jsonio import jsonable
 from .mapper import MapEstimate, RunResult, create_mapper, method_info, run
-from .stream import Stream
+from .stream import Step, Stream
 from .stream_file import StreamReader
 
 #: Bump to invalidate every cached result (the code fingerprint covers code changes).
+_log = logging.getLogger(__name__)
 CACHE_VERSION = 1
 
 
@@ -249,9 +251,10 @@ def strip_timings(results: Iterable[Mapping[str, Any]]) -> list[dict[str, Any]]:
 
 def run_file(stream_path: str | os.PathLike[str], method: str,
              options: Mapping[str, Any] | None = None, *, checkpoint_every: int = 10,
-             allow_truth: bool = False) -> RunResult:
+             allow_truth: bool = False,
+             progress: Callable[[int], None] | None = None) -> RunResult:
     """Run ``method`` with ``options`` over a stream file, read step by step (single-threaded
-    BLAS, as :func:`run_task`).
+    BLAS, as :func:`run_task`). ``progress(t)`` is called after each step is read.
 
     Raises
     ------
@@ -265,7 +268,35 @@ def run_file(stream_path: str | os.PathLike[str], method: str,
                           f"bound, not a mapper (pass --allow-truth to run it anyway)")
     with StreamReader(stream_path) as reader, threadpool_limits(limits=1):
         mapper = create_mapper(method, reader.header, truth=reader.truth, **dict(options or {}))
-        return run(mapper, reader, checkpoint_every=checkpoint_every, method=method)
+        steps: Iterable[Step] = reader if progress is None else _reporting(reader, progress)
+        _log.info("running %s on %s", method, stream_path)
+        result = run(mapper, steps, checkpoint_every=checkpoint_every, method=method)
+    _log.info("%s: %d checkpoints, %d landmarks at t = %d, %.3f s", method,
+              len(result.checkpoints), len(result.final), result.checkpoints[-1].t,
+              result.total_s)
+    if len(result.final) == 0:
+        _log.warning("%s mapped no landmark by t = %d (too few steps or too little parallax?)",
+                     method, result.checkpoints[-1].t)
+    if result.final.info.get("converged") is False:
+        _log.warning("%s: the final solve did not converge (%s)", method,
+                     result.final.info.get("stop", "see the estimate's info"))
+    return result
+
+
+def _reporting(steps: Iterable[Step], progress: Callable[[int], None]) -> Iterator[Step]:
+    for st in steps:
+        yield st
+        progress(st.t)
+
+
+def count_steps(stream_path: str | os.PathLike[str]) -> int:
+    """The number of step lines of a stream file (its lines after the header), without
+    parsing them: for a progress bar's total."""
+    n = 0
+    with open(stream_path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            n += block.count(b"\n")
+    return max(n - 1, 0)
 
 
 def run_example(method: str, experiment: Experiment, *, run_index: int = 0,
@@ -281,4 +312,4 @@ def run_example(method: str, experiment: Experiment, *, run_index: int = 0,
 
 
 __all__ = ["Executor", "run_task", "execute", "task_key", "code_fingerprint", "strip_timings",
-           "run_file", "run_example", "CACHE_VERSION"]
+           "run_file", "count_steps", "run_example", "CACHE_VERSION"]

@@ -1,14 +1,20 @@
 """The ``bomgraph`` command: argument parsing and printing only.
 
 Every command is one library call plus printing. A user error (a BomgraphError) prints one
-line to stderr and exits with status 2, without a traceback.
+line to stderr and exits with status 2, without a traceback. ``-v``/``-q`` set the level of
+the root ``logging`` handler (the library logs through ``logging.getLogger(__name__)``);
+a closed pipe ends the command quietly; Ctrl-C exits with status 130 and SIGTERM with 143,
+never with a traceback.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import logging
 import math
+import os
+import signal
 import sys
 from typing import Any, Callable, Sequence
 
@@ -16,7 +22,21 @@ import numpy as np
 
 from .errors import BomgraphError
 
+#: a run over this many steps shows a progress bar (when stderr is a terminal).
+PROGRESS_MIN_STEPS = 1000
 
+
+def _named(name: str) -> Callable[[Callable[[str], Any]], Callable[[str], Any]]:
+    """Give an argparse ``type`` the name its error messages show ("invalid NAME value")."""
+
+    def wrap(func: Callable[[str], Any]) -> Callable[[str], Any]:
+        func.__name__ = name
+        return func
+
+    return wrap
+
+
+@_named("non-negative integer")
 def _nonneg_int(text: str) -> int:
     v = int(text)
     if v < 0:
@@ -24,6 +44,7 @@ def _nonneg_int(text: str) -> int:
     return v
 
 
+@_named("number of processes")
 def _jobs(text: str) -> int:
     v = int(text)
     if v == 0:
@@ -32,11 +53,39 @@ def _jobs(text: str) -> int:
     return v
 
 
+@_named("positive integer")
 def _positive_int(text: str) -> int:
     v = int(text)
     if v < 1:
         raise argparse.ArgumentTypeError(f"must be >= 1, got {v}")
     return v
+
+
+@_named("integer")
+def _int(text: str) -> int:
+    return int(text)
+
+
+@_named("number")
+def _float(text: str) -> float:
+    v = float(text)
+    if math.isnan(v):
+        raise argparse.ArgumentTypeError("must be a number, got NaN")
+    return v
+
+
+def _version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("bomgraph")
+    except PackageNotFoundError:  # run from a source tree that is not installed
+        return "unknown (not installed)"
+
+
+def _say(text: str, *, to_stderr: bool = False) -> None:
+    """Print a result line (to stderr when stdout carries data, e.g. ``--out -``)."""
+    print(text, file=sys.stderr if to_stderr else sys.stdout)
 
 
 # --------------------------------------------------------------------------------------------
@@ -62,24 +111,62 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     return 0
 
 
+def _step_bar(stream_path: str, method: str, force: bool | None) -> Any:
+    """A tqdm bar over the stream's steps: always with ``--progress``, never with
+    ``--no-progress``, else when stderr is a terminal and the stream is long."""
+    if force is False or (force is None and not sys.stderr.isatty()):
+        return None
+    from .bench import count_steps
+
+    total = count_steps(stream_path)
+    if not force and total < PROGRESS_MIN_STEPS:
+        return None
+    from tqdm import tqdm
+
+    return tqdm(total=total, unit="step", desc=method, file=sys.stderr)
+
+
 def cmd_run(args: argparse.Namespace) -> int:
     from .bench import run_file
-    from .jsonio import parse_options
     from .estimate_file import write_estimate
+    from .jsonio import parse_options
+    from .stdio import STDIO, check_output_path, input_path, write_output
 
-    result = run_file(args.stream, args.method, parse_options(args.option),
-                      checkpoint_every=args.checkpoint_every, allow_truth=args.allow_truth)
-    write_estimate(result, args.out)
-    print(f"{args.method}: {len(result.final)} landmarks mapped at t = "
-          f"{result.checkpoints[-1].t} in {result.total_s:.3f} s; wrote {args.out}")
+    options = parse_options(args.option)
+    check_output_path(args.out, inputs=(args.stream,))
+    with input_path(args.stream) as stream_path:
+        bar = _step_bar(stream_path, args.method, args.progress)
+        progress = None if bar is None else (lambda t: bar.update(t + 1 - bar.n))
+        try:
+            result = run_file(stream_path, args.method, options,
+                              checkpoint_every=args.checkpoint_every,
+                              allow_truth=args.allow_truth, progress=progress)
+        finally:
+            if bar is not None:
+                bar.close()
+    write_output(args.out, lambda path: write_estimate(result, path))
+    to_stderr = args.out == STDIO
+    if args.json:
+        _say(json.dumps({"method": args.method, "stream": args.stream, "out": args.out,
+                         "landmarks": len(result.final), "t": result.checkpoints[-1].t,
+                         "checkpoints": len(result.checkpoints),
+                         "total_s": round(result.total_s, 6)}), to_stderr=to_stderr)
+    else:
+        _say(f"{args.method}: {len(result.final)} landmarks mapped at t = "
+             f"{result.checkpoints[-1].t} in {result.total_s:.3f} s; wrote {args.out}",
+             to_stderr=to_stderr)
     return 0
 
 
 def cmd_evaluate(args: argparse.Namespace) -> int:
     from .jsonio import jsonable
     from .report import evaluate_files, format_evaluation
+    from .stdio import STDIO, input_path
 
-    ev = evaluate_files(args.estimate, args.stream, with_scale=args.similarity)
+    if args.estimate == STDIO and args.stream == STDIO:
+        raise BomgraphError("only one of ESTIMATE and STREAM can be '-' (stdin)")
+    with input_path(args.estimate) as estimate, input_path(args.stream) as stream:
+        ev = evaluate_files(estimate, stream, with_scale=args.similarity)
     if args.json:
         print(json.dumps(jsonable(ev.as_dict()), allow_nan=False))
     else:
@@ -113,11 +200,45 @@ def cmd_export(args: argparse.Namespace) -> int:
 
 
 def cmd_methods(args: argparse.Namespace) -> int:
-    from .mapper import available_methods
+    from .jsonio import jsonable
+    from .mapper import available_methods, method_config_class, method_info
 
-    for info in available_methods():
-        flag = "  (benchmark only: reads the truth)" if info.needs_truth else ""
-        print(f"{info.name:18s} {info.description}{flag}")
+    if args.name is None:
+        infos = available_methods()
+        if args.json:
+            print(json.dumps([{"name": i.name, "description": i.description,
+                               "needs_truth": i.needs_truth} for i in infos]))
+            return 0
+        for info in infos:
+            flag = "  (benchmark only: reads the truth)" if info.needs_truth else ""
+            print(f"{info.name:18s} {info.description}{flag}")
+        return 0
+    from .config import describe_options
+
+    info = method_info(args.name)
+    cls = method_config_class(args.name)
+    options = describe_options(cls) if cls is not None else []
+    presets = {k: dict(v) for k, v in getattr(cls, "PRESETS", {}).items()}
+    if args.json:
+        print(json.dumps(jsonable({"name": info.name, "description": info.description,
+                                   "needs_truth": info.needs_truth,
+                                   "config": cls.__name__ if cls else None,
+                                   "options": [o._asdict() for o in options],
+                                   "presets": presets})))
+        return 0
+    print(f"{info.name}: {info.description}")
+    if cls is None:
+        print("  (this method declares no configuration class)")
+        return 0
+    print(f"\noptions ({cls.__name__}; --option KEY=VALUE):")
+    width = max(len(o.name) for o in options) if options else 0
+    for o in options:
+        print(f"  {o.name:{width}s}  {o.type}, default {o.default!r}"
+              + (f": {o.doc}" if o.doc else ""))
+    print("\npresets (--option preset=NAME):")
+    for name, overrides in presets.items():
+        text = ", ".join(f"{k}={v!r}" for k, v in overrides.items()) or "the defaults"
+        print(f"  {name}: {text}")
     return 0
 
 
@@ -136,7 +257,10 @@ def cmd_compare(args: argparse.Namespace) -> int:
 
         bar = tqdm(total=0, unit="run", desc="compare", file=sys.stderr)
 
+    seen = {"done": 0}
+
     def progress(done: int, total: int) -> None:
+        seen["done"] = done
         if bar is not None:
             bar.total = total
             bar.n = done
@@ -145,6 +269,13 @@ def cmd_compare(args: argparse.Namespace) -> int:
     try:
         result = compare(chosen, args.out, executor=executor, use_cache=not args.no_cache,
                          figures=not args.no_figures, progress=progress)
+    except KeyboardInterrupt:
+        if bar is not None:
+            bar.close()
+            bar = None
+        cached = "" if args.no_cache else f"; {seen['done']} runs cached, rerun to resume"
+        print(f"bomgraph: interrupted{cached}", file=sys.stderr)
+        return 130
     finally:
         if bar is not None:
             bar.close()
@@ -202,41 +333,56 @@ def cmd_import_victoria(args: argparse.Namespace) -> int:
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="bomgraph", description="Bearing-only mapping toolkit: "
                                 "BOM-STMDS and SLAM baselines side by side.")
-    sub = p.add_subparsers(dest="command", required=True)
+    p.add_argument("--version", action="version", version=f"bomgraph {_version()}",
+                   help="print the version and exit")
+    _add_verbosity(p)
+    sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
-    s = sub.add_parser("simulate", help="simulate a run of the paper's world into a stream file")
-    s.add_argument("--seed", type=_nonneg_int, default=0)
-    s.add_argument("--landmarks", type=_positive_int, default=50)
-    s.add_argument("--steps", type=int, default=300, help="number of moves (default 300)")
-    s.add_argument("--sensor-range", type=float, default=1.0, help="metres (default 1.0)")
-    s.add_argument("--fov-deg", type=float, default=360.0, help="field of view (default 360)")
-    s.add_argument("--noise-scale", type=float, default=1.0,
+    s = _command(sub, "simulate", "simulate a run of the paper's world into a stream file")
+    s.add_argument("--seed", type=_nonneg_int, default=0, help="random seed (default 0)")
+    s.add_argument("--landmarks", type=_positive_int, default=50,
+                   help="number of landmarks (default 50)")
+    s.add_argument("--steps", type=_int, default=300, help="number of moves (default 300)")
+    s.add_argument("--sensor-range", type=_float, default=1.0, help="metres (default 1.0)")
+    s.add_argument("--fov-deg", type=_float, default=360.0, help="field of view (default 360)")
+    s.add_argument("--noise-scale", type=_float, default=1.0,
                    help="multiplies the paper's noise; 0 gives noise-free data")
-    s.add_argument("--wrong-association-rate", type=float, default=0.0)
-    s.add_argument("--prior-fraction", type=float, default=0.0,
+    s.add_argument("--wrong-association-rate", type=_float, default=0.0,
+                   help="fraction of bearings given a wrong landmark id (default 0)")
+    s.add_argument("--prior-fraction", type=_float, default=0.0,
                    help="fraction of landmark pairs with a known distance (Exp. 3: 0.1)")
-    s.add_argument("--prior-sigma", type=float, default=0.03, help="metres per axis")
-    s.add_argument("--out", required=True)
+    s.add_argument("--prior-sigma", type=_float, default=0.03, help="metres per axis")
+    s.add_argument("--out", required=True, help="the stream file to write")
     s.set_defaults(func=cmd_simulate)
 
-    r = sub.add_parser("run", help="run a method on a stream file and write its estimate")
-    r.add_argument("stream")
+    r = _command(sub, "run", "run a method on a stream file and write its estimate")
+    r.add_argument("stream", help="the stream file ('-': read it from stdin)")
     r.add_argument("--method", required=True, help="see `bomgraph methods`")
-    r.add_argument("--out", required=True)
-    r.add_argument("--checkpoint-every", type=_positive_int, default=10)
+    r.add_argument("--out", required=True,
+                   help="the estimate file to write ('-': write it to stdout)")
+    r.add_argument("--checkpoint-every", type=_positive_int, default=10,
+                   help="estimate the map every N steps (default 10) and at the last step")
     r.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
-                   help="a method option (repeatable)")
+                   help="a method option (repeatable); `bomgraph methods NAME` lists them")
+    r.add_argument("--json", action="store_true",
+                   help="print the summary as one JSON line")
+    bar = r.add_mutually_exclusive_group()
+    bar.add_argument("--progress", action="store_true", default=None,
+                     help=f"always show a progress bar (default: on a terminal, for streams "
+                          f"of {PROGRESS_MIN_STEPS} steps or more)")
+    bar.add_argument("--no-progress", action="store_false", dest="progress",
+                     help="never show a progress bar")
     r.add_argument("--allow-truth", action="store_true", help=argparse.SUPPRESS)
     r.set_defaults(func=cmd_run)
 
-    e = sub.add_parser("evaluate", help="score an estimate file against a stream's truth")
-    e.add_argument("estimate")
-    e.add_argument("stream")
+    e = _command(sub, "evaluate", "score an estimate file against a stream's truth")
+    e.add_argument("estimate", help="the estimate file ('-': stdin)")
+    e.add_argument("stream", help="the stream file with the truth ('-': stdin; not both)")
     e.add_argument("--json", action="store_true", help="print one JSON object")
     e.add_argument("--similarity", action="store_true", help="also fit a scale")
     e.set_defaults(func=cmd_evaluate)
 
-    c = sub.add_parser("compare", help="the paper's experiments, every method side by side")
+    c = _command(sub, "compare", "the paper's experiments, every method side by side")
     c.add_argument("--quick", action="store_true",
                    help="2 runs of 150 steps per arm (a demo), instead of 25 runs of 300")
     c.add_argument("--experiments", default="",
@@ -246,47 +392,48 @@ def build_parser() -> argparse.ArgumentParser:
                    help="every method on the recorded datasets under DATA_DIR (e.g. "
                         "../shared/data) instead of the simulation")
     c.add_argument("--out", default="compare-results", help="output folder")
-    c.add_argument("--seed", type=_nonneg_int, default=0)
+    c.add_argument("--seed", type=_nonneg_int, default=0, help="random seed (default 0)")
     c.add_argument("--jobs", type=_jobs, default=-1, help="local processes (-1: one per core)")
     c.add_argument("--scheduler", default=None, metavar="ADDRESS",
                    help="run on an existing Dask distributed scheduler, e.g. tcp://host:8786")
-    c.add_argument("--dask-local", type=int, default=0, metavar="N",
+    c.add_argument("--dask-local", type=_nonneg_int, default=0, metavar="N",
                    help="start a local Dask cluster of N worker processes")
     c.add_argument("--no-cache", action="store_true", help="ignore and do not write the cache")
-    c.add_argument("--no-figures", action="store_true")
-    c.add_argument("--no-progress", action="store_true")
+    c.add_argument("--no-figures", action="store_true", help="write no figures")
+    c.add_argument("--no-progress", action="store_true", help="show no progress bar")
     c.set_defaults(func=cmd_compare)
 
-    i = sub.add_parser("import", help="turn a real dataset into a stream file")
-    isub = i.add_subparsers(dest="dataset", required=True)
-    im = isub.add_parser("mrclam", help="one robot of a UTIAS MRCLAM folder, keyframed")
+    i = _command(sub, "import", "turn a real dataset into a stream file")
+    isub = i.add_subparsers(dest="dataset", required=True, metavar="DATASET")
+    im = _command(isub, "mrclam", "one robot of a UTIAS MRCLAM folder, keyframed")
     im.add_argument("dir", help="the dataset folder (.dat or .dat.gz files)")
-    im.add_argument("--robot", type=int, required=True, choices=range(1, 6), metavar="{1..5}")
-    im.add_argument("--out", required=True)
-    im.add_argument("--min-distance", type=float, help="keyframe distance, metres "
+    im.add_argument("--robot", type=_int, required=True, choices=range(1, 6), metavar="{1..5}",
+                    help="the robot number")
+    im.add_argument("--out", required=True, help="the stream file to write")
+    im.add_argument("--min-distance", type=_float, help="keyframe distance, metres "
                     "(default: KeyframeConfig's, 0.3)")
-    im.add_argument("--min-turn", type=float, help="keyframe turn, radians (default 0.3)")
-    im.add_argument("--attach-window", type=float, help="seconds (default 0.6)")
+    im.add_argument("--min-turn", type=_float, help="keyframe turn, radians (default 0.3)")
+    im.add_argument("--attach-window", type=_float, help="seconds (default 0.6)")
     im.add_argument("--keep-ranges", action="store_true", help="keep ranges in the meta")
     im.add_argument("--no-calibrate", action="store_true",
                     help="use the default sigmas (needed without robot ground truth, mrclam1)")
     im.set_defaults(func=cmd_import_mrclam)
-    ig = isub.add_parser("g2o", help="a bearing-only g2o file")
-    ig.add_argument("file")
+    ig = _command(isub, "g2o", "a bearing-only g2o file")
+    ig.add_argument("file", help="the g2o file")
     ig.add_argument("--truth", default=None, help="a g2o file whose vertices are the truth")
-    ig.add_argument("--bearing-sigma", type=float, default=None,
+    ig.add_argument("--bearing-sigma", type=_float, default=None,
                     help="radians (default: from the bearing edges' information)")
-    ig.add_argument("--out", required=True)
+    ig.add_argument("--out", required=True, help="the stream file to write")
     ig.set_defaults(func=cmd_import_g2o)
-    iv = isub.add_parser("victoria", help="GTSAM's victoria_park.txt")
-    iv.add_argument("file")
-    iv.add_argument("--bearing-sigma", type=float, default=None,
+    iv = _command(isub, "victoria", "GTSAM's victoria_park.txt")
+    iv.add_argument("file", help="the victoria_park.txt file")
+    iv.add_argument("--bearing-sigma", type=_float, default=None,
                     help="radians (default: median propagated point covariance)")
-    iv.add_argument("--out", required=True)
+    iv.add_argument("--out", required=True, help="the stream file to write")
     iv.set_defaults(func=cmd_import_victoria)
 
-    x = sub.add_parser("export", help="write an estimate (or a stream's truth) as TUM, KITTI, "
-                       "CSV or g2o")
+    x = _command(sub, "export", "write an estimate (or a stream's truth) as TUM, KITTI, CSV "
+                 "or g2o")
     x.add_argument("estimate", nargs="?", default=None, help="an estimate file from `run`")
     x.add_argument("--stream", default=None, help="the estimate's stream: time stamps for "
                    "tum/csv, the measurements for g2o")
@@ -298,22 +445,80 @@ def build_parser() -> argparse.ArgumentParser:
     x.add_argument("--out", required=True, help="output file, or - for stdout")
     x.set_defaults(func=cmd_export)
 
-    m = sub.add_parser("methods", help="list the available methods")
+    m = _command(sub, "methods", "list the methods, or one method's options and presets")
+    m.add_argument("name", nargs="?", default=None, metavar="NAME",
+                   help="a method: list its options (type, default, meaning) and presets")
+    m.add_argument("--json", action="store_true", help="print JSON instead of text")
     m.set_defaults(func=cmd_methods)
     return p
 
 
+def _add_verbosity(p: argparse.ArgumentParser) -> None:
+    """``-v`` (INFO; ``-vv`` DEBUG) and ``-q`` (errors only), before or after the command."""
+    g = p.add_mutually_exclusive_group()
+    g.add_argument("-v", "--verbose", action="count", default=argparse.SUPPRESS,
+                   help="log progress (INFO); twice for DEBUG")
+    g.add_argument("-q", "--quiet", action="store_true", default=argparse.SUPPRESS,
+                   help="log errors only (no warnings)")
+
+
+def _command(sub: Any, name: str, help_text: str) -> argparse.ArgumentParser:
+    cmd = sub.add_parser(name, help=help_text, description=help_text)
+    _add_verbosity(cmd)
+    return cmd
+
+
+def configure_logging(verbose: int = 0, quiet: bool = False) -> None:
+    """The root handler on stderr: WARNING by default, INFO with -v, DEBUG with -vv, ERROR
+    with -q."""
+    level = (logging.ERROR if quiet else logging.DEBUG if verbose >= 2
+             else logging.INFO if verbose == 1 else logging.WARNING)
+    logging.basicConfig(level=level, format="bomgraph: %(levelname)s: %(message)s",
+                        stream=sys.stderr, force=True)
+    logging.captureWarnings(True)
+    if quiet:
+        import warnings
+
+        warnings.simplefilter("ignore")
+
+
+def _on_sigterm(signum: int, frame: Any) -> None:
+    raise SystemExit(128 + signum)  # unwinds, so partial files are removed
+
+
+def _stdout_closed() -> int:
+    """A closed pipe on stdout (``bomgraph methods | head -1``): exit quietly."""
+    try:  # stop the interpreter's final flush from failing again on the closed pipe
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+    except (OSError, ValueError):
+        pass
+    return 128 + signal.SIGPIPE if hasattr(signal, "SIGPIPE") else 1
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
+    try:
+        args = parser.parse_args(argv)
+    except BrokenPipeError:  # `bomgraph --help | head -1`
+        return _stdout_closed()
+    configure_logging(getattr(args, "verbose", 0), getattr(args, "quiet", False))
+    if hasattr(signal, "SIGTERM"):
+        signal.signal(signal.SIGTERM, _on_sigterm)
     func: Callable[[argparse.Namespace], int] = args.func
     try:
-        return func(args)
-    except BomgraphError as exc:
-        print(f"bomgraph: error: {exc}", file=sys.stderr)
-        return 2
-    except OSError as exc:
-        print(f"bomgraph: error: {exc}", file=sys.stderr)
+        status = func(args)
+        sys.stdout.flush()
+        return status
+    except BrokenPipeError:
+        return _stdout_closed()
+    except KeyboardInterrupt:
+        print("bomgraph: interrupted", file=sys.stderr)
+        return 130
+    except (BomgraphError, OSError) as exc:
+        from .stdio import display_path
+
+        print(f"bomgraph: error: {display_path(str(exc))}", file=sys.stderr)
         return 2
 
 

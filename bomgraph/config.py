@@ -10,7 +10,14 @@ configuration: a ready config alone, or a preset name plus options, never both.
 from __future__ import annotations
 
 import dataclasses
-from typing import Any, Callable, ClassVar, Mapping, TypeVar
+import math
+import numbers
+import re
+import types
+import typing
+from typing import Any, Callable, ClassVar, Mapping, NamedTuple, TypeVar
+
+import numpy as np
 
 from .errors import ConfigError
 
@@ -38,11 +45,118 @@ class Presets:
         if unknown:
             raise ConfigError(f"{cls.__name__}: unknown option(s) {', '.join(unknown)}; "
                               f"valid options: {', '.join(sorted(fields))}")
+        hints = typing.get_type_hints(cls)
+        for key, value in overrides.items():
+            problem = _type_problem(hints.get(key), value)
+            if problem:
+                raise ConfigError(f"{cls.__name__}: bad option value {key}={value!r}: {problem}")
         values = {**cls.PRESETS[name], **overrides}
         try:
             return cls(**values)
         except TypeError as exc:  # a value of the wrong type deep in __post_init__
             raise ConfigError(f"{cls.__name__}: bad option value: {exc}") from None
+
+
+def _type_problem(annotation: Any, value: Any) -> str | None:
+    """Why ``value`` does not fit the field type ``annotation`` (None when it does, or when the
+    annotation is not one of the plain types checked: bool, int, float, str, tuples, unions)."""
+    if annotation is None or annotation is Any:
+        return None
+    origin = typing.get_origin(annotation)
+    if origin in (typing.Union, types.UnionType):
+        args = typing.get_args(annotation)
+        if value is None and type(None) in args:
+            return None
+        problems = [_type_problem(a, value) for a in args if a is not type(None)]
+        return None if any(p is None for p in problems) else problems[0]
+    if origin is typing.Literal:
+        allowed = typing.get_args(annotation)
+        return None if value in allowed else f"must be one of {', '.join(map(repr, allowed))}"
+    if origin is tuple:
+        if not isinstance(value, (list, tuple)):
+            return "must be a list, e.g. [1, 2]"
+        args = [a for a in typing.get_args(annotation) if a is not Ellipsis]
+        for item in value:
+            problem = _type_problem(args[0] if args else None, item)
+            if problem:
+                return f"each item {problem[5:] if problem.startswith('must ') else problem}"
+        return None
+    if annotation is bool:
+        return None if isinstance(value, (bool, np.bool_)) else "must be true or false"
+    if annotation is int:
+        ok = isinstance(value, numbers.Integral) and not isinstance(value, bool)
+        return None if ok else "must be an integer"
+    if annotation is float:
+        if isinstance(value, bool) or not isinstance(value, numbers.Real):
+            return "must be a number"
+        return "must be a number, not NaN" if math.isnan(value) else None
+    if annotation is str:
+        return None if isinstance(value, str) else "must be a string"
+    return None
+
+
+class OptionDoc(NamedTuple):
+    """One option of a configuration: name, type, default and a one-line description."""
+
+    name: str
+    type: str
+    default: Any
+    doc: str
+
+
+def _type_name(annotation: Any) -> str:
+    if isinstance(annotation, type) and typing.get_origin(annotation) is None:
+        return annotation.__name__
+    return str(annotation).replace("typing.", "").replace("NoneType", "None")
+
+
+def _attribute_docs(cls: type) -> dict[str, str]:
+    """The first sentence of each entry of a numpydoc ``Attributes`` section; an entry naming
+    several fields (``a, b : float``) gives its text to each."""
+    text = (cls.__doc__ or "").expandtabs()
+    match = re.search(r"^\s*Attributes\s*\n\s*-+\s*\n(.*)", text, re.S | re.M)
+    if not match:
+        return {}
+    lines = match.group(1).splitlines()
+    indent = min((len(ln) - len(ln.lstrip()) for ln in lines if ln.strip()), default=0)
+    docs: dict[str, str] = {}
+    names: list[str] = []
+    body: list[str] = []
+
+    def flush() -> None:
+        sentence = re.split(r"(?<=\.)\s+(?=[A-Z(])", " ".join(body).strip(), maxsplit=1)[0]
+        for n in names:
+            docs[n] = sentence.rstrip(".")
+
+    continued = False
+    for ln in lines:
+        if ln.strip() and len(ln) - len(ln.lstrip()) == indent:
+            head = ln.split(" : ")[0] if " : " in ln else ln.strip().rstrip(":").strip()
+            if not continued:
+                flush()
+                names, body = [], []
+            names += [n.strip() for n in head.split(",") if n.strip()]
+            continued = ln.rstrip().endswith(",")
+        elif ln.strip():
+            body.append(ln.strip())
+    flush()
+    return docs
+
+
+def describe_options(config_cls: type) -> list[OptionDoc]:
+    """Every option of a configuration dataclass, in field order: its type (from the
+    annotation), default, and one line (``field(metadata={"doc": ...})``, or else the first
+    sentence of its entry in the class docstring's ``Attributes`` section)."""
+    hints = typing.get_type_hints(config_cls)
+    docs = _attribute_docs(config_cls)
+    out = []
+    for f in dataclasses.fields(config_cls):
+        default = (f.default if f.default is not dataclasses.MISSING else
+                   f.default_factory() if f.default_factory is not dataclasses.MISSING
+                   else None)
+        doc = (f.metadata.get("doc") or docs.get(f.name, "")).replace("``", "`")
+        out.append(OptionDoc(f.name, _type_name(hints.get(f.name, f.type)), default, doc))
+    return out
 
 
 def requirement(owner: str) -> Callable[[bool, str], None]:
@@ -75,4 +189,4 @@ def resolve(cls: type[C], config: C | None = None, preset: str | None = None,
     return cls.preset(preset or "paper", **options)
 
 
-__all__ = ["Presets", "requirement", "resolve"]
+__all__ = ["Presets", "requirement", "resolve", "OptionDoc", "describe_options"]

@@ -168,7 +168,10 @@ def parse_options(pairs: Sequence[str]) -> dict[str, Any]:
         k, v = p.split("=", 1)
         if not k:
             raise ConfigError(f"an option needs a name before '=', got {p!r}")
-        out[k] = parse_option_value(v)
+        try:
+            out[k] = parse_option_value(v)
+        except ConfigError as exc:
+            raise ConfigError(f"option {k}: {exc}") from None
     return out
 
 

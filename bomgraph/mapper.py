@@ -11,6 +11,7 @@ use, so ``bomgraph`` names the ``baselines`` methods without importing them.
 
 from __future__ import annotations
 
+import dataclasses
 import importlib
 import time
 from dataclasses import dataclass, field
@@ -300,6 +301,28 @@ def method_factory(name: str) -> Callable[..., Mapper]:
                                  f"be loaded: {exc}") from exc
 
 
+def method_config_class(name: str) -> type | None:
+    """The configuration dataclass of the method registered under ``name``: the ``config``
+    parameter's annotation of its factory, or the factory's ``config_class`` attribute
+    (None for a plugin that declares neither)."""
+    import inspect
+    import typing
+
+    factory = method_factory(name)
+    declared = getattr(factory, "config_class", None)
+    if declared is not None:
+        return declared
+    try:
+        hint = typing.get_type_hints(factory.__init__ if inspect.isclass(factory)
+                                     else factory).get("config")
+    except Exception:  # unresolvable annotations in a plugin: no options to show
+        return None
+    for cand in (hint, *typing.get_args(hint)):
+        if isinstance(cand, type) and dataclasses.is_dataclass(cand):
+            return cand
+    return None
+
+
 def create_mapper(name: str, header: StreamHeader, *, truth: Truth | None = None,
                   **options: Any) -> Mapper:
     """Build the mapper registered under ``name`` for a stream with ``header``.
@@ -322,4 +345,4 @@ def create_mapper(name: str, header: StreamHeader, *, truth: Truth | None = None
 
 __all__ = ["MapEstimate", "Mapper", "Checkpoint", "RunResult", "run", "checkpoint_times",
            "MethodInfo", "register_method", "available_methods", "method_info",
-           "method_factory", "create_mapper"]
+           "method_factory", "method_config_class", "create_mapper"]

@@ -68,6 +68,10 @@ def has_file(directory: str | os.PathLike[str], name: str) -> bool:
     return (d / name).is_file() or (d / (name + ".gz")).is_file()
 
 
+#: the first two bytes of every gzip file (RFC 1952).
+GZIP_MAGIC = b"\x1f\x8b"
+
+
 def read_text(path: str | os.PathLike[str]) -> str:
     """The whole file as text (gzip-decompressed if the name ends in ``.gz``).
 
@@ -78,18 +82,25 @@ def read_text(path: str | os.PathLike[str]) -> str:
     """
     p = Path(path)
     try:
-        raw = gzip.decompress(p.read_bytes()) if p.suffix == ".gz" else p.read_bytes()
+        data = p.read_bytes()
     except FileNotFoundError:
         raise DatasetError(f"{p}: file not found; check the path") from None
+    except OSError as exc:
+        raise DatasetError(f"{p}: cannot read ({exc.strerror or exc})") from None
+    is_gzip = data[:2] == GZIP_MAGIC
+    if p.suffix == ".gz" and not is_gzip:
+        raise DatasetError(f"{p}: named .gz but not gzip data; drop the .gz suffix")
+    try:
+        raw = gzip.decompress(data) if p.suffix == ".gz" else data
     except (OSError, EOFError) as exc:
-        raise DatasetError(f"{p}: cannot read ({exc}); if it is not gzip data, drop the .gz "
-                           f"suffix") from None
+        raise DatasetError(f"{p}: corrupt gzip data ({exc})") from None
     try:
         return raw.decode("utf-8")
     except UnicodeDecodeError as exc:
         line = raw[:exc.start].count(b"\n") + 1
-        raise dataset_error(p, line, None, f"not UTF-8 text (byte {exc.start}); the file "
-                                           f"is corrupt or not a text dataset") from None
+        hint = ("it is gzip data: name it with a .gz suffix" if is_gzip else
+                "the file is corrupt or not a text dataset")
+        raise dataset_error(p, line, None, f"not UTF-8 text (byte {exc.start}); {hint}") from None
 
 
 @dataclass(frozen=True)

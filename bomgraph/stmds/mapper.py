@@ -358,5 +358,9 @@ def make_stmds_smacof_loc(header: StreamHeader, **options: Any) -> StmdsMapper:
     return _make(header, "smacof", True, options)
 
 
+for _factory in (make_stmds_cs, make_stmds_smacof, make_stmds_cs_loc, make_stmds_smacof_loc):
+    _factory.config_class = StmdsConfig  # type: ignore[attr-defined]  # for `methods NAME`
+
+
 __all__ = ["StmdsConfig", "StmdsMapper", "make_stmds_cs", "make_stmds_smacof",
            "make_stmds_cs_loc", "make_stmds_smacof_loc"]

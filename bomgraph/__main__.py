@@ -1,0 +1,7 @@
+"""``python -m bomgraph``: the ``bomgraph`` command."""
+
+import sys
+
+from .cli import main
+
+sys.exit(main())
