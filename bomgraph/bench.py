@@ -249,9 +249,14 @@ def strip_timings(results: Iterable[Mapping[str, Any]]) -> list[dict[str, Any]]:
 
 def run_file(stream_path: str | os.PathLike[str], method: str,
              options: Mapping[str, Any] | None = None, *, checkpoint_every: int = 10,
-             allow_truth: bool = False) -> RunResult:
+             allow_truth: bool = False, out: str | os.PathLike[str] | None = None
+             ) -> RunResult:
     """Run ``method`` with ``options`` over a stream file, read step by step (single-threaded
     BLAS, as :func:`run_task`).
+
+    With ``out``, the estimate file is written there checkpoint by checkpoint (atomically,
+    with the stream's identity and the options; :class:`bomgraph.estimate_file.EstimateWriter`)
+    and the result keeps only the final checkpoint, so memory stays bounded by one map.
 
     Raises
     ------
@@ -263,6 +268,19 @@ def run_file(stream_path: str | os.PathLike[str], method: str,
     if method_info(method).needs_truth and not allow_truth:
         raise ConfigError(f"method {method!r} reads the ground truth; it is a benchmark "
                           f"bound, not a mapper (pass --allow-truth to run it anyway)")
+    if out is not None:
+        from .estimate_file import EstimateWriter, stream_file_identity
+
+        ident = stream_file_identity(stream_path)
+        with StreamReader(stream_path) as reader, threadpool_limits(limits=1), \
+                EstimateWriter(out, method, stream=ident, options=options,
+                               checkpoint_every=checkpoint_every) as writer:
+            mapper = create_mapper(method, reader.header, truth=reader.truth,
+                                   **dict(options or {}))
+            result = run(mapper, reader, checkpoint_every=checkpoint_every, method=method,
+                         on_checkpoint=writer.add, keep_checkpoints=False)
+            writer.finish(result)
+            return result
     with StreamReader(stream_path) as reader, threadpool_limits(limits=1):
         mapper = create_mapper(method, reader.header, truth=reader.truth, **dict(options or {}))
         return run(mapper, reader, checkpoint_every=checkpoint_every, method=method)

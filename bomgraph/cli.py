@@ -65,11 +65,10 @@ def cmd_simulate(args: argparse.Namespace) -> int:
 def cmd_run(args: argparse.Namespace) -> int:
     from .bench import run_file
     from .jsonio import parse_options
-    from .estimate_file import write_estimate
 
     result = run_file(args.stream, args.method, parse_options(args.option),
-                      checkpoint_every=args.checkpoint_every, allow_truth=args.allow_truth)
-    write_estimate(result, args.out)
+                      checkpoint_every=args.checkpoint_every, allow_truth=args.allow_truth,
+                      out=args.out)
     print(f"{args.method}: {len(result.final)} landmarks mapped at t = "
           f"{result.checkpoints[-1].t} in {result.total_s:.3f} s; wrote {args.out}")
     return 0
