@@ -151,6 +151,9 @@ class EstimateWriter:
         else:
             d, name = os.path.split(self.path)
             fd, self._tmp = tempfile.mkstemp(prefix=f".{name}.", suffix=".tmp", dir=d or ".")
+            umask = os.umask(0)
+            os.umask(umask)
+            os.chmod(fd, 0o666 & ~umask)   # as open() would, not mkstemp's 0600
             self._fh = os.fdopen(fd, "w", encoding="utf-8", newline="\n")
         if (threading.current_thread() is threading.main_thread()
                 and signal.getsignal(signal.SIGTERM) == signal.SIG_DFL):
