@@ -543,6 +543,10 @@ def read_estimate(path: str | os.PathLike[str]) -> EstimateFile:
         if isinstance(head, dict) and head.get("format") == ESTIMATE_FORMAT \
                 and head.get("version") == 2 and is_int(head.get("version")):
             return _read_v2(fh, head, path)
+        if isinstance(head, dict) and head.get("format") == "bomgraph-stream":
+            raise StreamFormatError("this is a stream file, not an estimate file (arguments "
+                                    "swapped? an estimate comes from `bomgraph run`)",
+                                    path=path, line=1, key="format")
         fh.seek(0)
         try:
             obj = json.loads(fh.read().decode("utf-8"), parse_constant=float,
@@ -553,10 +557,6 @@ def read_estimate(path: str | os.PathLike[str]) -> EstimateFile:
         except (json.JSONDecodeError, UnicodeDecodeError, RecursionError, ValueError) as exc:
             raise StreamFormatError(f"not a JSON estimate file ({type(exc).__name__})",
                                     path=path) from None
-    if isinstance(obj, dict) and obj.get("format") == "bomgraph-stream":
-        raise StreamFormatError("this is a stream file, not an estimate file (arguments "
-                                "swapped? an estimate comes from `bomgraph run`)", path=path,
-                                key="format")
     if not isinstance(obj, dict) or obj.get("format") != ESTIMATE_FORMAT:
         raise StreamFormatError(f"must be a JSON object with \"format\": \"{ESTIMATE_FORMAT}\"",
                                 path=path, key="format")
