@@ -271,3 +271,21 @@ def test_run_streaming_writer_matches_in_memory(tmp_path: Path) -> None:
     assert [c.t for c in back.checkpoints] == [c.t for c in mem.checkpoints]
     for c, d in zip(mem.checkpoints, back.checkpoints):
         _same(c.estimate, d.estimate)
+
+
+def test_cli_run_writes_v2_and_evaluate_refuses_mismatch(tmp_path: Path, capsys) -> None:
+    from bomgraph.cli import main
+
+    write_stream(_stream(30, 0), tmp_path / "s.jsonl")
+    write_stream(_stream(30, 1), tmp_path / "o.jsonl")
+    est = tmp_path / "e.est"
+    assert main(["run", str(tmp_path / "s.jsonl"), "--method", "triangulate",
+                 "--out", str(est)]) == 0
+    assert read_estimate(est).stream.n_steps == 31
+    capsys.readouterr()
+    assert main(["evaluate", str(est), str(tmp_path / "o.jsonl")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "computed from another stream" in err
+    assert main(["evaluate", str(tmp_path / "s.jsonl"), str(est)]) == 2
+    assert "swapped" in capsys.readouterr().err
+    assert sorted(os.listdir(tmp_path)) == ["e.est", "o.jsonl", "s.jsonl"]
