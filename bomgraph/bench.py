@@ -271,6 +271,9 @@ def run_file(stream_path: str | os.PathLike[str], method: str,
     if out is not None:
         from .estimate_file import EstimateWriter, stream_file_identity
 
+        if os.path.exists(out) and os.path.samefile(out, stream_path):
+            raise ConfigError(f"--out {os.fspath(out)} is the input stream; choose another "
+                              f"file for the estimate")
         ident = stream_file_identity(stream_path)
         with StreamReader(stream_path) as reader, threadpool_limits(limits=1), \
                 EstimateWriter(out, method, stream=ident, options=options,

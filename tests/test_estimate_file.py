@@ -289,3 +289,15 @@ def test_cli_run_writes_v2_and_evaluate_refuses_mismatch(tmp_path: Path, capsys)
     assert main(["evaluate", str(tmp_path / "s.jsonl"), str(est)]) == 2
     assert "swapped" in capsys.readouterr().err
     assert sorted(os.listdir(tmp_path)) == ["e.est", "o.jsonl", "s.jsonl"]
+
+
+def test_run_refuses_out_equal_to_the_stream(tmp_path: Path) -> None:
+    from bomgraph.bench import run_file
+    from bomgraph.errors import ConfigError
+
+    write_stream(_stream(20), tmp_path / "s.jsonl")
+    before = (tmp_path / "s.jsonl").read_bytes()
+    with pytest.raises(ConfigError, match="is the input stream"):
+        run_file(tmp_path / "s.jsonl", "triangulate", out=tmp_path / "s.jsonl")
+    assert (tmp_path / "s.jsonl").read_bytes() == before
+    assert sorted(os.listdir(tmp_path)) == ["s.jsonl"]
