@@ -13,6 +13,7 @@ The core never prints: progress is reported through a callback.
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import hashlib
 import json
@@ -252,9 +253,14 @@ def strip_timings(results: Iterable[Mapping[str, Any]]) -> list[dict[str, Any]]:
 def run_file(stream_path: str | os.PathLike[str], method: str,
              options: Mapping[str, Any] | None = None, *, checkpoint_every: int = 10,
              allow_truth: bool = False,
-             progress: Callable[[int], None] | None = None) -> RunResult:
+             progress: Callable[[int], None] | None = None,
+             out: str | os.PathLike[str] | None = None) -> RunResult:
     """Run ``method`` with ``options`` over a stream file, read step by step (single-threaded
     BLAS, as :func:`run_task`). ``progress(t)`` is called after each step is read.
+
+    With ``out``, the estimate file is written there checkpoint by checkpoint (atomically,
+    with the stream's identity and the options; :class:`bomgraph.estimate_file.EstimateWriter`)
+    and the result keeps only the final checkpoint, so memory stays bounded by one map.
 
     Raises
     ------
@@ -266,11 +272,26 @@ def run_file(stream_path: str | os.PathLike[str], method: str,
     if method_info(method).needs_truth and not allow_truth:
         raise ConfigError(f"method {method!r} reads the ground truth; it is a benchmark "
                           f"bound, not a mapper (pass --allow-truth to run it anyway)")
-    with StreamReader(stream_path) as reader, threadpool_limits(limits=1):
+    if out is not None and os.path.exists(out) and os.path.samefile(out, stream_path):
+        raise ConfigError(f"--out {os.fspath(out)} is the input stream; choose another "
+                          f"file for the estimate")
+    with contextlib.ExitStack() as stack:
+        reader = stack.enter_context(StreamReader(stream_path))
+        stack.enter_context(threadpool_limits(limits=1))
         mapper = create_mapper(method, reader.header, truth=reader.truth, **dict(options or {}))
         steps: Iterable[Step] = reader if progress is None else _reporting(reader, progress)
         _log.info("running %s on %s", method, stream_path)
-        result = run(mapper, steps, checkpoint_every=checkpoint_every, method=method)
+        if out is None:
+            result = run(mapper, steps, checkpoint_every=checkpoint_every, method=method)
+        else:
+            from .estimate_file import EstimateWriter, stream_file_identity
+
+            writer = stack.enter_context(EstimateWriter(
+                out, method, stream=stream_file_identity(stream_path), options=options,
+                checkpoint_every=checkpoint_every))
+            result = run(mapper, steps, checkpoint_every=checkpoint_every, method=method,
+                         on_checkpoint=writer.add, keep_checkpoints=False)
+            writer.finish(result)
     _log.info("%s: %d checkpoints, %d landmarks at t = %d, %.3f s", method,
               len(result.checkpoints), len(result.final), result.checkpoints[-1].t,
               result.total_s)

@@ -128,7 +128,6 @@ def _step_bar(stream_path: str, method: str, force: bool | None) -> Any:
 
 def cmd_run(args: argparse.Namespace) -> int:
     from .bench import run_file
-    from .estimate_file import write_estimate
     from .jsonio import parse_options
     from .stdio import STDIO, check_output_path, input_path, write_output
 
@@ -137,14 +136,19 @@ def cmd_run(args: argparse.Namespace) -> int:
     with input_path(args.stream) as stream_path:
         bar = _step_bar(stream_path, args.method, args.progress)
         progress = None if bar is None else (lambda t: bar.update(t + 1 - bar.n))
+        done: list = []
+
+        def compute(out_path: str) -> None:  # the estimate is written as the run goes
+            done.append(run_file(stream_path, args.method, options,
+                                 checkpoint_every=args.checkpoint_every,
+                                 allow_truth=args.allow_truth, progress=progress,
+                                 out=out_path))
         try:
-            result = run_file(stream_path, args.method, options,
-                              checkpoint_every=args.checkpoint_every,
-                              allow_truth=args.allow_truth, progress=progress)
+            write_output(args.out, compute)
         finally:
             if bar is not None:
                 bar.close()
-    write_output(args.out, lambda path: write_estimate(result, path))
+    result = done[0]
     to_stderr = args.out == STDIO
     if args.json:
         _say(json.dumps({"method": args.method, "stream": args.stream, "out": args.out,

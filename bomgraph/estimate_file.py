@@ -1,26 +1,256 @@
 """The estimate file: what ``bomgraph run`` writes and ``bomgraph evaluate`` reads.
 
-One JSON object (``STREAM_FORMAT.md``, last section): the method, the final map (landmarks
-``[id, x_m, y_m]`` and poses ``[t, x_m, y_m, psi_rad]``), every checkpoint and the timings.
-The reader is strict: unknown keys, duplicate keys and malformed entries are refused, naming
-the file and the key.
+Version 2 (written; ``docs/FORMATS.md``, "Estimate file") is JSON Lines, linear in the
+number of steps: a header line (method, the stream's identity, options), one line per
+checkpoint (the landmarks with optional 2x2 covariances, the poses new since the previous
+checkpoint, the method's ``info``; the last checkpoint carries its whole trajectory: it is the
+final map) and a last line with the timings. :class:`EstimateWriter` writes it checkpoint by
+checkpoint into a unique temporary file beside the target and renames it into place once
+complete, so an exception or SIGTERM leaves the previous file as it was.
+
+Version 1 (one JSON object with every checkpoint's whole map) is still read. The reader is
+strict: unknown keys, duplicate keys, non-finite numbers and malformed entries are refused,
+naming the file, the line and the key.
 """
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
+import signal
+import tempfile
+import threading
 from dataclasses import dataclass
-from typing import Any, Mapping
+from typing import IO, Any, Iterable, Mapping
 
 import numpy as np
 
 from .errors import StreamFormatError
-from .jsonio import DuplicateKeyError, is_id, is_num, no_duplicate_keys
+from .jsonio import (DuplicateKeyError, find_nonfinite, is_id, is_int, is_num, jsonable,
+                     loads_strict, no_duplicate_keys)
 from .mapper import Checkpoint, MapEstimate, RunResult
+from .stream import Step
 
 
 ESTIMATE_FORMAT = "bomgraph-estimate"
+ESTIMATE_VERSION = 2
+
+
+# --------------------------------------------------------------------------------------------
+# The stream's identity
+# --------------------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class StreamIdentity:
+    """Which stream an estimate was computed from: the SHA-256 of its steps and their count.
+
+    The digest is over the steps' canonical lines (``json.dumps(step_to_json(step)) + "\n"``
+    each, UTF-8): for a stream file written by bomgraph it is the SHA-256 of the file's bytes
+    after the header line (``tail -n +2 s.jsonl | sha256sum``).
+    """
+
+    steps_sha256: str
+    n_steps: int
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"steps_sha256": self.steps_sha256, "n_steps": self.n_steps}
+
+
+def stream_identity(steps: Iterable[Step]) -> StreamIdentity:
+    """The :class:`StreamIdentity` of a sequence of steps (a stream's ``steps``, a reader)."""
+    from .stream_file import step_to_json
+
+    h = hashlib.sha256()
+    n = 0
+    for st in steps:
+        h.update((json.dumps(step_to_json(st), allow_nan=False) + "\n").encode("utf-8"))
+        n += 1
+    return StreamIdentity(h.hexdigest(), n)
+
+
+def stream_file_identity(path: str | os.PathLike[str]) -> StreamIdentity:
+    """The identity of a stream file (read and validated step by step)."""
+    from .stream_file import StreamReader
+
+    with StreamReader(path) as reader:
+        return stream_identity(reader)
+
+
+# --------------------------------------------------------------------------------------------
+# Writing (version 2)
+# --------------------------------------------------------------------------------------------
+
+def _flat(cov: np.ndarray) -> list[list[float]]:
+    return [[float(v) for v in c.ravel()] for c in cov]
+
+
+def _checkpoint_line(c: Checkpoint, since_t: int | None) -> dict[str, Any]:
+    """One checkpoint as a JSON-ready dict: every landmark; the poses with ``t > since_t``
+    as ``new_poses`` (or, with ``since_t`` None, all of them as ``poses``)."""
+    est = c.estimate
+    obj: dict[str, Any] = {"t": int(c.t), "landmarks": [
+        [int(i), float(x), float(y)] for i, (x, y) in zip(est.landmark_ids, est.landmarks_xy)]}
+    if est.landmark_cov is not None:
+        obj["landmark_cov"] = _flat(est.landmark_cov)
+    if est.poses is not None:
+        keep = (np.ones(len(est.pose_t), bool) if since_t is None else est.pose_t > since_t)
+        key = "poses" if since_t is None else "new_poses"
+        obj[key] = [[int(t), float(p[0]), float(p[1]), float(p[2])]
+                    for t, p in zip(est.pose_t[keep], est.poses[keep])]
+        if est.pose_cov is not None:
+            obj[key.replace("poses", "pose_cov")] = _flat(est.pose_cov[keep])
+    if est.info:
+        obj["info"] = jsonable(est.info)
+    obj["estimate_s"] = float(c.estimate_s)
+    return obj
+
+
+def _dumps(obj: Any) -> str:
+    return json.dumps(obj, allow_nan=False, separators=(",", ":")) + "\n"
+
+
+class EstimateWriter:
+    """Writes a version-2 estimate file checkpoint by checkpoint, atomically.
+
+    Use as a context manager and pass :meth:`add` as :func:`bomgraph.mapper.run`'s
+    ``on_checkpoint``; :meth:`finish` writes the timings, flushes to disk and renames the
+    file into place. Until then the data sit in a uniquely named temporary file beside the
+    target (``.NAME.*.tmp``), removed if the block exits any other way; while the block runs
+    in the main thread with SIGTERM at its default, SIGTERM raises ``SystemExit(143)`` so the
+    temporary file is removed too. A target that exists and is not a regular file (a device,
+    a FIFO) is written directly. Memory: one checkpoint is held back (the last one is written
+    with its whole trajectory).
+    """
+
+    def __init__(self, path: str | os.PathLike[str], method: str, *,
+                 stream: StreamIdentity | None = None,
+                 options: Mapping[str, Any] | None = None,
+                 checkpoint_every: int | None = None) -> None:
+        self.path = os.path.realpath(os.fspath(path))
+        self._header: dict[str, Any] = {"format": ESTIMATE_FORMAT,
+                                        "version": ESTIMATE_VERSION, "method": str(method)}
+        if stream is not None:
+            self._header["stream"] = stream.as_dict()
+        if options:
+            self._header["options"] = jsonable(dict(options))
+        if checkpoint_every is not None:
+            self._header["checkpoint_every"] = int(checkpoint_every)
+        self._fh: IO[str] | None = None
+        self._tmp: str | None = None
+        self._held: Checkpoint | None = None
+        self._since_t: int | None = -1
+        self._last_t = -1
+        self._estimate_s: list[float] = []
+        self._old_handler: Any = None
+
+    def __enter__(self) -> "EstimateWriter":
+        special = os.path.exists(self.path) and not os.path.isfile(self.path)
+        if special:
+            self._fh = open(self.path, "w", encoding="utf-8", newline="\n")
+        else:
+            d, name = os.path.split(self.path)
+            fd, self._tmp = tempfile.mkstemp(prefix=f".{name}.", suffix=".tmp", dir=d or ".")
+            umask = os.umask(0)
+            os.umask(umask)
+            os.chmod(fd, 0o666 & ~umask)   # as open() would, not mkstemp's 0600
+            self._fh = os.fdopen(fd, "w", encoding="utf-8", newline="\n")
+        if (threading.current_thread() is threading.main_thread()
+                and signal.getsignal(signal.SIGTERM) == signal.SIG_DFL):
+            self._old_handler = signal.signal(signal.SIGTERM, _raise_exit)
+        self._fh.write(_dumps(self._header))
+        return self
+
+    def add(self, c: Checkpoint) -> None:
+        """The next checkpoint (in increasing ``t``)."""
+        if self._fh is None:
+            raise RuntimeError("EstimateWriter.add outside its with-block")
+        if c.t <= self._last_t:
+            raise ValueError(f"checkpoints must come in increasing t: {c.t} after "
+                             f"{self._last_t}")
+        self._last_t = c.t
+        self._estimate_s.append(float(c.estimate_s))
+        if self._held is not None:
+            self._fh.write(_dumps(_checkpoint_line(self._held, self._since_t)))
+            pt = self._held.estimate.pose_t
+            if pt is not None and len(pt):
+                self._since_t = max(self._since_t, int(pt.max()))
+        self._held = c
+
+    def finish(self, result: RunResult | None = None) -> None:
+        """Write the last checkpoint and the timings, and move the file into place."""
+        if self._fh is None or self._held is None:
+            raise ValueError("an estimate file needs at least one checkpoint")
+        self._fh.write(_dumps(_checkpoint_line(self._held, None)))
+        est = np.array(self._estimate_s)
+        timing: dict[str, float] = {}
+        if result is not None:
+            timing = {"total": float(result.total_s), "steps": float(result.step_s.sum()),
+                      "step_median": (float(np.median(result.step_s)) if result.step_s.size
+                                      else 0.0)}
+        timing.update({"estimates": float(est.sum()), "estimate_median": float(np.median(est))})
+        self._fh.write(_dumps({"timing_s": timing}))
+        self._fh.flush()
+        if self._tmp is not None:
+            os.fsync(self._fh.fileno())
+        self._fh.close()
+        self._fh = None
+        if self._tmp is not None:
+            os.replace(self._tmp, self.path)
+            self._tmp = None
+            _fsync_dir(os.path.dirname(self.path))
+
+    def __exit__(self, *exc: object) -> None:
+        try:
+            if self._fh is not None:
+                self._fh.close()
+                self._fh = None
+            if self._tmp is not None and os.path.exists(self._tmp):
+                os.remove(self._tmp)
+            self._tmp = None
+        finally:
+            if self._old_handler is not None:
+                signal.signal(signal.SIGTERM, self._old_handler)
+                self._old_handler = None
+
+
+def _raise_exit(signum: int, frame: Any) -> None:
+    raise SystemExit(128 + signum)
+
+
+def _fsync_dir(d: str) -> None:
+    try:
+        fd = os.open(d or ".", os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
+
+
+def write_estimate(result: RunResult, path: str | os.PathLike[str], *,
+                   stream: StreamIdentity | None = None,
+                   options: Mapping[str, Any] | None = None,
+                   checkpoint_every: int | None = None) -> None:
+    """Write a run's estimate file (version 2, atomically)."""
+    with EstimateWriter(path, result.method, stream=stream, options=options,
+                        checkpoint_every=checkpoint_every) as w:
+        for c in result.checkpoints:
+            w.add(c)
+        w.finish(result)
+
+
+def estimate_to_json(result: RunResult) -> dict[str, Any]:
+    """The version-1 object of a run (every checkpoint's whole map; kept for scripts that
+    want one JSON value; files are written as version 2)."""
+    obj: dict[str, Any] = {"format": ESTIMATE_FORMAT, "version": 1, "method": result.method}
+    obj.update(_estimate_parts(result.final))
+    obj["checkpoints"] = [{"t": c.t, **_estimate_parts(c.estimate)} for c in result.checkpoints]
+    obj["timing_s"] = result.timing()
+    return obj
 
 
 def _estimate_parts(est: MapEstimate) -> dict[str, Any]:
@@ -32,29 +262,22 @@ def _estimate_parts(est: MapEstimate) -> dict[str, Any]:
     return out
 
 
-def estimate_to_json(result: RunResult) -> dict[str, Any]:
-    """The estimate file of a run: the final map, every checkpoint and the timings."""
-    obj: dict[str, Any] = {"format": ESTIMATE_FORMAT, "version": 1, "method": result.method}
-    obj.update(_estimate_parts(result.final))
-    obj["checkpoints"] = [{"t": c.t, **_estimate_parts(c.estimate)} for c in result.checkpoints]
-    obj["timing_s"] = result.timing()
-    return obj
-
-
-def write_estimate(result: RunResult, path: str | os.PathLike[str]) -> None:
-    with open(path, "w", encoding="utf-8") as fh:
-        json.dump(estimate_to_json(result), fh, allow_nan=False)
-        fh.write("\n")
-
+# --------------------------------------------------------------------------------------------
+# Reading
+# --------------------------------------------------------------------------------------------
 
 @dataclass(frozen=True)
 class EstimateFile:
-    """An estimate file read back: the final map and the checkpoints."""
+    """An estimate file read back: the final map, the checkpoints (each with the whole
+    trajectory up to its ``t``), the timings and (version 2) the header's record."""
 
     method: str
     final: MapEstimate
     checkpoints: tuple[Checkpoint, ...]
     timing_s: Mapping[str, float]
+    version: int = 1
+    stream: StreamIdentity | None = None
+    options: Mapping[str, Any] | None = None
 
 
 _ESTIMATE_KEYS = {"format", "version", "method", "landmarks", "poses", "checkpoints",
@@ -98,27 +321,8 @@ def _parse_estimate_parts(obj: Mapping[str, Any], path: str, where: str) -> MapE
                        pose_t=pose_t, poses=poses)
 
 
-def read_estimate(path: str | os.PathLike[str]) -> EstimateFile:
-    """Read an estimate file written by ``bomgraph run`` (strictly: unknown keys, duplicate
-    keys and malformed entries are refused, naming the file and the key)."""
-    path = str(path)
-    try:
-        with open(path, encoding="utf-8") as fh:
-            obj = json.load(fh, object_pairs_hook=no_duplicate_keys)
-    except OSError as exc:
-        raise StreamFormatError(f"cannot open: {exc.strerror}", path=path) from None
-    except DuplicateKeyError as exc:
-        raise StreamFormatError("appears twice in one object", path=path, key=str(exc)) from None
-    except (json.JSONDecodeError, UnicodeDecodeError, RecursionError, ValueError) as exc:
-        raise StreamFormatError(f"not a JSON estimate file ({type(exc).__name__})",
-                                path=path) from None
-    if not isinstance(obj, dict) or obj.get("format") != ESTIMATE_FORMAT:
-        raise StreamFormatError(f"must be a JSON object with \"format\": \"{ESTIMATE_FORMAT}\"",
-                                path=path, key="format")
-    version = obj.get("version")
-    if not (isinstance(version, int) and not isinstance(version, bool) and version == 1):
-        raise StreamFormatError("unknown version; this reader knows version 1", path=path,
-                                key="version")
+def _read_v1(obj: dict, path: str) -> EstimateFile:
+    """A version-1 file (one JSON object) already parsed."""
     unknown = sorted(set(obj) - _ESTIMATE_KEYS)
     if unknown:
         raise StreamFormatError(f"unknown key; allowed: {', '.join(sorted(_ESTIMATE_KEYS))}",
@@ -151,5 +355,222 @@ def read_estimate(path: str | os.PathLike[str]) -> EstimateFile:
     return EstimateFile(str(obj.get("method", "")), final, tuple(cps), dict(timing))
 
 
-__all__ = ["ESTIMATE_FORMAT", "EstimateFile", "estimate_to_json", "write_estimate",
-           "read_estimate"]
+_HEADER_KEYS_V2 = {"format", "version", "method", "stream", "options", "checkpoint_every"}
+_LINE_KEYS_V2 = {"t", "landmarks", "landmark_cov", "poses", "pose_cov", "new_poses",
+                 "new_pose_cov", "info", "estimate_s"}
+
+
+class _Line:
+    """Where we are in a version-2 file, for error messages."""
+
+    def __init__(self, path: str, line: int) -> None:
+        self.path, self.line = path, line
+
+    def error(self, key: str | None, message: str) -> StreamFormatError:
+        return StreamFormatError(message, path=self.path, line=self.line, key=key)
+
+
+def _parse_line(text: str, ctx: _Line) -> dict:
+    try:
+        obj = loads_strict(text)
+    except DuplicateKeyError as exc:
+        raise ctx.error(str(exc), "appears twice in one object") from None
+    except (json.JSONDecodeError, RecursionError, ValueError) as exc:
+        raise ctx.error(None, f"not valid JSON ({getattr(exc, 'msg', type(exc).__name__)})"
+                        ) from None
+    if not isinstance(obj, dict):
+        raise ctx.error(None, f"expected a JSON object, got {type(obj).__name__}")
+    bad = find_nonfinite(obj)
+    if bad is not None:
+        raise ctx.error(bad, "non-finite number (NaN or Infinity) in the file; an estimate "
+                             "file holds finite numbers only")
+    return obj
+
+
+def _rows(v: Any, width: int, key: str, ctx: _Line, what: str, *, int_first: bool
+          ) -> tuple[np.ndarray, np.ndarray]:
+    """``[[id, v1, ...], ...]`` (``int_first``) or ``[[v1, ...], ...]`` as (ids, values)."""
+    if not isinstance(v, list):
+        raise ctx.error(key, f"must be a list of {what}")
+    ids, vals = [], []
+    for k, e in enumerate(v):
+        ok = isinstance(e, list) and len(e) == width
+        if ok and int_first:
+            ok = is_id(e[0]) and all(is_num(x) for x in e[1:])
+        elif ok:
+            ok = all(is_num(x) for x in e)
+        if not ok:
+            raise ctx.error(f"{key}[{k}]", f"must be {what}, got {json.dumps(e)[:60]}")
+        if int_first:
+            ids.append(e[0])
+        vals.append([float(x) for x in (e[1:] if int_first else e)])
+    n = width - 1 if int_first else width
+    return np.array(ids, dtype=np.int64), np.array(vals, dtype=float).reshape(-1, n)
+
+
+def _parse_checkpoint_v2(obj: dict, ctx: _Line, prev: MapEstimate | None
+                         ) -> tuple[int, MapEstimate, float]:
+    unknown = sorted(set(obj) - _LINE_KEYS_V2)
+    if unknown:
+        raise ctx.error(unknown[0], f"unknown key in a checkpoint line; allowed: "
+                                    f"{', '.join(sorted(_LINE_KEYS_V2))}")
+    if not is_id(obj.get("t")):
+        raise ctx.error("t", "a checkpoint line needs an integer t >= 0")
+    if "landmarks" not in obj:
+        raise ctx.error("landmarks", "missing (a list of [id, x_m, y_m])")
+    ids, xy = _rows(obj["landmarks"], 3, "landmarks", ctx, "[id, x_m, y_m]", int_first=True)
+    if len(set(ids.tolist())) != len(ids):
+        raise ctx.error("landmarks", "a landmark id appears twice")
+    lcov = None
+    if "landmark_cov" in obj:
+        _, lc = _rows(obj["landmark_cov"], 4, "landmark_cov", ctx,
+                      "[xx, xy, yx, yy] (m^2)", int_first=False)
+        if len(lc) != len(ids):
+            raise ctx.error("landmark_cov", f"{len(lc)} covariances for {len(ids)} landmarks")
+        lcov = lc.reshape(-1, 2, 2)
+    if "poses" in obj and "new_poses" in obj:
+        raise ctx.error("new_poses", "a checkpoint has either poses or new_poses")
+    for cov_key, pose_key in (("pose_cov", "poses"), ("new_pose_cov", "new_poses")):
+        if cov_key in obj and pose_key not in obj:
+            raise ctx.error(cov_key, f"given without {pose_key}")
+    pose_t = poses = pcov = None
+    key = "poses" if "poses" in obj else "new_poses" if "new_poses" in obj else None
+    if key is not None:
+        pose_t, poses = _rows(obj[key], 4, key, ctx, "[t, x_m, y_m, psi_rad]", int_first=True)
+        ck = key.replace("poses", "pose_cov")
+        if ck in obj:
+            _, pc = _rows(obj[ck], 9, ck, ctx, "9 numbers (row-major 3x3)", int_first=False)
+            if len(pc) != len(pose_t):
+                raise ctx.error(ck, f"{len(pc)} covariances for {len(pose_t)} poses")
+            pcov = pc.reshape(-1, 3, 3)
+        if key == "new_poses" and prev is not None and prev.pose_t is not None:
+            if len(pose_t) and len(prev.pose_t) and pose_t.min() <= prev.pose_t.max():
+                raise ctx.error(key, f"new poses must come after the previous checkpoint's "
+                                     f"last pose t = {int(prev.pose_t.max())}")
+            pcov = (np.concatenate([prev.pose_cov, pcov])
+                    if pcov is not None and prev.pose_cov is not None else None)
+            pose_t = np.concatenate([prev.pose_t, pose_t])
+            poses = np.concatenate([prev.poses, poses])
+        if len(set(pose_t.tolist())) != len(pose_t):
+            raise ctx.error(key, "a step t appears twice")
+    elif prev is not None and prev.pose_t is not None:   # no new poses: the trajectory so far
+        pose_t, poses, pcov = prev.pose_t, prev.poses, prev.pose_cov
+    info = obj.get("info", {})
+    if not isinstance(info, dict):
+        raise ctx.error("info", "must be an object")
+    est_s = obj.get("estimate_s", 0.0)
+    if not is_num(est_s):
+        raise ctx.error("estimate_s", "must be a number (seconds)")
+    return obj["t"], MapEstimate(ids, xy, pose_t=pose_t, poses=poses, landmark_cov=lcov,
+                                 pose_cov=pcov, info=info), float(est_s)
+
+
+def _parse_header_v2(obj: dict, ctx: _Line) -> tuple[str, StreamIdentity | None, Any]:
+    unknown = sorted(set(obj) - _HEADER_KEYS_V2)
+    if unknown:
+        raise ctx.error(unknown[0], f"unknown key in the header; allowed: "
+                                    f"{', '.join(sorted(_HEADER_KEYS_V2))}")
+    if not isinstance(obj.get("method"), str):
+        raise ctx.error("method", "must be a string")
+    ident = None
+    if "stream" in obj:
+        s = obj["stream"]
+        if not (isinstance(s, dict) and set(s) == {"steps_sha256", "n_steps"}
+                and isinstance(s["steps_sha256"], str) and len(s["steps_sha256"]) == 64
+                and is_id(s["n_steps"])):
+            raise ctx.error("stream", "must be {\"steps_sha256\": 64 hex digits, "
+                                      "\"n_steps\": integer}")
+        ident = StreamIdentity(s["steps_sha256"], s["n_steps"])
+    if "options" in obj and not isinstance(obj["options"], dict):
+        raise ctx.error("options", "must be an object")
+    if "checkpoint_every" in obj and not (is_int(obj["checkpoint_every"])
+                                          and obj["checkpoint_every"] >= 1):
+        raise ctx.error("checkpoint_every", "must be an integer >= 1")
+    return obj["method"], ident, obj.get("options")
+
+
+def _read_v2(fh: IO[bytes], header: dict, path: str) -> EstimateFile:
+    method, ident, options = _parse_header_v2(header, _Line(path, 1))
+    cps: list[Checkpoint] = []
+    prev: MapEstimate | None = None
+    timing: dict[str, float] | None = None
+    line_no = 1
+    for raw in fh:
+        line_no += 1
+        ctx = _Line(path, line_no)
+        if timing is not None:
+            raise ctx.error(None, "nothing may follow the timing_s line")
+        try:
+            text = raw.decode("utf-8")
+        except UnicodeDecodeError as exc:
+            raise ctx.error(None, f"not UTF-8 text (byte {exc.start})") from None
+        obj = _parse_line(text, ctx)
+        if "timing_s" in obj:
+            if set(obj) != {"timing_s"} or not isinstance(obj["timing_s"], dict) or not all(
+                    is_num(v) for v in obj["timing_s"].values()):
+                raise ctx.error("timing_s", "the last line is {\"timing_s\": {name: seconds}}")
+            timing = {k: float(v) for k, v in obj["timing_s"].items()}
+            continue
+        t, est, est_s = _parse_checkpoint_v2(obj, ctx, prev)
+        if cps and t <= cps[-1].t:
+            raise ctx.error("t", f"checkpoints must be in increasing t ({t} after {cps[-1].t})")
+        cps.append(Checkpoint(t, est, est_s))
+        prev = est
+    if timing is None:
+        raise StreamFormatError("ends before the timing_s line (truncated?)", path=path,
+                                line=line_no + 1, key="timing_s")
+    if not cps:
+        raise StreamFormatError("no checkpoint line; the final map is the last checkpoint",
+                                path=path, line=2, key="t")
+    return EstimateFile(method, cps[-1].estimate, tuple(cps), timing, 2, ident, options)
+
+
+def read_estimate(path: str | os.PathLike[str]) -> EstimateFile:
+    """Read an estimate file written by ``bomgraph run`` (version 2, or version 1), strictly:
+    unknown and duplicate keys, non-finite numbers and malformed entries are refused, naming
+    the file, the line (version 2) and the key."""
+    path = str(path)
+    try:
+        fh = open(path, "rb")
+    except OSError as exc:
+        raise StreamFormatError(f"cannot open: {exc.strerror}", path=path) from None
+    with fh:
+        first = fh.readline()
+        try:
+            head = loads_strict(first.decode("utf-8"))
+        except (ValueError, DuplicateKeyError, RecursionError, UnicodeDecodeError):
+            head = None
+        if isinstance(head, dict) and head.get("format") == ESTIMATE_FORMAT \
+                and head.get("version") == 2 and is_int(head.get("version")):
+            return _read_v2(fh, head, path)
+        if isinstance(head, dict) and head.get("format") == "bomgraph-stream":
+            raise StreamFormatError("this is a stream file, not an estimate file (arguments "
+                                    "swapped? an estimate comes from `bomgraph run`)",
+                                    path=path, line=1, key="format")
+        fh.seek(0)
+        try:
+            obj = json.loads(fh.read().decode("utf-8"), parse_constant=float,
+                             object_pairs_hook=no_duplicate_keys)
+        except DuplicateKeyError as exc:
+            raise StreamFormatError("appears twice in one object", path=path,
+                                    key=str(exc)) from None
+        except (json.JSONDecodeError, UnicodeDecodeError, RecursionError, ValueError) as exc:
+            raise StreamFormatError(f"not a JSON estimate file ({type(exc).__name__})",
+                                    path=path) from None
+    if not isinstance(obj, dict) or obj.get("format") != ESTIMATE_FORMAT:
+        raise StreamFormatError(f"must be a JSON object with \"format\": \"{ESTIMATE_FORMAT}\"",
+                                path=path, key="format")
+    version = obj.get("version")
+    if not (is_int(version) and version == 1):
+        raise StreamFormatError("unknown version; this reader knows versions 1 and 2",
+                                path=path, key="version")
+    bad = find_nonfinite(obj)
+    if bad is not None:
+        raise StreamFormatError("non-finite number (NaN or Infinity) in the file; an estimate "
+                                "file holds finite numbers only", path=path, key=bad)
+    return _read_v1(obj, path)
+
+
+__all__ = ["ESTIMATE_FORMAT", "ESTIMATE_VERSION", "StreamIdentity", "stream_identity",
+           "stream_file_identity", "EstimateWriter", "EstimateFile", "estimate_to_json",
+           "write_estimate", "read_estimate"]

@@ -181,8 +181,19 @@ def checkpoint_times(n_steps: int, every: int) -> list[int]:
     return ts
 
 
+def _take(checkpoints: list[Checkpoint], c: Checkpoint,
+          on_checkpoint: Callable[[Checkpoint], None] | None, keep: bool) -> None:
+    if on_checkpoint is not None:
+        on_checkpoint(c)
+    if not keep:
+        checkpoints.clear()
+    checkpoints.append(c)
+
+
 def run(mapper: Mapper, steps: Iterable[Step], *, checkpoint_every: int = 10,
-        method: str | None = None) -> RunResult:
+        method: str | None = None,
+        on_checkpoint: Callable[[Checkpoint], None] | None = None,
+        keep_checkpoints: bool = True) -> RunResult:
     """Feed ``steps`` to ``mapper``; estimate the map every ``checkpoint_every`` steps and last.
 
     Parameters
@@ -194,6 +205,11 @@ def run(mapper: Mapper, steps: Iterable[Step], *, checkpoint_every: int = 10,
         The paper maps every 10 steps (t = 10, 20, ...); the final step is always a checkpoint.
     method : str, optional
         Name recorded in the result (defaults to the mapper's class name).
+    on_checkpoint : callable, optional
+        Called with each :class:`Checkpoint` as soon as it is taken (e.g. to write it out).
+    keep_checkpoints : bool
+        False keeps only the latest checkpoint in the result (memory bounded by one map;
+        pair it with ``on_checkpoint``). The estimates are the same either way.
     """
     if checkpoint_every < 1:
         raise ConfigError(f"checkpoint_every must be >= 1, got {checkpoint_every}")
@@ -210,13 +226,15 @@ def run(mapper: Mapper, steps: Iterable[Step], *, checkpoint_every: int = 10,
         if st.t > 0 and st.t % checkpoint_every == 0:
             t0 = clock()
             est = mapper.estimate()
-            checkpoints.append(Checkpoint(st.t, est, clock() - t0))
+            _take(checkpoints, Checkpoint(st.t, est, clock() - t0), on_checkpoint,
+                  keep_checkpoints)
     if last_t < 0:
         raise ConfigError("run(): the stream has no steps")
     if not checkpoints or checkpoints[-1].t != last_t:
         t0 = clock()
         est = mapper.estimate()
-        checkpoints.append(Checkpoint(last_t, est, clock() - t0))
+        _take(checkpoints, Checkpoint(last_t, est, clock() - t0), on_checkpoint,
+              keep_checkpoints)
     return RunResult(method or type(mapper).__name__, tuple(checkpoints),
                      np.array(step_s), clock() - start)
 

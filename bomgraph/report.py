@@ -22,10 +22,10 @@ from typing import Any, Callable, Mapping, Sequence
 import numpy as np
 
 from .bench import Executor, execute, run_example
-from .errors import EvaluationError
-from .evaluate import MapScore, error_table, score_estimate
+from .errors import EvaluationError, StreamFormatError
+from .evaluate import MapScore, error_table, landmark_nees, pose_nees, score_estimate
 from .experiments import PAPER_REPORTED, Experiment
-from .estimate_file import read_estimate
+from .estimate_file import read_estimate, stream_identity
 from .plots import MapPanel, error_vs_time_figure, final_maps_figure, map_figure
 from .stream_file import read_stream
 
@@ -279,9 +279,12 @@ class FileEvaluation:
     method: str
     score: MapScore
     table: dict[str, np.ndarray] | None
+    nees_landmark: float = math.nan
+    nees_pose: float = math.nan
 
     def as_dict(self) -> dict[str, Any]:
-        out: dict[str, Any] = {"method": self.method, **self.score.as_dict()}
+        out: dict[str, Any] = {"method": self.method, **self.score.as_dict(),
+                               "nees_landmark": self.nees_landmark, "nees_pose": self.nees_pose}
         if self.table is not None:
             out["checkpoints"] = {k: v.tolist() for k, v in self.table.items()}
         return out
@@ -294,16 +297,58 @@ def evaluate_files(estimate_path: str | os.PathLike[str], stream_path: str | os.
     Raises
     ------
     EvaluationError
-        The stream has no ground truth, or the map shares fewer than 3 landmarks with it.
+        The stream has no ground truth, the estimate was computed from another stream (its
+        recorded identity differs) or has checkpoints beyond the stream's last step, or the
+        map shares fewer than 3 landmarks with it.
+
+    The NEES (landmarks: the mean over the common ones; pose: the latest) come from the
+    file's covariances and are NaN without them.
     """
+    try:
+        stream = read_stream(stream_path)
+    except StreamFormatError as exc:
+        if _is_estimate_file(stream_path):
+            raise EvaluationError(f"{stream_path} is an estimate file, not a stream (arguments "
+                                  f"swapped? usage: bomgraph evaluate ESTIMATE STREAM)") from None
+        raise exc from None
     est = read_estimate(estimate_path)
-    stream = read_stream(stream_path)
+    if est.stream is not None:
+        ident = stream_identity(stream.steps)
+        if ident != est.stream:
+            what = (f"{est.stream.n_steps} steps recorded, the stream has {ident.n_steps}"
+                    if ident.n_steps != est.stream.n_steps else
+                    f"steps SHA-256 {est.stream.steps_sha256[:12]}... recorded, the stream's "
+                    f"is {ident.steps_sha256[:12]}...")
+            raise EvaluationError(f"{estimate_path} was computed from another stream than "
+                                  f"{stream_path} ({what})")
+    last = len(stream.steps) - 1
+    beyond = [c.t for c in est.checkpoints if c.t > last]
+    if beyond:
+        raise EvaluationError(f"{estimate_path}: checkpoint t = {beyond[0]} is beyond the last "
+                              f"step t = {last} of {stream_path}")
     if stream.truth is None:
         raise EvaluationError(f"{stream_path}: the stream has no ground truth to evaluate "
                               f"against")
     score = score_estimate(est.final, stream.truth, with_scale=with_scale)
     table = error_table(est.checkpoints, stream.truth) if est.checkpoints else None
-    return FileEvaluation(est.method, score, table)
+    nl = np_ = math.nan
+    if not with_scale:
+        if est.final.landmark_cov is not None:
+            try:
+                nl = float(np.mean(landmark_nees(est.final, stream.truth, score.alignment)))
+            except np.linalg.LinAlgError:
+                nl = math.nan
+        np_ = pose_nees(est.final, stream.truth, score.alignment)
+    return FileEvaluation(est.method, score, table, nl, np_)
+
+
+def _is_estimate_file(path: str | os.PathLike[str]) -> bool:
+    """Whether ``path`` reads as an estimate file (to recognise swapped arguments)."""
+    try:
+        read_estimate(path)
+    except (StreamFormatError, OSError):
+        return False
+    return True
 
 
 def format_evaluation(ev: FileEvaluation) -> str:
@@ -317,6 +362,11 @@ def format_evaluation(ev: FileEvaluation) -> str:
     if s.n_poses:
         lines.append(f"  robot position error: last {100 * s.robot_last_m:.2f} cm, mean over "
                      f"{s.n_poses} poses {100 * s.robot_mean_m:.2f} cm")
+    nees = [f"{name} {v:.2f}" for name, v in (("landmark (mean)", ev.nees_landmark),
+                                                ("latest pose", ev.nees_pose))
+            if math.isfinite(v)]
+    if nees:
+        lines.append(f"  NEES from the file's covariances: {', '.join(nees)}")
     if ev.table is not None and len(ev.table["t"]) > 1:
         lines.append("  t      MPE [cm]  mapped")
         for t, m, n in zip(ev.table["t"], ev.table["mpe_m"], ev.table["n_mapped"]):

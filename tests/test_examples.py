@@ -2,11 +2,12 @@
 
 from __future__ import annotations
 
-import json
 import os
 import subprocess
 import sys
 from pathlib import Path
+
+from bomgraph.estimate_file import read_estimate
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLES = ROOT / "docs" / "examples"
@@ -46,8 +47,8 @@ def test_every_method_on_a_recording(tmp_path: Path) -> None:
 def test_plugin_method_runs_through_bomgraph_run(tmp_path: Path) -> None:
     stream, est = simulated(tmp_path), tmp_path / "e.json"
     assert "first-sight: " in run_example("plugin_method.py", str(stream), str(est))
-    doc = json.loads(est.read_text())
-    assert doc["method"] == "first-sight" and len(doc["landmarks"]) > 3
+    doc = read_estimate(est)
+    assert doc.method == "first-sight" and len(doc.final) > 3
 
 
 def test_custom_hybrid_runs_and_its_solve_converges() -> None:
