@@ -76,14 +76,11 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 
 def cmd_evaluate(args: argparse.Namespace) -> int:
-    from .jsonio import jsonable
     from .report import evaluate_files, format_evaluation
 
-    ev = evaluate_files(args.estimate, args.stream, with_scale=args.similarity)
-    if args.json:
-        print(json.dumps(jsonable(ev.as_dict()), allow_nan=False))
-    else:
-        print(format_evaluation(ev))
+    ev = evaluate_files(args.estimate, args.stream, with_scale=args.similarity,
+                        align_on=args.align, delta=args.delta, reference_path=args.reference)
+    print(format_evaluation(ev, "json" if args.json else args.format))
     return 0
 
 
@@ -209,6 +206,15 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("stream")
     e.add_argument("--json", action="store_true", help="print one JSON object")
     e.add_argument("--similarity", action="store_true", help="also fit a scale")
+    e.add_argument("--align", choices=("landmarks", "trajectory", "both"), default="landmarks",
+                   help="fit the alignment on the common landmarks (default), the robot "
+                        "positions (as evo), or both together")
+    e.add_argument("--delta", type=_positive_int, default=1, metavar="N",
+                   help="steps between the two poses of a relative pose error (default 1)")
+    e.add_argument("--reference", default=None, metavar="EST",
+                   help="score against this estimate file instead of the stream's truth")
+    e.add_argument("--format", choices=("text", "json", "csv", "markdown", "latex"),
+                   default="text", help="output format (default text; --json = json)")
     e.set_defaults(func=cmd_evaluate)
 
     c = sub.add_parser("compare", help="the paper's experiments, every method side by side")
