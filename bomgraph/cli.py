@@ -7,14 +7,13 @@ line to stderr and exits with status 2, without a traceback.
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import sys
 from typing import Any, Callable, Sequence
 
 import numpy as np
 
-from .errors import BomgraphError
+from .errors import BomgraphError, ConfigError
 
 
 def _nonneg_int(text: str) -> int:
@@ -81,6 +80,22 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     ev = evaluate_files(args.estimate, args.stream, with_scale=args.similarity,
                         align_on=args.align, delta=args.delta, reference_path=args.reference)
     print(format_evaluation(ev, "json" if args.json else args.format))
+    return 0
+
+
+def cmd_plot(args: argparse.Namespace) -> int:
+    from .figures import plot_results, plot_run
+
+    if args.results:
+        if args.estimate or args.stream:
+            raise ConfigError("plot --results DIR takes no estimate or stream")
+        path = plot_results(args.results, args.out, kind=args.kind,
+                            experiments=args.experiments.split(",") if args.experiments else ())
+    else:
+        if not (args.estimate and args.stream):
+            raise ConfigError("plot needs EST STREAM, or --results DIR")
+        path = plot_run(args.estimate, args.stream, args.out, t=args.t, align_on=args.align)
+    print(f"wrote {path}")
     return 0
 
 
@@ -265,6 +280,23 @@ def build_parser() -> argparse.ArgumentParser:
                     help="radians (default: median propagated point covariance)")
     iv.add_argument("--out", required=True)
     iv.set_defaults(func=cmd_import_victoria)
+
+    pl = sub.add_parser("plot", help="draw one run over its truth, or a compare folder")
+    pl.add_argument("estimate", nargs="?", help="an estimate file (bomgraph run)")
+    pl.add_argument("stream", nargs="?", help="its stream file")
+    pl.add_argument("--out", required=True, help="FILE.png, FILE.pdf or FILE.svg")
+    pl.add_argument("--t", type=_nonneg_int, default=None,
+                    help="draw the checkpoint at this step (default: the final map)")
+    pl.add_argument("--align", choices=("landmarks", "trajectory", "both"), default="landmarks",
+                    help="as for evaluate (default landmarks)")
+    pl.add_argument("--results", default=None, metavar="DIR",
+                    help="a `bomgraph compare` output folder: final MPE across runs and "
+                         "error against time")
+    pl.add_argument("--kind", choices=("box", "violin"), default="box",
+                    help="with --results: box or violin plots (default box)")
+    pl.add_argument("--experiments", default="",
+                    help="with --results: comma-separated experiments (default: all)")
+    pl.set_defaults(func=cmd_plot)
 
     m = sub.add_parser("methods", help="list the available methods")
     m.set_defaults(func=cmd_methods)
