@@ -490,8 +490,9 @@ def results_figure(final: Mapping[str, Mapping[str, np.ndarray]],
         ax.grid(True, axis="y", alpha=0.3)
         ax.set_title(f"{titles.get(exp, exp)}: final map, across runs")
         plot_error_vs_time_on_axes(row[1], curves.get(exp, {}), title=titles.get(exp, exp))
-        row[1].legend(fontsize="x-small", loc="upper left", bbox_to_anchor=(1.02, 1),
-                      frameon=False)
+        if row[1].get_legend_handles_labels()[0]:  # outside the data, on the right
+            row[1].legend(fontsize="x-small", loc="upper left", bbox_to_anchor=(1.02, 1),
+                          frameon=False)
     return fig
 
 
