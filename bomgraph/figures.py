@@ -66,9 +66,9 @@ def plot_run(estimate_path: str | os.PathLike[str], stream_path: str | os.PathLi
         truth = type(truth)(truth.landmark_ids, truth.landmarks_xy, truth.poses[:t + 1])
     pe = None if s.ape is None else (s.ape.t, s.ape.translation_m, s.ape.heading_rad)
     cm = (lambda v: "-" if not math.isfinite(v) else f"{100 * v:.2f} cm")
-    title = (f"{label}, {at}: landmark MPE {cm(s.mpe_m)} ({s.n_common} of {s.n_truth}), "
-             f"robot APE {cm(s.ape_trans_rmse_m)}; aligned on {align_on}"
-             f"{', reflected' if s.alignment.reflected else ''}")
+    robot = f", robot APE {cm(s.ape_trans_rmse_m)}" if s.ape is not None else ""
+    title = (f"{label}, {at}: landmark MPE {cm(s.mpe_m)} ({s.n_common} of {s.n_truth})"
+             f"{robot}; aligned on {align_on}{', reflected' if s.alignment.reflected else ''}")
     errors = {int(i): float(e) for i, e in zip(s.landmark_ids, s.errors_m)}
     fig = run_figure(truth, est, s.alignment, label=label, errors_m=errors, pose_errors=pe,
                      landmark_cov=est.landmark_cov, title=title)

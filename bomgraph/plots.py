@@ -435,7 +435,9 @@ def run_figure(truth: TruthLike | None, estimate: EstimateLike, alignment: Align
                    bbox_to_anchor=(0.5, -0.13), ncol=2, frameon=False)
         ax2.set_title("robot (aligned)")
     if title:
-        fig.suptitle(title)
+        import textwrap
+
+        fig.suptitle(textwrap.fill(title, 95 if two else 60))
     return fig
 
 
