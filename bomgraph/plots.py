@@ -52,7 +52,7 @@ METHOD_COLOURS = {
     "hybrid": "#8c564b", "oracle": "#000000",
 }
 _OTHER = ("#393b79", "#637939", "#8c6d31", "#843c39", "#7b4173", "#3182bd", "#e6550d")
-_SHADES = (-0.45, 0.35, -0.25, 0.5, 0.15, -0.6)
+_SHADES = (-0.3, 0.35, -0.18, 0.5, 0.2, -0.38)
 
 
 def _crc(text: str) -> int:
@@ -81,6 +81,16 @@ def method_linestyle(label: str) -> str:
     variant = label[len(base):].strip()
     return "-" if not variant else ("--", "-.", ":")[_crc(variant) % 3]
 
+
+
+def _plain_log_ticks(axis) -> None:
+    """Tick labels of a log axis as plain numbers (2, 5, 10, 20), not 2 x 10^0."""
+    from matplotlib.ticker import FuncFormatter
+
+    fmt = FuncFormatter(lambda v, _: f"{v:g}")
+    axis.set_major_formatter(fmt)
+    axis.set_minor_formatter(FuncFormatter(
+        lambda v, _: f"{v:g}" if f"{v:g}"[0] in "25" else ""))
 
 
 def _moved(alignment: AlignmentLike | None, points_xy: np.ndarray) -> np.ndarray:
@@ -121,6 +131,7 @@ def plot_error_vs_time_on_axes(ax, curves: Mapping[str, tuple[np.ndarray, np.nda
     ax.set_ylabel(f"{ylabel} ({stat})")
     if log:
         ax.set_yscale("log")
+        _plain_log_ticks(ax.yaxis)
     else:
         ax.set_ylim(bottom=0)
     ax.grid(True, alpha=0.3)
@@ -488,6 +499,7 @@ def results_figure(final: Mapping[str, Mapping[str, np.ndarray]],
                                          for k, a in enumerate(arms)],
                       rotation=55, ha="right", fontsize=8)
         ax.set_yscale("log")
+        _plain_log_ticks(ax.yaxis)
         ax.set_ylabel("final landmark MPE [cm]")
         ax.grid(True, axis="y", alpha=0.3)
         ax.set_title(f"{titles.get(exp, exp)}: final map, across runs")
