@@ -20,7 +20,7 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
-from .errors import BomgraphError
+from .errors import BomgraphError, ConfigError
 
 #: a run over this many steps shows a progress bar (when stderr is a terminal).
 PROGRESS_MIN_STEPS = 1000
@@ -163,18 +163,31 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 
 def cmd_evaluate(args: argparse.Namespace) -> int:
-    from .jsonio import jsonable
     from .report import evaluate_files, format_evaluation
     from .stdio import STDIO, input_path
 
     if args.estimate == STDIO and args.stream == STDIO:
         raise BomgraphError("only one of ESTIMATE and STREAM can be '-' (stdin)")
     with input_path(args.estimate) as estimate, input_path(args.stream) as stream:
-        ev = evaluate_files(estimate, stream, with_scale=args.similarity)
-    if args.json:
-        print(json.dumps(jsonable(ev.as_dict()), allow_nan=False))
+        ev = evaluate_files(estimate, stream, with_scale=args.similarity, align_on=args.align,
+                            delta=args.delta, reference_path=args.reference)
+    print(format_evaluation(ev, "json" if args.json else args.format))
+    return 0
+
+
+def cmd_plot(args: argparse.Namespace) -> int:
+    from .figures import plot_results, plot_run
+
+    if args.results:
+        if args.estimate or args.stream:
+            raise ConfigError("plot --results DIR takes no estimate or stream")
+        path = plot_results(args.results, args.out, kind=args.kind,
+                            experiments=args.experiments.split(",") if args.experiments else ())
     else:
-        print(format_evaluation(ev))
+        if not (args.estimate and args.stream):
+            raise ConfigError("plot needs EST STREAM, or --results DIR")
+        path = plot_run(args.estimate, args.stream, args.out, t=args.t, align_on=args.align)
+    print(f"wrote {path}")
     return 0
 
 
@@ -384,6 +397,15 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("stream", help="the stream file with the truth ('-': stdin; not both)")
     e.add_argument("--json", action="store_true", help="print one JSON object")
     e.add_argument("--similarity", action="store_true", help="also fit a scale")
+    e.add_argument("--align", choices=("landmarks", "trajectory", "both"), default="landmarks",
+                   help="fit the alignment on the common landmarks (default), the robot "
+                        "positions (as evo), or both together")
+    e.add_argument("--delta", type=_positive_int, default=1, metavar="N",
+                   help="steps between the two poses of a relative pose error (default 1)")
+    e.add_argument("--reference", default=None, metavar="EST",
+                   help="score against this estimate file instead of the stream's truth")
+    e.add_argument("--format", choices=("text", "json", "csv", "markdown", "latex"),
+                   default="text", help="output format (default text; --json = json)")
     e.set_defaults(func=cmd_evaluate)
 
     c = _command(sub, "compare", "the paper's experiments, every method side by side")
@@ -448,6 +470,23 @@ def build_parser() -> argparse.ArgumentParser:
                         "column; g2o: the problem with the estimate as values")
     x.add_argument("--out", required=True, help="output file, or - for stdout")
     x.set_defaults(func=cmd_export)
+
+    pl = _command(sub, "plot", "draw one run over its truth, or a compare folder")
+    pl.add_argument("estimate", nargs="?", help="an estimate file (bomgraph run)")
+    pl.add_argument("stream", nargs="?", help="its stream file")
+    pl.add_argument("--out", required=True, help="FILE.png, FILE.pdf or FILE.svg")
+    pl.add_argument("--t", type=_nonneg_int, default=None,
+                    help="draw the checkpoint at this step (default: the final map)")
+    pl.add_argument("--align", choices=("landmarks", "trajectory", "both"), default="landmarks",
+                    help="as for evaluate (default landmarks)")
+    pl.add_argument("--results", default=None, metavar="DIR",
+                    help="a `bomgraph compare` output folder: final MPE across runs and "
+                         "error against time")
+    pl.add_argument("--kind", choices=("box", "violin"), default="box",
+                    help="with --results: box or violin plots (default box)")
+    pl.add_argument("--experiments", default="",
+                    help="with --results: comma-separated experiments (default: all)")
+    pl.set_defaults(func=cmd_plot)
 
     m = _command(sub, "methods", "list the methods, or one method's options and presets")
     m.add_argument("name", nargs="?", default=None, metavar="NAME",

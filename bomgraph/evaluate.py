@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Sequence
+from typing import Any, Callable, Sequence, Union
 
 import numpy as np
 
@@ -24,15 +24,22 @@ from .angles import angle_residual
 from .errors import EvaluationError, TooFewLandmarksError
 from .mapper import Checkpoint, MapEstimate, RunResult
 from .stream import Truth
+from .trajectory import PoseErrors, _rms, absolute_pose_errors, relative_pose_errors
 
 
 @dataclass(frozen=True)
 class Alignment:
-    """``x -> scale * R x + translation``; ``R`` is orthogonal, det -1 when reflected."""
+    """``x -> scale * R x + translation``; ``R`` is orthogonal, det -1 when reflected.
+
+    ``rank`` is the rank of the fitted points' cross-covariance: 2 when the fit is determined;
+    1 when a set is collinear (with reflection allowed, its mirror image across the line fits
+    exactly as well); 0 when a set's points coincide (the rotation is undetermined).
+    """
 
     rotation: np.ndarray
     translation: np.ndarray
     scale: float = 1.0
+    rank: int = 2
 
     @property
     def reflected(self) -> bool:
@@ -50,6 +57,67 @@ class Alignment:
         return np.column_stack([self.apply(p[:, :2]), np.arctan2(h[:, 1], h[:, 0])])
 
 
+#: A cross-covariance whose second singular value is below this fraction of the first is
+#: rank 1 (collinear points): the mirror image fits as well to rounding.
+RANK_TOL = 1e-9
+#: Centred coordinates beyond 2**+-400 (about 1e+-120) are scaled by a power of two (exact)
+#: before the products and the SVD, so that nothing overflows or underflows.
+_SAFE_EXP = 400
+
+
+def _mean(x: np.ndarray) -> np.ndarray:
+    """Column means without overflow (scaled by a power of two when the values are huge)."""
+    m = float(np.max(np.abs(x))) if x.size else 0.0
+    if m == 0 or abs(math.frexp(m)[1]) < _SAFE_EXP:
+        return x.mean(0)
+    f = 2.0 ** -math.frexp(m)[1]
+    return (x * f).mean(0) / f
+
+
+def align_candidates(source_xy: np.ndarray, target_xy: np.ndarray, *,
+                     allow_reflection: bool = True, with_scale: bool = False
+                     ) -> tuple[Alignment, ...]:
+    """Every least-squares transform taking ``source_xy`` onto ``target_xy`` (Umeyama, 1991).
+
+    One alignment when the fit is determined. When a set is collinear (``rank`` 1) and
+    reflection is allowed, the two mirror images across the line, which fit equally well; the
+    first is what :func:`align` returns. Points are centred, and scaled by a power of two when
+    their magnitude would overflow the products (1e154 and beyond), before the SVD.
+    """
+    src = np.asarray(source_xy, dtype=float).reshape(-1, 2)
+    dst = np.asarray(target_xy, dtype=float).reshape(-1, 2)
+    if not (np.all(np.isfinite(src)) and np.all(np.isfinite(dst))):
+        raise EvaluationError("align(): points must be finite")
+    if src.shape != dst.shape:
+        raise EvaluationError(f"align(): {len(src)} source points but {len(dst)} targets")
+    if len(src) < 3:
+        raise TooFewLandmarksError(f"alignment needs at least 3 common landmarks, got {len(src)}")
+    mu_s, mu_d = _mean(src), _mean(dst)
+    a, b = src - mu_s, dst - mu_d
+    big = max(float(np.max(np.abs(a))), float(np.max(np.abs(b))))
+    if big > 0 and abs(math.frexp(big)[1]) >= _SAFE_EXP:  # exact rescaling, same rotation
+        f = 2.0 ** -math.frexp(big)[1]
+        a, b = a * f, b * f
+    u, sv, vt = np.linalg.svd(b.T @ a)
+    d = np.ones(2)
+    if not allow_reflection and np.linalg.det(u @ vt) < 0:
+        d[-1] = -1.0
+    rank = 0 if not (sv[0] > 0 and np.any(a) and np.any(b)) else (
+        1 if sv[1] <= RANK_TOL * sv[0] else 2)
+    signs = [d] if (rank != 1 or not allow_reflection) else [d, d * np.array([1.0, -1.0])]
+    out = []
+    for dd in signs:
+        r = (u * dd) @ vt
+        scale = 1.0
+        if with_scale:
+            var = float((a ** 2).sum())
+            if var == 0:
+                raise EvaluationError("align(): all source points coincide; scale is undefined")
+            scale = float((sv * dd).sum() / var)
+        out.append(Alignment(r, mu_d - scale * r @ mu_s, scale, rank))
+    return tuple(out)
+
+
 def align(source_xy: np.ndarray, target_xy: np.ndarray, *, allow_reflection: bool = True,
           with_scale: bool = False) -> Alignment:
     """The least-squares transform taking ``source_xy`` onto ``target_xy`` (Umeyama, 1991).
@@ -61,37 +129,31 @@ def align(source_xy: np.ndarray, target_xy: np.ndarray, *, allow_reflection: boo
         Allow det(R) = -1 (the paper's evaluation does: MDS maps come mirrored).
     with_scale : bool
         Also fit a scale (similarity transform).
+
+    A collinear set has two equally good fits (``rank`` 1): this returns the first of
+    :func:`align_candidates`; :func:`score_estimate` breaks the tie with the poses.
     """
-    src = np.asarray(source_xy, dtype=float).reshape(-1, 2)
-    dst = np.asarray(target_xy, dtype=float).reshape(-1, 2)
-    if not (np.all(np.isfinite(src)) and np.all(np.isfinite(dst))):
-        raise EvaluationError("align(): points must be finite")
-    if src.shape != dst.shape:
-        raise EvaluationError(f"align(): {len(src)} source points but {len(dst)} targets")
-    if len(src) < 3:
-        raise TooFewLandmarksError(f"alignment needs at least 3 common landmarks, got {len(src)}")
-    mu_s, mu_d = src.mean(0), dst.mean(0)
-    a, b = src - mu_s, dst - mu_d
-    u, sv, vt = np.linalg.svd(b.T @ a)
-    d = np.ones(2)
-    if not allow_reflection and np.linalg.det(u @ vt) < 0:
-        d[-1] = -1.0
-    r = (u * d) @ vt
-    scale = 1.0
-    if with_scale:
-        var = float((a ** 2).sum())
-        if var == 0:
-            raise EvaluationError("align(): all source points coincide; scale is undefined")
-        scale = float((sv * d).sum() / var)
-    return Alignment(r, mu_d - scale * r @ mu_s, scale)
+    return align_candidates(source_xy, target_xy, allow_reflection=allow_reflection,
+                            with_scale=with_scale)[0]
+
+
+ALIGN_ON = ("landmarks", "trajectory", "both")
+"""What the alignment is fitted on: the common landmarks (the paper's), the robot positions
+(evo's trajectory alignment) or both together."""
+
+#: A reference to score against: the stream's truth, or another estimate (no truth).
+Reference = Union[Truth, MapEstimate]
 
 
 @dataclass(frozen=True)
 class MapScore:
-    """Errors of one estimate after alignment (metres).
+    """Errors of one estimate after alignment (metres, radians).
 
-    ``robot_*`` are NaN when the estimate or the truth has no poses. ``robot_last_m`` is the
-    error of the latest estimated pose; ``robot_mean_m`` averages over all estimated poses.
+    ``robot_*`` and the pose errors are NaN when the estimate or the reference has no poses,
+    or when the alignment leaves the robot undetermined (``ambiguous``: a collinear set whose
+    mirror tie nothing breaks, or a rank-0 set). ``robot_last_m`` is the error of the latest
+    estimated pose; ``robot_mean_m`` averages over all estimated poses. ``ape_*`` and
+    ``rpe_*`` are RMS values of :mod:`bomgraph.trajectory`'s errors (``ape``, ``rpe``).
     """
 
     mpe_m: float
@@ -107,50 +169,142 @@ class MapScore:
     landmark_ids: np.ndarray
     errors_m: np.ndarray
     alignment: Alignment
+    align_on: str = "landmarks"
+    ambiguous: bool = False
+    ape_trans_rmse_m: float = math.nan
+    ape_heading_rmse_rad: float = math.nan
+    rpe_trans_rmse_m: float = math.nan
+    rpe_heading_rmse_rad: float = math.nan
+    rpe_delta: int = 1
+    n_rpe_pairs: int = 0
+    ape: PoseErrors | None = None
+    rpe: PoseErrors | None = None
 
-    def as_dict(self) -> dict[str, float | int]:
-        return {k: (float(v) if isinstance(v, (float, np.floating)) else int(v))
-                for k, v in self.__dict__.items()
-                if isinstance(v, (int, float, np.integer, np.floating))}
+    def as_dict(self) -> dict[str, Any]:
+        out: dict[str, Any] = {}
+        for k, v in self.__dict__.items():
+            if isinstance(v, (bool, np.bool_, str)):
+                out[k] = v if isinstance(v, str) else bool(v)
+            elif isinstance(v, (int, float, np.integer, np.floating)):
+                out[k] = float(v) if isinstance(v, (float, np.floating)) else int(v)
+        out["alignment_rank"] = self.alignment.rank
+        out["reflected"] = self.alignment.reflected
+        return out
 
 
-def score_estimate(estimate: MapEstimate, truth: Truth, *, allow_reflection: bool = True,
-                   with_scale: bool = False) -> MapScore:
-    """Align ``estimate`` to ``truth`` on the landmarks both have and measure the errors.
+def _reference_poses(ref: Reference, est: MapEstimate) -> tuple[np.ndarray, np.ndarray,
+                                                               np.ndarray] | None:
+    """Rows of ``est``'s poses, and the reference poses, at the steps both hold (or None)."""
+    if est.poses is None or not len(est.poses) or ref.poses is None:
+        return None
+    if isinstance(ref, MapEstimate):
+        common, ie, ir = np.intersect1d(est.pose_t, ref.pose_t, return_indices=True)
+        return (ie, common, ref.poses[ir]) if common.size else None
+    ok = (est.pose_t >= 0) & (est.pose_t < len(ref.poses))
+    if not np.all(ok):
+        raise EvaluationError(f"estimate has poses at steps "
+                              f"{est.pose_t[~ok][:5].tolist()} outside the truth's "
+                              f"0..{len(ref.poses) - 1}")
+    return np.arange(len(est.pose_t)), est.pose_t, ref.poses[est.pose_t]
+
+
+def _sse(x: np.ndarray, y: np.ndarray) -> float:
+    d = np.asarray(x, float) - np.asarray(y, float)
+    m = float(np.max(np.abs(d))) if d.size else 0.0
+    return 0.0 if m == 0 else float(((d / m) ** 2).sum()) * m * m
+
+
+def _break_tie(cands: tuple[Alignment, ...], keys: list[Callable[[Alignment], float]]
+               ) -> tuple[Alignment, bool]:
+    """The candidate that is lower on the first key where the two differ (relative 1e-9);
+    ``True`` with the first candidate when no key separates them."""
+    if len(cands) == 1:
+        return cands[0], cands[0].rank == 0
+    for key in keys:
+        v = [key(c) for c in cands]
+        if abs(v[0] - v[1]) > 1e-9 * max(abs(v[0]), abs(v[1])) + 1e-300:
+            return cands[int(np.argmin(v))], False
+    return cands[0], True
+
+
+def score_estimate(estimate: MapEstimate, truth: Reference, *, allow_reflection: bool = True,
+                   with_scale: bool = False, align_on: str = "landmarks",
+                   delta: int = 1) -> MapScore:
+    """Align ``estimate`` to ``truth`` and measure the landmark and pose errors.
+
+    Parameters
+    ----------
+    truth : Truth, or a MapEstimate used as the reference (poses matched by step)
+    align_on : ``"landmarks"`` (the paper's: the common landmarks), ``"trajectory"`` (the
+        positions of the common poses, evo's APE alignment) or ``"both"``
+    delta : steps between the two poses of a relative pose error
+
+    A collinear fitting set (``Alignment.rank`` 1) has two mirror-image fits of equal cost:
+    the tie is broken by the set not fitted (the positions, for a landmark fit; the landmarks,
+    for a trajectory fit), then by the headings. When nothing breaks it, ``ambiguous`` is set
+    and the pose errors are NaN, never a silent mirror.
 
     Raises
     ------
     EvaluationError
-        If fewer than 3 landmarks are common to the estimate and the truth.
+        If fewer than 3 landmarks are common to the estimate and the truth (or, for a
+        trajectory fit, fewer than 3 common poses).
     """
+    if align_on not in ALIGN_ON:
+        raise EvaluationError(f"align_on must be one of {', '.join(ALIGN_ON)}, got {align_on!r}")
     common, ie, it = np.intersect1d(estimate.landmark_ids, truth.landmark_ids,
                                     return_indices=True)
-    if common.size < 3:
+    if common.size < 3 and align_on != "trajectory":
         raise TooFewLandmarksError(f"the estimate shares {common.size} landmark(s) with the truth; "
                               f"alignment needs at least 3")
     est_xy = estimate.landmarks_xy[ie]
     true_xy = truth.landmarks_xy[it]
-    al = align(est_xy, true_xy, allow_reflection=allow_reflection, with_scale=with_scale)
-    err = np.linalg.norm(al.apply(est_xy) - true_xy, axis=1)
-    robot_last = robot_mean = float("nan")
+    pr = _reference_poses(truth, estimate)
+    est_p = estimate.poses[pr[0]] if pr is not None else np.zeros((0, 3))
+    ref_p = pr[2] if pr is not None else np.zeros((0, 3))
+    if align_on == "trajectory" and len(est_p) < 3:
+        raise EvaluationError(f"a trajectory alignment needs at least 3 common poses, got "
+                              f"{len(est_p)}")
+    src = {"landmarks": est_xy, "trajectory": est_p[:, :2],
+           "both": np.vstack([est_xy, est_p[:, :2]])}[align_on]
+    dst = {"landmarks": true_xy, "trajectory": ref_p[:, :2],
+           "both": np.vstack([true_xy, ref_p[:, :2]])}[align_on]
+    cands = align_candidates(src, dst, allow_reflection=allow_reflection,
+                             with_scale=with_scale)
+    keys = {"landmarks": [lambda c: _sse(c.apply(est_p[:, :2]), ref_p[:, :2])],
+            "trajectory": [lambda c: _sse(c.apply(est_xy), true_xy)],
+            "both": []}[align_on]
+    keys.append(lambda c: _sse(angle_residual(c.apply_poses(est_p)[:, 2], ref_p[:, 2]), 0.0))
+    al, ambiguous = _break_tie(cands, keys)
+    err = (np.hypot(*(al.apply(est_xy) - true_xy).T) if common.size
+           else np.zeros(0))
+    nan = math.nan
+    robot_last = robot_mean = nan
     n_poses = 0
-    if estimate.poses is not None and truth.poses is not None and len(estimate.poses):
-        ok = (estimate.pose_t >= 0) & (estimate.pose_t < len(truth.poses))
-        if not np.all(ok):
-            raise EvaluationError(f"estimate has poses at steps "
-                                  f"{estimate.pose_t[~ok][:5].tolist()} outside the truth's "
-                                  f"0..{len(truth.poses) - 1}")
-        p_err = np.linalg.norm(al.apply(estimate.poses[:, :2])
-                               - truth.poses[estimate.pose_t, :2], axis=1)
-        robot_last = float(p_err[np.argmax(estimate.pose_t)])
-        robot_mean = float(p_err.mean())
-        n_poses = int(len(p_err))
-    return MapScore(mpe_m=float(err.mean()), rmse_m=float(np.sqrt((err ** 2).mean())),
-                    median_m=float(np.median(err)), max_m=float(err.max()),
+    ape = rpe = None
+    if pr is not None and not (ambiguous and align_on == "landmarks"):
+        t = pr[1]
+        moved = al.apply_poses(est_p)
+        ape = absolute_pose_errors(t, moved, ref_p)
+        rpe = relative_pose_errors(t, moved, ref_p, delta)
+        robot_last = float(ape.translation_m[np.argmax(t)])
+        robot_mean = float(ape.translation_m.mean())
+        n_poses = int(len(t))
+    if ambiguous and align_on != "landmarks":
+        err = np.full(len(err), nan)
+    stat = (lambda f: float(f(err))) if err.size else (lambda f: nan)
+    return MapScore(mpe_m=stat(np.mean), rmse_m=_rms(err),
+                    median_m=stat(np.median), max_m=stat(np.max),
                     n_mapped=int(len(estimate.landmark_ids)),
                     n_truth=int(len(truth.landmark_ids)), n_common=int(common.size),
                     robot_last_m=robot_last, robot_mean_m=robot_mean, n_poses=n_poses,
-                    landmark_ids=common, errors_m=err, alignment=al)
+                    landmark_ids=common, errors_m=err, alignment=al, align_on=align_on,
+                    ambiguous=ambiguous,
+                    ape_trans_rmse_m=ape.translation_rmse_m if ape else nan,
+                    ape_heading_rmse_rad=ape.heading_rmse_rad if ape else nan,
+                    rpe_trans_rmse_m=rpe.translation_rmse_m if rpe else nan,
+                    rpe_heading_rmse_rad=rpe.heading_rmse_rad if rpe else nan,
+                    rpe_delta=delta, n_rpe_pairs=len(rpe) if rpe else 0, ape=ape, rpe=rpe)
 
 
 @dataclass(frozen=True)
@@ -174,24 +328,37 @@ class CheckpointScore:
     robot_mean_m: float
     nees_landmark: float
     nees_pose: float
+    ape_trans_rmse_m: float = math.nan
+    ape_heading_rmse_rad: float = math.nan
+    rpe_trans_rmse_m: float = math.nan
+    rpe_heading_rmse_rad: float = math.nan
 
 
-def score_checkpoints(result: RunResult | Sequence[Checkpoint], truth: Truth, *,
-                      nees: bool = True) -> list[CheckpointScore]:
-    """Score every checkpoint of a run (or a sequence of checkpoints) against ``truth``.
+def score_checkpoints(result: RunResult | Sequence[Checkpoint], truth: Reference, *,
+                      nees: bool = True, align_on: str = "landmarks", delta: int = 1,
+                      with_scale: bool = False) -> list[CheckpointScore]:
+    """Score every checkpoint of a run (or a sequence of checkpoints) against ``truth`` (or a
+    reference estimate), aligned as :func:`score_estimate` with ``align_on``.
 
-    A checkpoint whose map shares fewer than 3 landmarks with the truth gets NaN errors (and
-    its counts); any other evaluation error is raised. ``nees=False`` leaves the NEES NaN.
+    A checkpoint whose map shares fewer than 3 landmarks with the truth (or fewer than 3
+    poses, for a trajectory alignment) gets NaN errors (and its counts); any other evaluation
+    error is raised. ``nees=False`` leaves the NEES NaN (as does a reference estimate).
     """
     checkpoints = result.checkpoints if isinstance(result, RunResult) else tuple(result)
-    return [_score_checkpoint(c, truth, nees) for c in checkpoints]
+    return [_score_checkpoint(c, truth, nees and isinstance(truth, Truth), align_on, delta,
+                              with_scale) for c in checkpoints]
 
 
-def _score_checkpoint(c: Checkpoint, truth: Truth, nees: bool) -> CheckpointScore:
+def _score_checkpoint(c: Checkpoint, truth: Reference, nees: bool, align_on: str,
+                      delta: int, with_scale: bool) -> CheckpointScore:
     nan = math.nan
     try:
-        s = score_estimate(c.estimate, truth)
-    except TooFewLandmarksError:
+        s = score_estimate(c.estimate, truth, align_on=align_on, delta=delta,
+                           with_scale=with_scale)
+    except EvaluationError as exc:
+        if not isinstance(exc, TooFewLandmarksError) and not (
+                align_on == "trajectory" and "common poses" in str(exc)):
+            raise
         common = np.intersect1d(c.estimate.landmark_ids, truth.landmark_ids).size
         return CheckpointScore(c.t, len(c.estimate), c.estimate_s, nan, nan, nan, nan,
                                int(common), nan, nan, nan, nan)
@@ -200,7 +367,9 @@ def _score_checkpoint(c: Checkpoint, truth: Truth, nees: bool) -> CheckpointScor
         nl, np_ = _mean_landmark_nees(c.estimate, truth, s.alignment), pose_nees(
             c.estimate, truth, s.alignment)
     return CheckpointScore(c.t, len(c.estimate), c.estimate_s, s.mpe_m, s.rmse_m, s.median_m,
-                           s.max_m, s.n_common, s.robot_last_m, s.robot_mean_m, nl, np_)
+                           s.max_m, s.n_common, s.robot_last_m, s.robot_mean_m, nl, np_,
+                           s.ape_trans_rmse_m, s.ape_heading_rmse_rad, s.rpe_trans_rmse_m,
+                           s.rpe_heading_rmse_rad)
 
 
 ERROR_COLUMNS = ("t", "mpe_m", "rmse_m", "median_m", "max_m", "n_mapped", "n_common",
@@ -269,5 +438,5 @@ def pose_nees(estimate: MapEstimate, truth: Truth, alignment: Alignment) -> floa
         return math.nan
 
 
-__all__ = ["Alignment", "align", "MapScore", "score_estimate", "CheckpointScore",
+__all__ = ["Alignment", "RANK_TOL", "align_candidates", "align", "ALIGN_ON", "Reference", "MapScore", "score_estimate", "CheckpointScore",
            "score_checkpoints", "ERROR_COLUMNS", "error_table", "landmark_nees", "pose_nees"]

@@ -42,6 +42,57 @@ class AlignmentLike(Protocol):
     def apply(self, points_xy: np.ndarray) -> np.ndarray: ...
 
 
+#: One colour per method (by registry name), the same in every figure: a label is coloured by
+#: the longest method name it starts with; variants of a method ("(improved)", "+priors", ...)
+#: get a lighter or darker shade of it, fixed by the variant's text (crc32: stable across runs).
+METHOD_COLOURS = {
+    "triangulate": "#7f7f7f", "stmds-cs": "#ff7f0e", "stmds-smacof": "#d62728",
+    "stmds-cs-loc": "#e377c2", "stmds-smacof-loc": "#9467bd", "ekf": "#2ca02c",
+    "ekf-invdepth": "#bcbd22", "gtsam-batch": "#1f77b4", "gtsam-isam2": "#17becf",
+    "hybrid": "#8c564b", "oracle": "#000000",
+}
+_OTHER = ("#393b79", "#637939", "#8c6d31", "#843c39", "#7b4173", "#3182bd", "#e6550d")
+_SHADES = (-0.3, 0.35, -0.18, 0.5, 0.2, -0.38)
+
+
+def _crc(text: str) -> int:
+    import zlib
+
+    return zlib.crc32(text.encode("utf-8"))
+
+
+def method_colour(label: str) -> str:
+    """The colour of a method or arm label (``"#rrggbb"``), the same in every figure."""
+    base = max((m for m in METHOD_COLOURS if label == m or label.startswith(m + " ")
+                or label.startswith(m + "+")), key=len, default=None)
+    if base is None:
+        return _OTHER[_crc(label) % len(_OTHER)]
+    rgb = np.array([int(METHOD_COLOURS[base][k:k + 2], 16) for k in (1, 3, 5)]) / 255.0
+    variant = label[len(base):].strip()
+    if variant:
+        f = _SHADES[_crc(variant) % len(_SHADES)]
+        rgb = rgb + (1 - rgb) * f if f > 0 else rgb * (1 + f)
+    return "#" + "".join(f"{int(round(255 * v)):02x}" for v in np.clip(rgb, 0, 1))
+
+
+def method_linestyle(label: str) -> str:
+    """Solid for a method, dashed or dotted for its variants (by the variant's text)."""
+    base = max((m for m in METHOD_COLOURS if label.startswith(m)), key=len, default=label)
+    variant = label[len(base):].strip()
+    return "-" if not variant else ("--", "-.", ":")[_crc(variant) % 3]
+
+
+
+def _plain_log_ticks(axis) -> None:
+    """Tick labels of a log axis as plain numbers (2, 5, 10, 20), not 2 x 10^0."""
+    from matplotlib.ticker import FuncFormatter
+
+    fmt = FuncFormatter(lambda v, _: f"{v:g}")
+    axis.set_major_formatter(fmt)
+    axis.set_minor_formatter(FuncFormatter(
+        lambda v, _: f"{v:g}" if f"{v:g}"[0] in "25" else ""))
+
+
 def _moved(alignment: AlignmentLike | None, points_xy: np.ndarray) -> np.ndarray:
     """``(n, 2)`` points through ``alignment`` (None: as they are)."""
     return np.asarray(points_xy, dtype=float) if alignment is None else alignment.apply(points_xy)
@@ -72,21 +123,22 @@ def plot_error_vs_time_on_axes(ax, curves: Mapping[str, tuple[np.ndarray, np.nda
             else:
                 mean = np.nanmedian(v, axis=0)
                 lo, hi = np.nanpercentile(v, 25, axis=0), np.nanpercentile(v, 75, axis=0)
-        # ten colours, then the same colours dashed: no two curves look alike
-        (line,) = ax.plot(t, mean, label=label, lw=1.6, color=f"C{k % 10}",
-                          ls="-" if k < 10 else "--")
+        (line,) = ax.plot(t, mean, label=label, lw=1.6, color=method_colour(label),
+                          ls=method_linestyle(label))
         ax.fill_between(t, lo, hi, color=line.get_color(), alpha=0.18, lw=0)
     ax.set_xlabel("time step t")
     stat = "median, band 25-75%" if band == "iqr" else "mean, band +-1 std"
     ax.set_ylabel(f"{ylabel} ({stat})")
     if log:
         ax.set_yscale("log")
+        _plain_log_ticks(ax.yaxis)
     else:
         ax.set_ylim(bottom=0)
     ax.grid(True, alpha=0.3)
     if title:
         ax.set_title(title)
-    ax.legend(fontsize="small")
+    if ax.get_legend_handles_labels()[0]:
+        ax.legend(fontsize="small")
     return ax
 
 
@@ -298,5 +350,166 @@ def map_comparison_figure(estimates: Mapping[str, EstimateLike | None], *,
     return fig
 
 
-__all__ = ["plot_error_vs_time_on_axes", "plot_map_on_axes", "error_vs_time_figure",
+CHI2_2D_95 = 5.991464547107979
+"""The 95 % quantile of chi-square with 2 degrees of freedom (the ellipses' size)."""
+
+
+def _ellipse_xy(centre: np.ndarray, cov: np.ndarray, k2: float = CHI2_2D_95,
+                n: int = 48) -> np.ndarray:
+    """``(n, 2)`` points of ``{x : (x - c)^T cov^-1 (x - c) = k2}``."""
+    w, v = np.linalg.eigh(0.5 * (cov + cov.T))
+    a = np.linspace(0, 2 * np.pi, n)
+    circle = np.column_stack([np.cos(a), np.sin(a)]) * np.sqrt(np.clip(w, 0, None) * k2)
+    return centre + circle @ v.T
+
+
+def _outside_legend(ax) -> None:
+    """The legend under the axes, outside the data."""
+    ax.legend(fontsize="small", loc="upper center", bbox_to_anchor=(0.5, -0.13), ncol=3,
+              frameon=False)
+
+
+def run_figure(truth: TruthLike | None, estimate: EstimateLike, alignment: AlignmentLike | None,
+               *, label: str, errors_m: Mapping[int, float] | None = None,
+               pose_errors: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+               landmark_cov: np.ndarray | None = None, title: str | None = None):
+    """One run: the aligned map over the truth with error lines, the landmarks coloured by
+    their error, 95 % ellipses where ``landmark_cov`` ``(n, 2, 2)`` is given (in the
+    estimate's frame; rotated and scaled with the alignment), the trajectory over the true
+    one in the method's colour; beside it the robot's position and heading error against t.
+
+    Parameters
+    ----------
+    errors_m : landmark id -> error [m] after alignment (None: uncoloured)
+    pose_errors : ``(t (k,), translation_m (k,), heading_rad (k,))`` or None
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    colour = method_colour(label)
+    two = pose_errors is not None and len(pose_errors[0]) > 0
+    fig = _figure(figsize=(11.5 if two else 6.4, 6.0), layout="constrained")
+    axes = fig.subplots(1, 2, width_ratios=(1.25, 1)) if two else [fig.subplots()]
+    ax = axes[0]
+    if truth is not None:
+        ax.plot(truth.landmarks_xy[:, 0], truth.landmarks_xy[:, 1], "k^", ms=6, mfc="none",
+                label="true landmarks")
+        if truth.poses is not None:
+            ax.plot(truth.poses[:, 0], truth.poses[:, 1], "--", color="0.35", lw=0.9,
+                    label="true trajectory")
+    xy = _moved(alignment, estimate.landmarks_xy)
+    if estimate.poses is not None and len(estimate.poses):
+        order = np.argsort(estimate.pose_t)
+        p = _moved(alignment, estimate.poses[order, :2])
+        ax.plot(p[:, 0], p[:, 1], "-", color=colour, lw=1.3, label=f"{label} trajectory")
+    if landmark_cov is not None:
+        rot = np.asarray(getattr(alignment, "rotation", np.eye(2)), float)
+        sc = float(getattr(alignment, "scale", 1.0))
+        for k, (c, cov) in enumerate(zip(xy, np.asarray(landmark_cov, float))):
+            e = _ellipse_xy(c, sc * sc * rot @ cov @ rot.T)
+            ax.plot(e[:, 0], e[:, 1], "-", color=colour, lw=0.6, alpha=0.8,
+                    label="95 % ellipses" if k == 0 else None)
+    if truth is not None:
+        common, ie, it = np.intersect1d(estimate.landmark_ids, truth.landmark_ids,
+                                        return_indices=True)
+        for a, b in zip(xy[ie], truth.landmarks_xy[it]):
+            ax.plot([a[0], b[0]], [a[1], b[1]], "-", color="tab:red", lw=0.7)
+    if errors_m:
+        err = np.array([errors_m.get(int(i), np.nan) for i in estimate.landmark_ids]) * 100
+        pts = ax.scatter(xy[:, 0], xy[:, 1], c=err, cmap="viridis", s=22, zorder=3,
+                         edgecolors="k", linewidths=0.3, label=f"{label} landmarks")
+        fig.colorbar(pts, ax=ax, label="landmark error [cm]", shrink=0.8)
+    else:
+        ax.plot(xy[:, 0], xy[:, 1], "o", color=colour, ms=4, label=f"{label} landmarks")
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+    ax.grid(True, alpha=0.3)
+    _outside_legend(ax)
+    if two:
+        t, trans, head = (np.asarray(v, float) for v in pose_errors)
+        order = np.argsort(t)
+        ax2 = axes[1]
+        ax2.plot(t[order], 100 * trans[order], "-", color=colour, lw=1.2,
+                 label="position error [cm]")
+        ax2.set_xlabel("time step t")
+        ax2.set_ylabel("robot position error [cm]")
+        ax2.grid(True, alpha=0.3)
+        axh = ax2.twinx()
+        axh.plot(t[order], np.degrees(head[order]), ":", color=colour, lw=1.0,
+                 label="heading error [deg]")
+        axh.set_ylabel("heading error [deg]")
+        h1, l1 = ax2.get_legend_handles_labels()
+        h2, l2 = axh.get_legend_handles_labels()
+        ax2.legend(h1 + h2, l1 + l2, fontsize="small", loc="upper center",
+                   bbox_to_anchor=(0.5, -0.13), ncol=2, frameon=False)
+        ax2.set_title("robot (aligned)")
+    if title:
+        import textwrap
+
+        fig.suptitle(textwrap.fill(title, 95 if two else 60))
+    return fig
+
+
+def results_figure(final: Mapping[str, Mapping[str, np.ndarray]],
+                   curves: Mapping[str, Mapping[str, tuple[np.ndarray, np.ndarray]]], *,
+                   kind: str = "box", titles: Mapping[str, str] | None = None):
+    """A comparison across runs, one row per experiment: the final landmark MPE per arm as
+    box or violin plots (``kind``), and the MPE against time (median and 25-75 % band).
+
+    Parameters
+    ----------
+    final : experiment -> arm -> final MPE [m] of each run (NaN: no map, left out)
+    curves : experiment -> arm -> (t (k,), MPE [m] (runs, k))
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    if kind not in ("box", "violin"):
+        raise ValueError(f"kind must be 'box' or 'violin', got {kind!r}")
+    titles = titles or {}
+    exps = list(final)
+    nmax = max((len(final[e]) for e in exps), default=1)
+    fig = _figure(figsize=(max(11.0, 5 + 0.45 * nmax) + 3.5, 4.8 * max(len(exps), 1)),
+                  layout="constrained")
+    axes = fig.subplots(max(len(exps), 1), 2, squeeze=False, width_ratios=(1.1, 1))
+    for row, exp in zip(axes, exps):
+        arms = list(final[exp])
+        data = [np.asarray(final[exp][a], float) * 100 for a in arms]
+        data = [d[np.isfinite(d)] for d in data]
+        pos = [k for k, d in enumerate(data) if d.size]
+        ax = row[0]
+        if pos:
+            if kind == "box":
+                bp = ax.boxplot([data[k] for k in pos], positions=pos, widths=0.6,
+                                patch_artist=True, showfliers=True)
+                for k, patch in zip(pos, bp["boxes"]):
+                    patch.set_facecolor(method_colour(arms[k]))
+                    patch.set_alpha(0.75)
+                for med in bp["medians"]:
+                    med.set_color("k")
+            else:
+                vp = ax.violinplot([data[k] for k in pos], positions=pos, showmedians=True)
+                for k, body in zip(pos, vp["bodies"]):
+                    body.set_facecolor(method_colour(arms[k]))
+                    body.set_alpha(0.75)
+        ax.set_xticks(range(len(arms)), [a if data[k].size else f"{a} (no map)"
+                                         for k, a in enumerate(arms)],
+                      rotation=55, ha="right", fontsize=8)
+        ax.set_yscale("log")
+        _plain_log_ticks(ax.yaxis)
+        ax.set_ylabel("final landmark MPE [cm]")
+        ax.grid(True, axis="y", alpha=0.3)
+        ax.set_title(f"{titles.get(exp, exp)}: final map, across runs")
+        plot_error_vs_time_on_axes(row[1], curves.get(exp, {}), title=titles.get(exp, exp))
+        if row[1].get_legend_handles_labels()[0]:  # outside the data, on the right
+            row[1].legend(fontsize="x-small", loc="upper left", bbox_to_anchor=(1.02, 1),
+                          frameon=False)
+    return fig
+
+
+__all__ = ["METHOD_COLOURS", "method_colour", "method_linestyle", "CHI2_2D_95", "run_figure",
+           "results_figure", "plot_error_vs_time_on_axes", "plot_map_on_axes", "error_vs_time_figure",
            "map_figure", "MapPanel", "final_maps_figure", "map_comparison_figure"]

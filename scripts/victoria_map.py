@@ -49,7 +49,6 @@ from typing import Any, Callable, Iterable, Iterator, Mapping, Sequence
 
 import numpy as np
 
-from bomgraph.angles import angle_residual
 from bomgraph.datasets.victoria import import_victoria
 from bomgraph.errors import BomgraphError, TooFewLandmarksError
 from bomgraph.evaluate import Alignment, score_estimate
@@ -59,6 +58,7 @@ from bomgraph.estimate_file import write_estimate
 from bomgraph.mapper import MapEstimate, RunResult, create_mapper, run
 from bomgraph.report import write_csv
 from bomgraph.stream import Step, Stream, Truth
+from bomgraph.trajectory import bearing_residuals as trajectory_bearing_residuals
 
 ROOT = Path(__file__).resolve().parents[1]
 #: The shared data folder (``BOMGRAPH_DATA`` overrides it, as for scripts/check_identical.py).
@@ -147,23 +147,12 @@ def sightings(stream: Stream) -> dict[int, int]:
 
 
 def bearing_residuals(est: MapEstimate, stream: Stream) -> np.ndarray:
-    """Measured minus predicted bearing [rad] of every measurement of a mapped landmark from
-    a pose the estimate holds: how well the map and trajectory explain the data, shape (m,).
-    A self-consistency check that needs no truth (compare with the bearing sigma)."""
-    if est.poses is None or not len(est.poses) or not len(est):
+    """:func:`bomgraph.trajectory.bearing_residuals` of ``est``'s own map and trajectory over
+    the stream's bearings [rad], shape (m,) (empty without poses): a truth-free check."""
+    if est.poses is None:
         return np.zeros(0)
-    t = np.concatenate([np.full(len(st.landmark_ids), st.t) for st in stream.steps])
-    ids = np.concatenate([st.landmark_ids for st in stream.steps])
-    brg = np.concatenate([st.bearings_rad for st in stream.steps])
-    pose_row = {int(k): r for r, k in enumerate(est.pose_t)}
-    lm_row = {int(k): r for r, k in enumerate(est.landmark_ids)}
-    ok = np.array([int(a) in pose_row and int(b) in lm_row for a, b in zip(t, ids)], bool)
-    if not ok.any():
-        return np.zeros(0)
-    p = est.poses[[pose_row[int(a)] for a in t[ok]]]
-    q = est.landmarks_xy[[lm_row[int(b)] for b in ids[ok]]]
-    pred = angle_residual(np.arctan2(q[:, 1] - p[:, 1], q[:, 0] - p[:, 0]), p[:, 2])
-    return angle_residual(brg[ok], pred)
+    return trajectory_bearing_residuals(est.landmark_ids, est.landmarks_xy, est.pose_t,
+                                        est.poses, stream.steps)
 
 
 def agreement(est: MapEstimate, reference: MapEstimate) -> dict[str, Any]:

@@ -28,7 +28,9 @@ def test_run_task_scores_every_checkpoint() -> None:
     assert np.isfinite(res["checkpoints"][-1]["robot_last_m"])
     assert list(res["checkpoints"][0]) == ["t", "n_mapped", "estimate_s", "mpe_m", "rmse_m",
                                            "median_m", "max_m", "n_common", "robot_last_m",
-                                           "robot_mean_m", "nees_landmark", "nees_pose"]
+                                           "robot_mean_m", "nees_landmark", "nees_pose",
+                                           "ape_trans_rmse_m", "ape_heading_rmse_rad",
+                                           "rpe_trans_rmse_m", "rpe_heading_rmse_rad"]
     fm = res["final_map"]   # the final map in the truth's frame, for the map figures
     assert len(fm["landmarks"]) == res["checkpoints"][-1]["n_mapped"]
     assert len(fm["poses"]) == 41

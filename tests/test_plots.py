@@ -20,7 +20,7 @@ def test_plots_imports_only_numpy_and_matplotlib() -> None:
         elif isinstance(node, ast.Import):
             imported.update(a.name for a in node.names)
     assert imported <= {"__future__", "warnings", "dataclasses", "typing", "numpy",
-                        "textwrap", "matplotlib.figure"}, imported
+                        "textwrap", "zlib", "matplotlib.figure", "matplotlib.ticker"}, imported
 
 
 def test_figure_builders_draw_arrays() -> None:

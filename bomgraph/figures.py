@@ -1,0 +1,115 @@
+"""Figure files of ``bomgraph plot``: one run (an estimate file over its stream's truth) and a
+``compare`` output folder (its ``results.json``). This module reads and scores; the drawing is
+:func:`bomgraph.plots.run_figure` and :func:`bomgraph.plots.results_figure` on arrays. The
+format follows the file name: ``.png`` (raster), ``.pdf`` or ``.svg`` (vector).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from pathlib import Path
+from typing import Any, Sequence
+
+import numpy as np
+
+from .errors import ConfigError, EvaluationError
+from .estimate_file import read_estimate
+from .evaluate import score_estimate
+from .plots import results_figure, run_figure
+from .report import error_curves
+from .stream_file import read_stream
+
+FIGURE_SUFFIXES = (".png", ".pdf", ".svg")
+
+
+def _check_out(out: str | os.PathLike[str]) -> Path:
+    path = Path(out)
+    if path.suffix.lower() not in FIGURE_SUFFIXES:
+        raise ConfigError(f"{out}: the figure's file name must end in "
+                          f"{', '.join(FIGURE_SUFFIXES)}")
+    return path
+
+
+def _save(fig: Any, path: Path, dpi: int) -> str:
+    fig.savefig(path, dpi=dpi, facecolor="white")
+    return str(path)
+
+
+def plot_run(estimate_path: str | os.PathLike[str], stream_path: str | os.PathLike[str],
+             out: str | os.PathLike[str], *, t: int | None = None, align_on: str = "landmarks",
+             dpi: int = 150) -> str:
+    """Draw one estimate (the final map, or the checkpoint at step ``t``) over the stream's
+    truth, aligned as ``bomgraph evaluate --align``; returns the path written.
+
+    Without truth in the stream, the estimate is drawn in its own frame, uncoloured.
+    """
+    path = _check_out(out)
+    est_file = read_estimate(estimate_path)
+    stream = read_stream(stream_path)
+    est, at = est_file.final, "final"
+    if t is not None:
+        cps = {c.t: c for c in est_file.checkpoints}
+        if t not in cps:
+            raise EvaluationError(f"{estimate_path}: no checkpoint at t = {t}; it has "
+                                  f"{', '.join(map(str, sorted(cps))) or 'none'}")
+        est, at = cps[t].estimate, f"t = {t}"
+    truth = stream.truth
+    label = est_file.method or "estimate"
+    if truth is None:
+        fig = run_figure(None, est, None, label=label, landmark_cov=est.landmark_cov,
+                         title=f"{label}, {at} (no truth: the estimate's own frame)")
+        return _save(fig, path, dpi)
+    s = score_estimate(est, truth, align_on=align_on)
+    if truth.poses is not None and t is not None:
+        truth = type(truth)(truth.landmark_ids, truth.landmarks_xy, truth.poses[:t + 1])
+    pe = None if s.ape is None else (s.ape.t, s.ape.translation_m, s.ape.heading_rad)
+    cm = (lambda v: "-" if not math.isfinite(v) else f"{100 * v:.2f} cm")
+    robot = f", robot APE {cm(s.ape_trans_rmse_m)}" if s.ape is not None else ""
+    title = (f"{label}, {at}: landmark MPE {cm(s.mpe_m)} ({s.n_common} of {s.n_truth})"
+             f"{robot}; aligned on {align_on}{', reflected' if s.alignment.reflected else ''}")
+    errors = {int(i): float(e) for i, e in zip(s.landmark_ids, s.errors_m)}
+    fig = run_figure(truth, est, s.alignment, label=label, errors_m=errors, pose_errors=pe,
+                     landmark_cov=est.landmark_cov, title=title)
+    return _save(fig, path, dpi)
+
+
+def plot_results(results_dir: str | os.PathLike[str], out: str | os.PathLike[str], *,
+                 kind: str = "box", experiments: Sequence[str] = (), dpi: int = 120) -> str:
+    """Box or violin plots of the final landmark MPE per arm across runs and the MPE against
+    time, one row per experiment of a ``compare`` folder (``experiments``: a subset)."""
+    path = _check_out(out)
+    src = Path(results_dir) / "results.json"
+    try:
+        obj = json.loads(src.read_text(encoding="utf-8"))
+        results, meta = obj["results"], obj.get("experiments", [])
+    except OSError as exc:
+        raise ConfigError(f"{src}: cannot read ({exc.strerror}); give a `bomgraph compare` "
+                          f"output folder") from None
+    except (ValueError, KeyError, TypeError) as exc:
+        raise ConfigError(f"{src}: not a compare results file ({type(exc).__name__})") from None
+    names = list(dict.fromkeys(r["experiment"] for r in results))
+    unknown = sorted(set(experiments) - set(names))
+    if unknown:
+        raise ConfigError(f"{src}: no experiment {unknown[0]!r}; it has {', '.join(names)}")
+    chosen = [n for n in names if not experiments or n in experiments]
+    final: dict[str, dict[str, np.ndarray]] = {}
+    for r in results:
+        if r["experiment"] not in chosen:
+            continue
+        v = math.nan
+        if r.get("ok") and r.get("checkpoints"):
+            m = r["checkpoints"][-1].get("mpe_m")
+            v = math.nan if m is None else float(m)
+        arms = final.setdefault(r["experiment"], {})
+        arms[r["arm"]] = np.append(arms.get(r["arm"], np.zeros(0)), v)
+    curves: dict[str, dict[str, Any]] = {}
+    for (exp, arm), c in error_curves([r for r in results if r["experiment"] in chosen]).items():
+        curves.setdefault(exp, {})[arm] = c
+    titles = {m["name"]: f"{m.get('title', m['name'])} ({m.get('runs', '?')} runs)"
+              for m in meta if isinstance(m, dict) and "name" in m}
+    return _save(results_figure(final, curves, kind=kind, titles=titles), path, dpi)
+
+
+__all__ = ["FIGURE_SUFFIXES", "plot_run", "plot_results"]

@@ -1,0 +1,95 @@
+"""One table, five formats: ``text``, ``json``, ``csv``, ``markdown``, ``latex``.
+
+A table is a list of columns (name, header, scale, format) and rows of dicts. JSON and CSV
+carry the raw values in SI units under the column names (NaN: null / empty); text, Markdown
+and LaTeX show the scaled values under the headers, NaN as ``-``.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import math
+from dataclasses import dataclass
+from typing import Any, Mapping, Sequence
+
+FORMATS = ("text", "json", "csv", "markdown", "latex")
+
+
+@dataclass(frozen=True)
+class Column:
+    """``name``: the key in each row; ``header``: shown in human formats (with its unit);
+    ``scale`` multiplies the value for display; ``fmt`` formats it (e.g. ``".2f"``)."""
+
+    name: str
+    header: str
+    scale: float = 1.0
+    fmt: str = ".4g"
+
+
+def _shown(v: Any, col: Column) -> str:
+    if v is None or (isinstance(v, float) and not math.isfinite(v)):
+        return "-"
+    if isinstance(v, bool) or isinstance(v, str):
+        return str(v)
+    if isinstance(v, int) and col.scale == 1.0:
+        return str(v)
+    return format(float(v) * col.scale, col.fmt)
+
+
+def _latex_escape(s: str) -> str:
+    for a, b in (("\\", r"\textbackslash{}"), ("&", r"\&"), ("%", r"\%"), ("_", r"\_"),
+                 ("#", r"\#"), ("$", r"\$")):
+        s = s.replace(a, b)
+    return s
+
+
+def _json_value(v: Any) -> Any:
+    if isinstance(v, float) and not math.isfinite(v):
+        return None
+    return v
+
+
+def format_table(columns: Sequence[Column], rows: Sequence[Mapping[str, Any]], fmt: str, *,
+                 meta: Mapping[str, Any] | None = None, title: str = "") -> str:
+    """``rows`` as ``fmt``. ``meta`` (JSON only) is merged into the top-level object, next to
+    ``"rows"``; ``title`` heads the text and Markdown tables and captions the LaTeX one."""
+    if fmt not in FORMATS:
+        raise ValueError(f"format must be one of {', '.join(FORMATS)}, got {fmt!r}")
+    if fmt == "json":
+        obj = {k: _json_value(v) for k, v in (meta or {}).items()}
+        obj["rows"] = [{c.name: _json_value(r.get(c.name)) for c in columns} for r in rows]
+        return json.dumps(obj, allow_nan=False)
+    if fmt == "csv":
+        buf = io.StringIO()
+        w = csv.writer(buf, lineterminator="\n")
+        w.writerow([c.name for c in columns])
+        for r in rows:
+            w.writerow(["" if _json_value(r.get(c.name)) is None else r.get(c.name)
+                        for c in columns])
+        return buf.getvalue().rstrip("\n")
+    cells = [[_shown(r.get(c.name), c) for c in columns] for r in rows]
+    heads = [c.header for c in columns]
+    if fmt == "markdown":
+        lines = ([f"**{title}**", ""] if title else []) + [
+            "| " + " | ".join(heads) + " |", "|" + "---|" * len(heads)]
+        lines += ["| " + " | ".join(row) + " |" for row in cells]
+        return "\n".join(lines)
+    if fmt == "latex":
+        lines = [r"\begin{table}[t]", r"\centering"]
+        if title:
+            lines.append(rf"\caption{{{_latex_escape(title)}}}")
+        lines += [r"\begin{tabular}{" + "l" + "r" * (len(heads) - 1) + "}", r"\hline",
+                  " & ".join(_latex_escape(h) for h in heads) + r" \\", r"\hline"]
+        lines += [" & ".join(_latex_escape(c) for c in row) + r" \\" for row in cells]
+        lines += [r"\hline", r"\end{tabular}", r"\end{table}"]
+        return "\n".join(lines)
+    width = [max(len(h), *(len(row[k]) for row in cells)) for k, h in enumerate(heads)]
+    lines = [title] if title else []
+    lines.append("  ".join(h.rjust(w) for h, w in zip(heads, width)))
+    lines += ["  ".join(c.rjust(w) for c, w in zip(row, width)) for row in cells]
+    return "\n".join(lines)
+
+
+__all__ = ["FORMATS", "Column", "format_table"]

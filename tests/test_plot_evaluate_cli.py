@@ -1,0 +1,117 @@
+"""``bomgraph evaluate --format/--align/--reference`` and ``bomgraph plot`` (issue 17, points
+3 and 4): outputs parse, figures are non-empty with the right size and colours."""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from bomgraph.cli import main
+from bomgraph.mapper import MapEstimate
+from bomgraph.plots import method_colour, run_figure, results_figure
+from bomgraph.stream import Truth
+
+
+@pytest.fixture(scope="module")
+def files(tmp_path_factory) -> tuple[Path, Path, Path]:
+    d = tmp_path_factory.mktemp("ev")
+    s, e, r = d / "s.jsonl", d / "e.json", d / "r.json"
+    assert main(["simulate", "--seed", "1", "--steps", "40", "--landmarks", "20",
+                 "--out", str(s)]) == 0
+    assert main(["run", str(s), "--method", "ekf", "--out", str(e)]) == 0
+    assert main(["run", str(s), "--method", "triangulate", "--out", str(r)]) == 0
+    return s, e, r
+
+
+def _out(capsys, argv) -> str:
+    capsys.readouterr()
+    assert main(argv) == 0
+    return capsys.readouterr().out
+
+
+def test_formats_parse_or_hold_the_rows(files, capsys) -> None:
+    s, e, _ = files
+    obj = json.loads(_out(capsys, ["evaluate", str(e), str(s), "--format", "json"]))
+    assert obj["checkpoints"]["t"] == [10, 20, 30, 40] and obj["align_on"] == "landmarks"
+    assert obj["n_rpe_pairs"] > 0 and obj["bearing_n"] > 0
+    rows = list(csv.DictReader(io.StringIO(_out(capsys, ["evaluate", str(e), str(s),
+                                                         "--format", "csv"]))))
+    assert [r["t"] for r in rows] == ["10", "20", "30", "40"]
+    assert float(rows[-1]["mpe_m"]) == pytest.approx(obj["mpe_m"])
+    md = _out(capsys, ["evaluate", str(e), str(s), "--format", "markdown"])
+    assert "| 40 |" in md and "| t | mapped |" in md
+    tex = _out(capsys, ["evaluate", str(e), str(s), "--format", "latex"])
+    assert "\\begin{tabular}" in tex and "\n40 & " in tex
+    assert f"{100 * obj['mpe_m']:.2f}" in tex.splitlines()[-4]
+
+
+def test_align_trajectory_and_reference(files, capsys) -> None:
+    s, e, r = files
+    lm = json.loads(_out(capsys, ["evaluate", str(e), str(s), "--json"]))
+    tr = json.loads(_out(capsys, ["evaluate", str(e), str(s), "--json", "--align",
+                                  "trajectory", "--delta", "2"]))
+    assert tr["ape_trans_rmse_m"] <= lm["ape_trans_rmse_m"] + 1e-12
+    assert tr["rpe_delta"] == 2
+    ref = json.loads(_out(capsys, ["evaluate", str(e), str(s), "--json", "--reference", str(r)]))
+    assert ref["reference"] == "triangulate" and ref["reference_bearing_n"] > 0
+    self_ = json.loads(_out(capsys, ["evaluate", str(r), str(s), "--json", "--reference", str(r)]))
+    assert self_["mpe_m"] < 1e-9 and self_["ape_trans_rmse_m"] < 1e-9
+
+
+def _png_pixels(path: Path) -> np.ndarray:
+    from matplotlib.image import imread
+
+    return imread(str(path))
+
+
+def test_plot_writes_png_pdf_svg(files, tmp_path, capsys) -> None:
+    s, e, _ = files
+    for ext in ("png", "pdf", "svg"):
+        out = tmp_path / f"p.{ext}"
+        assert main(["plot", str(e), str(s), "--out", str(out)]) == 0
+        assert out.stat().st_size > 1000
+    assert (tmp_path / "p.pdf").read_bytes()[:5] == b"%PDF-"
+    assert b"<svg" in (tmp_path / "p.svg").read_bytes()[:500]
+    img = _png_pixels(tmp_path / "p.png")
+    assert img.shape[0] == 900 and img.shape[1] > 900   # 6 in high at 150 dpi
+    assert np.allclose(img[2, 2, :3], 1.0)               # white background
+    want = np.array([int(method_colour("ekf")[k:k + 2], 16) for k in (1, 3, 5)]) / 255
+    assert np.any(np.all(np.abs(img[..., :3] - want) < 0.02, axis=-1))  # the ekf trajectory
+    assert main(["plot", str(e), str(s), "--out", str(tmp_path / "x.gif")]) == 2
+    assert main(["plot", str(e), str(s), "--t", "7", "--out", str(tmp_path / "y.png")]) == 2
+
+
+def test_plot_results_folder(tmp_path) -> None:
+    t = [10, 20]
+    res = [{"experiment": "exp1", "arm": arm, "method": arm.split(" ")[0], "run": f"r{k}",
+            "ok": True, "checkpoints": [{"t": tt, "mpe_m": 0.01 * (k + 1) * (i + 1) / tt}
+                                        for tt in t]}
+           for i, arm in enumerate(["gtsam-batch", "stmds-smacof (improved)"]) for k in range(4)]
+    (tmp_path / "results.json").write_text(json.dumps({"experiments": [
+        {"name": "exp1", "title": "Exp. 1", "runs": 4}], "results": res}))
+    for kind in ("box", "violin"):
+        out = tmp_path / f"r_{kind}.png"
+        assert main(["plot", "--results", str(tmp_path), "--kind", kind, "--out", str(out)]) == 0
+        img = _png_pixels(out)
+        want = np.array([int(method_colour("gtsam-batch")[k:k + 2], 16) for k in (1, 3, 5)]) / 255
+        assert np.any(np.all(np.abs(img[..., :3] - want) < 0.02, axis=-1))
+    assert main(["plot", "--results", str(tmp_path / "none"), "--out", str(out)]) == 2
+
+
+def test_palette_is_per_method_and_ellipses_are_drawn() -> None:
+    assert method_colour("ekf") == method_colour("ekf")
+    assert method_colour("stmds-smacof (improved)") != method_colour("stmds-smacof")
+    assert method_colour("stmds-smacof-loc") != method_colour("stmds-smacof")
+    truth = Truth(np.arange(3), np.array([[0.0, 0], [1, 0], [0, 1]]))
+    est = MapEstimate(np.arange(3), truth.landmarks_xy, landmark_cov=np.tile(np.eye(2) * 1e-3,
+                                                                           (3, 1, 1)))
+    fig = run_figure(truth, est, None, label="ekf", landmark_cov=est.landmark_cov)
+    labels = fig.axes[0].get_legend_handles_labels()[1]
+    assert "95 % ellipses" in labels
+    fig = results_figure({"e": {"a": np.array([0.1, np.nan])}}, {}, kind="violin")
+    assert len(fig.axes) == 2
