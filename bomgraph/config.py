@@ -115,6 +115,9 @@ def _attribute_docs(cls: type) -> dict[str, str]:
     several fields (``a, b : float``) gives its text to each."""
     text = (cls.__doc__ or "").expandtabs()
     match = re.search(r"^\s*Attributes\s*\n\s*-+\s*\n(.*)", text, re.S | re.M)
+    informal = match is None
+    if informal:  # an informal list of ``name : text`` entries: the text follows the colon
+        match = re.search(r"^([ \t]*\w+(?:, \w+)* : .*)", text, re.S | re.M)
     if not match:
         return {}
     lines = match.group(1).splitlines()
@@ -137,6 +140,8 @@ def _attribute_docs(cls: type) -> dict[str, str]:
                 names, body = [], []
             names += [n.strip() for n in head.split(",") if n.strip()]
             continued = ln.rstrip().endswith(",")
+            if informal and " : " in ln:
+                body.append(ln.split(" : ", 1)[1].strip())
         elif ln.strip():
             body.append(ln.strip())
     flush()
@@ -148,7 +153,9 @@ def describe_options(config_cls: type) -> list[OptionDoc]:
     annotation), default, and one line (``field(metadata={"doc": ...})``, or else the first
     sentence of its entry in the class docstring's ``Attributes`` section)."""
     hints = typing.get_type_hints(config_cls)
-    docs = _attribute_docs(config_cls)
+    docs: dict[str, str] = {}
+    for klass in reversed(config_cls.__mro__):  # a subclass's entry wins over its base's
+        docs.update(_attribute_docs(klass))
     out = []
     for f in dataclasses.fields(config_cls):
         default = (f.default if f.default is not dataclasses.MISSING else

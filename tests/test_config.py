@@ -56,3 +56,47 @@ def test_requirement_names_its_owner() -> None:
     need(True, "never raised")
     with pytest.raises(ConfigError, match="^Toy: a must be > 0$"):
         need(False, "a must be > 0")
+
+
+def test_every_option_of_every_method_has_a_one_line_doc() -> None:
+    from bomgraph.config import describe_options
+    from bomgraph.mapper import available_methods, method_config_class
+
+    for m in available_methods():
+        cls = method_config_class(m.name)
+        assert cls is not None, m.name
+        missing = [o.name for o in describe_options(cls) if not o.doc]
+        assert missing == [], f"{m.name}: {missing}"
+
+
+def test_informal_and_inherited_attribute_docs_are_read() -> None:
+    from bomgraph.config import describe_options
+
+    @dataclass(frozen=True)
+    class Base(Presets):
+        """Base options.
+
+        a : the first option. More text.
+        b, c : two options sharing
+            one line.
+        """
+
+        a: int = 1
+        b: int = 2
+        c: int = 3
+
+    @dataclass(frozen=True)
+    class Child(Base):
+        """Child options.
+
+        Attributes
+        ----------
+        d : float
+            The fourth one.
+        """
+
+        d: float = 0.5
+
+    docs = {o.name: o.doc for o in describe_options(Child)}
+    assert docs == {"a": "the first option", "b": "two options sharing one line",
+                    "c": "two options sharing one line", "d": "The fourth one"}
