@@ -10,6 +10,7 @@ never with a traceback.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import logging
 import math
@@ -195,6 +196,7 @@ def cmd_export(args: argparse.Namespace) -> int:
     from .estimate_file import read_estimate
     from .errors import ExportError
     from .export import ExportSource, export_text, write_text_atomic
+    from .stdio import STDIO, input_path
     from .stream_file import read_stream
 
     if (args.estimate is None) == (args.truth is None):
@@ -202,14 +204,20 @@ def cmd_export(args: argparse.Namespace) -> int:
     if args.truth is not None and args.stream is not None:
         raise ExportError("--truth STREAM is the stream already; drop --stream")
     stream_path = args.truth if args.truth is not None else args.stream
-    stream = None if stream_path is None else read_stream(stream_path)
-    src = (ExportSource.from_truth(stream) if args.truth is not None  # type: ignore[arg-type]
-           else ExportSource.from_estimate(read_estimate(args.estimate).final))
+    if args.estimate == STDIO and stream_path == STDIO:
+        raise ExportError("only one of EST and the stream can be '-' (stdin)")
+    with input_path(stream_path) if stream_path else contextlib.nullcontext() as sp:
+        stream = None if sp is None else read_stream(sp)
+    if args.truth is not None:
+        src = ExportSource.from_truth(stream)  # type: ignore[arg-type]
+    else:
+        with input_path(args.estimate) as ep:
+            src = ExportSource.from_estimate(read_estimate(ep).final)
     text = export_text(src, args.format, stream)
     if args.out == "-":
         sys.stdout.write(text)
         return 0
-    write_text_atomic(text, args.out, [p for p in (args.estimate, stream_path) if p])
+    write_text_atomic(text, args.out, [p for p in (args.estimate, stream_path) if p and p != STDIO])
     print(f"wrote {args.out} ({args.format}): "
           f"{0 if src.poses is None else len(src.poses)} poses, {len(src.landmark_ids)} "
           f"landmarks")
@@ -460,7 +468,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     x = _command(sub, "export", "write an estimate (or a stream's truth) as TUM, KITTI, CSV "
                  "or g2o")
-    x.add_argument("estimate", nargs="?", default=None, help="an estimate file from `run`")
+    x.add_argument("estimate", nargs="?", default=None,
+                   help="an estimate file from `run` ('-': stdin)")
     x.add_argument("--stream", default=None, help="the estimate's stream: time stamps for "
                    "tum/csv, the measurements for g2o")
     x.add_argument("--truth", default=None, metavar="STREAM",

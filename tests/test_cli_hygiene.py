@@ -338,3 +338,19 @@ def test_gz_hint_only_where_the_bytes_say_gzip(tmp_path: Path) -> None:
     proc = bomgraph("import", "mrclam", str(tmp_path), "--robot", "1", "--out",
                     str(tmp_path / "o.jsonl"))
     assert proc.returncode == 2 and b"Traceback" not in proc.stderr
+
+
+def test_dash_is_stdin_and_stdout_on_export(tmp_path: Path, stream: Path) -> None:
+    est = tmp_path / "e.est"
+    assert bomgraph("run", str(stream), "--method", "ekf", "--out", str(est)).returncode == 0
+    by_file = tmp_path / "e.tum"
+    assert bomgraph("export", str(est), "--stream", str(stream), "--format", "tum", "--out",
+                    str(by_file)).returncode == 0
+    piped = bomgraph("export", "-", "--stream", str(stream), "--format", "tum", "--out", "-",
+                     stdin=est.read_bytes())
+    assert piped.returncode == 0 and piped.stdout == by_file.read_bytes()
+    truth = bomgraph("export", "--truth", "-", "--format", "csv", "--out", "-",
+                     stdin=stream.read_bytes())
+    assert truth.returncode == 0 and truth.stdout.startswith(b"kind,id,x_m,y_m,psi_rad,time_s")
+    one_error_line(bomgraph("export", "-", "--stream", "-", "--format", "tum", "--out", "x"),
+                   "only one of")
