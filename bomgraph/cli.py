@@ -195,7 +195,7 @@ def cmd_plot(args: argparse.Namespace) -> int:
 def cmd_export(args: argparse.Namespace) -> int:
     from .estimate_file import read_estimate
     from .errors import ExportError
-    from .export import ExportSource, export_text, write_text_atomic
+    from .export import export_text, truth_estimate, write_text_atomic
     from .stdio import STDIO, input_path
     from .stream_file import read_stream
 
@@ -209,10 +209,10 @@ def cmd_export(args: argparse.Namespace) -> int:
     with input_path(stream_path) if stream_path else contextlib.nullcontext() as sp:
         stream = None if sp is None else read_stream(sp)
     if args.truth is not None:
-        src = ExportSource.from_truth(stream)  # type: ignore[arg-type]
+        src = truth_estimate(stream)  # type: ignore[arg-type]
     else:
         with input_path(args.estimate) as ep:
-            src = ExportSource.from_estimate(read_estimate(ep).final)
+            src = read_estimate(ep).final
     text = export_text(src, args.format, stream)
     if args.out == "-":
         sys.stdout.write(text)

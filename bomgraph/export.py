@@ -41,7 +41,6 @@ from __future__ import annotations
 import math
 import os
 import tempfile
-from dataclasses import dataclass
 from typing import Sequence
 
 import numpy as np
@@ -55,35 +54,14 @@ FORMATS = ("tum", "kitti", "csv", "g2o")
 ZERO_SIGMA_FLOOR = 1e-4
 
 
-@dataclass(frozen=True)
-class ExportSource:
-    """What one export writes: ids and values in bomgraph's frame.
-
-    Attributes
-    ----------
-    landmark_ids : ndarray of shape (n,), int64
-    landmarks_xy : ndarray of shape (n, 2), metres
-    pose_t : ndarray of shape (m,), int64, or None
-    poses : ndarray of shape (m, 3), ``[x_m, y_m, psi_rad]``, or None
-    """
-
-    landmark_ids: np.ndarray
-    landmarks_xy: np.ndarray
-    pose_t: np.ndarray | None = None
-    poses: np.ndarray | None = None
-
-    @classmethod
-    def from_estimate(cls, est: MapEstimate) -> "ExportSource":
-        return cls(est.landmark_ids, est.landmarks_xy, est.pose_t, est.poses)
-
-    @classmethod
-    def from_truth(cls, stream: Stream) -> "ExportSource":
-        """The stream's ground truth (poses at every step when the truth has them)."""
-        if stream.truth is None:
-            raise ExportError("the stream has no truth to export")
-        tr = stream.truth
-        pose_t = None if tr.poses is None else np.arange(len(tr.poses), dtype=np.int64)
-        return cls(tr.landmark_ids, tr.landmarks_xy, pose_t, tr.poses)
+def truth_estimate(stream: Stream) -> MapEstimate:
+    """The stream's ground truth as a :class:`MapEstimate` (poses at every step when the
+    truth has them), so that it exports like any estimate."""
+    if stream.truth is None:
+        raise ExportError("the stream has no truth to export")
+    tr = stream.truth
+    pose_t = None if tr.poses is None else np.arange(len(tr.poses), dtype=np.int64)
+    return MapEstimate(tr.landmark_ids, tr.landmarks_xy, pose_t=pose_t, poses=tr.poses)
 
 
 def _r(v: float) -> str:
@@ -99,7 +77,7 @@ def _times(pose_t: np.ndarray, stream: Stream | None) -> list[float | None]:
     return [float(stream.steps[int(t)].time_s) for t in pose_t]  # type: ignore[arg-type]
 
 
-def _need_poses(src: ExportSource, fmt: str) -> tuple[np.ndarray, np.ndarray]:
+def _need_poses(src: MapEstimate, fmt: str) -> tuple[np.ndarray, np.ndarray]:
     if src.poses is None or src.pose_t is None or len(src.poses) == 0:
         raise ExportError(f"{fmt} holds robot poses and this estimate has none (the method maps "
                           f"landmarks only); use --format csv for its landmarks")
@@ -107,7 +85,7 @@ def _need_poses(src: ExportSource, fmt: str) -> tuple[np.ndarray, np.ndarray]:
     return src.pose_t[order], src.poses[order]
 
 
-def to_tum(src: ExportSource, stream: Stream | None = None) -> str:
+def to_tum(src: MapEstimate, stream: Stream | None = None) -> str:
     """TUM lines ``t x y z qx qy qz qw`` (module docstring), one per pose in step order."""
     pose_t, poses = _need_poses(src, "tum")
     times = _times(pose_t, stream)
@@ -120,7 +98,7 @@ def to_tum(src: ExportSource, stream: Stream | None = None) -> str:
     return "\n".join(lines) + "\n"
 
 
-def to_kitti(src: ExportSource) -> str:
+def to_kitti(src: MapEstimate) -> str:
     """KITTI lines: the 3x4 ``[R | t]`` of each pose row-major, in step order."""
     _, poses = _need_poses(src, "kitti")
     lines = []
@@ -134,7 +112,7 @@ def to_kitti(src: ExportSource) -> str:
 CSV_HEADER = "kind,id,x_m,y_m,psi_rad,time_s"
 
 
-def to_csv(src: ExportSource, stream: Stream | None = None) -> str:
+def to_csv(src: MapEstimate, stream: Stream | None = None) -> str:
     """One CSV with a ``kind`` column (``pose`` rows, then ``landmark`` rows)."""
     lines = [CSV_HEADER]
     if src.poses is not None and src.pose_t is not None:
@@ -159,7 +137,7 @@ def odometry_information(dth_rad: float, sigma: np.ndarray) -> np.ndarray:
     return jac.T @ np.diag(1.0 / np.asarray(sigma, dtype=float) ** 2) @ jac
 
 
-def to_g2o(src: ExportSource, stream: Stream) -> str:
+def to_g2o(src: MapEstimate, stream: Stream) -> str:
     """The stream's problem with ``src`` as the vertex values (module docstring)."""
     pose_t, poses = _need_poses(src, "g2o")
     n = len(stream.steps)
@@ -205,7 +183,7 @@ def to_g2o(src: ExportSource, stream: Stream) -> str:
     return "\n".join(lines) + "\n"
 
 
-def export_text(src: ExportSource, fmt: str, stream: Stream | None = None) -> str:
+def export_text(src: MapEstimate, fmt: str, stream: Stream | None = None) -> str:
     """The text of ``src`` in format ``fmt`` (one of :data:`FORMATS`)."""
     if fmt == "tum":
         return to_tum(src, stream)
@@ -243,5 +221,5 @@ def write_text_atomic(text: str, path: str | os.PathLike[str],
         raise
 
 
-__all__ = ["FORMATS", "ZERO_SIGMA_FLOOR", "CSV_HEADER", "ExportError", "ExportSource", "export_text", "to_tum",
+__all__ = ["FORMATS", "ZERO_SIGMA_FLOOR", "CSV_HEADER", "ExportError", "MapEstimate", "export_text", "to_tum",
            "to_kitti", "to_csv", "to_g2o", "odometry_information", "write_text_atomic"]

@@ -14,8 +14,8 @@ from bomgraph.angles import angle_residual
 from bomgraph.cli import main
 from bomgraph.datasets import import_g2o
 from bomgraph.datasets.g2o import _G2oFile
-from bomgraph.export import (CSV_HEADER, ZERO_SIGMA_FLOOR, ExportError, ExportSource, export_text,
-                             write_text_atomic)
+from bomgraph.export import (CSV_HEADER, ZERO_SIGMA_FLOOR, ExportError, export_text,
+                             truth_estimate, write_text_atomic)
 from bomgraph.mapper import MapEstimate
 from bomgraph.sim import SimConfig, simulate
 from bomgraph.stream import Stream
@@ -59,7 +59,7 @@ def test_tum_parses_back_to_the_poses(stream: Stream, estimate: MapEstimate) -> 
     timed = _with_times(stream)
     for s, times in ((stream, np.arange(len(stream.steps), dtype=float)),
                      (timed, 1000.0 + 0.37 * np.arange(len(stream.steps)))):
-        rows = _parse_tum(export_text(ExportSource.from_estimate(estimate), "tum", s))
+        rows = _parse_tum(export_text(estimate, "tum", s))
         assert rows.shape == (len(estimate.poses), 8)
         np.testing.assert_allclose(rows[:, 0], times, rtol=0, atol=1e-9)
         np.testing.assert_allclose(rows[:, 1:3], estimate.poses[:, :2], rtol=0, atol=1e-9)
@@ -71,7 +71,7 @@ def test_tum_parses_back_to_the_poses(stream: Stream, estimate: MapEstimate) -> 
 
 def test_tum_is_what_evo_reads(tmp_path: Path, stream: Stream, estimate: MapEstimate) -> None:
     path = tmp_path / "est.tum"
-    path.write_text(export_text(ExportSource.from_estimate(estimate), "tum", _with_times(stream)))
+    path.write_text(export_text(estimate, "tum", _with_times(stream)))
     try:
         from evo.tools.file_interface import read_tum_trajectory_file
     except ImportError:  # the TUM spec: '#' comments, 8 numbers a line, unit quaternion
@@ -92,7 +92,7 @@ def test_tum_is_what_evo_reads(tmp_path: Path, stream: Stream, estimate: MapEsti
 
 
 def test_kitti_round_trip(estimate: MapEstimate) -> None:
-    text = export_text(ExportSource.from_estimate(estimate), "kitti")
+    text = export_text(estimate, "kitti")
     m = np.array([[float(v) for v in ln.split()] for ln in text.splitlines()]).reshape(-1, 3, 4)
     np.testing.assert_allclose(m[:, :2, 3], estimate.poses[:, :2], rtol=0, atol=1e-12)
     assert np.all(m[:, 2] == [0.0, 0.0, 1.0, 0.0])
@@ -106,7 +106,7 @@ def test_csv_round_trip(stream: Stream, estimate: MapEstimate) -> None:
     import csv
     import io
 
-    text = export_text(ExportSource.from_estimate(estimate), "csv", _with_times(stream))
+    text = export_text(estimate, "csv", _with_times(stream))
     rows = list(csv.DictReader(io.StringIO(text)))
     assert text.splitlines()[0] == CSV_HEADER
     poses = [r for r in rows if r["kind"] == "pose"]
@@ -121,7 +121,7 @@ def test_csv_round_trip(stream: Stream, estimate: MapEstimate) -> None:
                           estimate.landmarks_xy)
     assert all(r["psi_rad"] == "" and r["time_s"] == "" for r in lms)
     # landmarks only: still a csv, while tum and kitti refuse
-    lm_only = ExportSource(estimate.landmark_ids, estimate.landmarks_xy)
+    lm_only = MapEstimate(estimate.landmark_ids, estimate.landmarks_xy)
     assert {r.split(",")[0] for r in export_text(lm_only, "csv").splitlines()[1:]} == {"landmark"}
     for fmt in ("tum", "kitti", "g2o"):
         with pytest.raises(ExportError, match="none"):
@@ -136,7 +136,7 @@ def test_g2o_round_trip_through_the_importer(tmp_path: Path, stream: Stream,
             s, odom_sigma=np.array([0.01, 0.02, 0.03]) * (1 + 0.1 * s.t)) for s in stream.steps)
         stream = Stream(stream.header, steps, stream.truth)
     path = tmp_path / "p.g2o"
-    path.write_text(export_text(ExportSource.from_estimate(estimate), "g2o", stream))
+    path.write_text(export_text(estimate, "g2o", stream))
     back = import_g2o(path)
     assert len(back.steps) == len(stream.steps)
     for a, b in zip(stream.steps, back.steps):
@@ -211,3 +211,13 @@ def test_write_is_atomic(tmp_path: Path) -> None:
     assert os.listdir(tmp_path) == ["o.txt"]  # no temporary file left beside it
     write_text_atomic("new\n", out)
     assert out.read_text() == "new\n" and os.listdir(tmp_path) == ["o.txt"]
+
+
+def test_truth_estimate_is_the_truth_and_needs_one() -> None:
+    s = simulate(SimConfig(n_steps=20, n_landmarks=8), np.random.default_rng(4))
+    est = truth_estimate(s)
+    np.testing.assert_array_equal(est.landmark_ids, s.truth.landmark_ids)
+    np.testing.assert_array_equal(est.poses, s.truth.poses)
+    np.testing.assert_array_equal(est.pose_t, np.arange(len(s.steps)))
+    with pytest.raises(ExportError, match="no truth"):
+        truth_estimate(type(s)(s.header, s.steps, None))
