@@ -403,6 +403,7 @@ class Isam2Mapper:
         self._external_values = gtsam.Values()
         self.failures: list[str] = []
         self.rebuilds = 0
+        self._batch = False  # set when iSAM2 cannot be rebuilt (see _rebuild)
         self.dropped_external = 0
         self.withdrawn: list[int] = []
 
@@ -445,55 +446,87 @@ class Isam2Mapper:
         values = gtsam.Values(new_poses)
         values.insert(new.landmark_values)
         values.insert(self._external_values)
+        self._external = gtsam.NonlinearFactorGraph()
+        self._external_values = gtsam.Values()
+        if self._batch:  # iSAM2 could not be rebuilt: the graph is solved in batch from now on
+            self.accepted.push_back(factors)
+            self.estimate_values.insert(values)
+            return
         try:
             self._isam.update(factors, values)
             self._accept(factors)
+            return
         except RuntimeError as exc:
             self.failures.append(_first_line(exc))
-            # iSAM2 is unusable after a failed update: rebuild from what it held before,
-            # then apply only the odometry and bearings to known landmarks.
-            self._rebuild(self.accepted, self.estimate_values)
-            if new.landmark_ids:
-                self.problem.withdraw(new.landmark_ids)
-                self.withdrawn.extend(new.landmark_ids)
-            self.dropped_external += int(self._external.size())
-            try:
-                self._isam.update(new.core, new_poses)
-                self._accept(new.core)
-            except RuntimeError as exc2:        # even the core fails: solve it in batch
-                self.failures.append(_first_line(exc2))
-                full = gtsam.NonlinearFactorGraph(self.accepted)
-                full.push_back(new.core)
-                start = gtsam.Values(self.estimate_values)
-                start.insert(new_poses)
-                values_lm, _ = solve_lm(full, start, self.config)
-                self._rebuild(full, values_lm)
-                self.accepted = full
+        # iSAM2 is unusable after a failed update: rebuild from what it held before, then
+        # apply only the odometry and bearings to known landmarks.
+        if new.landmark_ids:
+            self.problem.withdraw(new.landmark_ids)
+            self.withdrawn.extend(new.landmark_ids)
+        self.dropped_external += int(factors.size() - new.core.size() - new.landmark.size())
+        if not self._rebuild(self.accepted, self.estimate_values):
+            self.accepted.push_back(new.core)
+            self.estimate_values.insert(new_poses)
+            return
+        try:
+            self._isam.update(new.core, new_poses)
+            self._accept(new.core)
+        except RuntimeError as exc2:        # even the core fails: solve it in batch
+            self.failures.append(_first_line(exc2))
+            full = gtsam.NonlinearFactorGraph(self.accepted)
+            full.push_back(new.core)
+            start = gtsam.Values(self.estimate_values)
+            start.insert(new_poses)
+            values_lm, _ = solve_lm(full, start, self.config)
+            self.accepted = full
+            self.estimate_values = values_lm
+            if self._rebuild(full, values_lm):
                 self.estimate_values = self._isam.calculateEstimate()
-        self._external = gtsam.NonlinearFactorGraph()
-        self._external_values = gtsam.Values()
 
     def _accept(self, factors: gtsam.NonlinearFactorGraph) -> None:
         self.estimate_values = self._isam.calculateEstimate()
         self.accepted.push_back(factors)
 
-    def _rebuild(self, graph: gtsam.NonlinearFactorGraph, values: gtsam.Values) -> None:
+    def _rebuild(self, graph: gtsam.NonlinearFactorGraph, values: gtsam.Values) -> bool:
+        """A new iSAM2 holding ``graph`` at ``values``. If its undamped solve finds the system
+        indeterminate, the graph is first solved by (damped) LM and iSAM2 started from there;
+        if that fails too, the mapper goes on in batch (LM at each estimate, reported in
+        ``info["mode"]``) and this returns False."""
         self.rebuilds += 1
-        self._isam = self._new_isam()
-        self._isam.update(graph, values)
+        start = values
+        for attempt in range(2):
+            self._isam = self._new_isam()
+            try:
+                self._isam.update(graph, start)
+                return True
+            except RuntimeError as exc:
+                self.failures.append(_first_line(exc))
+            if attempt == 0:
+                start, _ = solve_lm(graph, values, self.config)
+        self._batch = True
+        self.estimate_values = gtsam.Values(start)
+        return False
 
     def estimate(self) -> MapEstimate:
         if self.problem.n_steps == 0:
             return MapEstimate.empty(reason="no steps yet")
-        try:
-            for _ in range(self.config.checkpoint_updates):
-                self._isam.update()
-            self.estimate_values = self._isam.calculateEstimate()
-        except RuntimeError as exc:
-            self.failures.append(_first_line(exc))
-            self._rebuild(self.accepted, self.estimate_values)
+        report = None
+        if not self._batch:
+            try:
+                for _ in range(self.config.checkpoint_updates):
+                    self._isam.update()
+                self.estimate_values = self._isam.calculateEstimate()
+            except RuntimeError as exc:
+                self.failures.append(_first_line(exc))
+                self._rebuild(self.accepted, self.estimate_values)
+        if self._batch:
+            self.estimate_values, report = solve_lm(self.accepted, self.estimate_values,
+                                                    self.config)
         step, decrease = gauss_newton_check(self.accepted, self.estimate_values)
-        info = {"converged": bool(decrease <= self.config.decrease_tol),
+        converged = bool(decrease <= self.config.decrease_tol)
+        if report is not None:
+            converged = converged and report.converged
+        info = {"converged": converged, "mode": "batch" if self._batch else "isam2",
                 "cost": float(self.accepted.error(self.estimate_values)), "gn_step": step,
                 "predicted_decrease": decrease,
                 "update_failures": len(self.failures), "rebuilds": self.rebuilds,

@@ -298,6 +298,10 @@ def run_file(stream_path: str | os.PathLike[str], method: str,
     if len(result.final) == 0:
         _log.warning("%s mapped no landmark by t = %d (too few steps or too little parallax?)",
                      method, result.checkpoints[-1].t)
+    failures = result.final.info.get("update_failures")
+    if failures:
+        _log.warning("%s: %d solver failure(s) recovered from (last: %s); see the estimate's "
+                     "info", method, failures, result.final.info.get("last_failure", "?"))
     if result.final.info.get("converged") is False:
         _log.warning("%s: the final solve did not converge (%s)", method,
                      result.final.info.get("stop", "see the estimate's info"))
