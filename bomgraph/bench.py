@@ -19,6 +19,7 @@ import hashlib
 import json
 import logging
 import os
+import tempfile
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any, Callable, Iterable, Iterator, Mapping, Sequence
@@ -171,12 +172,8 @@ def execute(tasks: Sequence[Task], executor: Executor = Executor(), *,
     if cache is not None:
         cache.mkdir(parents=True, exist_ok=True)
         for k, t in enumerate(tasks):
-            p = _cache_path(cache, t)
-            if p.exists():
-                try:
-                    cached = json.loads(p.read_text())
-                except (json.JSONDecodeError, OSError):
-                    continue
+            cached = _read_cached(_cache_path(cache, t))
+            if cached is not None:
                 cached.update(experiment=t.experiment, arm=t.arm.label)
                 results[k] = cached
     todo = [k for k, r in enumerate(results) if r is None]
@@ -186,13 +183,46 @@ def execute(tasks: Sequence[Task], executor: Executor = Executor(), *,
     for k, res in _dispatch([tasks[k] for k in todo], todo, executor):
         results[k] = res
         if cache is not None and res.get("ok"):  # failures are re-run next time
-            tmp = _cache_path(cache, tasks[k]).with_suffix(".tmp")
-            tmp.write_text(json.dumps(res, allow_nan=True))
-            tmp.replace(_cache_path(cache, tasks[k]))
+            _write_cached(_cache_path(cache, tasks[k]), res)
         done += 1
         if progress:
             progress(done, len(tasks))
     return [r for r in results if r is not None]
+
+
+def _read_cached(path: Path) -> dict[str, Any] | None:
+    """A cached result, or None when there is none or it is unreadable (a corrupt file, not
+    UTF-8, or JSON of the wrong shape is a cache miss, logged with its name, and is
+    overwritten when the task has run again)."""
+    if not path.exists():
+        return None
+    try:
+        cached = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, ValueError) as exc:
+        _log.warning("ignoring the unreadable cache file %s (%s); the task runs again", path,
+                     type(exc).__name__)
+        return None
+    if not (isinstance(cached, dict) and cached.get("ok") is True
+            and cached.get("key") == path.stem):
+        _log.warning("ignoring the cache file %s: not a result of this task; the task runs "
+                     "again", path)
+        return None
+    return cached
+
+
+def _write_cached(path: Path, result: Mapping[str, Any]) -> None:
+    """Write a result beside ``path`` under a unique temporary name, then rename it: two
+    sweeps sharing a folder never write the same temporary file, and a reader never sees
+    half a file."""
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as fh:
+            fh.write(json.dumps(result, allow_nan=True))
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            os.unlink(tmp)
+        raise
 
 
 def _indexed(k: int, task: Task) -> tuple[int, dict[str, Any]]:

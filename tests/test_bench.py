@@ -57,6 +57,26 @@ def test_cache_resumes_an_interrupted_sweep(tmp_path: Path) -> None:
     assert len(list(tmp_path.glob("*.json"))) == 4
 
 
+@pytest.mark.parametrize("corrupt", [b"\xff\xfe not utf-8", b"[1, 2, 3]", b'{"ok": true}',
+                                     b'{"ok": tru', b""])
+def test_a_corrupt_cache_file_is_a_miss_and_is_rewritten(tmp_path: Path, corrupt: bytes,
+                                                         caplog: pytest.LogCaptureFixture
+                                                         ) -> None:
+    """Issue 13 items 6 and 13: a corrupt or foreign cache file is run again (logged with its
+    name), never a crash; results are written under unique temporary names, none left."""
+    tasks = _exp((Arm("tri", "triangulate"),)).tasks()[:2]
+    first = strip_timings(execute(tasks, Executor("serial"), cache_dir=tmp_path))
+    bad = tmp_path / f"{task_key(tasks[0])}.json"
+    bad.write_bytes(corrupt)
+    with caplog.at_level("WARNING", logger="bomgraph.bench"):
+        again = strip_timings(execute(tasks, Executor("serial"), cache_dir=tmp_path))
+    assert json.dumps(again) == json.dumps(first)
+    assert str(bad) in caplog.text
+    assert json.loads(bad.read_text())["key"] == task_key(tasks[0])
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(
+        f"{task_key(t)}.json" for t in tasks)
+
+
 def test_executor_validates() -> None:
     with pytest.raises(ConfigError):
         Executor("threads")
