@@ -34,6 +34,14 @@ def _window_scene(rng: np.random.Generator, w: int = 6, n: int = 7):
     return odoms, poses, pts, np.where(seen, brg, np.nan)
 
 
+def _assert_exact_pair_distances(tri, pts: np.ndarray, w: int) -> None:
+    """Noise-free window: every pair's squared distance exact, every variance positive."""
+    pe = window_pair_squared_distances(tri, np.full((w - 1, 3), 0.01), 0.02)
+    true = np.sum((pts[pe.first] - pts[pe.second]) ** 2, axis=1)
+    np.testing.assert_allclose(pe.squared_distance_m2, true, rtol=0, atol=1e-12)
+    assert np.all(pe.variance_m4 > 0)
+
+
 @pytest.mark.parametrize("w", [2, 3, 6, 12])
 def test_noise_free_window_gives_exact_points_and_distances(w: int) -> None:
     rng = np.random.default_rng(w)
@@ -41,10 +49,7 @@ def test_noise_free_window_gives_exact_points_and_distances(w: int) -> None:
     tri, n_gated = triangulate_window(odoms, brg)
     assert n_gated == 0 and len(tri) == len(pts)
     np.testing.assert_allclose(tri.points_xy, to_local(poses[0], pts), atol=1e-12)
-    pe = window_pair_squared_distances(tri, np.full((w - 1, 3), 0.01), 0.02)
-    true = np.sum((pts[pe.first] - pts[pe.second]) ** 2, axis=1)
-    np.testing.assert_allclose(pe.squared_distance_m2, true, rtol=0, atol=1e-12)
-    assert np.all(pe.variance_m4 > 0)
+    _assert_exact_pair_distances(tri, pts, w)
 
 
 def test_the_passing_pair_furthest_apart_is_used() -> None:
@@ -140,10 +145,7 @@ def test_lsq_window_is_exact_on_noise_free_rays(w: int) -> None:
     np.testing.assert_allclose(tri.points_xy, to_local(poses[0], pts), rtol=0, atol=1e-12)
     assert tri.jacobian_bearing.shape == (len(pts), w)
     assert np.all((tri.jacobian_bearing != 0) == np.isfinite(brg[:, tri.column].T))
-    pe = window_pair_squared_distances(tri, np.full((w - 1, 3), 0.01), 0.02)
-    true = np.sum((pts[pe.first] - pts[pe.second]) ** 2, axis=1)
-    np.testing.assert_allclose(pe.squared_distance_m2, true, rtol=0, atol=1e-12)
-    assert np.all(pe.variance_m4 > 0)
+    _assert_exact_pair_distances(tri, pts, w)
 
 
 def test_lsq_window_of_two_rays_is_the_pair_rule() -> None:
