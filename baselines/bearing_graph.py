@@ -100,7 +100,7 @@ class FactorGraphConfig(Presets):
         Cauchy kernel (whitened threshold) on every odometry factor, in every pass; None keeps
         them Gaussian (the simulator's odometry is). Recordings have odometry outliers (a
         collision, a slip) the Gaussian model cannot absorb. Refused by ``gtsam-isam2`` (see
-        :class:`baselines.factor_graph.Isam2Mapper`).
+        :class:`baselines.isam2.Isam2Mapper`).
     bearing_cauchy_k : float or None
         Cauchy kernel on the bearing factors of the plain pass (the Huber pre-pass keeps its
         own kernel); None keeps them Gaussian. With robust odometry a gross bearing outlier

@@ -285,7 +285,7 @@ for _name, _target, _desc, _truth in [
      "bearing-only EKF-SLAM (filterpy), undelayed inverse-depth initialisation", False),
     ("gtsam-batch", "baselines.factor_graph:BatchMapper",
      "GTSAM bearing factor graph, Levenberg-Marquardt at each checkpoint", False),
-    ("gtsam-isam2", "baselines.factor_graph:Isam2Mapper",
+    ("gtsam-isam2", "baselines.isam2:Isam2Mapper",
      "GTSAM bearing factor graph, incremental iSAM2", False),
     ("hybrid", "baselines.hybrid:HybridMapper",
      "GTSAM seeded with the BOM-STMDS map (alignment + resection)", False),

@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 from baselines.bearing_graph import FactorGraphConfig, landmark_key, pose_key
-from baselines.factor_graph import BatchMapper, Isam2Mapper, OracleMapper, solve_lm
+from baselines.factor_graph import BatchMapper, OracleMapper, solve_lm
+from baselines.isam2 import Isam2Mapper
 from bomgraph.errors import ConfigError, StreamFormatError
 from bomgraph.evaluate import score_estimate
 from bomgraph.mapper import create_mapper, run
