@@ -19,7 +19,6 @@ import hashlib
 import json
 import logging
 import os
-import tempfile
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any, Callable, Iterable, Iterator, Mapping, Sequence
@@ -32,6 +31,7 @@ from .experiments import Experiment, SimSource, Task
 from .jsonio import jsonable
 from .mapper import MapEstimate, RunResult, create_mapper, method_info, run
 from .stream import Step, Stream
+from .stdio import bounded_lines, output_file
 from .stream_file import StreamReader
 
 #: Bump to invalidate every cached result (the code fingerprint covers code changes).
@@ -211,18 +211,11 @@ def _read_cached(path: Path) -> dict[str, Any] | None:
 
 
 def _write_cached(path: Path, result: Mapping[str, Any]) -> None:
-    """Write a result beside ``path`` under a unique temporary name, then rename it: two
-    sweeps sharing a folder never write the same temporary file, and a reader never sees
-    half a file."""
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as fh:
-            fh.write(json.dumps(result, allow_nan=True))
-        os.replace(tmp, path)
-    except BaseException:
-        with contextlib.suppress(OSError):
-            os.unlink(tmp)
-        raise
+    """Write a result as every output is (:func:`bomgraph.stdio.output_file`: under a unique
+    temporary name beside ``path``, then renamed): two sweeps sharing a folder never write the
+    same temporary file, and a reader never sees half a file."""
+    with output_file(path) as fh:
+        fh.write(json.dumps(result, allow_nan=True))
 
 
 def _indexed(k: int, task: Task) -> tuple[int, dict[str, Any]]:
@@ -347,10 +340,8 @@ def _reporting(steps: Iterable[Step], progress: Callable[[int], None]) -> Iterat
 def count_steps(stream_path: str | os.PathLike[str]) -> int:
     """The number of step lines of a stream file (its lines after the header), without
     parsing them: for a progress bar's total."""
-    n = 0
-    with open(stream_path, "rb") as fh:
-        for block in iter(lambda: fh.read(1 << 20), b""):
-            n += block.count(b"\n")
+    with open(stream_path, "rb") as fh:  # bounded: /dev/zero is refused, not counted forever
+        n = sum(1 for _ in bounded_lines(fh, stream_path))
     return max(n - 1, 0)
 
 

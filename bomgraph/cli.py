@@ -95,20 +95,25 @@ def _say(text: str, *, to_stderr: bool = False) -> None:
 
 def cmd_simulate(args: argparse.Namespace) -> int:
     from .sim import SimConfig, make_priors, simulate, with_priors
+    from .stdio import check_output_path, is_stdout
     from .stream_file import write_stream
 
+    check_output_path(args.out)
     config = SimConfig(n_landmarks=args.landmarks, n_steps=args.steps,
                        sensor_range_m=args.sensor_range, noise_scale=args.noise_scale,
                        fov_rad=math.radians(args.fov_deg),
                        wrong_association_rate=args.wrong_association_rate)
+    if not 0 <= args.prior_fraction <= 1:
+        raise ConfigError(f"--prior-fraction must be in [0, 1] (0: no priors; Exp. 3 uses "
+                          f"0.1), got {args.prior_fraction:g}")
     rng = np.random.default_rng(args.seed)
     stream = simulate(config, rng, meta={"seed": args.seed})
     if args.prior_fraction > 0:
         stream = with_priors(stream, make_priors(stream.truth, args.prior_fraction,
                                                  args.prior_sigma, rng))
     write_stream(stream, args.out)
-    print(f"wrote {args.out}: {len(stream.steps)} steps, {config.n_landmarks} landmarks, "
-          f"{len(stream.header.priors)} priors")
+    _say(f"wrote {args.out}: {len(stream.steps)} steps, {config.n_landmarks} landmarks, "
+         f"{len(stream.header.priors)} priors", to_stderr=is_stdout(args.out))
     return 0
 
 
@@ -312,17 +317,22 @@ def cmd_compare(args: argparse.Namespace) -> int:
     return 0
 
 
-def _report_import(stream: Any, out: str) -> int:
+def _import(args: argparse.Namespace, make: Callable[[], Any], *inputs: str | None) -> int:
+    """Check ``--out`` (not one of the ``inputs``) before ``make()`` imports, then write."""
+    from .stdio import check_output_path, is_stdout
     from .stream_file import write_stream
 
-    write_stream(stream, out)
+    check_output_path(args.out, inputs)
+    stream = make()
+    write_stream(stream, args.out, inputs=inputs)
     n_brg = sum(len(st.landmark_ids) for st in stream.steps)
     truth = "no truth" if stream.truth is None else (
         "truth: landmarks only" if stream.truth.poses is None else "truth: poses + landmarks")
-    print(f"wrote {out}: {len(stream.steps)} steps, {n_brg} bearings, "
-          f"{len(stream.landmark_ids())} landmarks; bearing sigma "
-          f"{stream.header.bearing_sigma_rad:.4f} rad, odometry sigma "
-          f"{', '.join(f'{v:.4f}' for v in stream.header.odometry_sigma)}; {truth}")
+    _say(f"wrote {args.out}: {len(stream.steps)} steps, {n_brg} bearings, "
+         f"{len(stream.landmark_ids())} landmarks; bearing sigma "
+         f"{stream.header.bearing_sigma_rad:.4f} rad, odometry sigma "
+         f"{', '.join(f'{v:.4f}' for v in stream.header.odometry_sigma)}; {truth}",
+         to_stderr=is_stdout(args.out))
     return 0
 
 
@@ -332,23 +342,24 @@ def cmd_import_mrclam(args: argparse.Namespace) -> int:
     given = {"min_distance_m": args.min_distance, "min_turn_rad": args.min_turn,
              "attach_window_s": args.attach_window}
     keyframe = KeyframeConfig(**{k: v for k, v in given.items() if v is not None})
-    return _report_import(import_mrclam(args.dir, args.robot, keyframe=keyframe,
-                                        keep_ranges=args.keep_ranges,
-                                        calibrate=not args.no_calibrate), args.out)
+    return _import(args, lambda: import_mrclam(args.dir, args.robot, keyframe=keyframe,
+                                               keep_ranges=args.keep_ranges,
+                                               calibrate=not args.no_calibrate), args.dir)
 
 
 def cmd_import_g2o(args: argparse.Namespace) -> int:
     from .datasets.g2o import import_g2o
 
-    return _report_import(import_g2o(args.file, truth_path=args.truth,
-                                     bearing_sigma_rad=args.bearing_sigma), args.out)
+    return _import(args, lambda: import_g2o(args.file, truth_path=args.truth,
+                                            bearing_sigma_rad=args.bearing_sigma),
+                   args.file, args.truth)
 
 
 def cmd_import_victoria(args: argparse.Namespace) -> int:
     from .datasets.victoria import import_victoria
 
-    return _report_import(import_victoria(args.file, bearing_sigma_rad=args.bearing_sigma),
-                          args.out)
+    return _import(args, lambda: import_victoria(args.file, bearing_sigma_rad=args.bearing_sigma),
+                   args.file)
 
 
 # --------------------------------------------------------------------------------------------

@@ -19,7 +19,6 @@ import hashlib
 import json
 import os
 import signal
-import tempfile
 import threading
 from dataclasses import dataclass
 from typing import IO, Any, Iterable, Mapping
@@ -30,6 +29,8 @@ from .errors import StreamFormatError
 from .jsonio import (DuplicateKeyError, find_nonfinite, is_id, is_int, is_num, jsonable,
                      loads_strict, no_duplicate_keys)
 from .mapper import Checkpoint, MapEstimate, RunResult
+from .stdio import (MAX_INPUT_BYTES, MAX_LINE_BYTES, AtomicOutput, bounded_lines,
+                    input_too_large, line_too_long)
 from .stream import Step
 
 
@@ -116,18 +117,19 @@ class EstimateWriter:
     Use as a context manager and pass :meth:`add` as :func:`bomgraph.mapper.run`'s
     ``on_checkpoint``; :meth:`finish` writes the timings, flushes to disk and renames the
     file into place. Until then the data sit in a uniquely named temporary file beside the
-    target (``.NAME.*.tmp``), removed if the block exits any other way; while the block runs
-    in the main thread with SIGTERM at its default, SIGTERM raises ``SystemExit(143)`` so the
-    temporary file is removed too. A target that exists and is not a regular file (a device,
-    a FIFO) is written directly. Memory: one checkpoint is held back (the last one is written
-    with its whole trajectory).
+    target (``.NAME.*.partial``), removed if the block exits any other way; while the block
+    runs in the main thread with SIGTERM at its default, SIGTERM raises ``SystemExit(143)`` so
+    the temporary file is removed too. The target is written as every bomgraph output is
+    (:class:`bomgraph.stdio.AtomicOutput`: links followed, devices and FIFOs written
+    directly). Memory: one checkpoint is held back (the last one is written with its whole
+    trajectory).
     """
 
     def __init__(self, path: str | os.PathLike[str], method: str, *,
                  stream: StreamIdentity | None = None,
                  options: Mapping[str, Any] | None = None,
                  checkpoint_every: int | None = None) -> None:
-        self.path = os.path.realpath(os.fspath(path))
+        self.path = os.fspath(path)
         self._header: dict[str, Any] = {"format": ESTIMATE_FORMAT,
                                         "version": ESTIMATE_VERSION, "method": str(method)}
         if stream is not None:
@@ -137,7 +139,7 @@ class EstimateWriter:
         if checkpoint_every is not None:
             self._header["checkpoint_every"] = int(checkpoint_every)
         self._fh: IO[str] | None = None
-        self._tmp: str | None = None
+        self._out: AtomicOutput | None = None
         self._held: Checkpoint | None = None
         self._since_t: int | None = -1
         self._last_t = -1
@@ -145,16 +147,8 @@ class EstimateWriter:
         self._old_handler: Any = None
 
     def __enter__(self) -> "EstimateWriter":
-        special = os.path.exists(self.path) and not os.path.isfile(self.path)
-        if special:
-            self._fh = open(self.path, "w", encoding="utf-8", newline="\n")
-        else:
-            d, name = os.path.split(self.path)
-            fd, self._tmp = tempfile.mkstemp(prefix=f".{name}.", suffix=".tmp", dir=d or ".")
-            umask = os.umask(0)
-            os.umask(umask)
-            os.chmod(fd, 0o666 & ~umask)   # as open() would, not mkstemp's 0600
-            self._fh = os.fdopen(fd, "w", encoding="utf-8", newline="\n")
+        self._out = AtomicOutput(self.path)
+        self._fh = self._out.open()
         if (threading.current_thread() is threading.main_thread()
                 and signal.getsignal(signal.SIGTERM) == signal.SIG_DFL):
             self._old_handler = signal.signal(signal.SIGTERM, _raise_exit)
@@ -190,24 +184,14 @@ class EstimateWriter:
                                       else 0.0)}
         timing.update({"estimates": float(est.sum()), "estimate_median": float(np.median(est))})
         self._fh.write(_dumps({"timing_s": timing}))
-        self._fh.flush()
-        if self._tmp is not None:
-            os.fsync(self._fh.fileno())
-        self._fh.close()
         self._fh = None
-        if self._tmp is not None:
-            os.replace(self._tmp, self.path)
-            self._tmp = None
-            _fsync_dir(os.path.dirname(self.path))
+        self._out.commit()
 
     def __exit__(self, *exc: object) -> None:
         try:
-            if self._fh is not None:
-                self._fh.close()
-                self._fh = None
-            if self._tmp is not None and os.path.exists(self._tmp):
-                os.remove(self._tmp)
-            self._tmp = None
+            self._fh = None
+            if self._out is not None:
+                self._out.abort()
         finally:
             if self._old_handler is not None:
                 signal.signal(signal.SIGTERM, self._old_handler)
@@ -216,19 +200,6 @@ class EstimateWriter:
 
 def _raise_exit(signum: int, frame: Any) -> None:
     raise SystemExit(128 + signum)
-
-
-def _fsync_dir(d: str) -> None:
-    try:
-        fd = os.open(d or ".", os.O_RDONLY)
-    except OSError:
-        return
-    try:
-        os.fsync(fd)
-    except OSError:
-        pass
-    finally:
-        os.close(fd)
 
 
 def write_estimate(result: RunResult, path: str | os.PathLike[str], *,
@@ -495,7 +466,7 @@ def _read_v2(fh: IO[bytes], header: dict, path: str) -> EstimateFile:
     prev: MapEstimate | None = None
     timing: dict[str, float] | None = None
     line_no = 1
-    for raw in fh:
+    for raw in bounded_lines(fh, path, first_line=2):
         line_no += 1
         ctx = _Line(path, line_no)
         if timing is not None:
@@ -535,7 +506,9 @@ def read_estimate(path: str | os.PathLike[str]) -> EstimateFile:
     except OSError as exc:
         raise StreamFormatError(f"cannot open: {exc.strerror}", path=path) from None
     with fh:
-        first = fh.readline()
+        first = fh.readline(MAX_LINE_BYTES + 1)
+        if len(first) > MAX_LINE_BYTES and not first.lstrip().startswith(b"{"):
+            raise line_too_long(path, 1)  # a version-1 file may be one long JSON line
         try:
             head = loads_strict(first.decode("utf-8"))
         except (ValueError, DuplicateKeyError, RecursionError, UnicodeDecodeError):
@@ -549,7 +522,10 @@ def read_estimate(path: str | os.PathLike[str]) -> EstimateFile:
                                     path=path, line=1, key="format")
         fh.seek(0)
         try:
-            obj = json.loads(fh.read().decode("utf-8"), parse_constant=float,
+            data = fh.read(MAX_INPUT_BYTES + 1)
+            if len(data) > MAX_INPUT_BYTES:
+                raise input_too_large(path)
+            obj = json.loads(data.decode("utf-8"), parse_constant=float,
                              object_pairs_hook=no_duplicate_keys)
         except DuplicateKeyError as exc:
             raise StreamFormatError("appears twice in one object", path=path,

@@ -40,7 +40,6 @@ from __future__ import annotations
 
 import math
 import os
-import tempfile
 from typing import Sequence
 
 import numpy as np
@@ -200,25 +199,15 @@ def export_text(src: MapEstimate, fmt: str, stream: Stream | None = None) -> str
 
 def write_text_atomic(text: str, path: str | os.PathLike[str],
                       inputs: Sequence[str | os.PathLike[str]] = ()) -> None:
-    """Write ``text`` to ``path`` through a temporary file beside it, refusing an input file."""
-    target = os.path.realpath(path)
-    for inp in inputs:
-        if os.path.realpath(inp) == target:
-            raise ExportError(f"{os.fspath(path)} is an input of this export; refusing to "
-                              f"overwrite it: choose another --out")
-    folder = os.path.dirname(target)
-    fd, tmp = tempfile.mkstemp(prefix=".bomgraph-export-", suffix=".partial", dir=folder)
+    """Write ``text`` to ``path`` as every bomgraph output is (:func:`bomgraph.stdio.
+    output_file`: atomically, links followed, devices written directly), refusing an input
+    file."""
+    from .stdio import OutputPathError, write_text
+
     try:
-        with os.fdopen(fd, "w", encoding="utf-8", newline="\n") as fh:
-            fh.write(text)
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)  # mkstemp's 0600 would outlive the rename
-        os.replace(tmp, target)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.remove(tmp)
-        raise
+        write_text(path, text, inputs=inputs)
+    except OutputPathError as exc:
+        raise ExportError(str(exc)) from None
 
 
 __all__ = ["FORMATS", "ZERO_SIGMA_FLOOR", "CSV_HEADER", "ExportError", "MapEstimate", "export_text", "to_tum",

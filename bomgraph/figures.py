@@ -19,21 +19,24 @@ from .estimate_file import read_estimate
 from .evaluate import score_estimate
 from .plots import results_figure, run_figure
 from .report import error_curves
+from .stdio import check_output_path, output_file
 from .stream_file import read_stream
 
 FIGURE_SUFFIXES = (".png", ".pdf", ".svg")
 
 
-def _check_out(out: str | os.PathLike[str]) -> Path:
+def _check_out(out: str | os.PathLike[str], *inputs: str | os.PathLike[str]) -> Path:
     path = Path(out)
     if path.suffix.lower() not in FIGURE_SUFFIXES:
         raise ConfigError(f"{out}: the figure's file name must end in "
                           f"{', '.join(FIGURE_SUFFIXES)}")
+    check_output_path(path, inputs)
     return path
 
 
 def _save(fig: Any, path: Path, dpi: int) -> str:
-    fig.savefig(path, dpi=dpi, facecolor="white")
+    with output_file(path, binary=True) as fh:  # as every output: atomic, links followed
+        fig.savefig(fh, format=path.suffix.lower()[1:], dpi=dpi, facecolor="white")
     return str(path)
 
 
@@ -45,7 +48,7 @@ def plot_run(estimate_path: str | os.PathLike[str], stream_path: str | os.PathLi
 
     Without truth in the stream, the estimate is drawn in its own frame, uncoloured.
     """
-    path = _check_out(out)
+    path = _check_out(out, estimate_path, stream_path)
     est_file = read_estimate(estimate_path)
     stream = read_stream(stream_path)
     est, at = est_file.final, "final"

@@ -31,6 +31,7 @@ from .plots import MapPanel, error_vs_time_figure, final_maps_figure, map_figure
 from .jsonio import jsonable
 from .mapper import MapEstimate
 from .stream import Step
+from .stdio import folder_lock, output_file, write_text
 from .stream_file import read_stream
 from .tables import Column, format_table
 from .trajectory import bearing_residuals
@@ -237,8 +238,8 @@ def write_csv(path: str | os.PathLike[str], rows: Sequence[Mapping[str, Any]],
             for k in r:
                 if k not in cols:
                     cols.append(k)
-    with open(path, "w", newline="", encoding="utf-8") as fh:
-        w = csv.DictWriter(fh, fieldnames=cols, extrasaction="ignore")
+    with output_file(path) as fh:  # atomically: a reader never sees half a table
+        w = csv.DictWriter(fh, fieldnames=cols, extrasaction="ignore", lineterminator="\r\n")
         w.writeheader()
         for r in rows:
             w.writerow({k: (";".join(map(str, v)) if isinstance(v, list) else v)
@@ -255,6 +256,13 @@ def compare(experiments: Sequence[Experiment], out_dir: str | os.PathLike[str], 
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
+    with folder_lock(out, "`bomgraph compare`"):
+        return _compare(experiments, out, executor, use_cache, figures, progress)
+
+
+def _compare(experiments: Sequence[Experiment], out: Path, executor: Executor,
+             use_cache: bool, figures: bool,
+             progress: Callable[[int, int], None] | None) -> CompareResult:
     start = time.perf_counter()
     tasks = [t for e in experiments for t in e.tasks()]
     results = execute(tasks, executor, cache_dir=out / "cache" if use_cache else None,
@@ -262,7 +270,7 @@ def compare(experiments: Sequence[Experiment], out_dir: str | os.PathLike[str], 
     summary = summarise(results)
     wall = time.perf_counter() - start
     files = [out / "results.json", out / "results.csv", out / "summary.csv"]
-    (out / "results.json").write_text(json.dumps(
+    write_text(out / "results.json", json.dumps(
         {"experiments": [{"name": e.name, "title": e.title,
                           "arms": [a.key() for a in e.arms], "seed": e.seed,
                           "runs": len(e.runs()), "n_steps": e.sim.n_steps}

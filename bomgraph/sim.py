@@ -26,6 +26,8 @@ from .angles import angle_residual, wrap_angle
 from .config import requirement
 from .errors import ConfigError
 from .geometry import bearings_to
+from .plausibility import (MAX_BEARING_SIGMA_RAD, MAX_COORDINATE_M, MAX_ODOMETRY_SIGMA,
+                           MAX_STEP_M, SENSOR_RANGE_LIMITS_M)
 from .stream import Prior, Step, Stream, StreamHeader, Truth
 
 DEG = math.pi / 180.0
@@ -82,6 +84,18 @@ class SimConfig:
         need(2 * self.wall_margin_m < self.arena_m, "wall_margin_m too large for the arena")
         need(0 <= self.start_margin_m < self.arena_m / 2, "start_margin_m out of range")
         need(0 <= self.wrong_association_rate <= 1, "wrong_association_rate must be in [0, 1]")
+        # plausibility (bomgraph.plausibility): valid numbers no method can use are refused
+        sigma_theta, odo = self.header_sigmas()
+        need(sigma_theta <= MAX_BEARING_SIGMA_RAD,
+             f"noise_scale {self.noise_scale:g} gives a bearing sigma of {sigma_theta:g} rad, "
+             f"above pi: such bearings carry no information (the paper's noise is 1)")
+        need(all(v <= lim for v, lim in zip(odo, MAX_ODOMETRY_SIGMA)),
+             f"noise_scale {self.noise_scale:g} gives odometry sigmas {odo}: no information")
+        lo, hi = SENSOR_RANGE_LIMITS_M
+        need(lo <= self.sensor_range_m <= hi,
+             f"sensor_range_m must be in [{lo:g}, {hi:g}] m, got {self.sensor_range_m:g}")
+        need(self.arena_m <= MAX_COORDINATE_M and self.step_max_m <= MAX_STEP_M,
+             f"arena_m (<= {MAX_COORDINATE_M:g}) or step_max_m (<= {MAX_STEP_M:g}) too large")
 
     @property
     def noise_free(self) -> bool:

@@ -1,30 +1,128 @@
-"""Standard streams and output paths for the command line: ``-`` as stdin/stdout, and the
-checks an output path gets before any computation (issue 13, item 22).
+"""Files in and out, one rule for every command: ``-`` as stdin/stdout, output paths checked
+before any computation and written the one way, inputs read within bounds (issue 13, items 4,
+5, 14, 22).
+
+Writing (:func:`output_file`, used by every writer of bomgraph: streams, estimates, exports,
+the compare results and cache, figures):
+
+* a symbolic link is followed: the file it points to is written, the link stays a link;
+* a character device or a FIFO (``/dev/null``, ``/dev/stdout``, a named pipe) and the names of
+  open descriptors (``/dev/stdout``, ``/dev/fd/N``, ``/proc/self/fd/N``) are written directly,
+  never replaced by a regular file;
+* anything else that exists and is not a regular file (a directory, a block device, a socket)
+  is refused in one line;
+* a regular file (or a new one) is written beside its target under a unique temporary name
+  (``.NAME.XXXX.partial``), flushed to disk and renamed into place, so a reader never sees half
+  a file and an interrupted write leaves the old file and no stray file;
+* an output that is one of the command's inputs (the same file, through links or hard links
+  too) is refused before anything is computed.
+
+Reading: :data:`MAX_LINE_BYTES` and :data:`MAX_INPUT_BYTES` bound every text file bomgraph
+reads (streams, estimates, datasets, stdin), so an input without newlines (``/dev/zero``) is
+refused in one line instead of being read until memory runs out.
 
 The core never prints; these helpers move bytes between files and the process's standard
-streams for :mod:`bomgraph.cli` and raise :class:`~bomgraph.errors.BomgraphError` on a path
-that cannot be written.
+streams for :mod:`bomgraph.cli` and raise :class:`~bomgraph.errors.BomgraphError` subclasses.
 """
 
 from __future__ import annotations
 
 import contextlib
 import os
-import shutil
+import re
+import stat
 import sys
 import tempfile
 from pathlib import Path
-from typing import Callable, Iterator
+from typing import IO, Callable, Iterator, Sequence
 
 from .errors import BomgraphError
 
 STDIO = "-"
+#: the longest line any bomgraph text input may have (a stream header with the truth of a
+#: 1,000,000-step run is about 60 MiB).
+MAX_LINE_BYTES = 64 * 2**20
+#: the largest text input bomgraph reads (a stream, an estimate, a dataset file, stdin).
+MAX_INPUT_BYTES = 4 * 2**30
+_CHUNK = 2**20
 #: temp paths standing for stdin, so messages can name ``<stdin>`` instead.
 _SPOOLED: dict[str, str] = {}
+#: names that stand for an already open descriptor: written directly, never renamed over.
+_FD_NAME = re.compile(r"^/(dev/(stdout|stderr|stdin|fd/\d+)|proc/(self|\d+)/fd/\d+)$")
 
 
 class OutputPathError(BomgraphError):
     """An ``--out`` that cannot or must not be written."""
+
+
+class InputTooLargeError(BomgraphError):
+    """An input file over :data:`MAX_INPUT_BYTES`, or with a line over :data:`MAX_LINE_BYTES`."""
+
+
+def _mib(n: int) -> str:
+    return f"{n / 2**20:g} MiB"
+
+
+def line_too_long(path: str | os.PathLike[str], line: int) -> InputTooLargeError:
+    """The refusal of a line longer than :data:`MAX_LINE_BYTES` (no newline in sight)."""
+    return InputTooLargeError(
+        f"{os.fspath(path)}, line {line}: longer than {_mib(MAX_LINE_BYTES)} without a "
+        f"newline; not a bomgraph text file (is it binary data or a device like /dev/zero?)")
+
+
+def input_too_large(path: str | os.PathLike[str]) -> InputTooLargeError:
+    """The refusal of an input larger than :data:`MAX_INPUT_BYTES`."""
+    return InputTooLargeError(f"{os.fspath(path)}: larger than {_mib(MAX_INPUT_BYTES)}, the "
+                              f"limit for one input file; split the run")
+
+
+def bounded_lines(fh: IO[bytes], path: str | os.PathLike[str], *,
+                  first_line: int = 1) -> Iterator[bytes]:
+    """The lines of a binary file from where it stands (each with its newline, the last maybe
+    without; numbered from ``first_line`` in messages), refusing a line over
+    :data:`MAX_LINE_BYTES` or a file over :data:`MAX_INPUT_BYTES`."""
+    total = fh.tell() if fh.seekable() else 0
+    number = first_line - 1
+    while True:
+        raw = fh.readline(MAX_LINE_BYTES + 1)
+        if not raw:
+            return
+        number += 1
+        if len(raw) > MAX_LINE_BYTES:
+            raise line_too_long(path, number)
+        total += len(raw)
+        if total > MAX_INPUT_BYTES:
+            raise input_too_large(path)
+        yield raw
+
+
+def read_bounded(fh: IO[bytes], path: str | os.PathLike[str]) -> bytes:
+    """All of a binary file, refusing it as :func:`bounded_lines` does."""
+    return b"".join(bounded_lines(fh, path))
+
+
+def copy_bounded(src: IO[bytes], dst: IO[bytes], path: str) -> None:
+    """Copy ``src`` to ``dst`` in chunks, refusing as :func:`bounded_lines` does (reading at
+    most one line's limit beyond the last newline)."""
+    total = 0
+    since_newline = 0
+    line = 1
+    while True:
+        chunk = src.read(_CHUNK)
+        if not chunk:
+            return
+        total += len(chunk)
+        if total > MAX_INPUT_BYTES:
+            raise input_too_large(path)
+        last = chunk.rfind(b"\n")
+        if last < 0:
+            since_newline += len(chunk)
+        else:
+            line += chunk.count(b"\n")
+            since_newline = len(chunk) - last - 1
+        if since_newline > MAX_LINE_BYTES:
+            raise line_too_long(path, line)
+        dst.write(chunk)
 
 
 def display_path(message: str) -> str:
@@ -36,15 +134,16 @@ def display_path(message: str) -> str:
 
 @contextlib.contextmanager
 def input_path(path: str) -> Iterator[str]:
-    """``path`` itself, or for ``-`` a temporary file holding all of stdin (removed after)."""
+    """``path`` itself, or for ``-`` a temporary file holding all of stdin (removed after;
+    bounded as every input is)."""
     if path != STDIO:
         yield path
         return
     with tempfile.TemporaryDirectory(prefix="bomgraph-stdin-") as tmp:
         spooled = os.path.join(tmp, "stdin")
-        with open(spooled, "wb") as fh:
-            shutil.copyfileobj(sys.stdin.buffer, fh)
         _SPOOLED[spooled] = "<stdin>"  # kept: the message may be printed after the cleanup
+        with open(spooled, "wb") as fh:
+            copy_bounded(sys.stdin.buffer, fh, spooled)
         yield spooled
 
 
@@ -57,38 +156,230 @@ def write_output(path: str, write: Callable[[str], None]) -> None:
         out = os.path.join(tmp, "out")
         write(out)
         with open(out, "rb") as fh:
-            shutil.copyfileobj(fh, sys.stdout.buffer)
+            while chunk := fh.read(_CHUNK):
+                sys.stdout.buffer.write(chunk)
         sys.stdout.buffer.flush()
 
 
-def check_output_path(path: str, inputs: tuple[str, ...] = ()) -> None:
+def _stat(path: str) -> os.stat_result | None:
+    try:
+        return os.stat(path)  # follows links: what a write would reach
+    except FileNotFoundError:
+        return None
+    except OSError as exc:
+        raise OutputPathError(f"--out {path}: {exc.strerror}") from None
+
+
+def _direct(path: str, st: os.stat_result | None) -> bool:
+    """Whether ``path`` is written in place: a character device, a FIFO, an open descriptor."""
+    if st is None:
+        return False
+    if stat.S_ISCHR(st.st_mode) or stat.S_ISFIFO(st.st_mode):
+        return True
+    return stat.S_ISREG(st.st_mode) and bool(_FD_NAME.match(os.path.abspath(path)))
+
+
+def is_stdout(path: str) -> bool:
+    """Whether writing ``path`` reaches this process's standard output (``-``,
+    ``/dev/stdout``, or the file stdout is redirected to): result lines then go to stderr."""
+    if path == STDIO:
+        return True
+    try:
+        return os.path.samestat(os.stat(path), os.fstat(sys.stdout.fileno()))
+    except (OSError, ValueError, AttributeError):
+        return False
+
+
+def check_output_path(path: str | os.PathLike[str],
+                      inputs: Sequence[str | os.PathLike[str] | None] = ()) -> None:
     """Refuse an output path before anything is computed.
 
-    Refused: a directory, one of ``inputs`` (the same file, through links too), a file whose
-    folder does not exist or is not writable, an existing file that is not writable. ``-``
-    (stdout) always passes.
+    Refused: a directory, a block device or socket, one of ``inputs`` (the same file, through
+    symbolic or hard links too; an input that is a folder refuses every file in it), a file
+    whose folder does not exist or is not writable, an existing file that is not writable.
+    ``-`` (stdout), character devices and FIFOs pass.
 
     Raises
     ------
     OutputPathError
     """
+    path = os.fspath(path)
     if path == STDIO:
         return
-    p = Path(path)
-    if p.is_dir():
+    st = _stat(path)
+    if st is not None and stat.S_ISDIR(st.st_mode):
         raise OutputPathError(f"--out {path}: is a directory; give a file name")
+    if _direct(path, st):
+        if not os.access(path, os.W_OK):
+            raise OutputPathError(f"--out {path}: not writable")
+        return
+    if st is not None and not stat.S_ISREG(st.st_mode):
+        raise OutputPathError(f"--out {path}: exists and is neither a regular file, a "
+                              f"character device nor a FIFO; choose another name")
+    target = os.path.realpath(path)
     for inp in inputs:
-        if inp != STDIO and os.path.exists(inp) and p.exists() and os.path.samefile(p, inp):
-            raise OutputPathError(f"--out {path}: is the input {inp}; writing it would "
-                                  f"destroy the input, choose another name")
-    folder = p.resolve().parent
+        if inp is None or os.fspath(inp) == STDIO:
+            continue
+        inp = os.fspath(inp)
+        same = os.path.realpath(inp) == target
+        if not same and st is not None and os.path.exists(inp):
+            with contextlib.suppress(OSError):
+                same = os.path.samefile(path, inp)
+        if not same and os.path.isdir(inp):
+            same = os.path.dirname(target) == os.path.realpath(inp) and target in {
+                os.path.realpath(os.path.join(inp, f)) for f in os.listdir(inp)}
+        if same:
+            raise OutputPathError(f"--out {path}: is the input {inp}; refusing to overwrite "
+                                  f"an input: choose another name")
+    folder = Path(target).parent
     if not folder.is_dir():
         raise OutputPathError(f"--out {path}: the folder {folder} does not exist")
-    if p.exists() and not os.access(p, os.W_OK):
+    if st is not None and not os.access(target, os.W_OK):
         raise OutputPathError(f"--out {path}: the file is not writable")
-    if not p.exists() and not os.access(folder, os.W_OK | os.X_OK):
+    if st is None and not os.access(folder, os.W_OK | os.X_OK):
         raise OutputPathError(f"--out {path}: the folder {folder} is not writable")
 
 
-__all__ = ["STDIO", "OutputPathError", "display_path", "input_path", "write_output",
-           "check_output_path"]
+class AtomicOutput:
+    """The one way bomgraph writes a file (see the module docstring): :meth:`open` gives the
+    handle, :meth:`commit` puts the file in place, :meth:`abort` removes what was written
+    beside it. :func:`output_file` wraps the three for a ``with`` block."""
+
+    def __init__(self, path: str | os.PathLike[str], *, binary: bool = False,
+                 inputs: Sequence[str | os.PathLike[str] | None] = ()) -> None:
+        self.given = os.fspath(path)
+        check_output_path(self.given, inputs)
+        st = _stat(self.given)
+        self.direct = _direct(self.given, st)
+        self.path = self.given if self.direct else os.path.realpath(self.given)
+        self._mode = 0o666 & ~_umask() if st is None else stat.S_IMODE(st.st_mode)
+        self._binary = binary
+        self._tmp: str | None = None
+        self.fh: IO | None = None
+
+    def open(self) -> IO:
+        kw = {} if self._binary else {"encoding": "utf-8", "newline": "\n"}
+        mode = "wb" if self._binary else "w"
+        if self.direct:
+            self.fh = open(self.given, mode, **kw)
+            return self.fh
+        d, name = os.path.split(self.path)
+        fd, self._tmp = tempfile.mkstemp(prefix=f".{name}.", suffix=".partial", dir=d)
+        try:
+            os.chmod(fd, self._mode)  # as open() would (or as the file was), not 0600
+            self.fh = os.fdopen(fd, mode, **kw)
+        except BaseException:
+            os.close(fd)
+            self.abort()
+            raise
+        return self.fh
+
+    def commit(self) -> None:
+        if self.fh is None:
+            raise RuntimeError("AtomicOutput.commit before open")
+        try:
+            self.fh.flush()
+            if self._tmp is not None:
+                os.fsync(self.fh.fileno())
+        finally:
+            self.fh.close()
+            self.fh = None
+        if self._tmp is not None:
+            os.replace(self._tmp, self.path)
+            self._tmp = None
+            _fsync_dir(os.path.dirname(self.path))
+
+    def abort(self) -> None:
+        if self.fh is not None:
+            with contextlib.suppress(OSError):
+                self.fh.close()
+            self.fh = None
+        if self._tmp is not None:
+            with contextlib.suppress(OSError):
+                os.unlink(self._tmp)
+            self._tmp = None
+
+
+@contextlib.contextmanager
+def output_file(path: str | os.PathLike[str], *, binary: bool = False,
+                inputs: Sequence[str | os.PathLike[str] | None] = ()) -> Iterator[IO]:
+    """A handle to write ``path`` the one way (module docstring); the file is in place when
+    the block ends normally, and nothing is left beside it when it raises (SIGTERM too, under
+    the CLI, which turns it into ``SystemExit``)."""
+    out = AtomicOutput(path, binary=binary, inputs=inputs)
+    fh = out.open()
+    try:
+        yield fh
+    except BaseException:
+        out.abort()
+        raise
+    out.commit()
+
+
+def write_text(path: str | os.PathLike[str], text: str,
+               inputs: Sequence[str | os.PathLike[str] | None] = ()) -> None:
+    """``text`` into ``path`` through :func:`output_file`."""
+    with output_file(path, inputs=inputs) as fh:
+        fh.write(text)
+
+
+class FolderBusyError(BomgraphError):
+    """Another process holds the lock of an output folder."""
+
+
+@contextlib.contextmanager
+def folder_lock(folder: str | os.PathLike[str], what: str) -> Iterator[None]:
+    """Hold an exclusive lock on ``folder`` (``fcntl.flock`` on ``folder/.bomgraph.lock``) for
+    the block, so two sweeps never write one folder; a second one is refused at once.
+
+    Raises
+    ------
+    FolderBusyError
+        The folder is locked by another process (the message names its pid).
+    """
+    try:
+        import fcntl
+    except ImportError:  # no flock on this platform: no lock
+        yield
+        return
+    lock = os.path.join(os.fspath(folder), ".bomgraph.lock")
+    fd = os.open(lock, os.O_RDWR | os.O_CREAT, 0o666 & ~_umask())
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            holder = os.pread(fd, 64, 0).decode("ascii", "replace").strip() or "?"
+            raise FolderBusyError(
+                f"{os.fspath(folder)}: another {what} (pid {holder}) is writing into this "
+                f"folder; wait for it to finish or choose another --out") from None
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, f"{os.getpid()}\n".encode("ascii"), 0)
+        yield
+    finally:
+        os.close(fd)  # releases the lock; the file stays (removing it would race)
+
+
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+def _fsync_dir(d: str) -> None:
+    try:
+        fd = os.open(d or ".", os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
+
+
+__all__ = ["STDIO", "MAX_LINE_BYTES", "MAX_INPUT_BYTES", "OutputPathError",
+           "InputTooLargeError", "line_too_long", "input_too_large", "bounded_lines",
+           "read_bounded", "copy_bounded", "display_path", "input_path", "write_output",
+           "is_stdout", "check_output_path", "AtomicOutput", "output_file", "write_text",
+           "FolderBusyError", "folder_lock"]

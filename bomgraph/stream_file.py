@@ -10,15 +10,20 @@ only when complete.
 from __future__ import annotations
 
 import json
+import logging
 import os
-from typing import IO, Any, Iterable, Iterator
+from typing import IO, Any, Iterable, Iterator, Sequence
 
 import numpy as np
 
 from .errors import StreamFormatError
 from .jsonio import (MAX_ID, DuplicateKeyError, decode_utf8, find_nonfinite, is_id, is_int,
                      is_num, loads_strict)
+from .plausibility import header_problems, step_problem, truth_problem
+from .stdio import MAX_LINE_BYTES, bounded_lines, line_too_long, output_file
 from .stream import Prior, Step, Stream, StreamHeader, Truth
+
+_log = logging.getLogger(__name__)
 
 FORMAT_NAME = "bomgraph-stream"
 FORMAT_VERSION = 1
@@ -258,7 +263,9 @@ class StreamReader:
         except OSError as exc:
             raise StreamFormatError(f"cannot open: {exc.strerror}", path=self.path) from None
         try:
-            first = self._fh.readline()
+            first = self._fh.readline(MAX_LINE_BYTES + 1)
+            if len(first) > MAX_LINE_BYTES:
+                raise line_too_long(self.path, 1)
             if not first:
                 raise StreamFormatError("empty file; line 1 must be the header",
                                         path=self.path, line=1)
@@ -269,6 +276,12 @@ class StreamReader:
             self._fh.close()
             raise
         self._started = False
+        for key, msg in header_problems(self.header):  # valid, but no method can use it
+            _log.warning("%s, line 1: '%s': %s", self.path, key, msg)
+        if self.truth is not None:
+            msg = truth_problem(self.truth.landmarks_xy, self.truth.poses)
+            if msg:
+                _log.warning("%s, line 1: 'truth': %s", self.path, msg)
 
     def __enter__(self) -> "StreamReader":
         return self
@@ -287,7 +300,8 @@ class StreamReader:
         line_no = 1
         t = 0
         pending_blank: int | None = None
-        for raw in self._fh:
+        warned = False
+        for raw in bounded_lines(self._fh, self.path, first_line=2):
             line_no += 1
             ctx = _Ctx(self.path, line_no)
             text = _decode(raw, ctx)
@@ -298,7 +312,12 @@ class StreamReader:
                 raise _Ctx(self.path, pending_blank).error(
                     None, "blank line; the format has one JSON object per line and no blank "
                           "lines")
-            yield _parse_step(_parse_json_line(text, ctx), t, ctx)
+            step = _parse_step(_parse_json_line(text, ctx), t, ctx)
+            if not warned and (problem := step_problem(step)) is not None:
+                warned = True
+                _log.warning("%s, line %d: '%s': %s (implausible; later steps are not "
+                             "checked)", self.path, line_no, *problem)
+            yield step
             t += 1
         if pending_blank is not None:
             raise _Ctx(self.path, pending_blank).error(None, "blank line at the end of the file; "
@@ -375,30 +394,28 @@ def step_to_json(step: Step) -> dict:
     return obj
 
 
-def write_stream(stream: Stream, path: str | os.PathLike[str]) -> None:
+def write_stream(stream: Stream, path: str | os.PathLike[str], *,
+                 inputs: Sequence[str | os.PathLike[str] | None] = ()) -> None:
     """Write a stream as JSON Lines; ``read_stream`` gives back an equal Stream.
 
-    The same Stream always gives the same bytes.
+    The same Stream always gives the same bytes (see :func:`write_stream_parts`).
     """
-    write_stream_parts(stream.header, stream.steps, path, truth=stream.truth)
+    write_stream_parts(stream.header, stream.steps, path, truth=stream.truth, inputs=inputs)
 
 
 def write_stream_parts(header: StreamHeader, steps: Iterable[Step],
-                       path: str | os.PathLike[str], truth: Truth | None = None) -> None:
+                       path: str | os.PathLike[str], truth: Truth | None = None, *,
+                       inputs: Sequence[str | os.PathLike[str] | None] = ()) -> None:
     """Write a header and an iterable of steps (which may be a generator) to ``path``.
 
-    The file appears only when complete (written beside it, then renamed)."""
-    tmp = f"{os.fspath(path)}.partial"
-    try:
-        with open(tmp, "w", encoding="utf-8", newline="\n") as fh:
-            fh.write(json.dumps(header_to_json(header, truth), allow_nan=False) + "\n")
-            for step in steps:
-                fh.write(json.dumps(step_to_json(step), allow_nan=False) + "\n")
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.remove(tmp)
-        raise
+    Written as every bomgraph output is (:func:`bomgraph.stdio.output_file`): a regular file
+    appears only when complete (written beside it under a unique name, then renamed), a link
+    is followed, a device or FIFO is written directly; ``inputs`` (the files the stream is
+    made from) are refused as ``path``."""
+    with output_file(path, inputs=inputs) as fh:
+        fh.write(json.dumps(header_to_json(header, truth), allow_nan=False) + "\n")
+        for step in steps:
+            fh.write(json.dumps(step_to_json(step), allow_nan=False) + "\n")
 
 
 __all__ = ["StreamReader", "read_stream", "write_stream", "write_stream_parts", "header_to_json",

@@ -280,9 +280,11 @@ def test_sigterm_while_writing_leaves_no_partial_file(tmp_path: Path, kind: str)
         args = ["import", "g2o", str(g2o), "--out", str(out)]
     proc = subprocess.Popen([sys.executable, "-m", "bomgraph", *args], stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, env=ENV)
-    partial = Path(f"{out}.partial")
+    def partial() -> list[Path]:  # written beside the target under a unique name
+        return list(tmp_path.glob(".big.jsonl.*.partial"))
+
     deadline = time.monotonic() + 120
-    while time.monotonic() < deadline and proc.poll() is None and not partial.exists():
+    while time.monotonic() < deadline and proc.poll() is None and not partial():
         time.sleep(0.005)
     if proc.poll() is not None:
         pytest.fail(f"{kind} ended before it began writing: {proc.communicate()}")
@@ -290,7 +292,7 @@ def test_sigterm_while_writing_leaves_no_partial_file(tmp_path: Path, kind: str)
     _, err = proc.communicate(timeout=60)
     assert proc.returncode == 143, err
     assert b"Traceback" not in err
-    assert not partial.exists() and not out.exists()
+    assert not partial() and not out.exists()
 
 
 def test_run_checks_out_before_computing(tmp_path: Path, stream: Path) -> None:

@@ -13,6 +13,7 @@ blanks are accepted (a public MRCLAM copy uses them).
 from __future__ import annotations
 
 import gzip
+import io
 import math
 import os
 from dataclasses import dataclass
@@ -22,6 +23,9 @@ from typing import Iterator, Literal, Sequence
 import numpy as np
 
 from ..errors import DatasetError
+from ..jsonio import MAX_ID
+from ..plausibility import MAX_BEARING_SIGMA_RAD
+from ..stdio import copy_bounded
 
 FieldKind = Literal["int", "float"]
 
@@ -38,10 +42,12 @@ def dataset_error(path: str | os.PathLike[str], line: int | None, field: str | N
 
 
 def checked_bearing_sigma(bearing_sigma_rad: float) -> float:
-    """A caller-given bearing sigma, refused unless finite and > 0."""
-    if not (math.isfinite(bearing_sigma_rad) and bearing_sigma_rad > 0):
-        raise DatasetError(f"bearing_sigma_rad must be a finite number > 0, got "
-                           f"{bearing_sigma_rad!r}")
+    """A caller-given bearing sigma, refused unless finite, > 0 and at most pi (above, the
+    bearings would carry no information: :mod:`bomgraph.plausibility`)."""
+    if not (math.isfinite(bearing_sigma_rad) and 0 < bearing_sigma_rad
+            <= MAX_BEARING_SIGMA_RAD):
+        raise DatasetError(f"bearing sigma must be a finite number in (0, pi] rad, got "
+                           f"{bearing_sigma_rad!r} (radians: 3 degrees is 0.0524)")
     return float(bearing_sigma_rad)
 
 
@@ -82,7 +88,10 @@ def read_text(path: str | os.PathLike[str]) -> str:
     """
     p = Path(path)
     try:
-        data = p.read_bytes()
+        buf = io.BytesIO()
+        with open(p, "rb") as fh:  # bounded: /dev/zero is refused after one line's limit
+            copy_bounded(fh, buf, str(p))
+        data = buf.getvalue()
     except FileNotFoundError:
         raise DatasetError(f"{p}: file not found; check the path") from None
     except OSError as exc:
@@ -91,7 +100,7 @@ def read_text(path: str | os.PathLike[str]) -> str:
     if p.suffix == ".gz" and not is_gzip:
         raise DatasetError(f"{p}: named .gz but not gzip data; drop the .gz suffix")
     try:
-        raw = gzip.decompress(data) if p.suffix == ".gz" else data
+        raw = _gunzip(data, p) if p.suffix == ".gz" else data
     except (OSError, EOFError) as exc:
         raise DatasetError(f"{p}: corrupt gzip data ({exc})") from None
     try:
@@ -101,6 +110,14 @@ def read_text(path: str | os.PathLike[str]) -> str:
         hint = ("it is gzip data: name it with a .gz suffix" if is_gzip else
                 "the file is corrupt or not a text dataset")
         raise dataset_error(p, line, None, f"not UTF-8 text (byte {exc.start}); {hint}") from None
+
+
+def _gunzip(data: bytes, path: Path) -> bytes:
+    """gzip data decompressed, bounded as every input (a gzip bomb is refused)."""
+    out = io.BytesIO()
+    with gzip.GzipFile(fileobj=io.BytesIO(data)) as src:
+        copy_bounded(src, out, str(path))
+    return out.getvalue()
 
 
 @dataclass(frozen=True)
@@ -134,12 +151,17 @@ def parse_float(token: str, path: str | os.PathLike[str], line: int, field: str)
 
 
 def parse_int(token: str, path: str | os.PathLike[str], line: int, field: str) -> int:
-    """An integer written without a fraction, or a DatasetError naming file, line, field."""
+    """An integer written without a fraction that fits int64 (a stream's ids are int64), or a
+    DatasetError naming file, line, field."""
     try:
-        return int(token)
+        value = int(token)
     except ValueError:
         raise dataset_error(path, line, field, f"cannot read {token[:40]!r} as an integer; "
                                                f"fix or delete this line") from None
+    if not -MAX_ID - 1 <= value <= MAX_ID:
+        raise dataset_error(path, line, field, f"{token[:40]} is out of range: integers "
+                                               f"(ids) must be below 2^63; renumber it")
+    return value
 
 
 def read_table(path: str | os.PathLike[str], fields: Sequence[tuple[str, FieldKind]], *,

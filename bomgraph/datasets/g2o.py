@@ -47,6 +47,8 @@ from typing import Any
 
 import numpy as np
 
+from ..errors import DatasetError
+from ..plausibility import refuse_implausible
 from ..stream import Step, Stream, StreamHeader, Truth
 from ._text import (chain_order, checked_bearing_sigma, data_lines, dataset_error, file_label,
                     parse_float, parse_int, read_text)
@@ -295,10 +297,36 @@ def import_g2o(path: str | os.PathLike[str], *, truth_path: str | os.PathLike[st
             err, _ = odometry_errors(odoms, truth.poses)
             check["odometry_rms_error"] = [float(v) for v in np.sqrt(np.mean(err ** 2, axis=0))]
             check["odometry_mean_error"] = [float(v) for v in err.mean(axis=0)]
+            _check_odometry_fits_truth(g.path, tg.path, odoms, check["odometry_rms_error"],
+                                       header_odo)
         meta["truth_check"] = check
 
     header = StreamHeader(bearing_sigma_rad=sigma_b, odometry_sigma=header_odo, meta=meta)
+    refuse_implausible(header, steps, DatasetError, str(g.path),
+                       landmarks_xy=None if truth is None else truth.landmarks_xy,
+                       poses=None if truth is None else truth.poses)
     return Stream(header, tuple(steps), truth)
+
+
+#: the truth check refuses odometry whose RMS translation error against the truth exceeds
+#: this fraction of the median step length and this many odometry sigmas (a reversed chain or
+#: another run's truth: the file's own data give 0.9 sigma and a few % of a step).
+MAX_ODOMETRY_ERROR_STEP_FRACTION = 0.5
+MAX_ODOMETRY_ERROR_SIGMAS = 10.0
+
+
+def _check_odometry_fits_truth(path: Path, truth_path: Path, odoms: np.ndarray,
+                               rms: list[float], sigma: tuple[float, float, float]) -> None:
+    """Refuse a truth the odometry contradicts (the chain reversed, or another run's truth)."""
+    step = float(np.median(np.hypot(odoms[:, 0], odoms[:, 1])))
+    trans = math.hypot(rms[0], rms[1])
+    sig = math.hypot(sigma[0], sigma[1])
+    if trans > MAX_ODOMETRY_ERROR_STEP_FRACTION * step and trans > MAX_ODOMETRY_ERROR_SIGMAS * sig:
+        raise DatasetError(
+            f"{path}: the odometry disagrees with the truth in {truth_path.name}: RMS "
+            f"translation error {trans:.3g} m per step (the median step is {step:.3g} m, the "
+            f"odometry sigma {sig:.3g} m); is the EDGE_SE2 chain reversed (edges from j to i), "
+            f"or is the truth another run's?")
 
 
 __all__ = ["import_g2o", "odometry_sigma_from_information"]

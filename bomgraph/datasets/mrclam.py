@@ -38,6 +38,7 @@ from ..angles import angle_residual, wrap_angle
 from ..config import requirement
 from ..errors import ConfigError, DatasetError
 from ..geometry import between
+from ..plausibility import refuse_implausible
 from ..stream import Step, Stream, StreamHeader, Truth
 from .calibration import (bearing_residuals, calibrate_odometry, odometry_sigma_model,
                           robust_bearing_stats)
@@ -438,6 +439,7 @@ def import_mrclam(data_dir: str | os.PathLike[str], robot: int, *,
     # steps and truth ----------------------------------------------------------------------
     n_kf = len(kf_t)
     odoms = between(kf_pose[:-1], kf_pose[1:]) if n_kf > 1 else np.zeros((0, 3))
+    _check_steps(odoms, kf_t, raw.files.get("odometry", "the odometry file"))
     # the sigma model's regressors: length and the whole (unwrapped) turn, which exceeds pi
     # when the robot spins during a long stretch without detections
     regress = odoms.copy()
@@ -496,6 +498,13 @@ def import_mrclam(data_dir: str | os.PathLike[str], robot: int, *,
             Stream(StreamHeader(1.0, header_odo), steps, truth))[0])
         bearing_sigma = stats["sigma_rad"]
         meta["bearing_calibration"] = stats
+        if bearing_sigma > MAX_CALIBRATED_BEARING_SIGMA_RAD:
+            raise DatasetError(
+                f"{Path(data_dir)}: robot {robot}: the bearings fit the ground truth with a "
+                f"sigma of {bearing_sigma:.3g} rad (the mrclam6 robots give 0.01-0.03 rad): "
+                f"the truth does not belong to these measurements (x and y swapped? another "
+                f"robot's {raw.files.get('groundtruth', 'ground truth')}?); check the files, "
+                f"or import with --no-calibrate")
     else:
         bearing_sigma = DEFAULT_BEARING_SIGMA_RAD
         meta["bearing_calibration"] = {"source": "DEFAULT_BEARING_SIGMA_RAD (mrclam6 robots "
@@ -504,7 +513,29 @@ def import_mrclam(data_dir: str | os.PathLike[str], robot: int, *,
         meta["ranges_m"] = [[int(s), int(i), float(r)] for s, i, r in zip(a_step, a_id, a_rng)]
     header = StreamHeader(bearing_sigma_rad=float(bearing_sigma), odometry_sigma=header_odo,
                           sensor_range_m=sensor_range, meta=meta)
+    refuse_implausible(header, steps, DatasetError, str(Path(data_dir)),
+                       landmarks_xy=truth.landmarks_xy, poses=truth.poses)
     return Stream(header, steps, truth)
+
+
+#: plausibility (issue 13, item 20): a calibrated bearing sigma above this means the truth
+#: does not fit the measurements (mrclam6: 0.011-0.021 rad; x/y swapped: 0.98 rad) ...
+MAX_CALIBRATED_BEARING_SIGMA_RAD = 0.2
+#: ... and a keyframe step above this cannot happen in the ~10 m MRCLAM arena.
+MAX_KEYFRAME_STEP_M = 100.0
+
+
+def _check_steps(odoms: np.ndarray, kf_t: np.ndarray, odometry_file: str) -> None:
+    """Refuse a keyframe step longer than :data:`MAX_KEYFRAME_STEP_M`, naming its times."""
+    if not len(odoms):
+        return
+    length = np.hypot(odoms[:, 0], odoms[:, 1])
+    k = int(np.argmax(length))
+    if length[k] > MAX_KEYFRAME_STEP_M:
+        raise DatasetError(f"keyframe step {k + 1} (times {kf_t[k]:.3f} to {kf_t[k + 1]:.3f} s) "
+                           f"moves {length[k]:.3g} m by the odometry, implausible in the ~10 m "
+                           f"MRCLAM arena: {odometry_file} has a corrupt velocity or time "
+                           f"stamp between those times")
 
 
 __all__ = ["KeyframeConfig", "MrclamRobotData", "read_mrclam_robot", "integrate_odometry",

@@ -57,6 +57,28 @@ def _check_sorted(path: Path, time_s: np.ndarray, lines: np.ndarray) -> None:
                             f"{time_s[k - 1]:.3f}; rows must be in time order (sort the file)")
 
 
+#: plausibility (issue 13, item 20): the MRCLAM robots drive below 0.1 m/s and turn below
+#: 0.6 rad/s, see ranges below 9 m, in an arena of about 10 m; a value 50-100 times beyond
+#: is a corrupt file (one such velocity made a 2e10 m keyframe step).
+MAX_SPEED_MPS = 5.0
+MAX_TURN_RATE_RADPS = 30.0
+MAX_RANGE_M = 1000.0
+MAX_COORDINATE_M = 1000.0
+
+
+def _check_within(path: Path, lines: np.ndarray, table: dict[str, np.ndarray],
+                  limits: dict[str, float]) -> None:
+    """Refuse the first row whose ``|field|`` exceeds its limit, naming file, line, field."""
+    for field, limit in limits.items():
+        bad = np.flatnonzero(np.abs(table[field]) > limit)
+        if bad.size:
+            k = int(bad[0])
+            raise dataset_error(path, int(lines[k]), field,
+                                f"{table[field][k]:g} is implausible for MRCLAM (|{field}| "
+                                f"above {limit:g}); the file is corrupt: fix or delete this "
+                                f"line")
+
+
 def read_mrclam_robot(data_dir: str | os.PathLike[str], robot: int) -> MrclamRobotData:
     """Read the files of one MRCLAM robot (``.dat`` or ``.dat.gz``).
 
@@ -100,6 +122,7 @@ def read_mrclam_robot(data_dir: str | os.PathLike[str], robot: int) -> MrclamRob
     files["landmarks"] = file_label(p)
     lm, lm_lines = read_table(p, [("subject", "int"), ("x", "float"), ("y", "float"),
                                   ("x_std", "float"), ("y_std", "float")])
+    _check_within(p, lm_lines, lm, {"x": MAX_COORDINATE_M, "y": MAX_COORDINATE_M})
     ids = lm["subject"]
     _, first_index = np.unique(ids, return_index=True)
     dup = np.setdiff1d(np.arange(ids.size), first_index)
@@ -120,6 +143,7 @@ def read_mrclam_robot(data_dir: str | os.PathLike[str], robot: int) -> MrclamRob
         raise DatasetError(f"{p}: needs at least 2 odometry rows to integrate, got "
                            f"{od['time'].size}")
     _check_sorted(p, od["time"], od_lines)
+    _check_within(p, od_lines, od, {"v": MAX_SPEED_MPS, "w": MAX_TURN_RATE_RADPS})
 
     p = find_file(d, f"Robot{robot}_Measurement.dat")
     files["measurements"] = file_label(p)
@@ -132,6 +156,8 @@ def read_mrclam_robot(data_dir: str | os.PathLike[str], robot: int) -> MrclamRob
         raise dataset_error(p, int(me_lines[k]), "range",
                             f"negative range {me['range'][k]}; fix or delete this line")
 
+    _check_within(p, me_lines, me, {"range": MAX_RANGE_M})
+
     gt = None
     if has_file(d, f"Robot{robot}_Groundtruth.dat"):
         p = find_file(d, f"Robot{robot}_Groundtruth.dat")
@@ -141,6 +167,7 @@ def read_mrclam_robot(data_dir: str | os.PathLike[str], robot: int) -> MrclamRob
         if g["time"].size < 2:
             raise DatasetError(f"{p}: needs at least 2 ground-truth rows to interpolate")
         _check_sorted(p, g["time"], g_lines)
+        _check_within(p, g_lines, g, {"x": MAX_COORDINATE_M, "y": MAX_COORDINATE_M})
         gt = {"time_s": g["time"], "x_m": g["x"], "y_m": g["y"], "psi_rad": g["heading"]}
 
     return MrclamRobotData(
@@ -152,4 +179,5 @@ def read_mrclam_robot(data_dir: str | os.PathLike[str], robot: int) -> MrclamRob
         groundtruth=gt, files=files)
 
 
-__all__ = ["MrclamRobotData", "read_mrclam_robot", "ROBOT_SUBJECTS"]
+__all__ = ["MrclamRobotData", "read_mrclam_robot", "ROBOT_SUBJECTS", "MAX_SPEED_MPS",
+           "MAX_TURN_RATE_RADPS", "MAX_RANGE_M", "MAX_COORDINATE_M"]

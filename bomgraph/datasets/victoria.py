@@ -36,6 +36,8 @@ from typing import Any
 
 import numpy as np
 
+from ..errors import DatasetError
+from ..plausibility import refuse_implausible
 from ..stream import Step, Stream, StreamHeader
 from ._text import (chain_order, checked_bearing_sigma, data_lines, dataset_error, file_label,
                     parse_float, parse_int, read_text)
@@ -192,6 +194,7 @@ def import_victoria(path: str | os.PathLike[str], *,
         "ground_truth": "none",
     }
     header = StreamHeader(bearing_sigma_rad=sigma_b, odometry_sigma=header_odo, meta=meta)
+    refuse_implausible(header, steps, DatasetError, str(p))
     return Stream(header, tuple(steps), None)
 
 

@@ -1,0 +1,107 @@
+"""Plausibility limits of a stream: values the format allows but no real run has (issue 13,
+items 11 and 20).
+
+``shared/STREAM_FORMAT.md`` asks only for finite numbers and positive sigmas, so a header with
+``bearing_sigma_rad = 1e300`` or a step of 1e12 m is a valid file. Such values come from a
+mistake upstream (a noise scale typed with an extra exponent, swapped columns, a corrupt
+velocity), and no method can use them. The rule:
+
+* the stream **reader** warns (``logging``), naming the file, the line and the key, and goes
+  on: the file is valid;
+* **importers** and ``simulate`` make streams, and refuse to make an implausible one
+  (:func:`refuse_implausible`), naming the cause.
+
+The limits are deliberately wide (orders of magnitude beyond any recording bomgraph knows):
+they catch absurd values, not unusual ones.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Iterable
+
+import numpy as np
+
+from .errors import BomgraphError
+from .stream import Step, StreamHeader
+
+#: a bearing sigma above pi: the bearings are uniform on the circle, they carry no information.
+MAX_BEARING_SIGMA_RAD = math.pi
+#: an odometry sigma above this (metres for dx, dy; radians for dpsi): no information.
+MAX_ODOMETRY_SIGMA = (1e5, 1e5, 2 * math.pi)
+#: a sensor reaching less than a micrometre or further than 1000 km.
+SENSOR_RANGE_LIMITS_M = (1e-6, 1e6)
+#: one step (the motion between two consecutive poses) longer than 100 km.
+MAX_STEP_M = 1e5
+#: a truth coordinate further than this from the origin.
+MAX_COORDINATE_M = 1e9
+
+
+def header_problems(header: StreamHeader) -> list[tuple[str, str]]:
+    """``(key, message)`` for each implausible value of ``header`` (empty when plausible)."""
+    out: list[tuple[str, str]] = []
+    if header.bearing_sigma_rad > MAX_BEARING_SIGMA_RAD:
+        out.append(("bearing_sigma_rad",
+                    f"{header.bearing_sigma_rad:g} rad is above pi: bearings that uncertain "
+                    f"carry no information (a noise scale or sigma off by orders of "
+                    f"magnitude?)"))
+    for name, value, limit in zip(("sigma_dx_m", "sigma_dy_m", "sigma_dpsi_rad"),
+                                  header.odometry_sigma, MAX_ODOMETRY_SIGMA):
+        if value > limit:
+            out.append(("odometry_sigma", f"{name} = {value:g} is above {limit:g}: odometry "
+                                          f"that uncertain carries no information"))
+    lo, hi = SENSOR_RANGE_LIMITS_M
+    r = header.sensor_range_m
+    if r is not None and not lo <= r <= hi:
+        out.append(("sensor_range_m", f"{r:g} m is outside [{lo:g}, {hi:g}] m: no sensor "
+                                      f"reaches that (give null if the range is unknown)"))
+    return out
+
+
+def step_problem(step: Step) -> tuple[str, str] | None:
+    """``(key, message)`` if ``step``'s odometry is implausible, else None."""
+    if step.odom is not None:
+        length = math.hypot(float(step.odom[0]), float(step.odom[1]))
+        if length > MAX_STEP_M:
+            return ("odom", f"step {step.t} moves {length:g} m, more than {MAX_STEP_M:g} m "
+                            f"in one step (a corrupt velocity, time stamp or unit?)")
+    if step.odom_sigma is not None:
+        for name, value, limit in zip(("sigma_dx_m", "sigma_dy_m", "sigma_dpsi_rad"),
+                                      step.odom_sigma, MAX_ODOMETRY_SIGMA):
+            if value > limit:
+                return ("odom_sigma", f"step {step.t}: {name} = {value:g} is above {limit:g}")
+    return None
+
+
+def truth_problem(landmarks_xy: np.ndarray, poses: np.ndarray | None) -> str | None:
+    """A message if a truth coordinate is beyond :data:`MAX_COORDINATE_M`, else None."""
+    for what, xy in (("landmark", landmarks_xy), ("pose", poses)):
+        if xy is not None and len(xy) and np.max(np.abs(xy[:, :2])) > MAX_COORDINATE_M:
+            return (f"a truth {what} coordinate is {np.max(np.abs(xy[:, :2])):g} m from the "
+                    f"origin, beyond {MAX_COORDINATE_M:g} m")
+    return None
+
+
+def refuse_implausible(header: StreamHeader, steps: Iterable[Step],
+                       error: type[BomgraphError], source: str, *,
+                       landmarks_xy: np.ndarray | None = None,
+                       poses: np.ndarray | None = None) -> None:
+    """Raise ``error`` naming the first implausible value of a stream being made by
+    ``source`` (an importer, the simulator): the header's sigmas and range, each step's
+    odometry, the truth's coordinates."""
+    problems = header_problems(header)
+    if problems:
+        key, msg = problems[0]
+        raise error(f"{source}: '{key}': {msg}; refusing to write an implausible stream")
+    for st in steps:
+        p = step_problem(st)
+        if p is not None:
+            raise error(f"{source}: '{p[0]}': {p[1]}; refusing to write an implausible stream")
+    msg = truth_problem(np.zeros((0, 2)) if landmarks_xy is None else landmarks_xy, poses)
+    if msg is not None:
+        raise error(f"{source}: {msg}; refusing to write an implausible stream")
+
+
+__all__ = ["MAX_BEARING_SIGMA_RAD", "MAX_ODOMETRY_SIGMA", "SENSOR_RANGE_LIMITS_M", "MAX_STEP_M",
+           "MAX_COORDINATE_M", "header_problems", "step_problem", "truth_problem",
+           "refuse_implausible"]
