@@ -415,7 +415,15 @@ def evaluate_files(estimate_path: str | os.PathLike[str], stream_path: str | os.
 
 
 def _is_estimate_file(path: str | os.PathLike[str]) -> bool:
-    """Whether ``path`` reads as an estimate file (to recognise swapped arguments)."""
+    """Whether ``path`` is an estimate file, even a broken one (to recognise swapped
+    arguments): its first line names the estimate format, or the whole file reads as one."""
+    try:
+        with open(path, "rb") as fh:
+            head = json.loads(fh.readline(2**16))
+        if isinstance(head, dict) and head.get("format") == "bomgraph-estimate":
+            return True
+    except (OSError, ValueError):
+        pass
     try:
         read_estimate(path)
     except (StreamFormatError, OSError):

@@ -61,7 +61,7 @@ def find_file(directory: str | os.PathLike[str], name: str) -> Path:
     """
     d = Path(directory)
     for candidate in (d / name, d / (name + ".gz")):
-        if candidate.is_file():
+        if candidate.exists() and not candidate.is_dir():  # a device or FIFO is read, bounded
             return candidate
     raise DatasetError(f"{d}: neither {name} nor {name}.gz exists; check the dataset "
                        f"directory (each MRCLAM folder holds Barcodes.dat, "
@@ -71,7 +71,7 @@ def find_file(directory: str | os.PathLike[str], name: str) -> Path:
 def has_file(directory: str | os.PathLike[str], name: str) -> bool:
     """Whether ``directory/name`` or ``directory/name.gz`` exists."""
     d = Path(directory)
-    return (d / name).is_file() or (d / (name + ".gz")).is_file()
+    return any(p.exists() and not p.is_dir() for p in (d / name, d / (name + ".gz")))
 
 
 #: the first two bytes of every gzip file (RFC 1952).
