@@ -31,7 +31,7 @@ from bomgraph.stream import Prior, Step, Stream, StreamHeader, Truth
 METHODS = [m.name for m in available_methods()]
 
 settings.register_profile(
-    "ci", max_examples=12, deadline=None, database=None, derandomize=True,
+    "ci", max_examples=20, deadline=None, database=None, derandomize=True,
     suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
 settings.register_profile(
     "deep", max_examples=300, deadline=None, database=None,
