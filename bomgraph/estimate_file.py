@@ -74,7 +74,7 @@ def stream_file_identity(path: str | os.PathLike[str]) -> StreamIdentity:
     """The identity of a stream file (read and validated step by step)."""
     from .stream_file import StreamReader
 
-    with StreamReader(path) as reader:
+    with StreamReader(path, warn=False) as reader:  # the run's own reader warns
         return stream_identity(reader)
 
 

@@ -253,11 +253,15 @@ class StreamReader:
             for step in reader:
                 mapper.step(step)
 
-    The truth-pose count is checked once the last step has been read.
+    The truth-pose count is checked once the last step has been read. Lines are bounded
+    (:data:`bomgraph.stdio.MAX_LINE_BYTES`, :data:`~bomgraph.stdio.MAX_INPUT_BYTES`). With
+    ``warn`` (default) implausible but valid values (:mod:`bomgraph.plausibility`) are logged
+    as warnings naming the line and the key: the header's, and the first implausible step's.
     """
 
-    def __init__(self, path: str | os.PathLike[str]) -> None:
+    def __init__(self, path: str | os.PathLike[str], *, warn: bool = True) -> None:
         self.path = str(path)
+        self._warn = warn
         try:
             self._fh: IO[bytes] = open(self.path, "rb")
         except OSError as exc:
@@ -276,9 +280,9 @@ class StreamReader:
             self._fh.close()
             raise
         self._started = False
-        for key, msg in header_problems(self.header):  # valid, but no method can use it
+        for key, msg in header_problems(self.header) if warn else ():  # valid, but no method can use it
             _log.warning("%s, line 1: '%s': %s", self.path, key, msg)
-        if self.truth is not None:
+        if warn and self.truth is not None:
             msg = truth_problem(self.truth.landmarks_xy, self.truth.poses)
             if msg:
                 _log.warning("%s, line 1: 'truth': %s", self.path, msg)
@@ -300,7 +304,7 @@ class StreamReader:
         line_no = 1
         t = 0
         pending_blank: int | None = None
-        warned = False
+        warned = not self._warn
         for raw in bounded_lines(self._fh, self.path, first_line=2):
             line_no += 1
             ctx = _Ctx(self.path, line_no)
