@@ -77,13 +77,24 @@ from bomgraph.mapper import MapEstimate
 from bomgraph.stream import Step, StreamHeader
 
 from .config import BearingEkfConfig, EkfConfig, InverseDepthConfig
-from .filter import BearingEkf
+from .filter import BearingEkf, BearingModel, JacobianRows
 from .models import (bearing_and_jacobian, invdepth_bearing_and_jacobian,
                      invdepth_conversion_kl, invdepth_to_xy, second_order_variance,
                      triangulation_kl)
 
 _LM, _CLONE, _IDP = "lm", "clone", "idp"
 _SIZE = {_LM: 2, _CLONE: 3, _IDP: 4}
+
+
+def _take_rows(parts: JacobianRows, keep: np.ndarray) -> JacobianRows:
+    """The rows ``keep`` (bool, (k,)) of a sparse Jacobian, renumbered ``0..count(keep)-1``."""
+    new = np.cumsum(keep) - 1
+    out = []
+    for rows, cols, j in parts:
+        m = keep[rows]
+        if m.any():
+            out.append((new[rows[m]], cols[m], j[m]))
+    return out
 
 
 class _EkfSlam:
@@ -154,15 +165,17 @@ class _EkfSlam:
 
     # -- measurement model ------------------------------------------------------------------
     def _model(self, pose_off: np.ndarray, kinds: np.ndarray, offsets: np.ndarray,
-               constrained: bool = True
-               ) -> Callable[[np.ndarray], tuple[np.ndarray, np.ndarray, list[Any]]]:
-        """The bearing model for filterpy, memoised on ``x``.
+               constrained: bool = True,
+               at: tuple[np.ndarray, np.ndarray, JacobianRows] | None = None) -> BearingModel:
+        """The bearing model for :meth:`BearingEkf.update`, memoised on ``x``.
 
         Bearings are taken from the poses at ``pose_off`` (0: the robot, else a clone) to the
         blocks at ``offsets`` of size ``kinds`` (2: Euclidean landmark, 4: inverse-depth
-        feature). The returned function maps ``x`` to ``h (k,)``, the dense Jacobian
-        ``H (k, n)`` and its nonzero part as ``[(row mask, columns (m, s), values (m, s))]``
-        per kind (observability-constrained when ``constrained``).
+        feature). The returned function maps ``x`` to ``h (k,)`` and the Jacobian's nonzero
+        blocks ``[(rows (m,), columns (m, s), values (m, s))]``, one per kind
+        (:data:`~baselines.ekf.filter.JacobianRows`; observability-constrained when
+        ``constrained``). ``at = (x, h, rows)`` seeds the memo with the model's values at
+        ``x`` (already computed).
         """
         k = len(offsets)
         groups = []
@@ -171,24 +184,24 @@ class _EkfSlam:
             if sel.any():
                 cols = np.concatenate([self._block_index(pose_off[sel], 3),
                                        self._block_index(offsets[sel], size)], 1)
-                groups.append((sel, np.flatnonzero(sel)[:, None], cols, fn))
+                groups.append((np.flatnonzero(sel), cols, fn))
         memo: dict[str, Any] = {}
+        if at is not None:
+            memo.update(x=at[0].copy(), h=at[1], parts=at[2])
 
-        def both(x: np.ndarray) -> tuple[np.ndarray, np.ndarray, list[Any]]:
+        def both(x: np.ndarray) -> tuple[np.ndarray, JacobianRows]:
             if "x" in memo and np.array_equal(memo["x"], x):
-                return memo["h"], memo["H"], memo["parts"]
+                return memo["h"], memo["parts"]
             h = np.empty(k)
-            H = np.zeros((k, len(x)))
             parts = []
-            for sel, rows, cols, fn in groups:
+            for rows, cols, fn in groups:
                 v = x[cols]
-                h[sel], j = fn(v[:, :3], v[:, 3:])
+                h[rows], j = fn(v[:, :3], v[:, 3:])
                 if constrained:
                     j = self._constrain(j, cols)
-                H[rows, cols] = j
-                parts.append((sel, cols, j))
-            memo.update(x=x.copy(), h=h, H=H, parts=parts)
-            return h, H, parts
+                parts.append((rows, cols, j))
+            memo.update(x=x.copy(), h=h, parts=parts)
+            return h, parts
 
         return both
 
@@ -220,16 +233,21 @@ class _EkfSlam:
         out = jac.copy()
         project = np.ones(len(jac), bool)
         if jac.shape[1] == 5:
-            h_l = jac[:, 3:5]                                    # J u / |r|
-            u = np.stack([h_l[:, 1], -h_l[:, 0]], 1)
-            u /= np.sqrt(np.einsum("ki,ki->k", u, u))[:, None]
-            a_l = np.stack([N[cols[:, 4], 2], -N[cols[:, 3], 2]], 1)
-            a_p = np.stack([N[cols[:, 1], 2], -N[cols[:, 0], 2]], 1)
-            length = np.einsum("ki,ki->k", u, a_l - a_p)
+            hx, hy = jac[:, 3], jac[:, 4]                          # J u / |r|
+            norm = np.sqrt(hy * hy + hx * hx)
+            ux, uy = hy / norm, -hx / norm
+            length = (ux * (N[cols[:, 4], 2] - N[cols[:, 1], 2])
+                      + uy * (N[cols[:, 0], 2] - N[cols[:, 3], 2]))
             ok = length > 1e-6
-            new_l = np.stack([-u[ok, 1], u[ok, 0]], 1) / length[ok, None]
-            out[ok, 3:5] = new_l
-            out[ok, 0:2] = -new_l
+            if ok.all():
+                out[:, 3] = -uy / length
+                out[:, 4] = ux / length
+                out[:, 0] = -out[:, 3]
+                out[:, 1] = -out[:, 4]
+                return out
+            out[ok, 3] = -uy[ok] / length[ok]
+            out[ok, 4] = ux[ok] / length[ok]
+            out[ok, 0:2] = -out[ok, 3:5]
             project = ~ok
         if project.any():
             ns = N[cols[project]]                                # (m, s, 3)
@@ -257,27 +275,29 @@ class _EkfSlam:
         """
         model = self._model(pose_off, kinds, offsets)
         x, P = self.filter.x, self.filter.P
-        h, _, parts = model(x)
+        h, parts = model(x)
         var = np.full(len(z), self.filter.bearing_sigma_rad ** 2)
         index = np.zeros(len(z))
         hph = np.zeros(len(z))
-        for sel, cols, j in parts:
+        for rows, cols, j in parts:
             block = P[cols[:, :, None], cols[:, None, :]]          # (m, s, s)
-            hph[sel] = np.einsum("mi,mij,mj->m", j, block, j)
-            var[sel], index[sel] = second_order_variance(x[cols], block,
-                                                         self.filter.bearing_sigma_rad)
+            hph[rows] = np.einsum("mi,mij,mj->m", j, block, j)
+            var[rows], index[rows] = second_order_variance(x[cols], block,
+                                                           self.filter.bearing_sigma_rad)
         usable = index <= self._max_nonlin
         gated = (np.asarray(angle_residual(z, h)) ** 2 / (hph + var) > self._gate) & usable
         self.n_nonlinear += int(np.count_nonzero(~usable))
         self.n_gated += int(np.count_nonzero(gated))
         keep = usable & ~gated
         if keep.any():
-            # filterpy evaluates hx and jac at this same x: the memo computes them once
-            plain = (self._model(pose_off, kinds, offsets, constrained=False)
-                     if self._iterations > 1 else model)
-            self.filter.update(z[keep], lambda x: model(x)[0][keep],
-                               lambda x: model(x)[1][keep], var[keep], self._iterations,
-                               lambda x: plain(x)[1][keep])
+            if keep.all():
+                kept = model
+            else:                           # the kept rows, already evaluated at this x
+                kept = self._model(pose_off[keep], kinds[keep], offsets[keep],
+                                   at=(x, h[keep], _take_rows(parts, keep)))
+            plain = (self._model(pose_off[keep], kinds[keep], offsets[keep], constrained=False)
+                     if self._iterations > 1 else None)
+            self.filter.update(z[keep], kept, var[keep], self._iterations, plain)
             self.n_updates += int(np.count_nonzero(keep))
         return gated
 
@@ -328,23 +348,21 @@ class _EkfSlam:
 
     def _update_mapped(self, ids: np.ndarray, z: np.ndarray) -> np.ndarray:
         """Gate and apply the bearings to landmarks in the state; returns the mask of those."""
+        found = [(n, kind, off) for n, i in enumerate(ids.tolist()) for kind in (_LM, _IDP)
+                 if (off := self._offset.get((kind, i))) is not None]
         in_state = np.zeros(len(ids), bool)
-        kinds = np.zeros(len(ids), np.int64)
-        offsets = np.zeros(len(ids), np.int64)
-        for n, i in enumerate(ids.tolist()):
-            for kind in (_LM, _IDP):
-                off = self._offset.get((kind, i))
-                if off is not None:
-                    in_state[n], kinds[n], offsets[n] = True, _SIZE[kind], off
-        if np.any(in_state):
-            gated = self._gated_update(np.zeros(np.count_nonzero(in_state), np.int64),
-                                       kinds[in_state], offsets[in_state], z[in_state])
+        if found:
+            rows, kind_names, offs = zip(*found)
+            in_state[list(rows)] = True
+            kinds = np.array([_SIZE[k] for k in kind_names], np.int64)
+            offsets = np.array(offs, np.int64)
+            gated = self._gated_update(np.zeros(len(found), np.int64), kinds, offsets,
+                                       z[in_state])
             # an inverse-depth feature gated again and again was started from an outlier:
             # drop it; the current sighting starts it again (as a new sighting)
             restart = []
-            for i, kind, g in zip(ids[in_state].tolist(), kinds[in_state].tolist(),
-                                  gated.tolist()):
-                if kind == _SIZE[_IDP]:
+            for i, kind, g in zip(ids[in_state].tolist(), kind_names, gated.tolist()):
+                if kind == _IDP:
                     run_length = self._gated_run.get(i, 0) + 1 if g else 0
                     self._gated_run[i] = run_length
                     if run_length >= self._restart_after:

@@ -21,10 +21,11 @@ Vectorised kernels on arrays; nothing here holds state.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from bomgraph.angles import wrap_angle
-from bomgraph.geometry import rotation
 
 
 def motion_jacobians(pose: np.ndarray, odom: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -43,14 +44,12 @@ def motion_jacobians(pose: np.ndarray, odom: np.ndarray) -> tuple[np.ndarray, np
     g_odom : ndarray of shape (3, 3)
         ``blockdiag(R(psi), 1)``.
     """
-    rot = rotation(float(pose[2]))
-    c, s = float(rot[0, 0]), float(rot[1, 0])
+    c, s = math.cos(float(pose[2])), math.sin(float(pose[2]))
     dx, dy = float(odom[0]), float(odom[1])
     f_pose = np.array([[1.0, 0.0, -s * dx - c * dy],
                        [0.0, 1.0, c * dx - s * dy],
                        [0.0, 0.0, 1.0]])
-    g_odom = np.eye(3)
-    g_odom[:2, :2] = rot
+    g_odom = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
     return f_pose, g_odom
 
 
