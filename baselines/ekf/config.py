@@ -40,6 +40,21 @@ class BearingEkfConfig(Presets):
         Civera's ``0.1`` and ``0.5`` per metre when the range is unknown.
     iterations : 1: the EKF update; more: the iterated EKF
         (:meth:`~baselines.ekf.filter.BearingEkf.update`).
+    max_state : the largest filter state allowed (robot pose, landmarks ``[x, y]``, pose
+        clones, inverse-depth features ``[x0, y0, theta, rho]``); the covariance is dense,
+        ``8 n^2`` bytes (4000: 128 MB) and an update costs ``O(n^2)`` per bearing. A step that
+        would exceed it is refused (:class:`~baselines.ekf.filter.StateLimitError`, before
+        anything is allocated); raise it with ``--option max_state=N``.
+    decorrelation_m, decorrelation_rad : the motion (metres of displacement, radians of turn)
+        over which bearing errors to one landmark decorrelate; a bearing taken after less
+        motion since that landmark's last used bearing has its variance scaled up so that the
+        information per unit of motion does not depend on the keyframing
+        (:meth:`~baselines.ekf.mappers._EkfSlam._decorrelation`). None: every bearing is
+        independent (the paper's simulation, whose noise is white).
+    adaptive_sigma : scale the bearing variance (gate and update) by the median normalised
+        innovation of the bearings so far over the chi-square 1-dof median, never below 1:
+        a stream's sigma that is too small (a MAD estimate) does not gate good bearings
+        away or make the filter overconfident.
     restart_after_gated : an inverse-depth feature whose bearings fail the gate this many
         times in a row is dropped and started again from the current sighting (its first
         bearing was an outlier); counted in ``info["restarted"]``. None: never.
@@ -52,6 +67,10 @@ class BearingEkfConfig(Presets):
     rho_sigma_per_m: float | None = None
     iterations: int = 1
     restart_after_gated: int | None = None
+    max_state: int = 4000
+    adaptive_sigma: bool = False
+    decorrelation_m: float | None = None
+    decorrelation_rad: float | None = None
 
     def __post_init__(self) -> None:
         if not 0 < self.gate_probability <= 1:
@@ -69,7 +88,12 @@ class BearingEkfConfig(Presets):
             if value is not None and not (math.isfinite(value) and value > 0):
                 raise ConfigError(f"{name} must be a finite number > 0 or None (from the "
                                   f"sensor range), got {value}")
-        for name in ("iterations", "restart_after_gated"):
+        if (self.decorrelation_m is None) != (self.decorrelation_rad is None) or not (
+                self.decorrelation_m is None or (self.decorrelation_m > 0
+                                                 and self.decorrelation_rad > 0)):
+            raise ConfigError("decorrelation_m and decorrelation_rad must both be None or "
+                              "both > 0")
+        for name in ("iterations", "restart_after_gated", "max_state"):
             value = getattr(self, name)
             if not ((value is None and name == "restart_after_gated")
                     or (isinstance(value, (int, np.integer)) and value >= 1)):
@@ -77,7 +101,8 @@ class BearingEkfConfig(Presets):
 
 
 #: The overrides of the ``"real"`` preset both filters share.
-_REAL = {"max_bearing_nonlinearity": math.inf, "iterations": 2, "restart_after_gated": 3}
+_REAL = {"max_bearing_nonlinearity": math.inf, "iterations": 2, "restart_after_gated": 3,
+         "decorrelation_m": 0.3, "decorrelation_rad": 0.3, "adaptive_sigma": True}
 
 
 @dataclass(frozen=True)

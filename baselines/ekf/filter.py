@@ -61,6 +61,11 @@ class StateLimitError(BomgraphError):
     """The filter's state would exceed its declared size (``max_state``)."""
 
 
+class FilterNumericalError(BomgraphError):
+    """The filter met numbers it cannot represent (an overflowing covariance, a non-positive
+    innovation covariance); the state is left as it was before the failed operation."""
+
+
 def rows_from_dense(H: np.ndarray) -> JacobianRows:  # noqa: N803
     """A dense Jacobian ``(k, n)`` as :data:`JacobianRows` (for tests and small models)."""
     k, n = H.shape
@@ -146,6 +151,15 @@ class BearingEkf:
         d[self._is_angle] = angle_residual(a[self._is_angle], b[self._is_angle])
         return d
 
+    def check_room(self, m: int) -> None:
+        """Raise :class:`StateLimitError` if ``m`` more states would exceed ``max_state``."""
+        n = self.dim
+        if self.max_state is not None and n + m > self.max_state:
+            raise StateLimitError(
+                f"the EKF state would grow to {n + m} entries (a dense covariance of "
+                f"{8 * (n + m) ** 2 / 2 ** 30:.2f} GiB), beyond its limit of {self.max_state}"
+                f"{self._limit_hint}")
+
     def augment(self, value: np.ndarray, idx: np.ndarray, jac: np.ndarray,
                 noise_cov: np.ndarray, is_angle: np.ndarray) -> int:
         """Append ``m`` states ``value = g(x[idx], w)`` with ``w`` independent of the state.
@@ -157,7 +171,7 @@ class BearingEkf:
             The existing states ``g`` depends on.
         jac : array of shape (m, k)
             ``dg/dx[idx]``.
-        noise_cov : array of shape (m, m)
+        noise_cov : array of shape (m, m), or (m,) for a diagonal one
             ``(dg/dw) Cov(w) (dg/dw)^T``.
         is_angle : bool array of shape (m,)
             Which new states are angles (wrapped after every update).
@@ -174,17 +188,18 @@ class BearingEkf:
         """
         P = self.kf.P
         n, m = self.dim, len(value)
-        if self.max_state is not None and n + m > self.max_state:
-            raise StateLimitError(
-                f"the EKF state would grow to {n + m} entries, beyond its limit of "
-                f"{self.max_state} (a dense covariance of {8 * (n + m) ** 2 / 2 ** 30:.2f} GiB)"
-                f"{self._limit_hint}")
+        self.check_room(m)
         cross = P[:, idx] @ jac.T
         new_p = np.empty((n + m, n + m))
         new_p[:n, :n] = P
         new_p[:n, n:] = cross
         new_p[n:, :n] = cross.T
-        blk = jac @ cross[idx] + noise_cov
+        blk = jac @ cross[idx]
+        noise_cov = np.asarray(noise_cov, float)
+        if noise_cov.ndim == 1:
+            blk[np.diag_indices(m)] += noise_cov
+        else:
+            blk += noise_cov
         new_p[n:, n:] = 0.5 * (blk + blk.T)
         angle = np.asarray(is_angle, bool)
         self._is_angle = np.concatenate([self._is_angle, angle])
@@ -225,11 +240,18 @@ class BearingEkf:
             f_pose[0, 2] = -(new_pose[1] + self.nullspace[0, 2])
             f_pose[1, 2] = new_pose[0] - self.nullspace[1, 2]
         self.nullspace[:3] = f_pose @ self.nullspace[:3]
-        q = (g_odom * np.asarray(odom_sigma, float) ** 2) @ g_odom.T
-        rr = f_pose @ P[:3, :3] @ f_pose.T + q
+        with np.errstate(over="ignore", invalid="ignore"):
+            q = (g_odom * np.asarray(odom_sigma, float) ** 2) @ g_odom.T
+            rr = f_pose @ P[:3, :3] @ f_pose.T + q
+            rm = f_pose @ P[:3, 3:]
+        if not (np.all(np.isfinite(rr)) and np.all(np.isfinite(rm))
+                and np.all(np.isfinite(new_pose))):
+            raise FilterNumericalError(
+                f"the predicted pose or its covariance overflows (odometry {odom.tolist()}, "
+                f"sigma {np.asarray(odom_sigma, float).tolist()}): the odometry or its sigma "
+                f"is beyond what the filter can represent")
         P[:3, :3] = 0.5 * (rr + rr.T)
         if len(x) > 3:
-            rm = f_pose @ P[:3, 3:]
             P[:3, 3:] = rm
             P[3:, :3] = rm.T
         x[:3] = new_pose
@@ -289,9 +311,10 @@ class BearingEkf:
         chol, info = _potrf(s, lower=1)                           # S = L L^T
         if info == 0:
             l_inv, info = _trtri(chol, lower=1)
-        if info != 0 or not np.all(np.isfinite(chol)):
-            raise ConfigError("BearingEkf.update: the innovation covariance is not positive "
-                              "definite (non-finite state or covariance?)")
+        if info != 0 or not (np.all(np.isfinite(chol)) and np.all(np.isfinite(hp))
+                             and np.all(np.isfinite(y))):
+            raise FilterNumericalError("the innovation covariance of the bearing update is not "
+                                       "positive definite or not finite (the update is skipped)")
         w_t = l_inv @ hp                                          # L^-1 H P = W^T, (k, n)
         x0 += (l_inv @ y) @ w_t                                   # x + K y, K = W L^-1
         x0[self._is_angle] = wrap_angle(x0[self._is_angle])
@@ -299,4 +322,5 @@ class BearingEkf:
         kf.S, kf.y = s, y
 
 
-__all__ = ["BearingEkf", "BearingModel", "JacobianRows", "StateLimitError", "rows_from_dense"]
+__all__ = ["BearingEkf", "BearingModel", "FilterNumericalError", "JacobianRows",
+           "StateLimitError", "rows_from_dense"]
