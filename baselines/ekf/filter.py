@@ -74,10 +74,15 @@ def rows_from_dense(H: np.ndarray) -> JacobianRows:  # noqa: N803
 
 def _compact(rows: JacobianRows, k: int) -> tuple[np.ndarray, np.ndarray]:
     """The states ``U`` a Jacobian touches (sorted) and the dense ``H_U`` of shape ``(k, |U|)``."""
-    cols = np.unique(np.concatenate([c.ravel() for _, c, _ in rows]))
+    everything = np.concatenate([c.ravel() for _, c, _ in rows]) if len(rows) > 1 \
+        else rows[0][1].ravel()
+    mark = np.zeros(everything.max() + 1, bool)
+    mark[everything] = True
+    cols = np.flatnonzero(mark)
+    position = np.cumsum(mark) - 1                   # state index -> column of H_U
     hu = np.zeros((k, cols.size))
     for r, c, v in rows:
-        hu[r[:, None], np.searchsorted(cols, c)] = v
+        hu[r[:, None], position[c]] = v
     return cols, hu
 
 
@@ -258,7 +263,8 @@ class BearingEkf:
 
     def update(self, z_rad: np.ndarray, model: BearingModel,
                var_rad2: np.ndarray | None = None, iterations: int = 1,
-               model_iterate: BearingModel | None = None) -> None:
+               model_iterate: BearingModel | None = None,
+               innovation: np.ndarray | None = None) -> None:
         """One batched bearing update, in place on filterpy's ``x`` and ``P``.
 
         Parameters
@@ -278,6 +284,8 @@ class BearingEkf:
             The model for the iterates (default ``model``); ``model`` is used for the last
             step. (The mappers iterate with the model's own Jacobian and make the last step
             with the observability-constrained one.)
+        innovation : array of shape (k,), optional
+            ``angle_residual(z, h(x))`` at the current state if the caller has it already.
         """
         kf = self.kf
         x0, P = kf.x, kf.P
@@ -301,9 +309,10 @@ class BearingEkf:
                 break
         h, rows = model(xi)
         cols, hu = _compact(rows, k)
-        y = np.asarray(angle_residual(z, h))
-        if xi is not x0:
-            y = y - hu @ self._difference(x0, xi)[cols]
+        if xi is not x0:           # the model linearised at x_i, h_i + H_i (x_0 - x_i)
+            y = np.asarray(angle_residual(z, h + hu @ self._difference(x0, xi)[cols]))
+        else:
+            y = np.asarray(angle_residual(z, h)) if innovation is None else innovation
         hp = hu @ P[cols]                                         # H P = (P H^T)^T, (k, n)
         s = hp[:, cols] @ hu.T
         s = 0.5 * (s + s.T)

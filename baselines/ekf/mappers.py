@@ -145,8 +145,8 @@ class _EkfSlam:
         self._t = -1
         self.n_nonlinear = 0
         self._max_nonlin = float(config.max_bearing_nonlinearity)
-        self._decorr = (None if config.decorrelation_m is None
-                        else (float(config.decorrelation_m), float(config.decorrelation_rad)))
+        self._decorr = (None if config.decorrelation_rad is None
+                        else float(config.decorrelation_rad))
         self._last_used: dict[int, np.ndarray] = {}   # landmark -> pose of its last bearing
         self._adaptive = bool(config.adaptive_sigma)
         self._nis: list[float] = []
@@ -320,7 +320,8 @@ class _EkfSlam:
             var[rows], index[rows] = second_order_variance(x[cols], block,
                                                            self.filter.bearing_sigma_rad)
         usable = index <= self._max_nonlin
-        nis = np.asarray(angle_residual(z, h)) ** 2 / (hph + var)
+        innovation = np.asarray(angle_residual(z, h))
+        nis = innovation ** 2 / (hph + var)
         if self._adaptive:
             # the stream's sigma may be a MAD estimate (too small when there are outliers) or
             # a generous one: scale the bearing variance by the median NIS of the bearings
@@ -345,7 +346,8 @@ class _EkfSlam:
                      if self._iterations > 1 else None)
             var_upd = var[keep] if inflation is None else var[keep] * inflation[keep]
             try:
-                self.filter.update(z[keep], kept, var_upd, self._iterations, plain)
+                self.filter.update(z[keep], kept, var_upd, self._iterations, plain,
+                                   innovation=innovation[keep])
             except FilterNumericalError as exc:         # the state is as before the update
                 self.n_failures += 1
                 self.last_failure = f"step {self._t}: {exc}"
@@ -399,32 +401,47 @@ class _EkfSlam:
             self._gated_run.pop(k[1], None)
         self.n_converted += m
 
-    def _decorrelation(self, ids: np.ndarray) -> np.ndarray | None:
+    def _decorrelation(self, ids: np.ndarray, kinds: np.ndarray,
+                       offsets: np.ndarray) -> np.ndarray | None:
         """Variance factors for bearings whose errors are correlated with the last one used.
 
-        Bearing errors of real sensors are serially correlated: consecutive sightings of a
-        landmark from nearly the same place share most of their error (MRCLAM6: lag-1
-        correlation 0.25-0.64 at 0.1 m / 10 deg keyframes). An EKF that takes them as
-        independent gains information in proportion to how often the stream was keyframed,
-        not to how much the geometry changed, and becomes overconfident on dense streams.
-        Here the bearing to landmark ``i`` is weighted by the motion since the last bearing
-        of ``i`` that was used: ``D = |p - p_i| / decorrelation_m + |psi - psi_i| /
-        decorrelation_rad`` (estimated poses) and the variance is multiplied by ``1 / D``
-        when ``D < 1``, so that however the path is keyframed, one decorrelation length of
-        motion brings about one bearing's information. None (the ``paper`` default): every
-        bearing counts in full.
+        Bearing errors of real sensors are serially correlated: sightings of a landmark from
+        nearly the same place and heading share much of their error (MRCLAM6 at 0.1 m / 10 deg
+        keyframes: correlation 0.66 between sightings less than 0.05 rad of parallax plus
+        turn apart, 0.38 at 0.05-0.1, 0.26 at 0.1-0.2, 0.11 beyond 0.4; docs/measurements.md).
+        An EKF that takes them as independent gains information in proportion to how often
+        the stream was keyframed, not to how much the geometry changed, and becomes
+        overconfident on dense streams. Here a bearing to landmark ``i`` is weighted by the
+        change of geometry since the last bearing of ``i`` that was used: ``D = (parallax +
+        |turn|) / decorrelation_rad``, the parallax being the angle at the landmark's
+        estimate between the two robot positions (scale-free); its variance is multiplied by
+        ``1 / D`` when ``D < 1``, so that however the path is keyframed, one decorrelation
+        angle of change brings about one bearing's information. None (the ``paper``
+        default): every bearing counts in full (the simulation's noise is white).
         """
         if self._decorr is None:
             return None
-        dist_m, turn_rad = self._decorr
-        pose = self.filter.x[:3]
+        x = self.filter.x
+        pose = x[:3]
         out = np.ones(len(ids))
-        for n, i in enumerate(ids.tolist()):
+        for n, (i, kind, off) in enumerate(zip(ids.tolist(), kinds.tolist(), offsets.tolist())):
             last = self._last_used.get(i)
-            if last is not None:
-                moved = (math.hypot(pose[0] - last[0], pose[1] - last[1]) / dist_m
-                         + abs(float(angle_residual(pose[2], last[2]))) / turn_rad)
-                out[n] = 1.0 / max(moved, 1e-9) if moved < 1.0 else 1.0
+            if last is None:
+                continue
+            if kind == 2:
+                lm = x[off:off + 2]
+            elif x[off + 3] > 0:
+                lm = invdepth_to_xy(x[None, off:off + 4])[0][0]
+            else:
+                lm = None
+            parallax = 0.0
+            if lm is not None:
+                a = math.atan2(pose[1] - lm[1], pose[0] - lm[0])
+                b = math.atan2(last[1] - lm[1], last[0] - lm[0])
+                parallax = abs(float(angle_residual(a, b)))
+            change = (parallax + abs(float(angle_residual(pose[2], last[2])))) / self._decorr
+            if change < 1.0:
+                out[n] = 1.0 / max(change, 1e-9)
         return out
 
     def _update_mapped(self, ids: np.ndarray, z: np.ndarray) -> np.ndarray:
@@ -438,7 +455,7 @@ class _EkfSlam:
             kinds = np.array([_SIZE[k] for k in kind_names], np.int64)
             offsets = np.array(offs, np.int64)
             seen = ids[in_state]
-            inflation = self._decorrelation(seen)
+            inflation = self._decorrelation(seen, kinds, offsets)
             gated = self._gated_update(np.zeros(len(found), np.int64), kinds, offsets,
                                        z[in_state], inflation)
             if inflation is not None:
@@ -477,8 +494,6 @@ class _EkfSlam:
                 raise FilterNumericalError(f"step {step.t}: {exc}") from None
         ids, z = step.landmark_ids, step.bearings_rad
         if ids.size:
-            if len(np.unique(ids)) != ids.size:
-                raise ConfigError(f"step {step.t}: a landmark id appears twice")
             in_state = self._update_mapped(ids, z)
             self._new_sightings(step.t, ids[~in_state], z[~in_state])
         self._last_t = step.t

@@ -192,3 +192,32 @@ def test_the_state_limit_refuses_before_allocating() -> None:
     with pytest.raises(StateLimitError, match=r"beyond its limit of 7; raise it with max_landmarks"):
         f.augment(np.ones(2), np.arange(3), np.zeros((2, 3)), np.eye(2), np.zeros(2, bool))
     assert f.dim == 7
+
+
+@pytest.mark.parametrize("z0", [0.6, np.pi - 0.01], ids=["plain", "across-pi"])
+def test_iterated_update_ends_with_filterpys_update_at_the_last_iterate(z0: float) -> None:
+    """The last step of the iterated update is filterpy's ``update`` with the model
+    linearised at the iterate, ``h_i + H_i (x - x_i)``, its residual wrapped after the linear
+    term (a bearing near +-pi and a large correction must not differ by 2 pi)."""
+    z, var = np.array([z0]), np.array([0.02 ** 2])
+    f, x0, p0 = _landmark_filter()
+    f.update(z, _model, var, iterations=2)
+    # the reference: one Gauss-Newton iterate by hand, then filterpy's update
+    h0, H0 = _bearing(x0), _bearing_jac(x0)
+    s = H0 @ p0 @ H0.T + np.diag(var)
+    xi = x0 + p0 @ H0.T @ np.linalg.solve(s, angle_residual(z, h0))
+    xi[2] = angle_residual(xi[2], 0.0)
+    h_i, H_i = _bearing(xi), _bearing_jac(xi)
+    ref = ExtendedKalmanFilter(dim_x=5, dim_z=1)
+    ref.x, ref.P = x0.copy(), p0.copy()
+
+    def diff(x: np.ndarray) -> np.ndarray:
+        d = x - xi
+        d[2] = angle_residual(x[2], xi[2])
+        return d
+
+    ref.update(z, HJacobian=lambda x: H_i, Hx=lambda x: h_i + H_i @ diff(x), R=np.diag(var),
+               residual=angle_residual)
+    ref.x[2] = angle_residual(ref.x[2], 0.0)
+    np.testing.assert_allclose(f.x, ref.x, rtol=0, atol=1e-10)
+    np.testing.assert_allclose(f.P, ref.P, rtol=0, atol=1e-12)
