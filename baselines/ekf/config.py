@@ -45,18 +45,6 @@ class BearingEkfConfig(Presets):
         ``8 n^2`` bytes (4000: 128 MB) and an update costs ``O(n^2)`` per bearing. A step that
         would exceed it is refused (:class:`~baselines.ekf.filter.StateLimitError`, before
         anything is allocated); raise it with ``--option max_state=N``.
-    decorrelation_rad : the change of viewing geometry (parallax at the landmark plus turn of
-        the robot, radians) over which bearing errors to one landmark decorrelate; a bearing
-        taken after less change since that landmark's last used bearing has its variance
-        scaled up, so that the information gained does not depend on the keyframing
-        (:meth:`~baselines.ekf.mappers._EkfSlam._decorrelation`). The ``real`` value, 0.1,
-        is where the correlation of MRCLAM6 bearing errors has fallen from 0.66 to about
-        0.3 (docs/measurements.md). None: every bearing is independent (the paper's
-        simulation, whose noise is white).
-    adaptive_sigma : scale the bearing variance (gate and update) by the median normalised
-        innovation of the bearings so far over the chi-square 1-dof median, never below 1:
-        a stream's sigma that is too small (a MAD estimate) does not gate good bearings
-        away or make the filter overconfident.
     restart_after_gated : an inverse-depth feature whose bearings fail the gate this many
         times in a row is dropped and started again from the current sighting (its first
         bearing was an outlier); counted in ``info["restarted"]``. None: never.
@@ -70,8 +58,6 @@ class BearingEkfConfig(Presets):
     iterations: int = 1
     restart_after_gated: int | None = None
     max_state: int = 4000
-    adaptive_sigma: bool = False
-    decorrelation_rad: float | None = None
 
     def __post_init__(self) -> None:
         if not 0 < self.gate_probability <= 1:
@@ -89,10 +75,6 @@ class BearingEkfConfig(Presets):
             if value is not None and not (math.isfinite(value) and value > 0):
                 raise ConfigError(f"{name} must be a finite number > 0 or None (from the "
                                   f"sensor range), got {value}")
-        if self.decorrelation_rad is not None and not (
-                math.isfinite(self.decorrelation_rad) and self.decorrelation_rad > 0):
-            raise ConfigError(f"decorrelation_rad must be a finite number > 0 or None, got "
-                              f"{self.decorrelation_rad}")
         for name in ("iterations", "restart_after_gated", "max_state"):
             value = getattr(self, name)
             if not ((value is None and name == "restart_after_gated")
@@ -101,8 +83,7 @@ class BearingEkfConfig(Presets):
 
 
 #: The overrides of the ``"real"`` preset both filters share.
-_REAL = {"max_bearing_nonlinearity": math.inf, "iterations": 2, "restart_after_gated": 3,
-         "decorrelation_rad": 0.1, "adaptive_sigma": True}
+_REAL = {"max_bearing_nonlinearity": math.inf, "iterations": 2, "restart_after_gated": 3}
 
 
 @dataclass(frozen=True)
