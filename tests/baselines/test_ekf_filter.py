@@ -12,13 +12,14 @@ import pytest
 from filterpy.kalman import ExtendedKalmanFilter
 from scipy.optimize import minimize
 
-from baselines.ekf import BearingEkf, EkfMapper
+import baselines.ekf.filter as filter_module
+from baselines.ekf import BearingEkf, EkfMapper, InverseDepthEkfMapper
 from baselines.ekf.filter import StateLimitError, rows_from_dense
 from baselines.ekf.models import bearing_and_jacobian, motion_jacobians
 from bomgraph.angles import angle_residual
 from bomgraph.errors import ConfigError
 from bomgraph.geometry import compose
-from bomgraph.sim import SimConfig, simulate
+from bomgraph.sim import RunSpec, SimConfig, simulate, simulate_run
 
 SMALL = SimConfig(n_landmarks=20, n_steps=80)
 
@@ -194,11 +195,11 @@ def test_the_state_limit_refuses_before_allocating() -> None:
     assert f.dim == 7
 
 
-@pytest.mark.parametrize("z0", [0.6, np.pi - 0.01], ids=["plain", "across-pi"])
+@pytest.mark.parametrize("z0", [0.6, np.pi - 0.01], ids=["small-innovation", "near-pi"])
 def test_iterated_update_ends_with_filterpys_update_at_the_last_iterate(z0: float) -> None:
     """The last step of the iterated update is filterpy's ``update`` with the model
     linearised at the iterate, ``h_i + H_i (x - x_i)``, its residual wrapped after the linear
-    term (a bearing near +-pi and a large correction must not differ by 2 pi)."""
+    term (the next test has a case where that matters)."""
     z, var = np.array([z0]), np.array([0.02 ** 2])
     f, x0, p0 = _landmark_filter()
     f.update(z, _model, var, iterations=2)
@@ -221,3 +222,53 @@ def test_iterated_update_ends_with_filterpys_update_at_the_last_iterate(z0: floa
     ref.x[2] = angle_residual(ref.x[2], 0.0)
     np.testing.assert_allclose(f.x, ref.x, rtol=0, atol=1e-10)
     np.testing.assert_allclose(f.P, ref.P, rtol=0, atol=1e-12)
+
+
+def _filterpy_iterated(f: BearingEkf, z: np.ndarray, model, var: np.ndarray, plain) -> tuple:
+    """The iterated update of two iterations as it was written on filterpy's dense ``update``:
+    one Gauss-Newton iterate, then ``update`` with ``h_i + H_i (x - x_i)``."""
+    def dense(rows, k: int, n: int) -> np.ndarray:
+        H = np.zeros((k, n))
+        for r, c, v in rows:
+            H[r[:, None], c] = v
+        return H
+
+    x0, p0, n, k = f.x.copy(), f.P.copy(), f.dim, len(z)
+    h0, rows0 = plain(x0)
+    H0 = dense(rows0, k, n)
+    s = H0 @ p0 @ H0.T + np.diag(var)
+    xi = x0 + p0 @ H0.T @ np.linalg.solve(s, angle_residual(z, h0))
+    xi[f._is_angle] = angle_residual(xi[f._is_angle], 0.0)
+    h_i, rows_i = model(xi)
+    H_i = dense(rows_i, k, n)
+    ref = ExtendedKalmanFilter(dim_x=n, dim_z=k)
+    ref.x, ref.P = x0, p0
+    ref.update(z, HJacobian=lambda x: H_i, Hx=lambda x: h_i + H_i @ f._difference(x, xi),
+               R=np.diag(var), residual=angle_residual)
+    x = ref.x.copy()
+    x[f._is_angle] = angle_residual(x[f._is_angle], 0.0)
+    return x, ref.P
+
+
+def test_iterated_update_of_a_mapper_run_is_filterpys_where_a_residual_passes_pi(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """At step 61 of this simulated run one bearing's linearised residual passes -pi (-8.06
+    rad unwrapped): wrapping it only before the linear term moved a feature by 0.09."""
+    stream = simulate_run(RunSpec(0, 0, 0), SimConfig())
+    m = InverseDepthEkfMapper(stream.header, preset="real")
+    seen = []
+    lean = filter_module.BearingEkf.update
+
+    def check(self, z, model, var, iterations=1, model_iterate=None, **kw):
+        if m._t == 61:
+            seen.append(_filterpy_iterated(self, np.asarray(z), model, np.asarray(var),
+                                           model_iterate))
+        lean(self, z, model, var, iterations, model_iterate, **kw)
+        if m._t == 61:
+            np.testing.assert_allclose(self.x, seen[-1][0], rtol=0, atol=1e-9)
+            np.testing.assert_allclose(self.P, seen[-1][1], rtol=0, atol=1e-12)
+
+    monkeypatch.setattr(filter_module.BearingEkf, "update", check)
+    for st in stream.steps[:62]:
+        m.step(st)
+    assert seen
