@@ -16,6 +16,11 @@ Usage::
                                 [--jobs 2] [--seed 0] [--out results/bench_ekf.json]
                                 [--option key=value ...]
 
+``--speed`` instead times, in one process with single-threaded BLAS, the CPU seconds per paper
+run (all steps and map estimates every 10 steps; the best of ``--repeat``) of each method and of
+the lean reference loop ``scripts/_ekf_lean.py`` (a bare numpy EKF-SLAM step on the same stream
+and state sizes), and prints the ratios; JSON to ``results/bench_ekf_speed.json``.
+
 ``--option preset=real`` runs the presets made for recordings (``EkfConfig.PRESETS``);
 options are parsed by ``bomgraph.jsonio.parse_options`` (``inf`` is a number). Prints a table and
 writes the numbers as JSON (``results/`` is git-ignored). docs/measurements.md holds what it
@@ -31,6 +36,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import argparse  # noqa: E402
 import json  # noqa: E402
+import math  # noqa: E402
 import platform  # noqa: E402
 import time  # noqa: E402
 import warnings  # noqa: E402
@@ -123,6 +129,35 @@ def summarise(runs: list[dict[str, Any]], n_steps: int) -> dict[str, Any]:
     }
 
 
+def speed(methods: list[str], n_runs: int, seed: int, n_steps: int, repeat: int,
+          options: dict[str, Any]) -> dict[str, Any]:
+    """CPU seconds per run of each method and of the lean loop, timed in this process."""
+    import sys
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from _ekf_lean import lean_ekf_slam
+
+    streams = [simulate_run(spec, SimConfig(n_steps=n_steps))
+               for spec in paper_design(seed)[:n_runs]]
+    cpu: dict[str, list[float]] = {m: [] for m in [*methods, "lean-loop"]}
+    for stream in streams:
+        truth_xy = dict(zip(stream.truth.landmark_ids.tolist(), stream.truth.landmarks_xy))
+        for name in cpu:
+            best = math.inf
+            for _ in range(repeat):
+                t0 = time.process_time()
+                if name == "lean-loop":
+                    lean_ekf_slam(stream.header, stream.steps, stream.truth.poses[0], truth_xy)
+                else:
+                    mapper = create_mapper(name, stream.header,
+                                           start_pose=tuple(stream.truth.poses[0]), **options)
+                    run(mapper, stream.steps, checkpoint_every=10, method=name)
+                best = min(best, time.process_time() - t0)
+            cpu[name].append(best)
+    lean = float(np.mean(cpu["lean-loop"]))
+    return {name: {"cpu_s_per_run": float(np.mean(v)), "runs": v,
+                   "ratio_to_lean_loop": float(np.mean(v)) / lean} for name, v in cpu.items()}
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--methods", nargs="+", default=["ekf", "ekf-invdepth"])
@@ -131,9 +166,29 @@ def main() -> None:
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--option", nargs="*", default=[], help="mapper option key=value")
-    ap.add_argument("--out", default="results/bench_ekf.json")
+    ap.add_argument("--out", default=None, help="JSON output (default results/bench_ekf.json, "
+                    "with --speed results/bench_ekf_speed.json)")
+    ap.add_argument("--speed", action="store_true", help="CPU per run vs the lean loop")
+    ap.add_argument("--repeat", type=int, default=3, help="--speed: best of this many")
     args = ap.parse_args()
     options = parse_options(args.option)
+    if args.speed:
+        n = min(args.runs, len(paper_design(args.seed)))
+        rep = speed(args.methods, n, args.seed, args.steps, args.repeat, options)
+        print(f"paper setup, {n} runs x {args.steps} steps, CPU s per run (best of "
+              f"{args.repeat}), single-threaded BLAS, load average {os.getloadavg()[0]:.1f}")
+        for name, row in rep.items():
+            print(f"{name:<14}{row['cpu_s_per_run']:8.3f} s  {row['ratio_to_lean_loop']:6.2f}x "
+                  f"the lean loop")
+        out = Path(args.out or "results/bench_ekf_speed.json")
+        out.parent.mkdir(parents=True, exist_ok=True)
+        out.write_text(json.dumps(jsonable({"setup": {"runs": n, "steps": args.steps,
+                                                      "repeat": args.repeat,
+                                                      "options": options},
+                                            "methods": rep}), allow_nan=False))
+        print(f"\nwrote {out}")
+        return
+    args.out = args.out or "results/bench_ekf.json"
     n_runs = min(args.runs, len(paper_design(args.seed)))
     report: dict[str, Any] = {"setup": {"design": "paper_design", "seed": args.seed,
                                         "runs": n_runs, "steps": args.steps,

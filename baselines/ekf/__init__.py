@@ -1,8 +1,9 @@
 """Bearing-only EKF-SLAM on filterpy: the paper's BOSLAM-EKF baseline (section IV, Exp. 2).
 
 ``models`` (motion and bearing models, Jacobians, Bailey's KL test, inverse depth), ``filter``
-(the filterpy wrapper), ``config`` (options and presets), ``mappers`` (``ekf``,
-``ekf-invdepth``).
+(the filter: filterpy's ``ExtendedKalmanFilter`` holds the state, lean block predict and
+sparse update), ``config`` (options and presets), ``slam`` (the machinery both mappers share),
+``mappers`` (``ekf``, ``ekf-invdepth``).
 """
 
 from .config import BearingEkfConfig, EkfConfig, InverseDepthConfig

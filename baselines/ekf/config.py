@@ -40,6 +40,11 @@ class BearingEkfConfig(Presets):
         Civera's ``0.1`` and ``0.5`` per metre when the range is unknown.
     iterations : 1: the EKF update; more: the iterated EKF
         (:meth:`~baselines.ekf.filter.BearingEkf.update`).
+    max_state : the largest filter state allowed (robot pose, landmarks ``[x, y]``, pose
+        clones, inverse-depth features ``[x0, y0, theta, rho]``); the covariance is dense,
+        ``8 n^2`` bytes (4000: 128 MB) and an update costs ``O(n^2)`` per bearing. A step that
+        would exceed it is refused (:class:`~baselines.ekf.filter.StateLimitError`, before
+        anything is allocated); raise it with ``--option max_state=N``.
     restart_after_gated : an inverse-depth feature whose bearings fail the gate this many
         times in a row is dropped and started again from the current sighting (its first
         bearing was an outlier); counted in ``info["restarted"]``. None: never.
@@ -52,6 +57,7 @@ class BearingEkfConfig(Presets):
     rho_sigma_per_m: float | None = None
     iterations: int = 1
     restart_after_gated: int | None = None
+    max_state: int = 4000
 
     def __post_init__(self) -> None:
         if not 0 < self.gate_probability <= 1:
@@ -69,7 +75,7 @@ class BearingEkfConfig(Presets):
             if value is not None and not (math.isfinite(value) and value > 0):
                 raise ConfigError(f"{name} must be a finite number > 0 or None (from the "
                                   f"sensor range), got {value}")
-        for name in ("iterations", "restart_after_gated"):
+        for name in ("iterations", "restart_after_gated", "max_state"):
             value = getattr(self, name)
             if not ((value is None and name == "restart_after_gated")
                     or (isinstance(value, (int, np.integer)) and value >= 1)):

@@ -1,55 +1,93 @@
-"""The filter of the EKF baselines: filterpy's ``ExtendedKalmanFilter`` with a state that grows
-and shrinks (paper section IV, Exp. 2).
+"""The filter of the EKF baselines: a state that grows and shrinks, held by filterpy's
+``ExtendedKalmanFilter``, with a predict and an update that exploit the structure of
+bearing-only SLAM (paper section IV, Exp. 2).
 
-:class:`BearingEkf` wraps ``filterpy.kalman.ExtendedKalmanFilter``: filterpy runs every predict
-and update; the wrapper builds it complete and resizes all its state-sized arrays together. The
-state is ``[x_m, y_m, psi_rad]`` of the robot followed by blocks the mappers lay out (landmarks
-``[x_m, y_m]``, pose clones ``[x_m, y_m, psi_rad]``, inverse-depth features ``[x0_m, y0_m,
-theta_rad, rho_per_m]``); it is 1-D, shape ``(n,)``.
+:class:`BearingEkf` keeps the state ``x`` (shape ``(n,)``) and covariance ``P`` (``(n, n)``) in a
+``filterpy.kalman.ExtendedKalmanFilter`` (``kf.x``, ``kf.P``; after an update also ``kf.y``,
+``kf.S``, ``kf.K``, ``kf.R`` of that batch). The state is ``[x_m, y_m, psi_rad]`` of the robot
+followed by blocks the mappers lay out (landmarks ``[x_m, y_m]``, pose clones ``[x_m, y_m,
+psi_rad]``, inverse-depth features ``[x0_m, y0_m, theta_rad, rho_per_m]``).
 
-- Predict: filterpy's ``predict`` is linear, so :class:`_OdometryEkf` overrides ``predict_x``
-  with ``pose ⊕ u`` and ``F`` is its Jacobian (identity outside the pose); the odometry noise
-  ``Sigma_u = diag(sigma_u**2)`` enters as ``Q = G Sigma_u G^T``
-  (:func:`~baselines.ekf.models.motion_jacobians`).
-- Update: a batch of bearings, ``residual=bomgraph.angles.angle_residual`` (innovations
-  straddling +-pi are small, never 2 pi), Joseph form ``P = (I-KH) P (I-KH)^T + K R K^T``;
-  optionally iterated (Gauss-Newton on the prior and the bearings; Bell and Cathey 1993).
+Which part of filterpy is used, and why: the ``ExtendedKalmanFilter`` object holds the state,
+and its ``update`` (``K = P H^T S^-1``, ``x + K y`` with a ``residual``, Joseph form) is the
+reference the lean update is tested against (tests/baselines/test_ekf_filter.py, to 1e-12).
+filterpy's ``predict`` and ``update`` are not called on the hot path: both are dense in the
+full state (``F P F^T`` and ``(I - KH) P (I - KH)^T`` are ``O(n^3)``) and copy ``x`` and ``P``
+four times per call, though ``F`` is the identity outside the pose block and a bearing touches
+5 (landmark) or 7 (inverse-depth feature) states. Here, in place on ``kf.x`` and ``kf.P``:
+
+- Predict: ``pose ⊕ u`` on ``x[:3]``; ``P_rr = F P_rr F^T + Q``, ``P_rm = F P_rm`` (the rest
+  of ``P`` is unchanged), ``Q = G Sigma_u G^T`` with ``Sigma_u = diag(sigma_u**2)``
+  (:func:`~baselines.ekf.models.motion_jacobians`). ``O(n)``.
+- Update: a batch of ``k`` bearings whose Jacobian is given by its nonzero blocks
+  (:data:`JacobianRows`); with ``U`` the states they touch, ``P H^T = P[:, U] H_U^T`` and
+  ``S = H_U P[U, U] H_U^T + R``; ``x += K y`` (``y`` wrapped by
+  :func:`bomgraph.angles.angle_residual`) and ``P -= W W^T`` with ``W = P H^T L^-T``,
+  ``S = L L^T``: the covariance of the optimal gain (equal to filterpy's Joseph form for it),
+  exactly symmetric. ``O(n^2 k)``. Optionally iterated (Gauss-Newton on the prior and the
+  bearings; Bell and Cathey 1993).
 - Observability constraints (OC-EKF, Huang, Mourikis and Roumeliotis, IJRR 2010): the
   nullspace ``N`` (n, 3) of global translation and rotation is carried with the state and the
   propagation Jacobian keeps ``F N_k = N_{k+1}``; the mappers linearise each bearing row so
   that ``h N = 0``.
+- Size: the state may not exceed ``max_state`` entries; :meth:`BearingEkf.augment` raises
+  :class:`StateLimitError` before allocating more (a dense ``n x n`` covariance of 8 ``n^2``
+  bytes).
 """
 
 from __future__ import annotations
 
 import math
-from typing import Any, Callable
+from typing import Callable, Sequence
 
 import numpy as np
 from filterpy.kalman import ExtendedKalmanFilter
+from scipy.linalg.lapack import dpotrf as _potrf, dtrtri as _trtri
 
 from bomgraph.angles import angle_residual, wrap_angle
-from bomgraph.errors import ConfigError
+from bomgraph.errors import BomgraphError, ConfigError
 from bomgraph.geometry import compose
 
 from .models import motion_jacobians
 
+#: A bearing Jacobian by its nonzero blocks: ``[(rows (m,), cols (m, s), values (m, s)), ...]``
+#: (``H[rows[i], cols[i, j]] = values[i, j]``; within one row the columns are distinct).
+JacobianRows = Sequence[tuple[np.ndarray, np.ndarray, np.ndarray]]
+#: ``x (n,) -> (h (k,), JacobianRows)``: predicted bearings and their Jacobian.
+BearingModel = Callable[[np.ndarray], tuple[np.ndarray, JacobianRows]]
 
-class _OdometryEkf(ExtendedKalmanFilter):
-    """filterpy's EKF whose state prediction is the nonlinear odometry composition.
 
-    ``predict(u)`` calls :meth:`predict_x` (here: ``pose ⊕ u`` on ``x[:3]``, the rest of the
-    state is static) and then ``P = F P F^T + Q`` with ``F`` and ``Q`` set by the caller.
-    """
+class StateLimitError(BomgraphError):
+    """The filter's state would exceed its declared size (``max_state``)."""
 
-    def predict_x(self, u: Any = 0) -> None:
-        x = self.x.copy()
-        x[:3] = compose(x[:3], u)
-        self.x = x
+
+class FilterNumericalError(BomgraphError):
+    """The filter met numbers it cannot represent (an overflowing covariance, a non-positive
+    innovation covariance); the state is left as it was before the failed operation."""
+
+
+def rows_from_dense(H: np.ndarray) -> JacobianRows:  # noqa: N803
+    """A dense Jacobian ``(k, n)`` as :data:`JacobianRows` (for tests and small models)."""
+    k, n = H.shape
+    return [(np.arange(k), np.broadcast_to(np.arange(n), (k, n)), H)]
+
+
+def _compact(rows: JacobianRows, k: int) -> tuple[np.ndarray, np.ndarray]:
+    """The states ``U`` a Jacobian touches (sorted) and the dense ``H_U`` of shape ``(k, |U|)``."""
+    everything = np.concatenate([c.ravel() for _, c, _ in rows]) if len(rows) > 1 \
+        else rows[0][1].ravel()
+    mark = np.zeros(everything.max() + 1, bool)
+    mark[everything] = True
+    cols = np.flatnonzero(mark)
+    position = np.cumsum(mark) - 1                   # state index -> column of H_U
+    hu = np.zeros((k, cols.size))
+    for r, c, v in rows:
+        hu[r[:, None], position[c]] = v
+    return cols, hu
 
 
 class BearingEkf:
-    """A planar bearing-only EKF on filterpy with a state that grows and shrinks.
+    """A planar bearing-only EKF with a state that grows and shrinks (held by filterpy).
 
     Parameters
     ----------
@@ -62,27 +100,26 @@ class BearingEkf:
     observability_constrained : bool
         Propagate with the OC-EKF Jacobian (the mappers always do; False gives the plain EKF
         predict, which the filter's own tests check).
-
-    Notes
-    -----
-    filterpy's arrays whose size follows the state (``x``, ``P``, ``F``, ``Q``, ``_I``, ``K``,
-    ``x_prior``, ``x_post``, ``P_prior``, ``P_post``, ``dim_x``) are all resized together in
-    :meth:`_set_state`. ``B`` stays filterpy's scalar 0: the control enters through
-    ``predict_x``, not through a linear ``B u``. ``dim_z``, ``y``, ``S``, ``SI`` follow the
-    size of the last batch of bearings.
+    max_state : int, optional
+        The largest state allowed (:class:`StateLimitError` beyond it); None: no limit.
+    limit_hint : str
+        Appended to the :class:`StateLimitError` message (which option raises the limit).
     """
 
     def __init__(self, pose0: np.ndarray, pose_cov0: np.ndarray,
-                 bearing_sigma_rad: float, observability_constrained: bool = False) -> None:
+                 bearing_sigma_rad: float, observability_constrained: bool = False,
+                 max_state: int | None = None, limit_hint: str = "") -> None:
         pose0 = np.asarray(pose0, dtype=float).reshape(3)
         pose_cov0 = np.asarray(pose_cov0, dtype=float).reshape(3, 3)
         if not (np.all(np.isfinite(pose0)) and np.all(np.isfinite(pose_cov0))):
             raise ConfigError("BearingEkf: the initial pose and its covariance must be finite")
-        if not (math.isfinite(bearing_sigma_rad) and bearing_sigma_rad > 0):
-            raise ConfigError(f"BearingEkf: bearing_sigma_rad must be > 0, got "
-                              f"{bearing_sigma_rad}")
+        if not (math.isfinite(bearing_sigma_rad) and 0 < bearing_sigma_rad <= math.pi):
+            raise ConfigError(f"BearingEkf: bearing_sigma_rad must be in (0, pi] (a larger "
+                              f"sigma carries no information), got {bearing_sigma_rad}")
         self.bearing_sigma_rad = float(bearing_sigma_rad)
-        self.kf = _OdometryEkf(dim_x=3, dim_z=1, dim_u=3)
+        self.max_state = max_state
+        self._limit_hint = limit_hint
+        self.kf = ExtendedKalmanFilter(dim_x=3, dim_z=1)
         self.kf.R = np.eye(1) * self.bearing_sigma_rad ** 2
         self._is_angle = np.array([False, False, True])
         self.observability_constrained = bool(observability_constrained)
@@ -95,7 +132,7 @@ class BearingEkf:
     # -- read access ------------------------------------------------------------------------
     @property
     def x(self) -> np.ndarray:
-        """The state, shape ``(n,)`` (a view of filterpy's; do not modify)."""
+        """The state, shape ``(n,)`` (filterpy's array; do not modify)."""
         return self.kf.x
 
     @property
@@ -109,29 +146,24 @@ class BearingEkf:
 
     # -- structure --------------------------------------------------------------------------
     def _set_state(self, x: np.ndarray, P: np.ndarray) -> None:  # noqa: N803
-        kf = self.kf
-        n = len(x)
-        kf.dim_x = n
-        kf.x = x
-        kf.P = P
-        kf.F = np.eye(n)
-        kf.Q = np.zeros((n, n))
-        kf._I = np.eye(n)
-        kf.K = np.zeros((n, kf.dim_z))
-        kf.x_prior = x.copy()
-        kf.x_post = x.copy()
-        kf.P_prior = P.copy()
-        kf.P_post = P.copy()
-
-    def _wrap(self) -> None:
-        x = self.kf.x
-        x[self._is_angle] = wrap_angle(x[self._is_angle])
+        self.kf.dim_x = len(x)
+        self.kf.x = x
+        self.kf.P = P
 
     def _difference(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
         """``a - b`` with the angle states differenced by ``angle_residual``."""
         d = a - b
         d[self._is_angle] = angle_residual(a[self._is_angle], b[self._is_angle])
         return d
+
+    def check_room(self, m: int) -> None:
+        """Raise :class:`StateLimitError` if ``m`` more states would exceed ``max_state``."""
+        n = self.dim
+        if self.max_state is not None and n + m > self.max_state:
+            raise StateLimitError(
+                f"the EKF state would grow to {n + m} entries (a dense covariance of "
+                f"{8 * (n + m) ** 2 / 2 ** 30:.2f} GiB), beyond its limit of {self.max_state}"
+                f"{self._limit_hint}")
 
     def augment(self, value: np.ndarray, idx: np.ndarray, jac: np.ndarray,
                 noise_cov: np.ndarray, is_angle: np.ndarray) -> int:
@@ -144,7 +176,7 @@ class BearingEkf:
             The existing states ``g`` depends on.
         jac : array of shape (m, k)
             ``dg/dx[idx]``.
-        noise_cov : array of shape (m, m)
+        noise_cov : array of shape (m, m), or (m,) for a diagonal one
             ``(dg/dw) Cov(w) (dg/dw)^T``.
         is_angle : bool array of shape (m,)
             Which new states are angles (wrapped after every update).
@@ -153,20 +185,33 @@ class BearingEkf:
         -------
         int
             The index of the first new state.
+
+        Raises
+        ------
+        StateLimitError
+            If ``n + m`` exceeds ``max_state`` (checked before anything is allocated).
         """
         P = self.kf.P
         n, m = self.dim, len(value)
+        self.check_room(m)
         cross = P[:, idx] @ jac.T
         new_p = np.empty((n + m, n + m))
         new_p[:n, :n] = P
         new_p[:n, n:] = cross
         new_p[n:, :n] = cross.T
-        blk = jac @ cross[idx] + noise_cov
+        blk = jac @ cross[idx]
+        noise_cov = np.asarray(noise_cov, float)
+        if noise_cov.ndim == 1:
+            blk[np.diag_indices(m)] += noise_cov
+        else:
+            blk += noise_cov
         new_p[n:, n:] = 0.5 * (blk + blk.T)
-        self._is_angle = np.concatenate([self._is_angle, np.asarray(is_angle, bool)])
+        angle = np.asarray(is_angle, bool)
+        self._is_angle = np.concatenate([self._is_angle, angle])
         self.nullspace = np.concatenate([self.nullspace, jac @ self.nullspace[idx]])
-        self._set_state(np.concatenate([self.kf.x, np.asarray(value, float)]), new_p)
-        self._wrap()
+        new_x = np.concatenate([self.kf.x, np.asarray(value, float)])
+        new_x[n:][angle] = wrap_angle(new_x[n:][angle])
+        self._set_state(new_x, new_p)
         return n
 
     def remove(self, idx: np.ndarray) -> None:
@@ -177,11 +222,13 @@ class BearingEkf:
             raise ConfigError("BearingEkf.remove: the robot pose (states 0..2) cannot be removed")
         self._is_angle = self._is_angle[keep]
         self.nullspace = self.nullspace[keep]
-        self._set_state(self.kf.x[keep], self.kf.P[np.ix_(keep, keep)])
+        k = np.flatnonzero(keep)
+        self._set_state(self.kf.x[k], self.kf.P[k[:, None], k])
 
     # -- filtering --------------------------------------------------------------------------
     def predict(self, odom: np.ndarray, odom_sigma: np.ndarray) -> None:
-        """filterpy's predict with the odometry model: ``F = dF/dx``, ``Q = G Sigma_u G^T``.
+        """Odometry predict on the pose block: ``x_r = x_r ⊕ u``, ``P_rr = F P_rr F^T + Q``,
+        ``P_rm = F P_rm`` (``F = d(x_r ⊕ u)/dx_r``, ``Q = G Sigma_u G^T``).
 
         With ``observability_constrained`` the heading column of ``F`` is
         ``J (p_{k+1|k} - a_k)`` where ``a_k`` is the position the nullspace's rotation
@@ -189,79 +236,100 @@ class BearingEkf:
         so that ``F N_k`` is again the nullspace of a rigid motion at the new prior position.
         ``N`` is propagated with the same ``F``.
         """
-        kf = self.kf
+        x, P = self.kf.x, self.kf.P
         odom = np.asarray(odom, float)
-        f_pose, g_odom = motion_jacobians(kf.x[:3], odom)
+        f_pose, g_odom = motion_jacobians(x[:3], odom)
+        new_pose = compose(x[:3], odom)
         if self.observability_constrained:
-            anchor = np.array([self.nullspace[1, 2], -self.nullspace[0, 2]])
-            d = compose(kf.x[:3], odom)[:2] - anchor
-            f_pose[0, 2], f_pose[1, 2] = -d[1], d[0]
+            # the anchor a_k = [N[1, 2], -N[0, 2]]; the column is J (p_{k+1|k} - a_k)
+            f_pose[0, 2] = -(new_pose[1] + self.nullspace[0, 2])
+            f_pose[1, 2] = new_pose[0] - self.nullspace[1, 2]
         self.nullspace[:3] = f_pose @ self.nullspace[:3]
-        # F = I and Q = 0 outside the pose block (as _set_state made them; filterpy keeps them)
-        kf.F[:3, :3] = f_pose
-        kf.Q[:3, :3] = (g_odom * np.asarray(odom_sigma, float) ** 2) @ g_odom.T
-        kf.predict(u=odom)
-        self._wrap()
+        with np.errstate(over="ignore", invalid="ignore"):
+            q = (g_odom * np.asarray(odom_sigma, float) ** 2) @ g_odom.T
+            rr = f_pose @ P[:3, :3] @ f_pose.T + q
+            rm = f_pose @ P[:3, 3:]
+        if not (np.all(np.isfinite(rr)) and np.all(np.isfinite(rm))
+                and np.all(np.isfinite(new_pose))):
+            raise FilterNumericalError(
+                f"the predicted pose or its covariance overflows (odometry {odom.tolist()}, "
+                f"sigma {np.asarray(odom_sigma, float).tolist()}): the odometry or its sigma "
+                f"is beyond what the filter can represent")
+        P[:3, :3] = 0.5 * (rr + rr.T)
+        if len(x) > 3:
+            P[:3, 3:] = rm
+            P[3:, :3] = rm.T
+        x[:3] = new_pose
 
-    def update(self, z_rad: np.ndarray, hx: Callable[[np.ndarray], np.ndarray],
-               jac: Callable[[np.ndarray], np.ndarray],
+    def update(self, z_rad: np.ndarray, model: BearingModel,
                var_rad2: np.ndarray | None = None, iterations: int = 1,
-               jac_iterate: Callable[[np.ndarray], np.ndarray] | None = None) -> None:
-        """One batched bearing update by filterpy (Joseph form, wrapped residual).
+               model_iterate: BearingModel | None = None,
+               innovation: np.ndarray | None = None) -> None:
+        """One batched bearing update, in place on filterpy's ``x`` and ``P``.
 
         Parameters
         ----------
         z_rad : array of shape (k,)
-        hx : callable ``x (n,) -> (k,)`` predicted bearings
-        jac : callable ``x (n,) -> (k, n)`` their Jacobian
+        model : callable ``x (n,) -> (h (k,), JacobianRows)``
+            Predicted bearings and their sparse Jacobian (:data:`JacobianRows`).
         var_rad2 : array of shape (k,), optional
             Variance of each bearing (default ``bearing_sigma_rad**2``); ``R = diag(var)``.
         iterations : int
             1: the EKF update. More: the iterated EKF (Gauss-Newton on the prior and the
             bearings; Bell and Cathey 1993): ``x_{i+1} = x_0 + K_i (z - h(x_i) - H_i (x_0 -
-            x_i))`` with ``H_i``, ``K_i`` at ``x_i``. filterpy makes the last step, given the
+            x_i))`` with ``H_i``, ``K_i`` at ``x_i``. The last step is the EKF update with the
             model linearised at the last iterate, ``h(x_i) + H_i (x - x_i)``, so ``P`` is
-            ``(I - K_i H_i) P_0`` in Joseph form. Stops early once an iterate moves less
-            than 1e-10.
-        jac_iterate : callable, optional
-            The Jacobian for the iterates (default ``jac``); ``jac`` is used for the last
+            ``(I - K_i H_i) P_0``. Stops early once an iterate moves less than 1e-10.
+        model_iterate : callable, optional
+            The model for the iterates (default ``model``); ``model`` is used for the last
             step. (The mappers iterate with the model's own Jacobian and make the last step
             with the observability-constrained one.)
+        innovation : array of shape (k,), optional
+            ``angle_residual(z, h(x))`` at the current state if the caller has it already.
         """
         kf = self.kf
-        k = len(z_rad)
+        x0, P = kf.x, kf.P
         z = np.asarray(z_rad, float)
-        if var_rad2 is None:
-            var_rad2 = np.full(k, self.bearing_sigma_rad ** 2)
-        kf.dim_z = k
-        r = np.diag(np.asarray(var_rad2, float))
-        kf.R = r
-        x0 = kf.x.copy()
+        k = len(z)
+        var = (np.full(k, self.bearing_sigma_rad ** 2) if var_rad2 is None
+               else np.asarray(var_rad2, float))
         xi = x0
-        jac_it = jac if jac_iterate is None else jac_iterate
+        it_model = model if model_iterate is None else model_iterate
         for _ in range(int(iterations) - 1):
-            H = jac_it(xi)
-            dx = self._difference(x0, xi)
-            y = np.asarray(angle_residual(z, hx(xi))) - H @ dx
-            s = H @ kf.P @ H.T + r
-            step = kf.P @ H.T @ np.linalg.solve(s, y)
-            x_next = x0 + step
+            h, rows = it_model(xi)
+            cols, hu = _compact(rows, k)
+            y = np.asarray(angle_residual(z, h)) - hu @ self._difference(x0, xi)[cols]
+            hp = hu @ P[cols]                                     # H P, (k, n)
+            s = hp[:, cols] @ hu.T + np.diag(var)
+            x_next = x0 + np.linalg.solve(s, y) @ hp
             x_next[self._is_angle] = wrap_angle(x_next[self._is_angle])
             converged = np.max(np.abs(self._difference(x_next, xi))) < 1e-10
             xi = x_next
             if converged:
                 break
-        if xi is x0:
-            kf.update(z, HJacobian=jac, Hx=hx, R=r, residual=angle_residual)
+        h, rows = model(xi)
+        cols, hu = _compact(rows, k)
+        if xi is not x0:           # the model linearised at x_i, h_i + H_i (x_0 - x_i)
+            y = np.asarray(angle_residual(z, h + hu @ self._difference(x0, xi)[cols]))
         else:
-            h_i, H_i = hx(xi), jac(xi)
-            kf.update(z, HJacobian=lambda x: H_i,
-                      Hx=lambda x: h_i + H_i @ self._difference(x, xi), R=r,
-                      residual=angle_residual)
-        kf.P = 0.5 * (kf.P + kf.P.T)
-        kf.P_post = kf.P.copy()
-        self._wrap()
-        kf.x_post = kf.x.copy()
+            y = np.asarray(angle_residual(z, h)) if innovation is None else innovation
+        hp = hu @ P[cols]                                         # H P = (P H^T)^T, (k, n)
+        s = hp[:, cols] @ hu.T
+        s = 0.5 * (s + s.T)
+        s[np.diag_indices(k)] += var                              # S = H P H^T + R
+        chol, info = _potrf(s, lower=1)                           # S = L L^T
+        if info == 0:
+            l_inv, info = _trtri(chol, lower=1)
+        if info != 0 or not (np.all(np.isfinite(chol)) and np.all(np.isfinite(hp))
+                             and np.all(np.isfinite(y))):
+            raise FilterNumericalError("the innovation covariance of the bearing update is not "
+                                       "positive definite or not finite (the update is skipped)")
+        w_t = l_inv @ hp                                          # L^-1 H P = W^T, (k, n)
+        x0 += (l_inv @ y) @ w_t                                   # x + K y, K = W L^-1
+        x0[self._is_angle] = wrap_angle(x0[self._is_angle])
+        P -= w_t.T @ w_t                                          # P - K S K^T (symmetric)
+        kf.S, kf.y = s, y
 
 
-__all__ = ["BearingEkf"]
+__all__ = ["BearingEkf", "BearingModel", "FilterNumericalError", "JacobianRows",
+           "StateLimitError", "rows_from_dense"]

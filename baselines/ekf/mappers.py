@@ -19,7 +19,7 @@ setup):
   second_order_variance`), taken in the robot's frame: a rotation of the map and the robot
   together changes no bearing, so an uncertain global heading does not count;
 * observability constraints (OC-EKF): every measurement row is linearised at the closest
-  point with ``h N = 0`` (:meth:`_EkfSlam._constrain`);
+  point with ``h N = 0`` (:meth:`~baselines.ekf.slam.EkfSlam._constrain`);
 * Bailey's intermediate bearings (below).
 
 Constrained (delayed) initialisation, ``ekf``
@@ -52,7 +52,9 @@ Inverse depth, ``ekf-invdepth``
     position, ``theta = psi + z``, ``rho ~ N(rho_init, rho_sigma^2)``); it is converted to a
     Euclidean ``[x, y]`` block once Civera's linearity index ``4 sigma_d / d |cos alpha|``
     falls below ``linearity_max``. Features still in inverse depth are reported through the
-    same conversion by ``estimate()`` (those with ``rho <= 0`` are left out). The prior on
+    same conversion by ``estimate()``; left out are those with ``rho <= 0`` and those whose
+    depth the bearings have not determined (the std. dev. of ``rho`` still above half its
+    prior's: no parallax yet, e.g. from a robot that has not moved). The prior on
     ``rho`` makes it inexact on noise-free data and it is less consistent than ``ekf``.
 
 Iterated update (``iterations > 1``)
@@ -64,347 +66,20 @@ Iterated update (``iterations > 1``)
 
 from __future__ import annotations
 
-import math
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
-from scipy.stats import chi2
 
-from bomgraph.angles import angle_residual, wrap_angle
+from bomgraph.angles import angle_residual
 from bomgraph.config import resolve
-from bomgraph.errors import ConfigError
-from bomgraph.mapper import MapEstimate
-from bomgraph.stream import Step, StreamHeader
+from bomgraph.stream import StreamHeader
 
-from .config import BearingEkfConfig, EkfConfig, InverseDepthConfig
-from .filter import BearingEkf
-from .models import (bearing_and_jacobian, invdepth_bearing_and_jacobian,
-                     invdepth_conversion_kl, invdepth_to_xy, second_order_variance,
-                     triangulation_kl)
-
-_LM, _CLONE, _IDP = "lm", "clone", "idp"
-_SIZE = {_LM: 2, _CLONE: 3, _IDP: 4}
+from .config import EkfConfig, InverseDepthConfig
+from .models import invdepth_conversion_kl, invdepth_to_xy, triangulation_kl
+from .slam import _CLONE, _IDP, _LM, EkfSlam
 
 
-class _EkfSlam:
-    """Shared machinery: state layout, predict, gated batch update, trajectory, estimate."""
-
-    def __init__(self, header: StreamHeader, start_pose: tuple[float, float, float],
-                 config: BearingEkfConfig) -> None:
-        self._header = header
-        self.filter = BearingEkf(np.asarray(start_pose, dtype=float),
-                                 np.diag(np.asarray(config.initial_pose_sigma, float) ** 2),
-                                 header.bearing_sigma_rad, observability_constrained=True)
-        p = config.gate_probability
-        self._gate = float(chi2.ppf(p, 1)) if p < 1 else np.inf
-        self._iterations = int(config.iterations)
-        rng_m = header.sensor_range_m
-        self.rho_init = config.rho_init_per_m or (2.0 / rng_m if rng_m else 0.1)
-        self.rho_sigma = config.rho_sigma_per_m or (1.0 / rng_m if rng_m else 0.5)
-        self.n_converted = 0
-        self.n_restarted = 0
-        self._restart_after = config.restart_after_gated or math.inf
-        self._gated_run: dict[int, int] = {}          # inverse-depth feature -> gated in a row
-        self._sizes: dict[tuple[str, int], int] = {}
-        self._offset: dict[tuple[str, int], int] = {}
-        self._last_t: int | None = None
-        self._pose_t: list[int] = []
-        self._poses: list[np.ndarray] = []
-        self._pose_covs: list[np.ndarray] = []
-        self.n_gated = 0
-        self.n_updates = 0
-        self.n_nonlinear = 0
-        self._max_nonlin = float(config.max_bearing_nonlinearity)
-
-    # -- layout -----------------------------------------------------------------------------
-    def _rebuild(self) -> None:
-        off = 3
-        self._offset = {}
-        for key, size in self._sizes.items():
-            self._offset[key] = off
-            off += size
-        if off != self.filter.dim:
-            raise RuntimeError("internal: state layout and filter size disagree")
-
-    def _add_blocks(self, keys: list[tuple[str, int]], value: np.ndarray, idx: np.ndarray,
-                    jac: np.ndarray, noise_cov: np.ndarray) -> None:
-        is_angle = np.zeros(len(value), bool)
-        pos = 0
-        for key in keys:
-            size = _SIZE[key[0]]
-            if key[0] in (_CLONE, _IDP):
-                is_angle[pos + 2] = True
-            pos += size
-        self.filter.augment(value, idx, jac, noise_cov, is_angle)
-        for key in keys:
-            self._sizes[key] = _SIZE[key[0]]
-        self._rebuild()
-
-    def _remove_blocks(self, keys: list[tuple[str, int]]) -> None:
-        if not keys:
-            return
-        idx = np.concatenate([self._offset[k] + np.arange(self._sizes[k]) for k in keys])
-        self.filter.remove(idx)
-        for k in keys:
-            del self._sizes[k]
-        self._rebuild()
-
-    def _block_index(self, offsets: np.ndarray, size: int) -> np.ndarray:
-        return np.asarray(offsets, np.int64)[:, None] + np.arange(size)
-
-    # -- measurement model ------------------------------------------------------------------
-    def _model(self, pose_off: np.ndarray, kinds: np.ndarray, offsets: np.ndarray,
-               constrained: bool = True
-               ) -> Callable[[np.ndarray], tuple[np.ndarray, np.ndarray, list[Any]]]:
-        """The bearing model for filterpy, memoised on ``x``.
-
-        Bearings are taken from the poses at ``pose_off`` (0: the robot, else a clone) to the
-        blocks at ``offsets`` of size ``kinds`` (2: Euclidean landmark, 4: inverse-depth
-        feature). The returned function maps ``x`` to ``h (k,)``, the dense Jacobian
-        ``H (k, n)`` and its nonzero part as ``[(row mask, columns (m, s), values (m, s))]``
-        per kind (observability-constrained when ``constrained``).
-        """
-        k = len(offsets)
-        groups = []
-        for size, fn in ((2, bearing_and_jacobian), (4, invdepth_bearing_and_jacobian)):
-            sel = kinds == size
-            if sel.any():
-                cols = np.concatenate([self._block_index(pose_off[sel], 3),
-                                       self._block_index(offsets[sel], size)], 1)
-                groups.append((sel, np.flatnonzero(sel)[:, None], cols, fn))
-        memo: dict[str, Any] = {}
-
-        def both(x: np.ndarray) -> tuple[np.ndarray, np.ndarray, list[Any]]:
-            if "x" in memo and np.array_equal(memo["x"], x):
-                return memo["h"], memo["H"], memo["parts"]
-            h = np.empty(k)
-            H = np.zeros((k, len(x)))
-            parts = []
-            for sel, rows, cols, fn in groups:
-                v = x[cols]
-                h[sel], j = fn(v[:, :3], v[:, 3:])
-                if constrained:
-                    j = self._constrain(j, cols)
-                H[rows, cols] = j
-                parts.append((sel, cols, j))
-            memo.update(x=x.copy(), h=h, H=H, parts=parts)
-            return h, H, parts
-
-        return both
-
-    def _constrain(self, jac: np.ndarray, cols: np.ndarray) -> np.ndarray:
-        """Jacobian rows that satisfy ``h N = 0`` (observability-constrained EKF).
-
-        ``N`` (n, 3) spans global translation and rotation of the linearised system
-        (:attr:`BearingEkf.nullspace`); keeping ``H N = 0`` at every step keeps them
-        unobservable, so the filter gains no spurious information about them (Huang, Mourikis
-        and Roumeliotis, IJRR 2010). A row to a Euclidean landmark keeps its direction and is
-        linearised at the closest point that satisfies the constraint: with ``u`` the unit
-        vector of the current ray and ``a_l``, ``a_p`` the positions the landmark's and the
-        pose's rows of ``N`` are anchored at, ``h_l = J u / L``, ``h_p = -h_l``,
-        ``h_psi = -1`` with ``L = u . (a_l - a_p)``. Other rows (inverse-depth features, or
-        ``L <= 0``) are projected, ``h <- h - (h N_S)(N_S^T N_S)^-1 N_S^T`` over their own
-        columns ``S``.
-
-        Parameters
-        ----------
-        jac : array of shape (m, s)
-            Rows over the columns ``cols`` (pose first, then the landmark block).
-        cols : int array of shape (m, s)
-
-        Returns
-        -------
-        ndarray of shape (m, s)
-        """
-        N = self.filter.nullspace
-        out = jac.copy()
-        project = np.ones(len(jac), bool)
-        if jac.shape[1] == 5:
-            h_l = jac[:, 3:5]                                    # J u / |r|
-            u = np.stack([h_l[:, 1], -h_l[:, 0]], 1)
-            u /= np.sqrt(np.einsum("ki,ki->k", u, u))[:, None]
-            a_l = np.stack([N[cols[:, 4], 2], -N[cols[:, 3], 2]], 1)
-            a_p = np.stack([N[cols[:, 1], 2], -N[cols[:, 0], 2]], 1)
-            length = np.einsum("ki,ki->k", u, a_l - a_p)
-            ok = length > 1e-6
-            new_l = np.stack([-u[ok, 1], u[ok, 0]], 1) / length[ok, None]
-            out[ok, 3:5] = new_l
-            out[ok, 0:2] = -new_l
-            project = ~ok
-        if project.any():
-            ns = N[cols[project]]                                # (m, s, 3)
-            h = jac[project]
-            gram = np.einsum("msi,msj->mij", ns, ns)
-            coef = np.linalg.solve(gram, np.einsum("ms,msi->mi", h, ns)[..., None])[..., 0]
-            out[project] = h - np.einsum("msi,mi->ms", ns, coef)
-        return out
-
-    def _gated_update(self, pose_off: np.ndarray, kinds: np.ndarray, offsets: np.ndarray,
-                      z: np.ndarray) -> np.ndarray:
-        """Gate each bearing on its own NIS, then one batched filterpy update with the rest.
-
-        The NIS of bearing ``i`` is ``y_i^2 / (H_i P H_i^T + var_i)`` with the wrapped
-        innovation ``y_i`` and the variance ``var_i`` of
-        :func:`~baselines.ekf.models.second_order_variance`; it is compared with the
-        chi-square 1-dof quantile. Bearings past ``max_bearing_nonlinearity`` are not used.
-        With ``iterations > 1`` the iterates of the iterated update use the model's own
-        Jacobians and only the last step the observability-constrained ones.
-
-        Returns
-        -------
-        ndarray of shape (k,), bool
-            The bearings that failed the gate.
-        """
-        model = self._model(pose_off, kinds, offsets)
-        x, P = self.filter.x, self.filter.P
-        h, _, parts = model(x)
-        var = np.full(len(z), self.filter.bearing_sigma_rad ** 2)
-        index = np.zeros(len(z))
-        hph = np.zeros(len(z))
-        for sel, cols, j in parts:
-            block = P[cols[:, :, None], cols[:, None, :]]          # (m, s, s)
-            hph[sel] = np.einsum("mi,mij,mj->m", j, block, j)
-            var[sel], index[sel] = second_order_variance(x[cols], block,
-                                                         self.filter.bearing_sigma_rad)
-        usable = index <= self._max_nonlin
-        gated = (np.asarray(angle_residual(z, h)) ** 2 / (hph + var) > self._gate) & usable
-        self.n_nonlinear += int(np.count_nonzero(~usable))
-        self.n_gated += int(np.count_nonzero(gated))
-        keep = usable & ~gated
-        if keep.any():
-            # filterpy evaluates hx and jac at this same x: the memo computes them once
-            plain = (self._model(pose_off, kinds, offsets, constrained=False)
-                     if self._iterations > 1 else model)
-            self.filter.update(z[keep], lambda x: model(x)[0][keep],
-                               lambda x: model(x)[1][keep], var[keep], self._iterations,
-                               lambda x: plain(x)[1][keep])
-            self.n_updates += int(np.count_nonzero(keep))
-        return gated
-
-    # -- inverse-depth features ---------------------------------------------------------------
-    def _add_inverse_depth(self, ids: np.ndarray, z: np.ndarray) -> None:
-        """Add first sightings as inverse-depth features anchored at the robot (Civera):
-        ``[x, y, psi + z, rho_init]`` with ``rho ~ N(rho_init, rho_sigma^2)``."""
-        if ids.size:
-            m = ids.size
-            x = self.filter.x
-            value = np.column_stack([np.broadcast_to(x[:2], (m, 2)), wrap_angle(x[2] + z),
-                                     np.full(m, self.rho_init)]).ravel()
-            g = np.tile(np.vstack([np.eye(3), np.zeros((1, 3))]), (m, 1))      # (4m, 3)
-            noise = np.diag(np.tile([0.0, 0.0, self.filter.bearing_sigma_rad ** 2,
-                                     self.rho_sigma ** 2], m))
-            self._add_blocks([(_IDP, int(i)) for i in ids], value, np.arange(3), g, noise)
-
-    def _idp_blocks(self) -> tuple[list[tuple[str, int]], np.ndarray]:
-        keys = [k for k in self._sizes if k[0] == _IDP]
-        bi = self._block_index(np.array([self._offset[k] for k in keys], np.int64), 4)
-        return keys, bi
-
-    def _convert(self, ready: Callable[[np.ndarray, np.ndarray], np.ndarray]) -> None:
-        """Replace the inverse-depth features that ``ready(features (k, 4), covs (k, 4, 4))``
-        selects by Euclidean ``[x, y]`` blocks (the exact linear map of their Gaussian)."""
-        keys, bi = self._idp_blocks()
-        if not keys:
-            return
-        x, P = self.filter.x, self.filter.P
-        f = x[bi]
-        sel = np.flatnonzero(ready(f, P[bi[:, :, None], bi[:, None, :]]) & (f[:, 3] > 0))
-        if sel.size == 0:
-            return
-        pts, jac = invdepth_to_xy(f[sel])
-        m = sel.size
-        idx = bi[sel].ravel()
-        g = np.zeros((2 * m, 4 * m))
-        rows = 2 * np.arange(m)[:, None] + np.arange(2)
-        cols = 4 * np.arange(m)[:, None] + np.arange(4)
-        g[rows[:, :, None], cols[:, None, :]] = jac
-        old = [keys[s] for s in sel]
-        self._add_blocks([(_LM, k[1]) for k in old], pts.ravel(), idx, g,
-                         np.zeros((2 * m, 2 * m)))
-        self._remove_blocks(old)
-        for k in old:
-            self._gated_run.pop(k[1], None)
-        self.n_converted += m
-
-    def _update_mapped(self, ids: np.ndarray, z: np.ndarray) -> np.ndarray:
-        """Gate and apply the bearings to landmarks in the state; returns the mask of those."""
-        in_state = np.zeros(len(ids), bool)
-        kinds = np.zeros(len(ids), np.int64)
-        offsets = np.zeros(len(ids), np.int64)
-        for n, i in enumerate(ids.tolist()):
-            for kind in (_LM, _IDP):
-                off = self._offset.get((kind, i))
-                if off is not None:
-                    in_state[n], kinds[n], offsets[n] = True, _SIZE[kind], off
-        if np.any(in_state):
-            gated = self._gated_update(np.zeros(np.count_nonzero(in_state), np.int64),
-                                       kinds[in_state], offsets[in_state], z[in_state])
-            # an inverse-depth feature gated again and again was started from an outlier:
-            # drop it; the current sighting starts it again (as a new sighting)
-            restart = []
-            for i, kind, g in zip(ids[in_state].tolist(), kinds[in_state].tolist(),
-                                  gated.tolist()):
-                if kind == _SIZE[_IDP]:
-                    run_length = self._gated_run.get(i, 0) + 1 if g else 0
-                    self._gated_run[i] = run_length
-                    if run_length >= self._restart_after:
-                        restart.append(i)
-            if restart:
-                self._remove_blocks([(_IDP, i) for i in restart])
-                for i in restart:
-                    del self._gated_run[i]
-                in_state &= ~np.isin(ids, restart)
-                self.n_restarted += len(restart)
-        return in_state
-
-    # -- the Mapper protocol ----------------------------------------------------------------
-    def step(self, step: Step) -> None:
-        """Predict with the step's odometry, update with its bearings, grow the map."""
-        if self._last_t is not None and step.t <= self._last_t:
-            raise ConfigError(f"steps must come in increasing t: got t = {step.t} after "
-                              f"t = {self._last_t}")
-        if step.odom is not None:
-            self.filter.predict(step.odom, step.odometry_sigma(self._header))
-        ids, z = step.landmark_ids, step.bearings_rad
-        if ids.size:
-            if len(np.unique(ids)) != ids.size:
-                raise ConfigError(f"step {step.t}: a landmark id appears twice")
-            in_state = self._update_mapped(ids, z)
-            self._new_sightings(step.t, ids[~in_state], z[~in_state])
-        self._last_t = step.t
-        self._pose_t.append(step.t)
-        self._poses.append(self.filter.x[:3].copy())
-        self._pose_covs.append(self.filter.P[:3, :3].copy())
-
-    def _new_sightings(self, t: int, ids: np.ndarray, z: np.ndarray) -> None:
-        raise NotImplementedError
-
-    def _landmarks(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
-        """Ids, positions ``(n, 2)`` and covariances ``(n, 2, 2)`` of the reportable landmarks."""
-        keys = [k for k in self._sizes if k[0] == _LM]
-        ids = np.array([k[1] for k in keys], np.int64)
-        bi = self._block_index(np.array([self._offset[k] for k in keys], np.int64), 2)
-        x, P = self.filter.x, self.filter.P
-        return ids, x[bi].reshape(-1, 2), P[bi[:, :, None], bi[:, None, :]].reshape(-1, 2, 2), {}
-
-    def estimate(self) -> MapEstimate:
-        """The filtered map, the filtered trajectory (every step) and their covariances."""
-        ids, xy, cov, info = self._landmarks()
-        order = np.argsort(ids)
-        info = dict(info)
-        info.update(state_dim=self.filter.dim, gated_bearings=self.n_gated,
-                    nonlinear_bearings=self.n_nonlinear, used_bearings=self.n_updates,
-                    restarted=self.n_restarted)
-        if not self._poses:
-            return MapEstimate.empty(reason="no steps yet", **info)
-        if ids.size == 0:
-            info["reason"] = "no landmark initialised yet"
-        return MapEstimate(ids[order], xy[order], pose_t=np.array(self._pose_t),
-                           poses=np.array(self._poses), landmark_cov=cov[order],
-                           pose_cov=np.array(self._pose_covs), info=info)
-
-
-class EkfMapper(_EkfSlam):
+class EkfMapper(EkfSlam):
     """Bearing-only EKF-SLAM with Bailey's constrained (delayed) initialisation (``ekf``).
 
     Parameters
@@ -535,7 +210,7 @@ class EkfMapper(_EkfSlam):
                               **{f"init_rejected_{k}": v for k, v in self.n_rejected.items()}}
 
 
-class InverseDepthEkfMapper(_EkfSlam):
+class InverseDepthEkfMapper(EkfSlam):
     """Bearing-only EKF-SLAM with undelayed inverse-depth features (``ekf-invdepth``).
 
     Parameters
@@ -577,11 +252,18 @@ class InverseDepthEkfMapper(_EkfSlam):
         ids, xy, cov, _ = super()._landmarks()
         keys, bi = self._idp_blocks()
         left_out: list[int] = []
+        n_no_depth = 0
         if keys:
             x, P = self.filter.x, self.filter.P
             f = x[bi]
-            ok = f[:, 3] > 0
+            # a feature's depth must come from the bearings (parallax), not from its prior:
+            # the bearings must have at least halved the prior std. dev. of rho (from a
+            # robot that never moves, or only turns, they carry no depth at all)
+            rho_sd = np.sqrt(np.clip(P[bi[:, 3], bi[:, 3]], 0, None))
+            no_depth = rho_sd > 0.5 * self.rho_sigma
+            ok = (f[:, 3] > 0) & ~no_depth
             left_out = sorted(k[1] for k, o in zip(keys, ok) if not o)
+            n_no_depth = int(np.count_nonzero(no_depth))
             if np.any(ok):
                 pts, jac = invdepth_to_xy(f[ok])
                 b = bi[ok]
@@ -591,7 +273,7 @@ class InverseDepthEkfMapper(_EkfSlam):
                 xy = np.concatenate([xy, pts])
                 cov = np.concatenate([cov, c])
         return ids, xy, cov, {"inverse_depth": int(len(keys)), "left_out": left_out,
-                              "converted": self.n_converted}
+                              "left_out_no_depth": n_no_depth, "converted": self.n_converted}
 
 
 __all__ = ["EkfMapper", "InverseDepthEkfMapper"]

@@ -21,10 +21,11 @@ Vectorised kernels on arrays; nothing here holds state.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from bomgraph.angles import wrap_angle
-from bomgraph.geometry import rotation
 
 
 def motion_jacobians(pose: np.ndarray, odom: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -43,14 +44,12 @@ def motion_jacobians(pose: np.ndarray, odom: np.ndarray) -> tuple[np.ndarray, np
     g_odom : ndarray of shape (3, 3)
         ``blockdiag(R(psi), 1)``.
     """
-    rot = rotation(float(pose[2]))
-    c, s = float(rot[0, 0]), float(rot[1, 0])
+    c, s = math.cos(float(pose[2])), math.sin(float(pose[2]))
     dx, dy = float(odom[0]), float(odom[1])
     f_pose = np.array([[1.0, 0.0, -s * dx - c * dy],
                        [0.0, 1.0, c * dx - s * dy],
                        [0.0, 0.0, 1.0]])
-    g_odom = np.eye(3)
-    g_odom[:2, :2] = rot
+    g_odom = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
     return f_pose, g_odom
 
 
@@ -306,15 +305,14 @@ def ray_covariance(values: np.ndarray, block: np.ndarray
         Radial and perpendicular variances and their covariance, m^2.
     """
     r = values[:, 3:5] - values[:, 0:2]
-    d2 = np.einsum("ki,ki->k", r, r)
-    u = r / np.sqrt(d2)[:, None]                      # radial unit vector
-    w = np.stack([-u[:, 1], u[:, 0]], 1)               # perpendicular
-    zero = np.zeros((len(d2), 1))
-    j_r = np.concatenate([-u, zero, u], 1)
-    j_p = np.concatenate([-w, -np.sqrt(d2)[:, None], w], 1)
-    c_rr = np.einsum("ki,kij,kj->k", j_r, block, j_r)
-    c_pp = np.einsum("ki,kij,kj->k", j_p, block, j_p)
-    c_rp = np.einsum("ki,kij,kj->k", j_r, block, j_p)
+    d2 = r[:, 0] * r[:, 0] + r[:, 1] * r[:, 1]
+    dist = np.sqrt(d2)
+    ux, uy = r[:, 0] / dist, r[:, 1] / dist          # radial unit vector; w = [-uy, ux]
+    j = np.zeros((len(d2), 2, 5))                    # rows: radial, perpendicular
+    j[:, 0, 0], j[:, 0, 1], j[:, 0, 3], j[:, 0, 4] = -ux, -uy, ux, uy
+    j[:, 1, 0], j[:, 1, 1], j[:, 1, 2], j[:, 1, 3], j[:, 1, 4] = uy, -ux, -dist, -uy, ux
+    c = j @ block @ j.transpose(0, 2, 1)
+    c_rr, c_pp, c_rp = c[:, 0, 0], c[:, 1, 1], c[:, 0, 1]
     return d2, c_rr, c_pp, c_rp
 
 

@@ -1,7 +1,9 @@
-"""The filter wrapper (baselines/ekf/filter.py): it is filterpy's EKF, its state-sized arrays
-grow and shrink together (also during a run of the mapper), augmenting is the exact covariance
-of a linear map, predict propagates the odometry noise through the input Jacobian, and the
-iterated update reaches the MAP estimate of prior and bearing (against a generic minimiser)."""
+"""The filter (baselines/ekf/filter.py): filterpy's EKF holds its state, whose arrays grow and
+shrink together (also during a run of the mapper); the lean block predict and sparse update
+give filterpy's own dense ``predict``/``update`` (Joseph form) to 1e-12; augmenting is the exact
+covariance of a linear map; predict propagates the odometry noise through the input Jacobian;
+the iterated update reaches the MAP estimate of prior and bearing (against a generic
+minimiser); the state limit refuses before allocating."""
 
 from __future__ import annotations
 
@@ -10,31 +12,27 @@ import pytest
 from filterpy.kalman import ExtendedKalmanFilter
 from scipy.optimize import minimize
 
-from baselines.ekf import BearingEkf, EkfMapper
+import baselines.ekf.filter as filter_module
+from baselines.ekf import BearingEkf, EkfMapper, InverseDepthEkfMapper
+from baselines.ekf.filter import StateLimitError, rows_from_dense
 from baselines.ekf.models import bearing_and_jacobian, motion_jacobians
 from bomgraph.angles import angle_residual
 from bomgraph.errors import ConfigError
 from bomgraph.geometry import compose
-from bomgraph.sim import SimConfig, simulate
+from bomgraph.sim import RunSpec, SimConfig, simulate, simulate_run
 
 SMALL = SimConfig(n_landmarks=20, n_steps=80)
 
 
 def sized_arrays(f: BearingEkf) -> dict[str, tuple[int, ...]]:
-    kf = f.kf
-    return {"x": kf.x.shape, "P": kf.P.shape, "F": kf.F.shape, "Q": kf.Q.shape,
-            "_I": kf._I.shape, "K": kf.K.shape[:1], "x_prior": kf.x_prior.shape,
-            "x_post": kf.x_post.shape, "P_prior": kf.P_prior.shape,
-            "P_post": kf.P_post.shape, "nullspace": f.nullspace.shape[:1]}
+    return {"x": f.kf.x.shape, "P": f.kf.P.shape, "nullspace": f.nullspace.shape,
+            "is_angle": f._is_angle.shape, "dim_x": (f.kf.dim_x,)}
 
 
 def assert_consistent_sizes(f: BearingEkf) -> None:
     n = f.dim
-    expected = {"x": (n,), "P": (n, n), "F": (n, n), "Q": (n, n), "_I": (n, n), "K": (n,),
-                "x_prior": (n,), "x_post": (n,), "P_prior": (n, n), "P_post": (n, n),
-                "nullspace": (n,)}
-    assert sized_arrays(f) == expected
-    np.testing.assert_allclose(f.kf._I, np.eye(n))
+    assert sized_arrays(f) == {"x": (n,), "P": (n, n), "nullspace": (n, 3), "is_angle": (n,),
+                               "dim_x": (n,)}
 
 
 def test_filter_is_filterpys_and_augment_is_the_exact_covariance_of_a_linear_map() -> None:
@@ -102,6 +100,10 @@ def _bearing_jac(x: np.ndarray) -> np.ndarray:
     return bearing_and_jacobian(x[None, :3], x[None, 3:5])[1]
 
 
+def _model(x: np.ndarray):
+    return _bearing(x), rows_from_dense(_bearing_jac(x))
+
+
 def test_iterated_update_is_the_map_estimate_of_prior_and_bearing() -> None:
     z, var = np.array([0.6]), np.array([0.02 ** 2])
     f, x0, p0 = _landmark_filter()
@@ -112,14 +114,161 @@ def test_iterated_update_is_the_map_estimate_of_prior_and_bearing() -> None:
         return 0.5 * (x - x0) @ info @ (x - x0) + 0.5 * r * r / var[0]
 
     best = minimize(cost, x0, method="BFGS", options={"gtol": 1e-12}).x
-    f.update(z, _bearing, _bearing_jac, var, iterations=30)
+    f.update(z, _model, var, iterations=30)
     np.testing.assert_allclose(f.x, best, atol=1e-6)
     # the covariance is (I - K H) P0 with H at the estimate: the inverse of the Gauss-Newton
     # Hessian there
     h = _bearing_jac(f.x)
     np.testing.assert_allclose(f.P, np.linalg.inv(info + h.T @ h / var[0]), atol=1e-12)
     plain, _, _ = _landmark_filter()
-    plain.update(z, _bearing, _bearing_jac, var)              # one linearisation, at x0
+    plain.update(z, _model, var)              # one linearisation, at x0
     assert cost(plain.x) > cost(f.x) + 1.0
 
 
+
+
+def _random_filter(rng: np.random.Generator, n_landmarks: int) -> BearingEkf:
+    """A pose and ``n_landmarks`` correlated landmarks 1-3 m away, random covariance."""
+    f = BearingEkf(np.array([0.2, -0.1, 0.4]), np.zeros((3, 3)), 0.03)
+    xy = rng.uniform(-3, 3, (n_landmarks, 2))
+    f.augment(xy.ravel(), np.arange(3), np.zeros((2 * n_landmarks, 3)),
+              np.zeros((2 * n_landmarks, 2 * n_landmarks)), np.zeros(2 * n_landmarks, bool))
+    a = rng.normal(size=(f.dim, f.dim)) * 0.05
+    f.kf.P = a @ a.T + 1e-4 * np.eye(f.dim)
+    return f
+
+
+def test_lean_predict_and_update_are_filterpys_dense_ones() -> None:
+    """The block predict and the sparse update give what filterpy's own ``predict`` (dense
+    ``F P F^T + Q``) and ``update`` (dense Joseph form) give, to 1e-12."""
+    rng = np.random.default_rng(3)
+    f = _random_filter(rng, 6)
+    n = f.dim
+    ref = ExtendedKalmanFilter(dim_x=n, dim_z=4)
+    ref.x, ref.P = f.x.copy(), f.P.copy()
+    odom, sig = np.array([0.3, 0.05, 0.2]), np.array([0.02, 0.01, 0.04])
+    f_pose, g = motion_jacobians(f.x[:3], odom)
+    ref.F = np.eye(n)
+    ref.F[:3, :3] = f_pose
+    ref.Q = np.zeros((n, n))
+    ref.Q[:3, :3] = g @ np.diag(sig ** 2) @ g.T
+    x_before = ref.x.copy()
+    ref.predict()                        # P = F P F^T + Q (its linear x = F x is replaced)
+    ref.x = x_before
+    ref.x[:3] = compose(x_before[:3], odom)
+    f.predict(odom, sig)
+    np.testing.assert_allclose(f.x, ref.x, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(f.P, ref.P, rtol=0, atol=1e-12)
+    lm = np.array([0, 2, 3, 5])                        # 4 bearings to 4 of the landmarks
+    z = rng.uniform(-np.pi, np.pi, 4)
+
+    def dense(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        h, j = bearing_and_jacobian(np.tile(x[:3], (4, 1)), x[3:].reshape(-1, 2)[lm])
+        H = np.zeros((4, len(x)))
+        H[:, :3] = j[:, :3]
+        H[np.arange(4)[:, None], 3 + 2 * lm[:, None] + np.arange(2)] = j[:, 3:]
+        return h, H
+
+    def sparse(x: np.ndarray):
+        h, j = bearing_and_jacobian(np.tile(x[:3], (4, 1)), x[3:].reshape(-1, 2)[lm])
+        cols = np.concatenate([np.tile(np.arange(3), (4, 1)),
+                               3 + 2 * lm[:, None] + np.arange(2)], 1)
+        return h, [(np.arange(4), cols, j)]
+
+    var = np.array([0.03, 0.02, 0.05, 0.04]) ** 2
+    ref.update(z, HJacobian=lambda x: dense(x)[1], Hx=lambda x: dense(x)[0], R=np.diag(var),
+               residual=angle_residual)
+    f.update(z, sparse, var)
+    ref_x = ref.x.copy()
+    ref_x[2] = angle_residual(ref_x[2], 0.0)
+    np.testing.assert_allclose(f.x, ref_x, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(f.P, ref.P, rtol=0, atol=1e-12)
+    np.testing.assert_array_equal(f.P, f.P.T)              # exactly symmetric, no fix-up
+
+
+def test_the_state_limit_refuses_before_allocating() -> None:
+    f = BearingEkf(np.zeros(3), np.zeros((3, 3)), 0.03, max_state=7,
+                   limit_hint="; raise it with max_landmarks")
+    f.augment(np.ones(4), np.arange(3), np.zeros((4, 3)), np.eye(4), np.zeros(4, bool))
+    with pytest.raises(StateLimitError, match=r"beyond its limit of 7; raise it with max_landmarks"):
+        f.augment(np.ones(2), np.arange(3), np.zeros((2, 3)), np.eye(2), np.zeros(2, bool))
+    assert f.dim == 7
+
+
+@pytest.mark.parametrize("z0", [0.6, np.pi - 0.01], ids=["small-innovation", "near-pi"])
+def test_iterated_update_ends_with_filterpys_update_at_the_last_iterate(z0: float) -> None:
+    """The last step of the iterated update is filterpy's ``update`` with the model
+    linearised at the iterate, ``h_i + H_i (x - x_i)``, its residual wrapped after the linear
+    term (the next test has a case where that matters)."""
+    z, var = np.array([z0]), np.array([0.02 ** 2])
+    f, x0, p0 = _landmark_filter()
+    f.update(z, _model, var, iterations=2)
+    # the reference: one Gauss-Newton iterate by hand, then filterpy's update
+    h0, H0 = _bearing(x0), _bearing_jac(x0)
+    s = H0 @ p0 @ H0.T + np.diag(var)
+    xi = x0 + p0 @ H0.T @ np.linalg.solve(s, angle_residual(z, h0))
+    xi[2] = angle_residual(xi[2], 0.0)
+    h_i, H_i = _bearing(xi), _bearing_jac(xi)
+    ref = ExtendedKalmanFilter(dim_x=5, dim_z=1)
+    ref.x, ref.P = x0.copy(), p0.copy()
+
+    def diff(x: np.ndarray) -> np.ndarray:
+        d = x - xi
+        d[2] = angle_residual(x[2], xi[2])
+        return d
+
+    ref.update(z, HJacobian=lambda x: H_i, Hx=lambda x: h_i + H_i @ diff(x), R=np.diag(var),
+               residual=angle_residual)
+    ref.x[2] = angle_residual(ref.x[2], 0.0)
+    np.testing.assert_allclose(f.x, ref.x, rtol=0, atol=1e-10)
+    np.testing.assert_allclose(f.P, ref.P, rtol=0, atol=1e-12)
+
+
+def _filterpy_iterated(f: BearingEkf, z: np.ndarray, model, var: np.ndarray, plain) -> tuple:
+    """The iterated update of two iterations as it was written on filterpy's dense ``update``:
+    one Gauss-Newton iterate, then ``update`` with ``h_i + H_i (x - x_i)``."""
+    def dense(rows, k: int, n: int) -> np.ndarray:
+        H = np.zeros((k, n))
+        for r, c, v in rows:
+            H[r[:, None], c] = v
+        return H
+
+    x0, p0, n, k = f.x.copy(), f.P.copy(), f.dim, len(z)
+    h0, rows0 = plain(x0)
+    H0 = dense(rows0, k, n)
+    s = H0 @ p0 @ H0.T + np.diag(var)
+    xi = x0 + p0 @ H0.T @ np.linalg.solve(s, angle_residual(z, h0))
+    xi[f._is_angle] = angle_residual(xi[f._is_angle], 0.0)
+    h_i, rows_i = model(xi)
+    H_i = dense(rows_i, k, n)
+    ref = ExtendedKalmanFilter(dim_x=n, dim_z=k)
+    ref.x, ref.P = x0, p0
+    ref.update(z, HJacobian=lambda x: H_i, Hx=lambda x: h_i + H_i @ f._difference(x, xi),
+               R=np.diag(var), residual=angle_residual)
+    x = ref.x.copy()
+    x[f._is_angle] = angle_residual(x[f._is_angle], 0.0)
+    return x, ref.P
+
+
+def test_iterated_update_of_a_mapper_run_is_filterpys_where_a_residual_passes_pi(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """At step 61 of this simulated run one bearing's linearised residual passes -pi (-8.06
+    rad unwrapped): wrapping it only before the linear term moved a feature by 0.09."""
+    stream = simulate_run(RunSpec(0, 0, 0), SimConfig())
+    m = InverseDepthEkfMapper(stream.header, preset="real")
+    seen = []
+    lean = filter_module.BearingEkf.update
+
+    def check(self, z, model, var, iterations=1, model_iterate=None, **kw):
+        if m._t == 61:
+            seen.append(_filterpy_iterated(self, np.asarray(z), model, np.asarray(var),
+                                           model_iterate))
+        lean(self, z, model, var, iterations, model_iterate, **kw)
+        if m._t == 61:
+            np.testing.assert_allclose(self.x, seen[-1][0], rtol=0, atol=1e-9)
+            np.testing.assert_allclose(self.P, seen[-1][1], rtol=0, atol=1e-12)
+
+    monkeypatch.setattr(filter_module.BearingEkf, "update", check)
+    for st in stream.steps[:62]:
+        m.step(st)
+    assert seen
