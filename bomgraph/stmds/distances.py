@@ -224,7 +224,10 @@ class DistanceStore:
     def slots(self, first: np.ndarray, second: np.ndarray) -> np.ndarray:
         """Slots of the pairs ``(first[p], second[p])`` of dense indices, created if new.
 
-        The pairs must be distinct within one call; the order inside a pair does not matter.
+        The order inside a pair does not matter; a pair may repeat (one slot). New pairs get
+        consecutive slots in the order of their first appearance. The new keys are merged
+        into the sorted key array (``np.searchsorted`` + ``np.insert``: linear in the pairs
+        stored, not a re-sort of them).
         """
         lo = np.minimum(first, second)
         hi = np.maximum(first, second)
@@ -240,25 +243,32 @@ class DistanceStore:
         else:
             found = np.zeros(len(keys), bool)
             out = np.empty(len(keys), np.int64)
-        if not found.all():
-            new = ~found
-            m = int(new.sum())
-            new_slots = np.arange(self._n, self._n + m, dtype=np.int64)
-            self._grow(self._n + m)
-            self._a[new_slots] = lo[new]
-            self._b[new_slots] = hi[new]
-            self._n += m
-            out[new] = new_slots
-            keys_all = np.concatenate([self._keys, keys[new]])
-            slots_all = np.concatenate([self._key_slot, new_slots])
-            order = np.argsort(keys_all)
-            self._keys, self._key_slot = keys_all[order], slots_all[order]
+        new = np.flatnonzero(~found)
+        new_keys, first_at, inverse = np.unique(keys[new], return_index=True,
+                                                return_inverse=True)
+        m = len(new_keys)
+        # slots by first appearance: rank of each unique new key's first position
+        rank = np.empty(m, np.int64)
+        rank[np.argsort(first_at, kind="stable")] = np.arange(m)
+        new_slots = self._n + rank
+        self._grow(self._n + m)
+        self._a[new_slots] = lo[new[first_at]]
+        self._b[new_slots] = hi[new[first_at]]
+        self._n += m
+        out[new] = new_slots[inverse]
+        at = np.searchsorted(self._keys, new_keys)      # new_keys are sorted and absent
+        self._keys = np.insert(self._keys, at, new_keys)
+        self._key_slot = np.insert(self._key_slot, at, new_slots)
         return out
 
     # ---------------------------------------------------------------------------- updates
     def add(self, first: np.ndarray, second: np.ndarray, squared_distance_m2: np.ndarray,
             variance_m4: np.ndarray) -> None:
-        """Fuse one step's instantaneous estimates (pairs distinct within the call).
+        """Fuse instantaneous estimates: one step's, or several steps' in order.
+
+        A pair may repeat (e.g. the same pair seen at consecutive steps of a batch): its
+        estimates are added one after the other in the order given (``np.add.at``), so a
+        batch gives the same sums, bit for bit, as one call per step.
 
         Parameters
         ----------
@@ -272,9 +282,9 @@ class DistanceStore:
         slot = self.slots(first, second)
         w, x = estimate_weights(self.fusion, np.asarray(squared_distance_m2, float),
                                 np.asarray(variance_m4, float))
-        self._sw[slot] += w
-        self._sx[slot] += w * x
-        self._count[slot] += 1
+        np.add.at(self._sw, slot, w)
+        np.add.at(self._sx, slot, w * x)
+        np.add.at(self._count, slot, 1)
 
     def add_priors(self, first: np.ndarray, second: np.ndarray, distance_m: ArrayLike,
                    sigma_m: ArrayLike) -> None:
@@ -291,21 +301,11 @@ class DistanceStore:
         if np.any(~np.isfinite(d)) or np.any(d <= 0) or np.any(~(s > 0)):
             raise ConfigError("prior distances and sigmas must be finite and > 0")
         d2, var = prior_squared(d, s)
-        # Fold one at a time per group of distinct pairs (slots() needs distinct pairs).
-        lo, hi = np.minimum(first, second), np.maximum(first, second)
-        keys = (lo << _KEY_SHIFT) | hi
-        _, inverse, counts = np.unique(keys, return_inverse=True, return_counts=True)
-        rank = np.zeros(len(keys), np.int64)
-        order = np.argsort(inverse, kind="stable")
-        starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
-        rank[order] = np.arange(len(keys)) - np.repeat(starts, counts)
-        for r in range(int(counts.max()) if len(counts) else 0):
-            sel = rank == r
-            slot = self.slots(lo[sel], hi[sel])
-            w, x = estimate_weights(self.fusion, d2[sel], var[sel])
-            self._sw[slot] += w
-            self._sx[slot] += w * x
-            self._prior[slot] = True
+        slot = self.slots(first, second)
+        w, x = estimate_weights(self.fusion, d2, var)
+        np.add.at(self._sw, slot, w)
+        np.add.at(self._sx, slot, w * x)
+        self._prior[slot] = True
 
     # ---------------------------------------------------------------------------- reading
     def fused(self) -> tuple[np.ndarray, np.ndarray]:

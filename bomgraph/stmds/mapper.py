@@ -30,6 +30,7 @@ from ..geometry import dead_reckon
 from ..mapper import MapEstimate
 from ..stream import Step, StreamHeader
 from .bundle import WindowBundle, bundle_adjust_window, bundle_pair_squared_distances
+from .batch import BATCH_STEPS, StepBatch
 from .config import StmdsConfig
 from .distances import DistanceStore, IdIndex
 from .localisation import RobotPoses, extend_with_robots, resect_headings, trilaterate_robots
@@ -100,6 +101,16 @@ class StmdsMapper:
         self._n_triangulated = 0
         self._prev_xy = np.zeros((0, 2))   # previous map by dense landmark index (NaN: absent)
         self._robots = RobotPoses(cfg.n_robot_poses, cfg.fusion) if cfg.localise else None
+        # the paper's rule (consecutive steps, no localisation, no relative gate) runs in
+        # batches of steps (.batch); the other variants step by step
+        self._batch: StepBatch | None = None
+        if (cfg.tri_window is None and cfg.baseline_steps == (1,) and self._robots is None
+                and not self._relative_gate):
+            self._batch = StepBatch(self._store, self._ids, bearing_sigma_rad=self._bearing_sigma,
+                                    min_parallax_rad=cfg.min_parallax_rad,
+                                    max_range_m=self._max_range,
+                                    default_sigma=np.asarray(header.odometry_sigma, float),
+                                    triangulated=self._triangulated)
         if header.priors:
             pi = self._ids.lookup(np.array([p.i for p in header.priors], np.int64))
             pj = self._ids.lookup(np.array([p.j for p in header.priors], np.int64))
@@ -112,6 +123,12 @@ class StmdsMapper:
         ``baseline_steps``; the paper: ``t-1`` and ``t``) and fuse their pair distances."""
         ids = step.landmark_ids
         brg = step.bearings_rad
+        if self._batch is not None:
+            self._t = step.t
+            self._batch.push(ids, brg, step.odom, step.odom_sigma)
+            if len(self._batch) >= BATCH_STEPS:
+                self._flush()
+            return
         if ids.size > 1:
             order = np.argsort(ids)
             ids, brg = ids[order], brg[order]
@@ -256,6 +273,15 @@ class StmdsMapper:
         self._store.add(idx[pairs.first], idx[pairs.second], pairs.squared_distance_m2,
                         pairs.variance_m4)
 
+    def _flush(self) -> None:
+        """Process the steps held by the batch (none held: nothing to do)."""
+        b = self._batch
+        if b is not None and len(b):
+            n_tri, n_gated = b.n_triangulated, b.n_gated
+            b.flush()
+            self._n_triangulated += b.n_triangulated - n_tri
+            self._n_gated += b.n_gated - n_gated
+
     # ------------------------------------------------------------------------------ map
     def _base_info(self) -> dict[str, Any]:
         cfg = self.config
@@ -267,6 +293,7 @@ class StmdsMapper:
     def estimate(self) -> MapEstimate:
         """The map now (and the held poses when localising); never raises for lack of data."""
         cfg = self.config
+        self._flush()
         info = self._base_info()
         known = self._store.known()
         info["n_known_pairs"] = len(known)
