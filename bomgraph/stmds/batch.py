@@ -34,10 +34,11 @@ def _pairs_within_groups(group: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     if k < 2:
         return np.zeros(0, np.int64), np.zeros(0, np.int64)
     pos = np.arange(k)
-    new = np.r_[True, group[1:] != group[:-1]]
-    end = np.r_[np.flatnonzero(new)[1:], k]
-    size = end[np.cumsum(new) - 1]                     # exclusive end of each item's group
-    count = size - pos - 1
+    new = np.empty(k, bool)
+    new[0] = True
+    np.not_equal(group[1:], group[:-1], out=new[1:])
+    end = np.append(np.flatnonzero(new)[1:], k)
+    count = end[np.cumsum(new) - 1] - pos - 1          # items after each one in its group
     first = np.repeat(pos, count)
     offset = np.arange(first.size) - np.repeat(np.cumsum(count) - count, count)
     return first, first + 1 + offset
@@ -140,8 +141,8 @@ class StepBatch:
         if f.size == 0:
             return
         pair_sid = ray_sid[ok[f]]
-        groups = np.flatnonzero(np.r_[True, pair_sid[1:] != pair_sid[:-1]])
-        counts = np.diff(np.r_[groups, pair_sid.size])
+        groups = np.append(0, np.flatnonzero(pair_sid[1:] != pair_sid[:-1]) + 1)
+        counts = np.diff(np.append(groups, pair_sid.size))
         pairs = pair_squared_distances(tri, sigma[pair_sid[groups]], self.bearing_sigma_rad,
                                        pairs=(ok[f], ok[g]), pair_groups=counts)
         self.store.add(lm[pairs.first], lm[pairs.second], pairs.squared_distance_m2,

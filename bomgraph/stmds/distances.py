@@ -226,7 +226,7 @@ class DistanceStore:
 
         The order inside a pair does not matter; a pair may repeat (one slot). New pairs get
         consecutive slots in the order of their first appearance. The new keys are merged
-        into the sorted key array (``np.searchsorted`` + ``np.insert``: linear in the pairs
+        into the sorted key array (``np.searchsorted``, then one scatter: linear in the pairs
         stored, not a re-sort of them).
         """
         lo = np.minimum(first, second)
@@ -256,9 +256,15 @@ class DistanceStore:
         self._b[new_slots] = hi[new[first_at]]
         self._n += m
         out[new] = new_slots[inverse]
-        at = np.searchsorted(self._keys, new_keys)      # new_keys are sorted and absent
-        self._keys = np.insert(self._keys, at, new_keys)
-        self._key_slot = np.insert(self._key_slot, at, new_slots)
+        # merge: new key k goes to (old keys below it) + (new keys below it)
+        dest = np.searchsorted(self._keys, new_keys) + np.arange(m)
+        old = np.ones(n + m, bool)
+        old[dest] = False
+        keys_all = np.empty(n + m, np.int64)
+        slots_all = np.empty(n + m, np.int64)
+        keys_all[dest], slots_all[dest] = new_keys, new_slots
+        keys_all[old], slots_all[old] = self._keys, self._key_slot
+        self._keys, self._key_slot = keys_all, slots_all
         return out
 
     # ---------------------------------------------------------------------------- updates
