@@ -198,6 +198,7 @@ class DistanceStore:
         self._keys = np.zeros(0, np.int64)       # sorted pair keys
         self._key_slot = np.zeros(0, np.int64)   # slot of each sorted key
         self._n = 0
+        self.n_degenerate = 0   # estimates dropped: zero length, or no finite, positive weight
         cap = 64
         self._a = np.zeros(cap, np.int64)
         self._b = np.zeros(cap, np.int64)
@@ -281,13 +282,24 @@ class DistanceStore:
         first, second : arrays of shape (P,)
             Dense landmark indices of each pair.
         squared_distance_m2, variance_m4 : arrays of shape (P,)
-            Instantaneous squared distances and their first-order variances (eq. 2).
+            Instantaneous squared distances and their first-order variances (eq. 2). Estimates
+        of zero length or without a finite positive weight are dropped and counted in
+        ``n_degenerate``.
         """
         if len(first) == 0:
             return
+        d2 = np.asarray(squared_distance_m2, float)
+        var = np.asarray(variance_m4, float)
+        w, x = estimate_weights(self.fusion, d2, var)
+        # an estimate of zero length (two landmarks on one point: parallel rays) or without a
+        # finite, positive weight (overflowing variances) carries no distance: dropped, counted
+        usable = (d2 > _TINY) & (w > 0) & np.isfinite(w) & np.isfinite(x)
+        if not usable.all():
+            self.n_degenerate += int(usable.size - usable.sum())
+            first, second, w, x = first[usable], second[usable], w[usable], x[usable]
+            if len(first) == 0:
+                return
         slot = self.slots(first, second)
-        w, x = estimate_weights(self.fusion, np.asarray(squared_distance_m2, float),
-                                np.asarray(variance_m4, float))
         np.add.at(self._sw, slot, w)
         np.add.at(self._sx, slot, w * x)
         np.add.at(self._count, slot, 1)
