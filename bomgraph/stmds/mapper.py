@@ -146,7 +146,7 @@ class StmdsMapper:
             self._t = step.t
             self._batch.push(ids, brg, step.odom, step.odom_sigma)
             if len(self._batch) >= BATCH_STEPS:
-                self._flush()
+                self.flush()
             return
         if ids.size > 1:
             order = np.argsort(ids)
@@ -292,8 +292,10 @@ class StmdsMapper:
         self._store.add(idx[pairs.first], idx[pairs.second], pairs.squared_distance_m2,
                         pairs.variance_m4)
 
-    def _flush(self) -> None:
-        """Process the steps held by the batch (none held: nothing to do)."""
+    def flush(self) -> None:
+        """Triangulate and fuse the steps held for the batched path (:mod:`.batch`; the
+        paper's rule holds up to ``batch.BATCH_STEPS`` steps). :meth:`estimate` calls it; a
+        timing of :meth:`step` alone should call it at the end too."""
         b = self._batch
         if b is not None and len(b):
             n_tri, n_gated = b.n_triangulated, b.n_gated
@@ -318,7 +320,7 @@ class StmdsMapper:
         landmark, e.g. a stuck sensor; or no finite variance), naming that cause.
         """
         cfg = self.config
-        self._flush()
+        self.flush()
         info = self._base_info()
         if len(self._store) == 0 and self._store.n_degenerate:
             raise DegenerateGeometryError(

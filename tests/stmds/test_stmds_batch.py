@@ -39,8 +39,8 @@ def test_batches_fuse_the_same_bits_as_one_step_at_a_time(cut_every: int) -> Non
         batched.step(s)
         single.step(s)
         if s.t % cut_every == 0:
-            batched._flush()
-    batched._flush()
+            batched.flush()
+    batched.flush()
     a, b = batched._store, single._store
     assert len(a) == len(b) > 100
     n = len(a)
