@@ -21,8 +21,8 @@ from ..errors import ConfigError
 
 # csgraph treats an explicit 0 as "no edge"; coincident landmarks get this length instead.
 _MIN_EDGE_M = 1e-12
-#: Largest graph completed by dense Floyd-Warshall (measured faster than Dijkstra up to here,
-#: ``scripts/bench_scale.py``; the two differ by round-off in the completed entries only).
+#: Largest graph completed by dense Floyd-Warshall (faster than Dijkstra up to here, see
+#: ``docs/measurements.md``; the two differ by round-off in the completed entries only).
 DENSE_PATHS_MAX = 300
 
 
