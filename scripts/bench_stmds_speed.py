@@ -1,7 +1,8 @@
 """Speed of BOM-STMDS (issue 3 targets), printed and saved to results/bench_stmds_speed.json.
 
 1. A full 300-step paper run of Method 2 with 30 map updates (target: median < 100 ms, one core).
-2. The per-step update with about 10 landmarks in view (target: < 0.1 ms).
+2. The per-step update with about 10 landmarks in view, amortised over a run (all steps and
+   the final flush of the batched triangulation; target: < 0.1 ms, issue 14: <= 0.05 ms).
 3. Reconstruction of N = 1000 landmarks (target: < 0.5 s): a 1000-landmark world at the paper's
    landmark density (an 11.2 m square), simulated long enough to see every landmark, then one
    ``estimate()`` of Method 1 and of Method 2, and the parts (DMC-SPL, classical scaling,
@@ -65,14 +66,16 @@ def per_step(repeats: int, options: dict) -> dict:
     med, cpu = [], []
     for _ in range(repeats):
         mapper = create_mapper("stmds-smacof", stream.header, **options)
-        t = []
+        flush = getattr(mapper, "flush", lambda: None)   # steps held in batches (stmds.batch)
+        t0 = time.perf_counter()
         c0 = time.process_time()
         for s in stream.steps:
-            t0 = time.perf_counter()
             mapper.step(s)
-            t.append(time.perf_counter() - t0)
+        flush()
         cpu.append((time.process_time() - c0) / len(stream.steps))
-        med.append(np.median(t[1:]))
+        med.append((time.perf_counter() - t0) / len(stream.steps))
+    # per step = all steps and the final flush of the batch over the number of steps (a
+    # single step() call only holds the step when the batched path is on)
     return {"mean_in_view": in_view, "step_ms_median": 1e3 * float(np.median(med)),
             "step_cpu_ms_mean": 1e3 * float(np.median(cpu))}
 
@@ -152,8 +155,9 @@ def main() -> None:
           f"{r1['estimates_ms_median']:.1f} ms = {r1['estimate_ms_each_median']:.2f} ms each); "
           f"target < 100 ms")
     report["per_step"] = r2 = per_step(args.repeats, options)
-    print(f"per-step update, {r2['mean_in_view']:.1f} landmarks in view: median "
-          f"{r2['step_ms_median']:.3f} ms wall (mean CPU {r2['step_cpu_ms_mean']:.3f} ms); "
+    print(f"per-step update (all steps + the final batch flush, per step), "
+          f"{r2['mean_in_view']:.1f} landmarks in view: "
+          f"{r2['step_ms_median']:.3f} ms wall (CPU {r2['step_cpu_ms_mean']:.3f} ms); "
           f"target < 0.1 ms")
     report["reconstruction"] = r3 = reconstruction(args.n_big, 3, args.quick, options)
     for name in ("stmds-cs", "stmds-smacof"):

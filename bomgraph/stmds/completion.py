@@ -2,8 +2,9 @@
 
 The known pairs form an undirected graph whose edge lengths are the fused *distances* (not
 squared: path lengths add). A missing entry of the distance matrix is replaced by the length of
-the shortest path between its two landmarks (Dijkstra over ``scipy.sparse.csgraph``, which is
-``O(n E log n)`` on the sparse graph instead of Floyd-Warshall's ``O(n^3)``). A graph in
+the shortest path between its two landmarks: Floyd-Warshall on the dense matrix for up to
+:data:`DENSE_PATHS_MAX` vertices (``O(n^3)`` but no sparse-matrix overhead: faster there), else
+Dijkstra over ``scipy.sparse.csgraph`` (``O(n E log n)`` on the sparse graph). A graph in
 several pieces cannot be embedded as one map: :func:`largest_component` picks the biggest piece
 and names the landmarks left out.
 """
@@ -14,12 +15,15 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.sparse import coo_matrix, csr_matrix
-from scipy.sparse.csgraph import shortest_path
+from scipy.sparse.csgraph import floyd_warshall, shortest_path
 
 from ..errors import ConfigError
 
 # csgraph treats an explicit 0 as "no edge"; coincident landmarks get this length instead.
 _MIN_EDGE_M = 1e-12
+#: Largest graph completed by dense Floyd-Warshall (faster than Dijkstra up to here, see
+#: ``docs/measurements.md``; the two differ by round-off in the completed entries only).
+DENSE_PATHS_MAX = 300
 
 
 def edge_graph(n: int, first: np.ndarray, second: np.ndarray,
@@ -136,12 +140,23 @@ def shortest_path_completion(n: int, first: np.ndarray, second: np.ndarray,
     distance_m : array of shape (P,)
         Edge lengths (distances, not squared).
     """
-    g = edge_graph(n, first, second, distance_m)
-    # the graph is stored symmetric, so the directed search gives the undirected answer
-    # without csgraph symmetrising it again (about a quarter faster)
-    full = shortest_path(g, method="D", directed=True)
-    if len(first):
+    if n <= DENSE_PATHS_MAX:
+        first = np.asarray(first, np.int64)
+        second = np.asarray(second, np.int64)
+        if first.size and (first.min() < 0 or max(first.max(), second.max()) >= n):
+            raise ConfigError(f"shortest_path_completion: vertex index out of range 0..{n - 1}")
+        w = np.full((n, n), np.inf)
         d = np.maximum(np.asarray(distance_m, float), _MIN_EDGE_M)
+        w[first, second] = d
+        w[second, first] = d
+        full = floyd_warshall(w, directed=True, overwrite=True)
+    else:
+        # the graph is stored symmetric, so the directed search gives the undirected answer
+        # without csgraph symmetrising it again (about a quarter faster)
+        full = shortest_path(edge_graph(n, first, second, distance_m), method="D",
+                             directed=True)
+        d = np.maximum(np.asarray(distance_m, float), _MIN_EDGE_M)
+    if len(first):
         full[first, second] = d
         full[second, first] = d
     return full
@@ -177,5 +192,5 @@ def pivot_shortest_paths(n: int, first: np.ndarray, second: np.ndarray,
     return pivots, rows
 
 
-__all__ = ["edge_graph", "pivot_shortest_paths", "Component", "largest_component",
+__all__ = ["DENSE_PATHS_MAX", "edge_graph", "pivot_shortest_paths", "Component", "largest_component",
            "component_labels", "prune_low_degree", "shortest_path_completion"]

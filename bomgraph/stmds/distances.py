@@ -198,6 +198,7 @@ class DistanceStore:
         self._keys = np.zeros(0, np.int64)       # sorted pair keys
         self._key_slot = np.zeros(0, np.int64)   # slot of each sorted key
         self._n = 0
+        self.n_degenerate = 0   # estimates dropped: zero length, or no finite, positive weight
         cap = 64
         self._a = np.zeros(cap, np.int64)
         self._b = np.zeros(cap, np.int64)
@@ -224,7 +225,10 @@ class DistanceStore:
     def slots(self, first: np.ndarray, second: np.ndarray) -> np.ndarray:
         """Slots of the pairs ``(first[p], second[p])`` of dense indices, created if new.
 
-        The pairs must be distinct within one call; the order inside a pair does not matter.
+        The order inside a pair does not matter; a pair may repeat (one slot). New pairs get
+        consecutive slots in the order of their first appearance. The new keys are merged
+        into the sorted key array (``np.searchsorted``, then one scatter: linear in the pairs
+        stored, not a re-sort of them).
         """
         lo = np.minimum(first, second)
         hi = np.maximum(first, second)
@@ -240,41 +244,65 @@ class DistanceStore:
         else:
             found = np.zeros(len(keys), bool)
             out = np.empty(len(keys), np.int64)
-        if not found.all():
-            new = ~found
-            m = int(new.sum())
-            new_slots = np.arange(self._n, self._n + m, dtype=np.int64)
-            self._grow(self._n + m)
-            self._a[new_slots] = lo[new]
-            self._b[new_slots] = hi[new]
-            self._n += m
-            out[new] = new_slots
-            keys_all = np.concatenate([self._keys, keys[new]])
-            slots_all = np.concatenate([self._key_slot, new_slots])
-            order = np.argsort(keys_all)
-            self._keys, self._key_slot = keys_all[order], slots_all[order]
+        new = np.flatnonzero(~found)
+        new_keys, first_at, inverse = np.unique(keys[new], return_index=True,
+                                                return_inverse=True)
+        m = len(new_keys)
+        # slots by first appearance: rank of each unique new key's first position
+        rank = np.empty(m, np.int64)
+        rank[np.argsort(first_at, kind="stable")] = np.arange(m)
+        new_slots = self._n + rank
+        self._grow(self._n + m)
+        self._a[new_slots] = lo[new[first_at]]
+        self._b[new_slots] = hi[new[first_at]]
+        self._n += m
+        out[new] = new_slots[inverse]
+        # merge: new key k goes to (old keys below it) + (new keys below it)
+        dest = np.searchsorted(self._keys, new_keys) + np.arange(m)
+        old = np.ones(n + m, bool)
+        old[dest] = False
+        keys_all = np.empty(n + m, np.int64)
+        slots_all = np.empty(n + m, np.int64)
+        keys_all[dest], slots_all[dest] = new_keys, new_slots
+        keys_all[old], slots_all[old] = self._keys, self._key_slot
+        self._keys, self._key_slot = keys_all, slots_all
         return out
 
     # ---------------------------------------------------------------------------- updates
     def add(self, first: np.ndarray, second: np.ndarray, squared_distance_m2: np.ndarray,
             variance_m4: np.ndarray) -> None:
-        """Fuse one step's instantaneous estimates (pairs distinct within the call).
+        """Fuse instantaneous estimates: one step's, or several steps' in order.
+
+        A pair may repeat (e.g. the same pair seen at consecutive steps of a batch): its
+        estimates are added one after the other in the order given (``np.add.at``), so a
+        batch gives the same sums, bit for bit, as one call per step.
 
         Parameters
         ----------
         first, second : arrays of shape (P,)
             Dense landmark indices of each pair.
         squared_distance_m2, variance_m4 : arrays of shape (P,)
-            Instantaneous squared distances and their first-order variances (eq. 2).
+            Instantaneous squared distances and their first-order variances (eq. 2). Estimates
+        of zero length or without a finite positive weight are dropped and counted in
+        ``n_degenerate``.
         """
         if len(first) == 0:
             return
+        d2 = np.asarray(squared_distance_m2, float)
+        var = np.asarray(variance_m4, float)
+        w, x = estimate_weights(self.fusion, d2, var)
+        # an estimate of zero length (two landmarks on one point: parallel rays) or without a
+        # finite, positive weight (overflowing variances) carries no distance: dropped, counted
+        usable = (d2 > _TINY) & (w > 0) & np.isfinite(w) & np.isfinite(x)
+        if not usable.all():
+            self.n_degenerate += int(usable.size - usable.sum())
+            first, second, w, x = first[usable], second[usable], w[usable], x[usable]
+            if len(first) == 0:
+                return
         slot = self.slots(first, second)
-        w, x = estimate_weights(self.fusion, np.asarray(squared_distance_m2, float),
-                                np.asarray(variance_m4, float))
-        self._sw[slot] += w
-        self._sx[slot] += w * x
-        self._count[slot] += 1
+        np.add.at(self._sw, slot, w)
+        np.add.at(self._sx, slot, w * x)
+        np.add.at(self._count, slot, 1)
 
     def add_priors(self, first: np.ndarray, second: np.ndarray, distance_m: ArrayLike,
                    sigma_m: ArrayLike) -> None:
@@ -291,21 +319,11 @@ class DistanceStore:
         if np.any(~np.isfinite(d)) or np.any(d <= 0) or np.any(~(s > 0)):
             raise ConfigError("prior distances and sigmas must be finite and > 0")
         d2, var = prior_squared(d, s)
-        # Fold one at a time per group of distinct pairs (slots() needs distinct pairs).
-        lo, hi = np.minimum(first, second), np.maximum(first, second)
-        keys = (lo << _KEY_SHIFT) | hi
-        _, inverse, counts = np.unique(keys, return_inverse=True, return_counts=True)
-        rank = np.zeros(len(keys), np.int64)
-        order = np.argsort(inverse, kind="stable")
-        starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
-        rank[order] = np.arange(len(keys)) - np.repeat(starts, counts)
-        for r in range(int(counts.max()) if len(counts) else 0):
-            sel = rank == r
-            slot = self.slots(lo[sel], hi[sel])
-            w, x = estimate_weights(self.fusion, d2[sel], var[sel])
-            self._sw[slot] += w
-            self._sx[slot] += w * x
-            self._prior[slot] = True
+        slot = self.slots(first, second)
+        w, x = estimate_weights(self.fusion, d2, var)
+        np.add.at(self._sw, slot, w)
+        np.add.at(self._sx, slot, w * x)
+        self._prior[slot] = True
 
     # ---------------------------------------------------------------------------- reading
     def fused(self) -> tuple[np.ndarray, np.ndarray]:

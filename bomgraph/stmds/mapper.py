@@ -25,11 +25,12 @@ from typing import Any
 import numpy as np
 
 from ..config import resolve
-from ..errors import ConfigError
+from ..errors import ConfigError, DegenerateGeometryError
 from ..geometry import dead_reckon
 from ..mapper import MapEstimate
 from ..stream import Step, StreamHeader
 from .bundle import WindowBundle, bundle_adjust_window, bundle_pair_squared_distances
+from .batch import BATCH_STEPS, StepBatch
 from .config import StmdsConfig
 from .distances import DistanceStore, IdIndex
 from .localisation import RobotPoses, extend_with_robots, resect_headings, trilaterate_robots
@@ -37,6 +38,21 @@ from .reconstruct import reconstruct
 from .triangulation import (compose_odometry, gate_points, pair_squared_distances,
                             range_variances, triangulate_rays)
 from .window import triangulate_window, triangulate_window_lsq, window_pair_squared_distances
+
+
+#: Largest std. dev. (metres or radians) STMDS accepts in a header or a step: beyond it no
+#: measurement carries information and the variances (fourth powers) leave double precision.
+MAX_SIGMA = 1e6
+
+
+def _check_sigmas(values: Any, what: str) -> None:
+    """Refuse sigmas above :data:`MAX_SIGMA` (or non-finite) with a message naming them."""
+    arr = np.asarray(values, float).reshape(-1)
+    if not np.all(np.isfinite(arr)) or np.any(np.abs(arr) > MAX_SIGMA):
+        raise DegenerateGeometryError(
+            f"STMDS cannot use {what} = {arr.tolist() if arr.size > 1 else float(arr[0])!r}: "
+            f"a std. dev. above {MAX_SIGMA:g} (m or rad) carries no information and overflows "
+            f"the variance arithmetic; fix the stream's sigmas")
 
 
 class _GrowingFlags:
@@ -72,6 +88,8 @@ class StmdsMapper:
         self.config = config or StmdsConfig()
         cfg = self.config
         self.header = header
+        _check_sigmas(header.bearing_sigma_rad, "the header's bearing_sigma_rad")
+        _check_sigmas(header.odometry_sigma, "the header's odometry_sigma")
         self._bearing_sigma = float(header.bearing_sigma_rad)
         if cfg.max_range_m is not None:
             self._max_range = float(cfg.max_range_m)
@@ -100,6 +118,16 @@ class StmdsMapper:
         self._n_triangulated = 0
         self._prev_xy = np.zeros((0, 2))   # previous map by dense landmark index (NaN: absent)
         self._robots = RobotPoses(cfg.n_robot_poses, cfg.fusion) if cfg.localise else None
+        # the paper's rule (consecutive steps, no localisation, no relative gate) runs in
+        # batches of steps (.batch); the other variants step by step
+        self._batch: StepBatch | None = None
+        if (cfg.tri_window is None and cfg.baseline_steps == (1,) and self._robots is None
+                and not self._relative_gate):
+            self._batch = StepBatch(self._store, self._ids, bearing_sigma_rad=self._bearing_sigma,
+                                    min_parallax_rad=cfg.min_parallax_rad,
+                                    max_range_m=self._max_range,
+                                    default_sigma=np.asarray(header.odometry_sigma, float),
+                                    triangulated=self._triangulated)
         if header.priors:
             pi = self._ids.lookup(np.array([p.i for p in header.priors], np.int64))
             pj = self._ids.lookup(np.array([p.j for p in header.priors], np.int64))
@@ -112,6 +140,14 @@ class StmdsMapper:
         ``baseline_steps``; the paper: ``t-1`` and ``t``) and fuse their pair distances."""
         ids = step.landmark_ids
         brg = step.bearings_rad
+        if step.odom_sigma is not None:
+            _check_sigmas(step.odom_sigma, f"step {step.t}'s odom_sigma")
+        if self._batch is not None:
+            self._t = step.t
+            self._batch.push(ids, brg, step.odom, step.odom_sigma)
+            if len(self._batch) >= BATCH_STEPS:
+                self.flush()
+            return
         if ids.size > 1:
             order = np.argsort(ids)
             ids, brg = ids[order], brg[order]
@@ -256,18 +292,42 @@ class StmdsMapper:
         self._store.add(idx[pairs.first], idx[pairs.second], pairs.squared_distance_m2,
                         pairs.variance_m4)
 
+    def flush(self) -> None:
+        """Triangulate and fuse the steps held for the batched path (:mod:`.batch`; the
+        paper's rule holds up to ``batch.BATCH_STEPS`` steps). :meth:`estimate` calls it; a
+        timing of :meth:`step` alone should call it at the end too."""
+        b = self._batch
+        if b is not None and len(b):
+            n_tri, n_gated = b.n_triangulated, b.n_gated
+            b.flush()
+            self._n_triangulated += b.n_triangulated - n_tri
+            self._n_gated += b.n_gated - n_gated
+
     # ------------------------------------------------------------------------------ map
     def _base_info(self) -> dict[str, Any]:
         cfg = self.config
         return {"method": f"stmds-{cfg.method}" + ("-loc" if cfg.localise else ""),
                 "t": self._t, "fusion": cfg.fusion, "n_pairs_stored": len(self._store),
                 "n_triangulated": self._n_triangulated, "n_gated": self._n_gated,
-                "n_outlier_rays": self._n_outliers}
+                "n_outlier_rays": self._n_outliers,
+                "n_degenerate_estimates": self._store.n_degenerate}
 
     def estimate(self) -> MapEstimate:
-        """The map now (and the held poses when localising); never raises for lack of data."""
+        """The map now (and the held poses when localising); never raises for lack of data.
+
+        Raises :class:`~bomgraph.errors.DegenerateGeometryError` when the stream gave pair
+        estimates but every one was degenerate (zero length: parallel rays through every
+        landmark, e.g. a stuck sensor; or no finite variance), naming that cause.
+        """
         cfg = self.config
+        self.flush()
         info = self._base_info()
+        if len(self._store) == 0 and self._store.n_degenerate:
+            raise DegenerateGeometryError(
+                f"the stream gives no usable landmark distance up to step {self._t}: all "
+                f"{self._store.n_degenerate} pair estimates put two landmarks on one point "
+                f"(parallel rays through every landmark: is the bearing sensor stuck at one "
+                f"value?) or had no finite variance")
         known = self._store.known()
         info["n_known_pairs"] = len(known)
         n_lm = len(self._ids)

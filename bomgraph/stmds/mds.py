@@ -214,6 +214,7 @@ class LaplacianSolver:
                  weights: np.ndarray, dense_max: int = 300) -> None:
         self.n = n
         self._minv: np.ndarray | None = None
+        self._minv_complex: np.ndarray | None = None     # the same, cast once for complex b
         self._lu = None
         if n <= 1:
             return
@@ -235,6 +236,10 @@ class LaplacianSolver:
     def solve(self, b: np.ndarray) -> np.ndarray:
         """``V^+ b`` for ``b`` of shape (n,) or (n, k), real or complex, with zero (column) sums."""
         if self._minv is not None:
+            if np.iscomplexobj(b):
+                if self._minv_complex is None:
+                    self._minv_complex = self._minv.astype(np.complex128)
+                return self._minv_complex @ b
             return self._minv @ b
         if self._lu is None:
             return np.zeros_like(b)
@@ -303,13 +308,16 @@ def _smacof_single(z: np.ndarray, first: np.ndarray, second: np.ndarray, delta: 
     s = float(np.dot(weights, r * r))
     history = [s]
     ratio = np.zeros(e)
+    both = np.empty(2 * e, np.complex128)        # (v, -v), reused by every iteration
+    v, minus_v = both[:e], both[e:]
+    flat = both.view(np.float64)
     for _ in range(max_iter):
         if s == 0.0:
             return z, history, True
         np.divide(wd, dist, out=ratio, where=dist > 0)
-        v = ratio * diff
-        bz = np.bincount(slot, np.concatenate((v, -v)).view(np.float64),
-                         2 * n).view(np.complex128)
+        np.multiply(ratio, diff, out=v)
+        np.negative(v, out=minus_v)
+        bz = np.bincount(slot, flat, 2 * n).view(np.complex128)
         g = solver.solve(bz)
         z_new = g if relaxation == 1.0 else z + relaxation * (g - z)
         diff_new = z_new[first] - z_new[second]

@@ -144,8 +144,10 @@ def triangulate_rays(odom: ArrayLike, bearing_prev_rad: ArrayLike,
 
     Parameters
     ----------
-    odom : array of shape (3,)
-        ``[dx_m, dy_m, dpsi_rad]`` from pose ``t-1`` to pose ``t`` in the frame of ``t-1``.
+    odom : array of shape (3,) or (k, 3)
+        ``[dx_m, dy_m, dpsi_rad]`` from pose ``t-1`` to pose ``t`` in the frame of ``t-1``; or
+        one such row per landmark (the rays of several steps at once, the same numbers as one
+        call per step).
     bearing_prev_rad, bearing_now_rad : arrays of shape (k,)
         Bearings of the same ``k`` landmarks at ``t-1`` and at ``t`` (relative to the heading).
 
@@ -155,20 +157,26 @@ def triangulate_rays(odom: ArrayLike, bearing_prev_rad: ArrayLike,
         Points, signed depths, parallax and the analytic Jacobian of the depth. Parallel rays
         give non-finite values (gate them with :func:`gate_points`); nothing raises.
     """
-    u = np.asarray(odom, dtype=float).reshape(3)
-    dx, dy, dpsi = float(u[0]), float(u[1]), float(u[2])
     a = np.asarray(bearing_prev_rad, dtype=float).reshape(-1)
     b = np.asarray(bearing_now_rad, dtype=float).reshape(-1)
     if a.shape != b.shape:
         raise ConfigError(f"triangulate_rays: {a.size} bearings at t-1 but {b.size} at t")
     k = a.size
+    u = np.asarray(odom, dtype=float)
+    if u.ndim == 2 and u.shape == (k, 3):        # one odometry per ray
+        dx, dy, dpsi = u[:, 0], u[:, 1], u[:, 2]
+        o_conj: complex | np.ndarray = np.empty(k, np.complex128)
+        o_conj.real, o_conj.imag = dx, -dy
+    else:
+        u = u.reshape(3)
+        dx, dy, dpsi = float(u[0]), float(u[1]), float(u[2])
+        o_conj = complex(dx, -dy)
     # Plane vectors as complex numbers (few, vectorised operations): u = exp(i angle),
     # u_b conj(u_a) = cos(b - a) + i sin(b - a), and Im(conj(o) u) = o x u.
     unit = np.exp(1j * np.concatenate((a, b + dpsi)))
     ua, ub = unit[:k], unit[k:]
     rel = ub * ua.conj()
     s, c = rel.imag, rel.real                    # sin(b - a), cos(b - a)
-    o_conj = complex(dx, -dy)
     ob = ub * o_conj                             # Im: dx sb - dy cb ; Re: dx cb + dy sb
     # dp/dz = u_a (d r1/dz + i r1 [z = theta_prev]) as a complex number; its real factor is dr1
     jac = np.zeros((k, 5), np.complex128)
@@ -344,6 +352,8 @@ class PairEstimates:
 
 def pair_squared_distances(tri: RayTriangulation, odometry: ArrayLike,
                            bearing_sigma_rad: float, *, select: np.ndarray | None = None,
+                           pairs: tuple[np.ndarray, np.ndarray] | None = None,
+                           pair_groups: np.ndarray | None = None,
                            with_jacobian: bool = False) -> PairEstimates:
     """Squared distance and its first-order variance for every pair of ``tri``'s landmarks.
 
@@ -353,10 +363,16 @@ def pair_squared_distances(tri: RayTriangulation, odometry: ArrayLike,
         The landmarks of one step, ``k`` of them.
     odometry : array of shape (3,) or (3, 3)
         Std. devs. of ``[dx_m, dy_m, dpsi_rad]`` for this step, or their covariance (e.g.
-        from :func:`compose_odometry` for a baseline of several steps).
+        from :func:`compose_odometry` for a baseline of several steps); or, with
+        ``pair_groups``, shape (G, 3): the std. devs. of each group of pairs (several steps).
     bearing_sigma_rad : float
     select : array of int, optional
         Only pairs among these landmarks (e.g. those that passed :func:`gate_points`).
+    pairs : (first, second) int arrays of shape (P,), optional
+        The pairs to take (indices into ``tri``), in place of all pairs of ``select``.
+    pair_groups : int array of shape (G,), optional
+        Numbers of consecutive pairs sharing each row of ``odometry`` (the steps of a batch;
+        each group's variances are those of one call per group, bit for bit).
     with_jacobian : bool
         Also return the ``(P, 7)`` Jacobian (tests; the variance never needs it).
 
@@ -365,7 +381,7 @@ def pair_squared_distances(tri: RayTriangulation, odometry: ArrayLike,
     PairEstimates
         The pairs ``(first, second)`` index ``tri``; in ``np.triu_indices`` order of ``select``.
     """
-    first, second = select_pairs(len(tri), select)
+    first, second = select_pairs(len(tri), select) if pairs is None else pairs
     unc = np.asarray(odometry, dtype=float)
     sb2 = float(bearing_sigma_rad) ** 2
     # e . dp/dz = Re(e conj(dp/dz)) for the offset e = p_i - p_j (complex plane)
@@ -379,6 +395,16 @@ def pair_squared_distances(tri: RayTriangulation, odometry: ArrayLike,
     grad = np.concatenate((gi[:, :3] - gj[:, :3], gi[:, 3:], gj[:, 3:]), axis=1)
     if unc.shape == (3,):                                       # independent components
         var = (grad * grad) @ np.concatenate((4.0 * unc * unc, np.full(4, 4.0 * sb2)))
+    elif pair_groups is not None:                               # rows of (G, 3) sigmas
+        g2 = grad * grad
+        var = np.empty(len(first))
+        scale = np.empty(7)
+        scale[3:] = 4.0 * sb2
+        end = np.cumsum(pair_groups)
+        for row, a, b in zip(unc, end - pair_groups, end):
+            if b > a:
+                scale[:3] = 4.0 * row * row
+                np.matmul(g2[a:b], scale, out=var[a:b])
     else:
         cov7 = np.zeros((7, 7))
         cov7[:3, :3] = odometry_covariance(unc)

@@ -1,0 +1,116 @@
+"""The batched consecutive-step path (stmds/batch.py), the merged pair keys of the distance store
+and the dense shortest paths: the same numbers as the step-by-step code."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from bomgraph.mapper import create_mapper
+from bomgraph.sim import SimConfig, simulate
+from bomgraph.stmds import completion
+from bomgraph.stmds.batch import _pairs_within_groups
+from bomgraph.stmds.completion import shortest_path_completion
+from bomgraph.stmds.distances import DistanceStore
+
+
+def _stream_with_breaks():
+    """A short simulated stream with a restart of the odometry chain, an empty step and a
+    step with its own odometry sigmas."""
+    stream = simulate(SimConfig(n_steps=90), np.random.default_rng(3))
+    steps = list(stream.steps)
+    steps[30] = dataclasses.replace(steps[30], odom=None)
+    steps[41] = dataclasses.replace(steps[41], landmark_ids=np.zeros(0, np.int64),
+                                    bearings_rad=np.zeros(0))
+    steps[55] = dataclasses.replace(steps[55], odom_sigma=np.array([0.05, 0.01, 0.07]))
+    return stream.header, steps
+
+
+@pytest.mark.parametrize("cut_every", [1, 7, 1000])
+def test_batches_fuse_the_same_bits_as_one_step_at_a_time(cut_every: int) -> None:
+    header, steps = _stream_with_breaks()
+    batched = create_mapper("stmds-smacof", header)
+    single = create_mapper("stmds-smacof", header)
+    assert batched._batch is not None
+    single._batch = None                       # the step-by-step code
+    for s in steps:
+        batched.step(s)
+        single.step(s)
+        if s.t % cut_every == 0:
+            batched.flush()
+    batched.flush()
+    a, b = batched._store, single._store
+    assert len(a) == len(b) > 100
+    n = len(a)
+    for name in ("_a", "_b", "_count", "_sw", "_sx"):
+        np.testing.assert_array_equal(getattr(a, name)[:n], getattr(b, name)[:n], err_msg=name)
+    assert batched._n_triangulated == single._n_triangulated
+    assert batched._n_gated == single._n_gated
+    np.testing.assert_array_equal(batched._ids.ids, single._ids.ids)
+    np.testing.assert_array_equal(batched._triangulated.array, single._triangulated.array)
+    ea, eb = batched.estimate(), single.estimate()
+    np.testing.assert_array_equal(ea.landmarks_xy, eb.landmarks_xy)
+
+
+def test_pairs_within_groups_follow_triu_order() -> None:
+    group = np.array([0, 0, 0, 2, 5, 5, 5, 5])
+    f, g = _pairs_within_groups(group)
+    want_f, want_g = [], []
+    for start, size in ((0, 3), (3, 1), (4, 4)):
+        i, j = np.triu_indices(size, 1)
+        want_f.append(i + start)
+        want_g.append(j + start)
+    np.testing.assert_array_equal(f, np.concatenate(want_f))
+    np.testing.assert_array_equal(g, np.concatenate(want_g))
+    assert _pairs_within_groups(np.array([4]))[0].size == 0
+
+
+def test_store_with_repeated_pairs_equals_one_call_per_step() -> None:
+    rng = np.random.default_rng(0)
+    one, many = DistanceStore("scale-free"), DistanceStore("scale-free")
+    calls = []
+    for _ in range(40):
+        a = rng.integers(0, 30, 12)
+        b = (a + 1 + rng.integers(0, 29, 12)) % 30
+        key = np.minimum(a, b) * 100 + np.maximum(a, b)
+        _, first = np.unique(key, return_index=True)      # distinct within one step
+        a, b = a[first], b[first]
+        calls.append((a, b, rng.uniform(0.1, 4, a.size), rng.uniform(0.01, 1, a.size)))
+    for c in calls:
+        one.add(*c)
+    many.add(*(np.concatenate(x) for x in zip(*calls)))
+    n = len(one)
+    assert len(many) == n
+    for name in ("_a", "_b", "_count", "_sw", "_sx"):
+        np.testing.assert_array_equal(getattr(one, name)[:n], getattr(many, name)[:n])
+    keys = one._keys
+    assert np.all(np.diff(keys) > 0)                           # sorted, merged
+    np.testing.assert_array_equal(np.sort(one._key_slot), np.arange(n))
+
+
+def test_degenerate_estimates_are_dropped_and_counted() -> None:
+    store = DistanceStore("scale-free")
+    store.add(np.array([0, 1, 2]), np.array([1, 2, 3]), np.array([0.0, 1.0, 2.0]),
+              np.array([1.0, np.inf, 0.5]))
+    known = store.known()
+    assert store.n_degenerate == 2
+    np.testing.assert_array_equal(known.first, [2])
+    assert np.all(np.isfinite(known.distance_m))
+
+
+@pytest.mark.parametrize("n", [12, 40])
+def test_dense_and_sparse_shortest_paths_agree(n: int, monkeypatch) -> None:
+    rng = np.random.default_rng(n)
+    xy = rng.uniform(0, 3, (n, 2))
+    i, j = np.triu_indices(n, 1)
+    d = np.hypot(*(xy[i] - xy[j]).T)
+    near = d < 1.2
+    dense = shortest_path_completion(n, i[near], j[near], d[near])
+    monkeypatch.setattr(completion, "DENSE_PATHS_MAX", 0)
+    sparse = shortest_path_completion(n, i[near], j[near], d[near])
+    np.testing.assert_array_equal(np.isinf(dense), np.isinf(sparse))
+    fin = np.isfinite(dense)
+    np.testing.assert_allclose(dense[fin], sparse[fin], rtol=1e-13)
+    np.testing.assert_array_equal(dense[i[near], j[near]], d[near])
