@@ -221,10 +221,17 @@ class Executor:
             raise ConfigError("the dask backend needs a scheduler address or dask_local > 0")
 
     @classmethod
-    def choose(cls, jobs: int = -1, scheduler: str | None = None,
-               dask_local: int = 0) -> "Executor":
+    def choose(cls, jobs: int | None = -1, scheduler: str | None = None,
+               dask_local: int | None = 0, *,
+               defaults: Mapping[str, Any] | None = None) -> "Executor":
         """Dask when a ``scheduler`` or ``dask_local`` workers are given, else serial for
-        ``jobs == 1``, else ``jobs`` local processes (-1: one per core)."""
+        ``jobs == 1``, else ``jobs`` local processes (-1: one per core). A value left None
+        is taken from ``defaults`` (a sweep file's ``[executor]``: ``jobs``, ``scheduler``,
+        ``dask_local``), else the default."""
+        d = dict(defaults or {})
+        jobs = d.get("jobs", -1) if jobs is None else jobs
+        scheduler = scheduler or d.get("scheduler")
+        dask_local = d.get("dask_local", 0) if dask_local is None else dask_local
         if scheduler or dask_local:
             return cls("dask", scheduler=scheduler, dask_local=dask_local or 0)
         if jobs == 1:

@@ -369,6 +369,51 @@ def load_experiments(path_or_name: Any) -> Sweep:
     return Sweep(tuple(exps), dict(spec.executor), spec.path)
 
 
+def compare_experiments(*, config: str | None = None, streams: Sequence[str] | None = None,
+                        methods: str | None = None, options: Sequence[str] = (),
+                        reference: str | None = None, checkpoint_every: int | None = None,
+                        real: str | None = None, quick: bool = False, seed: int | None = None,
+                        names: Sequence[str] = ()) -> tuple[list[Experiment], dict[str, Any]]:
+    """What ``bomgraph compare`` runs, from its options: a sweep file (``config``; default
+    the shipped ``paper``, whose design ``quick`` and ``seed`` change), stream files with
+    ``methods`` (``"NAME[@PRESET],..."``), ``options`` (``"NAME:KEY=VALUE"``) and a
+    ``reference``, or the recordings under ``real``; then the experiments called ``names``.
+    Returns them and the sweep file's executor settings.
+
+    Raises
+    ------
+    ConfigError
+        Options that do not go together (the message says which); a SweepError for a bad
+        sweep file or stream list.
+    """
+    from .sweep import command_line_spec
+
+    given = [n for n, v in (("--config", config), ("--streams", streams), ("--real", real)) if v]
+    if len(given) > 1:
+        raise ConfigError(f"compare: give one of --config, --streams, --real, not "
+                          f"{' and '.join(given)}")
+    for flag, value, where in (("--methods", methods, "[[methods]] tables"),
+                               ("--option", options, "options = {...}"),
+                               ("--reference", reference, 'reference = "NAME"'),
+                               ("--checkpoint-every", checkpoint_every, "checkpoint_every = N")):
+        if value and not streams:
+            raise ConfigError(f"compare: {flag} goes with --streams FILE... (in a sweep file: "
+                              f"{where})")
+    settings: dict[str, Any] = {}
+    if real:
+        exps = real_experiments(real)
+    elif streams:
+        sweep = load_experiments(command_line_spec(
+            streams, [m.strip() for m in (methods or "").split(",") if m.strip()], options,
+            reference=reference, checkpoint_every=checkpoint_every or 10))
+        exps = {e.name: e for e in sweep.experiments}
+    else:
+        sweep = load_experiments(config or "paper")
+        settings = dict(sweep.executor)
+        exps = {e.name: e for e in designed_variant(sweep.experiments, quick=quick, seed=seed)}
+    return select(exps, names), settings
+
+
 #: Registered methods the real-data experiments leave out by default (as before the redesign:
 #: Method 1 runs there as the mapping arm ``stmds-cs``, localisation as ``stmds-smacof-loc``).
 REAL_SKIPPED = ("stmds-cs-loc",)
@@ -441,6 +486,7 @@ def select(experiments: Mapping[str, Experiment], names: Sequence[str] = ()) -> 
 
 __all__ = ["Arm", "SimSource", "DatasetSource", "FileSource", "WorldSource", "World",
            "Experiment", "Task", "Sweep", "load_experiments", "designed_variant",
+           "compare_experiments",
            "paper_experiments",
            "real_experiments", "real_methods", "select", "REAL_VARIANTS", "REAL_SKIPPED",
            "PAPER_REPORTED"]

@@ -18,7 +18,7 @@ from typing import Any, Callable, Iterable, Mapping, Protocol, runtime_checkable
 
 import numpy as np
 
-from .errors import ConfigError, UnknownMethodError
+from .errors import BomgraphError, ConfigError, UnknownMethodError
 from .stream import Step, StreamHeader, Truth
 
 
@@ -350,6 +350,28 @@ def method_description(name: str) -> str:
     return text.splitlines()[0] if text else "(no description)"
 
 
+def preset_summary(overrides: Mapping[str, Any], width: int = 100) -> str:
+    """A preset's field overrides on one line (cut at ``width`` characters)."""
+    text = ", ".join(f"{k}={v!r}" for k, v in overrides.items()) or "the defaults"
+    return text if len(text) <= width else text[:width - 3] + "..."
+
+
+def method_listing(info: MethodInfo) -> dict[str, Any]:
+    """What ``bomgraph methods`` shows of one method (name, description, origin, its
+    distribution and version, presets as field overrides); a plugin that cannot be loaded is
+    listed with the reason in its description, not raised."""
+    row: dict[str, Any] = {"name": info.name, "needs_truth": info.needs_truth,
+                           "origin": info.origin, "distribution": info.distribution,
+                           "version": info.version, "presets": {}}
+    try:
+        row["description"] = method_description(info.name)
+        cls = method_config_class(info.name)
+        row["presets"] = {k: dict(v) for k, v in getattr(cls, "PRESETS", {}).items()}
+    except BomgraphError as exc:
+        row["description"] = f"(cannot be loaded: {exc})"
+    return row
+
+
 def method_fingerprint(name: str) -> str | None:
     """A hash of the method's own code for the cache key, or None for a built-in method
     (whose code the runner's :func:`bomgraph.bench.code_fingerprint` of the bomgraph and
@@ -408,5 +430,6 @@ def create_mapper(name: str, header: StreamHeader, *, truth: Truth | None = None
 
 __all__ = ["MapEstimate", "Mapper", "Checkpoint", "RunResult", "run", "checkpoint_times",
            "MethodInfo", "register_method", "available_methods", "method_info",
-           "method_factory", "method_description", "method_fingerprint",
+           "method_factory", "method_description", "method_fingerprint", "method_listing",
+           "preset_summary",
            "method_config_class", "create_mapper"]
