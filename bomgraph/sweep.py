@@ -192,18 +192,20 @@ def command_line_spec(streams: Sequence[str], methods: Sequence[str],
     _unique([a.label for a in arms], "--methods")
     exp = ExperimentSpec(name, f"{len(streams)} stream(s), {len(arms)} method(s)",
                          tuple(with_options(a) for a in arms),
-                         streams=_named_streams(list(streams)),
+                         streams=_named_streams([str(Path(s).resolve()) for s in streams]),
                          reference=None if ref is None else with_options(ref),
                          checkpoint_every=checkpoint_every)
     return SweepSpec("<command line>", (exp,))
 
 
 def _named_streams(paths: list[str]) -> tuple[tuple[str, str], ...]:
-    """Each path with its run label: the file stem, or the path without suffix when two
-    files share a stem."""
+    """Each path with its run label: the file stem, or ``folder-stem`` when two files share a
+    stem (``folder-stem-K`` when that is not enough)."""
     stems = [Path(p).stem for p in paths]
-    return tuple((p, s if stems.count(s) == 1 else str(Path(p).with_suffix("")))
-                 for p, s in zip(paths, stems))
+    labels = [s if stems.count(s) == 1 else f"{Path(p).parent.name}-{s}"
+              for p, s in zip(paths, stems)]
+    labels = [lb if labels.count(lb) == 1 else f"{lb}-{k}" for k, lb in enumerate(labels)]
+    return tuple(zip(paths, labels))
 
 
 def _unique(labels: Sequence[str], where: str) -> None:
@@ -331,10 +333,10 @@ class _Reader:
             pat = self.str_(pat, f"{key}[{k}]")
             full = pat if os.path.isabs(pat) else str(self.path.parent / pat)
             found = sorted(glob.glob(full, recursive=True))
-            found = [f for f in found if os.path.isfile(f)]
+            found = [str(Path(f).resolve()) for f in found if os.path.isfile(f)]
             if not found:
                 raise self.fail(f"{key}[{k}]", f"{pat!r} matches no file (relative to "
-                                               f"{self.path.parent})")
+                                               f"{self.path.parent.resolve()})")
             paths += [f for f in found if f not in paths]
         return _named_streams(paths)
 
