@@ -290,12 +290,14 @@ def refuse_runtime_methods(tasks: Sequence[Task], backend: str) -> None:
                           for m in (t.arm.method, *([t.reference.method] if t.reference else [])))
     for name in names:
         info = method_info(name)
+        target = ("yourpackage.module:Factory" if info.target.startswith("__main__:")
+                  else info.target)
         if info.origin == "runtime":
             raise ConfigError(
                 f"method {name!r} was registered at run time (register_method) and the "
                 f"{backend} workers cannot see it; make it a plugin: in your package's "
                 f"pyproject.toml add [project.entry-points.\"bomgraph.methods\"] "
-                f"{name} = \"{info.target}\", then `pip install -e .` it (or run serially: "
+                f"{name} = \"{target}\", then `pip install -e .` it (or run serially: "
                 f"--jobs 1, Executor('serial'))")
 
 

@@ -327,8 +327,9 @@ def method_info(name: str) -> MethodInfo:
     found = _plugin_infos().get(name)
     if found is None:
         known = ", ".join(m.name for m in available_methods())
-        raise UnknownMethodError(f"unknown method {name!r}; known methods: {known} (a method "
-                                 f"of your own: see `bomgraph methods --help` on plugins)")
+        raise UnknownMethodError(f"unknown method {name!r}; known methods: {known} (your own "
+                                 f"method: install a package declaring it in the entry-point "
+                                 f"group 'bomgraph.methods')")
     return found
 
 

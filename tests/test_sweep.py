@@ -204,3 +204,15 @@ def test_compare_command_line_mistakes_are_one_line(
     assert main(["compare", *args, "--out", str(runs / "x")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and message in err[0], err
+
+
+def test_methods_lists_every_preset_on_a_line_of_its_own(capsys: pytest.CaptureFixture) -> None:
+    assert main(["methods"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    k = next(i for i, ln in enumerate(lines) if ln.startswith("stmds-smacof "))
+    block = []
+    for ln in lines[k + 1:]:
+        if not ln.startswith("  @"):
+            break
+        block.append(ln.split()[0])
+    assert block[0] == "@paper" and "@real" in block and "@improved" in block
