@@ -27,7 +27,7 @@ from typing import Any, Callable, Iterable, Iterator, Mapping, Sequence
 
 import numpy as np
 
-from .errors import ConfigError, TooFewLandmarksError
+from .errors import ConfigError, TooFewLandmarksError, UnknownMethodError
 from .evaluate import CheckpointScore, score_checkpoints, score_estimate
 from .experiments import Arm, Experiment, SimSource, Task
 from .jsonio import jsonable
@@ -289,7 +289,10 @@ def refuse_runtime_methods(tasks: Sequence[Task], backend: str) -> None:
     names = dict.fromkeys(m for t in tasks
                           for m in (t.arm.method, *([t.reference.method] if t.reference else [])))
     for name in names:
-        info = method_info(name)
+        try:
+            info = method_info(name)
+        except UnknownMethodError:  # recorded as a failed run, with the reason
+            continue
         target = ("yourpackage.module:Factory" if info.target.startswith("__main__:")
                   else info.target)
         if info.origin == "runtime":

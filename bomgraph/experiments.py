@@ -420,9 +420,11 @@ REAL_SKIPPED = ("stmds-cs-loc",)
 
 
 def real_methods() -> list[str]:
-    """The methods of :func:`real_experiments` by default: every registered method (in
-    registration order) except :data:`REAL_SKIPPED`."""
-    return [m.name for m in available_methods() if m.name not in REAL_SKIPPED]
+    """The methods of :func:`real_experiments` by default: every built-in method (in
+    registration order) except :data:`REAL_SKIPPED` (plugins run through ``compare
+    --streams`` or a sweep file)."""
+    return [m.name for m in available_methods()
+            if m.name not in REAL_SKIPPED and m.origin == "builtin"]
 
 
 #: Arms added to the real-data experiments: the variants made for recordings (issues 7, 8),
