@@ -178,6 +178,8 @@ def format_summary(summary: Sequence[dict]) -> str:
     for (exp,), rows in _group(summary, "experiment").items():
         times = sorted({int(k.split("@")[1]) for r in rows for k in r
                         if k.startswith("mpe_mean_m@")})
+        if all(r.get("scored_against") == "none" for r in rows):
+            times = []  # no truth, no reference: no MPE to show
         lines.append(f"\n== {exp} ==  landmark MPE [cm] mean/median±std at t; robot: error "
                      f"[cm] of the latest pose at the end; conv: converged runs; NEES: robot "
                      f"pose; wall time per run; [k/n]: only k of n runs had a map")
