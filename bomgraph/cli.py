@@ -226,23 +226,15 @@ def cmd_export(args: argparse.Namespace) -> int:
 
 def cmd_methods(args: argparse.Namespace) -> int:
     from .jsonio import jsonable
-    from .mapper import (available_methods, method_config_class, method_info, method_listing,
-                         preset_summary)
+    from .mapper import (available_methods, format_method_list, method_config_class,
+                         method_info, method_listing, preset_summary)
 
     if args.name is None:
         rows = [method_listing(i) for i in available_methods()]
         if args.json:
             print(json.dumps(jsonable(rows)))
             return 0
-        for r in rows:
-            flag = "  (benchmark only: reads the truth)" if r["needs_truth"] else ""
-            if r["origin"] == "plugin":
-                flag += f"  (plugin: {r['distribution'] or '?'} {r['version'] or ''})".rstrip()
-            elif r["origin"] == "runtime":
-                flag += "  (registered at run time: this process only)"
-            print(f"{r['name']:18s} {r['description']}{flag}")
-            for name, overrides in r["presets"].items():
-                print(f"  @{name:15s} {preset_summary(overrides)}")
+        print(format_method_list(rows))
         return 0
     from .config import describe_options
 

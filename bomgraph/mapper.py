@@ -14,7 +14,8 @@ from __future__ import annotations
 import dataclasses
 import time
 from dataclasses import dataclass, field
-from typing import Any, Callable, Iterable, Mapping, Protocol, runtime_checkable
+from typing import (Any, Callable, Iterable, Mapping, Protocol, Sequence,
+                    runtime_checkable)
 
 import numpy as np
 
@@ -373,6 +374,22 @@ def method_listing(info: MethodInfo) -> dict[str, Any]:
     return row
 
 
+def format_method_list(rows: Sequence[Mapping[str, Any]]) -> str:
+    """:func:`method_listing` rows as the text of ``bomgraph methods``: a line per method
+    (name, description, where it comes from), then a line per preset (``@NAME`` and its
+    field overrides)."""
+    lines = []
+    for r in rows:
+        flag = "  (benchmark only: reads the truth)" if r["needs_truth"] else ""
+        if r["origin"] == "plugin":
+            flag += f"  (plugin: {r['distribution'] or '?'} {r['version'] or ''})".rstrip()
+        elif r["origin"] == "runtime":
+            flag += "  (registered at run time: this process only)"
+        lines.append(f"{r['name']:18s} {r['description']}{flag}")
+        lines += [f"  @{name:15s} {preset_summary(o)}" for name, o in r["presets"].items()]
+    return "\n".join(lines)
+
+
 def method_fingerprint(name: str) -> str | None:
     """A hash of the method's own code for the cache key, or None for a built-in method
     (whose code the runner's :func:`bomgraph.bench.code_fingerprint` of the bomgraph and
@@ -432,5 +449,5 @@ def create_mapper(name: str, header: StreamHeader, *, truth: Truth | None = None
 __all__ = ["MapEstimate", "Mapper", "Checkpoint", "RunResult", "run", "checkpoint_times",
            "MethodInfo", "register_method", "available_methods", "method_info",
            "method_factory", "method_description", "method_fingerprint", "method_listing",
-           "preset_summary",
+           "preset_summary", "format_method_list",
            "method_config_class", "create_mapper"]
