@@ -18,6 +18,7 @@ import functools
 import hashlib
 import json
 import logging
+import math
 import os
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -25,14 +26,16 @@ from typing import Any, Callable, Iterable, Iterator, Mapping, Sequence
 
 import numpy as np
 
-from .errors import ConfigError, TooFewLandmarksError
-from .evaluate import score_checkpoints, score_estimate
-from .experiments import Experiment, SimSource, Task
+from .errors import ConfigError, TooFewLandmarksError, UnknownMethodError
+from .evaluate import CheckpointScore, score_checkpoints, score_estimate
+from .experiments import Arm, Experiment, SimSource, Task
 from .jsonio import jsonable
-from .mapper import MapEstimate, RunResult, create_mapper, method_info, run
-from .stream import Step, Stream
+from .mapper import (Checkpoint, MapEstimate, RunResult, create_mapper, method_fingerprint,
+                     method_info, run)
 from .stdio import bounded_lines, output_file
+from .stream import Step, Stream, Truth
 from .stream_file import StreamReader
+from .trajectory import bearing_residuals
 
 #: Bump to invalidate every cached result (the code fingerprint covers code changes).
 _log = logging.getLogger(__name__)
@@ -57,27 +60,79 @@ def code_fingerprint() -> str:
     return h.hexdigest()[:16]
 
 
+def _method_code(task: Task) -> dict[str, str]:
+    """The fingerprints of the task's non-built-in methods (the arm's, the reference's), by
+    method name: empty for built-in methods, so their keys are as before plugins existed."""
+    methods = [task.arm.method] + ([task.reference.method] if task.reference else [])
+    return {m: fp for m in methods if (fp := method_fingerprint(m)) is not None}
+
+
 def task_key(task: Task) -> str:
     """A content hash of the task, the cache version and the code: the same task run by the
-    same code always has the same key (its cache file name)."""
-    blob = json.dumps({**task.identity(), "v": CACHE_VERSION, "code": code_fingerprint()},
-                      sort_keys=True)
+    same code always has the same key (its cache file name). The code is the bomgraph and
+    baselines sources and, for a plugin or a method registered at run time, the sources of
+    its package and its version (:func:`bomgraph.mapper.method_fingerprint`)."""
+    ident: dict[str, Any] = {**task.identity(), "v": CACHE_VERSION, "code": code_fingerprint()}
+    plugin_code = _method_code(task)
+    if plugin_code:
+        ident["method_code"] = plugin_code
+    blob = json.dumps(ident, sort_keys=True)
     return hashlib.sha256(blob.encode()).hexdigest()[:20]
 
 
 def run_task(task: Task) -> dict[str, Any]:
-    """Simulate the task's run, run its method, and score every checkpoint.
+    """Simulate (or read) the task's stream, run its method, and score every checkpoint.
 
     Returns a JSON-ready dict: per-checkpoint errors, timings, the method's final diagnostics.
     A method that raises is recorded as a failure with the reason, never dropped. The task
     runs with single-threaded BLAS: the matrices are small, parallelism is across tasks, and
     multithreaded BLAS on small matrices stalls on a loaded machine
     (docs/measurements.md).
+
+    A stream without ground truth is scored against the final map (and poses) of the task's
+    reference method when it has one (``scored_against``: ``"reference LABEL"``), else only
+    by truth-free metrics: landmarks mapped and ``bearing_rms_rad``, the RMS bearing residual
+    of each checkpoint's map and trajectory against the stream's own bearings.
     """
     from threadpoolctl import threadpool_limits
 
     with threadpool_limits(limits=1):
         return _run_task(task)
+
+
+def _run_method(task: Task, arm: Arm, stream: Stream) -> RunResult:
+    truth = stream.truth
+    needs_truth = method_info(arm.method).needs_truth
+    mapper = create_mapper(arm.method, stream.header, truth=truth if needs_truth else None,
+                           **dict(arm.options))
+    return run(mapper, stream.steps, checkpoint_every=arm.checkpoint_every
+               or task.checkpoint_every, method=arm.label)
+
+
+_REFERENCES: dict[str, MapEstimate] = {}
+
+
+def _reference_map(task: Task, stream: Stream) -> MapEstimate:
+    """The final estimate of the task's reference method on its stream (kept for the other
+    tasks of the same stream and reference that run in this process)."""
+    assert task.reference is not None
+    key = json.dumps({"source": task.source.key(), "ref": task.reference.key(),
+                      "every": task.checkpoint_every}, sort_keys=True)
+    if key not in _REFERENCES:
+        if len(_REFERENCES) >= 8:
+            _REFERENCES.pop(next(iter(_REFERENCES)))
+        _REFERENCES[key] = _run_method(task, task.reference, stream).final
+    return _REFERENCES[key]
+
+
+def _bearing_rms(estimate: MapEstimate, stream: Stream) -> float:
+    """RMS bearing residual [rad] of ``estimate`` against the stream's bearings (NaN without
+    poses or without a bearing on a mapped landmark): a truth-free score."""
+    if estimate.poses is None or not len(estimate):
+        return math.nan
+    r = bearing_residuals(estimate.landmark_ids, estimate.landmarks_xy, estimate.pose_t,
+                          estimate.poses, stream.steps)
+    return float(np.sqrt(np.mean(r ** 2))) if r.size else math.nan
 
 
 def _run_task(task: Task) -> dict[str, Any]:
@@ -89,40 +144,63 @@ def _run_task(task: Task) -> dict[str, Any]:
     except Exception as exc:  # a source that cannot be read is a failed run, with the reason
         out.update(ok=False, error=f"{type(exc).__name__}: {exc}")
         return out
-    truth = stream.truth
-    if truth is None:
-        out.update(ok=False, error="the stream has no ground truth to score against")
-        return out
+    truth: Truth | MapEstimate | None = stream.truth
+    out["scored_against"] = "truth"
+    if truth is None and task.reference is not None:
+        try:
+            truth = _reference_map(task, stream)
+        except Exception as exc:  # no reference, no score: a failed run with the reason
+            out.update(ok=False, error=f"reference {task.reference.label} failed: "
+                                       f"{type(exc).__name__}: {exc}")
+            return out
+        out["scored_against"] = f"reference {task.reference.label}"
+    elif truth is None:
+        out["scored_against"] = "none"
     try:
-        needs_truth = method_info(task.arm.method).needs_truth
-        mapper = create_mapper(task.arm.method, stream.header,
-                               truth=truth if needs_truth else None, **dict(task.arm.options))
-        result = run(mapper, stream.steps, checkpoint_every=task.checkpoint_every,
-                     method=task.arm.label)
+        result = _run_method(task, task.arm, stream)
     except Exception as exc:  # a failing method is a result, reported with its reason
         out.update(ok=False, error=f"{type(exc).__name__}: {exc}")
         return out
     try:
-        rows = [asdict(row) for row in score_checkpoints(result, truth)]
+        if truth is None:
+            rows = [{**_unscored(c), "bearing_rms_rad": _bearing_rms(c.estimate, stream)}
+                    for c in result.checkpoints]
+        else:
+            rows = [asdict(row) for row in score_checkpoints(result, truth)]
+            if stream.truth is None:
+                for row, c in zip(rows, result.checkpoints):
+                    row["bearing_rms_rad"] = _bearing_rms(c.estimate, stream)
     except Exception as exc:  # an unscorable estimate is a failed run, with the reason
         out.update(ok=False, error=f"scoring failed: {type(exc).__name__}: {exc}")
         return out
     info = jsonable(dict(result.final.info), max_items=64)
     final = result.final
-    try:  # the final map and trajectory in the truth's frame, for the map figures
-        al = score_estimate(final, truth).alignment
-        out["final_map"] = {
-            "landmarks": [[int(i), float(x), float(y)] for i, (x, y)
-                          in zip(final.landmark_ids, al.apply(final.landmarks_xy))],
-            "poses": ([] if final.poses is None else
-                      [[int(t), float(x), float(y)] for t, (x, y)
-                       in zip(final.pose_t, al.apply(final.poses[:, :2]))])}
-    except TooFewLandmarksError:
-        out["final_map"] = None
+    out["final_map"] = None
+    if truth is not None:
+        try:  # the final map and trajectory in the truth's frame, for the map figures
+            al = score_estimate(final, truth).alignment
+            out["final_map"] = {
+                "landmarks": [[int(i), float(x), float(y)] for i, (x, y)
+                              in zip(final.landmark_ids, al.apply(final.landmarks_xy))],
+                "poses": ([] if final.poses is None else
+                          [[int(t), float(x), float(y)] for t, (x, y)
+                           in zip(final.pose_t, al.apply(final.poses[:, :2]))])}
+        except TooFewLandmarksError:
+            pass
+    if out["scored_against"] == "truth":
+        del out["scored_against"]  # the paper's results keep their shape
     out.update(ok=True, checkpoints=rows, total_s=result.total_s,
                step_median_s=float(np.median(result.step_s)),
                converged=info.get("converged"), info=info)
     return out
+
+
+def _unscored(c: Checkpoint) -> dict[str, Any]:
+    """A checkpoint row without a reference: the counts, NaN errors (as a map sharing fewer
+    than 3 landmarks with the truth)."""
+    nan = math.nan
+    return asdict(CheckpointScore(c.t, len(c.estimate), c.estimate_s, nan, nan, nan, nan, 0,
+                                  nan, nan, nan, nan))
 
 
 @dataclass(frozen=True)
@@ -143,10 +221,17 @@ class Executor:
             raise ConfigError("the dask backend needs a scheduler address or dask_local > 0")
 
     @classmethod
-    def choose(cls, jobs: int = -1, scheduler: str | None = None,
-               dask_local: int = 0) -> "Executor":
+    def choose(cls, jobs: int | None = -1, scheduler: str | None = None,
+               dask_local: int | None = 0, *,
+               defaults: Mapping[str, Any] | None = None) -> "Executor":
         """Dask when a ``scheduler`` or ``dask_local`` workers are given, else serial for
-        ``jobs == 1``, else ``jobs`` local processes (-1: one per core)."""
+        ``jobs == 1``, else ``jobs`` local processes (-1: one per core). A value left None
+        is taken from ``defaults`` (a sweep file's ``[executor]``: ``jobs``, ``scheduler``,
+        ``dask_local``), else the default."""
+        d = dict(defaults or {})
+        jobs = d.get("jobs", -1) if jobs is None else jobs
+        scheduler = scheduler or d.get("scheduler")
+        dask_local = d.get("dask_local", 0) if dask_local is None else dask_local
         if scheduler or dask_local:
             return cls("dask", scheduler=scheduler, dask_local=dask_local or 0)
         if jobs == 1:
@@ -167,6 +252,8 @@ def execute(tasks: Sequence[Task], executor: Executor = Executor(), *,
     Finished tasks found in ``cache_dir`` are not run again; new results are written there as
     they arrive, so an interrupted sweep resumes where it stopped.
     """
+    if executor.backend != "serial":
+        refuse_runtime_methods(tasks, executor.backend)
     results: list[dict[str, Any] | None] = [None] * len(tasks)
     cache = Path(cache_dir) if cache_dir is not None else None
     if cache is not None:
@@ -174,7 +261,7 @@ def execute(tasks: Sequence[Task], executor: Executor = Executor(), *,
         for k, t in enumerate(tasks):
             cached = _read_cached(_cache_path(cache, t))
             if cached is not None:
-                cached.update(experiment=t.experiment, arm=t.arm.label)
+                cached.update(experiment=t.experiment, arm=t.arm.label, run=t.source.name)
                 results[k] = cached
     todo = [k for k, r in enumerate(results) if r is None]
     done = len(tasks) - len(todo)
@@ -188,6 +275,33 @@ def execute(tasks: Sequence[Task], executor: Executor = Executor(), *,
         if progress:
             progress(done, len(tasks))
     return [r for r in results if r is not None]
+
+
+def refuse_runtime_methods(tasks: Sequence[Task], backend: str) -> None:
+    """Raise when a task's method (or reference) was registered at run time: worker
+    processes start from the installed packages and never see such a registration.
+
+    Raises
+    ------
+    ConfigError
+        Naming the method and how to make it a plugin (or to run serially).
+    """
+    names = dict.fromkeys(m for t in tasks
+                          for m in (t.arm.method, *([t.reference.method] if t.reference else [])))
+    for name in names:
+        try:
+            info = method_info(name)
+        except UnknownMethodError:  # recorded as a failed run, with the reason
+            continue
+        target = ("yourpackage.module:Factory" if info.target.startswith("__main__:")
+                  else info.target)
+        if info.origin == "runtime":
+            raise ConfigError(
+                f"method {name!r} was registered at run time (register_method) and the "
+                f"{backend} workers cannot see it; make it a plugin: in your package's "
+                f"pyproject.toml add [project.entry-points.\"bomgraph.methods\"] "
+                f"{name} = \"{target}\", then `pip install -e .` it (or run serially: "
+                f"--jobs 1, Executor('serial'))")
 
 
 def _read_cached(path: Path) -> dict[str, Any] | None:
@@ -357,5 +471,5 @@ def run_example(method: str, experiment: Experiment, *, run_index: int = 0,
     return stream, (res.final if t is None else res.at(t))
 
 
-__all__ = ["Executor", "run_task", "execute", "task_key", "code_fingerprint", "strip_timings",
+__all__ = ["Executor", "run_task", "execute", "refuse_runtime_methods", "task_key", "code_fingerprint", "strip_timings",
            "run_file", "count_steps", "run_example", "CACHE_VERSION"]

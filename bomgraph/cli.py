@@ -231,32 +231,28 @@ def cmd_export(args: argparse.Namespace) -> int:
 
 def cmd_methods(args: argparse.Namespace) -> int:
     from .jsonio import jsonable
-    from .mapper import available_methods, method_config_class, method_info
+    from .mapper import (available_methods, format_method_list, method_config_class,
+                         method_info, method_listing, preset_summary)
 
     if args.name is None:
-        infos = available_methods()
+        rows = [method_listing(i) for i in available_methods()]
         if args.json:
-            print(json.dumps([{"name": i.name, "description": i.description,
-                               "needs_truth": i.needs_truth} for i in infos]))
+            print(json.dumps(jsonable(rows)))
             return 0
-        for info in infos:
-            flag = "  (benchmark only: reads the truth)" if info.needs_truth else ""
-            print(f"{info.name:18s} {info.description}{flag}")
+        print(format_method_list(rows))
         return 0
     from .config import describe_options
 
-    info = method_info(args.name)
+    r = method_listing(method_info(args.name))
     cls = method_config_class(args.name)
     options = describe_options(cls) if cls is not None else []
-    presets = {k: dict(v) for k, v in getattr(cls, "PRESETS", {}).items()}
     if args.json:
-        print(json.dumps(jsonable({"name": info.name, "description": info.description,
-                                   "needs_truth": info.needs_truth,
-                                   "config": cls.__name__ if cls else None,
-                                   "options": [o._asdict() for o in options],
-                                   "presets": presets})))
+        print(json.dumps(jsonable({**r, "config": cls.__name__ if cls else None,
+                                   "options": [o._asdict() for o in options]})))
         return 0
-    print(f"{info.name}: {info.description}")
+    print(f"{r['name']}: {r['description']}")
+    if r["origin"] == "plugin":
+        print(f"  plugin {method_info(args.name).target} from {r['distribution']} {r['version']}")
     if cls is None:
         print("  (this method declares no configuration class)")
         return 0
@@ -265,22 +261,23 @@ def cmd_methods(args: argparse.Namespace) -> int:
     for o in options:
         print(f"  {o.name:{width}s}  {o.type}, default {o.default!r}"
               + (f": {o.doc}" if o.doc else ""))
-    print("\npresets (--option preset=NAME):")
-    for name, overrides in presets.items():
-        text = ", ".join(f"{k}={v!r}" for k, v in overrides.items()) or "the defaults"
-        print(f"  {name}: {text}")
+    print("\npresets (--option preset=NAME, or NAME@PRESET in compare --methods):")
+    for name, overrides in r["presets"].items():
+        print(f"  {name}: {preset_summary(overrides, 1000)}")
     return 0
 
 
 def cmd_compare(args: argparse.Namespace) -> int:
     from .bench import Executor
-    from .experiments import paper_experiments, real_experiments, select
+    from .experiments import compare_experiments
     from .report import compare, final_by_run, format_by_run, format_summary
 
-    exps = (real_experiments(args.real) if args.real
-            else paper_experiments(quick=args.quick, seed=args.seed))
-    chosen = select(exps, args.experiments.split(",") if args.experiments else ())
-    executor = Executor.choose(args.jobs, args.scheduler, args.dask_local)
+    chosen, settings = compare_experiments(
+        config=args.config, streams=args.streams, methods=args.methods, options=args.option,
+        reference=args.reference, checkpoint_every=args.checkpoint_every, real=args.real,
+        quick=args.quick, seed=args.seed,
+        names=args.experiments.split(",") if args.experiments else ())
+    executor = Executor.choose(args.jobs, args.scheduler, args.dask_local, defaults=settings)
     bar = None
     if not args.no_progress:
         from tqdm import tqdm
@@ -310,8 +307,10 @@ def cmd_compare(args: argparse.Namespace) -> int:
         if bar is not None:
             bar.close()
     print(format_summary(result.summary))
-    if args.real:
-        print(format_by_run(final_by_run(result.results)))
+    recorded = {e.name for e in chosen if not e.designed}
+    if recorded:
+        print(format_by_run(final_by_run([r for r in result.results
+                                          if r["experiment"] in recorded])))
     print(f"\n{len(result.results)} runs in {result.wall_s:.1f} s; wrote "
           f"{', '.join(result.files)}")
     return 0
@@ -427,21 +426,36 @@ def build_parser() -> argparse.ArgumentParser:
                    default="text", help="output format (default text; --json = json)")
     e.set_defaults(func=cmd_evaluate)
 
-    c = _command(sub, "compare", "the paper's experiments, every method side by side")
+    c = _command(sub, "compare", "methods side by side: the paper's experiments, your "
+                 "streams and methods, or a sweep file")
+    c.add_argument("--config", default=None, metavar="SWEEP",
+                   help="a sweep file (TOML: streams, [[worlds]], [[methods]], [executor]; see "
+                        "the README) or a shipped one by name: paper (the default)")
+    c.add_argument("--streams", nargs="+", default=None, metavar="FILE",
+                   help="stream files to run --methods on (any recording or simulation)")
+    c.add_argument("--methods", default=None, metavar="NAME[@PRESET],...",
+                   help="with --streams: comma-separated methods, each optionally with a "
+                        "preset (stmds-smacof@real); plugins included (`bomgraph methods`)")
+    c.add_argument("--option", action="append", default=[], metavar="NAME:KEY=VALUE",
+                   help="with --streams: an option of method NAME (repeatable)")
+    c.add_argument("--reference", metavar="NAME[@PRESET]", help="with --streams: score "
+                   "truth-free streams against this method's final map")
+    c.add_argument("--checkpoint-every", type=_positive_int, metavar="N",
+                   help="with --streams: map every N steps (default 10)")
     c.add_argument("--quick", action="store_true",
                    help="2 runs of 150 steps per arm (a demo), instead of 25 runs of 300")
     c.add_argument("--experiments", default="",
-                   help="comma-separated subset of exp1,exp2,exp3,all (default: all four); "
-                        "with --real: mrclam6,g2o")
+                   help="comma-separated subset of the experiments (paper: exp1,exp2,exp3,"
+                        "all; with --real: mrclam6,g2o; a sweep file: its names)")
     c.add_argument("--real", default=None, metavar="DATA_DIR",
                    help="every method on the recorded datasets under DATA_DIR (e.g. "
                         "../shared/data) instead of the simulation")
     c.add_argument("--out", default="compare-results", help="output folder")
-    c.add_argument("--seed", type=_nonneg_int, default=0, help="random seed (default 0)")
-    c.add_argument("--jobs", type=_jobs, default=-1, help="local processes (-1: one per core)")
+    c.add_argument("--seed", type=_nonneg_int, help="the paper design's seed (default 0)")
+    c.add_argument("--jobs", type=_jobs, help="local processes (-1, the default: one per core)")
     c.add_argument("--scheduler", default=None, metavar="ADDRESS",
                    help="run on an existing Dask distributed scheduler, e.g. tcp://host:8786")
-    c.add_argument("--dask-local", type=_nonneg_int, default=0, metavar="N",
+    c.add_argument("--dask-local", type=_nonneg_int, metavar="N",
                    help="start a local Dask cluster of N worker processes")
     c.add_argument("--no-cache", action="store_true", help="ignore and do not write the cache")
     c.add_argument("--no-figures", action="store_true", help="write no figures")

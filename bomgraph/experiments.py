@@ -15,13 +15,16 @@ import functools
 import hashlib
 import json
 import os
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
+import numpy as np
+
 from .errors import ConfigError
 from .mapper import available_methods
-from .sim import RunSpec, SimConfig, paper_design, simulate_run
+from .sim import (RunSpec, SimConfig, make_priors, paper_design, simulate, simulate_run,
+                  with_priors)
 from .stream import Stream
 
 #: What the paper reports (simulation, 25 runs), for the tables: (experiment, arm) -> text.
@@ -43,12 +46,15 @@ class Arm:
 
     ``options`` are the method factory's keyword options, plain JSON values (they are hashed
     into the cache key): ``{"preset": NAME}`` in the library's experiments.
+    ``checkpoint_every`` overrides the experiment's cadence for this arm (the task's
+    ``every`` in the cache key says which one ran).
     """
 
     label: str
     method: str
     options: Mapping[str, Any] = field(default_factory=dict)
     prior_fraction: float = 0.0
+    checkpoint_every: int | None = None
 
     def __post_init__(self) -> None:
         try:
@@ -125,6 +131,90 @@ def _files_stamp(*paths: str | None) -> str:
     return h.hexdigest()[:16]
 
 
+@dataclass(frozen=True)
+class FileSource:
+    """A stream file (any recording or simulation written in the stream format).
+
+    Its cache key is the SHA-256 of the file's bytes, so a moved or renamed copy reuses the
+    cache and an edited file runs again. ``label`` names the run (default: the file stem).
+    """
+
+    path: str
+    label: str = ""
+
+    @property
+    def name(self) -> str:
+        return self.label or Path(self.path).stem
+
+    def stream(self) -> Stream:
+        st = os.stat(self.path)
+        return _read_stream_file(str(Path(self.path).resolve()), st.st_size, st.st_mtime_ns)
+
+    def key(self) -> dict[str, Any]:
+        st = os.stat(self.path)
+        return {"kind": "file", "sha256": _file_sha256(str(Path(self.path).resolve()),
+                                                       st.st_size, st.st_mtime_ns)}
+
+
+@functools.lru_cache(maxsize=64)
+def _file_sha256(path: str, size: int, mtime_ns: int) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+@functools.lru_cache(maxsize=8)
+def _read_stream_file(path: str, size: int, mtime_ns: int) -> Stream:
+    from .stream_file import read_stream
+
+    return read_stream(path)
+
+
+@dataclass(frozen=True)
+class WorldSource:
+    """A simulated run of a world: ``simulate(sim, default_rng(seed))``, the stream
+    ``bomgraph simulate --seed SEED`` writes for the same settings (priors drawn after it
+    from the same generator when ``prior_fraction`` > 0)."""
+
+    sim: SimConfig
+    seed: int
+    world: str = "world"
+    prior_fraction: float = 0.0
+    prior_sigma_xy_m: float = 0.03
+
+    @property
+    def name(self) -> str:
+        return f"{self.world}-seed{self.seed}"
+
+    def stream(self) -> Stream:
+        rng = np.random.default_rng(self.seed)
+        stream = simulate(self.sim, rng, meta={"seed": self.seed})
+        if self.prior_fraction > 0:
+            stream = with_priors(stream, make_priors(stream.truth, self.prior_fraction,
+                                                     self.prior_sigma_xy_m, rng))
+        return stream
+
+    def key(self) -> dict[str, Any]:
+        return {"kind": "world", "sim": asdict(self.sim), "seed": self.seed,
+                "prior_fraction": self.prior_fraction, "prior_sigma": self.prior_sigma_xy_m}
+
+
+@dataclass(frozen=True)
+class World:
+    """Simulated runs of one world: a :class:`~bomgraph.sim.SimConfig` and the seeds."""
+
+    name: str
+    sim: SimConfig
+    seeds: tuple[int, ...]
+    prior_sigma_xy_m: float = 0.03
+
+    def sources(self, prior_fraction: float = 0.0) -> list[WorldSource]:
+        return [WorldSource(self.sim, s, self.name, prior_fraction, self.prior_sigma_xy_m)
+                for s in self.seeds]
+
+
 @functools.lru_cache(maxsize=16)
 def _load_dataset(kind: str, path: str, robot: int | None, truth_path: str | None) -> Stream:
     from . import datasets
@@ -153,17 +243,35 @@ class Experiment:
     n_starts: int = 5
     prior_sigma_xy_m: float = 0.03
     checkpoint_every: int = 10
-    sources: tuple[DatasetSource, ...] = ()
+    sources: tuple[DatasetSource | FileSource, ...] = ()
+    worlds: tuple[World, ...] = ()
+    reference: Arm | None = None
+
+    @property
+    def designed(self) -> bool:
+        """Whether the runs are the paper's design (no recorded sources, no worlds)."""
+        return not self.sources and not self.worlds
 
     def runs(self) -> list[RunSpec]:
         return paper_design(self.seed, self.n_layouts, self.n_starts)
 
+    def n_runs(self) -> int:
+        """Runs per arm: the design's, or the sources and world seeds."""
+        if self.designed:
+            return len(self.runs())
+        return len(self.sources) + sum(len(w.seeds) for w in self.worlds)
+
     def tasks(self) -> list["Task"]:
-        if self.sources:
-            return [Task(self.name, arm, src, self.checkpoint_every)
-                    for arm in self.arms for src in self.sources]
-        return [Task(self.name, arm, SimSource(spec, self.sim, arm.prior_fraction,
-                                               self.prior_sigma_xy_m), self.checkpoint_every)
+        """Every arm on every run, arm by arm. Streams without truth are scored against
+        ``reference`` (when given) by the runner."""
+        def task(arm: Arm, src: Any) -> Task:
+            return Task(self.name, arm, src, arm.checkpoint_every or self.checkpoint_every,
+                        self.reference)
+        if not self.designed:
+            return [task(arm, src) for arm in self.arms
+                    for src in (*self.sources,
+                                *[s for w in self.worlds for s in w.sources(arm.prior_fraction)])]
+        return [task(arm, SimSource(spec, self.sim, arm.prior_fraction, self.prior_sigma_xy_m))
                 for arm in self.arms for spec in self.runs()]
 
 
@@ -173,71 +281,137 @@ class Task:
 
     experiment: str
     arm: Arm
-    source: SimSource | DatasetSource
+    source: SimSource | DatasetSource | FileSource | WorldSource
     checkpoint_every: int = 10
+    reference: Arm | None = None
 
     def stream(self) -> Stream:
         return self.source.stream()
 
     def identity(self) -> dict[str, Any]:
-        """What makes the task what it is (the arm, the source, the checkpoints): the runner
-        hashes it with the code's fingerprint into the cache key."""
-        return {"arm": self.arm.key(), "source": self.source.key(),
-                "every": self.checkpoint_every}
+        """What makes the task what it is (the arm, the source, the checkpoints, the
+        reference method): the runner hashes it with the code's fingerprint into the cache
+        key."""
+        out = {"arm": self.arm.key(), "source": self.source.key(),
+               "every": self.checkpoint_every}
+        if self.reference is not None:
+            out["reference"] = self.reference.key()
+        return out
 
 
 def paper_experiments(*, quick: bool = False, seed: int = 0) -> dict[str, Experiment]:
-    """Exp. 1-3 and the all-methods comparison on the paper setup.
+    """Exp. 1-3 and the all-methods comparison on the paper setup: the sweep file shipped as
+    ``bomgraph/sweeps/paper.toml`` (``bomgraph compare --config paper``).
 
-    ``quick`` keeps every arm but runs 2 layouts x 1 start of 150 steps (a demo and a test).
+    ``quick`` keeps every arm but runs 2 layouts x 1 start of 150 steps (a demo and a test);
+    ``seed`` is the design's seed.
     """
-    sim = SimConfig(n_steps=150) if quick else SimConfig()
-    size = dict(n_layouts=2, n_starts=1) if quick else {}
-    imp = {"preset": "improved"}
-    wls = {"preset": "window-lsq"}  # least squares over 10-pose windows (issue 8)
-    wba = {"preset": "window-ba"}  # bundle adjustment in 10-pose windows, stride 3 (issue 8)
-    exps = [
-        Experiment("exp1", "Exp. 1: mapping without localisation", (
-            Arm("stmds-cs", "stmds-cs"),
-            Arm("stmds-smacof", "stmds-smacof"),
-            Arm("stmds-cs (paper fusion)", "stmds-cs", {"fusion": "paper"}),
-            Arm("stmds-smacof (paper fusion)", "stmds-smacof", {"fusion": "paper"}),
-            Arm("stmds-cs (improved)", "stmds-cs", imp),
-            Arm("stmds-smacof (improved)", "stmds-smacof", imp),
-            Arm("stmds-smacof (window lsq)", "stmds-smacof", wls),
-            Arm("stmds-smacof (window ba)", "stmds-smacof", wba),
-        ), sim, seed, **size),
-        Experiment("exp2", "Exp. 2: simultaneous localisation and mapping", (
-            Arm("stmds-cs-loc", "stmds-cs-loc"),
-            Arm("stmds-smacof-loc", "stmds-smacof-loc"),
-            Arm("stmds-smacof-loc (improved)", "stmds-smacof-loc", imp),
-            Arm("ekf", "ekf"),
-            Arm("gtsam-batch", "gtsam-batch"),
-            Arm("gtsam-isam2", "gtsam-isam2"),
-            Arm("hybrid", "hybrid"),
-        ), sim, seed, **size),
-        Experiment("exp3", "Exp. 3: 10% of the pairs known as priors", (
-            Arm("stmds-smacof", "stmds-smacof"),
-            Arm("stmds-smacof+priors", "stmds-smacof", prior_fraction=0.1),
-            Arm("stmds-smacof (improved)", "stmds-smacof", imp),
-            Arm("stmds-smacof (improved)+priors", "stmds-smacof", imp, prior_fraction=0.1),
-        ), sim, seed, **size),
-        Experiment("all", "Every method side by side", (
-            Arm("triangulate", "triangulate"),
-            Arm("stmds-cs", "stmds-cs"),
-            Arm("stmds-smacof", "stmds-smacof"),
-            Arm("stmds-smacof (improved)", "stmds-smacof", imp),
-            Arm("stmds-smacof (window lsq)", "stmds-smacof", wls),
-            Arm("stmds-smacof (window ba)", "stmds-smacof", wba),
-            Arm("stmds-smacof-loc (improved)", "stmds-smacof-loc", imp),
-            Arm("ekf", "ekf"),
-            Arm("gtsam-batch", "gtsam-batch"),
-            Arm("gtsam-isam2", "gtsam-isam2"),
-            Arm("hybrid", "hybrid"),
-            Arm("oracle", "oracle"),
-        ), sim, seed, **size),
-    ]
-    return {e.name: e for e in exps}
+    return {e.name: e for e in designed_variant(load_experiments("paper").experiments,
+                                                quick=quick, seed=seed)}
+
+
+def designed_variant(experiments: Sequence[Experiment], *, quick: bool = False,
+                     seed: int | None = None) -> list[Experiment]:
+    """``experiments`` with their design (the paper's runs) made quick (2 layouts x 1 start
+    of 150 steps) and/or given another ``seed``; experiments on streams or worlds as given."""
+    out = []
+    for e in experiments:
+        if e.designed:
+            if quick:
+                e = replace(e, sim=replace(e.sim, n_steps=150), n_layouts=2, n_starts=1)
+            if seed is not None:
+                e = replace(e, seed=seed)
+        out.append(e)
+    return out
+
+
+@dataclass(frozen=True)
+class Sweep:
+    """Experiments read from a sweep file, with its executor settings (``jobs``,
+    ``dask_local``, ``scheduler``; absent keys are left to the caller)."""
+
+    experiments: tuple[Experiment, ...]
+    executor: Mapping[str, Any]
+    path: str
+
+
+def load_experiments(path_or_name: Any) -> Sweep:
+    """The experiments of a sweep file (:mod:`bomgraph.sweep` reads and checks it), of a
+    shipped one by name (``"paper"``: :func:`bomgraph.sweep.shipped`), or of a ready
+    :class:`bomgraph.sweep.SweepSpec` (e.g. :func:`bomgraph.sweep.command_line_spec`).
+
+    Raises
+    ------
+    SweepError
+        The file is missing, is not TOML, or a key is unknown or has a bad value (the message
+        names the file and the key).
+    """
+    from .sweep import SweepSpec, read_sweep
+
+    spec = path_or_name if isinstance(path_or_name, SweepSpec) else read_sweep(path_or_name)
+    exps = []
+    for e in spec.experiments:
+        def arm(m: Any) -> Arm:
+            return Arm(m.label, m.method, m.options, m.prior_fraction, m.checkpoint_every)
+        design = next((w for w in e.worlds if w.design is not None), None)
+        common = dict(checkpoint_every=e.checkpoint_every,
+                      reference=None if e.reference is None else arm(e.reference))
+        arms = tuple(arm(m) for m in e.methods)
+        if design is not None:
+            d = design.design
+            exps.append(Experiment(e.name, e.title, arms, design.sim, d["seed"], d["layouts"],
+                                   d["starts"], design.prior_sigma_xy_m, **common))
+            continue
+        exps.append(Experiment(
+            e.name, e.title, arms, **common,
+            sources=tuple(FileSource(p, label) for p, label in e.streams),
+            worlds=tuple(World(w.name, w.sim, w.seeds, w.prior_sigma_xy_m) for w in e.worlds)))
+    return Sweep(tuple(exps), dict(spec.executor), spec.path)
+
+
+def compare_experiments(*, config: str | None = None, streams: Sequence[str] | None = None,
+                        methods: str | None = None, options: Sequence[str] = (),
+                        reference: str | None = None, checkpoint_every: int | None = None,
+                        real: str | None = None, quick: bool = False, seed: int | None = None,
+                        names: Sequence[str] = ()) -> tuple[list[Experiment], dict[str, Any]]:
+    """What ``bomgraph compare`` runs, from its options: a sweep file (``config``; default
+    the shipped ``paper``, whose design ``quick`` and ``seed`` change), stream files with
+    ``methods`` (``"NAME[@PRESET],..."``), ``options`` (``"NAME:KEY=VALUE"``) and a
+    ``reference``, or the recordings under ``real``; then the experiments called ``names``.
+    Returns them and the sweep file's executor settings.
+
+    Raises
+    ------
+    ConfigError
+        Options that do not go together (the message says which); a SweepError for a bad
+        sweep file or stream list.
+    """
+    from .sweep import command_line_spec
+
+    given = [n for n, v in (("--config", config), ("--streams", streams), ("--real", real)) if v]
+    if len(given) > 1:
+        raise ConfigError(f"compare: give one of --config, --streams, --real, not "
+                          f"{' and '.join(given)}")
+    for flag, value, where in (("--methods", methods, "[[methods]] tables"),
+                               ("--option", options, "options = {...}"),
+                               ("--reference", reference, 'reference = "NAME"'),
+                               ("--checkpoint-every", checkpoint_every, "checkpoint_every = N")):
+        if value and not streams:
+            raise ConfigError(f"compare: {flag} goes with --streams FILE... (in a sweep file: "
+                              f"{where})")
+    settings: dict[str, Any] = {}
+    if real:
+        exps = real_experiments(real)
+    elif streams:
+        sweep = load_experiments(command_line_spec(
+            streams, [m.strip() for m in (methods or "").split(",") if m.strip()], options,
+            reference=reference, checkpoint_every=checkpoint_every or 10))
+        exps = {e.name: e for e in sweep.experiments}
+    else:
+        sweep = load_experiments(config or "paper")
+        settings = dict(sweep.executor)
+        exps = {e.name: e for e in designed_variant(sweep.experiments, quick=quick, seed=seed)}
+    return select(exps, names), settings
 
 
 #: Registered methods the real-data experiments leave out by default (as before the redesign:
@@ -246,9 +420,11 @@ REAL_SKIPPED = ("stmds-cs-loc",)
 
 
 def real_methods() -> list[str]:
-    """The methods of :func:`real_experiments` by default: every registered method (in
-    registration order) except :data:`REAL_SKIPPED`."""
-    return [m.name for m in available_methods() if m.name not in REAL_SKIPPED]
+    """The methods of :func:`real_experiments` by default: every built-in method (in
+    registration order) except :data:`REAL_SKIPPED` (plugins run through ``compare
+    --streams`` or a sweep file)."""
+    return [m.name for m in available_methods()
+            if m.name not in REAL_SKIPPED and m.origin == "builtin"]
 
 
 #: Arms added to the real-data experiments: the variants made for recordings (issues 7, 8),
@@ -310,6 +486,9 @@ def select(experiments: Mapping[str, Experiment], names: Sequence[str] = ()) -> 
     return [experiments[n] for n in names]
 
 
-__all__ = ["Arm", "SimSource", "DatasetSource", "Experiment", "Task", "paper_experiments",
+__all__ = ["Arm", "SimSource", "DatasetSource", "FileSource", "WorldSource", "World",
+           "Experiment", "Task", "Sweep", "load_experiments", "designed_variant",
+           "compare_experiments",
+           "paper_experiments",
            "real_experiments", "real_methods", "select", "REAL_VARIANTS", "REAL_SKIPPED",
            "PAPER_REPORTED"]

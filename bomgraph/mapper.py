@@ -12,14 +12,14 @@ use, so ``bomgraph`` names the ``baselines`` methods without importing them.
 from __future__ import annotations
 
 import dataclasses
-import importlib
 import time
 from dataclasses import dataclass, field
-from typing import Any, Callable, Iterable, Mapping, Protocol, runtime_checkable
+from typing import (Any, Callable, Iterable, Mapping, Protocol, Sequence,
+                    runtime_checkable)
 
 import numpy as np
 
-from .errors import ConfigError, UnknownMethodError
+from .errors import BomgraphError, ConfigError, UnknownMethodError
 from .stream import Step, StreamHeader, Truth
 
 
@@ -245,27 +245,39 @@ def run(mapper: Mapper, steps: Iterable[Step], *, checkpoint_every: int = 10,
 
 @dataclass(frozen=True)
 class MethodInfo:
-    """A registered method: its name, where its factory lives, and what it is."""
+    """A registered method: its name, where its factory lives, and what it is.
+
+    ``origin`` is ``"builtin"`` (bomgraph's and baselines' methods), ``"plugin"`` (an entry
+    point of the group ``bomgraph.methods`` of an installed distribution, named with its
+    version: :mod:`bomgraph.plugins`) or ``"runtime"`` (:func:`register_method` in the running
+    process: worker processes cannot see it).
+    """
 
     name: str
     target: str
     description: str
     needs_truth: bool = False
+    origin: str = "runtime"
+    distribution: str | None = None
+    version: str | None = None
 
 
 _REGISTRY: dict[str, MethodInfo] = {}
 
 
 def register_method(name: str, target: str, description: str, *,
-                    needs_truth: bool = False) -> None:
+                    needs_truth: bool = False, _origin: str = "runtime") -> None:
     """Register ``"package.module:Factory"`` under ``name``; the module is imported on use.
 
     The factory is called as ``Factory(header, **options)`` (and ``truth=`` when
-    ``needs_truth``) and must return a :class:`Mapper`.
+    ``needs_truth``) and must return a :class:`Mapper`. A method registered this way exists
+    in this process only: serial runs use it, worker processes (a local pool, Dask) do not
+    see it and :func:`bomgraph.bench.execute` refuses it there; declare it as an entry point
+    of the group ``bomgraph.methods`` instead (:mod:`bomgraph.plugins`).
     """
     if ":" not in target:
         raise ConfigError(f"method target must be 'module:attribute', got {target!r}")
-    _REGISTRY[name] = MethodInfo(name, target, description, needs_truth)
+    _REGISTRY[name] = MethodInfo(name, target, description, needs_truth, _origin)
 
 
 for _name, _target, _desc, _truth in [
@@ -292,31 +304,104 @@ for _name, _target, _desc, _truth in [
     ("oracle", "baselines.factor_graph:OracleMapper",
      "LM started from the ground truth: the accuracy bound (MLE)", True),
 ]:
-    register_method(_name, _target, _desc, needs_truth=_truth)
+    register_method(_name, _target, _desc, needs_truth=_truth, _origin="builtin")
+
+
+def _plugin_infos() -> dict[str, MethodInfo]:
+    """The installed plugins not shadowed by a registered method of the same name."""
+    from . import plugins
+
+    return {e.name: MethodInfo(e.name, e.target, "", False, "plugin", e.distribution,
+                               e.version)
+            for e in plugins.discover().values() if e.name not in _REGISTRY}
 
 
 def available_methods() -> list[MethodInfo]:
-    """Every registered method, in registration order."""
-    return list(_REGISTRY.values())
+    """Every registered method in registration order, then the installed plugins."""
+    return list(_REGISTRY.values()) + list(_plugin_infos().values())
 
 
 def method_info(name: str) -> MethodInfo:
-    try:
+    """The method called ``name``: a registered one, else an installed plugin."""
+    if name in _REGISTRY:
         return _REGISTRY[name]
-    except KeyError:
-        raise UnknownMethodError(f"unknown method {name!r}; known methods: "
-                                 f"{', '.join(_REGISTRY)}") from None
+    found = _plugin_infos().get(name)
+    if found is None:
+        known = ", ".join(m.name for m in available_methods())
+        raise UnknownMethodError(f"unknown method {name!r}; known methods: {known} (your own "
+                                 f"method: install a package declaring it in the entry-point "
+                                 f"group 'bomgraph.methods')")
+    return found
 
 
 def method_factory(name: str) -> Callable[..., Mapper]:
     """Import and return the factory registered under ``name``."""
+    from .plugins import load
+
+    return load(method_info(name).target, name)  # type: ignore[return-value]
+
+
+def method_description(name: str) -> str:
+    """What the method is: its registered description, else (a plugin) its factory's
+    ``description`` attribute or the first line of its docstring."""
     info = method_info(name)
-    module, attr = info.target.split(":")
+    if info.description:
+        return info.description
+    factory = method_factory(name)
+    text = getattr(factory, "description", None) or (factory.__doc__ or "").strip()
+    return text.splitlines()[0] if text else "(no description)"
+
+
+def preset_summary(overrides: Mapping[str, Any], width: int = 100) -> str:
+    """A preset's field overrides on one line (cut at ``width`` characters)."""
+    text = ", ".join(f"{k}={v!r}" for k, v in overrides.items()) or "the defaults"
+    return text if len(text) <= width else text[:width - 3] + "..."
+
+
+def method_listing(info: MethodInfo) -> dict[str, Any]:
+    """What ``bomgraph methods`` shows of one method (name, description, origin, its
+    distribution and version, presets as field overrides); a plugin that cannot be loaded is
+    listed with the reason in its description, not raised."""
+    row: dict[str, Any] = {"name": info.name, "needs_truth": info.needs_truth,
+                           "origin": info.origin, "distribution": info.distribution,
+                           "version": info.version, "presets": {}}
     try:
-        return getattr(importlib.import_module(module), attr)
-    except (ImportError, AttributeError) as exc:
-        raise UnknownMethodError(f"method {name!r} is registered as {info.target!r} but cannot "
-                                 f"be loaded: {exc}") from exc
+        row["description"] = method_description(info.name)
+        cls = method_config_class(info.name)
+        row["presets"] = {k: dict(v) for k, v in getattr(cls, "PRESETS", {}).items()}
+    except BomgraphError as exc:
+        row["description"] = f"(cannot be loaded: {exc})"
+    return row
+
+
+def format_method_list(rows: Sequence[Mapping[str, Any]]) -> str:
+    """:func:`method_listing` rows as the text of ``bomgraph methods``: a line per method
+    (name, description, where it comes from), then a line per preset (``@NAME`` and its
+    field overrides)."""
+    lines = []
+    for r in rows:
+        flag = "  (benchmark only: reads the truth)" if r["needs_truth"] else ""
+        if r["origin"] == "plugin":
+            flag += f"  (plugin: {r['distribution'] or '?'} {r['version'] or ''})".rstrip()
+        elif r["origin"] == "runtime":
+            flag += "  (registered at run time: this process only)"
+        lines.append(f"{r['name']:18s} {r['description']}{flag}")
+        lines += [f"  @{name:15s} {preset_summary(o)}" for name, o in r["presets"].items()]
+    return "\n".join(lines)
+
+
+def method_fingerprint(name: str) -> str | None:
+    """A hash of the method's own code for the cache key, or None for a built-in method
+    (whose code the runner's :func:`bomgraph.bench.code_fingerprint` of the bomgraph and
+    baselines sources covers already, so the paper's cache keys stay as they were). For a
+    plugin: its package's sources and its distribution's version; for a method registered
+    at run time: the sources of its target's top-level package (:mod:`bomgraph.plugins`)."""
+    from .plugins import source_fingerprint
+
+    info = method_info(name)
+    if info.origin == "builtin":
+        return None
+    return source_fingerprint(info.target, info.version)
 
 
 def method_config_class(name: str) -> type | None:
@@ -363,4 +448,6 @@ def create_mapper(name: str, header: StreamHeader, *, truth: Truth | None = None
 
 __all__ = ["MapEstimate", "Mapper", "Checkpoint", "RunResult", "run", "checkpoint_times",
            "MethodInfo", "register_method", "available_methods", "method_info",
-           "method_factory", "method_config_class", "create_mapper"]
+           "method_factory", "method_description", "method_fingerprint", "method_listing",
+           "preset_summary", "format_method_list",
+           "method_config_class", "create_mapper"]

@@ -105,8 +105,23 @@ def summarise(results: Sequence[Mapping[str, Any]],
         row["wall_s_mean"] = float(wall.mean()) if wall.size else math.nan
         row["paper"] = PAPER_REPORTED.get((exp, arm), "")
         row["last_t"] = last_t
+        _truth_free_columns(row, ok, last_t)
         rows.append(row)
     return rows
+
+
+def _truth_free_columns(row: dict[str, Any], ok: Sequence[Mapping[str, Any]],
+                        last_t: int) -> None:
+    """For runs on streams without ground truth (their checkpoints carry
+    ``bearing_rms_rad``): what they were scored against, landmarks mapped and the mean RMS
+    bearing residual at the end. Rows of runs with truth are left as they were."""
+    free = [r for r in ok if r["checkpoints"] and "bearing_rms_rad" in r["checkpoints"][-1]]
+    if not free:
+        return
+    row["scored_against"] = "; ".join(sorted({r.get("scored_against", "truth") for r in ok}))
+    row["n_mapped_mean"] = float(np.mean([r["checkpoints"][-1]["n_mapped"] for r in free]))
+    row["bearing_rms_mean_rad"] = _finite_stat(
+        np.nanmean, np.array([_value_at(r, last_t, "bearing_rms_rad") for r in free]))
 
 
 def final_by_run(results: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
@@ -120,7 +135,7 @@ def final_by_run(results: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
         last = r["checkpoints"][-1] if r.get("ok") and r.get("checkpoints") else {}
         row["t"] = last.get("t", math.nan)
         row["n_mapped"] = last.get("n_mapped", 0)
-        for key in ("mpe_m", "robot_last_m"):
+        for key in ("mpe_m", "robot_last_m", "bearing_rms_rad"):
             v = last.get(key)
             row[key] = math.nan if v is None else float(v)
         row["converged"] = r.get("converged")
@@ -164,11 +179,18 @@ def format_summary(summary: Sequence[dict]) -> str:
     for (exp,), rows in _group(summary, "experiment").items():
         times = sorted({int(k.split("@")[1]) for r in rows for k in r
                         if k.startswith("mpe_mean_m@")})
+        if all(r.get("scored_against") == "none" for r in rows):
+            times = []  # no truth, no reference: no MPE to show
         lines.append(f"\n== {exp} ==  landmark MPE [cm] mean/median±std at t; robot: error "
                      f"[cm] of the latest pose at the end; conv: converged runs; NEES: robot "
                      f"pose; wall time per run; [k/n]: only k of n runs had a map")
         head = f"{'arm':30s} {'runs':>4s} " + " ".join(f"{'t=' + str(t):>17s}" for t in times)
         head += f" {'robot':>7s} {'conv':>5s} {'NEES':>6s} {'wall s':>7s}  paper"
+        free = any("bearing_rms_mean_rad" in r for r in rows)
+        if free:  # streams without truth: landmarks mapped, bearing RMS [mrad], reference
+            lines[-1] += ("; mapped: landmarks at the end; brg: RMS bearing residual [mrad] "
+                          "of the map and trajectory against the stream (no truth needed)")
+            head = head.replace("  paper", f" {'mapped':>6s} {'brg':>6s}  scored against")
         lines.append(head)
         for r in rows:
             cells = []
@@ -188,8 +210,19 @@ def format_summary(summary: Sequence[dict]) -> str:
             lines.append(f"{r['arm'][:30]:30s} {r['runs']:4d} "
                          + " ".join(f"{c:>17s}" for c in cells)
                          + f" {_cm(r.get('robot_last_mean_m')):>7s} {conv_s:>5s} {nees_s:>6s}"
-                         f" {r.get('wall_s_mean', float('nan')):7.3f}  {r.get('paper', '')}{fail}")
+                         f" {r.get('wall_s_mean', float('nan')):7.3f}"
+                         + (_free_cells(r) if free else f"  {r.get('paper', '')}") + fail)
     return "\n".join(lines)
+
+
+def _free_cells(r: Mapping[str, Any]) -> str:
+    """The truth-free cells of a summary row: landmarks mapped, bearing RMS [mrad], the
+    reference."""
+    brg = r.get("bearing_rms_mean_rad", math.nan)
+    mapped = r.get("n_mapped_mean", math.nan)
+    return (f" {'-' if not math.isfinite(mapped) else f'{mapped:.1f}':>6s}"
+            f" {'-' if not math.isfinite(brg) else f'{1000 * brg:.2f}':>6s}"
+            f"  {r.get('scored_against', 'truth')}")
 
 
 def format_by_run(rows: Sequence[dict]) -> str:
@@ -200,7 +233,8 @@ def format_by_run(rows: Sequence[dict]) -> str:
         arms = list(dict.fromkeys(r["arm"] for r in rs))
         cell = {(r["arm"], r["run"]): r for r in rs}
         lines.append(f"\n== {exp}, final map per run ==  landmark MPE [cm] (landmarks mapped); "
-                     f"'no map': fewer than 3 landmarks; FAILED: the run raised")
+                     f"'no map': fewer than 3 landmarks; FAILED: the run raised; mrad: no "
+                     f"truth or reference, RMS bearing residual")
         lines.append(f"{'arm':30s} " + " ".join(f"{r[-14:]:>14s}" for r in runs))
         for arm in arms:
             cells = []
@@ -210,6 +244,8 @@ def format_by_run(rows: Sequence[dict]) -> str:
                     cells.append("")
                 elif not r["ok"]:
                     cells.append("FAILED")
+                elif not math.isfinite(r["mpe_m"]) and math.isfinite(r["bearing_rms_rad"]):
+                    cells.append(f"{1000 * r['bearing_rms_rad']:.1f}mrad ({r['n_mapped']})")
                 elif not math.isfinite(r["mpe_m"]):
                     cells.append(f"no map ({r['n_mapped']})")
                 else:
@@ -273,7 +309,7 @@ def _compare(experiments: Sequence[Experiment], out: Path, executor: Executor,
     write_text(out / "results.json", json.dumps(
         {"experiments": [{"name": e.name, "title": e.title,
                           "arms": [a.key() for a in e.arms], "seed": e.seed,
-                          "runs": len(e.runs()), "n_steps": e.sim.n_steps}
+                          "runs": e.n_runs(), "n_steps": e.sim.n_steps}
                          for e in experiments],
          "summary": summary, "results": results, "wall_s": wall}, allow_nan=True, indent=1))
     write_csv(out / "results.csv", results_to_csv_rows(results))
@@ -498,14 +534,14 @@ def write_compare_figures(out_dir: str | os.PathLike[str], experiments: Sequence
         rob = {arm: c for (e, arm), c in robot.items()
                if e == exp.name and np.any(np.isfinite(c[1]))}
         fig = error_vs_time_figure(curves, robot_curves=rob,
-                                   title=f"{exp.title}: landmarks ({len(exp.runs())} runs)")
+                                   title=f"{exp.title}: landmarks ({exp.n_runs()} runs)")
         path = out / f"{exp.name}_error_vs_time.png"
         fig.savefig(path, dpi=120)
         files.append(path)
     for exp in experiments:
         if exp.sources:
             files += _write_source_maps(out, exp, results)
-    sim_exps = [e for e in experiments if not e.sources]
+    sim_exps = [e for e in experiments if e.designed]
     if not sim_exps:
         return files
     # Example map (fig. 5: Method 2 with localisation at t = 100; fig. 3: the truth)

@@ -1,0 +1,134 @@
+"""Method plugins: mappers other packages add through the entry-point group ``bomgraph.methods``.
+
+A plugin package declares, in its ``pyproject.toml``::
+
+    [project.entry-points."bomgraph.methods"]
+    mine = "mypackage.module:MyMapper"
+
+and, once installed (``pip install .`` or ``pip install -e .``), ``mine`` is a method like the
+built-in ones: ``bomgraph methods`` lists it, ``bomgraph run``/``compare`` run it, and so do the
+worker processes of a local pool or a Dask cluster, because every process reads the installed
+entry points (not the memory of the process that started the sweep). The factory is called as
+``Factory(header, **options)`` and returns a :class:`bomgraph.mapper.Mapper`; an optional
+``description`` attribute (else the first docstring line) is what ``bomgraph methods`` shows.
+
+:func:`source_fingerprint` hashes a method's code (every ``.py`` file of the top-level package
+of its module, or the module's one file) with the distribution's version: the runner puts it
+in the cache key, so editing a plugin re-runs it. This module imports nothing from bomgraph
+but the errors (the registry in :mod:`bomgraph.mapper` builds on it).
+"""
+
+from __future__ import annotations
+
+import functools
+import hashlib
+import importlib
+import logging
+import sys
+from dataclasses import dataclass
+from importlib import metadata
+from pathlib import Path
+
+from .errors import UnknownMethodError
+
+#: The entry-point group a plugin package registers its methods in.
+GROUP = "bomgraph.methods"
+
+_log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class PluginEntry:
+    """One entry point of the group: the method name, its ``"module:attribute"`` target and
+    the distribution that declares it (name and version; None when unknown)."""
+
+    name: str
+    target: str
+    distribution: str | None
+    version: str | None
+
+
+@functools.lru_cache(maxsize=1)
+def discover() -> dict[str, PluginEntry]:
+    """The installed plugins by method name (read once per process; :func:`refresh` reads
+    again). Two distributions declaring one name: the first found wins, with a warning."""
+    found: dict[str, PluginEntry] = {}
+    for ep in metadata.entry_points(group=GROUP):
+        dist = getattr(ep, "dist", None)
+        entry = PluginEntry(ep.name, ep.value, dist.name if dist else None,
+                            dist.version if dist else None)
+        if ep.name in found and found[ep.name].target != entry.target:
+            _log.warning("method plugin %r is declared twice (%s and %s); using %s", ep.name,
+                         found[ep.name].target, entry.target, found[ep.name].target)
+            continue
+        found.setdefault(ep.name, entry)
+    return found
+
+
+def refresh() -> None:
+    """Forget what :func:`discover` read (after installing a plugin in a running process)."""
+    discover.cache_clear()
+    source_fingerprint.cache_clear()
+    importlib.invalidate_caches()
+
+
+def load(target: str, name: str) -> object:
+    """Import ``"module:attribute"`` and return the attribute.
+
+    Raises
+    ------
+    UnknownMethodError
+        The module cannot be imported or has no such attribute (the message says which).
+    """
+    module, _, attr = target.partition(":")
+    try:
+        obj: object = importlib.import_module(module)
+        for part in attr.split("."):
+            obj = getattr(obj, part)
+    except (ImportError, AttributeError) as exc:
+        raise UnknownMethodError(f"method {name!r} is registered as {target!r} but cannot be "
+                                 f"loaded: {exc}") from exc
+    return obj
+
+
+def _source_files(module_name: str) -> list[tuple[str, Path]]:
+    """The ``.py`` files of the top-level package of ``module_name`` (or its one file), each
+    with its name relative to the package folder, in a fixed order."""
+    top = module_name.split(".")[0]
+    mod = sys.modules.get(top) or importlib.import_module(top)
+    out: list[tuple[str, Path]] = []
+    for root in sorted(getattr(mod, "__path__", []) or []):
+        out += [(f.relative_to(root).as_posix(), f) for f in Path(root).rglob("*.py")]
+    if not out and getattr(mod, "__file__", None):
+        out = [(Path(mod.__file__).name, Path(mod.__file__))]
+    return sorted(out)
+
+
+@functools.lru_cache(maxsize=64)
+def source_fingerprint(target: str, version: str | None = None) -> str:
+    """A hash of the code behind ``"module:attribute"``: every ``.py`` file of the module's
+    top-level package (path relative to the package and contents; the module's own file for
+    a single-file module) and ``version``. 16 hex digits.
+
+    Raises
+    ------
+    UnknownMethodError
+        The module cannot be imported.
+    """
+    module = target.partition(":")[0]
+    try:
+        files = _source_files(module)
+    except ImportError as exc:
+        raise UnknownMethodError(f"cannot read the source of {target!r}: {exc}") from exc
+    h = hashlib.sha256(f"version={version};".encode())
+    for rel, f in files:
+        try:
+            data = f.read_bytes()
+        except OSError:  # a file removed while we read: hash its name only
+            data = b""
+        h.update(f"{rel}\0{len(data)}\0".encode())
+        h.update(data)
+    return h.hexdigest()[:16]
+
+
+__all__ = ["GROUP", "PluginEntry", "discover", "refresh", "load", "source_fingerprint"]

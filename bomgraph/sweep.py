@@ -1,0 +1,416 @@
+"""Sweep files: what ``bomgraph compare --config FILE`` runs, read and checked.
+
+A sweep file is TOML (``tomllib``). One experiment at the top level::
+
+    name = "mine"                       # optional (default: the file's stem)
+    streams = ["runs/*.jsonl"]          # globs, relative to the file
+    checkpoint_every = 10               # optional (default 10)
+    reference = "gtsam-isam2@real"      # optional: scores streams without ground truth
+
+    [[worlds]]                          # simulated runs: SimConfig fields plus seeds
+    n_steps = 200
+    noise_scale = 0.5
+    seeds = [0, 1, 2]                   # or a count: seeds = 3 (0, 1, 2)
+
+    [[methods]]
+    name = "stmds-smacof"
+    preset = "real"                     # optional
+    options = { window = 40 }           # optional: the factory's keyword options
+    checkpoint_every = 20               # optional, this method only
+
+    [executor]                          # optional; the command line's flags win
+    jobs = 2                            # or dask_local = 2, or scheduler = "tcp://host:8786"
+
+or several in ``[[experiments]]`` tables of the same keys (``checkpoint_every``,
+``reference`` and ``[executor]`` at the top level are defaults for all of them). A world may
+instead be the paper's design, ``design = { seed = 0, layouts = 5, starts = 5 }`` (the 25
+runs of section IV), alone in its experiment; a method may carry ``label`` and
+``prior_fraction`` (Exp. 3's priors on simulated runs). ``methods`` may also be a list of
+strings ``"NAME"`` / ``"NAME@PRESET"``. The paper's experiments are such a file, shipped in
+the package (``bomgraph/sweeps/paper.toml``, ``--config paper``).
+
+:func:`read_sweep` returns plain, checked data (:class:`SweepSpec`); a mistake raises
+:class:`SweepError` with one line naming the file and the key. :func:`command_line_spec`
+turns ``compare --streams ... --methods ...`` into the same data, so a sweep file and the
+equivalent command line run the same tasks with the same cache keys.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import glob
+import math
+import os
+import re
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Mapping, Sequence
+
+from .errors import BomgraphError, ConfigError
+from .sim import SimConfig
+
+#: The folder of the sweep files shipped in the package (``--config NAME``).
+SHIPPED_DIR = Path(__file__).with_name("sweeps")
+
+_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.+-]*$")
+_SIM_FIELDS = {f.name: f for f in dataclasses.fields(SimConfig)}
+_TOP = {"name", "title", "streams", "worlds", "methods", "reference", "checkpoint_every",
+        "executor", "experiments"}
+_EXPERIMENT = {"name", "title", "streams", "worlds", "methods", "reference", "checkpoint_every"}
+_METHOD = {"name", "preset", "options", "label", "checkpoint_every", "prior_fraction"}
+_WORLD_EXTRA = {"name", "seeds", "design", "prior_sigma_xy_m"}
+_EXECUTOR = {"jobs", "dask_local", "scheduler"}
+
+
+class SweepError(ConfigError):
+    """A sweep file (or its command-line equivalent) that cannot be run: the message names
+    the file and the key."""
+
+
+@dataclass(frozen=True)
+class MethodSpec:
+    """One arm: the curve's ``label``, the registered ``method`` and its factory options
+    (``{"preset": NAME, ...}``)."""
+
+    label: str
+    method: str
+    options: Mapping[str, Any] = field(default_factory=dict)
+    prior_fraction: float = 0.0
+    checkpoint_every: int | None = None
+
+
+@dataclass(frozen=True)
+class WorldSpec:
+    """Simulated runs: ``sim`` with ``seeds`` (``bomgraph simulate --seed``), or the paper's
+    ``design`` (``{"seed", "layouts", "starts"}``)."""
+
+    name: str
+    sim: SimConfig
+    seeds: tuple[int, ...] = ()
+    design: Mapping[str, int] | None = None
+    prior_sigma_xy_m: float = 0.03
+
+
+@dataclass(frozen=True)
+class ExperimentSpec:
+    name: str
+    title: str
+    methods: tuple[MethodSpec, ...]
+    streams: tuple[tuple[str, str], ...] = ()  # (path, run label)
+    worlds: tuple[WorldSpec, ...] = ()
+    reference: MethodSpec | None = None
+    checkpoint_every: int = 10
+
+
+@dataclass(frozen=True)
+class SweepSpec:
+    path: str
+    experiments: tuple[ExperimentSpec, ...]
+    executor: Mapping[str, Any] = field(default_factory=dict)
+
+
+def shipped() -> list[str]:
+    """The names of the sweep files shipped in the package (``--config NAME``)."""
+    return sorted(p.stem for p in SHIPPED_DIR.glob("*.toml"))
+
+
+def resolve_path(path_or_name: str | os.PathLike[str]) -> Path:
+    """A sweep file's path: ``path_or_name`` itself, or a shipped file of that name."""
+    p = Path(path_or_name)
+    if p.is_file():
+        return p
+    if (SHIPPED_DIR / f"{p}.toml").is_file() and p.suffix != ".toml":
+        return SHIPPED_DIR / f"{p}.toml"
+    raise SweepError(f"{path_or_name}: no such sweep file (a path, or a shipped one: "
+                     f"{', '.join(shipped())})")
+
+
+def read_sweep(path_or_name: str | os.PathLike[str]) -> SweepSpec:
+    """Read and check a sweep file (a path, or the name of a shipped one).
+
+    Raises
+    ------
+    SweepError
+        One line: the file, the key (e.g. ``methods[2].preset``) and what is wrong.
+    """
+    path = resolve_path(path_or_name)
+    try:
+        data = tomllib.loads(path.read_text(encoding="utf-8"))
+    except tomllib.TOMLDecodeError as exc:
+        raise SweepError(f"{path}: not valid TOML: {exc}") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise SweepError(f"{path}: cannot be read: {exc}") from None
+    return _Reader(path).sweep(data)
+
+
+def parse_method(token: str, where: str = "methods") -> MethodSpec:
+    """``"NAME"`` or ``"NAME@PRESET"`` as an arm labelled ``token``."""
+    name, _, preset = token.partition("@")
+    if not name or (("@" in token) and not preset):
+        raise SweepError(f"{where}: {token!r} is not NAME or NAME@PRESET")
+    return _checked_method(MethodSpec(token, name, {"preset": preset} if preset else {}), where)
+
+
+def command_line_spec(streams: Sequence[str], methods: Sequence[str],
+                      options: Sequence[str] = (), *, reference: str | None = None,
+                      checkpoint_every: int = 10, name: str = "streams") -> SweepSpec:
+    """``compare --streams FILE... --methods NAME[@PRESET],... [--option NAME:KEY=VALUE]
+    [--reference NAME[@PRESET]]`` as the sweep it stands for (one experiment)."""
+    from .jsonio import parse_options
+
+    if not streams:
+        raise SweepError("--streams: give at least one stream file")
+    if not methods:
+        raise SweepError("--methods: give at least one method (NAME or NAME@PRESET, "
+                         "comma-separated); `bomgraph methods` lists them")
+    arms = [parse_method(tok, f"--methods {tok}") for tok in methods]
+    ref = parse_method(reference, "--reference") if reference else None
+    extra: dict[str, dict[str, Any]] = {}
+    for text in options:
+        target, sep, pair = text.partition(":")
+        if not sep or "=" not in pair:
+            raise SweepError(f"--option {text}: an option is NAME:KEY=VALUE (NAME: a method "
+                             f"of --methods)")
+        if not any(target in (a.label, a.method) for a in [*arms, *([ref] if ref else [])]):
+            raise SweepError(f"--option {text}: {target!r} is not one of --methods "
+                             f"{','.join(methods)}")
+        try:
+            extra.setdefault(target, {}).update(parse_options([pair]))
+        except ConfigError as exc:
+            raise SweepError(f"--option {text}: {exc}") from None
+
+    def with_options(m: MethodSpec) -> MethodSpec:
+        opts = dict(m.options)
+        for target in (m.method, m.label):
+            opts.update(extra.get(target, {}))
+        return dataclasses.replace(m, options=opts)
+
+    missing = [s for s in streams if not Path(s).is_file()]
+    if missing:
+        raise SweepError(f"--streams: no such file {missing[0]}")
+    _unique([a.label for a in arms], "--methods")
+    exp = ExperimentSpec(name, f"{len(streams)} stream(s), {len(arms)} method(s)",
+                         tuple(with_options(a) for a in arms),
+                         streams=_named_streams([str(Path(s).resolve()) for s in streams]),
+                         reference=None if ref is None else with_options(ref),
+                         checkpoint_every=checkpoint_every)
+    return SweepSpec("<command line>", (exp,))
+
+
+def _named_streams(paths: list[str]) -> tuple[tuple[str, str], ...]:
+    """Each path with its run label: the file stem, or ``folder-stem`` when two files share a
+    stem (``folder-stem-K`` when that is not enough)."""
+    stems = [Path(p).stem for p in paths]
+    labels = [s if stems.count(s) == 1 else f"{Path(p).parent.name}-{s}"
+              for p, s in zip(paths, stems)]
+    labels = [lb if labels.count(lb) == 1 else f"{lb}-{k}" for k, lb in enumerate(labels)]
+    return tuple(zip(paths, labels))
+
+
+def _unique(labels: Sequence[str], where: str) -> None:
+    dup = sorted({x for x in labels if labels.count(x) > 1})
+    if dup:
+        raise SweepError(f"{where}: {dup[0]!r} appears twice (give one a label)")
+
+
+def _checked_method(m: MethodSpec, where: str) -> MethodSpec:
+    """Refuse an unknown method or preset (the preset against the method's config class)."""
+    from .mapper import method_config_class, method_info
+
+    try:
+        method_info(m.method)
+        cls = method_config_class(m.method)
+    except BomgraphError as exc:
+        raise SweepError(f"{where}: {exc}") from None
+    preset = m.options.get("preset")
+    presets = getattr(cls, "PRESETS", None)
+    if preset is not None and presets is not None and preset not in presets:
+        raise SweepError(f"{where}: unknown preset {preset!r} of {m.method}; choose one of "
+                         f"{', '.join(presets)}")
+    return m
+
+
+class _Reader:
+    """Checks the parsed TOML, key by key, naming ``file: key`` in every error."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+
+    def fail(self, key: str, message: str) -> SweepError:
+        return SweepError(f"{self.path}: {key}: {message}")
+
+    def keys(self, table: Any, allowed: set[str], where: str) -> Mapping[str, Any]:
+        if not isinstance(table, dict):
+            raise self.fail(where, f"must be a table, got {type(table).__name__}")
+        unknown = sorted(set(table) - allowed)
+        if unknown:
+            raise self.fail(f"{where}.{unknown[0]}" if where else unknown[0],
+                            f"unknown key; allowed: {', '.join(sorted(allowed))}")
+        return table
+
+    def int_(self, value: Any, key: str, low: int) -> int:
+        if isinstance(value, bool) or not isinstance(value, int) or value < low:
+            raise self.fail(key, f"must be an integer >= {low}, got {value!r}")
+        return value
+
+    def str_(self, value: Any, key: str) -> str:
+        if not isinstance(value, str) or not value:
+            raise self.fail(key, f"must be a non-empty string, got {value!r}")
+        return value
+
+    def sweep(self, data: Mapping[str, Any]) -> SweepSpec:
+        top = self.keys(data, _TOP, "")
+        executor = self.executor(top.get("executor", {}))
+        defaults = {k: top[k] for k in ("checkpoint_every", "reference") if k in top}
+        if "experiments" in top:
+            own = sorted(set(top) & (_EXPERIMENT - {"checkpoint_every", "reference"}))
+            if own:
+                raise self.fail(own[0], "with [[experiments]], put it inside each experiment")
+            tables = top["experiments"]
+            if not isinstance(tables, list) or not tables:
+                raise self.fail("experiments", "must be a non-empty array of tables")
+            exps = [self.experiment({**defaults, **self.keys(t, _EXPERIMENT,
+                                                             f"experiments[{k}]")},
+                                    f"experiments[{k}].") for k, t in enumerate(tables)]
+        else:
+            exps = [self.experiment({k: v for k, v in top.items() if k in _EXPERIMENT}, "")]
+        _unique_or(self, [e.name for e in exps], "experiments[].name")
+        return SweepSpec(str(self.path), tuple(exps), executor)
+
+    def executor(self, table: Any) -> dict[str, Any]:
+        t = self.keys(table, _EXECUTOR, "executor")
+        out: dict[str, Any] = {}
+        if "jobs" in t:
+            jobs = t["jobs"]
+            if isinstance(jobs, bool) or not isinstance(jobs, int) or jobs == 0 or jobs < -1:
+                raise self.fail("executor.jobs", f"must be -1 (one per core) or >= 1, got "
+                                                 f"{jobs!r}")
+            out["jobs"] = jobs
+        if "dask_local" in t:
+            out["dask_local"] = self.int_(t["dask_local"], "executor.dask_local", 0)
+        if "scheduler" in t:
+            out["scheduler"] = self.str_(t["scheduler"], "executor.scheduler")
+        return out
+
+    def experiment(self, t: Mapping[str, Any], at: str) -> ExperimentSpec:
+        name = t.get("name", self.path.stem)
+        if not isinstance(name, str) or not _NAME.match(name):
+            raise self.fail(f"{at}name", f"must be letters, digits and _.+- , got {name!r}")
+        every = self.int_(t.get("checkpoint_every", 10), f"{at}checkpoint_every", 1)
+        streams = self.streams(t.get("streams", []), f"{at}streams")
+        worlds = t.get("worlds", [])
+        if not isinstance(worlds, list):
+            raise self.fail(f"{at}worlds", "must be an array of tables ([[worlds]])")
+        worlds = [self.world(w, f"{at}worlds[{k}]", k) for k, w in enumerate(worlds)]
+        if any(w.design is not None for w in worlds) and (len(worlds) > 1 or streams):
+            raise self.fail(f"{at}worlds", "a world with a design must be the experiment's "
+                                           "only source (put the others in another "
+                                           "[[experiments]] table)")
+        if not streams and not worlds:
+            raise self.fail(f"{at}streams", "give streams or [[worlds]] to run the methods on")
+        _unique_or(self, [w.name for w in worlds], f"{at}worlds[].name")
+        methods = t.get("methods")
+        if not isinstance(methods, list) or not methods:
+            raise self.fail(f"{at}methods", "give at least one method ([[methods]] with a "
+                                            "name, or methods = [\"NAME@PRESET\", ...])")
+        arms = tuple(self.method(m, f"{at}methods[{k}]") for k, m in enumerate(methods))
+        _unique_or(self, [a.label for a in arms], f"{at}methods[].label")
+        ref = t.get("reference")
+        reference = None if ref is None else self.method(ref, f"{at}reference")
+        title = t.get("title", f"{name}: {len(streams)} stream(s), "
+                               f"{sum(len(w.seeds) for w in worlds)} simulated run(s)")
+        return ExperimentSpec(name, self.str_(title, f"{at}title"), arms, streams,
+                              tuple(worlds), reference, every)
+
+    def streams(self, patterns: Any, key: str) -> tuple[tuple[str, str], ...]:
+        if isinstance(patterns, str):
+            patterns = [patterns]
+        if not isinstance(patterns, list):
+            raise self.fail(key, "must be a list of file names or globs")
+        paths: list[str] = []
+        for k, pat in enumerate(patterns):
+            pat = self.str_(pat, f"{key}[{k}]")
+            full = pat if os.path.isabs(pat) else str(self.path.parent / pat)
+            found = sorted(glob.glob(full, recursive=True))
+            found = [str(Path(f).resolve()) for f in found if os.path.isfile(f)]
+            if not found:
+                raise self.fail(f"{key}[{k}]", f"{pat!r} matches no file (relative to "
+                                               f"{self.path.parent.resolve()})")
+            paths += [f for f in found if f not in paths]
+        return _named_streams(paths)
+
+    def world(self, t: Any, key: str, index: int) -> WorldSpec:
+        t = self.keys(t, set(_SIM_FIELDS) | _WORLD_EXTRA, key)
+        values: dict[str, Any] = {}
+        for k, v in t.items():
+            if k in _WORLD_EXTRA:
+                continue
+            default = _SIM_FIELDS[k].default
+            ok = (isinstance(v, int) if isinstance(default, int) else
+                  isinstance(v, (int, float)) and math.isfinite(v)) and not isinstance(v, bool)
+            if not ok:
+                raise self.fail(f"{key}.{k}", f"must be {'an integer' if isinstance(default, int) else 'a number'}, got {v!r}")
+            values[k] = float(v) if isinstance(default, float) else v
+        try:
+            sim = SimConfig(**values)
+        except ConfigError as exc:
+            raise self.fail(key, str(exc)) from None
+        name = t.get("name", f"world{index + 1}")
+        if not isinstance(name, str) or not _NAME.match(name):
+            raise self.fail(f"{key}.name", f"must be letters, digits and _.+- , got {name!r}")
+        sigma = t.get("prior_sigma_xy_m", 0.03)
+        if isinstance(sigma, bool) or not isinstance(sigma, (int, float)) or not sigma > 0:
+            raise self.fail(f"{key}.prior_sigma_xy_m", f"must be a number > 0, got {sigma!r}")
+        if "design" in t:
+            if "seeds" in t:
+                raise self.fail(f"{key}.seeds", "give seeds or a design, not both")
+            d = self.keys(t["design"], {"seed", "layouts", "starts"}, f"{key}.design")
+            design = {"seed": self.int_(d.get("seed", 0), f"{key}.design.seed", 0),
+                      "layouts": self.int_(d.get("layouts", 5), f"{key}.design.layouts", 1),
+                      "starts": self.int_(d.get("starts", 5), f"{key}.design.starts", 1)}
+            return WorldSpec(name, sim, (), design, float(sigma))
+        seeds = t.get("seeds")
+        if isinstance(seeds, int) and not isinstance(seeds, bool):
+            seeds = list(range(self.int_(seeds, f"{key}.seeds", 1)))
+        if not isinstance(seeds, list) or not seeds:
+            raise self.fail(f"{key}.seeds", "give the seeds: a list of integers, or a count")
+        seeds = [self.int_(s, f"{key}.seeds[{k}]", 0) for k, s in enumerate(seeds)]
+        if len(set(seeds)) != len(seeds):
+            raise self.fail(f"{key}.seeds", "a seed appears twice")
+        return WorldSpec(name, sim, tuple(seeds), None, float(sigma))
+
+    def method(self, t: Any, key: str) -> MethodSpec:
+        if isinstance(t, str):
+            return parse_method(t, f"{self.path}: {key}")
+        t = self.keys(t, _METHOD, key)
+        name = self.str_(t.get("name"), f"{key}.name")
+        options = t.get("options", {})
+        if not isinstance(options, dict):
+            raise self.fail(f"{key}.options", "must be a table, e.g. options = { window = 40 }")
+        options = dict(options)
+        if "preset" in t:
+            if "preset" in options:
+                raise self.fail(f"{key}.preset", "given twice (here and in options)")
+            options["preset"] = self.str_(t["preset"], f"{key}.preset")
+        label = t.get("label", f"{name}@{t['preset']}" if "preset" in t else name)
+        frac = t.get("prior_fraction", 0.0)
+        if isinstance(frac, bool) or not isinstance(frac, (int, float)) or not 0 <= frac <= 1:
+            raise self.fail(f"{key}.prior_fraction", f"must be in [0, 1], got {frac!r}")
+        every = t.get("checkpoint_every")
+        if every is not None:
+            every = self.int_(every, f"{key}.checkpoint_every", 1)
+        m = MethodSpec(self.str_(label, f"{key}.label"), name, options, float(frac), every)
+        return _checked_method(m, f"{self.path}: {key}")
+
+
+def _unique_or(reader: _Reader, labels: Sequence[str], key: str) -> None:
+    try:
+        _unique(labels, key)
+    except SweepError as exc:
+        raise SweepError(f"{reader.path}: {exc}") from None
+
+
+__all__ = ["SweepError", "SweepSpec", "ExperimentSpec", "MethodSpec", "WorldSpec",
+           "read_sweep", "command_line_spec", "parse_method", "shipped", "resolve_path",
+           "SHIPPED_DIR"]

@@ -1,0 +1,1 @@
+"""A toy bomgraph method plugin (see ``mapper.py``)."""
