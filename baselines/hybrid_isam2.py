@@ -14,12 +14,14 @@ two side by side:
    (:func:`baselines.gtsam_tools.align_map`), onto the landmarks iSAM2 already holds plus
    the pending ones whose rays intersect with ``align_parallax_rad`` on the current poses
    (:func:`bomgraph.geometry.intersect_rays`);
-3. the landmark enters the graph at its aligned seed position, with all its buffered
-   bearings, if that position lies in front of its rays and within the sensor range gate,
-   and (``seed_sigma_m``) with a weak ``PriorFactorPoint2`` at that position, so that the
-   linear system stays determined while its rays are still nearly parallel (the cause of
-   GTSAM's "Indeterminant linear system", :func:`baselines.gtsam_tools.diagnose`). The prior
-   stays; with hundreds of bearings later its weight is negligible.
+3. the seed position is moved onto the landmark's rays (:func:`refine_on_rays`: the rays
+   fix its direction, the seed the depth they leave open) and the landmark enters the graph
+   there, with all its buffered bearings, if that point lies in front of its rays and
+   within the sensor range gate. Optionally (``seed_sigma_m``) a ``PriorFactorPoint2`` at
+   that position holds it while its rays are nearly parallel (the cause of GTSAM's
+   "Indeterminant linear system", :func:`baselines.gtsam_tools.diagnose`); by default
+   none: an update that fails is recovered by :class:`Isam2Mapper` (the landmark goes back
+   to pending and retries).
 
 Landmarks the seed does not place enter as in ``gtsam-isam2``. Everything else (updates,
 rebuilds after a failed update, the batch fall-back, ``info``) is
@@ -74,8 +76,12 @@ class HybridIsam2Config(FactorGraphConfig):
         The seed map is recomputed at most every this many steps (only when a landmark is
         waiting for it).
     seed_sigma_m : float or None
-        Std. dev. (m) of the prior put on a seeded landmark at its seed position; None puts
-        none (the landmark then rests on its nearly parallel rays alone).
+        Std. dev. (m) of a prior put on a seeded landmark at its seed position, kept for
+        good; None (the default) puts none: the seed is only the starting point and the
+        landmark rests on its bearings, so the solution is the same problem's as
+        ``gtsam-isam2`` (a kept prior counts the seed's information twice and biased the
+        map; ``docs/measurements.md``). Without a prior the seed position is also refined
+        on the rays with ``max_align_rms_m`` as its std. dev. (:func:`refine_on_rays`).
     align_trim : float
         The alignment is refitted without landmarks whose residual exceeds ``align_trim``
         times the median residual.
@@ -97,7 +103,7 @@ class HybridIsam2Config(FactorGraphConfig):
     seed_method: str = "stmds-smacof"
     seed_options: Mapping[str, Any] | None = None
     seed_every: int = 1
-    seed_sigma_m: float | None = 0.3
+    seed_sigma_m: float | None = None
     align_trim: float = 3.0
     align_parallax_rad: float = 0.1
     min_align_landmarks: int = 3

@@ -60,7 +60,7 @@ def one(job: tuple[str, str, dict[str, Any], str, int]) -> dict[str, Any]:
     for c in result.checkpoints:
         try:
             s = score_estimate(c.estimate, stream.truth)
-            err = dict(zip(s.landmark_ids.tolist(), s.errors_m.tolist()))
+            err = {str(i): e for i, e in zip(s.landmark_ids.tolist(), s.errors_m.tolist())}
         except EvaluationError:
             err = {}
         cps.append({"t": c.t, "n_mapped": len(c.estimate), "errors": err})
@@ -149,13 +149,40 @@ def main(argv: Sequence[str] | None = None) -> int:
         arms[REFERENCE] = (REFERENCE, {})
     sources = [f"paper:{i}" for i in range(args.runs)] + list(args.streams)
     jobs = [(lab, m, o, s, args.every) for lab, (m, o) in arms.items() for s in sources]
-    with Pool(args.jobs) as pool:
-        rows = pool.map(one, jobs, chunksize=1)
+    # finished runs are appended to OUT.rows.jsonl as they come and reused by the next call
+    # with the same arms (delete the file after changing the code)
+    rows_path = Path(args.out).with_suffix(".rows.jsonl")
+    rows_path.parent.mkdir(parents=True, exist_ok=True)
+    done = {}
+    if rows_path.exists():
+        for line in rows_path.read_text().splitlines():
+            r = json.loads(line)
+            done[(r["label"], r["source"], json.dumps(r["options"], sort_keys=True))] = r
+    key = lambda j: (j[0], j[3], json.dumps(j[2], sort_keys=True))  # noqa: E731
+    rows = [done[key(j)] for j in jobs if key(j) in done]
+    todo = [j for j in jobs if key(j) not in done]
+    with Pool(args.jobs) as pool, rows_path.open("a") as fh:
+        for j, r in zip(todo, pool.imap(one, todo, chunksize=1)):
+            r["options"] = j[2]
+            fh.write(json.dumps(r) + "\n")
+            fh.flush()
+            rows.append(r)
     summary = summarise(rows, list(arms))
     print_summary(summary, [int(t) for t in args.ts.split(",")])
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+    per_source = {f"{r['label']} | {r['source']}": {
+        "cpu_s": r["cpu_s"], "t": [c["t"] for c in r["checkpoints"]],
+        "n_mapped": [c["n_mapped"] for c in r["checkpoints"]],
+        "mpe_cm": [100 * float(np.mean(list(c["errors"].values()))) if c["errors"] else None
+                   for c in r["checkpoints"]]} for r in rows}
+    for key, v in per_source.items():
+        if not key.split(" | ")[1].startswith("paper:"):
+            last = v["mpe_cm"][-1]
+            print(f"final {key}: t = {v['t'][-1]}, "
+                  f"MPE {'-' if last is None else f'{last:.1f}'} cm ({v['n_mapped'][-1]})")
     Path(args.out).write_text(json.dumps({"arms": {k: [m, o] for k, (m, o) in arms.items()},
-                                          "sources": sources, "summary": summary},
+                                          "sources": sources, "summary": summary,
+                                          "per_source": per_source},
                                          indent=1, default=str))
     return 0
 
