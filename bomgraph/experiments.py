@@ -438,6 +438,7 @@ REAL_VARIANTS: dict[str, tuple[tuple[str, dict[str, Any]], ...]] = {
     "gtsam-batch": (("gtsam-batch (robust)", {"preset": "robust"}),),
     "hybrid": (("hybrid (real seed)", {"preset": "real-seed"}),
                ("hybrid (real seed, robust)", {"preset": "real-seed-robust"})),
+    "hybrid-isam2": (("hybrid-isam2 (real)", {"preset": "real"}),),
     "oracle": (("oracle (robust)", {"preset": "robust"}),),
 }
 

@@ -301,6 +301,8 @@ for _name, _target, _desc, _truth in [
      "GTSAM bearing factor graph, incremental iSAM2", False),
     ("hybrid", "baselines.hybrid:HybridMapper",
      "GTSAM seeded with the BOM-STMDS map (alignment + resection)", False),
+    ("hybrid-isam2", "baselines.hybrid_isam2:HybridIsam2Mapper",
+     "incremental iSAM2 whose new landmarks enter at their BOM-STMDS positions", False),
     ("oracle", "baselines.factor_graph:OracleMapper",
      "LM started from the ground truth: the accuracy bound (MLE)", True),
 ]:

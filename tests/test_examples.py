@@ -53,7 +53,11 @@ def test_plugin_method_runs_through_bomgraph_run(tmp_path: Path) -> None:
 
 def test_custom_hybrid_runs_and_its_solve_converges() -> None:
     out = run_example("custom_hybrid.py", "--steps", "40").splitlines()
-    assert len(out) == 2 and out[1].startswith("hybrid, window seed")
-    assert out[1].endswith("converged True")
+    assert len(out) == 2 and out[0].startswith("seed: ") and "graph determined" in out[0]
+    assert out[1].startswith("custom hybrid: ") and out[1].endswith("converged True")
     mpe_cm = float(out[1].split("MPE")[1].split()[0])
     assert 0 < mpe_cm < 50
+
+
+def test_custom_hybrid_is_under_40_lines() -> None:
+    assert len((EXAMPLES / "custom_hybrid.py").read_text().splitlines()) < 40

@@ -56,7 +56,7 @@ def test_real_methods_are_the_registry_less_the_skipped() -> None:
     assert real_methods() == [n for n in names if n not in REAL_SKIPPED]
     assert real_methods() == ["triangulate", "stmds-cs", "stmds-smacof", "stmds-smacof-loc",
                               "ekf", "ekf-invdepth", "gtsam-batch", "gtsam-isam2", "hybrid",
-                              "oracle"]
+                              "hybrid-isam2", "oracle"]
 
 
 def test_select_keeps_the_order_and_names_unknown_experiments() -> None:

@@ -1,0 +1,121 @@
+"""Tests of the public GTSAM helpers (baselines/gtsam_tools.py): the same objects as the
+baselines', the graph of a stream, map alignment and seeding, the diagnosis that names what
+is unconstrained, and the checked solve."""
+
+from __future__ import annotations
+
+import math
+
+import gtsam
+import numpy as np
+import pytest
+
+from baselines import bearing_graph, factor_graph, gtsam_tools as gt, hybrid
+from bomgraph.errors import TooFewLandmarksError
+from bomgraph.evaluate import score_estimate
+from bomgraph.mapper import MapEstimate
+from bomgraph.sim import SimConfig, simulate
+from bomgraph.stream import Stream
+
+
+@pytest.fixture(scope="module")
+def noise_free() -> Stream:
+    return simulate(SimConfig(n_steps=60, n_landmarks=20, noise_scale=0.0),
+                    np.random.default_rng(3))
+
+
+@pytest.fixture(scope="module")
+def noisy() -> Stream:
+    return simulate(SimConfig(n_steps=60, n_landmarks=25), np.random.default_rng(4))
+
+
+def _mirrored(stream: Stream) -> MapEstimate:
+    """The true map mirrored, turned by 2 rad and shifted (as an MDS map may come)."""
+    c, s = math.cos(2.0), math.sin(2.0)
+    xy = (stream.truth.landmarks_xy * [1.0, -1.0]) @ np.array([[c, -s], [s, c]]).T + [3, 1]
+    return MapEstimate(stream.truth.landmark_ids, xy)
+
+
+def test_the_helpers_are_the_baselines_own_objects() -> None:
+    assert gt.solve_lm is factor_graph.solve_lm and gt.SolveReport is factor_graph.SolveReport
+    assert gt.BatchState is factor_graph.BatchState
+    assert gt.BearingGraph is bearing_graph.BearingGraph
+    assert gt.odometry_factors is bearing_graph.odometry_factors
+    assert gt.trimmed_align is hybrid.trimmed_align
+    assert set(gt.__all__) <= set(dir(gt))
+
+
+def test_build_graph_holds_every_factor(noisy: Stream) -> None:
+    state = gt.build_graph(noisy.header, noisy.steps)
+    p = state.problem
+    n_steps = len(noisy.steps)
+    assert p.n_steps == n_steps and p.landmark_ids
+    assert state.graph.size() == 1 + 2 * (n_steps - 1) + p.n_bearing_factors
+    assert state.values.size() == 2 * n_steps - 1 + len(p.landmark_ids)
+    held = gt.build_graph(noisy.header, noisy.steps, admit=False)
+    assert held.problem.landmark_ids == [] and held.problem.pending()
+
+
+def test_align_map_undoes_a_mirror_exactly(noise_free: Stream) -> None:
+    ids, xy = noise_free.truth.landmark_ids, noise_free.truth.landmarks_xy
+    aligned = gt.align_map(_mirrored(noise_free), ids[:5], xy[:5])
+    assert aligned.alignment.reflected and aligned.n_common == 5
+    np.testing.assert_allclose(aligned.landmarks_xy, xy, atol=1e-12)
+    with pytest.raises(TooFewLandmarksError, match="3 are needed"):
+        gt.align_map(_mirrored(noise_free), ids[:2], xy[:2])
+
+
+def test_seeding_from_a_mirrored_map_recovers_the_truth(noise_free: Stream) -> None:
+    state = gt.build_graph(noise_free.header, noise_free.steps,
+                           start_pose=noise_free.truth.poses[0])
+    before = len(state.problem.landmark_ids)
+    seed = gt.seed_landmarks(state, _mirrored(noise_free))
+    assert seed.alignment.reflected and len(state.problem.landmark_ids) >= before
+    values, report = gt.checked_solve(state.graph, state.values, state.config)
+    assert report.converged
+    score = score_estimate(state.to_estimate(values, report.as_info()), noise_free.truth)
+    assert score.max_m < 1e-6
+
+
+def test_diagnose_a_good_graph(noisy: Stream) -> None:
+    state = gt.build_graph(noisy.header, noisy.steps[:30])
+    d = gt.diagnose(state.graph, state.values)
+    assert d.ok and d.rank == d.n_columns and "graph determined" in d.summary()
+
+
+def test_diagnose_names_a_landmark_seen_once(noisy: Stream) -> None:
+    state = gt.build_graph(noisy.header, noisy.steps[:10])
+    state.values.insert(gt.landmark_key(999), gtsam.Point2(0.5, 0.5))
+    state.graph.add(gtsam.BearingFactor2D(gt.pose_key(3), gt.landmark_key(999),
+                                          gtsam.Rot2(0.2),
+                                          gtsam.noiseModel.Isotropic.Sigma(1, 0.05)))
+    d = gt.diagnose(state.graph, state.values)
+    assert not d.ok
+    assert d.weak_landmarks["l999"] == "1 bearing" and d.null_variables == ["l999"]
+    assert d.rank == d.n_columns - 1 and "l999" in d.elimination_error
+    with pytest.raises(gt.UnconstrainedGraphError, match="l999 \\(1 bearing\\)") as exc:
+        gt.checked_solve(state.graph, state.values, state.config)
+    assert exc.value.diagnosis.weak_landmarks == d.weak_landmarks
+
+
+def test_diagnose_names_parallel_rays_poses_without_prior_and_missing_values(
+        noisy: Stream) -> None:
+    state = gt.build_graph(noisy.header, noisy.steps[:10])
+    noise = gtsam.noiseModel.Isotropic.Sigma(1, 0.05)
+    state.values.insert(gt.landmark_key(998), gtsam.Point2(1.0, 0.0))
+    for t in (1, 2):   # two rays from near-by poses at the same bearing: nearly parallel
+        state.graph.add(gtsam.BearingFactor2D(gt.pose_key(t), gt.landmark_key(998),
+                                              gtsam.Rot2(0.0), noise))
+    d = gt.diagnose(state.graph, state.values)
+    assert d.weak_landmarks["l998"].startswith("rays span")
+    # a graph without its prior on x0 can slide: every pose is named
+    floating = gtsam.NonlinearFactorGraph()
+    for i in range(1, state.graph.size()):
+        floating.add(state.graph.at(i))
+    d2 = gt.diagnose(floating, state.values)
+    assert "x0" in d2.unanchored and "x9" in d2.unanchored and not d2.ok
+    # a factor on a key without a value
+    state.graph.add(gtsam.BearingFactor2D(gt.pose_key(4), gt.landmark_key(997),
+                                          gtsam.Rot2(0.0), noise))
+    d3 = gt.diagnose(state.graph, state.values)
+    assert d3.missing_values == ["l997"] and "no initial value for l997" in d3.summary()
