@@ -263,15 +263,24 @@ def execute(tasks: Sequence[Task], executor: Executor = Executor(), *,
             if cached is not None:
                 cached.update(experiment=t.experiment, arm=t.arm.label, run=t.source.name)
                 results[k] = cached
-    todo = [k for k, r in enumerate(results) if r is None]
-    done = len(tasks) - len(todo)
+    # Experiments that share an arm share its runs: a task whose key another task of this
+    # sweep already has runs once, and its result is given to both.
+    twins: dict[str, list[int]] = {}
+    for k, r in enumerate(results):
+        if r is None:
+            twins.setdefault(task_key(tasks[k]), []).append(k)
+    todo = [ks[0] for ks in twins.values()]
+    done = len(tasks) - sum(len(ks) for ks in twins.values())
     if progress:
         progress(done, len(tasks))
     for k, res in _dispatch([tasks[k] for k in todo], todo, executor):
-        results[k] = res
         if cache is not None and res.get("ok"):  # failures are re-run next time
             _write_cached(_cache_path(cache, tasks[k]), res)
-        done += 1
+        for j in twins[task_key(tasks[k])]:
+            t = tasks[j]
+            results[j] = res if j == k else {**res, "experiment": t.experiment,
+                                             "arm": t.arm.label, "run": t.source.name}
+            done += 1
         if progress:
             progress(done, len(tasks))
     return [r for r in results if r is not None]

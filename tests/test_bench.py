@@ -108,3 +108,22 @@ def test_existing_dask_scheduler_by_address() -> None:
         remote = strip_timings(execute(tasks, Executor("dask",
                                                        scheduler=cluster.scheduler_address)))
     assert json.dumps(serial) == json.dumps(remote)
+
+
+def test_tasks_that_experiments_share_run_once(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Exp. 2 and "all" share the gtsam arms: a key seen twice in one sweep runs once, and
+    each task gets the result under its own experiment name."""
+    import bomgraph.bench as bench
+
+    a = _exp((Arm("tri", "triangulate"),))
+    b = Experiment("u", "again", a.arms, SMALL, seed=3, n_layouts=2, n_starts=2)
+    tasks = a.tasks() + b.tasks()
+    calls: list[str] = []
+    real = bench.run_task
+    monkeypatch.setattr(bench, "run_task", lambda t: calls.append(task_key(t)) or real(t))
+    res = execute(tasks, Executor("serial"))
+    assert len(calls) == len(a.tasks()) == len(set(calls))
+    assert [r["experiment"] for r in res] == ["t"] * len(a.tasks()) + ["u"] * len(b.tasks())
+    half = len(a.tasks())
+    assert strip_timings(res[:half]) == [{**r, "experiment": "t"}
+                                         for r in strip_timings(res[half:])]
