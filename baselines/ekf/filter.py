@@ -156,12 +156,14 @@ class BearingEkf:
         d[self._is_angle] = angle_residual(a[self._is_angle], b[self._is_angle])
         return d
 
-    def check_room(self, m: int) -> None:
-        """Raise :class:`StateLimitError` if ``m`` more states would exceed ``max_state``."""
+    def check_room(self, m: int, what: str = "") -> None:
+        """Raise :class:`StateLimitError` if ``m`` more states would exceed ``max_state``
+        (``what`` names them in the message, e.g. "2500 new landmarks")."""
         n = self.dim
         if self.max_state is not None and n + m > self.max_state:
+            grow = f" with {what}" if what else ""
             raise StateLimitError(
-                f"the EKF state would grow to {n + m} entries (a dense covariance of "
+                f"the EKF state would grow{grow} to {n + m} entries (a dense covariance of "
                 f"{8 * (n + m) ** 2 / 2 ** 30:.2f} GiB), beyond its limit of {self.max_state}"
                 f"{self._limit_hint}")
 

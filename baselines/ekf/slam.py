@@ -108,6 +108,7 @@ class EkfSlam:
             if key[0] in (_CLONE, _IDP):
                 is_angle[pos + 2] = True
             pos += size
+        self.filter.check_room(len(value), f"{len(keys)} new landmark or pose blocks")
         self.filter.augment(value, idx, jac, noise_cov, is_angle)
         for key in keys:
             self._sizes[key] = _SIZE[key[0]]
@@ -280,7 +281,7 @@ class EkfSlam:
         ``[x, y, psi + z, rho_init]`` with ``rho ~ N(rho_init, rho_sigma^2)``."""
         if ids.size:
             m = ids.size
-            self.filter.check_room(4 * m)
+            self.filter.check_room(4 * m, f"{m} new landmark features")
             x = self.filter.x
             value = np.column_stack([np.broadcast_to(x[:2], (m, 2)), wrap_angle(x[2] + z),
                                      np.full(m, self.rho_init)]).ravel()
