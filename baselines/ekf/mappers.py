@@ -66,13 +66,15 @@ Iterated update (``iterations > 1``)
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
 
 from bomgraph.angles import angle_residual
 from bomgraph.config import resolve
-from bomgraph.stream import StreamHeader
+from bomgraph.geometry import compose
+from bomgraph.stream import Step, StreamHeader
 
 from .config import EkfConfig, InverseDepthConfig
 from .models import invdepth_conversion_kl, invdepth_to_xy, triangulation_kl
@@ -227,10 +229,31 @@ class InverseDepthEkfMapper(EkfSlam):
                  preset: str | None = None, **options: Any) -> None:
         self.config = resolve(InverseDepthConfig, config, preset, options)
         super().__init__(header, start_pose, self.config)
+        self._dr = np.asarray(start_pose, dtype=float)  # dead-reckoned pose (odometry only)
+        self._anchor: dict[int, tuple[float, float, float]] = {}  # id -> x, y, ray angle
+        self._baseline: dict[int, float] = {}  # feature id -> metres across its ray
 
     def _new_sightings(self, t: int, ids: np.ndarray, z: np.ndarray) -> None:
+        for i, zi in zip(ids.tolist(), z.tolist()):  # a new anchor (first sighting, restart)
+            self._anchor[i] = (self._dr[0], self._dr[1], self._dr[2] + zi)
+            self._baseline[i] = 0.0
         self._add_inverse_depth(ids, z)
         self._convert(self._linear_enough)
+
+    def step(self, step: Step) -> None:
+        """As :meth:`EkfSlam.step`; and, for each feature sighted, the largest baseline so far
+        across its anchor ray (metres, ``_baseline``), measured on the odometry alone (the
+        dead-reckoned pose ``_dr``): the parallax that can give the feature a depth. It does
+        not come from the filter's estimate, which its own updates move."""
+        if step.odom is not None:
+            self._dr = compose(self._dr, np.asarray(step.odom, dtype=float))
+        super().step(step)
+        for i in step.landmark_ids.tolist():
+            a = self._anchor.get(i)
+            if a is not None:
+                perp = abs(math.cos(a[2]) * (self._dr[1] - a[1])
+                           - math.sin(a[2]) * (self._dr[0] - a[0]))
+                self._baseline[i] = max(self._baseline[i], perp)
 
     def _linear_enough(self, features: np.ndarray, covs: np.ndarray) -> np.ndarray:
         """Civera's linearity index ``4 sigma_d / d |cos alpha|`` below ``linearity_max``."""
@@ -261,6 +284,11 @@ class InverseDepthEkfMapper(EkfSlam):
             # robot that never moves, or only turns, they carry no depth at all)
             rho_sd = np.sqrt(np.clip(P[bi[:, 3], bi[:, 3]], 0, None))
             no_depth = rho_sd > 0.5 * self.rho_sigma
+            # ... and the odometry must have moved the robot across the feature's ray by more
+            # than the bearing noise subtends at the feature's depth (turning on the spot
+            # gives the iterated update a spurious depth, never a baseline)
+            base = np.array([self._baseline.get(k[1], 0.0) for k in keys])
+            no_depth |= base * np.abs(f[:, 3]) < self.filter.bearing_sigma_rad
             ok = (f[:, 3] > 0) & ~no_depth
             left_out = sorted(k[1] for k, o in zip(keys, ok) if not o)
             n_no_depth = int(np.count_nonzero(no_depth))
