@@ -144,6 +144,10 @@ class FactorGraphConfig(Presets):
     relinearize_threshold: float = 0.001
     relinearize_skip: int = 1
     checkpoint_updates: int = 2
+    isam2_optimizer: str = "dogleg"
+    isam2_partial_check: bool = False
+    isam2_polish: int = 3
+    isam2_update_every: int = 10
 
     def __post_init__(self) -> None:
         need = requirement(type(self).__name__)
@@ -164,6 +168,10 @@ class FactorGraphConfig(Presets):
         need(self.relinearize_threshold > 0, "relinearize_threshold must be > 0")
         need(self.relinearize_skip >= 1, "relinearize_skip must be >= 1")
         need(self.checkpoint_updates >= 0, "checkpoint_updates must be >= 0")
+        need(self.isam2_optimizer in ("dogleg", "gauss-newton"),
+             "isam2_optimizer must be 'dogleg' or 'gauss-newton'")
+        need(self.isam2_polish >= 0, "isam2_polish must be >= 0")
+        need(self.isam2_update_every >= 1, "isam2_update_every must be >= 1")
 
 
 # --------------------------------------------------------------------------------------------
