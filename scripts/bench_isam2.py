@@ -48,6 +48,7 @@ from bomgraph.jsonio import parse_options  # noqa: E402
 from bomgraph.mapper import MapEstimate, run  # noqa: E402
 from bomgraph.sim import SimConfig, paper_design, simulate_run  # noqa: E402
 from bomgraph.stream import Stream  # noqa: E402
+from bomgraph.stream_file import read_stream  # noqa: E402
 
 
 def reference_loop(stream: Stream, every: int = 10) -> tuple[float, float]:
@@ -103,6 +104,41 @@ def _mpe(est: MapEstimate, stream: Stream) -> float:
         return math.nan
 
 
+def recorded(paths: list[Path], preset: str | None, opts: dict[str, Any], every: int,
+             out: Path | None) -> None:
+    """isam2 (``preset`` + ``opts``) beside the oracle and gtsam-batch (``robust``) on
+    recorded streams; the oracle needs robot truth (else the reference is batch)."""
+    rows = []
+    print(f"{'stream':18s} {'isam2 cm':>8s} {'oracle':>7s} {'batch':>7s} {'ratio':>6s} "
+          f"{'isam2 s':>7s} mode")
+    for path in paths:
+        stream = read_stream(path)
+        t0 = time.process_time()
+        _, est = timed_run(Isam2Mapper(stream.header, preset=preset, **opts), stream, every)
+        i_s = time.process_time() - t0
+        mpe = _mpe(est, stream)
+        o = math.nan
+        if stream.truth is not None and stream.truth.poses is not None:
+            om = OracleMapper(stream.header, truth=stream.truth,
+                              preset="robust" if preset in ("robust", "real") else None)
+            o = _mpe(run(om, stream.steps, checkpoint_every=10 ** 9).final, stream)
+        _, best = timed_run(BatchMapper(stream.header, preset="robust"), stream, every)
+        b = _mpe(best, stream)
+        ref = o if math.isfinite(o) else b
+        rows.append({"stream": path.stem, "isam2_mpe_m": mpe, "oracle_mpe_m": o,
+                     "batch_mpe_m": b, "ratio": mpe / ref, "isam2_cpu_s": i_s,
+                     "mode": est.info.get("mode"), "failures": est.info.get("update_failures"),
+                     "converged": est.info.get("converged")})
+        print(f"{path.stem:18s} {100 * mpe:8.2f} {100 * o:7.2f} {100 * b:7.2f} "
+              f"{mpe / ref:6.3f} {i_s:7.2f} {est.info.get('mode')} "
+              f"f={est.info.get('update_failures')} conv={est.info.get('converged')}",
+              flush=True)
+    if out:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        out.write_text(json.dumps({"preset": preset, "options": opts, "rows": rows},
+                                  indent=1))
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--runs", type=int, default=5)
@@ -112,9 +148,13 @@ def main() -> None:
     ap.add_argument("--preset", default=None)
     ap.add_argument("--long", type=int, default=0)
     ap.add_argument("--no-oracle", action="store_true")
+    ap.add_argument("--streams", nargs="*", type=Path, default=None,
+                    help="recorded streams: isam2 vs oracle (same preset) and batch, final MPE")
     ap.add_argument("--out", type=Path)
     a = ap.parse_args()
     opts = parse_options(a.option)
+    if a.streams:
+        return recorded(a.streams, a.preset, opts, a.every, a.out)
     rows = []
     print(f"{'run':12s} {'isam2 s':>8s} {'loop s':>7s} {'ratio':>6s} "
           f"{'mpe isam2':>9s} {'loop':>6s} {'oracle':>6s} {'/oracle':>7s} conv")
