@@ -85,7 +85,7 @@ class Isam2Config(FactorGraphConfig):
 
 class Isam2Mapper:
     """``gtsam-isam2``: iSAM2 updates with only the new factors and values, on an internal
-    schedule (every ``isam2_update_every`` steps).
+    schedule (every ``isam2_update_every`` steps, and at a step where landmarks entered).
 
     Each step's factors and values (odometry, bearings, entering landmarks: the graph of
     :class:`BearingGraph`) go to a buffer; every ``isam2_update_every`` steps the buffer is
