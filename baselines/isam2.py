@@ -192,12 +192,14 @@ class Isam2Mapper:
                 key = landmark_key(lid)
                 self._buffer.add(gtsam.PriorFactorPoint2(
                     key, new.landmark_values.atPoint2(key), noise))
-        if (t % self.config.isam2_update_every == 0 or self._external.size()
+        scheduled = t % self.config.isam2_update_every == 0
+        if (scheduled or self._external.size()
                 or (self.config.isam2_update_on_entry and new.landmark_ids)):
-            self._flush()
+            self._flush(extra=scheduled)
 
-    def _flush(self) -> None:
-        """Hand the buffer (and queued external factors) to the solver."""
+    def _flush(self, extra: bool = True) -> None:
+        """Hand the buffer (and queued external factors) to the solver; with ``extra``, the
+        ``checkpoint_updates`` extra updates follow (on the schedule only)."""
         factors, values = self._buffer, self._buffer_values
         external, ext_values = self._external, self._external_values
         self._buffer, self._buffer_values = gtsam.NonlinearFactorGraph(), gtsam.Values()
@@ -216,7 +218,7 @@ class Isam2Mapper:
         both.insert(ext_values)
         try:
             self._isam.update(graph, both)
-            for _ in range(self.config.checkpoint_updates):
+            for _ in range(self.config.checkpoint_updates if extra else 0):
                 self._isam.update()
             self.updates += 1
             self.accepted.push_back(graph)
