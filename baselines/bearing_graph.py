@@ -63,9 +63,32 @@ def mid_key(t: int) -> int:
     return gtsam.symbol("m", int(t))
 
 
+#: ``gtsam.symbol`` holds an index of 56 bits; stream ids go up to 2^63 - 1 (int64).
+_SYMBOL_INDEX_LIMIT = 1 << 56
+_WIDE_LANDMARK = 1 << 63
+
+
 def landmark_key(landmark_id: int) -> int:
-    """GTSAM key of landmark ``landmark_id``."""
-    return gtsam.symbol("l", int(landmark_id))
+    """GTSAM key of landmark ``landmark_id``, for every id the stream format allows
+    (``0 <= id < 2**63``).
+
+    Ids below 2^56 get ``symbol("l", id)``; larger ids (which ``gtsam.symbol`` refuses) get
+    the key ``2**63 | id``, whose top byte (>= 0x80) no symbol key of this module (``l``,
+    ``m``, ``x``) uses, so the map is injective without a table and the keys of ordinary ids,
+    hence every solve on them, are unchanged.
+
+    Raises
+    ------
+    ConfigError
+        For a negative id or one of 2^63 or more.
+    """
+    i = int(landmark_id)
+    if 0 <= i < _SYMBOL_INDEX_LIMIT:
+        return gtsam.symbol("l", i)
+    if _SYMBOL_INDEX_LIMIT <= i < _WIDE_LANDMARK:
+        return _WIDE_LANDMARK | i
+    raise ConfigError(f"landmark id {i} is outside 0 .. 2**63 - 1, the range of the stream "
+                      f"format; renumber the landmarks")
 
 
 # --------------------------------------------------------------------------------------------
@@ -99,8 +122,7 @@ class FactorGraphConfig(Presets):
     odometry_cauchy_k : float or None
         Cauchy kernel (whitened threshold) on every odometry factor, in every pass; None keeps
         them Gaussian (the simulator's odometry is). Recordings have odometry outliers (a
-        collision, a slip) the Gaussian model cannot absorb. Refused by ``gtsam-isam2`` (see
-        :class:`baselines.isam2.Isam2Mapper`).
+        collision, a slip) the Gaussian model cannot absorb.
     bearing_cauchy_k : float or None
         Cauchy kernel on the bearing factors of the plain pass (the Huber pre-pass keeps its
         own kernel); None keeps them Gaussian. With robust odometry a gross bearing outlier
@@ -117,9 +139,10 @@ class FactorGraphConfig(Presets):
     covariances : bool
         Fill ``landmark_cov`` and ``pose_cov`` through ``gtsam.Marginals`` (costs time).
     relinearize_threshold, relinearize_skip, checkpoint_updates :
-        iSAM2 (Cholesky, Powell's dogleg): relinearise a variable whose delta exceeds the
-        threshold, check every ``relinearize_skip`` updates, and run this many extra updates
-        at each estimate(). GTSAM's default threshold 0.1 is far above the 1 cm accuracy.
+        iSAM2 (:class:`baselines.isam2.Isam2Config`): relinearise a variable whose delta
+        exceeds the threshold, check every ``relinearize_skip`` updates, and run this many
+        extra updates after each internal update. GTSAM's default threshold 0.1 is far above
+        the 1 cm accuracy.
     """
 
     PRESETS: ClassVar[Mapping[str, Mapping[str, Any]]] = {
