@@ -50,21 +50,22 @@ from bomgraph.geometry import intersect_rays
 from bomgraph.mapper import MapEstimate, Mapper, create_mapper
 from bomgraph.stream import Step, StreamHeader
 
-from .bearing_graph import BearingGraph, FactorGraphConfig, landmark_key, landmarks_from_values
+from .bearing_graph import BearingGraph, landmark_key, landmarks_from_values
 from .gtsam_tools import align_map
-from .isam2 import Isam2Mapper
+from .isam2 import Isam2Config, Isam2Mapper
 
 _REAL_SEED = {"seed_options": {"preset": "real"}}
 
 
 @dataclass(frozen=True)
-class HybridIsam2Config(FactorGraphConfig):
-    """Options of ``hybrid-isam2``: the graph and iSAM2 fields of :class:`FactorGraphConfig`
-    plus the seeding.
+class HybridIsam2Config(Isam2Config):
+    """Options of ``hybrid-isam2``: the graph and iSAM2 fields of :class:`Isam2Config` plus
+    the seeding.
 
     Presets (:meth:`Presets.preset`): ``"paper"`` (the defaults, seed ``stmds-smacof`` with
-    its paper configuration) and ``"real"`` (the seed's ``"real"`` preset, windowed bundle
-    adjustment, for recordings).
+    its paper configuration) and ``"real"`` (``gtsam-isam2``'s ``"real"`` robust kernels and
+    weak landmark prior, and the seed's ``"real"`` preset, windowed bundle adjustment, for
+    recordings).
 
     Attributes
     ----------
@@ -97,7 +98,7 @@ class HybridIsam2Config(FactorGraphConfig):
 
     PRESETS: ClassVar[Mapping[str, Mapping[str, Any]]] = {
         "paper": {},
-        "real": dict(_REAL_SEED),
+        "real": {**Isam2Config.PRESETS["real"], **_REAL_SEED},
     }
 
     seed_method: str = "stmds-smacof"
