@@ -34,6 +34,7 @@ from bomgraph.stream import Step, StreamHeader, Truth
 
 from .bearing_graph import (BearingGraph, FactorGraphConfig, NewFactors, insert_pose,
                             landmark_key, landmarks_from_values, pose_key, poses_from_values)
+from .fixed_lag import window_problem
 
 # --------------------------------------------------------------------------------------------
 # Solving
@@ -190,9 +191,12 @@ def solve_lm(graph: gtsam.NonlinearFactorGraph, initial: gtsam.Values,
     converged = bool(stop != "failed" and math.isfinite(e1)
                      and e1 <= e0 * (1 + 1e-12) + 1e-12 and gn_ok)
     if not converged and not messages:
-        messages.append(f"LM stopped on {stop}; a Gauss-Newton step at the result has max-norm "
-                        f"{step:.3g} and would still lower the error by {decrease:.3g} "
-                        f"(decrease_tol {config.decrease_tol:g})")
+        messages.append(
+            f"LM stopped on {stop}; " + (
+                "the linear system at the result is singular (a direction the measurements "
+                "do not determine)" if not math.isfinite(step) else
+                f"a Gauss-Newton step at the result has max-norm {step:.3g} and would still "
+                f"lower the error by {decrease:.3g} (decrease_tol {config.decrease_tol:g})"))
     return values, SolveReport(converged, iterations, e0, e1, step, decrease, stop,
                                tuple(passes), "; ".join(messages))
 
@@ -288,6 +292,9 @@ class BatchState:
         self.values = gtsam.Values()
         self._lm_config = replace(config, relative_error_tol=config.warm_relative_error_tol)
         self._last = np.asarray(start_pose, dtype=float)
+        self._odom_sigma: list[np.ndarray] = []
+        self._full_n = 0                  # steps at the last whole-graph solve
+        self._fresh: list[int] = []       # landmarks entered since the last solution
         self._obs: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
         self._obs_cat: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
 
@@ -299,6 +306,7 @@ class BatchState:
         pose = self.problem.predict_pose(t, prev)
         insert_pose(self.values, t, pose, prev)
         self._last = np.asarray(pose, dtype=float)
+        self._odom_sigma.append(np.asarray(step.odometry_sigma(self.header), dtype=float))
         ids = np.asarray(step.landmark_ids, dtype=np.int64)
         if ids.size:
             self._obs.append((np.full(ids.size, t, np.int64), ids,
@@ -308,6 +316,7 @@ class BatchState:
     def set_values(self, values: gtsam.Values) -> None:
         """Make ``values`` the current solution (the next poses are predicted from it)."""
         self.values = values
+        self._fresh = []
         n = self.problem.n_steps
         if n:
             p = values.atPose2(pose_key(n - 1))
@@ -341,6 +350,7 @@ class BatchState:
         if self.robust_graph is not None and new.robust is not None:
             self.robust_graph.push_back(new.robust)
         self.values.insert(new.landmark_values)
+        self._fresh += list(new.landmark_ids)
         return new
 
     # -- plausibility ---------------------------------------------------------------------
@@ -389,9 +399,31 @@ class BatchState:
     def solve(self, initial: gtsam.Values) -> tuple[gtsam.Values, SolveReport]:
         """:func:`solve_lm` on ``graph`` from ``initial``: the plain pass, the Huber pass (if
         the config has one) and a Gauss-Newton check only where :meth:`looks_off`; ``values``
-        is left to the caller."""
+        is left to the caller.
+
+        Past ``lag_after_steps`` steps, and until the graph has grown by ``full_growth`` since
+        its last whole solve, only the last ``lag_steps`` poses and the landmarks they see are
+        solved (:mod:`baselines.fixed_lag`; the rest held at ``values``); the result is the
+        current values with the window replaced, its report the window's
+        (``info["solve"] = "window"``).
+        """
+        n, cfg = self.problem.n_steps, self.config
+        if n > cfg.lag_after_steps and n < cfg.full_growth * self._full_n:
+            return self._solve_window(initial)
+        self._full_n = n
         return solve_lm(self.graph, initial, self._lm_config, self.robust_graph,
                         looks_off=self.looks_off)
+
+    def _solve_window(self, initial: gtsam.Values) -> tuple[gtsam.Values, SolveReport]:
+        n = self.problem.n_steps
+        b = n - self.config.lag_steps
+        graph, start = window_problem(self.header, self.config, self.problem, self.bearings(),
+                                      np.array(self._odom_sigma), all_poses(self.values, n),
+                                      self.values, initial, b, self._fresh)
+        window, report = solve_lm(graph, start, self._lm_config)
+        values = gtsam.Values(self.values)
+        values.update(window)
+        return values, replace(report, stop=report.stop, passes=("window",) + report.passes)
 
     def to_estimate(self, values: gtsam.Values, info: dict[str, Any],
                     leave_out: np.ndarray | None = None) -> MapEstimate:
