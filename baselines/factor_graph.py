@@ -25,6 +25,7 @@ from typing import Any, Callable, Sequence
 import gtsam
 import numpy as np
 
+from bomgraph.angles import angle_residual
 from bomgraph.config import resolve
 from bomgraph.errors import ConfigError
 from bomgraph.geometry import rotation
@@ -33,6 +34,7 @@ from bomgraph.stream import Step, StreamHeader, Truth
 
 from .bearing_graph import (BearingGraph, FactorGraphConfig, NewFactors, insert_pose,
                             landmark_key, landmarks_from_values, pose_key, poses_from_values)
+from .fixed_lag import window_problem
 
 # --------------------------------------------------------------------------------------------
 # Solving
@@ -47,7 +49,9 @@ class SolveReport:
     gave up), ``"max_iterations"``, or ``"failed"`` (it raised). ``converged`` is True only if
     the error did not grow and either LM stopped on its tolerance or a Gauss-Newton step at the
     result predicts less than ``decrease_tol`` of further decrease; an LM run that gave up far
-    from a minimum is never reported as converged.
+    from a minimum is never reported as converged, nor a result whose Gauss-Newton step is
+    infinite or longer than :data:`ABSURD_STEP`. ``gn_step`` and ``predicted_decrease`` are NaN
+    when no check was needed (:func:`solve_lm` with ``looks_off``).
     """
 
     converged: bool
@@ -63,9 +67,18 @@ class SolveReport:
     def as_info(self) -> dict[str, Any]:
         return {"converged": self.converged, "iterations": self.iterations,
                 "initial_cost": self.initial_error, "cost": self.final_error,
-                "gn_step": self.gn_step, "predicted_decrease": self.predicted_decrease,
+                # NaN: no Gauss-Newton check was needed (solve_lm)
+                "gn_step": None if math.isnan(self.gn_step) else self.gn_step,
+                "predicted_decrease": (None if math.isnan(self.predicted_decrease)
+                                       else self.predicted_decrease),
                 "stop": self.stop, "passes": list(self.passes),
                 **({"message": self.message} if self.message else {})}
+
+
+#: A Gauss-Newton step longer than this (metres or radians, max-norm) at a solution means a
+#: direction the measurements do not determine (e.g. a landmark sliding along its rays): such a
+#: solution is never "converged". Infinite when the linear system is singular.
+ABSURD_STEP = 1e3
 
 
 def lm_params(config: FactorGraphConfig) -> gtsam.LevenbergMarquardtParams:
@@ -98,49 +111,94 @@ def gauss_newton_check(graph: gtsam.NonlinearFactorGraph,
 
 def solve_lm(graph: gtsam.NonlinearFactorGraph, initial: gtsam.Values,
              config: FactorGraphConfig,
-             robust_graph: gtsam.NonlinearFactorGraph | None = None
+             robust_graph: gtsam.NonlinearFactorGraph | None = None, *,
+             looks_off: Callable[[gtsam.Values], bool] | None = None
              ) -> tuple[gtsam.Values, SolveReport]:
-    """Levenberg-Marquardt on ``graph`` from ``initial``, after a robust pass if given.
+    """Levenberg-Marquardt on ``graph`` from ``initial``, with a robust pass if called for.
 
-    The robust result is kept only if it lowers the plain error. Never raises on a failed
-    solve: returns the best values reached and a report saying why (:class:`SolveReport`).
+    Without ``looks_off`` (the default): the Huber pass on ``robust_graph`` (if given) runs
+    first, the plain pass from its result, and a Gauss-Newton check of the result follows
+    (:func:`gauss_newton_check`). With ``looks_off(values)`` (True when a solution's residuals
+    or geometry are implausible): the plain pass runs first; only if ``looks_off`` says so of
+    its result does the Huber pass run (from ``initial``, then a plain pass from there: the
+    lower plain error is kept) and the Gauss-Newton check; an LM run that did not stop on its
+    tolerance is checked too. A Gauss-Newton step that is infinite (a singular system) or
+    predicts more than ``decrease_tol`` of decrease is never "converged". Never raises on a
+    failed solve: returns the best values reached and a report saying why
+    (:class:`SolveReport`).
     """
     params = lm_params(config)
-    e0 = float(graph.error(initial))
-    values = initial
     iterations = 0
     passes: list[str] = []
-    message = ""
-    stop = "failed"
-    for name, g in (("huber", robust_graph), ("plain", graph)):
-        if g is None:
-            continue
+    messages: list[str] = []
+    # id(values) -> (values, plain error): read off the optimizer where it has it; the values
+    # are held so that no id is reused
+    errors: dict[int, tuple[gtsam.Values, float]] = {}
+
+    def plain_error(v: gtsam.Values) -> float:
+        if id(v) not in errors:
+            errors[id(v)] = (v, float(graph.error(v)))
+        return errors[id(v)][1]
+
+    def run(name: str, g: gtsam.NonlinearFactorGraph, start: gtsam.Values
+            ) -> tuple[gtsam.Values, str] | None:
+        nonlocal iterations
         try:
-            opt = gtsam.LevenbergMarquardtOptimizer(g, values, params)
+            opt = gtsam.LevenbergMarquardtOptimizer(g, start, params)
+            if g is graph:
+                errors.setdefault(id(start), (start, float(opt.error())))
             result = opt.optimize()
         except RuntimeError as exc:
-            message = f"{name} pass failed: {_first_line(exc)}"
-            continue
+            messages.append(f"{name} pass failed: {_first_line(exc)}")
+            return None
+        if g is graph:
+            errors[id(result)] = (result, float(opt.error()))
         n_it = int(opt.iterations())
         iterations += n_it
         passes.append(name)
-        if name == "plain":
-            values = result
-            stop = ("max_iterations" if n_it >= config.max_iterations else
-                    "lambda_bound" if float(opt.lambda_()) >= config.lambda_upper_bound else
-                    "tolerance")
-        elif float(graph.error(result)) <= float(graph.error(values)):
-            values = result
-    e1 = float(graph.error(values))
-    step, decrease = gauss_newton_check(graph, values)
+        stop = ("max_iterations" if n_it >= config.max_iterations else
+                "lambda_bound" if float(opt.lambda_()) >= config.lambda_upper_bound else
+                "tolerance")
+        return result, stop
+
+    def robust_then_plain(start: gtsam.Values) -> tuple[gtsam.Values, str] | None:
+        assert robust_graph is not None
+        got = run("huber", robust_graph, start)
+        if got is not None and plain_error(got[0]) <= plain_error(start):
+            start = got[0]
+        return run("plain", graph, start)
+
+    best: tuple[gtsam.Values, str] | None
+    if looks_off is None:
+        best = robust_then_plain(initial) if robust_graph is not None else \
+            run("plain", graph, initial)
+        check = True
+    else:
+        best = run("plain", graph, initial)
+        off = best is None or looks_off(best[0])
+        if off and robust_graph is not None:
+            other = robust_then_plain(initial)
+            if other is not None and (best is None
+                                      or plain_error(other[0]) < plain_error(best[0])):
+                best = other
+        check = off or best is None or best[1] != "tolerance"
+    e0 = plain_error(initial)
+    values, stop = best if best is not None else (initial, "failed")
+    e1 = plain_error(values)
+    step, decrease = gauss_newton_check(graph, values) if check else (math.nan, math.nan)
+    gn_ok = not check or (step <= ABSURD_STEP and (stop == "tolerance"
+                                                   or decrease <= config.decrease_tol))
     converged = bool(stop != "failed" and math.isfinite(e1)
-                     and e1 <= e0 * (1 + 1e-12) + 1e-12
-                     and (stop == "tolerance" or decrease <= config.decrease_tol))
-    if not converged and not message:
-        message = (f"LM stopped on {stop}; a Gauss-Newton step would still lower the error by "
-                   f"{decrease:.3g} (> decrease_tol {config.decrease_tol:g})")
+                     and e1 <= e0 * (1 + 1e-12) + 1e-12 and gn_ok)
+    if not converged and not messages:
+        messages.append(
+            f"LM stopped on {stop}; " + (
+                "the linear system at the result is singular (a direction the measurements "
+                "do not determine)" if not math.isfinite(step) else
+                f"a Gauss-Newton step at the result has max-norm {step:.3g} and would still "
+                f"lower the error by {decrease:.3g} (decrease_tol {config.decrease_tol:g})"))
     return values, SolveReport(converged, iterations, e0, e1, step, decrease, stop,
-                               tuple(passes), message)
+                               tuple(passes), "; ".join(messages))
 
 
 def marginal_covariances(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values,
@@ -171,7 +229,7 @@ def estimate_from_values(graph: BearingGraph, values: gtsam.Values,
     ``info`` plus the graph's counts, and marginal covariances of ``solved`` if asked."""
     ids = np.array(sorted(graph.landmark_ids), dtype=np.int64)
     pose_t = np.arange(graph.n_steps, dtype=np.int64)
-    poses = poses_from_values(values, pose_t)
+    poses = all_poses(values, graph.n_steps)
     xy = landmarks_from_values(values, ids)
     info = dict(info)
     info.update({"n_landmarks": int(ids.size), "pending": len(graph.pending()),
@@ -191,11 +249,29 @@ def estimate_from_values(graph: BearingGraph, values: gtsam.Values,
 # Batch LM
 # --------------------------------------------------------------------------------------------
 
+def all_poses(values: gtsam.Values, n: int) -> np.ndarray:
+    """The robot poses ``x_0 .. x_{n-1}`` of ``values``, shape (n, 3), in one call.
+
+    ``gtsam.utilities.extractPose2`` returns every ``Pose2`` in key order: the intermediate
+    poses ``m_t`` (symbol ``m``) first, then ``x_t`` (symbol ``x``, the last symbol used).
+    """
+    if n == 0:
+        return np.zeros((0, 3))
+    p = np.asarray(gtsam.utilities.extractPose2(values)).reshape(-1, 3)
+    if len(p) < n:
+        raise ConfigError(f"the values hold {len(p)} poses, fewer than the {n} steps")
+    return p[len(p) - n:]
+
+
 class BatchState:
-    """What Levenberg-Marquardt solves at each ``estimate()``: the growing
-    :class:`BearingGraph` (``problem``), the factors moved out of it (``graph`` and, with a
-    Huber pass, ``robust_graph``) and the current values (``values``: the last solution, the
-    poses added since predicted by composing the odometry onto the last pose).
+    """What Levenberg-Marquardt solves: the growing :class:`BearingGraph` (``problem``), the
+    factors moved out of it (``graph`` and, with a Huber pass, ``robust_graph``) and the
+    current values (``values``: the last solution, the poses added since predicted by
+    composing the odometry onto the last pose).
+
+    It also keeps every bearing as arrays (``bearings()``), so the plausibility checks of a
+    solution (:meth:`looks_off`: whitened bearing residuals, landmarks out of the sensor's
+    reach) are vectorised, with no loop over factors.
 
     Parameters
     ----------
@@ -208,18 +284,53 @@ class BatchState:
     def __init__(self, header: StreamHeader, config: FactorGraphConfig,
                  start_pose: Sequence[float]) -> None:
         self.config = config
+        self.header = header
         self.problem = BearingGraph(header, config, np.asarray(start_pose, dtype=float))
         self.graph = gtsam.NonlinearFactorGraph()
         self.robust_graph = (gtsam.NonlinearFactorGraph() if config.huber_k is not None
                              else None)
         self.values = gtsam.Values()
+        self._lm_config = replace(config, relative_error_tol=config.warm_relative_error_tol)
+        self._last = np.asarray(start_pose, dtype=float)
+        self._odom_sigma: list[np.ndarray] = []
+        self._full_n = 0                  # steps at the last whole-graph solve
+        self._fresh: list[int] = []       # landmarks entered since the last solution
+        self._obs: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+        self._obs_cat: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
 
     def add_step(self, step: Step) -> None:
         """Record ``step`` and predict its pose from the previous one by the odometry."""
         self.problem.add_step(step)
         t = step.t
-        prev = (poses_from_values(self.values, [t - 1])[0] if t > 0 else None)
-        insert_pose(self.values, t, self.problem.predict_pose(t, prev), prev)
+        prev = self._last if t > 0 else None
+        pose = self.problem.predict_pose(t, prev)
+        insert_pose(self.values, t, pose, prev)
+        self._last = np.asarray(pose, dtype=float)
+        self._odom_sigma.append(np.asarray(step.odometry_sigma(self.header), dtype=float))
+        ids = np.asarray(step.landmark_ids, dtype=np.int64)
+        if ids.size:
+            self._obs.append((np.full(ids.size, t, np.int64), ids,
+                              np.asarray(step.bearings_rad, dtype=float)))
+            self._obs_cat = None
+
+    def set_values(self, values: gtsam.Values) -> None:
+        """Make ``values`` the current solution (the next poses are predicted from it)."""
+        self.values = values
+        self._fresh = []
+        n = self.problem.n_steps
+        if n:
+            p = values.atPose2(pose_key(n - 1))
+            self._last = np.array([p.x(), p.y(), p.theta()])
+
+    def bearings(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Every bearing so far: owner step, landmark id, bearing (rad), each (J,)."""
+        if self._obs_cat is None:
+            if self._obs:
+                self._obs_cat = tuple(np.concatenate(c) for c in zip(*self._obs))  # type: ignore
+            else:
+                self._obs_cat = (np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0))
+            self._obs = [self._obs_cat] if self._obs else []
+        return self._obs_cat
 
     def poses(self, ts: np.ndarray) -> np.ndarray:
         """Poses ``ts`` in the current values, shape (k, 3)."""
@@ -229,32 +340,154 @@ class BatchState:
         """Let in the landmarks now determined on the poses ``pose_at(ts)`` (the current values
         by default) and move all new factors and landmark points into ``graph`` / ``values``.
         """
-        self.problem.admit(self.poses if pose_at is None else pose_at)
+        if pose_at is None:
+            cache = all_poses(self.values, self.problem.n_steps)
+            pose_at = lambda ts: cache[np.asarray(ts, dtype=np.int64)]  # noqa: E731
+        self.problem.admit(pose_at)
         new = self.problem.take_new()
         self.graph.push_back(new.core)
         self.graph.push_back(new.landmark)
         if self.robust_graph is not None and new.robust is not None:
             self.robust_graph.push_back(new.robust)
         self.values.insert(new.landmark_values)
+        self._fresh += list(new.landmark_ids)
         return new
 
+    # -- plausibility ---------------------------------------------------------------------
+    def landmark_arrays(self, values: gtsam.Values) -> tuple[np.ndarray, np.ndarray]:
+        """The landmarks in the graph: ids sorted (n,) and their points in ``values`` (n, 2)."""
+        ids = np.array(sorted(self.problem.landmark_ids), dtype=np.int64)
+        return ids, landmarks_from_values(values, ids)
+
+    def out_of_reach(self, values: gtsam.Values) -> np.ndarray:
+        """Ids of the landmarks farther than ``range_gate * sensor_range_m`` from every pose of
+        ``values``, or not finite (none beyond reach when the header has no sensor range)."""
+        ids, xy = self.landmark_arrays(values)
+        if not ids.size:
+            return ids
+        bad = ~np.all(np.isfinite(xy), axis=1)
+        rng = self.header.sensor_range_m
+        if rng is not None:
+            poses = all_poses(values, self.problem.n_steps)[:, :2]
+            gate2 = (self.config.range_gate * rng) ** 2
+            near = np.zeros(ids.size, bool)
+            for lo in range(0, len(poses), 2048):     # bounded memory: (n, 2048) at a time
+                d2 = ((xy[:, None, :] - poses[None, lo:lo + 2048, :]) ** 2).sum(axis=2)
+                near |= (d2 <= gate2).any(axis=1)
+            bad |= ~near
+        return ids[bad]
+
+    def max_whitened_residual(self, values: gtsam.Values) -> float:
+        """Largest |bearing residual| / sigma over the bearings in the graph at ``values``."""
+        owner, lid, brg = self.bearings()
+        ids, xy = self.landmark_arrays(values)
+        if not ids.size or not owner.size:
+            return 0.0
+        pos = np.clip(np.searchsorted(ids, lid), 0, ids.size - 1)
+        sel = ids[pos] == lid
+        p = all_poses(values, self.problem.n_steps)[owner[sel]]
+        d = xy[pos[sel]] - p[:, :2]
+        r = angle_residual(np.arctan2(d[:, 1], d[:, 0]) - p[:, 2], brg[sel])
+        return float(np.max(np.abs(r))) / float(self.header.bearing_sigma_rad) if r.size else 0.0
+
+    def looks_off(self, values: gtsam.Values) -> bool:
+        """True if a solution calls for the robust pass and a Gauss-Newton check: a whitened
+        bearing residual above ``robust_trigger``, or a landmark out of reach."""
+        return (self.max_whitened_residual(values) > self.config.robust_trigger
+                or self.out_of_reach(values).size > 0)
+
     def solve(self, initial: gtsam.Values) -> tuple[gtsam.Values, SolveReport]:
-        """:func:`solve_lm` on ``graph`` from ``initial`` (after the Huber pass if the config
-        has one); ``values`` is left to the caller."""
-        return solve_lm(self.graph, initial, self.config, self.robust_graph)
+        """:func:`solve_lm` on ``graph`` from ``initial``: the plain pass, the Huber pass (if
+        the config has one) and a Gauss-Newton check only where :meth:`looks_off`; ``values``
+        is left to the caller.
 
-    def to_estimate(self, values: gtsam.Values, info: dict[str, Any]) -> MapEstimate:
-        """The MapEstimate of ``values`` (:func:`estimate_from_values`)."""
-        return estimate_from_values(self.problem, values, self.graph, info,
-                                    self.config.covariances)
+        Past ``lag_after_steps`` steps, and until the graph has grown by ``full_growth`` since
+        its last whole solve, only the last ``lag_steps`` poses and the landmarks they see are
+        solved (:mod:`baselines.fixed_lag`; the rest held at ``values``); the result is the
+        current values with the window replaced, its report the window's
+        (``info["solve"] = "window"``).
+        """
+        n, cfg = self.problem.n_steps, self.config
+        if n > cfg.lag_after_steps and n < cfg.full_growth * self._full_n:
+            return self._solve_window(initial)
+        self._full_n = n
+        return solve_lm(self.graph, initial, self._lm_config, self.robust_graph,
+                        looks_off=self.looks_off)
+
+    def _solve_window(self, initial: gtsam.Values) -> tuple[gtsam.Values, SolveReport]:
+        n = self.problem.n_steps
+        b = n - self.config.lag_steps
+        graph, start = window_problem(self.header, self.config, self.problem, self.bearings(),
+                                      np.array(self._odom_sigma), all_poses(self.values, n),
+                                      self.values, initial, b, self._fresh)
+        window, report = solve_lm(graph, start, self._lm_config)
+        values = gtsam.Values(self.values)
+        values.update(window)
+        return values, replace(report, stop=report.stop, passes=("window",) + report.passes)
+
+    def to_estimate(self, values: gtsam.Values, info: dict[str, Any],
+                    leave_out: np.ndarray | None = None) -> MapEstimate:
+        """The MapEstimate of ``values`` (:func:`estimate_from_values`), without the landmarks
+        ``leave_out`` (recorded in ``info["out_of_reach"]``)."""
+        est = estimate_from_values(self.problem, values, self.graph, info,
+                                   self.config.covariances)
+        if leave_out is not None and leave_out.size:
+            keep = ~np.isin(est.landmark_ids, leave_out)
+            est = replace(est, landmark_ids=est.landmark_ids[keep],
+                          landmarks_xy=est.landmarks_xy[keep],
+                          landmark_cov=None if est.landmark_cov is None
+                          else est.landmark_cov[keep],
+                          info={**est.info, "out_of_reach": leave_out.tolist()})
+        return est
 
 
-class BatchMapper:
-    """``gtsam-batch``: Levenberg-Marquardt on the whole graph at each ``estimate()``.
+class ScheduledSolver:
+    """The internal schedule of the LM mappers (issue 15: the map must not depend on how often
+    the caller asks for it).
+
+    ``step()`` feeds the step (:meth:`_feed`) and, every ``config.solve_every`` steps, admits
+    landmarks and solves (:meth:`_update`, which returns the new :class:`MapEstimate`).
+    ``estimate()`` returns the estimate of the last update if it is of the current step, else
+    catches up with one update now. Called every 10 steps (the paper) it therefore adds no
+    solve; called only at the end it gets the same map as at the scheduled steps.
+    """
+
+    config: FactorGraphConfig
+    state: BatchState
+    _estimate: MapEstimate | None = None
+    _estimate_n: int = -1
+
+    def _feed(self, step: Step) -> None:
+        self.state.add_step(step)
+
+    def _update(self) -> MapEstimate:
+        raise NotImplementedError
+
+    def step(self, step: Step) -> None:
+        self._feed(step)
+        if step.t > 0 and step.t % self.config.solve_every == 0:
+            self._refresh()
+
+    def _refresh(self) -> None:
+        self._estimate = self._update()
+        self._estimate_n = self.state.problem.n_steps
+
+    def estimate(self) -> MapEstimate:
+        if self.state.problem.n_steps == 0:
+            return MapEstimate.empty(reason="no steps yet")
+        if self._estimate is None or self._estimate_n != self.state.problem.n_steps:
+            self._refresh()
+        assert self._estimate is not None
+        return self._estimate
+
+
+class BatchMapper(ScheduledSolver):
+    """``gtsam-batch``: Levenberg-Marquardt on the whole graph every ``solve_every`` steps.
 
     Warm-started from the previous solution; poses added since then are predicted by
-    composing the odometry onto the last solved pose. A Huber pass on the bearings precedes
-    the plain pass (``huber_k``).
+    composing the odometry onto the last solved pose. A Huber pass on the bearings
+    (``huber_k``) runs only when the plain solution :meth:`~BatchState.looks_off`; landmarks
+    out of the sensor's reach of every pose are left out of the map (``info["out_of_reach"]``).
 
     Parameters
     ----------
@@ -276,20 +509,16 @@ class BatchMapper:
         self.header = header
         self.state = BatchState(header, self.config, start_pose)
 
-    def step(self, step: Step) -> None:
-        self.state.add_step(step)
-
-    def estimate(self) -> MapEstimate:
-        if self.state.problem.n_steps == 0:
-            return MapEstimate.empty(reason="no steps yet")
+    def _update(self) -> MapEstimate:
         self.state.absorb()
         values, report = self.state.solve(self.state.values)
-        self.state.values = values
-        return self.state.to_estimate(values, report.as_info())
+        self.state.set_values(values)
+        return self.state.to_estimate(values, report.as_info(), self.state.out_of_reach(values))
 
 
-class OracleMapper:
-    """``oracle``: LM started from the ground truth at each ``estimate()`` (benchmarks only).
+class OracleMapper(ScheduledSolver):
+    """``oracle``: LM started from the ground truth every ``solve_every`` steps (benchmarks
+    only).
 
     The truth (poses and landmarks) is moved into the map frame (the first true pose onto
     ``start_pose``); landmarks enter by the same rule as the other mappers, judged on the true
@@ -322,21 +551,23 @@ class OracleMapper:
                                             truth.poses[:, 2] - p0[2] + s[2]])
         self._true_xy = {int(i): (xy - p0[:2]) @ r.T + s[:2]
                          for i, xy in zip(truth.landmark_ids, truth.landmarks_xy)}
+        self._truth_values = gtsam.Values()
 
-    def step(self, step: Step) -> None:
-        if step.t >= len(self._true_poses):
-            raise ConfigError(f"the truth has {len(self._true_poses)} poses; step {step.t} "
+    def _feed(self, step: Step) -> None:
+        t = step.t
+        if t >= len(self._true_poses):
+            raise ConfigError(f"the truth has {len(self._true_poses)} poses; step {t} "
                               f"has none")
         self.state.add_step(step)
+        insert_pose(self._truth_values, t, self._true_poses[t],
+                    self._true_poses[t - 1] if t else None)
 
     def _true_pose_at(self, ts: np.ndarray) -> np.ndarray:
         return self._true_poses[np.asarray(ts, dtype=np.int64)]
 
     def initial_values(self) -> gtsam.Values:
         """The truth in the map frame (landmarks without truth at their ray intersection)."""
-        v = gtsam.Values()
-        for t in range(self.state.problem.n_steps):
-            insert_pose(v, t, self._true_poses[t], self._true_poses[t - 1] if t else None)
+        v = gtsam.Values(self._truth_values)
         for lid in self.state.problem.landmark_ids:
             xy = self._true_xy.get(lid)
             if xy is None:
@@ -344,15 +575,14 @@ class OracleMapper:
             v.insert(landmark_key(lid), gtsam.Point2(float(xy[0]), float(xy[1])))
         return v
 
-    def estimate(self) -> MapEstimate:
-        if self.state.problem.n_steps == 0:
-            return MapEstimate.empty(reason="no steps yet")
+    def _update(self) -> MapEstimate:
         self.state.absorb(self._true_pose_at)
         values, report = self.state.solve(self.initial_values())
-        self.state.values = values
-        return self.state.to_estimate(values, report.as_info())
+        self.state.set_values(values)
+        return self.state.to_estimate(values, report.as_info(), self.state.out_of_reach(values))
 
 
-__all__ = ["FactorGraphConfig", "SolveReport", "BatchState", "BatchMapper", "OracleMapper",
+__all__ = ["FactorGraphConfig", "SolveReport", "BatchState", "ScheduledSolver", "BatchMapper",
+           "OracleMapper", "all_poses",
            "solve_lm", "lm_params", "gauss_newton_check", "marginal_covariances",
            "estimate_from_values"]

@@ -17,7 +17,6 @@ import math
 from typing import Sequence
 
 import numpy as np
-from scipy import sparse
 
 from bomgraph.angles import angle_residual, wrap_angle
 from bomgraph.errors import ConfigError
@@ -33,12 +32,20 @@ def resection_jacobian(pose: np.ndarray, landmarks_xy: np.ndarray) -> np.ndarray
 
 
 def _group_sum(owner: np.ndarray, values: np.ndarray, n: int) -> np.ndarray:
-    """Sum ``values`` (J, ...) over rows with the same ``owner`` (J,), shape (n, ...)."""
+    """Sum ``values`` (J, ...) over rows with the same ``owner`` (J,), shape (n, ...).
+
+    One ``np.add.reduceat`` over the rows sorted by owner (they usually are: bearings come in
+    step order), no sparse matrix."""
+    out = np.zeros((n, *values.shape[1:]))
     if len(owner) == 0:
-        return np.zeros((n, *values.shape[1:]))
-    m = sparse.csr_matrix((np.ones(len(owner)), (owner, np.arange(len(owner)))),
-                          shape=(n, len(owner)))
-    return np.asarray(m @ values.reshape(len(owner), -1)).reshape(n, *values.shape[1:])
+        return out
+    own = np.asarray(owner, dtype=np.int64)
+    if np.any(own[1:] < own[:-1]):
+        order = np.argsort(own, kind="stable")
+        own, values = own[order], values[order]
+    starts = np.flatnonzero(np.r_[True, own[1:] != own[:-1]])
+    out[own[starts]] = np.add.reduceat(values, starts, axis=0)
+    return out
 
 
 def _huber_rho(r: np.ndarray, k: float) -> np.ndarray:
