@@ -369,7 +369,8 @@ class BatchState:
         rng = self.header.sensor_range_m
         if rng is not None:
             poses = all_poses(values, self.problem.n_steps)[:, :2]
-            gate2 = (self.config.range_gate * rng) ** 2
+            gate = self.config.range_gate * rng
+            gate2 = gate * gate if gate < 1e150 else math.inf  # a range beyond reach: no gate
             near = np.zeros(ids.size, bool)
             for lo in range(0, len(poses), 2048):     # bounded memory: (n, 2048) at a time
                 d2 = ((xy[:, None, :] - poses[None, lo:lo + 2048, :]) ** 2).sum(axis=2)
