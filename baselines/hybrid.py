@@ -54,7 +54,8 @@ class HybridConfig(FactorGraphConfig):
 
     Presets (:meth:`Presets.preset`): ``"paper"`` (the defaults), ``"robust"`` (the factor
     graph's Cauchy kernels), ``"real-seed"`` (the seed mapper's ``"real"`` preset) and
-    ``"real-seed-robust"`` (both).
+    ``"real-seed-robust"`` (both), and ``"real"``, the recording setting (issue 15: one per
+    method), which is ``"real-seed-robust"``.
 
     Attributes
     ----------
@@ -96,6 +97,7 @@ class HybridConfig(FactorGraphConfig):
         "robust": dict(_ROBUST),
         "real-seed": dict(_REAL_SEED),
         "real-seed-robust": {**_REAL_SEED, **_ROBUST},
+        "real": {**_REAL_SEED, **_ROBUST},
     }
 
     huber_k: float | None = None

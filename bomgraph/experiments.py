@@ -435,11 +435,12 @@ REAL_VARIANTS: dict[str, tuple[tuple[str, dict[str, Any]], ...]] = {
     "stmds-smacof-loc": (("stmds-smacof-loc (real)", {"preset": "real"}),),
     "ekf": (("ekf (real)", {"preset": "real"}),),
     "ekf-invdepth": (("ekf-invdepth (real)", {"preset": "real"}),),
-    "gtsam-batch": (("gtsam-batch (robust)", {"preset": "robust"}),),
+    "gtsam-batch": (("gtsam-batch (real)", {"preset": "real"}),),
+    "gtsam-isam2": (("gtsam-isam2 (real)", {"preset": "real"}),),
     "hybrid": (("hybrid (real seed)", {"preset": "real-seed"}),
-               ("hybrid (real seed, robust)", {"preset": "real-seed-robust"})),
+               ("hybrid (real)", {"preset": "real"})),
     "hybrid-isam2": (("hybrid-isam2 (real)", {"preset": "real"}),),
-    "oracle": (("oracle (robust)", {"preset": "robust"}),),
+    "oracle": (("oracle (real)", {"preset": "real"}),),
 }
 
 

@@ -296,7 +296,7 @@ for _name, _target, _desc, _truth in [
     ("ekf-invdepth", "baselines.ekf.mappers:InverseDepthEkfMapper",
      "bearing-only EKF-SLAM (filterpy), undelayed inverse-depth initialisation", False),
     ("gtsam-batch", "baselines.factor_graph:BatchMapper",
-     "GTSAM bearing factor graph, Levenberg-Marquardt at each checkpoint", False),
+     "GTSAM bearing factor graph, Levenberg-Marquardt every 10 steps (its own schedule)", False),
     ("gtsam-isam2", "baselines.isam2:Isam2Mapper",
      "GTSAM bearing factor graph, incremental iSAM2", False),
     ("hybrid", "baselines.hybrid:HybridMapper",
