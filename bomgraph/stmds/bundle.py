@@ -324,7 +324,9 @@ def bundle_adjust_window(odoms: ArrayLike, odometry_sigmas: ArrayLike, bearings_
         result = _fit(u[:end - 1], sig[:end - 1], sigma, brg[:end],
                       poses[:end], column, points[column], min_parallax_rad, max_range_m,
                       min_depth_m, outlier_sigma, max_outliers - n_outliers, max_iter, tol,
-                      estimate_sigma and end == n_win)
+                      estimate_sigma and end == n_win,
+                      (SIGMA_RANGE[0] * bearing_sigma_rad, SIGMA_RANGE[1] * bearing_sigma_rad),
+                      estimate_sigma)
         fit_poses, fit_column, fit_points, dropped, _, _, sigma_used = result
         poses[:end] = fit_poses
         points[:] = np.nan
@@ -346,10 +348,14 @@ def bundle_adjust_window(odoms: ArrayLike, odometry_sigmas: ArrayLike, bearings_
 def _fit(u: np.ndarray, sig: np.ndarray, bearing_sigma_rad: float, brg: np.ndarray,
          poses: np.ndarray, column: np.ndarray, points: np.ndarray, min_parallax_rad: float,
          max_range_m: float, min_depth_m: float, outlier_sigma: float | None,
-         max_outliers: int, max_iter: int, tol: float, estimate_sigma: bool = False) -> tuple:
+         max_outliers: int, max_iter: int, tol: float, estimate_sigma: bool = False,
+         sigma_bounds: tuple[float, float] = (0.0, math.inf),
+         robust_test: bool = False) -> tuple:
     """Levenberg-Marquardt on one prefix, dropping outlier rays (the worst first) and the
     landmarks that fail the gates, until neither happens. With ``estimate_sigma`` the bearing
-    sigma is re-estimated from the fit's own residuals first (:func:`_robust_scale`).
+    sigma is re-estimated from the fit's own residuals first (:func:`_robust_scale`), kept
+    within ``sigma_bounds``; with ``robust_test`` the outlier test is against
+    ``outlier_sigma`` times the residuals' robust scale when that exceeds 1.
 
     Returns ``(poses, column, points, (dropped pose, dropped column), covariance or None,
     converged, bearing sigma used)``.
@@ -384,13 +390,17 @@ def _fit(u: np.ndarray, sig: np.ndarray, bearing_sigma_rad: float, brg: np.ndarr
                 res = res / np.sqrt(np.clip(1.0 - h, 1e-6, 1.0))
             if not estimate_sigma or rnd == SIGMA_ROUNDS - 1:
                 break
-            scale = _robust_scale(res)
-            if abs(scale - 1.0) <= SIGMA_TOL:
+            new_sigma = float(np.clip(bearing_sigma_rad * _robust_scale(res), *sigma_bounds))
+            if abs(new_sigma / bearing_sigma_rad - 1.0) <= SIGMA_TOL:
                 break
-            bearing_sigma_rad *= scale
+            bearing_sigma_rad = new_sigma
         worst = int(np.argmax(res)) if res.size else -1
         keep = None
-        if (outlier_sigma is not None and worst >= 0 and res[worst] > outlier_sigma
+        # with a sigma to estimate, the test is against the residuals' own robust scale when
+        # that is larger (a sigma given too small must not drop good rays before the estimate)
+        limit = outlier_sigma if outlier_sigma is None or not robust_test else \
+            outlier_sigma * max(1.0, _robust_scale(res))
+        if (outlier_sigma is not None and worst >= 0 and res[worst] > limit
                 and len(drop_k) < max_outliers):
             keep = np.ones(len(k), bool)
             keep[worst] = False
@@ -413,20 +423,21 @@ def _fit(u: np.ndarray, sig: np.ndarray, bearing_sigma_rad: float, brg: np.ndarr
 
 
 #: Re-estimations of the bearing sigma per fit at most, and the relative change that ends them.
-SIGMA_ROUNDS = 4
-SIGMA_TOL = 0.05
-#: Fewest rays for a scale estimate, and the range of the factor applied to the sigma.
+SIGMA_ROUNDS = 6
+SIGMA_TOL = 0.02
+#: Fewest rays for a scale estimate, and the range of the estimate as a multiple of the
+#: sigma given (noise-free rays would drive it to zero).
 SIGMA_MIN_RAYS = 20
 SIGMA_RANGE = (0.25, 4.0)
 
 
 def _robust_scale(z: np.ndarray) -> float:
     """Robust scale of standardised residuals ``z`` (1 when the bearing sigma is right):
-    ``1.4826 median |z|`` (the MAD of a zero-mean normal, unmoved by a few gross outliers),
-    clipped to :data:`SIGMA_RANGE`; 1 with fewer than :data:`SIGMA_MIN_RAYS` rays."""
+    ``1.4826 median |z|`` (the MAD of a zero-mean normal, unmoved by a few gross outliers);
+    1 with fewer than :data:`SIGMA_MIN_RAYS` rays."""
     if z.size < SIGMA_MIN_RAYS:
         return 1.0
-    return float(np.clip(1.4826 * np.median(np.abs(z)), *SIGMA_RANGE))
+    return float(1.4826 * np.median(np.abs(z)))
 
 
 def _gates(poses: np.ndarray, points: np.ndarray, k: np.ndarray, lm: np.ndarray,

@@ -27,6 +27,10 @@ _WINDOW: dict[str, Any] = {"tri_window": 6, "tri_stride": 1, "fusion": "scale-fr
                            "weights": "inverse-variance", "min_count": 3,
                            "max_range_factor": 1.3, "robot_ranges": "all-poses"}
 
+#: What the recording settings share: fuse every window estimate, inverse-variance weights.
+_RECORDING: dict[str, Any] = {"fusion": "scale-free", "weights": "inverse-variance",
+                              "min_count": 1, "robot_ranges": "all-poses"}
+
 
 @dataclass(frozen=True)
 class StmdsConfig(Presets):
@@ -117,12 +121,13 @@ class StmdsConfig(Presets):
         test and covariance do not depend on how the stream's sigma was calibrated.
     tri_parallax_rad : float or None
         Windows measured in geometry, not in keyframes (in place of ``tri_window``, issue 15):
-        a window closes once the median effective parallax of its landmarks seen twice or more
-        (``geometry.effective_parallax`` of their dead-reckoned ray directions, at least three
-        landmarks) reaches this angle (``window.WindowSchedule``).
+        a window closes once the ``tri_parallax_quantile`` of the parallax of the landmarks it
+        saw (``geometry.direction_span`` of their dead-reckoned ray directions, at least three
+        landmarks) reaches this angle, and no sooner than ``1 / tri_overlap`` of the last
+        window's path after its end (``window.WindowSchedule``).
     tri_parallax_quantile : float
         Geometric windows: the quantile of the landmarks' parallax that must reach
-        ``tri_parallax_rad`` (0.5: the median landmark; 0.1: nine landmarks in ten).
+        ``tri_parallax_rad`` (0.5: the median landmark; 0.25: three landmarks in four).
     tri_window_m : float or None
         Windows measured in geometry: a window also closes once the path across it reaches
         this many metres (alone: windows of a fixed path length).
@@ -147,10 +152,18 @@ class StmdsConfig(Presets):
         "window-lsq": {**_WINDOW, "tri_method": "lsq", "tri_window": 10},
         # the README's best row
         "window-ba": {**_WINDOW, "tri_method": "ba", "tri_window": 10, "tri_stride": 3},
-        # recordings with a narrow view and small steps (MRCLAM6, the g2o set)
-        "real": {"tri_window": 60, "tri_stride": 10, "tri_method": "ba", "tri_grow": 3,
-                 "fusion": "scale-free", "weights": "inverse-variance", "min_count": 1,
-                 "robot_ranges": "all-poses"},
+        # recordings (issue 15): windows measured in geometry -- one closes when three in four
+        # of the landmarks it saw have rays spanning 0.3 rad (17 degrees) of directions,
+        # windows start and end a sixth of their path apart -- solved by local bundle
+        # adjustment with the bearing sigma re-estimated per window: the same windows and
+        # weights on any keyframing and any sigma calibration
+        "real": {"tri_parallax_rad": 0.3, "tri_parallax_quantile": 0.25, "tri_overlap": 6.0,
+                 "tri_method": "ba", "tri_estimate_sigma": True, **_RECORDING},
+        # issue 8's recording setting, counted in keyframes (60 of them, a new one every 10):
+        # tuned on MRCLAM6 as `bomgraph import mrclam` keyframes it, 5-10x worse on a denser
+        # keyframing of the same data
+        "real-keyframes": {"tri_window": 60, "tri_stride": 10, "tri_method": "ba",
+                           "tri_grow": 3, **_RECORDING},
     }
 
     method: str = "smacof"

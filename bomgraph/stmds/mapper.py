@@ -30,7 +30,8 @@ from ..errors import ConfigError
 from ..geometry import dead_reckon
 from ..mapper import MapEstimate
 from ..stream import Step, StreamHeader
-from .bundle import WindowBundle, bundle_adjust_window, bundle_pair_squared_distances
+from .bundle import (SIGMA_RANGE, WindowBundle, bundle_adjust_window,
+                     bundle_pair_squared_distances)
 from .config import StmdsConfig
 from .distances import DistanceStore, IdIndex
 from .localisation import RobotPoses, extend_with_robots, resect_headings, trilaterate_robots
@@ -207,7 +208,10 @@ class StmdsMapper:
                 estimate_sigma=self.config.tri_estimate_sigma)
             self._n_outliers += tri.n_outliers
             if self.config.tri_estimate_sigma and len(tri):
-                self._window_sigma = tri.bearing_sigma_rad   # the next window starts from it
+                # the next window starts from it (within SIGMA_RANGE of the header's)
+                self._window_sigma = float(np.clip(tri.bearing_sigma_rad,
+                                                   SIGMA_RANGE[0] * self._bearing_sigma,
+                                                   SIGMA_RANGE[1] * self._bearing_sigma))
             self._prev_bundle = (ts, tri.poses, uniq[tri.column], tri.points_xy) if len(tri) \
                 else None
         else:

@@ -23,7 +23,7 @@ from numpy.typing import ArrayLike
 
 from ..angles import angle_residual
 from ..errors import ConfigError
-from ..geometry import effective_parallax
+from ..geometry import direction_span, effective_parallax
 from .triangulation import PairEstimates, _TwoRayResult, select_pairs
 
 
@@ -387,6 +387,10 @@ def window_pair_squared_distances(tri: WindowTriangulation, odometry_sigmas: Arr
     return PairEstimates(first, second, d2, var, full)
 
 
+#: Path thresholds are met to this relative rounding (sums of increments drift in the last bits).
+_ROUND = 1.0 - 1e-9
+
+
 class WindowSchedule:
     """When the current window of steps closes, and how many steps the next one drops.
 
@@ -395,18 +399,23 @@ class WindowSchedule:
     * in keyframes (``poses``, ``stride``; the issue-8 windows): ``W`` poses, the next window
       ``stride`` steps later;
     * in the geometry of the motion (issue 15): a window closes once its landmarks are
-      well triangulated -- the median :func:`~bomgraph.geometry.effective_parallax` of the
-      landmarks it saw from two poses or more (at least ``min_landmarks`` of them) reaches
+      triangulated from well apart -- the ``quantile`` of the parallax of the landmarks it
+      saw from two poses or more (at least ``min_landmarks`` of them) reaches
       ``parallax_rad`` -- or once the path driven across it reaches ``length_m``, whichever
       comes first; the next window starts at the first step ``1 / overlap`` of the window's
-      path further on (``ceil(overlap)`` windows hold each reading).
+      path further on, and ends no sooner than that much path after its end (so windows are
+      spaced by the path, not by how many keyframes in a row pass the test;
+      ``ceil(overlap)`` windows hold each reading). A landmark seen once has parallax 0.
 
-    The parallax of a landmark is the spread of the world directions of its rays (dead-reckoned
-    heading plus bearing), so it grows with the baseline over the depth, not with the number of
-    rays: the same recording keyframed every 0.1 m or every 0.3 m closes its windows at the
-    same places (to a keyframe), and a wide-view recording with distant landmarks gets longer
-    windows in metres than a narrow arena. It is a pure angle, not a multiple of the
-    stream's bearing sigma, so a smaller or larger calibrated sigma does not change the windows.
+    The parallax of a landmark is the angle spanned by the world directions of its rays
+    (dead-reckoned heading plus bearing, :func:`~bomgraph.geometry.direction_span`): it grows
+    with the baseline over the depth and not with the number of rays, so the same recording
+    keyframed every 0.1 m or every 0.3 m closes its windows at the same places (to a
+    keyframe), and a recording with distant landmarks gets longer windows in metres than a
+    small arena. It is a pure angle, not a multiple of the stream's bearing sigma, so a
+    smaller or larger calibrated sigma does not change the windows. (The eigenvalue measure
+    :func:`~bomgraph.geometry.effective_parallax` is not used here: it weighs every ray, so two
+    rays at the ends of a baseline score up to sqrt(3) times more than many along it.)
     ``max_poses`` caps a window's size (the bundle's cost) whatever the motion.
 
     :meth:`push` a step, then :meth:`full` says whether the buffered steps make a window;
@@ -431,9 +440,10 @@ class WindowSchedule:
         self.max_poses = max_poses
         self._path: list[float] = []          # cumulative path of each step (m)
         self._psi = 0.0                       # dead-reckoned heading (rad)
-        self._ids: list[np.ndarray] = []      # per step: landmark ids, exp(2i world direction)
-        self._e2: list[np.ndarray] = []
+        self._ids: list[np.ndarray] = []      # per step: landmark ids, world ray directions
+        self._dirs: list[np.ndarray] = []
         self._by_geometry = False
+        self._next_end_m = -math.inf          # the next window ends no earlier (path, m)
 
     @property
     def inflation(self) -> float:
@@ -450,8 +460,9 @@ class WindowSchedule:
         """Forget the buffered steps (a gap in the odometry)."""
         self._path.clear()
         self._ids.clear()
-        self._e2.clear()
+        self._dirs.clear()
         self._psi = 0.0
+        self._next_end_m = -math.inf
 
     def push(self, odom: ArrayLike | None, landmark_ids: np.ndarray,
              bearings_rad: np.ndarray) -> None:
@@ -465,26 +476,20 @@ class WindowSchedule:
         self._path.append((self._path[-1] if self._path else 0.0) + step_m)
         if self.poses is None and self.parallax_rad is not None:
             self._ids.append(np.asarray(landmark_ids))
-            self._e2.append(np.exp(2j * (self._psi + np.asarray(bearings_rad, dtype=float))))
+            self._dirs.append(self._psi + np.asarray(bearings_rad, dtype=float))
 
     def parallax(self) -> tuple[float, int]:
-        """The ``quantile`` of the effective parallax (rad) of the buffered landmarks seen from
-        two steps or more, and how many there are."""
+        """The ``quantile`` of the parallax (rad) of the buffered landmarks
+        (:func:`~bomgraph.geometry.direction_span` of their dead-reckoned ray directions, 0
+        for a landmark seen once), and how many there are."""
         if not self._ids:
             return 0.0, 0
         ids = np.concatenate(self._ids)
         if ids.size < 2:
             return 0.0, 0
         uniq, owner = np.unique(ids, return_inverse=True)
-        e2 = np.concatenate(self._e2)
-        count = np.bincount(owner, minlength=uniq.size)
-        mean = (np.bincount(owner, e2.real, uniq.size)
-                + 1j * np.bincount(owner, e2.imag, uniq.size)) / count
-        two = count >= 2
-        if not two.any():
-            return 0.0, 0
-        par = np.arccos(np.clip(np.abs(mean[two]), 0.0, 1.0))
-        return float(np.quantile(par, self.quantile)), int(two.sum())
+        span = direction_span(np.concatenate(self._dirs), owner, uniq.size)
+        return float(np.quantile(span, self.quantile)), int(uniq.size)
 
     def full(self) -> bool:
         """Whether the buffered steps make a window."""
@@ -494,7 +499,9 @@ class WindowSchedule:
         self._by_geometry = False
         if n < 2:
             return False
-        if self._path[-1] - self._path[0] >= self.length_m:
+        if self._path[-1] < self._next_end_m * _ROUND:
+            pass                              # too soon after the last window's end
+        elif self._path[-1] - self._path[0] >= self.length_m * _ROUND:
             self._by_geometry = True
         elif self.parallax_rad is not None:
             par, n_lm = self.parallax()
@@ -520,13 +527,16 @@ class WindowSchedule:
             k = self.stride
         elif self._by_geometry:
             path = np.asarray(self._path) - self._path[0]
-            k = int(np.searchsorted(path, path[-1] / self.overlap, side="left"))
+            k = int(np.searchsorted(path, path[-1] / self.overlap * _ROUND, side="left"))
+            # the next window ends a stride later too: windows are spaced by the path, not
+            # by how many keyframes satisfy the closing test in a row
+            self._next_end_m = self._path[-1] + path[-1] / self.overlap
         else:                                 # closed by max_poses
             k = int(math.ceil(n / self.overlap))
         k = max(1, min(k, n))
         del self._path[:k]
         del self._ids[:k]
-        del self._e2[:k]
+        del self._dirs[:k]
         return k
 
 
