@@ -261,3 +261,31 @@ def effective_parallax(direction_rad: np.ndarray, owner: np.ndarray, n: int) -> 
     mean = (np.bincount(owner, e2.real, n) + 1j * np.bincount(owner, e2.imag, n)) \
         / np.maximum(count, 1)
     return np.arccos(np.clip(np.abs(mean), 0.0, 1.0))
+
+
+def direction_span(direction_rad: np.ndarray, owner: np.ndarray, n: int) -> np.ndarray:
+    """Per point, the angle its rays' world directions span (radians, 0 for one ray).
+
+    Unlike :func:`effective_parallax`, which weighs every ray, it does not change when the
+    same motion is sampled by more rays (two rays at the ends of a baseline and thirty along
+    it span the same angle, to the last ray), so it measures the geometry of a path, not how
+    often it was keyframed. Directions are taken about each point's circular mean.
+
+    Parameters
+    ----------
+    direction_rad : array of shape (R,)
+        World direction of each ray.
+    owner : int array of shape (R,)
+        Point of each ray, in ``0 .. n-1``.
+    n : int
+        Number of points.
+    """
+    d = np.asarray(direction_rad, dtype=float)
+    mean = np.arctan2(np.bincount(owner, np.sin(d), n), np.bincount(owner, np.cos(d), n))
+    res = angle_residual(d, mean[owner])
+    hi = np.full(n, -np.inf)
+    lo = np.full(n, np.inf)
+    np.maximum.at(hi, owner, res)
+    np.minimum.at(lo, owner, res)
+    return np.where(hi >= lo, hi - lo, 0.0)
+

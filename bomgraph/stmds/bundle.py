@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Sequence
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -65,6 +66,9 @@ class WindowBundle:
         Rays dropped by the outlier test.
     converged : bool
         The last Levenberg-Marquardt solve met its tolerance.
+    bearing_sigma_rad : float
+        The bearing std. dev. of the fit: the one given, or the one estimated from the
+        window's residuals (``estimate_sigma``).
     """
 
     column: np.ndarray
@@ -74,6 +78,7 @@ class WindowBundle:
     n_rays: np.ndarray
     n_outliers: int
     converged: bool
+    bearing_sigma_rad: float = math.nan
 
     def __len__(self) -> int:
         return len(self.column)
@@ -208,7 +213,8 @@ def bundle_adjust_window(odoms: ArrayLike, odometry_sigmas: ArrayLike, bearings_
                          outlier_sigma: float | None = 4.0,
                          initial_poses: ArrayLike | None = None,
                          initial_points: ArrayLike | None = None, initial_prefix: int = 1,
-                         grow: int = 5,
+                         grow: int = 5, prefix_ends: Sequence[int] | None = None,
+                         estimate_sigma: bool = False,
                          max_outliers: int = 10, max_iter: int = 30, tol: float = 1e-10
                          ) -> tuple[WindowBundle, int]:
     """Jointly estimate a window's poses and landmarks from its odometry and bearings.
@@ -250,6 +256,20 @@ def bundle_adjust_window(odoms: ArrayLike, odometry_sigmas: ArrayLike, bearings_
         odometry from it. Over a long window the odometry drifts by more than the parallax and
         one solve from the whole odometry chain falls into a wrong minimum; short increments
         keep every start close. ``grow >= W`` is a single solve.
+    prefix_ends : sequence of int, optional
+        The prefixes' ends (pose counts) in place of ``grow`` (e.g. at equal fractions of the
+        window's path, :meth:`.window.WindowSchedule.prefix_ends`); those not past the
+        ``initial_prefix`` are skipped and the whole window is always solved last.
+    estimate_sigma : bool
+        Re-estimate the bearing std. dev. from the window's own residuals, starting from
+        ``bearing_sigma_rad``: the sigma is multiplied by the robust scale of the
+        standardised residuals (:func:`_robust_scale`) and the whole window solved again,
+        until the scale is within :data:`SIGMA_TOL` of 1 (at most :data:`SIGMA_ROUNDS`
+        times; the growing prefixes before it use ``bearing_sigma_rad``, e.g. the previous
+        window's estimate). The weights of bearings
+        against odometry, the outlier test (``outlier_sigma`` robust std. devs.) and the
+        covariance then hold whether the stream's sigma is a small MAD estimate or a
+        generous one.
     max_iter, tol : Levenberg-Marquardt iterations and relative cost decrease to stop at.
 
     Returns
@@ -283,9 +303,13 @@ def bundle_adjust_window(odoms: ArrayLike, odometry_sigmas: ArrayLike, bearings_
     two_rays = np.isfinite(brg).sum(axis=0) >= 2
     # prefixes of the window solved in turn, each started from the one before
     solved = 1 if initial_poses is None else max(1, min(initial_prefix, n_win))
-    ends = list(range(solved + grow, n_win, grow)) + [n_win]
+    if prefix_ends is None:
+        ends = list(range(solved + grow, n_win, grow)) + [n_win]
+    else:
+        ends = sorted({int(e) for e in prefix_ends if solved < e < n_win}) + [n_win]
     n_outliers = 0
     result = None
+    sigma = float(bearing_sigma_rad)
     for end in ends:
         if end > solved:     # continue the poses not solved yet by the odometry
             poses[solved - 1:] = dead_reckon(u[solved - 1:], poses[solved - 1])
@@ -297,34 +321,44 @@ def bundle_adjust_window(odoms: ArrayLike, odometry_sigmas: ArrayLike, bearings_
                                               max_range_m=max_range_m)
             points[need[start.column]] = start.points_xy
         column = np.flatnonzero(seen & np.isfinite(points).all(axis=1))
-        result = _fit(u[:end - 1], sig[:end - 1], float(bearing_sigma_rad), brg[:end],
+        result = _fit(u[:end - 1], sig[:end - 1], sigma, brg[:end],
                       poses[:end], column, points[column], min_parallax_rad, max_range_m,
-                      min_depth_m, outlier_sigma, max_outliers - n_outliers, max_iter, tol)
-        fit_poses, fit_column, fit_points, dropped, _, _ = result
+                      min_depth_m, outlier_sigma, max_outliers - n_outliers, max_iter, tol,
+                      estimate_sigma and end == n_win,
+                      (SIGMA_RANGE[0] * bearing_sigma_rad, SIGMA_RANGE[1] * bearing_sigma_rad),
+                      estimate_sigma)
+        fit_poses, fit_column, fit_points, dropped, _, _, sigma_used = result
         poses[:end] = fit_poses
         points[:] = np.nan
         points[fit_column] = fit_points
         brg[dropped[0], dropped[1]] = np.nan
         n_outliers += len(dropped[0])
         solved = end
+        sigma = sigma_used
     assert result is not None
-    _, column, points_xy, _, cov, converged = result
+    _, column, points_xy, _, cov, converged, sigma_used = result
     n_gated = int(np.count_nonzero(two_rays)) - len(column)
     if cov is None:                       # numerically singular: refuse the whole window
         return _empty(poses, n_outliers), n_gated + len(column)
     n_rays = np.isfinite(brg[:, column]).sum(axis=0).astype(np.int64)
-    return WindowBundle(column, points_xy, cov, poses, n_rays, n_outliers, converged), n_gated
+    return WindowBundle(column, points_xy, cov, poses, n_rays, n_outliers, converged,
+                        sigma_used), n_gated
 
 
 def _fit(u: np.ndarray, sig: np.ndarray, bearing_sigma_rad: float, brg: np.ndarray,
          poses: np.ndarray, column: np.ndarray, points: np.ndarray, min_parallax_rad: float,
          max_range_m: float, min_depth_m: float, outlier_sigma: float | None,
-         max_outliers: int, max_iter: int, tol: float) -> tuple:
+         max_outliers: int, max_iter: int, tol: float, estimate_sigma: bool = False,
+         sigma_bounds: tuple[float, float] = (0.0, math.inf),
+         robust_test: bool = False) -> tuple:
     """Levenberg-Marquardt on one prefix, dropping outlier rays (the worst first) and the
-    landmarks that fail the gates, until neither happens.
+    landmarks that fail the gates, until neither happens. With ``estimate_sigma`` the bearing
+    sigma is re-estimated from the fit's own residuals first (:func:`_robust_scale`), kept
+    within ``sigma_bounds``; with ``robust_test`` the outlier test is against
+    ``outlier_sigma`` times the residuals' robust scale when that exceeds 1.
 
     Returns ``(poses, column, points, (dropped pose, dropped column), covariance or None,
-    converged)``.
+    converged, bearing sigma used)``.
     """
     sub = brg[:, column]
     k, lm = np.nonzero(np.isfinite(sub))
@@ -335,25 +369,38 @@ def _fit(u: np.ndarray, sig: np.ndarray, bearing_sigma_rad: float, brg: np.ndarr
     while True:
         if n_lm == 0:
             return (poses, column, points, (np.array(drop_k, np.int64),
-                                            np.array(drop_c, np.int64)), None, False)
-        prob = _Problem(u, sig, bearing_sigma_rad, k, lm, theta, n_lm)
-        poses, points, info, converged = _levenberg_marquardt(prob, poses, points, max_iter,
-                                                               tol)
-        res_rad = _bearing_residuals(poses, points, k, lm, theta)[0]
-        res = np.abs(res_rad) / bearing_sigma_rad
-        if outlier_sigma is not None and res.size:
-            # standardised residuals r / (sigma sqrt(1 - h)), h the ray's leverage: a ray at
-            # the newest pose is mostly absorbed by that pose's heading, so its raw residual
-            # understates it and good rays of the same landmark would be dropped first
-            jb = prob.linearise(poses, points)[1][prob.rows - len(k):]
-            try:
-                h = np.einsum("ri,ri->r", jb, np.linalg.solve(info, jb.T).T)
-            except np.linalg.LinAlgError:
-                h = np.zeros(len(k))
-            res = res / np.sqrt(np.clip(1.0 - h, 1e-6, 1.0))
+                                            np.array(drop_c, np.int64)), None, False,
+                    bearing_sigma_rad)
+        for rnd in range(SIGMA_ROUNDS if estimate_sigma else 1):
+            prob = _Problem(u, sig, bearing_sigma_rad, k, lm, theta, n_lm)
+            poses, points, info, converged = _levenberg_marquardt(prob, poses, points,
+                                                                   max_iter, tol)
+            res_rad = _bearing_residuals(poses, points, k, lm, theta)[0]
+            res = np.abs(res_rad) / bearing_sigma_rad
+            if (outlier_sigma is not None or estimate_sigma) and res.size:
+                # standardised residuals r / (sigma sqrt(1 - h)), h the ray's leverage: a ray
+                # at the newest pose is mostly absorbed by that pose's heading, so its raw
+                # residual understates it and good rays of the same landmark would be
+                # dropped first
+                jb = prob.linearise(poses, points)[1][prob.rows - len(k):]
+                try:
+                    h = np.einsum("ri,ri->r", jb, np.linalg.solve(info, jb.T).T)
+                except np.linalg.LinAlgError:
+                    h = np.zeros(len(k))
+                res = res / np.sqrt(np.clip(1.0 - h, 1e-6, 1.0))
+            if not estimate_sigma or rnd == SIGMA_ROUNDS - 1:
+                break
+            new_sigma = float(np.clip(bearing_sigma_rad * _robust_scale(res), *sigma_bounds))
+            if abs(new_sigma / bearing_sigma_rad - 1.0) <= SIGMA_TOL:
+                break
+            bearing_sigma_rad = new_sigma
         worst = int(np.argmax(res)) if res.size else -1
         keep = None
-        if (outlier_sigma is not None and worst >= 0 and res[worst] > outlier_sigma
+        # with a sigma to estimate, the test is against the residuals' own robust scale when
+        # that is larger (a sigma given too small must not drop good rays before the estimate)
+        limit = outlier_sigma if outlier_sigma is None or not robust_test else \
+            outlier_sigma * max(1.0, _robust_scale(res))
+        if (outlier_sigma is not None and worst >= 0 and res[worst] > limit
                 and len(drop_k) < max_outliers):
             keep = np.ones(len(k), bool)
             keep[worst] = False
@@ -372,7 +419,25 @@ def _fit(u: np.ndarray, sig: np.ndarray, bearing_sigma_rad: float, brg: np.ndarr
         n_lm = len(column)
     cov = _landmark_covariance(info, prob.n_pose_vars)
     return (poses, column, points, (np.array(drop_k, np.int64), np.array(drop_c, np.int64)),
-            cov, converged)
+            cov, converged, bearing_sigma_rad)
+
+
+#: Re-estimations of the bearing sigma per fit at most, and the relative change that ends them.
+SIGMA_ROUNDS = 6
+SIGMA_TOL = 0.02
+#: Fewest rays for a scale estimate, and the range of the estimate as a multiple of the
+#: sigma given (noise-free rays would drive it to zero).
+SIGMA_MIN_RAYS = 20
+SIGMA_RANGE = (0.25, 4.0)
+
+
+def _robust_scale(z: np.ndarray) -> float:
+    """Robust scale of standardised residuals ``z`` (1 when the bearing sigma is right):
+    ``1.4826 median |z|`` (the MAD of a zero-mean normal, unmoved by a few gross outliers);
+    1 with fewer than :data:`SIGMA_MIN_RAYS` rays."""
+    if z.size < SIGMA_MIN_RAYS:
+        return 1.0
+    return float(1.4826 * np.median(np.abs(z)))
 
 
 def _gates(poses: np.ndarray, points: np.ndarray, k: np.ndarray, lm: np.ndarray,

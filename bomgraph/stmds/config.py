@@ -27,6 +27,10 @@ _WINDOW: dict[str, Any] = {"tri_window": 6, "tri_stride": 1, "fusion": "scale-fr
                            "weights": "inverse-variance", "min_count": 3,
                            "max_range_factor": 1.3, "robot_ranges": "all-poses"}
 
+#: What the recording settings share: fuse every window estimate, inverse-variance weights.
+_RECORDING: dict[str, Any] = {"fusion": "scale-free", "weights": "inverse-variance",
+                              "min_count": 1, "robot_ranges": "all-poses"}
+
 
 @dataclass(frozen=True)
 class StmdsConfig(Presets):
@@ -111,6 +115,31 @@ class StmdsConfig(Presets):
     tri_min_depth_m : float
         ``tri_method="ba"``: landmarks closer than this (metres) to a pose that saw them are
         refused.
+    tri_estimate_sigma : bool
+        ``tri_method="ba"``: each window re-estimates the bearing std. dev. from its own
+        residuals (a robust scale, ``bundle.bundle_adjust_window``), so its weights, outlier
+        test and covariance do not depend on how the stream's sigma was calibrated.
+    tri_parallax_rad : float or None
+        Windows measured in geometry, not in keyframes (in place of ``tri_window``, issue 15):
+        a window closes once the ``tri_parallax_quantile`` of the parallax of the landmarks it
+        saw (``geometry.direction_span`` of their dead-reckoned ray directions, at least three
+        landmarks) reaches this angle, and no sooner than ``1 / tri_overlap`` of the last
+        window's path after its end (``window.WindowSchedule``).
+    tri_parallax_quantile : float
+        Geometric windows: the quantile of the landmarks' parallax that must reach
+        ``tri_parallax_rad`` (0.5: the median landmark; 0.25: three landmarks in four).
+    tri_window_m : float or None
+        Windows measured in geometry: a window also closes once the path across it reaches
+        this many metres (alone: windows of a fixed path length).
+    tri_overlap : float
+        Geometric windows: the next window starts ``1 / tri_overlap`` of the window's path
+        further on, so every reading enters about ``ceil(tri_overlap)`` windows (and each
+        estimate's variance is inflated by that).
+    tri_max_poses : int
+        Geometric windows: at most this many poses (caps the bundle's cost on any keyframing).
+    tri_prefixes : int
+        Geometric windows with ``tri_method="ba"``: the bundle grows on prefixes at this many
+        equal fractions of the window's path (``tri_grow`` measured in path, not poses).
     """
 
     #: name -> field overrides; "paper" is the defaults.
@@ -123,10 +152,18 @@ class StmdsConfig(Presets):
         "window-lsq": {**_WINDOW, "tri_method": "lsq", "tri_window": 10},
         # the README's best row
         "window-ba": {**_WINDOW, "tri_method": "ba", "tri_window": 10, "tri_stride": 3},
-        # recordings with a narrow view and small steps (MRCLAM6, the g2o set)
-        "real": {"tri_window": 60, "tri_stride": 10, "tri_method": "ba", "tri_grow": 3,
-                 "fusion": "scale-free", "weights": "inverse-variance", "min_count": 1,
-                 "robot_ranges": "all-poses"},
+        # recordings (issue 15): windows measured in geometry -- one closes when three in four
+        # of the landmarks it saw have rays spanning 0.3 rad (17 degrees) of directions,
+        # windows start and end a sixth of their path apart -- solved by local bundle
+        # adjustment with the bearing sigma re-estimated per window: the same windows and
+        # weights on any keyframing and any sigma calibration
+        "real": {"tri_parallax_rad": 0.3, "tri_parallax_quantile": 0.25, "tri_overlap": 6.0,
+                 "tri_method": "ba", "tri_estimate_sigma": True, **_RECORDING},
+        # issue 8's recording setting, counted in keyframes (60 of them, a new one every 10):
+        # tuned on MRCLAM6 as `bomgraph import mrclam` keyframes it, 5-10x worse on a denser
+        # keyframing of the same data
+        "real-keyframes": {"tri_window": 60, "tri_stride": 10, "tri_method": "ba",
+                           "tri_grow": 3, **_RECORDING},
     }
 
     method: str = "smacof"
@@ -156,6 +193,23 @@ class StmdsConfig(Presets):
     tri_outlier_sigma: float | None = 4.0
     tri_min_depth_m: float = 0.05
     tri_grow: int = 5
+    tri_estimate_sigma: bool = False
+    tri_parallax_rad: float | None = None
+    tri_parallax_quantile: float = 0.5
+    tri_window_m: float | None = None
+    tri_overlap: float = 6.0
+    tri_max_poses: int = 400
+    tri_prefixes: int = 20
+
+    @property
+    def windowed(self) -> bool:
+        """Windowed triangulation, counted in keyframes or measured in geometry."""
+        return self.tri_window is not None or self.geometric_windows
+
+    @property
+    def geometric_windows(self) -> bool:
+        """Windows measured in parallax and / or path (``tri_parallax_rad``, ``tri_window_m``)."""
+        return self.tri_parallax_rad is not None or self.tri_window_m is not None
 
     def __post_init__(self) -> None:
         need = requirement("StmdsConfig")
@@ -189,8 +243,21 @@ class StmdsConfig(Presets):
              "tri_stride needs tri_window")
         need(self.tri_method in TRI_METHODS,
              f"tri_method must be one of {TRI_METHODS}, got {self.tri_method!r}")
-        need(self.tri_method == "pair" or self.tri_window is not None,
-             f"tri_method={self.tri_method!r} needs tri_window")
+        need(self.tri_method == "pair" or self.windowed,
+             f"tri_method={self.tri_method!r} needs tri_window (or tri_parallax_rad / "
+             f"tri_window_m)")
+        need(self.tri_parallax_rad is None or 0 < self.tri_parallax_rad <= math.pi / 2,
+             "tri_parallax_rad must be in (0, pi/2] (effective parallax)")
+        need(0 <= self.tri_parallax_quantile <= 1, "tri_parallax_quantile must be in [0, 1]")
+        need(self.tri_window_m is None or self.tri_window_m > 0, "tri_window_m must be > 0")
+        need(self.tri_overlap >= 1, "tri_overlap must be >= 1 (windows per reading)")
+        need(int(self.tri_max_poses) == self.tri_max_poses and self.tri_max_poses >= 2,
+             "tri_max_poses must be an integer >= 2")
+        need(int(self.tri_prefixes) == self.tri_prefixes and self.tri_prefixes >= 1,
+             "tri_prefixes must be an integer >= 1")
+        need(not (self.geometric_windows and self.tri_window is not None),
+             "give tri_window (keyframes) or tri_parallax_rad / tri_window_m (geometry), not "
+             "both")
         need(self.tri_min_depth_m >= 0, "tri_min_depth_m must be >= 0")
         need(int(self.tri_grow) == self.tri_grow and self.tri_grow >= 1,
              "tri_grow must be an integer >= 1")
@@ -201,9 +268,10 @@ class StmdsConfig(Presets):
                  f"tri_window must be an integer >= 2 (poses per window), got "
                  f"{self.tri_window!r}")
             object.__setattr__(self, "tri_window", int(self.tri_window))
+        if self.windowed:
             need(self.baseline_steps == (1,),
                  "tri_window replaces baseline_steps: leave baseline_steps=(1,)")
-            if self.tri_stride is not None:
+            if self.tri_stride is not None and self.tri_window is not None:
                 need(int(self.tri_stride) == self.tri_stride
                      and 1 <= self.tri_stride <= self.tri_window,
                      f"tri_stride must be an integer in [1, tri_window], got "

@@ -18,6 +18,7 @@ frame was reflected.
 
 from __future__ import annotations
 
+import copy
 import math
 from dataclasses import replace
 from typing import Any
@@ -29,15 +30,17 @@ from ..errors import ConfigError, DegenerateGeometryError
 from ..geometry import dead_reckon
 from ..mapper import MapEstimate
 from ..stream import Step, StreamHeader
-from .bundle import WindowBundle, bundle_adjust_window, bundle_pair_squared_distances
 from .batch import BATCH_STEPS, StepBatch
+from .bundle import (SIGMA_RANGE, WindowBundle, bundle_adjust_window,
+                     bundle_pair_squared_distances)
 from .config import StmdsConfig
 from .distances import DistanceStore, IdIndex
 from .localisation import RobotPoses, extend_with_robots, resect_headings, trilaterate_robots
 from .reconstruct import reconstruct
 from .triangulation import (compose_odometry, gate_points, pair_squared_distances,
                             range_variances, triangulate_rays)
-from .window import triangulate_window, triangulate_window_lsq, window_pair_squared_distances
+from .window import (WindowSchedule, triangulate_window, triangulate_window_lsq,
+                     window_pair_squared_distances)
 
 
 #: Largest std. dev. (metres or radians) STMDS accepts in a header or a step: beyond it no
@@ -105,10 +108,14 @@ class StmdsMapper:
         # windowed triangulation: the current window's steps (ids, bearings, odom, sigma, t)
         self._tri_buffer: list[tuple] = []
         self._prev_bundle: tuple | None = None    # tri_method="ba": (t, poses, ids, xy)
-        if cfg.tri_window is not None:
-            self._tri_stride = cfg.tri_stride or cfg.tri_window - 1
-            self._tri_inflation = float(max(1, math.ceil((cfg.tri_window - 1)
-                                                         / self._tri_stride)))
+        self._closed_t = -1                       # last step of the last closed window
+        self._window_sigma = self._bearing_sigma  # tri_estimate_sigma: the last estimate
+        if cfg.windowed:
+            self._schedule = WindowSchedule(
+                poses=cfg.tri_window, stride=cfg.tri_stride, parallax_rad=cfg.tri_parallax_rad,
+                length_m=cfg.tri_window_m, overlap=cfg.tri_overlap,
+                quantile=cfg.tri_parallax_quantile, max_poses=cfg.tri_max_poses)
+            self._tri_inflation = self._schedule.inflation
         self._t = -1
         self._n_gated = 0
         self._n_outliers = 0                      # rays dropped by the window bundle
@@ -121,7 +128,7 @@ class StmdsMapper:
         # the paper's rule (consecutive steps, no localisation, no relative gate) runs in
         # batches of steps (.batch); the other variants step by step
         self._batch: StepBatch | None = None
-        if (cfg.tri_window is None and cfg.baseline_steps == (1,) and self._robots is None
+        if (not cfg.windowed and cfg.baseline_steps == (1,) and self._robots is None
                 and not self._relative_gate):
             self._batch = StepBatch(self._store, self._ids, bearing_sigma_rad=self._bearing_sigma,
                                     min_parallax_rad=cfg.min_parallax_rad,
@@ -156,7 +163,7 @@ class StmdsMapper:
         if self._robots is not None:
             self._robots.push(step.t, step.odom, None if step.odom is None
                               else step.odometry_sigma(self.header), idx_now, brg)
-        if self.config.tri_window is not None:
+        if self.config.windowed:
             self._tri_window_step(step, ids, brg)
             return
         hist = self._history
@@ -174,17 +181,43 @@ class StmdsMapper:
 
     def _tri_window_step(self, step: Step, ids: np.ndarray, brg: np.ndarray) -> None:
         """Collect the step into the current window; triangulate the window once it is full
-        and start the next one ``tri_stride`` steps later."""
+        and start the next one where :class:`.window.WindowSchedule` says."""
         buf = self._tri_buffer
         if step.odom is None:
             buf.clear()
+            self._schedule.clear()
             self._prev_bundle = None
         buf.append((ids, brg, step.odom,
                     None if step.odom is None else step.odometry_sigma(self.header), step.t))
-        if len(buf) < self.config.tri_window:
+        self._schedule.push(step.odom, ids, brg)
+        if not self._schedule.full():
             return
         self._triangulate_window(buf)
-        del buf[:self._tri_stride]
+        self._closed_t = step.t
+        del buf[:self._schedule.advance()]
+
+    def _with_open_window(self) -> tuple[DistanceStore, np.ndarray]:
+        """The distance store and the triangulated flags for an estimate now.
+
+        Geometric windows close where the motion says, so the steps since the last closed
+        window can be many; they are triangulated as one window for this estimate alone (a
+        copy of the store and the flags; nothing is kept), so the map at ``t`` uses every
+        step up to ``t`` and does not depend on when earlier estimates were asked for.
+        """
+        buf = self._tri_buffer
+        if (not self.config.geometric_windows or len(buf) < 2
+                or buf[-1][4] <= self._closed_t):
+            return self._store, self._triangulated.array
+        kept = (self._store, self._triangulated, self._prev_bundle, self._n_triangulated,
+                self._n_gated, self._n_outliers, self._window_sigma)
+        try:
+            self._store = copy.deepcopy(self._store)
+            self._triangulated = copy.deepcopy(self._triangulated)
+            self._triangulate_window(buf)
+            return self._store, self._triangulated.array
+        finally:
+            (self._store, self._triangulated, self._prev_bundle, self._n_triangulated,
+             self._n_gated, self._n_outliers, self._window_sigma) = kept
 
     def _triangulate_window(self, buf: list[tuple]) -> None:
         """Windowed triangulation of the buffered steps; fuse the pairs of the window."""
@@ -201,12 +234,20 @@ class StmdsMapper:
             ts = np.array([b[4] for b in buf], np.int64)
             init_poses, init_points, n_shared = self._warm_start(ts, uniq, odoms)
             tri, n_gated = bundle_adjust_window(
-                odoms, sig, brg, self._bearing_sigma, min_parallax_rad=self.config.min_parallax_rad,
+                odoms, sig, brg, self._window_sigma, min_parallax_rad=self.config.min_parallax_rad,
                 max_range_m=self._max_range, min_depth_m=self.config.tri_min_depth_m,
                 outlier_sigma=self.config.tri_outlier_sigma, initial_poses=init_poses,
                 initial_points=init_points, initial_prefix=n_shared,
-                grow=self.config.tri_grow)
+                grow=self.config.tri_grow,
+                prefix_ends=self._schedule.prefix_ends(self.config.tri_prefixes)
+                if self.config.geometric_windows else None,
+                estimate_sigma=self.config.tri_estimate_sigma)
             self._n_outliers += tri.n_outliers
+            if self.config.tri_estimate_sigma and len(tri):
+                # the next window starts from it (within SIGMA_RANGE of the header's)
+                self._window_sigma = float(np.clip(tri.bearing_sigma_rad,
+                                                   SIGMA_RANGE[0] * self._bearing_sigma,
+                                                   SIGMA_RANGE[1] * self._bearing_sigma))
             self._prev_bundle = (ts, tri.poses, uniq[tri.column], tri.points_xy) if len(tri) \
                 else None
         else:
@@ -322,13 +363,14 @@ class StmdsMapper:
         cfg = self.config
         self.flush()
         info = self._base_info()
-        if len(self._store) == 0 and self._store.n_degenerate:
+        store, triangulated = self._with_open_window()
+        if len(store) == 0 and store.n_degenerate:
             raise DegenerateGeometryError(
                 f"the stream gives no usable landmark distance up to step {self._t}: all "
-                f"{self._store.n_degenerate} pair estimates put two landmarks on one point "
+                f"{store.n_degenerate} pair estimates put two landmarks on one point "
                 f"(parallel rays through every landmark: is the bearing sensor stuck at one "
                 f"value?) or had no finite variance")
-        known = self._store.known()
+        known = store.known()
         info["n_known_pairs"] = len(known)
         n_lm = len(self._ids)
         first, second = known.first, known.second
@@ -343,11 +385,11 @@ class StmdsMapper:
         if joint and len(self._robots.t) >= 1:
             first, second, dist, var, robot_nodes = extend_with_robots(
                 self._robots, first, second, dist, var, n_lm, cfg.robot_ranges,
-                self._bearing_sigma, cfg.min_parallax_rad)
+                self._window_sigma, cfg.min_parallax_rad)
             measured = np.concatenate([measured, np.ones(len(first) - len(measured), bool)])
             n_nodes = n_lm + len(robot_nodes)
         rec = reconstruct(cfg, n_nodes, n_lm, first, second, dist, var, measured,
-                          self._triangulated.array, t=self._t, n_smacof=self._n_smacof,
+                          triangulated, t=self._t, n_smacof=self._n_smacof,
                           previous_xy=self._prev_xy)
         if len(rec.nodes) == 0:
             self._prev_xy = np.zeros((0, 2))

@@ -312,6 +312,7 @@ def test_mapper_with_window_two_equals_the_paper_rule() -> None:
 
 @pytest.mark.parametrize("options", [{"tri_window": 3}, {"tri_window": 7, "tri_stride": 7},
                                      {"preset": "window"}, {"preset": "real"},
+                                     {"preset": "real-keyframes"},
                                      {"preset": "window", "tri_method": "lsq"},
                                      {"tri_window": 8, "tri_method": "ba"},
                                      {"tri_window": 9, "tri_stride": 3, "tri_method": "ba",
@@ -319,7 +320,7 @@ def test_mapper_with_window_two_equals_the_paper_rule() -> None:
 @pytest.mark.parametrize("name", ["stmds-cs", "stmds-smacof", "stmds-smacof-loc"])
 def test_noise_free_windowed_maps_are_exact(name: str, options: dict) -> None:
     # the "real" preset's windows are 60 steps long: the run must hold a few of them
-    n_steps = 130 if options.get("preset") == "real" else 70
+    n_steps = 130 if str(options.get("preset")).startswith("real") else 70
     s = simulate(SimConfig(noise_scale=0.0, n_landmarks=20, n_steps=n_steps,
                            sensor_range_m=5.0), np.random.default_rng(3))
     if name.endswith("-loc") and "preset" not in options:
@@ -345,9 +346,11 @@ def test_noise_free_windowed_maps_are_exact(name: str, options: dict) -> None:
 
 def test_window_options_are_validated_and_presets_named() -> None:
     header = simulate(SimConfig(n_steps=3), np.random.default_rng(0)).header
-    m = create_mapper("stmds-smacof", header, preset="real", min_count=2)
+    m = create_mapper("stmds-smacof", header, preset="real-keyframes", min_count=2)
     assert m.config.tri_window == 60 and m.config.tri_stride == 10 and m.config.min_count == 2
     assert m.config.tri_method == "ba"
+    real = create_mapper("stmds-smacof", header, preset="real").config
+    assert real.tri_window is None and real.geometric_windows and real.tri_method == "ba"
     assert create_mapper("stmds-smacof-loc", header, preset="window").config.robot_ranges \
         == "all-poses"
     for bad in ({"tri_window": 1}, {"tri_window": 2.5}, {"tri_stride": 2},
