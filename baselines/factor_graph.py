@@ -36,6 +36,11 @@ from .bearing_graph import (BearingGraph, FactorGraphConfig, NewFactors, insert_
                             landmark_key, landmarks_from_values, pose_key, poses_from_values)
 from .fixed_lag import window_problem
 
+#: What a failing GTSAM call raises in Python: its C++ exceptions arrive as RuntimeError,
+#: except one whose message is not UTF-8 (an indeterminate-system message naming a key by a
+#: raw character), which pybind11 turns into UnicodeDecodeError while converting it.
+GTSAM_ERRORS: tuple[type[Exception], ...] = (RuntimeError, UnicodeDecodeError)
+
 # --------------------------------------------------------------------------------------------
 # Solving
 # --------------------------------------------------------------------------------------------
@@ -100,7 +105,7 @@ def gauss_newton_check(graph: gtsam.NonlinearFactorGraph,
     try:
         linear = graph.linearize(values)
         delta = linear.optimize()
-    except RuntimeError:
+    except GTSAM_ERRORS:
         return math.inf, math.inf
     zero = gtsam.VectorValues(delta)
     zero.setZero()
@@ -148,7 +153,7 @@ def solve_lm(graph: gtsam.NonlinearFactorGraph, initial: gtsam.Values,
             if g is graph:
                 errors.setdefault(id(start), (start, float(opt.error())))
             result = opt.optimize()
-        except RuntimeError as exc:
+        except GTSAM_ERRORS as exc:
             messages.append(f"{name} pass failed: {_first_line(exc)}")
             return None
         if g is graph:
@@ -210,7 +215,7 @@ def marginal_covariances(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values
         marg = gtsam.Marginals(graph, values)
         lc = np.array([marg.marginalCovariance(landmark_key(int(i))) for i in landmark_ids])
         pc = np.array([marg.marginalCovariance(pose_key(int(t))) for t in pose_t])
-    except RuntimeError:
+    except GTSAM_ERRORS:
         return None, None
     return lc.reshape(-1, 2, 2), pc.reshape(-1, 3, 3)
 
@@ -586,4 +591,4 @@ class OracleMapper(ScheduledSolver):
 __all__ = ["FactorGraphConfig", "SolveReport", "BatchState", "ScheduledSolver", "BatchMapper",
            "OracleMapper", "all_poses",
            "solve_lm", "lm_params", "gauss_newton_check", "marginal_covariances",
-           "estimate_from_values"]
+           "estimate_from_values", "GTSAM_ERRORS"]

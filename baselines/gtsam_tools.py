@@ -69,8 +69,8 @@ from bomgraph.stream import Step, StreamHeader
 from .bearing_graph import (BearingGraph, FactorGraphConfig, NewFactors, bearing_noise,
                             insert_pose, landmark_key, landmarks_from_values, mid_key,
                             odometry_factors, pose_key, poses_from_values, prior_factor)
-from .factor_graph import (BatchState, SolveReport, estimate_from_values, gauss_newton_check,
-                           lm_params, marginal_covariances, solve_lm)
+from .factor_graph import (GTSAM_ERRORS, BatchState, SolveReport, estimate_from_values,
+                           gauss_newton_check, lm_params, marginal_covariances, solve_lm)
 from .hybrid import _triangulate, trimmed_align
 
 
@@ -339,7 +339,7 @@ def _names(items: Iterable[str]) -> str:
 def _is_point2(values: gtsam.Values, key: int) -> bool:
     try:
         values.atPoint2(key)
-    except RuntimeError:
+    except GTSAM_ERRORS:
         return False
     return True
 
@@ -437,7 +437,7 @@ def diagnose(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, *,
         linear = graph.linearize(values)
         try:
             linear.optimize()
-        except RuntimeError as exc:
+        except GTSAM_ERRORS as exc:
             text = " ".join(str(exc).split())
             m = re.search(r"near variable (\d+)", text)
             elim = (f"indeterminant linear system near {key_name(int(m.group(1)))}" if m

@@ -19,7 +19,7 @@ from bomgraph.mapper import MapEstimate
 from bomgraph.stream import Step, StreamHeader
 
 from .bearing_graph import BearingGraph, FactorGraphConfig, insert_pose, landmark_key, pose_key
-from .factor_graph import _first_line, estimate_from_values, solve_lm
+from .factor_graph import GTSAM_ERRORS, _first_line, estimate_from_values, solve_lm
 
 
 @dataclass(frozen=True)
@@ -224,7 +224,7 @@ class Isam2Mapper:
             self.accepted.push_back(graph)
             self.estimate_values = self._isam.calculateEstimate()
             return
-        except RuntimeError as exc:
+        except GTSAM_ERRORS as exc:
             self.failures.append(_first_line(exc))
         self.dropped_external += int(external.size())
         start = gtsam.Values(self.estimate_values)
@@ -244,7 +244,7 @@ class Isam2Mapper:
                 self._isam.update(self.accepted, start)
                 self.estimate_values = self._isam.calculateEstimate()
                 return
-            except RuntimeError as exc:
+            except GTSAM_ERRORS as exc:
                 self.failures.append(_first_line(exc))
             if attempt == 0:
                 start, _ = solve_lm(self.accepted, start, self.config)
@@ -294,7 +294,7 @@ def polish(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, iterations: 
         try:
             linear = graph.linearize(values)
             delta = linear.optimize()
-        except RuntimeError:
+        except GTSAM_ERRORS:
             return values, math.inf, math.inf
         v = delta.vector()
         step = float(np.max(np.abs(v))) if v.size else 0.0
