@@ -14,9 +14,9 @@
 Every other method (EKF, BOM-STMDS, triangulate) gets its CPU time per run only. Sections
 (``--sections``): ``paper`` (the paper's setup, 300 steps, 50 landmarks, a map every 10 steps;
 the median over ``--runs`` runs of the design), ``long`` (one ``--long-steps``-step simulated
-run at the default cadence, every method in ``--long-methods``). A section is a function
-``(args) -> list of rows`` in :data:`SECTIONS`; a scale section (``scripts/bench_scale.py``)
-plugs in the same way. Rows: ``{"section", "method", "cpu_s", "reference", "reference_cpu_s",
+run at the default cadence, every method in ``--long-methods``), ``scale`` (``stmds-smacof``
+at N = 1,000 / 5,000 / 10,000 landmarks, ``scripts/bench_scale.py``, with peak memory and the
+fitted exponent). A section is a function ``(args) -> list of rows`` in :data:`SECTIONS`. Rows: ``{"section", "method", "cpu_s", "reference", "reference_cpu_s",
 "ratio", "mpe_cm", ...}``.
 
 CPU seconds (``time.process_time``) with single-threaded BLAS; ratios are against a
@@ -24,7 +24,8 @@ reference timed in the same process, as wall time means nothing on a shared mach
 
 Usage::
 
-    python scripts/bench_speed.py [--runs 3] [--sections paper long] [--long-steps 3000]
+    python scripts/bench_speed.py [--runs 3] [--sections paper long scale] [--long-steps 3000]
+        [--scale-sizes 1000 5000 10000]
         [--methods M ...] [--long-methods M ...] [--out /tmp/bench_speed.json]
 """
 
@@ -193,10 +194,29 @@ def long_rows(args: argparse.Namespace) -> list[dict[str, Any]]:
     return _rows(f"long ({args.long_steps} steps)", [stream], args.long_methods, 10)
 
 
-#: Section name -> rows. A scale section (scripts/bench_scale.py) is added here the same way.
+def scale_section(args: argparse.Namespace) -> list[dict[str, Any]]:
+    """``stmds-smacof`` on N = ``--scale-sizes`` landmarks (arena grown at the paper's
+    density, steps in proportion; final map only), each size in a fresh process
+    (``scripts/bench_scale.py``): CPU s, peak RSS, MPE and the fitted exponent."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location(
+        "bench_scale", Path(__file__).resolve().with_name("bench_scale.py"))
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    rows = []
+    for r in mod.scale_rows(args.scale_sizes):
+        rows.append({**r, "section": f"scale N={r['n_landmarks']}", "method": "stmds-smacof",
+                     "mpe_cm": 100 * r["mpe_m"], "reference": None,
+                     "peak_rss_mb": r["peak_rss_bytes"] / 2 ** 20})
+    return rows
+
+
+#: Section name -> rows.
 SECTIONS: dict[str, Callable[[argparse.Namespace], list[dict[str, Any]]]] = {
     "paper": paper_rows,
     "long": long_rows,
+    "scale": scale_section,
 }
 
 
@@ -217,7 +237,9 @@ def main(argv: list[str] | None = None) -> int:
     names = [m.name for m in available_methods()]
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--runs", type=int, default=3, help="paper runs (median over them)")
-    ap.add_argument("--sections", nargs="+", default=["paper", "long"], choices=list(SECTIONS))
+    ap.add_argument("--sections", nargs="+", default=["paper", "long", "scale"],
+                    choices=list(SECTIONS))
+    ap.add_argument("--scale-sizes", nargs="+", type=int, default=[1000, 5000, 10000])
     ap.add_argument("--methods", nargs="+", default=names, choices=names)
     ap.add_argument("--long-steps", type=int, default=3000)
     ap.add_argument("--long-methods", nargs="+", default=names, choices=names)
