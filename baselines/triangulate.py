@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any, ClassVar, Mapping
 
 import numpy as np
 
@@ -22,12 +23,16 @@ from bomgraph.stream import Step, StreamHeader
 
 @dataclass(frozen=True)
 class TriangulateConfig(Presets):
-    """Options of the naive baseline (one preset, ``paper``: the defaults).
+    """Options of the naive baseline. Presets: ``paper`` (the defaults) and ``real``, the
+    recording setting every method has (issue 15 item 4), which for this baseline is the same:
+    it has nothing a recording would tune.
 
     min_parallax_rad : a landmark is mapped once its rays span at least this angle.
     min_front_fraction : the point must lie in front of this fraction of its rays (dead
         reckoning drifts over a long run, so not all of them).
     """
+
+    PRESETS: ClassVar[Mapping[str, Mapping[str, Any]]] = {"paper": {}, "real": {}}
 
     min_parallax_rad: float = math.radians(2.0)
     min_front_fraction: float = 0.5
