@@ -89,6 +89,9 @@ class StreamHeader:
         except (TypeError, ValueError) as exc:
             raise StreamFormatError(f"must be JSON-serialisable with finite numbers ({exc})",
                                     key="meta") from None
+        except RecursionError:  # Python 3.13's json parses what this cannot walk
+            raise StreamFormatError("is nested too deeply (keep meta a few levels deep)",
+                                    key="meta") from None
         object.__setattr__(self, "meta", meta)
 
 

@@ -50,6 +50,21 @@ class _Ctx:
         return StreamFormatError(message, path=self.path, line=self.line, key=key)
 
 
+#: Deepest nesting of a header's ``meta`` the reader accepts (importers write 2-3 levels).
+MAX_META_DEPTH = 64
+
+
+def _depth(value: object) -> int:
+    """Nesting depth of JSON data (iterative: no recursion limit)."""
+    deepest, todo = 0, [(value, 1)]
+    while todo:
+        v, d = todo.pop()
+        if isinstance(v, (dict, list)):
+            deepest = max(deepest, d)
+            todo.extend((c, d + 1) for c in (v.values() if isinstance(v, dict) else v))
+    return deepest
+
+
 def _parse_json_line(text: str, ctx: _Ctx) -> dict:
     if not text.strip():
         raise ctx.error(None, "blank line; the format has one JSON object per line and no "
@@ -127,6 +142,8 @@ def _parse_header(obj: dict, ctx: _Ctx) -> tuple[StreamHeader, Truth | None]:
         meta = {}
     if not isinstance(meta, dict):
         raise ctx.error("meta", f"must be a JSON object, got {type(meta).__name__}")
+    if _depth(meta) > MAX_META_DEPTH:  # Python 3.13's json parses what cannot be walked
+        raise ctx.error("meta", f"is nested more than {MAX_META_DEPTH} levels deep")
     truth = _parse_truth(obj.get("truth"), ctx)
     header = StreamHeader(bearing_sigma_rad=bearing_sigma, odometry_sigma=odo_sigma,
                           sensor_range_m=sensor_range, priors=priors, meta=meta)
