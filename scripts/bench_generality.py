@@ -2,6 +2,7 @@
 
     python scripts/bench_generality.py [--data ../shared/data] [--work results/generality]
                                        [--methods a,b,...] [--robots 1,2,3,4,5] [--jobs N]
+                                       [--families m6,m6dense,...]
                                        [--cadence]
 
 The ``real`` presets were chosen on MRCLAM6 as ``bomgraph import mrclam`` keyframes it
@@ -109,14 +110,15 @@ def _ratio(a: float, b: float) -> float:
     return a / b if (math.isfinite(a) and math.isfinite(b) and b > 0) else math.nan
 
 
-def summarise(rows: list[dict[str, Any]], methods: list[str], robots: list[int]) -> dict:
+def summarise(rows: list[dict[str, Any]], methods: list[str], robots: list[int],
+              families: tuple[str, ...] = FAMILIES) -> dict:
     """The issue's target ratios, per method, as worst case over the robots."""
     mpe = {(r["stream"], r["method"], r["checkpoint_every"]): r["mpe_m"] for r in rows}
     summary: dict[str, dict[str, float]] = {}
     for m in methods:
         vs_bound, dense, sig_lo, sig_hi, cadence = [], [], [], [], []
         for r in robots:
-            for fam in FAMILIES:
+            for fam in families:
                 s = f"{fam}_r{r}"
                 mine = mpe.get((s, m, 10), math.nan)
                 if fam.startswith("m1"):
@@ -148,13 +150,13 @@ def summarise(rows: list[dict[str, Any]], methods: list[str], robots: list[int])
 
 
 def print_tables(rows: list[dict[str, Any]], methods: list[str], robots: list[int],
-                 summary: dict) -> None:
+                 summary: dict, families: tuple[str, ...] = FAMILIES) -> None:
     by = {(r["stream"], r["method"]): r for r in rows if r["checkpoint_every"] == 10}
     width = max(12, *(len(m) + 1 for m in methods))
     print("Final-map landmark MPE, cm (landmarks mapped); * = no `real` preset, defaults")
     print("stream".ljust(14) + "".join(
         (m + ("" if has_real(m) else "*")).rjust(width + 5) for m in methods))
-    for fam in FAMILIES:
+    for fam in families:
         for r in robots:
             s = f"{fam}_r{r}"
             cells = []
@@ -186,6 +188,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--methods", default=None,
                     help="comma-separated (default: every registered method but triangulate)")
     ap.add_argument("--robots", default="1,2,3,4,5")
+    ap.add_argument("--families", default=",".join(FAMILIES),
+                    help=f"comma-separated subset of {', '.join(FAMILIES)}")
     ap.add_argument("--jobs", type=int, default=1)
     ap.add_argument("--cadence", action="store_true",
                     help="also run each method on the m6 streams with one final checkpoint")
@@ -198,7 +202,11 @@ def main(argv: list[str] | None = None) -> int:
         methods.append("oracle")
     work = Path(args.work)
     streams = make_streams(Path(args.data), work / "streams", robots)
-    jobs = [(streams[f][r], m, 10) for f in FAMILIES for r in robots for m in methods]
+    families = [f for f in args.families.split(",") if f]
+    unknown = sorted(set(families) - set(FAMILIES))
+    if unknown:
+        ap.error(f"unknown stream families {unknown}; choose from {', '.join(FAMILIES)}")
+    jobs = [(streams[f][r], m, 10) for f in families for r in robots for m in methods]
     if args.cadence:
         jobs += [(streams["m6"][r], m, 100000) for r in robots for m in methods]
     t0 = time.perf_counter()
@@ -207,8 +215,8 @@ def main(argv: list[str] | None = None) -> int:
         rows = Parallel(n_jobs=args.jobs)(delayed(one_run)(*j) for j in jobs)
     else:
         rows = [one_run(*j) for j in jobs]
-    summary = summarise(rows, methods, robots)
-    print_tables(rows, methods, robots, summary)
+    summary = summarise(rows, methods, robots, tuple(families))
+    print_tables(rows, methods, robots, summary, tuple(families))
     out = work / "generality.json"
     tmp = out.with_suffix(".tmp")
     tmp.write_text(json.dumps(jsonable({"rows": rows, "summary": summary,
