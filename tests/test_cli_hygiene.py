@@ -50,6 +50,13 @@ def stream(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return path
 
 
+
+def _sigint_default() -> None:
+    """In the child before exec: SIGINT back to its default, so Python installs its handler
+    (a test runner started in the background inherits SIGINT ignored, and so would the
+    command)."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
 def test_version_comes_from_the_package_metadata() -> None:
     proc = bomgraph("--version")
     assert proc.returncode == 0
@@ -250,7 +257,8 @@ def test_sigint_during_compare_prints_one_line_and_exits_130(tmp_path: Path) -> 
     proc = subprocess.Popen([sys.executable, "-m", "bomgraph", "compare", "--quick",
                              "--experiments", "all", "--jobs", "1", "--no-figures",
                              "--no-progress", "--out", str(out)],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=ENV)
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=ENV,
+                            preexec_fn=_sigint_default)
     deadline = time.monotonic() + 120
     while time.monotonic() < deadline and proc.poll() is None \
             and not any(out.rglob("*.json")):

@@ -47,6 +47,13 @@ def work(tmp_path: Path, sim: Stream) -> Path:
 
 @pytest.mark.parametrize("content", [b"\xff\xfe not utf-8", b"[1, 2, 3]", b'{"ok": true}',
                                      b"{truncated"])
+
+def _sigint_default() -> None:
+    """In the child before exec: SIGINT back to its default, so Python installs its handler
+    (a test runner started in the background inherits SIGINT ignored, and so would the
+    command)."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
 def test_item13_a_corrupt_cache_file_is_a_named_miss(tmp_path: Path, content: bytes,
                                                      caplog: pytest.LogCaptureFixture) -> None:
     from bomgraph.bench import _read_cached
@@ -160,7 +167,8 @@ def test_item21_sigint_during_compare_is_one_line(tmp_path: Path) -> None:
     proc = subprocess.Popen([sys.executable, "-m", "bomgraph", "compare", "--quick",
                              "--experiments", "all", "--jobs", "1", "--no-figures",
                              "--no-progress", "--out", str(out)],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=ENV)
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=ENV,
+                            preexec_fn=_sigint_default)
     deadline = time.monotonic() + 180
     while time.monotonic() < deadline and proc.poll() is None \
             and not any((out / "cache").glob("*.json")):
