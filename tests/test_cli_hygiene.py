@@ -50,7 +50,6 @@ def stream(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return path
 
 
-
 def _sigint_default() -> None:
     """In the child before exec: SIGINT back to its default, so Python installs its handler
     (a test runner started in the background inherits SIGINT ignored, and so would the

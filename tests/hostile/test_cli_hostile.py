@@ -43,17 +43,17 @@ def work(tmp_path: Path, sim: Stream) -> Path:
     return tmp_path
 
 
-# ---- item 13: a corrupt compare cache ---------------------------------------------------------
-
-@pytest.mark.parametrize("content", [b"\xff\xfe not utf-8", b"[1, 2, 3]", b'{"ok": true}',
-                                     b"{truncated"])
-
 def _sigint_default() -> None:
     """In the child before exec: SIGINT back to its default, so Python installs its handler
     (a test runner started in the background inherits SIGINT ignored, and so would the
     command)."""
     signal.signal(signal.SIGINT, signal.SIG_DFL)
 
+
+# ---- item 13: a corrupt compare cache ---------------------------------------------------------
+
+@pytest.mark.parametrize("content", [b"\xff\xfe not utf-8", b"[1, 2, 3]", b'{"ok": true}',
+                                     b"{truncated"])
 def test_item13_a_corrupt_cache_file_is_a_named_miss(tmp_path: Path, content: bytes,
                                                      caplog: pytest.LogCaptureFixture) -> None:
     from bomgraph.bench import _read_cached
