@@ -148,11 +148,15 @@ class EstimateWriter:
 
     def __enter__(self) -> "EstimateWriter":
         self._out = AtomicOutput(self.path)
-        self._fh = self._out.open()
-        if (threading.current_thread() is threading.main_thread()
-                and signal.getsignal(signal.SIGTERM) == signal.SIG_DFL):
-            self._old_handler = signal.signal(signal.SIGTERM, _raise_exit)
-        self._fh.write(_dumps(self._header))
+        try:  # __exit__ does not run when __enter__ raises
+            self._fh = self._out.open()
+            if (threading.current_thread() is threading.main_thread()
+                    and signal.getsignal(signal.SIGTERM) == signal.SIG_DFL):
+                self._old_handler = signal.signal(signal.SIGTERM, _raise_exit)
+            self._fh.write(_dumps(self._header))
+        except BaseException:
+            self.__exit__()
+            raise
         return self
 
     def add(self, c: Checkpoint) -> None:

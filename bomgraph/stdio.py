@@ -30,9 +30,11 @@ from __future__ import annotations
 import contextlib
 import os
 import re
+import signal
 import stat
 import sys
 import tempfile
+import threading
 from pathlib import Path
 from typing import IO, Callable, Iterator, Sequence
 
@@ -240,6 +242,22 @@ def check_output_path(path: str | os.PathLike[str],
         raise OutputPathError(f"--out {path}: the folder {folder} is not writable")
 
 
+@contextlib.contextmanager
+def _signals_held() -> Iterator[None]:
+    """Block SIGTERM and SIGINT for the block (main thread, POSIX); a signal that came
+    meanwhile is delivered, and its handler run, when the block ends."""
+    if (not hasattr(signal, "pthread_sigmask")
+            or threading.current_thread() is not threading.main_thread()):
+        yield
+        return
+    held = {signal.SIGTERM, signal.SIGINT}
+    old = signal.pthread_sigmask(signal.SIG_BLOCK, held)
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, old)
+
+
 class AtomicOutput:
     """The one way bomgraph writes a file (see the module docstring): :meth:`open` gives the
     handle, :meth:`commit` puts the file in place, :meth:`abort` removes what was written
@@ -264,14 +282,19 @@ class AtomicOutput:
             self.fh = open(self.given, mode, **kw)
             return self.fh
         d, name = os.path.split(self.path)
-        fd, self._tmp = tempfile.mkstemp(prefix=f".{name}.", suffix=".partial", dir=d)
-        try:
-            os.chmod(fd, self._mode)  # as open() would (or as the file was), not 0600
-            self.fh = os.fdopen(fd, mode, **kw)
-        except BaseException:
-            os.close(fd)
-            self.abort()
-            raise
+        # SIGTERM/SIGINT are held back from the temporary file's creation until the handle
+        # owns it: a signal raising mid-way would leave a file nobody removes, or close the
+        # descriptor twice (EBADF). Delivered at the unmask, the handle is in place for abort.
+        with _signals_held():
+            fd, self._tmp = tempfile.mkstemp(prefix=f".{name}.", suffix=".partial", dir=d)
+            try:
+                os.chmod(fd, self._mode)  # as open() would (or as the file was), not 0600
+                self.fh = os.fdopen(fd, mode, **kw)
+            except BaseException:
+                with contextlib.suppress(OSError):
+                    os.close(fd)
+                self.abort()
+                raise
         return self.fh
 
     def commit(self) -> None:
@@ -307,8 +330,8 @@ def output_file(path: str | os.PathLike[str], *, binary: bool = False,
     the block ends normally, and nothing is left beside it when it raises (SIGTERM too, under
     the CLI, which turns it into ``SystemExit``)."""
     out = AtomicOutput(path, binary=binary, inputs=inputs)
-    fh = out.open()
     try:
+        fh = out.open()
         yield fh
     except BaseException:
         out.abort()

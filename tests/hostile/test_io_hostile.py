@@ -259,3 +259,39 @@ def test_item10_deeply_nested_json_is_a_format_error(tmp_path: Path, where: str)
     one_error(bomgraph("run", tmp_path / "d.jsonl", "--method", "triangulate", "--out",
                        tmp_path / "e.jsonl"), "d.jsonl", "line")
     assert sorted(os.listdir(tmp_path)) == ["d.jsonl"]
+
+
+@pytest.mark.parametrize("where", ["mkstemp", "chmod", "fdopen"])
+def test_sigterm_as_the_temporary_file_is_created_leaves_nothing(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch, where: str) -> None:
+    """A SIGTERM that arrives while the ``.partial`` file is being created (CI once saw
+    ``[Errno 9] Bad file descriptor`` instead of exit 143): SystemExit comes out, the
+    descriptor is closed once, nothing is left beside the target."""
+    import tempfile
+
+    import bomgraph.stdio as stdio
+
+    real = {"mkstemp": tempfile.mkstemp, "chmod": os.chmod, "fdopen": os.fdopen}
+
+    def arrives(*a, **kw):  # the real call, then the signal, as if it came during it
+        out = real[where](*a, **kw)  # to the main thread, as the CLI (one thread) gets it
+        signal.pthread_kill(threading.main_thread().ident, signal.SIGTERM)
+        return out
+
+    def raise_exit(signum, frame):
+        raise SystemExit(143)
+
+    monkeypatch.setattr({"mkstemp": stdio.tempfile, "chmod": stdio.os,
+                         "fdopen": stdio.os}[where], where, arrives)
+    # (a process-wide signal may go to any thread that does not block it, which then has the
+    # main thread run the handler at once: the mask is a guarantee for one-thread processes)
+    old = signal.signal(signal.SIGTERM, raise_exit)
+    target = tmp_path / "out.txt"
+    try:
+        with pytest.raises(SystemExit) as exc:
+            with stdio.output_file(target) as fh:
+                fh.write("never")
+    finally:
+        signal.signal(signal.SIGTERM, old)
+    assert exc.value.code == 143
+    assert sorted(p.name for p in tmp_path.iterdir()) == []
