@@ -9,12 +9,10 @@ import fcntl
 import json
 import os
 import pty
-import signal
 import struct
 import subprocess
 import sys
 import termios
-import time
 from importlib.metadata import version
 from pathlib import Path
 
@@ -49,12 +47,6 @@ def stream(tmp_path_factory: pytest.TempPathFactory) -> Path:
     assert bomgraph("simulate", "--seed", "0", "--steps", "60", "--out", str(path)).returncode == 0
     return path
 
-
-def _sigint_default() -> None:
-    """In the child before exec: SIGINT back to its default, so Python installs its handler
-    (a test runner started in the background inherits SIGINT ignored, and so would the
-    command)."""
-    signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 def test_version_comes_from_the_package_metadata() -> None:
     proc = bomgraph("--version")
@@ -249,59 +241,6 @@ def test_every_method_checks_its_option_types() -> None:
             for value in bad:
                 with pytest.raises(ConfigError, match=name):
                     cls.preset(**{name: value})
-
-
-def test_sigint_during_compare_prints_one_line_and_exits_130(tmp_path: Path) -> None:
-    out = tmp_path / "cmp"
-    proc = subprocess.Popen([sys.executable, "-m", "bomgraph", "compare", "--quick",
-                             "--experiments", "all", "--jobs", "1", "--no-figures",
-                             "--no-progress", "--out", str(out)],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=ENV,
-                            preexec_fn=_sigint_default)
-    deadline = time.monotonic() + 120
-    while time.monotonic() < deadline and proc.poll() is None \
-            and not any(out.rglob("*.json")):
-        time.sleep(0.05)
-    assert proc.poll() is None, proc.communicate()
-    # ("all": its GTSAM runs keep the sweep busy for seconds after the first result;
-    # exp1's quick BOM-STMDS runs now all end within a second, before the signal lands)
-    proc.send_signal(signal.SIGINT)
-    _, err = proc.communicate(timeout=120)
-    text = err.decode()
-    assert proc.returncode == 130, text
-    assert "Traceback" not in text and "KeyboardInterrupt" not in text
-    lines = text.strip().splitlines()
-    assert len(lines) == 1 and "interrupted;" in lines[0] and "rerun to resume" in lines[0]
-
-
-@pytest.mark.parametrize("kind", ["simulate", "import"])
-def test_sigterm_while_writing_leaves_no_partial_file(tmp_path: Path, kind: str) -> None:
-    out = tmp_path / "big.jsonl"
-    if kind == "simulate":
-        args = ["simulate", "--steps", "150000", "--landmarks", "50", "--out", str(out)]
-    else:  # a g2o file written by the test: a long chain of poses, one bearing each
-        g2o = tmp_path / "chain.g2o"
-        rows = [f"VERTEX_SE2 {i} {0.1 * i} 0 0" for i in range(60000)]
-        rows += ["VERTEX_XY 100000 0 5"]
-        rows += [f"EDGE_SE2 {i} {i + 1} 0.1 0 0 100 0 0 100 0 100" for i in range(59999)]
-        rows += [f"EDGE_BEARING_SE2_XY {i} 100000 1.0 400" for i in range(60000)]
-        g2o.write_text("\n".join(rows) + "\n")
-        args = ["import", "g2o", str(g2o), "--out", str(out)]
-    proc = subprocess.Popen([sys.executable, "-m", "bomgraph", *args], stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, env=ENV)
-    def partial() -> list[Path]:  # written beside the target under a unique name
-        return list(tmp_path.glob(".big.jsonl.*.partial"))
-
-    deadline = time.monotonic() + 120
-    while time.monotonic() < deadline and proc.poll() is None and not partial():
-        time.sleep(0.005)
-    if proc.poll() is not None:
-        pytest.fail(f"{kind} ended before it began writing: {proc.communicate()}")
-    proc.send_signal(signal.SIGTERM)
-    _, err = proc.communicate(timeout=60)
-    assert proc.returncode == 143, err
-    assert b"Traceback" not in err
-    assert not partial() and not out.exists()
 
 
 def test_run_checks_out_before_computing(tmp_path: Path, stream: Path) -> None:

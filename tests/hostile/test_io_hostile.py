@@ -8,7 +8,6 @@ Each test asserts the user-facing rule: a result, or exit 2 with one line
 
 from __future__ import annotations
 
-import gzip
 import json
 import os
 import signal
@@ -16,35 +15,21 @@ import stat
 import subprocess
 import sys
 import threading
-import time
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from hostile_helpers import (ENV, HEADER, MEMORY_LIMIT_BYTES, ROOT, bomgraph, no_traceback,
-                             one_error, snapshot, write_jsonl)
+from hostile_helpers import ENV, HEADER, ROOT, bomgraph, no_traceback, one_error, snapshot
 
 sys.path.insert(0, str(ROOT / "tests" / "datasets"))
 from dataset_excerpts import make_mrclam, write_g2o  # noqa: E402
 
-from bomgraph.estimate_file import read_estimate, write_estimate  # noqa: E402
+from bomgraph.estimate_file import write_estimate  # noqa: E402
 from bomgraph.mapper import Checkpoint, MapEstimate, RunResult  # noqa: E402
 from bomgraph.sim import SimConfig, simulate  # noqa: E402
 from bomgraph.stream import Step, Stream, StreamHeader, Truth  # noqa: E402
 from bomgraph.stream_file import write_stream  # noqa: E402
-
-
-@pytest.fixture(scope="module")
-def sim() -> Stream:
-    return simulate(SimConfig(n_steps=60), np.random.default_rng(0))
-
-
-@pytest.fixture()
-def work(tmp_path: Path, sim: Stream) -> Path:
-    """A folder holding ``s.jsonl`` (60 simulated steps)."""
-    write_stream(sim, tmp_path / "s.jsonl")
-    return tmp_path
 
 
 def _g2o(folder: Path, stream: Stream, name: str = "data.g2o", **kw) -> Path:
