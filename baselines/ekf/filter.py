@@ -263,6 +263,27 @@ class BearingEkf:
             P[3:, :3] = rm.T
         x[:3] = new_pose
 
+    def decay(self, idx: np.ndarray, factor: np.ndarray, noise_var: np.ndarray) -> None:
+        """A first-order Gauss-Markov step of scalar states, in place: ``x_i <- a_i x_i + n_i``
+        with independent ``n_i ~ N(0, q_i)``; ``P`` rows and columns ``i`` scaled by ``a_i``,
+        ``q_i`` added to the diagonal. ``O(n k)``.
+
+        Parameters
+        ----------
+        idx : int array of shape (k,), distinct
+        factor : array of shape (k,)
+            ``a_i``.
+        noise_var : array of shape (k,)
+            ``q_i``.
+        """
+        x, P = self.kf.x, self.kf.P
+        a = np.asarray(factor, float)
+        x[idx] *= a
+        P[idx, :] *= a[:, None]
+        P[:, idx] *= a
+        P[idx, idx] += noise_var
+        self.nullspace[idx] *= a[:, None]
+
     def update(self, z_rad: np.ndarray, model: BearingModel,
                var_rad2: np.ndarray | None = None, iterations: int = 1,
                model_iterate: BearingModel | None = None,
