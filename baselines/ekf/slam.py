@@ -75,9 +75,11 @@ class EkfSlam:
         self._sizes: dict[tuple[str, int], int] = {}
         self._offset: dict[tuple[str, int], int] = {}
         self._last_t: int | None = None
-        self._pose_t: list[int] = []
-        self._poses: list[np.ndarray] = []
-        self._pose_covs: list[np.ndarray] = []
+        # the filtered trajectory, in buffers that double when full
+        self._n_poses = 0
+        self._pose_t = np.zeros(64, np.int64)
+        self._poses = np.zeros((64, 3))
+        self._pose_covs = np.zeros((64, 3, 3))
         self.n_gated = 0
         self.n_updates = 0
         self.n_failures = 0
@@ -161,11 +163,17 @@ class EkfSlam:
                 groups.append((np.flatnonzero(sel), np.concatenate(blocks, 1), fn))
         geo = 3 + np.array([2, 4])             # columns of the geometric part, per kind
         memo: dict[str, Any] = {}
-        if at is not None:
-            memo.update(x=at[0].copy(), h=at[1], parts=at[2])
+        filt = self.filter
+        if at is not None:       # at the filter's own state (version), else at a copy of x
+            if at[0] is filt.x:
+                memo.update(version=filt.version, x=None, h=at[1], parts=at[2])
+            else:
+                memo.update(version=None, x=at[0].copy(), h=at[1], parts=at[2])
 
         def both(x: np.ndarray) -> tuple[np.ndarray, JacobianRows]:
-            if "x" in memo and np.array_equal(memo["x"], x):
+            own = x is filt.x
+            if "h" in memo and ((memo["version"] == filt.version) if own and memo["x"] is None
+                                else (memo["x"] is not None and np.array_equal(memo["x"], x))):
                 return memo["h"], memo["parts"]
             h = np.empty(k)
             parts = []
@@ -179,7 +187,10 @@ class EkfSlam:
                     h[rows] += v[:, s]
                     j = np.concatenate([j, np.ones((len(j), 1))], 1)
                 parts.append((rows, cols, j))
-            memo.update(x=x.copy(), h=h, parts=parts)
+            if own:
+                memo.update(version=filt.version, x=None, h=h, parts=parts)
+            else:
+                memo.update(version=None, x=x.copy(), h=h, parts=parts)
             return h, parts
 
         return both
@@ -416,9 +427,15 @@ class EkfSlam:
             in_state = self._update_mapped(ids, z)
             self._new_sightings(step.t, ids[~in_state], z[~in_state])
         self._last_t = step.t
-        self._pose_t.append(step.t)
-        self._poses.append(self.filter.x[:3].copy())
-        self._pose_covs.append(self.filter.P[:3, :3].copy())
+        n = self._n_poses
+        if n == len(self._pose_t):
+            self._pose_t = np.concatenate([self._pose_t, np.zeros_like(self._pose_t)])
+            self._poses = np.concatenate([self._poses, np.zeros_like(self._poses)])
+            self._pose_covs = np.concatenate([self._pose_covs, np.zeros_like(self._pose_covs)])
+        self._pose_t[n] = step.t
+        self._poses[n] = self.filter.x[:3]
+        self._pose_covs[n] = self.filter.P[:3, :3]
+        self._n_poses = n + 1
 
     def _new_sightings(self, t: int, ids: np.ndarray, z: np.ndarray) -> None:
         raise NotImplementedError
@@ -441,13 +458,14 @@ class EkfSlam:
                     restarted=self.n_restarted)
         if self.n_failures:
             info.update(update_failures=self.n_failures, last_failure=self.last_failure)
-        if not self._poses:
+        n = self._n_poses
+        if not n:
             return MapEstimate.empty(reason="no steps yet", **info)
         if ids.size == 0:
             info["reason"] = "no landmark initialised yet"
-        return MapEstimate(ids[order], xy[order], pose_t=np.array(self._pose_t),
-                           poses=np.array(self._poses), landmark_cov=cov[order],
-                           pose_cov=np.array(self._pose_covs), info=info)
+        return MapEstimate(ids[order], xy[order], pose_t=self._pose_t[:n],
+                           poses=self._poses[:n], landmark_cov=cov[order],
+                           pose_cov=self._pose_covs[:n], info=info)
 
 
 __all__ = ["EkfSlam"]
