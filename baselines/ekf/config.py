@@ -48,6 +48,12 @@ class BearingEkfConfig(Presets):
     restart_after_gated : an inverse-depth feature whose bearings fail the gate this many
         times in a row is dropped and started again from the current sighting (its first
         bearing was an outlier); counted in ``info["restarted"]``. None: never.
+    correlated_fraction : ``c`` in ``[0, 1)``, the share of the bearing variance that is a
+        per-landmark error correlated between sightings from similar viewing geometry
+        (:mod:`baselines.ekf.coloured`: a Gauss-Markov state per landmark, augmented into the
+        filter); 0: white bearing errors (the paper's simulation).
+    correlation_length_rad : ``L``, the change of viewing geometry (parallax at the landmark
+        plus the robot's turn, rad) over which that correlation falls by ``e``.
     """
 
     gate_probability: float = 0.999
@@ -58,8 +64,16 @@ class BearingEkfConfig(Presets):
     iterations: int = 1
     restart_after_gated: int | None = None
     max_state: int = 4000
+    correlated_fraction: float = 0.0
+    correlation_length_rad: float = 0.05
 
     def __post_init__(self) -> None:
+        if not (math.isfinite(self.correlated_fraction) and 0 <= self.correlated_fraction < 1):
+            raise ConfigError(f"correlated_fraction must be in [0, 1) (0: white bearing "
+                              f"errors), got {self.correlated_fraction}")
+        if not (math.isfinite(self.correlation_length_rad) and self.correlation_length_rad > 0):
+            raise ConfigError(f"correlation_length_rad must be a finite number > 0, got "
+                              f"{self.correlation_length_rad}")
         if not 0 < self.gate_probability <= 1:
             raise ConfigError(f"gate_probability must be in (0, 1] (1 disables the gate), got "
                               f"{self.gate_probability}")
@@ -121,6 +135,9 @@ class EkfConfig(BearingEkfConfig):
             raise ConfigError("inconsistent_parallax_rad must be in (0, pi)")
         if self.max_pending_steps < 1:
             raise ConfigError(f"max_pending_steps must be >= 1, got {self.max_pending_steps}")
+        if self.correlated_fraction > 0 and self.candidates == "clones":
+            raise ConfigError("correlated_fraction > 0 needs candidates='inverse-depth' (the "
+                              "clone candidates keep their bearings outside the filter)")
         if self.candidates not in ("clones", "inverse-depth"):
             raise ConfigError(f"candidates must be 'clones' (Bailey: pose clones, the bearings "
                               f"wait) or 'inverse-depth' (updated at once, made Euclidean when "

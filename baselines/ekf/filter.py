@@ -122,7 +122,10 @@ class BearingEkf:
         self.kf = ExtendedKalmanFilter(dim_x=3, dim_z=1)
         self.kf.R = np.eye(1) * self.bearing_sigma_rad ** 2
         self._is_angle = np.array([False, False, True])
+        self._angle_index = np.array([2])
         self.observability_constrained = bool(observability_constrained)
+        #: incremented by every change of ``x`` or ``P`` (models memoise on it)
+        self.version = 0
         # the unobservable directions of the linearised system (global translation and
         # rotation), one row per state: [[1, 0, -y], [0, 1, x], [0, 0, 1]] for a pose
         self.nullspace = np.array([[1.0, 0.0, -pose0[1]], [0.0, 1.0, pose0[0]], [0, 0, 1.0]])
@@ -146,6 +149,7 @@ class BearingEkf:
 
     # -- structure --------------------------------------------------------------------------
     def _set_state(self, x: np.ndarray, P: np.ndarray) -> None:  # noqa: N803
+        self.version += 1
         self.kf.dim_x = len(x)
         self.kf.x = x
         self.kf.P = P
@@ -210,6 +214,7 @@ class BearingEkf:
         new_p[n:, n:] = 0.5 * (blk + blk.T)
         angle = np.asarray(is_angle, bool)
         self._is_angle = np.concatenate([self._is_angle, angle])
+        self._angle_index = np.flatnonzero(self._is_angle)
         self.nullspace = np.concatenate([self.nullspace, jac @ self.nullspace[idx]])
         new_x = np.concatenate([self.kf.x, np.asarray(value, float)])
         new_x[n:][angle] = wrap_angle(new_x[n:][angle])
@@ -223,6 +228,7 @@ class BearingEkf:
         if np.any(~keep[:3]):
             raise ConfigError("BearingEkf.remove: the robot pose (states 0..2) cannot be removed")
         self._is_angle = self._is_angle[keep]
+        self._angle_index = np.flatnonzero(self._is_angle)
         self.nullspace = self.nullspace[keep]
         k = np.flatnonzero(keep)
         self._set_state(self.kf.x[k], self.kf.P[k[:, None], k])
@@ -251,17 +257,41 @@ class BearingEkf:
             q = (g_odom * np.asarray(odom_sigma, float) ** 2) @ g_odom.T
             rr = f_pose @ P[:3, :3] @ f_pose.T + q
             rm = f_pose @ P[:3, 3:]
-        if not (np.all(np.isfinite(rr)) and np.all(np.isfinite(rm))
-                and np.all(np.isfinite(new_pose))):
+            # one check: a sum is finite only if every term is (inf - inf is nan)
+            finite = math.isfinite(rr.sum() + rm.sum() + new_pose.sum())
+        if not finite:
             raise FilterNumericalError(
                 f"the predicted pose or its covariance overflows (odometry {odom.tolist()}, "
                 f"sigma {np.asarray(odom_sigma, float).tolist()}): the odometry or its sigma "
                 f"is beyond what the filter can represent")
+        self.version += 1
         P[:3, :3] = 0.5 * (rr + rr.T)
         if len(x) > 3:
             P[:3, 3:] = rm
             P[3:, :3] = rm.T
         x[:3] = new_pose
+
+    def decay(self, idx: np.ndarray, factor: np.ndarray, noise_var: np.ndarray) -> None:
+        """A first-order Gauss-Markov step of scalar states, in place: ``x_i <- a_i x_i + n_i``
+        with independent ``n_i ~ N(0, q_i)``; ``P`` rows and columns ``i`` scaled by ``a_i``,
+        ``q_i`` added to the diagonal. ``O(n k)``.
+
+        Parameters
+        ----------
+        idx : int array of shape (k,), distinct
+        factor : array of shape (k,)
+            ``a_i``.
+        noise_var : array of shape (k,)
+            ``q_i``.
+        """
+        x, P = self.kf.x, self.kf.P
+        self.version += 1
+        a = np.asarray(factor, float)
+        x[idx] *= a
+        P[idx, :] *= a[:, None]
+        P[:, idx] *= a
+        P[idx, idx] += noise_var
+        self.nullspace[idx] *= a[:, None]
 
     def update(self, z_rad: np.ndarray, model: BearingModel,
                var_rad2: np.ndarray | None = None, iterations: int = 1,
@@ -322,13 +352,16 @@ class BearingEkf:
         chol, info = _potrf(s, lower=1)                           # S = L L^T
         if info == 0:
             l_inv, info = _trtri(chol, lower=1)
-        if info != 0 or not (np.all(np.isfinite(chol)) and np.all(np.isfinite(hp))
-                             and np.all(np.isfinite(y))):
+        with np.errstate(over="ignore", invalid="ignore"):
+            finite = info == 0 and math.isfinite(chol.sum() + hp.sum() + y.sum())
+        if not finite:
             raise FilterNumericalError("the innovation covariance of the bearing update is not "
                                        "positive definite or not finite (the update is skipped)")
+        self.version += 1
         w_t = l_inv @ hp                                          # L^-1 H P = W^T, (k, n)
         x0 += (l_inv @ y) @ w_t                                   # x + K y, K = W L^-1
-        x0[self._is_angle] = wrap_angle(x0[self._is_angle])
+        angles = self._angle_index
+        x0[angles] = wrap_angle(x0[angles])
         P -= w_t.T @ w_t                                          # P - K S K^T (symmetric)
         kf.S, kf.y = s, y
 

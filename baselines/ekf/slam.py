@@ -19,13 +19,14 @@ from bomgraph.errors import ConfigError
 from bomgraph.mapper import MapEstimate
 from bomgraph.stream import Step, StreamHeader
 
+from .coloured import ColouredBearingError, ray_directions
 from .config import BearingEkfConfig
 from .filter import BearingEkf, BearingModel, FilterNumericalError, JacobianRows
 from .models import (bearing_and_jacobian, invdepth_bearing_and_jacobian, invdepth_to_xy,
                      second_order_variance)
 
-_LM, _CLONE, _IDP = "lm", "clone", "idp"
-_SIZE = {_LM: 2, _CLONE: 3, _IDP: 4}
+_LM, _CLONE, _IDP, _BIAS = "lm", "clone", "idp", "bias"
+_SIZE = {_LM: 2, _CLONE: 3, _IDP: 4, _BIAS: 1}
 
 
 def _take_rows(parts: JacobianRows, keep: np.ndarray) -> JacobianRows:
@@ -74,9 +75,11 @@ class EkfSlam:
         self._sizes: dict[tuple[str, int], int] = {}
         self._offset: dict[tuple[str, int], int] = {}
         self._last_t: int | None = None
-        self._pose_t: list[int] = []
-        self._poses: list[np.ndarray] = []
-        self._pose_covs: list[np.ndarray] = []
+        # the filtered trajectory, in buffers that double when full
+        self._n_poses = 0
+        self._pose_t = np.zeros(64, np.int64)
+        self._poses = np.zeros((64, 3))
+        self._pose_covs = np.zeros((64, 3, 3))
         self.n_gated = 0
         self.n_updates = 0
         self.n_failures = 0
@@ -84,6 +87,11 @@ class EkfSlam:
         self._t = -1
         self.n_nonlinear = 0
         self._max_nonlin = float(config.max_bearing_nonlinearity)
+        # the per-landmark coloured bearing error (off in the paper's setup)
+        self._coloured = ColouredBearingError(header.bearing_sigma_rad,
+                                              float(config.correlated_fraction),
+                                              float(config.correlation_length_rad))
+        self._white_sigma = self._coloured.white_sigma_rad
 
     @staticmethod
     def _uses_inverse_depth(config: BearingEkfConfig) -> bool:
@@ -129,7 +137,8 @@ class EkfSlam:
     # -- measurement model ------------------------------------------------------------------
     def _model(self, pose_off: np.ndarray, kinds: np.ndarray, offsets: np.ndarray,
                constrained: bool = True,
-               at: tuple[np.ndarray, np.ndarray, JacobianRows] | None = None) -> BearingModel:
+               at: tuple[np.ndarray, np.ndarray, JacobianRows] | None = None,
+               bias_off: np.ndarray | None = None) -> BearingModel:
         """The bearing model for :meth:`BearingEkf.update`, memoised on ``x``.
 
         Bearings are taken from the poses at ``pose_off`` (0: the robot, else a clone) to the
@@ -138,32 +147,50 @@ class EkfSlam:
         blocks ``[(rows (m,), columns (m, s), values (m, s))]``, one per kind
         (:data:`~baselines.ekf.filter.JacobianRows`; observability-constrained when
         ``constrained``). ``at = (x, h, rows)`` seeds the memo with the model's values at
-        ``x`` (already computed).
+        ``x`` (already computed). ``bias_off`` (k,): the state of each bearing's coloured error
+        (:mod:`baselines.ekf.coloured`), added to ``h`` with a Jacobian entry of 1, appended
+        as the last column of each row (it is outside the OC-EKF nullspace).
         """
         k = len(offsets)
         groups = []
         for size, fn in ((2, bearing_and_jacobian), (4, invdepth_bearing_and_jacobian)):
             sel = kinds == size
             if sel.any():
-                cols = np.concatenate([self._block_index(pose_off[sel], 3),
-                                       self._block_index(offsets[sel], size)], 1)
-                groups.append((np.flatnonzero(sel), cols, fn))
+                blocks = [self._block_index(pose_off[sel], 3),
+                          self._block_index(offsets[sel], size)]
+                if bias_off is not None:
+                    blocks.append(np.asarray(bias_off, np.int64)[sel, None])
+                groups.append((np.flatnonzero(sel), np.concatenate(blocks, 1), fn))
+        geo = 3 + np.array([2, 4])             # columns of the geometric part, per kind
         memo: dict[str, Any] = {}
-        if at is not None:
-            memo.update(x=at[0].copy(), h=at[1], parts=at[2])
+        filt = self.filter
+        if at is not None:       # at the filter's own state (version), else at a copy of x
+            if at[0] is filt.x:
+                memo.update(version=filt.version, x=None, h=at[1], parts=at[2])
+            else:
+                memo.update(version=None, x=at[0].copy(), h=at[1], parts=at[2])
 
         def both(x: np.ndarray) -> tuple[np.ndarray, JacobianRows]:
-            if "x" in memo and np.array_equal(memo["x"], x):
+            own = x is filt.x
+            if "h" in memo and ((memo["version"] == filt.version) if own and memo["x"] is None
+                                else (memo["x"] is not None and np.array_equal(memo["x"], x))):
                 return memo["h"], memo["parts"]
             h = np.empty(k)
             parts = []
             for rows, cols, fn in groups:
                 v = x[cols]
-                h[rows], j = fn(v[:, :3], v[:, 3:])
+                s = geo[0] if fn is bearing_and_jacobian else geo[1]
+                h[rows], j = fn(v[:, :3], v[:, 3:s])
                 if constrained:
-                    j = self._constrain(j, cols)
+                    j = self._constrain(j, cols[:, :s])
+                if bias_off is not None:
+                    h[rows] += v[:, s]
+                    j = np.concatenate([j, np.ones((len(j), 1))], 1)
                 parts.append((rows, cols, j))
-            memo.update(x=x.copy(), h=h, parts=parts)
+            if own:
+                memo.update(version=filt.version, x=None, h=h, parts=parts)
+            else:
+                memo.update(version=None, x=x.copy(), h=h, parts=parts)
             return h, parts
 
         return both
@@ -225,7 +252,7 @@ class EkfSlam:
         return out
 
     def _gated_update(self, pose_off: np.ndarray, kinds: np.ndarray, offsets: np.ndarray,
-                      z: np.ndarray) -> np.ndarray:
+                      z: np.ndarray, bias_off: np.ndarray | None = None) -> np.ndarray:
         """Gate each bearing on its own NIS, then one batched filterpy update with the rest.
 
         The NIS of bearing ``i`` is ``y_i^2 / (H_i P H_i^T + var_i)`` with the wrapped
@@ -233,24 +260,27 @@ class EkfSlam:
         :func:`~baselines.ekf.models.second_order_variance`; it is compared with the
         chi-square 1-dof quantile. Bearings past ``max_bearing_nonlinearity`` are not used.
         With ``iterations > 1`` the iterates of the iterated update use the model's own
-        Jacobians and only the last step the observability-constrained ones.
+        Jacobians and only the last step the observability-constrained ones. ``bias_off``:
+        the states of the bearings' coloured errors (:meth:`_model`); the white part's
+        variance is then ``(1 - c) sigma^2``.
 
         Returns
         -------
         ndarray of shape (k,), bool
             The bearings that failed the gate.
         """
-        model = self._model(pose_off, kinds, offsets)
+        model = self._model(pose_off, kinds, offsets, bias_off=bias_off)
         x, P = self.filter.x, self.filter.P
         h, parts = model(x)
-        var = np.full(len(z), self.filter.bearing_sigma_rad ** 2)
+        var = np.empty(len(z))
         index = np.zeros(len(z))
         hph = np.zeros(len(z))
         for rows, cols, j in parts:
             block = P[cols[:, :, None], cols[:, None, :]]          # (m, s, s)
             hph[rows] = np.einsum("mi,mij,mj->m", j, block, j)
-            var[rows], index[rows] = second_order_variance(x[cols], block,
-                                                           self.filter.bearing_sigma_rad)
+            s = cols.shape[1] - (bias_off is not None)             # the geometric part
+            var[rows], index[rows] = second_order_variance(x[cols[:, :s]], block[:, :s, :s],
+                                                           self._white_sigma)
         usable = index <= self._max_nonlin
         innovation = np.asarray(angle_residual(z, h))
         gated = (innovation ** 2 / (hph + var) > self._gate) & usable
@@ -258,12 +288,15 @@ class EkfSlam:
         self.n_gated += int(np.count_nonzero(gated))
         keep = usable & ~gated
         if keep.any():
+            bias_kept = None if bias_off is None else bias_off[keep]
             if keep.all():
                 kept = model
             else:                           # the kept rows, already evaluated at this x
                 kept = self._model(pose_off[keep], kinds[keep], offsets[keep],
-                                   at=(x, h[keep], _take_rows(parts, keep)))
-            plain = (self._model(pose_off[keep], kinds[keep], offsets[keep], constrained=False)
+                                   at=(x, h[keep], _take_rows(parts, keep)),
+                                   bias_off=bias_kept)
+            plain = (self._model(pose_off[keep], kinds[keep], offsets[keep], constrained=False,
+                                 bias_off=bias_kept)
                      if self._iterations > 1 else None)
             try:
                 self.filter.update(z[keep], kept, var[keep], self._iterations, plain,
@@ -281,14 +314,24 @@ class EkfSlam:
         ``[x, y, psi + z, rho_init]`` with ``rho ~ N(rho_init, rho_sigma^2)``."""
         if ids.size:
             m = ids.size
-            self.filter.check_room(4 * m, f"{m} new landmark features")
+            col = self._coloured
+            self.filter.check_room((5 if col.enabled else 4) * m, f"{m} new landmark features")
             x = self.filter.x
             value = np.column_stack([np.broadcast_to(x[:2], (m, 2)), wrap_angle(x[2] + z),
                                      np.full(m, self.rho_init)]).ravel()
             g = np.tile(np.vstack([np.eye(3), np.zeros((1, 3))]), (m, 1))      # (4m, 3)
-            noise = np.tile([0.0, 0.0, self.filter.bearing_sigma_rad ** 2,
-                             self.rho_sigma ** 2], m)                           # diagonal
-            self._add_blocks([(_IDP, int(i)) for i in ids], value, np.arange(3), g, noise)
+            noise = np.tile([0.0, 0.0, self._white_sigma ** 2, self.rho_sigma ** 2], m)
+            idx = np.arange(3)
+            if col.enabled:         # theta = psi + z - b: the coloured error comes first
+                keys = [(_BIAS, int(i)) for i in ids]
+                self._add_blocks(keys, np.zeros(m), np.zeros(0, np.int64), np.zeros((m, 0)),
+                                 np.full(m, col.bias_var_rad2))
+                bias = np.array([self._offset[k] for k in keys], np.int64)
+                idx = np.concatenate([idx, bias])
+                g = np.concatenate([g, np.zeros((4 * m, m))], 1)
+                g[4 * np.arange(m) + 2, 3 + np.arange(m)] = -1.0
+                col.remember(ids.tolist(), value.reshape(m, 4)[:, 2], float(x[2]))
+            self._add_blocks([(_IDP, int(i)) for i in ids], value, idx, g, noise)
 
     def _idp_blocks(self) -> tuple[list[tuple[str, int]], np.ndarray]:
         keys = [k for k in self._sizes if k[0] == _IDP]
@@ -331,8 +374,9 @@ class EkfSlam:
             in_state[list(rows)] = True
             kinds = np.array([_SIZE[k] for k in kind_names], np.int64)
             offsets = np.array(offs, np.int64)
+            bias = self._decay_coloured(ids[in_state].tolist(), kinds, offsets)
             gated = self._gated_update(np.zeros(len(found), np.int64), kinds, offsets,
-                                       z[in_state])
+                                       z[in_state], bias)
             # an inverse-depth feature gated again and again was started from an outlier:
             # drop it; the current sighting starts it again (as a new sighting)
             restart = []
@@ -343,12 +387,28 @@ class EkfSlam:
                     if run_length >= self._restart_after:
                         restart.append(i)
             if restart:
-                self._remove_blocks([(_IDP, i) for i in restart])
+                self._remove_blocks([(kind, i) for i in restart for kind in (_IDP, _BIAS)
+                                     if (kind, i) in self._sizes])
+                self._coloured.forget(restart)
                 for i in restart:
                     del self._gated_run[i]
                 in_state &= ~np.isin(ids, restart)
                 self.n_restarted += len(restart)
         return in_state
+
+    def _decay_coloured(self, ids: list[int], kinds: np.ndarray, offsets: np.ndarray
+                        ) -> np.ndarray | None:
+        """Propagate the coloured errors of the landmarks ``ids`` (blocks ``kinds``,
+        ``offsets``) to the current viewing geometry (:mod:`baselines.ekf.coloured`); returns
+        their state offsets (None when the model is off)."""
+        col = self._coloured
+        if not col.enabled:
+            return None
+        bias = np.array([self._offset[(_BIAS, i)] for i in ids], np.int64)
+        x = self.filter.x
+        a = col.factors(ids, ray_directions(x, kinds, offsets), float(x[2]))
+        self.filter.decay(bias, a, (1.0 - a * a) * col.bias_var_rad2)
+        return bias
 
     # -- the Mapper protocol ----------------------------------------------------------------
     def step(self, step: Step) -> None:
@@ -367,9 +427,15 @@ class EkfSlam:
             in_state = self._update_mapped(ids, z)
             self._new_sightings(step.t, ids[~in_state], z[~in_state])
         self._last_t = step.t
-        self._pose_t.append(step.t)
-        self._poses.append(self.filter.x[:3].copy())
-        self._pose_covs.append(self.filter.P[:3, :3].copy())
+        n = self._n_poses
+        if n == len(self._pose_t):
+            self._pose_t = np.concatenate([self._pose_t, np.zeros_like(self._pose_t)])
+            self._poses = np.concatenate([self._poses, np.zeros_like(self._poses)])
+            self._pose_covs = np.concatenate([self._pose_covs, np.zeros_like(self._pose_covs)])
+        self._pose_t[n] = step.t
+        self._poses[n] = self.filter.x[:3]
+        self._pose_covs[n] = self.filter.P[:3, :3]
+        self._n_poses = n + 1
 
     def _new_sightings(self, t: int, ids: np.ndarray, z: np.ndarray) -> None:
         raise NotImplementedError
@@ -392,13 +458,14 @@ class EkfSlam:
                     restarted=self.n_restarted)
         if self.n_failures:
             info.update(update_failures=self.n_failures, last_failure=self.last_failure)
-        if not self._poses:
+        n = self._n_poses
+        if not n:
             return MapEstimate.empty(reason="no steps yet", **info)
         if ids.size == 0:
             info["reason"] = "no landmark initialised yet"
-        return MapEstimate(ids[order], xy[order], pose_t=np.array(self._pose_t),
-                           poses=np.array(self._poses), landmark_cov=cov[order],
-                           pose_cov=np.array(self._pose_covs), info=info)
+        return MapEstimate(ids[order], xy[order], pose_t=self._pose_t[:n],
+                           poses=self._poses[:n], landmark_cov=cov[order],
+                           pose_cov=self._pose_covs[:n], info=info)
 
 
 __all__ = ["EkfSlam"]
