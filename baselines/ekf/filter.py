@@ -345,10 +345,30 @@ class BearingEkf:
             y = np.asarray(angle_residual(z, h + hu @ self._difference(x0, xi)[cols]))
         else:
             y = np.asarray(angle_residual(z, h)) if innovation is None else innovation
+        self.update_compact(cols, hu, y, var)
+
+    def update_compact(self, cols: np.ndarray, hu: np.ndarray, y: np.ndarray,
+                       var: np.ndarray) -> None:
+        """The EKF update with a Jacobian given by the states it touches, in place.
+
+        Parameters
+        ----------
+        cols : int array of shape (u,), sorted, distinct
+            The states ``U`` the bearings touch.
+        hu : array of shape (k, u)
+            ``H[:, U]`` (``H`` is zero elsewhere).
+        y : array of shape (k,)
+            The wrapped innovations ``z - h(x)``.
+        var : array of shape (k,)
+            The bearing variances (``R = diag(var)``).
+        """
+        kf = self.kf
+        x0, P = kf.x, kf.P
+        k = len(y)
         hp = hu @ P[cols]                                         # H P = (P H^T)^T, (k, n)
         s = hp[:, cols] @ hu.T
         s = 0.5 * (s + s.T)
-        s[np.diag_indices(k)] += var                              # S = H P H^T + R
+        s.flat[::k + 1] += var                                    # S = H P H^T + R
         chol, info = _potrf(s, lower=1)                           # S = L L^T
         if info == 0:
             l_inv, info = _trtri(chol, lower=1)

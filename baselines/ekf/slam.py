@@ -21,12 +21,13 @@ from bomgraph.stream import Step, StreamHeader
 
 from .coloured import ColouredBearingError, ray_directions
 from .config import BearingEkfConfig
-from .filter import BearingEkf, BearingModel, FilterNumericalError, JacobianRows
+from .filter import BearingEkf, BearingModel, FilterNumericalError, JacobianRows, _compact
 from .models import (bearing_and_jacobian, invdepth_bearing_and_jacobian, invdepth_to_xy,
                      second_order_variance)
 
 _LM, _CLONE, _IDP, _BIAS = "lm", "clone", "idp", "bias"
 _SIZE = {_LM: 2, _CLONE: 3, _IDP: 4, _BIAS: 1}
+_RANGE = np.arange(4)
 
 
 def _take_rows(parts: JacobianRows, keep: np.ndarray) -> JacobianRows:
@@ -269,6 +270,8 @@ class EkfSlam:
         ndarray of shape (k,), bool
             The bearings that failed the gate.
         """
+        if bias_off is None and self._iterations == 1:
+            return self._plain_gated_update(pose_off, kinds, offsets, z)
         model = self._model(pose_off, kinds, offsets, bias_off=bias_off)
         x, P = self.filter.x, self.filter.P
         h, parts = model(x)
@@ -306,6 +309,64 @@ class EkfSlam:
                 self.last_failure = f"step {self._t}: {exc}"
                 return np.zeros(len(z), bool)
             self.n_updates += int(np.count_nonzero(keep))
+        return gated
+
+    def _plain_gated_update(self, pose_off: np.ndarray, kinds: np.ndarray,
+                            offsets: np.ndarray, z: np.ndarray) -> np.ndarray:
+        """:meth:`_gated_update` for one EKF update (``iterations = 1``) of white bearings:
+        the same arithmetic in one pass, without the model object (each kind's rows
+        predicted, constrained, gated and compacted in a few vectorised calls; the update on
+        the touched states, :meth:`BearingEkf.update_compact`)."""
+        filt = self.filter
+        x, P = filt.x, filt.P
+        k = len(z)
+        h = np.empty(k)
+        var = np.empty(k)
+        index = np.empty(k)
+        hph = np.empty(k)
+        parts = []
+        for size, fn in ((2, bearing_and_jacobian), (4, invdepth_bearing_and_jacobian)):
+            sel = kinds == size
+            n_sel = int(np.count_nonzero(sel))
+            if n_sel == 0:
+                continue
+            if n_sel == k:
+                rows, po, off = np.arange(k), pose_off, offsets
+            else:
+                rows = np.flatnonzero(sel)
+                po, off = pose_off[sel], offsets[sel]
+            cols = np.empty((n_sel, 3 + size), np.int64)
+            cols[:, :3] = po[:, None] + _RANGE[:3]
+            cols[:, 3:] = off[:, None] + _RANGE[:size]
+            v = x[cols]
+            h[rows], j = fn(v[:, :3], v[:, 3:])
+            j = self._constrain(j, cols)
+            block = P[cols[:, :, None], cols[:, None, :]]          # (m, s, s)
+            hph[rows] = np.einsum("mi,mij,mj->m", j, block, j)
+            var[rows], index[rows] = second_order_variance(v, block, self._white_sigma)
+            parts.append((rows, cols, j))
+        usable = index <= self._max_nonlin
+        innovation = np.asarray(angle_residual(z, h))
+        gated = (innovation ** 2 / (hph + var) > self._gate) & usable
+        n_unusable = k - int(np.count_nonzero(usable))
+        n_gated = int(np.count_nonzero(gated))
+        self.n_nonlinear += n_unusable
+        self.n_gated += n_gated
+        if n_unusable + n_gated == k:
+            return gated
+        if n_unusable + n_gated:
+            keep = usable & ~gated
+            parts = _take_rows(parts, keep)
+            innovation, var = innovation[keep], var[keep]
+        n_keep = len(innovation)
+        cols, hu = _compact(parts, n_keep)
+        try:
+            filt.update_compact(cols, hu, innovation, var)
+        except FilterNumericalError as exc:             # the state is as before the update
+            self.n_failures += 1
+            self.last_failure = f"step {self._t}: {exc}"
+            return np.zeros(k, bool)
+        self.n_updates += n_keep
         return gated
 
     # -- inverse-depth features ---------------------------------------------------------------
