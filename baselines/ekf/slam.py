@@ -272,6 +272,13 @@ class EkfSlam:
         """
         if bias_off is None and self._iterations == 1:
             return self._plain_gated_update(pose_off, kinds, offsets, z)
+        return self._model_gated_update(pose_off, kinds, offsets, z, bias_off)
+
+    def _model_gated_update(self, pose_off: np.ndarray, kinds: np.ndarray,
+                            offsets: np.ndarray, z: np.ndarray,
+                            bias_off: np.ndarray | None) -> np.ndarray:
+        """:meth:`_gated_update` through the bearing model (:meth:`_model`) and
+        :meth:`BearingEkf.update`: any ``iterations``, coloured errors."""
         model = self._model(pose_off, kinds, offsets, bias_off=bias_off)
         x, P = self.filter.x, self.filter.P
         h, parts = model(x)

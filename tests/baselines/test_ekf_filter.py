@@ -19,7 +19,8 @@ from baselines.ekf.models import bearing_and_jacobian, motion_jacobians
 from bomgraph.angles import angle_residual
 from bomgraph.errors import ConfigError
 from bomgraph.geometry import compose
-from bomgraph.sim import RunSpec, SimConfig, simulate, simulate_run
+from bomgraph.mapper import create_mapper, run
+from bomgraph.sim import RunSpec, SimConfig, paper_design, simulate, simulate_run
 
 SMALL = SimConfig(n_landmarks=20, n_steps=80)
 
@@ -272,3 +273,32 @@ def test_iterated_update_of_a_mapper_run_is_filterpys_where_a_residual_passes_pi
     for st in stream.steps[:62]:
         m.step(st)
     assert seen
+
+
+@pytest.mark.parametrize("method", ["ekf", "ekf-invdepth"])
+def test_one_pass_gated_update_is_the_model_path_bit_for_bit(method: str) -> None:
+    """The one-pass gated update of the paper presets (``_plain_gated_update``) gives the
+    same maps, bit for bit, as the general path through the bearing model and
+    ``BearingEkf.update``."""
+    stream = simulate_run(paper_design(0)[1], SimConfig(n_steps=120))
+    results = []
+    for one_pass in (True, False):
+        mapper = create_mapper(method, stream.header, start_pose=tuple(stream.truth.poses[0]))
+        calls = []
+        if one_pass:
+            plain = mapper._plain_gated_update
+            mapper._plain_gated_update = lambda *a: calls.append(1) or plain(*a)
+        else:
+            mapper._plain_gated_update = (
+                lambda po, k, o, z: calls.append(1) or mapper._model_gated_update(po, k, o, z,
+                                                                                  None))
+        est = run(mapper, stream.steps, checkpoint_every=10).final
+        assert len(calls) > 100                       # the path under test was taken
+        results.append((est, mapper.filter.P.copy(), mapper.n_gated, mapper.n_updates))
+    (a, pa, ga, ua), (b, pb, gb, ub) = results
+    assert a.landmark_ids.size > 10
+    np.testing.assert_array_equal(a.landmark_ids, b.landmark_ids)
+    np.testing.assert_array_equal(a.landmarks_xy, b.landmarks_xy)
+    np.testing.assert_array_equal(a.poses, b.poses)
+    np.testing.assert_array_equal(pa, pb)
+    assert (ga, ua) == (gb, ub)
