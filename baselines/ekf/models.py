@@ -72,8 +72,12 @@ def bearing_and_jacobian(poses: np.ndarray, points_xy: np.ndarray) -> tuple[np.n
     d = points_xy - poses[:, :2]
     q = np.einsum("ki,ki->k", d, d)
     b = wrap_angle(np.arctan2(d[:, 1], d[:, 0]) - poses[:, 2])
-    gx, gy = -d[:, 1] / q, d[:, 0] / q
-    jac = np.column_stack([-gx, -gy, -np.ones(len(q)), gx, gy])
+    jac = np.empty((len(q), 5))
+    gx = np.divide(-d[:, 1], q, out=jac[:, 3])
+    gy = np.divide(d[:, 0], q, out=jac[:, 4])
+    np.negative(gx, out=jac[:, 0])
+    np.negative(gy, out=jac[:, 1])
+    jac[:, 2] = -1.0
     return np.asarray(b).reshape(-1), jac
 
 
@@ -354,7 +358,7 @@ def second_order_variance(values: np.ndarray, block: np.ndarray, bearing_sigma_r
         var += 0.5 * (h_rr * block[:, 6, 6]) ** 2
         return var, np.zeros(m)
     d2, c_rr, c_pp, c_rp = ray_covariance(values, block)
-    prod = np.clip(c_rr * c_pp, 0, None)
+    prod = np.maximum(c_rr * c_pp, 0.0)
     var += (prod + c_rp ** 2) / (d2 * d2)
     return var, prod ** 0.25 / np.sqrt(d2)
 

@@ -75,6 +75,7 @@ class EkfSlam:
         self._gated_run: dict[int, int] = {}          # inverse-depth feature -> gated in a row
         self._sizes: dict[tuple[str, int], int] = {}
         self._offset: dict[tuple[str, int], int] = {}
+        self._mapped: dict[int, tuple[str, int]] = {}
         self._last_t: int | None = None
         # the filtered trajectory, in buffers that double when full
         self._n_poses = 0
@@ -102,8 +103,11 @@ class EkfSlam:
     def _rebuild(self) -> None:
         off = 3
         self._offset = {}
+        self._mapped = {}         # landmark id -> (kind, offset) of its landmark or feature
         for key, size in self._sizes.items():
             self._offset[key] = off
+            if key[0] == _LM or key[0] == _IDP:
+                self._mapped[key[1]] = (key[0], off)
             off += size
         if off != self.filter.dim:
             raise RuntimeError("internal: state layout and filter size disagree")
@@ -222,7 +226,7 @@ class EkfSlam:
         """
         N = self.filter.nullspace
         out = jac.copy()
-        project = np.ones(len(jac), bool)
+        project = None
         if jac.shape[1] == 5:
             hx, hy = jac[:, 3], jac[:, 4]                          # J u / |r|
             norm = np.sqrt(hy * hy + hx * hx)
@@ -240,6 +244,8 @@ class EkfSlam:
             out[ok, 4] = ux[ok] / length[ok]
             out[ok, 0:2] = -out[ok, 3:5]
             project = ~ok
+        if project is None:
+            project = np.ones(len(jac), bool)
         if project.any():
             ns = N[cols[project]]                                # (m, s, 3)
             h = jac[project]
@@ -352,6 +358,8 @@ class EkfSlam:
             hph[rows] = np.einsum("mi,mij,mj->m", j, block, j)
             var[rows], index[rows] = second_order_variance(v, block, self._white_sigma)
             parts.append((rows, cols, j))
+            if n_sel == k:
+                break
         usable = index <= self._max_nonlin
         innovation = np.asarray(angle_residual(z, h))
         gated = (innovation ** 2 / (hph + var) > self._gate) & usable
@@ -434,8 +442,9 @@ class EkfSlam:
 
     def _update_mapped(self, ids: np.ndarray, z: np.ndarray) -> np.ndarray:
         """Gate and apply the bearings to landmarks in the state; returns the mask of those."""
-        found = [(n, kind, off) for n, i in enumerate(ids.tolist()) for kind in (_LM, _IDP)
-                 if (off := self._offset.get((kind, i))) is not None]
+        mapped = self._mapped
+        found = [(n, *where) for n, i in enumerate(ids.tolist())
+                 if (where := mapped.get(i)) is not None]
         in_state = np.zeros(len(ids), bool)
         if found:
             rows, kind_names, offs = zip(*found)
@@ -448,7 +457,8 @@ class EkfSlam:
             # an inverse-depth feature gated again and again was started from an outlier:
             # drop it; the current sighting starts it again (as a new sighting)
             restart = []
-            for i, kind, g in zip(ids[in_state].tolist(), kind_names, gated.tolist()):
+            for i, kind, g in (zip(ids[in_state].tolist(), kind_names, gated.tolist())
+                               if _IDP in kind_names else ()):
                 if kind == _IDP:
                     run_length = self._gated_run.get(i, 0) + 1 if g else 0
                     self._gated_run[i] = run_length
