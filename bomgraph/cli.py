@@ -285,7 +285,9 @@ def cmd_import_mrclam(args: argparse.Namespace) -> int:
     keyframe = KeyframeConfig(**{k: v for k, v in given.items() if v is not None})
     return _import(args, lambda: import_mrclam(args.dir, args.robot, keyframe=keyframe,
                                                keep_ranges=args.keep_ranges,
-                                               calibrate=not args.no_calibrate), args.dir)
+                                               calibrate=not args.no_calibrate,
+                                               landmark_check=not args.no_landmark_check),
+                   args.dir)
 
 
 def cmd_import_g2o(args: argparse.Namespace) -> int:

@@ -185,6 +185,9 @@ def build_parser() -> argparse.ArgumentParser:
     im.add_argument("--keep-ranges", action="store_true", help="keep ranges in the meta")
     im.add_argument("--no-calibrate", action="store_true",
                     help="use the default sigmas (needed without robot ground truth, mrclam1)")
+    im.add_argument("--no-landmark-check", action="store_true",
+                    help="take Landmark_Groundtruth.dat as read: no erratum corrected, no check "
+                         "against the measured ranges")
     im.set_defaults(func="cmd_import_mrclam")
     ig = _command(isub, "g2o", "a bearing-only g2o file")
     ig.add_argument("file", help="the g2o file")

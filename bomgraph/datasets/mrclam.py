@@ -6,7 +6,9 @@ recording (``shared/data/mrclam*/SOURCE.md``) into keyframes (numbered as in its
 
 1. **Rows.** Barcodes map to subjects; subjects 1-5 are robots, unknown barcodes false
    detections (both dropped); subjects in ``Landmark_Groundtruth.dat`` are landmarks (id =
-   subject). Every dropped row is counted in ``meta["rows"]``. Ranges are dropped
+   subject). The landmark table is checked against the detections' range-bearing pair
+   distances and a known erratum corrected (:mod:`.landmark_truth`, ``meta["landmark_truth"]``;
+   MRCLAM Dataset 1 swaps landmarks 11 and 17). Every dropped row is counted in ``meta["rows"]``. Ranges are dropped
    (``keep_ranges=True`` keeps them in ``meta["ranges_m"]``; ``sensor_range_m`` is the largest).
 2. **Time window.** Detections outside the odometry or the robot's truth, or in a truth gap
    longer than ``max_truth_gap_s``, are dropped and counted, so every step has a true pose.
@@ -42,6 +44,7 @@ from ..plausibility import refuse_implausible
 from ..stream import Step, Stream, StreamHeader, Truth
 from .calibration import (bearing_residuals, calibrate_odometry, odometry_sigma_model,
                           robust_bearing_stats)
+from .landmark_truth import checked_mrclam_landmarks
 from .mrclam_files import ROBOT_SUBJECTS, MrclamRobotData, read_mrclam_robot
 
 DEFAULT_BEARING_SIGMA_RAD = 0.0160
@@ -366,7 +369,7 @@ def _raw_bearing_check(raw: MrclamRobotData, subject: np.ndarray,
 
 def import_mrclam(data_dir: str | os.PathLike[str], robot: int, *,
                   keyframe: KeyframeConfig = KeyframeConfig(), keep_ranges: bool = False,
-                  calibrate: bool = True) -> Stream:
+                  calibrate: bool = True, landmark_check: bool = True) -> Stream:
     """Import one MRCLAM robot as a keyframed bearing-only stream (see the module docstring).
 
     Parameters
@@ -382,6 +385,10 @@ def import_mrclam(data_dir: str | os.PathLike[str], robot: int, *,
     calibrate : bool
         Fit the odometry and bearing sigmas against the robot's ground truth (required to
         exist); False uses the documented defaults measured on mrclam6.
+    landmark_check : bool
+        Correct a landmark table that matches a known erratum (MRCLAM Dataset 1 lists
+        landmarks 11 and 17 at each other's positions) and refuse one that the detections'
+        pair distances contradict (:mod:`.landmark_truth`); False takes the table as read.
 
     Returns
     -------
@@ -392,13 +399,17 @@ def import_mrclam(data_dir: str | os.PathLike[str], robot: int, *,
     Raises
     ------
     DatasetError
-        Missing or malformed files, no usable detections, or ``calibrate=True`` without the
-        robot's ground truth.
+        Missing or malformed files, no usable detections, ``calibrate=True`` without the
+        robot's ground truth, or (``landmark_check``) a landmark table that contradicts the
+        measured ranges and bearings.
     """
     if not isinstance(keyframe, KeyframeConfig):
         raise ConfigError(f"keyframe must be a KeyframeConfig, got {type(keyframe).__name__}")
     # 1-2. rows and time window ------------------------------------------------------------
     raw = read_mrclam_robot(data_dir, robot)
+    landmark_truth: dict[str, Any] = {"checked": False}
+    if landmark_check:
+        raw, landmark_truth = checked_mrclam_landmarks(raw, data_dir, robot)
     gt = raw.groundtruth
     if calibrate and gt is None:
         raise DatasetError(f"{Path(data_dir)}: no Robot{robot}_Groundtruth.dat, so the sigmas "
@@ -485,6 +496,7 @@ def import_mrclam(data_dir: str | os.PathLike[str], robot: int, *,
                            "components": ["dx_m", "dy_m", "dpsi_rad"],
                            "abc": [[float(v) for v in row] for row in model], **odo_info},
         "calibrated": bool(calibrate),
+        "landmark_truth": landmark_truth,
     }
     if gt is not None:
         tg = gt["time_s"]

@@ -73,8 +73,13 @@ def write_table(path: Path, rows: list[str], *, crlf: bool = False, gz: bool = F
 def make_mrclam(folder: Path, *, v: float = 0.08, w: float | np.ndarray = 0.15,
                 seconds: float = 40.0, noise_rad: float = 0.0, bias_rad: float = 0.0,
                 gross_every: int = 0, seed: int = 0, crlf: bool = False, gz: bool = False,
-                extras: bool = True, truth: bool = True) -> dict:
+                extras: bool = True, truth: bool = True, landmarks: dict | None = None,
+                listed: dict | None = None, barcodes: dict | None = None) -> dict:
     """Robot 1 driving with held commands; bursts of exact (or noisy) bearings every 0.25 s.
+
+    The detections come from ``landmarks`` (default ``LANDMARKS``); ``Landmark_Groundtruth.dat``
+    lists them with the rows of ``listed`` overriding (a faulty table); ``barcodes`` replaces
+    ``BARCODES``.
 
     Odometry and ground truth share 100 Hz time stamps; bursts lie on them, so interpolated
     truth is exact. With ``extras`` every burst also holds a sighting of robot 2, every 10th an
@@ -89,11 +94,13 @@ def make_mrclam(folder: Path, *, v: float = 0.08, w: float | np.ndarray = 0.15,
     ww = np.broadcast_to(np.asarray(w, dtype=float), (n,)).copy()
     gt = true_poses(t, vv, ww, (0.3, -0.2, 0.4))
     end = " " if crlf else ""
-    write_table(folder / "Barcodes.dat", [f"  {s} \t  {b}{end}" for s, b in BARCODES.items()],
+    landmarks = LANDMARKS if landmarks is None else landmarks
+    codes = BARCODES if barcodes is None else barcodes
+    write_table(folder / "Barcodes.dat", [f"  {s} \t  {b}{end}" for s, b in codes.items()],
                 crlf=crlf, gz=gz)
     write_table(folder / "Landmark_Groundtruth.dat",
                 [f"  {s} \t {exact_repr(x)} \t {exact_repr(y)} \t 0.0001 \t 0.0001{end}"
-                 for s, (x, y) in LANDMARKS.items()], crlf=crlf, gz=gz)
+                 for s, (x, y) in {**landmarks, **(listed or {})}.items()], crlf=crlf, gz=gz)
     write_table(folder / "Robot1_Odometry.dat",
                 [f"{exact_repr(a)} \t {exact_repr(b)} \t {exact_repr(c)}{end}" for a, b, c in zip(t, vv, ww)],
                 crlf=crlf, gz=gz)
@@ -102,8 +109,8 @@ def make_mrclam(folder: Path, *, v: float = 0.08, w: float | np.ndarray = 0.15,
                     [f"{exact_repr(a)} \t {exact_repr(p[0])} \t {exact_repr(p[1])} \t {exact_repr(p[2])}{end}"
                      for a, p in zip(t, gt)],
                     crlf=crlf, gz=gz)
-    ids = np.array(list(LANDMARKS))
-    xy = np.array(list(LANDMARKS.values()))
+    ids = np.array(list(landmarks))
+    xy = np.array(list(landmarks.values()))
     rows, counts = [], {"landmark": 0, "robot": 0, "unknown": 0, "gross": 0, "repeat": 0}
     k_meas = 0
     for b, k in enumerate(range(25, n - 25, 25)):
@@ -116,7 +123,7 @@ def make_mrclam(folder: Path, *, v: float = 0.08, w: float | np.ndarray = 0.15,
             if gross_every and k_meas % gross_every == 0:
                 val += 0.5
                 counts["gross"] += 1
-            rows.append(f"{exact_repr(t[k])} \t {BARCODES[int(lid)]} \t {exact_repr(rng_m[seen][i])} \t "
+            rows.append(f"{exact_repr(t[k])} \t {codes[int(lid)]} \t {exact_repr(rng_m[seen][i])} \t "
                         f"{exact_repr(float(wrap_angle(val)))}{end}")
             counts["landmark"] += 1
         if extras:
@@ -126,7 +133,7 @@ def make_mrclam(folder: Path, *, v: float = 0.08, w: float | np.ndarray = 0.15,
                 rows.append(f"{exact_repr(t[k])} \t 99 \t 2.0 \t -0.2{end}")
                 counts["unknown"] += 1
                 if seen.any():
-                    rows.append(f"{exact_repr(t[k] + 0.001)} \t {BARCODES[int(ids[seen][0])]} \t 2.0 \t "
+                    rows.append(f"{exact_repr(t[k] + 0.001)} \t {codes[int(ids[seen][0])]} \t 2.0 \t "
                                 f"0.3{end}")
                     counts["landmark"] += 1
                     counts["repeat"] += 1
