@@ -94,3 +94,16 @@ def test_no_import_cycle() -> None:
         if m not in state:
             cycle = visit(m)
             assert cycle is None, " -> ".join(cycle)
+
+
+def test_no_recorded_data_is_committed() -> None:
+    """Streams, estimates and dataset files stay out of the repository (the brief: data are
+    read from ``../shared/data``, never copied in); only ``tests/data`` holds a reference."""
+    import subprocess
+
+    tracked = subprocess.run(["git", "ls-files"], cwd=ROOT, capture_output=True, text=True,
+                             check=True).stdout.split()
+    data_like = (".jsonl", ".g2o", ".dat", ".dat.gz", ".jsonl.gz", ".txt.gz", ".mat")
+    bad = [f for f in tracked if f.endswith(data_like) and not f.startswith("tests/data/")]
+    assert not bad, f"data files committed: {bad}"
+    assert not [f for f in tracked if "/" not in f and f.endswith(".json")], tracked
