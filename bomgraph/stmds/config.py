@@ -138,8 +138,11 @@ class StmdsConfig(Presets):
     tri_max_poses : int
         Geometric windows: at most this many poses (caps the bundle's cost on any keyframing).
     tri_prefixes : int
-        Geometric windows with ``tri_method="ba"``: the bundle grows on prefixes at this many
-        equal fractions of the window's path (``tri_grow`` measured in path, not poses).
+        Geometric windows with ``tri_method="ba"``: the bundle grows on prefixes ending every
+        ``1 / tri_prefixes`` of the last closed window's path (in a first window: each
+        ``j / tri_prefixes`` of ``tri_parallax_rad`` reached; ``tri_grow`` measured in path, not
+        poses), fixed as the steps arrive so an estimate resumes the open window's bundle
+        from its last prefix (``window.WindowSchedule.prefix_ends``).
     """
 
     #: name -> field overrides; "paper" is the defaults.

@@ -31,7 +31,7 @@ from ..geometry import dead_reckon
 from ..mapper import MapEstimate
 from ..stream import Step, StreamHeader
 from .batch import BATCH_STEPS, StepBatch
-from .bundle import (SIGMA_RANGE, WindowBundle, bundle_adjust_window,
+from .bundle import (SIGMA_RANGE, PrefixState, WindowBundle, bundle_adjust_window,
                      bundle_pair_squared_distances)
 from .config import StmdsConfig
 from .distances import DistanceStore, IdIndex
@@ -110,11 +110,15 @@ class StmdsMapper:
         self._prev_bundle: tuple | None = None    # tri_method="ba": (t, poses, ids, xy)
         self._closed_t = -1                       # last step of the last closed window
         self._window_sigma = self._bearing_sigma  # tri_estimate_sigma: the last estimate
+        # geometric windows, "ba": the open window's bundle after its last prefix (first step,
+        # landmark ids of its columns, PrefixState), for the next estimate to go on from
+        self._open_prefix: tuple | None = None
         if cfg.windowed:
             self._schedule = WindowSchedule(
                 poses=cfg.tri_window, stride=cfg.tri_stride, parallax_rad=cfg.tri_parallax_rad,
                 length_m=cfg.tri_window_m, overlap=cfg.tri_overlap,
-                quantile=cfg.tri_parallax_quantile, max_poses=cfg.tri_max_poses)
+                quantile=cfg.tri_parallax_quantile, max_poses=cfg.tri_max_poses,
+                prefixes=cfg.tri_prefixes)
             self._tri_inflation = self._schedule.inflation
         self._t = -1
         self._n_gated = 0
@@ -187,6 +191,7 @@ class StmdsMapper:
             buf.clear()
             self._schedule.clear()
             self._prev_bundle = None
+            self._open_prefix = None
         buf.append((ids, brg, step.odom,
                     None if step.odom is None else step.odometry_sigma(self.header), step.t))
         self._schedule.push(step.odom, ids, brg)
@@ -194,6 +199,7 @@ class StmdsMapper:
             return
         self._triangulate_window(buf)
         self._closed_t = step.t
+        self._open_prefix = None
         del buf[:self._schedule.advance()]
 
     def _with_open_window(self) -> tuple[DistanceStore, np.ndarray]:
@@ -233,15 +239,18 @@ class StmdsMapper:
         if self.config.tri_method == "ba":
             ts = np.array([b[4] for b in buf], np.int64)
             init_poses, init_points, n_shared = self._warm_start(ts, uniq, odoms)
+            resume = self._resume(ts, uniq) if self.config.geometric_windows else None
             tri, n_gated = bundle_adjust_window(
                 odoms, sig, brg, self._window_sigma, min_parallax_rad=self.config.min_parallax_rad,
                 max_range_m=self._max_range, min_depth_m=self.config.tri_min_depth_m,
                 outlier_sigma=self.config.tri_outlier_sigma, initial_poses=init_poses,
                 initial_points=init_points, initial_prefix=n_shared,
                 grow=self.config.tri_grow,
-                prefix_ends=self._schedule.prefix_ends(self.config.tri_prefixes)
+                prefix_ends=self._schedule.prefix_ends()
                 if self.config.geometric_windows else None,
-                estimate_sigma=self.config.tri_estimate_sigma)
+                estimate_sigma=self.config.tri_estimate_sigma, resume=resume)
+            if self.config.geometric_windows and tri.prefix_state is not None:
+                self._open_prefix = (int(ts[0]), uniq, tri.prefix_state)
             self._n_outliers += tri.n_outliers
             if self.config.tri_estimate_sigma and len(tri):
                 # the next window starts from it (within SIGMA_RANGE of the header's)
@@ -270,6 +279,18 @@ class StmdsMapper:
         var = pairs.variance_m4 if self._tri_inflation == 1.0 else \
             pairs.variance_m4 * self._tri_inflation
         self._store.add(idx[pairs.first], idx[pairs.second], pairs.squared_distance_m2, var)
+
+    def _resume(self, ts: np.ndarray, uniq: np.ndarray) -> PrefixState | None:
+        """The open window's :class:`.bundle.PrefixState` from the last estimate, its columns
+        moved to this window's landmarks (the same window, grown since), or None."""
+        if self._open_prefix is None or self._open_prefix[0] != ts[0]:
+            return None
+        _, old_ids, state = self._open_prefix
+        col = np.searchsorted(uniq, old_ids)           # every old landmark is still in view
+        points = np.full((len(uniq), 2), np.nan)
+        points[col] = state.points_xy
+        return PrefixState(state.solved, state.poses, points, state.dropped_pose,
+                           col[state.dropped_column])
 
     def _warm_start(self, ts: np.ndarray, uniq: np.ndarray, odoms: np.ndarray
                     ) -> tuple[np.ndarray | None, np.ndarray | None, int]:

@@ -425,7 +425,7 @@ class WindowSchedule:
     def __init__(self, *, poses: int | None = None, stride: int | None = None,
                  parallax_rad: float | None = None, length_m: float | None = None,
                  overlap: float = 1.0, min_landmarks: int = 3, quantile: float = 0.5,
-                 max_poses: int | None = None) -> None:
+                 max_poses: int | None = None, prefixes: int = 20) -> None:
         geometric = parallax_rad is not None or length_m is not None
         if (poses is None) == (not geometric):
             raise ConfigError("WindowSchedule: give poses (keyframes), or parallax_rad and / "
@@ -444,6 +444,9 @@ class WindowSchedule:
         self._dirs: list[np.ndarray] = []
         self._by_geometry = False
         self._next_end_m = -math.inf          # the next window ends no earlier (path, m)
+        self.prefixes = int(prefixes)
+        self._parallax_at = (-1, 0.0, 0)      # (steps buffered, parallax, landmarks): cached
+        self._start_spacing()
 
     @property
     def inflation(self) -> float:
@@ -463,6 +466,17 @@ class WindowSchedule:
         self._dirs.clear()
         self._psi = 0.0
         self._next_end_m = -math.inf
+        self._start_spacing()
+
+    def _start_spacing(self) -> None:
+        """Prefix ends of a first window (no window closed before it): at ``1 / prefixes``
+        of ``length_m``, or, measuring parallax, where it first reaches each
+        ``j / prefixes`` of ``parallax_rad``."""
+        self._bounds: list[int] = []
+        self._mark = 1
+        self._spacing_m = (self.length_m / self.prefixes
+                           if self.parallax_rad is None and math.isfinite(self.length_m)
+                           else None)
 
     def push(self, odom: ArrayLike | None, landmark_ids: np.ndarray,
              bearings_rad: np.ndarray) -> None:
@@ -477,6 +491,29 @@ class WindowSchedule:
         if self.poses is None and self.parallax_rad is not None:
             self._ids.append(np.asarray(landmark_ids))
             self._dirs.append(self._psi + np.asarray(bearings_rad, dtype=float))
+        if self.poses is None:
+            self._mark_prefix()
+
+    def _mark_prefix(self) -> None:
+        """Record the newest step as a prefix end if it crosses the next mark."""
+        n = len(self._path)
+        if n < 2:
+            return
+        if self._spacing_m is not None:
+            progress = (self._path[-1] - self._path[0]) / self._spacing_m
+        else:
+            par, n_lm = self._cached_parallax()
+            progress = (par / self.parallax_rad * self.prefixes
+                        if n_lm >= self.min_landmarks else 0.0)
+        if progress >= self._mark * _ROUND:
+            self._bounds.append(n)
+            self._mark = int(math.floor(progress / _ROUND)) + 1
+
+    def _cached_parallax(self) -> tuple[float, int]:
+        n = len(self._path)
+        if self._parallax_at[0] != n:
+            self._parallax_at = (n, *self.parallax())
+        return self._parallax_at[1], self._parallax_at[2]
 
     def parallax(self) -> tuple[float, int]:
         """The ``quantile`` of the parallax (rad) of the buffered landmarks
@@ -504,21 +541,21 @@ class WindowSchedule:
         elif self._path[-1] - self._path[0] >= self.length_m * _ROUND:
             self._by_geometry = True
         elif self.parallax_rad is not None:
-            par, n_lm = self.parallax()
+            par, n_lm = self._cached_parallax()
             self._by_geometry = n_lm >= self.min_landmarks and par >= self.parallax_rad
         return self._by_geometry or (self.max_poses is not None and n >= self.max_poses)
 
-    def prefix_ends(self, n_prefixes: int) -> list[int]:
-        """Ends (pose counts) of ``n_prefixes`` prefixes of the buffered window at equal
-        fractions of its path (a bundle solved on growing prefixes, issue 8's ``grow``
-        measured in path instead of poses); the last is the whole window."""
-        path = np.asarray(self._path) - self._path[0]
-        total = path[-1]
-        if total <= 0 or n_prefixes <= 1:
-            return [len(path)]
-        marks = total * np.arange(1, n_prefixes) / n_prefixes
-        ends = np.searchsorted(path, marks, side="left") + 1
-        return sorted(set(int(e) for e in ends if 2 <= e < len(path))) + [len(path)]
+    def prefix_ends(self) -> list[int]:
+        """Ends (pose counts) of the prefixes of the buffered window on which a bundle is
+        solved in turn (issue 8's ``grow`` measured in path instead of poses); the last is
+        the whole window. They are fixed as the steps arrive, never moved by later ones, so
+        the open window's prefixes are those of the window it becomes (an estimate can go on
+        from the last one, :class:`.bundle.PrefixState`): every ``1 / prefixes`` of the last
+        closed window's path from the window's start (windows close at about the same path,
+        :meth:`advance`); in a first window, ``length_m / prefixes``, or where the parallax
+        first reaches each ``j / prefixes`` of ``parallax_rad``."""
+        n = len(self._path)
+        return [e for e in self._bounds if 2 <= e < n] + [n]
 
     def advance(self) -> int:
         """Drop the steps the next window does not share (at least one) and return how many."""
@@ -528,15 +565,27 @@ class WindowSchedule:
         elif self._by_geometry:
             path = np.asarray(self._path) - self._path[0]
             k = int(np.searchsorted(path, path[-1] / self.overlap * _ROUND, side="left"))
+            if path[-1] > 0:
+                self._spacing_m = path[-1] / self.prefixes
             # the next window ends a stride later too: windows are spaced by the path, not
             # by how many keyframes satisfy the closing test in a row
             self._next_end_m = self._path[-1] + path[-1] / self.overlap
         else:                                 # closed by max_poses
             k = int(math.ceil(n / self.overlap))
+            if self._path[-1] > self._path[0]:
+                self._spacing_m = (self._path[-1] - self._path[0]) / self.prefixes
         k = max(1, min(k, n))
         del self._path[:k]
         del self._ids[:k]
         del self._dirs[:k]
+        if self.poses is None:            # the next window's prefix ends, from its start
+            self._bounds, self._mark = [], 1
+            self._parallax_at = (-1, 0.0, 0)
+            kept, self._path = self._path, []
+            for i, v in enumerate(kept):
+                self._path.append(v)
+                if self._spacing_m is not None or i == len(kept) - 1:
+                    self._mark_prefix()
         return k
 
 

@@ -229,3 +229,42 @@ def test_geometric_options_are_validated() -> None:
     cfg = StmdsConfig(tri_parallax_rad=0.3, tri_method="ba")
     assert cfg.windowed and cfg.geometric_windows
     assert not StmdsConfig().windowed and StmdsConfig(tri_window=4).windowed
+
+
+def test_the_open_window_goes_on_from_its_last_prefix_bit_for_bit() -> None:
+    """An estimate's bundle of the open window hands back its state after the last prefix
+    (``prefix_state``); the bundle of the grown window resumed from it is the bundle of one
+    call on the grown window, to the bit (with a gross outlier in the window)."""
+    u, sig, brg = _noisy_window(3)
+    brg = brg.copy()
+    brg[3, 1] += 0.5                                   # ~29 sigma
+    ends = [3, 4, 6]
+    short, _ = bundle_adjust_window(u[:5], sig[:5], brg[:6], OUT_SIGMA_B, prefix_ends=ends)
+    state = short.prefix_state
+    assert state is not None and state.solved == 4
+    once, g1 = bundle_adjust_window(u, sig, brg, OUT_SIGMA_B, prefix_ends=ends)
+    resumed, g2 = bundle_adjust_window(u, sig, brg, OUT_SIGMA_B, prefix_ends=ends, resume=state)
+    assert g1 == g2 and once.n_outliers == resumed.n_outliers >= 1
+    for field in ("column", "points_xy", "covariance_m2", "poses", "n_rays"):
+        np.testing.assert_array_equal(getattr(once, field), getattr(resumed, field))
+
+
+def test_prefix_ends_are_fixed_as_the_steps_arrive() -> None:
+    """A prefix end, once set, never moves as the window grows (so the open window's
+    prefixes are those of the window it becomes), in the first window and after it."""
+    rng = np.random.default_rng(0)
+    sched = WindowSchedule(parallax_rad=0.3, overlap=6.0, quantile=0.25, prefixes=20)
+    ids = np.arange(8)
+    seen: list[int] = []
+    n_closed = 0
+    for t in range(400):
+        odom = None if t == 0 else np.array([0.05, 0.0, rng.uniform(-0.05, 0.05)])
+        sched.push(odom, ids, rng.uniform(-1.0, 1.0, ids.size) + 0.002 * t)
+        ends = sched.prefix_ends()[:-1]
+        assert ends[:len(seen)] == seen[:len(ends)] and len(ends) >= min(len(seen), len(ends))
+        seen = ends
+        if sched.full():
+            n_closed += 1
+            sched.advance()
+            seen = sched.prefix_ends()[:-1]
+    assert n_closed >= 3

@@ -1,0 +1,247 @@
+"""The window bundle's least-squares problem and its Levenberg-Marquardt solver
+(``tri_method="ba"``, :mod:`.bundle`): residuals and Jacobians of the odometry and bearing
+terms, the normal equations in blocks (poses, poses x landmarks, 2 x 2 landmark blocks) and
+the damped step by the Schur complement on the poses.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..angles import angle_residual
+
+#: Odometry std. devs. below this (m or rad) are raised to it: a zero std. dev. (the paper's
+#: simulator has no lateral slip, ``sigma_dy = 0``) would be an infinite weight, and a tiny one
+#: makes the normal equations so stiff that Levenberg-Marquardt crawls (1e-6: about 30
+#: iterations per solve on the paper setup). The residual of such a component is zero at the
+#: truth, so noise-free data stay exact; the factor graphs use the same floor.
+SIGMA_FLOOR = 1e-3
+
+
+def _between_residuals(poses: np.ndarray, odoms: np.ndarray, jacobians: bool = True
+                       ) -> tuple[np.ndarray, ...]:
+    """Odometry residuals ``between(x_{m-1}, x_m) - u_m`` and their Jacobians.
+
+    Returns ``(res (M, 3), d res / d x_{m-1} (M, 3, 3), d res / d x_m (M, 3, 3))``, or
+    ``(res,)`` without ``jacobians``.
+    """
+    a, b = poses[:-1], poses[1:]
+    c, s = np.cos(a[:, 2]), np.sin(a[:, 2])
+    dx, dy = b[:, 0] - a[:, 0], b[:, 1] - a[:, 1]
+    res = np.column_stack([c * dx + s * dy - odoms[:, 0], -s * dx + c * dy - odoms[:, 1],
+                           angle_residual(b[:, 2] - a[:, 2], odoms[:, 2])])
+    if not jacobians:
+        return (res,)
+    m = len(a)
+    jb = np.zeros((m, 3, 3))
+    jb[:, 0, 0], jb[:, 0, 1], jb[:, 1, 0], jb[:, 1, 1], jb[:, 2, 2] = c, s, -s, c, 1.0
+    ja = -jb
+    ja[:, 0, 2] = -s * dx + c * dy
+    ja[:, 1, 2] = -c * dx - s * dy
+    return res, ja, jb
+
+
+def _bearing_residuals(poses: np.ndarray, points: np.ndarray, k: np.ndarray, lm: np.ndarray,
+                       theta: np.ndarray, jacobians: bool = True
+                       ) -> tuple[np.ndarray, np.ndarray | None]:
+    """Bearing residuals and ``d res / d (p_l)`` (``d / d z_k`` is its negative,
+    ``d / d psi_k = -1``; None without ``jacobians``)."""
+    d = points[lm] - poses[k, :2]
+    res = angle_residual(np.arctan2(d[:, 1], d[:, 0]) - poses[k, 2], theta)
+    if not jacobians:
+        return res, None
+    r2 = np.einsum("ra,ra->r", d, d)
+    dp = np.column_stack([-d[:, 1], d[:, 0]]) / r2[:, None]
+    return res, dp
+
+
+class _Problem:
+    """One window's least-squares problem over poses 1..W-1 and the landmarks."""
+
+    def __init__(self, odoms: np.ndarray, sigmas: np.ndarray, bearing_sigma_rad: float,
+                 k: np.ndarray, lm: np.ndarray, theta: np.ndarray, n_lm: int) -> None:
+        self.odoms = odoms
+        self.w_odo = 1.0 / np.maximum(sigmas, SIGMA_FLOOR)          # (M, 3)
+        self.w_b = 1.0 / bearing_sigma_rad
+        self.k, self.lm, self.theta = k, lm, theta
+        self.n_pose_vars = 3 * len(odoms)
+        self.n = self.n_pose_vars + 2 * n_lm
+        m = len(odoms)
+        self.rows = 3 * m + len(k)
+        # column of each pose's variables (-1: pose 0 is fixed)
+        self.pose_col = np.concatenate([[-1], 3 * np.arange(m)])
+        self._onehot: tuple | None = None
+
+    def cost(self, poses: np.ndarray, points: np.ndarray) -> float:
+        ro = _between_residuals(poses, self.odoms, False)[0] * self.w_odo
+        rb = _bearing_residuals(poses, points, self.k, self.lm, self.theta, False)[0] * self.w_b
+        return float(np.sum(ro * ro) + np.sum(rb * rb))
+
+    def linearise(self, poses: np.ndarray, points: np.ndarray
+                  ) -> tuple[np.ndarray, np.ndarray]:
+        """Whitened residual vector and dense Jacobian, shape ``(rows,)`` and ``(rows, n)``."""
+        m = len(self.odoms)
+        ro, ja, jb = _between_residuals(poses, self.odoms)
+        rb, dp = _bearing_residuals(poses, points, self.k, self.lm, self.theta)
+        jac = np.zeros((self.rows, self.n))
+        odo_rows = np.arange(3 * m).reshape(m, 3)
+        wo = self.w_odo[:, :, None]
+        for j in range(3):                    # the three variables of the pose before / after
+            jac[odo_rows[1:], (3 * np.arange(m - 1) + j)[:, None]] = (ja[1:, :, j:j + 1]
+                                                                     * wo[1:])[..., 0]
+            jac[odo_rows, (3 * np.arange(m) + j)[:, None]] = (jb[:, :, j:j + 1] * wo)[..., 0]
+        rows = 3 * m + np.arange(len(self.k))
+        pc = self.pose_col[self.k]
+        seen_from_var = pc >= 0
+        r_v, c_v = rows[seen_from_var], pc[seen_from_var]
+        jac[r_v, c_v] = -dp[seen_from_var, 0] * self.w_b
+        jac[r_v, c_v + 1] = -dp[seen_from_var, 1] * self.w_b
+        jac[r_v, c_v + 2] = -self.w_b
+        lc = self.n_pose_vars + 2 * self.lm
+        jac[rows, lc] = dp[:, 0] * self.w_b
+        jac[rows, lc + 1] = dp[:, 1] * self.w_b
+        res = np.concatenate([(ro * self.w_odo).ravel(), rb * self.w_b])
+        return res, jac
+
+    def normal_equations(self, poses: np.ndarray, points: np.ndarray
+                         ) -> tuple[float, tuple[np.ndarray, ...]]:
+        """The cost and the blocks of ``J^T J`` and ``J^T r`` (whitened), without the dense
+        Jacobian: ``(cost, (A (P, P) poses, B (P, 2 L) poses x landmarks, C (L, 2, 2)
+        landmark blocks, g_poses (P,), g_landmarks (2 L,)))``, ``P = 3 (W - 1)``."""
+        m, n_lm = len(self.odoms), (self.n - self.n_pose_vars) // 2
+        ro, ja, jb = _between_residuals(poses, self.odoms)
+        rb, dp = _bearing_residuals(poses, points, self.k, self.lm, self.theta)
+        wo = self.w_odo[:, :, None]
+        ja, jb, ro = ja * wo, jb * wo, ro * self.w_odo
+        rb = rb * self.w_b
+        jl = dp * self.w_b                                   # d res / d landmark (R, 2)
+        a = np.zeros((m, m, 3, 3))
+        i = np.arange(m)
+        jbt, jat = jb.transpose(0, 2, 1), ja[1:].transpose(0, 2, 1)
+        a[i, i] = jbt @ jb
+        a[i[:-1], i[:-1]] += jat @ ja[1:]
+        off = jat @ jb[1:]
+        a[i[:-1], i[1:]] = off
+        a[i[1:], i[:-1]] = off.transpose(0, 2, 1)
+        gp = (jbt @ ro[:, :, None])[:, :, 0]
+        gp[:-1] += (jat @ ro[1:, :, None])[:, :, 0]
+        if self._onehot is None:
+            self._setup_onehot(m, n_lm)
+        sel, k_sel, pose_of, lm_of = self._onehot
+        jp = np.empty((len(sel), 3))                        # d res / d pose k >= 1
+        jp[:, :2] = -jl[sel]
+        jp[:, 2] = -self.w_b
+        a[i, i] += (pose_of @ (jp[:, :, None] * jp[:, None, :]).reshape(-1, 9)).reshape(m, 3, 3)
+        gp += pose_of @ (jp * rb[sel, None])
+        c = (lm_of @ (jl[:, :, None] * jl[:, None, :]).reshape(-1, 4)).reshape(n_lm, 2, 2)
+        gl = lm_of @ (jl * rb[:, None])
+        b = np.zeros((m, n_lm, 3, 2))
+        b[k_sel, self.lm[sel]] = jp[:, :, None] * jl[sel][:, None, :]
+        cost = float(np.sum(ro * ro) + np.sum(rb * rb))
+        return cost, (a.transpose(0, 2, 1, 3).reshape(3 * m, 3 * m),
+                      b.transpose(0, 2, 1, 3).reshape(3 * m, 2 * n_lm), c,
+                      gp.ravel(), gl.ravel())
+
+    def _setup_onehot(self, m: int, n_lm: int) -> None:
+        """Rays seen from a pose variable, and the one-hot matrices summing per pose and per
+        landmark (a matrix product is one call; the problem's rays do not change)."""
+        sel = np.flatnonzero(self.k >= 1)
+        k_sel = self.k[sel] - 1
+        pose_of = np.zeros((m, len(sel)))
+        pose_of[k_sel, np.arange(len(sel))] = 1.0
+        lm_of = np.zeros((n_lm, len(self.k)))
+        lm_of[self.lm, np.arange(len(self.k))] = 1.0
+        self._onehot = (sel, k_sel, pose_of, lm_of)
+
+    def unpack(self, poses: np.ndarray, points: np.ndarray, delta: np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray]:
+        new_poses = poses.copy()
+        new_poses[1:] += delta[:self.n_pose_vars].reshape(-1, 3)
+        return new_poses, points + delta[self.n_pose_vars:].reshape(-1, 2)
+
+
+def _levenberg_marquardt(prob: _Problem, poses: np.ndarray, points: np.ndarray,
+                         max_iter: int, tol: float
+                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray, bool]:
+    """Minimise the window's cost; returns poses, points, ``J^T J`` at the end, converged.
+
+    Each step solves the damped normal equations by the Schur complement on the poses
+    (:meth:`_Problem.normal_equations`, :func:`_schur_step`): the landmark block is 2 x 2
+    block-diagonal, so only a ``3 (W - 1)`` system is factorised."""
+    lam = 1e-6
+    cost, blocks = prob.normal_equations(poses, points)
+    converged = False
+    for _ in range(max_iter):
+        step_ok = False
+        while lam < 1e10:
+            delta = _schur_step(blocks, lam)
+            if delta is None:
+                lam *= 10.0
+                continue
+            cand_poses, cand_points = prob.unpack(poses, points, delta)
+            # linearised at once: most steps are accepted, and the cost comes with it
+            cand_cost, cand_blocks = prob.normal_equations(cand_poses, cand_points)
+            if cand_cost <= cost:
+                step_ok = True
+                break
+            lam *= 10.0
+        if not step_ok:
+            converged = True                  # no descent direction left at this precision
+            break
+        poses, points = cand_poses, cand_points
+        small = cost - cand_cost <= tol * max(cost, 1e-300)
+        lam = max(lam / 10.0, 1e-12)
+        cost, blocks = cand_cost, cand_blocks
+        if small:
+            converged = True
+            break
+    return poses, points, _dense_information(blocks), converged
+
+
+def _schur_step(blocks: tuple[np.ndarray, ...], lam: float) -> np.ndarray | None:
+    """The Levenberg-Marquardt step ``-(H + lam diag(H))^-1 g`` from the blocks of ``H``
+    (poses ``A``, cross ``B``, 2 x 2 landmark blocks ``C``), landmarks eliminated first;
+    None when the damped system is singular or the step is not finite."""
+    a, b, c, gp, gl = blocks
+    n_p, n_l = len(gp), len(gl)
+    a_d = a + lam * np.diag(np.maximum(np.diag(a), 1e-12))
+    c_d = c.copy()
+    c_d[:, 0, 0] += lam * np.maximum(c[:, 0, 0], 1e-12)
+    c_d[:, 1, 1] += lam * np.maximum(c[:, 1, 1], 1e-12)
+    det = c_d[:, 0, 0] * c_d[:, 1, 1] - c_d[:, 0, 1] * c_d[:, 1, 0]
+    if not np.all(det > 0):
+        return None
+    c_inv = np.empty_like(c_d)
+    c_inv[:, 0, 0], c_inv[:, 1, 1] = c_d[:, 1, 1] / det, c_d[:, 0, 0] / det
+    c_inv[:, 0, 1], c_inv[:, 1, 0] = -c_d[:, 0, 1] / det, -c_d[:, 1, 0] / det
+    g_l = gl.reshape(-1, 2)
+    if n_p == 0:
+        return -np.einsum("lab,lb->la", c_inv, g_l).ravel()
+    bw = np.einsum("pla,lab->plb", b.reshape(n_p, -1, 2), c_inv).reshape(n_p, n_l)
+    schur = a_d - bw @ b.T
+    rhs = bw @ gl - gp
+    try:
+        x = np.linalg.solve(schur, rhs)
+    except np.linalg.LinAlgError:
+        return None
+    y = -np.einsum("lab,lb->la", c_inv, g_l + (b.T @ x).reshape(-1, 2)).ravel()
+    delta = np.concatenate([x, y])
+    return delta if np.all(np.isfinite(delta)) else None
+
+
+def _dense_information(blocks: tuple[np.ndarray, ...]) -> np.ndarray:
+    """``J^T J`` as one dense matrix (poses first, then landmarks) from its blocks."""
+    a, b, c, gp, gl = blocks
+    n_p, n_l = len(gp), len(gl)
+    info = np.zeros((n_p + n_l, n_p + n_l))
+    info[:n_p, :n_p] = a
+    info[:n_p, n_p:] = b
+    info[n_p:, :n_p] = b.T
+    lm = np.arange(0, n_l, 2)
+    for i in range(2):
+        for j in range(2):
+            info[n_p + lm + i, n_p + lm + j] = c[:, i, j]
+    return info
+
+
+__all__ = ["SIGMA_FLOOR"]
