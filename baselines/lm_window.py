@@ -14,8 +14,8 @@ Two uses (issue 14 items 1-2):
   starts near its minimum and needs fewer iterations;
 * **fixed-lag solve** (:meth:`StepChunks.window`): on long recordings, the last ``lag_steps``
   poses and the landmarks they see, each landmark's bearings from the older (held) poses
-  folded into one Gaussian prior (:func:`fold_bearings`, as in :mod:`baselines.fixed_lag`). The fold is
-  kept per landmark and grown as steps leave the window, so a solve costs the window, not the
+  folded into one Gaussian prior (:func:`fold_bearings`, as in :mod:`baselines.fixed_lag`).
+  The fold is kept per landmark and grown as steps leave the window, so a solve costs the window, not the
   history; a landmark's fold is redone from all its old bearings when its point has moved more
   than ``refold_m`` from where it was folded (fluid relinearisation), and all folds are reset
   after a whole-graph solve.
@@ -35,6 +35,21 @@ from bomgraph.stream import StreamHeader
 from .lm_report import GTSAM_ERRORS, lm_params
 from .bearing_graph import (FactorGraphConfig, bearing_noise, landmark_key, mid_key, pose_key,
                             prior_factor)
+
+
+_POSE_CHARS = (ord("x"), ord("m"))
+
+
+def _is_landmark(key: int) -> bool:
+    """Every key of the graph is a pose (``x``, ``m``) or a landmark
+    (:func:`baselines.bearing_graph.landmark_key`, wide ids included)."""
+    return (int(key) >> 56) not in _POSE_CHARS
+
+
+def _landmark_id(key: int) -> int:
+    """The landmark id of a landmark key (the inverse of ``landmark_key``)."""
+    k = int(key)
+    return k ^ (1 << 63) if k >> 63 else k & ((1 << 56) - 1)
 
 
 class StepChunks:
@@ -110,8 +125,7 @@ class StepChunks:
     def _values(keys: Iterable[int], source: gtsam.Values) -> gtsam.Values:
         out = gtsam.Values()
         for k in keys:
-            out.insert(k, source.atPoint2(k) if gtsam.Symbol(k).chr() == ord("l")
-                       else source.atPose2(k))
+            out.insert(k, source.atPoint2(k) if _is_landmark(k) else source.atPose2(k))
         return out
 
     # -- warm start -------------------------------------------------------------------------
@@ -129,7 +143,7 @@ class StepChunks:
         keys = list(graph.keyVector())
         noise = gtsam.noiseModel.Isotropic.Sigma(2, sigma_m)
         for k in keys:
-            if gtsam.Symbol(k).chr() == ord("l"):
+            if _is_landmark(k):
                 graph.add(gtsam.PriorFactorPoint2(k, values.atPoint2(k), noise))
         return self._lm(graph, self._values(keys, values), values, tol)
 
@@ -152,7 +166,8 @@ class StepChunks:
     # -- fixed-lag window -------------------------------------------------------------------
     def window(self, b: int, n_steps: int, initial: gtsam.Values, held: gtsam.Values,
                pose_at: Callable[[np.ndarray], np.ndarray],
-               bearings: tuple[np.ndarray, np.ndarray, np.ndarray], landmark_ids: np.ndarray, fresh: Sequence[int]
+               bearings: tuple[np.ndarray, np.ndarray, np.ndarray],
+               landmark_ids: np.ndarray, fresh: Sequence[int]
                ) -> tuple[gtsam.NonlinearFactorGraph, gtsam.Values]:
         """The fixed-lag problem with held pose ``b`` (module docstring): factors and start.
 
@@ -167,8 +182,7 @@ class StepChunks:
         graph = self._factors(b)
         graph.add(gtsam.PriorFactorPose2(pose_key(b), held.atPose2(pose_key(b)), self._hold))
         keys = set(graph.keyVector())
-        active = sorted({i for i in (int(gtsam.Symbol(k).index()) for k in keys
-                                     if gtsam.Symbol(k).chr() == ord("l"))}
+        active = sorted({_landmark_id(k) for k in keys if _is_landmark(k)}
                         | {int(i) for i in fresh})
         for i in active:
             keys.add(landmark_key(i))
