@@ -163,6 +163,10 @@ class FactorGraphConfig(Presets):
         the poses added since the last solution are solved alone, the landmarks held near
         their points by an isotropic prior of this std. dev. (m); the whole-graph LM then
         starts near its minimum. None: no pre-solve.
+    presolved_relative_error_tol : float
+        ``relative_error_tol`` of a whole-graph solve after the warm pre-solve: LM starts so
+        near its minimum that ``warm_relative_error_tol`` stops it short
+        (``docs/measurements.md``).
     relinearize_threshold, relinearize_skip, checkpoint_updates :
         iSAM2 (:class:`baselines.isam2.Isam2Config`): relinearise a variable whose delta
         exceeds the threshold, check every ``relinearize_skip`` updates, and run this many
@@ -196,6 +200,7 @@ class FactorGraphConfig(Presets):
     lag_steps: int = 100
     full_growth: float = 1.25
     warm_presolve_sigma_m: float | None = 3e-3
+    presolved_relative_error_tol: float = 1e-6
     robust_trigger: float = 5.0
     relinearize_threshold: float = 0.001
     relinearize_skip: int = 1
@@ -224,6 +229,7 @@ class FactorGraphConfig(Presets):
         need(self.full_growth > 1, "full_growth must be > 1")
         need(self.warm_presolve_sigma_m is None or self.warm_presolve_sigma_m > 0,
              "warm_presolve_sigma_m must be > 0 or None")
+        need(self.presolved_relative_error_tol >= 0, "presolved_relative_error_tol must be >= 0")
         need(self.robust_trigger > 0, "robust_trigger must be > 0")
         need(self.relinearize_threshold > 0, "relinearize_threshold must be > 0")
         need(self.relinearize_skip >= 1, "relinearize_skip must be >= 1")

@@ -343,17 +343,21 @@ class BatchState:
         (``info["passes"]`` starts with ``"window"``).
         """
         n, cfg = self.problem.n_steps, self.config
+        lm_config = self._lm_config
         if warm and cfg.warm_presolve_sigma_m is not None:
-            initial, _ = self.chunks.warm_start(initial, self.values,
-                                                cfg.warm_presolve_sigma_m,
-                                                cfg.warm_relative_error_tol)
+            initial, its = self.chunks.warm_start(initial, self.values,
+                                                  cfg.warm_presolve_sigma_m,
+                                                  cfg.warm_relative_error_tol)
+            if its:
+                lm_config = replace(lm_config,
+                                    relative_error_tol=cfg.presolved_relative_error_tol)
         if n > cfg.lag_after_steps and n < cfg.full_growth * self._full_n:
             b = self.chunks.boundary(n, cfg.lag_steps)
             if b is not None:
                 return self._solve_window(initial, b)
         self._full_n = n
         self.chunks.reset_folds()
-        return solve_lm(self.graph, initial, self._lm_config, self.robust_graph,
+        return solve_lm(self.graph, initial, lm_config, self.robust_graph,
                         looks_off=self.looks_off)
 
     def _solve_window(self, initial: gtsam.Values, b: int
