@@ -156,7 +156,17 @@ class FactorGraphConfig(Presets):
         steps a scheduled solve relinearises only the last ``lag_steps`` poses and the
         landmarks they see (fixed-lag: the older poses held, their bearings folded into one
         Gaussian prior per landmark), and the whole graph is solved again each time it has
-        grown by the factor ``full_growth`` (:class:`baselines.factor_graph.BatchState`).
+        grown by the factor ``full_growth`` (:class:`baselines.factor_graph.BatchState`,
+        :mod:`baselines.lm_window`).
+    warm_presolve_sigma_m : float or None
+        Before a warm-started whole-graph solve (``gtsam-batch``, the hybrid's warm start),
+        the poses added since the last solution are solved alone, the landmarks held near
+        their points by an isotropic prior of this std. dev. (m); the whole-graph LM then
+        starts near its minimum. None: no pre-solve.
+    presolved_relative_error_tol : float
+        ``relative_error_tol`` of a whole-graph solve after the warm pre-solve: LM starts so
+        near its minimum that ``warm_relative_error_tol`` stops it short
+        (``docs/measurements.md``).
     relinearize_threshold, relinearize_skip, checkpoint_updates :
         iSAM2 (:class:`baselines.isam2.Isam2Config`): relinearise a variable whose delta
         exceeds the threshold, check every ``relinearize_skip`` updates, and run this many
@@ -189,6 +199,8 @@ class FactorGraphConfig(Presets):
     lag_after_steps: int = 500
     lag_steps: int = 100
     full_growth: float = 1.25
+    warm_presolve_sigma_m: float | None = 3e-3
+    presolved_relative_error_tol: float = 1e-6
     robust_trigger: float = 5.0
     relinearize_threshold: float = 0.001
     relinearize_skip: int = 1
@@ -215,6 +227,9 @@ class FactorGraphConfig(Presets):
         need(self.lag_steps >= 2 and self.lag_after_steps >= self.lag_steps,
              "lag_steps must be >= 2 and lag_after_steps >= lag_steps")
         need(self.full_growth > 1, "full_growth must be > 1")
+        need(self.warm_presolve_sigma_m is None or self.warm_presolve_sigma_m > 0,
+             "warm_presolve_sigma_m must be > 0 or None")
+        need(self.presolved_relative_error_tol >= 0, "presolved_relative_error_tol must be >= 0")
         need(self.robust_trigger > 0, "robust_trigger must be > 0")
         need(self.relinearize_threshold > 0, "relinearize_threshold must be > 0")
         need(self.relinearize_skip >= 1, "relinearize_skip must be >= 1")
@@ -526,6 +541,11 @@ class BearingGraph:
         self._new_values = gtsam.Values()
         self._last_batch, self._entered = self._entered, {}
         return out
+
+    def entered_last(self) -> dict[int, tuple[list[int], list[float]]]:
+        """The landmarks that entered in the batch last handed out by :meth:`take_new`: id ->
+        (steps, bearings) of the buffered bearings they entered with."""
+        return self._last_batch
 
     def _add(self, f: gtsam.NonlinearFactor,
              graph: gtsam.NonlinearFactorGraph | None = None) -> None:

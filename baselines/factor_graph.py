@@ -34,85 +34,13 @@ from bomgraph.stream import Step, StreamHeader, Truth
 
 from .bearing_graph import (BearingGraph, FactorGraphConfig, NewFactors, insert_pose,
                             landmark_key, landmarks_from_values, pose_key, poses_from_values)
-from .fixed_lag import window_problem
-
-#: What a failing GTSAM call raises in Python: its C++ exceptions arrive as RuntimeError,
-#: except one whose message is not UTF-8 (an indeterminate-system message naming a key by a
-#: raw character), which pybind11 turns into UnicodeDecodeError while converting it.
-GTSAM_ERRORS: tuple[type[Exception], ...] = (RuntimeError, UnicodeDecodeError)
+from .lm_report import (ABSURD_STEP, GTSAM_ERRORS, SolveReport, _first_line,  # noqa: F401
+                        gauss_newton_check, lm_params)
+from .lm_window import StepChunks
 
 # --------------------------------------------------------------------------------------------
 # Solving
 # --------------------------------------------------------------------------------------------
-
-@dataclass(frozen=True)
-class SolveReport:
-    """How a Levenberg-Marquardt solve went.
-
-    ``stop`` is why the plain pass ended: ``"tolerance"`` (the error stopped decreasing),
-    ``"lambda_bound"`` (no damped step decreased the error up to ``lambda_upper_bound``: LM
-    gave up), ``"max_iterations"``, or ``"failed"`` (it raised). ``converged`` is True only if
-    the error did not grow and either LM stopped on its tolerance or a Gauss-Newton step at the
-    result predicts less than ``decrease_tol`` of further decrease; an LM run that gave up far
-    from a minimum is never reported as converged, nor a result whose Gauss-Newton step is
-    infinite or longer than :data:`ABSURD_STEP`. ``gn_step`` and ``predicted_decrease`` are NaN
-    when no check was needed (:func:`solve_lm` with ``looks_off``).
-    """
-
-    converged: bool
-    iterations: int
-    initial_error: float
-    final_error: float
-    gn_step: float
-    predicted_decrease: float
-    stop: str
-    passes: tuple[str, ...]
-    message: str = ""
-
-    def as_info(self) -> dict[str, Any]:
-        return {"converged": self.converged, "iterations": self.iterations,
-                "initial_cost": self.initial_error, "cost": self.final_error,
-                # NaN: no Gauss-Newton check was needed (solve_lm)
-                "gn_step": None if math.isnan(self.gn_step) else self.gn_step,
-                "predicted_decrease": (None if math.isnan(self.predicted_decrease)
-                                       else self.predicted_decrease),
-                "stop": self.stop, "passes": list(self.passes),
-                **({"message": self.message} if self.message else {})}
-
-
-#: A Gauss-Newton step longer than this (metres or radians, max-norm) at a solution means a
-#: direction the measurements do not determine (e.g. a landmark sliding along its rays): such a
-#: solution is never "converged". Infinite when the linear system is singular.
-ABSURD_STEP = 1e3
-
-
-def lm_params(config: FactorGraphConfig) -> gtsam.LevenbergMarquardtParams:
-    """GTSAM LM parameters from the config (tight tolerances, a large lambda bound)."""
-    p = gtsam.LevenbergMarquardtParams()
-    p.setMaxIterations(config.max_iterations)
-    p.setRelativeErrorTol(config.relative_error_tol)
-    p.setAbsoluteErrorTol(config.absolute_error_tol)
-    p.setlambdaUpperBound(config.lambda_upper_bound)
-    p.setDiagonalDamping(config.diagonal_damping)
-    return p
-
-
-def gauss_newton_check(graph: gtsam.NonlinearFactorGraph,
-                       values: gtsam.Values) -> tuple[float, float]:
-    """The Gauss-Newton step at ``values``: its max-norm (metres or radians) and the decrease
-    of the error (``graph.error``, i.e. chi^2 / 2) its linear model predicts; ``(inf, inf)``
-    if the linear system is singular."""
-    try:
-        linear = graph.linearize(values)
-        delta = linear.optimize()
-    except GTSAM_ERRORS:
-        return math.inf, math.inf
-    zero = gtsam.VectorValues(delta)
-    zero.setZero()
-    v = delta.vector()
-    step = float(np.max(np.abs(v))) if v.size else 0.0
-    return step, float(linear.error(zero) - linear.error(delta))
-
 
 def solve_lm(graph: gtsam.NonlinearFactorGraph, initial: gtsam.Values,
              config: FactorGraphConfig,
@@ -220,13 +148,6 @@ def marginal_covariances(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values
     return lc.reshape(-1, 2, 2), pc.reshape(-1, 3, 3)
 
 
-def _first_line(exc: BaseException) -> str:
-    """The gist of a GTSAM exception: one line, without the generic help text."""
-    text = " ".join(str(exc).split())
-    text = text.split(" Thrown when")[0]
-    return text[:300] if text else type(exc).__name__
-
-
 def estimate_from_values(graph: BearingGraph, values: gtsam.Values,
                          solved: gtsam.NonlinearFactorGraph, info: dict[str, Any],
                          covariances: bool) -> MapEstimate:
@@ -302,6 +223,8 @@ class BatchState:
         self._fresh: list[int] = []       # landmarks entered since the last solution
         self._obs: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
         self._obs_cat: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+        self.chunks = StepChunks(header, config)
+        self._chunk_start = 0
 
     def add_step(self, step: Step) -> None:
         """Record ``step`` and predict its pose from the previous one by the odometry."""
@@ -352,6 +275,9 @@ class BatchState:
         new = self.problem.take_new()
         self.graph.push_back(new.core)
         self.graph.push_back(new.landmark)
+        # after the push: the chunk (new.core) gets the entering landmarks' recent bearings
+        self.chunks.add(self._chunk_start, new.core, self.problem.entered_last())
+        self._chunk_start = self.problem.n_steps
         if self.robust_graph is not None and new.robust is not None:
             self.robust_graph.push_back(new.robust)
         self.values.insert(new.landmark_values)
@@ -402,34 +328,50 @@ class BatchState:
         return (self.max_whitened_residual(values) > self.config.robust_trigger
                 or self.out_of_reach(values).size > 0)
 
-    def solve(self, initial: gtsam.Values) -> tuple[gtsam.Values, SolveReport]:
+    def solve(self, initial: gtsam.Values, warm: bool = False
+              ) -> tuple[gtsam.Values, SolveReport]:
         """:func:`solve_lm` on ``graph`` from ``initial``: the plain pass, the Huber pass (if
         the config has one) and a Gauss-Newton check only where :meth:`looks_off`; ``values``
-        is left to the caller.
+        is left to the caller. ``warm``: ``initial`` is the current values (the last solution
+        and the odometry predictions since), whose new poses are first solved alone
+        (``warm_presolve_sigma_m``, :meth:`baselines.lm_window.StepChunks.warm_start`).
 
         Past ``lag_after_steps`` steps, and until the graph has grown by ``full_growth`` since
         its last whole solve, only the last ``lag_steps`` poses and the landmarks they see are
-        solved (:mod:`baselines.fixed_lag`; the rest held at ``values``); the result is the
+        solved (:mod:`baselines.lm_window`; the rest held at ``values``); the result is the
         current values with the window replaced, its report the window's
-        (``info["solve"] = "window"``).
+        (``info["passes"]`` starts with ``"window"``).
         """
         n, cfg = self.problem.n_steps, self.config
+        lm_config = self._lm_config
+        if warm and cfg.warm_presolve_sigma_m is not None:
+            initial, its = self.chunks.warm_start(initial, self.values,
+                                                  cfg.warm_presolve_sigma_m,
+                                                  cfg.warm_relative_error_tol)
+            if its:
+                lm_config = replace(lm_config,
+                                    relative_error_tol=cfg.presolved_relative_error_tol)
         if n > cfg.lag_after_steps and n < cfg.full_growth * self._full_n:
-            return self._solve_window(initial)
+            b = self.chunks.boundary(n, cfg.lag_steps)
+            if b is not None:
+                return self._solve_window(initial, b)
         self._full_n = n
-        return solve_lm(self.graph, initial, self._lm_config, self.robust_graph,
+        self.chunks.reset_folds()
+        return solve_lm(self.graph, initial, lm_config, self.robust_graph,
                         looks_off=self.looks_off)
 
-    def _solve_window(self, initial: gtsam.Values) -> tuple[gtsam.Values, SolveReport]:
+    def _solve_window(self, initial: gtsam.Values, b: int
+                      ) -> tuple[gtsam.Values, SolveReport]:
         n = self.problem.n_steps
-        b = n - self.config.lag_steps
-        graph, start = window_problem(self.header, self.config, self.problem, self.bearings(),
-                                      np.array(self._odom_sigma), all_poses(self.values, n),
-                                      self.values, initial, b, self._fresh)
-        window, report = solve_lm(graph, start, self._lm_config)
+        ids = np.array(sorted(self.problem.landmark_ids), dtype=np.int64)
+        graph, start = self.chunks.window(b, n, initial, self.values, self.poses,
+                                          self.bearings(), ids, self._fresh)
+        # the window's own LM report tells convergence; a check only if it did not stop
+        # on its tolerance
+        window, report = solve_lm(graph, start, self._lm_config, looks_off=_never_off)
         values = gtsam.Values(self.values)
         values.update(window)
-        return values, replace(report, stop=report.stop, passes=("window",) + report.passes)
+        return values, replace(report, passes=("window",) + report.passes)
 
     def to_estimate(self, values: gtsam.Values, info: dict[str, Any],
                     leave_out: np.ndarray | None = None) -> MapEstimate:
@@ -445,6 +387,10 @@ class BatchState:
                           else est.landmark_cov[keep],
                           info={**est.info, "out_of_reach": leave_out.tolist()})
         return est
+
+
+def _never_off(values: gtsam.Values) -> bool:
+    return False
 
 
 class ScheduledSolver:
@@ -517,7 +463,7 @@ class BatchMapper(ScheduledSolver):
 
     def _update(self) -> MapEstimate:
         self.state.absorb()
-        values, report = self.state.solve(self.state.values)
+        values, report = self.state.solve(self.state.values, warm=True)
         self.state.set_values(values)
         return self.state.to_estimate(values, report.as_info(), self.state.out_of_reach(values))
 

@@ -350,7 +350,8 @@ class HybridMapper(ScheduledSolver):
         if seed is None or (self.config.warm_start and self._have_solution):
             # previous solution + odometry predictions + new landmarks' intersections
             starts.append("warm")
-            solved.append(("warm", *state.solve(self._with_landmarks(warm, {}))))
+            solved.append(("warm", *state.solve(self._with_landmarks(warm, {}),
+                                                warm=self._have_solution)))
         if incremental:
             assert found is not None
             # the seed start only where it could lead elsewhere than the warm solution

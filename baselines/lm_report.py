@@ -1,0 +1,103 @@
+"""What a Levenberg-Marquardt solve of the LM mappers reports, and the pieces it is made of.
+
+:class:`SolveReport` (honest: an LM run that gave up is never "converged"), the LM parameters
+of a :class:`~baselines.bearing_graph.FactorGraphConfig` (:func:`lm_params`), the Gauss-Newton
+check of a solution (:func:`gauss_newton_check`) and what GTSAM raises
+(:data:`GTSAM_ERRORS`). :func:`baselines.factor_graph.solve_lm` puts them together; they live
+here so that :mod:`baselines.lm_window` can use them without importing the mappers.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import gtsam
+import numpy as np
+
+from .bearing_graph import FactorGraphConfig
+
+#: What a failing GTSAM call raises in Python: its C++ exceptions arrive as RuntimeError,
+#: except one whose message is not UTF-8 (an indeterminate-system message naming a key by a
+#: raw character), which pybind11 turns into UnicodeDecodeError while converting it.
+GTSAM_ERRORS: tuple[type[Exception], ...] = (RuntimeError, UnicodeDecodeError)
+
+
+@dataclass(frozen=True)
+class SolveReport:
+    """How a Levenberg-Marquardt solve went.
+
+    ``stop`` is why the plain pass ended: ``"tolerance"`` (the error stopped decreasing),
+    ``"lambda_bound"`` (no damped step decreased the error up to ``lambda_upper_bound``: LM
+    gave up), ``"max_iterations"``, or ``"failed"`` (it raised). ``converged`` is True only if
+    the error did not grow and either LM stopped on its tolerance or a Gauss-Newton step at the
+    result predicts less than ``decrease_tol`` of further decrease; an LM run that gave up far
+    from a minimum is never reported as converged, nor a result whose Gauss-Newton step is
+    infinite or longer than :data:`ABSURD_STEP`. ``gn_step`` and ``predicted_decrease`` are NaN
+    when no check was needed (:func:`solve_lm` with ``looks_off``).
+    """
+
+    converged: bool
+    iterations: int
+    initial_error: float
+    final_error: float
+    gn_step: float
+    predicted_decrease: float
+    stop: str
+    passes: tuple[str, ...]
+    message: str = ""
+
+    def as_info(self) -> dict[str, Any]:
+        return {"converged": self.converged, "iterations": self.iterations,
+                "initial_cost": self.initial_error, "cost": self.final_error,
+                # NaN: no Gauss-Newton check was needed (solve_lm)
+                "gn_step": None if math.isnan(self.gn_step) else self.gn_step,
+                "predicted_decrease": (None if math.isnan(self.predicted_decrease)
+                                       else self.predicted_decrease),
+                "stop": self.stop, "passes": list(self.passes),
+                **({"message": self.message} if self.message else {})}
+
+
+#: A Gauss-Newton step longer than this (metres or radians, max-norm) at a solution means a
+#: direction the measurements do not determine (e.g. a landmark sliding along its rays): such a
+#: solution is never "converged". Infinite when the linear system is singular.
+ABSURD_STEP = 1e3
+
+
+def lm_params(config: FactorGraphConfig) -> gtsam.LevenbergMarquardtParams:
+    """GTSAM LM parameters from the config (tight tolerances, a large lambda bound)."""
+    p = gtsam.LevenbergMarquardtParams()
+    p.setMaxIterations(config.max_iterations)
+    p.setRelativeErrorTol(config.relative_error_tol)
+    p.setAbsoluteErrorTol(config.absolute_error_tol)
+    p.setlambdaUpperBound(config.lambda_upper_bound)
+    p.setDiagonalDamping(config.diagonal_damping)
+    return p
+
+
+def gauss_newton_check(graph: gtsam.NonlinearFactorGraph,
+                       values: gtsam.Values) -> tuple[float, float]:
+    """The Gauss-Newton step at ``values``: its max-norm (metres or radians) and the decrease
+    of the error (``graph.error``, i.e. chi^2 / 2) its linear model predicts; ``(inf, inf)``
+    if the linear system is singular."""
+    try:
+        linear = graph.linearize(values)
+        delta = linear.optimize()
+    except GTSAM_ERRORS:
+        return math.inf, math.inf
+    zero = gtsam.VectorValues(delta)
+    zero.setZero()
+    v = delta.vector()
+    step = float(np.max(np.abs(v))) if v.size else 0.0
+    return step, float(linear.error(zero) - linear.error(delta))
+
+
+def _first_line(exc: BaseException) -> str:
+    """The gist of a GTSAM exception: one line, without the generic help text."""
+    text = " ".join(str(exc).split())
+    text = text.split(" Thrown when")[0]
+    return text[:300] if text else type(exc).__name__
+
+
+__all__ = ["GTSAM_ERRORS", "ABSURD_STEP", "SolveReport", "lm_params", "gauss_newton_check"]

@@ -1,0 +1,283 @@
+"""The recent part of the LM mappers' graph, kept by step, for warm starts and fixed-lag solves.
+
+:class:`baselines.factor_graph.BatchState` hands every batch of new factors to
+:class:`StepChunks`, which files them by the steps that own them (a *chunk*: the odometry and
+bearings of the steps since the previous batch; a late landmark's buffered bearings go to the
+chunk of their step). A window ``x_b .. x_{T-1}`` (``b + 1`` a chunk's first step) is then the
+union of the newest chunks, taken without a loop over factors, plus a prior holding ``x_b``.
+Two uses (issue 14 items 1-2):
+
+* **warm start** (:meth:`StepChunks.warm_start`): before a whole-graph solve, the poses added
+  since the last solution (predicted by dead reckoning, often centimetres off) are solved with
+  the landmarks held near their current points by an isotropic prior of
+  ``warm_presolve_sigma_m``: a problem of ``solve_every`` poses, after which the whole-graph LM
+  starts near its minimum and needs fewer iterations;
+* **fixed-lag solve** (:meth:`StepChunks.window`): on long recordings, the last ``lag_steps``
+  poses and the landmarks they see, each landmark's bearings from the older (held) poses
+  folded into one Gaussian prior (:func:`fold_bearings`, as in :mod:`baselines.fixed_lag`).
+  The fold is kept per landmark and grown as steps leave the window, so a solve costs the window, not the
+  history; a landmark's fold is redone from all its old bearings when its point has moved more
+  than ``refold_m`` from where it was folded (fluid relinearisation), and all folds are reset
+  after a whole-graph solve.
+"""
+
+from __future__ import annotations
+
+import bisect
+from typing import Callable, Iterable, Sequence
+
+import gtsam
+import numpy as np
+
+from bomgraph.angles import angle_residual
+from bomgraph.stream import StreamHeader
+
+from .lm_report import GTSAM_ERRORS, lm_params
+from .bearing_graph import (FactorGraphConfig, bearing_noise, landmark_key, mid_key, pose_key,
+                            prior_factor)
+
+
+_POSE_CHARS = (ord("x"), ord("m"))
+
+
+def _is_landmark(key: int) -> bool:
+    """Every key of the graph is a pose (``x``, ``m``) or a landmark
+    (:func:`baselines.bearing_graph.landmark_key`, wide ids included)."""
+    return (int(key) >> 56) not in _POSE_CHARS
+
+
+def _landmark_id(key: int) -> int:
+    """The landmark id of a landmark key (the inverse of ``landmark_key``)."""
+    k = int(key)
+    return k ^ (1 << 63) if k >> 63 else k & ((1 << 56) - 1)
+
+
+class StepChunks:
+    """The factors of the recent steps by chunk, and the folded old bearings of each landmark.
+
+    Parameters
+    ----------
+    header : StreamHeader
+    config : FactorGraphConfig
+        ``sigma_floor_*`` (the boundary prior), ``bearing_cauchy_k``, ``lag_steps``.
+    """
+
+    #: A landmark folded at a point farther than this (m) from its current one is refolded.
+    refold_m = 1e-3
+
+    def __init__(self, header: StreamHeader, config: FactorGraphConfig) -> None:
+        self.header = header
+        self.config = config
+        self._starts: list[int] = []                       # first step of each chunk
+        self._graphs: list[gtsam.NonlinearFactorGraph] = []
+        self._noise = bearing_noise(header, cauchy_k=config.bearing_cauchy_k)
+        fm, fr = config.sigma_floor_m, config.sigma_floor_rad
+        self._hold = gtsam.noiseModel.Diagonal.Sigmas([fm, fm, fr])
+        # folded old bearings: landmark id -> [information (2, 2), information vector (2,),
+        # point folded at (2,)]; bearings of steps < _folded_to are in the fold
+        self._fold: dict[int, list[np.ndarray]] = {}
+        self._folded_to = 0
+
+    # -- filing -----------------------------------------------------------------------------
+    def add(self, first_step: int, core: gtsam.NonlinearFactorGraph,
+            entries: dict[int, tuple[Sequence[int], Sequence[float]]]) -> None:
+        """File a batch: ``core`` (the factors of steps ``first_step ..``) as a new chunk and
+        the buffered bearings ``entries`` (landmark id -> (steps, bearings)) of the landmarks
+        that entered now, each in its step's chunk (dropped if that chunk is gone; a
+        bearing of a step already folded is added to its landmark's fold at the next
+        window). Chunks older than two windows are forgotten."""
+        self._starts.append(int(first_step))
+        self._graphs.append(core)
+        oldest = self._starts[0]
+        for lid, (ts, bs) in entries.items():
+            for t, b in zip(ts, bs):
+                if t < oldest:
+                    continue
+                k = bisect.bisect_right(self._starts, t) - 1
+                self._graphs[k].add(gtsam.BearingFactor2D(pose_key(t), landmark_key(lid),
+                                                          gtsam.Rot2(float(b)), self._noise))
+        keep = first_step - 2 * self.config.lag_steps
+        while len(self._starts) > 1 and self._starts[1] <= keep:
+            self._starts.pop(0)
+            self._graphs.pop(0)
+
+    def boundary(self, n_steps: int, lag_steps: int) -> int | None:
+        """The held pose ``b`` of a window of at least ``lag_steps`` poses ending at step
+        ``n_steps - 1`` (``b + 1`` a chunk's first step), or None if no chunk starts late
+        enough to leave a pose before it."""
+        k = bisect.bisect_right(self._starts, max(n_steps - lag_steps, 1)) - 1
+        if k < 0 or self._starts[k] < 1:
+            return None
+        return self._starts[k] - 1
+
+    def newest_boundary(self) -> int | None:
+        """The held pose of the newest chunk alone (the last solved pose), or None."""
+        return self._starts[-1] - 1 if self._starts and self._starts[-1] >= 1 else None
+
+    def _factors(self, b: int) -> gtsam.NonlinearFactorGraph:
+        graph = gtsam.NonlinearFactorGraph()
+        for start, g in zip(self._starts, self._graphs):
+            if start > b:
+                graph.push_back(g)
+        return graph
+
+    @staticmethod
+    def _values(keys: Iterable[int], source: gtsam.Values) -> gtsam.Values:
+        out = gtsam.Values()
+        for k in keys:
+            out.insert(k, source.atPoint2(k) if _is_landmark(k) else source.atPose2(k))
+        return out
+
+    # -- warm start -------------------------------------------------------------------------
+    def warm_start(self, values: gtsam.Values, held: gtsam.Values, sigma_m: float,
+                   tol: float) -> tuple[gtsam.Values, int]:
+        """``values`` with the poses of the newest chunk solved against the landmarks, each
+        held at its point in ``values`` by an isotropic prior of ``sigma_m``, the last solved
+        pose held at ``held`` (module docstring); the LM iterations taken. ``values``
+        unchanged (and 0) if there is no earlier chunk or the small solve fails."""
+        b = self.newest_boundary()
+        if b is None:
+            return values, 0
+        graph = self._factors(b)
+        graph.add(gtsam.PriorFactorPose2(pose_key(b), held.atPose2(pose_key(b)), self._hold))
+        keys = list(graph.keyVector())
+        noise = gtsam.noiseModel.Isotropic.Sigma(2, sigma_m)
+        for k in keys:
+            if _is_landmark(k):
+                graph.add(gtsam.PriorFactorPoint2(k, values.atPoint2(k), noise))
+        return self._lm(graph, self._values(keys, values), values, tol)
+
+    def _lm(self, graph: gtsam.NonlinearFactorGraph, start: gtsam.Values,
+            values: gtsam.Values, tol: float) -> tuple[gtsam.Values, int]:
+        params = lm_params(self.config)
+        params.setRelativeErrorTol(tol)
+        try:
+            opt = gtsam.LevenbergMarquardtOptimizer(graph, start, params)
+            e0 = opt.error()
+            solved = opt.optimize()
+        except GTSAM_ERRORS:
+            return values, 0
+        if not opt.error() <= e0:
+            return values, int(opt.iterations())
+        out = gtsam.Values(values)
+        out.update(solved)
+        return out, int(opt.iterations())
+
+    # -- fixed-lag window -------------------------------------------------------------------
+    def window(self, b: int, n_steps: int, initial: gtsam.Values, held: gtsam.Values,
+               pose_at: Callable[[np.ndarray], np.ndarray],
+               bearings: tuple[np.ndarray, np.ndarray, np.ndarray],
+               landmark_ids: np.ndarray, fresh: Sequence[int]
+               ) -> tuple[gtsam.NonlinearFactorGraph, gtsam.Values]:
+        """The fixed-lag problem with held pose ``b`` (module docstring): factors and start.
+
+        Parameters
+        ----------
+        initial : start of the window's variables; held : the current values (the held
+        pose, the landmarks' points to fold at); pose_at : ``pose_at(ts)`` the current poses
+        ``ts`` (k,), shape (k, 3);
+        bearings : (owner (J,), id (J,), bearing (J,)) every bearing so far, owner sorted;
+        landmark_ids : (n,) sorted, those in the graph; fresh : entered since the last solve.
+        """
+        graph = self._factors(b)
+        graph.add(gtsam.PriorFactorPose2(pose_key(b), held.atPose2(pose_key(b)), self._hold))
+        keys = set(graph.keyVector())
+        active = sorted({_landmark_id(k) for k in keys if _is_landmark(k)}
+                        | {int(i) for i in fresh})
+        for i in active:
+            keys.add(landmark_key(i))
+        self._fold_upto(b + 1, held, pose_at, bearings, landmark_ids, active)
+        for i in active:
+            f = self._fold.get(i)
+            if f is None or not f[0].any():
+                continue
+            h = f[0] + (1e-12 + 1e-9 * np.trace(f[0])) * np.eye(2)
+            mean = np.linalg.solve(h, f[1])
+            graph.add(gtsam.PriorFactorPoint2(landmark_key(i), gtsam.Point2(*mean),
+                                              gtsam.noiseModel.Gaussian.Information(h)))
+        act = set(active)
+        for p in self.header.priors:
+            if p.i in act and p.j in act:
+                graph.add(prior_factor(p))
+        return graph, self._values(sorted(keys), initial)
+
+    def reset_folds(self) -> None:
+        """Forget every fold (after a whole-graph solve moved the held poses)."""
+        self._fold = {}
+        self._folded_to = 0
+
+    def _fold_upto(self, upto: int, held: gtsam.Values,
+                   pose_at: Callable[[np.ndarray], np.ndarray],
+                   bearings: tuple[np.ndarray, np.ndarray, np.ndarray],
+                   landmark_ids: np.ndarray, active: Sequence[int]) -> None:
+        """Fold the bearings of steps ``_folded_to .. upto - 1`` (and, for the active
+        landmarks folded too far from their current point or never, all their bearings of
+        steps < ``upto``) of landmarks in the graph."""
+        owner, lid, brg = bearings
+        if not landmark_ids.size or not owner.size:
+            return
+        refold = []
+        for i in active:
+            f = self._fold.get(i)
+            cur = np.asarray(held.atPoint2(landmark_key(i)), dtype=float)
+            if f is None or np.hypot(*(cur - f[2])) > self.refold_m:
+                refold.append(i)
+        hi = int(np.searchsorted(owner, upto))
+        lo = int(np.searchsorted(owner, self._folded_to))
+        parts = [np.arange(lo, hi)]
+        if refold:
+            for i in refold:
+                self._fold.pop(i, None)
+            r = np.asarray(refold, dtype=np.int64)
+            parts.append(np.nonzero(np.isin(lid[:lo], r))[0])
+        sel = np.concatenate(parts)
+        sel = sel[np.isin(lid[sel], landmark_ids)]
+        self._folded_to = max(self._folded_to, upto)
+        if not sel.size:
+            return
+        ids, which = np.unique(lid[sel], return_inverse=True)
+        xy = np.array([held.atPoint2(landmark_key(int(i))) for i in ids]).reshape(-1, 2)
+        ts, at = np.unique(owner[sel], return_inverse=True)
+        info, eta = fold_bearings(pose_at(ts)[at], xy, brg[sel], which,
+                                  float(self.header.bearing_sigma_rad),
+                                  self.config.bearing_cauchy_k)
+        for k, i in enumerate(ids.tolist()):
+            f = self._fold.get(i)
+            if f is None:
+                self._fold[i] = [info[k], eta[k], xy[k]]
+            else:
+                f[0] = f[0] + info[k]
+                f[1] = f[1] + eta[k]
+
+
+def fold_bearings(poses: np.ndarray, points: np.ndarray, bearings_rad: np.ndarray,
+                  which: np.ndarray, sigma_rad: float, cauchy_k: float | None = None
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """Bearings from held poses on landmarks, linearised at the landmarks' ``points``, in
+    information form: the cost ``sum w (J (l - l0) - r)^2`` of landmark ``k`` is
+    ``l^T H_k l - 2 eta_k^T l + const``.
+
+    Parameters
+    ----------
+    poses : (J, 3) the pose of each bearing; points : (n, 2) the linearisation points;
+    bearings_rad : (J,); which : (J,) int, the landmark (0 .. n-1) of each bearing;
+    sigma_rad : bearing std. dev.; cauchy_k : Cauchy threshold (whitened) or None
+    (iteratively reweighted at ``points``).
+
+    Returns
+    -------
+    info : (n, 2, 2) ``H = sum w J^T J``; eta : (n, 2) ``H l0 + sum w J^T r``.
+    """
+    n = len(points)
+    d = points[which] - poses[:, :2]
+    r2 = np.maximum((d * d).sum(axis=1), 1e-18)
+    res = angle_residual(bearings_rad, np.arctan2(d[:, 1], d[:, 0]) - poses[:, 2]) / sigma_rad
+    jx, jy = -d[:, 1] / r2 / sigma_rad, d[:, 0] / r2 / sigma_rad
+    w = np.ones_like(res) if cauchy_k is None else 1.0 / (1.0 + (res / cauchy_k) ** 2)
+    info = np.empty((n, 2, 2))
+    info[:, 0, 0] = np.bincount(which, w * jx * jx, n)
+    info[:, 0, 1] = info[:, 1, 0] = np.bincount(which, w * jx * jy, n)
+    info[:, 1, 1] = np.bincount(which, w * jy * jy, n)
+    grad = np.column_stack([np.bincount(which, w * res * jx, n),
+                            np.bincount(which, w * res * jy, n)])
+    return info, np.einsum("nij,nj->ni", info, points) + grad
