@@ -49,6 +49,7 @@ CONFIGS: list[tuple[str, str, dict[str, Any]]] = [
     ("stmds-smacof@window-lsq", "stmds-smacof", {"preset": "window-lsq"}),
     ("stmds-smacof@window-ba", "stmds-smacof", {"preset": "window-ba"}),
     ("stmds-smacof@real", "stmds-smacof", {"preset": "real"}),
+    ("stmds-smacof@real-keyframes", "stmds-smacof", {"preset": "real-keyframes"}),
     ("stmds-cs-loc", "stmds-cs-loc", {}),
     ("stmds-smacof-loc", "stmds-smacof-loc", {}),
     ("stmds-smacof-loc@improved", "stmds-smacof-loc", {"preset": "improved"}),
@@ -59,12 +60,18 @@ CONFIGS: list[tuple[str, str, dict[str, Any]]] = [
     ("ekf-invdepth@real", "ekf-invdepth", {"preset": "real"}),
     ("gtsam-batch", "gtsam-batch", {}),
     ("gtsam-batch@robust", "gtsam-batch", {"preset": "robust"}),
+    ("gtsam-batch@real", "gtsam-batch", {"preset": "real"}),
     ("gtsam-isam2", "gtsam-isam2", {}),
+    ("gtsam-isam2@real", "gtsam-isam2", {"preset": "real"}),
+    ("hybrid-isam2", "hybrid-isam2", {}),
+    ("hybrid-isam2@real", "hybrid-isam2", {"preset": "real"}),
     ("hybrid", "hybrid", {}),
     ("hybrid@real-seed", "hybrid", {"preset": "real-seed"}),
     ("hybrid@real-seed-robust", "hybrid", {"preset": "real-seed-robust"}),
+    ("hybrid@real", "hybrid", {"preset": "real"}),
     ("oracle", "oracle", {}),
     ("oracle@robust", "oracle", {"preset": "robust"}),
+    ("oracle@real", "oracle", {"preset": "real"}),
 ]
 
 STREAMS = ("sim-l0", "sim-l1", "sim-l2", "mrclam6-r3", "g2o")
