@@ -137,6 +137,9 @@ class Isam2Mapper:
     on the whole graph, each kept only if it lowers the error, so the map at step ``T``
     does not depend on how often it was asked for. ``info["converged"]`` says whether the
     last Gauss-Newton step predicted a decrease of at most ``decrease_tol`` and was finite.
+    Past ``long_after_steps`` the mapper runs in long mode (:class:`Isam2Config`; bounded
+    work per update, no whole-graph polish per estimate, ``info["mode"] = "isam2-long"``
+    and ``info["checked_at_step"]``, the step of the whole-graph check it reports).
 
     If an update raises (e.g. an indeterminate linear system), the external factors of that
     update (:meth:`add_factors`) are dropped and the solver is rebuilt from the factors held
