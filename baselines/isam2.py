@@ -18,8 +18,14 @@ from bomgraph.config import requirement, resolve
 from bomgraph.mapper import MapEstimate
 from bomgraph.stream import Step, StreamHeader
 
-from .bearing_graph import BearingGraph, FactorGraphConfig, insert_pose, landmark_key, pose_key
+from .bearing_graph import (BearingGraph, FactorGraphConfig, insert_pose, landmark_key,
+                            mid_key, pose_key)
 from .factor_graph import GTSAM_ERRORS, _first_line, estimate_from_values, solve_lm
+
+
+#: The relinearisation settings the recording presets were validated with (``docs/measurements.md``,
+#: "gtsam-isam2: schedule, polish, robust kernels"); the paper defaults are cheaper (issue 14).
+_VALIDATED_RELINEARISATION = {"relinearize_threshold": 0.001, "checkpoint_updates": 2}
 
 
 @dataclass(frozen=True)
@@ -55,15 +61,40 @@ class Isam2Config(FactorGraphConfig):
         undamped iSAM2 solve determinate where the bearings leave a landmark's range
         unobserved (small parallax) or a robust kernel switches its factors off, at a cost
         of ``(d / sigma)^2 / 2`` for a displacement ``d``. None: no prior.
+    relinearize_threshold, checkpoint_updates :
+        As in :class:`FactorGraphConfig`, with cheaper defaults here (0.01 and 1; the
+        ``robust`` and ``real`` presets keep 0.001 and 2, with which they were validated on
+        recordings).
+    long_after_steps : int or None
+        Long recordings: from the first scheduled update at or past this many steps the
+        mapper goes *long* (None: never). iSAM2 is rebuilt once with Gauss-Newton (Powell's
+        dogleg evaluates the whole graph's error and gradient at every update: O(T) per
+        update), poses older than ``long_lag_steps`` are not relinearised (ISAM2's
+        ``noRelinKeys``; they still move with the linear solution) except at an update
+        where the graph has grown by ``long_growth`` since the last full check, which also
+        runs the Gauss-Newton convergence check; ``estimate()`` no longer polishes the whole
+        graph (it reports the last check). Cost per update is then bounded by the lag and
+        the landmarks, and the whole-graph work adds up to a geometric series.
+    long_lag_steps : int
+        Poses relinearised in long mode (the latest this many).
+    long_relinearize_threshold : float
+        ``relinearize_threshold`` in long mode (the poses that would drift past it are held
+        by ``long_lag_steps``).
+    long_growth : float
+        Growth factor of the graph (in steps) between two whole-graph relinearisations and
+        convergence checks in long mode.
     """
 
     PRESETS: ClassVar[Mapping[str, Mapping[str, Any]]] = {
         "paper": {},
         "robust": {"odometry_cauchy_k": 3.0, "bearing_cauchy_k": 3.0,
-                   "landmark_prior_sigma_m": 100.0},
+                   "landmark_prior_sigma_m": 100.0, **_VALIDATED_RELINEARISATION},
         "real": {"odometry_cauchy_k": 3.0, "bearing_cauchy_k": 3.0,
-                 "landmark_prior_sigma_m": 100.0},
+                 "landmark_prior_sigma_m": 100.0, **_VALIDATED_RELINEARISATION},
     }
+
+    relinearize_threshold: float = 0.01
+    checkpoint_updates: int = 1
 
     isam2_update_every: int = 10
     isam2_update_on_entry: bool = True
@@ -71,6 +102,10 @@ class Isam2Config(FactorGraphConfig):
     isam2_partial_check: bool = False
     isam2_polish: int = 3
     landmark_prior_sigma_m: float | None = None
+    long_after_steps: int | None = 500
+    long_lag_steps: int = 100
+    long_relinearize_threshold: float = 0.001
+    long_growth: float = 1.25
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -81,6 +116,11 @@ class Isam2Config(FactorGraphConfig):
         need(self.isam2_polish >= 0, "isam2_polish must be >= 0")
         need(self.landmark_prior_sigma_m is None or self.landmark_prior_sigma_m > 0,
              "landmark_prior_sigma_m must be > 0 or None")
+        need(self.long_after_steps is None or self.long_after_steps >= 1,
+             "long_after_steps must be >= 1 or None")
+        need(self.long_lag_steps >= 1, "long_lag_steps must be >= 1")
+        need(self.long_relinearize_threshold > 0, "long_relinearize_threshold must be > 0")
+        need(self.long_growth > 1, "long_growth must be > 1")
 
 
 class Isam2Mapper:
@@ -97,6 +137,9 @@ class Isam2Mapper:
     on the whole graph, each kept only if it lowers the error, so the map at step ``T``
     does not depend on how often it was asked for. ``info["converged"]`` says whether the
     last Gauss-Newton step predicted a decrease of at most ``decrease_tol`` and was finite.
+    Past ``long_after_steps`` the mapper runs in long mode (:class:`Isam2Config`; bounded
+    work per update, no whole-graph polish per estimate, ``info["mode"] = "isam2-long"``
+    and ``info["checked_at_step"]``, the step of the whole-graph check it reports).
 
     If an update raises (e.g. an indeterminate linear system), the external factors of that
     update (:meth:`add_factors`) are dropped and the solver is rebuilt from the factors held
@@ -130,6 +173,7 @@ class Isam2Mapper:
         self.problem = BearingGraph(header, self.config, np.asarray(start_pose, dtype=float))
         self.accepted = gtsam.NonlinearFactorGraph()   # every factor the solver holds
         self.estimate_values = gtsam.Values()          # its estimate after the last update
+        self._long = False   # long mode (Isam2Config.long_after_steps)
         self._isam = self._new_isam()
         self._buffer = gtsam.NonlinearFactorGraph()    # steps since the last update
         self._buffer_values = gtsam.Values()
@@ -140,15 +184,21 @@ class Isam2Mapper:
         self.updates = 0
         self._batch = False  # set when iSAM2 cannot be rebuilt (see _recover)
         self.dropped_external = 0
+        self._long_full = 0  # steps at the last whole-graph relinearisation and check
+        self._long_check: dict[str, Any] = {}
+        self._old = gtsam.KeyList()  # what long mode does not relinearise
+        self._old_upto = 0
+        self._old_landmarks: set[int] = set()
 
     def _new_isam(self) -> gtsam.ISAM2:
         """A fresh iSAM2: Cholesky, Powell's dogleg (a trust region) or Gauss-Newton."""
         p = gtsam.ISAM2Params()
-        p.setRelinearizeThreshold(self.config.relinearize_threshold)
+        p.setRelinearizeThreshold(self.config.long_relinearize_threshold if self._long
+                                  else self.config.relinearize_threshold)
         p.relinearizeSkip = self.config.relinearize_skip
         p.enablePartialRelinearizationCheck = self.config.isam2_partial_check
         p.setFactorization("CHOLESKY")
-        if self.config.isam2_optimizer == "dogleg":
+        if self.config.isam2_optimizer == "dogleg" and not self._long:
             p.setOptimizationParams(gtsam.ISAM2DoglegParams())
         else:
             p.setOptimizationParams(gtsam.ISAM2GaussNewtonParams())
@@ -217,12 +267,19 @@ class Isam2Mapper:
         both = gtsam.Values(values)
         both.insert(ext_values)
         try:
-            self._isam.update(graph, both)
+            full = self._long and self.problem.n_steps >= self.config.long_growth * self._long_full
+            params = self._update_params(full)
+            self._isam.update(graph, both, params)
             for _ in range(self.config.checkpoint_updates if extra else 0):
-                self._isam.update()
+                self._isam.update(gtsam.NonlinearFactorGraph(), gtsam.Values(), params)
             self.updates += 1
             self.accepted.push_back(graph)
             self.estimate_values = self._isam.calculateEstimate()
+            if full:
+                self._check_long()
+            elif (extra and not self._long and self.config.long_after_steps is not None
+                  and self.problem.n_steps >= self.config.long_after_steps):
+                self._go_long()
             return
         except GTSAM_ERRORS as exc:
             self.failures.append(_first_line(exc))
@@ -230,6 +287,59 @@ class Isam2Mapper:
         start = gtsam.Values(self.estimate_values)
         start.insert(values)
         self._recover(factors, start)
+
+    # -- long recordings ------------------------------------------------------------------
+    def _update_params(self, full: bool) -> gtsam.ISAM2UpdateParams:
+        """The update's parameters: in long mode (unless ``full``) the poses older than
+        ``long_lag_steps`` are not relinearised."""
+        params = gtsam.ISAM2UpdateParams()
+        if self._long and not full:
+            upto = self.problem.n_steps - self.config.long_lag_steps
+            for t in range(self._old_upto, max(upto, self._old_upto)):
+                self._old.push_back(pose_key(t))
+                if t > 0:
+                    self._old.push_back(mid_key(t))
+            self._old_upto = max(upto, self._old_upto)
+            params.noRelinKeys = self._old
+        elif self._long:   # the landmarks held from now until the next full update
+            for lid in self.problem.landmark_ids:
+                if lid not in self._old_landmarks:
+                    self._old_landmarks.add(lid)
+                    self._old.push_back(landmark_key(lid))
+        return params
+
+    def _go_long(self) -> None:
+        """Enter long mode: iSAM2 rebuilt with Gauss-Newton from the current estimate
+        (one batch elimination), then the first check. If the rebuild fails, the mapper
+        stays in its normal mode (a rebuild with the previous optimizer, :meth:`_recover`)."""
+        self._long = True
+        self._isam = self._new_isam()
+        try:
+            self._isam.update(self.accepted, self.estimate_values)
+            self.estimate_values = self._isam.calculateEstimate()
+        except GTSAM_ERRORS as exc:
+            self.failures.append(_first_line(exc))
+            self._long = False
+            self._recover(gtsam.NonlinearFactorGraph(), gtsam.Values(self.estimate_values))
+            return
+        self._check_long()
+
+    def _check_long(self) -> None:
+        """The whole-graph Gauss-Newton check of long mode (no step taken), after which up to
+        ``isam2_polish`` more whole-graph updates run while it predicts a decrease above
+        ``decrease_tol``: what ``estimate()`` reports until the next one."""
+        self._long_full = self.problem.n_steps
+        for k in range(self.config.isam2_polish + 1):
+            _, step, decrease, cost = polish(self.accepted, self.estimate_values, 0,
+                                             self.config.decrease_tol)
+            if decrease <= self.config.decrease_tol or k == self.config.isam2_polish:
+                break
+            self._isam.update()
+            self.estimate_values = self._isam.calculateEstimate()
+        self._long_check = {"converged": bool(decrease <= self.config.decrease_tol
+                                              and math.isfinite(step)),
+                            "cost": cost, "gn_step": step, "predicted_decrease": decrease,
+                            "checked_at_step": self.problem.n_steps}
 
     def _recover(self, factors: gtsam.NonlinearFactorGraph, start: gtsam.Values) -> None:
         """After a failed update (iSAM2 is unusable then): a new iSAM2 holding the accepted
@@ -265,14 +375,18 @@ class Isam2Mapper:
         report = None
         if self._batch:
             values, report = solve_lm(graph, values, self.config)
-        values, step, decrease = polish(graph, values, self.config.isam2_polish,
-                                        self.config.decrease_tol)
-        converged = bool(decrease <= self.config.decrease_tol and math.isfinite(step))
+        if self._long and not self._batch:
+            check = dict(self._long_check)  # no whole-graph work per estimate in long mode
+        else:
+            values, step, decrease, cost = polish(graph, values, self.config.isam2_polish,
+                                                  self.config.decrease_tol)
+            check = {"converged": bool(decrease <= self.config.decrease_tol
+                                       and math.isfinite(step)),
+                     "cost": cost, "gn_step": step, "predicted_decrease": decrease}
         if report is not None:
-            converged = converged and report.converged
-        info = {"converged": converged, "mode": "batch" if self._batch else "isam2",
-                "cost": float(graph.error(values)), "gn_step": step,
-                "predicted_decrease": decrease, "isam2_updates": self.updates,
+            check["converged"] = check["converged"] and report.converged
+        mode = "batch" if self._batch else ("isam2-long" if self._long else "isam2")
+        info = {**check, "mode": mode, "isam2_updates": self.updates,
                 "update_failures": len(self.failures), "rebuilds": self.rebuilds,
                 "dropped_external_factors": self.dropped_external}
         if self.failures:
@@ -282,12 +396,13 @@ class Isam2Mapper:
 
 
 def polish(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, iterations: int,
-           decrease_tol: float) -> tuple[gtsam.Values, float, float]:
+           decrease_tol: float) -> tuple[gtsam.Values, float, float, float]:
     """Up to ``iterations`` Gauss-Newton steps on ``graph`` from ``values``, each kept only if
     it lowers the error; the last one computed is also the convergence check, and after a
     step predicting at most ``decrease_tol`` the polish stops. Returns ``(values, max-norm of
-    the last step, the decrease its linear model predicted)``; ``(values, inf, inf)`` if the
-    linear system is singular. With ``iterations = 0`` it is only the check."""
+    the last step, the decrease its linear model predicted, graph.error(values))``; ``(values,
+    inf, inf, error)`` if the linear system is singular. With ``iterations = 0`` it is only the
+    check."""
     error = float(graph.error(values))
     step = decrease = math.inf
     for _ in range(max(iterations, 1)):
@@ -295,7 +410,7 @@ def polish(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, iterations: 
             linear = graph.linearize(values)
             delta = linear.optimize()
         except GTSAM_ERRORS:
-            return values, math.inf, math.inf
+            return values, math.inf, math.inf, error
         v = delta.vector()
         step = float(np.max(np.abs(v))) if v.size else 0.0
         zero = gtsam.VectorValues(delta)
@@ -310,7 +425,7 @@ def polish(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, iterations: 
         values, error = trial, e
         if decrease <= decrease_tol:
             break
-    return values, step, decrease
+    return values, step, decrease, error
 
 
 __all__ = ["Isam2Config", "Isam2Mapper", "polish"]

@@ -57,7 +57,8 @@ from bomgraph.stream import Stream  # noqa: E402
 
 #: The reference loop of each GTSAM method (others have none).
 REFERENCE_OF = {"gtsam-batch": "loop-warm-lm", "hybrid": "loop-warm-lm",
-                "gtsam-isam2": "loop-warm-lm", "oracle": "loop-truth-lm"}
+                "gtsam-isam2": "loop-warm-lm", "hybrid-isam2": "loop-warm-lm",
+                "oracle": "loop-truth-lm"}
 
 
 # --------------------------------------------------------------------------------------------

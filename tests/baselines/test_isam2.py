@@ -57,6 +57,27 @@ def test_map_does_not_depend_on_how_often_it_was_asked_for(small: Stream) -> Non
     assert maps[0].info["converged"]
 
 
+def test_long_mode_is_cadence_independent_and_reaches_the_same_map(small: Stream) -> None:
+    """Long mode (Gauss-Newton, old poses and landmarks held between whole-graph updates, no
+    polish per estimate), entered early here: the final map does not depend on the cadence,
+    and right after a whole-graph update (t = 110, 1.25 x 88 steps) it is the normal mode's
+    polished map (MPE within 2 %, cost within 0.1 %)."""
+    long = {"long_after_steps": 60, "long_lag_steps": 30}
+    maps = [_final(small, every, **long) for every in (1, 10, 10 ** 6)]
+    for other in maps[1:]:
+        _assert_same_map(maps[0], other)
+    assert maps[0].info["mode"] == "isam2-long"
+    cut = replace(small, steps=small.steps[:111],
+                  truth=Truth(small.truth.landmark_ids, small.truth.landmarks_xy,
+                              small.truth.poses[:111]))
+    at, normal = _final(cut, 10, **long), _final(cut, 10, long_after_steps=None)
+    assert at.info["checked_at_step"] == 111 and at.info["converged"]
+    assert normal.info["mode"] == "isam2"
+    a, b = (score_estimate(m, small.truth).mpe_m for m in (at, normal))
+    assert abs(a - b) <= 0.02 * b
+    assert at.info["cost"] <= 1.001 * normal.info["cost"]
+
+
 @pytest.mark.skipif(not (DATA / "mrclam6").is_dir(), reason=f"no shared data at {DATA}")
 def test_cadence_independence_on_a_recording() -> None:
     from bomgraph.datasets.mrclam import import_mrclam
