@@ -116,3 +116,14 @@ def test_mrclam6_needs_no_erratum_and_passes():
     lt = s.header.meta["landmark_truth"]
     assert lt["errata_applied"] == [] and lt["check"]["failing"] == []
     assert lt["check"]["max_pair_error_m"] < 0.2
+
+
+def test_the_cli_refuses_a_contradicting_table_in_one_line(tmp_path: Path, capsys):
+    make_mrclam(tmp_path, listed={6: LANDMARKS[9], 9: LANDMARKS[6]})
+    out = tmp_path / "o.jsonl"
+    assert bomgraph_main(["import", "mrclam", str(tmp_path), "--robot", "1",
+                          "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("bomgraph: error:"), err
+    assert "landmarks 6 and 9" in err[0] and "--no-landmark-check" in err[0]
+    assert not out.exists()
