@@ -9,6 +9,7 @@ The paper's figures: fig. 3/5 (map and trajectory), fig. 4/6/7/8 (errors against
 
 from __future__ import annotations
 
+import textwrap
 import warnings
 from dataclasses import dataclass
 from typing import Mapping, Protocol, Sequence
@@ -248,8 +249,9 @@ def final_maps_figure(truth: TruthLike, panels: Sequence[MapPanel], *, title: st
         ax.set_xlim(lo[0], hi[0])
         ax.set_ylim(lo[1], hi[1])
         if panel.landmarks is None:
-            ax.text(0.5, 0.5, f"FAILED\n{panel.failure[:60]}", transform=ax.transAxes,
-                    ha="center", va="center", color="tab:red", fontsize=8, wrap=True)
+            ax.text(0.5, 0.5, f"FAILED\n{textwrap.fill(panel.failure[:120], 40)}",
+                    transform=ax.transAxes, ha="center", va="center", color="tab:red",
+                    fontsize=8, bbox={"fc": "white", "ec": "none", "alpha": 0.85})
             continue
         lm = np.asarray(panel.landmarks, dtype=float).reshape(-1, 3)
         ax.plot(lm[:, 1], lm[:, 2], "o", color="tab:red", ms=4, label="estimate")
@@ -266,7 +268,7 @@ def final_maps_figure(truth: TruthLike, panels: Sequence[MapPanel], *, title: st
     for ax in axes.ravel()[n:]:
         ax.set_visible(False)
     fig.suptitle(title)
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, 0, 1, 1 - 0.4 / (4.4 * nrow)))   # room for the suptitle
     return fig
 
 
@@ -296,7 +298,6 @@ def map_comparison_figure(estimates: Mapping[str, EstimateLike | None], *,
     -------
     matplotlib.figure.Figure
     """
-    import textwrap
 
     alignments = alignments or {}
     notes = notes or {}
@@ -446,7 +447,6 @@ def run_figure(truth: TruthLike | None, estimate: EstimateLike, alignment: Align
                    bbox_to_anchor=(0.5, -0.13), ncol=2, frameon=False)
         ax2.set_title("robot (aligned)")
     if title:
-        import textwrap
 
         fig.suptitle(textwrap.fill(title, 95 if two else 60))
     return fig
