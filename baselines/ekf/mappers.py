@@ -257,19 +257,16 @@ class InverseDepthEkfMapper(EkfSlam):
 
     def _linear_enough(self, features: np.ndarray, covs: np.ndarray) -> np.ndarray:
         """Civera's linearity index ``4 sigma_d / d |cos alpha|`` below ``linearity_max``."""
-        x = self.filter.x
-        rho = features[:, 3]
-        ok = rho > 0
-        lin = np.full(len(rho), np.inf)
-        if np.any(ok):
-            sig_rho = np.sqrt(covs[ok, 3, 3])
-            pts, _ = invdepth_to_xy(features[ok])
-            d_vec = pts - x[:2]
-            d = np.linalg.norm(d_vec, axis=1)
-            m = np.column_stack([np.cos(features[ok, 2]), np.sin(features[ok, 2])])
-            cos_a = np.einsum("ki,ki->k", m, d_vec) / d
-            lin[ok] = 4.0 * (sig_rho / rho[ok] ** 2) / d * np.abs(cos_a)
-        return lin < self.config.linearity_max
+        px, py = self.filter.x[:2].tolist()
+        th, rho = features[:, 2], features[:, 3]
+        ct, st = np.cos(th), np.sin(th)
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):   # rho <= 0: out
+            dx = features[:, 0] + ct / rho - px        # the point a + m / rho, from the robot
+            dy = features[:, 1] + st / rho - py
+            d = np.sqrt(dx * dx + dy * dy)
+            lin = 4.0 * (np.sqrt(covs[:, 3, 3]) / (rho * rho)) / d * np.abs((ct * dx + st * dy)
+                                                                            / d)
+        return (rho > 0) & (lin < self.config.linearity_max)
 
     def _landmarks(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
         ids, xy, cov, _ = super()._landmarks()

@@ -96,4 +96,55 @@ def landmark_rows(x: np.ndarray, P: np.ndarray, nullspace: np.ndarray,  # noqa: 
     return h, r[:, 2], c[:, 2, 2], var, prod ** 0.25 / dist
 
 
-__all__ = ["landmark_rows"]
+
+
+
+def feature_rows(x: np.ndarray, P: np.ndarray, nullspace: np.ndarray,  # noqa: N803
+                 cols: np.ndarray, white_sigma_rad: float
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """As :func:`landmark_rows` for ``m`` bearings to inverse-depth features ``[x0, y0, theta,
+    rho]``: the arithmetic of :func:`~baselines.ekf.models.invdepth_bearing_and_jacobian`, the
+    projected constraint of :meth:`~baselines.ekf.slam.EkfSlam._constrain` and the
+    second-order variance of :func:`~baselines.ekf.models.second_order_variance`, as batched
+    products.
+
+    Parameters
+    ----------
+    cols : int array of shape (m, 7)
+        The pose ``[x, y, psi]``, then the feature.
+
+    Returns
+    -------
+    h_rad (m,) (not wrapped), jac (m, 7), hph (m,), var_rad2 (m,); the nonlinearity index of
+    a feature row is 0.
+    """
+    v = x[cols]                                                  # (m, 7)
+    block = P[cols[:, :, None], cols[:, None, :]]                # (m, 7, 7)
+    amp = v[:, 3:5] - v[:, 0:2]                                  # anchor - pose
+    th, rho = v[:, 5], v[:, 6]
+    ct, st = np.cos(th), np.sin(th)
+    vx, vy = rho * amp[:, 0] + ct, rho * amp[:, 1] + st          # rho (a - p) + m
+    q = vx * vx + vy * vy
+    gx, gy = -vy / q, vx / q
+    h = np.arctan2(vy, vx) - v[:, 2]
+    j = np.empty((len(q), 1, 7))
+    j[:, 0, 3], j[:, 0, 4] = rho * gx, rho * gy
+    j[:, 0, 0], j[:, 0, 1] = -j[:, 0, 3], -j[:, 0, 4]
+    j[:, 0, 2] = -1.0
+    j[:, 0, 5] = -gx * st + gy * ct
+    j[:, 0, 6] = gx * amp[:, 0] + gy * amp[:, 1]
+    ns = nullspace[cols]                                         # (m, 7, 3)
+    ns_t = ns.transpose(0, 2, 1)
+    gram = ns_t @ ns
+    rhs = ns_t @ j.transpose(0, 2, 1)                            # (m, 3, 1)
+    try:
+        coef = np.linalg.solve(gram, rhs)
+    except np.linalg.LinAlgError:       # a degenerate nullspace (e.g. after a huge step)
+        coef = np.linalg.pinv(gram) @ rhs
+    j -= (ns @ coef).transpose(0, 2, 1)                          # h N_S = 0
+    hph = (j @ block @ j.transpose(0, 2, 1))[:, 0, 0]
+    cross = vx * amp[:, 1] - vy * amp[:, 0]
+    h_rr = -2.0 * cross * (vx * amp[:, 0] + vy * amp[:, 1]) / (q * q)
+    var = white_sigma_rad ** 2 + 0.5 * (h_rr * block[:, 6, 6]) ** 2
+    return h, j[:, 0], hph, var
+__all__ = ["feature_rows", "landmark_rows"]

@@ -24,7 +24,7 @@ from .config import BearingEkfConfig
 from .filter import BearingEkf, BearingModel, FilterNumericalError, JacobianRows
 from .models import (bearing_and_jacobian, invdepth_bearing_and_jacobian, invdepth_to_xy,
                      second_order_variance)
-from .rows import landmark_rows
+from .rows import feature_rows, landmark_rows
 
 _LM, _CLONE, _IDP, _BIAS = "lm", "clone", "idp", "bias"
 _SIZE = {_LM: 2, _CLONE: 3, _IDP: 4, _BIAS: 1}
@@ -76,6 +76,7 @@ class EkfSlam:
         self._gated_run: dict[int, int] = {}          # inverse-depth feature -> gated in a row
         self._sizes: dict[tuple[str, int], int] = {}
         self._offset: dict[tuple[str, int], int] = {}
+        self._idp: tuple[list[tuple[str, int]], np.ndarray] | None = None
         self._mapped: dict[int, tuple[str, int]] = {}
         self._last_t: int | None = None
         # the filtered trajectory, in buffers that double when full
@@ -104,6 +105,7 @@ class EkfSlam:
     def _rebuild(self) -> None:
         off = 3
         self._offset = {}
+        self._idp = None
         self._mapped = {}         # landmark id -> (kind, offset) of its landmark or feature
         for key, size in self._sizes.items():
             self._offset[key] = off
@@ -331,8 +333,9 @@ class EkfSlam:
         the same model in one pass, without the model object. The bearings to Euclidean
         landmarks go through the fused kernel :func:`~baselines.ekf.rows.landmark_rows`
         (prediction, constrained rows, ``H_i P H_i^T``, second-order variance in a few
-        calls), those to inverse-depth features through the per-kind functions; the update is
-        :meth:`BearingEkf.update_rows` on each row's own states (5 or 7)."""
+        calls), those to inverse-depth features through :func:`~baselines.ekf.rows.
+        feature_rows`; the update is :meth:`BearingEkf.update_rows` on each row's own states
+        (5 or 7; a landmark row padded to 7 with zeros when both kinds are in the batch)."""
         filt = self.filter
         x, P = filt.x, filt.P
         k = len(z)
@@ -353,14 +356,10 @@ class EkfSlam:
             if n_lm:
                 h[lm], jac[lm, :5], hph[lm], var[lm], index[lm] = landmark_rows(
                     x, P, filt.nullspace, cols[lm, :5], self._white_sigma, self._constrain)
-            fc = cols[~lm]
-            v = x[fc]
-            h[~lm], j = invdepth_bearing_and_jacobian(v[:, :3], v[:, 3:])
-            j = self._constrain(j, fc)
-            block = P[fc[:, :, None], fc[:, None, :]]               # (m, 7, 7)
-            hph[~lm] = np.einsum("mi,mij,mj->m", j, block, j)
-            var[~lm], index[~lm] = second_order_variance(v, block, self._white_sigma)
-            jac[~lm] = j
+            f = ~lm
+            h[f], jac[f], hph[f], var[f] = feature_rows(x, P, filt.nullspace, cols[f],
+                                                        self._white_sigma)
+            index[f] = 0.0
         usable = index <= self._max_nonlin
         innovation = angle_residual(z, h)
         gated = innovation * innovation > self._gate * (hph + var)
@@ -409,9 +408,13 @@ class EkfSlam:
             self._add_blocks([(_IDP, int(i)) for i in ids], value, idx, g, noise)
 
     def _idp_blocks(self) -> tuple[list[tuple[str, int]], np.ndarray]:
-        keys = [k for k in self._sizes if k[0] == _IDP]
-        bi = self._block_index(np.array([self._offset[k] for k in keys], np.int64), 4)
-        return keys, bi
+        """The inverse-depth features' keys and state indices ``(k, 4)`` (kept until the
+        layout changes)."""
+        if self._idp is None:
+            keys = [k for k in self._sizes if k[0] == _IDP]
+            bi = self._block_index(np.array([self._offset[k] for k in keys], np.int64), 4)
+            self._idp = keys, bi
+        return self._idp
 
     def _convert(self, ready: Callable[[np.ndarray, np.ndarray], np.ndarray]) -> None:
         """Replace the inverse-depth features that ``ready(features (k, 4), covs (k, 4, 4))``
