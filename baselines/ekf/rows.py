@@ -81,8 +81,8 @@ def landmark_rows(x: np.ndarray, P: np.ndarray, nullspace: np.ndarray,  # noqa: 
     r[:, 0, 2] = 0.0
     np.negative(dist, out=r[:, 1, 2])
     r[:, 2, 2] = -1.0
-    bad = ~(length > 1e-6)
-    if bad.any():
+    if not (length > 1e-6).all():
+        bad = ~(length > 1e-6)
         raw = np.zeros((int(np.count_nonzero(bad)), 5))
         rb, db, qb = r[bad], d[bad], q[bad]
         raw[:, 3], raw[:, 4] = -db[:, 1] / qb, db[:, 0] / qb
