@@ -218,6 +218,22 @@ class BearingEkf:
         self._set_state(new_x, new_p)
         return n
 
+    def clone(self, idx: np.ndarray) -> int:
+        """Append a copy of the states ``idx`` (stochastic cloning): :meth:`augment` with
+        ``g`` the identity and no noise, without its products. Returns the first new index."""
+        P = self.kf.P  # noqa: N806
+        n, m = self.dim, len(idx)
+        self.check_room(m)
+        new_p = np.empty((n + m, n + m))
+        new_p[:n, :n] = P
+        new_p[:n, n:] = P[:, idx]
+        new_p[n:] = new_p[idx]
+        self._is_angle = np.concatenate([self._is_angle, self._is_angle[idx]])
+        self._angle_index = np.flatnonzero(self._is_angle)
+        self.nullspace = np.concatenate([self.nullspace, self.nullspace[idx]])
+        self._set_state(np.concatenate([self.kf.x, self.kf.x[idx]]), new_p)
+        return n
+
     def remove(self, idx: np.ndarray) -> None:
         """Marginalise the states ``idx`` out (drop their rows and columns)."""
         keep = np.ones(self.dim, bool)
@@ -243,8 +259,8 @@ class BearingEkf:
         """
         x, P = self.kf.x, self.kf.P
         # the 3 x 3 pose block in Python floats (numpy's per-call cost exceeds the arithmetic)
-        ux, uy, upsi = (float(v) for v in np.ravel(odom))
-        va, vb, vc = (float(v) ** 2 for v in np.ravel(odom_sigma))
+        ux, uy, upsi = np.ravel(odom).astype(float).tolist()
+        va, vb, vc = (v * v for v in np.ravel(odom_sigma).tolist())   # inf, not OverflowError
         px, py, psi = x[:3].tolist()
         c, s = math.cos(psi), math.sin(psi)
         nx, ny = px + c * ux - s * uy, py + s * ux + c * uy          # pose ⊕ u (compose)
@@ -393,8 +409,9 @@ class BearingEkf:
         y, var : arrays of shape (k,)
             As in :meth:`update_compact`.
         """
-        hp = np.einsum("ks,ksn->kn", jac, self.kf.P[cols])        # H P, (k, n)
-        self._apply(hp, np.einsum("bs,abs->ab", jac, hp[:, cols]), y, var)
+        hp = (jac[:, None, :] @ self.kf.P[cols])[:, 0]            # H P, (k, n)
+        # (H P H^T)^T: row b is sum_s H[b, s] (H P)[:, cols[b, s]] (symmetrised in _apply)
+        self._apply(hp, (hp[:, cols].transpose(1, 0, 2) @ jac[:, :, None])[..., 0], y, var)
 
     def _apply(self, hp: np.ndarray, s: np.ndarray, y: np.ndarray, var: np.ndarray) -> None:
         """``x += K y``, ``P -= K S K^T`` from ``H P`` (k, n) and ``H P H^T`` (k, k)."""

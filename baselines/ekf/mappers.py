@@ -81,7 +81,6 @@ from .models import invdepth_conversion_kl, invdepth_to_xy, triangulation_kl
 from .slam import _CLONE, _IDP, _LM, EkfSlam
 
 _R3 = np.arange(3)
-_EYE3, _ZERO33 = np.eye(3), np.zeros((3, 3))
 
 
 class EkfMapper(EkfSlam):
@@ -210,7 +209,10 @@ class EkfMapper(EkfSlam):
         for n in extend:
             cands[ids_l[n]].append((t, z_l[n]))
         if (restart or extend) and (_CLONE, t) not in self._sizes:
-            self._add_blocks([(_CLONE, t)], self.filter.x[:3].copy(), _R3, _EYE3, _ZERO33)
+            self.filter.check_room(3, "a pose clone")
+            self.filter.clone(_R3)
+            self._sizes[(_CLONE, t)] = 3
+            self._rebuild()
         used = {ts for sightings in self._candidates.values() for ts, _ in sightings}
         self._remove_blocks([k for k in self._sizes if k[0] == _CLONE and k[1] not in used])
 

@@ -108,3 +108,20 @@ def test_paper_maps_are_pinned_to_the_implementation_before_the_fused_path(
     np.testing.assert_allclose(est.landmark_cov, ref[p + "lmcov"], rtol=0, atol=1e-12)
     counts = [est.info[k] for k in ("gated_bearings", "nonlinear_bearings", "used_bearings")]
     np.testing.assert_array_equal(counts, ref[p + "counts"])
+
+
+def test_clone_is_augment_with_the_identity() -> None:
+    mapper = _mid_run_mapper()
+    f = mapper.filter
+    x0, p0, n0 = f.x.copy(), f.P.copy(), f.nullspace.copy()
+    angle0 = f._is_angle.copy()
+    idx = np.array([0, 1, 2])
+    assert f.clone(idx) == len(x0)
+    x_c, p_c, n_c = f.x.copy(), f.P.copy(), f.nullspace.copy()
+    f.nullspace, f._is_angle = n0, angle0
+    f._set_state(x0, p0)
+    f.augment(x0[idx], idx, np.eye(3), np.zeros((3, 3)), angle0[idx])
+    np.testing.assert_array_equal(p_c, f.P)
+    np.testing.assert_array_equal(n_c, f.nullspace)
+    np.testing.assert_allclose(x_c, f.x, rtol=0, atol=1e-15)
+    np.testing.assert_array_equal(f._angle_index, np.flatnonzero(f._is_angle))
