@@ -6,6 +6,8 @@ the ``residual`` handed to filterpy's EKF update.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numpy.typing import ArrayLike
 
@@ -25,6 +27,10 @@ def wrap_angle(angle_rad: ArrayLike) -> np.ndarray:
     ndarray or numpy float
         Same shape as the input; ``-pi`` maps to ``+pi``.
     """
+    if type(angle_rad) is float and math.isfinite(angle_rad):
+        # one Python float: the same IEEE operations without numpy's per-call cost
+        w = math.pi - (math.pi - angle_rad) % TWO_PI
+        return np.float64(w + TWO_PI if w <= -math.pi else w)
     a = np.asarray(angle_rad, dtype=float)
     w = np.pi - np.mod(np.pi - a, TWO_PI)
     # rounding can land exactly on -pi (e.g. just above +pi); the interval is (-pi, pi]

@@ -46,9 +46,6 @@ from scipy.linalg.lapack import dpotrf as _potrf, dtrtri as _trtri
 
 from bomgraph.angles import angle_residual, wrap_angle
 from bomgraph.errors import BomgraphError, ConfigError
-from bomgraph.geometry import compose
-
-from .models import motion_jacobians
 
 #: A bearing Jacobian by its nonzero blocks: ``[(rows (m,), cols (m, s), values (m, s)), ...]``
 #: (``H[rows[i], cols[i, j]] = values[i, j]``; within one row the columns are distinct).
@@ -221,6 +218,22 @@ class BearingEkf:
         self._set_state(new_x, new_p)
         return n
 
+    def clone(self, idx: np.ndarray) -> int:
+        """Append a copy of the states ``idx`` (stochastic cloning): :meth:`augment` with
+        ``g`` the identity and no noise, without its products. Returns the first new index."""
+        P = self.kf.P  # noqa: N806
+        n, m = self.dim, len(idx)
+        self.check_room(m)
+        new_p = np.empty((n + m, n + m))
+        new_p[:n, :n] = P
+        new_p[:n, n:] = P[:, idx]
+        new_p[n:] = new_p[idx]
+        self._is_angle = np.concatenate([self._is_angle, self._is_angle[idx]])
+        self._angle_index = np.flatnonzero(self._is_angle)
+        self.nullspace = np.concatenate([self.nullspace, self.nullspace[idx]])
+        self._set_state(np.concatenate([self.kf.x, self.kf.x[idx]]), new_p)
+        return n
+
     def remove(self, idx: np.ndarray) -> None:
         """Marginalise the states ``idx`` out (drop their rows and columns)."""
         keep = np.ones(self.dim, bool)
@@ -245,31 +258,48 @@ class BearingEkf:
         ``N`` is propagated with the same ``F``.
         """
         x, P = self.kf.x, self.kf.P
-        odom = np.asarray(odom, float)
-        f_pose, g_odom = motion_jacobians(x[:3], odom)
-        new_pose = compose(x[:3], odom)
+        # the 3 x 3 pose block in Python floats (numpy's per-call cost exceeds the arithmetic)
+        ux, uy, upsi = np.ravel(odom).astype(float).tolist()
+        va, vb, vc = (v * v for v in np.ravel(odom_sigma).tolist())   # inf, not OverflowError
+        px, py, psi = x[:3].tolist()
+        c, s = math.cos(psi), math.sin(psi)
+        nx, ny = px + c * ux - s * uy, py + s * ux + c * uy          # pose ⊕ u (compose)
+        npsi = float(wrap_angle(psi + upsi))
+        N = self.nullspace                                    # noqa: N806
         if self.observability_constrained:
             # the anchor a_k = [N[1, 2], -N[0, 2]]; the column is J (p_{k+1|k} - a_k)
-            f_pose[0, 2] = -(new_pose[1] + self.nullspace[0, 2])
-            f_pose[1, 2] = new_pose[0] - self.nullspace[1, 2]
-        self.nullspace[:3] = f_pose @ self.nullspace[:3]
+            f0, f1 = -(ny + float(N[0, 2])), nx - float(N[1, 2])
+        else:                           # F = [[1, 0, f0], [0, 1, f1], [0, 0, 1]]
+            f0, f1 = -s * ux - c * uy, c * ux - s * uy
+        (p00, p01, p02), (p10, p11, p12), (p20, p21, p22) = P[:3, :3].tolist()
+        a0, a1, a2 = p00 + f0 * p20, p01 + f0 * p21, p02 + f0 * p22      # F P
+        b0, b1, b2 = p10 + f1 * p20, p11 + f1 * p21, p12 + f1 * p22
+        r00, r01, r02 = a0 + f0 * a2, a1 + f1 * a2, a2                   # F P F^T
+        r10, r11, r12 = b0 + f0 * b2, b1 + f1 * b2, b2
+        r20, r21, r22 = p20 + f0 * p22, p21 + f1 * p22, p22
+        cs = c * s * (va - vb)                                # Q = G diag(sigma_u^2) G^T
+        rr = [[r00 + (c * c * va + s * s * vb), 0.5 * (r01 + r10) + cs, 0.5 * (r02 + r20)],
+              [0.0, r11 + (s * s * va + c * c * vb), 0.5 * (r12 + r21)],
+              [0.0, 0.0, r22 + vc]]
+        rr[1][0], rr[2][0], rr[2][1] = rr[0][1], rr[0][2], rr[1][2]
         with np.errstate(over="ignore", invalid="ignore"):
-            q = (g_odom * np.asarray(odom_sigma, float) ** 2) @ g_odom.T
-            rr = f_pose @ P[:3, :3] @ f_pose.T + q
-            rm = f_pose @ P[:3, 3:]
+            rm = P[:2, 3:] + np.multiply.outer((f0, f1), P[2, 3:])   # F P_rm (row 2 as is)
             # one check: a sum is finite only if every term is (inf - inf is nan)
-            finite = math.isfinite(rr.sum() + rm.sum() + new_pose.sum())
+            finite = math.isfinite(float(rm.sum()) + sum(rr[0]) + sum(rr[1]) + rr[2][2]
+                                   + nx + ny + npsi)
         if not finite:
             raise FilterNumericalError(
-                f"the predicted pose or its covariance overflows (odometry {odom.tolist()}, "
-                f"sigma {np.asarray(odom_sigma, float).tolist()}): the odometry or its sigma "
-                f"is beyond what the filter can represent")
+                f"the predicted pose or its covariance overflows (odometry "
+                f"{np.ravel(odom).tolist()}, sigma {np.ravel(odom_sigma).tolist()}): the "
+                f"odometry or its sigma is beyond what the filter can represent")
         self.version += 1
-        P[:3, :3] = 0.5 * (rr + rr.T)
+        n0, n1, n2 = N[:3].tolist()
+        N[:2] = [[n0[i] + f0 * n2[i] for i in range(3)], [n1[i] + f1 * n2[i] for i in range(3)]]
+        P[:3, :3] = rr
         if len(x) > 3:
-            P[:3, 3:] = rm
-            P[3:, :3] = rm.T
-        x[:3] = new_pose
+            P[:2, 3:] = rm
+            P[3:, :2] = rm.T
+        x[:3] = (nx, ny, npsi)
 
     def decay(self, idx: np.ndarray, factor: np.ndarray, noise_var: np.ndarray) -> None:
         """A first-order Gauss-Markov step of scalar states, in place: ``x_i <- a_i x_i + n_i``
@@ -362,11 +392,32 @@ class BearingEkf:
         var : array of shape (k,)
             The bearing variances (``R = diag(var)``).
         """
+        hp = hu @ self.kf.P[cols]                                 # H P = (P H^T)^T, (k, n)
+        self._apply(hp, hp[:, cols] @ hu.T, y, var)
+
+    def update_rows(self, cols: np.ndarray, jac: np.ndarray, y: np.ndarray,
+                    var: np.ndarray) -> None:
+        """The EKF update with a Jacobian given row by row by its nonzeros, in place.
+
+        Parameters
+        ----------
+        cols : int array of shape (k, s)
+            The states bearing ``i`` touches (distinct within a row, or repeated with a zero
+            in ``jac``).
+        jac : array of shape (k, s)
+            ``H[i, cols[i]]``.
+        y, var : arrays of shape (k,)
+            As in :meth:`update_compact`.
+        """
+        hp = (jac[:, None, :] @ self.kf.P[cols])[:, 0]            # H P, (k, n)
+        # (H P H^T)^T: row b is sum_s H[b, s] (H P)[:, cols[b, s]] (symmetrised in _apply)
+        self._apply(hp, (hp[:, cols].transpose(1, 0, 2) @ jac[:, :, None])[..., 0], y, var)
+
+    def _apply(self, hp: np.ndarray, s: np.ndarray, y: np.ndarray, var: np.ndarray) -> None:
+        """``x += K y``, ``P -= K S K^T`` from ``H P`` (k, n) and ``H P H^T`` (k, k)."""
         kf = self.kf
         x0, P = kf.x, kf.P
         k = len(y)
-        hp = hu @ P[cols]                                         # H P = (P H^T)^T, (k, n)
-        s = hp[:, cols] @ hu.T
         s = 0.5 * (s + s.T)
         s.flat[::k + 1] += var                                    # S = H P H^T + R
         chol, info = _potrf(s, lower=1)                           # S = L L^T

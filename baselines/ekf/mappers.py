@@ -80,6 +80,8 @@ from .config import EkfConfig, InverseDepthConfig
 from .models import invdepth_conversion_kl, invdepth_to_xy, triangulation_kl
 from .slam import _CLONE, _IDP, _LM, EkfSlam
 
+_R3 = np.arange(3)
+
 
 class EkfMapper(EkfSlam):
     """Bearing-only EKF-SLAM with Bailey's constrained (delayed) initialisation (``ekf``).
@@ -113,27 +115,29 @@ class EkfMapper(EkfSlam):
         """Triangulate candidates from their clones and the current pose; Bailey's test."""
         x, P = self.filter.x, self.filter.P
         m = len(z1)
-        ci = self._block_index(clone_off, 3)
-        ui = np.concatenate([ci, np.broadcast_to(np.arange(3), (m, 3))], 1)   # (m, 6)
+        sigma2 = self.filter.bearing_sigma_rad ** 2
+        ui = np.empty((m, 6), np.int64)                       # the clone's states, the robot's
+        ci = ui[:, :3]
+        np.add(clone_off[:, None], _R3, out=ci)
+        ui[:, 3:] = _R3
         cov_u = np.zeros((m, 8, 8))
         cov_u[:, :6, :6] = P[ui[:, :, None], ui[:, None, :]]
-        cov_u[:, 6, 6] = cov_u[:, 7, 7] = self.filter.bearing_sigma_rad ** 2
-        pose_c = x[ci]
-        pose_r = np.broadcast_to(x[:3], (m, 3))
-        pts, jac, kl = triangulation_kl(
-            np.concatenate([pose_c, pose_r, z1[:, None], z2[:, None]], 1), cov_u)
+        cov_u[:, 6, 6] = cov_u[:, 7, 7] = sigma2
+        inputs = np.empty((m, 8))
+        inputs[:, :6] = x[ui]
+        inputs[:, 6], inputs[:, 7] = z1, z2
+        pts, jac, kl = triangulation_kl(inputs, cov_u)
         # depth along both rays (in front of the robot at both sightings)
-        d1 = pts - pose_c[:, :2]
-        d2 = pts - pose_r[:, :2]
-        a1 = pose_c[:, 2] + z1
-        a2 = pose_r[:, 2] + z2
-        front = (np.einsum("mi,mi->m", d1, np.column_stack([np.cos(a1), np.sin(a1)])) > 0) \
-            & (np.einsum("mi,mi->m", d2, np.column_stack([np.cos(a2), np.sin(a2)])) > 0)
+        a1 = inputs[:, 2] + z1
+        a2 = x[2] + z2
+        d1 = pts - inputs[:, :2]
+        d2 = pts - x[:2]
+        front = ((d1[:, 0] * np.cos(a1) + d1[:, 1] * np.sin(a1) > 0)
+                 & (d2[:, 0] * np.cos(a2) + d2[:, 1] * np.sin(a2) > 0))
         parallax = np.abs(angle_residual(a2, a1))
+        jz = jac[:, :, 6:8]                                   # d point / d (z1, z2)
         return {"points": pts, "jac": jac, "kl": kl, "front": front & np.isfinite(pts).all(1),
-                "parallax": parallax, "noise_cov": self.filter.bearing_sigma_rad ** 2
-                * (jac[:, :, 6:7] @ jac[:, :, 6:7].transpose(0, 2, 1)
-                   + jac[:, :, 7:8] @ jac[:, :, 7:8].transpose(0, 2, 1)),
+                "parallax": parallax, "noise_cov": sigma2 * (jz @ jz.transpose(0, 2, 1)),
                 "clone_index": ci}
 
     def _initialise(self, ids: np.ndarray, test: dict[str, np.ndarray], sel: np.ndarray) -> None:
@@ -172,35 +176,43 @@ class EkfMapper(EkfSlam):
             self._add_inverse_depth(ids, z)
             self._convert(self._gaussian_enough)
             return
-        cand = np.array([i in self._candidates for i in ids.tolist()], bool)
-        restart = ~cand
-        extend = np.zeros(len(ids), bool)
-        if np.any(cand):
-            cid = ids[cand]
-            first = [self._candidates[i][0] for i in cid.tolist()]
+        cands = self._candidates
+        ids_l, z_l = ids.tolist(), z.tolist()
+        seen = [n for n, i in enumerate(ids_l) if i in cands]       # positions of candidates
+        restart = [n for n, i in enumerate(ids_l) if i not in cands]
+        extend = []
+        if seen:
+            first = [cands[ids_l[n]][0] for n in seen]
             anchor_t = np.array([f[0] for f in first], np.int64)
-            z1 = np.array([f[1] for f in first])
-            clone_off = np.array([self._offset[(_CLONE, int(a))] for a in anchor_t], np.int64)
-            test = self._triangulation_test(clone_off, z1, z[cand])
-            ready = test["front"] & (test["kl"] <= self.config.init_kl_max)
-            self.n_rejected["behind"] += int(np.count_nonzero(~test["front"]))
-            self.n_rejected["kl"] += int(np.count_nonzero(test["front"] & ~ready))
-            bad = (~test["front"] & (test["parallax"] > self.config.inconsistent_parallax_rad)) \
+            clone_off = np.array([self._offset[(_CLONE, f[0])] for f in first], np.int64)
+            test = self._triangulation_test(clone_off, np.array([f[1] for f in first]),
+                                            z[seen])
+            front = test["front"]
+            ready = front & (test["kl"] <= self.config.init_kl_max)
+            bad = (~front & (test["parallax"] > self.config.inconsistent_parallax_rad)) \
                 | ((t - anchor_t) >= self.config.max_pending_steps)
             bad &= ~ready
+            n_front, n_ready = int(np.count_nonzero(front)), int(np.count_nonzero(ready))
+            self.n_rejected["behind"] += len(seen) - n_front
+            self.n_rejected["kl"] += n_front - n_ready         # ready implies front
             self.n_reanchored += int(np.count_nonzero(bad))
-            if np.any(ready):
-                self._initialise(cid, test, ready)
-            pos = np.flatnonzero(cand)
-            restart[pos[bad]] = True
-            extend[pos[~bad & ~ready]] = True
-        for i, zi in zip(ids[restart].tolist(), z[restart].tolist()):
-            self._candidates[i] = [(t, zi)]
-        for i, zi in zip(ids[extend].tolist(), z[extend].tolist()):
-            self._candidates[i].append((t, zi))
-        if np.any(restart | extend) and (_CLONE, t) not in self._sizes:
-            self._add_blocks([(_CLONE, t)], self.filter.x[:3].copy(), np.arange(3), np.eye(3),
-                             np.zeros((3, 3)))
+            if n_ready:
+                self._initialise(ids[seen], test, ready)
+            for n, b, r in zip(seen, bad.tolist(), ready.tolist()):
+                if b:
+                    restart.append(n)
+                elif not r:
+                    extend.append(n)
+            restart.sort()
+        for n in restart:
+            cands[ids_l[n]] = [(t, z_l[n])]
+        for n in extend:
+            cands[ids_l[n]].append((t, z_l[n]))
+        if (restart or extend) and (_CLONE, t) not in self._sizes:
+            self.filter.check_room(3, "a pose clone")
+            self.filter.clone(_R3)
+            self._sizes[(_CLONE, t)] = 3
+            self._rebuild()
         used = {ts for sightings in self._candidates.values() for ts, _ in sightings}
         self._remove_blocks([k for k in self._sizes if k[0] == _CLONE and k[1] not in used])
 
@@ -257,19 +269,16 @@ class InverseDepthEkfMapper(EkfSlam):
 
     def _linear_enough(self, features: np.ndarray, covs: np.ndarray) -> np.ndarray:
         """Civera's linearity index ``4 sigma_d / d |cos alpha|`` below ``linearity_max``."""
-        x = self.filter.x
-        rho = features[:, 3]
-        ok = rho > 0
-        lin = np.full(len(rho), np.inf)
-        if np.any(ok):
-            sig_rho = np.sqrt(covs[ok, 3, 3])
-            pts, _ = invdepth_to_xy(features[ok])
-            d_vec = pts - x[:2]
-            d = np.linalg.norm(d_vec, axis=1)
-            m = np.column_stack([np.cos(features[ok, 2]), np.sin(features[ok, 2])])
-            cos_a = np.einsum("ki,ki->k", m, d_vec) / d
-            lin[ok] = 4.0 * (sig_rho / rho[ok] ** 2) / d * np.abs(cos_a)
-        return lin < self.config.linearity_max
+        px, py = self.filter.x[:2].tolist()
+        th, rho = features[:, 2], features[:, 3]
+        ct, st = np.cos(th), np.sin(th)
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):   # rho <= 0: out
+            dx = features[:, 0] + ct / rho - px        # the point a + m / rho, from the robot
+            dy = features[:, 1] + st / rho - py
+            d = np.sqrt(dx * dx + dy * dy)
+            lin = 4.0 * (np.sqrt(covs[:, 3, 3]) / (rho * rho)) / d * np.abs((ct * dx + st * dy)
+                                                                            / d)
+        return (rho > 0) & (lin < self.config.linearity_max)
 
     def _landmarks(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
         ids, xy, cov, _ = super()._landmarks()

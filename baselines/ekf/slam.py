@@ -21,9 +21,10 @@ from bomgraph.stream import Step, StreamHeader
 
 from .coloured import ColouredBearingError, ray_directions
 from .config import BearingEkfConfig
-from .filter import BearingEkf, BearingModel, FilterNumericalError, JacobianRows, _compact
+from .filter import BearingEkf, BearingModel, FilterNumericalError, JacobianRows
 from .models import (bearing_and_jacobian, invdepth_bearing_and_jacobian, invdepth_to_xy,
                      second_order_variance)
+from .rows import feature_rows, landmark_rows
 
 _LM, _CLONE, _IDP, _BIAS = "lm", "clone", "idp", "bias"
 _SIZE = {_LM: 2, _CLONE: 3, _IDP: 4, _BIAS: 1}
@@ -75,6 +76,7 @@ class EkfSlam:
         self._gated_run: dict[int, int] = {}          # inverse-depth feature -> gated in a row
         self._sizes: dict[tuple[str, int], int] = {}
         self._offset: dict[tuple[str, int], int] = {}
+        self._idp: tuple[list[tuple[str, int]], np.ndarray] | None = None
         self._mapped: dict[int, tuple[str, int]] = {}
         self._last_t: int | None = None
         # the filtered trajectory, in buffers that double when full
@@ -103,6 +105,7 @@ class EkfSlam:
     def _rebuild(self) -> None:
         off = 3
         self._offset = {}
+        self._idp = None
         self._mapped = {}         # landmark id -> (kind, offset) of its landmark or feature
         for key, size in self._sizes.items():
             self._offset[key] = off
@@ -327,42 +330,40 @@ class EkfSlam:
     def _plain_gated_update(self, pose_off: np.ndarray, kinds: np.ndarray,
                             offsets: np.ndarray, z: np.ndarray) -> np.ndarray:
         """:meth:`_gated_update` for one EKF update (``iterations = 1``) of white bearings:
-        the same arithmetic in one pass, without the model object (each kind's rows
-        predicted, constrained, gated and compacted in a few vectorised calls; the update on
-        the touched states, :meth:`BearingEkf.update_compact`)."""
+        the same model in one pass, without the model object. The bearings to Euclidean
+        landmarks go through the fused kernel :func:`~baselines.ekf.rows.landmark_rows`
+        (prediction, constrained rows, ``H_i P H_i^T``, second-order variance in a few
+        calls), those to inverse-depth features through :func:`~baselines.ekf.rows.
+        feature_rows`; the update is :meth:`BearingEkf.update_rows` on each row's own states
+        (5 or 7; a landmark row padded to 7 with zeros when both kinds are in the batch)."""
         filt = self.filter
         x, P = filt.x, filt.P
         k = len(z)
-        h = np.empty(k)
-        var = np.empty(k)
-        index = np.empty(k)
-        hph = np.empty(k)
-        parts = []
-        for size, fn in ((2, bearing_and_jacobian), (4, invdepth_bearing_and_jacobian)):
-            sel = kinds == size
-            n_sel = int(np.count_nonzero(sel))
-            if n_sel == 0:
-                continue
-            if n_sel == k:
-                rows, po, off = np.arange(k), pose_off, offsets
-            else:
-                rows = np.flatnonzero(sel)
-                po, off = pose_off[sel], offsets[sel]
-            cols = np.empty((n_sel, 3 + size), np.int64)
-            cols[:, :3] = po[:, None] + _RANGE[:3]
-            cols[:, 3:] = off[:, None] + _RANGE[:size]
-            v = x[cols]
-            h[rows], j = fn(v[:, :3], v[:, 3:])
-            j = self._constrain(j, cols)
-            block = P[cols[:, :, None], cols[:, None, :]]          # (m, s, s)
-            hph[rows] = np.einsum("mi,mij,mj->m", j, block, j)
-            var[rows], index[rows] = second_order_variance(v, block, self._white_sigma)
-            parts.append((rows, cols, j))
-            if n_sel == k:
-                break
+        n_lm = int(np.count_nonzero(kinds == 2))
+        width = 5 if n_lm == k else 7
+        cols = np.empty((k, width), np.int64)
+        cols[:, :3] = pose_off[:, None] + _RANGE[:3]
+        if n_lm == k:
+            cols[:, 3:] = offsets[:, None] + _RANGE[:2]
+            h, jac, hph, var, index = landmark_rows(x, P, filt.nullspace, cols,
+                                                    self._white_sigma, self._constrain)
+        else:
+            jac = np.zeros((k, width))
+            h, hph, var, index = np.empty(k), np.empty(k), np.empty(k), np.empty(k)
+            lm = kinds == 2
+            cols[:, 3:] = offsets[:, None] + _RANGE[:4]
+            cols[lm, 5:] = cols[lm, 3:5]            # padding: repeated states, zero entries
+            if n_lm:
+                h[lm], jac[lm, :5], hph[lm], var[lm], index[lm] = landmark_rows(
+                    x, P, filt.nullspace, cols[lm, :5], self._white_sigma, self._constrain)
+            f = ~lm
+            h[f], jac[f], hph[f], var[f] = feature_rows(x, P, filt.nullspace, cols[f],
+                                                        self._white_sigma)
+            index[f] = 0.0
         usable = index <= self._max_nonlin
-        innovation = np.asarray(angle_residual(z, h))
-        gated = (innovation ** 2 / (hph + var) > self._gate) & usable
+        innovation = angle_residual(z, h)
+        gated = innovation * innovation > self._gate * (hph + var)
+        gated &= usable
         n_unusable = k - int(np.count_nonzero(usable))
         n_gated = int(np.count_nonzero(gated))
         self.n_nonlinear += n_unusable
@@ -370,18 +371,15 @@ class EkfSlam:
         if n_unusable + n_gated == k:
             return gated
         if n_unusable + n_gated:
-            keep = usable & ~gated
-            parts = _take_rows(parts, keep)
-            innovation, var = innovation[keep], var[keep]
-        n_keep = len(innovation)
-        cols, hu = _compact(parts, n_keep)
+            keep = usable ^ gated                    # usable and not gated (gated => usable)
+            cols, jac, innovation, var = cols[keep], jac[keep], innovation[keep], var[keep]
         try:
-            filt.update_compact(cols, hu, innovation, var)
+            filt.update_rows(cols, jac, innovation, var)
         except FilterNumericalError as exc:             # the state is as before the update
             self.n_failures += 1
             self.last_failure = f"step {self._t}: {exc}"
             return np.zeros(k, bool)
-        self.n_updates += n_keep
+        self.n_updates += len(innovation)
         return gated
 
     # -- inverse-depth features ---------------------------------------------------------------
@@ -410,9 +408,13 @@ class EkfSlam:
             self._add_blocks([(_IDP, int(i)) for i in ids], value, idx, g, noise)
 
     def _idp_blocks(self) -> tuple[list[tuple[str, int]], np.ndarray]:
-        keys = [k for k in self._sizes if k[0] == _IDP]
-        bi = self._block_index(np.array([self._offset[k] for k in keys], np.int64), 4)
-        return keys, bi
+        """The inverse-depth features' keys and state indices ``(k, 4)`` (kept until the
+        layout changes)."""
+        if self._idp is None:
+            keys = [k for k in self._sizes if k[0] == _IDP]
+            bi = self._block_index(np.array([self._offset[k] for k in keys], np.int64), 4)
+            self._idp = keys, bi
+        return self._idp
 
     def _convert(self, ready: Callable[[np.ndarray, np.ndarray], np.ndarray]) -> None:
         """Replace the inverse-depth features that ``ready(features (k, 4), covs (k, 4, 4))``

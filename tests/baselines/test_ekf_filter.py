@@ -276,9 +276,10 @@ def test_iterated_update_of_a_mapper_run_is_filterpys_where_a_residual_passes_pi
 
 
 @pytest.mark.parametrize("method", ["ekf", "ekf-invdepth"])
-def test_one_pass_gated_update_is_the_model_path_bit_for_bit(method: str) -> None:
-    """The one-pass gated update of the paper presets (``_plain_gated_update``) gives the
-    same maps, bit for bit, as the general path through the bearing model and
+def test_one_pass_gated_update_is_the_model_path_to_rounding(method: str) -> None:
+    """The one-pass gated update of the paper presets (``_plain_gated_update``: the fused
+    kernel of baselines/ekf/rows.py and ``BearingEkf.update_rows``) gives the same maps, to
+    rounding (1e-9), and the same gate counts as the general path through the bearing model and
     ``BearingEkf.update``."""
     stream = simulate_run(paper_design(0)[1], SimConfig(n_steps=120))
     results = []
@@ -298,7 +299,7 @@ def test_one_pass_gated_update_is_the_model_path_bit_for_bit(method: str) -> Non
     (a, pa, ga, ua), (b, pb, gb, ub) = results
     assert a.landmark_ids.size > 10
     np.testing.assert_array_equal(a.landmark_ids, b.landmark_ids)
-    np.testing.assert_array_equal(a.landmarks_xy, b.landmarks_xy)
-    np.testing.assert_array_equal(a.poses, b.poses)
-    np.testing.assert_array_equal(pa, pb)
+    np.testing.assert_allclose(a.landmarks_xy, b.landmarks_xy, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(a.poses, b.poses, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(pa, pb, rtol=0, atol=1e-9)
     assert (ga, ua) == (gb, ub)
