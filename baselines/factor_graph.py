@@ -221,6 +221,7 @@ class BatchState:
         self._last = np.asarray(start_pose, dtype=float)
         self._odom_sigma: list[np.ndarray] = []
         self._full_n = 0                  # steps at the last whole-graph solve
+        self._window_b = 0                # held pose of the last solve if a window, else 0
         self._fresh: list[int] = []       # landmarks entered since the last solution
         self._obs: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
         self._obs_cat: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
@@ -311,8 +312,12 @@ class BatchState:
         return ids[bad]
 
     def max_whitened_residual(self, values: gtsam.Values) -> float:
-        """Largest |bearing residual| / sigma over the bearings in the graph at ``values``."""
+        """Largest |bearing residual| / sigma over the bearings in the graph at ``values``
+        (after a window solve, over the window's bearings only: the held poses are stale)."""
         owner, lid, brg = self.bearings()
+        if self._window_b:     # a window solution: the held poses' bearings are in its prior
+            keep = owner > self._window_b
+            owner, lid, brg = owner[keep], lid[keep], brg[keep]
         ids, xy = self.landmark_arrays(values)
         if not ids.size or not owner.size:
             return 0.0
@@ -357,6 +362,7 @@ class BatchState:
             if b is not None:
                 return self._solve_window(initial, b)
         self._full_n = n
+        self._window_b = 0
         self.chunks.reset_folds()
         return solve_lm(self.graph, initial, lm_config, self.robust_graph,
                         looks_off=self.looks_off)
@@ -364,6 +370,7 @@ class BatchState:
     def _solve_window(self, initial: gtsam.Values, b: int
                       ) -> tuple[gtsam.Values, SolveReport]:
         n = self.problem.n_steps
+        self._window_b = b
         ids = np.array(sorted(self.problem.landmark_ids), dtype=np.int64)
         graph, start = self.chunks.window(b, n, initial, self.values, self.poses,
                                           self.bearings(), ids, self._fresh)
