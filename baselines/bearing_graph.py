@@ -158,6 +158,11 @@ class FactorGraphConfig(Presets):
         Gaussian prior per landmark), and the whole graph is solved again each time it has
         grown by the factor ``full_growth`` (:class:`baselines.factor_graph.BatchState`,
         :mod:`baselines.lm_window`).
+    lag_marginal_landmarks : int
+        The older poses of a window are eliminated into a marginal on the boundary pose and
+        the landmarks while the graph has at most this many landmarks (the window solve is
+        then the whole-graph solution to first order); beyond, and with 0, the old bearings
+        are conditioned on the held poses instead (:mod:`baselines.lm_window`).
     warm_presolve_sigma_m : float or None
         Before a warm-started whole-graph solve (``gtsam-batch``, the hybrid's warm start),
         the poses added since the last solution are solved alone, the landmarks held near
@@ -199,6 +204,7 @@ class FactorGraphConfig(Presets):
     lag_after_steps: int = 500
     lag_steps: int = 100
     full_growth: float = 1.25
+    lag_marginal_landmarks: int = 200
     warm_presolve_sigma_m: float | None = 3e-3
     presolved_relative_error_tol: float = 1e-6
     robust_trigger: float = 5.0
@@ -227,6 +233,7 @@ class FactorGraphConfig(Presets):
         need(self.lag_steps >= 2 and self.lag_after_steps >= self.lag_steps,
              "lag_steps must be >= 2 and lag_after_steps >= lag_steps")
         need(self.full_growth > 1, "full_growth must be > 1")
+        need(self.lag_marginal_landmarks >= 0, "lag_marginal_landmarks must be >= 0")
         need(self.warm_presolve_sigma_m is None or self.warm_presolve_sigma_m > 0,
              "warm_presolve_sigma_m must be > 0 or None")
         need(self.presolved_relative_error_tol >= 0, "presolved_relative_error_tol must be >= 0")

@@ -24,6 +24,7 @@ from typing import Any, Callable, Sequence
 
 import gtsam
 import numpy as np
+from scipy.spatial import cKDTree
 
 from bomgraph.angles import angle_residual
 from bomgraph.config import resolve
@@ -220,6 +221,7 @@ class BatchState:
         self._last = np.asarray(start_pose, dtype=float)
         self._odom_sigma: list[np.ndarray] = []
         self._full_n = 0                  # steps at the last whole-graph solve
+        self._window_b = 0                # held pose of the last solve if a window, else 0
         self._fresh: list[int] = []       # landmarks entered since the last solution
         self._obs: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
         self._obs_cat: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
@@ -299,19 +301,23 @@ class BatchState:
         bad = ~np.all(np.isfinite(xy), axis=1)
         rng = self.header.sensor_range_m
         if rng is not None:
-            poses = all_poses(values, self.problem.n_steps)[:, :2]
             gate = self.config.range_gate * rng
-            gate2 = gate * gate if gate < 1e150 else math.inf  # a range beyond reach: no gate
-            near = np.zeros(ids.size, bool)
-            for lo in range(0, len(poses), 2048):     # bounded memory: (n, 2048) at a time
-                d2 = ((xy[:, None, :] - poses[None, lo:lo + 2048, :]) ** 2).sum(axis=2)
-                near |= (d2 <= gate2).any(axis=1)
-            bad |= ~near
+            if math.isfinite(gate) and gate < 1e150:     # a range beyond reach: no gate
+                poses = all_poses(values, self.problem.n_steps)[:, :2]
+                ok = ~bad
+                near = np.zeros(ids.size, bool)
+                d, _ = cKDTree(poses).query(xy[ok], distance_upper_bound=gate)
+                near[ok] = d <= gate
+                bad |= ~near
         return ids[bad]
 
     def max_whitened_residual(self, values: gtsam.Values) -> float:
-        """Largest |bearing residual| / sigma over the bearings in the graph at ``values``."""
+        """Largest |bearing residual| / sigma over the bearings in the graph at ``values``
+        (after a window solve, over the window's bearings only: the held poses are stale)."""
         owner, lid, brg = self.bearings()
+        if self._window_b:     # a window solution: the held poses' bearings are in its prior
+            keep = owner > self._window_b
+            owner, lid, brg = owner[keep], lid[keep], brg[keep]
         ids, xy = self.landmark_arrays(values)
         if not ids.size or not owner.size:
             return 0.0
@@ -356,6 +362,7 @@ class BatchState:
             if b is not None:
                 return self._solve_window(initial, b)
         self._full_n = n
+        self._window_b = 0
         self.chunks.reset_folds()
         return solve_lm(self.graph, initial, lm_config, self.robust_graph,
                         looks_off=self.looks_off)
@@ -363,6 +370,7 @@ class BatchState:
     def _solve_window(self, initial: gtsam.Values, b: int
                       ) -> tuple[gtsam.Values, SolveReport]:
         n = self.problem.n_steps
+        self._window_b = b
         ids = np.array(sorted(self.problem.landmark_ids), dtype=np.int64)
         graph, start = self.chunks.window(b, n, initial, self.values, self.poses,
                                           self.bearings(), ids, self._fresh)
@@ -372,6 +380,13 @@ class BatchState:
         values = gtsam.Values(self.values)
         values.update(window)
         return values, replace(report, passes=("window",) + report.passes)
+
+    def estimate_of(self, values: gtsam.Values, report: SolveReport
+                    ) -> Callable[[], MapEstimate]:
+        """A function making the MapEstimate of the solution ``values`` (:meth:`to_estimate`,
+        the landmarks out of reach left out), for :class:`ScheduledSolver`, which calls it
+        only before the next step (so it sees the graph ``values`` solved)."""
+        return lambda: self.to_estimate(values, report.as_info(), self.out_of_reach(values))
 
     def to_estimate(self, values: gtsam.Values, info: dict[str, Any],
                     leave_out: np.ndarray | None = None) -> MapEstimate:
@@ -398,7 +413,8 @@ class ScheduledSolver:
     the caller asks for it).
 
     ``step()`` feeds the step (:meth:`_feed`) and, every ``config.solve_every`` steps, admits
-    landmarks and solves (:meth:`_update`, which returns the new :class:`MapEstimate`).
+    landmarks and solves (:meth:`_update`, which returns the new :class:`MapEstimate`, or a
+    function making it that runs only if the estimate is asked for).
     ``estimate()`` returns the estimate of the last update if it is of the current step, else
     catches up with one update now. Called every 10 steps (the paper) it therefore adds no
     solve; called only at the end it gets the same map as at the scheduled steps.
@@ -406,13 +422,13 @@ class ScheduledSolver:
 
     config: FactorGraphConfig
     state: BatchState
-    _estimate: MapEstimate | None = None
+    _estimate: MapEstimate | Callable[[], MapEstimate] | None = None
     _estimate_n: int = -1
 
     def _feed(self, step: Step) -> None:
         self.state.add_step(step)
 
-    def _update(self) -> MapEstimate:
+    def _update(self) -> MapEstimate | Callable[[], MapEstimate]:
         raise NotImplementedError
 
     def step(self, step: Step) -> None:
@@ -429,6 +445,8 @@ class ScheduledSolver:
             return MapEstimate.empty(reason="no steps yet")
         if self._estimate is None or self._estimate_n != self.state.problem.n_steps:
             self._refresh()
+        if callable(self._estimate):
+            self._estimate = self._estimate()
         assert self._estimate is not None
         return self._estimate
 
@@ -461,11 +479,11 @@ class BatchMapper(ScheduledSolver):
         self.header = header
         self.state = BatchState(header, self.config, start_pose)
 
-    def _update(self) -> MapEstimate:
+    def _update(self) -> Callable[[], MapEstimate]:
         self.state.absorb()
         values, report = self.state.solve(self.state.values, warm=True)
         self.state.set_values(values)
-        return self.state.to_estimate(values, report.as_info(), self.state.out_of_reach(values))
+        return self.state.estimate_of(values, report)
 
 
 class OracleMapper(ScheduledSolver):
@@ -527,11 +545,11 @@ class OracleMapper(ScheduledSolver):
             v.insert(landmark_key(lid), gtsam.Point2(float(xy[0]), float(xy[1])))
         return v
 
-    def _update(self) -> MapEstimate:
+    def _update(self) -> Callable[[], MapEstimate]:
         self.state.absorb(self._true_pose_at)
         values, report = self.state.solve(self.initial_values())
         self.state.set_values(values)
-        return self.state.to_estimate(values, report.as_info(), self.state.out_of_reach(values))
+        return self.state.estimate_of(values, report)
 
 
 __all__ = ["FactorGraphConfig", "SolveReport", "BatchState", "ScheduledSolver", "BatchMapper",

@@ -13,12 +13,22 @@ Two uses (issue 14 items 1-2):
   ``warm_presolve_sigma_m``: a problem of ``solve_every`` poses, after which the whole-graph LM
   starts near its minimum and needs fewer iterations;
 * **fixed-lag solve** (:meth:`StepChunks.window`): on long recordings, the last ``lag_steps``
-  poses and the landmarks they see, each landmark's bearings from the older (held) poses
-  folded into one Gaussian prior (:func:`fold_bearings`, as in :mod:`baselines.fixed_lag`).
-  The fold is kept per landmark and grown as steps leave the window, so a solve costs the window, not the
-  history; a landmark's fold is redone from all its old bearings when its point has moved more
-  than ``refold_m`` from where it was folded (fluid relinearisation), and all folds are reset
-  after a whole-graph solve.
+  poses and the landmarks they see. The older steps' factors are *eliminated* into a marginal:
+  as the window moves on, the chunks that leave it are linearised at the current values with
+  the marginal so far and every pose but the new boundary pose eliminated
+  (``eliminatePartialMultifrontal``), leaving a Gaussian on the boundary pose and the
+  landmarks (``LinearContainerFactor``). A window solve therefore costs the window plus a
+  dense block of ``2 L + 3`` unknowns for ``L`` landmarks, not the history, and is the
+  whole-graph Gauss-Newton solution to first order in the values the old steps were
+  linearised at; after each whole-graph solve the marginal is rebuilt from every chunk at the
+  new values. Bearings filed after their chunk was eliminated (a landmark entering late) are
+  folded by conditioning on the held poses (:func:`fold_bearings`). Past
+  ``lag_marginal_landmarks`` landmarks (large maps, where a dense marginal would cost
+  ``O(L^3)`` per iteration) the marginal is given up for *conditional folds*: each landmark's
+  bearings from the older (held) poses folded into one Gaussian prior (as in
+  :mod:`baselines.fixed_lag`), grown as steps leave the window, redone from all its old
+  bearings when its point has moved more than ``refold_m`` from where it was folded, and all
+  reset after a whole-graph solve; the held boundary pose is then fixed by a prior.
 """
 
 from __future__ import annotations
@@ -77,6 +87,14 @@ class StepChunks:
         # point folded at (2,)]; bearings of steps < _folded_to are in the fold
         self._fold: dict[int, list[np.ndarray]] = {}
         self._folded_to = 0
+        # the marginal (module docstring): chunks [0, _n_marg) eliminated into _marg, a graph
+        # of LinearContainerFactors on the landmarks and the last eliminated boundary pose;
+        # _late: bearings filed after their chunk was eliminated (folded by conditioning)
+        self.marginal = config.lag_marginal_landmarks > 0
+        self._n_marg = 0
+        self._marg = gtsam.NonlinearFactorGraph()
+        self._marg_landmarks = 0
+        self._late: list[tuple[int, int, float]] = []
 
     # -- filing -----------------------------------------------------------------------------
     def add(self, first_step: int, core: gtsam.NonlinearFactorGraph,
@@ -91,15 +109,22 @@ class StepChunks:
         oldest = self._starts[0]
         for lid, (ts, bs) in entries.items():
             for t, b in zip(ts, bs):
-                if t < oldest:
-                    continue
-                k = bisect.bisect_right(self._starts, t) - 1
-                self._graphs[k].add(gtsam.BearingFactor2D(pose_key(t), landmark_key(lid),
-                                                          gtsam.Rot2(float(b)), self._noise))
+                if t >= oldest:
+                    self._file(int(t), int(lid), float(b))
         keep = first_step - 2 * self.config.lag_steps
-        while len(self._starts) > 1 and self._starts[1] <= keep:
+        while not self.marginal and len(self._starts) > 1 and self._starts[1] <= keep:
             self._starts.pop(0)
             self._graphs.pop(0)
+
+    def _file(self, t: int, lid: int, bearing: float) -> None:
+        """File one bearing into its step's chunk, or among the late bearings if that chunk
+        is already in the marginal."""
+        k = bisect.bisect_right(self._starts, t) - 1
+        if k < self._n_marg:
+            self._late.append((t, lid, bearing))
+        else:
+            self._graphs[k].add(gtsam.BearingFactor2D(pose_key(t), landmark_key(lid),
+                                                      gtsam.Rot2(bearing), self._noise))
 
     def boundary(self, n_steps: int, lag_steps: int) -> int | None:
         """The held pose ``b`` of a window of at least ``lag_steps`` poses ending at step
@@ -116,9 +141,8 @@ class StepChunks:
 
     def _factors(self, b: int) -> gtsam.NonlinearFactorGraph:
         graph = gtsam.NonlinearFactorGraph()
-        for start, g in zip(self._starts, self._graphs):
-            if start > b:
-                graph.push_back(g)
+        for g in self._graphs[bisect.bisect_right(self._starts, b):]:
+            graph.push_back(g)
         return graph
 
     @staticmethod
@@ -179,20 +203,29 @@ class StepChunks:
         bearings : (owner (J,), id (J,), bearing (J,)) every bearing so far, owner sorted;
         landmark_ids : (n,) sorted, those in the graph; fresh : entered since the last solve.
         """
+        if self.marginal:
+            self._marginalise(b, held)
         graph = self._factors(b)
-        graph.add(gtsam.PriorFactorPose2(pose_key(b), held.atPose2(pose_key(b)), self._hold))
+        if self.marginal:
+            graph.push_back(self._marg)
+        else:
+            graph.add(gtsam.PriorFactorPose2(pose_key(b), held.atPose2(pose_key(b)),
+                                             self._hold))
         keys = set(graph.keyVector())
         active = sorted({_landmark_id(k) for k in keys if _is_landmark(k)}
                         | {int(i) for i in fresh})
         for i in active:
             keys.add(landmark_key(i))
-        self._fold_upto(b + 1, held, pose_at, bearings, landmark_ids, active)
-        for i in active:
-            f = self._fold.get(i)
-            if f is None or not f[0].any():
+        if self.marginal:
+            folds = self._late_folds(b, held, pose_at, active)
+        else:
+            self._fold_upto(b + 1, held, pose_at, bearings, landmark_ids, active)
+            folds = ((i, *self._fold[i][:2]) for i in active if i in self._fold)
+        for i, info, eta in folds:
+            if not info.any():
                 continue
-            h = f[0] + (1e-12 + 1e-9 * np.trace(f[0])) * np.eye(2)
-            mean = np.linalg.solve(h, f[1])
+            h = info + (1e-12 + 1e-9 * np.trace(info)) * np.eye(2)
+            mean = np.linalg.solve(h, eta)
             graph.add(gtsam.PriorFactorPoint2(landmark_key(i), gtsam.Point2(*mean),
                                               gtsam.noiseModel.Gaussian.Information(h)))
         act = set(active)
@@ -201,10 +234,65 @@ class StepChunks:
                 graph.add(prior_factor(p))
         return graph, self._values(sorted(keys), initial)
 
+    def _marginalise(self, b: int, held: gtsam.Values) -> None:
+        """Eliminate the chunks of steps <= ``b`` not yet in the marginal: their factors and
+        the marginal, linearised at ``held``, with every pose but ``x_b`` eliminated, leave a
+        Gaussian on ``x_b`` and the landmarks (LinearContainerFactors). Past
+        ``lag_marginal_landmarks`` landmarks the marginal is given up for the conditional
+        folds (:meth:`_fold_upto`) for the rest of the run."""
+        j = bisect.bisect_right(self._starts, b)
+        if j <= self._n_marg:
+            return
+        nl = gtsam.NonlinearFactorGraph(self._marg)
+        for g in self._graphs[self._n_marg:j]:
+            nl.push_back(g)
+        keys = list(nl.keyVector())
+        n_lm = sum(1 for k in keys if _is_landmark(k))
+        if n_lm > self.config.lag_marginal_landmarks:
+            self.marginal, self._marg, self._late = False, gtsam.NonlinearFactorGraph(), []
+            self.reset_folds()
+            return
+        start = self._values(keys, held)
+        hold = pose_key(b)
+        gone = [k for k in keys if not _is_landmark(k) and k != hold]
+        _, rest = nl.linearize(start).eliminatePartialMultifrontal(gone)
+        self._marg = gtsam.NonlinearFactorGraph()
+        for i in range(rest.size()):
+            f = rest.at(i)
+            if f is not None:
+                self._marg.add(gtsam.LinearContainerFactor(f, self._values(f.keys(), start)))
+        self._n_marg = j
+        self._marg_landmarks = n_lm
+
+    def _late_folds(self, b: int, held: gtsam.Values,
+                    pose_at: Callable[[np.ndarray], np.ndarray], active: Sequence[int]
+                    ) -> list[tuple[int, np.ndarray, np.ndarray]]:
+        """Conditional folds (:func:`fold_bearings` at the held poses) of the bearings of
+        ``active`` landmarks from steps <= ``b`` that are not in the marginal (filed after
+        their chunk was eliminated): (id, information (2, 2), information vector (2,))."""
+        if not self._late:
+            return []
+        t, lid, brg = (np.array(c) for c in zip(*self._late))
+        sel = (t <= b) & np.isin(lid, np.asarray(active, dtype=np.int64))
+        if not sel.any():
+            return []
+        ids, which = np.unique(lid[sel], return_inverse=True)
+        xy = np.array([held.atPoint2(landmark_key(int(i))) for i in ids]).reshape(-1, 2)
+        info, eta = fold_bearings(pose_at(t[sel]), xy, brg[sel], which,
+                                  float(self.header.bearing_sigma_rad),
+                                  self.config.bearing_cauchy_k)
+        return [(int(i), info[k], eta[k]) for k, i in enumerate(ids.tolist())]
+
     def reset_folds(self) -> None:
-        """Forget every fold (after a whole-graph solve moved the held poses)."""
+        """Forget every fold and the marginal (a whole-graph solve moves the held poses: the
+        next window eliminates every chunk again, at the new values)."""
         self._fold = {}
         self._folded_to = 0
+        self._n_marg = 0
+        self._marg = gtsam.NonlinearFactorGraph()
+        late, self._late = self._late, []
+        for t, lid, b in late:
+            self._file(t, lid, b)
 
     def _fold_upto(self, upto: int, held: gtsam.Values,
                    pose_at: Callable[[np.ndarray], np.ndarray],

@@ -1,0 +1,75 @@
+"""The fixed-lag windows of the LM mappers (``baselines/lm_window.py``): the old steps'
+factors eliminated into a marginal on the boundary pose and the landmarks (issue 14 item 2),
+not conditioned on held poses, so a window solve stays at the whole-graph optimum."""
+
+from __future__ import annotations
+
+import gtsam
+import numpy as np
+import pytest
+
+from baselines.bearing_graph import landmarks_from_values, poses_from_values
+from bomgraph.mapper import create_mapper, run
+from bomgraph.sim import SimConfig, paper_design, simulate_run
+from bomgraph.stream import Stream
+
+
+@pytest.fixture(scope="module")
+def stream() -> Stream:
+    return simulate_run(paper_design(0)[2], SimConfig(n_steps=185))
+
+
+def _optimum(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values) -> gtsam.Values:
+    p = gtsam.GaussNewtonParams()
+    p.setMaxIterations(6)
+    return gtsam.GaussNewtonOptimizer(graph, values, p).optimize()
+
+
+def _rms(a: np.ndarray, b: np.ndarray) -> float:
+    return float(np.sqrt(np.mean(np.sum((a - b) ** 2, axis=1))))
+
+
+def test_a_window_at_the_whole_graph_optimum_stays_there(stream: Stream) -> None:
+    """Every factor of the graph is in the window or in the marginal exactly once: solved
+    from the whole-graph optimum, the window does not move the landmarks."""
+    mapper = create_mapper("gtsam-batch", stream.header, lag_after_steps=10 ** 4, lag_steps=30)
+    est = run(mapper, stream.steps).final
+    state = mapper.state
+    best = _optimum(state.graph, state.values)
+    n = state.problem.n_steps
+    b = state.chunks.boundary(n, 30)
+    assert b is not None and b > 100
+    graph, start = state.chunks.window(b, n, best, best, lambda ts: poses_from_values(best, ts),
+                                       state.bearings(), est.landmark_ids, [])
+    assert state.chunks.marginal
+    solved = _optimum(graph, start)
+    ids = est.landmark_ids
+    assert _rms(landmarks_from_values(solved, ids), landmarks_from_values(best, ids)) < 1e-5
+
+
+def _gap_m(stream: Stream, **options) -> tuple[float, list[str]]:
+    lag = dict(lag_after_steps=60, lag_steps=30, full_growth=1.5, huber_k=None)
+    mapper = create_mapper("gtsam-batch", stream.header, **lag, **options)
+    est = run(mapper, stream.steps).final
+    best = _optimum(mapper.state.graph, mapper.state.values)
+    return (_rms(est.landmarks_xy, landmarks_from_values(best, est.landmark_ids)),
+            est.info["passes"])
+
+
+def test_marginal_windows_track_the_whole_graph_optimum(stream: Stream) -> None:
+    """The final map is a window solve (the last whole solve was at 131 steps); with the
+    marginal it is nearer the whole-graph optimum than with the old bearings conditioned on
+    the held poses (``lag_marginal_landmarks=0``)."""
+    marginal, passes = _gap_m(stream)
+    conditional, _ = _gap_m(stream, lag_marginal_landmarks=0)
+    assert passes[0] == "window"
+    assert marginal < 0.8 * conditional, (marginal, conditional)
+
+
+def test_the_marginal_gives_way_to_conditional_folds_past_its_landmark_bound(
+        stream: Stream) -> None:
+    mapper = create_mapper("gtsam-batch", stream.header, lag_after_steps=60, lag_steps=30,
+                           lag_marginal_landmarks=5)
+    est = run(mapper, stream.steps).final
+    assert not mapper.state.chunks.marginal
+    assert est.info["passes"][0] == "window" and len(est) >= 20
