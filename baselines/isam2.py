@@ -83,6 +83,13 @@ class Isam2Config(FactorGraphConfig):
     long_growth : float
         Growth factor of the graph (in steps) between two whole-graph relinearisations and
         convergence checks in long mode.
+    long_wildfire_threshold : float
+        Gauss-Newton wildfire threshold in long mode (0: full back-substitution). GTSAM's
+        0.001 left deltas stale by up to 1e-3 on the rigid split-odometry directions (sigma
+        1e-3), which the whole-graph check saw as ~100-2,700 units of predicted decrease.
+    long_checkpoint_updates : int
+        ``checkpoint_updates`` in long mode (0 measured faster but left the final map
+        128 units above the minimum, ``docs/measurements.md``).
     """
 
     PRESETS: ClassVar[Mapping[str, Mapping[str, Any]]] = {
@@ -106,6 +113,8 @@ class Isam2Config(FactorGraphConfig):
     long_lag_steps: int = 100
     long_relinearize_threshold: float = 0.001
     long_growth: float = 1.25
+    long_wildfire_threshold: float = 0.0
+    long_checkpoint_updates: int = 1
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -184,6 +193,7 @@ class Isam2Mapper:
         self.updates = 0
         self._batch = False  # set when iSAM2 cannot be rebuilt (see _recover)
         self.dropped_external = 0
+        self.lm_restarts = 0
         self._long_full = 0  # steps at the last whole-graph relinearisation and check
         self._long_check: dict[str, Any] = {}
         self._old = gtsam.KeyList()  # what long mode does not relinearise
@@ -201,7 +211,8 @@ class Isam2Mapper:
         if self.config.isam2_optimizer == "dogleg" and not self._long:
             p.setOptimizationParams(gtsam.ISAM2DoglegParams())
         else:
-            p.setOptimizationParams(gtsam.ISAM2GaussNewtonParams())
+            p.setOptimizationParams(gtsam.ISAM2GaussNewtonParams(
+                self.config.long_wildfire_threshold if self._long else 0.001))
         return gtsam.ISAM2(p)
 
     def add_factors(self, factors: gtsam.NonlinearFactorGraph,
@@ -270,7 +281,9 @@ class Isam2Mapper:
             full = self._long and self.problem.n_steps >= self.config.long_growth * self._long_full
             params = self._update_params(full)
             self._isam.update(graph, both, params)
-            for _ in range(self.config.checkpoint_updates if extra else 0):
+            n_extra = (self.config.long_checkpoint_updates if self._long
+                       else self.config.checkpoint_updates)
+            for _ in range(n_extra if extra else 0):
                 self._isam.update(gtsam.NonlinearFactorGraph(), gtsam.Values(), params)
             self.updates += 1
             self.accepted.push_back(graph)
@@ -325,21 +338,51 @@ class Isam2Mapper:
         self._check_long()
 
     def _check_long(self) -> None:
-        """The whole-graph Gauss-Newton check of long mode (no step taken), after which up to
-        ``isam2_polish`` more whole-graph updates run while it predicts a decrease above
-        ``decrease_tol``: what ``estimate()`` reports until the next one."""
+        """The whole-graph Gauss-Newton check of long mode (no step taken): what
+        ``estimate()`` reports until the graph changes. If it predicts more than
+        ``decrease_tol`` of decrease, iSAM2's own Gauss-Newton iteration is not reaching the
+        minimum (it can cycle between two points where a bearing is strongly nonlinear, e.g.
+        a pose passing close to a landmark): the whole graph is then solved by
+        Levenberg-Marquardt from the estimate (:func:`baselines.factor_graph.solve_lm`, which
+        checks its own result) and iSAM2 rebuilt there if LM lowered the error
+        (``info["lm_restarts"]``)."""
         self._long_full = self.problem.n_steps
-        for k in range(self.config.isam2_polish + 1):
-            _, step, decrease, cost = polish(self.accepted, self.estimate_values, 0,
-                                             self.config.decrease_tol)
-            if decrease <= self.config.decrease_tol or k == self.config.isam2_polish:
-                break
-            self._isam.update()
-            self.estimate_values = self._isam.calculateEstimate()
-        self._long_check = {"converged": bool(decrease <= self.config.decrease_tol
-                                              and math.isfinite(step)),
-                            "cost": cost, "gn_step": step, "predicted_decrease": decrease,
+        _, step, decrease, cost = polish(self.accepted, self.estimate_values, 0,
+                                         self.config.decrease_tol)
+        converged = decrease <= self.config.decrease_tol and math.isfinite(step)
+        if not converged:
+            values, report = solve_lm(self.accepted, self.estimate_values, self.config)
+            if report.final_error < cost:
+                isam = self._new_isam()
+                try:
+                    isam.update(self.accepted, values)
+                    self._isam = isam
+                    self.estimate_values = self._isam.calculateEstimate()
+                    self.lm_restarts += 1
+                    _, step, decrease, cost = polish(self.accepted, self.estimate_values, 0,
+                                                     self.config.decrease_tol)
+                    converged = decrease <= self.config.decrease_tol and math.isfinite(step)
+                except GTSAM_ERRORS as exc:   # the old solver is still usable
+                    self.failures.append(_first_line(exc))
+        self._long_check = {"converged": bool(converged), "cost": cost, "gn_step": step,
+                            "predicted_decrease": decrease,
                             "checked_at_step": self.problem.n_steps}
+
+    def _long_report(self, unbuffered: bool) -> dict[str, Any]:
+        """What ``estimate()`` says of convergence in long mode (no whole-graph work per
+        estimate): the last whole-graph check if it was made on this very graph and
+        estimate, else ``converged`` None (not known) with the last check under ``last_*``
+        and the reason in ``convergence``."""
+        c = self._long_check
+        if unbuffered and c["checked_at_step"] == self.problem.n_steps:
+            return {**c, "convergence": "whole-graph Gauss-Newton check of this estimate"}
+        return {"converged": None, "checked_at_step": c["checked_at_step"],
+                "last_converged": c["converged"], "last_cost": c["cost"],
+                "last_predicted_decrease": c["predicted_decrease"],
+                "convergence": (f"not checked: long mode checks the whole graph when it has "
+                                f"grown {self.config.long_growth:g}x (last at step "
+                                f"{c['checked_at_step']}: "
+                                f"{'passed' if c['converged'] else 'failed'})")}
 
     def _recover(self, factors: gtsam.NonlinearFactorGraph, start: gtsam.Values) -> None:
         """After a failed update (iSAM2 is unusable then): a new iSAM2 holding the accepted
@@ -376,7 +419,7 @@ class Isam2Mapper:
         if self._batch:
             values, report = solve_lm(graph, values, self.config)
         if self._long and not self._batch:
-            check = dict(self._long_check)  # no whole-graph work per estimate in long mode
+            check = self._long_report(graph is self.accepted)
         else:
             values, step, decrease, cost = polish(graph, values, self.config.isam2_polish,
                                                   self.config.decrease_tol)
@@ -388,6 +431,7 @@ class Isam2Mapper:
         mode = "batch" if self._batch else ("isam2-long" if self._long else "isam2")
         info = {**check, "mode": mode, "isam2_updates": self.updates,
                 "update_failures": len(self.failures), "rebuilds": self.rebuilds,
+                "lm_restarts": self.lm_restarts,
                 "dropped_external_factors": self.dropped_external}
         if self.failures:
             info["last_failure"] = self.failures[-1]

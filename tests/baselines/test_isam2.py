@@ -78,6 +78,20 @@ def test_long_mode_is_cadence_independent_and_reaches_the_same_map(small: Stream
     assert at.info["cost"] <= 1.001 * normal.info["cost"]
 
 
+def test_long_mode_never_calls_an_unchecked_estimate_converged(small: Stream) -> None:
+    """Between whole-graph checks long mode does not know whether its estimate is at the
+    minimum: ``converged`` is None there (not True), with the last check beside it and the
+    reason; the LM restart counter is reported."""
+    long = {"long_after_steps": 60, "long_lag_steps": 30}
+    final = _final(small, 10, **long)     # T = 120, last check at 111
+    assert final.info["mode"] == "isam2-long"
+    assert final.info["checked_at_step"] < small.truth.poses.shape[0]
+    assert final.info["converged"] is None
+    assert final.info["last_converged"] in (True, False)
+    assert "not checked" in final.info["convergence"]
+    assert final.info["lm_restarts"] >= 0
+
+
 @pytest.mark.skipif(not (DATA / "mrclam6").is_dir(), reason=f"no shared data at {DATA}")
 def test_cadence_independence_on_a_recording() -> None:
     from bomgraph.datasets.mrclam import import_mrclam
