@@ -67,6 +67,12 @@ class BearingEkfConfig(Presets):
         rows as in ``"oc"``); both with the first-estimate predict. ``"plain"``: the model's
         own Jacobians at the current estimate (the standard EKF, which gains information
         along global rotation).
+    max_predict_turn_rad : a step whose odometry turns by more than this is predicted in
+        ``k = ceil(|dpsi| / max_predict_turn_rad)`` equal sub-steps along its
+        constant-curvature arc (:func:`bomgraph.geometry.arc_root`), each with the step's
+        sigma over ``sqrt(k)``: the heading noise then enters along the turn, not as one
+        linearisation of a large rotation (recordings keyframed sparsely have blind steps of
+        2-3 rad). None (every preset): one predict per step.
     """
 
     gate_probability: float = 0.999
@@ -80,8 +86,13 @@ class BearingEkfConfig(Presets):
     correlated_fraction: float = 0.0
     correlation_length_rad: float = 0.05
     jacobians: str = "oc"
+    max_predict_turn_rad: float | None = None
 
     def __post_init__(self) -> None:
+        turn = self.max_predict_turn_rad
+        if turn is not None and not (math.isfinite(turn) and turn > 0):
+            raise ConfigError(f"max_predict_turn_rad must be a finite number > 0 or None (one "
+                              f"predict per step), got {turn}")
         if self.jacobians not in JACOBIANS:
             raise ConfigError(f"jacobians must be one of {', '.join(JACOBIANS)} "
                               f"(observability-constrained, first estimates, the model's own), "

@@ -16,6 +16,7 @@ from scipy.stats import chi2
 
 from bomgraph.angles import angle_residual, wrap_angle
 from bomgraph.errors import ConfigError
+from bomgraph.geometry import arc_root
 from bomgraph.mapper import MapEstimate
 from bomgraph.stream import Step, StreamHeader
 
@@ -55,6 +56,7 @@ class EkfSlam:
                                  limit_hint=" (option max_state; raise it with --option "
                                             "max_state=N, the covariance takes 8 N^2 bytes)")
         self._jacobians = config.jacobians
+        self._max_turn = config.max_predict_turn_rad
         p = config.gate_probability
         self._gate = float(chi2.ppf(p, 1)) if p < 1 else np.inf
         self._iterations = int(config.iterations)
@@ -517,7 +519,7 @@ class EkfSlam:
         self._t = step.t
         if step.odom is not None:
             try:
-                self.filter.predict(step.odom, step.odometry_sigma(self._header))
+                self._predict(np.asarray(step.odom, float), step.odometry_sigma(self._header))
             except FilterNumericalError as exc:
                 raise FilterNumericalError(f"step {step.t}: {exc}") from None
         ids, z = step.landmark_ids, step.bearings_rad
@@ -534,6 +536,17 @@ class EkfSlam:
         self._poses[n] = self.filter.x[:3]
         self._pose_covs[n] = self.filter.P[:3, :3]
         self._n_poses = n + 1
+
+    def _predict(self, odom: np.ndarray, sigma: np.ndarray) -> None:
+        """The odometry predict, in ``k`` sub-steps along the arc when the step turns by more
+        than ``max_predict_turn_rad`` (each ``arc_root(odom, k)`` with ``sigma / sqrt(k)``)."""
+        k = 1 if self._max_turn is None else math.ceil(abs(float(odom[2])) / self._max_turn)
+        if k <= 1:
+            self.filter.predict(odom, sigma)
+            return
+        sub, sub_sigma = arc_root(odom, k), np.asarray(sigma, float) / math.sqrt(k)
+        for _ in range(k):
+            self.filter.predict(sub, sub_sigma)
 
     def _new_sightings(self, t: int, ids: np.ndarray, z: np.ndarray) -> None:
         raise NotImplementedError

@@ -7,7 +7,8 @@ unobservable directions of bearing-only SLAM (global translation and rotation, t
 filters in both presets, and every predict carries ``N`` to the rigid-motion directions at the
 new prior pose; the standard EKF (``"plain"``) gains information there (so the check can
 fail). On a Monte Carlo of the paper's simulation the robot's heading NEES lies in the 95 %
-chi-square band.
+chi-square band. A large turn predicted in sub-steps (``max_predict_turn_rad``) keeps the
+step's end pose and heading variance.
 """
 
 from __future__ import annotations
@@ -20,8 +21,10 @@ from baselines.ekf import filter as ekf_filter
 from baselines.ekf import EkfConfig
 from bomgraph.angles import angle_residual
 from bomgraph.errors import ConfigError
+from bomgraph.geometry import compose
 from bomgraph.mapper import create_mapper, run
 from bomgraph.sim import SimConfig, simulate
+from bomgraph.stream import Step, StreamHeader
 
 
 def _information_along_nullspace(monkeypatch: pytest.MonkeyPatch, method: str, preset: str,
@@ -90,3 +93,24 @@ def test_heading_nees_of_a_monte_carlo_is_in_the_95_percent_band(method: str) ->
 def test_unknown_jacobians_are_refused() -> None:
     with pytest.raises(ConfigError, match="jacobians"):
         EkfConfig(jacobians="first-estimates")
+
+
+def test_a_large_turn_is_predicted_along_its_arc() -> None:
+    # one blind step of 2.5 rad: in 25 sub-steps with max_predict_turn_rad = 0.1 the mean is
+    # the step's exact end pose and the heading variance the step's; the heading noise enters
+    # along the arc, so the position covariance differs from one predict's
+    header = StreamHeader(bearing_sigma_rad=0.02, odometry_sigma=(0.05, 0.02, 0.3))
+    odom = np.array([0.4, 0.9, 2.5])
+    step = Step(t=1, odom=odom, landmark_ids=np.zeros(0, np.int64), bearings_rad=np.zeros(0))
+    first = Step(t=0, odom=None, landmark_ids=np.zeros(0, np.int64), bearings_rad=np.zeros(0))
+    one, arc = (create_mapper("ekf", header, max_predict_turn_rad=m) for m in (None, 0.1))
+    for m in (one, arc):
+        m.step(first)
+        m.step(step)
+    np.testing.assert_allclose(arc.filter.x[:3], one.filter.x[:3], atol=1e-12)
+    np.testing.assert_allclose(one.filter.x[:3], compose(np.zeros(3), odom), atol=1e-12)
+    assert abs(arc.filter.P[2, 2] - 0.3 ** 2) < 1e-12
+    assert abs(one.filter.P[2, 2] - 0.3 ** 2) < 1e-12
+    assert np.abs(arc.filter.P[:2, :2] - one.filter.P[:2, :2]).max() > 1e-3
+    with pytest.raises(ConfigError, match="max_predict_turn_rad"):
+        EkfConfig(max_predict_turn_rad=0.0)
