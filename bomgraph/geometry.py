@@ -41,6 +41,24 @@ def compose(pose: ArrayLike, odom: ArrayLike) -> np.ndarray:
     return np.stack([x, y, wrap_angle(p[..., 2] + u[..., 2])], -1)
 
 
+def arc_root(odom: ArrayLike, k: int) -> np.ndarray:
+    """The increment ``v`` with ``v ⊕ v ⊕ ... ⊕ v`` (``k`` times) ``= odom``: one ``k``-th of
+    the constant-curvature arc from the origin to ``odom`` (the SE(2) exponential of a
+    ``k``-th of its logarithm), shape ``(3,)``; the turn is taken in ``(-pi, pi]``."""
+    dx, dy, th = (float(v) for v in np.asarray(odom, dtype=float).reshape(3))
+    th = float(wrap_angle(th))
+
+    def v_matrix(a: float) -> np.ndarray:      # translation = V(a) [vx, vy] for a turn a
+        if abs(a) < 1e-9:
+            return np.eye(2)
+        sa, ca = math.sin(a), math.cos(a)
+        return np.array([[sa / a, -(1.0 - ca) / a], [(1.0 - ca) / a, sa / a]])
+
+    velocity = np.linalg.solve(v_matrix(th), [dx, dy]) / k
+    t = v_matrix(th / k) @ velocity
+    return np.array([t[0], t[1], th / k])
+
+
 def between(pose_a: ArrayLike, pose_b: ArrayLike) -> np.ndarray:
     """The increment ``u`` with ``pose_a ⊕ u = pose_b``, shape ``(..., 3)``."""
     a = np.asarray(pose_a, dtype=float)

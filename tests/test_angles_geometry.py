@@ -8,7 +8,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from bomgraph.angles import angle_residual, wrap_angle
-from bomgraph.geometry import (between, bearings_to, compose, dead_reckon, to_local, to_world)
+from bomgraph.geometry import (arc_root, between, bearings_to, compose, dead_reckon, to_local,
+                               to_world)
 
 
 def test_wrap_textbook_values() -> None:
@@ -52,3 +53,21 @@ def test_frames_and_bearings() -> None:
     np.testing.assert_allclose(to_world(pose, to_local(pose, pts)), pts, atol=1e-12)
     local = to_local(pose, pts)
     np.testing.assert_allclose(bearings_to(pose, pts), np.arctan2(local[:, 1], local[:, 0]))
+
+
+def test_arc_root_composed_k_times_is_the_increment() -> None:
+    rng = np.random.default_rng(3)
+    for u in np.column_stack([rng.normal(0, 2, (40, 2)), rng.uniform(-3.1, 3.1, 40)]):
+        for k in (1, 2, 7, 30):
+            v = arc_root(u, k)
+            p = np.zeros(3)
+            for _ in range(k):
+                p = compose(p, v)
+            np.testing.assert_allclose(p[:2], u[:2], atol=1e-9)
+            assert abs(float(angle_residual(p[2], u[2]))) < 1e-12
+            assert abs(v[2] - u[2] / k) < 1e-12           # equal turns along the arc
+    np.testing.assert_allclose(arc_root([1.0, 0.0, 0.0], 4), [0.25, 0.0, 0.0])
+    # a quarter circle of radius 1 in two halves: each an eighth
+    half = arc_root([1.0, 1.0, np.pi / 2], 2)
+    np.testing.assert_allclose(half, [np.sin(np.pi / 4), 1 - np.cos(np.pi / 4), np.pi / 4],
+                               atol=1e-12)

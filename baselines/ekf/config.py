@@ -22,6 +22,10 @@ from bomgraph.config import Presets
 from bomgraph.errors import ConfigError
 
 
+#: The linearisations of :attr:`BearingEkfConfig.jacobians`.
+JACOBIANS = ("oc", "fej", "plain")
+
+
 @dataclass(frozen=True)
 class BearingEkfConfig(Presets):
     """The fields both EKF baselines share.
@@ -54,6 +58,21 @@ class BearingEkfConfig(Presets):
         filter); 0: white bearing errors (the paper's simulation).
     correlation_length_rad : ``L``, the change of viewing geometry (parallax at the landmark
         plus the robot's turn, rad) over which that correlation falls by ``e``.
+    jacobians : how the predict and the bearing rows are linearised against the spurious
+        information of EKF-SLAM (Huang, Mourikis and Roumeliotis): ``"oc"``, the
+        observability-constrained EKF (IJRR 2010; rows near the model's Jacobian at the
+        current estimate, constrained to ``h N = 0``, :meth:`~baselines.ekf.slam.EkfSlam.
+        _constrain`); ``"fej"``, first-estimate Jacobians (ICRA 2008, ISER 2008: a Euclidean
+        landmark's row evaluated at its first estimate and the pose's prior, inverse-depth
+        rows as in ``"oc"``); both with the first-estimate predict. ``"plain"``: the model's
+        own Jacobians at the current estimate (the standard EKF, which gains information
+        along global rotation).
+    max_predict_turn_rad : a step whose odometry turns by more than this is predicted in
+        ``k = ceil(|dpsi| / max_predict_turn_rad)`` equal sub-steps along its
+        constant-curvature arc (:func:`bomgraph.geometry.arc_root`), each with the step's
+        sigma over ``sqrt(k)``: the heading noise then enters along the turn, not as one
+        linearisation of a large rotation (recordings keyframed sparsely have blind steps of
+        2-3 rad). None (every preset): one predict per step.
     """
 
     gate_probability: float = 0.999
@@ -66,8 +85,18 @@ class BearingEkfConfig(Presets):
     max_state: int = 4000
     correlated_fraction: float = 0.0
     correlation_length_rad: float = 0.05
+    jacobians: str = "oc"
+    max_predict_turn_rad: float | None = None
 
     def __post_init__(self) -> None:
+        turn = self.max_predict_turn_rad
+        if turn is not None and not (math.isfinite(turn) and turn > 0):
+            raise ConfigError(f"max_predict_turn_rad must be a finite number > 0 or None (one "
+                              f"predict per step), got {turn}")
+        if self.jacobians not in JACOBIANS:
+            raise ConfigError(f"jacobians must be one of {', '.join(JACOBIANS)} "
+                              f"(observability-constrained, first estimates, the model's own), "
+                              f"got {self.jacobians!r}")
         if not (math.isfinite(self.correlated_fraction) and 0 <= self.correlated_fraction < 1):
             raise ConfigError(f"correlated_fraction must be in [0, 1) (0: white bearing "
                               f"errors), got {self.correlated_fraction}")
@@ -162,4 +191,4 @@ class InverseDepthConfig(BearingEkfConfig):
             raise ConfigError("linearity_max must be > 0")
 
 
-__all__ = ["BearingEkfConfig", "EkfConfig", "InverseDepthConfig"]
+__all__ = ["BearingEkfConfig", "EkfConfig", "InverseDepthConfig", "JACOBIANS"]

@@ -19,7 +19,8 @@ setup):
   second_order_variance`), taken in the robot's frame: a rotation of the map and the robot
   together changes no bearing, so an uncertain global heading does not count;
 * observability constraints (OC-EKF): every measurement row is linearised at the closest
-  point with ``h N = 0`` (:meth:`~baselines.ekf.slam.EkfSlam._constrain`);
+  point with ``h N = 0`` (:meth:`~baselines.ekf.slam.EkfSlam._constrain`; the option
+  ``jacobians`` also offers first-estimate Jacobians and the plain EKF);
 * Bailey's intermediate bearings (below).
 
 Constrained (delayed) initialisation, ``ekf``

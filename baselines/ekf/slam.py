@@ -16,6 +16,7 @@ from scipy.stats import chi2
 
 from bomgraph.angles import angle_residual, wrap_angle
 from bomgraph.errors import ConfigError
+from bomgraph.geometry import arc_root
 from bomgraph.mapper import MapEstimate
 from bomgraph.stream import Step, StreamHeader
 
@@ -50,10 +51,13 @@ class EkfSlam:
         self._header = header
         self.filter = BearingEkf(np.asarray(start_pose, dtype=float),
                                  np.diag(np.asarray(config.initial_pose_sigma, float) ** 2),
-                                 header.bearing_sigma_rad, observability_constrained=True,
+                                 header.bearing_sigma_rad,
+                                 observability_constrained=config.jacobians != "plain",
                                  max_state=int(config.max_state),
                                  limit_hint=" (option max_state; raise it with --option "
                                             "max_state=N, the covariance takes 8 N^2 bytes)")
+        self._jacobians = config.jacobians
+        self._max_turn = config.max_predict_turn_rad
         p = config.gate_probability
         self._gate = float(chi2.ppf(p, 1)) if p < 1 else np.inf
         self._iterations = int(config.iterations)
@@ -217,6 +221,12 @@ class EkfSlam:
         ``L <= 0``) are projected, ``h <- h - (h N_S)(N_S^T N_S)^-1 N_S^T`` over their own
         columns ``S``.
 
+        With ``jacobians="fej"`` a Euclidean landmark's row is instead the model's Jacobian at
+        the anchors themselves (the landmark's first estimate ``a_l`` and the pose's prior
+        ``a_p``): ``h_l = J d / |d|^2`` with ``d = a_l - a_p``, ``h_p = -h_l``, ``h_psi = -1``
+        (Huang, Mourikis and Roumeliotis, ICRA 2008), which satisfies ``h N = 0`` as well.
+        With ``jacobians="plain"`` the rows are returned unchanged.
+
         Parameters
         ----------
         jac : array of shape (m, s)
@@ -227,10 +237,22 @@ class EkfSlam:
         -------
         ndarray of shape (m, s)
         """
+        if self._jacobians == "plain":
+            return jac
         N = self.filter.nullspace
         out = jac.copy()
         project = None
-        if jac.shape[1] == 5:
+        if jac.shape[1] == 5 and self._jacobians == "fej":
+            d = np.column_stack([N[cols[:, 4], 2] - N[cols[:, 1], 2],
+                                 N[cols[:, 0], 2] - N[cols[:, 3], 2]])      # a_l - a_p
+            q = d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1]
+            ok = q > 1e-12
+            out[ok, 3] = -d[ok, 1] / q[ok]
+            out[ok, 4] = d[ok, 0] / q[ok]
+            out[ok, 0:2] = -out[ok, 3:5]
+            out[ok, 2] = -1.0
+            project = ~ok
+        elif jac.shape[1] == 5:
             hx, hy = jac[:, 3], jac[:, 4]                          # J u / |r|
             norm = np.sqrt(hy * hy + hx * hx)
             ux, uy = hy / norm, -hx / norm
@@ -499,7 +521,7 @@ class EkfSlam:
         self._t = step.t
         if step.odom is not None:
             try:
-                self.filter.predict(step.odom, step.odometry_sigma(self._header))
+                self._predict(np.asarray(step.odom, float), step.odometry_sigma(self._header))
             except FilterNumericalError as exc:
                 raise FilterNumericalError(f"step {step.t}: {exc}") from None
         ids, z = step.landmark_ids, step.bearings_rad
@@ -516,6 +538,17 @@ class EkfSlam:
         self._poses[n] = self.filter.x[:3]
         self._pose_covs[n] = self.filter.P[:3, :3]
         self._n_poses = n + 1
+
+    def _predict(self, odom: np.ndarray, sigma: np.ndarray) -> None:
+        """The odometry predict, in ``k`` sub-steps along the arc when the step turns by more
+        than ``max_predict_turn_rad`` (each ``arc_root(odom, k)`` with ``sigma / sqrt(k)``)."""
+        k = 1 if self._max_turn is None else math.ceil(abs(float(odom[2])) / self._max_turn)
+        if k <= 1:
+            self.filter.predict(odom, sigma)
+            return
+        sub, sub_sigma = arc_root(odom, k), np.asarray(sigma, float) / math.sqrt(k)
+        for _ in range(k):
+            self.filter.predict(sub, sub_sigma)
 
     def _new_sightings(self, t: int, ids: np.ndarray, z: np.ndarray) -> None:
         raise NotImplementedError
