@@ -260,7 +260,6 @@ class StmdsMapper:
                                                    SIGMA_RANGE[1] * self._bearing_sigma))
             self._prev_bundle = (ts, tri.poses, uniq[tri.column], tri.points_xy) if len(tri) \
                 else None
-            well = None
             if self._relative_gate and len(tri):
                 # a landmark is admitted to the map once a window triangulates it well (its
                 # covariance); its pairs from every window are fused
@@ -275,8 +274,7 @@ class StmdsMapper:
         if len(tri) == 0:
             return
         idx = self._ids.lookup(uniq[tri.column], add=False)
-        self._triangulated[idx if not (self.config.tri_method == "ba" and well is not None)
-                           else idx[well]] = True
+        self._triangulated[idx if well is None else idx[well]] = True
         if len(tri) < 2:
             return
         if isinstance(tri, WindowBundle):
