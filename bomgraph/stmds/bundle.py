@@ -397,6 +397,26 @@ def _empty(poses: np.ndarray, n_outliers: int) -> WindowBundle:
                         np.zeros(0, np.int64), n_outliers, False)
 
 
+def relative_range_sigma(bundle: WindowBundle, bearings_rad: ArrayLike) -> np.ndarray:
+    """How well each landmark of a window is triangulated: the largest std. dev. of its
+    point (the square root of the larger eigenvalue of its 2 x 2 block of the bundle's
+    covariance, from the rays' actual geometry and the window's bearing sigma) over its mean
+    range from the poses that saw it (finite entries of ``bearings_rad``, the window's
+    ``(W, n)`` bearing matrix). A landmark seen from a short baseline far away has a long,
+    thin error ellipse along its rays: its value approaches the relative depth error."""
+    brg = np.asarray(bearings_rad, dtype=float)[:, bundle.column]
+    n = len(bundle)
+    if n == 0:
+        return np.zeros(0)
+    idx = np.arange(n)
+    blocks = bundle.covariance_m2.reshape(n, 2, n, 2)[idx, :, idx, :]        # (n, 2, 2)
+    largest = np.linalg.eigvalsh(blocks)[:, -1]
+    seen = np.isfinite(brg)
+    d = bundle.points_xy[None, :, :] - bundle.poses[:, None, :2]             # (W, n, 2)
+    rng = np.where(seen, np.hypot(d[..., 0], d[..., 1]), 0.0).sum(0) / seen.sum(0)
+    return np.sqrt(np.maximum(largest, 0.0)) / rng
+
+
 def bundle_pair_squared_distances(bundle: WindowBundle) -> PairEstimates:
     """Squared distance and first-order variance of every pair of a window's landmarks.
 
@@ -414,4 +434,4 @@ def bundle_pair_squared_distances(bundle: WindowBundle) -> PairEstimates:
 
 
 __all__ = ["SIGMA_FLOOR", "PrefixState", "WindowBundle", "bundle_adjust_window",
-           "bundle_pair_squared_distances"]
+           "bundle_pair_squared_distances", "relative_range_sigma"]

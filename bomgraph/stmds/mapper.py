@@ -32,7 +32,7 @@ from ..mapper import MapEstimate
 from ..stream import Step, StreamHeader
 from .batch import BATCH_STEPS, StepBatch
 from .bundle import (SIGMA_RANGE, PrefixState, WindowBundle, bundle_adjust_window,
-                     bundle_pair_squared_distances)
+                     bundle_pair_squared_distances, relative_range_sigma)
 from .config import StmdsConfig
 from .distances import DistanceStore, IdIndex
 from .localisation import RobotPoses, extend_with_robots, resect_headings, trilaterate_robots
@@ -236,6 +236,7 @@ class StmdsMapper:
         brg[row, col] = np.concatenate([b[1] for b in buf])
         odoms = np.array([b[2] for b in buf[1:]], float).reshape(-1, 3)
         sig = np.array([b[3] for b in buf[1:]], float).reshape(-1, 3)
+        well = None
         if self.config.tri_method == "ba":
             ts = np.array([b[4] for b in buf], np.int64)
             init_poses, init_points, n_shared = self._warm_start(ts, uniq, odoms)
@@ -259,6 +260,10 @@ class StmdsMapper:
                                                    SIGMA_RANGE[1] * self._bearing_sigma))
             self._prev_bundle = (ts, tri.poses, uniq[tri.column], tri.points_xy) if len(tri) \
                 else None
+            if self._relative_gate and len(tri):
+                # a landmark is admitted to the map once a window triangulates it well (its
+                # covariance); its pairs from every window are fused
+                well = relative_range_sigma(tri, brg) <= self.config.max_relative_range_sigma
         else:
             kernel = triangulate_window_lsq if self.config.tri_method == "lsq" else \
                 triangulate_window
@@ -269,7 +274,7 @@ class StmdsMapper:
         if len(tri) == 0:
             return
         idx = self._ids.lookup(uniq[tri.column], add=False)
-        self._triangulated[idx] = True
+        self._triangulated[idx if well is None else idx[well]] = True
         if len(tri) < 2:
             return
         if isinstance(tri, WindowBundle):
