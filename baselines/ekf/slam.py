@@ -301,7 +301,8 @@ class EkfSlam:
         ndarray of shape (k,), bool
             The bearings that failed the gate.
         """
-        if bias_off is None and self._iterations == 1:
+        # the fused kernels build the OC-EKF rows only; "fej" and "plain" take the model path
+        if bias_off is None and self._iterations == 1 and self._jacobians == "oc":
             return self._plain_gated_update(pose_off, kinds, offsets, z)
         return self._model_gated_update(pose_off, kinds, offsets, z, bias_off)
 
