@@ -302,7 +302,7 @@ class BatchState:
         rng = self.header.sensor_range_m
         if rng is not None:
             gate = self.config.range_gate * rng
-            if math.isfinite(gate) and gate < 1e150:     # a range beyond reach: no gate
+            if gate < 1e150:     # a range beyond reach (or inf/NaN): no gate
                 poses = all_poses(values, self.problem.n_steps)[:, :2]
                 ok = ~bad
                 near = np.zeros(ids.size, bool)
