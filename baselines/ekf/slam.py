@@ -317,9 +317,13 @@ class EkfSlam:
 
     def _model_gated_update(self, pose_off: np.ndarray, kinds: np.ndarray,
                             offsets: np.ndarray, z: np.ndarray,
-                            bias_off: np.ndarray | None, iterations: int) -> np.ndarray:
+                            bias_off: np.ndarray | None,
+                            iterations: int | None = None) -> np.ndarray:
         """:meth:`_gated_update` through the bearing model (:meth:`_model`) and
-        :meth:`BearingEkf.update`: any number of ``iterations``, coloured errors."""
+        :meth:`BearingEkf.update`: any number of ``iterations`` (None: the configured
+        ``iterations``), coloured errors."""
+        if iterations is None:
+            iterations = self._iterations
         model = self._model(pose_off, kinds, offsets, bias_off=bias_off)
         x, P = self.filter.x, self.filter.P
         h, parts = model(x)
@@ -556,8 +560,11 @@ class EkfSlam:
         k = 1 if self._max_turn is None else math.ceil(abs(float(odom[2])) / self._max_turn)
         if k > 1:
             odom, sigma = arc_root(odom, k), np.asarray(sigma, float) / math.sqrt(k)
-        extra = (path_heading_noise(odom, float(np.ravel(sigma)[2])) if self._path_noise
-                 else None)
+        if not self._path_noise:
+            for _ in range(max(k, 1)):
+                self.filter.predict(odom, sigma)
+            return
+        extra = path_heading_noise(odom, float(np.ravel(sigma)[2]))
         for _ in range(max(k, 1)):
             self.filter.predict(odom, sigma, extra)
 
