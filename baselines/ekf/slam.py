@@ -322,8 +322,7 @@ class EkfSlam:
         """:meth:`_gated_update` through the bearing model (:meth:`_model`) and
         :meth:`BearingEkf.update`: any number of ``iterations`` (None: the configured
         ``iterations``), coloured errors."""
-        if iterations is None:
-            iterations = self._iterations
+        iterations = self._iterations if iterations is None else iterations
         model = self._model(pose_off, kinds, offsets, bias_off=bias_off)
         x, P = self.filter.x, self.filter.P
         h, parts = model(x)
@@ -560,13 +559,9 @@ class EkfSlam:
         k = 1 if self._max_turn is None else math.ceil(abs(float(odom[2])) / self._max_turn)
         if k > 1:
             odom, sigma = arc_root(odom, k), np.asarray(sigma, float) / math.sqrt(k)
-        if not self._path_noise:
-            for _ in range(max(k, 1)):
-                self.filter.predict(odom, sigma)
-            return
-        extra = path_heading_noise(odom, float(np.ravel(sigma)[2]))
-        for _ in range(max(k, 1)):
-            self.filter.predict(odom, sigma, extra)
+        extra = (path_heading_noise(odom, float(np.ravel(sigma)[2])),) if self._path_noise else ()
+        for _ in range(max(k, 1)):       # (the paper path calls predict(odom, sigma) as always)
+            self.filter.predict(odom, sigma, *extra)
 
     def _new_sightings(self, t: int, ids: np.ndarray, z: np.ndarray) -> None:
         raise NotImplementedError
