@@ -73,6 +73,19 @@ class BearingEkfConfig(Presets):
         sigma over ``sqrt(k)``: the heading noise then enters along the turn, not as one
         linearisation of a large rotation (recordings keyframed sparsely have blind steps of
         2-3 rad). None (every preset): one predict per step.
+    path_heading_noise : the odometry covariance of a step also gets the translation error
+        its heading error makes when it accumulates along the step's chord
+        (:func:`~baselines.ekf.models.path_heading_noise`, ``sigma_psi^2 l^2 / 3`` across the
+        chord, correlated with the heading): for streams whose per-component odometry
+        sigmas leave it out (keyframed recordings with long blind steps). False (every
+        preset): ``Sigma_u = diag(sigma_u^2)``.
+    wide_prior_heading_sd_rad : a bearing update whose prior robot heading std. dev. (rad)
+        exceeds this is iterated ``wide_prior_iterations`` times instead of ``iterations``
+        (the iterated EKF of :meth:`~baselines.ekf.filter.BearingEkf.update`: iterates with
+        the model's own Jacobians, the last step with the observability-constrained rows):
+        Gauss-Newton where the prior is wide, the plain update elsewhere. None (every
+        preset): ``iterations`` for every update.
+    wide_prior_iterations : the iterations of such an update (an integer >= 1).
     """
 
     gate_probability: float = 0.999
@@ -87,8 +100,15 @@ class BearingEkfConfig(Presets):
     correlation_length_rad: float = 0.05
     jacobians: str = "oc"
     max_predict_turn_rad: float | None = None
+    path_heading_noise: bool = False
+    wide_prior_heading_sd_rad: float | None = None
+    wide_prior_iterations: int = 10
 
     def __post_init__(self) -> None:
+        wide = self.wide_prior_heading_sd_rad
+        if wide is not None and not (math.isfinite(wide) and wide >= 0):
+            raise ConfigError(f"wide_prior_heading_sd_rad must be a finite number >= 0 or None "
+                              f"(never), got {wide}")
         turn = self.max_predict_turn_rad
         if turn is not None and not (math.isfinite(turn) and turn > 0):
             raise ConfigError(f"max_predict_turn_rad must be a finite number > 0 or None (one "
@@ -118,7 +138,7 @@ class BearingEkfConfig(Presets):
             if value is not None and not (math.isfinite(value) and value > 0):
                 raise ConfigError(f"{name} must be a finite number > 0 or None (from the "
                                   f"sensor range), got {value}")
-        for name in ("iterations", "restart_after_gated", "max_state"):
+        for name in ("iterations", "restart_after_gated", "max_state", "wide_prior_iterations"):
             value = getattr(self, name)
             if not ((value is None and name == "restart_after_gated")
                     or (isinstance(value, (int, np.integer)) and value >= 1)):

@@ -247,9 +247,12 @@ class BearingEkf:
         self._set_state(self.kf.x[k], self.kf.P[k[:, None], k])
 
     # -- filtering --------------------------------------------------------------------------
-    def predict(self, odom: np.ndarray, odom_sigma: np.ndarray) -> None:
+    def predict(self, odom: np.ndarray, odom_sigma: np.ndarray,
+                odom_cov_extra: np.ndarray | None = None) -> None:
         """Odometry predict on the pose block: ``x_r = x_r ⊕ u``, ``P_rr = F P_rr F^T + Q``,
-        ``P_rm = F P_rm`` (``F = d(x_r ⊕ u)/dx_r``, ``Q = G Sigma_u G^T``).
+        ``P_rm = F P_rm`` (``F = d(x_r ⊕ u)/dx_r``, ``Q = G Sigma_u G^T``,
+        ``Sigma_u = diag(odom_sigma**2)`` plus ``odom_cov_extra``, a symmetric (3, 3)
+        covariance of ``u`` in the odometry frame, m^2 / m rad / rad^2, when given).
 
         With ``observability_constrained`` the heading column of ``F`` is
         ``J (p_{k+1|k} - a_k)`` where ``a_k`` is the position the nullspace's rotation
@@ -282,6 +285,10 @@ class BearingEkf:
               [0.0, r11 + (s * s * va + c * c * vb), 0.5 * (r12 + r21)],
               [0.0, 0.0, r22 + vc]]
         rr[1][0], rr[2][0], rr[2][1] = rr[0][1], rr[0][2], rr[1][2]
+        if odom_cov_extra is not None:                        # G E G^T, G = blockdiag(R, 1)
+            g = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+            e = np.asarray(odom_cov_extra, float)
+            rr = (np.array(rr) + g @ (0.5 * (e + e.T)) @ g.T).tolist()
         with np.errstate(over="ignore", invalid="ignore"):
             rm = P[:2, 3:] + np.multiply.outer((f0, f1), P[2, 3:])   # F P_rm (row 2 as is)
             # one check: a sum is finite only if every term is (inf - inf is nan)

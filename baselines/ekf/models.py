@@ -4,7 +4,8 @@ Vectorised kernels on arrays; nothing here holds state.
 
 - Motion: ``pose_t = pose_{t-1} ⊕ u`` (:func:`bomgraph.geometry.compose`), ``u = [dx_m,
   dy_m, dpsi_rad]``; :func:`motion_jacobians` gives ``dF/dx`` and the input Jacobian
-  ``G = d(pose ⊕ u)/du = blockdiag(R(psi), 1)``.
+  ``G = d(pose ⊕ u)/du = blockdiag(R(psi), 1)``; :func:`path_heading_noise` the translation
+  noise of a heading error accumulated along the step.
 - Bearing to a Euclidean landmark ``[x_m, y_m]``: ``h = wrap(atan2(ly - y, lx - x) - psi)``
   (:func:`bearing_and_jacobian`); to an inverse-depth feature ``[x0_m, y0_m, theta_rad,
   rho_per_m]`` (Civera, Davison and Montiel, IEEE T-RO 2008, in the plane):
@@ -51,6 +52,44 @@ def motion_jacobians(pose: np.ndarray, odom: np.ndarray) -> tuple[np.ndarray, np
                        [0.0, 0.0, 1.0]])
     g_odom = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
     return f_pose, g_odom
+
+
+def path_heading_noise(odom: np.ndarray, sigma_psi_rad: float) -> np.ndarray:
+    """The covariance a step's heading noise adds to its own translation when it accumulates
+    along the path instead of all at its end.
+
+    The step's heading error is taken as a random walk along its chord (length ``l``,
+    unit direction ``c``, left normal ``n = J c``) reaching ``sigma_psi_rad**2`` at the end:
+    an increment ``dW`` at arc length ``s`` rotates the rest of the path about that point, so
+    the end position moves by ``(l - s) n dW``. Over the step this adds
+    ``sigma_psi^2 [[l^2/3 n n^T, l/2 n], [l/2 n^T, 0]]`` to ``Cov(u)`` (the heading's own
+    variance stays ``sigma_psi^2``): the limit of predicting the chord in many sub-steps with
+    the heading noise split among them.
+
+    Parameters
+    ----------
+    odom : array of shape (3,)
+        ``[dx_m, dy_m, dpsi_rad]`` (only the translation is used: the chord).
+    sigma_psi_rad : float
+        The std. dev. of the step's heading.
+
+    Returns
+    -------
+    ndarray of shape (3, 3)
+        In the odometry frame (``[dx, dy, dpsi]``); zeros for a turn on the spot.
+    """
+    dx, dy = float(odom[0]), float(odom[1])
+    length = math.hypot(dx, dy)
+    out = np.zeros((3, 3))
+    if length == 0.0:
+        return out
+    var = float(sigma_psi_rad) ** 2
+    nx, ny = -dy / length, dx / length
+    out[:2, :2] = (var * length * length / 3.0) * np.array([[nx * nx, nx * ny],
+                                                             [nx * ny, ny * ny]])
+    out[0, 2] = out[2, 0] = 0.5 * var * length * nx
+    out[1, 2] = out[2, 1] = 0.5 * var * length * ny
+    return out
 
 
 def bearing_and_jacobian(poses: np.ndarray, points_xy: np.ndarray) -> tuple[np.ndarray,
@@ -392,5 +431,6 @@ def gaussian_kl_2d(mean_p: np.ndarray, cov_p: np.ndarray, mean_q: np.ndarray,
 
 
 __all__ = ["bearing_and_jacobian", "gaussian_kl_2d", "invdepth_bearing_and_jacobian",
-           "invdepth_conversion_kl", "invdepth_to_xy", "motion_jacobians", "ray_covariance",
+           "invdepth_conversion_kl", "invdepth_to_xy", "motion_jacobians", "path_heading_noise",
+           "ray_covariance",
            "second_order_variance", "triangulate_two_bearings", "triangulation_kl"]

@@ -24,7 +24,7 @@ from .coloured import ColouredBearingError, ray_directions
 from .config import BearingEkfConfig
 from .filter import BearingEkf, BearingModel, FilterNumericalError, JacobianRows
 from .models import (bearing_and_jacobian, invdepth_bearing_and_jacobian, invdepth_to_xy,
-                     second_order_variance)
+                     path_heading_noise, second_order_variance)
 from .rows import feature_rows, landmark_rows
 
 _LM, _CLONE, _IDP, _BIAS = "lm", "clone", "idp", "bias"
@@ -58,9 +58,13 @@ class EkfSlam:
                                             "max_state=N, the covariance takes 8 N^2 bytes)")
         self._jacobians = config.jacobians
         self._max_turn = config.max_predict_turn_rad
+        self._path_noise = bool(config.path_heading_noise)
         p = config.gate_probability
         self._gate = float(chi2.ppf(p, 1)) if p < 1 else np.inf
         self._iterations = int(config.iterations)
+        wide = config.wide_prior_heading_sd_rad
+        self._wide_var = None if wide is None else float(wide) ** 2
+        self._wide_iterations = int(config.wide_prior_iterations)
         rng_m = header.sensor_range_m
         self.rho_init = config.rho_init_per_m or (2.0 / rng_m if rng_m else 0.1)
         self.rho_sigma = config.rho_sigma_per_m or (1.0 / rng_m if rng_m else 0.5)
@@ -294,23 +298,31 @@ class EkfSlam:
         With ``iterations > 1`` the iterates of the iterated update use the model's own
         Jacobians and only the last step the observability-constrained ones. ``bias_off``:
         the states of the bearings' coloured errors (:meth:`_model`); the white part's
-        variance is then ``(1 - c) sigma^2``.
+        variance is then ``(1 - c) sigma^2``. With ``wide_prior_heading_sd_rad`` set, an update
+        whose prior robot heading variance exceeds its square is iterated
+        ``wide_prior_iterations`` times.
 
         Returns
         -------
         ndarray of shape (k,), bool
             The bearings that failed the gate.
         """
+        iterations = self._iterations
+        if self._wide_var is not None and self.filter.P[2, 2] > self._wide_var:
+            iterations = self._wide_iterations
         # the fused kernels build the OC-EKF rows only; "fej" and "plain" take the model path
-        if bias_off is None and self._iterations == 1 and self._jacobians == "oc":
+        if bias_off is None and iterations == 1 and self._jacobians == "oc":
             return self._plain_gated_update(pose_off, kinds, offsets, z)
-        return self._model_gated_update(pose_off, kinds, offsets, z, bias_off)
+        return self._model_gated_update(pose_off, kinds, offsets, z, bias_off, iterations)
 
     def _model_gated_update(self, pose_off: np.ndarray, kinds: np.ndarray,
                             offsets: np.ndarray, z: np.ndarray,
-                            bias_off: np.ndarray | None) -> np.ndarray:
+                            bias_off: np.ndarray | None,
+                            iterations: int | None = None) -> np.ndarray:
         """:meth:`_gated_update` through the bearing model (:meth:`_model`) and
-        :meth:`BearingEkf.update`: any ``iterations``, coloured errors."""
+        :meth:`BearingEkf.update`: any number of ``iterations`` (None: the configured
+        ``iterations``), coloured errors."""
+        iterations = self._iterations if iterations is None else iterations
         model = self._model(pose_off, kinds, offsets, bias_off=bias_off)
         x, P = self.filter.x, self.filter.P
         h, parts = model(x)
@@ -339,9 +351,9 @@ class EkfSlam:
                                    bias_off=bias_kept)
             plain = (self._model(pose_off[keep], kinds[keep], offsets[keep], constrained=False,
                                  bias_off=bias_kept)
-                     if self._iterations > 1 else None)
+                     if iterations > 1 else None)
             try:
-                self.filter.update(z[keep], kept, var[keep], self._iterations, plain,
+                self.filter.update(z[keep], kept, var[keep], iterations, plain,
                                    innovation=innovation[keep])
             except FilterNumericalError as exc:         # the state is as before the update
                 self.n_failures += 1
@@ -542,14 +554,14 @@ class EkfSlam:
 
     def _predict(self, odom: np.ndarray, sigma: np.ndarray) -> None:
         """The odometry predict, in ``k`` sub-steps along the arc when the step turns by more
-        than ``max_predict_turn_rad`` (each ``arc_root(odom, k)`` with ``sigma / sqrt(k)``)."""
+        than ``max_predict_turn_rad`` (each ``arc_root(odom, k)`` with ``sigma / sqrt(k)``),
+        with :func:`~baselines.ekf.models.path_heading_noise` when ``path_heading_noise``."""
         k = 1 if self._max_turn is None else math.ceil(abs(float(odom[2])) / self._max_turn)
-        if k <= 1:
-            self.filter.predict(odom, sigma)
-            return
-        sub, sub_sigma = arc_root(odom, k), np.asarray(sigma, float) / math.sqrt(k)
-        for _ in range(k):
-            self.filter.predict(sub, sub_sigma)
+        if k > 1:
+            odom, sigma = arc_root(odom, k), np.asarray(sigma, float) / math.sqrt(k)
+        extra = (path_heading_noise(odom, float(np.ravel(sigma)[2])),) if self._path_noise else ()
+        for _ in range(max(k, 1)):       # (the paper path calls predict(odom, sigma) as always)
+            self.filter.predict(odom, sigma, *extra)
 
     def _new_sightings(self, t: int, ids: np.ndarray, z: np.ndarray) -> None:
         raise NotImplementedError
