@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Sequence
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -185,19 +186,20 @@ def _window_points(u: np.ndarray, psi: np.ndarray, z: np.ndarray, heading: np.nd
 
 def _window_chain_jacobians(u: np.ndarray, z: np.ndarray, heading: np.ndarray
                             ) -> tuple[np.ndarray, np.ndarray]:
-    """``d z_k / d [dx, dy, dpsi]_m`` (complex, shape ``(W, W-1, 3)``) and ``d psi_k / d ...``
-    (real, same shape) of the dead-reckoned window poses ``k`` wrt the increments ``m``."""
-    w1 = len(u)
+    """``d z_k / d [dx, dy, dpsi]_m`` (complex, shape ``(B, W, W-1, 3)``) and ``d psi_k / d
+    ...`` (real, same shape) of the dead-reckoned poses ``k`` of ``B`` windows wrt their
+    increments ``m`` (``u`` of shape ``(B, W-1, 3)``, ``z`` and ``heading`` ``(B, W)``)."""
+    n_b, w1 = u.shape[:2]
     w = w1 + 1
     k = np.arange(w)[:, None]
     m = np.arange(1, w1 + 1)[None, :]
-    upto = m <= k                                                    # increment m moves pose k
-    dz = np.zeros((w, w1, 3), np.complex128)
-    dz[:, :, 0] = np.where(upto, heading[:-1][None, :], 0.0)
-    dz[:, :, 1] = np.where(upto, 1j * heading[:-1][None, :], 0.0)
-    dz[:, :, 2] = np.where(upto, 1j * (z[:, None] - z[1:][None, :]), 0.0)
-    dpsi = np.zeros((w, w1, 3))
-    dpsi[:, :, 2] = upto
+    upto = (m <= k)[None]                                            # increment m moves pose k
+    dz = np.zeros((n_b, w, w1, 3), np.complex128)
+    dz[..., 0] = np.where(upto, heading[:, None, :-1], 0.0)
+    dz[..., 1] = np.where(upto, 1j * heading[:, None, :-1], 0.0)
+    dz[..., 2] = np.where(upto, 1j * (z[:, :, None] - z[:, None, 1:]), 0.0)
+    dpsi = np.zeros((n_b, w, w1, 3))
+    dpsi[..., 2] = upto
     return dz, dpsi
 
 
@@ -246,17 +248,68 @@ def triangulate_window_lsq(odoms: ArrayLike, bearings_rad: ArrayLike, *,
     n_gated : int
         Landmarks seen from two poses or more that failed a gate (or did not converge).
     """
-    u, brg, w, psi, heading, z = _window_chain(odoms, bearings_rad, "triangulate_window_lsq")
+    u, brg, w, _, _, _ = _window_chain(odoms, bearings_rad, "triangulate_window_lsq")
+    return _lsq_windows(u[None], brg[None], min_parallax_rad, max_range_m, max_iter, tol_m)[0]
+
+
+def triangulate_windows_lsq(odoms: Sequence[ArrayLike], bearings_rad: Sequence[ArrayLike], *,
+                            min_parallax_rad: float = 0.0, max_range_m: float = np.inf,
+                            max_iter: int = 20, tol_m: float = 1e-13
+                            ) -> list[tuple[WindowTriangulation, int]]:
+    """:func:`triangulate_window_lsq` of several windows of ``W`` poses at once (lists of
+    ``(W - 1, 3)`` increments and ``(W, n_b)`` bearings, ``n_b`` per window): the same
+    numbers, bit for bit, window by window, in a few calls over all their rays (every ray and
+    landmark is computed alone, the sums are per landmark)."""
+    if len(odoms) != len(bearings_rad):
+        raise ConfigError("triangulate_windows_lsq: one bearing matrix per window")
+    if not len(odoms):
+        return []
+    chains = [_window_chain(o, b, "triangulate_windows_lsq") for o, b in zip(odoms, bearings_rad)]
+    w = chains[0][2]
+    if any(c[2] != w for c in chains):
+        raise ConfigError("triangulate_windows_lsq: every window must have the same poses")
+    n_max = max(c[1].shape[1] for c in chains)
+    brg = np.full((len(chains), w, n_max), np.nan)
+    for b, c in enumerate(chains):
+        brg[b, :, :c[1].shape[1]] = c[1]
+    u = np.stack([c[0] for c in chains])
+    return _lsq_windows(u, brg, min_parallax_rad, max_range_m, max_iter, tol_m)
+
+
+def _gather_rays(keep: np.ndarray, owner: np.ndarray, start: np.ndarray, *arrays: np.ndarray
+                 ) -> tuple[np.ndarray, ...]:
+    """The rays of the landmarks ``keep`` (indices of the groups of ``owner``, contiguous,
+    starting at ``start``), in their order: ``(owner renumbered 0 .. len(keep) - 1, *arrays
+    at those rays, the new group starts)``."""
+    counts = np.diff(np.append(start, owner.size))[keep]
+    first = start[keep]
+    rays = np.repeat(first - np.cumsum(counts) + counts, counts) + np.arange(counts.sum())
+    new_owner = np.repeat(np.arange(keep.size), counts)
+    new_start = np.cumsum(counts) - counts
+    return (new_owner, *(a[rays] for a in arrays), new_start)
+
+
+def _lsq_windows(u: np.ndarray, brg: np.ndarray, min_parallax_rad: float, max_range_m: float,
+                 max_iter: int, tol_m: float) -> list[tuple[WindowTriangulation, int]]:
+    """The kernel of :func:`triangulate_window_lsq` on ``B`` windows: ``u`` of shape
+    ``(B, W-1, 3)``, ``brg`` ``(B, W, n)`` (NaN: not seen); one result per window."""
+    n_b, w = brg.shape[:2]
+    psi = np.concatenate([np.zeros((n_b, 1)), np.cumsum(u[:, :, 2], axis=1)], axis=1)
+    heading = np.exp(1j * psi)
+    z = np.concatenate([np.zeros((n_b, 1), np.complex128),
+                        np.cumsum(heading[:, :-1] * (u[:, :, 0] + 1j * u[:, :, 1]), axis=1)],
+                       axis=1)
     seen = np.isfinite(brg)
-    cand = np.flatnonzero(seen.sum(axis=0) >= 2)
+    cand_b, cand = np.nonzero(seen.sum(axis=1) >= 2)       # by window, then column
     nc = cand.size
     # the rays, grouped by landmark (owner-major order), poses increasing within a landmark
-    owner, pose = np.nonzero(seen[:, cand].T)
+    owner, pose = np.nonzero(seen.transpose(0, 2, 1)[cand_b, cand])
     start = np.flatnonzero(np.r_[True, owner[1:] != owner[:-1]]) if owner.size else \
         np.zeros(0, np.int64)
-    alpha = psi[pose] + brg[pose, cand[owner]]
+    ray_b = cand_b[owner]
+    alpha = psi[ray_b, pose] + brg[ray_b, pose, cand[owner]]
     ray = np.exp(1j * alpha)
-    zr = z[pose]
+    zr = z[ray_b, pose]
 
     def bsum(x: np.ndarray) -> np.ndarray:
         return np.add.reduceat(x, start, axis=0) if x.size else np.zeros((0,) + x.shape[1:])
@@ -273,23 +326,34 @@ def triangulate_window_lsq(odoms: ArrayLike, bearings_rad: ArrayLike, *,
             det = axx * ayy - axy * axy
             p = ((ayy * bx - axy * by) + 1j * (axx * by - axy * bx)) / det
             wgt = 1.0 / np.maximum(np.abs(p[owner] - zr) ** 2, 1e-12)
-        # Gauss-Newton on the bearing residuals
-        done = ~np.isfinite(p)
+        # Gauss-Newton on the bearing residuals, each landmark until its step is small (the
+        # landmarks still moving and their rays are gathered again as others finish)
+        active = np.flatnonzero(np.isfinite(p))
+        converged = np.zeros(nc, bool) if max_iter > 0 else np.ones(nc, bool)
+        a_owner, a_zr, a_alpha, a_start = owner, zr, alpha, start
+        if active.size < nc:
+            a_owner, a_zr, a_alpha, a_start = _gather_rays(active, owner, start, zr, alpha)
         for _ in range(max_iter):
-            d = p[owner] - zr
+            if active.size == 0:
+                break
+            d = p[active][a_owner] - a_zr
             rho2 = (d * d.conj()).real
             q = 1j * d / rho2                               # gradient of the ray's angle
-            res = angle_residual(np.angle(d), alpha)
-            nxx, nxy, nyy = bsum(q.real ** 2), bsum(q.real * q.imag), bsum(q.imag ** 2)
-            gx, gy = bsum(res * q.real), bsum(res * q.imag)
+            res = angle_residual(np.angle(d), a_alpha)
+            nxx, nxy, nyy, gx, gy = (np.add.reduceat(x, a_start) for x in (
+                q.real ** 2, q.real * q.imag, q.imag ** 2, res * q.real, res * q.imag))
             det = nxx * nyy - nxy * nxy
             step = -((nyy * gx - nxy * gy) + 1j * (nxx * gy - nxy * gx)) / det
-            step[done] = 0.0
-            p = p + step
-            small = np.abs(step) <= tol_m * np.maximum(np.abs(p), 1.0)
-            done |= small | ~np.isfinite(step)
-            if done.all():
-                break
+            p_new = p[active] + step
+            p[active] = p_new
+            small = np.abs(step) <= tol_m * np.maximum(np.abs(p_new), 1.0)
+            converged[active[small]] = True
+            moving = ~(small | ~np.isfinite(step))
+            if not moving.all():
+                sub = np.flatnonzero(moving)
+                active = active[sub]
+                a_owner, a_zr, a_alpha, a_start = _gather_rays(sub, a_owner, a_start, a_zr,
+                                                               a_alpha)
         # gates: parallax of the ray directions, in front of every ray, depth
         d = p[owner] - zr
         span = effective_parallax(alpha, owner, nc)
@@ -299,7 +363,6 @@ def triangulate_window_lsq(odoms: ArrayLike, bearings_rad: ArrayLike, *,
                                  else np.zeros(0, bool))
         lo = max(min_parallax_rad, 1e-15)
         good &= span >= lo
-        converged = small if max_iter > 0 else np.ones(nc, bool)
         good &= converged
     keep = good[owner]
     # Jacobians at the optimum (implicit function theorem), rays of the kept landmarks only
@@ -322,9 +385,12 @@ def triangulate_window_lsq(odoms: ArrayLike, bearings_rad: ArrayLike, *,
         hinv = np.linalg.inv(h) if len(h) else h
         dz, dpsi = _window_chain_jacobians(u, z, heading)
         c = 3 * (w - 1)
-        dz_r = np.stack([dz.real.reshape(w, c), dz.imag.reshape(w, c)], axis=1)  # (W, 2, C)
+        dz_r = np.stack([dz.real.reshape(n_b, w, c), dz.imag.reshape(n_b, w, c)],
+                        axis=2)                                          # (B, W, 2, C)
         qv = np.column_stack([q.real, q.imag])
-        m_ray = hk @ dz_r[k_pose] + qv[:, :, None] * dpsi.reshape(w, c)[k_pose][:, None, :]
+        o_b = ray_b[keep]
+        m_ray = hk @ dz_r[o_b, k_pose] + qv[:, :, None] * dpsi.reshape(n_b, w, c)[
+            o_b, k_pose][:, None, :]
         m_sum = np.add.reduceat(m_ray, st, axis=0) if o.size else np.zeros((0, 2, c))
         j_odo = hinv @ m_sum                                                # (k, 2, C)
         j_b = np.einsum("rab,rb->ra", hinv[o], qv)                          # (R, 2)
@@ -337,10 +403,17 @@ def triangulate_window_lsq(odoms: ArrayLike, bearings_rad: ArrayLike, *,
     pk = p[kept]
     depth_k = (d * np.exp(-1j * a_ray)).real
     span_k = span[kept]
-    tri = WindowTriangulation(cand[kept], a_idx, b_idx, np.column_stack([pk.real, pk.imag]),
-                              depth_k[st], depth_k[last], np.sin(span_k), np.cos(span_k),
-                              jac_odo, jac_b)
-    return tri, int(nc - kept.size)
+    fields = (cand[kept], a_idx, b_idx, np.column_stack([pk.real, pk.imag]), depth_k[st],
+              depth_k[last], np.sin(span_k), np.cos(span_k), jac_odo, jac_b)
+    # window b holds the landmarks (and candidates) in one run each: by window, then column
+    n_cand = np.bincount(cand_b, minlength=n_b)
+    n_kept = np.bincount(cand_b[kept], minlength=n_b)
+    ends = np.cumsum(n_kept)
+    out = []
+    for b in range(n_b):
+        sl = slice(int(ends[b] - n_kept[b]), int(ends[b]))
+        out.append((WindowTriangulation(*(f[sl] for f in fields)), int(n_cand[b] - n_kept[b])))
+    return out
 
 
 def window_pair_squared_distances(tri: WindowTriangulation, odometry_sigmas: ArrayLike,
@@ -590,4 +663,4 @@ class WindowSchedule:
 
 
 __all__ = ["WindowSchedule", "WindowTriangulation", "triangulate_window", "triangulate_window_lsq",
-           "window_pair_squared_distances"]
+           "triangulate_windows_lsq", "window_pair_squared_distances"]
