@@ -112,6 +112,23 @@ class _Problem:
         res = np.concatenate([(ro * self.w_odo).ravel(), rb * self.w_b])
         return res, jac
 
+    def bearing_rows(self, poses: np.ndarray, points: np.ndarray) -> np.ndarray:
+        """The bearing rows of :meth:`linearise`'s Jacobian alone, shape ``(R, n)`` (the same
+        numbers, without the odometry rows)."""
+        dp = _bearing_residuals(poses, points, self.k, self.lm, self.theta)[1]
+        jac = np.zeros((len(self.k), self.n))
+        rows = np.arange(len(self.k))
+        pc = self.pose_col[self.k]
+        seen_from_var = pc >= 0
+        r_v, c_v = rows[seen_from_var], pc[seen_from_var]
+        jac[r_v, c_v] = -dp[seen_from_var, 0] * self.w_b
+        jac[r_v, c_v + 1] = -dp[seen_from_var, 1] * self.w_b
+        jac[r_v, c_v + 2] = -self.w_b
+        lc = self.n_pose_vars + 2 * self.lm
+        jac[rows, lc] = dp[:, 0] * self.w_b
+        jac[rows, lc + 1] = dp[:, 1] * self.w_b
+        return jac
+
     def normal_equations(self, poses: np.ndarray, points: np.ndarray
                          ) -> tuple[float, tuple[np.ndarray, ...]]:
         """The cost and the blocks of ``J^T J`` and ``J^T r`` (whitened), without the dense

@@ -101,6 +101,7 @@ def test_normal_equation_blocks_and_schur_step_match_the_dense_jacobian() -> Non
     p0[0] = 0.0
     q0 = to_local(poses[0], pts[:n]) + rng.normal(0.0, 0.1, (n, 2))
     res, jac = prob.linearise(p0, q0)
+    np.testing.assert_array_equal(prob.bearing_rows(p0, q0), jac[prob.rows - k.size:])
     cost, blocks = prob.normal_equations(p0, q0)
     assert cost == pytest.approx(float(res @ res), rel=1e-14)
     scale = np.abs(jac.T @ jac).max()

@@ -12,7 +12,7 @@ from bomgraph.geometry import bearings_to, dead_reckon, to_local
 from bomgraph.stmds.triangulation import pair_squared_distances, triangulate_rays
 from bomgraph.stmds.window import (WindowTriangulation, triangulate_window,
                                    triangulate_window_lsq, triangulate_windows_lsq,
-                                   window_pair_squared_distances)
+                                   window_lsq_points, window_pair_squared_distances)
 from test_stmds_triangulation import _numeric_jacobian  # the central-difference helper
 
 
@@ -173,6 +173,10 @@ def test_lsq_windows_at_once_are_each_window_alone_bit_for_bit() -> None:
             a, b = getattr(tri, name), getattr(alone, name)
             assert a.shape == b.shape and a.tobytes() == b.tobytes(), name
     assert len(batch[3][0]) == 0 and batch[1][1] >= 1
+    for odoms, brg, (tri, _) in zip(odoms_list, brg_list, batch):   # the bundle's start
+        column, points = window_lsq_points(odoms, brg, max_range_m=5.0)
+        assert column.tobytes() == tri.column.tobytes()
+        assert points.tobytes() == tri.points_xy.tobytes()
     assert sum(len(t) for t, _ in batch) > 10
 
 
