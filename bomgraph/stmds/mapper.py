@@ -264,8 +264,11 @@ class StmdsMapper:
         results = triangulate_windows_lsq([w[2] for w in held], [w[1] for w in held],
                                           min_parallax_rad=self.config.min_parallax_rad,
                                           max_range_m=self._max_range)
+        pairs: list[tuple] = []
         for (uniq, _, _, sig), (tri, n_gated) in zip(held, results):
-            self._fuse_window(tri, n_gated, uniq, sig, None)
+            self._fuse_window(tri, n_gated, uniq, sig, None, pairs)
+        if pairs:                  # one fusion call, the estimates in window order
+            self._store.add(*(np.concatenate(col) for col in zip(*pairs)))
 
     def _triangulate_window(self, buf: list[tuple]) -> None:
         """Windowed triangulation of the buffered steps; fuse the pairs of the window."""
@@ -309,9 +312,11 @@ class StmdsMapper:
         self._fuse_window(tri, n_gated, uniq, sig, well)
 
     def _fuse_window(self, tri: Any, n_gated: int, uniq: np.ndarray, sig: np.ndarray,
-                     well: np.ndarray | None) -> None:
+                     well: np.ndarray | None, pending: list | None = None) -> None:
         """Count a window's triangulation, flag its landmarks (those ``well`` triangulated,
-        if given) and fuse its pairs."""
+        if given) and fuse its pairs (or append them to ``pending`` as ``(first, second,
+        squared distance, variance)`` for one :meth:`.distances.DistanceStore.add` of
+        several windows, which gives the same sums)."""
         self._n_triangulated += len(tri)
         self._n_gated += n_gated
         if len(tri) == 0:
@@ -326,6 +331,9 @@ class StmdsMapper:
             pairs = window_pair_squared_distances(tri, sig, self._bearing_sigma)
         var = pairs.variance_m4 if self._tri_inflation == 1.0 else \
             pairs.variance_m4 * self._tri_inflation
+        if pending is not None:
+            pending.append((idx[pairs.first], idx[pairs.second], pairs.squared_distance_m2, var))
+            return
         self._store.add(idx[pairs.first], idx[pairs.second], pairs.squared_distance_m2, var)
 
     def _resume(self, ts: np.ndarray, uniq: np.ndarray) -> PrefixState | None:
