@@ -13,7 +13,9 @@
 
 Every other method (EKF, BOM-STMDS, triangulate) gets its CPU time per run only. Sections
 (``--sections``): ``paper`` (the paper's setup, 300 steps, 50 landmarks, a map every 10 steps;
-the median over ``--runs`` runs of the design), ``long`` (one ``--long-steps``-step simulated
+the median over ``--runs`` runs of the design), ``stmds-step``
+(the per-step update of ``stmds-smacof``, microseconds per step over the paper runs, and over
+the same runs with 25 landmarks, about 10 in view; :func:`stmds_step_rows`), ``long`` (one ``--long-steps``-step simulated
 run at the default cadence, every method in ``--long-methods``), ``scale`` (``stmds-smacof``
 at N = 1,000 / 5,000 / 10,000 landmarks, ``scripts/bench_scale.py``, with peak memory and the
 fitted exponent). A section is a function ``(args) -> list of rows`` in :data:`SECTIONS`. Rows: ``{"section", "method", "cpu_s", "reference", "reference_cpu_s",
@@ -24,7 +26,8 @@ reference timed in the same process, as wall time means nothing on a shared mach
 
 Usage::
 
-    python scripts/bench_speed.py [--runs 3] [--sections paper long scale] [--long-steps 3000]
+    python scripts/bench_speed.py [--runs 3] [--sections paper stmds-step long scale]
+        [--long-steps 3000]
         [--scale-sizes 1000 5000 10000]
         [--methods M ...] [--long-methods M ...] [--out /tmp/bench_speed.json]
 """
@@ -213,11 +216,48 @@ def scale_section(args: argparse.Namespace) -> list[dict[str, Any]]:
     return rows
 
 
+def stmds_step_rows(args: argparse.Namespace) -> list[dict[str, Any]]:
+    """The per-step update of ``stmds-smacof`` (paper preset, issue 14 item 4): CPU time of
+    ``mapper.step`` over a run plus the ``flush()`` of the held steps before each map (the
+    paper rule triangulates in batches, :mod:`bomgraph.stmds.batch`: most steps are a push,
+    the work comes at the flush), excluding ``estimate()``'s reconstruction; the median over
+    ``--runs`` runs of the mean per step, in microseconds (``cpu_s``: per run), beside the
+    mean number of landmarks in view per step. Two rows: the paper's runs (50 landmarks,
+    about 20 in view) and the same runs with 25 landmarks (about 10 in view)."""
+    rows = []
+    for label, config in (("stmds-step", SimConfig()),
+                          ("stmds-step N=25", SimConfig(n_landmarks=25))):
+        per_step, per_run, in_view = [], [], []
+        for spec in paper_design(0)[:args.runs]:
+            stream = simulate_run(spec, config)
+            mapper = create_mapper("stmds-smacof", stream.header)
+            update = 0.0
+            last = stream.steps[-1].t
+            for st in stream.steps:
+                c0 = time.process_time()
+                mapper.step(st)
+                mapped = (st.t > 0 and st.t % 10 == 0) or st.t == last
+                if mapped:
+                    mapper.flush()
+                update += time.process_time() - c0
+                if mapped:
+                    mapper.estimate()
+            per_run.append(update)
+            per_step.append(update / len(stream.steps))
+            in_view.append(float(np.mean([st.landmark_ids.size for st in stream.steps])))
+        rows.append({"section": label, "method": "stmds-smacof",
+                     "cpu_s": float(np.median(per_run)), "reference": None,
+                     "us_per_step": 1e6 * float(np.median(per_step)),
+                     "landmarks_in_view": float(np.mean(in_view)), "runs": len(per_run)})
+    return rows
+
+
 #: Section name -> rows.
 SECTIONS: dict[str, Callable[[argparse.Namespace], list[dict[str, Any]]]] = {
     "paper": paper_rows,
     "long": long_rows,
     "scale": scale_section,
+    "stmds-step": stmds_step_rows,
 }
 
 
@@ -229,6 +269,8 @@ def table(rows: list[dict[str, Any]]) -> str:
         rc = f"{r['reference_cpu_s']:.2f}" if r.get("reference_cpu_s") else "-"
         ratio = f"{r['ratio']:.2f}" if r.get("ratio") else "-"
         mpe = f"{r['mpe_cm']:.3f}" if r.get("mpe_cm") is not None else "-"
+        if "us_per_step" in r:
+            mpe = f"{r['us_per_step']:.1f} us/step, {r['landmarks_in_view']:.1f} in view"
         lines.append(f"{r['section']:22s} {r['method']:18s} {r['cpu_s']:10.2f} {ref:>14s} "
                      f"{rc:>10s} {ratio:>6s} {mpe:>7s}")
     return "\n".join(lines)
@@ -238,7 +280,7 @@ def main(argv: list[str] | None = None) -> int:
     names = [m.name for m in available_methods()]
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--runs", type=int, default=3, help="paper runs (median over them)")
-    ap.add_argument("--sections", nargs="+", default=["paper", "long", "scale"],
+    ap.add_argument("--sections", nargs="+", default=["paper", "stmds-step", "long", "scale"],
                     choices=list(SECTIONS))
     ap.add_argument("--scale-sizes", nargs="+", type=int, default=[1000, 5000, 10000])
     ap.add_argument("--methods", nargs="+", default=names, choices=names)

@@ -37,7 +37,7 @@ from ..geometry import between, dead_reckon, effective_parallax, to_local
 from .bundle_lm import (SIGMA_FLOOR, _bearing_residuals, _Problem,  # noqa: F401 (re-exported)
                         _levenberg_marquardt)
 from .triangulation import PairEstimates, pair_indices
-from .window import triangulate_window_lsq
+from .window import window_lsq_points
 
 
 
@@ -235,10 +235,10 @@ def bundle_adjust_window(odoms: ArrayLike, odometry_sigmas: ArrayLike, bearings_
         seen = np.isfinite(brg[:end]).sum(axis=0) >= 2
         need = np.flatnonzero(seen & ~np.isfinite(points).all(axis=1))
         if need.size:        # new landmarks: all their rays from the poses as they stand
-            start, _ = triangulate_window_lsq(between(poses[:end - 1], poses[1:end]),
-                                              brg[:end, need], min_parallax_rad=min_parallax_rad,
-                                              max_range_m=max_range_m)
-            points[need[start.column]] = start.points_xy
+            start_col, start_xy = window_lsq_points(
+                between(poses[:end - 1], poses[1:end]), brg[:end, need],
+                min_parallax_rad=min_parallax_rad, max_range_m=max_range_m)
+            points[need[start_col]] = start_xy
         column = np.flatnonzero(seen & np.isfinite(points).all(axis=1))
         result = _fit(u[:end - 1], sig[:end - 1], sigma, brg[:end],
                       poses[:end], column, points[column], min_parallax_rad, max_range_m,
@@ -303,7 +303,7 @@ def _fit(u: np.ndarray, sig: np.ndarray, bearing_sigma_rad: float, brg: np.ndarr
                 # at the newest pose is mostly absorbed by that pose's heading, so its raw
                 # residual understates it and good rays of the same landmark would be
                 # dropped first
-                jb = prob.linearise(poses, points)[1][prob.rows - len(k):]
+                jb = prob.bearing_rows(poses, points)
                 try:
                     h = np.einsum("ri,ri->r", jb, np.linalg.solve(info, jb.T).T)
                 except np.linalg.LinAlgError:

@@ -27,16 +27,21 @@ def _between_residuals(poses: np.ndarray, odoms: np.ndarray, jacobians: bool = T
     """
     a, b = poses[:-1], poses[1:]
     c, s = np.cos(a[:, 2]), np.sin(a[:, 2])
-    dx, dy = b[:, 0] - a[:, 0], b[:, 1] - a[:, 1]
-    res = np.column_stack([c * dx + s * dy - odoms[:, 0], -s * dx + c * dy - odoms[:, 1],
-                           angle_residual(b[:, 2] - a[:, 2], odoms[:, 2])])
+    delta = b - a
+    dx, dy = delta[:, 0], delta[:, 1]
+    m = len(a)
+    lateral = -s * dx + c * dy
+    res = np.empty((m, 3))
+    res[:, 0] = c * dx + s * dy - odoms[:, 0]
+    res[:, 1] = lateral - odoms[:, 1]
+    res[:, 2] = angle_residual(delta[:, 2], odoms[:, 2])
     if not jacobians:
         return (res,)
-    m = len(a)
     jb = np.zeros((m, 3, 3))
-    jb[:, 0, 0], jb[:, 0, 1], jb[:, 1, 0], jb[:, 1, 1], jb[:, 2, 2] = c, s, -s, c, 1.0
+    jbf = jb.reshape(m, 9)
+    jbf[:, 0], jbf[:, 1], jbf[:, 3], jbf[:, 4], jbf[:, 8] = c, s, -s, c, 1.0
     ja = -jb
-    ja[:, 0, 2] = -s * dx + c * dy
+    ja[:, 0, 2] = lateral
     ja[:, 1, 2] = -c * dx - s * dy
     return res, ja, jb
 
@@ -46,12 +51,16 @@ def _bearing_residuals(poses: np.ndarray, points: np.ndarray, k: np.ndarray, lm:
                        ) -> tuple[np.ndarray, np.ndarray | None]:
     """Bearing residuals and ``d res / d (p_l)`` (``d / d z_k`` is its negative,
     ``d / d psi_k = -1``; None without ``jacobians``)."""
-    d = points[lm] - poses[k, :2]
-    res = angle_residual(np.arctan2(d[:, 1], d[:, 0]) - poses[k, 2], theta)
+    pk = poses[k]
+    d = points[lm] - pk[:, :2]
+    dx, dy = d[:, 0], d[:, 1]
+    res = angle_residual(np.arctan2(dy, dx) - pk[:, 2], theta)
     if not jacobians:
         return res, None
-    r2 = np.einsum("ra,ra->r", d, d)
-    dp = np.column_stack([-d[:, 1], d[:, 0]]) / r2[:, None]
+    r2 = dx * dx + dy * dy
+    dp = np.empty_like(d)
+    dp[:, 0] = -dy / r2
+    dp[:, 1] = dx / r2
     return res, dp
 
 
@@ -103,55 +112,91 @@ class _Problem:
         res = np.concatenate([(ro * self.w_odo).ravel(), rb * self.w_b])
         return res, jac
 
+    def bearing_rows(self, poses: np.ndarray, points: np.ndarray) -> np.ndarray:
+        """The bearing rows of :meth:`linearise`'s Jacobian alone, shape ``(R, n)`` (the same
+        numbers, without the odometry rows)."""
+        dp = _bearing_residuals(poses, points, self.k, self.lm, self.theta)[1]
+        jac = np.zeros((len(self.k), self.n))
+        rows = np.arange(len(self.k))
+        pc = self.pose_col[self.k]
+        seen_from_var = pc >= 0
+        r_v, c_v = rows[seen_from_var], pc[seen_from_var]
+        jac[r_v, c_v] = -dp[seen_from_var, 0] * self.w_b
+        jac[r_v, c_v + 1] = -dp[seen_from_var, 1] * self.w_b
+        jac[r_v, c_v + 2] = -self.w_b
+        lc = self.n_pose_vars + 2 * self.lm
+        jac[rows, lc] = dp[:, 0] * self.w_b
+        jac[rows, lc + 1] = dp[:, 1] * self.w_b
+        return jac
+
     def normal_equations(self, poses: np.ndarray, points: np.ndarray
                          ) -> tuple[float, tuple[np.ndarray, ...]]:
         """The cost and the blocks of ``J^T J`` and ``J^T r`` (whitened), without the dense
         Jacobian: ``(cost, (A (P, P) poses, B (P, 2 L) poses x landmarks, C (L, 2, 2)
         landmark blocks, g_poses (P,), g_landmarks (2 L,)))``, ``P = 3 (W - 1)``."""
-        m, n_lm = len(self.odoms), (self.n - self.n_pose_vars) // 2
+        cost, lin = self.evaluate(poses, points)
+        return cost, self.blocks(lin)
+
+    def evaluate(self, poses: np.ndarray, points: np.ndarray
+                 ) -> tuple[float, tuple[np.ndarray, ...]]:
+        """The cost and the whitened residuals and Jacobians it came from (for
+        :meth:`blocks`): ``(cost, (odometry residuals (M, 3), d / d x_{m-1} (M, 3, 3),
+        d / d x_m (M, 3, 3), bearing residuals (R,), d res / d landmark (R, 2)))``."""
         ro, ja, jb = _between_residuals(poses, self.odoms)
         rb, dp = _bearing_residuals(poses, points, self.k, self.lm, self.theta)
         wo = self.w_odo[:, :, None]
         ja, jb, ro = ja * wo, jb * wo, ro * self.w_odo
         rb = rb * self.w_b
-        jl = dp * self.w_b                                   # d res / d landmark (R, 2)
-        a = np.zeros((m, m, 3, 3))
-        i = np.arange(m)
-        jbt, jat = jb.transpose(0, 2, 1), ja[1:].transpose(0, 2, 1)
-        a[i, i] = jbt @ jb
-        a[i[:-1], i[:-1]] += jat @ ja[1:]
-        off = jat @ jb[1:]
-        a[i[:-1], i[1:]] = off
-        a[i[1:], i[:-1]] = off.transpose(0, 2, 1)
-        gp = (jbt @ ro[:, :, None])[:, :, 0]
-        gp[:-1] += (jat @ ro[1:, :, None])[:, :, 0]
+        cost = float(np.sum(ro * ro) + np.sum(rb * rb))
+        return cost, (ro, ja, jb, rb, dp * self.w_b)
+
+    def blocks(self, lin: tuple[np.ndarray, ...]) -> tuple[np.ndarray, ...]:
+        """The blocks of :meth:`normal_equations` from :meth:`evaluate`'s residuals and
+        Jacobians. Sums over rays are one product with a fixed one-hot matrix per pose and per
+        landmark (:meth:`_setup_onehot`)."""
+        ro, ja, jb, rb, jl = lin
+        m, n_lm = len(self.odoms), (self.n - self.n_pose_vars) // 2
         if self._onehot is None:
             self._setup_onehot(m, n_lm)
-        sel, k_sel, pose_of, lm_of = self._onehot
+        sel, b_flat, pose_of, lm_of, diag, upper, lower = self._onehot
+        jbt, jat = jb.transpose(0, 2, 1), ja[1:].transpose(0, 2, 1)
         jp = np.empty((len(sel), 3))                        # d res / d pose k >= 1
         jp[:, :2] = -jl[sel]
         jp[:, 2] = -self.w_b
-        a[i, i] += (pose_of @ (jp[:, :, None] * jp[:, None, :]).reshape(-1, 9)).reshape(m, 3, 3)
+        d = jbt @ jb                                        # the 3 x 3 blocks on the diagonal
+        d[:-1] += jat @ ja[1:]
+        d += (pose_of @ (jp[:, :, None] * jp[:, None, :]).reshape(-1, 9)).reshape(m, 3, 3)
+        a = np.zeros((3 * m, 3 * m))
+        a4 = a.reshape(m, 3, m, 3)
+        a4[diag, :, diag, :] = d
+        off = jat @ jb[1:]
+        a4[upper, :, lower, :] = off
+        a4[lower, :, upper, :] = off.transpose(0, 2, 1)
+        gp = (jbt @ ro[:, :, None])[:, :, 0]
+        gp[:-1] += (jat @ ro[1:, :, None])[:, :, 0]
         gp += pose_of @ (jp * rb[sel, None])
         c = (lm_of @ (jl[:, :, None] * jl[:, None, :]).reshape(-1, 4)).reshape(n_lm, 2, 2)
         gl = lm_of @ (jl * rb[:, None])
-        b = np.zeros((m, n_lm, 3, 2))
-        b[k_sel, self.lm[sel]] = jp[:, :, None] * jl[sel][:, None, :]
-        cost = float(np.sum(ro * ro) + np.sum(rb * rb))
-        return cost, (a.transpose(0, 2, 1, 3).reshape(3 * m, 3 * m),
-                      b.transpose(0, 2, 1, 3).reshape(3 * m, 2 * n_lm), c,
-                      gp.ravel(), gl.ravel())
+        b = np.zeros((3 * m, 2 * n_lm))
+        np.put(b, b_flat, jp[:, :, None] * jl[sel][:, None, :])
+        return a, b, c, gp.ravel(), gl.ravel()
 
     def _setup_onehot(self, m: int, n_lm: int) -> None:
-        """Rays seen from a pose variable, and the one-hot matrices summing per pose and per
-        landmark (a matrix product is one call; the problem's rays do not change)."""
+        """Rays seen from a pose variable, the one-hot matrices summing per pose and per
+        landmark (a matrix product is one call; the problem's rays do not change), where each
+        ray's pose x landmark products land in ``B``, and the pose blocks on and beside the
+        diagonal."""
         sel = np.flatnonzero(self.k >= 1)
         k_sel = self.k[sel] - 1
         pose_of = np.zeros((m, len(sel)))
         pose_of[k_sel, np.arange(len(sel))] = 1.0
         lm_of = np.zeros((n_lm, len(self.k)))
         lm_of[self.lm, np.arange(len(self.k))] = 1.0
-        self._onehot = (sel, k_sel, pose_of, lm_of)
+        i = np.arange(m)
+        # flat index in B (3 M, 2 L) of (pose variable 3 k + a, landmark variable 2 l + b)
+        b_flat = ((3 * k_sel[:, None, None] + np.arange(3)[None, :, None]) * (2 * n_lm)
+                  + 2 * self.lm[sel][:, None, None] + np.arange(2)[None, None, :])
+        self._onehot = (sel, b_flat, pose_of, lm_of, i, i[:-1], i[1:])
 
     def unpack(self, poses: np.ndarray, points: np.ndarray, delta: np.ndarray
                ) -> tuple[np.ndarray, np.ndarray]:
@@ -179,8 +224,8 @@ def _levenberg_marquardt(prob: _Problem, poses: np.ndarray, points: np.ndarray,
                 lam *= 10.0
                 continue
             cand_poses, cand_points = prob.unpack(poses, points, delta)
-            # linearised at once: most steps are accepted, and the cost comes with it
-            cand_cost, cand_blocks = prob.normal_equations(cand_poses, cand_points)
+            # the cost with the Jacobian rows at once; the normal equations once accepted
+            cand_cost, cand_lin = prob.evaluate(cand_poses, cand_points)
             if cand_cost <= cost:
                 step_ok = True
                 break
@@ -191,11 +236,15 @@ def _levenberg_marquardt(prob: _Problem, poses: np.ndarray, points: np.ndarray,
         poses, points = cand_poses, cand_points
         small = cost - cand_cost <= tol * max(cost, 1e-300)
         lam = max(lam / 10.0, 1e-12)
-        cost, blocks = cand_cost, cand_blocks
+        cost, blocks = cand_cost, prob.blocks(cand_lin)
         if small:
             converged = True
             break
     return poses, points, _dense_information(blocks), converged
+
+
+#: Signs of the 2 x 2 adjugate ``[[d, -b], [-c, a]]`` (flattened).
+_ADJUGATE_SIGN = np.array([1.0, -1.0, -1.0, 1.0])
 
 
 def _schur_step(blocks: tuple[np.ndarray, ...], lam: float) -> np.ndarray | None:
@@ -203,28 +252,29 @@ def _schur_step(blocks: tuple[np.ndarray, ...], lam: float) -> np.ndarray | None
     (poses ``A``, cross ``B``, 2 x 2 landmark blocks ``C``), landmarks eliminated first;
     None when the damped system is singular or the step is not finite."""
     a, b, c, gp, gl = blocks
-    n_p, n_l = len(gp), len(gl)
-    a_d = a + lam * np.diag(np.maximum(np.diag(a), 1e-12))
-    c_d = c.copy()
-    c_d[:, 0, 0] += lam * np.maximum(c[:, 0, 0], 1e-12)
-    c_d[:, 1, 1] += lam * np.maximum(c[:, 1, 1], 1e-12)
-    det = c_d[:, 0, 0] * c_d[:, 1, 1] - c_d[:, 0, 1] * c_d[:, 1, 0]
+    n_p = len(gp)
+    a_d = a.copy()
+    a_d.flat[::n_p + 1] += lam * np.maximum(a.diagonal(), 1e-12)
+    c_d = c.reshape(-1, 4).copy()                     # (c00, c01, c10, c11) per landmark
+    c_d[:, ::3] += lam * np.maximum(c_d[:, ::3], 1e-12)
+    det = c_d[:, 0] * c_d[:, 3] - c_d[:, 1] * c_d[:, 2]
     if not np.all(det > 0):
         return None
-    c_inv = np.empty_like(c_d)
-    c_inv[:, 0, 0], c_inv[:, 1, 1] = c_d[:, 1, 1] / det, c_d[:, 0, 0] / det
-    c_inv[:, 0, 1], c_inv[:, 1, 0] = -c_d[:, 0, 1] / det, -c_d[:, 1, 0] / det
+    c_inv = (c_d[:, [3, 1, 2, 0]] * _ADJUGATE_SIGN / det[:, None]).reshape(-1, 2, 2)
     g_l = gl.reshape(-1, 2)
     if n_p == 0:
-        return -np.einsum("lab,lb->la", c_inv, g_l).ravel()
-    bw = np.einsum("pla,lab->plb", b.reshape(n_p, -1, 2), c_inv).reshape(n_p, n_l)
+        return -(c_inv * g_l[:, None, :]).sum(2).ravel()
+    b3 = b.reshape(n_p, -1, 2)
+    bw = (b3[:, :, 0, None] * c_inv[None, :, 0] + b3[:, :, 1, None] * c_inv[None, :, 1]
+          ).reshape(n_p, -1)
     schur = a_d - bw @ b.T
     rhs = bw @ gl - gp
     try:
         x = np.linalg.solve(schur, rhs)
     except np.linalg.LinAlgError:
         return None
-    y = -np.einsum("lab,lb->la", c_inv, g_l + (b.T @ x).reshape(-1, 2)).ravel()
+    v = g_l + (b.T @ x).reshape(-1, 2)
+    y = -(c_inv * v[:, None, :]).sum(2).ravel()
     delta = np.concatenate([x, y])
     return delta if np.all(np.isfinite(delta)) else None
 

@@ -40,12 +40,15 @@ from .reconstruct import reconstruct
 from .triangulation import (compose_odometry, gate_points, pair_squared_distances,
                             range_variances, triangulate_rays)
 from .window import (WindowSchedule, triangulate_window, triangulate_window_lsq,
-                     window_pair_squared_distances)
+                     triangulate_windows_lsq, window_pair_squared_distances)
 
 
 #: Largest std. dev. (metres or radians) STMDS accepts in a header or a step: beyond it no
 #: measurement carries information and the variances (fourth powers) leave double precision.
 MAX_SIGMA = 1e6
+
+#: Keyframe windows (``tri_method="lsq"``) held before they are triangulated together.
+BATCH_WINDOWS = 64
 
 
 def _check_sigmas(values: Any, what: str) -> None:
@@ -132,6 +135,11 @@ class StmdsMapper:
         # the paper's rule (consecutive steps, no localisation, no relative gate) runs in
         # batches of steps (.batch); the other variants step by step
         self._batch: StepBatch | None = None
+        # keyframe windows solved by least squares are held and triangulated together
+        # (up to BATCH_WINDOWS; estimate() processes them at once too)
+        self._window_batch: list | None = None
+        if cfg.windowed and cfg.tri_method == "lsq" and not cfg.geometric_windows:
+            self._window_batch = []
         if (not cfg.windowed and cfg.baseline_steps == (1,) and self._robots is None
                 and not self._relative_gate):
             self._batch = StepBatch(self._store, self._ids, bearing_sigma_rad=self._bearing_sigma,
@@ -197,7 +205,12 @@ class StmdsMapper:
         self._schedule.push(step.odom, ids, brg)
         if not self._schedule.full():
             return
-        self._triangulate_window(buf)
+        if self._window_batch is not None:
+            self._window_batch.append(self._window_arrays(buf))
+            if len(self._window_batch) >= BATCH_WINDOWS:
+                self.flush()
+        else:
+            self._triangulate_window(buf)
         self._closed_t = step.t
         self._open_prefix = None
         del buf[:self._schedule.advance()]
@@ -225,17 +238,44 @@ class StmdsMapper:
             (self._store, self._triangulated, self._prev_bundle, self._n_triangulated,
              self._n_gated, self._n_outliers, self._window_sigma) = kept
 
-    def _triangulate_window(self, buf: list[tuple]) -> None:
-        """Windowed triangulation of the buffered steps; fuse the pairs of the window."""
+    def _window_arrays(self, buf: list[tuple]) -> tuple | None:
+        """The buffered window as arrays: ``(landmark ids (n,), bearings (W, n) NaN where
+        not seen, increments (W-1, 3), their sigmas (W-1, 3))``; None with fewer than two
+        readings."""
         all_ids = np.concatenate([b[0] for b in buf])
         if all_ids.size < 2:
-            return
+            return None
         uniq, col = np.unique(all_ids, return_inverse=True)
         brg = np.full((len(buf), uniq.size), np.nan)
         row = np.repeat(np.arange(len(buf)), [b[0].size for b in buf])
         brg[row, col] = np.concatenate([b[1] for b in buf])
         odoms = np.array([b[2] for b in buf[1:]], float).reshape(-1, 3)
         sig = np.array([b[3] for b in buf[1:]], float).reshape(-1, 3)
+        return uniq, brg, odoms, sig
+
+    def _flush_windows(self) -> None:
+        """Triangulate the held keyframe windows (``tri_method="lsq"``) in one call
+        (:func:`.window.triangulate_windows_lsq`, the numbers of one window at a time) and
+        fuse them in order."""
+        held = [w for w in self._window_batch if w is not None]
+        self._window_batch = []
+        if not held:
+            return
+        results = triangulate_windows_lsq([w[2] for w in held], [w[1] for w in held],
+                                          min_parallax_rad=self.config.min_parallax_rad,
+                                          max_range_m=self._max_range)
+        pairs: list[tuple] = []
+        for (uniq, _, _, sig), (tri, n_gated) in zip(held, results):
+            self._fuse_window(tri, n_gated, uniq, sig, None, pairs)
+        if pairs:                  # one fusion call, the estimates in window order
+            self._store.add(*(np.concatenate(col) for col in zip(*pairs)))
+
+    def _triangulate_window(self, buf: list[tuple]) -> None:
+        """Windowed triangulation of the buffered steps; fuse the pairs of the window."""
+        arrays = self._window_arrays(buf)
+        if arrays is None:
+            return
+        uniq, brg, odoms, sig = arrays
         well = None
         if self.config.tri_method == "ba":
             ts = np.array([b[4] for b in buf], np.int64)
@@ -269,6 +309,14 @@ class StmdsMapper:
                 triangulate_window
             tri, n_gated = kernel(odoms, brg, min_parallax_rad=self.config.min_parallax_rad,
                                   max_range_m=self._max_range)
+        self._fuse_window(tri, n_gated, uniq, sig, well)
+
+    def _fuse_window(self, tri: Any, n_gated: int, uniq: np.ndarray, sig: np.ndarray,
+                     well: np.ndarray | None, pending: list | None = None) -> None:
+        """Count a window's triangulation, flag its landmarks (those ``well`` triangulated,
+        if given) and fuse its pairs (or append them to ``pending`` as ``(first, second,
+        squared distance, variance)`` for one :meth:`.distances.DistanceStore.add` of
+        several windows, which gives the same sums)."""
         self._n_triangulated += len(tri)
         self._n_gated += n_gated
         if len(tri) == 0:
@@ -283,6 +331,9 @@ class StmdsMapper:
             pairs = window_pair_squared_distances(tri, sig, self._bearing_sigma)
         var = pairs.variance_m4 if self._tri_inflation == 1.0 else \
             pairs.variance_m4 * self._tri_inflation
+        if pending is not None:
+            pending.append((idx[pairs.first], idx[pairs.second], pairs.squared_distance_m2, var))
+            return
         self._store.add(idx[pairs.first], idx[pairs.second], pairs.squared_distance_m2, var)
 
     def _resume(self, ts: np.ndarray, uniq: np.ndarray) -> PrefixState | None:
@@ -360,9 +411,12 @@ class StmdsMapper:
                         pairs.variance_m4)
 
     def flush(self) -> None:
-        """Triangulate and fuse the steps held for the batched path (:mod:`.batch`; the
-        paper's rule holds up to ``batch.BATCH_STEPS`` steps). :meth:`estimate` calls it; a
-        timing of :meth:`step` alone should call it at the end too."""
+        """Triangulate and fuse the steps held for the batched paths (:mod:`.batch`: the
+        paper's rule holds up to ``batch.BATCH_STEPS`` steps; keyframe windows with
+        ``tri_method="lsq"`` up to :data:`BATCH_WINDOWS` windows). :meth:`estimate` calls it;
+        a timing of :meth:`step` alone should call it at the end too."""
+        if self._window_batch:
+            self._flush_windows()
         b = self._batch
         if b is not None and len(b):
             n_tri, n_gated = b.n_triangulated, b.n_gated

@@ -17,14 +17,16 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Sequence
 
 import numpy as np
 from numpy.typing import ArrayLike
 
 from ..angles import angle_residual
 from ..errors import ConfigError
-from ..geometry import direction_span, effective_parallax
+from ..geometry import effective_parallax
 from .triangulation import PairEstimates, _TwoRayResult, select_pairs
+from .window_schedule import WindowSchedule  # noqa: F401 (re-exported: the mapper's)
 
 
 @dataclass(frozen=True, eq=False)
@@ -185,19 +187,20 @@ def _window_points(u: np.ndarray, psi: np.ndarray, z: np.ndarray, heading: np.nd
 
 def _window_chain_jacobians(u: np.ndarray, z: np.ndarray, heading: np.ndarray
                             ) -> tuple[np.ndarray, np.ndarray]:
-    """``d z_k / d [dx, dy, dpsi]_m`` (complex, shape ``(W, W-1, 3)``) and ``d psi_k / d ...``
-    (real, same shape) of the dead-reckoned window poses ``k`` wrt the increments ``m``."""
-    w1 = len(u)
+    """``d z_k / d [dx, dy, dpsi]_m`` (complex, shape ``(B, W, W-1, 3)``) and ``d psi_k / d
+    ...`` (real, same shape) of the dead-reckoned poses ``k`` of ``B`` windows wrt their
+    increments ``m`` (``u`` of shape ``(B, W-1, 3)``, ``z`` and ``heading`` ``(B, W)``)."""
+    n_b, w1 = u.shape[:2]
     w = w1 + 1
     k = np.arange(w)[:, None]
     m = np.arange(1, w1 + 1)[None, :]
-    upto = m <= k                                                    # increment m moves pose k
-    dz = np.zeros((w, w1, 3), np.complex128)
-    dz[:, :, 0] = np.where(upto, heading[:-1][None, :], 0.0)
-    dz[:, :, 1] = np.where(upto, 1j * heading[:-1][None, :], 0.0)
-    dz[:, :, 2] = np.where(upto, 1j * (z[:, None] - z[1:][None, :]), 0.0)
-    dpsi = np.zeros((w, w1, 3))
-    dpsi[:, :, 2] = upto
+    upto = (m <= k)[None]                                            # increment m moves pose k
+    dz = np.zeros((n_b, w, w1, 3), np.complex128)
+    dz[..., 0] = np.where(upto, heading[:, None, :-1], 0.0)
+    dz[..., 1] = np.where(upto, 1j * heading[:, None, :-1], 0.0)
+    dz[..., 2] = np.where(upto, 1j * (z[:, :, None] - z[:, None, 1:]), 0.0)
+    dpsi = np.zeros((n_b, w, w1, 3))
+    dpsi[..., 2] = upto
     return dz, dpsi
 
 
@@ -246,17 +249,80 @@ def triangulate_window_lsq(odoms: ArrayLike, bearings_rad: ArrayLike, *,
     n_gated : int
         Landmarks seen from two poses or more that failed a gate (or did not converge).
     """
-    u, brg, w, psi, heading, z = _window_chain(odoms, bearings_rad, "triangulate_window_lsq")
+    u, brg, w, _, _, _ = _window_chain(odoms, bearings_rad, "triangulate_window_lsq")
+    return _lsq_windows(u[None], brg[None], min_parallax_rad, max_range_m, max_iter, tol_m)[0]
+
+
+def triangulate_windows_lsq(odoms: Sequence[ArrayLike], bearings_rad: Sequence[ArrayLike], *,
+                            min_parallax_rad: float = 0.0, max_range_m: float = np.inf,
+                            max_iter: int = 20, tol_m: float = 1e-13
+                            ) -> list[tuple[WindowTriangulation, int]]:
+    """:func:`triangulate_window_lsq` of several windows of ``W`` poses at once (lists of
+    ``(W - 1, 3)`` increments and ``(W, n_b)`` bearings, ``n_b`` per window): the same
+    numbers, bit for bit, window by window, in a few calls over all their rays (every ray and
+    landmark is computed alone, the sums are per landmark)."""
+    if len(odoms) != len(bearings_rad):
+        raise ConfigError("triangulate_windows_lsq: one bearing matrix per window")
+    if not len(odoms):
+        return []
+    chains = [_window_chain(o, b, "triangulate_windows_lsq") for o, b in zip(odoms, bearings_rad)]
+    w = chains[0][2]
+    if any(c[2] != w for c in chains):
+        raise ConfigError("triangulate_windows_lsq: every window must have the same poses")
+    n_max = max(c[1].shape[1] for c in chains)
+    brg = np.full((len(chains), w, n_max), np.nan)
+    for b, c in enumerate(chains):
+        brg[b, :, :c[1].shape[1]] = c[1]
+    u = np.stack([c[0] for c in chains])
+    return _lsq_windows(u, brg, min_parallax_rad, max_range_m, max_iter, tol_m)
+
+
+def _gather_rays(keep: np.ndarray, owner: np.ndarray, start: np.ndarray, *arrays: np.ndarray
+                 ) -> tuple[np.ndarray, ...]:
+    """The rays of the landmarks ``keep`` (indices of the groups of ``owner``, contiguous,
+    starting at ``start``), in their order: ``(owner renumbered 0 .. len(keep) - 1, *arrays
+    at those rays, the new group starts)``."""
+    counts = np.diff(np.append(start, owner.size))[keep]
+    first = start[keep]
+    rays = np.repeat(first - np.cumsum(counts) + counts, counts) + np.arange(counts.sum())
+    new_owner = np.repeat(np.arange(keep.size), counts)
+    new_start = np.cumsum(counts) - counts
+    return (new_owner, *(a[rays] for a in arrays), new_start)
+
+
+def window_lsq_points(odoms: ArrayLike, bearings_rad: ArrayLike, *,
+                      min_parallax_rad: float = 0.0, max_range_m: float = np.inf
+                      ) -> tuple[np.ndarray, np.ndarray]:
+    """The landmarks of :func:`triangulate_window_lsq` alone, without their Jacobians (the
+    start of a window bundle, :mod:`.bundle`): ``(column (k,), points_xy (k, 2))``, the same
+    numbers."""
+    u, brg, _, _, _, _ = _window_chain(odoms, bearings_rad, "window_lsq_points")
+    return _lsq_windows(u[None], brg[None], min_parallax_rad, max_range_m, 20, 1e-13,
+                        jacobians=False)[0]
+
+
+def _lsq_windows(u: np.ndarray, brg: np.ndarray, min_parallax_rad: float, max_range_m: float,
+                 max_iter: int, tol_m: float, jacobians: bool = True) -> list[tuple]:
+    """The kernel of :func:`triangulate_window_lsq` on ``B`` windows: ``u`` of shape
+    ``(B, W-1, 3)``, ``brg`` ``(B, W, n)`` (NaN: not seen); one ``(WindowTriangulation,
+    n_gated)`` per window, or without ``jacobians`` (one window) ``[(column, points_xy)]``."""
+    n_b, w = brg.shape[:2]
+    psi = np.concatenate([np.zeros((n_b, 1)), np.cumsum(u[:, :, 2], axis=1)], axis=1)
+    heading = np.exp(1j * psi)
+    z = np.concatenate([np.zeros((n_b, 1), np.complex128),
+                        np.cumsum(heading[:, :-1] * (u[:, :, 0] + 1j * u[:, :, 1]), axis=1)],
+                       axis=1)
     seen = np.isfinite(brg)
-    cand = np.flatnonzero(seen.sum(axis=0) >= 2)
+    cand_b, cand = np.nonzero(seen.sum(axis=1) >= 2)       # by window, then column
     nc = cand.size
     # the rays, grouped by landmark (owner-major order), poses increasing within a landmark
-    owner, pose = np.nonzero(seen[:, cand].T)
+    owner, pose = np.nonzero(seen.transpose(0, 2, 1)[cand_b, cand])
     start = np.flatnonzero(np.r_[True, owner[1:] != owner[:-1]]) if owner.size else \
         np.zeros(0, np.int64)
-    alpha = psi[pose] + brg[pose, cand[owner]]
+    ray_b = cand_b[owner]
+    alpha = psi[ray_b, pose] + brg[ray_b, pose, cand[owner]]
     ray = np.exp(1j * alpha)
-    zr = z[pose]
+    zr = z[ray_b, pose]
 
     def bsum(x: np.ndarray) -> np.ndarray:
         return np.add.reduceat(x, start, axis=0) if x.size else np.zeros((0,) + x.shape[1:])
@@ -273,23 +339,34 @@ def triangulate_window_lsq(odoms: ArrayLike, bearings_rad: ArrayLike, *,
             det = axx * ayy - axy * axy
             p = ((ayy * bx - axy * by) + 1j * (axx * by - axy * bx)) / det
             wgt = 1.0 / np.maximum(np.abs(p[owner] - zr) ** 2, 1e-12)
-        # Gauss-Newton on the bearing residuals
-        done = ~np.isfinite(p)
+        # Gauss-Newton on the bearing residuals, each landmark until its step is small (the
+        # landmarks still moving and their rays are gathered again as others finish)
+        active = np.flatnonzero(np.isfinite(p))
+        converged = np.zeros(nc, bool) if max_iter > 0 else np.ones(nc, bool)
+        a_owner, a_zr, a_alpha, a_start = owner, zr, alpha, start
+        if active.size < nc:
+            a_owner, a_zr, a_alpha, a_start = _gather_rays(active, owner, start, zr, alpha)
         for _ in range(max_iter):
-            d = p[owner] - zr
+            if active.size == 0:
+                break
+            d = p[active][a_owner] - a_zr
             rho2 = (d * d.conj()).real
             q = 1j * d / rho2                               # gradient of the ray's angle
-            res = angle_residual(np.angle(d), alpha)
-            nxx, nxy, nyy = bsum(q.real ** 2), bsum(q.real * q.imag), bsum(q.imag ** 2)
-            gx, gy = bsum(res * q.real), bsum(res * q.imag)
+            res = angle_residual(np.angle(d), a_alpha)
+            nxx, nxy, nyy, gx, gy = (np.add.reduceat(x, a_start) for x in (
+                q.real ** 2, q.real * q.imag, q.imag ** 2, res * q.real, res * q.imag))
             det = nxx * nyy - nxy * nxy
             step = -((nyy * gx - nxy * gy) + 1j * (nxx * gy - nxy * gx)) / det
-            step[done] = 0.0
-            p = p + step
-            small = np.abs(step) <= tol_m * np.maximum(np.abs(p), 1.0)
-            done |= small | ~np.isfinite(step)
-            if done.all():
-                break
+            p_new = p[active] + step
+            p[active] = p_new
+            small = np.abs(step) <= tol_m * np.maximum(np.abs(p_new), 1.0)
+            converged[active[small]] = True
+            moving = ~(small | ~np.isfinite(step))
+            if not moving.all():
+                sub = np.flatnonzero(moving)
+                active = active[sub]
+                a_owner, a_zr, a_alpha, a_start = _gather_rays(sub, a_owner, a_start, a_zr,
+                                                               a_alpha)
         # gates: parallax of the ray directions, in front of every ray, depth
         d = p[owner] - zr
         span = effective_parallax(alpha, owner, nc)
@@ -299,11 +376,12 @@ def triangulate_window_lsq(odoms: ArrayLike, bearings_rad: ArrayLike, *,
                                  else np.zeros(0, bool))
         lo = max(min_parallax_rad, 1e-15)
         good &= span >= lo
-        converged = small if max_iter > 0 else np.ones(nc, bool)
         good &= converged
+    kept = np.flatnonzero(good)
+    if not jacobians:
+        return [(cand[kept], np.column_stack([p[kept].real, p[kept].imag]))]
     keep = good[owner]
     # Jacobians at the optimum (implicit function theorem), rays of the kept landmarks only
-    kept = np.flatnonzero(good)
     remap = np.full(nc, -1, np.int64)
     remap[kept] = np.arange(kept.size)
     o, k_pose, d, a_ray = remap[owner[keep]], pose[keep], d[keep], alpha[keep]
@@ -322,9 +400,12 @@ def triangulate_window_lsq(odoms: ArrayLike, bearings_rad: ArrayLike, *,
         hinv = np.linalg.inv(h) if len(h) else h
         dz, dpsi = _window_chain_jacobians(u, z, heading)
         c = 3 * (w - 1)
-        dz_r = np.stack([dz.real.reshape(w, c), dz.imag.reshape(w, c)], axis=1)  # (W, 2, C)
+        dz_r = np.stack([dz.real.reshape(n_b, w, c), dz.imag.reshape(n_b, w, c)],
+                        axis=2)                                          # (B, W, 2, C)
         qv = np.column_stack([q.real, q.imag])
-        m_ray = hk @ dz_r[k_pose] + qv[:, :, None] * dpsi.reshape(w, c)[k_pose][:, None, :]
+        o_b = ray_b[keep]
+        m_ray = hk @ dz_r[o_b, k_pose] + qv[:, :, None] * dpsi.reshape(n_b, w, c)[
+            o_b, k_pose][:, None, :]
         m_sum = np.add.reduceat(m_ray, st, axis=0) if o.size else np.zeros((0, 2, c))
         j_odo = hinv @ m_sum                                                # (k, 2, C)
         j_b = np.einsum("rab,rb->ra", hinv[o], qv)                          # (R, 2)
@@ -337,10 +418,17 @@ def triangulate_window_lsq(odoms: ArrayLike, bearings_rad: ArrayLike, *,
     pk = p[kept]
     depth_k = (d * np.exp(-1j * a_ray)).real
     span_k = span[kept]
-    tri = WindowTriangulation(cand[kept], a_idx, b_idx, np.column_stack([pk.real, pk.imag]),
-                              depth_k[st], depth_k[last], np.sin(span_k), np.cos(span_k),
-                              jac_odo, jac_b)
-    return tri, int(nc - kept.size)
+    fields = (cand[kept], a_idx, b_idx, np.column_stack([pk.real, pk.imag]), depth_k[st],
+              depth_k[last], np.sin(span_k), np.cos(span_k), jac_odo, jac_b)
+    # window b holds the landmarks (and candidates) in one run each: by window, then column
+    n_cand = np.bincount(cand_b, minlength=n_b)
+    n_kept = np.bincount(cand_b[kept], minlength=n_b)
+    ends = np.cumsum(n_kept)
+    out = []
+    for b in range(n_b):
+        sl = slice(int(ends[b] - n_kept[b]), int(ends[b]))
+        out.append((WindowTriangulation(*(f[sl] for f in fields)), int(n_cand[b] - n_kept[b])))
+    return out
 
 
 def window_pair_squared_distances(tri: WindowTriangulation, odometry_sigmas: ArrayLike,
@@ -387,207 +475,5 @@ def window_pair_squared_distances(tri: WindowTriangulation, odometry_sigmas: Arr
     return PairEstimates(first, second, d2, var, full)
 
 
-#: Path thresholds are met to this relative rounding (sums of increments drift in the last bits).
-_ROUND = 1.0 - 1e-9
-
-
-class WindowSchedule:
-    """When the current window of steps closes, and how many steps the next one drops.
-
-    Two ways to measure a window:
-
-    * in keyframes (``poses``, ``stride``; the issue-8 windows): ``W`` poses, the next window
-      ``stride`` steps later;
-    * in the geometry of the motion (issue 15): a window closes once its landmarks are
-      triangulated from well apart -- the ``quantile`` of the parallax of the landmarks it
-      saw from two poses or more (at least ``min_landmarks`` of them) reaches
-      ``parallax_rad`` -- or once the path driven across it reaches ``length_m``, whichever
-      comes first; the next window starts at the first step ``1 / overlap`` of the window's
-      path further on, and ends no sooner than that much path after its end (so windows are
-      spaced by the path, not by how many keyframes in a row pass the test;
-      ``ceil(overlap)`` windows hold each reading). A landmark seen once has parallax 0.
-
-    The parallax of a landmark is the angle spanned by the world directions of its rays
-    (dead-reckoned heading plus bearing, :func:`~bomgraph.geometry.direction_span`): it grows
-    with the baseline over the depth and not with the number of rays, so the same recording
-    keyframed every 0.1 m or every 0.3 m closes its windows at the same places (to a
-    keyframe), and a recording with distant landmarks gets longer windows in metres than a
-    small arena. It is a pure angle, not a multiple of the stream's bearing sigma, so a
-    smaller or larger calibrated sigma does not change the windows. (The eigenvalue measure
-    :func:`~bomgraph.geometry.effective_parallax` is not used here: it weighs every ray, so two
-    rays at the ends of a baseline score up to sqrt(3) times more than many along it.)
-    ``max_poses`` caps a window's size (the bundle's cost) whatever the motion.
-
-    :meth:`push` a step, then :meth:`full` says whether the buffered steps make a window;
-    :meth:`advance` drops the steps the next window does not share and says how many.
-    """
-
-    def __init__(self, *, poses: int | None = None, stride: int | None = None,
-                 parallax_rad: float | None = None, length_m: float | None = None,
-                 overlap: float = 1.0, min_landmarks: int = 3, quantile: float = 0.5,
-                 max_poses: int | None = None, prefixes: int = 20) -> None:
-        geometric = parallax_rad is not None or length_m is not None
-        if (poses is None) == (not geometric):
-            raise ConfigError("WindowSchedule: give poses (keyframes), or parallax_rad and / "
-                              "or length_m (geometry)")
-        self.poses = poses
-        self.stride = stride if stride is not None else (poses - 1 if poses else None)
-        self.parallax_rad = parallax_rad
-        self.length_m = math.inf if length_m is None else float(length_m)
-        self.overlap = float(overlap)
-        self.min_landmarks = int(min_landmarks)
-        self.quantile = float(quantile)
-        self.max_poses = max_poses
-        self._path: list[float] = []          # cumulative path of each step (m)
-        self._psi = 0.0                       # dead-reckoned heading (rad)
-        self._ids: list[np.ndarray] = []      # per step: landmark ids, world ray directions
-        self._dirs: list[np.ndarray] = []
-        self._by_geometry = False
-        self._next_end_m = -math.inf          # the next window ends no earlier (path, m)
-        self.prefixes = int(prefixes)
-        self._parallax_at = (-1, 0.0, 0)      # (steps buffered, parallax, landmarks): cached
-        self._start_spacing()
-
-    @property
-    def inflation(self) -> float:
-        """About how many windows a reading enters; each fused estimate's variance is
-        multiplied by it, so overlapping windows do not count one reading several times."""
-        if self.poses is not None:
-            return float(max(1, math.ceil((self.poses - 1) / self.stride)))
-        return float(max(1, math.ceil(self.overlap)))
-
-    def __len__(self) -> int:
-        return len(self._path)
-
-    def clear(self) -> None:
-        """Forget the buffered steps (a gap in the odometry)."""
-        self._path.clear()
-        self._ids.clear()
-        self._dirs.clear()
-        self._psi = 0.0
-        self._next_end_m = -math.inf
-        self._start_spacing()
-
-    def _start_spacing(self) -> None:
-        """Prefix ends of a first window (no window closed before it): at ``1 / prefixes``
-        of ``length_m``, or, measuring parallax, where it first reaches each
-        ``j / prefixes`` of ``parallax_rad``."""
-        self._bounds: list[int] = []
-        self._mark = 1
-        self._spacing_m = (self.length_m / self.prefixes
-                           if self.parallax_rad is None and math.isfinite(self.length_m)
-                           else None)
-
-    def push(self, odom: ArrayLike | None, landmark_ids: np.ndarray,
-             bearings_rad: np.ndarray) -> None:
-        """Buffer one step: its increment from the step before (None: the first step) and
-        its bearings."""
-        step_m = 0.0
-        if odom is not None and self._path:
-            dx, dy, dpsi = (float(v) for v in odom)
-            step_m = math.hypot(dx, dy)
-            self._psi += dpsi
-        self._path.append((self._path[-1] if self._path else 0.0) + step_m)
-        if self.poses is None and self.parallax_rad is not None:
-            self._ids.append(np.asarray(landmark_ids))
-            self._dirs.append(self._psi + np.asarray(bearings_rad, dtype=float))
-        if self.poses is None:
-            self._mark_prefix()
-
-    def _mark_prefix(self) -> None:
-        """Record the newest step as a prefix end if it crosses the next mark."""
-        n = len(self._path)
-        if n < 2:
-            return
-        if self._spacing_m is not None:
-            progress = (self._path[-1] - self._path[0]) / self._spacing_m
-        else:
-            par, n_lm = self._cached_parallax()
-            progress = (par / self.parallax_rad * self.prefixes
-                        if n_lm >= self.min_landmarks else 0.0)
-        if progress >= self._mark * _ROUND:
-            self._bounds.append(n)
-            self._mark = int(math.floor(progress / _ROUND)) + 1
-
-    def _cached_parallax(self) -> tuple[float, int]:
-        n = len(self._path)
-        if self._parallax_at[0] != n:
-            self._parallax_at = (n, *self.parallax())
-        return self._parallax_at[1], self._parallax_at[2]
-
-    def parallax(self) -> tuple[float, int]:
-        """The ``quantile`` of the parallax (rad) of the buffered landmarks
-        (:func:`~bomgraph.geometry.direction_span` of their dead-reckoned ray directions, 0
-        for a landmark seen once), and how many there are."""
-        if not self._ids:
-            return 0.0, 0
-        ids = np.concatenate(self._ids)
-        if ids.size < 2:
-            return 0.0, 0
-        uniq, owner = np.unique(ids, return_inverse=True)
-        span = direction_span(np.concatenate(self._dirs), owner, uniq.size)
-        return float(np.quantile(span, self.quantile)), int(uniq.size)
-
-    def full(self) -> bool:
-        """Whether the buffered steps make a window."""
-        n = len(self._path)
-        if self.poses is not None:
-            return n >= self.poses
-        self._by_geometry = False
-        if n < 2:
-            return False
-        if self._path[-1] < self._next_end_m * _ROUND:
-            pass                              # too soon after the last window's end
-        elif self._path[-1] - self._path[0] >= self.length_m * _ROUND:
-            self._by_geometry = True
-        elif self.parallax_rad is not None:
-            par, n_lm = self._cached_parallax()
-            self._by_geometry = n_lm >= self.min_landmarks and par >= self.parallax_rad
-        return self._by_geometry or (self.max_poses is not None and n >= self.max_poses)
-
-    def prefix_ends(self) -> list[int]:
-        """Ends (pose counts) of the prefixes of the buffered window on which a bundle is
-        solved in turn (issue 8's ``grow`` measured in path instead of poses); the last is
-        the whole window. They are fixed as the steps arrive, never moved by later ones, so
-        the open window's prefixes are those of the window it becomes (an estimate can go on
-        from the last one, :class:`.bundle.PrefixState`): every ``1 / prefixes`` of the last
-        closed window's path from the window's start (windows close at about the same path,
-        :meth:`advance`); in a first window, ``length_m / prefixes``, or where the parallax
-        first reaches each ``j / prefixes`` of ``parallax_rad``."""
-        n = len(self._path)
-        return [e for e in self._bounds if 2 <= e < n] + [n]
-
-    def advance(self) -> int:
-        """Drop the steps the next window does not share (at least one) and return how many."""
-        n = len(self._path)
-        if self.poses is not None:
-            k = self.stride
-        elif self._by_geometry:
-            path = np.asarray(self._path) - self._path[0]
-            k = int(np.searchsorted(path, path[-1] / self.overlap * _ROUND, side="left"))
-            if path[-1] > 0:
-                self._spacing_m = path[-1] / self.prefixes
-            # the next window ends a stride later too: windows are spaced by the path, not
-            # by how many keyframes satisfy the closing test in a row
-            self._next_end_m = self._path[-1] + path[-1] / self.overlap
-        else:                                 # closed by max_poses
-            k = int(math.ceil(n / self.overlap))
-            if self._path[-1] > self._path[0]:
-                self._spacing_m = (self._path[-1] - self._path[0]) / self.prefixes
-        k = max(1, min(k, n))
-        del self._path[:k]
-        del self._ids[:k]
-        del self._dirs[:k]
-        if self.poses is None:            # the next window's prefix ends, from its start
-            self._bounds, self._mark = [], 1
-            self._parallax_at = (-1, 0.0, 0)
-            kept, self._path = self._path, []
-            for i, v in enumerate(kept):
-                self._path.append(v)
-                if self._spacing_m is not None or i == len(kept) - 1:
-                    self._mark_prefix()
-        return k
-
-
 __all__ = ["WindowSchedule", "WindowTriangulation", "triangulate_window", "triangulate_window_lsq",
-           "window_pair_squared_distances"]
+           "triangulate_windows_lsq", "window_lsq_points", "window_pair_squared_distances"]

@@ -83,6 +83,40 @@ def test_linearise_jacobian_matches_central_differences() -> None:
     assert np.all(np.abs(jac).sum(axis=0) > 0)
 
 
+def test_normal_equation_blocks_and_schur_step_match_the_dense_jacobian() -> None:
+    """The block assembly (one-hot sums, scattered cross block) is ``J^T J`` and ``J^T r`` of
+    the dense Jacobian, and the Schur-complement step solves the damped dense system."""
+    from bomgraph.stmds.bundle_lm import _dense_information, _schur_step
+
+    rng = np.random.default_rng(12)
+    w, n = 7, 6
+    odoms, poses, pts, brg = _scene(rng, w, n + 1, p_seen=0.75)
+    brg = brg[:, :n]
+    brg[0, :2] = bearings_to(poses[0], pts[:2])        # rays from the fixed pose 0 too
+    k, lm = np.nonzero(np.isfinite(brg))
+    theta = brg[k, lm] + rng.normal(0.0, 0.05, k.size)
+    sig = rng.uniform(0.005, 0.05, (w - 1, 3))
+    prob = _Problem(odoms + rng.normal(0.0, 0.03, odoms.shape), sig, 0.02, k, lm, theta, n)
+    p0 = between(poses[0], poses) + rng.normal(0.0, 0.05, (w, 3))
+    p0[0] = 0.0
+    q0 = to_local(poses[0], pts[:n]) + rng.normal(0.0, 0.1, (n, 2))
+    res, jac = prob.linearise(p0, q0)
+    np.testing.assert_array_equal(prob.bearing_rows(p0, q0), jac[prob.rows - k.size:])
+    cost, blocks = prob.normal_equations(p0, q0)
+    assert cost == pytest.approx(float(res @ res), rel=1e-14)
+    scale = np.abs(jac.T @ jac).max()
+    np.testing.assert_allclose(_dense_information(blocks), jac.T @ jac, rtol=0,
+                               atol=1e-12 * scale)
+    np.testing.assert_allclose(np.concatenate(blocks[3:]), jac.T @ res, rtol=0,
+                               atol=1e-12 * np.abs(jac.T @ res).max())
+    h = jac.T @ jac
+    lam = 1e-3
+    damped = h + lam * np.diag(np.maximum(np.diag(h), 1e-12))
+    step = _schur_step(blocks, lam)
+    np.testing.assert_allclose(step, -np.linalg.solve(damped, jac.T @ res), rtol=1e-9,
+                               atol=1e-12)
+
+
 # ----------------------------------------------------------------- noise-free exactness
 @pytest.mark.parametrize("w", [2, 3, 6, 12])
 @pytest.mark.parametrize("grow", [1, 3, None])

@@ -10,8 +10,9 @@ import pytest
 
 from bomgraph.geometry import bearings_to, dead_reckon, to_local
 from bomgraph.stmds.triangulation import pair_squared_distances, triangulate_rays
-from bomgraph.stmds.window import (triangulate_window, triangulate_window_lsq,
-                                   window_pair_squared_distances)
+from bomgraph.stmds.window import (WindowTriangulation, triangulate_window,
+                                   triangulate_window_lsq, triangulate_windows_lsq,
+                                   window_lsq_points, window_pair_squared_distances)
 from test_stmds_triangulation import _numeric_jacobian  # the central-difference helper
 
 
@@ -146,6 +147,37 @@ def test_lsq_window_is_exact_on_noise_free_rays(w: int) -> None:
     assert tri.jacobian_bearing.shape == (len(pts), w)
     assert np.all((tri.jacobian_bearing != 0) == np.isfinite(brg[:, tri.column].T))
     _assert_exact_pair_distances(tri, pts, w)
+
+
+def test_lsq_windows_at_once_are_each_window_alone_bit_for_bit() -> None:
+    """The batched kernel (windows padded to one bearing matrix, landmarks dropped from the
+    Gauss-Newton loop as they converge) gives each window's numbers exactly: noisy windows of
+    different landmark counts, one with no landmark seen twice, one with gated landmarks."""
+    rng = np.random.default_rng(21)
+    w = 6
+    odoms_list, brg_list = [], []
+    for n in (7, 3, 9, 2, 5):
+        odoms, _, _, brg = _window_scene(rng, w=w, n=n)
+        brg = brg + rng.normal(0.0, 0.02, brg.shape)
+        odoms_list.append(odoms + rng.normal(0.0, 0.005, odoms.shape))
+        brg_list.append(brg)
+    brg_list[3][:, :] = np.nan
+    brg_list[3][0, 0] = brg_list[3][2, 1] = 0.3            # every landmark seen once
+    brg_list[1][:, 0] = brg_list[1][0, 0]                  # parallel rays: gated
+    batch = triangulate_windows_lsq(odoms_list, brg_list, max_range_m=5.0)
+    assert len(batch) == len(brg_list)
+    for odoms, brg, (tri, n_gated) in zip(odoms_list, brg_list, batch):
+        alone, n_alone = triangulate_window_lsq(odoms, brg, max_range_m=5.0)
+        assert n_gated == n_alone
+        for name in WindowTriangulation.__dataclass_fields__:
+            a, b = getattr(tri, name), getattr(alone, name)
+            assert a.shape == b.shape and a.tobytes() == b.tobytes(), name
+    assert len(batch[3][0]) == 0 and batch[1][1] >= 1
+    for odoms, brg, (tri, _) in zip(odoms_list, brg_list, batch):   # the bundle's start
+        column, points = window_lsq_points(odoms, brg, max_range_m=5.0)
+        assert column.tobytes() == tri.column.tobytes()
+        assert points.tobytes() == tri.points_xy.tobytes()
+    assert sum(len(t) for t, _ in batch) > 10
 
 
 def test_lsq_window_of_two_rays_is_the_pair_rule() -> None:

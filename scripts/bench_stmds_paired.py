@@ -1,0 +1,77 @@
+"""Paired CPU time of BOM-STMDS presets, this checkout against another one, in one process.
+
+The other checkout's ``bomgraph`` package is loaded under another name (``--old``: a copy of
+its ``bomgraph`` folder renamed, e.g. ``cp -r /work/main/bomgraph /tmp/old/bomgraph_old``;
+the package imports itself relatively), and every paper run is mapped by the old and the new
+code in turn (the order alternating), a map every 10 steps, CPU seconds per run
+(``time.process_time``, single-threaded BLAS). Prints the median CPU per run of each and the
+median of the per-run ratios old / new, and checks that both gave the same final map bit
+for bit.
+
+Usage::
+
+    python scripts/bench_stmds_paired.py --old /tmp/old/bomgraph_old --presets window-ba
+        window-lsq [--runs 25] [--repeats 1]
+"""
+
+from __future__ import annotations
+
+import os
+
+for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_v, "1")
+
+import argparse  # noqa: E402
+import importlib  # noqa: E402
+import sys  # noqa: E402
+import time  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import numpy as np  # noqa: E402
+
+from bomgraph.mapper import run  # noqa: E402
+from bomgraph.sim import paper_design, simulate_run  # noqa: E402
+from bomgraph.stmds.mapper import make_stmds_smacof  # noqa: E402
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--old", type=Path, required=True, help="the old package folder")
+    ap.add_argument("--presets", nargs="+", default=["window-ba", "window-lsq"])
+    ap.add_argument("--runs", type=int, default=25)
+    ap.add_argument("--repeats", type=int, default=1)
+    args = ap.parse_args(argv)
+    sys.path.insert(0, str(args.old.resolve().parent))
+    old_pkg = args.old.name
+    old_make = importlib.import_module(f"{old_pkg}.stmds.mapper").make_stmds_smacof
+    old_run = importlib.import_module(f"{old_pkg}.mapper").run
+    streams = [simulate_run(spec) for spec in paper_design(0)[:args.runs]]
+    for preset in args.presets:
+        opts = {} if preset == "paper" else {"preset": preset}
+        cpu: dict[str, list[float]] = {"old": [], "new": []}
+        ratios, same = [], True
+        for i, stream in enumerate(streams * args.repeats):
+            finals = {}
+            order = ("old", "new") if i % 2 == 0 else ("new", "old")
+            per = {}
+            for which in order:
+                make, go = (old_make, old_run) if which == "old" else (make_stmds_smacof, run)
+                mapper = make(stream.header, **opts)
+                c0 = time.process_time()
+                res = go(mapper, stream.steps, checkpoint_every=10, keep_checkpoints=False)
+                per[which] = time.process_time() - c0
+                finals[which] = res.final
+            for k in per:
+                cpu[k].append(per[k])
+            ratios.append(per["old"] / per["new"])
+            same &= (np.array_equal(finals["old"].landmark_ids, finals["new"].landmark_ids)
+                     and finals["old"].landmarks_xy.tobytes()
+                     == finals["new"].landmarks_xy.tobytes())
+        print(f"{preset:12s} old {np.median(cpu['old']):.3f} s/run  new "
+              f"{np.median(cpu['new']):.3f} s/run  ratio (median of {len(ratios)} paired) "
+              f"{np.median(ratios):.2f}  final maps bit for bit: {same}", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
