@@ -82,7 +82,9 @@ class Isam2Config(FactorGraphConfig):
         by ``long_lag_steps``).
     long_growth : float
         Growth factor of the graph (in steps) between two whole-graph relinearisations and
-        convergence checks in long mode.
+        convergence checks in long mode (each check is a whole-graph linearisation and
+        solve, plus a whole-graph LM solve when it fails; 2 measured cheaper than 1.25 at
+        the same final map, ``docs/measurements.md``).
     long_wildfire_threshold : float
         Gauss-Newton wildfire threshold in long mode (0: full back-substitution). GTSAM's
         0.001 left deltas stale by up to 1e-3 on the rigid split-odometry directions (sigma
@@ -112,7 +114,7 @@ class Isam2Config(FactorGraphConfig):
     long_after_steps: int | None = 500
     long_lag_steps: int = 100
     long_relinearize_threshold: float = 0.001
-    long_growth: float = 1.25
+    long_growth: float = 2.0
     long_wildfire_threshold: float = 0.0
     long_checkpoint_updates: int = 1
 

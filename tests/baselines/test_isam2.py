@@ -62,7 +62,7 @@ def test_long_mode_is_cadence_independent_and_reaches_the_same_map(small: Stream
     polish per estimate), entered early here: the final map does not depend on the cadence,
     and right after a whole-graph update (t = 110, 1.25 x 88 steps) it is the normal mode's
     polished map (MPE within 2 %, cost within 0.1 %)."""
-    long = {"long_after_steps": 60, "long_lag_steps": 30}
+    long = {"long_after_steps": 60, "long_lag_steps": 30, "long_growth": 1.25}
     maps = [_final(small, every, **long) for every in (1, 10, 10 ** 6)]
     for other in maps[1:]:
         _assert_same_map(maps[0], other)
@@ -82,7 +82,7 @@ def test_long_mode_never_calls_an_unchecked_estimate_converged(small: Stream) ->
     """Between whole-graph checks long mode does not know whether its estimate is at the
     minimum: ``converged`` is None there (not True), with the last check beside it and the
     reason; the LM restart counter is reported."""
-    long = {"long_after_steps": 60, "long_lag_steps": 30}
+    long = {"long_after_steps": 60, "long_lag_steps": 30, "long_growth": 1.25}
     final = _final(small, 10, **long)     # T = 120, last check at 111
     assert final.info["mode"] == "isam2-long"
     assert final.info["checked_at_step"] < small.truth.poses.shape[0]
@@ -90,6 +90,24 @@ def test_long_mode_never_calls_an_unchecked_estimate_converged(small: Stream) ->
     assert final.info["last_converged"] in (True, False)
     assert "not checked" in final.info["convergence"]
     assert final.info["lm_restarts"] >= 0
+
+
+def test_long_mode_checks_the_whole_graph_each_time_it_doubles(small: Stream) -> None:
+    """Default ``long_growth`` 2: after the check on entering long mode (t = 30, 31 steps) the
+    next whole-graph check is at the first update with >= 62 steps (t = 70), and none after
+    it up to T = 120; a map taken right at a check says it passed."""
+    assert Isam2Config().long_growth == 2.0
+    long = {"long_after_steps": 30, "long_lag_steps": 30}
+    final = _final(small, 10, **long)
+    assert final.info["mode"] == "isam2-long"
+    assert final.info["checked_at_step"] == 71 and final.info["converged"] is None
+    cut = replace(small, steps=small.steps[:71],
+                  truth=Truth(small.truth.landmark_ids, small.truth.landmarks_xy,
+                              small.truth.poses[:71]))
+    at = _final(cut, 10, **long)
+    assert at.info["checked_at_step"] == 71 and at.info["converged"] is True
+    dense = _final(small, 10, long_growth=1.25, **long)
+    assert dense.info["checked_at_step"] == 111
 
 
 @pytest.mark.skipif(not (DATA / "mrclam6").is_dir(), reason=f"no shared data at {DATA}")
