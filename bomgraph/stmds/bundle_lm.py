@@ -100,6 +100,14 @@ class _Problem:
                                                                      * wo[1:])[..., 0]
             jac[odo_rows, (3 * np.arange(m) + j)[:, None]] = (jb[:, :, j:j + 1] * wo)[..., 0]
         rows = 3 * m + np.arange(len(self.k))
+        self._fill_bearing_rows(jac, rows, dp)
+        res = np.concatenate([(ro * self.w_odo).ravel(), rb * self.w_b])
+        return res, jac
+
+    def _fill_bearing_rows(self, jac: np.ndarray, rows: np.ndarray, dp: np.ndarray) -> None:
+        """Write the whitened bearing Jacobian into ``jac[rows]`` (``dp``: the bearing's
+        derivative direction per row, ``(R, 2)``; the pose columns only where the pose is a
+        variable)."""
         pc = self.pose_col[self.k]
         seen_from_var = pc >= 0
         r_v, c_v = rows[seen_from_var], pc[seen_from_var]
@@ -109,8 +117,6 @@ class _Problem:
         lc = self.n_pose_vars + 2 * self.lm
         jac[rows, lc] = dp[:, 0] * self.w_b
         jac[rows, lc + 1] = dp[:, 1] * self.w_b
-        res = np.concatenate([(ro * self.w_odo).ravel(), rb * self.w_b])
-        return res, jac
 
     def bearing_rows(self, poses: np.ndarray, points: np.ndarray) -> np.ndarray:
         """The bearing rows of :meth:`linearise`'s Jacobian alone, shape ``(R, n)`` (the same
@@ -118,15 +124,7 @@ class _Problem:
         dp = _bearing_residuals(poses, points, self.k, self.lm, self.theta)[1]
         jac = np.zeros((len(self.k), self.n))
         rows = np.arange(len(self.k))
-        pc = self.pose_col[self.k]
-        seen_from_var = pc >= 0
-        r_v, c_v = rows[seen_from_var], pc[seen_from_var]
-        jac[r_v, c_v] = -dp[seen_from_var, 0] * self.w_b
-        jac[r_v, c_v + 1] = -dp[seen_from_var, 1] * self.w_b
-        jac[r_v, c_v + 2] = -self.w_b
-        lc = self.n_pose_vars + 2 * self.lm
-        jac[rows, lc] = dp[:, 0] * self.w_b
-        jac[rows, lc + 1] = dp[:, 1] * self.w_b
+        self._fill_bearing_rows(jac, rows, dp)
         return jac
 
     def normal_equations(self, poses: np.ndarray, points: np.ndarray
