@@ -54,22 +54,29 @@ def _pair_d2(bundle: WindowBundle) -> np.ndarray:
 
 
 # ---------------------------------------------------------------------------- the Jacobian
-def test_linearise_jacobian_matches_central_differences() -> None:
-    rng = np.random.default_rng(11)
-    w, n = 7, 6
+def _perturbed_problem(seed: int, w: int = 7, n: int = 6):
+    """A window problem with nonzero residuals (rays from the fixed pose 0 too) and a point
+    ``(p0, q0)`` away from its solution, in the frame of pose 0 (the problem's gauge); also
+    the number of bearings."""
+    rng = np.random.default_rng(seed)
     odoms, poses, pts, brg = _scene(rng, w, n + 1, p_seen=0.75)
     brg = brg[:, :n]
-    brg[0, :2] = bearings_to(poses[0], pts[:2])        # rays from the fixed pose 0 too
+    brg[0, :2] = bearings_to(poses[0], pts[:2])
     k, lm = np.nonzero(np.isfinite(brg))
-    theta = brg[k, lm] + rng.normal(0.0, 0.05, k.size)             # nonzero residuals
+    theta = brg[k, lm] + rng.normal(0.0, 0.05, k.size)
     sig = rng.uniform(0.005, 0.05, (w - 1, 3))
     prob = _Problem(odoms + rng.normal(0.0, 0.03, odoms.shape), sig, 0.02, k, lm, theta, n)
-    # a point away from the solution, in the frame of pose 0 (the problem's gauge)
     p0 = between(poses[0], poses) + rng.normal(0.0, 0.05, (w, 3))
     p0[0] = 0.0
     q0 = to_local(poses[0], pts[:n]) + rng.normal(0.0, 0.1, (n, 2))
+    return prob, p0, q0, k.size
+
+
+def test_linearise_jacobian_matches_central_differences() -> None:
+    w, n = 7, 6
+    prob, p0, q0, n_bearings = _perturbed_problem(11, w, n)
     res, jac = prob.linearise(p0, q0)
-    assert jac.shape == (3 * (w - 1) + k.size, 3 * (w - 1) + 2 * n) == (prob.rows, prob.n)
+    assert jac.shape == (3 * (w - 1) + n_bearings, 3 * (w - 1) + 2 * n) == (prob.rows, prob.n)
     assert prob.cost(p0, q0) == pytest.approx(float(res @ res), rel=1e-14)
 
     def residual(delta: np.ndarray) -> np.ndarray:
@@ -88,20 +95,9 @@ def test_normal_equation_blocks_and_schur_step_match_the_dense_jacobian() -> Non
     the dense Jacobian, and the Schur-complement step solves the damped dense system."""
     from bomgraph.stmds.bundle_lm import _dense_information, _schur_step
 
-    rng = np.random.default_rng(12)
-    w, n = 7, 6
-    odoms, poses, pts, brg = _scene(rng, w, n + 1, p_seen=0.75)
-    brg = brg[:, :n]
-    brg[0, :2] = bearings_to(poses[0], pts[:2])        # rays from the fixed pose 0 too
-    k, lm = np.nonzero(np.isfinite(brg))
-    theta = brg[k, lm] + rng.normal(0.0, 0.05, k.size)
-    sig = rng.uniform(0.005, 0.05, (w - 1, 3))
-    prob = _Problem(odoms + rng.normal(0.0, 0.03, odoms.shape), sig, 0.02, k, lm, theta, n)
-    p0 = between(poses[0], poses) + rng.normal(0.0, 0.05, (w, 3))
-    p0[0] = 0.0
-    q0 = to_local(poses[0], pts[:n]) + rng.normal(0.0, 0.1, (n, 2))
+    prob, p0, q0, n_bearings = _perturbed_problem(12)
     res, jac = prob.linearise(p0, q0)
-    np.testing.assert_array_equal(prob.bearing_rows(p0, q0), jac[prob.rows - k.size:])
+    np.testing.assert_array_equal(prob.bearing_rows(p0, q0), jac[prob.rows - n_bearings:])
     cost, blocks = prob.normal_equations(p0, q0)
     assert cost == pytest.approx(float(res @ res), rel=1e-14)
     scale = np.abs(jac.T @ jac).max()
