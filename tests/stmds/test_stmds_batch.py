@@ -67,9 +67,12 @@ def test_pairs_within_groups_follow_triu_order() -> None:
     assert _pairs_within_groups(np.array([4]))[0].size == 0
 
 
-def test_store_with_repeated_pairs_equals_one_call_per_step() -> None:
+@pytest.mark.parametrize("dense", [True, False])
+def test_store_with_repeated_pairs_equals_one_call_per_step(dense: bool) -> None:
     rng = np.random.default_rng(0)
     one, many = DistanceStore("scale-free"), DistanceStore("scale-free")
+    if not dense:                                  # the sorted keys from the start
+        one._dense_max = many._dense_max = 0
     calls = []
     for _ in range(40):
         a = rng.integers(0, 30, 12)
@@ -85,9 +88,40 @@ def test_store_with_repeated_pairs_equals_one_call_per_step() -> None:
     assert len(many) == n
     for name in ("_a", "_b", "_count", "_sw", "_sx"):
         np.testing.assert_array_equal(getattr(one, name)[:n], getattr(many, name)[:n])
+    if dense:
+        assert one._table is not None and (one._table >= 0).sum() == n
+        return
     keys = one._keys
     assert np.all(np.diff(keys) > 0)                           # sorted, merged
     np.testing.assert_array_equal(np.sort(one._key_slot), np.arange(n))
+
+
+@pytest.mark.parametrize("dense_max", [64, 200, 100_000])
+def test_dense_pair_table_gives_the_slots_of_the_sorted_keys(dense_max: int) -> None:
+    """The dense table (growing with the landmark indices, and switching to sorted keys past
+    ``dense_max``) numbers the pairs as the sorted keys do: first appearance, repeats and
+    pairs of a landmark with itself included; the sums follow the slots."""
+    rng = np.random.default_rng(5)
+    table, keys = DistanceStore("scale-free"), DistanceStore("scale-free")
+    table._dense_max, keys._dense_max = dense_max, 0
+    top = 10
+    for call in range(60):
+        top = min(top + int(rng.integers(0, 12)), 400)     # indices grow past the table
+        size = int(rng.integers(0, 40))
+        a = rng.integers(0, top, size)
+        b = np.where(rng.random(size) < 0.05, a, rng.integers(0, top, size))
+        if size and call % 7 == 0:                          # a repeated block of pairs
+            a, b = np.concatenate([a, a[:5], b[:3]]), np.concatenate([b, b[:5], a[:3]])
+        np.testing.assert_array_equal(table.slots(a, b), keys.slots(a, b))
+        d2 = rng.uniform(0.1, 4, a.size)
+        var = rng.uniform(0.01, 1, a.size)
+        table.add(a, b, d2, var)
+        keys.add(a, b, d2, var)
+    n = len(keys)
+    assert len(table) == n > 1000
+    for name in ("_a", "_b", "_count", "_sw", "_sx"):
+        np.testing.assert_array_equal(getattr(table, name)[:n], getattr(keys, name)[:n])
+    assert (table._table is None) == (dense_max < 400)
 
 
 def test_degenerate_estimates_are_dropped_and_counted() -> None:
