@@ -128,9 +128,7 @@ class StepBatch:
             now = None                          # every ray from ``start`` on
         if now is not None and now.size == 0:
             return
-        odom = np.empty((n_steps + 1, 3))
-        odom[0] = 0.0
-        odom[1:] = np.reshape(np.concatenate(odoms), (n_steps, 3))
+        odom = np.concatenate([_ZERO3] + odoms).reshape(n_steps + 1, 3)
         # the ray of the same landmark one step before (the first, if it repeats)
         if small_ids:
             sorted_key, korder = key, None
@@ -151,7 +149,7 @@ class StepBatch:
             return
         prev = pos if korder is None else korder[pos]
         ray_sid = sid[now]
-        tri = triangulate_rays(odom[ray_sid], brg[prev], brg[now])
+        tri = triangulate_rays(np.take(odom, ray_sid, axis=0), brg[prev], brg[now])
         ok = gate_points(tri, None, min_parallax_rad=self.min_parallax_rad,
                          max_range_m=self.max_range_m).nonzero()[0]
         self.n_triangulated += ok.size

@@ -36,6 +36,7 @@ as *known* once it has a prior or at least ``min_count`` instantaneous estimates
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -353,12 +354,17 @@ class DistanceStore:
         w, x = estimate_weights(self.fusion, d2, var)
         # an estimate of zero length (two landmarks on one point: parallel rays) or without a
         # finite, positive weight (overflowing variances) carries no distance: dropped, counted
-        usable = (d2 > _TINY) & (w > 0) & np.isfinite(w) & np.isfinite(x)
-        if not usable.all():
-            self.n_degenerate += int(usable.size - usable.sum())
-            first, second, w, x = first[usable], second[usable], w[usable], x[usable]
-            if len(first) == 0:
-                return
+        # (the usual case, all usable, by four reductions: NaN and inf propagate into them, and
+        # an overflowing sum only sends the check to the element-wise mask)
+        with np.errstate(over="ignore"):
+            all_usable = d2.min() > _TINY and w.min() > 0 and math.isfinite(w.sum() + x.sum())
+        if not all_usable:
+            usable = (d2 > _TINY) & (w > 0) & np.isfinite(w) & np.isfinite(x)
+            if not usable.all():
+                self.n_degenerate += int(usable.size - usable.sum())
+                first, second, w, x = first[usable], second[usable], w[usable], x[usable]
+                if len(first) == 0:
+                    return
         slot = self.slots(first, second)
         np.add.at(self._sw, slot, w)
         np.add.at(self._sx, slot, w * x)

@@ -165,9 +165,10 @@ def triangulate_rays(odom: ArrayLike, bearing_prev_rad: ArrayLike,
     k = a.size
     u = np.asarray(odom, dtype=float)
     if u.ndim == 2 and u.shape == (k, 3):        # one odometry per ray
-        dx, dy, dpsi = u[:, 0], u[:, 1], u[:, 2]
-        o_conj: complex | np.ndarray = np.empty(k, np.complex128)
-        o_conj.real, o_conj.imag = dx, -dy
+        dpsi = u[:, 2]
+        # dx - i dy per ray (the conjugate negates dy exactly)
+        o_conj: complex | np.ndarray = np.ascontiguousarray(u[:, :2]).view(
+            np.complex128)[:, 0].conj()
     else:
         u = u.reshape(3)
         dx, dy, dpsi = float(u[0]), float(u[1]), float(u[2])
@@ -188,8 +189,9 @@ def triangulate_rays(odom: ArrayLike, bearing_prev_rad: ArrayLike,
         r2 = (ua * o_conj).imag * inv_s
         np.multiply(ub.imag, inv_s, out=dr1[:, 0])                   # d r1 / d dx
         np.multiply(ub.real, -inv_s, out=dr1[:, 1])                  # d r1 / d dy
-        np.multiply(ob.real - r1 * c, inv_s, out=dr1[:, 2])          # d r1 / d b (= dpsi)
-        np.multiply(r1 * c, inv_s, out=dr1[:, 3])                    # d r1 / d a
+        r1c = r1 * c
+        np.multiply(ob.real - r1c, inv_s, out=dr1[:, 2])             # d r1 / d b (= dpsi)
+        np.multiply(r1c, inv_s, out=dr1[:, 3])                       # d r1 / d a
         dr1[:, 4] = dr1[:, 2]                                        # b = dpsi + theta_now
         dr1 = dr1.copy()
         jac.imag[:, 3] = r1
@@ -394,22 +396,31 @@ def pair_squared_distances(tri: RayTriangulation, odometry: ArrayLike,
     unc = np.asarray(odometry, dtype=float)
     sb2 = float(bearing_sigma_rad) ** 2
     # e . dp/dz = Re(e conj(dp/dz)) for the offset e = p_i - p_j (complex plane); both ends
-    # of every pair at once, component-major (5, 2, P): long rows for the small arrays
+    # of every pair at once, component-major (5, 2, P): long rows for the small arrays, and
+    # one (P, 10)-sized temporary worked in place (large temporaries cost page faults)
     pts = np.ascontiguousarray(tri.points_xy).view(np.complex128)[:, 0]
     ends = pts[idx2]
     e = ends[0] - ends[1]
     d2 = (e * e.conj()).real
-    g = (e * np.take(tri.jacobian_complex.T.conj(), idx2, axis=1)).real
+    g = np.take(np.ascontiguousarray(tri.jacobian_complex.T), idx2, axis=1)
+    np.conjugate(g, out=g)
+    np.multiply(e, g, out=g)
+    g = g.real
     # d |e|^2 / dz = 2 e . de/dz: the odometry moves both points, each bearing one of them
     grad_t = np.empty((7, len(first)))
     np.subtract(g[:3, 0], g[:3, 1], out=grad_t[:3])
     grad_t[3:5] = g[3:, 0]
     grad_t[5:] = g[3:, 1]
     grad = np.ascontiguousarray(grad_t.T)                       # (P, 7)
+    full = None
+    if with_jacobian:
+        full = 2.0 * grad
+        full[:, 5:] *= -1.0
     if unc.shape == (3,):                                       # independent components
-        var = (grad * grad) @ np.concatenate((4.0 * unc * unc, np.full(4, 4.0 * sb2)))
+        var = np.multiply(grad, grad, out=grad) @ np.concatenate((4.0 * unc * unc,
+                                                                 np.full(4, 4.0 * sb2)))
     elif pair_groups is not None:                               # rows of (G, 3) sigmas
-        g2 = grad * grad
+        g2 = np.multiply(grad, grad, out=grad)
         var = np.empty(len(first))
         scale = np.empty((len(unc), 7))
         np.multiply(4.0 * unc, unc, out=scale[:, :3])
@@ -427,10 +438,6 @@ def pair_squared_distances(tri: RayTriangulation, odometry: ArrayLike,
         cov7[:3, :3] = odometry_covariance(unc)
         cov7.flat[24::8] = sb2                                  # the four bearings
         var = 4.0 * ((grad @ cov7) * grad).sum(axis=1)
-    full = None
-    if with_jacobian:
-        full = 2.0 * grad
-        full[:, 5:] *= -1.0
     return PairEstimates(first, second, d2, var, full)
 
 
