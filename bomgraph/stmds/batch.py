@@ -27,23 +27,6 @@ BATCH_STEPS = 64
 _SHIFT = np.int64(32)
 
 
-def _pairs_within_groups(group: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """All pairs ``i < j`` of items in the same group (``group`` non-decreasing), ordered by
-    group, then ``i``, then ``j`` (``np.triu_indices`` order inside each group)."""
-    k = group.size
-    if k < 2:
-        return np.zeros(0, np.int64), np.zeros(0, np.int64)
-    pos = np.arange(k)
-    new = np.empty(k, bool)
-    new[0] = True
-    np.not_equal(group[1:], group[:-1], out=new[1:])
-    end = np.append(np.flatnonzero(new)[1:], k)
-    count = end[np.cumsum(new) - 1] - pos - 1          # items after each one in its group
-    first = np.repeat(pos, count)
-    offset = np.arange(first.size) - np.repeat(np.cumsum(count) - count, count)
-    return first, first + 1 + offset
-
-
 class StepBatch:
     """Steps waiting for the consecutive-step triangulation, and the last step processed.
 

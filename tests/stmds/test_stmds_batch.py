@@ -10,8 +10,8 @@ import pytest
 
 from bomgraph.mapper import create_mapper
 from bomgraph.sim import SimConfig, simulate
+from bomgraph.stream import Prior
 from bomgraph.stmds import completion
-from bomgraph.stmds.batch import _pairs_within_groups
 from bomgraph.stmds.completion import shortest_path_completion
 from bomgraph.stmds.distances import DistanceStore
 
@@ -54,17 +54,49 @@ def test_batches_fuse_the_same_bits_as_one_step_at_a_time(cut_every: int) -> Non
     np.testing.assert_array_equal(ea.landmarks_xy, eb.landmarks_xy)
 
 
-def test_pairs_within_groups_follow_triu_order() -> None:
-    group = np.array([0, 0, 0, 2, 5, 5, 5, 5])
-    f, g = _pairs_within_groups(group)
-    want_f, want_g = [], []
-    for start, size in ((0, 3), (3, 1), (4, 4)):
-        i, j = np.triu_indices(size, 1)
-        want_f.append(i + start)
-        want_g.append(j + start)
-    np.testing.assert_array_equal(f, np.concatenate(want_f))
-    np.testing.assert_array_equal(g, np.concatenate(want_g))
-    assert _pairs_within_groups(np.array([4]))[0].size == 0
+def _relabelled(header, steps, layout: str, rng):
+    """The stream with its landmark ids mapped (``small``: as simulated; ``cache``: past the
+    id cache; ``huge``: past 2**31, the dense-index keys) and each step's readings shuffled
+    (``shuffled``), with two priors on the mapped ids."""
+    ids = np.unique(np.concatenate([s.landmark_ids for s in steps]))
+    offset = {"small": 0, "shuffled": 0, "cache": (1 << 20) + 3, "huge": (1 << 40) + 11}[layout]
+    new_ids = {int(i): offset + 7 * int(i) for i in ids}
+    out = []
+    for s in steps:
+        lid = np.array([new_ids[int(i)] for i in s.landmark_ids], np.int64)
+        brg = s.bearings_rad
+        if layout in ("shuffled", "huge") and lid.size:
+            order = rng.permutation(lid.size)
+            lid, brg = lid[order], brg[order]
+        out.append(dataclasses.replace(s, landmark_ids=lid, bearings_rad=brg))
+    a, b, c = (new_ids[int(i)] for i in ids[:3])
+    header = dataclasses.replace(header, priors=(Prior(a, b, 1.5, 0.1), Prior(c, a, 2.0, 0.2)))
+    return header, out
+
+
+@pytest.mark.parametrize("layout", ["small", "shuffled", "cache", "huge"])
+def test_batch_keys_and_id_cache_follow_the_step_by_step_code(layout: str) -> None:
+    """Steps not sorted by id, ids past the id cache and past the (step, id) keys: the batch
+    gives the step-by-step numbers (pair slots in the same order, the same sums)."""
+    header, steps = _relabelled(*_stream_with_breaks(), layout, np.random.default_rng(4))
+    batched = create_mapper("stmds-smacof", header)
+    single = create_mapper("stmds-smacof", header)
+    single._batch = None
+    for s in steps:
+        batched.step(s)
+        single.step(s)
+        if s.t % 10 == 0:
+            batched.flush()
+    batched.flush()
+    a, b = batched._store, single._store
+    n = len(a)
+    assert n == len(b) > 100
+    for name in ("_a", "_b", "_count", "_sw", "_sx", "_prior"):
+        np.testing.assert_array_equal(getattr(a, name)[:n], getattr(b, name)[:n], err_msg=name)
+    np.testing.assert_array_equal(batched._ids.ids, single._ids.ids)
+    np.testing.assert_array_equal(batched._triangulated.array, single._triangulated.array)
+    cache = batched._batch._id_cache
+    assert (cache.size > 0) == (layout in ("small", "shuffled"))
 
 
 @pytest.mark.parametrize("dense", [True, False])
