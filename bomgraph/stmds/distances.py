@@ -36,6 +36,7 @@ as *known* once it has a prior or at least ``min_count`` instantaneous estimates
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -88,6 +89,9 @@ def fused_from_sums(rule: str, sum_w: np.ndarray,
 
 
 _KEY_SHIFT = np.int64(32)
+#: Landmark indices up to which :class:`DistanceStore` finds pair slots in a dense table
+#: (at most ``DENSE_MAX ** 2`` int64, 8 MB); beyond, in sorted pair keys.
+DENSE_MAX = 1024
 _TINY = 1e-300
 
 
@@ -195,8 +199,13 @@ class DistanceStore:
             raise ConfigError(f"min_count must be >= 1, got {min_count}")
         self.fusion = fusion
         self.min_count = int(min_count)
-        self._keys = np.zeros(0, np.int64)       # sorted pair keys
+        self._keys = np.zeros(0, np.int64)       # sorted pair keys (past the dense table)
         self._key_slot = np.zeros(0, np.int64)   # slot of each sorted key
+        # while every landmark index is below DENSE_MAX: slot (or -1) of pair (lo, hi) at
+        # lo * cap + hi of a flat (cap * cap) table, cap a power of two
+        self._dense_max = DENSE_MAX
+        self._cap = 0
+        self._table: np.ndarray | None = np.zeros(0, np.int64)
         self._n = 0
         self.n_degenerate = 0   # estimates dropped: zero length, or no finite, positive weight
         cap = 64
@@ -226,12 +235,22 @@ class DistanceStore:
         """Slots of the pairs ``(first[p], second[p])`` of dense indices, created if new.
 
         The order inside a pair does not matter; a pair may repeat (one slot). New pairs get
-        consecutive slots in the order of their first appearance. The new keys are merged
-        into the sorted key array (``np.searchsorted``, then one scatter: linear in the pairs
-        stored, not a re-sort of them).
+        consecutive slots in the order of their first appearance. While the landmark indices
+        stay below :data:`DENSE_MAX` the slots are read from a dense table of pairs (one
+        gather); beyond, the new keys are merged into a sorted key array
+        (``np.searchsorted``, then one scatter: linear in the pairs stored, not a re-sort of
+        them). Both give the same slots.
         """
         lo = np.minimum(first, second)
         hi = np.maximum(first, second)
+        if len(hi) == 0:
+            return np.zeros(0, np.int64)
+        if self._table is not None:
+            top = int(hi.max())
+            if top >= self._cap:
+                self._grow_table(top + 1)
+            if self._table is not None:
+                return self._dense_slots(lo, hi)
         keys = (lo << _KEY_SHIFT) | hi
         n = len(self._keys)
         if n:
@@ -268,6 +287,48 @@ class DistanceStore:
         self._keys, self._key_slot = keys_all, slots_all
         return out
 
+    def _grow_table(self, need: int) -> None:
+        """A dense table for indices below ``need`` (rebuilt from the slots), or the sorted
+        keys once ``need`` passes ``_dense_max``."""
+        n = self._n
+        a, b = self._a[:n], self._b[:n]
+        if need > self._dense_max:
+            keys = (a << _KEY_SHIFT) | b
+            order = np.argsort(keys, kind="stable")
+            self._keys, self._key_slot = keys[order], order.astype(np.int64, copy=False)
+            self._table, self._cap = None, 0
+            return
+        cap = max(64, self._cap)
+        while cap < need:
+            cap *= 2
+        table = np.full(cap * cap, -1, np.int64)
+        table[a * cap + b] = np.arange(n)
+        self._table, self._cap = table, cap
+
+    def _dense_slots(self, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+        """:meth:`slots` from the dense table (``lo <= hi``, both below its size)."""
+        table = self._table
+        flat = lo * self._cap + hi
+        out = table[flat]
+        new = (out < 0).nonzero()[0]
+        if new.size == 0:
+            return out
+        new_flat = flat[new]
+        # each new pair's first appearance: the least position among its repeats
+        order = np.arange(new.size)
+        table[new_flat] = new.size
+        np.minimum.at(table, new_flat, order)
+        first = (table[new_flat] == order).nonzero()[0]
+        m = first.size
+        new_slots = np.arange(self._n, self._n + m)
+        self._grow(self._n + m)
+        self._a[new_slots] = lo[new[first]]
+        self._b[new_slots] = hi[new[first]]
+        self._n += m
+        table[new_flat[first]] = new_slots
+        out[new] = table[new_flat]
+        return out
+
     # ---------------------------------------------------------------------------- updates
     def add(self, first: np.ndarray, second: np.ndarray, squared_distance_m2: np.ndarray,
             variance_m4: np.ndarray) -> None:
@@ -293,12 +354,17 @@ class DistanceStore:
         w, x = estimate_weights(self.fusion, d2, var)
         # an estimate of zero length (two landmarks on one point: parallel rays) or without a
         # finite, positive weight (overflowing variances) carries no distance: dropped, counted
-        usable = (d2 > _TINY) & (w > 0) & np.isfinite(w) & np.isfinite(x)
-        if not usable.all():
-            self.n_degenerate += int(usable.size - usable.sum())
-            first, second, w, x = first[usable], second[usable], w[usable], x[usable]
-            if len(first) == 0:
-                return
+        # (the usual case, all usable, by four reductions: NaN and inf propagate into them, and
+        # an overflowing sum only sends the check to the element-wise mask)
+        with np.errstate(over="ignore"):
+            all_usable = d2.min() > _TINY and w.min() > 0 and math.isfinite(w.sum() + x.sum())
+        if not all_usable:
+            usable = (d2 > _TINY) & (w > 0) & np.isfinite(w) & np.isfinite(x)
+            if not usable.all():
+                self.n_degenerate += int(usable.size - usable.sum())
+                first, second, w, x = first[usable], second[usable], w[usable], x[usable]
+                if len(first) == 0:
+                    return
         slot = self.slots(first, second)
         np.add.at(self._sw, slot, w)
         np.add.at(self._sx, slot, w * x)

@@ -31,6 +31,7 @@ relative first-order std. dev. of its depth ``sigma_r1 / r1`` is at most
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass
 
@@ -164,9 +165,10 @@ def triangulate_rays(odom: ArrayLike, bearing_prev_rad: ArrayLike,
     k = a.size
     u = np.asarray(odom, dtype=float)
     if u.ndim == 2 and u.shape == (k, 3):        # one odometry per ray
-        dx, dy, dpsi = u[:, 0], u[:, 1], u[:, 2]
-        o_conj: complex | np.ndarray = np.empty(k, np.complex128)
-        o_conj.real, o_conj.imag = dx, -dy
+        dpsi = u[:, 2]
+        # dx - i dy per ray (the conjugate negates dy exactly)
+        o_conj: complex | np.ndarray = np.ascontiguousarray(u[:, :2]).view(
+            np.complex128)[:, 0].conj()
     else:
         u = u.reshape(3)
         dx, dy, dpsi = float(u[0]), float(u[1]), float(u[2])
@@ -187,8 +189,9 @@ def triangulate_rays(odom: ArrayLike, bearing_prev_rad: ArrayLike,
         r2 = (ua * o_conj).imag * inv_s
         np.multiply(ub.imag, inv_s, out=dr1[:, 0])                   # d r1 / d dx
         np.multiply(ub.real, -inv_s, out=dr1[:, 1])                  # d r1 / d dy
-        np.multiply(ob.real - r1 * c, inv_s, out=dr1[:, 2])          # d r1 / d b (= dpsi)
-        np.multiply(r1 * c, inv_s, out=dr1[:, 3])                    # d r1 / d a
+        r1c = r1 * c
+        np.multiply(ob.real - r1c, inv_s, out=dr1[:, 2])             # d r1 / d b (= dpsi)
+        np.multiply(r1c, inv_s, out=dr1[:, 3])                       # d r1 / d a
         dr1[:, 4] = dr1[:, 2]                                        # b = dpsi + theta_now
         dr1 = dr1.copy()
         jac.imag[:, 3] = r1
@@ -311,14 +314,16 @@ def gate_points(tri: RayTriangulation, range_var_m2: np.ndarray | None = None, *
     ndarray of shape (k,), bool
     """
     # parallax in [min, pi - min]  <=>  sin(parallax) >= sin(min) (and > 0)
-    sin_par = np.abs(tri.sin_parallax)
-    with np.errstate(invalid="ignore"):
-        ok = sin_par >= max(math.sin(min_parallax_rad), 1e-15)
-        r1, r2 = tri.range_prev_m, tri.range_now_m
-        ok &= (r1 > 0) & (r2 > 0) & (r1 <= max_range_m) & (r2 <= max_range_m)
-        if np.isfinite(max_relative_range_sigma):
-            if range_var_m2 is None:
-                raise ConfigError("gate_points: the relative range gate needs range_var_m2")
+    ok = np.abs(tri.sin_parallax) >= max(math.sin(min_parallax_rad), 1e-15)
+    # both depths in (0, max_range_m] (NaN depths fail: the extremes propagate NaN)
+    r1, r2 = tri.range_prev_m, tri.range_now_m
+    ok &= np.minimum(r1, r2) > 0
+    if max_range_m < math.inf:
+        ok &= np.maximum(r1, r2) <= max_range_m
+    if math.isfinite(max_relative_range_sigma):
+        if range_var_m2 is None:
+            raise ConfigError("gate_points: the relative range gate needs range_var_m2")
+        with np.errstate(invalid="ignore", over="ignore"):
             ok &= range_var_m2 <= (max_relative_range_sigma * tri.range_prev_m) ** 2
     return ok
 
@@ -352,8 +357,8 @@ class PairEstimates:
 
 def pair_squared_distances(tri: RayTriangulation, odometry: ArrayLike,
                            bearing_sigma_rad: float, *, select: np.ndarray | None = None,
-                           pairs: tuple[np.ndarray, np.ndarray] | None = None,
-                           pair_groups: np.ndarray | None = None,
+                           pairs: tuple[np.ndarray, np.ndarray] | np.ndarray | None = None,
+                           pair_groups: np.ndarray | list[int] | None = None,
                            with_jacobian: bool = False) -> PairEstimates:
     """Squared distance and its first-order variance for every pair of ``tri``'s landmarks.
 
@@ -368,9 +373,9 @@ def pair_squared_distances(tri: RayTriangulation, odometry: ArrayLike,
     bearing_sigma_rad : float
     select : array of int, optional
         Only pairs among these landmarks (e.g. those that passed :func:`gate_points`).
-    pairs : (first, second) int arrays of shape (P,), optional
+    pairs : (first, second) int arrays of shape (P,), or an int array of shape (2, P), optional
         The pairs to take (indices into ``tri``), in place of all pairs of ``select``.
-    pair_groups : int array of shape (G,), optional
+    pair_groups : ints (array or sequence) of length G, optional
         Numbers of consecutive pairs sharing each row of ``odometry`` (the steps of a batch;
         each group's variances are those of one call per group, bit for bit).
     with_jacobian : bool
@@ -381,39 +386,58 @@ def pair_squared_distances(tri: RayTriangulation, odometry: ArrayLike,
     PairEstimates
         The pairs ``(first, second)`` index ``tri``; in ``np.triu_indices`` order of ``select``.
     """
-    first, second = select_pairs(len(tri), select) if pairs is None else pairs
+    if pairs is None:
+        idx2 = np.stack(select_pairs(len(tri), select))
+    elif isinstance(pairs, np.ndarray) and pairs.ndim == 2:
+        idx2 = pairs
+    else:
+        idx2 = np.stack(pairs)
+    first, second = idx2[0], idx2[1]
     unc = np.asarray(odometry, dtype=float)
     sb2 = float(bearing_sigma_rad) ** 2
-    # e . dp/dz = Re(e conj(dp/dz)) for the offset e = p_i - p_j (complex plane)
+    # e . dp/dz = Re(e conj(dp/dz)) for the offset e = p_i - p_j (complex plane); both ends
+    # of every pair at once, component-major (5, 2, P): long rows for the small arrays, and
+    # one (P, 10)-sized temporary worked in place (large temporaries cost page faults)
     pts = np.ascontiguousarray(tri.points_xy).view(np.complex128)[:, 0]
-    jac_conj = tri.jacobian_complex.conj()                      # (k, 5)
-    e = pts[first] - pts[second]
+    ends = pts[idx2]
+    e = ends[0] - ends[1]
     d2 = (e * e.conj()).real
-    gi = (e[:, None] * jac_conj[first]).real                    # e . dp_i/dz, (P, 5)
-    gj = (e[:, None] * jac_conj[second]).real                   # e . dp_j/dz
+    g = np.take(np.ascontiguousarray(tri.jacobian_complex.T), idx2, axis=1)
+    np.conjugate(g, out=g)
+    np.multiply(e, g, out=g)
+    g = g.real
     # d |e|^2 / dz = 2 e . de/dz: the odometry moves both points, each bearing one of them
-    grad = np.concatenate((gi[:, :3] - gj[:, :3], gi[:, 3:], gj[:, 3:]), axis=1)
+    grad_t = np.empty((7, len(first)))
+    np.subtract(g[:3, 0], g[:3, 1], out=grad_t[:3])
+    grad_t[3:5] = g[3:, 0]
+    grad_t[5:] = g[3:, 1]
+    grad = np.ascontiguousarray(grad_t.T)                       # (P, 7)
+    full = None
+    if with_jacobian:
+        full = 2.0 * grad
+        full[:, 5:] *= -1.0
     if unc.shape == (3,):                                       # independent components
-        var = (grad * grad) @ np.concatenate((4.0 * unc * unc, np.full(4, 4.0 * sb2)))
+        var = np.multiply(grad, grad, out=grad) @ np.concatenate((4.0 * unc * unc,
+                                                                 np.full(4, 4.0 * sb2)))
     elif pair_groups is not None:                               # rows of (G, 3) sigmas
-        g2 = grad * grad
+        g2 = np.multiply(grad, grad, out=grad)
         var = np.empty(len(first))
-        scale = np.empty(7)
-        scale[3:] = 4.0 * sb2
-        end = np.cumsum(pair_groups)
-        for row, a, b in zip(unc, end - pair_groups, end):
+        scale = np.empty((len(unc), 7))
+        np.multiply(4.0 * unc, unc, out=scale[:, :3])
+        scale[:, 3:] = 4.0 * sb2
+        a = 0
+        # one matrix-vector product per group, as one call per step (BLAS rounds a row
+        # differently by its place in the call, so the groups are not merged)
+        for row, b in zip(scale, itertools.accumulate(
+                pair_groups.tolist() if isinstance(pair_groups, np.ndarray) else pair_groups)):
             if b > a:
-                scale[:3] = 4.0 * row * row
-                np.matmul(g2[a:b], scale, out=var[a:b])
+                np.matmul(g2[a:b], row, out=var[a:b])
+            a = b
     else:
         cov7 = np.zeros((7, 7))
         cov7[:3, :3] = odometry_covariance(unc)
         cov7.flat[24::8] = sb2                                  # the four bearings
         var = 4.0 * ((grad @ cov7) * grad).sum(axis=1)
-    full = None
-    if with_jacobian:
-        full = 2.0 * grad
-        full[:, 5:] *= -1.0
     return PairEstimates(first, second, d2, var, full)
 
 

@@ -10,8 +10,8 @@ import pytest
 
 from bomgraph.mapper import create_mapper
 from bomgraph.sim import SimConfig, simulate
+from bomgraph.stream import Prior
 from bomgraph.stmds import completion
-from bomgraph.stmds.batch import _pairs_within_groups
 from bomgraph.stmds.completion import shortest_path_completion
 from bomgraph.stmds.distances import DistanceStore
 
@@ -54,22 +54,57 @@ def test_batches_fuse_the_same_bits_as_one_step_at_a_time(cut_every: int) -> Non
     np.testing.assert_array_equal(ea.landmarks_xy, eb.landmarks_xy)
 
 
-def test_pairs_within_groups_follow_triu_order() -> None:
-    group = np.array([0, 0, 0, 2, 5, 5, 5, 5])
-    f, g = _pairs_within_groups(group)
-    want_f, want_g = [], []
-    for start, size in ((0, 3), (3, 1), (4, 4)):
-        i, j = np.triu_indices(size, 1)
-        want_f.append(i + start)
-        want_g.append(j + start)
-    np.testing.assert_array_equal(f, np.concatenate(want_f))
-    np.testing.assert_array_equal(g, np.concatenate(want_g))
-    assert _pairs_within_groups(np.array([4]))[0].size == 0
+def _relabelled(header, steps, layout: str, rng):
+    """The stream with its landmark ids mapped (``small``: as simulated; ``cache``: past the
+    id cache; ``huge``: past 2**31, the dense-index keys) and each step's readings shuffled
+    (``shuffled``), with two priors on the mapped ids."""
+    ids = np.unique(np.concatenate([s.landmark_ids for s in steps]))
+    offset = {"small": 0, "shuffled": 0, "cache": (1 << 20) + 3, "huge": (1 << 40) + 11}[layout]
+    new_ids = {int(i): offset + 7 * int(i) for i in ids}
+    out = []
+    for s in steps:
+        lid = np.array([new_ids[int(i)] for i in s.landmark_ids], np.int64)
+        brg = s.bearings_rad
+        if layout in ("shuffled", "huge") and lid.size:
+            order = rng.permutation(lid.size)
+            lid, brg = lid[order], brg[order]
+        out.append(dataclasses.replace(s, landmark_ids=lid, bearings_rad=brg))
+    a, b, c = (new_ids[int(i)] for i in ids[:3])
+    header = dataclasses.replace(header, priors=(Prior(a, b, 1.5, 0.1), Prior(c, a, 2.0, 0.2)))
+    return header, out
 
 
-def test_store_with_repeated_pairs_equals_one_call_per_step() -> None:
+@pytest.mark.parametrize("layout", ["small", "shuffled", "cache", "huge"])
+def test_batch_keys_and_id_cache_follow_the_step_by_step_code(layout: str) -> None:
+    """Steps not sorted by id, ids past the id cache and past the (step, id) keys: the batch
+    gives the step-by-step numbers (pair slots in the same order, the same sums)."""
+    header, steps = _relabelled(*_stream_with_breaks(), layout, np.random.default_rng(4))
+    batched = create_mapper("stmds-smacof", header)
+    single = create_mapper("stmds-smacof", header)
+    single._batch = None
+    for s in steps:
+        batched.step(s)
+        single.step(s)
+        if s.t % 10 == 0:
+            batched.flush()
+    batched.flush()
+    a, b = batched._store, single._store
+    n = len(a)
+    assert n == len(b) > 100
+    for name in ("_a", "_b", "_count", "_sw", "_sx", "_prior"):
+        np.testing.assert_array_equal(getattr(a, name)[:n], getattr(b, name)[:n], err_msg=name)
+    np.testing.assert_array_equal(batched._ids.ids, single._ids.ids)
+    np.testing.assert_array_equal(batched._triangulated.array, single._triangulated.array)
+    cache = batched._batch._id_cache
+    assert (cache.size > 0) == (layout in ("small", "shuffled"))
+
+
+@pytest.mark.parametrize("dense", [True, False])
+def test_store_with_repeated_pairs_equals_one_call_per_step(dense: bool) -> None:
     rng = np.random.default_rng(0)
     one, many = DistanceStore("scale-free"), DistanceStore("scale-free")
+    if not dense:                                  # the sorted keys from the start
+        one._dense_max = many._dense_max = 0
     calls = []
     for _ in range(40):
         a = rng.integers(0, 30, 12)
@@ -85,9 +120,40 @@ def test_store_with_repeated_pairs_equals_one_call_per_step() -> None:
     assert len(many) == n
     for name in ("_a", "_b", "_count", "_sw", "_sx"):
         np.testing.assert_array_equal(getattr(one, name)[:n], getattr(many, name)[:n])
+    if dense:
+        assert one._table is not None and (one._table >= 0).sum() == n
+        return
     keys = one._keys
     assert np.all(np.diff(keys) > 0)                           # sorted, merged
     np.testing.assert_array_equal(np.sort(one._key_slot), np.arange(n))
+
+
+@pytest.mark.parametrize("dense_max", [64, 200, 100_000])
+def test_dense_pair_table_gives_the_slots_of_the_sorted_keys(dense_max: int) -> None:
+    """The dense table (growing with the landmark indices, and switching to sorted keys past
+    ``dense_max``) numbers the pairs as the sorted keys do: first appearance, repeats and
+    pairs of a landmark with itself included; the sums follow the slots."""
+    rng = np.random.default_rng(5)
+    table, keys = DistanceStore("scale-free"), DistanceStore("scale-free")
+    table._dense_max, keys._dense_max = dense_max, 0
+    top = 10
+    for call in range(60):
+        top = min(top + int(rng.integers(0, 12)), 400)     # indices grow past the table
+        size = int(rng.integers(0, 40))
+        a = rng.integers(0, top, size)
+        b = np.where(rng.random(size) < 0.05, a, rng.integers(0, top, size))
+        if size and call % 7 == 0:                          # a repeated block of pairs
+            a, b = np.concatenate([a, a[:5], b[:3]]), np.concatenate([b, b[:5], a[:3]])
+        np.testing.assert_array_equal(table.slots(a, b), keys.slots(a, b))
+        d2 = rng.uniform(0.1, 4, a.size)
+        var = rng.uniform(0.01, 1, a.size)
+        table.add(a, b, d2, var)
+        keys.add(a, b, d2, var)
+    n = len(keys)
+    assert len(table) == n > 1000
+    for name in ("_a", "_b", "_count", "_sw", "_sx"):
+        np.testing.assert_array_equal(getattr(table, name)[:n], getattr(keys, name)[:n])
+    assert (table._table is None) == (dense_max < 400)
 
 
 def test_degenerate_estimates_are_dropped_and_counted() -> None:

@@ -182,3 +182,31 @@ def test_pair_variance_with_a_full_odometry_covariance_and_a_selection() -> None
     np.testing.assert_array_equal(part.second, sel[sub.second])
     np.testing.assert_allclose(part.variance_m4, sub.variance_m4)
     np.testing.assert_allclose(part.squared_distance_m2, sub.squared_distance_m2)
+
+
+def test_grouped_pairs_give_the_bits_of_one_call_per_group() -> None:
+    """Pairs given as a (2, P) array or a pair of arrays, groups as a list or an array: each
+    group's numbers (and Jacobian) are those of one call on its own rays and sigmas."""
+    rng = np.random.default_rng(8)
+    sizes = [5, 1, 0, 7, 2]
+    k = sum(sizes)
+    a = rng.uniform(-1.0, 1.0, k)
+    tri = triangulate_rays(rng.uniform(0.05, 0.3, (k, 3)), a, a + rng.uniform(0.1, 0.6, k))
+    sig = rng.uniform(0.01, 0.05, (len(sizes), 3))
+    starts = np.cumsum(sizes) - sizes
+    blocks = [np.stack(np.triu_indices(n, 1)) + s for n, s in zip(sizes, starts)]
+    idx = np.concatenate(blocks, axis=1)
+    counts = [blk.shape[1] for blk in blocks]
+    stacked = pair_squared_distances(tri, sig, 0.04, pairs=idx, pair_groups=counts,
+                                     with_jacobian=True)
+    split = pair_squared_distances(tri, sig, 0.04, pairs=(idx[0], idx[1]),
+                                   pair_groups=np.array(counts), with_jacobian=True)
+    alone = [pair_squared_distances(tri.subset(np.arange(s, s + n)), sig[g], 0.04,
+                                    with_jacobian=True)
+             for g, (n, s) in enumerate(zip(sizes, starts))]
+    for field in ("first", "second", "squared_distance_m2", "variance_m4", "jacobian"):
+        assert getattr(stacked, field).tobytes() == getattr(split, field).tobytes(), field
+    for field in ("squared_distance_m2", "variance_m4", "jacobian"):
+        one_by_one = np.concatenate([getattr(p, field) for p in alone])
+        assert getattr(stacked, field).tobytes() == one_by_one.tobytes(), field
+    assert len(stacked) == sum(n * (n - 1) // 2 for n in sizes)
