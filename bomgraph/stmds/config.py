@@ -126,6 +126,17 @@ class StmdsConfig(Presets):
         ``tri_method="ba"``: each window re-estimates the bearing std. dev. from its own
         residuals (a robust scale, ``bundle.bundle_adjust_window``), so its weights, outlier
         test and covariance do not depend on how the stream's sigma was calibrated.
+    tri_robust_start : bool
+        ``tri_method="ba"``: a landmark whose starting triangulation is refused is started
+        again without the one ray that most disagrees with the others (beyond
+        ``tri_outlier_sigma``; ``bundle.bundle_adjust_window``'s ``robust_start``), so one
+        misidentified detection does not refuse its landmark from every window that holds it.
+    admit_parallax_rad : float or None
+        Window bundles (``tri_method="ba"``): a landmark is returned in the map only when the
+        origins of its rays over the whole run, every window carried into the map frame by a
+        rigid fit of its landmarks, span at least this angle seen from its mapped position
+        (``admission.accumulated_parallax``; the geometric half of the factor-graph
+        baselines' 0.3 rad entry rule). None (default): every reconstructed landmark.
     tri_parallax_rad : float or None
         Windows measured in geometry, not in keyframes (in place of ``tri_window``, issue 15):
         a window closes once the ``tri_parallax_quantile`` of the parallax of the landmarks it
@@ -209,6 +220,11 @@ class StmdsConfig(Presets):
     tri_min_depth_m: float = 0.05
     tri_grow: int = 5
     tri_estimate_sigma: bool = False
+    tri_robust_start: bool = False
+    tri_fuse_relative_sigma: float = math.inf
+    fuse_outlier_sigma: float | None = None
+    tri_heading_bias_rad: float = 0.0
+    admit_parallax_rad: float | None = None
     tri_parallax_rad: float | None = None
     tri_parallax_quantile: float = 0.5
     tri_window_m: float | None = None
@@ -274,6 +290,10 @@ class StmdsConfig(Presets):
              "give tri_window (keyframes) or tri_parallax_rad / tri_window_m (geometry), not "
              "both")
         need(self.tri_min_depth_m >= 0, "tri_min_depth_m must be >= 0")
+        need(self.admit_parallax_rad is None
+             or (0 < self.admit_parallax_rad <= math.pi and self.tri_method == "ba"),
+             "admit_parallax_rad must be in (0, pi] and needs tri_method='ba' (window "
+             "bundles)")
         need(int(self.tri_grow) == self.tri_grow and self.tri_grow >= 1,
              "tri_grow must be an integer >= 1")
         need(self.tri_outlier_sigma is None or self.tri_outlier_sigma > 0,
