@@ -114,7 +114,8 @@ def bundle_adjust_window(odoms: ArrayLike, odometry_sigmas: ArrayLike, bearings_
                          initial_points: ArrayLike | None = None, initial_prefix: int = 1,
                          grow: int = 5, prefix_ends: Sequence[int] | None = None,
                          estimate_sigma: bool = False, resume: PrefixState | None = None,
-                         robust_start: bool = False, max_outliers: int = 10, max_iter: int = 30, tol: float = 1e-6
+                         robust_start: bool = False, max_outliers: int = 10,
+                         max_iter: int = 30, tol: float = 1e-6
                          ) -> tuple[WindowBundle, int]:
     """Jointly estimate a window's poses and landmarks from its odometry and bearings.
 
@@ -170,13 +171,15 @@ def bundle_adjust_window(odoms: ArrayLike, odometry_sigmas: ArrayLike, bearings_
         covariance then hold whether the stream's sigma is a small MAD estimate or a
         generous one.
     robust_start : bool
-        A landmark the starting triangulation refuses (behind a ray, too little parallax,
-        not converged) is tried again without each of its rays in turn (at least three rays);
-        the ray whose removal gives a point that passes the gates with the smallest residuals
-        of the others, and whose own residual there exceeds ``outlier_sigma`` sigmas, is
-        dropped as an outlier (:func:`_start_without_outlier`). Off: one gross outlier (a
-        misidentified landmark) refuses its landmark from every window that holds the ray,
-        since the bundle's outlier test only sees landmarks that have a start.
+        A landmark the starting triangulation refuses (e.g. behind one of its rays) with at
+        least three rays is tried again without each of them in turn
+        (:func:`_start_without_outlier`): a ray is dropped as an outlier when the point its
+        other rays give passes the start's gates, the ray points away from it (residual at
+        least pi / 2) and the point is further from the ray's pose than that pose is from the
+        nearest other pose that saw the landmark. Off: one misidentified detection refuses
+        its landmark from every window that holds it, since the bundle's outlier test only
+        sees landmarks that have a start. Rays in a window's last prefix whose landmark was
+        started before are the bundle's outlier test's (unchanged).
     resume : PrefixState, optional
         Go on from the ``prefix_state`` of an earlier call on a shorter window of the same
         steps (same first pose, same bearings, columns remapped by the caller; ``prefix_ends``

@@ -127,16 +127,11 @@ class StmdsConfig(Presets):
         residuals (a robust scale, ``bundle.bundle_adjust_window``), so its weights, outlier
         test and covariance do not depend on how the stream's sigma was calibrated.
     tri_robust_start : bool
-        ``tri_method="ba"``: a landmark whose starting triangulation is refused is started
-        again without the one ray that most disagrees with the others (beyond
-        ``tri_outlier_sigma``; ``bundle.bundle_adjust_window``'s ``robust_start``), so one
-        misidentified detection does not refuse its landmark from every window that holds it.
-    admit_parallax_rad : float or None
-        Window bundles (``tri_method="ba"``): a landmark is returned in the map only when the
-        origins of its rays over the whole run, every window carried into the map frame by a
-        rigid fit of its landmarks, span at least this angle seen from its mapped position
-        (``admission.accumulated_parallax``; the geometric half of the factor-graph
-        baselines' 0.3 rad entry rule). None (default): every reconstructed landmark.
+        ``tri_method="ba"``: a landmark the window's starting triangulation refuses is started
+        again without the one ray that points away from where its other rays put it, seen
+        from further than the robot's own step (``bundle.bundle_adjust_window``'s
+        ``robust_start``): one misidentified detection no longer refuses its landmark from
+        every window that holds it (issue 15, MRCLAM6 robot 5, ``docs/measurements.md``).
     tri_parallax_rad : float or None
         Windows measured in geometry, not in keyframes (in place of ``tri_window``, issue 15):
         a window closes once the ``tri_parallax_quantile`` of the parallax of the landmarks it
@@ -182,9 +177,11 @@ class StmdsConfig(Presets):
         # of the landmarks it saw have rays spanning 0.3 rad (17 degrees) of directions,
         # windows start and end a sixth of their path apart -- solved by local bundle
         # adjustment with the bearing sigma re-estimated per window: the same windows and
-        # weights on any keyframing and any sigma calibration
+        # weights on any keyframing and any sigma calibration; a ray pointing away from its
+        # landmark's other rays is an outlier of the start, not a reason to refuse the landmark
         "real": {"tri_parallax_rad": 0.3, "tri_parallax_quantile": 0.25, "tri_overlap": 6.0,
-                 "tri_method": "ba", "tri_estimate_sigma": True, **_RECORDING},
+                 "tri_method": "ba", "tri_estimate_sigma": True, "tri_robust_start": True,
+                 **_RECORDING},
         # issue 8's recording setting, counted in keyframes (60 of them, a new one every 10):
         # tuned on MRCLAM6 as `bomgraph import mrclam` keyframes it, 5-10x worse on a denser
         # keyframing of the same data
@@ -221,10 +218,6 @@ class StmdsConfig(Presets):
     tri_grow: int = 5
     tri_estimate_sigma: bool = False
     tri_robust_start: bool = False
-    tri_fuse_relative_sigma: float = math.inf
-    fuse_outlier_sigma: float | None = None
-    tri_heading_bias_rad: float = 0.0
-    admit_parallax_rad: float | None = None
     tri_parallax_rad: float | None = None
     tri_parallax_quantile: float = 0.5
     tri_window_m: float | None = None
@@ -290,10 +283,6 @@ class StmdsConfig(Presets):
              "give tri_window (keyframes) or tri_parallax_rad / tri_window_m (geometry), not "
              "both")
         need(self.tri_min_depth_m >= 0, "tri_min_depth_m must be >= 0")
-        need(self.admit_parallax_rad is None
-             or (0 < self.admit_parallax_rad <= math.pi and self.tri_method == "ba"),
-             "admit_parallax_rad must be in (0, pi] and needs tri_method='ba' (window "
-             "bundles)")
         need(int(self.tri_grow) == self.tri_grow and self.tri_grow >= 1,
              "tri_grow must be an integer >= 1")
         need(self.tri_outlier_sigma is None or self.tri_outlier_sigma > 0,

@@ -30,7 +30,6 @@ from ..errors import ConfigError, DegenerateGeometryError
 from ..geometry import dead_reckon
 from ..mapper import MapEstimate
 from ..stream import Step, StreamHeader
-from .admission import WindowRays, accumulated_parallax, window_rays
 from .batch import BATCH_STEPS, StepBatch
 from .bundle import (SIGMA_RANGE, PrefixState, WindowBundle, bundle_adjust_window,
                      bundle_pair_squared_distances, relative_range_sigma)
@@ -38,8 +37,6 @@ from .config import StmdsConfig
 from .distances import DistanceStore, IdIndex
 from .localisation import RobotPoses, extend_with_robots, resect_headings, trilaterate_robots
 from .reconstruct import reconstruct
-from .robust_fusion import consistent_estimates
-from .window_weights import heading_bias_pairs
 from .triangulation import (compose_odometry, gate_points, pair_squared_distances,
                             range_variances, triangulate_rays)
 from .window import (WindowSchedule, triangulate_window, triangulate_window_lsq,
@@ -62,13 +59,6 @@ def _check_sigmas(values: Any, what: str) -> None:
             f"STMDS cannot use {what} = {arr.tolist() if arr.size > 1 else float(arr[0])!r}: "
             f"a std. dev. above {MAX_SIGMA:g} (m or rad) carries no information and overflows "
             f"the variance arithmetic; fix the stream's sigmas")
-
-
-def _pairs_of(pairs: Any, keep: np.ndarray) -> Any:
-    """The pair estimates ``keep`` (a boolean mask) of a window's ``PairEstimates``."""
-    return replace(pairs, first=pairs.first[keep], second=pairs.second[keep],
-                   squared_distance_m2=pairs.squared_distance_m2[keep],
-                   variance_m4=pairs.variance_m4[keep])
 
 
 class _GrowingFlags:
@@ -126,11 +116,6 @@ class StmdsMapper:
         # geometric windows, "ba": the open window's bundle after its last prefix (first step,
         # landmark ids of its columns, PrefixState), for the next estimate to go on from
         self._open_prefix: tuple | None = None
-        # admit_parallax_rad: every window's rays (.admission), None when off
-        self._window_rays: list[WindowRays] | None = \
-            [] if cfg.admit_parallax_rad is not None else None
-        # fuse_outlier_sigma: every window's pair estimates, held to be tested at estimate()
-        self._held: list[tuple] | None = [] if cfg.fuse_outlier_sigma is not None else None
         if cfg.windowed:
             self._schedule = WindowSchedule(
                 poses=cfg.tri_window, stride=cfg.tri_stride, parallax_rad=cfg.tri_parallax_rad,
@@ -230,9 +215,8 @@ class StmdsMapper:
         self._open_prefix = None
         del buf[:self._schedule.advance()]
 
-    def _with_open_window(self) -> tuple[DistanceStore, np.ndarray, list | None]:
-        """The distance store, the triangulated flags and the windows' rays (None unless
-        ``admit_parallax_rad``) for an estimate now.
+    def _with_open_window(self) -> tuple[DistanceStore, np.ndarray]:
+        """The distance store and the triangulated flags for an estimate now.
 
         Geometric windows close where the motion says, so the steps since the last closed
         window can be many; they are triangulated as one window for this estimate alone (a
@@ -242,23 +226,17 @@ class StmdsMapper:
         buf = self._tri_buffer
         if (not self.config.geometric_windows or len(buf) < 2
                 or buf[-1][4] <= self._closed_t):
-            return self._robust_store(), self._triangulated.array, self._window_rays
+            return self._store, self._triangulated.array
         kept = (self._store, self._triangulated, self._prev_bundle, self._n_triangulated,
-                self._n_gated, self._n_outliers, self._window_sigma, self._window_rays,
-                self._held)
+                self._n_gated, self._n_outliers, self._window_sigma)
         try:
             self._store = copy.deepcopy(self._store)
             self._triangulated = copy.deepcopy(self._triangulated)
-            if self._window_rays is not None:
-                self._window_rays = list(self._window_rays)
-            if self._held is not None:
-                self._held = list(self._held)
             self._triangulate_window(buf)
-            return self._robust_store(), self._triangulated.array, self._window_rays
+            return self._store, self._triangulated.array
         finally:
             (self._store, self._triangulated, self._prev_bundle, self._n_triangulated,
-             self._n_gated, self._n_outliers, self._window_sigma, self._window_rays,
-             self._held) = kept
+             self._n_gated, self._n_outliers, self._window_sigma) = kept
 
     def _window_arrays(self, buf: list[tuple]) -> tuple | None:
         """The buffered window as arrays: ``(landmark ids (n,), bearings (W, n) NaN where
@@ -298,7 +276,7 @@ class StmdsMapper:
         if arrays is None:
             return
         uniq, brg, odoms, sig = arrays
-        well = fuse = None
+        well = None
         if self.config.tri_method == "ba":
             ts = np.array([b[4] for b in buf], np.int64)
             init_poses, init_points, n_shared = self._warm_start(ts, uniq, odoms)
@@ -323,12 +301,6 @@ class StmdsMapper:
                                                    SIGMA_RANGE[1] * self._bearing_sigma))
             self._prev_bundle = (ts, tri.poses, uniq[tri.column], tri.points_xy) if len(tri) \
                 else None
-            if self._window_rays is not None and len(tri):
-                self._window_rays.append(window_rays(uniq[tri.column], tri.points_xy,
-                                                     tri.poses, uniq, brg))
-            if math.isfinite(self.config.tri_fuse_relative_sigma) and len(tri):
-                # the window's pair estimates of its well-triangulated landmarks only
-                fuse = relative_range_sigma(tri, brg) <= self.config.tri_fuse_relative_sigma
             if self._relative_gate and len(tri):
                 # a landmark is admitted to the map once a window triangulates it well (its
                 # covariance); its pairs from every window are fused
@@ -338,12 +310,10 @@ class StmdsMapper:
                 triangulate_window
             tri, n_gated = kernel(odoms, brg, min_parallax_rad=self.config.min_parallax_rad,
                                   max_range_m=self._max_range)
-        self._fuse_window(tri, n_gated, uniq, sig, well, fuse=fuse,
-                          brg=brg if self.config.tri_heading_bias_rad > 0 else None)
+        self._fuse_window(tri, n_gated, uniq, sig, well)
 
     def _fuse_window(self, tri: Any, n_gated: int, uniq: np.ndarray, sig: np.ndarray,
-                     well: np.ndarray | None, pending: list | None = None,
-                     fuse: np.ndarray | None = None, brg: np.ndarray | None = None) -> None:
+                     well: np.ndarray | None, pending: list | None = None) -> None:
         """Count a window's triangulation, flag its landmarks (those ``well`` triangulated,
         if given) and fuse its pairs (or append them to ``pending`` as ``(first, second,
         squared distance, variance)`` for one :meth:`.distances.DistanceStore.add` of
@@ -358,41 +328,14 @@ class StmdsMapper:
             return
         if isinstance(tri, WindowBundle):
             pairs = bundle_pair_squared_distances(tri)
-            if brg is not None:
-                # tri_heading_bias_rad: narrow views of a landmark lose weight (.window_weights)
-                pairs = heading_bias_pairs(
-                    pairs, tri, brg, self.config.tri_heading_bias_rad,
-                    max(self.config.tri_outlier_sigma or 4.0, 4.0) * tri.bearing_sigma_rad)
-            if fuse is not None:
-                pairs = _pairs_of(pairs, fuse[pairs.first] & fuse[pairs.second])
         else:
             pairs = window_pair_squared_distances(tri, sig, self._bearing_sigma)
         var = pairs.variance_m4 if self._tri_inflation == 1.0 else \
             pairs.variance_m4 * self._tri_inflation
-        if self._held is not None:
-            self._held.append((idx[pairs.first], idx[pairs.second], pairs.squared_distance_m2,
-                               var))
         if pending is not None:
             pending.append((idx[pairs.first], idx[pairs.second], pairs.squared_distance_m2, var))
             return
         self._store.add(idx[pairs.first], idx[pairs.second], pairs.squared_distance_m2, var)
-
-    def _robust_store(self) -> DistanceStore:
-        """The distance store, or with ``fuse_outlier_sigma`` one fused again from the held
-        window estimates that agree with their pairs' other estimates
-        (:func:`.robust_fusion.consistent_estimates`), the priors first as in the store."""
-        if self._held is None or not self._held:
-            return self._store
-        first, second, d2, var = (np.concatenate(c) for c in zip(*self._held))
-        keep = consistent_estimates(first, second, d2, var, self.config.fuse_outlier_sigma)
-        store = DistanceStore(self.config.fusion, self.config.min_count)
-        priors = self.header.priors
-        if priors:
-            store.add_priors(self._ids.lookup(np.array([p.i for p in priors], np.int64)),
-                             self._ids.lookup(np.array([p.j for p in priors], np.int64)),
-                             [p.distance_m for p in priors], [p.sigma_m for p in priors])
-        store.add(first[keep], second[keep], d2[keep], var[keep])
-        return store
 
     def _resume(self, ts: np.ndarray, uniq: np.ndarray) -> PrefixState | None:
         """The open window's :class:`.bundle.PrefixState` from the last estimate, its columns
@@ -501,7 +444,7 @@ class StmdsMapper:
         cfg = self.config
         self.flush()
         info = self._base_info()
-        store, triangulated, rays = self._with_open_window()
+        store, triangulated = self._with_open_window()
         if len(store) == 0 and store.n_degenerate:
             raise DegenerateGeometryError(
                 f"the stream gives no usable landmark distance up to step {self._t}: all "
@@ -556,15 +499,7 @@ class StmdsMapper:
                                                               lm_idx, lm_xy)
             info["reflected"] = reflected
         order = np.argsort(lm_ids)
-        lm_ids, lm_xy = lm_ids[order], lm_xy[order]
-        if rays is not None:
-            # admit_parallax_rad: the landmarks the whole run saw with enough parallax
-            span = accumulated_parallax(rays, lm_ids, lm_xy)
-            ok = span >= cfg.admit_parallax_rad
-            info["refused_parallax"] = lm_ids[~ok].tolist()
-            info["left_out"] = sorted(info.get("left_out", []) + lm_ids[~ok].tolist())
-            lm_ids, lm_xy = lm_ids[ok], lm_xy[ok]
-        return MapEstimate(lm_ids, lm_xy, pose_t=pose_t, poses=poses, info=info)
+        return MapEstimate(lm_ids[order], lm_xy[order], pose_t=pose_t, poses=poses, info=info)
 
 
 def _make(header: StreamHeader, method: str, localise: bool, options: dict) -> StmdsMapper:
