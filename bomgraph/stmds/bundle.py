@@ -178,8 +178,10 @@ def bundle_adjust_window(odoms: ArrayLike, odometry_sigmas: ArrayLike, bearings_
         least pi / 2) and the point is further from the ray's pose than that pose is from the
         nearest other pose that saw the landmark. Off: one misidentified detection refuses
         its landmark from every window that holds it, since the bundle's outlier test only
-        sees landmarks that have a start. Rays in a window's last prefix whose landmark was
-        started before are the bundle's outlier test's (unchanged).
+        sees landmarks that have a start. Not covered: a ray pointing away at a prefix's new
+        poses for a landmark started on an earlier prefix (it goes straight to the fit, which
+        refuses the landmark; e.g. at the last pose of the test window of
+        ``tests/stmds/test_stmds_robust_start.py``).
     resume : PrefixState, optional
         Go on from the ``prefix_state`` of an earlier call on a shorter window of the same
         steps (same first pose, same bearings, columns remapped by the caller; ``prefix_ends``
