@@ -32,6 +32,7 @@ from typing import Sequence
 import numpy as np
 from numpy.typing import ArrayLike
 
+from ..angles import angle_residual
 from ..errors import ConfigError
 from ..geometry import between, dead_reckon, effective_parallax, to_local
 from .bundle_lm import (SIGMA_FLOOR, _bearing_residuals, _Problem,  # noqa: F401 (re-exported)
@@ -113,7 +114,8 @@ def bundle_adjust_window(odoms: ArrayLike, odometry_sigmas: ArrayLike, bearings_
                          initial_points: ArrayLike | None = None, initial_prefix: int = 1,
                          grow: int = 5, prefix_ends: Sequence[int] | None = None,
                          estimate_sigma: bool = False, resume: PrefixState | None = None,
-                         max_outliers: int = 10, max_iter: int = 30, tol: float = 1e-6
+                         robust_start: bool = False, max_outliers: int = 10,
+                         max_iter: int = 30, tol: float = 1e-6
                          ) -> tuple[WindowBundle, int]:
     """Jointly estimate a window's poses and landmarks from its odometry and bearings.
 
@@ -168,6 +170,18 @@ def bundle_adjust_window(odoms: ArrayLike, odometry_sigmas: ArrayLike, bearings_
         against odometry, the outlier test (``outlier_sigma`` robust std. devs.) and the
         covariance then hold whether the stream's sigma is a small MAD estimate or a
         generous one.
+    robust_start : bool
+        A landmark the starting triangulation refuses (e.g. behind one of its rays) with at
+        least three rays is tried again without each of them in turn
+        (:func:`_start_without_outlier`): a ray is dropped as an outlier when the point its
+        other rays give passes the start's gates, the ray points away from it (residual at
+        least pi / 2) and the point is further from the ray's pose than that pose is from the
+        nearest other pose that saw the landmark. Off: one misidentified detection refuses
+        its landmark from every window that holds it, since the bundle's outlier test only
+        sees landmarks that have a start. Not covered: a ray pointing away at a prefix's new
+        poses for a landmark started on an earlier prefix (it goes straight to the fit, which
+        refuses the landmark; e.g. at the last pose of the test window of
+        ``tests/stmds/test_stmds_robust_start.py``).
     resume : PrefixState, optional
         Go on from the ``prefix_state`` of an earlier call on a shorter window of the same
         steps (same first pose, same bearings, columns remapped by the caller; ``prefix_ends``
@@ -239,6 +253,17 @@ def bundle_adjust_window(odoms: ArrayLike, odometry_sigmas: ArrayLike, bearings_
                 between(poses[:end - 1], poses[1:end]), brg[:end, need],
                 min_parallax_rad=min_parallax_rad, max_range_m=max_range_m)
             points[need[start_col]] = start_xy
+            if robust_start and n_outliers < max_outliers:
+                refused = np.setdiff1d(need, need[start_col])
+                rk, rc, rxy = _start_without_outlier(
+                    poses[:end], brg[:end], refused, min_parallax_rad, max_range_m,
+                    max_outliers - n_outliers)
+                if rc.size:
+                    points[rc] = rxy
+                    brg[rk, rc] = np.nan
+                    n_outliers += len(rk)
+                    drop_k.append(rk)
+                    drop_c.append(rc)
         column = np.flatnonzero(seen & np.isfinite(points).all(axis=1))
         result = _fit(u[:end - 1], sig[:end - 1], sigma, brg[:end],
                       poses[:end], column, points[column], min_parallax_rad, max_range_m,
@@ -350,6 +375,73 @@ SIGMA_TOL = 0.02
 #: sigma given (noise-free rays would drive it to zero).
 SIGMA_MIN_RAYS = 20
 SIGMA_RANGE = (0.25, 4.0)
+
+
+def _start_without_outlier(poses: np.ndarray, brg: np.ndarray, refused: np.ndarray,
+                           min_parallax_rad: float, max_range_m: float,
+                           max_drops: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Starts of refused landmarks with one ray left out (``robust_start`` of
+    :func:`bundle_adjust_window`).
+
+    Parameters
+    ----------
+    poses : array of shape (W, 3)
+        The window's poses as they stand.
+    brg : array of shape (W, n)
+        Its bearings (NaN: not seen).
+    refused : int array
+        Columns the starting triangulation refused.
+    min_parallax_rad, max_range_m : float
+        The gates of :func:`.window.window_lsq_points`.
+    max_drops : int
+        At most this many rays are dropped (landmarks in column order).
+
+    Returns
+    -------
+    (pose of each dropped ray, its column, the landmark's start point (k, 2))
+    """
+    empty = (np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((0, 2)))
+    seen = np.isfinite(brg[:, refused])
+    cand = refused[seen.sum(axis=0) >= 3]
+    if cand.size == 0 or max_drops <= 0:
+        return empty
+    # one column per (landmark, ray left out)
+    ray_k, ray_c = np.nonzero(np.isfinite(brg[:, cand]).T)[::-1]
+    owner = cand[ray_c]
+    loo = brg[:, owner].copy()
+    loo[ray_k, np.arange(owner.size)] = np.nan
+    col, xy = window_lsq_points(between(poses[:-1], poses[1:]), loo,
+                                min_parallax_rad=min_parallax_rad, max_range_m=max_range_m)
+    if col.size == 0:
+        return empty
+    # residuals of every ray of the landmark at each point found without one of them
+    full = brg[:, owner[col]]                                        # (W, m)
+    d = xy[None, :, :] - poses[:, None, :2]
+    res = np.abs(angle_residual(np.arctan2(d[..., 1], d[..., 0]) - poses[:, None, 2], full))
+    left = res[ray_k[col], np.arange(col.size)].copy()
+    res[ray_k[col], np.arange(col.size)] = np.nan
+    rms = np.sqrt(np.nanmean(res ** 2, axis=0))
+    at_ray = np.hypot(*(xy - poses[ray_k[col], :2]).T)
+    # distance from the ray's pose to the nearest other pose that saw the landmark
+    gap = np.hypot(*(poses[None, :, :2] - poses[ray_k[col], None, :2]).transpose(2, 0, 1))
+    gap[~np.isfinite(full.T)] = np.inf
+    gap[np.arange(col.size), ray_k[col]] = np.inf
+    # the ray points away from the point its landmark's other rays agree on, and the point is
+    # not within the robot's own step of that pose (from that close a small pose error turns
+    # a bearing through any angle; from further it cannot)
+    ok = (left >= math.pi / 2) & (at_ray > gap.min(axis=1))
+    out_k, out_c, out_xy = [], [], []
+    for c in np.unique(owner[col[ok]]):
+        sel = np.flatnonzero(ok & (owner[col] == c))
+        best = sel[np.argmin(rms[sel])]
+        out_k.append(ray_k[col[best]])
+        out_c.append(c)
+        out_xy.append(xy[best])
+        if len(out_c) == max_drops:
+            break
+    if not out_c:
+        return empty
+    return np.array(out_k, np.int64), np.array(out_c, np.int64), np.array(out_xy)
 
 
 def _robust_scale(z: np.ndarray) -> float:

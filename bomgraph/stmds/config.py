@@ -126,6 +126,12 @@ class StmdsConfig(Presets):
         ``tri_method="ba"``: each window re-estimates the bearing std. dev. from its own
         residuals (a robust scale, ``bundle.bundle_adjust_window``), so its weights, outlier
         test and covariance do not depend on how the stream's sigma was calibrated.
+    tri_robust_start : bool
+        ``tri_method="ba"``: a landmark the window's starting triangulation refuses is started
+        again without the one ray that points away from where its other rays put it, seen
+        from further than the robot's own step (``bundle.bundle_adjust_window``'s
+        ``robust_start``): one misidentified detection no longer refuses its landmark from
+        every window that holds it (issue 15, MRCLAM6 robot 5, ``docs/measurements.md``).
     tri_parallax_rad : float or None
         Windows measured in geometry, not in keyframes (in place of ``tri_window``, issue 15):
         a window closes once the ``tri_parallax_quantile`` of the parallax of the landmarks it
@@ -171,9 +177,11 @@ class StmdsConfig(Presets):
         # of the landmarks it saw have rays spanning 0.3 rad (17 degrees) of directions,
         # windows start and end a sixth of their path apart -- solved by local bundle
         # adjustment with the bearing sigma re-estimated per window: the same windows and
-        # weights on any keyframing and any sigma calibration
+        # weights on any keyframing and any sigma calibration; a ray pointing away from its
+        # landmark's other rays is an outlier of the start, not a reason to refuse the landmark
         "real": {"tri_parallax_rad": 0.3, "tri_parallax_quantile": 0.25, "tri_overlap": 6.0,
-                 "tri_method": "ba", "tri_estimate_sigma": True, **_RECORDING},
+                 "tri_method": "ba", "tri_estimate_sigma": True, "tri_robust_start": True,
+                 **_RECORDING},
         # issue 8's recording setting, counted in keyframes (60 of them, a new one every 10):
         # tuned on MRCLAM6 as `bomgraph import mrclam` keyframes it, 5-10x worse on a denser
         # keyframing of the same data
@@ -209,6 +217,7 @@ class StmdsConfig(Presets):
     tri_min_depth_m: float = 0.05
     tri_grow: int = 5
     tri_estimate_sigma: bool = False
+    tri_robust_start: bool = False
     tri_parallax_rad: float | None = None
     tri_parallax_quantile: float = 0.5
     tri_window_m: float | None = None

@@ -289,7 +289,8 @@ class StmdsMapper:
                 grow=self.config.tri_grow,
                 prefix_ends=self._schedule.prefix_ends()
                 if self.config.geometric_windows else None,
-                estimate_sigma=self.config.tri_estimate_sigma, resume=resume)
+                estimate_sigma=self.config.tri_estimate_sigma, resume=resume,
+                robust_start=self.config.tri_robust_start)
             if self.config.geometric_windows and tri.prefix_state is not None:
                 self._open_prefix = (int(ts[0]), uniq, tri.prefix_state)
             self._n_outliers += tri.n_outliers
