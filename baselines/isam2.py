@@ -8,7 +8,7 @@ by a rebuild, and a rebuild that fails hands over to batch Levenberg-Marquardt
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from typing import Any, ClassVar, Mapping, Sequence
 
 import gtsam
@@ -19,8 +19,9 @@ from bomgraph.mapper import MapEstimate
 from bomgraph.stream import Step, StreamHeader
 
 from .bearing_graph import (BearingGraph, FactorGraphConfig, insert_pose, landmark_key,
-                            mid_key, pose_key)
+                            mid_key, pose_key, poses_from_values)
 from .factor_graph import GTSAM_ERRORS, _first_line, estimate_from_values, solve_lm
+from .lm_window import StepChunks
 
 
 #: The relinearisation settings the recording presets were validated with (``docs/measurements.md``,
@@ -76,7 +77,8 @@ class Isam2Config(FactorGraphConfig):
         graph (it reports the last check). Cost per update is then bounded by the lag and
         the landmarks, and the whole-graph work adds up to a geometric series.
     long_lag_steps : int
-        Poses relinearised in long mode (the latest this many).
+        Poses relinearised in long mode (the latest this many): with ``long_window`` the
+        shortest window (50; with ``long_window`` False the session-7 value was 100).
     long_relinearize_threshold : float
         ``relinearize_threshold`` in long mode (the poses that would drift past it are held
         by ``long_lag_steps``).
@@ -92,6 +94,23 @@ class Isam2Config(FactorGraphConfig):
     long_checkpoint_updates : int
         ``checkpoint_updates`` in long mode (0 measured faster but left the final map
         128 units above the minimum, ``docs/measurements.md``).
+    long_window : bool
+        Long mode with a bounded iSAM2 (the default): iSAM2 holds only the last
+        ``long_lag_steps`` to ``long_lag_steps + long_shift_steps`` poses and the landmarks;
+        the older steps are eliminated into the Gaussian marginal of
+        :class:`baselines.lm_window.StepChunks` (the fixed-lag machinery of ``gtsam-batch``),
+        on the boundary pose and the landmarks. When the window would exceed its length, or
+        new factors reach a variable outside it (a bearing from an eliminated pose, a
+        landmark seen again after it left), iSAM2 is rebuilt on the window that ends at the
+        newest step. At each whole-graph check (``long_growth``) the whole graph gets up to
+        ``isam2_polish`` Gauss-Newton steps (each kept only if it lowers the error) before
+        the check, and the marginal is rebuilt at the new values. Poses older than the window
+        are held at their last estimate. False: the session-7 long mode, one iSAM2 over the
+        whole history with the old poses in ``noRelinKeys`` (per-update cost growing with
+        the run).
+    long_shift_steps : int
+        How far the window's end moves before iSAM2 is rebuilt on a new window (each rebuild
+        eliminates these steps into the marginal and factorises the window once).
     """
 
     PRESETS: ClassVar[Mapping[str, Mapping[str, Any]]] = {
@@ -112,11 +131,13 @@ class Isam2Config(FactorGraphConfig):
     isam2_polish: int = 3
     landmark_prior_sigma_m: float | None = None
     long_after_steps: int | None = 500
-    long_lag_steps: int = 100
+    long_lag_steps: int = 50
     long_relinearize_threshold: float = 0.001
     long_growth: float = 2.0
     long_wildfire_threshold: float = 0.0
     long_checkpoint_updates: int = 1
+    long_window: bool = True
+    long_shift_steps: int = 50
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -132,6 +153,7 @@ class Isam2Config(FactorGraphConfig):
         need(self.long_lag_steps >= 1, "long_lag_steps must be >= 1")
         need(self.long_relinearize_threshold > 0, "long_relinearize_threshold must be > 0")
         need(self.long_growth > 1, "long_growth must be > 1")
+        need(self.long_shift_steps >= 1, "long_shift_steps must be >= 1")
 
 
 class Isam2Mapper:
@@ -201,6 +223,21 @@ class Isam2Mapper:
         self._old = gtsam.KeyList()  # what long mode does not relinearise
         self._old_upto = 0
         self._old_landmarks: set[int] = set()
+        # long_window: every step's factors filed by step (the fixed-lag machinery of
+        # gtsam-batch), every bearing as arrays (the chunks' conditional folds), the held
+        # pose of the window iSAM2 holds (0: iSAM2 holds the whole graph)
+        cfg = self.config
+        self._chunks: StepChunks | None = None
+        if cfg.long_window and cfg.long_after_steps is not None:
+            span = cfg.long_lag_steps + cfg.long_shift_steps
+            self._chunks = StepChunks(header, replace(
+                cfg, lag_steps=max(span, 2),
+                lag_after_steps=max(cfg.lag_after_steps, span, 2)), keep_conditionals=True)
+        self._obs: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+        self._window_b = 0
+        self._window_fresh: list[int] = []
+        self.window_rebuilds = 0
+        self._at_check = False   # the estimate is the one the last whole-graph check checked
 
     def _new_isam(self) -> gtsam.ISAM2:
         """A fresh iSAM2: Cholesky, Powell's dogleg (a trust region) or Gauss-Newton."""
@@ -249,16 +286,43 @@ class Isam2Mapper:
         self._buffer.push_back(new.landmark)
         self._buffer_values.insert(new.landmark_values)
         sigma = self.config.landmark_prior_sigma_m
+        weak = gtsam.NonlinearFactorGraph()
         if sigma is not None and new.landmark_ids:
             noise = gtsam.noiseModel.Isotropic.Sigma(2, float(sigma))
             for lid in new.landmark_ids:
                 key = landmark_key(lid)
-                self._buffer.add(gtsam.PriorFactorPoint2(
-                    key, new.landmark_values.atPoint2(key), noise))
+                weak.add(gtsam.PriorFactorPoint2(key, new.landmark_values.atPoint2(key), noise))
+            self._buffer.push_back(weak)
+        if self._chunks is not None:
+            self._file(step, new.core, weak, new.landmark_ids)
         scheduled = t % self.config.isam2_update_every == 0
         if (scheduled or self._external.size()
                 or (self.config.isam2_update_on_entry and new.landmark_ids)):
             self._flush(extra=scheduled)
+
+    def _file(self, step: Step, core: gtsam.NonlinearFactorGraph,
+              weak: gtsam.NonlinearFactorGraph, entered: list[int]) -> None:
+        """File step ``step``'s factors for long mode's window (``long_window``): its core
+        factors and weak landmark priors as the chunk of its step, the buffered bearings of the
+        landmarks that entered in their steps' chunks (:meth:`StepChunks.add`), its bearings in
+        the arrays of :meth:`_bearings`."""
+        assert self._chunks is not None
+        chunk = gtsam.NonlinearFactorGraph(core)
+        chunk.push_back(weak)
+        self._chunks.add(step.t, chunk, self.problem.entered_last())
+        ids = np.asarray(step.landmark_ids, dtype=np.int64)
+        if ids.size:
+            self._obs.append((np.full(ids.size, step.t, np.int64), ids,
+                              np.asarray(step.bearings_rad, dtype=float)))
+        self._window_fresh += list(entered)
+
+    def _bearings(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Every bearing so far: owner step, landmark id, bearing (rad), each (J,)."""
+        if not self._obs:
+            return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0)
+        if len(self._obs) > 1:
+            self._obs = [tuple(np.concatenate(c) for c in zip(*self._obs))]  # type: ignore
+        return self._obs[0]
 
     def _flush(self, extra: bool = True) -> None:
         """Hand the buffer (and queued external factors) to the solver; with ``extra``, the
@@ -280,6 +344,12 @@ class Isam2Mapper:
         both = gtsam.Values(values)
         both.insert(ext_values)
         try:
+            if self._long and self._window_b:
+                if external.size():     # filed with the newest step's chunk
+                    assert self._chunks is not None
+                    self._chunks.add(self.problem.n_steps - 1, external, {})
+                self._update_window(graph, both, extra)
+                return
             full = self._long and self.problem.n_steps >= self.config.long_growth * self._long_full
             params = self._update_params(full)
             self._isam.update(graph, both, params)
@@ -300,7 +370,9 @@ class Isam2Mapper:
             self.failures.append(_first_line(exc))
         self.dropped_external += int(external.size())
         start = gtsam.Values(self.estimate_values)
-        start.insert(values)
+        start.insert_or_assign(values)   # (a window update may have inserted them)
+        if self._window_b:               # the whole graph from here on (long_window off)
+            self._leave_window()
         self._recover(factors, start)
 
     # -- long recordings ------------------------------------------------------------------
@@ -323,11 +395,120 @@ class Isam2Mapper:
                     self._old.push_back(landmark_key(lid))
         return params
 
+    # -- long mode with a bounded window (long_window) ---------------------------------------
+    def _update_window(self, graph: gtsam.NonlinearFactorGraph, values: gtsam.Values,
+                       extra: bool) -> None:
+        """One update of the window iSAM2 with the new factors and values, or a rebuild on the
+        window ending now if the window is full or a factor reaches a variable iSAM2 does not
+        hold; the whole-graph polish and check when the graph has grown ``long_growth``x."""
+        cfg = self.config
+        n = self.problem.n_steps
+        held = all(self._isam.valueExists(k) or values.exists(k) for k in graph.keyVector())
+        self.estimate_values.insert(values)
+        self._at_check = False
+        if held and n - self._window_b <= cfg.long_lag_steps + cfg.long_shift_steps:
+            self._isam.update(graph, values)
+            for _ in range(cfg.long_checkpoint_updates if extra else 0):
+                self._isam.update(gtsam.NonlinearFactorGraph(), gtsam.Values())
+            self.estimate_values.update(self._isam.calculateEstimate())
+        else:
+            self._rebuild_window(take_estimate=True)
+        self.updates += 1
+        self.accepted.push_back(graph)
+        if n >= cfg.long_growth * self._long_full:
+            try:
+                self._check_window()
+            except GTSAM_ERRORS as exc:   # the whole graph from here on
+                self.failures.append(_first_line(exc))
+                self._leave_window()
+                self._recover(gtsam.NonlinearFactorGraph(), gtsam.Values(self.estimate_values))
+
+    def _rebuild_window(self, take_estimate: bool) -> None:
+        """A new iSAM2 on the window ending at the newest step (:meth:`StepChunks.window`:
+        its chunks, the marginal of the older ones at the current estimate, the folds),
+        started at the current estimate; with ``take_estimate`` its solution is taken at once
+        (else at the next update: the estimate stays the one just checked)."""
+        assert self._chunks is not None
+        cfg = self.config
+        n = self.problem.n_steps
+        b = self._chunks.boundary(n, cfg.long_lag_steps)
+        if b is None:
+            raise RuntimeError(f"no window of {cfg.long_lag_steps} steps at step {n}")
+        ids = np.array(sorted(self.problem.landmark_ids), dtype=np.int64)
+        current = self.estimate_values
+        graph, start = self._chunks.window(
+            b, n, current, current, lambda ts: poses_from_values(current, ts),
+            self._bearings(), ids, self._window_fresh)
+        isam = self._new_isam()
+        isam.update(graph, start)
+        for _ in range(cfg.long_checkpoint_updates):
+            isam.update(gtsam.NonlinearFactorGraph(), gtsam.Values())
+        self._isam, self._window_b, self._window_fresh = isam, b, []
+        self.window_rebuilds += 1
+        if take_estimate:
+            self.estimate_values.update(isam.calculateEstimate())
+
+    def _check_window(self) -> None:
+        """The whole-graph work of long mode with a window: up to ``isam2_polish``
+        Gauss-Newton steps on the whole graph (each kept only if it lowers the error), the
+        convergence check, Levenberg-Marquardt on the whole graph if the check fails (kept if
+        lower, ``info["lm_restarts"]``), then the marginal rebuilt at the result and the window
+        iSAM2 on it. The estimate is the checked one until the next update."""
+        assert self._chunks is not None
+        cfg = self.config
+        self._long_full = self.problem.n_steps
+        values, step, decrease, cost = polish(self.accepted, self.current_values(),
+                                              cfg.isam2_polish, cfg.decrease_tol)
+        converged = decrease <= cfg.decrease_tol and math.isfinite(step)
+        if not converged:
+            lm, report = solve_lm(self.accepted, values, cfg)
+            if report.final_error < cost:
+                self.lm_restarts += 1
+                values = lm
+                _, step, decrease, cost = polish(self.accepted, values, 0, cfg.decrease_tol)
+                converged = decrease <= cfg.decrease_tol and math.isfinite(step)
+        self.estimate_values = values
+        self._chunks.reset_folds()
+        self._rebuild_window(take_estimate=False)
+        self._at_check = True
+        self._long_check = {"converged": bool(converged), "cost": cost, "gn_step": step,
+                            "predicted_decrease": decrease,
+                            "checked_at_step": self.problem.n_steps}
+
+    def current_values(self) -> gtsam.Values:
+        """The solver's estimate of every variable: with the window (``long_window``), the
+        window's solution and the poses before it back-substituted through the conditionals
+        they were eliminated into (:meth:`StepChunks.back_substitute`; a new Values), except
+        right after a whole-graph check (the checked estimate)."""
+        if not (self._long and self._window_b and self._chunks is not None) or self._at_check:
+            return self.estimate_values
+        values = gtsam.Values(self.estimate_values)
+        values.update(self._chunks.back_substitute(values))
+        return values
+
+    def _leave_window(self) -> None:
+        """Give the window up for the rest of the run (after a failure): long mode goes on
+        with one iSAM2 over the whole graph (``long_window`` False)."""
+        self._window_b = 0
+        self._chunks = None
+        self._obs = []
+
     def _go_long(self) -> None:
-        """Enter long mode: iSAM2 rebuilt with Gauss-Newton from the current estimate
-        (one batch elimination), then the first check. If the rebuild fails, the mapper
-        stays in its normal mode (a rebuild with the previous optimizer, :meth:`_recover`)."""
+        """Enter long mode: with ``long_window``, the first whole-graph check and the window
+        iSAM2 (:meth:`_check_window`); else (or if that fails) iSAM2 rebuilt with
+        Gauss-Newton over the whole graph from the current estimate (one batch elimination),
+        then the first check. If the rebuild fails, the mapper stays in its normal mode (a
+        rebuild with the previous optimizer, :meth:`_recover`)."""
         self._long = True
+        if self._chunks is not None:
+            values = self.estimate_values
+            try:
+                self._check_window()
+                return
+            except GTSAM_ERRORS as exc:
+                self.failures.append(_first_line(exc))
+                self.estimate_values = values
+                self._leave_window()
         self._isam = self._new_isam()
         try:
             self._isam.update(self.accepted, self.estimate_values)
@@ -411,11 +592,11 @@ class Isam2Mapper:
         if self.problem.n_steps == 0:
             return MapEstimate.empty(reason="no steps yet")
         graph = self.accepted
-        values = self.estimate_values
+        values = self.current_values()
         if self._buffer.size() or self._buffer_values.size():
             graph = gtsam.NonlinearFactorGraph(self.accepted)
             graph.push_back(self._buffer)
-            values = gtsam.Values(self.estimate_values)
+            values = gtsam.Values(values)
             values.insert(self._buffer_values)
         report = None
         if self._batch:
@@ -431,6 +612,9 @@ class Isam2Mapper:
         if report is not None:
             check["converged"] = check["converged"] and report.converged
         mode = "batch" if self._batch else ("isam2-long" if self._long else "isam2")
+        if self._long and self._window_b:
+            check.update({"window_start": self._window_b,
+                          "window_rebuilds": self.window_rebuilds})
         info = {**check, "mode": mode, "isam2_updates": self.updates,
                 "update_failures": len(self.failures), "rebuilds": self.rebuilds,
                 "lm_restarts": self.lm_restarts,
