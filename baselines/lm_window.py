@@ -31,8 +31,7 @@ Two uses (issue 14 items 1-2):
   reset after a whole-graph solve; the held boundary pose is then fixed by a prior.
 
 With ``keep_conditionals`` (``gtsam-isam2``'s window) the eliminated poses are kept as Gaussian
-conditionals on the poses and landmarks left (a sequential elimination instead of the
-multifrontal one, the same marginal), and :meth:`StepChunks.back_substitute` moves the held
+conditionals on the poses and landmarks left (the cliques of the same elimination), and :meth:`StepChunks.back_substitute` moves the held
 poses with a window's solution: the whole-graph Gauss-Newton solution to first order, at the
 cost of one back-substitution, without solving the older steps again.
 """
@@ -270,14 +269,12 @@ class StepChunks:
         start = self._values(keys, held)
         hold = pose_key(b)
         gone = [k for k in keys if not _is_landmark(k) and k != hold]
+        tree, rest = nl.linearize(start).eliminatePartialMultifrontal(gone)
         if self._keep:
-            net, rest = nl.linearize(start).eliminatePartialSequential(gone)
             lms = [k for k in keys if _is_landmark(k)]
             xy = np.array([start.atPoint2(k) for k in lms]).reshape(-1, 2)
-            self._conditionals.append((net, self._values(gone, start), lms, xy, hold,
-                                       start.atPose2(hold)))
-        else:
-            _, rest = nl.linearize(start).eliminatePartialMultifrontal(gone)
+            self._conditionals.append((_bayes_net(tree), self._values(gone, start), lms, xy,
+                                       hold, start.atPose2(hold)))
         self._marg = gtsam.NonlinearFactorGraph()
         for i in range(rest.size()):
             f = rest.at(i)
@@ -379,6 +376,21 @@ class StepChunks:
             else:
                 f[0] = f[0] + info[k]
                 f[1] = f[1] + eta[k]
+
+
+def _bayes_net(tree: gtsam.GaussianBayesTree) -> gtsam.GaussianBayesNet:
+    """The clique conditionals of ``tree`` as a Bayes net in elimination order (every clique
+    after its children), for back-substitution given the variables it was conditioned on."""
+    net = gtsam.GaussianBayesNet()
+    stack = [(c, False) for c in tree.roots()]
+    while stack:
+        clique, seen = stack.pop()
+        if seen:
+            net.push_back(clique.conditional())
+            continue
+        stack.append((clique, True))
+        stack.extend((clique[i], False) for i in range(clique.nrChildren()))
+    return net
 
 
 def fold_bearings(poses: np.ndarray, points: np.ndarray, bearings_rad: np.ndarray,
