@@ -68,14 +68,15 @@ class Isam2Config(FactorGraphConfig):
         recordings).
     long_after_steps : int or None
         Long recordings: from the first scheduled update at or past this many steps the
-        mapper goes *long* (None: never). iSAM2 is rebuilt once with Gauss-Newton (Powell's
-        dogleg evaluates the whole graph's error and gradient at every update: O(T) per
-        update), poses older than ``long_lag_steps`` are not relinearised (ISAM2's
+        mapper goes *long* (None: never): iSAM2 runs Gauss-Newton (Powell's dogleg evaluates
+        the whole graph's error and gradient at every update: O(T) per update) on a bounded
+        window (``long_window``, the default) or, with ``long_window`` False, over the whole
+        history with poses older than ``long_lag_steps`` not relinearised (ISAM2's
         ``noRelinKeys``; they still move with the linear solution) except at an update
-        where the graph has grown by ``long_growth`` since the last full check, which also
-        runs the Gauss-Newton convergence check; ``estimate()`` no longer polishes the whole
-        graph (it reports the last check). Cost per update is then bounded by the lag and
-        the landmarks, and the whole-graph work adds up to a geometric series.
+        where the graph has grown by ``long_growth`` since the last full check. Either way
+        the whole graph is checked (Gauss-Newton) each time it has grown ``long_growth``x;
+        ``estimate()`` no longer polishes the whole graph (it reports the last check), so
+        the whole-graph work adds up to a geometric series.
     long_lag_steps : int
         Poses relinearised in long mode (the latest this many): with ``long_window`` the
         shortest window (50; with ``long_window`` False the session-7 value was 100).
@@ -172,7 +173,10 @@ class Isam2Mapper:
     last Gauss-Newton step predicted a decrease of at most ``decrease_tol`` and was finite.
     Past ``long_after_steps`` the mapper runs in long mode (:class:`Isam2Config`; bounded
     work per update, no whole-graph polish per estimate, ``info["mode"] = "isam2-long"``
-    and ``info["checked_at_step"]``, the step of the whole-graph check it reports).
+    and ``info["checked_at_step"]``, the step of the whole-graph check it reports; with the
+    window also ``info["window_start"]``, its held pose, and ``info["window_rebuilds"]``).
+    In long mode with the window, the map's older poses are back-substituted from the
+    window's solution (:meth:`current_values`).
 
     If an update raises (e.g. an indeterminate linear system), the external factors of that
     update (:meth:`add_factors`) are dropped and the solver is rebuilt from the factors held
