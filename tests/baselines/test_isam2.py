@@ -316,3 +316,30 @@ def test_window_isam2_reaches_the_whole_graph_minimum(window_run) -> None:
                 checkpoint_every=10).final
     mpe = score_estimate(final, stream.truth).mpe_m
     assert mpe <= 1.1 * score_estimate(batch, stream.truth).mpe_m
+
+
+def test_a_failed_window_rebuild_hands_over_to_the_whole_graph(small: Stream,
+                                                               monkeypatch) -> None:
+    """If building the window iSAM2 raises, long mode goes on with iSAM2 over the whole
+    graph (the failure counted, a rebuild made) and ends in a map near the whole-history
+    long mode's (``long_window`` False, what it hands over to)."""
+    calls = {"n": 0}
+    real = Isam2Mapper._rebuild_window
+
+    def flaky(self, take_estimate):
+        calls["n"] += 1
+        if calls["n"] == 2:
+            raise RuntimeError("indeterminant system (test)")
+        return real(self, take_estimate)
+
+    monkeypatch.setattr(Isam2Mapper, "_rebuild_window", flaky)
+    long = {"long_after_steps": 60, "long_lag_steps": 10, "long_shift_steps": 10}
+    m = Isam2Mapper(small.header, **long)
+    final = run(m, small.steps, checkpoint_every=10).final
+    assert calls["n"] == 2 and m._window_b == 0 and m._chunks is None
+    assert final.info["mode"] == "isam2-long" and final.info["update_failures"] >= 1
+    assert final.info["rebuilds"] >= 1 and "window_start" not in final.info
+    monkeypatch.undo()
+    whole = _final(small, 10, long_window=False, **long)
+    a, b = (score_estimate(x, small.truth).mpe_m for x in (final, whole))
+    assert a <= 1.1 * b
