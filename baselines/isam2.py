@@ -106,7 +106,10 @@ class Isam2Config(FactorGraphConfig):
         newest step. At each whole-graph check (``long_growth``) the whole graph gets up to
         ``isam2_polish`` Gauss-Newton steps (each kept only if it lowers the error) before
         the check, and the marginal is rebuilt at the new values. Poses older than the window
-        are held at their last estimate. False: the session-7 long mode, one iSAM2 over the
+        are back-substituted from the window's solution through the conditionals they were
+        eliminated into (:meth:`Isam2Mapper.current_values`; held at their last estimate
+        past ``lag_marginal_landmarks`` landmarks, where the chunks fold instead of
+        eliminating). False: the session-7 long mode, one iSAM2 over the
         whole history with the old poses in ``noRelinKeys`` (per-update cost growing with
         the run).
     long_shift_steps : int
