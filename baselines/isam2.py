@@ -8,7 +8,7 @@ by a rebuild, and a rebuild that fails hands over to batch Levenberg-Marquardt
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from typing import Any, ClassVar, Mapping, Sequence
 
 import gtsam
@@ -21,6 +21,9 @@ from bomgraph.stream import Step, StreamHeader
 from .bearing_graph import (BearingGraph, FactorGraphConfig, insert_pose, landmark_key,
                             mid_key, pose_key)
 from .factor_graph import GTSAM_ERRORS, _first_line, estimate_from_values, solve_lm
+from .isam2_window import WindowLongMode
+from .lm_report import polish
+from .lm_window import StepChunks
 
 
 #: The relinearisation settings the recording presets were validated with (``docs/measurements.md``,
@@ -67,16 +70,18 @@ class Isam2Config(FactorGraphConfig):
         recordings).
     long_after_steps : int or None
         Long recordings: from the first scheduled update at or past this many steps the
-        mapper goes *long* (None: never). iSAM2 is rebuilt once with Gauss-Newton (Powell's
-        dogleg evaluates the whole graph's error and gradient at every update: O(T) per
-        update), poses older than ``long_lag_steps`` are not relinearised (ISAM2's
+        mapper goes *long* (None: never): iSAM2 runs Gauss-Newton (Powell's dogleg evaluates
+        the whole graph's error and gradient at every update: O(T) per update) on a bounded
+        window (``long_window``, the default) or, with ``long_window`` False, over the whole
+        history with poses older than ``long_lag_steps`` not relinearised (ISAM2's
         ``noRelinKeys``; they still move with the linear solution) except at an update
-        where the graph has grown by ``long_growth`` since the last full check, which also
-        runs the Gauss-Newton convergence check; ``estimate()`` no longer polishes the whole
-        graph (it reports the last check). Cost per update is then bounded by the lag and
-        the landmarks, and the whole-graph work adds up to a geometric series.
+        where the graph has grown by ``long_growth`` since the last full check. Either way
+        the whole graph is checked (Gauss-Newton) each time it has grown ``long_growth``x;
+        ``estimate()`` no longer polishes the whole graph (it reports the last check), so
+        the whole-graph work adds up to a geometric series.
     long_lag_steps : int
-        Poses relinearised in long mode (the latest this many).
+        Poses relinearised in long mode (the latest this many): with ``long_window`` the
+        shortest window (50; with ``long_window`` False the session-7 value was 100).
     long_relinearize_threshold : float
         ``relinearize_threshold`` in long mode (the poses that would drift past it are held
         by ``long_lag_steps``).
@@ -92,6 +97,26 @@ class Isam2Config(FactorGraphConfig):
     long_checkpoint_updates : int
         ``checkpoint_updates`` in long mode (0 measured faster but left the final map
         128 units above the minimum, ``docs/measurements.md``).
+    long_window : bool
+        Long mode with a bounded iSAM2 (the default): iSAM2 holds only the last
+        ``long_lag_steps`` to ``long_lag_steps + long_shift_steps`` poses and the landmarks;
+        the older steps are eliminated into the Gaussian marginal of
+        :class:`baselines.lm_window.StepChunks` (the fixed-lag machinery of ``gtsam-batch``),
+        on the boundary pose and the landmarks. When the window would exceed its length, or
+        new factors reach a variable outside it (a bearing from an eliminated pose, a
+        landmark seen again after it left), iSAM2 is rebuilt on the window that ends at the
+        newest step. At each whole-graph check (``long_growth``) the whole graph gets up to
+        ``isam2_polish`` Gauss-Newton steps (each kept only if it lowers the error) before
+        the check, and the marginal is rebuilt at the new values. Poses older than the window
+        are back-substituted from the window's solution through the conditionals they were
+        eliminated into (:meth:`Isam2Mapper.current_values`; held at their last estimate
+        past ``lag_marginal_landmarks`` landmarks, where the chunks fold instead of
+        eliminating). False: the session-7 long mode, one iSAM2 over the
+        whole history with the old poses in ``noRelinKeys`` (per-update cost growing with
+        the run).
+    long_shift_steps : int
+        How far the window's end moves before iSAM2 is rebuilt on a new window (each rebuild
+        eliminates these steps into the marginal and factorises the window once).
     """
 
     PRESETS: ClassVar[Mapping[str, Mapping[str, Any]]] = {
@@ -112,11 +137,13 @@ class Isam2Config(FactorGraphConfig):
     isam2_polish: int = 3
     landmark_prior_sigma_m: float | None = None
     long_after_steps: int | None = 500
-    long_lag_steps: int = 100
+    long_lag_steps: int = 50
     long_relinearize_threshold: float = 0.001
     long_growth: float = 2.0
     long_wildfire_threshold: float = 0.0
     long_checkpoint_updates: int = 1
+    long_window: bool = True
+    long_shift_steps: int = 50
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -132,9 +159,10 @@ class Isam2Config(FactorGraphConfig):
         need(self.long_lag_steps >= 1, "long_lag_steps must be >= 1")
         need(self.long_relinearize_threshold > 0, "long_relinearize_threshold must be > 0")
         need(self.long_growth > 1, "long_growth must be > 1")
+        need(self.long_shift_steps >= 1, "long_shift_steps must be >= 1")
 
 
-class Isam2Mapper:
+class Isam2Mapper(WindowLongMode):
     """``gtsam-isam2``: iSAM2 updates with only the new factors and values, on an internal
     schedule (every ``isam2_update_every`` steps, and at a step where landmarks entered).
 
@@ -150,7 +178,10 @@ class Isam2Mapper:
     last Gauss-Newton step predicted a decrease of at most ``decrease_tol`` and was finite.
     Past ``long_after_steps`` the mapper runs in long mode (:class:`Isam2Config`; bounded
     work per update, no whole-graph polish per estimate, ``info["mode"] = "isam2-long"``
-    and ``info["checked_at_step"]``, the step of the whole-graph check it reports).
+    and ``info["checked_at_step"]``, the step of the whole-graph check it reports; with the
+    window also ``info["window_start"]``, its held pose, and ``info["window_rebuilds"]``).
+    In long mode with the window, the map's older poses are back-substituted from the
+    window's solution (:meth:`current_values`).
 
     If an update raises (e.g. an indeterminate linear system), the external factors of that
     update (:meth:`add_factors`) are dropped and the solver is rebuilt from the factors held
@@ -201,6 +232,21 @@ class Isam2Mapper:
         self._old = gtsam.KeyList()  # what long mode does not relinearise
         self._old_upto = 0
         self._old_landmarks: set[int] = set()
+        # long_window: every step's factors filed by step (the fixed-lag machinery of
+        # gtsam-batch), every bearing as arrays (the chunks' conditional folds), the held
+        # pose of the window iSAM2 holds (0: iSAM2 holds the whole graph)
+        cfg = self.config
+        self._chunks: StepChunks | None = None
+        if cfg.long_window and cfg.long_after_steps is not None:
+            span = cfg.long_lag_steps + cfg.long_shift_steps
+            self._chunks = StepChunks(header, replace(
+                cfg, lag_steps=max(span, 2),
+                lag_after_steps=max(cfg.lag_after_steps, span, 2)), keep_conditionals=True)
+        self._obs: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+        self._window_b = 0
+        self._window_fresh: list[int] = []
+        self.window_rebuilds = 0
+        self._at_check = False   # the estimate is the one the last whole-graph check checked
 
     def _new_isam(self) -> gtsam.ISAM2:
         """A fresh iSAM2: Cholesky, Powell's dogleg (a trust region) or Gauss-Newton."""
@@ -249,12 +295,15 @@ class Isam2Mapper:
         self._buffer.push_back(new.landmark)
         self._buffer_values.insert(new.landmark_values)
         sigma = self.config.landmark_prior_sigma_m
+        weak = gtsam.NonlinearFactorGraph()
         if sigma is not None and new.landmark_ids:
             noise = gtsam.noiseModel.Isotropic.Sigma(2, float(sigma))
             for lid in new.landmark_ids:
                 key = landmark_key(lid)
-                self._buffer.add(gtsam.PriorFactorPoint2(
-                    key, new.landmark_values.atPoint2(key), noise))
+                weak.add(gtsam.PriorFactorPoint2(key, new.landmark_values.atPoint2(key), noise))
+            self._buffer.push_back(weak)
+        if self._chunks is not None:
+            self._file(step, new.core, weak, new.landmark_ids)
         scheduled = t % self.config.isam2_update_every == 0
         if (scheduled or self._external.size()
                 or (self.config.isam2_update_on_entry and new.landmark_ids)):
@@ -280,6 +329,12 @@ class Isam2Mapper:
         both = gtsam.Values(values)
         both.insert(ext_values)
         try:
+            if self._long and self._window_b:
+                if external.size():     # filed with the newest step's chunk
+                    assert self._chunks is not None
+                    self._chunks.add(self.problem.n_steps - 1, external, {})
+                self._update_window(graph, both, extra)
+                return
             full = self._long and self.problem.n_steps >= self.config.long_growth * self._long_full
             params = self._update_params(full)
             self._isam.update(graph, both, params)
@@ -300,7 +355,9 @@ class Isam2Mapper:
             self.failures.append(_first_line(exc))
         self.dropped_external += int(external.size())
         start = gtsam.Values(self.estimate_values)
-        start.insert(values)
+        start.insert_or_assign(values)   # (a window update may have inserted them)
+        if self._window_b:               # the whole graph from here on (long_window off)
+            self._leave_window()
         self._recover(factors, start)
 
     # -- long recordings ------------------------------------------------------------------
@@ -324,10 +381,21 @@ class Isam2Mapper:
         return params
 
     def _go_long(self) -> None:
-        """Enter long mode: iSAM2 rebuilt with Gauss-Newton from the current estimate
-        (one batch elimination), then the first check. If the rebuild fails, the mapper
-        stays in its normal mode (a rebuild with the previous optimizer, :meth:`_recover`)."""
+        """Enter long mode: with ``long_window``, the first whole-graph check and the window
+        iSAM2 (:meth:`_check_window`); else (or if that fails) iSAM2 rebuilt with
+        Gauss-Newton over the whole graph from the current estimate (one batch elimination),
+        then the first check. If the rebuild fails, the mapper stays in its normal mode (a
+        rebuild with the previous optimizer, :meth:`_recover`)."""
         self._long = True
+        if self._chunks is not None:
+            values = self.estimate_values
+            try:
+                self._check_window()
+                return
+            except GTSAM_ERRORS as exc:
+                self.failures.append(_first_line(exc))
+                self.estimate_values = values
+                self._leave_window()
         self._isam = self._new_isam()
         try:
             self._isam.update(self.accepted, self.estimate_values)
@@ -411,11 +479,11 @@ class Isam2Mapper:
         if self.problem.n_steps == 0:
             return MapEstimate.empty(reason="no steps yet")
         graph = self.accepted
-        values = self.estimate_values
+        values = self.current_values()
         if self._buffer.size() or self._buffer_values.size():
             graph = gtsam.NonlinearFactorGraph(self.accepted)
             graph.push_back(self._buffer)
-            values = gtsam.Values(self.estimate_values)
+            values = gtsam.Values(values)
             values.insert(self._buffer_values)
         report = None
         if self._batch:
@@ -431,6 +499,9 @@ class Isam2Mapper:
         if report is not None:
             check["converged"] = check["converged"] and report.converged
         mode = "batch" if self._batch else ("isam2-long" if self._long else "isam2")
+        if self._long and self._window_b:
+            check.update({"window_start": self._window_b,
+                          "window_rebuilds": self.window_rebuilds})
         info = {**check, "mode": mode, "isam2_updates": self.updates,
                 "update_failures": len(self.failures), "rebuilds": self.rebuilds,
                 "lm_restarts": self.lm_restarts,
@@ -439,39 +510,6 @@ class Isam2Mapper:
             info["last_failure"] = self.failures[-1]
         return estimate_from_values(self.problem, values, graph, info,
                                      self.config.covariances)
-
-
-def polish(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, iterations: int,
-           decrease_tol: float) -> tuple[gtsam.Values, float, float, float]:
-    """Up to ``iterations`` Gauss-Newton steps on ``graph`` from ``values``, each kept only if
-    it lowers the error; the last one computed is also the convergence check, and after a
-    step predicting at most ``decrease_tol`` the polish stops. Returns ``(values, max-norm of
-    the last step, the decrease its linear model predicted, graph.error(values))``; ``(values,
-    inf, inf, error)`` if the linear system is singular. With ``iterations = 0`` it is only the
-    check."""
-    error = float(graph.error(values))
-    step = decrease = math.inf
-    for _ in range(max(iterations, 1)):
-        try:
-            linear = graph.linearize(values)
-            delta = linear.optimize()
-        except GTSAM_ERRORS:
-            return values, math.inf, math.inf, error
-        v = delta.vector()
-        step = float(np.max(np.abs(v))) if v.size else 0.0
-        zero = gtsam.VectorValues(delta)
-        zero.setZero()
-        decrease = float(linear.error(zero) - linear.error(delta))
-        if iterations == 0 or not (math.isfinite(step) and math.isfinite(decrease)):
-            break
-        trial = values.retract(delta)
-        e = float(graph.error(trial))
-        if not e < error:
-            break
-        values, error = trial, e
-        if decrease <= decrease_tol:
-            break
-    return values, step, decrease, error
 
 
 __all__ = ["Isam2Config", "Isam2Mapper", "polish"]

@@ -2,7 +2,8 @@
 
 :class:`SolveReport` (honest: an LM run that gave up is never "converged"), the LM parameters
 of a :class:`~baselines.bearing_graph.FactorGraphConfig` (:func:`lm_params`), the Gauss-Newton
-check of a solution (:func:`gauss_newton_check`) and what GTSAM raises
+check of a solution (:func:`gauss_newton_check`), the kept-if-lower Gauss-Newton polish of the
+iSAM2 mappers (:func:`polish`) and what GTSAM raises
 (:data:`GTSAM_ERRORS`). :func:`baselines.factor_graph.solve_lm` puts them together; they live
 here so that :mod:`baselines.lm_window` can use them without importing the mappers.
 """
@@ -100,4 +101,38 @@ def _first_line(exc: BaseException) -> str:
     return text[:300] if text else type(exc).__name__
 
 
-__all__ = ["GTSAM_ERRORS", "ABSURD_STEP", "SolveReport", "lm_params", "gauss_newton_check"]
+def polish(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, iterations: int,
+           decrease_tol: float) -> tuple[gtsam.Values, float, float, float]:
+    """Up to ``iterations`` Gauss-Newton steps on ``graph`` from ``values``, each kept only if
+    it lowers the error; the last one computed is also the convergence check, and after a
+    step predicting at most ``decrease_tol`` the polish stops. Returns ``(values, max-norm of
+    the last step, the decrease its linear model predicted, graph.error(values))``; ``(values,
+    inf, inf, error)`` if the linear system is singular. With ``iterations = 0`` it is only the
+    check."""
+    error = float(graph.error(values))
+    step = decrease = math.inf
+    for _ in range(max(iterations, 1)):
+        try:
+            linear = graph.linearize(values)
+            delta = linear.optimize()
+        except GTSAM_ERRORS:
+            return values, math.inf, math.inf, error
+        v = delta.vector()
+        step = float(np.max(np.abs(v))) if v.size else 0.0
+        zero = gtsam.VectorValues(delta)
+        zero.setZero()
+        decrease = float(linear.error(zero) - linear.error(delta))
+        if iterations == 0 or not (math.isfinite(step) and math.isfinite(decrease)):
+            break
+        trial = values.retract(delta)
+        e = float(graph.error(trial))
+        if not e < error:
+            break
+        values, error = trial, e
+        if decrease <= decrease_tol:
+            break
+    return values, step, decrease, error
+
+
+__all__ = ["GTSAM_ERRORS", "ABSURD_STEP", "SolveReport", "lm_params", "gauss_newton_check",
+           "polish"]

@@ -29,6 +29,11 @@ Two uses (issue 14 items 1-2):
   :mod:`baselines.fixed_lag`), grown as steps leave the window, redone from all its old
   bearings when its point has moved more than ``refold_m`` from where it was folded, and all
   reset after a whole-graph solve; the held boundary pose is then fixed by a prior.
+
+With ``keep_conditionals`` (``gtsam-isam2``'s window) the eliminated poses are kept as Gaussian
+conditionals on the poses and landmarks left (the cliques of the same elimination), and :meth:`StepChunks.back_substitute` moves the held
+poses with a window's solution: the whole-graph Gauss-Newton solution to first order, at the
+cost of one back-substitution, without solving the older steps again.
 """
 
 from __future__ import annotations
@@ -70,12 +75,15 @@ class StepChunks:
     header : StreamHeader
     config : FactorGraphConfig
         ``sigma_floor_*`` (the boundary prior), ``bearing_cauchy_k``, ``lag_steps``.
+    keep_conditionals : bool
+        Keep the eliminated poses' conditionals for :meth:`back_substitute`.
     """
 
     #: A landmark folded at a point farther than this (m) from its current one is refolded.
     refold_m = 1e-3
 
-    def __init__(self, header: StreamHeader, config: FactorGraphConfig) -> None:
+    def __init__(self, header: StreamHeader, config: FactorGraphConfig,
+                 keep_conditionals: bool = False) -> None:
         self.header = header
         self.config = config
         self._starts: list[int] = []                       # first step of each chunk
@@ -95,6 +103,12 @@ class StepChunks:
         self._marg = gtsam.NonlinearFactorGraph()
         self._marg_landmarks = 0
         self._late: list[tuple[int, int, float]] = []
+        # keep_conditionals: (Bayes net of the eliminated poses, their linearisation points,
+        # its parent landmarks' keys (n,) and points (n, 2), the held pose's key and point),
+        # oldest first
+        self._keep = keep_conditionals
+        self._conditionals: list[tuple[gtsam.GaussianBayesNet, gtsam.Values, list[int],
+                                       np.ndarray, int, gtsam.Pose2]] = []
 
     # -- filing -----------------------------------------------------------------------------
     def add(self, first_step: int, core: gtsam.NonlinearFactorGraph,
@@ -255,7 +269,12 @@ class StepChunks:
         start = self._values(keys, held)
         hold = pose_key(b)
         gone = [k for k in keys if not _is_landmark(k) and k != hold]
-        _, rest = nl.linearize(start).eliminatePartialMultifrontal(gone)
+        tree, rest = nl.linearize(start).eliminatePartialMultifrontal(gone)
+        if self._keep:
+            lms = [k for k in keys if _is_landmark(k)]
+            xy = np.array([start.atPoint2(k) for k in lms]).reshape(-1, 2)
+            self._conditionals.append((_bayes_net(tree), self._values(gone, start), lms, xy,
+                                       hold, start.atPose2(hold)))
         self._marg = gtsam.NonlinearFactorGraph()
         for i in range(rest.size()):
             f = rest.at(i)
@@ -263,6 +282,26 @@ class StepChunks:
                 self._marg.add(gtsam.LinearContainerFactor(f, self._values(f.keys(), start)))
         self._n_marg = j
         self._marg_landmarks = n_lm
+
+    def back_substitute(self, current: gtsam.Values) -> gtsam.Values:
+        """The eliminated poses given ``current`` (which holds every landmark and the newest
+        held pose, e.g. a window's solution): newest conditionals first, each solved for its
+        poses given its parents (the landmarks and the pose held when it was made, taken from
+        ``current`` or from a newer conditional's solution), as deltas from the points it was
+        linearised at. Empty without ``keep_conditionals`` or before the first elimination."""
+        out = gtsam.Values()
+        points: dict[int, np.ndarray] = {}
+        for net, frontal, lms, xy, hold, at in reversed(self._conditionals):
+            given = gtsam.VectorValues()
+            for k, p0 in zip(lms, xy):
+                p = points.get(k)
+                if p is None:
+                    p = points[k] = np.asarray(current.atPoint2(k))
+                given.insert(k, p - p0)
+            src = out if out.exists(hold) else current
+            given.insert(hold, at.localCoordinates(src.atPose2(hold)))
+            out.insert(frontal.retract(net.optimize(given)))
+        return out
 
     def _late_folds(self, b: int, held: gtsam.Values,
                     pose_at: Callable[[np.ndarray], np.ndarray], active: Sequence[int]
@@ -290,6 +329,7 @@ class StepChunks:
         self._folded_to = 0
         self._n_marg = 0
         self._marg = gtsam.NonlinearFactorGraph()
+        self._conditionals = []
         late, self._late = self._late, []
         for t, lid, b in late:
             self._file(t, lid, b)
@@ -336,6 +376,21 @@ class StepChunks:
             else:
                 f[0] = f[0] + info[k]
                 f[1] = f[1] + eta[k]
+
+
+def _bayes_net(tree: gtsam.GaussianBayesTree) -> gtsam.GaussianBayesNet:
+    """The clique conditionals of ``tree`` as a Bayes net in elimination order (every clique
+    after its children), for back-substitution given the variables it was conditioned on."""
+    net = gtsam.GaussianBayesNet()
+    stack = [(c, False) for c in tree.roots()]
+    while stack:
+        clique, seen = stack.pop()
+        if seen:
+            net.push_back(clique.conditional())
+            continue
+        stack.append((clique, True))
+        stack.extend((clique[i], False) for i in range(clique.nrChildren()))
+    return net
 
 
 def fold_bearings(poses: np.ndarray, points: np.ndarray, bearings_rad: np.ndarray,

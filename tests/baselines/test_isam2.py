@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from baselines.bearing_graph import FactorGraphConfig, landmark_key
+from baselines.bearing_graph import FactorGraphConfig, landmark_key, pose_key
 from baselines.isam2 import Isam2Config, Isam2Mapper
 from bomgraph.errors import BomgraphError, ConfigError
 from bomgraph.evaluate import score_estimate
@@ -253,3 +253,93 @@ def test_huge_landmark_ids_map_like_small_ones(method: str) -> None:
     # the keys sort differently (elimination order), so equal to rounding, not bit for bit
     assert np.max(np.abs(a.landmarks_xy - b.landmarks_xy)) < 1e-6
     assert b.info.get("n_prior_factors", 0) == a.info.get("n_prior_factors", 0)
+
+
+# --------------------------------------------------------------------------------------------
+# Long mode with a bounded window (issue 14 items 1-2)
+# --------------------------------------------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def window_run() -> tuple[Stream, Isam2Mapper, list[int], Isam2Mapper]:
+    """A 400-step paper-design run in long mode from step 100 with a 20-40-step window; the
+    number of variables iSAM2 holds after each step; the same run with ``long_window``
+    False."""
+    from bomgraph.sim import paper_design, simulate_run
+    stream = simulate_run(paper_design(0)[0], SimConfig(n_steps=400))
+    long = {"long_after_steps": 100, "long_lag_steps": 20, "long_shift_steps": 20}
+    m = Isam2Mapper(stream.header, **long)
+    held = []
+    for step in stream.steps:
+        m.step(step)
+        if m._window_b:
+            held.append(int(m._isam.getLinearizationPoint().size()))
+    whole = Isam2Mapper(stream.header, long_window=False, **long)
+    for step in stream.steps:
+        whole.step(step)
+    return stream, m, held, whole
+
+
+def test_window_isam2_holds_a_bounded_number_of_variables(window_run) -> None:
+    """Past long_after_steps iSAM2 holds only the window: at most lag + shift + one update's
+    steps of poses (two keys each, x_t and m_t, plus the held pose) and the landmarks, at
+    every step; the whole-history long mode holds every variable."""
+    stream, m, held, whole = window_run
+    cfg = m.config
+    n_lm = len(m.problem.landmark_ids)
+    span = cfg.long_lag_steps + cfg.long_shift_steps + cfg.isam2_update_every
+    assert len(held) >= 250 and m.window_rebuilds >= 5
+    assert max(held) <= 2 * span + 1 + n_lm
+    assert whole._isam.getLinearizationPoint().size() == 2 * len(stream.steps) - 1 + n_lm
+
+
+def test_window_isam2_reaches_the_whole_graph_minimum(window_run) -> None:
+    """The window's solution with the older poses back-substituted through their eliminated
+    conditionals passes the whole-graph Gauss-Newton check and is within 1 unit of the
+    Levenberg-Marquardt minimum of the whole graph (the held poses alone fail the check by
+    far); its landmark MPE is no worse than 1.1 x gtsam-batch's fixed-lag window on the same
+    stream."""
+    from baselines.factor_graph import BatchMapper, solve_lm
+    from baselines.isam2 import polish
+    stream, m, _, _ = window_run
+    final = m.estimate()
+    assert final.info["mode"] == "isam2-long" and final.info["window_start"] > 300
+    current = m.current_values()
+    _, step, decrease, cost = polish(m.accepted, current, 0, m.config.decrease_tol)
+    assert decrease <= m.config.decrease_tol
+    assert polish(m.accepted, m.estimate_values, 0, 1.0)[2] > 100 * m.config.decrease_tol
+    _, report = solve_lm(m.accepted, current, m.config)
+    assert report.converged and cost - report.final_error <= 1.0
+    assert np.allclose(final.poses, np.array([[current.atPose2(k).x(), current.atPose2(k).y(),
+                                               current.atPose2(k).theta()]
+                                              for k in map(pose_key, range(m.problem.n_steps))]))
+    batch = run(BatchMapper(stream.header, lag_after_steps=100, lag_steps=20), stream.steps,
+                checkpoint_every=10).final
+    mpe = score_estimate(final, stream.truth).mpe_m
+    assert mpe <= 1.1 * score_estimate(batch, stream.truth).mpe_m
+
+
+def test_a_failed_window_rebuild_hands_over_to_the_whole_graph(small: Stream,
+                                                               monkeypatch) -> None:
+    """If building the window iSAM2 raises, long mode goes on with iSAM2 over the whole
+    graph (the failure counted, a rebuild made) and ends in a map near the whole-history
+    long mode's (``long_window`` False, what it hands over to)."""
+    calls = {"n": 0}
+    real = Isam2Mapper._rebuild_window
+
+    def flaky(self, take_estimate):
+        calls["n"] += 1
+        if calls["n"] == 2:
+            raise RuntimeError("indeterminant system (test)")
+        return real(self, take_estimate)
+
+    monkeypatch.setattr(Isam2Mapper, "_rebuild_window", flaky)
+    long = {"long_after_steps": 60, "long_lag_steps": 10, "long_shift_steps": 10}
+    m = Isam2Mapper(small.header, **long)
+    final = run(m, small.steps, checkpoint_every=10).final
+    assert calls["n"] == 2 and m._window_b == 0 and m._chunks is None
+    assert final.info["mode"] == "isam2-long" and final.info["update_failures"] >= 1
+    assert final.info["rebuilds"] >= 1 and "window_start" not in final.info
+    monkeypatch.undo()
+    whole = _final(small, 10, long_window=False, **long)
+    a, b = (score_estimate(x, small.truth).mpe_m for x in (final, whole))
+    assert a <= 1.1 * b
