@@ -227,6 +227,8 @@ class BatchState:
         self._obs_cat: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
         self.chunks = StepChunks(header, config)
         self._chunk_start = 0
+        # landmarks out of reach after the last whole-graph solve that ran the robust pass
+        self._unreached = np.zeros(0, np.int64)
 
     def add_step(self, step: Step) -> None:
         """Record ``step`` and predict its pose from the previous one by the odometry."""
@@ -364,8 +366,20 @@ class BatchState:
         self._full_n = n
         self._window_b = 0
         self.chunks.reset_folds()
-        return solve_lm(self.graph, initial, lm_config, self.robust_graph,
-                        looks_off=self.looks_off)
+        values, report = solve_lm(self.graph, initial, lm_config, self.robust_graph,
+                                  looks_off=self._looks_off_again)
+        if "huber" in report.passes:
+            self._unreached = self.out_of_reach(values)
+        return values, report
+
+    def _looks_off_again(self, values: gtsam.Values) -> bool:
+        """:meth:`looks_off` for a whole-graph solve, except that landmarks still out of
+        reach that were already out of reach after the last robust pass do not call for
+        another (a landmark placed beyond reach stays there through every Huber pass, and
+        each pass costs as much as the solve; it is left out of the map all the same)."""
+        if self.max_whitened_residual(values) > self.config.robust_trigger:
+            return True
+        return np.setdiff1d(self.out_of_reach(values), self._unreached).size > 0
 
     def _solve_window(self, initial: gtsam.Values, b: int
                       ) -> tuple[gtsam.Values, SolveReport]:

@@ -286,3 +286,28 @@ def test_isam2_survives_an_indeterminate_rebuild(rate: float, seed: int, sane: b
         assert score_estimate(final, s.truth).mpe_m < 1.0
     else:
         assert final.info["converged"] is False
+
+
+def test_a_landmark_left_beyond_reach_calls_for_one_robust_pass_not_one_per_solve() -> None:
+    """In the world of ``scripts/bench_scale.py`` at N = 1,000 (seed 11) landmark 241 is
+    placed beyond the sensor's reach from step 10 on: the first solve runs the Huber pass,
+    the next ones (the same landmark still beyond reach, nothing else off) do not, and the
+    landmark stays out of the map."""
+    side = 2.5 * np.sqrt(1000 / 50)
+    stream = simulate(SimConfig(arena_m=side, n_landmarks=1000, n_steps=6000),
+                      np.random.default_rng(11))
+    mapper = create_mapper("gtsam-batch", stream.header)
+    passes, left_out = [], []
+    for s in stream.steps[:41]:
+        mapper.step(s)
+        if s.t and s.t % 10 == 0:
+            est = mapper.estimate()
+            passes.append(tuple(est.info["passes"]))
+            left_out.append(est.info.get("out_of_reach"))
+    assert passes == [("plain", "huber", "plain")] + [("plain",)] * 3
+    assert left_out == [[241]] * 4
+    # a landmark newly beyond reach still calls for the pass
+    state = mapper.state
+    assert not state._looks_off_again(state.values)
+    state._unreached = np.zeros(0, np.int64)
+    assert state._looks_off_again(state.values)
