@@ -44,6 +44,7 @@ for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
 import argparse  # noqa: E402
 import json  # noqa: E402
 import platform  # noqa: E402
+import sys  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 from typing import Any, Callable  # noqa: E402
@@ -59,6 +60,9 @@ from bomgraph.jsonio import jsonable  # noqa: E402
 from bomgraph.mapper import available_methods, create_mapper, run  # noqa: E402
 from bomgraph.sim import SimConfig, paper_design, simulate_run  # noqa: E402
 from bomgraph.stream import Stream  # noqa: E402
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_stmds_paired import step_update  # noqa: E402  (the per-step timing, shared)
 
 #: The reference loop of each GTSAM method (others have none).
 REFERENCE_OF = {"gtsam-batch": "loop-warm-lm", "hybrid": "loop-warm-lm",
@@ -259,20 +263,9 @@ def stmds_step_rows(args: argparse.Namespace) -> list[dict[str, Any]]:
         per_step, per_run, in_view = [], [], []
         for spec in paper_design(0)[:args.runs]:
             stream = simulate_run(spec, config)
-            mapper = create_mapper("stmds-smacof", stream.header)
-            update = 0.0
-            last = stream.steps[-1].t
-            for st in stream.steps:
-                c0 = time.process_time()
-                mapper.step(st)
-                mapped = (st.t > 0 and st.t % 10 == 0) or st.t == last
-                if mapped:
-                    mapper.flush()
-                update += time.process_time() - c0
-                if mapped:
-                    mapper.estimate()
-            per_run.append(update)
-            per_step.append(update / len(stream.steps))
+            step_s, _ = step_update(lambda h: create_mapper("stmds-smacof", h), stream)
+            per_run.append(step_s * len(stream.steps))
+            per_step.append(step_s)
             in_view.append(float(np.mean([st.landmark_ids.size for st in stream.steps])))
         rows.append({"section": label, "method": "stmds-smacof",
                      "cpu_s": float(np.median(per_run)), "reference": None,

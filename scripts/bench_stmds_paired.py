@@ -83,7 +83,7 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
-def _step_update(make, stream) -> tuple[float, object]:
+def step_update(make, stream) -> tuple[float, object]:
     """CPU seconds per step of ``step()`` plus the ``flush()`` before each map (a map every
     10 steps and at the end, ``estimate()`` not timed), and the mapper."""
     mapper = make(stream.header)
@@ -111,7 +111,7 @@ def stmds_step(old_make, runs: int, repeats: int) -> int:
             order = ("old", "new") if i % 2 == 0 else ("new", "old")
             mappers = {}
             for which in order:
-                t, mappers[which] = _step_update(old_make if which == "old" else
+                t, mappers[which] = step_update(old_make if which == "old" else
                                                  make_stmds_smacof, stream)
                 per[which].append(t)
             ratios.append(per["old"][-1] / per["new"][-1])
