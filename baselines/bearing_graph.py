@@ -344,6 +344,30 @@ def _put(values: gtsam.Values, key: int, value: Any) -> None:
 # The growing problem
 # --------------------------------------------------------------------------------------------
 
+class BearingLog:
+    """Every bearing of a run kept as three flat arrays (owner step, landmark id, bearing in
+    rad, each ``(J,)``): appended per step, concatenated into one piece when read after new
+    bearings came in (shared by the LM mappers' state and iSAM2's long-mode window)."""
+
+    def __init__(self) -> None:
+        self._parts: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+
+    def add(self, step: Step) -> None:
+        """Keep ``step``'s bearings."""
+        ids = np.asarray(step.landmark_ids, dtype=np.int64)
+        if ids.size:
+            self._parts.append((np.full(ids.size, step.t, np.int64), ids,
+                                np.asarray(step.bearings_rad, dtype=float)))
+
+    def arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Owner steps, landmark ids and bearings (rad) of every bearing kept, each ``(J,)``."""
+        if not self._parts:
+            return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0)
+        if len(self._parts) > 1:
+            self._parts = [tuple(np.concatenate(c) for c in zip(*self._parts))]  # type: ignore
+        return self._parts[0]
+
+
 @dataclass
 class NewFactors:
     """What :meth:`BearingGraph.take_new` hands over since its last call.
@@ -570,6 +594,6 @@ class BearingGraph:
         self.n_bearing_factors += 1
 
 
-__all__ = ["FactorGraphConfig", "BearingGraph", "NewFactors",
+__all__ = ["FactorGraphConfig", "BearingGraph", "BearingLog", "NewFactors",
            "odometry_factors", "bearing_noise", "prior_factor", "pose_key", "mid_key",
            "landmark_key", "poses_from_values", "landmarks_from_values", "insert_pose"]

@@ -33,7 +33,7 @@ from bomgraph.geometry import rotation
 from bomgraph.mapper import MapEstimate
 from bomgraph.stream import Step, StreamHeader, Truth
 
-from .bearing_graph import (BearingGraph, FactorGraphConfig, NewFactors, insert_pose,
+from .bearing_graph import (BearingGraph, BearingLog, FactorGraphConfig, NewFactors, insert_pose,
                             landmark_key, landmarks_from_values, pose_key, poses_from_values)
 from .lm_report import (ABSURD_STEP, GTSAM_ERRORS, SolveReport, _first_line,  # noqa: F401
                         gauss_newton_check, lm_params)
@@ -223,8 +223,7 @@ class BatchState:
         self._full_n = 0                  # steps at the last whole-graph solve
         self._window_b = 0                # held pose of the last solve if a window, else 0
         self._fresh: list[int] = []       # landmarks entered since the last solution
-        self._obs: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
-        self._obs_cat: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+        self._log = BearingLog()
         self.chunks = StepChunks(header, config)
         self._chunk_start = 0
         # landmarks out of reach after the last whole-graph solve that ran the robust pass
@@ -239,11 +238,7 @@ class BatchState:
         insert_pose(self.values, t, pose, prev)
         self._last = np.asarray(pose, dtype=float)
         self._odom_sigma.append(np.asarray(step.odometry_sigma(self.header), dtype=float))
-        ids = np.asarray(step.landmark_ids, dtype=np.int64)
-        if ids.size:
-            self._obs.append((np.full(ids.size, t, np.int64), ids,
-                              np.asarray(step.bearings_rad, dtype=float)))
-            self._obs_cat = None
+        self._log.add(step)
 
     def set_values(self, values: gtsam.Values) -> None:
         """Make ``values`` the current solution (the next poses are predicted from it)."""
@@ -256,13 +251,7 @@ class BatchState:
 
     def bearings(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Every bearing so far: owner step, landmark id, bearing (rad), each (J,)."""
-        if self._obs_cat is None:
-            if self._obs:
-                self._obs_cat = tuple(np.concatenate(c) for c in zip(*self._obs))  # type: ignore
-            else:
-                self._obs_cat = (np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0))
-            self._obs = [self._obs_cat] if self._obs else []
-        return self._obs_cat
+        return self._log.arrays()
 
     def poses(self, ts: np.ndarray) -> np.ndarray:
         """Poses ``ts`` in the current values, shape (k, 3)."""

@@ -18,7 +18,7 @@ from bomgraph.config import requirement, resolve
 from bomgraph.mapper import MapEstimate
 from bomgraph.stream import Step, StreamHeader
 
-from .bearing_graph import (BearingGraph, FactorGraphConfig, insert_pose, landmark_key,
+from .bearing_graph import (BearingGraph, BearingLog, FactorGraphConfig, insert_pose, landmark_key,
                             mid_key, pose_key)
 from .factor_graph import GTSAM_ERRORS, _first_line, estimate_from_values, solve_lm
 from .isam2_window import WindowLongMode
@@ -246,7 +246,7 @@ class Isam2Mapper(WindowLongMode):
             self._chunks = StepChunks(header, replace(
                 cfg, lag_steps=max(span, 2),
                 lag_after_steps=max(cfg.lag_after_steps, span, 2)), keep_conditionals=True)
-        self._obs: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+        self._log = BearingLog()
         self._window_b = 0
         self._window_fresh: list[int] = []
         self.window_rebuilds = 0

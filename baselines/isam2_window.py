@@ -19,7 +19,7 @@ import numpy as np
 
 from bomgraph.stream import Step
 
-from .bearing_graph import poses_from_values
+from .bearing_graph import BearingLog, poses_from_values
 from .factor_graph import GTSAM_ERRORS, _first_line, solve_lm
 from .lm_report import polish
 from .lm_window import StepChunks
@@ -44,19 +44,12 @@ class WindowLongMode:
         chunk = gtsam.NonlinearFactorGraph(core)
         chunk.push_back(weak)
         self._chunks.add(step.t, chunk, self.problem.entered_last())
-        ids = np.asarray(step.landmark_ids, dtype=np.int64)
-        if ids.size:
-            self._obs.append((np.full(ids.size, step.t, np.int64), ids,
-                              np.asarray(step.bearings_rad, dtype=float)))
+        self._log.add(step)
         self._window_fresh += list(entered)
 
     def _bearings(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Every bearing so far: owner step, landmark id, bearing (rad), each (J,)."""
-        if not self._obs:
-            return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0)
-        if len(self._obs) > 1:
-            self._obs = [tuple(np.concatenate(c) for c in zip(*self._obs))]  # type: ignore
-        return self._obs[0]
+        return self._log.arrays()
 
     def _update_window(self, graph: gtsam.NonlinearFactorGraph, values: gtsam.Values,
                        extra: bool) -> None:
@@ -153,7 +146,7 @@ class WindowLongMode:
         with one iSAM2 over the whole graph (``long_window`` False)."""
         self._window_b = 0
         self._chunks = None
-        self._obs = []
+        self._log = BearingLog()
 
 
 __all__ = ["WindowLongMode"]
