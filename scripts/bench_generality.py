@@ -40,12 +40,14 @@ import time
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from bomgraph.bench import run_file
 from bomgraph.cli import main as bomgraph_main
 from bomgraph.errors import BomgraphError
 from bomgraph.evaluate import score_estimate
 from bomgraph.jsonio import jsonable
-from bomgraph.mapper import available_methods, method_config_class
+from bomgraph.mapper import MapEstimate, available_methods, method_config_class
 from bomgraph.stream_file import StreamReader
 
 FAMILIES = ("m6", "m6dense", "m6sigx0.5", "m6sigx2", "m1", "m1dense")
@@ -100,7 +102,9 @@ def one_run(stream: Path, method: str, checkpoint_every: int) -> dict[str, Any]:
             truth = reader.truth
         score = score_estimate(result.final, truth)
         row.update(mpe_m=score.mpe_m, n_mapped=score.n_mapped, n_truth=score.n_truth,
-                   converged=result.final.info.get("converged"))
+                   converged=result.final.info.get("converged"),
+                   landmark_ids=result.final.landmark_ids.tolist(),
+                   landmarks_xy=result.final.landmarks_xy.tolist())
     except BomgraphError as exc:
         row.update(mpe_m=math.nan, n_mapped=0, error=f"{type(exc).__name__}: {exc}")
     row["cpu_s"] = time.process_time() - t0
@@ -109,6 +113,52 @@ def one_run(stream: Path, method: str, checkpoint_every: int) -> dict[str, Any]:
 
 def _ratio(a: float, b: float) -> float:
     return a / b if (math.isfinite(a) and math.isfinite(b) and b > 0) else math.nan
+
+
+def common_set_mpe(a: dict[str, Any], b: dict[str, Any], truth: Any) -> tuple[float, float, int]:
+    """MPE (m) of the final maps of rows ``a`` and ``b`` on the landmarks both mapped, each
+    aligned on that common set alone, and the size of the set (NaN below 3 landmarks).
+
+    "vs bound" compares each method's whole map with the bound's whole map; where the two map
+    different landmarks (the oracle leaves out landmarks whose rays on the true poses do not
+    pass its parallax test, MRCLAM6 robot 4), this is the like-for-like figure beside it."""
+    if not (a.get("landmark_ids") and b.get("landmark_ids")):
+        return math.nan, math.nan, 0
+    ids = np.intersect1d(a["landmark_ids"], b["landmark_ids"])
+    if ids.size < 3:
+        return math.nan, math.nan, int(ids.size)
+    out = []
+    for r in (a, b):
+        lid = np.asarray(r["landmark_ids"], dtype=np.int64)
+        keep = np.isin(lid, ids)
+        est = MapEstimate(lid[keep], np.asarray(r["landmarks_xy"], dtype=float)[keep])
+        out.append(score_estimate(est, truth).mpe_m)
+    return out[0], out[1], int(ids.size)
+
+
+def common_set_ratios(rows: list[dict[str, Any]], truths: dict[str, Any]) -> dict[str, dict]:
+    """Per stream and method: the method's MPE over the bound's on the landmarks both mapped
+    (:func:`common_set_mpe`); the bound as in :func:`summarise` (the oracle; on MRCLAM1 the
+    best method by whole-map MPE)."""
+    by = {(r["stream"], r["method"]): r for r in rows
+          if r["checkpoint_every"] == 10 and math.isfinite(r["mpe_m"])}
+    out: dict[str, dict] = {}
+    for s in sorted({k[0] for k in by}):
+        if s.startswith("m1"):
+            cands = [r for (ss, m), r in by.items() if ss == s and m != "oracle"]
+            bound = min(cands, key=lambda r: r["mpe_m"]) if cands else None
+        else:
+            bound = by.get((s, "oracle"))
+        if bound is None or s not in truths:
+            continue
+        for (ss, m), r in by.items():
+            if ss != s or r is bound:
+                continue
+            mine, theirs, n = common_set_mpe(r, bound, truths[s])
+            out.setdefault(m, {})[s] = {"ratio": _ratio(mine, theirs), "n_common": n,
+                                        "mpe_m": mine, "bound_mpe_m": theirs,
+                                        "bound": bound["method"]}
+    return out
 
 
 def summarise(rows: list[dict[str, Any]], methods: list[str], robots: list[int],
@@ -166,10 +216,15 @@ def summarise(rows: list[dict[str, Any]], methods: list[str], robots: list[int],
     return summary
 
 
+def width_of(methods: list[str]) -> int:
+    """The method column's width in the printed tables."""
+    return max(12, *(len(m) + 1 for m in methods))
+
+
 def print_tables(rows: list[dict[str, Any]], methods: list[str], robots: list[int],
                  summary: dict, families: tuple[str, ...] = FAMILIES) -> None:
     by = {(r["stream"], r["method"]): r for r in rows if r["checkpoint_every"] == 10}
-    width = max(12, *(len(m) + 1 for m in methods))
+    width = width_of(methods)
     print("Final-map landmark MPE, cm (landmarks mapped); * = no `real` preset, defaults")
     print("stream".ljust(14) + "".join(
         (m + ("" if has_real(m) else "*")).rjust(width + 5) for m in methods))
@@ -246,9 +301,31 @@ def main(argv: list[str] | None = None) -> int:
         rows = [one_run(*j) for j in jobs]
     summary = summarise(rows, methods, robots, tuple(families))
     print_tables(rows, methods, robots, summary, tuple(families))
+    truths = {}
+    for f in families:
+        for r in robots:
+            with StreamReader(streams[f][r]) as reader:
+                truths[f"{f}_r{r}"] = reader.truth
+    common = common_set_ratios(rows, truths)
+    for m in methods:
+        v = [c["ratio"] for c in common.get(m, {}).values() if math.isfinite(c["ratio"])]
+        summary.setdefault(m, {})["max_vs_bound_common"] = max(v) if v else math.nan
+    print()
+    print("vs bound on the landmarks both mapped (each map aligned on that set alone): worst "
+          "stream per method")
+    for m in methods:
+        cells = common.get(m, {})
+        if not cells:
+            continue
+        s_worst = max(cells, key=lambda k: (math.isfinite(cells[k]["ratio"]),
+                                            cells[k]["ratio"]))
+        c = cells[s_worst]
+        print(f"{m.ljust(width_of(methods))}{summary[m]['max_vs_bound_common']:8.2f}  "
+              f"({s_worst}: {100 * c['mpe_m']:.1f} vs {c['bound']} {100 * c['bound_mpe_m']:.1f} "
+              f"cm on {c['n_common']})")
     out = work / "generality.json"
     tmp = out.with_suffix(".tmp")
-    tmp.write_text(json.dumps(jsonable({"rows": rows, "summary": summary,
+    tmp.write_text(json.dumps(jsonable({"rows": rows, "summary": summary, "common": common,
                                         "wall_s": time.perf_counter() - t0}), indent=1))
     tmp.replace(out)
     print(f"\n{len(rows)} runs in {time.perf_counter() - t0:.0f} s; wrote {out}")
