@@ -286,7 +286,8 @@ def cmd_import_mrclam(args: argparse.Namespace) -> int:
     return _import(args, lambda: import_mrclam(args.dir, args.robot, keyframe=keyframe,
                                                keep_ranges=args.keep_ranges,
                                                calibrate=not args.no_calibrate,
-                                               landmark_check=not args.no_landmark_check),
+                                               landmark_check=not args.no_landmark_check,
+                                               odometry_scale=args.odometry_scale),
                    args.dir)
 
 

@@ -185,6 +185,10 @@ def build_parser() -> argparse.ArgumentParser:
     im.add_argument("--keep-ranges", action="store_true", help="keep ranges in the meta")
     im.add_argument("--no-calibrate", action="store_true",
                     help="use the default sigmas (needed without robot ground truth, mrclam1)")
+    im.add_argument("--odometry-scale", type=_float, default=1.0, metavar="K",
+                    help="multiply the logged forward velocities by K (a robot's length "
+                         "calibration: the meta's odometry_length_ratio of the same robot "
+                         "imported with ground truth; default 1)")
     im.add_argument("--no-landmark-check", action="store_true",
                     help="take Landmark_Groundtruth.dat as read: no erratum corrected, no check "
                          "against the measured ranges")

@@ -211,6 +211,31 @@ def odometry_errors(odoms: np.ndarray, truth_poses: np.ndarray) -> tuple[np.ndar
     return err, true_inc
 
 
+def odometry_length_ratio(odoms: np.ndarray, truth_poses: np.ndarray) -> float | None:
+    """The odometry's length scale against the truth: ``sum |true step| / sum |odometry
+    step|`` over the steps (translation only), or None without a step that moved.
+
+    Bearings cannot observe a map's scale; the odometry sets it, so a robot whose velocity
+    commands over-read the distance driven maps everything that much too large. This is the
+    factor to multiply the odometry's lengths by (``import_mrclam(..., odometry_scale=)``,
+    CLI ``--odometry-scale``). A ratio of path lengths, not a median of per-step ratios:
+    short steps' ratios are dominated by noise, and the sum is the same at any keyframing
+    (MRCLAM6: 0.938 and 0.938 for robot 2 at 0.3 m / 0.3 rad and at 0.1 m / 10 deg; ninth
+    session, ``docs/measurements.md``). Noise inflates each odometry length by about
+    ``sigma_lateral^2 / (2 l)``: 0.2 % at 0.1 m steps with 2 cm of lateral noise.
+
+    Parameters
+    ----------
+    odoms : ndarray of shape (T, 3)
+    truth_poses : ndarray of shape (T + 1, 3)
+    """
+    true_inc = between(truth_poses[:-1], truth_poses[1:])
+    lo = float(np.hypot(odoms[:, 0], odoms[:, 1]).sum())
+    if not lo > 0:
+        return None
+    return float(np.hypot(true_inc[:, 0], true_inc[:, 1]).sum()) / lo
+
+
 def calibrate_odometry(odoms: np.ndarray, regress: np.ndarray, truth_poses: np.ndarray,
                        min_distance_m: float, min_turn_rad: float) -> tuple[np.ndarray, dict]:
     """Fit the odometry sigma model of a keyframed run against its truth poses.
@@ -249,5 +274,6 @@ def calibrate_odometry(odoms: np.ndarray, regress: np.ndarray, truth_poses: np.n
 
 
 __all__ = ["bearing_residuals", "robust_bearing_stats", "odometry_errors", "odometry_sigma_model",
+           "odometry_length_ratio",
            "fit_odometry_sigma", "calibrate_odometry", "GROSS_OUTLIER_RAD", "OUTLIER_MADS",
            "MIN_BEARING_SIGMA_RAD"]

@@ -42,7 +42,8 @@ from ..errors import ConfigError, DatasetError
 from ..geometry import between
 from ..plausibility import refuse_implausible
 from ..stream import Step, Stream, StreamHeader, Truth
-from .calibration import (bearing_residuals, calibrate_odometry, odometry_sigma_model,
+from .calibration import (bearing_residuals, calibrate_odometry, odometry_length_ratio,
+                          odometry_sigma_model,
                           robust_bearing_stats)
 from .landmark_truth import checked_mrclam_landmarks
 from .mrclam_files import ROBOT_SUBJECTS, MrclamRobotData, read_mrclam_robot
@@ -369,7 +370,8 @@ def _raw_bearing_check(raw: MrclamRobotData, subject: np.ndarray,
 
 def import_mrclam(data_dir: str | os.PathLike[str], robot: int, *,
                   keyframe: KeyframeConfig = KeyframeConfig(), keep_ranges: bool = False,
-                  calibrate: bool = True, landmark_check: bool = True) -> Stream:
+                  calibrate: bool = True, landmark_check: bool = True,
+                  odometry_scale: float = 1.0) -> Stream:
     """Import one MRCLAM robot as a keyframed bearing-only stream (see the module docstring).
 
     Parameters
@@ -389,6 +391,12 @@ def import_mrclam(data_dir: str | os.PathLike[str], robot: int, *,
         Correct a landmark table that matches a known erratum (MRCLAM Dataset 1 lists
         landmarks 11 and 17 at each other's positions) and refuse one that the detections'
         pair distances contradict (:mod:`.landmark_truth`); False takes the table as read.
+    odometry_scale : float
+        Multiply the logged forward velocities by this before anything else (keyframing
+        included): a robot's odometry calibration, e.g. ``meta["odometry_length_ratio"]`` of
+        the same robot imported from a recording with ground truth (MRCLAM6 puts robots 1-5 at
+        0.932-0.974; :func:`.calibration.odometry_length_ratio`). 1 (the default): as logged.
+        Recorded in ``meta["odometry_scale"]``.
 
     Returns
     -------
@@ -405,6 +413,10 @@ def import_mrclam(data_dir: str | os.PathLike[str], robot: int, *,
     """
     if not isinstance(keyframe, KeyframeConfig):
         raise ConfigError(f"keyframe must be a KeyframeConfig, got {type(keyframe).__name__}")
+    if not (isinstance(odometry_scale, (int, float)) and math.isfinite(odometry_scale)
+            and 0.5 <= odometry_scale <= 2.0):
+        raise ConfigError(f"odometry_scale must be a number in [0.5, 2] (a length calibration "
+                          f"of a few per cent is typical), got {odometry_scale!r}")
     # 1-2. rows and time window ------------------------------------------------------------
     raw = read_mrclam_robot(data_dir, robot)
     landmark_truth: dict[str, Any] = {"checked": False}
@@ -418,6 +430,8 @@ def import_mrclam(data_dir: str | os.PathLike[str], robot: int, *,
     me = raw.measurements
     od = dict(raw.odometry)
     od["time_s"] = od["time_s"] + keyframe.command_delay_s
+    if odometry_scale != 1.0:
+        od["v_mps"] = od["v_mps"] * float(odometry_scale)
     subject, use, idx, rows = _classify_rows(raw, od["time_s"], keyframe)
     if idx.size == 0:
         raise DatasetError(f"{Path(data_dir)}: robot {robot} has no landmark detection inside "
@@ -496,8 +510,11 @@ def import_mrclam(data_dir: str | os.PathLike[str], robot: int, *,
                            "components": ["dx_m", "dy_m", "dpsi_rad"],
                            "abc": [[float(v) for v in row] for row in model], **odo_info},
         "calibrated": bool(calibrate),
+        "odometry_scale": float(odometry_scale),
         "landmark_truth": landmark_truth,
     }
+    if truth_poses is not None and n_kf > 1:
+        meta["odometry_length_ratio"] = odometry_length_ratio(odoms, truth_poses)
     if gt is not None:
         tg = gt["time_s"]
         k = np.clip(np.searchsorted(tg, kf_t, side="right") - 1, 0, len(tg) - 2)

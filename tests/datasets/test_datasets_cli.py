@@ -28,3 +28,20 @@ def test_cli_import_commands(tmp_path, sim_stream, capsys):
                  str(tmp_path / "x.jsonl")]) == 2
     err = capsys.readouterr().err
     assert "v.txt, line 7: field 'y'" in err and not (tmp_path / "x.jsonl").exists()
+
+
+def test_cli_import_mrclam_odometry_scale(tmp_path, capsys):
+    from bomgraph.cli import main
+
+    make_mrclam(tmp_path / "m")
+    assert main(["import", "mrclam", str(tmp_path / "m"), "--robot", "1", "--out",
+                 str(tmp_path / "s.jsonl"), "--odometry-scale", "0.95"]) == 0
+    assert read_stream(tmp_path / "s.jsonl") == import_mrclam(tmp_path / "m", 1,
+                                                              odometry_scale=0.95)
+    assert read_stream(tmp_path / "s.jsonl").header.meta["odometry_scale"] == 0.95
+    capsys.readouterr()
+    assert main(["import", "mrclam", str(tmp_path / "m"), "--robot", "1", "--out",
+                 str(tmp_path / "x.jsonl"), "--odometry-scale", "3"]) == 2
+    err = capsys.readouterr().err
+    assert "odometry_scale must be a number in [0.5, 2]" in err and err.count("\n") == 1
+    assert not (tmp_path / "x.jsonl").exists()

@@ -211,6 +211,33 @@ def test_round_trip_and_keep_ranges(tmp_path):
     assert read_stream(tmp_path / "s.jsonl") == s
 
 
+def test_odometry_scale_scales_the_lengths_and_the_meta_measures_it(tmp_path):
+    """Velocities logged 5 % high: the odometry increments are the true chords x 1.05 (the
+    same headings, arcs over the same intervals), so ``odometry_length_ratio`` is 1 / 1.05,
+    and importing with that scale gives the true increments back."""
+    world = make_mrclam(tmp_path, extras=False)
+    odo = tmp_path / "Robot1_Odometry.dat"
+    lines = odo.read_text().split("\n")
+    head = [ln for ln in lines if ln.startswith("#")]
+    rows = [ln.split("\t") for ln in lines if ln.strip() and not ln.startswith("#")]
+    odo.write_text("\n".join(head + [f"{a}\t {float(b) * 1.05!r} \t{c}" for a, b, c in rows])
+                   + "\n")
+    s = import_mrclam(tmp_path, 1, keyframe=KeyframeConfig(**EXACT))
+    assert s.header.meta["odometry_scale"] == 1.0
+    assert s.header.meta["odometry_length_ratio"] == pytest.approx(1 / 1.05, abs=1e-9)
+    fixed = import_mrclam(tmp_path, 1, keyframe=KeyframeConfig(**EXACT),
+                          odometry_scale=1 / 1.05)
+    assert fixed.header.meta["odometry_scale"] == pytest.approx(1 / 1.05)
+    assert fixed.header.meta["odometry_length_ratio"] == pytest.approx(1.0, abs=1e-9)
+    rows_at = np.searchsorted(world["t"], [st.time_s for st in fixed.steps])
+    np.testing.assert_allclose(fixed.truth.poses, world["gt"][rows_at], atol=1e-12)
+    inc = between(fixed.truth.poses[:-1], fixed.truth.poses[1:])
+    np.testing.assert_allclose(np.array([st.odom for st in fixed.steps[1:]]), inc, atol=1e-9)
+    for bad in (0.0, 3.0, float("nan")):
+        with pytest.raises(ConfigError, match="odometry_scale"):
+            import_mrclam(tmp_path, 1, odometry_scale=bad)
+
+
 def test_without_truth_calibration_must_be_turned_off(tmp_path):
     make_mrclam(tmp_path, truth=False)
     with pytest.raises(DatasetError, match="calibrate=False"):
