@@ -189,6 +189,51 @@ def compare(rows: list[dict[str, Any]]) -> str:
     return "\n".join(out)
 
 
+#: The checkpoints of the README's accuracy tables (issue 14's bar: their cells to 1 %).
+TABLE_T = (50, 100, 200, 300)
+
+
+def table_cells(rows: list[dict[str, Any]]) -> dict[tuple[str, str], dict[str, float]]:
+    """Per (arm, variant): the mean and median MPE (m) over the runs at each table checkpoint,
+    keyed ``"mean@50"``, ``"median@50"``, ... (the cells of the README's tables)."""
+    cells: dict[tuple[str, str], dict[str, float]] = {}
+    for key in sorted({(r["arm"], r["variant"]) for r in rows}):
+        mine = [r for r in rows if (r["arm"], r["variant"]) == key]
+        out = {}
+        for t in TABLE_T:
+            v = np.array([c["mpe_m"] for r in mine for c in r["checkpoints"] if c["t"] == t])
+            v = v[np.isfinite(v)]
+            if v.size:
+                out[f"mean@{t}"] = float(np.mean(v))
+                out[f"median@{t}"] = float(np.median(v))
+        cells[key] = out
+    return cells
+
+
+def compare_tables(rows: list[dict[str, Any]]) -> str:
+    """Per arm and variant on the runs it shares with the default: the table cells (cm) and
+    the largest relative change of a cell against the default (issue 14's bar: 1 %; a lower
+    MPE is not a failure, so the worst increase is printed too)."""
+    by = {(r["arm"], r["variant"], r["run"]): r for r in rows}
+    out = []
+    for arm in sorted({r["arm"] for r in rows}):
+        base_runs = {k[2] for k in by if k[:2] == (arm, "default")}
+        for variant in sorted({r["variant"] for r in rows if r["arm"] == arm}):
+            runs = base_runs & {k[2] for k in by if k[:2] == (arm, variant)}
+            sub = [by[(arm, v, n)] for v in ("default", variant) for n in sorted(runs)]
+            cells = table_cells(sub)
+            mine, base = cells[(arm, variant)], cells[(arm, "default")]
+            rel = {k: (mine[k] - base[k]) / base[k] for k in base if k in mine and base[k]}
+            worst = max(rel.items(), key=lambda kv: abs(kv[1]), default=("-", 0.0))
+            up = max(rel.items(), key=lambda kv: kv[1], default=("-", 0.0))
+            shown = " ".join(f"{100 * mine[f'mean@{t}']:.2f}/{100 * mine[f'median@{t}']:.2f}"
+                             for t in TABLE_T if f"mean@{t}" in mine)
+            out.append(f"{arm:13s} {variant:13s} cells(cm, mean/median at {TABLE_T}) {shown}; "
+                       f"worst change {worst[1]:+.2%} ({worst[0]}), worst increase "
+                       f"{up[1]:+.2%} ({up[0]})")
+    return "\n".join(out)
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--arms", nargs="+", choices=ARMS, default=["oracle"])
@@ -197,12 +242,15 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--carry-div", type=float, default=1.0)
     ap.add_argument("--option", action="append", default=[], metavar="FIELD=VALUE",
                     help="config override of the 'options' variant (repeatable)")
+    ap.add_argument("--label", help="record the 'options' variant under this name (to compare "
+                    "several option sets from separate files)")
     ap.add_argument("--out", help="write the rows (JSON) here")
     ap.add_argument("--compare", nargs="+", help="JSON files of earlier runs: compare only")
     args = ap.parse_args(argv)
     if args.compare:
         rows = [r for f in args.compare for r in json.load(open(f))]
         print(compare(rows))
+        print(compare_tables(rows))
         return 0
     options = {}
     for o in args.option:
@@ -218,6 +266,8 @@ def main(argv: list[str] | None = None) -> int:
                 if not applies(arm, variant):
                     continue
                 r = one(arm, variant, stream, design[i].name, args.carry_div, options)
+                if args.label and variant == "options":
+                    r["variant"] = args.label
                 rows.append(r)
                 its = sum(c["iterations"] or 0 for c in r["checkpoints"])
                 print(f"{arm:13s} {variant:13s} {r['run']} cpu {r['cpu_s']:.2f} s LM its {its} "
@@ -226,6 +276,7 @@ def main(argv: list[str] | None = None) -> int:
             with open(args.out, "w") as f:
                 json.dump(rows, f)
     print(compare(rows))
+    print(compare_tables(rows))
     return 0
 
 
