@@ -64,3 +64,31 @@ def test_compare_counts_identical_runs_and_the_worst_mpe_change() -> None:
     text = bench.compare(rows)
     warm = [line for line in text.splitlines() if "oracle-warm" in line][0]
     assert "identical  1/2" in warm and "30.00% b" in warm
+
+
+def _row(arm: str, variant: str, run_name: str, mpe: dict[int, float]) -> dict:
+    return {"arm": arm, "variant": variant, "run": run_name, "cpu_s": 1.0,
+            "checkpoints": [{"t": t, "mpe_m": m, "hash": f"{variant}{t}{m}",
+                             "iterations": 3, "passes": ["plain"], "starts": None,
+                             "cost": 1.0} for t, m in mpe.items()]}
+
+
+def test_table_cells_are_the_mean_and_median_over_runs_at_the_table_checkpoints() -> None:
+    rows = [_row("oracle", "default", f"r{k}", {50: 0.01 * (k + 1), 60: 9.0, 300: 0.02})
+            for k in range(3)]
+    cells = bench.table_cells(rows)[("oracle", "default")]
+    assert cells["mean@50"] == pytest.approx(0.02) and cells["median@50"] == pytest.approx(0.02)
+    assert cells["mean@300"] == pytest.approx(0.02)
+    assert "mean@60" not in cells and "mean@100" not in cells   # not a table checkpoint
+
+
+def test_compare_tables_reports_the_worst_cell_change_against_the_default() -> None:
+    base = [_row("oracle", "default", f"r{k}", {50: 0.01, 300: 0.02}) for k in range(4)]
+    # one run of four 40 % worse at t = 300: the mean cell moves by 10 %, the median by 0
+    mine = [_row("oracle", "tol", f"r{k}", {50: 0.01, 300: 0.028 if k == 0 else 0.02})
+            for k in range(4)]
+    text = bench.compare_tables(base + mine)
+    line = next(x for x in text.splitlines() if " tol " in x)
+    assert "worst change +10.00% (mean@300)" in line
+    assert "worst increase +10.00% (mean@300)" in line
+    assert "2.20/2.00" in line        # the t = 300 cell, cm: mean / median
