@@ -70,3 +70,63 @@ def test_select_keeps_the_order_and_names_unknown_experiments() -> None:
 def test_arm_options_must_be_plain_json() -> None:
     with pytest.raises(ConfigError, match="plain JSON"):
         Arm("bad", "triangulate", {"x": object()})
+
+
+def test_a_simulated_run_is_made_once_per_process_and_is_the_fresh_simulation() -> None:
+    import numpy as np
+
+    from bomgraph.experiments import SIMULATED, SimSource, WorldSource
+    from bomgraph.sim import paper_design, simulate_run
+
+    SIMULATED.clear()
+    spec = paper_design(0)[3]
+    small = SimConfig(n_steps=40, n_landmarks=12)
+    a, b = SimSource(spec, small), SimSource(spec, small)
+    assert a.stream() is b.stream()                      # equal sources share the stream
+    fresh = simulate_run(spec, small)
+    kept = a.stream()
+    assert kept.header == fresh.header
+    for x, y in zip(kept.steps, fresh.steps):
+        assert np.array_equal(x.odom, y.odom) and np.array_equal(x.landmark_ids, y.landmark_ids)
+        assert np.array_equal(x.bearings_rad, y.bearings_rad)
+    assert np.array_equal(kept.truth.poses, fresh.truth.poses)
+    # another source (priors, another world seed) is another stream
+    assert SimSource(spec, small, prior_fraction=0.1).stream() is not kept
+    w = WorldSource(small, 5)
+    assert w.stream() is WorldSource(small, 5).stream()
+    assert WorldSource(small, 6).stream() is not w.stream()
+    SIMULATED.clear()
+
+
+def test_the_kept_streams_are_bounded_by_their_steps_least_recently_used_out() -> None:
+    from bomgraph.experiments import SimulatedStreams, SimSource
+    from bomgraph.sim import paper_design
+
+    small = SimConfig(n_steps=40, n_landmarks=12)       # 41 steps each
+    kept = SimulatedStreams(max_steps=100)               # room for two
+    src = [SimSource(s, small) for s in paper_design(0)[:3]]
+    made: list[int] = []
+
+    def get(k: int):
+        def make():
+            made.append(k)
+            return _simulate(src[k])
+        return kept.get(src[k], make)
+
+    get(0), get(1), get(0), get(2)           # 2 pushes out 1, the least recently used
+    assert made == [0, 1, 2]
+    get(0)
+    assert made == [0, 1, 2]                 # still kept
+    get(1)
+    assert made == [0, 1, 2, 1]              # made again
+    assert kept._steps <= 100
+    huge = SimulatedStreams(max_steps=10)    # a stream larger than the bound is not kept
+    huge.get(src[0], lambda: _simulate(src[0]))
+    assert huge._steps == 0 and not huge._kept
+
+
+def _simulate(source):
+    from bomgraph.sim import simulate_run
+
+    return simulate_run(source.spec, source.sim, prior_fraction=source.prior_fraction,
+                        prior_sigma_xy_m=source.prior_sigma_xy_m)
