@@ -228,6 +228,8 @@ class BatchState:
         self._chunk_start = 0
         # landmarks out of reach after the last whole-graph solve that ran the robust pass
         self._unreached = np.zeros(0, np.int64)
+        # bearings (indices in bearings()) above robust_trigger after that pass
+        self._unsettled = np.zeros(0, np.int64)
 
     def add_step(self, step: Step) -> None:
         """Record ``step`` and predict its pose from the previous one by the odometry."""
@@ -302,22 +304,30 @@ class BatchState:
                 bad |= ~near
         return ids[bad]
 
+    def whitened_residuals(self, values: gtsam.Values) -> tuple[np.ndarray, np.ndarray]:
+        """Bearing residual / sigma (signed, (k,)) at ``values`` of the bearings in the graph,
+        and their indices (k,) in :meth:`bearings` (after a window solve, of the window's
+        bearings only: the held poses are stale)."""
+        owner, lid, brg = self.bearings()
+        at = np.arange(owner.size)
+        if self._window_b:     # a window solution: the held poses' bearings are in its prior
+            at = at[owner > self._window_b]
+        ids, xy = self.landmark_arrays(values)
+        if not ids.size or not at.size:
+            return np.zeros(0), at[:0]
+        pos = np.clip(np.searchsorted(ids, lid[at]), 0, ids.size - 1)
+        sel = ids[pos] == lid[at]
+        at, pos = at[sel], pos[sel]
+        p = all_poses(values, self.problem.n_steps)[owner[at]]
+        d = xy[pos] - p[:, :2]
+        r = angle_residual(np.arctan2(d[:, 1], d[:, 0]) - p[:, 2], brg[at])
+        return r / float(self.header.bearing_sigma_rad), at
+
     def max_whitened_residual(self, values: gtsam.Values) -> float:
         """Largest |bearing residual| / sigma over the bearings in the graph at ``values``
-        (after a window solve, over the window's bearings only: the held poses are stale)."""
-        owner, lid, brg = self.bearings()
-        if self._window_b:     # a window solution: the held poses' bearings are in its prior
-            keep = owner > self._window_b
-            owner, lid, brg = owner[keep], lid[keep], brg[keep]
-        ids, xy = self.landmark_arrays(values)
-        if not ids.size or not owner.size:
-            return 0.0
-        pos = np.clip(np.searchsorted(ids, lid), 0, ids.size - 1)
-        sel = ids[pos] == lid
-        p = all_poses(values, self.problem.n_steps)[owner[sel]]
-        d = xy[pos[sel]] - p[:, :2]
-        r = angle_residual(np.arctan2(d[:, 1], d[:, 0]) - p[:, 2], brg[sel])
-        return float(np.max(np.abs(r))) / float(self.header.bearing_sigma_rad) if r.size else 0.0
+        (:meth:`whitened_residuals`; 0 if none)."""
+        r, _ = self.whitened_residuals(values)
+        return float(np.max(np.abs(r))) if r.size else 0.0
 
     def looks_off(self, values: gtsam.Values) -> bool:
         """True if a solution calls for the robust pass and a Gauss-Newton check: a whitened
@@ -359,14 +369,21 @@ class BatchState:
                                   looks_off=self._looks_off_again)
         if "huber" in report.passes:
             self._unreached = self.out_of_reach(values)
+            r, at = self.whitened_residuals(values)
+            self._unsettled = at[np.abs(r) > cfg.robust_trigger]
         return values, report
 
     def _looks_off_again(self, values: gtsam.Values) -> bool:
-        """:meth:`looks_off` for a whole-graph solve, except that landmarks still out of
-        reach that were already out of reach after the last robust pass do not call for
-        another (a landmark placed beyond reach stays there through every Huber pass, and
-        each pass costs as much as the solve; it is left out of the map all the same)."""
-        if self.max_whitened_residual(values) > self.config.robust_trigger:
+        """:meth:`looks_off` for a whole-graph solve, except that what the last robust pass
+        left as it was does not call for another: landmarks still out of reach that were out
+        of reach after it (a landmark placed beyond reach stays there through every Huber
+        pass), and bearings whose whitened residual is still above ``robust_trigger`` that
+        were above it after it (in practice a landmark a few mm from a pose that saw it, whose
+        bearing from there flips by ~180 degrees with a sub-mm move: ``docs/measurements.md``).
+        Each pass costs as much as the solve; a cause it did not change is no reason to run it
+        again, and a new cause still calls for one."""
+        r, at = self.whitened_residuals(values)
+        if np.any(np.abs(r[~np.isin(at, self._unsettled)]) > self.config.robust_trigger):
             return True
         return np.setdiff1d(self.out_of_reach(values), self._unreached).size > 0
 
