@@ -18,7 +18,7 @@ import os
 from collections import OrderedDict
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
-from typing import Any, Mapping, Sequence
+from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 
@@ -85,7 +85,7 @@ class SimulatedStreams:
         self._kept: OrderedDict[Any, Stream] = OrderedDict()
         self._steps = 0
 
-    def get(self, key: Any, make: Any) -> Stream:
+    def get(self, key: Any, make: Callable[[], Stream]) -> Stream:
         """The stream of ``key`` (a hashable source), made by ``make()`` if not kept."""
         stream = self._kept.get(key)
         if stream is not None:
@@ -534,7 +534,8 @@ def select(experiments: Mapping[str, Experiment], names: Sequence[str] = ()) -> 
     return [experiments[n] for n in names]
 
 
-__all__ = ["SimulatedStreams", "SIMULATED", "Arm", "SimSource", "DatasetSource", "FileSource", "WorldSource", "World",
+__all__ = ["SimulatedStreams", "SIMULATED", "Arm", "SimSource", "DatasetSource", "FileSource",
+           "WorldSource", "World",
            "Experiment", "Task", "Sweep", "load_experiments", "designed_variant",
            "compare_experiments",
            "paper_experiments",
