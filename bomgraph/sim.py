@@ -11,7 +11,9 @@ turn_max_rad)``. If the point ``lookahead_m`` ahead along the new heading would 
 Because ``lookahead_m >= step_max_m`` the next move always stays inside the arena.
 
 Odometry is ``[l + n_l, 0, phi + n_phi]``; bearings are ``theta + n_theta`` wrapped, for the
-landmarks in range ``[min_range_m, sensor_range_m]`` and inside the field of view.
+landmarks in range ``[min_range_m, sensor_range_m]`` and inside the field of view. The noise
+``n_theta`` is drawn for every landmark within ``sensor_range_m``, so ``min_range_m`` and
+``fov_rad`` leave bearings out without changing the noise of the others.
 """
 
 from __future__ import annotations
@@ -208,11 +210,14 @@ def simulate(config: SimConfig, rng: np.random.Generator, *,
         pose = poses[t]
         d = np.hypot(*(landmarks_xy - pose[:2]).T)
         brg = bearings_to(pose, landmarks_xy)
-        seen = (d <= config.sensor_range_m) & (d >= config.min_range_m) \
-            & (np.abs(brg) <= config.fov_rad / 2)
-        seen_ids = ids[seen]
-        meas = wrap_angle(brg[seen] + k * config.sigma_theta_rad
-                          * rng.standard_normal(seen_ids.size))
+        # noise is drawn for every landmark within sensor range, before the minimum range and
+        # the field of view leave some out, so that those two settings change no other
+        # bearing's noise (a stream with and without them pairs bearing for bearing)
+        near = d <= config.sensor_range_m
+        noise = k * config.sigma_theta_rad * rng.standard_normal(int(near.sum()))
+        seen = (d[near] >= config.min_range_m) & (np.abs(brg[near]) <= config.fov_rad / 2)
+        seen_ids = ids[near][seen]
+        meas = wrap_angle(brg[near][seen] + noise[seen])
         if config.wrong_association_rate > 0 and seen_ids.size:
             seen_ids = _mislabel(seen_ids, n, config.wrong_association_rate, rng)
         steps.append(Step(t=t, odom=odom, landmark_ids=seen_ids, bearings_rad=meas))

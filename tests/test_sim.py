@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -78,6 +79,24 @@ def test_sensor_options_fov_min_range_and_wrong_associations() -> None:
         pred = bearings_to(bad.truth.poses[st.t], bad.truth.landmarks_xy[st.landmark_ids])
         wrong += int(np.sum(np.abs(pred - st.bearings_rad) > 1e-9))
     assert wrong > 50
+
+
+def test_min_range_and_fov_leave_the_other_bearings_noise_unchanged() -> None:
+    # the same generator state with and without a minimum range / field of view: every
+    # bearing the restricted stream keeps is, to the bit, the unrestricted stream's bearing
+    base = SimConfig(n_steps=80)
+    full = simulate(base, np.random.default_rng(5))
+    for cfg in (replace(base, min_range_m=0.2), replace(base, fov_rad=math.radians(90)),
+                replace(base, min_range_m=0.1, fov_rad=math.radians(120))):
+        part = simulate(cfg, np.random.default_rng(5))
+        dropped = 0
+        for a, b in zip(full.steps, part.steps):
+            assert np.array_equal(a.odom, b.odom) if a.odom is not None else b.odom is None
+            keep = np.isin(a.landmark_ids, b.landmark_ids)
+            assert np.array_equal(np.asarray(a.landmark_ids)[keep], b.landmark_ids)
+            assert np.array_equal(np.asarray(a.bearings_rad)[keep], b.bearings_rad)
+            dropped += int((~keep).sum())
+        assert dropped > 0
 
 
 def test_priors_exp3() -> None:
