@@ -492,11 +492,8 @@ class EkfSlam:
             gated = self._gated_update(np.zeros(len(found), np.int64), kinds, offsets,
                                        z[in_state], bias)
             # an inverse-depth feature gated again and again was started from an outlier:
-            # drop it; the current sighting starts it again (as a new sighting). A gated
-            # bearing counts against its feature only when another bearing of the same step
-            # passed the gate: when every bearing fails, the robot's predicted pose is the
-            # likelier culprit (an odometry fault), and restarting would anchor the feature
-            # at that wrong pose (docs/measurements.md, MRCLAM1 with calibrated odometry)
+            # drop it; the current sighting starts it again. It counts only at steps where a
+            # bearing passed: if all fail, the pose is the culprit (docs/measurements.md)
             restart = []
             corroborated = not bool(gated.all())
             for i, kind, g in (zip(ids[in_state].tolist(), kind_names, gated.tolist())
