@@ -51,7 +51,10 @@ class BearingEkfConfig(Presets):
         anything is allocated); raise it with ``--option max_state=N``.
     restart_after_gated : an inverse-depth feature whose bearings fail the gate this many
         times in a row is dropped and started again from the current sighting (its first
-        bearing was an outlier); counted in ``info["restarted"]``. None: never.
+        bearing was an outlier); counted in ``info["restarted"]``. None: never. Only steps at
+        which another bearing passed the gate count (a step whose bearings all fail leaves
+        the count as it is): when every bearing fails, the robot's predicted pose is the
+        likelier culprit (an odometry fault), and a restart would anchor the feature there.
     correlated_fraction : ``c`` in ``[0, 1)``, the share of the bearing variance that is a
         per-landmark error correlated between sightings from similar viewing geometry
         (:mod:`baselines.ekf.coloured`: a Gauss-Markov state per landmark, augmented into the

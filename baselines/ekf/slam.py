@@ -492,11 +492,13 @@ class EkfSlam:
             gated = self._gated_update(np.zeros(len(found), np.int64), kinds, offsets,
                                        z[in_state], bias)
             # an inverse-depth feature gated again and again was started from an outlier:
-            # drop it; the current sighting starts it again (as a new sighting)
+            # drop it; the current sighting starts it again. It counts only at steps where a
+            # bearing passed: if all fail, the pose is the culprit (docs/measurements.md)
             restart = []
+            corroborated = not bool(gated.all())
             for i, kind, g in (zip(ids[in_state].tolist(), kind_names, gated.tolist())
                                if _IDP in kind_names else ()):
-                if kind == _IDP:
+                if kind == _IDP and (corroborated or not g):
                     run_length = self._gated_run.get(i, 0) + 1 if g else 0
                     self._gated_run[i] = run_length
                     if run_length >= self._restart_after:
