@@ -6,8 +6,9 @@ image that does not; a gross outlier is gated (the state is bit-for-bit what it 
 bearing); the map is equivariant under a change of the start frame; the robot-pose NEES of
 noisy runs lies in the 95% chi-square band; presets and their validation; gross outliers are
 gated (and wreck the map without the gate); a feature started from an outlier is started
-again, but not while every bearing fails the gate (a lost robot); the real preset maps MRCLAM6 robots 3 and 5 (skipped only without the shared data,
-``BOMGRAPH_DATA`` or ../shared/data).
+again, but not while every bearing fails the gate (a lost robot); the real preset maps
+MRCLAM6 robots 3 and 5 (skipped only without the shared data, ``BOMGRAPH_DATA`` or
+../shared/data).
 """
 
 from __future__ import annotations
