@@ -263,10 +263,7 @@ class BatchState:
         """Let in the landmarks now determined on the poses ``pose_at(ts)`` (the current values
         by default) and move all new factors and landmark points into ``graph`` / ``values``.
         """
-        if pose_at is None:
-            cache = all_poses(self.values, self.problem.n_steps)
-            pose_at = lambda ts: cache[np.asarray(ts, dtype=np.int64)]  # noqa: E731
-        self.problem.admit(pose_at)
+        self.problem.admit(self.poses if pose_at is None else pose_at)
         new = self.problem.take_new()
         self.graph.push_back(new.core)
         self.graph.push_back(new.landmark)
