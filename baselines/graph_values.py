@@ -64,7 +64,7 @@ def _read(values: gtsam.Values, keys: np.ndarray, extract, width: int) -> np.nda
 
 def poses_at(values: gtsam.Values, ts: Sequence[int] | np.ndarray) -> np.ndarray:
     """Robot poses ``x_t`` (``[x, y, theta]``) of ``values`` for the steps ``ts`` (k,), in
-    that order: (k, 3). Raises (GTSAM's error) if one is missing."""
+    that order: (k, 3). Raises GTSAM's RuntimeError if one is missing."""
     return _read(values, symbol_keys("x", np.asarray(ts, dtype=np.int64)),
                  gtsam.utilities.extractPose2, 3)
 
