@@ -166,9 +166,23 @@ class StepChunks:
         held at its point in ``values`` by an isotropic prior of ``sigma_m``, the last solved
         pose held at ``held`` (module docstring); the LM iterations taken. ``values``
         unchanged (and 0) if there is no earlier chunk or the small solve fails."""
+        solved, its = self.warm_solve(values, held, sigma_m, tol)
+        if solved is None:
+            return values, its
+        out = gtsam.Values(values)
+        out.update(solved)
+        return out, its
+
+    def warm_solve(self, values: gtsam.Values, held: gtsam.Values, sigma_m: float,
+                   tol: float) -> tuple[gtsam.Values | None, int]:
+        """The small solve of :meth:`warm_start` alone: its solution (the newest chunk's
+        poses and the landmarks they see), to lay over ``values``, and the LM iterations
+        taken; None if there is no earlier chunk, or the solve failed (0 iterations) or did
+        not lower its error. Saves the copy of ``values`` when only a window of it is used
+        (:meth:`window`'s ``overlay``)."""
         b = self.newest_boundary()
         if b is None:
-            return values, 0
+            return None, 0
         graph = self._factors(b)
         graph.add(gtsam.PriorFactorPose2(pose_key(b), held.atPose2(pose_key(b)), self._hold))
         keys = list(graph.keyVector())
@@ -176,10 +190,10 @@ class StepChunks:
         for k in keys:
             if _is_landmark(k):
                 graph.add(gtsam.PriorFactorPoint2(k, values.atPoint2(k), noise))
-        return self._lm(graph, self._values(keys, values), values, tol)
+        return self._lm(graph, self._values(keys, values), tol)
 
-    def _lm(self, graph: gtsam.NonlinearFactorGraph, start: gtsam.Values,
-            values: gtsam.Values, tol: float) -> tuple[gtsam.Values, int]:
+    def _lm(self, graph: gtsam.NonlinearFactorGraph, start: gtsam.Values, tol: float
+            ) -> tuple[gtsam.Values | None, int]:
         params = lm_params(self.config)
         params.setRelativeErrorTol(tol)
         try:
@@ -187,18 +201,17 @@ class StepChunks:
             e0 = opt.error()
             solved = opt.optimize()
         except GTSAM_ERRORS:
-            return values, 0
+            return None, 0
         if not opt.error() <= e0:
-            return values, int(opt.iterations())
-        out = gtsam.Values(values)
-        out.update(solved)
-        return out, int(opt.iterations())
+            return None, int(opt.iterations())
+        return solved, int(opt.iterations())
 
     # -- fixed-lag window -------------------------------------------------------------------
     def window(self, b: int, n_steps: int, initial: gtsam.Values, held: gtsam.Values,
                pose_at: Callable[[np.ndarray], np.ndarray],
                bearings: tuple[np.ndarray, np.ndarray, np.ndarray],
-               landmark_ids: np.ndarray, fresh: Sequence[int]
+               landmark_ids: np.ndarray, fresh: Sequence[int],
+               overlay: gtsam.Values | None = None
                ) -> tuple[gtsam.NonlinearFactorGraph, gtsam.Values]:
         """The fixed-lag problem with held pose ``b`` (module docstring): factors and start.
 
@@ -208,7 +221,8 @@ class StepChunks:
         pose, the landmarks' points to fold at); pose_at : ``pose_at(ts)`` the current poses
         ``ts`` (k,), shape (k, 3);
         bearings : (owner (J,), id (J,), bearing (J,)) every bearing so far, owner sorted;
-        landmark_ids : (n,) sorted, those in the graph; fresh : entered since the last solve.
+        landmark_ids : (n,) sorted, those in the graph; fresh : entered since the last solve;
+        overlay : values laid over ``initial`` in the start (a :meth:`warm_solve` solution).
         """
         if self.marginal:
             self._marginalise(b, held)
@@ -243,7 +257,11 @@ class StepChunks:
         for p in self.header.priors:
             if p.i in act and p.j in act:
                 graph.add(prior_factor(p))
-        return graph, self._values(keys.tolist(), initial)
+        start = self._values(keys.tolist(), initial)
+        if overlay is not None:
+            over = np.intersect1d(np.asarray(overlay.keys(), dtype=np.uint64), keys)
+            start.update(overlay.extract(over.tolist()))
+        return graph, start
 
     def _marginalise(self, b: int, held: gtsam.Values) -> None:
         """Eliminate the chunks of steps <= ``b`` not yet in the marginal: their factors and
