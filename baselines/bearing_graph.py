@@ -49,6 +49,8 @@ from bomgraph.errors import ConfigError, StreamFormatError
 from bomgraph.geometry import compose, intersect_rays
 from bomgraph.stream import Prior, Step, StreamHeader
 
+from .graph_values import points_at, poses_at
+
 # --------------------------------------------------------------------------------------------
 # Keys
 # --------------------------------------------------------------------------------------------
@@ -304,20 +306,15 @@ def prior_factor(prior: Prior) -> gtsam.NonlinearFactor:
 
 
 def poses_from_values(values: gtsam.Values, ts: Sequence[int] | np.ndarray) -> np.ndarray:
-    """Robot poses ``x_t`` read from ``values``, shape ``(len(ts), 3)``."""
-    out = np.empty((len(ts), 3))
-    for k, t in enumerate(ts):
-        p = values.atPose2(pose_key(int(t)))
-        out[k] = (p.x(), p.y(), p.theta())
-    return out
+    """Robot poses ``x_t`` read from ``values``, shape ``(len(ts), 3)`` (in bulk:
+    :func:`baselines.graph_values.poses_at`)."""
+    return poses_at(values, ts)
 
 
 def landmarks_from_values(values: gtsam.Values, ids: Sequence[int] | np.ndarray) -> np.ndarray:
-    """Landmark positions read from ``values``, shape ``(len(ids), 2)``."""
-    out = np.empty((len(ids), 2))
-    for k, i in enumerate(ids):
-        out[k] = values.atPoint2(landmark_key(int(i)))
-    return out
+    """Landmark positions read from ``values``, shape ``(len(ids), 2)`` (in bulk:
+    :func:`baselines.graph_values.points_at`)."""
+    return points_at(values, ids)
 
 
 def insert_pose(values: gtsam.Values, t: int, pose: np.ndarray,
@@ -586,11 +583,10 @@ class BearingGraph:
 
     def _add_bearing(self, t: int, lid: int, brg: float,
                      graph: gtsam.NonlinearFactorGraph) -> None:
-        graph.add(gtsam.BearingFactor2D(pose_key(t), landmark_key(lid), gtsam.Rot2(brg),
-                                        self._noise))
+        x, l, r = pose_key(t), landmark_key(lid), gtsam.Rot2(brg)
+        graph.add(gtsam.BearingFactor2D(x, l, r, self._noise))
         if self._robust is not None:
-            self._robust.add(gtsam.BearingFactor2D(pose_key(t), landmark_key(lid),
-                                                   gtsam.Rot2(brg), self._robust_noise))
+            self._robust.add(gtsam.BearingFactor2D(x, l, r, self._robust_noise))
         self.n_bearing_factors += 1
 
 

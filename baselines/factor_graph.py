@@ -263,10 +263,7 @@ class BatchState:
         """Let in the landmarks now determined on the poses ``pose_at(ts)`` (the current values
         by default) and move all new factors and landmark points into ``graph`` / ``values``.
         """
-        if pose_at is None:
-            cache = all_poses(self.values, self.problem.n_steps)
-            pose_at = lambda ts: cache[np.asarray(ts, dtype=np.int64)]  # noqa: E731
-        self.problem.admit(pose_at)
+        self.problem.admit(self.poses if pose_at is None else pose_at)
         new = self.problem.take_new()
         self.graph.push_back(new.core)
         self.graph.push_back(new.landmark)
@@ -335,7 +332,7 @@ class BatchState:
         return (self.max_whitened_residual(values) > self.config.robust_trigger
                 or self.out_of_reach(values).size > 0)
 
-    def solve(self, initial: gtsam.Values, warm: bool = False
+    def solve(self, initial: gtsam.Values, warm: bool = False, adopt: bool = False
               ) -> tuple[gtsam.Values, SolveReport]:
         """:func:`solve_lm` on ``graph`` from ``initial``: the plain pass, the Huber pass (if
         the config has one) and a Gauss-Newton check only where :meth:`looks_off`; ``values``
@@ -347,12 +344,15 @@ class BatchState:
         its last whole solve, only the last ``lag_steps`` poses and the landmarks they see are
         solved (:mod:`baselines.lm_window`; the rest held at ``values``); the result is the
         current values with the window replaced, its report the window's
-        (``info["passes"]`` starts with ``"window"``).
+        (``info["passes"]`` starts with ``"window"``). ``adopt``: the caller makes the result
+        the current values at once (:meth:`set_values`), so a window's solution is written
+        into ``values`` itself, not a copy (not for a caller that compares solves).
         """
         n, cfg = self.problem.n_steps, self.config
         lm_config = self._lm_config
+        overlay = None      # the warm pre-solve's solution, laid over initial
         if warm and cfg.warm_presolve_sigma_m is not None:
-            initial, its = self.chunks.warm_start(initial, self.values,
+            overlay, its = self.chunks.warm_solve(initial, self.values,
                                                   cfg.warm_presolve_sigma_m,
                                                   cfg.warm_relative_error_tol)
             if its:
@@ -361,7 +361,10 @@ class BatchState:
         if n > cfg.lag_after_steps and n < cfg.full_growth * self._full_n:
             b = self.chunks.boundary(n, cfg.lag_steps)
             if b is not None:
-                return self._solve_window(initial, b)
+                return self._solve_window(initial, b, overlay, adopt)
+        if overlay is not None:
+            initial = gtsam.Values(initial)
+            initial.update(overlay)
         self._full_n = n
         self._window_b = 0
         self.chunks.reset_folds()
@@ -387,17 +390,17 @@ class BatchState:
             return True
         return np.setdiff1d(self.out_of_reach(values), self._unreached).size > 0
 
-    def _solve_window(self, initial: gtsam.Values, b: int
-                      ) -> tuple[gtsam.Values, SolveReport]:
+    def _solve_window(self, initial: gtsam.Values, b: int, overlay: gtsam.Values | None,
+                      adopt: bool) -> tuple[gtsam.Values, SolveReport]:
         n = self.problem.n_steps
         self._window_b = b
         ids = np.array(sorted(self.problem.landmark_ids), dtype=np.int64)
         graph, start = self.chunks.window(b, n, initial, self.values, self.poses,
-                                          self.bearings(), ids, self._fresh)
+                                          self.bearings(), ids, self._fresh, overlay)
         # the window's own LM report tells convergence; a check only if it did not stop
         # on its tolerance
         window, report = solve_lm(graph, start, self._lm_config, looks_off=_never_off)
-        values = gtsam.Values(self.values)
+        values = self.values if adopt else gtsam.Values(self.values)
         values.update(window)
         return values, replace(report, passes=("window",) + report.passes)
 
@@ -501,7 +504,7 @@ class BatchMapper(ScheduledSolver):
 
     def _update(self) -> Callable[[], MapEstimate]:
         self.state.absorb()
-        values, report = self.state.solve(self.state.values, warm=True)
+        values, report = self.state.solve(self.state.values, warm=True, adopt=True)
         self.state.set_values(values)
         return self.state.estimate_of(values, report)
 
@@ -567,7 +570,7 @@ class OracleMapper(ScheduledSolver):
 
     def _update(self) -> Callable[[], MapEstimate]:
         self.state.absorb(self._true_pose_at)
-        values, report = self.state.solve(self.initial_values())
+        values, report = self.state.solve(self.initial_values(), adopt=True)
         self.state.set_values(values)
         return self.state.estimate_of(values, report)
 

@@ -50,6 +50,7 @@ from bomgraph.stream import StreamHeader
 from .lm_report import GTSAM_ERRORS, lm_params
 from .bearing_graph import (FactorGraphConfig, bearing_noise, landmark_key, mid_key, pose_key,
                             prior_factor)
+from .graph_values import key_landmark_ids, landmark_keys, points_at
 
 
 _POSE_CHARS = (ord("x"), ord("m"))
@@ -59,12 +60,6 @@ def _is_landmark(key: int) -> bool:
     """Every key of the graph is a pose (``x``, ``m``) or a landmark
     (:func:`baselines.bearing_graph.landmark_key`, wide ids included)."""
     return (int(key) >> 56) not in _POSE_CHARS
-
-
-def _landmark_id(key: int) -> int:
-    """The landmark id of a landmark key (the inverse of ``landmark_key``)."""
-    k = int(key)
-    return k ^ (1 << 63) if k >> 63 else k & ((1 << 56) - 1)
 
 
 class StepChunks:
@@ -161,10 +156,8 @@ class StepChunks:
 
     @staticmethod
     def _values(keys: Iterable[int], source: gtsam.Values) -> gtsam.Values:
-        out = gtsam.Values()
-        for k in keys:
-            out.insert(k, source.atPoint2(k) if _is_landmark(k) else source.atPose2(k))
-        return out
+        """The entries of ``source`` for ``keys`` (unique), copied in one ``extract``."""
+        return source.extract([int(k) for k in keys])
 
     # -- warm start -------------------------------------------------------------------------
     def warm_start(self, values: gtsam.Values, held: gtsam.Values, sigma_m: float,
@@ -173,9 +166,23 @@ class StepChunks:
         held at its point in ``values`` by an isotropic prior of ``sigma_m``, the last solved
         pose held at ``held`` (module docstring); the LM iterations taken. ``values``
         unchanged (and 0) if there is no earlier chunk or the small solve fails."""
+        solved, its = self.warm_solve(values, held, sigma_m, tol)
+        if solved is None:
+            return values, its
+        out = gtsam.Values(values)
+        out.update(solved)
+        return out, its
+
+    def warm_solve(self, values: gtsam.Values, held: gtsam.Values, sigma_m: float,
+                   tol: float) -> tuple[gtsam.Values | None, int]:
+        """The small solve of :meth:`warm_start` alone: its solution (the newest chunk's
+        poses and the landmarks they see), to lay over ``values``, and the LM iterations
+        taken; None if there is no earlier chunk, or the solve failed (0 iterations) or did
+        not lower its error. Saves the copy of ``values`` when only a window of it is used
+        (:meth:`window`'s ``overlay``)."""
         b = self.newest_boundary()
         if b is None:
-            return values, 0
+            return None, 0
         graph = self._factors(b)
         graph.add(gtsam.PriorFactorPose2(pose_key(b), held.atPose2(pose_key(b)), self._hold))
         keys = list(graph.keyVector())
@@ -183,10 +190,10 @@ class StepChunks:
         for k in keys:
             if _is_landmark(k):
                 graph.add(gtsam.PriorFactorPoint2(k, values.atPoint2(k), noise))
-        return self._lm(graph, self._values(keys, values), values, tol)
+        return self._lm(graph, self._values(keys, values), tol)
 
-    def _lm(self, graph: gtsam.NonlinearFactorGraph, start: gtsam.Values,
-            values: gtsam.Values, tol: float) -> tuple[gtsam.Values, int]:
+    def _lm(self, graph: gtsam.NonlinearFactorGraph, start: gtsam.Values, tol: float
+            ) -> tuple[gtsam.Values | None, int]:
         params = lm_params(self.config)
         params.setRelativeErrorTol(tol)
         try:
@@ -194,18 +201,17 @@ class StepChunks:
             e0 = opt.error()
             solved = opt.optimize()
         except GTSAM_ERRORS:
-            return values, 0
+            return None, 0
         if not opt.error() <= e0:
-            return values, int(opt.iterations())
-        out = gtsam.Values(values)
-        out.update(solved)
-        return out, int(opt.iterations())
+            return None, int(opt.iterations())
+        return solved, int(opt.iterations())
 
     # -- fixed-lag window -------------------------------------------------------------------
     def window(self, b: int, n_steps: int, initial: gtsam.Values, held: gtsam.Values,
                pose_at: Callable[[np.ndarray], np.ndarray],
                bearings: tuple[np.ndarray, np.ndarray, np.ndarray],
-               landmark_ids: np.ndarray, fresh: Sequence[int]
+               landmark_ids: np.ndarray, fresh: Sequence[int],
+               overlay: gtsam.Values | None = None
                ) -> tuple[gtsam.NonlinearFactorGraph, gtsam.Values]:
         """The fixed-lag problem with held pose ``b`` (module docstring): factors and start.
 
@@ -215,7 +221,8 @@ class StepChunks:
         pose, the landmarks' points to fold at); pose_at : ``pose_at(ts)`` the current poses
         ``ts`` (k,), shape (k, 3);
         bearings : (owner (J,), id (J,), bearing (J,)) every bearing so far, owner sorted;
-        landmark_ids : (n,) sorted, those in the graph; fresh : entered since the last solve.
+        landmark_ids : (n,) sorted, those in the graph; fresh : entered since the last solve;
+        overlay : values laid over ``initial`` in the start (a :meth:`warm_solve` solution).
         """
         if self.marginal:
             self._marginalise(b, held)
@@ -225,28 +232,36 @@ class StepChunks:
         else:
             graph.add(gtsam.PriorFactorPose2(pose_key(b), held.atPose2(pose_key(b)),
                                              self._hold))
-        keys = set(graph.keyVector())
-        active = sorted({_landmark_id(k) for k in keys if _is_landmark(k)}
-                        | {int(i) for i in fresh})
-        for i in active:
-            keys.add(landmark_key(i))
+        in_graph = np.asarray(graph.keyVector(), dtype=np.uint64)
+        arr = np.union1d(key_landmark_ids(in_graph), np.asarray(fresh, dtype=np.int64))
+        active = arr.tolist()
+        keys = np.union1d(in_graph, landmark_keys(arr))
         if self.marginal:
             folds = self._late_folds(b, held, pose_at, active)
         else:
             self._fold_upto(b + 1, held, pose_at, bearings, landmark_ids, active)
-            folds = ((i, *self._fold[i][:2]) for i in active if i in self._fold)
-        for i, info, eta in folds:
-            if not info.any():
-                continue
-            h = info + (1e-12 + 1e-9 * np.trace(info)) * np.eye(2)
-            mean = np.linalg.solve(h, eta)
-            graph.add(gtsam.PriorFactorPoint2(landmark_key(i), gtsam.Point2(*mean),
-                                              gtsam.noiseModel.Gaussian.Information(h)))
+            folds = [(i, *self._fold[i][:2]) for i in active if i in self._fold]
+        if folds:
+            # every fold's prior at once: H + (1e-12 + 1e-9 tr H) I, its mean H^-1 eta
+            ids = np.array([f[0] for f in folds], dtype=np.int64)
+            info = np.array([f[1] for f in folds]).reshape(-1, 2, 2)
+            eta = np.array([f[2] for f in folds]).reshape(-1, 2)
+            use = info.any(axis=(1, 2))
+            ids, info, eta = ids[use], info[use], eta[use]
+            h = info + (1e-12 + 1e-9 * (info[:, 0, 0] + info[:, 1, 1]))[:, None, None] \
+                * np.eye(2)
+            mean = np.linalg.solve(h, eta[:, :, None])[:, :, 0]
+            for k, m, hk in zip(landmark_keys(ids).tolist(), mean, h):
+                graph.add(gtsam.PriorFactorPoint2(k, m, gtsam.noiseModel.Gaussian.Information(hk)))
         act = set(active)
         for p in self.header.priors:
             if p.i in act and p.j in act:
                 graph.add(prior_factor(p))
-        return graph, self._values(sorted(keys), initial)
+        start = self._values(keys.tolist(), initial)
+        if overlay is not None:
+            over = np.intersect1d(np.asarray(overlay.keys(), dtype=np.uint64), keys)
+            start.update(overlay.extract(over.tolist()))
+        return graph, start
 
     def _marginalise(self, b: int, held: gtsam.Values) -> None:
         """Eliminate the chunks of steps <= ``b`` not yet in the marginal: their factors and
@@ -316,7 +331,7 @@ class StepChunks:
         if not sel.any():
             return []
         ids, which = np.unique(lid[sel], return_inverse=True)
-        xy = np.array([held.atPoint2(landmark_key(int(i))) for i in ids]).reshape(-1, 2)
+        xy = points_at(held, ids)
         info, eta = fold_bearings(pose_at(t[sel]), xy, brg[sel], which,
                                   float(self.header.bearing_sigma_rad),
                                   self.config.bearing_cauchy_k)
@@ -344,12 +359,12 @@ class StepChunks:
         owner, lid, brg = bearings
         if not landmark_ids.size or not owner.size:
             return
-        refold = []
-        for i in active:
-            f = self._fold.get(i)
-            cur = np.asarray(held.atPoint2(landmark_key(i)), dtype=float)
-            if f is None or np.hypot(*(cur - f[2])) > self.refold_m:
-                refold.append(i)
+        refold = [i for i in active if i not in self._fold]
+        old = [i for i in active if i in self._fold]
+        if old:     # folded farther than refold_m from the current point
+            d = points_at(held, old) - np.array([self._fold[i][2] for i in old])
+            far = np.hypot(d[:, 0], d[:, 1]) > self.refold_m
+            refold = sorted(refold + np.asarray(old)[far].tolist())
         hi = int(np.searchsorted(owner, upto))
         lo = int(np.searchsorted(owner, self._folded_to))
         parts = [np.arange(lo, hi)]
@@ -364,7 +379,7 @@ class StepChunks:
         if not sel.size:
             return
         ids, which = np.unique(lid[sel], return_inverse=True)
-        xy = np.array([held.atPoint2(landmark_key(int(i))) for i in ids]).reshape(-1, 2)
+        xy = points_at(held, ids)
         ts, at = np.unique(owner[sel], return_inverse=True)
         info, eta = fold_bearings(pose_at(ts)[at], xy, brg[sel], which,
                                   float(self.header.bearing_sigma_rad),

@@ -12,6 +12,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 TWO_PI = 2.0 * np.pi
+_SCALARS = (float, np.float64)
 
 
 def wrap_angle(angle_rad: ArrayLike) -> np.ndarray:
@@ -27,9 +28,10 @@ def wrap_angle(angle_rad: ArrayLike) -> np.ndarray:
     ndarray or numpy float
         Same shape as the input; ``-pi`` maps to ``+pi``.
     """
-    if type(angle_rad) is float and math.isfinite(angle_rad):
-        # one Python float: the same IEEE operations without numpy's per-call cost
-        w = math.pi - (math.pi - angle_rad) % TWO_PI
+    if type(angle_rad) in _SCALARS and math.isfinite(angle_rad):
+        # one float (Python's or numpy's float64): the same IEEE operations without numpy's
+        # per-call cost
+        w = math.pi - (math.pi - float(angle_rad)) % TWO_PI
         return np.float64(w + TWO_PI if w <= -math.pi else w)
     a = np.asarray(angle_rad, dtype=float)
     w = np.pi - np.mod(np.pi - a, TWO_PI)

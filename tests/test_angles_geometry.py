@@ -20,6 +20,21 @@ def test_wrap_textbook_values() -> None:
     np.testing.assert_allclose(wrap_angle([7.0, -7.0]), [7.0 - 2 * np.pi, -7.0 + 2 * np.pi])
 
 
+
+def test_wrap_of_one_float_is_the_array_path_bit_for_bit() -> None:
+    """Python floats and numpy float64 scalars take the scalar path (math, no arrays); it gives
+    the same bits as the array path, at the edges of the interval too."""
+    rng = np.random.default_rng(1)
+    a = np.concatenate([rng.uniform(-50, 50, 2000),
+                        [np.pi, -np.pi, 3 * np.pi, -3 * np.pi, 0.0, -0.0, 1e-300,
+                         np.nextafter(np.pi, 4), np.nextafter(-np.pi, -4)]])
+    whole = wrap_angle(a)
+    for one in (np.float64, float):
+        got = np.array([wrap_angle(one(x)) for x in a])
+        assert got.tobytes() == whole.tobytes()
+    assert type(wrap_angle(np.float64(1.0))) is np.float64
+
+
 @settings(max_examples=200, deadline=None)
 @given(a=st.floats(-1e4, 1e4), b=st.floats(-1e4, 1e4))
 def test_residual_is_the_shortest_turn(a: float, b: float) -> None:

@@ -8,7 +8,7 @@ import gtsam
 import numpy as np
 import pytest
 
-from baselines.bearing_graph import landmarks_from_values, poses_from_values
+from baselines.bearing_graph import landmarks_from_values, pose_key, poses_from_values
 from bomgraph.mapper import create_mapper, run
 from bomgraph.sim import SimConfig, paper_design, simulate_run
 from bomgraph.stream import Stream
@@ -73,3 +73,28 @@ def test_the_marginal_gives_way_to_conditional_folds_past_its_landmark_bound(
     est = run(mapper, stream.steps).final
     assert not mapper.state.chunks.marginal
     assert est.info["passes"][0] == "window" and len(est) >= 20
+
+
+def test_an_overlay_on_the_start_is_the_start_of_the_overlaid_values(stream: Stream) -> None:
+    """``window(overlay=)`` (the warm pre-solve laid over the start without copying the
+    whole values) gives, bit for bit, the start of the values with the overlay applied;
+    overlay entries outside the window are left out."""
+    mapper = create_mapper("gtsam-batch", stream.header, lag_after_steps=10 ** 4, lag_steps=30)
+    est = run(mapper, stream.steps).final
+    state = mapper.state
+    n = state.problem.n_steps
+    b = state.chunks.boundary(n, 30)
+    over = gtsam.Values()
+    for t in (0, n - 1):          # x_0 is outside the window, x_{n-1} inside
+        p = state.values.atPose2(pose_key(t))
+        over.insert(pose_key(t), gtsam.Pose2(p.x() + 0.25, p.y() - 0.5, p.theta() + 0.1))
+    laid = gtsam.Values(state.values)
+    laid.update(over)
+    args = (lambda ts: poses_from_values(state.values, ts), state.bearings(), est.landmark_ids,
+            [])
+    _, start = state.chunks.window(b, n, state.values, state.values, *args, overlay=over)
+    _, want = state.chunks.window(b, n, laid, state.values, *args)
+    assert list(start.keys()) == list(want.keys()) and not start.exists(pose_key(0))
+    for read in (gtsam.utilities.extractPose2, gtsam.utilities.extractPoint2):
+        assert read(start).tobytes() == read(want).tobytes()
+    assert start.atPose2(pose_key(n - 1)).x() == over.atPose2(pose_key(n - 1)).x()
