@@ -213,11 +213,11 @@ def simulate(config: SimConfig, rng: np.random.Generator, *,
         # noise is drawn for every landmark within sensor range, before the minimum range and
         # the field of view leave some out, so that those two settings change no other
         # bearing's noise (a stream with and without them pairs bearing for bearing)
-        near = d <= config.sensor_range_m
-        noise = k * config.sigma_theta_rad * rng.standard_normal(int(near.sum()))
-        seen = (d[near] >= config.min_range_m) & (np.abs(brg[near]) <= config.fov_rad / 2)
-        seen_ids = ids[near][seen]
-        meas = wrap_angle(brg[near][seen] + noise[seen])
+        in_range = d <= config.sensor_range_m
+        noise = k * config.sigma_theta_rad * rng.standard_normal(int(in_range.sum()))
+        seen = (d[in_range] >= config.min_range_m) & (np.abs(brg[in_range]) <= config.fov_rad / 2)
+        seen_ids = ids[in_range][seen]
+        meas = wrap_angle(brg[in_range][seen] + noise[seen])
         if config.wrong_association_rate > 0 and seen_ids.size:
             seen_ids = _mislabel(seen_ids, n, config.wrong_association_rate, rng)
         steps.append(Step(t=t, odom=odom, landmark_ids=seen_ids, bearings_rad=meas))
