@@ -252,7 +252,8 @@ class StepChunks:
                 * np.eye(2)
             mean = np.linalg.solve(h, eta[:, :, None])[:, :, 0]
             for k, m, hk in zip(landmark_keys(ids).tolist(), mean, h):
-                graph.add(gtsam.PriorFactorPoint2(k, m, gtsam.noiseModel.Gaussian.Information(hk)))
+                graph.add(gtsam.PriorFactorPoint2(k, m,
+                                                  gtsam.noiseModel.Gaussian.Information(hk)))
         act = set(active)
         for p in self.header.priors:
             if p.i in act and p.j in act:
