@@ -338,7 +338,7 @@ class BatchState:
         the config has one) and a Gauss-Newton check only where :meth:`looks_off`; ``values``
         is left to the caller. ``warm``: ``initial`` is the current values (the last solution
         and the odometry predictions since), whose new poses are first solved alone
-        (``warm_presolve_sigma_m``, :meth:`baselines.lm_window.StepChunks.warm_start`).
+        (``warm_presolve_sigma_m``, :meth:`baselines.lm_window.StepChunks.warm_solve`).
 
         Past ``lag_after_steps`` steps, and until the graph has grown by ``full_growth`` since
         its last whole solve, only the last ``lag_steps`` poses and the landmarks they see are

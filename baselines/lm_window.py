@@ -7,7 +7,7 @@ chunk of their step). A window ``x_b .. x_{T-1}`` (``b + 1`` a chunk's first ste
 union of the newest chunks, taken without a loop over factors, plus a prior holding ``x_b``.
 Two uses (issue 14 items 1-2):
 
-* **warm start** (:meth:`StepChunks.warm_start`): before a whole-graph solve, the poses added
+* **warm start** (:meth:`StepChunks.warm_solve`): before a whole-graph solve, the poses added
   since the last solution (predicted by dead reckoning, often centimetres off) are solved with
   the landmarks held near their current points by an isotropic prior of
   ``warm_presolve_sigma_m``: a problem of ``solve_every`` poses, after which the whole-graph LM
@@ -160,26 +160,15 @@ class StepChunks:
         return source.extract([int(k) for k in keys])
 
     # -- warm start -------------------------------------------------------------------------
-    def warm_start(self, values: gtsam.Values, held: gtsam.Values, sigma_m: float,
-                   tol: float) -> tuple[gtsam.Values, int]:
-        """``values`` with the poses of the newest chunk solved against the landmarks, each
-        held at its point in ``values`` by an isotropic prior of ``sigma_m``, the last solved
-        pose held at ``held`` (module docstring); the LM iterations taken. ``values``
-        unchanged (and 0) if there is no earlier chunk or the small solve fails."""
-        solved, its = self.warm_solve(values, held, sigma_m, tol)
-        if solved is None:
-            return values, its
-        out = gtsam.Values(values)
-        out.update(solved)
-        return out, its
-
     def warm_solve(self, values: gtsam.Values, held: gtsam.Values, sigma_m: float,
                    tol: float) -> tuple[gtsam.Values | None, int]:
-        """The small solve of :meth:`warm_start` alone: its solution (the newest chunk's
-        poses and the landmarks they see), to lay over ``values``, and the LM iterations
-        taken; None if there is no earlier chunk, or the solve failed (0 iterations) or did
-        not lower its error. Saves the copy of ``values`` when only a window of it is used
-        (:meth:`window`'s ``overlay``)."""
+        """The warm start (module docstring): the poses of the newest chunk solved against
+        the landmarks, each held at its point in ``values`` by an isotropic prior of
+        ``sigma_m``, the last solved pose held at ``held``. Returns that solution (the newest
+        chunk's poses and the landmarks they see), to lay over ``values`` (whole, or only a
+        window's part: :meth:`window`'s ``overlay``), and the LM iterations taken; None if
+        there is no earlier chunk, or the solve failed (0 iterations) or did not lower its
+        error."""
         b = self.newest_boundary()
         if b is None:
             return None, 0
