@@ -20,7 +20,7 @@ the median over ``--runs`` runs of the design; with ``stmds-smacof`` also its ra
 the same runs with 25 landmarks, about 10 in view; :func:`stmds_step_rows`), ``long`` (one ``--long-steps``-step simulated
 run at the default cadence, every method in ``--long-methods``), ``scale`` (``stmds-smacof``
 at N = 1,000 / 5,000 / 10,000 landmarks, ``scripts/bench_scale.py``, with peak memory and the
-fitted exponent). A section is a function ``(args) -> list of rows`` in :data:`SECTIONS`. Rows: ``{"section", "method", "cpu_s", "reference", "reference_cpu_s",
+fitted exponent; and ``gtsam-batch`` at N = 1,000, ``--batch-scale-sizes``). A section is a function ``(args) -> list of rows`` in :data:`SECTIONS`. Rows: ``{"section", "method", "cpu_s", "reference", "reference_cpu_s",
 "ratio", "mpe_cm", ...}``.
 
 CPU seconds (``time.process_time``) with single-threaded BLAS; ratios are against a
@@ -30,7 +30,7 @@ Usage::
 
     python scripts/bench_speed.py [--runs 3] [--sections paper stmds-step long scale]
         [--long-steps 3000]
-        [--scale-sizes 1000 5000 10000]
+        [--scale-sizes 1000 5000 10000] [--batch-scale-sizes 1000]
         [--methods M ...] [--long-methods M ...] [--out /tmp/bench_speed.json]
 """
 
@@ -232,9 +232,10 @@ def long_rows(args: argparse.Namespace) -> list[dict[str, Any]]:
 
 
 def scale_section(args: argparse.Namespace) -> list[dict[str, Any]]:
-    """``stmds-smacof`` on N = ``--scale-sizes`` landmarks (arena grown at the paper's
-    density, steps in proportion; final map only), each size in a fresh process
-    (``scripts/bench_scale.py``): CPU s, peak RSS, MPE and the fitted exponent."""
+    """``stmds-smacof`` on N = ``--scale-sizes`` landmarks and ``gtsam-batch`` on N =
+    ``--batch-scale-sizes`` (arena grown at the paper's density, steps in proportion; final
+    map only), each size in a fresh process (``scripts/bench_scale.py``): CPU s, peak RSS, MPE
+    and the fitted exponent (per method)."""
     import importlib.util
 
     spec = importlib.util.spec_from_file_location(
@@ -242,10 +243,12 @@ def scale_section(args: argparse.Namespace) -> list[dict[str, Any]]:
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
     rows = []
-    for r in mod.scale_rows(args.scale_sizes):
-        rows.append({**r, "section": f"scale N={r['n_landmarks']}", "method": "stmds-smacof",
-                     "mpe_cm": 100 * r["mpe_m"], "reference": None,
-                     "peak_rss_mb": r["peak_rss_bytes"] / 2 ** 20})
+    for method, sizes in (("stmds-smacof", args.scale_sizes),
+                          ("gtsam-batch", args.batch_scale_sizes)):
+        for r in (mod.scale_rows(sizes, method=method) if sizes else []):
+            rows.append({**r, "section": f"scale N={r['n_landmarks']}", "method": method,
+                         "mpe_cm": 100 * r["mpe_m"], "reference": None,
+                         "peak_rss_mb": r["peak_rss_bytes"] / 2 ** 20})
     return rows
 
 
@@ -305,6 +308,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--sections", nargs="+", default=["paper", "stmds-step", "long", "scale"],
                     choices=list(SECTIONS))
     ap.add_argument("--scale-sizes", nargs="+", type=int, default=[1000, 5000, 10000])
+    ap.add_argument("--batch-scale-sizes", nargs="*", type=int, default=[1000],
+                    help="sizes for gtsam-batch's scale rows (none: leave them out)")
     ap.add_argument("--methods", nargs="+", default=names, choices=names)
     ap.add_argument("--long-steps", type=int, default=3000)
     ap.add_argument("--long-methods", nargs="+", default=names, choices=names)
