@@ -46,7 +46,7 @@ import numpy as np
 
 from bomgraph.config import Presets, requirement
 from bomgraph.errors import ConfigError, StreamFormatError
-from bomgraph.geometry import compose, intersect_rays
+from bomgraph.geometry import compose, intersect_ray_groups
 from bomgraph.stream import Prior, Step, StreamHeader
 
 from .graph_values import points_at, poses_at
@@ -466,43 +466,43 @@ class BearingGraph:
 
     def admit(self, pose_at: Callable[[np.ndarray], np.ndarray], *,
               only_fresh: bool = False) -> list[int]:
-        """Let in every pending landmark whose rays now intersect well.
-
-        Parameters
-        ----------
-        pose_at : callable
-            ``pose_at(ts)`` returns the current estimates of poses ``ts``, shape (k, 3).
-        only_fresh : bool
-            Only try landmarks that got a bearing since the last call (incremental use).
-
-        Returns
-        -------
-        list of int
-            Ids that entered now; their factors and initial points wait in :meth:`take_new`.
-        """
+        """Let in every pending landmark whose rays now intersect well (:meth:`initial_points`
+        on ``pose_at(ts)``, the current estimates of poses ``ts``, shape (k, 3)); with
+        ``only_fresh`` only those that got a bearing since the last call (incremental use).
+        Returns the ids that entered now; their factors and points wait in :meth:`take_new`."""
         cand = self._fresh if only_fresh else set(self._rays)
         cand = sorted(lid for lid in cand if len(self._rays[lid][0]) >= 2)
         self._fresh = set()
-        entered = []
-        for lid in cand:
-            ts, bs = self._rays[lid]
-            xy = self.initial_point(pose_at(np.asarray(ts)), np.asarray(bs))
-            if xy is not None:
-                self.enter(lid, xy)
-                entered.append(lid)
+        xy, ok = self.initial_points(*self.rays_of(cand, pose_at))
+        entered = [lid for lid, good in zip(cand, ok.tolist()) if good]
+        for lid, point in zip(entered, xy[ok]):
+            self.enter(lid, point)
         return entered
 
-    def initial_point(self, poses: np.ndarray, bearings_rad: np.ndarray) -> np.ndarray | None:
-        """The ray intersection, or None if not determined (parallax, behind, out of range)."""
-        xy, ok = intersect_rays(poses[:, :2], poses[:, 2] + bearings_rad,
-                                min_parallax_rad=self.config.min_parallax_rad)
-        if not ok:
-            return None
+    def rays_of(self, ids: Sequence[int], pose_at: Callable[[np.ndarray], np.ndarray],
+                source: Mapping[int, tuple[list[int], list[float]]] | None = None
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+        """The rays of landmarks ``ids`` (buffered here, or in ``source``) on the poses
+        ``pose_at(ts)``, one call: ``(poses (R, 3), bearings_rad (R,), owner (R,), m)``."""
+        rays = [(self._rays if source is None else source)[lid] for lid in ids]
+        if not rays:
+            return np.zeros((0, 3)), np.zeros(0), np.zeros(0, np.int64), 0
+        owner = np.repeat(np.arange(len(rays)), [len(ts) for ts, _ in rays])
+        poses = pose_at(np.concatenate([np.asarray(ts, np.int64) for ts, _ in rays]))
+        return poses, np.concatenate([np.asarray(bs, float) for _, bs in rays]), owner, len(rays)
+
+    def initial_points(self, poses: np.ndarray, bearings_rad: np.ndarray, owner: np.ndarray,
+                       m: int) -> tuple[np.ndarray, np.ndarray]:
+        """The ray intersections of ``m`` landmarks, ray ``k`` from ``poses[k]`` (R, 3) with
+        ``bearings_rad[k]`` for landmark ``owner[k]``: ``(points (m, 2), ok (m,))``, ok False
+        (and NaN) where the parallax, a ray's depth or the range gate refuses the point."""
+        xy, ok = intersect_ray_groups(poses[:, :2], poses[:, 2] + bearings_rad, owner, m,
+                                      min_parallax_rad=self.config.min_parallax_rad)
         rng = self.header.sensor_range_m
-        if rng is not None and np.any(np.hypot(*(poses[:, :2] - xy).T)
-                                      > self.config.range_gate * rng):
-            return None
-        return xy
+        if rng is not None and m:
+            far = np.hypot(*(poses[:, :2] - xy[owner]).T) > self.config.range_gate * rng
+            ok &= np.bincount(owner, weights=far, minlength=m) == 0
+        return xy, ok
 
     def enter(self, lid: int, xy: np.ndarray) -> None:
         """Put pending landmark ``lid`` in the graph at ``xy`` with all its buffered bearings.

@@ -13,7 +13,7 @@ two side by side:
    frame, rigid with reflection allowed and trimmed
    (:func:`baselines.gtsam_tools.align_map`), onto the landmarks iSAM2 already holds plus
    the pending ones whose rays intersect with ``align_parallax_rad`` on the current poses
-   (:func:`bomgraph.geometry.intersect_rays`);
+   (:func:`bomgraph.geometry.intersect_ray_groups`);
 3. the seed position is moved onto the landmark's rays (:func:`refine_on_rays`: the rays
    fix its direction, the seed the depth they leave open) and the landmark enters the graph
    there, with all its buffered bearings, if that point lies in front of its rays and
@@ -46,7 +46,7 @@ import numpy as np
 from bomgraph.angles import angle_residual
 from bomgraph.config import requirement, resolve
 from bomgraph.errors import BomgraphError, ConfigError
-from bomgraph.geometry import intersect_rays
+from bomgraph.geometry import intersect_ray_groups
 from bomgraph.mapper import MapEstimate, Mapper, create_mapper
 from bomgraph.stream import Step, StreamHeader
 
@@ -193,14 +193,9 @@ class HybridIsam2Mapper(Isam2Mapper):
     def _waiting(self, graph: BearingGraph, pose_at: Callable[[np.ndarray], np.ndarray]
                  ) -> list[int]:
         """Pending landmarks with >= 2 bearings that the parallax rule does not yet admit."""
-        out = []
-        for lid, n in sorted(graph.pending().items()):
-            if n < 2:
-                continue
-            ts, bs = self._rays[lid]
-            if graph.initial_point(pose_at(np.asarray(ts)), np.asarray(bs)) is None:
-                out.append(lid)
-        return out
+        ids = [lid for lid, n in sorted(graph.pending().items()) if n >= 2]
+        _, ok = graph.initial_points(*graph.rays_of(ids, pose_at, self._rays))
+        return [lid for lid, good in zip(ids, ok.tolist()) if not good]
 
     def _current_seed(self, t: int) -> MapEstimate | None:
         if self._seed_map is None or t - self._seed_t >= self.config.seed_every:
@@ -219,19 +214,12 @@ class HybridIsam2Mapper(Isam2Mapper):
         in_graph = np.array([lid for lid in graph.landmark_ids
                              if self.estimate_values.exists(landmark_key(lid))], np.int64)
         xy = [landmarks_from_values(self.estimate_values, in_graph)]
-        extra_ids = []
-        for lid in sorted(graph.pending()):
-            ts, bs = self._rays[lid]
-            if len(ts) < 2:
-                continue
-            poses = pose_at(np.asarray(ts))
-            p, ok = intersect_rays(poses[:, :2], poses[:, 2] + np.asarray(bs),
-                                   min_parallax_rad=self.config.align_parallax_rad)
-            if ok:
-                extra_ids.append(lid)
-                xy.append(p[None])
-        return (np.concatenate([in_graph, np.array(extra_ids, np.int64)]),
-                np.concatenate(xy).reshape(-1, 2))
+        ids = [lid for lid in sorted(graph.pending()) if len(self._rays[lid][0]) >= 2]
+        poses, bearings, owner, m = graph.rays_of(ids, pose_at, self._rays)
+        p, ok = intersect_ray_groups(poses[:, :2], poses[:, 2] + bearings, owner, m,
+                                     min_parallax_rad=self.config.align_parallax_rad)
+        return (np.concatenate([in_graph, np.array(ids, np.int64)[ok]]),
+                np.concatenate([*xy, p[ok]]).reshape(-1, 2))
 
     def _seed_pending(self, graph: BearingGraph,
                       pose_at: Callable[[np.ndarray], np.ndarray]) -> None:

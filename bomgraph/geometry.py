@@ -190,12 +190,51 @@ def intersect_rays(origins_xy: np.ndarray, directions_rad: np.ndarray, *,
         raise ConfigError(f"intersect_rays: {len(o)} origins but {len(d)} directions")
     if len(o) < 2:
         return np.full(2, np.nan), False
-    n = ray_normals(d)
-    a = n.sum(0)
-    b = np.einsum("kij,kj->i", n, o)
-    x, ok = solve_ray_normal_equations(a[None], b[None], o, d, min_parallax_rad, min_front_fraction,
-                   np.zeros(len(o), np.int64))
+    x, ok = intersect_ray_groups(o, d, np.zeros(len(o), np.int64), 1,
+                                 min_parallax_rad=min_parallax_rad,
+                                 min_front_fraction=min_front_fraction)
     return x[0], bool(ok[0])
+
+
+def intersect_ray_groups(origins_xy: np.ndarray, directions_rad: np.ndarray, owner: np.ndarray,
+                         m: int, *, min_parallax_rad: float = math.radians(2.0),
+                         min_front_fraction: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`intersect_rays` for ``m`` points at once, each from its own rays.
+
+    Parameters
+    ----------
+    origins_xy : array of shape (R, 2)
+        Every ray's origin (world frame, metres).
+    directions_rad : array of shape (R,)
+        Every ray's world direction.
+    owner : int array of shape (R,)
+        The point (``0 .. m-1``) of each ray; a point with fewer than two rays is refused.
+    m : int
+        Number of points.
+    min_parallax_rad, min_front_fraction : float
+        The gates of :func:`intersect_rays`.
+
+    Returns
+    -------
+    points_xy : ndarray of shape (m, 2)
+        NaN where refused.
+    ok : bool ndarray of shape (m,)
+
+    Each point's normal equations are summed ray by ray in the rays' order (``np.add.at``),
+    the same sums as :func:`intersect_rays` makes for one point.
+    """
+    n = ray_normals(directions_rad)
+    if m == 1:  # the same sums, without the scatter's overhead
+        a, b = n.sum(0)[None], np.einsum("kij,kj->i", n, origins_xy)[None]
+    else:
+        a, b = np.zeros((m, 2, 2)), np.zeros((m, 2))
+        np.add.at(a, owner, n)
+        np.add.at(b, owner, np.einsum("kij,kj->ki", n, origins_xy))
+    x, ok = solve_ray_normal_equations(a, b, origins_xy, directions_rad, min_parallax_rad,
+                                       min_front_fraction, owner)
+    few = np.bincount(owner, minlength=m) < 2
+    x[few] = np.nan
+    return x, ok & ~few
 
 
 def origin_spread(points_xy: np.ndarray, origins: np.ndarray, owner: np.ndarray,

@@ -8,7 +8,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from bomgraph.angles import angle_residual, wrap_angle
-from bomgraph.geometry import (arc_root, between, bearings_to, compose, dead_reckon, to_local,
+from bomgraph.geometry import (arc_root, between, bearings_to, compose, dead_reckon,
+                               intersect_ray_groups, intersect_rays, ray_normals, to_local,
                                to_world)
 
 
@@ -86,3 +87,30 @@ def test_arc_root_composed_k_times_is_the_increment() -> None:
     half = arc_root([1.0, 1.0, np.pi / 2], 2)
     np.testing.assert_allclose(half, [np.sin(np.pi / 4), 1 - np.cos(np.pi / 4), np.pi / 4],
                                atol=1e-12)
+
+
+def test_ray_groups_are_intersect_rays_point_by_point_bit_for_bit() -> None:
+    """One grouped call gives each point exactly what :func:`intersect_rays` gives it alone
+    (the refusals too: one ray, parallel rays, a point behind a ray), so batching the
+    admission of landmarks changes no map."""
+    rng = np.random.default_rng(5)
+    target = rng.uniform(-3, 3, (40, 2))
+    counts = rng.integers(1, 12, 40)
+    owner = np.repeat(np.arange(40), counts)
+    origins = target[owner] + rng.normal(0, 1.5, (len(owner), 2))
+    d = target[owner] - origins
+    dirs = np.arctan2(d[:, 1], d[:, 0]) + rng.normal(0, 0.02, len(owner))
+    dirs[owner == 3] = dirs[owner == 3][0]                      # parallel rays
+    dirs[np.flatnonzero(owner == 5)[0]] += np.pi                # one ray pointing away
+    xy, ok = intersect_ray_groups(origins, dirs, owner, 40, min_parallax_rad=0.05)
+    refused = 0
+    for i in range(40):
+        one, good = intersect_rays(origins[owner == i], dirs[owner == i], min_parallax_rad=0.05)
+        assert good == ok[i]
+        assert np.array_equal(one, xy[i], equal_nan=True)
+        refused += not good
+        if good:  # the normal equations summed as a single point's were before the groups
+            n = ray_normals(dirs[owner == i])
+            a, b = n.sum(0), np.einsum("kij,kj->i", n, origins[owner == i])
+            assert np.array_equal(np.linalg.solve(a[None], b[None, :, None])[0, :, 0], xy[i])
+    assert ok[counts > 1].sum() > 25 and refused >= 3 and not ok[3] and not ok[5]
