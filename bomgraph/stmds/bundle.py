@@ -38,6 +38,7 @@ from ..geometry import between, dead_reckon, effective_parallax, to_local
 from .bundle_bias import corrected_squared_distance, full_covariance, second_order_bias
 from .bundle_lm import (SIGMA_FLOOR, _bearing_residuals, _Problem,  # noqa: F401 (re-exported)
                         _levenberg_marquardt)
+from .distances import rule_form
 from .triangulation import PairEstimates, pair_indices
 from .window import window_lsq_points
 
@@ -545,15 +546,17 @@ def relative_range_sigma(bundle: WindowBundle, bearings_rad: ArrayLike) -> np.nd
 
 
 def bundle_pair_squared_distances(bundle: WindowBundle,
-                                  domain: str | None = None) -> PairEstimates:
+                                  fusion: str | None = None) -> PairEstimates:
     """Squared distance and first-order variance of every pair of a window's landmarks.
 
     ``var(d_ij^2) = 4 e^T (C_ii + C_jj - C_ij - C_ji) e`` with ``e = p_i - p_j`` and ``C`` the
-    joint covariance of the bundle (shared poses and bearings included). With ``domain``
-    (``"d2"``, ``"d"``, ``"inv"``: the quantity the fusion rule averages) and a bias estimated
-    but not subtracted (``bias="estimate"``), the squared distances are those whose quantity
-    is unbiased to order ``sigma^2`` (:func:`.bundle_bias.corrected_squared_distance`); the
-    variances stay those of ``e``.
+    joint covariance of the bundle (shared poses and bearings included). With ``fusion`` (the
+    rule of :mod:`.distances` the pairs go to) and a bias estimated but not subtracted
+    (``bias="estimate"``), the squared distances are those whose averaged quantity (``d^2``,
+    ``d`` or ``1 / d``) is unbiased to order ``sigma^2``
+    (:func:`.bundle_bias.corrected_squared_distance`) and the variances are scaled so that
+    each estimate keeps the rule's weight ``d2^m / var``: the correction moves an estimate,
+    it adds no information.
     """
     first, second = pair_indices(len(bundle))
     e = bundle.points_xy[first] - bundle.points_xy[second]
@@ -562,11 +565,13 @@ def bundle_pair_squared_distances(bundle: WindowBundle,
     d = (blocks[first, first] + blocks[second, second] - blocks[first, second]
          - blocks[second, first])
     var = 4.0 * np.einsum("pa,pab,pb->p", e, d, e)
-    if domain is not None and bundle.points_bias_m is not None and not bundle.bias_subtracted:
+    d2 = np.einsum("pa,pa->p", e, e)
+    if fusion is not None and bundle.points_bias_m is not None and not bundle.bias_subtracted:
+        m, domain = rule_form(fusion)
         bias_e = bundle.points_bias_m[first] - bundle.points_bias_m[second]
-        d2 = corrected_squared_distance(e, d, bias_e, domain)
-    else:
-        d2 = np.einsum("pa,pa->p", e, e)
+        fixed = corrected_squared_distance(e, d, bias_e, domain)
+        var = var * (fixed / d2) ** m
+        d2 = fixed
     return PairEstimates(first, second, d2, var, None)
 
 

@@ -143,7 +143,8 @@ class StmdsConfig(Presets):
         formed; ``"distances"``: each pair's squared distance (m^2) is corrected so that the
         quantity the fusion rule averages (``d^2``, ``d`` or ``1 / d``) is unbiased to that
         order, the points' bias and the curvature of that quantity included
-        (``bundle_bias.corrected_squared_distance``). Variances stay first order. None (the
+        (``bundle_bias.corrected_squared_distance``), each estimate keeping its weight in
+        the fusion. Variances are first order. None (the
         default): the least-squares solution as it is (``docs/measurements.md``, issue 15).
     tri_parallax_rad : float or None
         Windows measured in geometry, not in keyframes (in place of ``tri_window``, issue 15):

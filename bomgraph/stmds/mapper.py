@@ -34,7 +34,7 @@ from .batch import BATCH_STEPS, StepBatch
 from .bundle import (SIGMA_RANGE, PrefixState, WindowBundle, bundle_adjust_window,
                      bundle_pair_squared_distances, relative_range_sigma)
 from .config import StmdsConfig
-from .distances import DistanceStore, IdIndex, fusion_domain
+from .distances import DistanceStore, IdIndex
 from .localisation import RobotPoses, extend_with_robots, resect_headings, trilaterate_robots
 from .reconstruct import reconstruct
 from .triangulation import (compose_odometry, gate_points, pair_squared_distances,
@@ -331,8 +331,8 @@ class StmdsMapper:
             return
         if isinstance(tri, WindowBundle):
             pairs = bundle_pair_squared_distances(
-                tri, fusion_domain(self.config.fusion)
-                if self.config.tri_bias_correction == "distances" else None)
+                tri, self.config.fusion if self.config.tri_bias_correction == "distances"
+                else None)
         else:
             pairs = window_pair_squared_distances(tri, sig, self._bearing_sigma)
         var = pairs.variance_m4 if self._tri_inflation == 1.0 else \

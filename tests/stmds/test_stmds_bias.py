@@ -108,7 +108,7 @@ def _monte_carlo(n_pairs=200, seed=1):
                                           sigma, outlier_sigma=None, grow=w, bias="estimate")
             assert len(tri) == 5 and tri.points_bias_m is not None
             raw, fixed = tri.points_xy, tri.points_xy - tri.points_bias_m
-            pairs = bundle_pair_squared_distances(tri, "inv")
+            pairs = bundle_pair_squared_distances(tri, "scale-free")
             q = np.flatnonzero((pairs.first == 0) & (pairs.second == 1))[0]
             err[i, int(sign < 0)] = [np.hypot(*raw[0]) - depth, np.hypot(*fixed[0]) - depth,
                                      1 / np.hypot(*(raw[0] - raw[1])) - inv_d,
@@ -158,5 +158,5 @@ def test_subtract_is_estimate_minus_bias():
     np.testing.assert_array_equal(sub.covariance_m2, est.covariance_m2)
     # without a domain (or with the bias subtracted) the pairs are those of the points
     a = bundle_pair_squared_distances(est)
-    b = bundle_pair_squared_distances(plain, "inv")
+    b = bundle_pair_squared_distances(plain, "scale-free")
     np.testing.assert_array_equal(a.squared_distance_m2, b.squared_distance_m2)
