@@ -156,4 +156,5 @@ def full_covariance(info: np.ndarray) -> np.ndarray | None:
     return inv if np.all(np.isfinite(inv)) else None
 
 
-__all__ = ["corrected_squared_distance", "full_covariance", "residual_hessian_traces", "second_order_bias"]
+__all__ = ["corrected_squared_distance", "full_covariance", "residual_hessian_traces",
+           "second_order_bias"]
