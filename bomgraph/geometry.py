@@ -148,29 +148,6 @@ def bearings_to(pose: ArrayLike, points_world_xy: ArrayLike) -> np.ndarray:
 # Rays
 # --------------------------------------------------------------------------------------------
 
-def bearing_hessian(offset_xy: np.ndarray) -> np.ndarray:
-    """Hessian of the direction ``atan2(dy, dx)`` with respect to the offset ``(dx, dy)``.
-
-    Parameters
-    ----------
-    offset_xy : array of shape (k, 2)
-        Offsets ``point - origin`` in metres (nonzero).
-
-    Returns
-    -------
-    ndarray of shape (k, 2, 2)
-        ``[[2 dx dy, dy^2 - dx^2], [dy^2 - dx^2, -2 dx dy]] / r^4`` in rad / m^2 (the
-        gradient is ``(-dy, dx) / r^2``). Taken with respect to the point it is this, with
-        respect to the origin too, and minus this for the mixed block.
-    """
-    d = np.asarray(offset_xy, dtype=float).reshape(-1, 2)
-    dx, dy = d[:, 0], d[:, 1]
-    r4 = (dx * dx + dy * dy) ** 2
-    xy = 2.0 * dx * dy / r4
-    off = (dy * dy - dx * dx) / r4
-    return np.stack([np.stack([xy, off], -1), np.stack([off, -xy], -1)], -2)
-
-
 def ray_normals(directions_rad: np.ndarray) -> np.ndarray:
     """``I - d d^T`` for world ray directions, shape ``(k, 2, 2)``."""
     c, s = np.cos(directions_rad), np.sin(directions_rad)

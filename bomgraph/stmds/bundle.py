@@ -35,10 +35,8 @@ from numpy.typing import ArrayLike
 from ..angles import angle_residual
 from ..errors import ConfigError
 from ..geometry import between, dead_reckon, effective_parallax, to_local
-from .bundle_bias import corrected_squared_distance, full_covariance, second_order_bias
 from .bundle_lm import (SIGMA_FLOOR, _bearing_residuals, _Problem,  # noqa: F401 (re-exported)
                         _levenberg_marquardt)
-from .distances import rule_form
 from .triangulation import PairEstimates, pair_indices
 from .window import window_lsq_points
 
@@ -67,14 +65,6 @@ class WindowBundle:
     bearing_sigma_rad : float
         The bearing std. dev. of the fit: the one given, or the one estimated from the
         window's residuals (``estimate_sigma``).
-    prefix_state : PrefixState or None
-        See :func:`bundle_adjust_window`.
-    points_bias_m : ndarray of shape (k, 2) or None
-        With ``bias``: the order-``sigma^2`` bias of the least-squares landmarks (metres);
-        already subtracted from ``points_xy`` (and its pose counterpart from ``poses``) with
-        ``bias="subtract"``, not with ``"estimate"``. None without ``bias``.
-    bias_subtracted : bool
-        ``points_bias_m`` was subtracted.
     """
 
     column: np.ndarray
@@ -86,8 +76,6 @@ class WindowBundle:
     converged: bool
     bearing_sigma_rad: float = math.nan
     prefix_state: "PrefixState | None" = None
-    points_bias_m: np.ndarray | None = None
-    bias_subtracted: bool = False
 
     def __len__(self) -> int:
         return len(self.column)
@@ -126,8 +114,7 @@ def bundle_adjust_window(odoms: ArrayLike, odometry_sigmas: ArrayLike, bearings_
                          initial_points: ArrayLike | None = None, initial_prefix: int = 1,
                          grow: int = 5, prefix_ends: Sequence[int] | None = None,
                          estimate_sigma: bool = False, resume: PrefixState | None = None,
-                         robust_start: bool = False, bias: str | None = None,
-                         max_outliers: int = 10,
+                         robust_start: bool = False, max_outliers: int = 10,
                          max_iter: int = 30, tol: float = 1e-6
                          ) -> tuple[WindowBundle, int]:
     """Jointly estimate a window's poses and landmarks from its odometry and bearings.
@@ -195,13 +182,6 @@ def bundle_adjust_window(odoms: ArrayLike, odometry_sigmas: ArrayLike, bearings_
         poses for a landmark started on an earlier prefix (it goes straight to the fit, which
         refuses the landmark; e.g. at the last pose of the test window of
         ``tests/stmds/test_stmds_robust_start.py``).
-    bias : {None, "estimate", "subtract"}
-        The order-``sigma^2`` bias of the whole window's solution (Box 1971,
-        :mod:`.bundle_bias`, with the bearing sigma the fit used; a landmark seen at low
-        parallax is estimated too far by least squares): ``"estimate"`` reports it
-        (``points_bias_m``), ``"subtract"`` also subtracts it from the poses and landmarks
-        (not from the prefixes before the whole window). The covariance stays the
-        first-order one.
     resume : PrefixState, optional
         Go on from the ``prefix_state`` of an earlier call on a shorter window of the same
         steps (same first pose, same bearings, columns remapped by the caller; ``prefix_ends``
@@ -218,8 +198,6 @@ def bundle_adjust_window(odoms: ArrayLike, odometry_sigmas: ArrayLike, bearings_
         fit, including landmarks left with fewer than two rays). ``prefix_state`` holds the
         state after the last prefix short of the window (None if there was none).
     """
-    if bias not in BIAS_MODES:
-        raise ConfigError(f"bias must be one of {BIAS_MODES}, got {bias!r}")
     u = np.asarray(odoms, dtype=float).reshape(-1, 3)
     sig = np.asarray(odometry_sigmas, dtype=float).reshape(-1, 3)
     brg = np.array(bearings_rad, dtype=float)          # a copy: dropped rays become NaN
@@ -292,8 +270,8 @@ def bundle_adjust_window(odoms: ArrayLike, odometry_sigmas: ArrayLike, bearings_
                       min_depth_m, outlier_sigma, max_outliers - n_outliers, max_iter, tol,
                       estimate_sigma and end == n_win,
                       (SIGMA_RANGE[0] * bearing_sigma_rad, SIGMA_RANGE[1] * bearing_sigma_rad),
-                      estimate_sigma, bias if end == n_win else None)
-        fit_poses, fit_column, fit_points, dropped, _, _, sigma_used, _ = result
+                      estimate_sigma)
+        fit_poses, fit_column, fit_points, dropped, _, _, sigma_used = result
         poses[:end] = fit_poses
         points[:] = np.nan
         points[fit_column] = fit_points
@@ -304,14 +282,13 @@ def bundle_adjust_window(odoms: ArrayLike, odometry_sigmas: ArrayLike, bearings_
         solved = end
         sigma = sigma_used
     assert result is not None
-    _, column, points_xy, _, cov, converged, sigma_used, point_bias = result
+    _, column, points_xy, _, cov, converged, sigma_used = result
     n_gated = int(np.count_nonzero(two_rays)) - len(column)
     if cov is None:                       # numerically singular: refuse the whole window
         return _empty(poses, n_outliers), n_gated + len(column)
     n_rays = np.isfinite(brg[:, column]).sum(axis=0).astype(np.int64)
     return WindowBundle(column, points_xy, cov, poses, n_rays, n_outliers, converged,
-                        sigma_used, state, point_bias,
-                        point_bias is not None and bias == "subtract"), n_gated
+                        sigma_used, state), n_gated
 
 
 def _fit(u: np.ndarray, sig: np.ndarray, bearing_sigma_rad: float, brg: np.ndarray,
@@ -319,19 +296,15 @@ def _fit(u: np.ndarray, sig: np.ndarray, bearing_sigma_rad: float, brg: np.ndarr
          max_range_m: float, min_depth_m: float, outlier_sigma: float | None,
          max_outliers: int, max_iter: int, tol: float, estimate_sigma: bool = False,
          sigma_bounds: tuple[float, float] = (0.0, math.inf),
-         robust_test: bool = False, bias: str | None = None) -> tuple:
+         robust_test: bool = False) -> tuple:
     """Levenberg-Marquardt on one prefix, dropping outlier rays (the worst first) and the
     landmarks that fail the gates, until neither happens. With ``estimate_sigma`` the bearing
     sigma is re-estimated from the fit's own residuals first (:func:`_robust_scale`), kept
     within ``sigma_bounds``; with ``robust_test`` the outlier test is against
     ``outlier_sigma`` times the residuals' robust scale when that exceeds 1.
 
-    With ``bias`` the landmarks' order-``sigma^2`` bias is computed
-    (:func:`.bundle_bias.second_order_bias`); with ``"subtract"`` the solution returned is the
-    least-squares one minus the bias.
-
     Returns ``(poses, column, points, (dropped pose, dropped column), covariance or None,
-    converged, bearing sigma used, the landmarks' bias or None)``.
+    converged, bearing sigma used)``.
     """
     sub = brg[:, column]
     k, lm = np.nonzero(np.isfinite(sub))
@@ -343,7 +316,7 @@ def _fit(u: np.ndarray, sig: np.ndarray, bearing_sigma_rad: float, brg: np.ndarr
         if n_lm == 0:
             return (poses, column, points, (np.array(drop_k, np.int64),
                                             np.array(drop_c, np.int64)), None, False,
-                    bearing_sigma_rad, None)
+                    bearing_sigma_rad)
         for rnd in range(SIGMA_ROUNDS if estimate_sigma else 1):
             prob = _Problem(u, sig, bearing_sigma_rad, k, lm, theta, n_lm)
             poses, points, info, converged = _levenberg_marquardt(prob, poses, points,
@@ -391,19 +364,10 @@ def _fit(u: np.ndarray, sig: np.ndarray, bearing_sigma_rad: float, brg: np.ndarr
         k, lm, theta = k[keep], new_index[lm[keep]], theta[keep]
         n_lm = len(column)
     cov = _landmark_covariance(info, prob.n_pose_vars)
-    point_bias = None
-    if bias is not None and cov is not None:
-        full = full_covariance(info)
-        if full is not None:
-            pose_bias, point_bias = second_order_bias(prob, poses, points, full)
-            if bias == "subtract":
-                poses, points = poses - pose_bias, points - point_bias
     return (poses, column, points, (np.array(drop_k, np.int64), np.array(drop_c, np.int64)),
-            cov, converged, bearing_sigma_rad, point_bias)
+            cov, converged, bearing_sigma_rad)
 
 
-#: The ``bias`` options of :func:`bundle_adjust_window`.
-BIAS_MODES = (None, "estimate", "subtract")
 #: Re-estimations of the bearing sigma per fit at most, and the relative change that ends them.
 SIGMA_ROUNDS = 6
 SIGMA_TOL = 0.02
@@ -545,18 +509,11 @@ def relative_range_sigma(bundle: WindowBundle, bearings_rad: ArrayLike) -> np.nd
     return np.sqrt(np.maximum(largest, 0.0)) / rng
 
 
-def bundle_pair_squared_distances(bundle: WindowBundle,
-                                  fusion: str | None = None) -> PairEstimates:
+def bundle_pair_squared_distances(bundle: WindowBundle) -> PairEstimates:
     """Squared distance and first-order variance of every pair of a window's landmarks.
 
     ``var(d_ij^2) = 4 e^T (C_ii + C_jj - C_ij - C_ji) e`` with ``e = p_i - p_j`` and ``C`` the
-    joint covariance of the bundle (shared poses and bearings included). With ``fusion`` (the
-    rule of :mod:`.distances` the pairs go to) and a bias estimated but not subtracted
-    (``bias="estimate"``), the squared distances are those whose averaged quantity (``d^2``,
-    ``d`` or ``1 / d``) is unbiased to order ``sigma^2``
-    (:func:`.bundle_bias.corrected_squared_distance`) and the variances are scaled so that
-    each estimate keeps the rule's weight ``d2^m / var``: the correction moves an estimate,
-    it adds no information.
+    joint covariance of the bundle (shared poses and bearings included).
     """
     first, second = pair_indices(len(bundle))
     e = bundle.points_xy[first] - bundle.points_xy[second]
@@ -565,14 +522,7 @@ def bundle_pair_squared_distances(bundle: WindowBundle,
     d = (blocks[first, first] + blocks[second, second] - blocks[first, second]
          - blocks[second, first])
     var = 4.0 * np.einsum("pa,pab,pb->p", e, d, e)
-    d2 = np.einsum("pa,pa->p", e, e)
-    if fusion is not None and bundle.points_bias_m is not None and not bundle.bias_subtracted:
-        m, domain = rule_form(fusion)
-        bias_e = bundle.points_bias_m[first] - bundle.points_bias_m[second]
-        fixed = corrected_squared_distance(e, d, bias_e, domain)
-        var = var * (fixed / d2) ** m
-        d2 = fixed
-    return PairEstimates(first, second, d2, var, None)
+    return PairEstimates(first, second, np.einsum("pa,pa->p", e, e), var, None)
 
 
 __all__ = ["SIGMA_FLOOR", "PrefixState", "WindowBundle", "bundle_adjust_window",

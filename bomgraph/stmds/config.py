@@ -21,7 +21,6 @@ WEIGHTS = ("binary", "inverse-variance")
 INITS = ("best", "previous", "classical")
 TRI_METHODS = ("pair", "lsq", "ba")
 ROBOT_RANGES = ("pairwise", "all-poses")
-BIAS_CORRECTIONS = (None, "points", "distances")
 
 #: Windowed triangulation on the paper's simulation (``scripts/bench_stmds_window.py``).
 _WINDOW: dict[str, Any] = {"tri_window": 6, "tri_stride": 1, "fusion": "scale-free",
@@ -133,22 +132,6 @@ class StmdsConfig(Presets):
         from further than the robot's own step (``bundle.bundle_adjust_window``'s
         ``robust_start``): one misidentified detection no longer refuses its landmark from
         every window that holds it (issue 15, MRCLAM6 robot 5, ``docs/measurements.md``).
-    tri_bias_correction : {None, "points", "distances"}
-        ``tri_method="ba"``: remove the order-``sigma^2`` bias of each window's least-squares
-        solution (Box 1971; ``bundle_bias.second_order_bias``: ``b = -(J^T J)^-1 J^T d / 2``,
-        ``d_i = tr((J^T J)^-1 H_i)`` over the window's whitened bearing and odometry residuals,
-        analytic Hessians ``H_i``, the window's own bearing sigma; a landmark far away at low
-        parallax is triangulated too far). ``"points"``: the bias (metres, ``(k, 2)`` for the
-        landmarks, ``(W, 3)`` for the poses) is subtracted before the pair distances are
-        formed; ``"distances"``: each pair's squared distance (m^2) is corrected so that the
-        quantity the fusion rule averages (``d^2``, ``d`` or ``1 / d``) is unbiased to that
-        order, the points' bias and the curvature of that quantity included
-        (``bundle_bias.corrected_squared_distance``), each estimate keeping its weight in
-        the fusion. Variances are first order. None (the default, and every preset): the
-        least-squares solution as it is. Measured on MRCLAM6
-        (issue 15, ``docs/measurements.md``): the bias is real but small at the windows'
-        parallax, the ``scale-free`` fusion's ``1 / d`` is nearly unbiased without it, and
-        both corrections made robot 4 8-9 cm worse; not chosen.
     tri_parallax_rad : float or None
         Windows measured in geometry, not in keyframes (in place of ``tri_window``, issue 15):
         a window closes once the ``tri_parallax_quantile`` of the parallax of the landmarks it
@@ -235,7 +218,6 @@ class StmdsConfig(Presets):
     tri_grow: int = 5
     tri_estimate_sigma: bool = False
     tri_robust_start: bool = False
-    tri_bias_correction: str | None = None
     tri_parallax_rad: float | None = None
     tri_parallax_quantile: float = 0.5
     tri_window_m: float | None = None
@@ -301,11 +283,6 @@ class StmdsConfig(Presets):
              "give tri_window (keyframes) or tri_parallax_rad / tri_window_m (geometry), not "
              "both")
         need(self.tri_min_depth_m >= 0, "tri_min_depth_m must be >= 0")
-        need(self.tri_bias_correction in BIAS_CORRECTIONS,
-             f"tri_bias_correction must be one of {BIAS_CORRECTIONS}, got "
-             f"{self.tri_bias_correction!r}")
-        need(self.tri_bias_correction is None or self.tri_method == "ba",
-             "tri_bias_correction needs tri_method='ba'")
         need(int(self.tri_grow) == self.tri_grow and self.tri_grow >= 1,
              "tri_grow must be an integer >= 1")
         need(self.tri_outlier_sigma is None or self.tri_outlier_sigma > 0,
@@ -331,5 +308,4 @@ class StmdsConfig(Presets):
                  "with tri_window, localisation needs robot_ranges='all-poses'")
 
 
-__all__ = ["StmdsConfig", "BIAS_CORRECTIONS", "METHODS", "WEIGHTS", "INITS", "TRI_METHODS",
-           "ROBOT_RANGES"]
+__all__ = ["StmdsConfig", "METHODS", "WEIGHTS", "INITS", "TRI_METHODS", "ROBOT_RANGES"]

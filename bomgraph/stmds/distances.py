@@ -50,12 +50,6 @@ _RULES: dict[str, tuple[int, str]] = {
 FUSION_RULES = tuple(_RULES)
 
 
-def rule_form(rule: str) -> tuple[int, str]:
-    """A fusion rule's exponent ``m`` (weights ``d2^m / var(d2)``) and the quantity it
-    averages: ``"d2"``, ``"d"`` or ``"inv"`` (``1 / d``)."""
-    return _RULES[rule]
-
-
 def estimate_weights(rule: str, squared_distance_m2: np.ndarray,
                      variance_m4: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Weights and averaged values of independent estimates under a fusion rule (no state).
@@ -413,5 +407,5 @@ class DistanceStore:
         return KnownPairs(self._a[idx], self._b[idx], d[idx], v[idx], self._count[idx])
 
 
-__all__ = ["FUSION_RULES", "estimate_weights", "rule_form", "fused_from_sums", "IdIndex",
-           "KnownPairs", "DistanceStore", "prior_squared"]
+__all__ = ["FUSION_RULES", "estimate_weights", "fused_from_sums", "IdIndex", "KnownPairs",
+           "DistanceStore", "prior_squared"]

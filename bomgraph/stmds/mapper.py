@@ -49,8 +49,6 @@ MAX_SIGMA = 1e6
 
 #: Keyframe windows (``tri_method="lsq"``) held before they are triangulated together.
 BATCH_WINDOWS = 64
-#: ``tri_bias_correction`` -> the ``bias`` of :func:`.bundle.bundle_adjust_window`.
-_BUNDLE_BIAS = {None: None, "points": "subtract", "distances": "estimate"}
 
 
 def _check_sigmas(values: Any, what: str) -> None:
@@ -292,8 +290,7 @@ class StmdsMapper:
                 prefix_ends=self._schedule.prefix_ends()
                 if self.config.geometric_windows else None,
                 estimate_sigma=self.config.tri_estimate_sigma, resume=resume,
-                robust_start=self.config.tri_robust_start,
-                bias=_BUNDLE_BIAS[self.config.tri_bias_correction])
+                robust_start=self.config.tri_robust_start)
             if self.config.geometric_windows and tri.prefix_state is not None:
                 self._open_prefix = (int(ts[0]), uniq, tri.prefix_state)
             self._n_outliers += tri.n_outliers
@@ -330,9 +327,7 @@ class StmdsMapper:
         if len(tri) < 2:
             return
         if isinstance(tri, WindowBundle):
-            pairs = bundle_pair_squared_distances(
-                tri, self.config.fusion if self.config.tri_bias_correction == "distances"
-                else None)
+            pairs = bundle_pair_squared_distances(tri)
         else:
             pairs = window_pair_squared_distances(tri, sig, self._bearing_sigma)
         var = pairs.variance_m4 if self._tri_inflation == 1.0 else \
