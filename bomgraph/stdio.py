@@ -196,9 +196,10 @@ def check_output_path(path: str | os.PathLike[str],
                       inputs: Sequence[str | os.PathLike[str] | None] = ()) -> None:
     """Refuse an output path before anything is computed.
 
-    Refused: a directory, a block device or socket, one of ``inputs`` (the same file, through
-    symbolic or hard links too; an input that is a folder refuses every file in it), a file
-    whose folder does not exist or is not writable, an existing file that is not writable.
+    Refused: an empty name, a directory, a block device or socket, one of ``inputs`` (the
+    same file, through symbolic or hard links too; an input that is a folder refuses every
+    file in it), a file whose folder does not exist or is not writable, an existing file that
+    is not writable.
     ``-`` (stdout), character devices and FIFOs pass.
 
     Raises
@@ -208,6 +209,8 @@ def check_output_path(path: str | os.PathLike[str],
     path = os.fspath(path)
     if path == STDIO:
         return
+    if not path:  # os.path.realpath("") is the working folder: the rename would aim at it
+        raise OutputPathError("--out is empty; give a file name")
     st = _stat(path)
     if st is not None and stat.S_ISDIR(st.st_mode):
         raise OutputPathError(f"--out {path}: is a directory; give a file name")
