@@ -136,16 +136,28 @@ def display_path(message: str) -> str:
 
 @contextlib.contextmanager
 def input_path(path: str) -> Iterator[str]:
-    """``path`` itself, or for ``-`` a temporary file holding all of stdin (removed after;
-    bounded as every input is)."""
+    """``path`` itself, or for ``-`` and a FIFO (``/dev/stdin`` on a pipe, a named pipe) a
+    temporary file holding all of it (removed after; bounded as every input is): a command
+    may read its input more than once (``run`` reads the stream for its identity too), and a
+    pipe gives its bytes only once."""
     if path != STDIO:
-        yield path
-        return
+        try:
+            fifo = stat.S_ISFIFO(os.stat(path).st_mode)
+        except (OSError, ValueError):  # missing, unreadable, ...: the reader says so
+            fifo = False
+        if not fifo:
+            yield path
+            return
     with tempfile.TemporaryDirectory(prefix="bomgraph-stdin-") as tmp:
         spooled = os.path.join(tmp, "stdin")
-        _SPOOLED[spooled] = "<stdin>"  # kept: the message may be printed after the cleanup
+        # kept: the message may be printed after the cleanup
+        _SPOOLED[spooled] = "<stdin>" if path == STDIO else path
         with open(spooled, "wb") as fh:
-            copy_bounded(sys.stdin.buffer, fh, spooled)
+            if path == STDIO:
+                copy_bounded(sys.stdin.buffer, fh, spooled)
+            else:
+                with open(path, "rb") as src:
+                    copy_bounded(src, fh, spooled)
         yield spooled
 
 
