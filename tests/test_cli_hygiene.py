@@ -204,6 +204,15 @@ def test_argparse_messages_show_no_internal_names() -> None:
     assert "invalid positive integer value: 'x'" in err
 
 
+
+def test_compare_jobs_below_minus_one_is_refused(capsys: pytest.CaptureFixture) -> None:
+    # as a sweep file's executor.jobs is; joblib read -5 as "cores - 4"
+    from bomgraph.cli import build_parser
+
+    with pytest.raises(SystemExit):
+        build_parser().parse_args(["compare", "--jobs", "-5"])
+    assert "or -1 for one per core" in capsys.readouterr().err
+
 def test_progress_bar_on_a_terminal_for_long_streams_only(tmp_path: Path) -> None:
     long = tmp_path / "long.jsonl"
     assert bomgraph("simulate", "--steps", "1200", "--landmarks", "5", "--out",
