@@ -213,6 +213,15 @@ def test_compare_jobs_below_minus_one_is_refused(capsys: pytest.CaptureFixture) 
         build_parser().parse_args(["compare", "--jobs", "-5"])
     assert "or -1 for one per core" in capsys.readouterr().err
 
+
+@pytest.mark.skipif(not os.path.exists("/dev/full"), reason="needs /dev/full")
+@pytest.mark.parametrize("command", ["simulate", "run"])
+def test_a_full_disk_names_the_output(stream: Path, command: str) -> None:
+    # "[Errno 28] No space left on device" named no file (session 12)
+    args = (["simulate", "--steps", "5"] if command == "simulate" else
+            ["run", str(stream), "--method", "triangulate"])
+    one_error_line(bomgraph(*args, "--out", "/dev/full"), "--out /dev/full: No space left")
+
 def test_progress_bar_on_a_terminal_for_long_streams_only(tmp_path: Path) -> None:
     long = tmp_path / "long.jsonl"
     assert bomgraph("simulate", "--steps", "1200", "--landmarks", "5", "--out",
