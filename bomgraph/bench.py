@@ -345,6 +345,23 @@ def _indexed(k: int, task: Task) -> tuple[int, dict[str, Any]]:
     return k, run_task(task)
 
 
+#: local worker processes per core at most: a typo (``--jobs 100000``) started that many.
+MAX_WORKERS_PER_CORE = 4
+
+
+def _local_workers(requested: int, n_tasks: int) -> int:
+    """Local worker processes for ``n_tasks`` tasks: ``requested`` (-1, joblib's one per
+    core, is passed on), but never more than the tasks nor :data:`MAX_WORKERS_PER_CORE` per
+    core."""
+    if requested < 1:
+        return requested
+    cap = min(n_tasks, MAX_WORKERS_PER_CORE * (os.cpu_count() or 1))
+    if requested > cap:
+        _log.info("%d worker processes asked for %d task(s) on %d core(s): starting %d",
+                  requested, n_tasks, os.cpu_count() or 1, max(cap, 1))
+    return max(min(requested, cap), 1)
+
+
 def _dispatch(tasks: list[Task], index: list[int],
               executor: Executor) -> Iterator[tuple[int, dict[str, Any]]]:
     if not tasks:
@@ -355,7 +372,8 @@ def _dispatch(tasks: list[Task], index: list[int],
     elif executor.backend == "processes":
         from joblib import Parallel, delayed
 
-        par = Parallel(n_jobs=executor.n_jobs, return_as="generator_unordered")
+        par = Parallel(n_jobs=_local_workers(executor.n_jobs, len(tasks)),
+                       return_as="generator_unordered")
         yield from par(delayed(_indexed)(k, t) for k, t in zip(index, tasks))
     else:
         yield from _dispatch_dask(tasks, index, executor)
@@ -369,7 +387,8 @@ def _dispatch_dask(tasks: list[Task], index: list[int],
     if executor.scheduler:
         client = Client(executor.scheduler)
     else:
-        cluster = LocalCluster(n_workers=executor.dask_local, threads_per_worker=1,
+        cluster = LocalCluster(n_workers=_local_workers(executor.dask_local, len(tasks)),
+                               threads_per_worker=1,
                                processes=True, host="127.0.0.1", dashboard_address=None)
         client = Client(cluster)
     try:

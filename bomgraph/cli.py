@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import errno
 import json
 import logging
 import math
@@ -338,6 +339,9 @@ def _stdout_closed() -> int:
     return 128 + signal.SIGPIPE if hasattr(signal, "SIGPIPE") else 1
 
 
+#: errors of a write (a full disk, a quota, a file size limit): the OSError names no file.
+_WRITE_ERRNOS = {errno.ENOSPC, errno.EDQUOT, errno.EFBIG}
+
 #: the handler of each subcommand, by the name :func:`build_parser` gives it.
 _COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {
     f.__name__: f for f in (cmd_simulate, cmd_run, cmd_evaluate, cmd_plot, cmd_export,
@@ -367,7 +371,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (BomgraphError, OSError) as exc:
         from .stdio import display_path
 
-        print(f"bomgraph: error: {display_path(str(exc))}", file=sys.stderr)
+        message = str(exc)
+        if isinstance(exc, OSError) and exc.filename is None and exc.errno in _WRITE_ERRNOS \
+                and getattr(args, "out", None):  # a write error names no file: name --out
+            message = f"--out {args.out}: {exc.strerror}"
+        print(f"bomgraph: error: {display_path(message)}", file=sys.stderr)
         return 2
 
 

@@ -36,7 +36,7 @@ def _nonneg_int(text: str) -> int:
 @_named("number of processes")
 def _jobs(text: str) -> int:
     v = int(text)
-    if v == 0:
+    if v == 0 or v < -1:
         raise argparse.ArgumentTypeError("must be a number of processes >= 1, or -1 for one "
                                          "per core")
     return v

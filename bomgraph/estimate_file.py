@@ -526,9 +526,14 @@ def read_estimate(path: str | os.PathLike[str]) -> EstimateFile:
                                     path=path, line=1, key="format")
         fh.seek(0)
         try:
-            data = fh.read(MAX_INPUT_BYTES + 1)
-            if len(data) > MAX_INPUT_BYTES:
-                raise input_too_large(path)
+            chunks: list[bytes] = []  # in 1 MiB reads: read(4 GiB) reserves 4 GiB at once
+            size = 0
+            while chunk := fh.read(1 << 20):
+                size += len(chunk)
+                if size > MAX_INPUT_BYTES:
+                    raise input_too_large(path)
+                chunks.append(chunk)
+            data = b"".join(chunks)
             obj = json.loads(data.decode("utf-8"), parse_constant=float,
                              object_pairs_hook=no_duplicate_keys)
         except DuplicateKeyError as exc:

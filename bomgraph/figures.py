@@ -14,7 +14,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from .errors import ConfigError, EvaluationError
+from .errors import BomgraphError, ConfigError, EvaluationError
 from .estimate_file import read_estimate
 from .evaluate import score_estimate
 from .plots import results_figure, run_figure
@@ -85,13 +85,24 @@ def plot_results(results_dir: str | os.PathLike[str], out: str | os.PathLike[str
     path = _check_out(out)
     src = Path(results_dir) / "results.json"
     try:
-        obj = json.loads(src.read_text(encoding="utf-8"))
-        results, meta = obj["results"], obj.get("experiments", [])
+        final, curves, titles = _results_data(json.loads(src.read_text(encoding="utf-8")),
+                                              src, experiments)
     except OSError as exc:
         raise ConfigError(f"{src}: cannot read ({exc.strerror}); give a `bomgraph compare` "
                           f"output folder") from None
-    except (ValueError, KeyError, TypeError) as exc:
+    except BomgraphError:
+        raise
+    except (ValueError, KeyError, TypeError, AttributeError, IndexError,
+            RecursionError) as exc:  # a row of the wrong shape anywhere in the file
         raise ConfigError(f"{src}: not a compare results file ({type(exc).__name__})") from None
+    return _save(results_figure(final, curves, kind=kind, titles=titles), path, dpi)
+
+
+def _results_data(obj: Any, src: Path, experiments: Sequence[str]) -> tuple[
+        dict[str, dict[str, np.ndarray]], dict[str, dict[str, Any]], dict[str, str]]:
+    """The final MPE per experiment and arm, the error curves and the titles of a parsed
+    ``results.json`` (malformed rows raise ValueError, KeyError, TypeError, ...)."""
+    results, meta = obj["results"], obj.get("experiments", [])
     names = list(dict.fromkeys(r["experiment"] for r in results))
     unknown = sorted(set(experiments) - set(names))
     if unknown:
@@ -112,7 +123,7 @@ def plot_results(results_dir: str | os.PathLike[str], out: str | os.PathLike[str
         curves.setdefault(exp, {})[arm] = c
     titles = {m["name"]: f"{m.get('title', m['name'])} ({m.get('runs', '?')} runs)"
               for m in meta if isinstance(m, dict) and "name" in m}
-    return _save(results_figure(final, curves, kind=kind, titles=titles), path, dpi)
+    return final, curves, titles
 
 
 __all__ = ["FIGURE_SUFFIXES", "plot_run", "plot_results"]

@@ -428,6 +428,34 @@ def method_config_class(name: str) -> type | None:
     return None
 
 
+def check_method_options(name: str, options: Mapping[str, Any]) -> None:
+    """Refuse, before any run, the options of ``name`` that its configuration class refuses
+    (an unknown name, a wrong type, a value out of range), as the factory would at every run.
+
+    Only the configuration's own checks are made: options that are parameters of the factory
+    itself (``start_pose``, ...) and checks that need the stream's header are left to the
+    factory. Methods whose configuration class has no presets (plugins) are not checked.
+
+    Raises
+    ------
+    ConfigError
+    """
+    import inspect
+
+    from .config import Presets
+
+    cls = method_config_class(name)
+    opts = dict(options)
+    if cls is None or not issubclass(cls, Presets) or "config" in opts:
+        return
+    factory = method_factory(name)
+    params = inspect.signature(factory.__init__ if inspect.isclass(factory)
+                               else factory).parameters
+    own = {k for k, p in params.items() if p.kind is not inspect.Parameter.VAR_KEYWORD}
+    preset = opts.pop("preset", None)
+    cls.preset(preset or "paper", **{k: v for k, v in opts.items() if k not in own})
+
+
 def create_mapper(name: str, header: StreamHeader, *, truth: Truth | None = None,
                   **options: Any) -> Mapper:
     """Build the mapper registered under ``name`` for a stream with ``header``.
@@ -452,4 +480,4 @@ __all__ = ["MapEstimate", "Mapper", "Checkpoint", "RunResult", "run", "checkpoin
            "MethodInfo", "register_method", "available_methods", "method_info",
            "method_factory", "method_description", "method_fingerprint", "method_listing",
            "preset_summary", "format_method_list",
-           "method_config_class", "create_mapper"]
+           "method_config_class", "check_method_options", "create_mapper"]

@@ -34,6 +34,23 @@ from .stream import Prior, Step, Stream, StreamHeader, Truth
 
 DEG = math.pi / 180.0
 
+#: the most moves one simulated run may have: its truth (one header line) then fills about
+#: 60 MiB, near the readers' 64 MiB line limit (``bomgraph.stdio.MAX_LINE_BYTES``).
+MAX_SIM_STEPS = 1_000_000
+#: the most landmarks one simulated world may have (``bench_speed.py`` scales to 10,000).
+MAX_SIM_LANDMARKS = 100_000
+#: Exp. 3's priors are drawn from all landmark pairs (``np.triu_indices``): at most this many
+#: pairs (n = 4,472 landmarks), and at most this many priors (one header line, about 35 MiB).
+MAX_PRIOR_PAIRS = 10_000_000
+MAX_PRIORS = 500_000
+
+
+def _finite(v: float) -> bool:
+    try:
+        return math.isfinite(v)
+    except OverflowError:  # an int beyond float range (`simulate --landmarks 10**400`)
+        return False
+
 
 @dataclass(frozen=True)
 class SimConfig:
@@ -67,11 +84,13 @@ class SimConfig:
 
         for f in self.__dataclass_fields__:
             v = getattr(self, f)
-            need(isinstance(v, (int, float)) and math.isfinite(v),
+            need(isinstance(v, (int, float)) and _finite(v),
                  f"{f} must be a finite number, got {v!r}")
         need(self.arena_m > 0, f"arena_m must be > 0, got {self.arena_m}")
-        need(self.n_landmarks >= 1, f"n_landmarks must be >= 1, got {self.n_landmarks}")
-        need(self.n_steps >= 0, f"n_steps must be >= 0, got {self.n_steps}")
+        need(1 <= self.n_landmarks <= MAX_SIM_LANDMARKS,
+             f"n_landmarks must be in [1, {MAX_SIM_LANDMARKS:,}], got {self.n_landmarks}")
+        need(0 <= self.n_steps <= MAX_SIM_STEPS,
+             f"n_steps must be in [0, {MAX_SIM_STEPS:,}], got {self.n_steps}")
         need(self.sensor_range_m > 0, f"sensor_range_m must be > 0, got {self.sensor_range_m}")
         need(0 <= self.min_range_m < self.sensor_range_m,
              "min_range_m must be in [0, sensor_range_m)")
@@ -310,6 +329,11 @@ def make_priors(truth: Truth, fraction: float, sigma_xy_m: float,
     if not (math.isfinite(sigma_xy_m) and sigma_xy_m > 0):
         raise ConfigError(f"prior sigma must be > 0, got {sigma_xy_m}")
     n = len(truth.landmark_ids)
+    if n * (n - 1) // 2 > MAX_PRIOR_PAIRS or n_prior_pairs(n, fraction) > MAX_PRIORS:
+        raise ConfigError(f"priors for {n:,} landmarks: {n * (n - 1) // 2:,} pairs to draw "
+                          f"{n_prior_pairs(n, fraction):,} priors from; at most "
+                          f"{MAX_PRIOR_PAIRS:,} pairs and {MAX_PRIORS:,} priors (fewer "
+                          f"landmarks or a smaller fraction)")
     iu, ju = np.triu_indices(n, 1)
     pick = np.sort(rng.choice(iu.size, size=n_prior_pairs(n, fraction), replace=False))
     a, b = iu[pick], ju[pick]

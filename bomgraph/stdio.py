@@ -136,16 +136,28 @@ def display_path(message: str) -> str:
 
 @contextlib.contextmanager
 def input_path(path: str) -> Iterator[str]:
-    """``path`` itself, or for ``-`` a temporary file holding all of stdin (removed after;
-    bounded as every input is)."""
+    """``path`` itself, or for ``-`` and a FIFO (``/dev/stdin`` on a pipe, a named pipe) a
+    temporary file holding all of it (removed after; bounded as every input is): a command
+    may read its input more than once (``run`` reads the stream for its identity too), and a
+    pipe gives its bytes only once."""
     if path != STDIO:
-        yield path
-        return
+        try:
+            fifo = stat.S_ISFIFO(os.stat(path).st_mode)
+        except (OSError, ValueError):  # missing, unreadable, ...: the reader says so
+            fifo = False
+        if not fifo:
+            yield path
+            return
     with tempfile.TemporaryDirectory(prefix="bomgraph-stdin-") as tmp:
         spooled = os.path.join(tmp, "stdin")
-        _SPOOLED[spooled] = "<stdin>"  # kept: the message may be printed after the cleanup
+        # kept: the message may be printed after the cleanup
+        _SPOOLED[spooled] = "<stdin>" if path == STDIO else path
         with open(spooled, "wb") as fh:
-            copy_bounded(sys.stdin.buffer, fh, spooled)
+            if path == STDIO:
+                copy_bounded(sys.stdin.buffer, fh, spooled)
+            else:
+                with open(path, "rb") as src:
+                    copy_bounded(src, fh, spooled)
         yield spooled
 
 
@@ -196,9 +208,10 @@ def check_output_path(path: str | os.PathLike[str],
                       inputs: Sequence[str | os.PathLike[str] | None] = ()) -> None:
     """Refuse an output path before anything is computed.
 
-    Refused: a directory, a block device or socket, one of ``inputs`` (the same file, through
-    symbolic or hard links too; an input that is a folder refuses every file in it), a file
-    whose folder does not exist or is not writable, an existing file that is not writable.
+    Refused: an empty name, a directory, a block device or socket, one of ``inputs`` (the
+    same file, through symbolic or hard links too; an input that is a folder refuses every
+    file in it), a file whose folder does not exist or is not writable, an existing file that
+    is not writable.
     ``-`` (stdout), character devices and FIFOs pass.
 
     Raises
@@ -208,6 +221,8 @@ def check_output_path(path: str | os.PathLike[str],
     path = os.fspath(path)
     if path == STDIO:
         return
+    if not path:  # os.path.realpath("") is the working folder: the rename would aim at it
+        raise OutputPathError("--out is empty; give a file name")
     st = _stat(path)
     if st is not None and stat.S_ISDIR(st.st_mode):
         raise OutputPathError(f"--out {path}: is a directory; give a file name")

@@ -55,13 +55,15 @@ MAX_META_DEPTH = 64
 
 
 def _depth(value: object) -> int:
-    """Nesting depth of JSON data (iterative: no recursion limit)."""
+    """Nesting depth of JSON data (iterative: no recursion limit; only containers are
+    queued, so a long list of numbers costs nothing)."""
     deepest, todo = 0, [(value, 1)]
     while todo:
         v, d = todo.pop()
         if isinstance(v, (dict, list)):
             deepest = max(deepest, d)
-            todo.extend((c, d + 1) for c in (v.values() if isinstance(v, dict) else v))
+            todo.extend((c, d + 1) for c in (v.values() if isinstance(v, dict) else v)
+                        if isinstance(c, (dict, list)))
     return deepest
 
 

@@ -61,6 +61,11 @@ _EXPERIMENT = {"name", "title", "streams", "worlds", "methods", "reference", "ch
 _METHOD = {"name", "preset", "options", "label", "checkpoint_every", "prior_fraction"}
 _WORLD_EXTRA = {"name", "seeds", "design", "prior_sigma_xy_m"}
 _EXECUTOR = {"jobs", "dask_local", "scheduler"}
+#: a sweep file is read whole; beyond this it is not one (the shipped ones are 2-3 KiB).
+MAX_SWEEP_BYTES = 16 * 2**20
+#: the most simulated runs of one world (its seeds, or a design's layouts x starts): a bound
+#: on a typo (``seeds = 1000000000``), far beyond any sweep one machine finishes.
+MAX_WORLD_RUNS = 100_000
 
 
 class SweepError(ConfigError):
@@ -136,9 +141,16 @@ def read_sweep(path_or_name: str | os.PathLike[str]) -> SweepSpec:
     """
     path = resolve_path(path_or_name)
     try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
+        with open(path, "rb") as fh:
+            raw = fh.read(MAX_SWEEP_BYTES + 1)
+        if len(raw) > MAX_SWEEP_BYTES:
+            raise SweepError(f"{path}: larger than {MAX_SWEEP_BYTES // 2**20} MiB; not a sweep "
+                             f"file")
+        data = tomllib.loads(raw.decode("utf-8"))
     except tomllib.TOMLDecodeError as exc:
         raise SweepError(f"{path}: not valid TOML: {exc}") from None
+    except RecursionError:
+        raise SweepError(f"{path}: not valid TOML: arrays or tables nested too deeply") from None
     except (OSError, UnicodeDecodeError) as exc:
         raise SweepError(f"{path}: cannot be read: {exc}") from None
     return _Reader(path).sweep(data)
@@ -184,7 +196,9 @@ def command_line_spec(streams: Sequence[str], methods: Sequence[str],
         opts = dict(m.options)
         for target in (m.method, m.label):
             opts.update(extra.get(target, {}))
-        return dataclasses.replace(m, options=opts)
+        if opts == dict(m.options):
+            return m
+        return _checked_method(dataclasses.replace(m, options=opts), f"--option {m.label}")
 
     missing = [s for s in streams if not Path(s).is_file()]
     if missing:
@@ -215,8 +229,9 @@ def _unique(labels: Sequence[str], where: str) -> None:
 
 
 def _checked_method(m: MethodSpec, where: str) -> MethodSpec:
-    """Refuse an unknown method or preset (the preset against the method's config class)."""
-    from .mapper import method_config_class, method_info
+    """Refuse an unknown method or preset (the preset against the method's config class)
+    and options the method's configuration refuses."""
+    from .mapper import check_method_options, method_config_class, method_info
 
     try:
         method_info(m.method)
@@ -224,10 +239,16 @@ def _checked_method(m: MethodSpec, where: str) -> MethodSpec:
     except BomgraphError as exc:
         raise SweepError(f"{where}: {exc}") from None
     preset = m.options.get("preset")
+    if preset is not None and not isinstance(preset, str):
+        raise SweepError(f"{where}: preset must be a name, got {preset!r}")
     presets = getattr(cls, "PRESETS", None)
     if preset is not None and presets is not None and preset not in presets:
         raise SweepError(f"{where}: unknown preset {preset!r} of {m.method}; choose one of "
                          f"{', '.join(presets)}")
+    try:  # every run would fail alike: refuse the sweep before it starts
+        check_method_options(m.method, m.options)
+    except ConfigError as exc:
+        raise SweepError(f"{where}: options {dict(m.options)}: {exc}") from None
     return m
 
 
@@ -360,8 +381,10 @@ class _Reader:
         if not isinstance(name, str) or not _NAME.match(name):
             raise self.fail(f"{key}.name", f"must be letters, digits and _.+- , got {name!r}")
         sigma = t.get("prior_sigma_xy_m", 0.03)
-        if isinstance(sigma, bool) or not isinstance(sigma, (int, float)) or not sigma > 0:
-            raise self.fail(f"{key}.prior_sigma_xy_m", f"must be a number > 0, got {sigma!r}")
+        if isinstance(sigma, bool) or not isinstance(sigma, (int, float)) \
+                or not 0 < sigma < math.inf:
+            raise self.fail(f"{key}.prior_sigma_xy_m", f"must be a finite number > 0, got "
+                                                       f"{sigma!r}")
         if "design" in t:
             if "seeds" in t:
                 raise self.fail(f"{key}.seeds", "give seeds or a design, not both")
@@ -369,12 +392,23 @@ class _Reader:
             design = {"seed": self.int_(d.get("seed", 0), f"{key}.design.seed", 0),
                       "layouts": self.int_(d.get("layouts", 5), f"{key}.design.layouts", 1),
                       "starts": self.int_(d.get("starts", 5), f"{key}.design.starts", 1)}
+            if design["layouts"] * design["starts"] > MAX_WORLD_RUNS:
+                raise self.fail(f"{key}.design", f"layouts x starts must be at most "
+                                                 f"{MAX_WORLD_RUNS:,} runs, got "
+                                                 f"{design['layouts'] * design['starts']:,}")
             return WorldSpec(name, sim, (), design, float(sigma))
         seeds = t.get("seeds")
         if isinstance(seeds, int) and not isinstance(seeds, bool):
-            seeds = list(range(self.int_(seeds, f"{key}.seeds", 1)))
+            seeds = self.int_(seeds, f"{key}.seeds", 1)
+            if seeds > MAX_WORLD_RUNS:
+                raise self.fail(f"{key}.seeds", f"at most {MAX_WORLD_RUNS:,} runs of one "
+                                                f"world, got {seeds:,}")
+            seeds = list(range(seeds))
         if not isinstance(seeds, list) or not seeds:
             raise self.fail(f"{key}.seeds", "give the seeds: a list of integers, or a count")
+        if len(seeds) > MAX_WORLD_RUNS:
+            raise self.fail(f"{key}.seeds", f"at most {MAX_WORLD_RUNS:,} runs of one world, "
+                                            f"got {len(seeds):,}")
         seeds = [self.int_(s, f"{key}.seeds[{k}]", 0) for k, s in enumerate(seeds)]
         if len(set(seeds)) != len(seeds):
             raise self.fail(f"{key}.seeds", "a seed appears twice")

@@ -76,6 +76,8 @@ def relative_pose_errors(t: np.ndarray, est_poses: np.ndarray, ref_poses: np.nda
     e, r = np.asarray(est_poses, float).reshape(-1, 3), np.asarray(ref_poses, float).reshape(-1, 3)
     order = np.argsort(t)
     t, e, r = t[order], e[order], r[order]
+    if not len(t) or delta > int(t[-1]) - int(t[0]):  # no pair (and no int64 overflow)
+        return PoseErrors(t[:0], np.zeros(0), np.zeros(0))
     j = np.searchsorted(t, t + delta)
     ok = j < len(t)
     ok[ok] = t[j[ok]] == t[ok] + delta

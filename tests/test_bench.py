@@ -91,6 +91,33 @@ def test_executor_choose_follows_the_command_line() -> None:
     assert Executor.choose(1, scheduler="tcp://x:1").scheduler == "tcp://x:1"
 
 
+
+def test_local_processes_are_bounded_by_the_tasks_and_the_cores(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    # `compare --jobs 100000` started 100,000 worker processes for one run (session 12)
+    import os
+
+    import joblib
+
+    from bomgraph import bench
+
+    asked: list[int] = []
+
+    class Recorder:
+        def __init__(self, n_jobs: int, **kw) -> None:
+            asked.append(n_jobs)
+
+        def __call__(self, jobs):
+            return iter(())
+
+    monkeypatch.setattr(joblib, "Parallel", Recorder)
+    monkeypatch.setattr(os, "cpu_count", lambda: 2)
+    tasks = [object()] * 3
+    for n_jobs in (100_000, 2, -1):
+        list(bench._dispatch(tasks, [0, 1, 2], Executor("processes", n_jobs=n_jobs)))
+    list(bench._dispatch([object()] * 50, list(range(50)), Executor("processes", n_jobs=10**5)))
+    assert asked == [3, 2, -1, 8]
+
 def test_task_key_is_stable_and_tells_tasks_apart() -> None:
     tasks = _exp((Arm("tri", "triangulate"), Arm("cs", "stmds-cs"))).tasks()
     keys = [task_key(t) for t in tasks]

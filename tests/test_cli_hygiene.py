@@ -25,9 +25,10 @@ ROOT = Path(__file__).resolve().parents[1]
 ENV = {**os.environ, "PYTHONPATH": str(ROOT), "PYTHONUNBUFFERED": "1"}
 
 
-def bomgraph(*args: str, stdin: bytes | None = None, **kw) -> subprocess.CompletedProcess:
+def bomgraph(*args: str, stdin: bytes | None = None, timeout: float = 300,
+             **kw) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-m", "bomgraph", *args], input=stdin,
-                          capture_output=True, env=ENV, timeout=300, **kw)
+                          capture_output=True, env=ENV, timeout=timeout, **kw)
 
 
 def one_error_line(proc: subprocess.CompletedProcess, *needles: str) -> str:
@@ -96,6 +97,31 @@ def test_dash_is_stdin_and_stdout_on_run_and_evaluate(tmp_path: Path, stream: Pa
     bad = one_error_line(bomgraph("run", "-", "--method", "triangulate", "--out", "-",
                                   stdin=b"garbage\n"), "<stdin>, line 1")
     assert "/tmp" not in bad
+
+
+def _feed_fifo(path: Path, data: bytes) -> None:
+    import threading
+
+    os.mkfifo(path)
+    threading.Thread(target=path.write_bytes, args=(data,), daemon=True).start()
+
+
+def test_a_named_pipe_as_the_stream_is_read_once(tmp_path: Path, stream: Path) -> None:
+    # `run` reads its stream twice (the run and the stream's identity; three times with
+    # --progress): a named pipe gives its bytes once, and the second open waited forever
+    _feed_fifo(tmp_path / "s.fifo", stream.read_bytes())
+    proc = bomgraph("run", str(tmp_path / "s.fifo"), "--method", "triangulate", "--progress",
+                    "--out", str(tmp_path / "e.json"), timeout=60)
+    assert proc.returncode == 0, proc.stderr
+    by_file = tmp_path / "f.json"
+    assert bomgraph("run", str(stream), "--method", "triangulate", "--out",
+                    str(by_file)).returncode == 0
+    assert read_estimate(tmp_path / "e.json").stream == read_estimate(by_file).stream
+    _feed_fifo(tmp_path / "bad.fifo", b"garbage\n")
+    bad = one_error_line(bomgraph("run", str(tmp_path / "bad.fifo"), "--method", "triangulate",
+                                  "--out", str(tmp_path / "x.json"), timeout=60),
+                         f"{tmp_path / 'bad.fifo'}, line 1")
+    assert "bomgraph-stdin" not in bad
 
 
 @pytest.mark.parametrize("args", [["methods"], ["methods", "stmds-smacof"], ["--help"]])
@@ -177,6 +203,24 @@ def test_argparse_messages_show_no_internal_names() -> None:
     err = bomgraph("simulate", "--landmarks", "x", "--out", "o").stderr.decode()
     assert "invalid positive integer value: 'x'" in err
 
+
+
+def test_compare_jobs_below_minus_one_is_refused(capsys: pytest.CaptureFixture) -> None:
+    # as a sweep file's executor.jobs is; joblib read -5 as "cores - 4"
+    from bomgraph.cli import build_parser
+
+    with pytest.raises(SystemExit):
+        build_parser().parse_args(["compare", "--jobs", "-5"])
+    assert "or -1 for one per core" in capsys.readouterr().err
+
+
+@pytest.mark.skipif(not os.path.exists("/dev/full"), reason="needs /dev/full")
+@pytest.mark.parametrize("command", ["simulate", "run"])
+def test_a_full_disk_names_the_output(stream: Path, command: str) -> None:
+    # "[Errno 28] No space left on device" named no file (session 12)
+    args = (["simulate", "--steps", "5"] if command == "simulate" else
+            ["run", str(stream), "--method", "triangulate"])
+    one_error_line(bomgraph(*args, "--out", "/dev/full"), "--out /dev/full: No space left")
 
 def test_progress_bar_on_a_terminal_for_long_streams_only(tmp_path: Path) -> None:
     long = tmp_path / "long.jsonl"

@@ -36,6 +36,24 @@ def test_strict_reading_refuses_duplicates_and_finds_non_finite() -> None:
     assert is_num(1e300) and not is_num(10**400) and not is_num(False)
 
 
+
+def test_find_nonfinite_spells_no_path_per_element() -> None:
+    # a stream header of 60 MiB (a list of 31 million numbers, under the line cap) took over
+    # 3 GiB here: one path string and one tuple per element (session 12)
+    import tracemalloc
+
+    data = {"meta": {"a": [1] * 300_000 + [0.5] * 300_000, "b": [[1.0, 2.0]] * 100_000}}
+    tracemalloc.start()
+    try:
+        assert find_nonfinite(data) is None
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 1_000_000, peak
+    data["meta"]["b"][70_000] = [1.0, math.nan]
+    assert find_nonfinite(data, "h") == "h.meta.b[70000][1]"
+    assert find_nonfinite([{"x": [math.inf]}, math.nan]) == "[0].x[0]"  # depth first, in order
+
 def test_option_parser_accepts_infinity_and_refuses_nan() -> None:
     got = parse_options(["a=inf", "b=-Infinity", "c=3", "d=abc", "e=[1, 2]", "f=null",
                          "g=1e-3", "h=true"])

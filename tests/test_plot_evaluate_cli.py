@@ -103,6 +103,16 @@ def test_plot_results_folder(tmp_path) -> None:
     assert main(["plot", "--results", str(tmp_path / "none"), "--out", str(out)]) == 2
 
 
+
+@pytest.mark.parametrize("content", ['{"results": [1, 2]}', '{"results": [{"experiment": "e"}]}',
+                                     "[" * 100_000 + "]" * 100_000])
+def test_plot_results_of_the_wrong_shape_is_one_line(tmp_path, capsys, content: str) -> None:
+    # rows of the wrong shape and deep nesting were tracebacks (session 12)
+    (tmp_path / "results.json").write_text(content)
+    assert main(["plot", "--results", str(tmp_path), "--out", str(tmp_path / "r.png")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "not a compare results file" in err[0], err
+
 def test_palette_is_per_method_and_ellipses_are_drawn() -> None:
     assert method_colour("ekf") == method_colour("ekf")
     assert method_colour("stmds-smacof (improved)") != method_colour("stmds-smacof")

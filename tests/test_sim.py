@@ -115,7 +115,20 @@ def test_priors_exp3() -> None:
 
 @pytest.mark.parametrize("kwargs", [dict(n_landmarks=0), dict(sensor_range_m=0),
                                     dict(step_min_m=0.3, step_max_m=0.2),
-                                    dict(lookahead_m=0.1), dict(wrong_association_rate=2)])
+                                    dict(lookahead_m=0.1), dict(wrong_association_rate=2),
+                                    # absurd sizes: refused, not allocated (session 12)
+                                    dict(n_landmarks=10**9), dict(n_steps=10**9),
+                                    dict(n_landmarks=10**400)])
 def test_config_refuses_nonsense(kwargs: dict) -> None:
     with pytest.raises(ConfigError):
         SimConfig(**kwargs)
+
+
+def test_priors_for_too_many_landmarks_are_refused_before_the_pairs_are_listed() -> None:
+    # 20,000 landmarks: np.triu_indices would list 2e8 pairs (3 GiB) before drawing
+    from bomgraph.stream import Truth
+
+    n = 20_000
+    truth = Truth(np.arange(n), np.zeros((n, 2)), None)
+    with pytest.raises(ConfigError, match="pairs"):
+        make_priors(truth, 0.01, 0.03, np.random.default_rng(0))

@@ -341,3 +341,26 @@ def test_bearing_just_above_pi_round_trips(tmp_path: Path) -> None:
     assert s.steps[0].bearings_rad[0] == np.pi
     write_stream(s, tmp_path / "pi.jsonl")
     assert read_stream(tmp_path / "pi.jsonl") == s
+
+
+def test_a_long_list_in_the_header_costs_its_own_size_only(tmp_path: Path) -> None:
+    # a 60 MiB header (31 million numbers in `meta`, under the line cap) took 2.9 GiB to read:
+    # the nesting check and the non-finite check queued one tuple per number (session 12)
+    import tracemalloc
+
+    from bomgraph.stream_file import _depth
+
+    meta = {"a": [1] * 300_000, "b": [0.5] * 300_000}
+    tracemalloc.start()
+    try:
+        assert _depth(meta) == 2
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 100_000, peak  # one queued tuple per number: about 40 MB
+    assert _depth({"a": [[1, [2.0]], 3]}) == 4
+    header = {"format": "bomgraph-stream", "version": 1, "bearing_sigma_rad": 0.05,
+              "odometry_sigma": [0.03, 0.0, 0.05], "meta": meta}
+    path = tmp_path / "s.jsonl"
+    path.write_text(json.dumps(header) + '\n{"t": 0, "bearings": []}\n')
+    assert read_stream(path).header.meta["a"][-1] == 1

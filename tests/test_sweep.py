@@ -176,6 +176,22 @@ def test_a_stream_without_truth_gets_truth_free_scores_or_a_reference(
     ("streams = [\"runs/*.jsonl\"]\nmethods = [\"triangulate\"]\n[executor]\njobs = 0\n",
      "executor.jobs"),
     ("streams = [\"runs/*.jsonl\"\n", "not valid TOML"),
+    # session 12's hostile audit: each of these ran (or allocated) before it was refused
+    ("streams = [\"runs/*.jsonl\"]\n[[methods]]\nname = \"stmds-smacof\"\n"
+     "options = { tri_window = -3 }\n", "methods[0]: options {'tri_window': -3}: StmdsConfig"),
+    ("streams = [\"runs/*.jsonl\"]\n[[methods]]\nname = \"ekf\"\noptions = { nope = 1 }\n",
+     "methods[0]: options {'nope': 1}: EkfConfig: unknown option(s) nope"),
+    ("streams = [\"runs/*.jsonl\"]\n[[methods]]\nname = \"ekf\"\noptions = { preset = [1] }\n",
+     "methods[0]: preset must be a name"),
+    ("methods = [\"triangulate\"]\n[[worlds]]\nseeds = 1000000000\n",
+     "worlds[0].seeds: at most 100,000 runs"),
+    ("methods = [\"triangulate\"]\n[[worlds]]\ndesign = { layouts = 1000000000, "
+     "starts = 1000000000 }\n", "worlds[0].design: layouts x starts must be at most"),
+    ("methods = [\"triangulate\"]\n[[worlds]]\nn_landmarks = 1000000000\nseeds = 1\n",
+     "worlds[0]: SimConfig: n_landmarks must be in [1, 100,000]"),
+    ("methods = [\"triangulate\"]\n[[worlds]]\nseeds = 1\nprior_sigma_xy_m = inf\n",
+     "worlds[0].prior_sigma_xy_m: must be a finite number"),
+    ("x = " + "[" * 3000 + "]" * 3000 + "\n", "nested too deeply"),
 ])
 def test_a_bad_sweep_file_is_one_line_naming_the_file_and_key(
         runs: Path, capsys: pytest.CaptureFixture, text: str, key: str) -> None:
@@ -198,6 +214,8 @@ def test_a_bad_sweep_file_is_one_line_naming_the_file_and_key(
     (["--streams", "S", "--methods", "triangulate,triangulate"], "appears twice"),
     (["--streams", "S"], "give at least one method"),
     (["--streams", "S", "--methods", "triangulate", "--config", "paper"], "give one of"),
+    (["--streams", "S", "--methods", "stmds-smacof", "--option", "stmds-smacof:tri_window=-3"],
+     "--option stmds-smacof: options {'tri_window': -3}: StmdsConfig: tri_window"),
 ])
 def test_compare_command_line_mistakes_are_one_line(
         runs: Path, capsys: pytest.CaptureFixture, args: list[str], message: str) -> None:
@@ -205,6 +223,17 @@ def test_compare_command_line_mistakes_are_one_line(
     assert main(["compare", *args, "--out", str(runs / "x")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and message in err[0], err
+
+
+def test_a_sweep_file_over_the_size_limit_is_refused_unread(
+        runs: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    import bomgraph.sweep as sweep
+
+    monkeypatch.setattr(sweep, "MAX_SWEEP_BYTES", 100)
+    path = runs / "big.toml"
+    path.write_text("# " + "x" * 200 + "\nstreams = [\"runs/*.jsonl\"]\nmethods = [\"ekf\"]\n")
+    with pytest.raises(SweepError, match="big.toml: larger than"):
+        read_sweep(path)
 
 
 def test_methods_lists_every_preset_on_a_line_of_its_own(capsys: pytest.CaptureFixture) -> None:

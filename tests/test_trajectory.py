@@ -85,6 +85,15 @@ def test_rpe_equals_a_hand_computation_on_five_poses() -> None:
     assert len(relative_pose_errors(np.array([0, 1, 3, 4, 6]), est, truth, 1)) == 2
 
 
+
+@pytest.mark.parametrize("delta", [5, 2**63 - 1, 10**30])
+def test_rpe_with_a_delta_beyond_the_run_has_no_pairs_and_no_overflow(delta: int) -> None:
+    # `evaluate --delta 1000000000000000000000000000000` raised OverflowError (int64)
+    poses = np.zeros((5, 3))
+    r = relative_pose_errors(np.arange(5), poses, poses, delta=delta)
+    assert len(r) == 0 and r.t.dtype == np.int64
+    assert len(relative_pose_errors(np.zeros(0, int), poses[:0], poses[:0], delta=1)) == 0
+
 @pytest.mark.parametrize("with_poses", [True, False])
 def test_collinear_landmarks_pick_the_unmirrored_fit_with_poses(with_poses: bool) -> None:
     rng = np.random.default_rng(3)

@@ -95,6 +95,17 @@ def test_item14_an_input_over_the_size_cap_is_refused(work: Path,
         read_stream(work / "s.jsonl")
 
 
+
+@pytest.mark.parametrize("content", [b"", b"\xef\xbb\xbf{}", b'{"format": "x"}\n'])
+def test_item14_a_small_estimate_that_is_not_version_2_is_read_in_bounded_memory(
+        work: Path, content: bytes) -> None:
+    # the version-1 path read with fh.read(4 GiB + 1), which reserves the whole cap at once:
+    # a MemoryError traceback under an address-space limit, for an empty file
+    est = work / "e.json"
+    est.write_bytes(content)
+    one_error(bomgraph("evaluate", est, work / "s.jsonl", memory=MEMORY_LIMIT_BYTES),
+              str(est))
+
 # ---- item 15: option values of the wrong type ---------------------------------------------
 
 @pytest.mark.parametrize("method,option", [

@@ -122,6 +122,10 @@ def test_item04_out_that_is_a_directory_or_socket_is_refused(tmp_path: Path) -> 
     import socket
 
     one_error(bomgraph("simulate", "--out", tmp_path), "is a directory")
+    # an empty name was the working folder: simulated, then a rename of .NAME.partial over it
+    (tmp_path / "cwd").mkdir()
+    one_error(bomgraph("simulate", "--out", "", cwd=tmp_path / "cwd"), "--out is empty")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["cwd"]
     sock_path = tmp_path / "sock"
     sock = socket.socket(socket.AF_UNIX)
     sock.bind(str(sock_path))
