@@ -113,6 +113,25 @@ def test_normal_equation_blocks_and_schur_step_match_the_dense_jacobian() -> Non
                                atol=1e-12)
 
 
+def test_long_windows_eliminate_the_poses_first_to_the_same_step() -> None:
+    """A window with more pose variables than :data:`ARROW_MIN_POSE_VARS` (and than landmark
+    variables) takes the arrow path (:func:`_arrow_step`); its damped step solves the damped
+    dense system like the short window's above."""
+    from bomgraph.stmds.bundle_lm import ARROW_MIN_POSE_VARS, _schur_step
+
+    w, n = 30, 6
+    prob, p0, q0, _ = _perturbed_problem(21, w, n)
+    assert prob.n_pose_vars >= ARROW_MIN_POSE_VARS and prob.n_pose_vars > 2 * n
+    res, jac = prob.linearise(p0, q0)
+    h = jac.T @ jac
+    _, blocks = prob.normal_equations(p0, q0)
+    for lam in (1e-6, 1e-2):
+        damped = h + lam * np.diag(np.maximum(np.diag(h), 1e-12))
+        np.testing.assert_allclose(_schur_step(blocks, lam),
+                                   -np.linalg.solve(damped, jac.T @ res), rtol=1e-8,
+                                   atol=1e-11)
+
+
 # ----------------------------------------------------------------- noise-free exactness
 @pytest.mark.parametrize("w", [2, 3, 6, 12])
 @pytest.mark.parametrize("grow", [1, 3, None])
