@@ -1,7 +1,8 @@
 """The window bundle's least-squares problem and its Levenberg-Marquardt solver
 (``tri_method="ba"``, :mod:`.bundle`): residuals and Jacobians of the odometry and bearing
 terms, the normal equations in blocks (poses, poses x landmarks, 2 x 2 landmark blocks) and
-the damped step by the Schur complement on the poses.
+the damped step by the Schur complement on the poses (short windows) or on the landmarks, the
+banded pose block factorised first (long windows, :func:`_arrow_step`).
 """
 
 from __future__ import annotations
@@ -210,7 +211,8 @@ def _levenberg_marquardt(prob: _Problem, poses: np.ndarray, points: np.ndarray,
 
     Each step solves the damped normal equations by the Schur complement on the poses
     (:meth:`_Problem.normal_equations`, :func:`_schur_step`): the landmark block is 2 x 2
-    block-diagonal, so only a ``3 (W - 1)`` system is factorised."""
+    block-diagonal, so only a ``3 (W - 1)`` system is factorised (and in long windows only a
+    banded one and the landmarks' ``2 L`` one, :func:`_arrow_step`)."""
     lam = 1e-6
     cost, blocks = prob.normal_equations(poses, points)
     converged = False
