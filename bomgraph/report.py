@@ -31,7 +31,7 @@ from .plots import MapPanel, error_vs_time_figure, final_maps_figure, map_figure
 from .jsonio import jsonable
 from .mapper import MapEstimate
 from .stream import Step
-from .stdio import folder_lock, output_file, write_text
+from .stdio import folder_lock, make_folder, output_file, write_text
 from .stream_file import read_stream
 from .tables import Column, format_table
 from .trajectory import bearing_residuals
@@ -291,7 +291,7 @@ def compare(experiments: Sequence[Experiment], out_dir: str | os.PathLike[str], 
     Finished runs are cached in ``out_dir/cache`` so an interrupted sweep resumes.
     """
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    make_folder(out)
     with folder_lock(out, "`bomgraph compare`"):
         return _compare(experiments, out, executor, use_cache, figures, progress)
 

@@ -359,7 +359,8 @@ def _decode(raw: bytes, ctx: _Ctx) -> str:
     try:
         return decode_utf8(raw)
     except UnicodeDecodeError as exc:
-        raise ctx.error(None, f"not UTF-8 text (byte {exc.start})") from None
+        hint = "; it is gzip data: decompress it first (gunzip)" if raw[:2] == b"\x1f\x8b" else ""
+        raise ctx.error(None, f"not UTF-8 text (byte {exc.start}){hint}") from None
 
 
 def read_stream(path: str | os.PathLike[str]) -> Stream:

@@ -348,3 +348,13 @@ def test_dash_is_stdin_and_stdout_on_export(tmp_path: Path, stream: Path) -> Non
     assert truth.returncode == 0 and truth.stdout.startswith(b"kind,id,x_m,y_m,psi_rad,time_s")
     one_error_line(bomgraph("export", "-", "--stream", "-", "--format", "tum", "--out", "x"),
                    "only one of")
+
+
+def test_compare_out_that_is_a_file_is_named_and_kept(tmp_path: Path) -> None:
+    """`compare --out` naming an existing file: one line saying so, the file untouched (it
+    was the bare "[Errno 17] File exists")."""
+    target = tmp_path / "results"
+    target.write_text("keep me")
+    one_error_line(bomgraph("compare", "--quick", "--no-progress", "--no-figures", "--out",
+                            str(target)), "--out", "is a file; give a folder")
+    assert target.read_text() == "keep me"

@@ -364,3 +364,15 @@ def test_a_long_list_in_the_header_costs_its_own_size_only(tmp_path: Path) -> No
     path = tmp_path / "s.jsonl"
     path.write_text(json.dumps(header) + '\n{"t": 0, "bearings": []}\n')
     assert read_stream(path).header.meta["a"][-1] == 1
+
+
+def test_gzip_data_is_refused_with_the_hint_to_decompress(tmp_path: Path) -> None:
+    """A gzipped stream is not UTF-8; the refusal names file and line and says what it is."""
+    import gzip
+
+    plain = tmp_path / "s.jsonl"
+    write_stream(simulate_run(paper_design(0)[0]), plain)
+    packed = tmp_path / "s.jsonl.gz"
+    packed.write_bytes(gzip.compress(plain.read_bytes()))
+    with pytest.raises(StreamFormatError, match=r"line 1.*not UTF-8.*gzip data: decompress"):
+        read_stream(packed)
