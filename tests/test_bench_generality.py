@@ -44,7 +44,7 @@ def test_common_set_leaves_out_the_landmark_the_bound_did_not_map() -> None:
     ratios = bench.common_set_ratios([a, b], {"m6_r4": TRUTH})
     assert ratios["stmds-smacof"]["m6_r4"]["n_common"] == 4
     assert ratios["stmds-smacof"]["m6_r4"]["ratio"] < 1e-9
-    assert "oracle" not in ratios  # the bound is not compared with itself
+    assert ratios["oracle"]["m6_r4"]["ratio"] == 1.0  # the bound against itself
 
 
 def test_mrclam1_bound_is_the_best_method_and_too_few_common_is_nan() -> None:
@@ -73,3 +73,43 @@ def test_summarise_reads_the_key_it_is_given() -> None:
     assert math.isclose(rigid["ekf"]["max_vs_bound"], 1.0)
     assert math.isclose(shape["gtsam-batch"]["max_vs_bound"], 1.0)
     assert math.isclose(shape["ekf"]["max_vs_bound"], 2.0)
+
+
+def test_summary_table_has_the_common_set_column_beside_the_whole_map_one(capsys) -> None:
+    """The whole-map ratio counts the landmark only the method mapped (1 m off); the common-set
+    column leaves it out. Both are printed in the summary table, under their own labels, with
+    the values each definition gives."""
+    # landmarks 0-3 are a rectangle's corners, 2.5 m from its centre: a copy scaled by 1 + k
+    # about the centre is best aligned by the identity and is off by 2.5 k at every corner
+    centre = TRUE_XY[:4].mean(axis=0)
+    bound_xy = centre + 1.004 * (TRUE_XY[:4] - centre)  # 1 cm off
+    mine_xy = TRUE_XY.copy()
+    mine_xy[:4] = centre + 1.008 * (TRUE_XY[:4] - centre)  # 2 cm off
+    mine_xy[4] += [1.0, 0.0]
+    c, s = math.cos(0.3), math.sin(0.3)
+    moved = mine_xy @ np.array([[c, s], [s, -c]]).T + [5.0, -2.0]  # a reflection, moved
+    est = bench.MapEstimate(np.arange(5, dtype=np.int64), moved)
+    ref = bench.MapEstimate(np.arange(4, dtype=np.int64), bound_xy)
+    whole = bench.score_estimate(est, TRUTH).mpe_m
+    bound = bench.score_estimate(ref, TRUTH).mpe_m
+    rows = [_row("m6_r4", "stmds-smacof", [0, 1, 2, 3, 4], moved, whole),
+            _row("m6_r4", "oracle", [0, 1, 2, 3], bound_xy, bound)]
+    rows[0]["n_mapped"], rows[1]["n_mapped"] = 5, 4
+    methods = ["stmds-smacof", "oracle"]
+    summary = bench.summarise(rows, methods, [4], ("m6",))
+    common = bench.common_set_ratios(rows, {"m6_r4": TRUTH})
+    for m, v in bench.worst_common(common, methods).items():
+        summary[m]["max_vs_bound_common"] = v
+    # on the four common landmarks the method is off by 2 cm where the bound is off by 1 cm
+    assert math.isclose(summary["stmds-smacof"]["max_vs_bound_common"], 2.0, rel_tol=1e-9)
+    assert summary["stmds-smacof"]["max_vs_bound"] > 10  # the 1 m landmark dominates
+    assert summary["oracle"]["max_vs_bound_common"] == 1.0
+    bench.print_tables(rows, methods, [4], summary, ("m6",))
+    out = capsys.readouterr().out
+    lines = out.splitlines()
+    head = next(ln for ln in lines if ln.startswith("method") and "vs_bound_common" in ln)
+    row = lines[lines.index(head) + 1].split()
+    assert head.split()[1:3] == ["vs_bound", "vs_bound_common"]
+    assert row[0] == "stmds-smacof"
+    assert row[1] == f"{summary['stmds-smacof']['max_vs_bound']:.2f}"
+    assert row[2] == "2.00"
