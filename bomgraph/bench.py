@@ -30,8 +30,8 @@ from .errors import ConfigError, TooFewLandmarksError, UnknownMethodError
 from .evaluate import CheckpointScore, score_checkpoints, score_estimate
 from .experiments import Arm, Experiment, SimSource, Task
 from .jsonio import jsonable
-from .mapper import (Checkpoint, MapEstimate, RunResult, create_mapper, method_fingerprint,
-                     method_info, run)
+from .mapper import (Checkpoint, MapEstimate, RunResult, checkpoint_times, create_mapper,
+                     method_fingerprint, method_info, run)
 from .stdio import bounded_lines, output_file
 from .stream import Step, Stream, Truth
 from .stream_file import StreamReader
@@ -458,8 +458,8 @@ def run_file(stream_path: str | os.PathLike[str], method: str,
                          on_checkpoint=writer.add, keep_checkpoints=False)
             writer.finish(result)
     _log.info("%s: %d checkpoints, %d landmarks at t = %d, %.3f s", method,
-              len(result.checkpoints), len(result.final), result.checkpoints[-1].t,
-              result.total_s)
+              len(checkpoint_times(result.checkpoints[-1].t + 1, checkpoint_every)),
+              len(result.final), result.checkpoints[-1].t, result.total_s)
     if len(result.final) == 0:
         _log.warning("%s mapped no landmark by t = %d (too few steps or too little parallax?)",
                      method, result.checkpoints[-1].t)

@@ -78,6 +78,7 @@ def _step_bar(stream_path: str, method: str, force: bool | None) -> Any:
 def cmd_run(args: argparse.Namespace) -> int:
     from .bench import run_file
     from .jsonio import parse_options
+    from .mapper import checkpoint_times
     from .stdio import STDIO, check_output_path, input_path, write_output
 
     options = parse_options(args.option)
@@ -99,10 +100,11 @@ def cmd_run(args: argparse.Namespace) -> int:
                 bar.close()
     result = done[0]
     to_stderr = args.out == STDIO
-    if args.json:
+    if args.json:  # the result keeps only the last checkpoint; the file has all of them
+        written = len(checkpoint_times(result.checkpoints[-1].t + 1, args.checkpoint_every))
         _say(json.dumps({"method": args.method, "stream": args.stream, "out": args.out,
                          "landmarks": len(result.final), "t": result.checkpoints[-1].t,
-                         "checkpoints": len(result.checkpoints),
+                         "checkpoints": written,
                          "total_s": round(result.total_s, 6)}), to_stderr=to_stderr)
     else:
         _say(f"{args.method}: {len(result.final)} landmarks mapped at t = "

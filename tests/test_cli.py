@@ -63,3 +63,20 @@ def test_option_errors_are_user_errors(tmp_path: Path, capsys: pytest.CaptureFix
     assert main(["compare", "--quick", "--experiments", "exp9", "--out",
                  str(tmp_path / "c")]) == 2
     assert "unknown experiment" in capsys.readouterr().err
+
+
+def test_run_json_summary_counts_the_checkpoints_written(tmp_path: Path,
+                                                         capsys: pytest.CaptureFixture) -> None:
+    """``run --json`` reports the checkpoints in the estimate file (run() keeps only the last
+    one in memory when it writes the file as it goes)."""
+    from bomgraph.estimate_file import read_estimate
+
+    run_file, est_file = tmp_path / "run.jsonl", tmp_path / "est.json"
+    assert main(["simulate", "--seed", "1", "--steps", "45", "--landmarks", "20",
+                 "--out", str(run_file)]) == 0
+    capsys.readouterr()
+    assert main(["run", str(run_file), "--method", "triangulate", "--out", str(est_file),
+                 "--json"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["t"] == 45
+    assert summary["checkpoints"] == len(read_estimate(est_file).checkpoints) == 5
