@@ -20,6 +20,7 @@ import json
 import logging
 import math
 import os
+import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any, Callable, Iterable, Iterator, Mapping, Sequence
@@ -100,13 +101,17 @@ def run_task(task: Task) -> dict[str, Any]:
         return _run_task(task)
 
 
-def _run_method(task: Task, arm: Arm, stream: Stream) -> RunResult:
+def _run_method(task: Task, arm: Arm, stream: Stream,
+                on_checkpoint: Callable[[Checkpoint], None]) -> RunResult:
+    """The arm on the stream, each checkpoint handed to ``on_checkpoint`` as it is taken and
+    only the last kept (each map holds the trajectory so far: kept, they grow as T^2)."""
     truth = stream.truth
     needs_truth = method_info(arm.method).needs_truth
     mapper = create_mapper(arm.method, stream.header, truth=truth if needs_truth else None,
                            **dict(arm.options))
     return run(mapper, stream.steps, checkpoint_every=arm.checkpoint_every
-               or task.checkpoint_every, method=arm.label)
+               or task.checkpoint_every, method=arm.label, on_checkpoint=on_checkpoint,
+               keep_checkpoints=False)
 
 
 _REFERENCES: dict[str, MapEstimate] = {}
@@ -121,7 +126,7 @@ def _reference_map(task: Task, stream: Stream) -> MapEstimate:
     if key not in _REFERENCES:
         if len(_REFERENCES) >= 8:
             _REFERENCES.pop(next(iter(_REFERENCES)))
-        _REFERENCES[key] = _run_method(task, task.reference, stream).final
+        _REFERENCES[key] = _run_method(task, task.reference, stream, lambda c: None).final
     return _REFERENCES[key]
 
 
@@ -156,22 +161,29 @@ def _run_task(task: Task) -> dict[str, Any]:
         out["scored_against"] = f"reference {task.reference.label}"
     elif truth is None:
         out["scored_against"] = "none"
+    rows: list[dict[str, Any]] = []
+    unscorable: list[str] = []
+    scoring_s = [0.0]
+
+    def score(c: Checkpoint) -> None:  # as the run goes, outside the run's own timing
+        t0 = time.perf_counter()
+        try:
+            row = (_unscored(c) if truth is None else
+                   asdict(score_checkpoints([c], truth)[0]))
+            if stream.truth is None:
+                row["bearing_rms_rad"] = _bearing_rms(c.estimate, stream)
+            rows.append(row)
+        except Exception as exc:  # an unscorable estimate is a failed run, with the reason
+            unscorable.append(f"scoring failed: {type(exc).__name__}: {exc}")
+        scoring_s[0] += time.perf_counter() - t0
+
     try:
-        result = _run_method(task, task.arm, stream)
+        result = _run_method(task, task.arm, stream, lambda c: None if unscorable else score(c))
     except Exception as exc:  # a failing method is a result, reported with its reason
         out.update(ok=False, error=f"{type(exc).__name__}: {exc}")
         return out
-    try:
-        if truth is None:
-            rows = [{**_unscored(c), "bearing_rms_rad": _bearing_rms(c.estimate, stream)}
-                    for c in result.checkpoints]
-        else:
-            rows = [asdict(row) for row in score_checkpoints(result, truth)]
-            if stream.truth is None:
-                for row, c in zip(rows, result.checkpoints):
-                    row["bearing_rms_rad"] = _bearing_rms(c.estimate, stream)
-    except Exception as exc:  # an unscorable estimate is a failed run, with the reason
-        out.update(ok=False, error=f"scoring failed: {type(exc).__name__}: {exc}")
+    if unscorable:
+        out.update(ok=False, error=unscorable[0])
         return out
     info = jsonable(dict(result.final.info), max_items=64)
     final = result.final
@@ -189,7 +201,7 @@ def _run_task(task: Task) -> dict[str, Any]:
             pass
     if out["scored_against"] == "truth":
         del out["scored_against"]  # the paper's results keep their shape
-    out.update(ok=True, checkpoints=rows, total_s=result.total_s,
+    out.update(ok=True, checkpoints=rows, total_s=result.total_s - scoring_s[0],
                step_median_s=float(np.median(result.step_s)),
                converged=info.get("converged"), info=info)
     return out
