@@ -221,3 +221,12 @@ def test_truth_estimate_is_the_truth_and_needs_one() -> None:
     np.testing.assert_array_equal(est.pose_t, np.arange(len(s.steps)))
     with pytest.raises(ExportError, match="no truth"):
         truth_estimate(type(s)(s.header, s.steps, None))
+
+
+def test_a_truth_without_poses_is_named_as_such() -> None:
+    """MRCLAM1 has landmark truth only: exporting it as TUM says so (it blamed "the method")."""
+    s = simulate(SimConfig(n_steps=20, n_landmarks=8), np.random.default_rng(4))
+    lm_only = type(s)(s.header, s.steps, dataclasses.replace(s.truth, poses=None))
+    with pytest.raises(ExportError, match=r"the stream's truth has none \(landmark truth only"):
+        export_text(truth_estimate(lm_only), "tum")
+    assert export_text(truth_estimate(lm_only), "csv").count("landmark,") == 8
