@@ -286,6 +286,7 @@ def execute(tasks: Sequence[Task], executor: Executor = Executor(), *,
     if progress:
         progress(done, len(tasks))
     for k, res in _dispatch([tasks[k] for k in todo], todo, executor):
+        res = _same_code(tasks[k], res)
         if cache is not None and res.get("ok"):  # failures are re-run next time
             _write_cached(_cache_path(cache, tasks[k]), res)
         for j in twins[task_key(tasks[k])]:
@@ -323,6 +324,20 @@ def refuse_runtime_methods(tasks: Sequence[Task], backend: str) -> None:
                 f"pyproject.toml add [project.entry-points.\"bomgraph.methods\"] "
                 f"{name} = \"{target}\", then `pip install -e .` it (or run serially: "
                 f"--jobs 1, Executor('serial'))")
+
+
+def _same_code(task: Task, res: dict[str, Any]) -> dict[str, Any]:
+    """``res``, or a failed run when the worker keyed the task otherwise than this process:
+    it ran other code (a Dask worker that imported an older version of a plugin before it
+    was edited keeps running it; a remote worker with other sources installed)."""
+    key = task_key(task)
+    if res.get("key") == key:
+        return res
+    return {k: res[k] for k in ("experiment", "arm", "method", "run") if k in res} | {
+        "key": key, "ok": False,
+        "error": f"stale worker: restart the workers and run again (Dask: client.restart(), "
+                 f"or restart `dask worker`); it ran other code than this process, an older "
+                 f"plugin or bomgraph it had imported (its key {res.get('key')}, here {key})"}
 
 
 def _read_cached(path: Path) -> dict[str, Any] | None:

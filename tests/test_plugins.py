@@ -245,3 +245,41 @@ def test_a_plugin_without_presets_has_its_options_checked_before_anything_runs(
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and "typed" in err[0], err
     assert not (tmp_path / "cmp" / "results.json").exists()
+
+
+def test_a_dask_worker_holding_an_older_plugin_is_caught_not_trusted(
+        installed: dict, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A worker of a cluster that outlives one compare (``--scheduler ADDR``) keeps the plugin
+    module it imported; after an edit the client keys the task with the new source, the
+    worker runs the old code (before: reported as the edited plugin's result). The runner
+    compares the worker's key with its own and reports such a run as failed, uncached, saying
+    to restart the workers."""
+    from distributed import LocalCluster
+
+    from bomgraph import plugins
+
+    for mod in [m for m in sys.modules if m.split(".")[0] == "toy_plugin"]:
+        monkeypatch.delitem(sys.modules, mod)  # an earlier test imported docs/examples' copy
+    monkeypatch.syspath_prepend(str(installed["site"]))
+    monkeypatch.setenv("PYTHONPATH", installed["env"]["PYTHONPATH"])
+    plugins.refresh()
+    exp = Experiment("d", "dask", (Arm("mine", "mine"),),
+                     sources=(FileSource(installed["streams"][0]),))
+    source = installed["site"] / "toy_plugin" / "mapper.py"
+    text = source.read_text()
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=True, host="127.0.0.1",
+                      dashboard_address=None) as cluster:
+        executor = Executor("dask", scheduler=cluster.scheduler_address)
+        (first,) = execute(exp.tasks(), executor)
+        assert first["ok"] and first["key"] == task_key(exp.tasks()[0])
+        try:
+            source.write_text(text + "\n# edited while the cluster runs\n")
+            plugins.refresh()
+            cache = installed["root"] / "stale-cache"
+            (second,) = execute(exp.tasks(), executor, cache_dir=cache)
+        finally:
+            source.write_text(text)
+            plugins.refresh()
+    assert not second["ok"] and "restart the workers" in second["error"]
+    assert second["key"] != first["key"]
+    assert list(cache.glob("*.json")) == []
