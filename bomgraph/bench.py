@@ -140,10 +140,32 @@ def _bearing_rms(estimate: MapEstimate, stream: Stream) -> float:
     return float(np.sqrt(np.mean(r ** 2))) if r.size else math.nan
 
 
+def _stale_plugin(task: Task) -> str:
+    """Why this process cannot run the task's plugin as it is now on disk ("" when it can):
+    Python does not reload a module, so a worker that imported a plugin (its sources hashed
+    then, :func:`bomgraph.mapper.method_fingerprint`) keeps running that code after an edit,
+    while the client keys the task with the new sources."""
+    from .plugins import source_fingerprint
+
+    for m in [task.arm.method] + ([task.reference.method] if task.reference else []):
+        loaded = method_fingerprint(m)
+        info = method_info(m)
+        if loaded is not None and source_fingerprint.__wrapped__(info.target,
+                                                                 info.version) != loaded:
+            return (f"stale worker: restart the workers and run again (Dask: client.restart(),"
+                    f" or restart `dask worker`); method {m!r} was edited since this worker "
+                    f"imported it, and a worker does not reload a module")
+    return ""
+
+
 def _run_task(task: Task) -> dict[str, Any]:
     out: dict[str, Any] = {"experiment": task.experiment, "arm": task.arm.label,
                            "method": task.arm.method, "run": task.source.name,
                            "key": task_key(task)}
+    stale = _stale_plugin(task)
+    if stale:
+        out.update(ok=False, error=stale)
+        return out
     try:
         stream = task.stream()
     except Exception as exc:  # a source that cannot be read is a failed run, with the reason
@@ -286,8 +308,11 @@ def execute(tasks: Sequence[Task], executor: Executor = Executor(), *,
     if progress:
         progress(done, len(tasks))
     for k, res in _dispatch([tasks[k] for k in todo], todo, executor):
-        res = _same_code(tasks[k], res)
-        if cache is not None and res.get("ok"):  # failures are re-run next time
+        if res.get("key") != task_key(tasks[k]):  # kept, but a later read would refuse it
+            _log.warning("%s on %s: the worker keyed the task %s, this process %s (other code "
+                         "or data files there); the result is not cached", tasks[k].arm.label,
+                         tasks[k].source.name, res.get("key"), task_key(tasks[k]))
+        elif cache is not None and res.get("ok"):  # failures are re-run next time
             _write_cached(_cache_path(cache, tasks[k]), res)
         for j in twins[task_key(tasks[k])]:
             t = tasks[j]
@@ -324,20 +349,6 @@ def refuse_runtime_methods(tasks: Sequence[Task], backend: str) -> None:
                 f"pyproject.toml add [project.entry-points.\"bomgraph.methods\"] "
                 f"{name} = \"{target}\", then `pip install -e .` it (or run serially: "
                 f"--jobs 1, Executor('serial'))")
-
-
-def _same_code(task: Task, res: dict[str, Any]) -> dict[str, Any]:
-    """``res``, or a failed run when the worker keyed the task otherwise than this process:
-    it ran other code (a Dask worker that imported an older version of a plugin before it
-    was edited keeps running it; a remote worker with other sources installed)."""
-    key = task_key(task)
-    if res.get("key") == key:
-        return res
-    return {k: res[k] for k in ("experiment", "arm", "method", "run") if k in res} | {
-        "key": key, "ok": False,
-        "error": f"stale worker: restart the workers and run again (Dask: client.restart(), "
-                 f"or restart `dask worker`); it ran other code than this process, an older "
-                 f"plugin or bomgraph it had imported (its key {res.get('key')}, here {key})"}
 
 
 def _read_cached(path: Path) -> dict[str, Any] | None:

@@ -251,9 +251,9 @@ def test_a_dask_worker_holding_an_older_plugin_is_caught_not_trusted(
         installed: dict, monkeypatch: pytest.MonkeyPatch) -> None:
     """A worker of a cluster that outlives one compare (``--scheduler ADDR``) keeps the plugin
     module it imported; after an edit the client keys the task with the new source, the
-    worker runs the old code (before: reported as the edited plugin's result). The runner
-    compares the worker's key with its own and reports such a run as failed, uncached, saying
-    to restart the workers."""
+    worker runs the old code (before: reported as the edited plugin's result). The worker
+    sees that the plugin's source changed since it imported it and reports a failed run,
+    uncached, saying to restart the workers."""
     from distributed import LocalCluster
 
     from bomgraph import plugins
@@ -281,5 +281,5 @@ def test_a_dask_worker_holding_an_older_plugin_is_caught_not_trusted(
             source.write_text(text)
             plugins.refresh()
     assert not second["ok"] and "restart the workers" in second["error"]
-    assert second["key"] != first["key"]
+    assert "'mine' was edited since this worker imported it" in second["error"]
     assert list(cache.glob("*.json")) == []
