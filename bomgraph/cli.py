@@ -223,17 +223,18 @@ def cmd_compare(args: argparse.Namespace) -> int:
         quick=args.quick, seed=args.seed,
         names=args.experiments.split(",") if args.experiments else ())
     executor = Executor.choose(args.jobs, args.scheduler, args.dask_local, defaults=settings)
+    show = sys.stderr.isatty() if args.progress is None else args.progress
     bar = None
-    if not args.no_progress:
-        from tqdm import tqdm
-
-        bar = tqdm(total=0, unit="run", desc="compare", file=sys.stderr)
-
     seen = {"done": 0}
 
-    def progress(done: int, total: int) -> None:
+    def progress(done: int, total: int) -> None:  # the bar starts when the total is known
+        nonlocal bar
         seen["done"] = done
-        if bar is not None:
+        if show and bar is None:
+            from tqdm import tqdm
+
+            bar = tqdm(total=total, initial=done, unit="run", desc="compare", file=sys.stderr)
+        elif bar is not None:
             bar.total = total
             bar.n = done
             bar.refresh()
