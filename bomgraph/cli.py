@@ -176,8 +176,8 @@ def cmd_export(args: argparse.Namespace) -> int:
 
 def cmd_methods(args: argparse.Namespace) -> int:
     from .jsonio import jsonable
-    from .mapper import (available_methods, format_method_list, method_config_class,
-                         method_info, method_listing, preset_summary)
+    from .mapper import (available_methods, factory_options, format_method_list,
+                         method_config_class, method_info, method_listing, preset_summary)
 
     if args.name is None:
         rows = [method_listing(i) for i in available_methods()]
@@ -190,7 +190,7 @@ def cmd_methods(args: argparse.Namespace) -> int:
 
     r = method_listing(method_info(args.name))
     cls = method_config_class(args.name)
-    options = describe_options(cls) if cls is not None else []
+    options = describe_options(cls) if cls is not None else factory_options(args.name)
     if args.json:
         print(json.dumps(jsonable({**r, "config": cls.__name__ if cls else None,
                                    "options": [o._asdict() for o in options]})))
@@ -198,14 +198,15 @@ def cmd_methods(args: argparse.Namespace) -> int:
     print(f"{r['name']}: {r['description']}")
     if r["origin"] == "plugin":
         print(f"  plugin {method_info(args.name).target} from {r['distribution']} {r['version']}")
-    if cls is None:
-        print("  (this method declares no configuration class)")
-        return 0
-    print(f"\noptions ({cls.__name__}; --option KEY=VALUE):")
+    where = cls.__name__ if cls is not None else "the factory's keyword parameters"
+    print(f"\noptions ({where}; --option KEY=VALUE):" if options else "\noptions: none")
     width = max(len(o.name) for o in options) if options else 0
     for o in options:
         print(f"  {o.name:{width}s}  {o.type}, default {o.default!r}"
               + (f": {o.doc}" if o.doc else ""))
+    if not r["presets"]:
+        print("\npresets: none (NAME@PRESET is refused)")
+        return 0
     print("\npresets (--option preset=NAME, or NAME@PRESET in compare --methods):")
     for name, overrides in r["presets"].items():
         print(f"  {name}: {preset_summary(overrides, 1000)}")

@@ -498,6 +498,29 @@ def _check_plain_options(name: str, target: Callable[..., Any],
             raise ConfigError(f"method {name!r}: bad option value {key}={value!r}: {problem}")
 
 
+def factory_options(name: str) -> list[Any]:
+    """The keyword parameters of the factory of ``name`` (a method without a configuration
+    class, e.g. ``def __init__(self, header, *, depth_m: float = 1.0)``), as
+    :class:`bomgraph.config.OptionDoc` with their annotations and defaults."""
+    import inspect
+    import typing
+
+    from .config import OptionDoc, _type_name
+
+    factory = method_factory(name)
+    target = factory.__init__ if inspect.isclass(factory) else factory
+    try:
+        hints = typing.get_type_hints(target)
+    except Exception:  # unresolvable annotations in a plugin: names and defaults only
+        hints = {}
+    return [OptionDoc(k, _type_name(hints[k]) if k in hints else "",
+                      None if p.default is inspect.Parameter.empty else p.default, "")
+            for k, p in inspect.signature(target).parameters.items()
+            if k not in ("self", "header", "truth")
+            and p.kind in (inspect.Parameter.KEYWORD_ONLY,
+                           inspect.Parameter.POSITIONAL_OR_KEYWORD)]
+
+
 def create_mapper(name: str, header: StreamHeader, *, truth: Truth | None = None,
                   **options: Any) -> Mapper:
     """Build the mapper registered under ``name`` for a stream with ``header``.
@@ -524,4 +547,4 @@ __all__ = ["MapEstimate", "Mapper", "Checkpoint", "RunResult", "run", "checkpoin
            "MethodInfo", "register_method", "available_methods", "method_info",
            "method_factory", "method_description", "method_fingerprint", "method_listing",
            "preset_summary", "format_method_list",
-           "method_config_class", "check_method_options", "create_mapper"]
+           "method_config_class", "check_method_options", "factory_options", "create_mapper"]

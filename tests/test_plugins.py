@@ -114,6 +114,9 @@ def _scores(res: dict) -> list:
 
 
 def test_methods_lists_the_installed_plugin(installed: dict) -> None:
+    described = _bomgraph(installed["env"], "methods", "mine").stdout
+    assert "options (the factory's keyword parameters; --option KEY=VALUE):" in described
+    assert "depth_m  float, default 1.0" in described  # no config class: its signature
     out = _bomgraph(installed["env"], "methods").stdout
     line = next(ln for ln in out.splitlines() if ln.startswith("mine "))
     assert "each landmark depth_m along its first bearing" in line
@@ -232,6 +235,11 @@ def test_a_plugin_without_presets_has_its_options_checked_before_anything_runs(
                         ({"preset": "paper"}, r"unknown option 'preset' \(it has no presets")):
         with pytest.raises(ConfigError, match=match):
             mapper.check_method_options("typed", opts)
+    capsys.readouterr()
+    assert main(["methods", "typed"]) == 0
+    listing = capsys.readouterr().out
+    assert "min_parallax_rad  float, default 0.05" in listing
+    assert listing.rstrip().endswith("presets: none (NAME@PRESET is refused)")
     stream = installed["streams"][0]
     assert main(["run", stream, "--method", "typed", "--option", "min_parallax_rad=abc",
                  "--out", str(tmp_path / "e.json")]) == 2
