@@ -168,9 +168,10 @@ def cmd_export(args: argparse.Namespace) -> int:
         sys.stdout.write(text)
         return 0
     write_text_atomic(text, args.out, [p for p in (args.estimate, stream_path) if p and p != STDIO])
-    print(f"wrote {args.out} ({args.format}): "
-          f"{0 if src.poses is None else len(src.poses)} poses, {len(src.landmark_ids)} "
-          f"landmarks")
+    held = [f"{0 if src.poses is None else len(src.poses)} poses"]
+    if args.format in ("csv", "g2o"):  # TUM and KITTI hold poses only
+        held.append(f"{len(src.landmark_ids)} landmarks")
+    print(f"wrote {args.out} ({args.format}): {', '.join(held)}")
     return 0
 
 

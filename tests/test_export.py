@@ -230,3 +230,19 @@ def test_a_truth_without_poses_is_named_as_such() -> None:
     with pytest.raises(ExportError, match=r"the stream's truth has none \(landmark truth only"):
         export_text(truth_estimate(lm_only), "tum")
     assert export_text(truth_estimate(lm_only), "csv").count("landmark,") == 8
+
+
+def test_cli_export_says_what_the_file_holds(tmp_path: Path, stream: Stream,
+                                             capsys: pytest.CaptureFixture) -> None:
+    """TUM and KITTI hold poses only: the summary line counted the landmarks too."""
+    s_path = tmp_path / "s.jsonl"
+    write_stream(stream, s_path)
+    for fmt, held in (("tum", "poses"), ("kitti", "poses"), ("csv", "poses, "),
+                      ("g2o", "poses, ")):
+        capsys.readouterr()
+        assert main(["export", "--truth", str(s_path), "--format", fmt,
+                     "--out", str(tmp_path / f"t.{fmt}")]) == 0
+        line = capsys.readouterr().out.strip()
+        n = len(stream.steps)
+        assert line.startswith(f"wrote {tmp_path / f't.{fmt}'} ({fmt}): {n} {held}")
+        assert ("landmarks" in line) == (fmt in ("csv", "g2o")), line
