@@ -20,6 +20,7 @@ import json
 import logging
 import math
 import os
+import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any, Callable, Iterable, Iterator, Mapping, Sequence
@@ -30,8 +31,8 @@ from .errors import ConfigError, TooFewLandmarksError, UnknownMethodError
 from .evaluate import CheckpointScore, score_checkpoints, score_estimate
 from .experiments import Arm, Experiment, SimSource, Task
 from .jsonio import jsonable
-from .mapper import (Checkpoint, MapEstimate, RunResult, create_mapper, method_fingerprint,
-                     method_info, run)
+from .mapper import (Checkpoint, MapEstimate, RunResult, checkpoint_times, create_mapper,
+                     method_fingerprint, method_info, run)
 from .stdio import bounded_lines, output_file
 from .stream import Step, Stream, Truth
 from .stream_file import StreamReader
@@ -100,13 +101,17 @@ def run_task(task: Task) -> dict[str, Any]:
         return _run_task(task)
 
 
-def _run_method(task: Task, arm: Arm, stream: Stream) -> RunResult:
+def _run_method(task: Task, arm: Arm, stream: Stream,
+                on_checkpoint: Callable[[Checkpoint], None]) -> RunResult:
+    """The arm on the stream, each checkpoint handed to ``on_checkpoint`` as it is taken and
+    only the last kept (each map holds the trajectory so far: kept, they grow as T^2)."""
     truth = stream.truth
     needs_truth = method_info(arm.method).needs_truth
     mapper = create_mapper(arm.method, stream.header, truth=truth if needs_truth else None,
                            **dict(arm.options))
     return run(mapper, stream.steps, checkpoint_every=arm.checkpoint_every
-               or task.checkpoint_every, method=arm.label)
+               or task.checkpoint_every, method=arm.label, on_checkpoint=on_checkpoint,
+               keep_checkpoints=False)
 
 
 _REFERENCES: dict[str, MapEstimate] = {}
@@ -121,7 +126,7 @@ def _reference_map(task: Task, stream: Stream) -> MapEstimate:
     if key not in _REFERENCES:
         if len(_REFERENCES) >= 8:
             _REFERENCES.pop(next(iter(_REFERENCES)))
-        _REFERENCES[key] = _run_method(task, task.reference, stream).final
+        _REFERENCES[key] = _run_method(task, task.reference, stream, lambda c: None).final
     return _REFERENCES[key]
 
 
@@ -135,10 +140,32 @@ def _bearing_rms(estimate: MapEstimate, stream: Stream) -> float:
     return float(np.sqrt(np.mean(r ** 2))) if r.size else math.nan
 
 
+def _stale_plugin(task: Task) -> str:
+    """Why this process cannot run the task's plugin as it is now on disk ("" when it can):
+    Python does not reload a module, so a worker that imported a plugin (its sources hashed
+    then, :func:`bomgraph.mapper.method_fingerprint`) keeps running that code after an edit,
+    while the client keys the task with the new sources."""
+    from .plugins import source_fingerprint
+
+    for m in [task.arm.method] + ([task.reference.method] if task.reference else []):
+        loaded = method_fingerprint(m)
+        info = method_info(m)
+        if loaded is not None and source_fingerprint.__wrapped__(info.target,
+                                                                 info.version) != loaded:
+            return (f"stale worker: restart the workers and run again (Dask: client.restart(),"
+                    f" or restart `dask worker`); method {m!r} was edited since this worker "
+                    f"imported it, and a worker does not reload a module")
+    return ""
+
+
 def _run_task(task: Task) -> dict[str, Any]:
     out: dict[str, Any] = {"experiment": task.experiment, "arm": task.arm.label,
                            "method": task.arm.method, "run": task.source.name,
                            "key": task_key(task)}
+    stale = _stale_plugin(task)
+    if stale:
+        out.update(ok=False, error=stale)
+        return out
     try:
         stream = task.stream()
     except Exception as exc:  # a source that cannot be read is a failed run, with the reason
@@ -156,22 +183,29 @@ def _run_task(task: Task) -> dict[str, Any]:
         out["scored_against"] = f"reference {task.reference.label}"
     elif truth is None:
         out["scored_against"] = "none"
+    rows: list[dict[str, Any]] = []
+    unscorable: list[str] = []
+    scoring_s = [0.0]
+
+    def score(c: Checkpoint) -> None:  # as the run goes, outside the run's own timing
+        t0 = time.perf_counter()
+        try:
+            row = (_unscored(c) if truth is None else
+                   asdict(score_checkpoints([c], truth)[0]))
+            if stream.truth is None:
+                row["bearing_rms_rad"] = _bearing_rms(c.estimate, stream)
+            rows.append(row)
+        except Exception as exc:  # an unscorable estimate is a failed run, with the reason
+            unscorable.append(f"scoring failed: {type(exc).__name__}: {exc}")
+        scoring_s[0] += time.perf_counter() - t0
+
     try:
-        result = _run_method(task, task.arm, stream)
+        result = _run_method(task, task.arm, stream, lambda c: None if unscorable else score(c))
     except Exception as exc:  # a failing method is a result, reported with its reason
         out.update(ok=False, error=f"{type(exc).__name__}: {exc}")
         return out
-    try:
-        if truth is None:
-            rows = [{**_unscored(c), "bearing_rms_rad": _bearing_rms(c.estimate, stream)}
-                    for c in result.checkpoints]
-        else:
-            rows = [asdict(row) for row in score_checkpoints(result, truth)]
-            if stream.truth is None:
-                for row, c in zip(rows, result.checkpoints):
-                    row["bearing_rms_rad"] = _bearing_rms(c.estimate, stream)
-    except Exception as exc:  # an unscorable estimate is a failed run, with the reason
-        out.update(ok=False, error=f"scoring failed: {type(exc).__name__}: {exc}")
+    if unscorable:
+        out.update(ok=False, error=unscorable[0])
         return out
     info = jsonable(dict(result.final.info), max_items=64)
     final = result.final
@@ -189,7 +223,7 @@ def _run_task(task: Task) -> dict[str, Any]:
             pass
     if out["scored_against"] == "truth":
         del out["scored_against"]  # the paper's results keep their shape
-    out.update(ok=True, checkpoints=rows, total_s=result.total_s,
+    out.update(ok=True, checkpoints=rows, total_s=result.total_s - scoring_s[0],
                step_median_s=float(np.median(result.step_s)),
                converged=info.get("converged"), info=info)
     return out
@@ -274,7 +308,11 @@ def execute(tasks: Sequence[Task], executor: Executor = Executor(), *,
     if progress:
         progress(done, len(tasks))
     for k, res in _dispatch([tasks[k] for k in todo], todo, executor):
-        if cache is not None and res.get("ok"):  # failures are re-run next time
+        if res.get("key") != task_key(tasks[k]):  # kept, but a later read would refuse it
+            _log.warning("%s on %s: the worker keyed the task %s, this process %s (other code "
+                         "or data files there); the result is not cached", tasks[k].arm.label,
+                         tasks[k].source.name, res.get("key"), task_key(tasks[k]))
+        elif cache is not None and res.get("ok"):  # failures are re-run next time
             _write_cached(_cache_path(cache, tasks[k]), res)
         for j in twins[task_key(tasks[k])]:
             t = tasks[j]
@@ -458,8 +496,8 @@ def run_file(stream_path: str | os.PathLike[str], method: str,
                          on_checkpoint=writer.add, keep_checkpoints=False)
             writer.finish(result)
     _log.info("%s: %d checkpoints, %d landmarks at t = %d, %.3f s", method,
-              len(result.checkpoints), len(result.final), result.checkpoints[-1].t,
-              result.total_s)
+              len(checkpoint_times(result.checkpoints[-1].t + 1, checkpoint_every)),
+              len(result.final), result.checkpoints[-1].t, result.total_s)
     if len(result.final) == 0:
         _log.warning("%s mapped no landmark by t = %d (too few steps or too little parallax?)",
                      method, result.checkpoints[-1].t)

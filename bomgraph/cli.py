@@ -78,6 +78,7 @@ def _step_bar(stream_path: str, method: str, force: bool | None) -> Any:
 def cmd_run(args: argparse.Namespace) -> int:
     from .bench import run_file
     from .jsonio import parse_options
+    from .mapper import checkpoint_times
     from .stdio import STDIO, check_output_path, input_path, write_output
 
     options = parse_options(args.option)
@@ -99,10 +100,11 @@ def cmd_run(args: argparse.Namespace) -> int:
                 bar.close()
     result = done[0]
     to_stderr = args.out == STDIO
-    if args.json:
+    if args.json:  # the result keeps only the last checkpoint; the file has all of them
+        written = len(checkpoint_times(result.checkpoints[-1].t + 1, args.checkpoint_every))
         _say(json.dumps({"method": args.method, "stream": args.stream, "out": args.out,
                          "landmarks": len(result.final), "t": result.checkpoints[-1].t,
-                         "checkpoints": len(result.checkpoints),
+                         "checkpoints": written,
                          "total_s": round(result.total_s, 6)}), to_stderr=to_stderr)
     else:
         _say(f"{args.method}: {len(result.final)} landmarks mapped at t = "
@@ -166,16 +168,17 @@ def cmd_export(args: argparse.Namespace) -> int:
         sys.stdout.write(text)
         return 0
     write_text_atomic(text, args.out, [p for p in (args.estimate, stream_path) if p and p != STDIO])
-    print(f"wrote {args.out} ({args.format}): "
-          f"{0 if src.poses is None else len(src.poses)} poses, {len(src.landmark_ids)} "
-          f"landmarks")
+    held = [f"{0 if src.poses is None else len(src.poses)} poses"]
+    if args.format in ("csv", "g2o"):  # TUM and KITTI hold poses only
+        held.append(f"{len(src.landmark_ids)} landmarks")
+    print(f"wrote {args.out} ({args.format}): {', '.join(held)}")
     return 0
 
 
 def cmd_methods(args: argparse.Namespace) -> int:
     from .jsonio import jsonable
-    from .mapper import (available_methods, format_method_list, method_config_class,
-                         method_info, method_listing, preset_summary)
+    from .mapper import (available_methods, factory_options, format_method_list,
+                         method_config_class, method_info, method_listing, preset_summary)
 
     if args.name is None:
         rows = [method_listing(i) for i in available_methods()]
@@ -188,7 +191,7 @@ def cmd_methods(args: argparse.Namespace) -> int:
 
     r = method_listing(method_info(args.name))
     cls = method_config_class(args.name)
-    options = describe_options(cls) if cls is not None else []
+    options = describe_options(cls) if cls is not None else factory_options(args.name)
     if args.json:
         print(json.dumps(jsonable({**r, "config": cls.__name__ if cls else None,
                                    "options": [o._asdict() for o in options]})))
@@ -196,14 +199,15 @@ def cmd_methods(args: argparse.Namespace) -> int:
     print(f"{r['name']}: {r['description']}")
     if r["origin"] == "plugin":
         print(f"  plugin {method_info(args.name).target} from {r['distribution']} {r['version']}")
-    if cls is None:
-        print("  (this method declares no configuration class)")
-        return 0
-    print(f"\noptions ({cls.__name__}; --option KEY=VALUE):")
+    where = cls.__name__ if cls is not None else "the factory's keyword parameters"
+    print(f"\noptions ({where}; --option KEY=VALUE):" if options else "\noptions: none")
     width = max(len(o.name) for o in options) if options else 0
     for o in options:
         print(f"  {o.name:{width}s}  {o.type}, default {o.default!r}"
               + (f": {o.doc}" if o.doc else ""))
+    if not r["presets"]:
+        print("\npresets: none (NAME@PRESET is refused)")
+        return 0
     print("\npresets (--option preset=NAME, or NAME@PRESET in compare --methods):")
     for name, overrides in r["presets"].items():
         print(f"  {name}: {preset_summary(overrides, 1000)}")
@@ -221,17 +225,18 @@ def cmd_compare(args: argparse.Namespace) -> int:
         quick=args.quick, seed=args.seed,
         names=args.experiments.split(",") if args.experiments else ())
     executor = Executor.choose(args.jobs, args.scheduler, args.dask_local, defaults=settings)
+    show = sys.stderr.isatty() if args.progress is None else args.progress
     bar = None
-    if not args.no_progress:
-        from tqdm import tqdm
-
-        bar = tqdm(total=0, unit="run", desc="compare", file=sys.stderr)
-
     seen = {"done": 0}
 
-    def progress(done: int, total: int) -> None:
+    def progress(done: int, total: int) -> None:  # the bar starts when the total is known
+        nonlocal bar
         seen["done"] = done
-        if bar is not None:
+        if show and bar is None:
+            from tqdm import tqdm
+
+            bar = tqdm(total=total, initial=done, unit="run", desc="compare", file=sys.stderr)
+        elif bar is not None:
             bar.total = total
             bar.n = done
             bar.refresh()

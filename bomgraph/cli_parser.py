@@ -168,7 +168,11 @@ def build_parser() -> argparse.ArgumentParser:
                    help="start a local Dask cluster of N worker processes")
     c.add_argument("--no-cache", action="store_true", help="ignore and do not write the cache")
     c.add_argument("--no-figures", action="store_true", help="write no figures")
-    c.add_argument("--no-progress", action="store_true", help="show no progress bar")
+    cbar = c.add_mutually_exclusive_group()
+    cbar.add_argument("--progress", action="store_true", default=None,
+                      help="always show a progress bar (default: when stderr is a terminal)")
+    cbar.add_argument("--no-progress", action="store_false", dest="progress",
+                      help="show no progress bar")
     c.set_defaults(func="cmd_compare")
 
     i = _command(sub, "import", "turn a real dataset into a stream file")

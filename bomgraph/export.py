@@ -60,7 +60,8 @@ def truth_estimate(stream: Stream) -> MapEstimate:
         raise ExportError("the stream has no truth to export")
     tr = stream.truth
     pose_t = None if tr.poses is None else np.arange(len(tr.poses), dtype=np.int64)
-    return MapEstimate(tr.landmark_ids, tr.landmarks_xy, pose_t=pose_t, poses=tr.poses)
+    return MapEstimate(tr.landmark_ids, tr.landmarks_xy, pose_t=pose_t, poses=tr.poses,
+                       info={"source": "truth"})
 
 
 def _r(v: float) -> str:
@@ -78,8 +79,11 @@ def _times(pose_t: np.ndarray, stream: Stream | None) -> list[float | None]:
 
 def _need_poses(src: MapEstimate, fmt: str) -> tuple[np.ndarray, np.ndarray]:
     if src.poses is None or src.pose_t is None or len(src.poses) == 0:
-        raise ExportError(f"{fmt} holds robot poses and this estimate has none (the method maps "
-                          f"landmarks only); use --format csv for its landmarks")
+        whose = ("the stream's truth has none (landmark truth only)"
+                 if src.info.get("source") == "truth" else
+                 "this estimate has none (the method maps landmarks only)")
+        raise ExportError(f"{fmt} holds robot poses and {whose}; use --format csv for its "
+                          f"landmarks")
     order = np.argsort(src.pose_t, kind="stable")
     return src.pose_t[order], src.poses[order]
 

@@ -434,7 +434,11 @@ def check_method_options(name: str, options: Mapping[str, Any]) -> None:
 
     Only the configuration's own checks are made: options that are parameters of the factory
     itself (``start_pose``, ...) and checks that need the stream's header are left to the
-    factory. Methods whose configuration class has no presets (plugins) are not checked.
+    factory. A method whose configuration has no presets (a plugin with a plain dataclass as
+    ``config_class``, or none) has its option names checked against the factory's parameters
+    and the dataclass's fields, and their values against the type annotations (bool, int,
+    float, str, tuples, unions, literals), so a typo or ``NAME@PRESET`` of a plugin without
+    presets is refused in one line instead of failing every run.
 
     Raises
     ------
@@ -446,14 +450,75 @@ def check_method_options(name: str, options: Mapping[str, Any]) -> None:
 
     cls = method_config_class(name)
     opts = dict(options)
-    if cls is None or not issubclass(cls, Presets) or "config" in opts:
+    if "config" in opts:
         return
     factory = method_factory(name)
-    params = inspect.signature(factory.__init__ if inspect.isclass(factory)
-                               else factory).parameters
+    target = factory.__init__ if inspect.isclass(factory) else factory
+    params = inspect.signature(target).parameters
     own = {k for k, p in params.items() if p.kind is not inspect.Parameter.VAR_KEYWORD}
-    preset = opts.pop("preset", None)
-    cls.preset(preset or "paper", **{k: v for k, v in opts.items() if k not in own})
+    if cls is not None and issubclass(cls, Presets):
+        preset = opts.pop("preset", None)
+        cls.preset(preset or "paper", **{k: v for k, v in opts.items() if k not in own})
+        return
+    _check_plain_options(name, target, params, cls, opts)
+
+
+def _check_plain_options(name: str, target: Callable[..., Any],
+                         params: Mapping[str, Any], cls: type | None,
+                         opts: Mapping[str, Any]) -> None:
+    """:func:`check_method_options` for a method without presets: names against the
+    factory's parameters and ``cls``'s fields, values against their annotations."""
+    import inspect
+    import typing
+
+    from .config import _type_problem
+
+    def hints_of(obj: Any) -> dict[str, Any]:
+        try:
+            return typing.get_type_hints(obj)
+        except Exception:  # unresolvable annotations in a plugin: nothing to check against
+            return {}
+
+    hints = {k: v for k, v in hints_of(target).items() if k in params}
+    known = {k for k in params if k not in ("self", "header", "truth")
+             and params[k].kind not in (inspect.Parameter.VAR_KEYWORD,
+                                        inspect.Parameter.VAR_POSITIONAL)}
+    if cls is not None and dataclasses.is_dataclass(cls):
+        fields = {f.name for f in dataclasses.fields(cls)}
+        hints.update({k: v for k, v in hints_of(cls).items() if k in fields})
+        known |= fields
+    takes_any = any(p.kind is inspect.Parameter.VAR_KEYWORD for p in params.values())
+    for key, value in opts.items():
+        if key not in known and not takes_any:
+            what = ("it has no presets" if key == "preset" else
+                    f"its options: {', '.join(sorted(known))}" if known else "it takes none")
+            raise ConfigError(f"method {name!r}: unknown option {key!r} ({what})")
+        problem = _type_problem(hints.get(key), value)
+        if problem:
+            raise ConfigError(f"method {name!r}: bad option value {key}={value!r}: {problem}")
+
+
+def factory_options(name: str) -> list[Any]:
+    """The keyword parameters of the factory of ``name`` (a method without a configuration
+    class, e.g. ``def __init__(self, header, *, depth_m: float = 1.0)``), as
+    :class:`bomgraph.config.OptionDoc` with their annotations and defaults."""
+    import inspect
+    import typing
+
+    from .config import OptionDoc, _type_name
+
+    factory = method_factory(name)
+    target = factory.__init__ if inspect.isclass(factory) else factory
+    try:
+        hints = typing.get_type_hints(target)
+    except Exception:  # unresolvable annotations in a plugin: names and defaults only
+        hints = {}
+    return [OptionDoc(k, _type_name(hints[k]) if k in hints else "",
+                      None if p.default is inspect.Parameter.empty else p.default, "")
+            for k, p in inspect.signature(target).parameters.items()
+            if k not in ("self", "header", "truth")
+            and p.kind in (inspect.Parameter.KEYWORD_ONLY,
+                           inspect.Parameter.POSITIONAL_OR_KEYWORD)]
 
 
 def create_mapper(name: str, header: StreamHeader, *, truth: Truth | None = None,
@@ -467,6 +532,8 @@ def create_mapper(name: str, header: StreamHeader, *, truth: Truth | None = None
     if info.needs_truth and truth is None:
         raise ConfigError(f"method {name!r} reads the ground truth (a benchmark bound); the "
                           f"stream has none")
+    if info.origin != "builtin":  # a plugin's own options: refused here in one line
+        check_method_options(name, options)
     factory = method_factory(name)
     try:
         if info.needs_truth:
@@ -480,4 +547,4 @@ __all__ = ["MapEstimate", "Mapper", "Checkpoint", "RunResult", "run", "checkpoin
            "MethodInfo", "register_method", "available_methods", "method_info",
            "method_factory", "method_description", "method_fingerprint", "method_listing",
            "preset_summary", "format_method_list",
-           "method_config_class", "check_method_options", "create_mapper"]
+           "method_config_class", "check_method_options", "factory_options", "create_mapper"]

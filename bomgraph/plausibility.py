@@ -27,6 +27,10 @@ from .stream import Step, StreamHeader
 
 #: a bearing sigma above pi: the bearings are uniform on the circle, they carry no information.
 MAX_BEARING_SIGMA_RAD = math.pi
+#: a bearing sigma below a nanoradian (the finest star trackers reach about 1e-7 rad): a
+#: sigma typed with a wrong exponent. At 1e-300 its square underflows to 0 and every method's
+#: weights 1 / sigma^2 overflow.
+MIN_BEARING_SIGMA_RAD = 1e-9
 #: an odometry sigma above this (metres for dx, dy; radians for dpsi): no information.
 MAX_ODOMETRY_SIGMA = (1e5, 1e5, 2 * math.pi)
 #: a sensor reaching less than a micrometre or further than 1000 km.
@@ -45,6 +49,11 @@ def header_problems(header: StreamHeader) -> list[tuple[str, str]]:
                     f"{header.bearing_sigma_rad:g} rad is above pi: bearings that uncertain "
                     f"carry no information (a noise scale or sigma off by orders of "
                     f"magnitude?)"))
+    elif header.bearing_sigma_rad < MIN_BEARING_SIGMA_RAD:
+        out.append(("bearing_sigma_rad",
+                    f"{header.bearing_sigma_rad:g} rad is below {MIN_BEARING_SIGMA_RAD:g}: no "
+                    f"sensor measures bearings that precisely, and the methods' weights "
+                    f"1/sigma^2 overflow (a sigma off by orders of magnitude?)"))
     for name, value, limit in zip(("sigma_dx_m", "sigma_dy_m", "sigma_dpsi_rad"),
                                   header.odometry_sigma, MAX_ODOMETRY_SIGMA):
         if value > limit:

@@ -146,11 +146,12 @@ def final_by_run(results: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
 
 def error_curves(results: Sequence[Mapping[str, Any]], metric: str = "mpe_m"
                  ) -> dict[tuple[str, str], tuple[np.ndarray, np.ndarray]]:
-    """Per (experiment, arm): checkpoint times ``(k,)`` and the metric ``(runs, k)``."""
+    """Per (experiment, arm): all runs' checkpoint times ``(k,)``, the metric ``(runs, k)``."""
     out: dict[tuple[str, str], tuple[np.ndarray, np.ndarray]] = {}
     for key, rs in _group([r for r in results if r.get("ok")], "experiment", "arm").items():
-        ts = np.array([c["t"] for c in rs[0]["checkpoints"]])
-        vals = np.array([[_value_at(r, t, metric) for t in ts] for r in rs])
+        ts = np.array(sorted({c["t"] for r in rs for c in r["checkpoints"]}))
+        vals = np.array([[_value_at(r, t, metric) if t <= r["checkpoints"][-1]["t"]
+                          else math.nan for t in ts] for r in rs])  # NaN: the stream ended
         out[key] = (ts, vals)
     return out
 
@@ -305,7 +306,7 @@ def _compare(experiments: Sequence[Experiment], out: Path, executor: Executor,
                       progress=progress)
     summary = summarise(results)
     wall = time.perf_counter() - start
-    files = [out / "results.json", out / "results.csv", out / "summary.csv"]
+    files = [out / n for n in ("results.json", "results.csv", "summary.csv", "final_by_run.csv")]
     # compact: without ``indent`` json.dumps takes CPython's C encoder (the main job's file:
     # 0.5 s against 1.6 s indented, docs/measurements.md, "The main job against ...")
     write_text(out / "results.json", json.dumps(
@@ -317,7 +318,6 @@ def _compare(experiments: Sequence[Experiment], out: Path, executor: Executor,
     write_csv(out / "results.csv", results_to_csv_rows(results))
     write_csv(out / "summary.csv", summary)
     write_csv(out / "final_by_run.csv", final_by_run(results))
-    files.append(out / "final_by_run.csv")
     if figures:
         files += write_compare_figures(out, experiments, results)
     return CompareResult(tuple(results), tuple(summary), tuple(str(f) for f in files), wall)

@@ -28,7 +28,7 @@ from .angles import angle_residual, wrap_angle
 from .config import requirement
 from .errors import ConfigError
 from .geometry import bearings_to
-from .plausibility import (MAX_BEARING_SIGMA_RAD, MAX_COORDINATE_M, MAX_ODOMETRY_SIGMA,
+from .plausibility import (MAX_BEARING_SIGMA_RAD, MIN_BEARING_SIGMA_RAD, MAX_COORDINATE_M, MAX_ODOMETRY_SIGMA,
                            MAX_STEP_M, SENSOR_RANGE_LIMITS_M)
 from .stream import Prior, Step, Stream, StreamHeader, Truth
 
@@ -107,6 +107,10 @@ class SimConfig:
         need(0 <= self.wrong_association_rate <= 1, "wrong_association_rate must be in [0, 1]")
         # plausibility (bomgraph.plausibility): valid numbers no method can use are refused
         sigma_theta, odo = self.header_sigmas()
+        need(sigma_theta >= MIN_BEARING_SIGMA_RAD,
+             f"the bearing sigma (sigma_theta_rad x noise_scale) is {sigma_theta:g} rad, "
+             f"below {MIN_BEARING_SIGMA_RAD:g}: no sensor is that precise (for noise-free "
+             f"data give noise_scale 0)")
         need(sigma_theta <= MAX_BEARING_SIGMA_RAD,
              f"noise_scale {self.noise_scale:g} gives a bearing sigma of {sigma_theta:g} rad, "
              f"above pi: such bearings carry no information (the paper's noise is 1)")

@@ -63,3 +63,36 @@ def test_option_errors_are_user_errors(tmp_path: Path, capsys: pytest.CaptureFix
     assert main(["compare", "--quick", "--experiments", "exp9", "--out",
                  str(tmp_path / "c")]) == 2
     assert "unknown experiment" in capsys.readouterr().err
+
+
+def test_run_json_summary_counts_the_checkpoints_written(tmp_path: Path,
+                                                         capsys: pytest.CaptureFixture) -> None:
+    """``run --json`` reports the checkpoints in the estimate file (run() keeps only the last
+    one in memory when it writes the file as it goes)."""
+    from bomgraph.estimate_file import read_estimate
+
+    run_file, est_file = tmp_path / "run.jsonl", tmp_path / "est.json"
+    assert main(["simulate", "--seed", "1", "--steps", "45", "--landmarks", "20",
+                 "--out", str(run_file)]) == 0
+    capsys.readouterr()
+    assert main(["run", str(run_file), "--method", "triangulate", "--out", str(est_file),
+                 "--json"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["t"] == 45
+    assert summary["checkpoints"] == len(read_estimate(est_file).checkpoints) == 5
+
+
+def test_compare_shows_its_bar_on_a_terminal_only(tmp_path: Path) -> None:
+    """Like ``run``: no progress bar when stderr is a file or a pipe (it filled logs with
+    carriage returns, and began with an empty "0run" bar), ``--progress`` forces it."""
+    run_file = tmp_path / "s.jsonl"
+    assert main(["simulate", "--steps", "20", "--landmarks", "10", "--out", str(run_file)]) == 0
+    base = [sys.executable, "-m", "bomgraph", "compare", "--streams", str(run_file),
+            "--methods", "triangulate", "--jobs", "1", "--no-figures"]
+    quiet = subprocess.run([*base, "--out", str(tmp_path / "a")], capture_output=True,
+                           text=True)
+    assert quiet.returncode == 0 and "run/s" not in quiet.stderr and "%|" not in quiet.stderr
+    forced = subprocess.run([*base, "--progress", "--out", str(tmp_path / "b")],
+                            capture_output=True, text=True)
+    assert forced.returncode == 0 and "1/1" in forced.stderr
+    assert "compare: 0run" not in forced.stderr  # the empty bar before the total was known

@@ -222,6 +222,22 @@ def test_v1_files_still_read(tmp_path: Path) -> None:
         read_estimate(tmp_path / "nan.json")
 
 
+def test_a_version_1_file_is_read_whole_only_up_to_its_cap(tmp_path: Path, monkeypatch) -> None:
+    """A version-1 estimate is parsed as one object (about 12x its bytes in memory), so it has
+    its own cap below the 4 GiB of line-read inputs; the refusal names version 2."""
+    import bomgraph.estimate_file as ef
+    s = _stream(25)
+    result = run(TriangulateMapper(s.header), s.steps, method="triangulate")
+    text = json.dumps(estimate_to_json(result)) + "\n"
+    (tmp_path / "v1.json").write_text(text)
+    monkeypatch.setattr(ef, "MAX_V1_BYTES", len(text))
+    assert read_estimate(tmp_path / "v1.json").version == 1        # at the cap: read
+    monkeypatch.setattr(ef, "MAX_V1_BYTES", len(text) - 1)
+    with pytest.raises(StreamFormatError, match=r"v1\.json.*version-1.*at most.*version 2"):
+        read_estimate(tmp_path / "v1.json")
+    assert ef.MAX_V1_BYTES < 2**30                                   # far below the file cap
+
+
 def test_evaluate_refuses_other_stream_beyond_and_swapped(tmp_path: Path) -> None:
     s, other = _stream(40, 0), _stream(40, 1)
     write_stream(s, tmp_path / "s.jsonl")

@@ -44,6 +44,17 @@ def test_every_method_on_a_recording(tmp_path: Path) -> None:
     assert 0 < mpe < 50  # cm, on a 2.5 m arena
 
 
+def test_every_method_with_the_recording_preset(tmp_path: Path) -> None:
+    from bomgraph.mapper import available_methods, method_config_class
+
+    out = run_example("every_method.py", str(simulated(tmp_path)), "--preset", "real")
+    names = {line.split()[0] for line in out.splitlines()[1:]}
+    assert names == {m.name + ("@real" if "real" in getattr(method_config_class(m.name),
+                                                            "PRESETS", {}) else "")
+                     for m in available_methods() if not m.needs_truth}
+    assert "stmds-smacof@real" in names
+
+
 def test_plugin_method_runs_through_bomgraph_run(tmp_path: Path) -> None:
     stream, est = simulated(tmp_path), tmp_path / "e.json"
     assert "first-sight: " in run_example("plugin_method.py", str(stream), str(est))

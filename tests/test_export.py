@@ -221,3 +221,28 @@ def test_truth_estimate_is_the_truth_and_needs_one() -> None:
     np.testing.assert_array_equal(est.pose_t, np.arange(len(s.steps)))
     with pytest.raises(ExportError, match="no truth"):
         truth_estimate(type(s)(s.header, s.steps, None))
+
+
+def test_a_truth_without_poses_is_named_as_such() -> None:
+    """MRCLAM1 has landmark truth only: exporting it as TUM says so (it blamed "the method")."""
+    s = simulate(SimConfig(n_steps=20, n_landmarks=8), np.random.default_rng(4))
+    lm_only = type(s)(s.header, s.steps, dataclasses.replace(s.truth, poses=None))
+    with pytest.raises(ExportError, match=r"the stream's truth has none \(landmark truth only"):
+        export_text(truth_estimate(lm_only), "tum")
+    assert export_text(truth_estimate(lm_only), "csv").count("landmark,") == 8
+
+
+def test_cli_export_says_what_the_file_holds(tmp_path: Path, stream: Stream,
+                                             capsys: pytest.CaptureFixture) -> None:
+    """TUM and KITTI hold poses only: the summary line counted the landmarks too."""
+    s_path = tmp_path / "s.jsonl"
+    write_stream(stream, s_path)
+    for fmt, held in (("tum", "poses"), ("kitti", "poses"), ("csv", "poses, "),
+                      ("g2o", "poses, ")):
+        capsys.readouterr()
+        assert main(["export", "--truth", str(s_path), "--format", fmt,
+                     "--out", str(tmp_path / f"t.{fmt}")]) == 0
+        line = capsys.readouterr().out.strip()
+        n = len(stream.steps)
+        assert line.startswith(f"wrote {tmp_path / f't.{fmt}'} ({fmt}): {n} {held}")
+        assert ("landmarks" in line) == (fmt in ("csv", "g2o")), line

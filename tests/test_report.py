@@ -61,3 +61,30 @@ def test_compare_writes_tables_and_figures(tmp_path: Path) -> None:
     assert (tmp_path / "t_error_vs_time.png").stat().st_size > 10_000
     assert (tmp_path / "example_map.png").exists() or (tmp_path / "example_map.txt").exists()
     assert (tmp_path / "final_by_run.csv").exists()
+
+
+def test_error_curves_of_streams_of_different_lengths_do_not_depend_on_their_order(
+        tmp_path: Path) -> None:
+    """The curves span every run's checkpoints, whatever run comes first; a run that has ended
+    is NaN after its last checkpoint (it was cut at the first run's times before)."""
+    from bomgraph.experiments import FileSource
+    from bomgraph.sim import simulate
+    from bomgraph.stream_file import write_stream
+
+    paths = []
+    for steps in (25, 45):
+        path = tmp_path / f"s{steps}.jsonl"
+        write_stream(simulate(SimConfig(n_steps=steps, n_landmarks=15),
+                              np.random.default_rng(steps)), path)
+        paths.append(str(path))
+    curves = []
+    for order in (paths, paths[::-1]):
+        exp = Experiment("f", "files", (Arm("tri", "triangulate"),),
+                         sources=tuple(FileSource(p) for p in order))
+        curves.append(error_curves(execute(exp.tasks(), Executor("serial"))))
+    (t, vals), = curves[0].values()
+    assert t.tolist() == [10, 20, 25, 30, 40, 45]
+    assert np.isnan(vals[0, 3:]).all() and np.isfinite(vals[1, 1:]).all()
+    (t2, vals2), = curves[1].values()
+    assert t2.tolist() == t.tolist()
+    np.testing.assert_array_equal(vals2[::-1], vals)

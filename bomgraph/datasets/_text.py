@@ -24,7 +24,7 @@ import numpy as np
 
 from ..errors import DatasetError
 from ..jsonio import MAX_ID
-from ..plausibility import MAX_BEARING_SIGMA_RAD
+from ..plausibility import MAX_BEARING_SIGMA_RAD, MIN_BEARING_SIGMA_RAD
 from ..stdio import copy_bounded
 
 FieldKind = Literal["int", "float"]
@@ -42,12 +42,12 @@ def dataset_error(path: str | os.PathLike[str], line: int | None, field: str | N
 
 
 def checked_bearing_sigma(bearing_sigma_rad: float) -> float:
-    """A caller-given bearing sigma, refused unless finite, > 0 and at most pi (above, the
-    bearings would carry no information: :mod:`bomgraph.plausibility`)."""
-    if not (math.isfinite(bearing_sigma_rad) and 0 < bearing_sigma_rad
+    """A caller-given bearing sigma, refused unless finite and in [1e-9, pi] rad (above, the
+    bearings would carry no information; below, no sensor: :mod:`bomgraph.plausibility`)."""
+    if not (math.isfinite(bearing_sigma_rad) and MIN_BEARING_SIGMA_RAD <= bearing_sigma_rad
             <= MAX_BEARING_SIGMA_RAD):
-        raise DatasetError(f"bearing sigma must be a finite number in (0, pi] rad, got "
-                           f"{bearing_sigma_rad!r} (radians: 3 degrees is 0.0524)")
+        raise DatasetError(f"bearing sigma must be a finite number in [{MIN_BEARING_SIGMA_RAD:g}, "
+                           f"pi] rad, got {bearing_sigma_rad!r} (radians: 3 degrees is 0.0524)")
     return float(bearing_sigma_rad)
 
 

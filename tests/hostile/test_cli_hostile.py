@@ -245,6 +245,8 @@ def test_item20_simulate_refuses_absurd_values(tmp_path: Path) -> None:
     one_error(bomgraph("simulate", "--prior-fraction", "2", "--out", out), "--prior-fraction")
     one_error(bomgraph("simulate", "--noise-scale", "1e300", "--out", out), "noise_scale",
               "above pi")
+    one_error(bomgraph("simulate", "--noise-scale", "1e-300", "--out", out), "bearing sigma",
+              "below 1e-09")
     one_error(bomgraph("simulate", "--sensor-range", "1e300", "--out", out), "sensor_range_m")
     one_error(bomgraph("simulate", "--sensor-range", "1e-300", "--out", out), "sensor_range_m")
     assert os.listdir(tmp_path) == []
@@ -260,10 +262,15 @@ def test_item20_g2o_refuses_an_absurd_sigma_and_a_reversed_chain(tmp_path: Path,
     assert bomgraph("import", "g2o", g2o, "--truth", truth, "--out", out).returncode == 0
     out.unlink()
     one_error(bomgraph("import", "g2o", g2o, "--bearing-sigma", "1e300", "--out", out),
-              "bearing sigma", "(0, pi]")
+              "bearing sigma", "[1e-09, pi]")
     tiny = tmp_path / "tiny_w.g2o"  # bearing information 1e-300: sigma 1e150 rad
     write_g2o(tiny, sim, w=1e-300)
     one_error(bomgraph("import", "g2o", tiny, "--out", out), "bearing_sigma_rad", "above pi")
+    one_error(bomgraph("import", "g2o", g2o, "--bearing-sigma", "1e-300", "--out", out),
+              "bearing sigma", "[1e-09, pi]")
+    huge_w = tmp_path / "huge_w.g2o"  # bearing information 1e300: sigma 1e-150 rad
+    write_g2o(huge_w, sim, w=1e300)
+    one_error(bomgraph("import", "g2o", huge_w, "--out", out), "bearing_sigma_rad", "below 1e-09")
     rev = tmp_path / "reversed.g2o"
     lines = []
     for ln in g2o.read_text().splitlines():
@@ -308,7 +315,7 @@ def test_item20_mrclam_refuses_a_corrupt_velocity_and_a_swapped_truth(tmp_path: 
     assert not out.exists()
 
 
-@pytest.mark.parametrize("case", ["sigma", "range", "step"])
+@pytest.mark.parametrize("case", ["sigma", "tiny sigma", "range", "step"])
 def test_item11_the_reader_warns_about_valid_but_absurd_values(tmp_path: Path,
                                                                case: str) -> None:
     header = dict(HEADER)
@@ -318,6 +325,8 @@ def test_item11_the_reader_warns_about_valid_but_absurd_values(tmp_path: Path,
               for t in range(1, 30)]
     if case == "sigma":
         header["bearing_sigma_rad"] = 1e300
+    elif case == "tiny sigma":
+        header["bearing_sigma_rad"] = 1e-300
     elif case == "range":
         header["sensor_range_m"] = 1e-300
     else:
@@ -325,7 +334,7 @@ def test_item11_the_reader_warns_about_valid_but_absurd_values(tmp_path: Path,
     s = write_jsonl(tmp_path / "x.jsonl", header, steps)
     proc = bomgraph("run", s, "--method", "triangulate", "--out", tmp_path / "e.jsonl")
     err = ok_or_one_error(proc)
-    key = {"sigma": "'bearing_sigma_rad'", "range": "'sensor_range_m'", "step": "line 17"}[case]
+    key = {"sigma": "'bearing_sigma_rad'", "tiny sigma": "below 1e-09", "range": "'sensor_range_m'", "step": "line 17"}[case]
     warning = [ln for ln in err.splitlines() if "WARNING" in ln and "x.jsonl" in ln]
     assert len(warning) == 1 and key in warning[0], err  # once, though the file is read twice
 

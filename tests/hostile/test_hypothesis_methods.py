@@ -28,7 +28,7 @@ from bomgraph.mapper import available_methods, create_mapper, run
 from bomgraph.sim import SimConfig, simulate
 from bomgraph.stream import Prior, Step, Stream, StreamHeader, Truth
 
-METHODS = [m.name for m in available_methods()]
+METHODS = [m.name for m in available_methods() if m.origin == "builtin"]  # not plugins
 
 settings.register_profile(
     "ci", max_examples=20, deadline=None, database=None, derandomize=True,
