@@ -47,7 +47,7 @@ class Presets:
                               f"valid options: {', '.join(sorted(fields))}")
         hints = typing.get_type_hints(cls)
         for key, value in overrides.items():
-            problem = _type_problem(hints.get(key), value)
+            problem = type_problem(hints.get(key), value)
             if problem:
                 raise ConfigError(f"{cls.__name__}: bad option value {key}={value!r}: {problem}")
         values = {**cls.PRESETS[name], **overrides}
@@ -57,7 +57,7 @@ class Presets:
             raise ConfigError(f"{cls.__name__}: bad option value: {exc}") from None
 
 
-def _type_problem(annotation: Any, value: Any) -> str | None:
+def type_problem(annotation: Any, value: Any) -> str | None:
     """Why ``value`` does not fit the field type ``annotation`` (None when it does, or when the
     annotation is not one of the plain types checked: bool, int, float, str, tuples, unions)."""
     if annotation is None or annotation is Any:
@@ -67,7 +67,7 @@ def _type_problem(annotation: Any, value: Any) -> str | None:
         args = typing.get_args(annotation)
         if value is None and type(None) in args:
             return None
-        problems = [_type_problem(a, value) for a in args if a is not type(None)]
+        problems = [type_problem(a, value) for a in args if a is not type(None)]
         return None if any(p is None for p in problems) else problems[0]
     if origin is typing.Literal:
         allowed = typing.get_args(annotation)
@@ -77,7 +77,7 @@ def _type_problem(annotation: Any, value: Any) -> str | None:
             return "must be a list, e.g. [1, 2]"
         args = [a for a in typing.get_args(annotation) if a is not Ellipsis]
         for item in value:
-            problem = _type_problem(args[0] if args else None, item)
+            problem = type_problem(args[0] if args else None, item)
             if problem:
                 return f"each item {problem[5:] if problem.startswith('must ') else problem}"
         return None
@@ -104,7 +104,8 @@ class OptionDoc(NamedTuple):
     doc: str
 
 
-def _type_name(annotation: Any) -> str:
+def type_name(annotation: Any) -> str:
+    """A short readable name of a field type (``float``, ``int | None``, ``tuple[float, ...]``)."""
     if isinstance(annotation, type) and typing.get_origin(annotation) is None:
         return annotation.__name__
     return str(annotation).replace("typing.", "").replace("NoneType", "None")
@@ -162,7 +163,7 @@ def describe_options(config_cls: type) -> list[OptionDoc]:
                    f.default_factory() if f.default_factory is not dataclasses.MISSING
                    else None)
         doc = (f.metadata.get("doc") or docs.get(f.name, "")).replace("``", "`")
-        out.append(OptionDoc(f.name, _type_name(hints.get(f.name, f.type)), default, doc))
+        out.append(OptionDoc(f.name, type_name(hints.get(f.name, f.type)), default, doc))
     return out
 
 
@@ -196,4 +197,5 @@ def resolve(cls: type[C], config: C | None = None, preset: str | None = None,
     return cls.preset(preset or "paper", **options)
 
 
-__all__ = ["Presets", "requirement", "resolve", "OptionDoc", "describe_options"]
+__all__ = ["Presets", "requirement", "resolve", "OptionDoc", "describe_options", "type_problem",
+           "type_name"]

@@ -471,7 +471,7 @@ def _check_plain_options(name: str, target: Callable[..., Any],
     import inspect
     import typing
 
-    from .config import _type_problem
+    from .config import type_problem
 
     def hints_of(obj: Any) -> dict[str, Any]:
         try:
@@ -493,7 +493,7 @@ def _check_plain_options(name: str, target: Callable[..., Any],
             what = ("it has no presets" if key == "preset" else
                     f"its options: {', '.join(sorted(known))}" if known else "it takes none")
             raise ConfigError(f"method {name!r}: unknown option {key!r} ({what})")
-        problem = _type_problem(hints.get(key), value)
+        problem = type_problem(hints.get(key), value)
         if problem:
             raise ConfigError(f"method {name!r}: bad option value {key}={value!r}: {problem}")
 
@@ -505,7 +505,7 @@ def factory_options(name: str) -> list[Any]:
     import inspect
     import typing
 
-    from .config import OptionDoc, _type_name
+    from .config import OptionDoc, type_name
 
     factory = method_factory(name)
     target = factory.__init__ if inspect.isclass(factory) else factory
@@ -513,7 +513,7 @@ def factory_options(name: str) -> list[Any]:
         hints = typing.get_type_hints(target)
     except Exception:  # unresolvable annotations in a plugin: names and defaults only
         hints = {}
-    return [OptionDoc(k, _type_name(hints[k]) if k in hints else "",
+    return [OptionDoc(k, type_name(hints[k]) if k in hints else "",
                       None if p.default is inspect.Parameter.empty else p.default, "")
             for k, p in inspect.signature(target).parameters.items()
             if k not in ("self", "header", "truth")
