@@ -224,7 +224,7 @@ class BatchState:
         self._window_b = 0                # held pose of the last solve if a window, else 0
         self._fresh: list[int] = []       # landmarks entered since the last solution
         self._log = BearingLog()
-        self.chunks = StepChunks(header, config)
+        self.chunks = StepChunks(header, config, keep_conditionals=True)
         self._chunk_start = 0
         # landmarks out of reach after the last whole-graph solve that ran the robust pass
         self._unreached = np.zeros(0, np.int64)
@@ -304,7 +304,7 @@ class BatchState:
     def whitened_residuals(self, values: gtsam.Values) -> tuple[np.ndarray, np.ndarray]:
         """Bearing residual / sigma (signed, (k,)) at ``values`` of the bearings in the graph,
         and their indices (k,) in :meth:`bearings` (after a window solve, of the window's
-        bearings only: the held poses are stale)."""
+        bearings only: the older ones are in its marginal or folds)."""
         owner, lid, brg = self.bearings()
         at = np.arange(owner.size)
         if self._window_b:     # a window solution: the held poses' bearings are in its prior
@@ -343,10 +343,13 @@ class BatchState:
         Past ``lag_after_steps`` steps, and until the graph has grown by ``full_growth`` since
         its last whole solve, only the last ``lag_steps`` poses and the landmarks they see are
         solved (:mod:`baselines.lm_window`; the rest held at ``values``); the result is the
-        current values with the window replaced, its report the window's
-        (``info["passes"]`` starts with ``"window"``). ``adopt``: the caller makes the result
-        the current values at once (:meth:`set_values`), so a window's solution is written
-        into ``values`` itself, not a copy (not for a caller that compares solves).
+        current values with the window replaced and the poses eliminated into the window's
+        marginal back-substituted from its solution
+        (:meth:`baselines.lm_window.StepChunks.back_substitute`; else they would keep the
+        values they had when eliminated, which the moved landmarks no longer fit), its report
+        the window's (``info["passes"]`` starts with ``"window"``). ``adopt``: the caller makes
+        the result the current values at once (:meth:`set_values`), so a window's solution is
+        written into ``values`` itself, not a copy (not for a caller that compares solves).
         """
         n, cfg = self.problem.n_steps, self.config
         lm_config = self._lm_config
@@ -402,6 +405,7 @@ class BatchState:
         window, report = solve_lm(graph, start, self._lm_config, looks_off=_never_off)
         values = self.values if adopt else gtsam.Values(self.values)
         values.update(window)
+        values.update(self.chunks.back_substitute(values))
         return values, replace(report, passes=("window",) + report.passes)
 
     def estimate_of(self, values: gtsam.Values, report: SolveReport

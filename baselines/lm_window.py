@@ -30,10 +30,11 @@ Two uses (issue 14 items 1-2):
   bearings when its point has moved more than ``refold_m`` from where it was folded, and all
   reset after a whole-graph solve; the held boundary pose is then fixed by a prior.
 
-With ``keep_conditionals`` (``gtsam-isam2``'s window) the eliminated poses are kept as Gaussian
-conditionals on the poses and landmarks left (the cliques of the same elimination), and :meth:`StepChunks.back_substitute` moves the held
-poses with a window's solution: the whole-graph Gauss-Newton solution to first order, at the
-cost of one back-substitution, without solving the older steps again.
+With ``keep_conditionals`` (the windows of ``gtsam-batch``, ``oracle``, ``hybrid`` and
+``gtsam-isam2``) the eliminated poses are kept as Gaussian conditionals on the poses and
+landmarks left (the cliques of the same elimination), and :meth:`StepChunks.back_substitute`
+moves the held poses with a window's solution: the whole-graph Gauss-Newton solution to first
+order, at the cost of one back-substitution, without solving the older steps again.
 """
 
 from __future__ import annotations
