@@ -29,7 +29,7 @@ from scipy.spatial import cKDTree
 from bomgraph.angles import angle_residual
 from bomgraph.config import resolve
 from bomgraph.errors import ConfigError
-from bomgraph.geometry import rotation
+from bomgraph.geometry import origin_spread, rotation
 from bomgraph.mapper import MapEstimate
 from bomgraph.stream import Step, StreamHeader, Truth
 
@@ -172,6 +172,13 @@ def estimate_from_values(graph: BearingGraph, values: gtsam.Values,
                        info=info)
 
 
+#: A landmark whose observing poses span less than this many bearing sigmas, seen from its
+#: solved point, is beyond its rays' reach (:meth:`BatchState.out_of_reach`). Victoria Park,
+#: hybrid: the runaway landmarks (1e5 to 1e9 m away) span below 1e-4 rad, every other one
+#: 0.056 rad or more against a sigma of 0.05 rad (``docs/measurements.md``).
+UNDETERMINED_SPAN = 0.1
+
+
 # --------------------------------------------------------------------------------------------
 # Batch LM
 # --------------------------------------------------------------------------------------------
@@ -283,17 +290,25 @@ class BatchState:
         return ids, landmarks_from_values(values, ids)
 
     def out_of_reach(self, values: gtsam.Values) -> np.ndarray:
-        """Ids of the landmarks farther than ``range_gate * sensor_range_m`` from every pose of
-        ``values``, or not finite (none beyond reach when the header has no sensor range)."""
+        """Ids of the landmarks of ``values`` that are not finite, farther than ``range_gate *
+        sensor_range_m`` from every pose (with a sensor range), or beyond their rays' reach:
+        the poses that saw one span less than :data:`UNDETERMINED_SPAN` bearing sigmas seen
+        from it, so its rays no longer tell it from a point at infinity (LM slid it out along
+        them, or behind them; with or without a sensor range)."""
         ids, xy = self.landmark_arrays(values)
         if not ids.size:
             return ids
         bad = ~np.all(np.isfinite(xy), axis=1)
+        poses = all_poses(values, self.problem.n_steps)[:, :2]
+        owner, lid, _ = self.bearings()
+        pos = np.clip(np.searchsorted(ids, lid), 0, ids.size - 1)
+        sel = ids[pos] == lid
+        span = origin_spread(xy, poses[owner[sel]], pos[sel], ids.size)
+        bad |= span < UNDETERMINED_SPAN * float(self.header.bearing_sigma_rad)
         rng = self.header.sensor_range_m
         if rng is not None:
             gate = self.config.range_gate * rng
             if gate < 1e150:     # a range beyond reach (or inf/NaN): no gate
-                poses = all_poses(values, self.problem.n_steps)[:, :2]
                 ok = ~bad
                 near = np.zeros(ids.size, bool)
                 d, _ = cKDTree(poses).query(xy[ok], distance_upper_bound=gate)
