@@ -66,9 +66,8 @@ def test_noise_free_exact_recovery(seed: str, noise_free: Stream) -> None:
     assert est.info["starts"] == ["warm"] and est.info["start_gap_m"] < 1e-6
 
 
-class MirroredSeed:
-    """A real seed mapper (naive triangulation) whose map is mirrored and moved, as an MDS map
-    may come out."""
+class TriangulationSeed:
+    """A real seed mapper: naive triangulation, its map changed by :meth:`change`."""
 
     def __init__(self, header: StreamHeader) -> None:
         self.inner = TriangulateMapper(header)
@@ -77,7 +76,16 @@ class MirroredSeed:
         self.inner.step(step)
 
     def estimate(self) -> MapEstimate:
-        e = self.inner.estimate()
+        return self.change(self.inner.estimate())
+
+    def change(self, e: MapEstimate) -> MapEstimate:
+        raise NotImplementedError
+
+
+class MirroredSeed(TriangulationSeed):
+    """The triangulation's map mirrored and moved, as an MDS map may come out."""
+
+    def change(self, e: MapEstimate) -> MapEstimate:
         xy = np.column_stack([-e.landmarks_xy[:, 0] + 5.0, e.landmarks_xy[:, 1] - 2.0])
         return MapEstimate(e.landmark_ids, xy)
 
@@ -177,17 +185,10 @@ def _diverging_stream(n_steps: int = 30, seen: range = range(10, 16)) -> Stream:
                   tuple(steps), None)
 
 
-class FarSeed:
+class FarSeed(TriangulationSeed):
     """Naive triangulation's map, with ``FAR`` (which its rays never place) put 40 m ahead."""
 
-    def __init__(self, header: StreamHeader) -> None:
-        self.inner = TriangulateMapper(header)
-
-    def step(self, step: Step) -> None:
-        self.inner.step(step)
-
-    def estimate(self) -> MapEstimate:
-        e = self.inner.estimate()
+    def change(self, e: MapEstimate) -> MapEstimate:
         keep = e.landmark_ids != FAR
         return MapEstimate(np.append(e.landmark_ids[keep], FAR),
                            np.vstack([e.landmarks_xy[keep], [40.0, 2.0]]))
