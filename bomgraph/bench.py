@@ -188,6 +188,8 @@ def _run_task(task: Task) -> dict[str, Any]:
     scoring_s = [0.0]
 
     def score(c: Checkpoint) -> None:  # as the run goes, outside the run's own timing
+        if unscorable:  # the run has failed already; its later maps are not scored
+            return
         t0 = time.perf_counter()
         try:
             row = (_unscored(c) if truth is None else
@@ -200,7 +202,7 @@ def _run_task(task: Task) -> dict[str, Any]:
         scoring_s[0] += time.perf_counter() - t0
 
     try:
-        result = _run_method(task, task.arm, stream, lambda c: None if unscorable else score(c))
+        result = _run_method(task, task.arm, stream, score)
     except Exception as exc:  # a failing method is a result, reported with its reason
         out.update(ok=False, error=f"{type(exc).__name__}: {exc}")
         return out
