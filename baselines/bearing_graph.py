@@ -49,6 +49,7 @@ from bomgraph.errors import ConfigError, StreamFormatError
 from bomgraph.geometry import compose, intersect_ray_groups
 from bomgraph.stream import Prior, Step, StreamHeader
 
+from .bearing_log import BearingLog
 from .graph_values import points_at, poses_at
 
 # --------------------------------------------------------------------------------------------
@@ -153,6 +154,13 @@ class FactorGraphConfig(Presets):
     robust_trigger : float
         A Huber pass (``huber_k``) and a Gauss-Newton check run only when the plain solution
         leaves a whitened bearing residual above this (or a landmark out of reach).
+    near_range_m : float or None
+        Past ``lag_after_steps`` steps, a whole-graph LM solve (``gtsam-batch``, ``oracle``,
+        ``hybrid``) and its plausibility checks leave out the bearings whose landmark lies
+        within this many metres of the pose that took them (after a loop closure such a
+        bearing flips by pi under LM's steps and stalls it, :mod:`baselines.near_range`).
+        None: the stream's odometry translation sigma, ``hypot(sigma_dx, sigma_dy)`` of its
+        header; 0: keep every bearing.
     lag_after_steps, lag_steps, full_growth :
         Long recordings (``gtsam-batch``, ``oracle``, ``hybrid``): past ``lag_after_steps``
         steps a scheduled solve relinearises only the last ``lag_steps`` poses and the
@@ -210,6 +218,7 @@ class FactorGraphConfig(Presets):
     warm_presolve_sigma_m: float | None = 3e-3
     presolved_relative_error_tol: float = 1e-6
     robust_trigger: float = 5.0
+    near_range_m: float | None = None
     relinearize_threshold: float = 0.001
     relinearize_skip: int = 1
     checkpoint_updates: int = 2
@@ -240,6 +249,8 @@ class FactorGraphConfig(Presets):
              "warm_presolve_sigma_m must be > 0 or None")
         need(self.presolved_relative_error_tol >= 0, "presolved_relative_error_tol must be >= 0")
         need(self.robust_trigger > 0, "robust_trigger must be > 0")
+        need(self.near_range_m is None or self.near_range_m >= 0,
+             "near_range_m must be >= 0 or None")
         need(self.relinearize_threshold > 0, "relinearize_threshold must be > 0")
         need(self.relinearize_skip >= 1, "relinearize_skip must be >= 1")
         need(self.checkpoint_updates >= 0, "checkpoint_updates must be >= 0")
@@ -341,30 +352,6 @@ def _put(values: gtsam.Values, key: int, value: Any) -> None:
 # The growing problem
 # --------------------------------------------------------------------------------------------
 
-class BearingLog:
-    """Every bearing of a run kept as three flat arrays (owner step, landmark id, bearing in
-    rad, each ``(J,)``): appended per step, concatenated into one piece when read after new
-    bearings came in (shared by the LM mappers' state and iSAM2's long-mode window)."""
-
-    def __init__(self) -> None:
-        self._parts: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
-
-    def add(self, step: Step) -> None:
-        """Keep ``step``'s bearings."""
-        ids = np.asarray(step.landmark_ids, dtype=np.int64)
-        if ids.size:
-            self._parts.append((np.full(ids.size, step.t, np.int64), ids,
-                                np.asarray(step.bearings_rad, dtype=float)))
-
-    def arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Owner steps, landmark ids and bearings (rad) of every bearing kept, each ``(J,)``."""
-        if not self._parts:
-            return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0)
-        if len(self._parts) > 1:
-            self._parts = [tuple(np.concatenate(c) for c in zip(*self._parts))]  # type: ignore
-        return self._parts[0]
-
-
 @dataclass
 class NewFactors:
     """What :meth:`BearingGraph.take_new` hands over since its last call.
@@ -373,6 +360,8 @@ class NewFactors:
     ``landmark`` the factors of landmarks that entered now (all their buffered bearings and
     the priors they complete), whose initial points are in ``landmark_values``. ``robust``
     mirrors ``core + landmark`` with Huber bearing factors (None without a Huber pass).
+    ``bearing_rows`` (k, 5) places each bearing factor: ``(t, landmark id, 1 if in core else
+    0, index there, index in robust or -1)`` (:class:`baselines.near_range.BearingFactors`).
     """
 
     core: gtsam.NonlinearFactorGraph
@@ -380,6 +369,7 @@ class NewFactors:
     robust: gtsam.NonlinearFactorGraph | None
     landmark_ids: list[int]
     landmark_values: gtsam.Values
+    bearing_rows: np.ndarray
 
 
 class BearingGraph:
@@ -418,6 +408,7 @@ class BearingGraph:
         self._robust = gtsam.NonlinearFactorGraph() if self._robust_noise else None
         self._new_ids: list[int] = []
         self._new_values = gtsam.Values()
+        self._rows: list[tuple[int, int, int, int, int]] = []     # NewFactors.bearing_rows
         self._entered: dict[int, tuple[list[int], list[float]]] = {}
         self._last_batch: dict[int, tuple[list[int], list[float]]] = {}
 
@@ -561,7 +552,8 @@ class BearingGraph:
     def take_new(self) -> NewFactors:
         """The factors and landmark points added since the last call (buffers are reset)."""
         out = NewFactors(self._core, self._landmark, self._robust, self._new_ids,
-                         self._new_values)
+                         self._new_values, np.array(self._rows, np.int64).reshape(-1, 5))
+        self._rows = []
         self._core = gtsam.NonlinearFactorGraph()
         self._landmark = gtsam.NonlinearFactorGraph()
         self._robust = gtsam.NonlinearFactorGraph() if self._robust_noise else None
@@ -587,6 +579,8 @@ class BearingGraph:
         graph.add(gtsam.BearingFactor2D(x, l, r, self._noise))
         if self._robust is not None:
             self._robust.add(gtsam.BearingFactor2D(x, l, r, self._robust_noise))
+        self._rows.append((t, lid, int(graph is self._core), int(graph.size()) - 1,
+                           -1 if self._robust is None else int(self._robust.size()) - 1))
         self.n_bearing_factors += 1
 
 

@@ -36,8 +36,11 @@ from bomgraph.stream import Step, StreamHeader, Truth
 from .bearing_graph import (BearingGraph, BearingLog, FactorGraphConfig, NewFactors, insert_pose,
                             landmark_key, landmarks_from_values, pose_key, poses_from_values)
 from .lm_report import (ABSURD_STEP, GTSAM_ERRORS, SolveReport, _first_line,  # noqa: F401
-                        gauss_newton_check, lm_params)
+                        all_poses, estimate_from_values, gauss_newton_check, lm_params,
+                        marginal_covariances)
+from .bearing_log import BearingFactors
 from .lm_window import StepChunks
+from .near_range import near_bearings, near_range_of, without_factors
 
 # --------------------------------------------------------------------------------------------
 # Solving
@@ -135,43 +138,6 @@ def solve_lm(graph: gtsam.NonlinearFactorGraph, initial: gtsam.Values,
                                tuple(passes), "; ".join(messages))
 
 
-def marginal_covariances(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values,
-                         pose_t: np.ndarray, landmark_ids: np.ndarray
-                         ) -> tuple[np.ndarray | None, np.ndarray | None]:
-    """Marginal covariances ``(n, 2, 2)`` of the landmarks and ``(m, 3, 3)`` of the poses
-    (pose covariances in GTSAM's body frame convention), or ``(None, None)`` if singular."""
-    try:
-        marg = gtsam.Marginals(graph, values)
-        lc = np.array([marg.marginalCovariance(landmark_key(int(i))) for i in landmark_ids])
-        pc = np.array([marg.marginalCovariance(pose_key(int(t))) for t in pose_t])
-    except GTSAM_ERRORS:
-        return None, None
-    return lc.reshape(-1, 2, 2), pc.reshape(-1, 3, 3)
-
-
-def estimate_from_values(graph: BearingGraph, values: gtsam.Values,
-                         solved: gtsam.NonlinearFactorGraph, info: dict[str, Any],
-                         covariances: bool) -> MapEstimate:
-    """The MapEstimate of a solution: every pose, the landmarks in the graph (sorted by id),
-    ``info`` plus the graph's counts, and marginal covariances of ``solved`` if asked."""
-    ids = np.array(sorted(graph.landmark_ids), dtype=np.int64)
-    pose_t = np.arange(graph.n_steps, dtype=np.int64)
-    poses = all_poses(values, graph.n_steps)
-    xy = landmarks_from_values(values, ids)
-    info = dict(info)
-    info.update({"n_landmarks": int(ids.size), "pending": len(graph.pending()),
-                 "n_bearing_factors": graph.n_bearing_factors,
-                 "n_prior_factors": graph.n_prior_factors, "n_factors": int(solved.size())})
-    lc = pc = None
-    if covariances and ids.size:
-        lc, pc = marginal_covariances(solved, values, pose_t, ids)
-        info["covariances"] = lc is not None
-    if ids.size == 0:
-        info.setdefault("reason", "no landmark has two bearings with enough parallax yet")
-    return MapEstimate(ids, xy, pose_t=pose_t, poses=poses, landmark_cov=lc, pose_cov=pc,
-                       info=info)
-
-
 #: A landmark whose observing poses span less than this many bearing sigmas, seen from its
 #: solved point, is beyond its rays' reach (:meth:`BatchState.out_of_reach`). Victoria Park,
 #: hybrid: the runaway landmarks (1e5 to 1e9 m away) span below 1e-4 rad, every other one
@@ -182,20 +148,6 @@ UNDETERMINED_SPAN = 0.1
 # --------------------------------------------------------------------------------------------
 # Batch LM
 # --------------------------------------------------------------------------------------------
-
-def all_poses(values: gtsam.Values, n: int) -> np.ndarray:
-    """The robot poses ``x_0 .. x_{n-1}`` of ``values``, shape (n, 3), in one call.
-
-    ``gtsam.utilities.extractPose2`` returns every ``Pose2`` in key order: the intermediate
-    poses ``m_t`` (symbol ``m``) first, then ``x_t`` (symbol ``x``, the last symbol used).
-    """
-    if n == 0:
-        return np.zeros((0, 3))
-    p = np.asarray(gtsam.utilities.extractPose2(values)).reshape(-1, 3)
-    if len(p) < n:
-        raise ConfigError(f"the values hold {len(p)} poses, fewer than the {n} steps")
-    return p[len(p) - n:]
-
 
 class BatchState:
     """What Levenberg-Marquardt solves: the growing :class:`BearingGraph` (``problem``), the
@@ -237,6 +189,12 @@ class BatchState:
         self._unreached = np.zeros(0, np.int64)
         # bearings (indices in bearings()) above robust_trigger after that pass
         self._unsettled = np.zeros(0, np.int64)
+        self._factors = BearingFactors()
+        self._near_m = near_range_of(header, config.near_range_m)
+        # bearings (indices in bearings()) left out of the last whole-graph solve as too near
+        # their landmark, and the graph that solve used (:mod:`baselines.near_range`)
+        self._near = np.zeros(0, np.int64)
+        self.solved_graph = self.graph
 
     def add_step(self, step: Step) -> None:
         """Record ``step`` and predict its pose from the previous one by the odometry."""
@@ -272,6 +230,9 @@ class BatchState:
         """
         self.problem.admit(self.poses if pose_at is None else pose_at)
         new = self.problem.take_new()
+        off = self.graph.size()
+        self._factors.add(new.bearing_rows, off, off + new.core.size(),
+                          0 if self.robust_graph is None else self.robust_graph.size())
         self.graph.push_back(new.core)
         self.graph.push_back(new.landmark)
         # after the push: the chunk (new.core) gets the entering landmarks' recent bearings
@@ -324,6 +285,8 @@ class BatchState:
         at = np.arange(owner.size)
         if self._window_b:     # a window solution: the held poses' bearings are in its prior
             at = at[owner > self._window_b]
+        if self._near.size:    # left out of the solve (:meth:`without_near`)
+            at = at[~np.isin(at, self._near)]
         ids, xy = self.landmark_arrays(values)
         if not ids.size or not at.size:
             return np.zeros(0), at[:0]
@@ -386,13 +349,40 @@ class BatchState:
         self._full_n = n
         self._window_b = 0
         self.chunks.reset_folds()
-        values, report = solve_lm(self.graph, initial, lm_config, self.robust_graph,
+        graph, robust = self.without_near()
+        values, report = solve_lm(graph, initial, lm_config, robust,
                                   looks_off=self._looks_off_again)
         if "huber" in report.passes:
             self._unreached = self.out_of_reach(values)
             r, at = self.whitened_residuals(values)
             self._unsettled = at[np.abs(r) > cfg.robust_trigger]
         return values, report
+
+    def without_near(self) -> tuple[gtsam.NonlinearFactorGraph,
+                                     gtsam.NonlinearFactorGraph | None]:
+        """The graph and robust graph of a whole-graph solve: past ``lag_after_steps`` steps,
+        without the bearings whose landmark lies within the near range of their pose in the
+        current values (:mod:`baselines.near_range`; their indices in :meth:`bearings` kept in
+        ``_near``, the graph in ``solved_graph``). The graphs themselves where none is that
+        near, and in a run's first ``lag_after_steps`` steps."""
+        self._near = np.zeros(0, np.int64)
+        self.solved_graph = self.graph
+        if self._near_m <= 0 or self.problem.n_steps <= self.config.lag_after_steps:
+            return self.graph, self.robust_graph
+        owner, lid, _ = self.bearings()
+        ids, xy = self.landmark_arrays(self.values)
+        if not ids.size or not owner.size:
+            return self.graph, self.robust_graph
+        pos = np.clip(np.searchsorted(ids, lid), 0, ids.size - 1)
+        at = np.flatnonzero(ids[pos] == lid)
+        poses = all_poses(self.values, self.problem.n_steps)
+        self._near = at[near_bearings(poses[owner[at], :2], xy[pos[at]], self._near_m)]
+        if not self._near.size:
+            return self.graph, self.robust_graph
+        g, r = self._factors.find(owner[self._near], lid[self._near])
+        self.solved_graph = without_factors(self.graph, g)
+        return self.solved_graph, (None if self.robust_graph is None
+                                   else without_factors(self.robust_graph, r[r >= 0]))
 
     def _looks_off_again(self, values: gtsam.Values) -> bool:
         """:meth:`looks_off` for a whole-graph solve, except that what the last robust pass
@@ -412,6 +402,7 @@ class BatchState:
                       adopt: bool) -> tuple[gtsam.Values, SolveReport]:
         n = self.problem.n_steps
         self._window_b = b
+        self.solved_graph = self.graph      # covariances and counts: the whole graph
         ids = np.array(sorted(self.problem.landmark_ids), dtype=np.int64)
         graph, start = self.chunks.window(b, n, initial, self.values, self.poses,
                                           self.bearings(), ids, self._fresh, overlay)
@@ -434,7 +425,9 @@ class BatchState:
                     leave_out: np.ndarray | None = None) -> MapEstimate:
         """The MapEstimate of ``values`` (:func:`estimate_from_values`), without the landmarks
         ``leave_out`` (recorded in ``info["out_of_reach"]``)."""
-        est = estimate_from_values(self.problem, values, self.graph, info,
+        if self._near.size:
+            info = {**info, "near_bearings_left_out": int(self._near.size)}
+        est = estimate_from_values(self.problem, values, self.solved_graph, info,
                                    self.config.covariances)
         if leave_out is not None and leave_out.size:
             keep = ~np.isin(est.landmark_ids, leave_out)

@@ -3,8 +3,8 @@
 :class:`SolveReport` (honest: an LM run that gave up is never "converged"), the LM parameters
 of a :class:`~baselines.bearing_graph.FactorGraphConfig` (:func:`lm_params`), the Gauss-Newton
 check of a solution (:func:`gauss_newton_check`), the kept-if-lower Gauss-Newton polish of the
-iSAM2 mappers (:func:`polish`) and what GTSAM raises
-(:data:`GTSAM_ERRORS`). :func:`baselines.factor_graph.solve_lm` puts them together; they live
+iSAM2 mappers (:func:`polish`), what GTSAM raises (:data:`GTSAM_ERRORS`), and the
+:class:`~bomgraph.mapper.MapEstimate` of a solution (:func:`estimate_from_values`). :func:`baselines.factor_graph.solve_lm` puts them together; they live
 here so that :mod:`baselines.lm_window` can use them without importing the mappers.
 """
 
@@ -17,7 +17,11 @@ from typing import Any
 import gtsam
 import numpy as np
 
-from .bearing_graph import FactorGraphConfig
+from bomgraph.errors import ConfigError
+from bomgraph.mapper import MapEstimate
+
+from .bearing_graph import (BearingGraph, FactorGraphConfig, landmark_key, landmarks_from_values,
+                            pose_key)
 
 #: What a failing GTSAM call raises in Python: its C++ exceptions arrive as RuntimeError,
 #: except one whose message is not UTF-8 (an indeterminate-system message naming a key by a
@@ -134,5 +138,56 @@ def polish(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, iterations: 
     return values, step, decrease, error
 
 
+def all_poses(values: gtsam.Values, n: int) -> np.ndarray:
+    """The robot poses ``x_0 .. x_{n-1}`` of ``values``, shape (n, 3), in one call.
+
+    ``gtsam.utilities.extractPose2`` returns every ``Pose2`` in key order: the intermediate
+    poses ``m_t`` (symbol ``m``) first, then ``x_t`` (symbol ``x``, the last symbol used).
+    """
+    if n == 0:
+        return np.zeros((0, 3))
+    p = np.asarray(gtsam.utilities.extractPose2(values)).reshape(-1, 3)
+    if len(p) < n:
+        raise ConfigError(f"the values hold {len(p)} poses, fewer than the {n} steps")
+    return p[len(p) - n:]
+
+
+def marginal_covariances(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values,
+                         pose_t: np.ndarray, landmark_ids: np.ndarray
+                         ) -> tuple[np.ndarray | None, np.ndarray | None]:
+    """Marginal covariances ``(n, 2, 2)`` of the landmarks and ``(m, 3, 3)`` of the poses
+    (pose covariances in GTSAM's body frame convention), or ``(None, None)`` if singular."""
+    try:
+        marg = gtsam.Marginals(graph, values)
+        lc = np.array([marg.marginalCovariance(landmark_key(int(i))) for i in landmark_ids])
+        pc = np.array([marg.marginalCovariance(pose_key(int(t))) for t in pose_t])
+    except GTSAM_ERRORS:
+        return None, None
+    return lc.reshape(-1, 2, 2), pc.reshape(-1, 3, 3)
+
+
+def estimate_from_values(graph: BearingGraph, values: gtsam.Values,
+                         solved: gtsam.NonlinearFactorGraph, info: dict[str, Any],
+                         covariances: bool) -> MapEstimate:
+    """The MapEstimate of a solution: every pose, the landmarks in the graph (sorted by id),
+    ``info`` plus the graph's counts, and marginal covariances of ``solved`` if asked."""
+    ids = np.array(sorted(graph.landmark_ids), dtype=np.int64)
+    pose_t = np.arange(graph.n_steps, dtype=np.int64)
+    poses = all_poses(values, graph.n_steps)
+    xy = landmarks_from_values(values, ids)
+    info = dict(info)
+    info.update({"n_landmarks": int(ids.size), "pending": len(graph.pending()),
+                 "n_bearing_factors": graph.n_bearing_factors,
+                 "n_prior_factors": graph.n_prior_factors, "n_factors": int(solved.size())})
+    lc = pc = None
+    if covariances and ids.size:
+        lc, pc = marginal_covariances(solved, values, pose_t, ids)
+        info["covariances"] = lc is not None
+    if ids.size == 0:
+        info.setdefault("reason", "no landmark has two bearings with enough parallax yet")
+    return MapEstimate(ids, xy, pose_t=pose_t, poses=poses, landmark_cov=lc, pose_cov=pc,
+                       info=info)
+
+
 __all__ = ["GTSAM_ERRORS", "ABSURD_STEP", "SolveReport", "lm_params", "gauss_newton_check",
-           "polish"]
+           "polish", "all_poses", "marginal_covariances", "estimate_from_values"]
