@@ -116,7 +116,9 @@ def build_parser() -> argparse.ArgumentParser:
                           f"of {PROGRESS_MIN_STEPS} steps or more)")
     bar.add_argument("--no-progress", action="store_false", dest="progress",
                      help="never show a progress bar")
-    r.add_argument("--allow-truth", action="store_true", help=argparse.SUPPRESS)
+    r.add_argument("--allow-truth", action="store_true",
+                   help="let a method that reads the stream's ground truth run (oracle: a "
+                        "benchmark bound, not a mapper)")
     r.set_defaults(func="cmd_run")
 
     e = _command(sub, "evaluate", "score an estimate file against a stream's truth")
@@ -144,7 +146,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="stream files to run --methods on (any recording or simulation)")
     c.add_argument("--methods", default=None, metavar="NAME[@PRESET],...",
                    help="with --streams: comma-separated methods, each optionally with a "
-                        "preset (stmds-smacof@real); plugins included (`bomgraph methods`)")
+                        "preset (stmds-smacof@real); plugins included (`bomgraph methods`); "
+                        "with --real: names only, each with its recording variants")
     c.add_argument("--option", action="append", default=[], metavar="NAME:KEY=VALUE",
                    help="with --streams: an option of method NAME (repeatable)")
     c.add_argument("--reference", metavar="NAME[@PRESET]", help="with --streams: score "

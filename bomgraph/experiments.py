@@ -23,7 +23,7 @@ from typing import Any, Callable, Mapping, Sequence
 import numpy as np
 
 from .errors import ConfigError
-from .mapper import available_methods
+from .mapper import available_methods, method_info
 from .sim import (RunSpec, SimConfig, make_priors, paper_design, simulate, simulate_run,
                   with_priors)
 from .stream import Stream
@@ -442,12 +442,13 @@ def compare_experiments(*, config: str | None = None, streams: Sequence[str] | N
                                ("--option", options, "options = {...}"),
                                ("--reference", reference, 'reference = "NAME"'),
                                ("--checkpoint-every", checkpoint_every, "checkpoint_every = N")):
-        if value and not streams:
-            raise ConfigError(f"compare: {flag} goes with --streams FILE... (in a sweep file: "
-                              f"{where})")
+        if value and not streams and not (real and flag == "--methods"):
+            raise ConfigError(f"compare: {flag} goes with --streams FILE..."
+                              f"{' or --real DIR' if flag == '--methods' else ''} (in a sweep "
+                              f"file: {where})")
     settings: dict[str, Any] = {}
     if real:
-        exps = real_experiments(real)
+        exps = real_experiments(real, _real_method_names(methods) if methods else None)
     elif streams:
         sweep = load_experiments(command_line_spec(
             streams, [m.strip() for m in (methods or "").split(",") if m.strip()], options,
@@ -458,6 +459,25 @@ def compare_experiments(*, config: str | None = None, streams: Sequence[str] | N
         settings = dict(sweep.executor)
         exps = {e.name: e for e in designed_variant(sweep.experiments, quick=quick, seed=seed)}
     return select(exps, names), settings
+
+
+def _real_method_names(methods: str) -> list[str]:
+    """The methods of ``compare --real --methods A,B``: names only (each runs with its
+    defaults and its recording variants, :data:`REAL_VARIANTS`), each known (plugins
+    included), none twice."""
+    names = [m.strip() for m in methods.split(",") if m.strip()]
+    for name in names:
+        if "@" in name:
+            raise ConfigError(f"compare --real --methods: give names without a preset "
+                              f"({name!r}): each method runs with its defaults and its "
+                              f"recording variants")
+        method_info(name)
+    twice = sorted({n for n in names if names.count(n) > 1})
+    if twice:
+        raise ConfigError(f"compare --real --methods: {', '.join(twice)} appears twice")
+    if not names:
+        raise ConfigError("compare --real --methods: give at least one method")
+    return names
 
 
 #: Registered methods the real-data experiments leave out by default (as before the redesign:

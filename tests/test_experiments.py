@@ -7,8 +7,8 @@ from pathlib import Path
 import pytest
 
 from bomgraph.errors import ConfigError
-from bomgraph.experiments import (REAL_SKIPPED, REAL_VARIANTS, Arm, paper_experiments,
-                                  real_experiments, real_methods, select)
+from bomgraph.experiments import (REAL_SKIPPED, REAL_VARIANTS, Arm, compare_experiments,
+                                  paper_experiments, real_experiments, real_methods, select)
 from bomgraph.mapper import available_methods
 from bomgraph.sim import SimConfig
 
@@ -49,6 +49,20 @@ def test_real_experiments_hold_every_method_and_its_real_variant(tmp_path: Path)
     assert {"ekf-invdepth", "gtsam-isam2", "oracle"} <= set(labels)
     with pytest.raises(ConfigError, match="no dataset folders"):
         real_experiments(tmp_path / "nothing")
+
+
+def test_compare_real_takes_a_method_list(tmp_path: Path) -> None:
+    """``compare --real DIR --methods ekf,gtsam-batch``: those methods, each with its
+    recording variants, on every recording."""
+    for d in ("mrclam6", "bearing_only_sim_g2o"):
+        (tmp_path / d).mkdir()
+    chosen, _ = compare_experiments(real=str(tmp_path), methods="ekf, gtsam-batch",
+                                    names=["g2o"])
+    assert [e.name for e in chosen] == ["g2o"]
+    assert [(a.label, a.method, dict(a.options)) for a in chosen[0].arms] == [
+        ("ekf", "ekf", {}), ("ekf (real)", "ekf", {"preset": "real"}),
+        ("gtsam-batch", "gtsam-batch", {}),
+        ("gtsam-batch (real)", "gtsam-batch", {"preset": "real"})]
 
 
 def test_real_methods_are_the_registry_less_the_skipped() -> None:

@@ -206,7 +206,12 @@ def test_a_bad_sweep_file_is_one_line_naming_the_file_and_key(
 
 
 @pytest.mark.parametrize("args, message", [
-    (["--methods", "triangulate"], "--methods goes with --streams"),
+    (["--methods", "triangulate"], "--methods goes with --streams FILE... or --real DIR"),
+    (["--reference", "ekf"], "--reference goes with --streams FILE... (in"),
+    (["--real", "R", "--methods", "ekf@real"], "give names without a preset"),
+    (["--real", "R", "--methods", "ekf,ekf"], "ekf appears twice"),
+    (["--real", "R", "--methods", "nope"], "unknown method 'nope'"),
+    (["--real", "R", "--methods", " , "], "give at least one method"),
     (["--streams", "S", "--methods", "triangulate", "--option", "k=1"], "NAME:KEY=VALUE"),
     (["--streams", "S", "--methods", "triangulate", "--option", "ekf:k=1"],
      "'ekf' is not one of --methods"),
@@ -219,7 +224,8 @@ def test_a_bad_sweep_file_is_one_line_naming_the_file_and_key(
 ])
 def test_compare_command_line_mistakes_are_one_line(
         runs: Path, capsys: pytest.CaptureFixture, args: list[str], message: str) -> None:
-    args = [str(runs / "runs" / "r1.jsonl") if a == "S" else a for a in args]
+    args = [str(runs / "runs" / "r1.jsonl") if a == "S" else str(runs) if a == "R" else a
+            for a in args]
     assert main(["compare", *args, "--out", str(runs / "x")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and message in err[0], err
