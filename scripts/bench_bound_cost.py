@@ -15,8 +15,9 @@ with the robust kernels), the method's graph at the oracle's values and the orac
 the method's. The verdict compares the two solutions on the oracle's graph (the batch
 objective; ``same_graph`` records whether the two graphs agree at both solutions); where the
 two graphs differ in size (the method let in landmarks the oracle did not, or the reverse, or
-holds other factors: ``gtsam-isam2``'s graph on these streams has a few fewer) the solutions
-are not comparable. ``gtsam-batch``, ``hybrid``
+holds other factors: ``gtsam-isam2``'s graph has a weak prior on each landmark, and
+``mapper.accepted`` lacks the steps still in its update buffer) the solutions are not
+comparable. ``gtsam-batch``, ``hybrid``
 and ``oracle`` keep their graph and values in ``mapper.state``; ``gtsam-isam2`` in
 ``mapper.accepted`` and ``mapper.estimate_values``.
 
