@@ -114,7 +114,7 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 
 def cmd_evaluate(args: argparse.Namespace) -> int:
-    from .report import evaluate_files, format_evaluation
+    from .file_evaluation import evaluate_files, format_evaluation
     from .stdio import STDIO, input_path
 
     if args.estimate == STDIO and args.stream == STDIO:

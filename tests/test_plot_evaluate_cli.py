@@ -125,3 +125,43 @@ def test_palette_is_per_method_and_ellipses_are_drawn() -> None:
     assert "95 % ellipses" in labels
     fig = results_figure({"e": {"a": np.array([0.1, np.nan])}}, {}, kind="violin")
     assert len(fig.axes) == 2
+
+
+def test_a_stream_without_truth_gets_the_truth_free_measures(files, tmp_path, capsys) -> None:
+    """No truth, no --reference: per checkpoint the landmarks mapped and the RMS bearing
+    residual of the map and trajectory against the stream's own bearings, checked here by
+    an independent computation; the alignment options are refused in one line."""
+    from bomgraph.angles import angle_residual
+    from bomgraph.estimate_file import read_estimate
+    from bomgraph.stream_file import read_stream
+
+    s, e, _ = files
+    lines = s.read_text().splitlines()
+    head = json.loads(lines[0])
+    del head["truth"]
+    bare = tmp_path / "bare.jsonl"
+    bare.write_text("\n".join([json.dumps(head), *lines[1:]]) + "\n")
+    text = _out(capsys, ["evaluate", str(e), str(bare)])
+    assert "no ground truth" in text and "bearing residual RMS" in text
+    obj = json.loads(_out(capsys, ["evaluate", str(e), str(bare), "--json"]))
+    assert obj["truth"] is False and obj["checkpoints"]["t"] == [10, 20, 30, 40]
+    steps = read_stream(bare).steps
+    for k, c in enumerate(read_estimate(e).checkpoints):
+        pos = {int(i): xy for i, xy in zip(c.estimate.landmark_ids, c.estimate.landmarks_xy)}
+        pose = dict(zip(c.estimate.pose_t.tolist(), c.estimate.poses))
+        r = [angle_residual(np.arctan2(*(pos[i] - pose[st.t][:2])[::-1]) - pose[st.t][2], b)
+             for st in steps[: c.t + 1] for i, b in zip(st.landmark_ids.tolist(),
+                                                        st.bearings_rad.tolist())
+             if i in pos and st.t in pose]
+        assert obj["checkpoints"]["n_bearings"][k] == len(r) > 0
+        assert obj["checkpoints"]["bearing_rms_rad"][k] == pytest.approx(
+            float(np.sqrt(np.mean(np.square(r)))), rel=1e-9)
+        assert obj["checkpoints"]["n_mapped"][k] == len(c.estimate)
+    assert obj["bearing_rms_rad"] == obj["checkpoints"]["bearing_rms_rad"][-1]
+    rows = list(csv.DictReader(io.StringIO(_out(capsys, ["evaluate", str(e), str(bare),
+                                                         "--format", "csv"]))))
+    assert [int(r["t"]) for r in rows] == [10, 20, 30, 40] and "bearing_rms_rad" in rows[0]
+    capsys.readouterr()
+    assert main(["evaluate", str(e), str(bare), "--similarity"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "nothing to align to" in err[0]

@@ -1,0 +1,281 @@
+"""``bomgraph evaluate``: an estimate file scored against a stream file's ground truth, a
+reference estimate, or, for a stream with neither, by what the stream itself can tell.
+
+:func:`evaluate_files` reads both files, refuses a mismatched pair (the estimate's recorded
+stream identity, checkpoints beyond the stream) and scores every checkpoint
+(:func:`bomgraph.evaluate.score_checkpoints`: landmark MPE, APE and RPE, NEES from the file's
+covariances); :func:`format_evaluation` prints it as text, JSON, CSV, Markdown or LaTeX. A
+stream without ground truth and no ``--reference`` gets the truth-free measures only: per
+checkpoint, the landmarks mapped and the RMS bearing residual of the map and trajectory
+against the stream's own bearings (:func:`bearing_consistency`), the measure ``compare``
+reports for such streams.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from dataclasses import asdict, dataclass
+from typing import Any, Sequence
+
+import numpy as np
+
+from .errors import EvaluationError, StreamFormatError
+from .evaluate import (CheckpointScore, MapScore, error_table, landmark_nees, pose_nees,
+                       score_checkpoints, score_estimate)
+from .estimate_file import read_estimate, stream_identity
+from .jsonio import jsonable
+from .mapper import MapEstimate
+from .stream import Step
+from .stream_file import read_stream
+from .tables import Column, format_table
+from .trajectory import bearing_residuals
+
+#: The per-checkpoint table of ``bomgraph evaluate`` (SI in JSON/CSV; cm and deg shown).
+EVALUATION_COLUMNS = (
+    Column("t", "t"), Column("n_mapped", "mapped"), Column("n_common", "common"),
+    Column("mpe_m", "MPE [cm]", 100, ".2f"), Column("rmse_m", "RMSE [cm]", 100, ".2f"),
+    Column("median_m", "median [cm]", 100, ".2f"), Column("max_m", "max [cm]", 100, ".2f"),
+    Column("robot_last_m", "robot [cm]", 100, ".2f"),
+    Column("ape_trans_rmse_m", "APE [cm]", 100, ".2f"),
+    Column("ape_heading_rmse_rad", "APE [deg]", 180 / math.pi, ".2f"),
+    Column("rpe_trans_rmse_m", "RPE [cm]", 100, ".2f"),
+    Column("rpe_heading_rmse_rad", "RPE [deg]", 180 / math.pi, ".2f"),
+    Column("nees_landmark", "NEES lm", 1, ".2f"), Column("nees_pose", "NEES pose", 1, ".2f"))
+
+#: The per-checkpoint table of a stream without ground truth (and no reference).
+TRUTH_FREE_COLUMNS = (
+    Column("t", "t"), Column("n_mapped", "mapped"), Column("n_bearings", "bearings"),
+    Column("bearing_rms_rad", "bearing RMS [deg]", 180 / math.pi, ".3f"))
+
+
+@dataclass(frozen=True)
+class BearingConsistency:
+    """RMS bearing residual [rad] of an estimate against its own map and trajectory over the
+    ``n`` bearings they cover (no truth needed), and the same for its mirror image."""
+
+    n: int
+    rms_rad: float
+    mirrored_rms_rad: float
+
+
+def bearing_consistency(estimate: MapEstimate, steps: Sequence[Step]) -> BearingConsistency:
+    """:func:`bomgraph.trajectory.bearing_residuals` of ``estimate`` as RMS values."""
+    if estimate.poses is None:
+        return BearingConsistency(0, math.nan, math.nan)
+    args = (estimate.landmark_ids, estimate.landmarks_xy, estimate.pose_t, estimate.poses, steps)
+    r = bearing_residuals(*args)
+    m = bearing_residuals(*args, mirrored=True)
+    rms = (lambda v: float(np.sqrt(np.mean(v ** 2))) if v.size else math.nan)
+    return BearingConsistency(int(r.size), rms(r), rms(m))
+
+
+@dataclass(frozen=True)
+class FileEvaluation:
+    """An estimate file scored against a stream file's truth or a reference estimate: the
+    final map's score, one :class:`bomgraph.evaluate.CheckpointScore` per checkpoint, and the
+    truth-free bearing consistency of the estimate (and of the reference). Against neither
+    (``score`` None): ``free_rows``, per checkpoint ``t``, ``n_mapped``, ``n_bearings`` and
+    ``bearing_rms_rad``."""
+
+    method: str
+    score: MapScore | None
+    table: dict[str, np.ndarray] | None
+    rows: tuple[CheckpointScore, ...] = ()
+    reference: str | None = None
+    bearing: BearingConsistency | None = None
+    reference_bearing: BearingConsistency | None = None
+    nees_landmark: float = math.nan
+    nees_pose: float = math.nan
+    free_rows: tuple[dict[str, Any], ...] = ()
+
+    def as_dict(self) -> dict[str, Any]:
+        if self.score is None:
+            return {"method": self.method, "reference": None, "truth": False,
+                    **{k: v for k, v in self.free_rows[-1].items() if k != "t"},
+                    "checkpoints": {c.name: [r[c.name] for r in self.free_rows]
+                                    for c in TRUTH_FREE_COLUMNS}}
+        out: dict[str, Any] = {"method": self.method, "reference": self.reference,
+                               **self.score.as_dict(), "nees_landmark": self.nees_landmark,
+                               "nees_pose": self.nees_pose}
+        for name, b in (("bearing", self.bearing), ("reference_bearing", self.reference_bearing)):
+            if b is not None:
+                out[f"{name}_rms_rad"] = b.rms_rad
+                out[f"{name}_mirrored_rms_rad"] = b.mirrored_rms_rad
+                out[f"{name}_n"] = b.n
+        if self.rows:
+            out["checkpoints"] = {c.name: [getattr(r, c.name) for r in self.rows]
+                                  for c in EVALUATION_COLUMNS}
+        return out
+
+
+def evaluate_files(estimate_path: str | os.PathLike[str], stream_path: str | os.PathLike[str],
+                   *, with_scale: bool = False, align_on: str = "landmarks", delta: int = 1,
+                   reference_path: str | os.PathLike[str] | None = None) -> FileEvaluation:
+    """Score an estimate file against the ground truth of a stream file, or, with
+    ``reference_path``, against another estimate file (its final map and poses).
+
+    A stream without ground truth, and no reference: the truth-free measures of every
+    checkpoint (:class:`FileEvaluation`, ``score`` None).
+
+    Raises
+    ------
+    EvaluationError
+        The estimate was computed from another stream (its recorded identity differs) or has
+        checkpoints beyond the stream's last step, or the map shares fewer than 3 landmarks
+        with the truth or reference.
+
+    The NEES against the truth (landmarks: the mean over the common ones; pose: the latest)
+    come from the file's covariances and are NaN without them.
+    """
+    try:
+        stream = read_stream(stream_path)
+    except StreamFormatError as exc:
+        if _is_estimate_file(stream_path):
+            raise EvaluationError(f"{stream_path} is an estimate file, not a stream (arguments "
+                                  f"swapped? usage: bomgraph evaluate ESTIMATE STREAM)") from None
+        raise exc from None
+    est = read_estimate(estimate_path)
+    if est.stream is not None:
+        ident = stream_identity(stream.steps)
+        if ident != est.stream:
+            what = (f"{est.stream.n_steps} steps recorded, the stream has {ident.n_steps}"
+                    if ident.n_steps != est.stream.n_steps else
+                    f"steps SHA-256 {est.stream.steps_sha256[:12]}... recorded, the stream's "
+                    f"is {ident.steps_sha256[:12]}...")
+            raise EvaluationError(f"{estimate_path} was computed from another stream than "
+                                  f"{stream_path} ({what})")
+    last = len(stream.steps) - 1
+    beyond = [c.t for c in est.checkpoints if c.t > last]
+    if beyond:
+        raise EvaluationError(f"{estimate_path}: checkpoint t = {beyond[0]} is beyond the last "
+                              f"step t = {last} of {stream_path}")
+    ref_est = read_estimate(reference_path) if reference_path is not None else None
+    if ref_est is None and stream.truth is None:
+        if with_scale or align_on != "landmarks" or delta != 1:
+            raise EvaluationError(f"{stream_path}: the stream has no ground truth, so there is "
+                                  f"nothing to align to (--similarity, --align, --delta); give "
+                                  f"--reference EST, or drop them for the truth-free measures")
+        free = []
+        for c in (est.checkpoints or (None,)):
+            e = est.final if c is None else c.estimate
+            b = bearing_consistency(e, stream.steps[: (len(stream.steps) if c is None
+                                                       else c.t + 1)])
+            free.append({"t": None if c is None else c.t, "n_mapped": len(e),
+                         "n_bearings": b.n, "bearing_rms_rad": b.rms_rad})
+        return FileEvaluation(est.method, None, None, bearing=bearing_consistency(
+            est.final, stream.steps), free_rows=tuple(free))
+    target = ref_est.final if ref_est is not None else stream.truth
+    kw = dict(with_scale=with_scale, align_on=align_on, delta=delta)
+    score = score_estimate(est.final, target, **kw)
+    rows = tuple(score_checkpoints(est.checkpoints, target, **kw)) if est.checkpoints else ()
+    table = (error_table(est.checkpoints, stream.truth)
+             if est.checkpoints and ref_est is None and align_on == "landmarks" else None)
+    nl = np_ = math.nan
+    if ref_est is None and not with_scale:
+        if est.final.landmark_cov is not None:
+            try:
+                nl = float(np.mean(landmark_nees(est.final, stream.truth, score.alignment)))
+            except np.linalg.LinAlgError:
+                nl = math.nan
+        np_ = pose_nees(est.final, stream.truth, score.alignment)
+    return FileEvaluation(est.method, score, table, rows,
+                          None if ref_est is None else (ref_est.method or str(reference_path)),
+                          bearing_consistency(est.final, stream.steps),
+                          None if ref_est is None else bearing_consistency(ref_est.final,
+                                                                           stream.steps),
+                          nl, np_)
+
+
+def _is_estimate_file(path: str | os.PathLike[str]) -> bool:
+    """Whether ``path`` is an estimate file, even a broken one (to recognise swapped
+    arguments): its first line names the estimate format, or the whole file reads as one."""
+    try:
+        with open(path, "rb") as fh:
+            head = json.loads(fh.readline(2**16))
+        if isinstance(head, dict) and head.get("format") == "bomgraph-estimate":
+            return True
+    except (OSError, ValueError):
+        pass
+    try:
+        read_estimate(path)
+    except (StreamFormatError, OSError):
+        return False
+    return True
+
+
+def format_evaluation(ev: FileEvaluation, fmt: str = "text") -> str:
+    """The evaluation as ``fmt`` (:data:`bomgraph.tables.FORMATS`): text gives counts,
+    landmark errors [cm], robot errors and the per-checkpoint table; JSON the whole
+    evaluation; CSV, Markdown and LaTeX the per-checkpoint table (the final map's row when
+    the file has no checkpoints)."""
+    if ev.score is None:
+        return _format_truth_free(ev, fmt)
+    rows = [asdict(r) for r in ev.rows] or [{**ev.score.as_dict(), "t": None}]
+    against = f"reference {ev.reference}" if ev.reference else "truth"
+    title = (f"{ev.method} against the {against}, aligned on {ev.score.align_on}; RPE over "
+             f"{ev.score.rpe_delta} step(s)")
+    if fmt == "json":
+        return json.dumps(jsonable(ev.as_dict()), allow_nan=False)
+    if fmt != "text":
+        return format_table(EVALUATION_COLUMNS, rows, fmt, title=title)
+    s = ev.score
+    na = (lambda v, k=100, f=".2f", u=" cm": "-" if not math.isfinite(v) else f"{k * v:{f}}{u}")
+    lines = [f"method {ev.method}: {s.n_common} of {s.n_truth} landmarks of the {against} "
+             f"mapped ({s.n_mapped} in the estimate); aligned on {s.align_on}"
+             f"{', reflected' if s.alignment.reflected else ''}",
+             f"  landmark MPE {na(s.mpe_m)}, RMSE {na(s.rmse_m)}, "
+             f"median {na(s.median_m)}, max {na(s.max_m)}"]
+    if s.alignment.rank < 2:
+        lines.append(f"  the fitted set is {'collinear' if s.alignment.rank == 1 else 'one point'}"
+                     f": {'the mirror tie is unbroken, robot errors undefined' if s.ambiguous else 'mirror tie broken by the poses'}")
+    if s.n_poses:
+        lines.append(f"  robot position error: last {na(s.robot_last_m)}, mean over "
+                     f"{s.n_poses} poses {na(s.robot_mean_m)}")
+        lines.append(f"  APE RMSE {na(s.ape_trans_rmse_m)}, heading "
+                     f"{na(s.ape_heading_rmse_rad, 180 / math.pi, '.3f', ' deg')}; RPE "
+                     f"(delta {s.rpe_delta}, {s.n_rpe_pairs} pairs) RMSE "
+                     f"{na(s.rpe_trans_rmse_m)}, heading "
+                     f"{na(s.rpe_heading_rmse_rad, 180 / math.pi, '.3f', ' deg')}")
+    nees = [f"{name} {v:.2f}" for name, v in (("landmark (mean)", ev.nees_landmark),
+                                                ("latest pose", ev.nees_pose))
+            if math.isfinite(v)]
+    if nees:
+        lines.append(f"  NEES from the file's covariances: {', '.join(nees)}")
+    for name, b in (("estimate", ev.bearing), ("reference", ev.reference_bearing)):
+        if b is not None and b.n:
+            lines.append(f"  bearing residual RMS of the {name} against its own map and "
+                         f"trajectory: {b.rms_rad:.4f} rad over {b.n} bearings (mirrored: "
+                         f"{b.mirrored_rms_rad:.4f} rad)")
+    if len(ev.rows) > 1:
+        lines.append("")
+        lines.append(format_table(EVALUATION_COLUMNS, rows, "text"))
+    return "\n".join(lines)
+
+
+
+def _format_truth_free(ev: FileEvaluation, fmt: str) -> str:
+    """:func:`format_evaluation` of a stream without truth (``ev.score`` None)."""
+    title = (f"{ev.method}: no ground truth in the stream (nor --reference): truth-free "
+             f"measures only")
+    if fmt == "json":
+        return json.dumps(jsonable(ev.as_dict()), allow_nan=False)
+    if fmt != "text":
+        return format_table(TRUTH_FREE_COLUMNS, ev.free_rows, fmt, title=title)
+    last = ev.free_rows[-1]
+    lines = [title, f"  final map: {last['n_mapped']} landmarks"]
+    b = ev.bearing
+    if b is not None and b.n:
+        lines.append(f"  bearing residual RMS against its own map and trajectory: "
+                     f"{b.rms_rad:.4f} rad ({math.degrees(b.rms_rad):.3f} deg) over {b.n} "
+                     f"bearings (mirrored: {b.mirrored_rms_rad:.4f} rad)")
+    else:
+        lines.append("  no bearing of the stream is covered by the estimate's map and poses")
+    if len(ev.free_rows) > 1:
+        lines += ["", format_table(TRUTH_FREE_COLUMNS, ev.free_rows, "text")]
+    return "\n".join(lines)
+
+
+__all__ = ["EVALUATION_COLUMNS", "TRUTH_FREE_COLUMNS", "BearingConsistency",
+           "bearing_consistency", "FileEvaluation", "evaluate_files", "format_evaluation"]
