@@ -20,6 +20,7 @@ import json
 import logging
 import math
 import os
+import tempfile
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -28,6 +29,7 @@ from typing import Any, Callable, Iterable, Iterator, Mapping, Sequence
 import numpy as np
 
 from .errors import ConfigError, TooFewLandmarksError, UnknownMethodError
+from .estimate_file import stream_identity, write_estimate
 from .evaluate import CheckpointScore, score_checkpoints, score_estimate
 from .experiments import Arm, Experiment, SimSource, Task
 from .jsonio import jsonable
@@ -228,7 +230,22 @@ def _run_task(task: Task) -> dict[str, Any]:
     out.update(ok=True, checkpoints=rows, total_s=result.total_s - scoring_s[0],
                step_median_s=float(np.median(result.step_s)),
                converged=info.get("converged"), info=info)
+    if task.keep_estimate:
+        out["estimate_file"] = _estimate_text(task, stream, result)
     return out
+
+
+def _estimate_text(task: Task, stream: Stream, result: RunResult) -> str:
+    """The run's final estimate as the text of an estimate file (version 2: the final map
+    and trajectory, covariances if any, the stream's identity and the arm's options), written
+    by the canonical writer on the worker (remote or not) and handed back in the result."""
+    with tempfile.TemporaryDirectory(prefix="bomgraph-est-") as d:
+        path = os.path.join(d, "final.est")
+        write_estimate(result, path, stream=stream_identity(stream.steps),
+                       options=dict(task.arm.options),
+                       checkpoint_every=task.arm.checkpoint_every or task.checkpoint_every)
+        with open(path, encoding="utf-8") as fh:
+            return fh.read()
 
 
 def _unscored(c: Checkpoint) -> dict[str, Any]:

@@ -243,7 +243,8 @@ def cmd_compare(args: argparse.Namespace) -> int:
 
     try:
         result = compare(chosen, args.out, executor=executor, use_cache=not args.no_cache,
-                         figures=not args.no_figures, progress=progress)
+                         figures=not args.no_figures, progress=progress,
+                         estimates=args.estimates)
     except KeyboardInterrupt:
         if bar is not None:
             bar.close()
@@ -259,8 +260,14 @@ def cmd_compare(args: argparse.Namespace) -> int:
     if recorded:
         print(format_by_run(final_by_run([r for r in result.results
                                           if r["experiment"] in recorded])))
-    print(f"\n{len(result.results)} runs in {result.wall_s:.1f} s; wrote "
-          f"{', '.join(result.files)}")
+    est = [f for f in result.files if f.endswith(".est")]
+    streams = [f for f in result.files if f.endswith(".jsonl")]
+    wrote = [f for f in result.files if not f.endswith((".est", ".jsonl"))]
+    if est:
+        wrote.append(f"{len(est)} estimate files under {os.path.join(args.out, 'estimates')}")
+    if streams:
+        wrote.append(f"{len(streams)} stream files under {os.path.join(args.out, 'streams')}")
+    print(f"\n{len(result.results)} runs in {result.wall_s:.1f} s; wrote {', '.join(wrote)}")
     return 0
 
 

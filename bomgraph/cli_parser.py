@@ -171,6 +171,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="start a local Dask cluster of N worker processes")
     c.add_argument("--no-cache", action="store_true", help="ignore and do not write the cache")
     c.add_argument("--no-figures", action="store_true", help="write no figures")
+    c.add_argument("--estimates", action="store_true",
+                   help="also write each run's final estimate file (map, trajectory, "
+                        "covariances if any) to OUT/estimates/EXPERIMENT/ARM/RUN.est, for "
+                        "`bomgraph evaluate`, `plot` and `export`")
     cbar = c.add_mutually_exclusive_group()
     cbar.add_argument("--progress", action="store_true", default=None,
                       help="always show a progress bar (default: when stderr is a terminal)")

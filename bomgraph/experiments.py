@@ -330,18 +330,23 @@ class Task:
     source: SimSource | DatasetSource | FileSource | WorldSource
     checkpoint_every: int = 10
     reference: Arm | None = None
+    #: the result also carries the final estimate as an estimate file's text
+    #: (``compare --estimates``)
+    keep_estimate: bool = False
 
     def stream(self) -> Stream:
         return self.source.stream()
 
     def identity(self) -> dict[str, Any]:
         """What makes the task what it is (the arm, the source, the checkpoints, the
-        reference method): the runner hashes it with the code's fingerprint into the cache
-        key."""
+        reference method, whether the estimate is kept): the runner hashes it with the code's
+        fingerprint into the cache key."""
         out = {"arm": self.arm.key(), "source": self.source.key(),
                "every": self.checkpoint_every}
         if self.reference is not None:
             out["reference"] = self.reference.key()
+        if self.keep_estimate:
+            out["estimate"] = True
         return out
 
 

@@ -11,11 +11,13 @@ A result is the dict of :func:`bomgraph.bench.run_task`; its ``checkpoints`` are
 from __future__ import annotations
 
 import csv
+import hashlib
 import json
 import math
 import os
+import re
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Callable, Mapping, Sequence
 
@@ -23,7 +25,7 @@ import numpy as np
 
 from .bench import Executor, execute, run_example
 from .evaluate import score_estimate
-from .experiments import PAPER_REPORTED, Experiment
+from .experiments import PAPER_REPORTED, Experiment, FileSource, Task
 from .plots import MapPanel, error_vs_time_figure, final_maps_figure, map_figure
 from .stdio import folder_lock, make_folder, output_file, write_text
 
@@ -276,28 +278,32 @@ def write_csv(path: str | os.PathLike[str], rows: Sequence[Mapping[str, Any]],
 
 def compare(experiments: Sequence[Experiment], out_dir: str | os.PathLike[str], *,
             executor: Executor = Executor(), use_cache: bool = True, figures: bool = True,
-            progress: Callable[[int, int], None] | None = None) -> CompareResult:
+            progress: Callable[[int, int], None] | None = None,
+            estimates: bool = False) -> CompareResult:
     """Run ``experiments``, write ``results.json``, ``results.csv``, ``summary.csv`` and the
-    figures (PNG) into ``out_dir``, and return the summary.
+    figures (PNG) into ``out_dir``, and return the summary. With ``estimates``, also each
+    run's final estimate file and its stream (:func:`write_estimate_files`).
 
     Finished runs are cached in ``out_dir/cache`` so an interrupted sweep resumes.
     """
     out = Path(out_dir)
     make_folder(out)
     with folder_lock(out, "`bomgraph compare`"):
-        return _compare(experiments, out, executor, use_cache, figures, progress)
+        return _compare(experiments, out, executor, use_cache, figures, progress, estimates)
 
 
 def _compare(experiments: Sequence[Experiment], out: Path, executor: Executor,
              use_cache: bool, figures: bool,
-             progress: Callable[[int, int], None] | None) -> CompareResult:
+             progress: Callable[[int, int], None] | None, estimates: bool) -> CompareResult:
     start = time.perf_counter()
-    tasks = [t for e in experiments for t in e.tasks()]
+    tasks = [replace(t, keep_estimate=estimates) for e in experiments for t in e.tasks()]
     results = execute(tasks, executor, cache_dir=out / "cache" if use_cache else None,
                       progress=progress)
+    written = write_estimate_files(out, tasks, results) if estimates else []
     summary = summarise(results)
     wall = time.perf_counter() - start
     files = [out / n for n in ("results.json", "results.csv", "summary.csv", "final_by_run.csv")]
+    files += written
     # compact: without ``indent`` json.dumps takes CPython's C encoder (the main job's file:
     # 0.5 s against 1.6 s indented, docs/measurements.md, "The main job against ...")
     write_text(out / "results.json", json.dumps(
@@ -312,6 +318,65 @@ def _compare(experiments: Sequence[Experiment], out: Path, executor: Executor,
     if figures:
         files += write_compare_figures(out, experiments, results)
     return CompareResult(tuple(results), tuple(summary), tuple(str(f) for f in files), wall)
+
+
+def _slug(name: str) -> str:
+    """``name`` as a file or folder name: letters, digits, ``.``, ``-``, ``_``, ``@``, the
+    rest ``_``."""
+    return re.sub(r"[^A-Za-z0-9._@-]+", "_", name).strip("_") or "_"
+
+
+def write_estimate_files(out: Path, tasks: Sequence[Task], results: Sequence[dict[str, Any]]
+                         ) -> list[Path]:
+    """Write each run's final estimate (a result's ``estimate_file`` text, taken out of the
+    result) to ``out/estimates/EXPERIMENT/ARM/RUN.est`` and, unless the run read a stream
+    file the user has, its stream to ``out/streams/EXPERIMENT/RUN.jsonl`` (made again here,
+    the same bytes the worker ran on; a run whose arms saw different streams, e.g. with
+    priors, gets its stream's short hash in the name), so that ``bomgraph evaluate EST
+    STREAM`` pairs them; ``out/estimates/index.csv`` lists each run's estimate and stream
+    (paths relative to ``out``, a user's stream file as given). Names keep letters, digits
+    and ``.-_@``, the rest turned to ``_``. Returns the paths; a failed run has no estimate
+    and gets none."""
+    from .stream_file import write_stream
+
+    paths: list[Path] = []
+    index: list[dict[str, Any]] = []
+    names: dict[tuple[str, str], set[str]] = {}
+    for t in tasks:
+        names.setdefault((t.experiment, t.source.name), set()).add(_source_hash(t))
+    written: set[Path] = set()
+    for t, r in zip(tasks, results):
+        text = r.pop("estimate_file", None)
+        if text is None:
+            continue
+        exp, run = _slug(t.experiment), _slug(t.source.name)
+        path = out / "estimates" / exp / _slug(t.arm.label) / f"{run}.est"
+        path.parent.mkdir(parents=True, exist_ok=True)
+        write_text(path, text)
+        paths.append(path)
+        row = {"experiment": t.experiment, "arm": t.arm.label, "run": t.source.name,
+               "estimate": str(path.relative_to(out))}
+        index.append(row)
+        if isinstance(t.source, FileSource):
+            row["stream"] = t.source.path
+            continue
+        h = _source_hash(t)
+        stem = run if len(names[(t.experiment, t.source.name)]) == 1 else f"{run}-{h}"
+        spath = out / "streams" / exp / f"{stem}.jsonl"
+        row["stream"] = str(spath.relative_to(out))
+        if spath not in written:
+            spath.parent.mkdir(parents=True, exist_ok=True)
+            write_stream(t.stream(), spath)
+            written.add(spath)
+            paths.append(spath)
+    if index:
+        write_csv(out / "estimates" / "index.csv", index)
+        paths.append(out / "estimates" / "index.csv")
+    return paths
+
+
+def _source_hash(task: Task) -> str:
+    return hashlib.sha256(json.dumps(task.source.key(), sort_keys=True).encode()).hexdigest()[:8]
 
 
 def write_compare_figures(out_dir: str | os.PathLike[str], experiments: Sequence[Experiment],
@@ -394,4 +459,4 @@ def _map_panel(r: Mapping[str, Any]) -> MapPanel:
 
 __all__ = ["REPORT_TIMES", "summarise", "final_by_run", "error_curves", "results_to_csv_rows",
            "format_summary", "format_by_run", "write_csv", "CompareResult", "compare",
-           "write_compare_figures"]
+           "write_compare_figures", "write_estimate_files"]

@@ -1,0 +1,60 @@
+"""``bomgraph compare --estimates``: each run's final estimate file and its stream, paired in
+an index, scored again by ``evaluate`` to the same numbers as the comparison's."""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+from pathlib import Path
+
+import pytest
+
+from bomgraph.cli import main
+from bomgraph.estimate_file import read_estimate
+from bomgraph.file_evaluation import evaluate_files
+
+
+def _index(out: Path) -> list[dict[str, str]]:
+    with open(out / "estimates" / "index.csv", newline="") as fh:
+        return list(csv.DictReader(fh))
+
+
+def test_estimates_and_streams_pair_up_and_score_as_in_the_comparison(
+        tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    out = tmp_path / "c"
+    assert main(["compare", "--quick", "--experiments", "exp3", "--estimates", "--jobs", "1",
+                 "--no-figures", "--no-progress", "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert "8 estimate files under" in printed and "stream files under" in printed
+    results = json.loads((out / "results.json").read_text())["results"]
+    assert len(results) == 8 and not any("estimate_file" in r for r in results)
+    rows = _index(out)
+    assert len(rows) == 8
+    final = {(r["arm"], r["run"]): r["checkpoints"][-1]["mpe_m"] for r in results}
+    for row in rows:
+        est = read_estimate(out / row["estimate"])
+        assert len(est.checkpoints) == 1 and est.checkpoints[0].t == 150
+        ev = evaluate_files(out / row["estimate"], out / row["stream"])   # identity checked
+        assert math.isclose(ev.score.mpe_m, final[(row["arm"], row["run"])], rel_tol=1e-12)
+    # the arms with and without priors ran on different streams of the same run
+    streams = {(r["arm"], r["run"]): r["stream"] for r in rows}
+    assert streams[("stmds-smacof", "s0-l0-r0")] != streams[("stmds-smacof+priors", "s0-l0-r0")]
+    # a second run reads the cache, estimates included, and writes the same files
+    before = {r["estimate"]: (out / r["estimate"]).read_text() for r in rows}
+    assert main(["compare", "--quick", "--experiments", "exp3", "--estimates", "--jobs", "1",
+                 "--no-figures", "--no-progress", "--out", str(out)]) == 0
+    assert {r["estimate"]: (out / r["estimate"]).read_text() for r in _index(out)} == before
+
+
+def test_a_user_stream_is_named_not_copied(tmp_path: Path) -> None:
+    s = tmp_path / "mine.jsonl"
+    assert main(["simulate", "--seed", "4", "--steps", "60", "--out", str(s), "-q"]) == 0
+    out = tmp_path / "c"
+    assert main(["compare", "--streams", str(s), "--methods", "triangulate,ekf", "--estimates",
+                 "--jobs", "1", "--no-figures", "--no-progress", "--out", str(out)]) == 0
+    rows = _index(out)
+    assert [r["arm"] for r in rows] == ["triangulate", "ekf"]
+    assert {r["stream"] for r in rows} == {str(s)} and not (out / "streams").exists()
+    for row in rows:
+        assert evaluate_files(out / row["estimate"], s).score.n_common > 3
