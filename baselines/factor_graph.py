@@ -19,7 +19,7 @@ Each factory takes ``config=`` (a :class:`FactorGraphConfig`) or ``preset=`` (``
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from typing import Any, Callable, Sequence
 
 import gtsam
@@ -262,8 +262,7 @@ class BatchState:
         bad = ~np.all(np.isfinite(xy), axis=1)
         poses = all_poses(values, self.problem.n_steps)[:, :2]
         owner, lid, _ = self.bearings()
-        pos = np.clip(np.searchsorted(ids, lid), 0, ids.size - 1)
-        sel = ids[pos] == lid
+        pos, sel = _locate(ids, lid)
         span = origin_spread(xy, poses[owner[sel]], pos[sel], ids.size)
         bad |= span < UNDETERMINED_SPAN * float(self.header.bearing_sigma_rad)
         rng = self.header.sensor_range_m
@@ -290,8 +289,7 @@ class BatchState:
         ids, xy = self.landmark_arrays(values)
         if not ids.size or not at.size:
             return np.zeros(0), at[:0]
-        pos = np.clip(np.searchsorted(ids, lid[at]), 0, ids.size - 1)
-        sel = ids[pos] == lid[at]
+        pos, sel = _locate(ids, lid[at])
         at, pos = at[sel], pos[sel]
         p = all_poses(values, self.problem.n_steps)[owner[at]]
         d = xy[pos] - p[:, :2]
@@ -373,8 +371,8 @@ class BatchState:
         ids, xy = self.landmark_arrays(self.values)
         if not ids.size or not owner.size:
             return self.graph, self.robust_graph
-        pos = np.clip(np.searchsorted(ids, lid), 0, ids.size - 1)
-        at = np.flatnonzero(ids[pos] == lid)
+        pos, sel = _locate(ids, lid)
+        at = np.flatnonzero(sel)
         poses = all_poses(self.values, self.problem.n_steps)
         self._near = at[near_bearings(poses[owner[at], :2], xy[pos[at]], self._near_m)]
         if not self._near.size:
@@ -437,6 +435,13 @@ class BatchState:
                           else est.landmark_cov[keep],
                           info={**est.info, "out_of_reach": leave_out.tolist()})
         return est
+
+
+def _locate(ids: np.ndarray, lid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Where each of ``lid`` (k,) sits in the sorted, non-empty ``ids`` (n,), and whether it is
+    there at all: ``(positions (k,), present (k,) bool)``."""
+    pos = np.clip(np.searchsorted(ids, lid), 0, ids.size - 1)
+    return pos, ids[pos] == lid
 
 
 def _never_off(values: gtsam.Values) -> bool:
