@@ -4,8 +4,9 @@ The graph (poses, split odometry, bearings, priors, delayed landmark entry) is b
 :class:`baselines.bearing_graph.BearingGraph`; this module solves it and wraps the solvers as
 mappers (the paper's section IV, Exp. 2 comparison):
 
-* :func:`solve_lm`: Levenberg-Marquardt after an optional Huber pass, with an honest report
-  (:class:`SolveReport`: an LM run that gave up is never "converged");
+* :func:`~baselines.lm_report.solve_lm` (re-exported here): Levenberg-Marquardt after an
+  optional Huber pass, with an honest report (:class:`SolveReport`: an LM run that gave up is
+  never "converged");
 * :class:`BatchState`: the graph, the factors taken from it and the current values, which the
   LM mappers (and :class:`baselines.hybrid.HybridMapper`) hold;
 * :class:`BatchMapper` (``gtsam-batch``) and :class:`OracleMapper` (``oracle``, started from the ground truth; a benchmark bound, never a
@@ -18,7 +19,6 @@ Each factory takes ``config=`` (a :class:`FactorGraphConfig`) or ``preset=`` (``
 
 from __future__ import annotations
 
-import math
 from dataclasses import replace
 from typing import Any, Callable, Sequence
 
@@ -35,108 +35,12 @@ from bomgraph.stream import Step, StreamHeader, Truth
 
 from .bearing_graph import (BearingGraph, BearingLog, FactorGraphConfig, NewFactors, insert_pose,
                             landmark_key, landmarks_from_values, pose_key, poses_from_values)
-from .lm_report import (ABSURD_STEP, GTSAM_ERRORS, SolveReport, _first_line,  # noqa: F401
-                        all_poses, estimate_from_values, gauss_newton_check, lm_params,
-                        marginal_covariances)
+from .lm_report import (GTSAM_ERRORS, SolveReport, all_poses,  # noqa: F401 (re-exported)
+                        estimate_from_values, gauss_newton_check, lm_params,
+                        marginal_covariances, solve_lm)
 from .bearing_log import BearingFactors
 from .lm_window import StepChunks
 from .near_range import near_bearings, near_range_of, without_factors
-
-# --------------------------------------------------------------------------------------------
-# Solving
-# --------------------------------------------------------------------------------------------
-
-def solve_lm(graph: gtsam.NonlinearFactorGraph, initial: gtsam.Values,
-             config: FactorGraphConfig,
-             robust_graph: gtsam.NonlinearFactorGraph | None = None, *,
-             looks_off: Callable[[gtsam.Values], bool] | None = None
-             ) -> tuple[gtsam.Values, SolveReport]:
-    """Levenberg-Marquardt on ``graph`` from ``initial``, with a robust pass if called for.
-
-    Without ``looks_off`` (the default): the Huber pass on ``robust_graph`` (if given) runs
-    first, the plain pass from its result, and a Gauss-Newton check of the result follows
-    (:func:`gauss_newton_check`). With ``looks_off(values)`` (True when a solution's residuals
-    or geometry are implausible): the plain pass runs first; only if ``looks_off`` says so of
-    its result does the Huber pass run (from ``initial``, then a plain pass from there: the
-    lower plain error is kept) and the Gauss-Newton check; an LM run that did not stop on its
-    tolerance is checked too. A Gauss-Newton step that is infinite (a singular system) or
-    predicts more than ``decrease_tol`` of decrease is never "converged". Never raises on a
-    failed solve: returns the best values reached and a report saying why
-    (:class:`SolveReport`).
-    """
-    params = lm_params(config)
-    iterations = 0
-    passes: list[str] = []
-    messages: list[str] = []
-    # id(values) -> (values, plain error): read off the optimizer where it has it; the values
-    # are held so that no id is reused
-    errors: dict[int, tuple[gtsam.Values, float]] = {}
-
-    def plain_error(v: gtsam.Values) -> float:
-        if id(v) not in errors:
-            errors[id(v)] = (v, float(graph.error(v)))
-        return errors[id(v)][1]
-
-    def run(name: str, g: gtsam.NonlinearFactorGraph, start: gtsam.Values
-            ) -> tuple[gtsam.Values, str] | None:
-        nonlocal iterations
-        try:
-            opt = gtsam.LevenbergMarquardtOptimizer(g, start, params)
-            if g is graph:
-                errors.setdefault(id(start), (start, float(opt.error())))
-            result = opt.optimize()
-        except GTSAM_ERRORS as exc:
-            messages.append(f"{name} pass failed: {_first_line(exc)}")
-            return None
-        if g is graph:
-            errors[id(result)] = (result, float(opt.error()))
-        n_it = int(opt.iterations())
-        iterations += n_it
-        passes.append(name)
-        stop = ("max_iterations" if n_it >= config.max_iterations else
-                "lambda_bound" if float(opt.lambda_()) >= config.lambda_upper_bound else
-                "tolerance")
-        return result, stop
-
-    def robust_then_plain(start: gtsam.Values) -> tuple[gtsam.Values, str] | None:
-        assert robust_graph is not None
-        got = run("huber", robust_graph, start)
-        if got is not None and plain_error(got[0]) <= plain_error(start):
-            start = got[0]
-        return run("plain", graph, start)
-
-    best: tuple[gtsam.Values, str] | None
-    if looks_off is None:
-        best = robust_then_plain(initial) if robust_graph is not None else \
-            run("plain", graph, initial)
-        check = True
-    else:
-        best = run("plain", graph, initial)
-        off = best is None or looks_off(best[0])
-        if off and robust_graph is not None:
-            other = robust_then_plain(initial)
-            if other is not None and (best is None
-                                      or plain_error(other[0]) < plain_error(best[0])):
-                best = other
-        check = off or best is None or best[1] != "tolerance"
-    e0 = plain_error(initial)
-    values, stop = best if best is not None else (initial, "failed")
-    e1 = plain_error(values)
-    step, decrease = gauss_newton_check(graph, values) if check else (math.nan, math.nan)
-    gn_ok = not check or (step <= ABSURD_STEP and (stop == "tolerance"
-                                                   or decrease <= config.decrease_tol))
-    converged = bool(stop != "failed" and math.isfinite(e1)
-                     and e1 <= e0 * (1 + 1e-12) + 1e-12 and gn_ok)
-    if not converged and not messages:
-        messages.append(
-            f"LM stopped on {stop}; " + (
-                "the linear system at the result is singular (a direction the measurements "
-                "do not determine)" if not math.isfinite(step) else
-                f"a Gauss-Newton step at the result has max-norm {step:.3g} and would still "
-                f"lower the error by {decrease:.3g} (decrease_tol {config.decrease_tol:g})"))
-    return values, SolveReport(converged, iterations, e0, e1, step, decrease, stop,
-                               tuple(passes), "; ".join(messages))
-
 
 #: A landmark whose observing poses span less than this many bearing sigmas, seen from its
 #: solved point, is beyond its rays' reach (:meth:`BatchState.out_of_reach`). Victoria Park,
@@ -181,6 +85,7 @@ class BatchState:
         self._odom_sigma: list[np.ndarray] = []
         self._full_n = 0                  # steps at the last whole-graph solve
         self._window_b = 0                # held pose of the last solve if a window, else 0
+        self.whole_only = False           # set by ScheduledSolver.finish: no window solve
         self._fresh: list[int] = []       # landmarks entered since the last solution
         self._log = BearingLog()
         self.chunks = StepChunks(header, config, keep_conditionals=True)
@@ -337,7 +242,8 @@ class BatchState:
             if its:
                 lm_config = replace(lm_config,
                                     relative_error_tol=cfg.presolved_relative_error_tol)
-        if n > cfg.lag_after_steps and n < cfg.full_growth * self._full_n:
+        if (n > cfg.lag_after_steps and n < cfg.full_growth * self._full_n
+                and not self.whole_only):
             b = self.chunks.boundary(n, cfg.lag_steps)
             if b is not None:
                 return self._solve_window(initial, b, overlay, adopt)
@@ -382,6 +288,20 @@ class BatchState:
         return self.solved_graph, (None if self.robust_graph is None
                                    else without_factors(self.robust_graph, r[r >= 0]))
 
+    def with_near_bearings(self) -> tuple[gtsam.Values, SolveReport]:
+        """Levenberg-Marquardt on the whole graph, every bearing in, from the current values
+        (a whole-graph solution without the near bearings, :meth:`without_near`): plain LM,
+        a Gauss-Newton check if it does not stop on its tolerance (:func:`solve_lm`). If it
+        converged its solution becomes the current values and no bearing is left out any
+        more; otherwise nothing changes. Returns its solution and report."""
+        values, report = solve_lm(self.graph, self.values, self._lm_config,
+                                  looks_off=_never_off)
+        if report.converged:
+            self._near = np.zeros(0, np.int64)
+            self.solved_graph = self.graph
+            self.set_values(values)
+        return values, report
+
     def _looks_off_again(self, values: gtsam.Values) -> bool:
         """:meth:`looks_off` for a whole-graph solve, except that what the last robust pass
         left as it was does not call for another: landmarks still out of reach that were out
@@ -425,6 +345,8 @@ class BatchState:
         ``leave_out`` (recorded in ``info["out_of_reach"]``)."""
         if self._near.size:
             info = {**info, "near_bearings_left_out": int(self._near.size)}
+        if self.chunks.marginal_failure:
+            info = {**info, "window_marginal_failure": self.chunks.marginal_failure}
         est = estimate_from_values(self.problem, values, self.solved_graph, info,
                                    self.config.covariances)
         if leave_out is not None and leave_out.size:
@@ -464,6 +386,7 @@ class ScheduledSolver:
     state: BatchState
     _estimate: MapEstimate | Callable[[], MapEstimate] | None = None
     _estimate_n: int = -1
+    _finished_n: int = -1
 
     def _feed(self, step: Step) -> None:
         self.state.add_step(step)
@@ -479,6 +402,44 @@ class ScheduledSolver:
     def _refresh(self) -> None:
         self._estimate = self._update()
         self._estimate_n = self.state.problem.n_steps
+
+    def finish(self) -> None:
+        """The stream has ended (:func:`bomgraph.mapper.run` calls this after the last step).
+
+        Past ``lag_after_steps`` the last solve was most likely a window's
+        (:meth:`BatchState.solve`), whose older poses and landmarks are only back-substituted,
+        and every whole-graph solve there leaves out the near bearings
+        (:meth:`BatchState.without_near`). So the whole graph is solved once more, then, if
+        bearings were left out, solved again from that solution with them back in
+        (:meth:`BatchState.with_near_bearings`): the final map is the minimum of the whole
+        graph with every bearing (``info["near_bearings_back"]``, the number put back). If
+        that last solve does not converge the map stays the one without them and
+        ``info["near_bearings_back"]`` says why. Before ``lag_after_steps``: nothing
+        (:meth:`estimate` catches up; the paper runs are unchanged)."""
+        state = self.state
+        n = state.problem.n_steps
+        if n <= self.config.lag_after_steps or self._finished_n == n:
+            return
+        if not (self._estimate_n == n and state._full_n == n and not state._window_b):
+            state.whole_only = True
+            try:
+                self._refresh()
+            finally:
+                state.whole_only = False
+        est = self.estimate()
+        self._finished_n = n
+        left_out = int(state._near.size)
+        if not left_out:
+            return
+        values, report = state.with_near_bearings()
+        if not report.converged:
+            self._estimate = replace(est, info={
+                **est.info, "near_bearings_back": f"not put back ({left_out}): the solve with "
+                f"them did not converge ({report.message or report.stop})"})
+            return
+        info = {**est.info, **report.as_info(), "near_bearings_back": left_out}
+        info.pop("near_bearings_left_out", None)
+        self._estimate = state.to_estimate(values, info, state.out_of_reach(values))
 
     def estimate(self) -> MapEstimate:
         if self.state.problem.n_steps == 0:

@@ -20,7 +20,7 @@ from bomgraph.stream import Step, StreamHeader
 
 from .bearing_graph import (BearingGraph, BearingLog, FactorGraphConfig, insert_pose, landmark_key,
                             mid_key, pose_key)
-from .factor_graph import GTSAM_ERRORS, _first_line, estimate_from_values, solve_lm
+from .lm_report import GTSAM_ERRORS, _first_line, estimate_from_values, solve_lm
 from .isam2_window import WindowLongMode
 from .lm_report import polish
 from .lm_window import StepChunks
@@ -479,6 +479,30 @@ class Isam2Mapper(WindowLongMode):
         self.estimate_values = gtsam.Values(start)
 
     # -- the map --------------------------------------------------------------------------
+    def finish(self) -> None:
+        """The stream has ended (:func:`bomgraph.mapper.run` calls this after the last step).
+        In long mode the buffered steps go to the solver and the whole graph is polished and
+        checked once more, Levenberg-Marquardt if the check fails (:meth:`_check_window`,
+        :meth:`_check_long`), unless that was just done at this step: the final map is then
+        the checked one (``info["converged"]`` True or False, never None). Otherwise nothing:
+        :meth:`estimate` polishes the whole graph with the buffered steps itself."""
+        n = self.problem.n_steps
+        if not self._long or self._batch or n == 0:
+            return
+        if self._buffer.size() or self._buffer_values.size() or self._external.size():
+            self._flush(extra=True)
+        if self._batch or not self._long or self._long_check.get("checked_at_step") == n:
+            return
+        if self._window_b:
+            try:
+                self._check_window()
+            except GTSAM_ERRORS as exc:   # as in _update_window: the whole graph from here on
+                self.failures.append(_first_line(exc))
+                self._leave_window()
+                self._recover(gtsam.NonlinearFactorGraph(), gtsam.Values(self.estimate_values))
+        else:
+            self._check_long()
+
     def estimate(self) -> MapEstimate:
         if self.problem.n_steps == 0:
             return MapEstimate.empty(reason="no steps yet")

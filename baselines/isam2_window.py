@@ -20,7 +20,7 @@ import numpy as np
 from bomgraph.stream import Step
 
 from .bearing_graph import BearingLog, poses_from_values
-from .factor_graph import GTSAM_ERRORS, _first_line, solve_lm
+from .lm_report import GTSAM_ERRORS, _first_line, solve_lm
 from .lm_report import polish
 from .lm_window import StepChunks
 

@@ -4,15 +4,17 @@
 of a :class:`~baselines.bearing_graph.FactorGraphConfig` (:func:`lm_params`), the Gauss-Newton
 check of a solution (:func:`gauss_newton_check`), the kept-if-lower Gauss-Newton polish of the
 iSAM2 mappers (:func:`polish`), what GTSAM raises (:data:`GTSAM_ERRORS`), and the
-:class:`~bomgraph.mapper.MapEstimate` of a solution (:func:`estimate_from_values`). :func:`baselines.factor_graph.solve_lm` puts them together; they live
-here so that :mod:`baselines.lm_window` can use them without importing the mappers.
+:class:`~bomgraph.mapper.MapEstimate` of a solution (:func:`estimate_from_values`), and
+:func:`solve_lm`, which puts them together; they live here so that
+:mod:`baselines.lm_window` can use them without importing the mappers (:mod:`baselines.factor_graph`
+re-exports them).
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Callable
 
 import gtsam
 import numpy as np
@@ -136,6 +138,98 @@ def polish(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, iterations: 
         if decrease <= decrease_tol:
             break
     return values, step, decrease, error
+
+
+def solve_lm(graph: gtsam.NonlinearFactorGraph, initial: gtsam.Values,
+             config: FactorGraphConfig,
+             robust_graph: gtsam.NonlinearFactorGraph | None = None, *,
+             looks_off: Callable[[gtsam.Values], bool] | None = None
+             ) -> tuple[gtsam.Values, SolveReport]:
+    """Levenberg-Marquardt on ``graph`` from ``initial``, with a robust pass if called for.
+
+    Without ``looks_off`` (the default): the Huber pass on ``robust_graph`` (if given) runs
+    first, the plain pass from its result, and a Gauss-Newton check of the result follows
+    (:func:`gauss_newton_check`). With ``looks_off(values)`` (True when a solution's residuals
+    or geometry are implausible): the plain pass runs first; only if ``looks_off`` says so of
+    its result does the Huber pass run (from ``initial``, then a plain pass from there: the
+    lower plain error is kept) and the Gauss-Newton check; an LM run that did not stop on its
+    tolerance is checked too. A Gauss-Newton step that is infinite (a singular system) or
+    predicts more than ``decrease_tol`` of decrease is never "converged". Never raises on a
+    failed solve: returns the best values reached and a report saying why
+    (:class:`SolveReport`).
+    """
+    params = lm_params(config)
+    iterations = 0
+    passes: list[str] = []
+    messages: list[str] = []
+    # id(values) -> (values, plain error): read off the optimizer where it has it; the values
+    # are held so that no id is reused
+    errors: dict[int, tuple[gtsam.Values, float]] = {}
+
+    def plain_error(v: gtsam.Values) -> float:
+        if id(v) not in errors:
+            errors[id(v)] = (v, float(graph.error(v)))
+        return errors[id(v)][1]
+
+    def run(name: str, g: gtsam.NonlinearFactorGraph, start: gtsam.Values
+            ) -> tuple[gtsam.Values, str] | None:
+        nonlocal iterations
+        try:
+            opt = gtsam.LevenbergMarquardtOptimizer(g, start, params)
+            if g is graph:
+                errors.setdefault(id(start), (start, float(opt.error())))
+            result = opt.optimize()
+        except GTSAM_ERRORS as exc:
+            messages.append(f"{name} pass failed: {_first_line(exc)}")
+            return None
+        if g is graph:
+            errors[id(result)] = (result, float(opt.error()))
+        n_it = int(opt.iterations())
+        iterations += n_it
+        passes.append(name)
+        stop = ("max_iterations" if n_it >= config.max_iterations else
+                "lambda_bound" if float(opt.lambda_()) >= config.lambda_upper_bound else
+                "tolerance")
+        return result, stop
+
+    def robust_then_plain(start: gtsam.Values) -> tuple[gtsam.Values, str] | None:
+        assert robust_graph is not None
+        got = run("huber", robust_graph, start)
+        if got is not None and plain_error(got[0]) <= plain_error(start):
+            start = got[0]
+        return run("plain", graph, start)
+
+    best: tuple[gtsam.Values, str] | None
+    if looks_off is None:
+        best = robust_then_plain(initial) if robust_graph is not None else \
+            run("plain", graph, initial)
+        check = True
+    else:
+        best = run("plain", graph, initial)
+        off = best is None or looks_off(best[0])
+        if off and robust_graph is not None:
+            other = robust_then_plain(initial)
+            if other is not None and (best is None
+                                      or plain_error(other[0]) < plain_error(best[0])):
+                best = other
+        check = off or best is None or best[1] != "tolerance"
+    e0 = plain_error(initial)
+    values, stop = best if best is not None else (initial, "failed")
+    e1 = plain_error(values)
+    step, decrease = gauss_newton_check(graph, values) if check else (math.nan, math.nan)
+    gn_ok = not check or (step <= ABSURD_STEP and (stop == "tolerance"
+                                                   or decrease <= config.decrease_tol))
+    converged = bool(stop != "failed" and math.isfinite(e1)
+                     and e1 <= e0 * (1 + 1e-12) + 1e-12 and gn_ok)
+    if not converged and not messages:
+        messages.append(
+            f"LM stopped on {stop}; " + (
+                "the linear system at the result is singular (a direction the measurements "
+                "do not determine)" if not math.isfinite(step) else
+                f"a Gauss-Newton step at the result has max-norm {step:.3g} and would still "
+                f"lower the error by {decrease:.3g} (decrease_tol {config.decrease_tol:g})"))
+    return values, SolveReport(converged, iterations, e0, e1, step, decrease, stop,
+                               tuple(passes), "; ".join(messages))
 
 
 def all_poses(values: gtsam.Values, n: int) -> np.ndarray:

@@ -24,7 +24,8 @@ Two uses (issue 14 items 1-2):
   new values. Bearings filed after their chunk was eliminated (a landmark entering late) are
   folded by conditioning on the held poses (:func:`fold_bearings`). Past
   ``lag_marginal_landmarks`` landmarks (large maps, where a dense marginal would cost
-  ``O(L^3)`` per iteration) the marginal is given up for *conditional folds*: each landmark's
+  ``O(L^3)`` per iteration), or when an elimination fails (``marginal_failure``), the
+  marginal is given up for *conditional folds*: each landmark's
   bearings from the older (held) poses folded into one Gaussian prior (as in
   :mod:`baselines.fixed_lag`), grown as steps leave the window, redone from all its old
   bearings when its point has moved more than ``refold_m`` from where it was folded, and all
@@ -48,8 +49,8 @@ import numpy as np
 from bomgraph.angles import angle_residual
 from bomgraph.stream import StreamHeader
 
-from .lm_report import GTSAM_ERRORS, lm_params
-from .bearing_graph import (FactorGraphConfig, bearing_noise, landmark_key, mid_key, pose_key,
+from .lm_report import GTSAM_ERRORS, _first_line, lm_params
+from .bearing_graph import (FactorGraphConfig, bearing_noise, landmark_key, pose_key,
                             prior_factor)
 from .graph_values import key_landmark_ids, landmark_keys, points_at
 
@@ -95,6 +96,7 @@ class StepChunks:
         # of LinearContainerFactors on the landmarks and the last eliminated boundary pose;
         # _late: bearings filed after their chunk was eliminated (folded by conditioning)
         self.marginal = config.lag_marginal_landmarks > 0
+        self.marginal_failure: str | None = None   # why the marginal was given up, if it failed
         self._n_marg = 0
         self._marg = gtsam.NonlinearFactorGraph()
         self._marg_landmarks = 0
@@ -269,13 +271,21 @@ class StepChunks:
         keys = list(nl.keyVector())
         n_lm = sum(1 for k in keys if _is_landmark(k))
         if n_lm > self.config.lag_marginal_landmarks:
-            self.marginal, self._marg, self._late = False, gtsam.NonlinearFactorGraph(), []
-            self.reset_folds()
+            self._give_up_marginal()
             return
         start = self._values(keys, held)
         hold = pose_key(b)
         gone = [k for k in keys if not _is_landmark(k) and k != hold]
-        tree, rest = nl.linearize(start).eliminatePartialMultifrontal(gone)
+        try:
+            tree, rest = nl.linearize(start).eliminatePartialMultifrontal(gone)
+        except GTSAM_ERRORS as exc:
+            # a nearly indeterminate elimination: seen where a pose passed millimetres from a
+            # landmark (its bearing's Jacobian ~1e6 times the others'; the whole system
+            # positive definite at condition ~1e12). The conditional folds need no
+            # elimination.
+            self.marginal_failure = _first_line(exc)
+            self._give_up_marginal()
+            return
         if self._keep:
             lms = [k for k in keys if _is_landmark(k)]
             xy = np.array([start.atPoint2(k) for k in lms]).reshape(-1, 2)
@@ -288,6 +298,11 @@ class StepChunks:
                 self._marg.add(gtsam.LinearContainerFactor(f, self._values(f.keys(), start)))
         self._n_marg = j
         self._marg_landmarks = n_lm
+
+    def _give_up_marginal(self) -> None:
+        """From now on the conditional folds (:meth:`_fold_upto`) instead of the marginal."""
+        self.marginal, self._marg, self._late = False, gtsam.NonlinearFactorGraph(), []
+        self.reset_folds()
 
     def back_substitute(self, current: gtsam.Values) -> gtsam.Values:
         """The eliminated poses given ``current`` (which holds every landmark and the newest

@@ -110,6 +110,11 @@ class Mapper(Protocol):
 
     ``step`` is called once per step in order ``t = 0, 1, 2, ...``; ``estimate`` may be called
     at any time and returns the current map (possibly empty), never raising for lack of data.
+
+    A mapper may also have a ``finish()`` method (not part of the protocol): :func:`run`
+    calls it once after the last step, before the final estimate, so the method can spend on
+    its final map what it does not spend on every checkpoint (the LM mappers solve the whole
+    graph once after windowed solves on a long recording). No step follows it.
     """
 
     def step(self, step: Step) -> None: ...
@@ -181,8 +186,18 @@ def checkpoint_times(n_steps: int, every: int) -> list[int]:
     return ts
 
 
-def _take(checkpoints: list[Checkpoint], c: Checkpoint,
-          on_checkpoint: Callable[[Checkpoint], None] | None, keep: bool) -> None:
+_END = object()
+
+
+def _estimate_at(mapper: Mapper, t: int, finish: Callable[[], None] | None,
+                 checkpoints: list[Checkpoint],
+                 on_checkpoint: Callable[[Checkpoint], None] | None, keep: bool) -> None:
+    """Take the checkpoint after step ``t``: ``finish()`` first if given (the last step), its
+    time counted in the estimate's."""
+    t0 = time.perf_counter()
+    if finish is not None:
+        finish()
+    c = Checkpoint(t, mapper.estimate(), time.perf_counter() - t0)
     if on_checkpoint is not None:
         on_checkpoint(c)
     if not keep:
@@ -195,6 +210,10 @@ def run(mapper: Mapper, steps: Iterable[Step], *, checkpoint_every: int = 10,
         on_checkpoint: Callable[[Checkpoint], None] | None = None,
         keep_checkpoints: bool = True) -> RunResult:
     """Feed ``steps`` to ``mapper``; estimate the map every ``checkpoint_every`` steps and last.
+
+    The steps are read one ahead, so the last one is known as such: after it the mapper's
+    ``finish()`` (if it has one, :class:`Mapper`) runs before the final estimate, its time
+    counted in that checkpoint's ``estimate_s``.
 
     Parameters
     ----------
@@ -217,24 +236,28 @@ def run(mapper: Mapper, steps: Iterable[Step], *, checkpoint_every: int = 10,
     start = clock()
     step_s: list[float] = []
     checkpoints: list[Checkpoint] = []
-    last_t = -1
-    for st in steps:
+    finish = getattr(mapper, "finish", None)
+    finish = finish if callable(finish) else None
+    it = iter(steps)
+    nxt = next(it, _END)
+    if nxt is _END:
+        raise ConfigError("run(): the stream has no steps")
+    while nxt is not _END:
+        st = nxt
         t0 = clock()
         mapper.step(st)
         step_s.append(clock() - t0)
-        last_t = st.t
-        if st.t > 0 and st.t % checkpoint_every == 0:
-            t0 = clock()
-            est = mapper.estimate()
-            _take(checkpoints, Checkpoint(st.t, est, clock() - t0), on_checkpoint,
-                  keep_checkpoints)
-    if last_t < 0:
-        raise ConfigError("run(): the stream has no steps")
-    if not checkpoints or checkpoints[-1].t != last_t:
-        t0 = clock()
-        est = mapper.estimate()
-        _take(checkpoints, Checkpoint(last_t, est, clock() - t0), on_checkpoint,
-              keep_checkpoints)
+        due = st.t > 0 and st.t % checkpoint_every == 0
+        try:     # one step ahead: the last step is known as such before its estimate
+            nxt = next(it, _END)
+        except Exception:
+            if due:   # the checkpoint of a step read before a bad one is not lost
+                _estimate_at(mapper, st.t, None, checkpoints, on_checkpoint, keep_checkpoints)
+            raise
+        if nxt is _END:
+            _estimate_at(mapper, st.t, finish, checkpoints, on_checkpoint, keep_checkpoints)
+        elif due:
+            _estimate_at(mapper, st.t, None, checkpoints, on_checkpoint, keep_checkpoints)
     return RunResult(method or type(mapper).__name__, tuple(checkpoints),
                      np.array(step_s), clock() - start)
 

@@ -78,6 +78,8 @@ def one_size(n: int, method: str = "stmds-smacof", seed: int = 11) -> dict:
     for s in stream.steps:
         mapper.step(s)
     c1 = time.process_time()
+    if callable(getattr(mapper, "finish", None)):   # as bomgraph.mapper.run after the last step
+        mapper.finish()
     est = mapper.estimate()
     c2 = time.process_time()
     rss_peak = _rss_bytes()

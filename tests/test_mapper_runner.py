@@ -42,6 +42,56 @@ def test_run_checkpoints_every_10_and_at_the_end() -> None:
         result.at(15)
 
 
+class Finisher(Recorder):
+    """A recorder with ``finish()``, logging the order of the calls."""
+
+    def __init__(self, header: StreamHeader) -> None:
+        super().__init__(header)
+        self.log: list[str] = []
+
+    def step(self, step: Step) -> None:
+        super().step(step)
+        self.log.append(f"step {step.t}")
+
+    def finish(self) -> None:
+        self.log.append("finish")
+
+    def estimate(self) -> MapEstimate:
+        self.log.append("estimate")
+        return super().estimate()
+
+
+@pytest.mark.parametrize("n_steps", [30, 35])
+def test_run_calls_finish_once_after_the_last_step_before_its_estimate(n_steps: int) -> None:
+    """Whether or not the last step falls on the cadence: ``finish()`` once, right before the
+    final estimate, and no checkpoint twice."""
+    s = simulate_run(paper_design(0)[0], SimConfig(n_steps=n_steps))
+    rec = Finisher(s.header)
+    seen: list[int] = []
+    result = run(rec, s.steps, checkpoint_every=10, on_checkpoint=lambda c: seen.append(c.t))
+    assert rec.log.count("finish") == 1
+    assert rec.log[-3:] == [f"step {n_steps}", "finish", "estimate"]
+    assert [c.t for c in result.checkpoints] == seen == checkpoint_times(n_steps + 1, 10)
+    assert rec.estimates == len(seen)
+
+
+def test_a_bad_step_after_a_checkpoint_step_keeps_that_checkpoint() -> None:
+    """``run()`` reads one step ahead; a stream that fails on the step after a checkpoint
+    step still delivers that checkpoint (nothing lost), then the error, and no ``finish()``
+    (the stream did not end)."""
+    s = simulate_run(paper_design(0)[0], SimConfig(n_steps=35))
+
+    def steps():
+        yield from s.steps[:21]
+        raise ConfigError("line 23: bad step (test)")
+
+    rec = Finisher(s.header)
+    seen: list[int] = []
+    with pytest.raises(ConfigError, match="line 23"):
+        run(rec, steps(), checkpoint_every=10, on_checkpoint=lambda c: seen.append(c.t))
+    assert seen == [10, 20] and "finish" not in rec.log
+
+
 def test_registry_lists_every_method_and_refuses_unknown_names() -> None:
     names = [m.name for m in available_methods()]
     for n in ["triangulate", "stmds-cs", "stmds-smacof", "ekf", "gtsam-batch", "gtsam-isam2",

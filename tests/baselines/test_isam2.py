@@ -33,6 +33,15 @@ def _final(stream: Stream, every: int, **options) -> object:
     return run(m, stream.steps, checkpoint_every=every).final
 
 
+def _unfinished(stream: Stream, **options) -> tuple[object, Isam2Mapper]:
+    """The map after the last step as ``estimate()`` gives it mid-stream (no ``finish()``,
+    which ``run()`` calls), and the mapper."""
+    m = Isam2Mapper(stream.header, **options)
+    for s in stream.steps:
+        m.step(s)
+    return m.estimate(), m
+
+
 # --------------------------------------------------------------------------------------------
 # Cadence independence (issue 15 item 1)
 # --------------------------------------------------------------------------------------------
@@ -83,13 +92,18 @@ def test_long_mode_never_calls_an_unchecked_estimate_converged(small: Stream) ->
     minimum: ``converged`` is None there (not True), with the last check beside it and the
     reason; the LM restart counter is reported."""
     long = {"long_after_steps": 60, "long_lag_steps": 30, "long_growth": 1.25}
-    final = _final(small, 10, **long)     # T = 120, last check at 111
+    final, m = _unfinished(small, **long)     # T = 120, last check at 111
     assert final.info["mode"] == "isam2-long"
     assert final.info["checked_at_step"] < small.truth.poses.shape[0]
     assert final.info["converged"] is None
     assert final.info["last_converged"] in (True, False)
     assert "not checked" in final.info["convergence"]
     assert final.info["lm_restarts"] >= 0
+    # finish() (run() calls it after the last step) checks the whole graph at T
+    m.finish()
+    done = m.estimate()
+    assert done.info["checked_at_step"] == small.truth.poses.shape[0]
+    assert done.info["converged"] is True and "convergence" in done.info
 
 
 def test_long_mode_checks_the_whole_graph_each_time_it_doubles(small: Stream) -> None:
@@ -98,7 +112,7 @@ def test_long_mode_checks_the_whole_graph_each_time_it_doubles(small: Stream) ->
     it up to T = 120; a map taken right at a check says it passed."""
     assert Isam2Config().long_growth == 2.0
     long = {"long_after_steps": 30, "long_lag_steps": 30}
-    final = _final(small, 10, **long)
+    final, _ = _unfinished(small, **long)
     assert final.info["mode"] == "isam2-long"
     assert final.info["checked_at_step"] == 71 and final.info["converged"] is None
     cut = replace(small, steps=small.steps[:71],
@@ -106,7 +120,7 @@ def test_long_mode_checks_the_whole_graph_each_time_it_doubles(small: Stream) ->
                               small.truth.poses[:71]))
     at = _final(cut, 10, **long)
     assert at.info["checked_at_step"] == 71 and at.info["converged"] is True
-    dense = _final(small, 10, long_growth=1.25, **long)
+    dense, _ = _unfinished(small, long_growth=1.25, **long)
     assert dense.info["checked_at_step"] == 111
 
 
