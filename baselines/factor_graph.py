@@ -380,6 +380,8 @@ class ScheduledSolver:
     ``estimate()`` returns the estimate of the last update if it is of the current step, else
     catches up with one update now. Called every 10 steps (the paper) it therefore adds no
     solve; called only at the end it gets the same map as at the scheduled steps.
+    ``finish()`` (called by :func:`bomgraph.mapper.run` after the last step) makes a long
+    run's final map the whole graph's minimum (:meth:`finish`).
     """
 
     config: FactorGraphConfig

@@ -185,7 +185,8 @@ class Isam2Mapper(WindowLongMode):
     and ``info["checked_at_step"]``, the step of the whole-graph check it reports; with the
     window also ``info["window_start"]``, its held pose, and ``info["window_rebuilds"]``).
     In long mode with the window, the map's older poses are back-substituted from the
-    window's solution (:meth:`current_values`).
+    window's solution (:meth:`current_values`). At the end of a run, :meth:`finish` (called
+    by :func:`bomgraph.mapper.run`) checks the whole graph once more in long mode.
 
     If an update raises (e.g. an indeterminate linear system), the external factors of that
     update (:meth:`add_factors`) are dropped and the solver is rebuilt from the factors held

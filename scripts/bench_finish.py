@@ -10,10 +10,14 @@ cadence. Per run: CPU seconds (``time.process_time``, single-threaded BLAS), the
 for the LM mappers, the final values' cost on the whole graph, every bearing in
 (``state.graph``). The medians are printed and saved as JSON.
 
+With ``--mc K``: K small simulated worlds instead (:func:`monte_carlo`), ``gtsam-batch`` with
+and without ``finish()`` against the oracle's whole-graph solves.
+
 Usage::
 
     python scripts/bench_finish.py [--steps 3000] [--repeats 1]
         [--methods gtsam-batch,gtsam-isam2,hybrid,hybrid-isam2,oracle] [--out FILE.json]
+    python scripts/bench_finish.py --mc 12 --steps 300 --long-after 60
 """
 
 from __future__ import annotations
@@ -61,6 +65,40 @@ def one_run(stream: Stream, method: str, finish: bool, preset: str | None) -> di
     return row
 
 
+def monte_carlo(worlds: int, n_steps: int, long_after: int) -> list[dict[str, Any]]:
+    """``worlds`` small simulated worlds (30 landmarks, seeds 100, 101, ...): ``gtsam-batch``
+    with its long mode from ``long_after`` steps (a 20-pose window, a whole-graph solve when
+    the graph has doubled) with and without ``finish()``, and the oracle without the long
+    mode (whole-graph solves from the truth): final MPE in cm of each."""
+    from bomgraph.sim import simulate
+    import numpy as np
+
+    long = {"lag_after_steps": long_after, "lag_steps": 20, "full_growth": 2.0}
+    rows = []
+    for k in range(worlds):
+        stream = simulate(SimConfig(n_steps=n_steps, n_landmarks=30),
+                          np.random.default_rng(100 + k))
+        row: dict[str, Any] = {"seed": 100 + k}
+        for finish in (True, False):
+            mapper = create_mapper("gtsam-batch", stream.header, **long)
+            if not finish:
+                mapper.finish = None
+            final = run(mapper, stream.steps).final
+            row["finish" if finish else "window"] = 100 * score_estimate(final,
+                                                                         stream.truth).mpe_m
+        oracle = run(create_mapper("oracle", stream.header, truth=stream.truth,
+                                   lag_after_steps=10 ** 9), stream.steps).final
+        row["oracle_whole"] = 100 * score_estimate(oracle, stream.truth).mpe_m
+        print(json.dumps(row), flush=True)
+        rows.append(row)
+    for key in ("finish", "window"):
+        gaps = [abs(r[key] - r["oracle_whole"]) for r in rows]
+        print(f"{key}: mean MPE {statistics.mean(r[key] for r in rows):.4f} cm, "
+              f"|MPE - oracle's| mean {statistics.mean(gaps):.4f}, max {max(gaps):.4f} cm")
+    print(f"oracle (whole graph): mean MPE {statistics.mean(r['oracle_whole'] for r in rows):.4f} cm")
+    return rows
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--steps", type=int, default=3000)
@@ -70,7 +108,17 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--repeats", type=int, default=1)
     ap.add_argument("--methods", default=METHODS)
     ap.add_argument("--out")
+    ap.add_argument("--mc", type=int, default=0, metavar="K",
+                    help="instead: K small worlds of --steps steps, gtsam-batch in long mode "
+                         "from --long-after (monte_carlo)")
+    ap.add_argument("--long-after", type=int, default=60)
     args = ap.parse_args(argv)
+    if args.mc:
+        rows = monte_carlo(args.mc, args.steps, args.long_after)
+        if args.out:
+            with open(args.out, "w") as fh:
+                json.dump({"monte_carlo": rows}, fh, indent=1)
+        return 0
     stream = (read_stream(args.stream) if args.stream else
               simulate_run(paper_design(args.seed)[0], SimConfig(n_steps=args.steps)))
     rows: list[dict[str, Any]] = []
