@@ -441,6 +441,7 @@ class ScheduledSolver:
             return
         info = {**est.info, **report.as_info(), "near_bearings_back": left_out}
         info.pop("near_bearings_left_out", None)
+        info.pop("out_of_reach", None)   # to_estimate says it anew, for these values
         self._estimate = state.to_estimate(values, info, state.out_of_reach(values))
 
     def estimate(self) -> MapEstimate:

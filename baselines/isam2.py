@@ -501,6 +501,8 @@ class Isam2Mapper(WindowLongMode):
                 self.failures.append(_first_line(exc))
                 self._leave_window()
                 self._recover(gtsam.NonlinearFactorGraph(), gtsam.Values(self.estimate_values))
+                if not self._batch:   # the recovered whole graph, checked as promised
+                    self._check_long()
         else:
             self._check_long()
 
@@ -537,6 +539,8 @@ class Isam2Mapper(WindowLongMode):
                 "dropped_external_factors": self.dropped_external}
         if self.failures:
             info["last_failure"] = self.failures[-1]
+        if self._chunks is not None and self._chunks.marginal_failure:
+            info["window_marginal_failure"] = self._chunks.marginal_failure
         return estimate_from_values(self.problem, values, graph, info,
                                      self.config.covariances)
 

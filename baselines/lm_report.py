@@ -283,5 +283,6 @@ def estimate_from_values(graph: BearingGraph, values: gtsam.Values,
                        info=info)
 
 
-__all__ = ["GTSAM_ERRORS", "ABSURD_STEP", "SolveReport", "lm_params", "gauss_newton_check",
-           "polish", "all_poses", "marginal_covariances", "estimate_from_values"]
+__all__ = ["GTSAM_ERRORS", "ABSURD_STEP", "SolveReport", "lm_params", "solve_lm",
+           "gauss_newton_check", "polish", "all_poses", "marginal_covariances",
+           "estimate_from_values"]

@@ -12,6 +12,7 @@ use, so ``bomgraph`` names the ``baselines`` methods without importing them.
 from __future__ import annotations
 
 import dataclasses
+import inspect
 import time
 from dataclasses import dataclass, field
 from typing import (Any, Callable, Iterable, Mapping, Protocol, Sequence,
@@ -114,7 +115,8 @@ class Mapper(Protocol):
     A mapper may also have a ``finish()`` method (not part of the protocol): :func:`run`
     calls it once after the last step, before the final estimate, so the method can spend on
     its final map what it does not spend on every checkpoint (the LM mappers solve the whole
-    graph once after windowed solves on a long recording). No step follows it.
+    graph once after windowed solves on a long recording). No step follows it. It takes no
+    arguments; a ``finish`` that needs some is refused before the first step.
     """
 
     def step(self, step: Step) -> None: ...
@@ -128,7 +130,8 @@ class Mapper(Protocol):
 
 @dataclass(frozen=True)
 class Checkpoint:
-    """The estimate after step ``t`` and the wall time ``estimate()`` took."""
+    """The estimate after step ``t`` and the wall time ``estimate()`` took (at the final
+    checkpoint, with the mapper's ``finish()`` before it)."""
 
     t: int
     estimate: MapEstimate
@@ -205,6 +208,25 @@ def _estimate_at(mapper: Mapper, t: int, finish: Callable[[], None] | None,
     checkpoints.append(c)
 
 
+def _finish_hook(mapper: Mapper) -> Callable[[], Any] | None:
+    """The mapper's ``finish`` if it has one (:class:`Mapper`), checked to take no arguments."""
+    finish = getattr(mapper, "finish", None)
+    if not callable(finish):
+        return None
+    try:
+        signature = inspect.signature(finish)
+    except (TypeError, ValueError):   # no signature to read (a builtin): called as it is
+        return finish
+    try:
+        signature.bind()
+    except TypeError:
+        raise ConfigError(
+            f"{type(mapper).__name__}.finish({', '.join(signature.parameters)}) takes "
+            f"arguments, but run() calls finish() with none, once after the last step (the "
+            f"Mapper's end-of-stream hook); give it defaults or rename the method") from None
+    return finish
+
+
 def run(mapper: Mapper, steps: Iterable[Step], *, checkpoint_every: int = 10,
         method: str | None = None,
         on_checkpoint: Callable[[Checkpoint], None] | None = None,
@@ -236,8 +258,7 @@ def run(mapper: Mapper, steps: Iterable[Step], *, checkpoint_every: int = 10,
     start = clock()
     step_s: list[float] = []
     checkpoints: list[Checkpoint] = []
-    finish = getattr(mapper, "finish", None)
-    finish = finish if callable(finish) else None
+    finish = _finish_hook(mapper)
     it = iter(steps)
     nxt = next(it, _END)
     if nxt is _END:

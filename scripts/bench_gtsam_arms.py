@@ -12,10 +12,10 @@ CPU ratios are paired:
 * ``oracle-warm`` (oracle only): LM started from the previous checkpoint's solution, the new
   poses and landmarks at the truth, instead of the truth for everything;
 * ``lambda-carry`` (the LM arms): each Levenberg-Marquardt solve of
-  :func:`baselines.factor_graph.solve_lm` starts with lambda = the previous solve's final
+  :func:`baselines.lm_report.solve_lm` starts with lambda = the previous solve's final
   lambda / ``--carry-div`` (at least GTSAM's default 1e-5) instead of 1e-5. The Huber and
   warm pre-solves keep GTSAM's default. Implemented here by wrapping the optimizer class in
-  ``baselines.factor_graph``'s namespace (an experiment, not a library option);
+  ``baselines.lm_report``'s namespace (an experiment, not a library option);
 * ``options``: the arm with config fields overridden (``--option
   warm_relative_error_tol=1e-4``, repeatable; values parsed as Python literals).
 
@@ -54,7 +54,7 @@ from typing import Any, Callable, Iterator  # noqa: E402
 import gtsam  # noqa: E402
 import numpy as np  # noqa: E402
 
-import baselines.factor_graph as factor_graph  # noqa: E402
+import baselines.lm_report as lm_report  # noqa: E402
 from baselines.bearing_graph import insert_pose, landmark_key, mid_key, pose_key  # noqa: E402
 from baselines.factor_graph import OracleMapper  # noqa: E402
 from bomgraph.errors import BomgraphError  # noqa: E402
@@ -116,12 +116,12 @@ def lambda_carry(div: float) -> Iterator[None]:
     proxy = types.SimpleNamespace(**{k: getattr(gtsam, k) for k in dir(gtsam)
                                      if not k.startswith("__")})
     proxy.LevenbergMarquardtOptimizer = Carried
-    saved = factor_graph.gtsam
-    factor_graph.gtsam = proxy  # type: ignore[assignment]
+    saved = lm_report.gtsam   # solve_lm's namespace: it builds the optimizers
+    lm_report.gtsam = proxy  # type: ignore[assignment]
     try:
         yield
     finally:
-        factor_graph.gtsam = saved
+        lm_report.gtsam = saved
 
 
 def estimate_hash(est: MapEstimate) -> str:

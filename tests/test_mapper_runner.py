@@ -75,6 +75,29 @@ def test_run_calls_finish_once_after_the_last_step_before_its_estimate(n_steps: 
     assert rec.estimates == len(seen)
 
 
+def test_a_finish_that_takes_arguments_is_refused_before_the_first_step() -> None:
+    """``run()`` calls ``finish()`` with no arguments; a plugin whose ``finish`` means
+    something else (and needs an argument) gets one ConfigError up front, not a TypeError
+    after the whole stream."""
+    class OwnFinish(Recorder):
+        def finish(self, result: object) -> None: ...
+
+    class DefaultedFinish(Recorder):
+        finished = 0
+
+        def finish(self, result: object = None) -> None:
+            self.finished += 1
+
+    s = simulate_run(paper_design(0)[0])
+    mapper = OwnFinish(s.header)
+    with pytest.raises(ConfigError, match=r"OwnFinish\.finish\(result\) takes arguments"):
+        run(mapper, s.steps[:30])
+    assert mapper.ts == []
+    ok = DefaultedFinish(s.header)
+    run(ok, s.steps[:30])
+    assert ok.finished == 1 and len(ok.ts) == 30
+
+
 def test_a_bad_step_after_a_checkpoint_step_keeps_that_checkpoint() -> None:
     """``run()`` reads one step ahead; a stream that fails on the step after a checkpoint
     step still delivers that checkpoint (nothing lost), then the error, and no ``finish()``
