@@ -36,7 +36,7 @@ from ..angles import angle_residual
 from ..errors import ConfigError
 from ..geometry import between, dead_reckon, effective_parallax, to_local
 from .bundle_lm import (SIGMA_FLOOR, _bearing_residuals, _Problem,  # noqa: F401 (re-exported)
-                        _dense_information, _levenberg_marquardt, arrow_inverse, uses_arrow)
+                        _levenberg_marquardt)
 from .triangulation import PairEstimates, pair_indices
 from .window import window_lsq_points
 
@@ -312,7 +312,6 @@ def _fit(u: np.ndarray, sig: np.ndarray, bearing_sigma_rad: float, brg: np.ndarr
     drop_k: list[int] = []
     drop_c: list[int] = []
     n_lm = len(column)
-    inverse: _Inverse | None = None
     while True:
         if n_lm == 0:
             return (poses, column, points, (np.array(drop_k, np.int64),
@@ -320,7 +319,7 @@ def _fit(u: np.ndarray, sig: np.ndarray, bearing_sigma_rad: float, brg: np.ndarr
                     bearing_sigma_rad)
         for rnd in range(SIGMA_ROUNDS if estimate_sigma else 1):
             prob = _Problem(u, sig, bearing_sigma_rad, k, lm, theta, n_lm)
-            poses, points, blocks, converged = _levenberg_marquardt(prob, poses, points,
+            poses, points, info, converged = _levenberg_marquardt(prob, poses, points,
                                                                    max_iter, tol)
             res_rad = _bearing_residuals(poses, points, k, lm, theta)[0]
             res = np.abs(res_rad) / bearing_sigma_rad
@@ -329,8 +328,11 @@ def _fit(u: np.ndarray, sig: np.ndarray, bearing_sigma_rad: float, brg: np.ndarr
                 # at the newest pose is mostly absorbed by that pose's heading, so its raw
                 # residual understates it and good rays of the same landmark would be
                 # dropped first
-                inverse = _Inverse(prob, blocks)
-                h = inverse.leverage(prob.bearing_rows(poses, points))
+                jb = prob.bearing_rows(poses, points)
+                try:
+                    h = np.einsum("ri,ri->r", jb, np.linalg.solve(info, jb.T).T)
+                except np.linalg.LinAlgError:
+                    h = np.zeros(len(k))
                 res = res / np.sqrt(np.clip(1.0 - h, 1e-6, 1.0))
             if not estimate_sigma or rnd == SIGMA_ROUNDS - 1:
                 break
@@ -361,9 +363,7 @@ def _fit(u: np.ndarray, sig: np.ndarray, bearing_sigma_rad: float, brg: np.ndarr
         column, points = column[ok], points[ok]
         k, lm, theta = k[keep], new_index[lm[keep]], theta[keep]
         n_lm = len(column)
-    if inverse is None or inverse.blocks is not blocks:
-        inverse = _Inverse(prob, blocks)
-    cov = inverse.landmark_covariance()
+    cov = _landmark_covariance(info, prob.n_pose_vars)
     return (poses, column, points, (np.array(drop_k, np.int64), np.array(drop_c, np.int64)),
             cov, converged, bearing_sigma_rad)
 
@@ -469,57 +469,6 @@ def _gates(poses: np.ndarray, points: np.ndarray, k: np.ndarray, lm: np.ndarray,
     far = np.bincount(lm, bad, minlength=n_lm) > 0
     parallax = effective_parallax(ang, lm, n_lm)
     return (count >= 2) & ~far & (parallax >= max(min_parallax_rad, 1e-15))
-
-
-class _Inverse:
-    """What a window's fit needs of ``(J^T J)^-1`` at its solution (``blocks``:
-    :meth:`_Problem.blocks`): each ray's leverage and the landmarks' covariance. Long windows
-    (:func:`~bomgraph.stmds.bundle_lm.uses_arrow`) take them from the arrow structure
-    (:func:`~bomgraph.stmds.bundle_lm.arrow_inverse`, computed once, ``O(P^2)``); short ones,
-    or a long one whose banded factorisation fails, from the dense matrix (``O(P^3)``)."""
-
-    def __init__(self, prob: _Problem, blocks: tuple[np.ndarray, ...]) -> None:
-        self.prob, self.blocks = prob, blocks
-        n_p = prob.n_pose_vars
-        self._arrow = arrow_inverse(blocks) if uses_arrow(n_p, prob.n - n_p) else None
-        self._dense: np.ndarray | None = None
-
-    def _info(self) -> np.ndarray:
-        if self._dense is None:
-            self._dense = _dense_information(self.blocks)
-        return self._dense
-
-    def leverage(self, jb: np.ndarray) -> np.ndarray:
-        """``j^T (J^T J)^-1 j`` of each bearing row of ``jb`` (:meth:`_Problem.bearing_rows`,
-        ``(R, n)``); zeros if the information is singular."""
-        if self._arrow is None:
-            try:
-                return np.einsum("ri,ri->r", jb, np.linalg.solve(self._info(), jb.T).T)
-            except np.linalg.LinAlgError:
-                return np.zeros(len(jb))
-        s, ainv_kk, ainv_b, sigma_l = self._arrow
-        n_p = self.prob.n_pose_vars
-        js = jb * s                                    # the rows in the scaled variables
-        pc = self.prob.pose_col[self.prob.k]           # -1: seen from the fixed pose 0
-        var = pc >= 0
-        kk = np.where(var, pc // 3, 0)
-        jp = np.take_along_axis(js, np.where(var, pc, 0)[:, None] + np.arange(3), axis=1)
-        jp[~var] = 0.0
-        w3 = ainv_b.reshape(-1, 3, ainv_b.shape[1])[kk]             # (R, 3, 2 L)
-        v = (jp[:, :, None] * w3).sum(1) - js[:, n_p:]
-        return np.einsum("ri,rij,rj->r", jp, ainv_kk[kk], jp) + np.einsum(
-            "rj,rj->r", v @ sigma_l, v)
-
-    def landmark_covariance(self) -> np.ndarray | None:
-        """The landmarks' block of ``(J^T J)^-1`` (``2 L x 2 L``), None if singular."""
-        if self._arrow is None:
-            return _landmark_covariance(self._info(), self.prob.n_pose_vars)
-        s, _, _, sigma_l = self._arrow
-        sl = s[self.prob.n_pose_vars:]
-        cov = sigma_l * sl[:, None] * sl[None, :]
-        if not np.all(np.isfinite(cov)) or np.any(np.diag(cov) <= 0):
-            return None
-        return cov
 
 
 def _landmark_covariance(info: np.ndarray, n_pose_vars: int) -> np.ndarray | None:

@@ -206,9 +206,8 @@ class _Problem:
 
 def _levenberg_marquardt(prob: _Problem, poses: np.ndarray, points: np.ndarray,
                          max_iter: int, tol: float
-                         ) -> tuple[np.ndarray, np.ndarray, tuple[np.ndarray, ...], bool]:
-    """Minimise the window's cost; returns poses, points, the blocks of ``J^T J`` at the end
-    (:meth:`_Problem.blocks`; :func:`_dense_information` makes the matrix), converged.
+                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray, bool]:
+    """Minimise the window's cost; returns poses, points, ``J^T J`` at the end, converged.
 
     Each step solves the damped normal equations by the Schur complement on the poses
     (:meth:`_Problem.normal_equations`, :func:`_schur_step`): the landmark block is 2 x 2
@@ -241,7 +240,7 @@ def _levenberg_marquardt(prob: _Problem, poses: np.ndarray, points: np.ndarray,
         if small:
             converged = True
             break
-    return poses, points, blocks, converged
+    return poses, points, _dense_information(blocks), converged
 
 
 #: Signs of the 2 x 2 adjugate ``[[d, -b], [-c, a]]`` (flattened).
@@ -265,7 +264,7 @@ def _schur_step(blocks: tuple[np.ndarray, ...], lam: float) -> np.ndarray | None
     g_l = gl.reshape(-1, 2)
     if n_p == 0:
         return -(c_inv * g_l[:, None, :]).sum(2).ravel()
-    if uses_arrow(n_p, len(gl)):
+    if n_p >= ARROW_MIN_POSE_VARS and n_p > len(gl):
         return _arrow_step(a_d, b, c_d, gp, gl)
     b3 = b.reshape(n_p, -1, 2)
     bw = (b3[:, :, 0, None] * c_inv[None, :, 0] + b3[:, :, 1, None] * c_inv[None, :, 1]
@@ -323,71 +322,6 @@ def _arrow_step(a_d: np.ndarray, b: np.ndarray, c_d: np.ndarray, gp: np.ndarray,
     return delta if np.all(np.isfinite(delta)) else None
 
 
-def uses_arrow(n_pose_vars: int, n_landmark_vars: int) -> bool:
-    """Whether a window eliminates its poses first (:func:`_arrow_step`,
-    :func:`arrow_inverse`): long windows with more pose than landmark variables."""
-    return n_pose_vars >= ARROW_MIN_POSE_VARS and n_pose_vars > n_landmark_vars
-
-
-def arrow_inverse(blocks: tuple[np.ndarray, ...]
-                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
-    """The blocks of ``(J^T J)^-1`` a long window's fit needs, without the dense inverse.
-
-    With the information ``[[A, B], [B^T, C]]`` (poses first; ``A`` block-tridiagonal, ``C``
-    2 x 2 block-diagonal) Jacobi-scaled by ``s = diag(J^T J)^-1/2`` (as the dense path,
-    :func:`bomgraph.stmds.bundle._landmark_covariance`), ``A = U^T U`` banded and ``S = C -
-    B^T A^-1 B`` the landmarks' Schur complement:
-
-    * ``(J^T J)^-1`` restricted to the landmarks is ``S^-1`` (scaled back);
-    * a ray's leverage ``j^T (J^T J)^-1 j`` is ``j_p^T (A^-1)_kk j_p + v^T S^-1 v`` with ``v =
-      (A^-1 B)_k^T j_p - j_l`` (``k`` its pose, ``j_p``, ``j_l`` the ray's pose and landmark
-      entries; the block inverse of the arrow matrix), so only the 3 x 3 diagonal blocks of
-      ``A^-1`` are needed: ``(A^-1)_kk = X_k^T X_k`` over the columns of ``X = U^-T``, one
-      banded triangular solve.
-
-    ``O(P^2)`` for ``P`` pose variables against ``O(P^3)`` for the dense inverse. Returns, in
-    the scaled variables, ``(s (P + 2 L,), (A^-1)_kk (P / 3, 3, 3), A^-1 B (P, 2 L), S^-1 (2 L,
-    2 L))``; None if a factorisation fails (the caller then takes the dense path)."""
-    from scipy.linalg import LinAlgError, cholesky_banded
-    from scipy.linalg.lapack import dtbtrs
-
-    a, b, c, gp, gl = blocks
-    n_p, n_l = len(gp), len(gl)
-    s = 1.0 / np.sqrt(np.maximum(np.concatenate([a.diagonal(),
-                                                 c[:, [0, 1], [0, 1]].ravel()]), 1e-300))
-    sp, sl = s[:n_p], s[n_p:]
-    band = np.zeros((6, n_p))
-    for k in range(6):
-        band[5 - k, k:] = a.diagonal(k) * sp[k:] * sp[:n_p - k]
-    b_s = b * sp[:, None] * sl[None, :]
-    try:
-        factor = cholesky_banded(band, lower=False, check_finite=False)
-    except (LinAlgError, ValueError):
-        return None
-    rhs = np.column_stack([b_s, np.eye(n_p)])
-    y, info = dtbtrs(factor, rhs, uplo="U", trans="T")        # U^-T [B, I]
-    if info != 0:
-        return None
-    x, y_b = y[:, n_l:], y[:, :n_l]                            # U^-T, U^-T B
-    ainv_b, info = dtbtrs(factor, y_b, uplo="U", trans="N")   # A^-1 B
-    if info != 0:
-        return None
-    x3 = x.reshape(n_p, n_p // 3, 3)
-    ainv_kk = np.einsum("rki,rkj->kij", x3, x3)
-    schur = -(y_b.T @ y_b)                                     # - B^T A^-1 B
-    lm = np.arange(0, n_l, 2)
-    for i in range(2):
-        for j in range(2):
-            schur[lm + i, lm + j] += c[:, i, j] * sl[lm + i] * sl[lm + j]
-    try:
-        sigma_l = np.linalg.inv(schur)
-    except np.linalg.LinAlgError:
-        return None
-    if not (np.all(np.isfinite(sigma_l)) and np.all(np.isfinite(ainv_b))):
-        return None
-    return s, ainv_kk, ainv_b, sigma_l
-
-
 def _dense_information(blocks: tuple[np.ndarray, ...]) -> np.ndarray:
     """``J^T J`` as one dense matrix (poses first, then landmarks) from its blocks."""
     a, b, c, gp, gl = blocks
@@ -403,4 +337,4 @@ def _dense_information(blocks: tuple[np.ndarray, ...]) -> np.ndarray:
     return info
 
 
-__all__ = ["SIGMA_FLOOR", "arrow_inverse", "uses_arrow"]
+__all__ = ["SIGMA_FLOOR"]

@@ -565,32 +565,3 @@ def test_invalid_bundle_options_raise_config_error(bad: dict) -> None:
         StmdsConfig(**bad)
     assert create_mapper("stmds-smacof", header, tri_window=8, tri_method="ba",
                          tri_outlier_sigma=None, tri_grow=1).config.tri_grow == 1
-
-
-@pytest.mark.parametrize("seed", [21, 22, 23])
-def test_long_windows_take_leverage_and_covariance_from_the_arrow_to_the_dense_values(
-        seed: int) -> None:
-    """A long window's ray leverages ``j^T (J^T J)^-1 j`` and landmark covariance come from
-    the arrow structure (banded pose block, landmarks' Schur complement: ``arrow_inverse``)
-    without the dense inverse; they equal the dense computation to rounding, including rays
-    seen from the fixed first pose."""
-    from bomgraph.stmds.bundle import _Inverse, _landmark_covariance
-    from bomgraph.stmds.bundle_lm import _dense_information, uses_arrow
-
-    w, n = 30 + seed - 21, 6
-    prob, p0, q0, _ = _perturbed_problem(seed, w, n)
-    assert uses_arrow(prob.n_pose_vars, 2 * n) and np.any(prob.k == 0)
-    _, blocks = prob.normal_equations(p0, q0)
-    inverse = _Inverse(prob, blocks)
-    assert inverse._arrow is not None                   # the arrow path, not the fallback
-    info = _dense_information(blocks)
-    jb = prob.bearing_rows(p0, q0)
-    dense_h = np.einsum("ri,ri->r", jb, np.linalg.solve(info, jb.T).T)
-    np.testing.assert_allclose(inverse.leverage(jb), dense_h, rtol=1e-8, atol=1e-12)
-    assert np.all((dense_h > 0) & (dense_h < 1))
-    np.testing.assert_allclose(inverse.landmark_covariance(),
-                               _landmark_covariance(info, prob.n_pose_vars), rtol=1e-8,
-                               atol=1e-14)
-    # and against the plain inverse, unscaled: the Jacobi scaling is undone correctly
-    plain = np.linalg.inv(info)[prob.n_pose_vars:, prob.n_pose_vars:]
-    np.testing.assert_allclose(inverse.landmark_covariance(), plain, rtol=1e-7, atol=1e-14)
