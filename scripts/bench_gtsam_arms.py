@@ -13,8 +13,8 @@ CPU ratios are paired:
   poses and landmarks at the truth, instead of the truth for everything;
 * ``lambda-carry`` (the LM arms): each Levenberg-Marquardt solve of
   :func:`baselines.lm_report.solve_lm` starts with lambda = the previous solve's final
-  lambda / ``--carry-div`` (at least GTSAM's default 1e-5) instead of 1e-5. The Huber and
-  warm pre-solves keep GTSAM's default. Implemented here by wrapping the optimizer class in
+  lambda / ``--carry-div`` (at least GTSAM's default 1e-5) instead of 1e-5 (its Huber
+  passes too); the warm pre-solves (``baselines/lm_window.py``) keep GTSAM's default. Implemented here by wrapping the optimizer class in
   ``baselines.lm_report``'s namespace (an experiment, not a library option);
 * ``options``: the arm with config fields overridden (``--option
   warm_relative_error_tol=1e-4``, repeatable; values parsed as Python literals).
