@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import importlib.util
 import math
 import sys
 from pathlib import Path
@@ -12,13 +11,11 @@ import numpy as np
 from bomgraph.sim import SimConfig, simulate
 from bomgraph.stream_file import write_stream
 
+from _scripts import load_script  # noqa: E402  (tests/_scripts.py)
+
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "scripts"))
-_spec = importlib.util.spec_from_file_location("bench_bound_cost",
-                                               ROOT / "scripts" / "bench_bound_cost.py")
-bench = importlib.util.module_from_spec(_spec)
-sys.modules["bench_bound_cost"] = bench
-_spec.loader.exec_module(bench)
+bench = load_script("bench_bound_cost")
 
 
 def test_verdict_bands() -> None:

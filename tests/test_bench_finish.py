@@ -2,16 +2,12 @@
 
 from __future__ import annotations
 
-import importlib.util
 import json
-import sys
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-_spec = importlib.util.spec_from_file_location("bench_finish", ROOT / "scripts" / "bench_finish.py")
-bench = importlib.util.module_from_spec(_spec)
-sys.modules["bench_finish"] = bench
-_spec.loader.exec_module(bench)
+from _scripts import load_script  # noqa: E402  (tests/_scripts.py)
+
+bench = load_script("bench_finish")
 
 
 def test_a_short_run_is_the_same_with_and_without_finish(tmp_path: Path) -> None:

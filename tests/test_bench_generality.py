@@ -2,21 +2,15 @@
 
 from __future__ import annotations
 
-import importlib.util
 import math
-import sys
-from pathlib import Path
 
 import numpy as np
 
 from bomgraph.stream import Truth
 
-ROOT = Path(__file__).resolve().parents[1]
-_spec = importlib.util.spec_from_file_location("bench_generality",
-                                               ROOT / "scripts" / "bench_generality.py")
-bench = importlib.util.module_from_spec(_spec)
-sys.modules["bench_generality"] = bench
-_spec.loader.exec_module(bench)
+from _scripts import load_script  # noqa: E402  (tests/_scripts.py)
+
+bench = load_script("bench_generality")
 
 TRUE_XY = np.array([[0.0, 0.0], [4.0, 0.0], [4.0, 3.0], [0.0, 3.0], [2.0, 6.0]])
 TRUTH = Truth(np.arange(5, dtype=np.int64), TRUE_XY, np.zeros((1, 3)))

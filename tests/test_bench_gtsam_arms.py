@@ -3,8 +3,6 @@ comparison table (issue 14)."""
 
 from __future__ import annotations
 
-import importlib.util
-from pathlib import Path
 
 import pytest
 
@@ -14,11 +12,9 @@ import baselines.lm_report as lm_report  # noqa: E402
 from bomgraph.mapper import create_mapper, run  # noqa: E402
 from bomgraph.sim import SimConfig, paper_design, simulate_run  # noqa: E402
 
-ROOT = Path(__file__).resolve().parents[1]
-_spec = importlib.util.spec_from_file_location("bench_gtsam_arms",
-                                               ROOT / "scripts" / "bench_gtsam_arms.py")
-bench = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(bench)  # type: ignore[union-attr]
+from _scripts import load_script  # noqa: E402  (tests/_scripts.py)
+
+bench = load_script("bench_gtsam_arms")
 
 SMALL = SimConfig(n_steps=60, n_landmarks=20)
 

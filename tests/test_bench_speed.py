@@ -3,17 +3,14 @@ through the warm LM loop, and the table it prints (issue 14 item 4)."""
 
 from __future__ import annotations
 
-import importlib.util
-from pathlib import Path
 
 import pytest
 
 pytest.importorskip("gtsam")
 
-ROOT = Path(__file__).resolve().parents[1]
-_spec = importlib.util.spec_from_file_location("bench_speed", ROOT / "scripts" / "bench_speed.py")
-bench = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(bench)  # type: ignore[union-attr]
+from _scripts import load_script  # noqa: E402  (tests/_scripts.py)
+
+bench = load_script("bench_speed")
 
 
 def test_the_issue_machine_itself_gives_the_issue_ratio() -> None:

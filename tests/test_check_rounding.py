@@ -3,9 +3,7 @@ moves."""
 
 from __future__ import annotations
 
-import importlib.util
 import json
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -15,12 +13,9 @@ from bomgraph.mapper import create_mapper, run
 from bomgraph.sim import SimConfig, simulate
 from bomgraph.stream_file import write_stream
 
-ROOT = Path(__file__).resolve().parents[1]
-_spec = importlib.util.spec_from_file_location("check_rounding",
-                                               ROOT / "scripts" / "check_rounding.py")
-check = importlib.util.module_from_spec(_spec)
-sys.modules["check_rounding"] = check
-_spec.loader.exec_module(check)
+from _scripts import load_script  # noqa: E402  (tests/_scripts.py)
+
+check = load_script("check_rounding")
 
 
 def test_perturbed_moves_only_the_bearings_by_about_eps() -> None:

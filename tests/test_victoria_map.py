@@ -9,10 +9,8 @@ figure and tables are written.
 from __future__ import annotations
 
 import csv
-import importlib.util
 import json
 import os
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -20,6 +18,8 @@ import pytest
 
 from bomgraph.datasets.victoria import import_victoria
 from bomgraph.stream import Stream
+
+from _scripts import load_script  # noqa: E402  (tests/_scripts.py)
 
 ROOT = Path(__file__).resolve().parents[1]
 DATA = Path(os.environ.get("BOMGRAPH_DATA", ROOT.parent / "shared" / "data"))
@@ -29,12 +29,7 @@ pytestmark = pytest.mark.skipif(not DATA.is_dir(), reason="no data folder (../sh
 
 
 def _script():
-    spec = importlib.util.spec_from_file_location("victoria_map",
-                                                  ROOT / "scripts" / "victoria_map.py")
-    mod = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = mod   # dataclasses look their module up there
-    spec.loader.exec_module(mod)
-    return mod
+    return load_script("victoria_map")
 
 
 @pytest.fixture(scope="module")
