@@ -15,7 +15,10 @@ at most a few hundred unknowns). It starts from :func:`triangulation.triangulate
 (odometry poses, all rays of each landmark), so the gates of that function apply to the start;
 rays whose standardised residual (whitened, divided by ``sqrt(1 - leverage)``) exceeds
 ``outlier_sigma`` are dropped one at a time (the worst first) and the window solved again,
-so a gross bearing outlier cannot bend the window.
+so a gross bearing outlier cannot bend the window. The leverages come from a pseudo-inverse of
+``J^T J`` (:func:`.bundle_lm.ray_leverages`); a ray of leverage ~1 (no redundancy, as each of a
+landmark's only two rays) has a zero residual whatever its noise, and is neither tested nor
+counted in the bearing-sigma estimate.
 
 The joint covariance of the window's landmarks is the landmark block of ``(J^T J)^-1`` (first
 order, exact for the MLE of a linear model); the variance of a pair's squared distance follows
@@ -35,8 +38,8 @@ from numpy.typing import ArrayLike
 from ..angles import angle_residual
 from ..errors import ConfigError
 from ..geometry import between, dead_reckon, effective_parallax, to_local
-from .bundle_lm import (SIGMA_FLOOR, _bearing_residuals, _Problem,  # noqa: F401 (re-exported)
-                        _levenberg_marquardt)
+from .bundle_lm import (SIGMA_FLOOR, UNDETERMINED_LEVERAGE,  # noqa: F401 (re-exported)
+                        _bearing_residuals, _levenberg_marquardt, _Problem, ray_leverages)
 from .triangulation import PairEstimates, pair_indices
 from .window import window_lsq_points
 
@@ -323,20 +326,21 @@ def _fit(u: np.ndarray, sig: np.ndarray, bearing_sigma_rad: float, brg: np.ndarr
                                                                    max_iter, tol)
             res_rad = _bearing_residuals(poses, points, k, lm, theta)[0]
             res = np.abs(res_rad) / bearing_sigma_rad
+            determined = np.ones(len(k), bool)
             if (outlier_sigma is not None or estimate_sigma) and res.size:
                 # standardised residuals r / (sigma sqrt(1 - h)), h the ray's leverage: a ray
                 # at the newest pose is mostly absorbed by that pose's heading, so its raw
                 # residual understates it and good rays of the same landmark would be
-                # dropped first
-                jb = prob.bearing_rows(poses, points)
-                try:
-                    h = np.einsum("ri,ri->r", jb, np.linalg.solve(info, jb.T).T)
-                except np.linalg.LinAlgError:
-                    h = np.zeros(len(k))
-                res = res / np.sqrt(np.clip(1.0 - h, 1e-6, 1.0))
+                # dropped first. A ray with h ~ 1 has no redundancy (its residual is zero
+                # up to rounding whatever its noise, so r / sqrt(1 - h) would be rounding):
+                # it is neither tested nor counted in the sigma estimate
+                h = ray_leverages(info, prob.bearing_rows(poses, points))
+                determined = h < UNDETERMINED_LEVERAGE
+                res = np.where(determined, res / np.sqrt(np.clip(1.0 - h, 1e-6, 1.0)), 0.0)
             if not estimate_sigma or rnd == SIGMA_ROUNDS - 1:
                 break
-            new_sigma = float(np.clip(bearing_sigma_rad * _robust_scale(res), *sigma_bounds))
+            new_sigma = float(np.clip(bearing_sigma_rad * _robust_scale(res[determined]),
+                                      *sigma_bounds))
             if abs(new_sigma / bearing_sigma_rad - 1.0) <= SIGMA_TOL:
                 break
             bearing_sigma_rad = new_sigma
@@ -345,7 +349,7 @@ def _fit(u: np.ndarray, sig: np.ndarray, bearing_sigma_rad: float, brg: np.ndarr
         # with a sigma to estimate, the test is against the residuals' own robust scale when
         # that is larger (a sigma given too small must not drop good rays before the estimate)
         limit = outlier_sigma if outlier_sigma is None or not robust_test else \
-            outlier_sigma * max(1.0, _robust_scale(res))
+            outlier_sigma * max(1.0, _robust_scale(res[determined]))
         if (outlier_sigma is not None and worst >= 0 and res[worst] > limit
                 and len(drop_k) < max_outliers):
             keep = np.ones(len(k), bool)

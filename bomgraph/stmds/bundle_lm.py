@@ -8,6 +8,7 @@ banded pose block factorised first (long windows, :func:`_arrow_step`).
 from __future__ import annotations
 
 import numpy as np
+from scipy.linalg import lapack, solve_triangular
 
 from ..angles import angle_residual
 
@@ -241,6 +242,52 @@ def _levenberg_marquardt(prob: _Problem, poses: np.ndarray, points: np.ndarray,
             converged = True
             break
     return poses, points, _dense_information(blocks), converged
+
+
+#: Eigenvalues of the Jacobi-scaled ``J^T J`` under this fraction of the largest are directions
+#: the window does not determine; :func:`ray_leverages` leaves them out (a pseudo-inverse).
+LEVERAGE_RCOND = 1e-10
+#: :func:`ray_leverages` takes the leverages from a Cholesky factor when the (estimated)
+#: condition of the scaled ``J^T J`` is under this (their relative error is then ~1e-8), from
+#: the eigendecomposition otherwise.
+CHOLESKY_MAX_COND = 1e8
+#: A ray whose leverage is at least this has no redundancy: the fit reproduces it whatever its
+#: noise (one of a landmark's only two rays, say), so its residual is zero up to rounding and
+#: says nothing about the noise. The outlier test and the bearing-sigma estimate leave it out
+#: (:func:`bomgraph.stmds.bundle._fit`).
+UNDETERMINED_LEVERAGE = 1.0 - 1e-6
+
+
+def ray_leverages(info: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    """Leverage ``h_r = j_r^T (J^T J)^+ j_r`` of each whitened bearing row ``j_r`` (the hat
+    matrix's diagonal, in [0, 1]), shape ``(R,)``; ``info`` is ``J^T J`` ``(n, n)`` and
+    ``rows`` the bearing rows of ``J`` ``(R, n)``.
+
+    Windows of recordings have ``J^T J`` of condition up to ~1e16 (a landmark barely
+    determined); a plain solve there returns leverages off by ~1e-3, and rays of leverage ~1
+    then get a standardised residual ``r / sqrt(1 - h)`` that is rounding over rounding. So
+    the Jacobi-scaled ``J^T J`` is factorised by Cholesky, and where LAPACK's estimate of its
+    condition is under :data:`CHOLESKY_MAX_COND` (every paper window) the leverages come from
+    the factor (accurate to ~1e-8); otherwise from an eigendecomposition with the directions
+    under :data:`LEVERAGE_RCOND` of the largest eigenvalue left out (a pseudo-inverse: the
+    projector onto the determined directions). Where ``J`` has full rank both equal a QR of
+    ``J`` (``tests/stmds/test_leverage.py``). Zeros when ``info`` is not finite.
+    """
+    scale = 1.0 / np.sqrt(np.maximum(np.diag(info), 1e-300))
+    scaled = info * scale[:, None] * scale[None, :]
+    if not np.all(np.isfinite(scaled)):
+        return np.zeros(len(rows))
+    rs = rows * scale
+    factor, fail = lapack.dpotrf(scaled, lower=1, clean=1)
+    if not fail:
+        rcond, fail = lapack.dpocon(factor, np.abs(scaled).sum(0).max(), uplo="L")
+        if not fail and rcond * CHOLESKY_MAX_COND > 1.0:
+            a = solve_triangular(factor, rs.T, lower=True, check_finite=False)
+            return np.clip(np.einsum("ir,ir->r", a, a), 0.0, 1.0)
+    w, v = np.linalg.eigh(scaled)
+    keep = w > LEVERAGE_RCOND * max(w[-1], 1e-300)
+    a = rs @ v[:, keep]
+    return np.clip(np.einsum("rk,rk,k->r", a, a, 1.0 / w[keep]), 0.0, 1.0)
 
 
 #: Signs of the 2 x 2 adjugate ``[[d, -b], [-c, a]]`` (flattened).
