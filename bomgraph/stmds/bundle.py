@@ -39,7 +39,7 @@ from ..angles import angle_residual
 from ..errors import ConfigError
 from ..geometry import between, dead_reckon, effective_parallax, to_local
 from .bundle_lm import (SIGMA_FLOOR, UNDETERMINED_LEVERAGE,  # noqa: F401 (re-exported)
-                        _bearing_residuals, _levenberg_marquardt, _Problem, ray_leverages)
+                        WindowInverse, _bearing_residuals, _levenberg_marquardt, _Problem)
 from .triangulation import PairEstimates, pair_indices
 from .window import window_lsq_points
 
@@ -315,6 +315,7 @@ def _fit(u: np.ndarray, sig: np.ndarray, bearing_sigma_rad: float, brg: np.ndarr
     drop_k: list[int] = []
     drop_c: list[int] = []
     n_lm = len(column)
+    inverse: WindowInverse | None = None
     while True:
         if n_lm == 0:
             return (poses, column, points, (np.array(drop_k, np.int64),
@@ -322,8 +323,8 @@ def _fit(u: np.ndarray, sig: np.ndarray, bearing_sigma_rad: float, brg: np.ndarr
                     bearing_sigma_rad)
         for rnd in range(SIGMA_ROUNDS if estimate_sigma else 1):
             prob = _Problem(u, sig, bearing_sigma_rad, k, lm, theta, n_lm)
-            poses, points, info, converged = _levenberg_marquardt(prob, poses, points,
-                                                                   max_iter, tol)
+            poses, points, blocks, converged = _levenberg_marquardt(prob, poses, points,
+                                                                     max_iter, tol)
             res_rad = _bearing_residuals(poses, points, k, lm, theta)[0]
             res = np.abs(res_rad) / bearing_sigma_rad
             determined = np.ones(len(k), bool)
@@ -334,7 +335,8 @@ def _fit(u: np.ndarray, sig: np.ndarray, bearing_sigma_rad: float, brg: np.ndarr
                 # dropped first. A ray with h ~ 1 has no redundancy (its residual is zero
                 # up to rounding whatever its noise, so r / sqrt(1 - h) would be rounding):
                 # it is neither tested nor counted in the sigma estimate
-                h = ray_leverages(info, prob.bearing_rows(poses, points))
+                inverse = WindowInverse(prob, blocks)
+                h = inverse.leverages(prob.bearing_rows(poses, points))
                 determined = h < UNDETERMINED_LEVERAGE
                 res = np.where(determined, res / np.sqrt(np.clip(1.0 - h, 1e-6, 1.0)), 0.0)
             if not estimate_sigma or rnd == SIGMA_ROUNDS - 1:
@@ -367,7 +369,9 @@ def _fit(u: np.ndarray, sig: np.ndarray, bearing_sigma_rad: float, brg: np.ndarr
         column, points = column[ok], points[ok]
         k, lm, theta = k[keep], new_index[lm[keep]], theta[keep]
         n_lm = len(column)
-    cov = _landmark_covariance(info, prob.n_pose_vars)
+    if inverse is None or inverse.blocks is not blocks:
+        inverse = WindowInverse(prob, blocks)
+    cov = inverse.landmark_covariance()
     return (poses, column, points, (np.array(drop_k, np.int64), np.array(drop_c, np.int64)),
             cov, converged, bearing_sigma_rad)
 
@@ -473,19 +477,6 @@ def _gates(poses: np.ndarray, points: np.ndarray, k: np.ndarray, lm: np.ndarray,
     far = np.bincount(lm, bad, minlength=n_lm) > 0
     parallax = effective_parallax(ang, lm, n_lm)
     return (count >= 2) & ~far & (parallax >= max(min_parallax_rad, 1e-15))
-
-
-def _landmark_covariance(info: np.ndarray, n_pose_vars: int) -> np.ndarray | None:
-    """Landmark block of ``info^-1`` (Jacobi-scaled for conditioning), None if singular."""
-    scale = 1.0 / np.sqrt(np.maximum(np.diag(info), 1e-300))
-    try:
-        inv = np.linalg.inv(info * scale[:, None] * scale[None, :])
-    except np.linalg.LinAlgError:
-        return None
-    cov = (inv * scale[:, None] * scale[None, :])[n_pose_vars:, n_pose_vars:]
-    if not np.all(np.isfinite(cov)) or np.any(np.diag(cov) <= 0):
-        return None
-    return cov
 
 
 def _empty(poses: np.ndarray, n_outliers: int) -> WindowBundle:

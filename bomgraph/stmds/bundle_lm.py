@@ -207,8 +207,10 @@ class _Problem:
 
 def _levenberg_marquardt(prob: _Problem, poses: np.ndarray, points: np.ndarray,
                          max_iter: int, tol: float
-                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray, bool]:
-    """Minimise the window's cost; returns poses, points, ``J^T J`` at the end, converged.
+                         ) -> tuple[np.ndarray, np.ndarray, tuple[np.ndarray, ...], bool]:
+    """Minimise the window's cost; returns poses, points, the blocks of ``J^T J`` at the end
+    (:meth:`_Problem.blocks`; :class:`WindowInverse` takes what the fit needs from them),
+    converged.
 
     Each step solves the damped normal equations by the Schur complement on the poses
     (:meth:`_Problem.normal_equations`, :func:`_schur_step`): the landmark block is 2 x 2
@@ -241,7 +243,7 @@ def _levenberg_marquardt(prob: _Problem, poses: np.ndarray, points: np.ndarray,
         if small:
             converged = True
             break
-    return poses, points, _dense_information(blocks), converged
+    return poses, points, blocks, converged
 
 
 #: Eigenvalues of the Jacobi-scaled ``J^T J`` under this fraction of the largest are directions
@@ -261,20 +263,27 @@ UNDETERMINED_LEVERAGE = 1.0 - 1e-6
 def ray_leverages(info: np.ndarray, rows: np.ndarray) -> np.ndarray:
     """Leverage ``h_r = j_r^T (J^T J)^+ j_r`` of each whitened bearing row ``j_r`` (the hat
     matrix's diagonal, in [0, 1]), shape ``(R,)``; ``info`` is ``J^T J`` ``(n, n)`` and
-    ``rows`` the bearing rows of ``J`` ``(R, n)``.
+    ``rows`` the bearing rows of ``J`` ``(R, n)`` (:func:`psd_quadratic_forms`)."""
+    return np.clip(psd_quadratic_forms(info, rows), 0.0, 1.0)
+
+
+def psd_quadratic_forms(m: np.ndarray, rows: np.ndarray, jacobi: bool = True) -> np.ndarray:
+    """``x_r^T M^+ x_r`` for each row ``x_r`` of ``rows`` ``(R, n)``, ``M`` ``(n, n)`` symmetric
+    positive semi-definite, with the directions ``M`` does not determine left out.
 
     Windows of recordings have ``J^T J`` of condition up to ~1e16 (a landmark barely
     determined); a plain solve there returns leverages off by ~1e-3, and rays of leverage ~1
     then get a standardised residual ``r / sqrt(1 - h)`` that is rounding over rounding. So
-    the Jacobi-scaled ``J^T J`` is factorised by Cholesky, and where LAPACK's estimate of its
-    condition is under :data:`CHOLESKY_MAX_COND` (every paper window) the leverages come from
-    the factor (accurate to ~1e-8); otherwise from an eigendecomposition with the directions
-    under :data:`LEVERAGE_RCOND` of the largest eigenvalue left out (a pseudo-inverse: the
-    projector onto the determined directions). Where ``J`` has full rank both equal a QR of
-    ``J`` (``tests/stmds/test_leverage.py``). Zeros when ``info`` is not finite.
+    the Jacobi-scaled ``M`` is factorised by Cholesky, and where LAPACK's estimate of its
+    condition is under :data:`CHOLESKY_MAX_COND` (every paper window) the forms come from the
+    factor (accurate to ~1e-8); otherwise from an eigendecomposition with the directions under
+    :data:`LEVERAGE_RCOND` of the largest eigenvalue left out (a pseudo-inverse). Where ``M``
+    is well conditioned both equal a QR of ``J`` (``tests/stmds/test_leverage.py``). Zeros
+    when ``M`` is not finite. ``jacobi=False``: ``M`` is taken as scaled already (a Schur
+    complement in the scaled variables, whose own diagonal can vanish by cancellation).
     """
-    scale = 1.0 / np.sqrt(np.maximum(np.diag(info), 1e-300))
-    scaled = info * scale[:, None] * scale[None, :]
+    scale = 1.0 / np.sqrt(np.maximum(np.diag(m), 1e-300)) if jacobi else np.ones(len(m))
+    scaled = m * scale[:, None] * scale[None, :]
     if not np.all(np.isfinite(scaled)):
         return np.zeros(len(rows))
     rs = rows * scale
@@ -283,11 +292,80 @@ def ray_leverages(info: np.ndarray, rows: np.ndarray) -> np.ndarray:
         rcond, fail = lapack.dpocon(factor, np.abs(scaled).sum(0).max(), uplo="L")
         if not fail and rcond * CHOLESKY_MAX_COND > 1.0:
             a = solve_triangular(factor, rs.T, lower=True, check_finite=False)
-            return np.clip(np.einsum("ir,ir->r", a, a), 0.0, 1.0)
+            return np.einsum("ir,ir->r", a, a)
     w, v = np.linalg.eigh(scaled)
     keep = w > LEVERAGE_RCOND * max(w[-1], 1e-300)
     a = rs @ v[:, keep]
-    return np.clip(np.einsum("rk,rk,k->r", a, a, 1.0 / w[keep]), 0.0, 1.0)
+    return np.einsum("rk,rk,k->r", a, a, 1.0 / w[keep])
+
+
+class WindowInverse:
+    """What a window's fit needs of ``(J^T J)^-1`` at its solution (``blocks``:
+    :meth:`_Problem.blocks`): each ray's leverage and the landmarks' covariance.
+
+    Long windows (:func:`uses_arrow`) take them from the arrow structure
+    (:func:`arrow_inverse`: the banded pose block, then only the landmarks' ``2 L x 2 L`` Schur
+    complement ``T`` is dense; ``O(P)`` in the poses against ``O(P^3)``), the leverages with
+    :func:`psd_quadratic_forms` on ``T`` (the ill-conditioning of a recording's window is in
+    its barely determined landmarks, ``T``; the poses are held by the odometry). Short windows
+    (every paper preset), or a long one whose banded factorisation fails, take the dense
+    matrix: :func:`ray_leverages` and the Jacobi-scaled inverse."""
+
+    def __init__(self, prob: "_Problem", blocks: tuple[np.ndarray, ...]) -> None:
+        self.prob, self.blocks = prob, blocks
+        n_p = prob.n_pose_vars
+        self._arrow = arrow_inverse(blocks) if uses_arrow(n_p, prob.n - n_p) else None
+        self._dense: np.ndarray | None = None
+
+    def _info(self) -> np.ndarray:
+        if self._dense is None:
+            self._dense = _dense_information(self.blocks)
+        return self._dense
+
+    def leverages(self, rows: np.ndarray) -> np.ndarray:
+        """Each bearing row's leverage (:meth:`_Problem.bearing_rows`, ``(R, n)``), in [0, 1]."""
+        if self._arrow is None:
+            return ray_leverages(self._info(), rows)
+        s, ainv_kk, ainv_b, schur = self._arrow
+        n_p = self.prob.n_pose_vars
+        js = rows * s                                  # the rows in the scaled variables
+        pc = self.prob.pose_col[self.prob.k]           # -1: seen from the fixed pose 0
+        var = pc >= 0
+        kk = np.where(var, pc // 3, 0)
+        jp = np.take_along_axis(js, np.where(var, pc, 0)[:, None] + np.arange(3), axis=1)
+        jp[~var] = 0.0
+        w3 = ainv_b.reshape(-1, 3, ainv_b.shape[1])[kk]             # (R, 3, 2 L)
+        v = (jp[:, :, None] * w3).sum(1) - js[:, n_p:]
+        h = np.einsum("ri,rij,rj->r", jp, ainv_kk[kk], jp) + psd_quadratic_forms(
+            schur, v, jacobi=False)
+        return np.clip(h, 0.0, 1.0)
+
+    def landmark_covariance(self) -> np.ndarray | None:
+        """The landmarks' block of ``(J^T J)^-1`` (``2 L x 2 L``), None if singular."""
+        if self._arrow is None:
+            return _landmark_covariance(self._info(), self.prob.n_pose_vars)
+        s, _, _, schur = self._arrow
+        sl = s[self.prob.n_pose_vars:]
+        try:
+            cov = np.linalg.inv(schur) * sl[:, None] * sl[None, :]
+        except np.linalg.LinAlgError:
+            return None
+        if not np.all(np.isfinite(cov)) or np.any(np.diag(cov) <= 0):
+            return None
+        return cov
+
+
+def _landmark_covariance(info: np.ndarray, n_pose_vars: int) -> np.ndarray | None:
+    """Landmark block of ``info^-1`` (Jacobi-scaled for conditioning), None if singular."""
+    scale = 1.0 / np.sqrt(np.maximum(np.diag(info), 1e-300))
+    try:
+        inv = np.linalg.inv(info * scale[:, None] * scale[None, :])
+    except np.linalg.LinAlgError:
+        return None
+    cov = (inv * scale[:, None] * scale[None, :])[n_pose_vars:, n_pose_vars:]
+    if not np.all(np.isfinite(cov)) or np.any(np.diag(cov) <= 0):
+        return None
+    return cov
 
 
 #: Signs of the 2 x 2 adjugate ``[[d, -b], [-c, a]]`` (flattened).
@@ -311,7 +389,7 @@ def _schur_step(blocks: tuple[np.ndarray, ...], lam: float) -> np.ndarray | None
     g_l = gl.reshape(-1, 2)
     if n_p == 0:
         return -(c_inv * g_l[:, None, :]).sum(2).ravel()
-    if n_p >= ARROW_MIN_POSE_VARS and n_p > len(gl):
+    if uses_arrow(n_p, len(gl)):
         return _arrow_step(a_d, b, c_d, gp, gl)
     b3 = b.reshape(n_p, -1, 2)
     bw = (b3[:, :, 0, None] * c_inv[None, :, 0] + b3[:, :, 1, None] * c_inv[None, :, 1]
@@ -367,6 +445,64 @@ def _arrow_step(a_d: np.ndarray, b: np.ndarray, c_d: np.ndarray, gp: np.ndarray,
         return None
     delta = np.concatenate([-ainv_g - ainv_b @ dl, dl])
     return delta if np.all(np.isfinite(delta)) else None
+
+
+def uses_arrow(n_pose_vars: int, n_landmark_vars: int) -> bool:
+    """Whether a window eliminates its poses first (:func:`_arrow_step`,
+    :func:`arrow_inverse`): long windows with more pose than landmark variables."""
+    return n_pose_vars >= ARROW_MIN_POSE_VARS and n_pose_vars > n_landmark_vars
+
+
+def arrow_inverse(blocks: tuple[np.ndarray, ...]
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
+    """The parts of ``(J^T J)^-1`` a long window's fit needs, without the dense inverse.
+
+    With the information ``[[A, B], [B^T, C]]`` (poses first; ``A`` block-tridiagonal, ``C``
+    2 x 2 block-diagonal) Jacobi-scaled by ``s = diag(J^T J)^-1/2``, ``A = U^T U`` banded and
+    ``T = C - B^T A^-1 B`` the landmarks' Schur complement:
+
+    * ``(J^T J)^-1`` restricted to the landmarks is ``T^-1`` (scaled back);
+    * a ray's leverage ``j^T (J^T J)^-1 j`` is ``j_p^T (A^-1)_kk j_p + v^T T^-1 v`` with ``v =
+      (A^-1 B)_k^T j_p - j_l`` (``k`` its pose, ``j_p``, ``j_l`` the ray's pose and landmark
+      entries; the block inverse of the arrow matrix), so only the 3 x 3 diagonal blocks of
+      ``A^-1`` are needed: ``(A^-1)_kk = X_k^T X_k`` over the columns of ``X = U^-T``, one
+      banded triangular solve.
+
+    Returns, in the scaled variables, ``(s (P + 2 L,), (A^-1)_kk (P / 3, 3, 3), A^-1 B (P, 2
+    L), T (2 L, 2 L))``; None if the banded factorisation fails (the caller then takes the
+    dense path)."""
+    from scipy.linalg import LinAlgError, cholesky_banded
+
+    a, b, c, gp, gl = blocks
+    n_p, n_l = len(gp), len(gl)
+    s = 1.0 / np.sqrt(np.maximum(np.concatenate([a.diagonal(),
+                                                 c[:, [0, 1], [0, 1]].ravel()]), 1e-300))
+    sp, sl = s[:n_p], s[n_p:]
+    band = np.zeros((6, n_p))
+    for k in range(6):
+        band[5 - k, k:] = a.diagonal(k) * sp[k:] * sp[:n_p - k]
+    b_s = b * sp[:, None] * sl[None, :]
+    if not (np.all(np.isfinite(band)) and np.all(np.isfinite(b_s))):
+        return None
+    try:
+        factor = cholesky_banded(band, lower=False, check_finite=False)
+    except (LinAlgError, ValueError):
+        return None
+    y, fail = lapack.dtbtrs(factor, np.column_stack([b_s, np.eye(n_p)]), uplo="U", trans="T")
+    if fail:
+        return None
+    x, y_b = y[:, n_l:], y[:, :n_l]                            # U^-T, U^-T B
+    ainv_b, fail = lapack.dtbtrs(factor, y_b, uplo="U", trans="N")   # A^-1 B
+    if fail or not np.all(np.isfinite(ainv_b)):
+        return None
+    x3 = x.reshape(n_p, n_p // 3, 3)
+    ainv_kk = np.einsum("rki,rkj->kij", x3, x3)
+    schur = -(y_b.T @ y_b)                                     # - B^T A^-1 B
+    lm = np.arange(0, n_l, 2)
+    for i in range(2):
+        for j in range(2):
+            schur[lm + i, lm + j] += c[:, i, j] * sl[lm + i] * sl[lm + j]
+    return s, ainv_kk, ainv_b, schur
 
 
 def _dense_information(blocks: tuple[np.ndarray, ...]) -> np.ndarray:
