@@ -15,8 +15,9 @@ at most a few hundred unknowns). It starts from :func:`triangulation.triangulate
 (odometry poses, all rays of each landmark), so the gates of that function apply to the start;
 rays whose standardised residual (whitened, divided by ``sqrt(1 - leverage)``) exceeds
 ``outlier_sigma`` are dropped one at a time (the worst first) and the window solved again,
-so a gross bearing outlier cannot bend the window. The leverages come from a pseudo-inverse of
-``J^T J`` (:func:`.bundle_lm.ray_leverages`); a ray of leverage ~1 (no redundancy, as each of a
+so a gross bearing outlier cannot bend the window. The leverages are well-posed (a
+pseudo-inverse of ``J^T J`` where it is numerically singular,
+:class:`.bundle_lm.WindowInverse`); a ray of leverage ~1 (no redundancy, as each of a
 landmark's only two rays) has a zero residual whatever its noise, and is neither tested nor
 counted in the bearing-sigma estimate.
 

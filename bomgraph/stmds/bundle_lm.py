@@ -261,9 +261,11 @@ UNDETERMINED_LEVERAGE = 1.0 - 1e-6
 
 
 def ray_leverages(info: np.ndarray, rows: np.ndarray) -> np.ndarray:
-    """Leverage ``h_r = j_r^T (J^T J)^+ j_r`` of each whitened bearing row ``j_r`` (the hat
-    matrix's diagonal, in [0, 1]), shape ``(R,)``; ``info`` is ``J^T J`` ``(n, n)`` and
-    ``rows`` the bearing rows of ``J`` ``(R, n)`` (:func:`psd_quadratic_forms`)."""
+    """Leverage ``h_r = j_r^T (J^T J)^+ j_r`` of each whitened bearing row ``j_r``, in [0, 1],
+    shape ``(R,)``; ``info`` is ``J^T J`` ``(n, n)`` and ``rows`` the bearing rows of ``J``
+    ``(R, n)`` (:func:`psd_quadratic_forms`). This is the hat matrix's diagonal while the
+    scaled ``J``'s singular values stay above ``sqrt(LEVERAGE_RCOND)`` of the largest; below
+    that the direction counts as undetermined (forming ``J^T J`` squares the condition)."""
     return np.clip(psd_quadratic_forms(info, rows), 0.0, 1.0)
 
 
@@ -275,8 +277,8 @@ def psd_quadratic_forms(m: np.ndarray, rows: np.ndarray, jacobi: bool = True) ->
     determined); a plain solve there returns leverages off by ~1e-3, and rays of leverage ~1
     then get a standardised residual ``r / sqrt(1 - h)`` that is rounding over rounding. So
     the Jacobi-scaled ``M`` is factorised by Cholesky, and where LAPACK's estimate of its
-    condition is under :data:`CHOLESKY_MAX_COND` (every paper window) the forms come from the
-    factor (accurate to ~1e-8); otherwise from an eigendecomposition with the directions under
+    condition is under :data:`CHOLESKY_MAX_COND` (most windows; about one in eight of
+    ``window-ba``'s on the paper setup is not) the forms come from the factor (accurate to ~1e-8); otherwise from an eigendecomposition with the directions under
     :data:`LEVERAGE_RCOND` of the largest eigenvalue left out (a pseudo-inverse). Where ``M``
     is well conditioned both equal a QR of ``J`` (``tests/stmds/test_leverage.py``). Zeros
     when ``M`` is not finite. ``jacobi=False``: ``M`` is taken as scaled already (a Schur
@@ -305,11 +307,16 @@ class WindowInverse:
 
     Long windows (:func:`uses_arrow`) take them from the arrow structure
     (:func:`arrow_inverse`: the banded pose block, then only the landmarks' ``2 L x 2 L`` Schur
-    complement ``T`` is dense; ``O(P)`` in the poses against ``O(P^3)``), the leverages with
-    :func:`psd_quadratic_forms` on ``T`` (the ill-conditioning of a recording's window is in
-    its barely determined landmarks, ``T``; the poses are held by the odometry). Short windows
-    (every paper preset), or a long one whose banded factorisation fails, take the dense
-    matrix: :func:`ray_leverages` and the Jacobi-scaled inverse."""
+    complement ``T`` is dense; ``O(P^2)`` in the poses against ``O(P^3)``), the leverages with
+    :func:`psd_quadratic_forms` on ``T``: the ill-conditioning of a recording's window is
+    mostly in its barely determined landmarks, ``T``, while the odometry holds the poses.
+    Where it does not (a landmark micrometres from a pose makes the scaled pose block
+    numerically singular, and its rounding would reach every leverage), :func:`arrow_inverse`
+    refuses (:data:`ARROW_MAX_COND`). Short windows (the paper presets but ``window-ba-long``),
+    or a long one the arrow path refuses, take the dense matrix: :func:`ray_leverages` and the
+    Jacobi-scaled inverse. On a numerically singular window the two paths are two generalised
+    inverses: they agree on rows in the range of ``J``, not on rows with a component along a
+    direction near the cut-off (``tests/stmds/test_leverage.py``)."""
 
     def __init__(self, prob: "_Problem", blocks: tuple[np.ndarray, ...]) -> None:
         self.prob, self.blocks = prob, blocks
@@ -406,6 +413,9 @@ def _schur_step(blocks: tuple[np.ndarray, ...], lam: float) -> np.ndarray | None
     return delta if np.all(np.isfinite(delta)) else None
 
 
+#: :func:`arrow_inverse` gives way to the dense path when its bound on the condition of the
+#: scaled pose block, ``|A|_1 trace(A^-1)`` (at most ``P`` times the condition), reaches this.
+ARROW_MAX_COND = 1e9
 #: Windows with at least this many pose variables, and more of them than landmark variables,
 #: eliminate the poses first (:func:`_arrow_step`); smaller ones (the paper presets' 10-pose
 #: windows among them) keep the dense Schur complement on the poses, which is as fast there.
@@ -469,8 +479,9 @@ def arrow_inverse(blocks: tuple[np.ndarray, ...]
       banded triangular solve.
 
     Returns, in the scaled variables, ``(s (P + 2 L,), (A^-1)_kk (P / 3, 3, 3), A^-1 B (P, 2
-    L), T (2 L, 2 L))``; None if the banded factorisation fails (the caller then takes the
-    dense path)."""
+    L), T (2 L, 2 L))``; None if the banded factorisation fails or the scaled pose block's
+    condition bound ``|A|_1 trace(A^-1)`` reaches :data:`ARROW_MAX_COND` (the caller then
+    takes the dense path)."""
     from scipy.linalg import LinAlgError, cholesky_banded
 
     a, b, c, gp, gl = blocks
@@ -497,6 +508,13 @@ def arrow_inverse(blocks: tuple[np.ndarray, ...]
         return None
     x3 = x.reshape(n_p, n_p // 3, 3)
     ainv_kk = np.einsum("rki,rkj->kij", x3, x3)
+    # cond(A) <= |A|_1 trace(A^-1) <= n cond(A): an ill-conditioned pose block (a landmark
+    # micrometres from a pose) would carry its rounding into T and the leverages
+    col = np.abs(band).sum(0)
+    for k in range(1, 6):
+        col[:-k] += np.abs(band[5 - k, k:])
+    if not col.max() * np.trace(ainv_kk, axis1=1, axis2=2).sum() < ARROW_MAX_COND:
+        return None
     schur = -(y_b.T @ y_b)                                     # - B^T A^-1 B
     lm = np.arange(0, n_l, 2)
     for i in range(2):

@@ -47,7 +47,9 @@ def test_the_cholesky_and_the_eigendecomposition_paths_agree(monkeypatch) -> Non
     rows = prob.bearing_rows(p0, q0)
     d = 1.0 / np.linalg.norm(jac, axis=0)
     assert np.linalg.cond((jac * d).T @ (jac * d)) < bundle_lm.CHOLESKY_MAX_COND
-    fast = ray_leverages(jac.T @ jac, rows)
+    with monkeypatch.context() as m:                     # the Cholesky branch, no eigh
+        m.setattr(np.linalg, "eigh", lambda *a: pytest.fail("eigh on a well-posed window"))
+        fast = ray_leverages(jac.T @ jac, rows)
     monkeypatch.setattr(bundle_lm, "CHOLESKY_MAX_COND", 0.0)
     np.testing.assert_allclose(ray_leverages(jac.T @ jac, rows), fast, rtol=0, atol=1e-10)
 
@@ -192,3 +194,84 @@ def test_a_barely_determined_landmark_in_a_long_window(seed: int) -> None:
     rng = np.random.default_rng(seed)
     moved = rows * (1.0 + 1e-13 * rng.normal(size=rows.shape))
     assert np.abs(inverse.leverages(moved) - h).max() < 1e-7
+
+
+def _two_ray_scene(seed: int, sigma_rad: float = 0.01):
+    """A 12-pose window: 6 landmarks seen from every pose and 12 seen from two poses only
+    (rays of leverage 1), bearings with noise ``sigma_rad``."""
+    from bomgraph.geometry import bearings_to, dead_reckon, to_world
+
+    rng = np.random.default_rng(seed)
+    w = 12
+    odoms = np.column_stack([rng.uniform(0.2, 0.3, w - 1), np.zeros(w - 1),
+                             rng.uniform(-0.1, 0.1, w - 1)])
+    poses = dead_reckon(odoms, np.zeros(3))
+    local = np.column_stack([rng.uniform(0.0, 3.0, 18), rng.choice([-1.0, 1.0], 18)
+                             * rng.uniform(1.0, 3.0, 18)])
+    pts = to_world(np.zeros(3), local)
+    brg = np.stack([bearings_to(p, pts) for p in poses]) + rng.normal(0, sigma_rad, (w, 18))
+    for j in range(6, 18):
+        seen = rng.choice(w, 2, replace=False)
+        brg[np.setdiff1d(np.arange(w), seen), j] = np.nan
+    return odoms, brg
+
+
+def test_rays_without_redundancy_do_not_pull_the_sigma_estimate_down() -> None:
+    """A window re-estimating its bearing sigma from its residuals: a third of its rays
+    belong to two-ray landmarks, fitted exactly (residual 0 whatever the noise). Counted, they
+    would pull the median residual, and so the sigma, down by about a third; left out, the
+    estimate is the noise's (mean over 8 windows within 12 %)."""
+    from bomgraph.stmds.bundle import bundle_adjust_window
+
+    sigma = 0.01
+    ratios = []
+    for seed in range(8):
+        odoms, brg = _two_ray_scene(seed, sigma)
+        sig = np.tile([0.01, 0.005, 0.01], (len(odoms), 1))
+        bundle = bundle_adjust_window(odoms, sig, brg, sigma, estimate_sigma=True,
+                                      outlier_sigma=None)[0]
+        assert len(bundle.column) == 18
+        ratios.append(bundle.bearing_sigma_rad / sigma)
+    assert abs(np.mean(ratios) - 1.0) < 0.12, ratios
+
+
+def _near_pose_window(seed: int, gap_m: float = 2e-6):
+    """A long window with one more landmark ``gap_m`` from pose 10, seen from poses 9-11:
+    its bearings pin that pose's position so hard that the scaled pose block is numerically
+    singular (condition ~1e11-1e13)."""
+    prob, p0, q0 = _long_window(seed)
+    n = len(q0)
+    point = p0[10, :2] + gap_m * np.array([0.8, 0.6])
+    d = point - p0[[9, 10, 11], :2]
+    k = np.append(prob.k, [9, 10, 11])
+    lm = np.append(prob.lm, [n, n, n])
+    theta = np.append(prob.theta, np.arctan2(d[:, 1], d[:, 0]) - p0[[9, 10, 11], 2])
+    near = _Problem(prob.odoms, 1.0 / prob.w_odo, 1.0 / prob.w_b, k, lm, theta, n + 1)
+    return near, p0, np.vstack([q0, point])
+
+
+def _symmetric_move(rng: np.random.Generator, a: np.ndarray, eps: float) -> np.ndarray:
+    noise = rng.normal(size=a.shape)
+    return a * (1.0 + eps * (noise + noise.T) / 2.0)
+
+
+@pytest.mark.parametrize("seed", [21, 22])
+def test_an_ill_conditioned_pose_block_takes_the_dense_path(seed: int, monkeypatch) -> None:
+    """Where the scaled pose block is numerically singular, the arrow path's ``A^-1`` carries
+    rounding into every leverage: moved by 1e-13 it moves them by ~1e-2. Such a window takes
+    the dense path, which moves them by under 1e-7."""
+    prob, p0, q0 = _near_pose_window(seed)
+    _, blocks = prob.normal_equations(p0, q0)
+    rows = prob.bearing_rows(p0, q0)
+    rng = np.random.default_rng(seed)
+    moved = (_symmetric_move(rng, blocks[0], 1e-13), *blocks[1:])
+    inverse = bundle_lm.WindowInverse(prob, blocks)
+    assert inverse._arrow is None                       # refused by the condition bound
+    h = inverse.leverages(rows)
+    assert np.abs(bundle_lm.WindowInverse(prob, moved).leverages(rows) - h).max() < 1e-7
+    monkeypatch.setattr(bundle_lm, "ARROW_MAX_COND", np.inf)     # the arrow path forced
+    forced = bundle_lm.WindowInverse(prob, blocks)
+    assert forced._arrow is not None
+    drift = np.abs(bundle_lm.WindowInverse(prob, moved).leverages(rows)
+                   - forced.leverages(rows)).max()
+    assert drift > 1e-4                                 # what the bound guards against
