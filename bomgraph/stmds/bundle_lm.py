@@ -278,7 +278,8 @@ def psd_quadratic_forms(m: np.ndarray, rows: np.ndarray, jacobi: bool = True) ->
     then get a standardised residual ``r / sqrt(1 - h)`` that is rounding over rounding. So
     the Jacobi-scaled ``M`` is factorised by Cholesky, and where LAPACK's estimate of its
     condition is under :data:`CHOLESKY_MAX_COND` (most windows; about one in eight of
-    ``window-ba``'s on the paper setup is not) the forms come from the factor (accurate to ~1e-8); otherwise from an eigendecomposition with the directions under
+    ``window-ba``'s on the paper setup is not) the forms come from the factor (accurate to
+    ~1e-8); otherwise from an eigendecomposition with the directions under
     :data:`LEVERAGE_RCOND` of the largest eigenvalue left out (a pseudo-inverse). Where ``M``
     is well conditioned both equal a QR of ``J`` (``tests/stmds/test_leverage.py``). Zeros
     when ``M`` is not finite. ``jacobi=False``: ``M`` is taken as scaled already (a Schur
@@ -414,7 +415,8 @@ def _schur_step(blocks: tuple[np.ndarray, ...], lam: float) -> np.ndarray | None
 
 
 #: :func:`arrow_inverse` gives way to the dense path when its bound on the condition of the
-#: scaled pose block, ``|A|_1 trace(A^-1)`` (at most ``P`` times the condition), reaches this.
+#: scaled pose block, ``|A|_1 trace(A^-1)`` (at least its condition, at most about ``3.3 P``
+#: times it: ``P`` pose variables, 11 nonzeros a row), reaches this.
 ARROW_MAX_COND = 1e9
 #: Windows with at least this many pose variables, and more of them than landmark variables,
 #: eliminate the poses first (:func:`_arrow_step`); smaller ones (the paper presets' 10-pose
@@ -508,8 +510,8 @@ def arrow_inverse(blocks: tuple[np.ndarray, ...]
         return None
     x3 = x.reshape(n_p, n_p // 3, 3)
     ainv_kk = np.einsum("rki,rkj->kij", x3, x3)
-    # cond(A) <= |A|_1 trace(A^-1) <= n cond(A): an ill-conditioned pose block (a landmark
-    # micrometres from a pose) would carry its rounding into T and the leverages
+    # cond(A) <= |A|_1 trace(A^-1) <= sqrt(11) n cond(A): an ill-conditioned pose block (a
+    # landmark micrometres from a pose) would carry its rounding into T and the leverages
     col = np.abs(band).sum(0)
     for k in range(1, 6):
         col[:-k] += np.abs(band[5 - k, k:])

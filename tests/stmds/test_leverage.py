@@ -1,7 +1,9 @@
-"""Ray leverages of the window bundle (``bundle_lm.ray_leverages``): against a QR and an SVD of
-the whitened Jacobian (independent computations), invariant to the units of the variables,
-stable on a numerically singular window, 1 for rays without redundancy; and the end-to-end property they serve: the
-``real`` preset's outlier and sigma choices on a recording are not decided by rounding."""
+"""Ray leverages of the window bundle (``bundle_lm.ray_leverages``, ``WindowInverse``): against
+a QR and an SVD of the whitened Jacobian (independent computations), invariant to the units of
+the variables, stable on numerically singular windows (the arrow path refused where the pose
+block is singular), 1 for rays without redundancy, left out of the sigma estimate; and the
+end-to-end property they serve: the ``real`` preset's outlier and sigma choices on a recording
+are not decided by rounding."""
 
 from __future__ import annotations
 
