@@ -355,12 +355,9 @@ class WindowInverse:
         s, _, _, schur = self._arrow
         sl = s[self.prob.n_pose_vars:]
         try:
-            cov = np.linalg.inv(schur) * sl[:, None] * sl[None, :]
+            return _covariance_or_none(np.linalg.inv(schur) * sl[:, None] * sl[None, :])
         except np.linalg.LinAlgError:
             return None
-        if not np.all(np.isfinite(cov)) or np.any(np.diag(cov) <= 0):
-            return None
-        return cov
 
 
 def _landmark_covariance(info: np.ndarray, n_pose_vars: int) -> np.ndarray | None:
@@ -370,7 +367,12 @@ def _landmark_covariance(info: np.ndarray, n_pose_vars: int) -> np.ndarray | Non
         inv = np.linalg.inv(info * scale[:, None] * scale[None, :])
     except np.linalg.LinAlgError:
         return None
-    cov = (inv * scale[:, None] * scale[None, :])[n_pose_vars:, n_pose_vars:]
+    return _covariance_or_none((inv * scale[:, None] * scale[None, :])[n_pose_vars:,
+                                                                        n_pose_vars:])
+
+
+def _covariance_or_none(cov: np.ndarray) -> np.ndarray | None:
+    """``cov`` if it is finite with a positive diagonal, else None (a singular window)."""
     if not np.all(np.isfinite(cov)) or np.any(np.diag(cov) <= 0):
         return None
     return cov
