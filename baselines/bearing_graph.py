@@ -140,7 +140,9 @@ class FactorGraphConfig(Presets):
     decrease_tol : float
         A solution counts as converged when a Gauss-Newton step at it predicts less than this
         decrease of the error (GTSAM's error, chi^2 / 2), or when LM stopped on its
-        tolerances (:class:`baselines.factor_graph.SolveReport`).
+        tolerances (:class:`baselines.factor_graph.SolveReport`). It is the definition of
+        convergence (a large value calls more solutions converged; the report gives the
+        predicted decrease beside ``converged``), so it must be finite.
     covariances : bool
         Fill ``landmark_cov`` and ``pose_cov`` through ``gtsam.Marginals`` (costs time).
     warm_relative_error_tol : float
@@ -238,7 +240,8 @@ class FactorGraphConfig(Presets):
         need(self.relative_error_tol >= 0 and self.absolute_error_tol >= 0,
              "error tolerances must be >= 0")
         need(self.lambda_upper_bound > 0, "lambda_upper_bound must be > 0")
-        need(self.decrease_tol > 0, "decrease_tol must be > 0")
+        need(0 < self.decrease_tol < math.inf, "decrease_tol must be finite and > 0 (it is "
+             "the convergence test: infinity would call any solution converged)")
         need(self.warm_relative_error_tol >= 0, "warm_relative_error_tol must be >= 0")
         need(self.solve_every >= 1, "solve_every must be >= 1")
         need(self.lag_steps >= 2 and self.lag_after_steps >= self.lag_steps,

@@ -38,6 +38,7 @@ from .mapper import (Checkpoint, MapEstimate, RunResult, checkpoint_times, creat
 from .stdio import bounded_lines, output_file
 from .stream import Step, Stream, Truth
 from .stream_file import StreamReader
+from .sweep import scheduler_address_problem
 from .trajectory import bearing_residuals
 
 #: Bump to invalidate every cached result (the code fingerprint covers code changes).
@@ -272,6 +273,10 @@ class Executor:
             raise ConfigError(f"backend must be serial, processes or dask, got {self.backend!r}")
         if self.backend == "dask" and not (self.scheduler or self.dask_local > 0):
             raise ConfigError("the dask backend needs a scheduler address or dask_local > 0")
+        if self.scheduler is not None:
+            problem = scheduler_address_problem(self.scheduler)
+            if problem:
+                raise ConfigError(f"--scheduler {self.scheduler!r}: {problem}")
 
     @classmethod
     def choose(cls, jobs: int | None = -1, scheduler: str | None = None,

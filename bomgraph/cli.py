@@ -268,6 +268,12 @@ def cmd_compare(args: argparse.Namespace) -> int:
     if streams:
         wrote.append(f"{len(streams)} stream files under {os.path.join(args.out, 'streams')}")
     print(f"\n{len(result.results)} runs in {result.wall_s:.1f} s; wrote {', '.join(wrote)}")
+    bad = [r["error"] for r in result.results
+           if not r.get("ok") and str(r.get("error", "")).startswith("StreamFormatError: ")]
+    if bad:  # a malformed input is the user's to fix, not a method's failure
+        print(f"bomgraph: error: {len(bad)} run(s) stopped on a malformed stream file: "
+              f"{bad[0].partition(': ')[2]}", file=sys.stderr)
+        return 2
     return 0
 
 

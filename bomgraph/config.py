@@ -57,6 +57,11 @@ class Presets:
             raise ConfigError(f"{cls.__name__}: bad option value: {exc}") from None
 
 
+#: The largest integer option (a C ``int``): iteration counts, windows and sizes are handed to
+#: GTSAM's C++ as ``int``, which refuses anything larger with a ``TypeError``.
+MAX_INT_OPTION = 2**31 - 1
+
+
 def type_problem(annotation: Any, value: Any) -> str | None:
     """Why ``value`` does not fit the field type ``annotation`` (None when it does, or when the
     annotation is not one of the plain types checked: bool, int, float, str, tuples, unions)."""
@@ -85,6 +90,8 @@ def type_problem(annotation: Any, value: Any) -> str | None:
         return None if isinstance(value, (bool, np.bool_)) else "must be true or false"
     if annotation is int:
         ok = isinstance(value, numbers.Integral) and not isinstance(value, bool)
+        if ok and abs(int(value)) > MAX_INT_OPTION:  # counts and sizes reach C++ (GTSAM) as int
+            return f"must be an integer within +-{MAX_INT_OPTION:,} (a C int)"
         return None if ok else "must be an integer"
     if annotation is float:
         if isinstance(value, bool) or not isinstance(value, numbers.Real):

@@ -25,9 +25,9 @@ import numpy as np
 
 from .bench import Executor, execute, run_example
 from .evaluate import score_estimate
-from .experiments import PAPER_REPORTED, Experiment, FileSource, Task
+from .experiments import PAPER_REPORTED, DatasetSource, Experiment, FileSource, Task
 from .plots import MapPanel, error_vs_time_figure, final_maps_figure, map_figure
-from .stdio import folder_lock, make_folder, output_file, write_text
+from .stdio import OutputPathError, folder_lock, make_folder, output_file, write_text
 
 #: The checkpoints the summary reports (and the last one of each experiment).
 REPORT_TIMES = (50, 100, 200, 300)
@@ -287,9 +287,52 @@ def compare(experiments: Sequence[Experiment], out_dir: str | os.PathLike[str], 
     Finished runs are cached in ``out_dir/cache`` so an interrupted sweep resumes.
     """
     out = Path(out_dir)
+    refuse_inputs_among_outputs(out, experiments)
     make_folder(out)
     with folder_lock(out, "`bomgraph compare`"):
         return _compare(experiments, out, executor, use_cache, figures, progress, estimates)
+
+
+#: What :func:`compare` writes into its folder: these files, every ``.png`` there, and
+#: everything under these sub-folders (``streams/`` is not among them: compare writes there
+#: only the streams of simulated and imported runs, never over a stream file it reads, which
+#: :func:`write_estimate_files` refuses as it writes).
+COMPARE_FILES = ("results.json", "results.csv", "summary.csv", "final_by_run.csv",
+                 "example_map.txt")
+COMPARE_FOLDERS = ("cache", "estimates")
+
+
+def refuse_inputs_among_outputs(out: Path, experiments: Sequence[Experiment]) -> None:
+    """Refuse, before anything runs, a stream file or recording that ``compare`` would
+    overwrite in ``out``: one of :data:`COMPARE_FILES`, a ``.png`` in it or a file under one
+    of :data:`COMPARE_FOLDERS`, or a link there to an input (outputs follow links).
+
+    Raises
+    ------
+    OutputPathError
+        Naming the input and what to do.
+    """
+    inputs: dict[str, str] = {}
+    for e in experiments:
+        for src in e.sources:
+            paths = ([src.path] if isinstance(src, FileSource) else
+                     [src.path, src.truth_path] if isinstance(src, DatasetSource) else [])
+            inputs.update((os.path.realpath(p), str(p)) for p in paths if p is not None)
+    if not inputs or not out.is_dir():
+        return
+    folder = os.path.realpath(out)
+    if folder in inputs:
+        raise OutputPathError(f"--out {out}: is the input {inputs[folder]}; compare writes its "
+                              f"results there: choose another folder")
+    written = [out / n for n in COMPARE_FILES] + list(out.glob("*.png"))
+    for sub in COMPARE_FOLDERS:
+        written += [p for p in (out / sub).rglob("*") if not p.is_dir()]
+    for path in written:
+        real = os.path.realpath(path)
+        if real in inputs:
+            raise OutputPathError(f"--out {out}: compare writes {path}, which is the input "
+                                  f"{inputs[real]}; refusing to overwrite an input: move it "
+                                  f"or choose another folder")
 
 
 def _compare(experiments: Sequence[Experiment], out: Path, executor: Executor,
@@ -345,6 +388,7 @@ def write_estimate_files(out: Path, tasks: Sequence[Task], results: Sequence[dic
     for t in tasks:
         names.setdefault((t.experiment, t.source.name), set()).add(_source_hash(t))
     written: set[Path] = set()
+    inputs = sorted({t.source.path for t in tasks if isinstance(t.source, FileSource)})
     for t, r in zip(tasks, results):
         text = r.pop("estimate_file", None)
         if text is None:
@@ -366,7 +410,7 @@ def write_estimate_files(out: Path, tasks: Sequence[Task], results: Sequence[dic
         row["stream"] = str(spath.relative_to(out))
         if spath not in written:
             spath.parent.mkdir(parents=True, exist_ok=True)
-            write_stream(t.stream(), spath)
+            write_stream(t.stream(), spath, inputs=inputs)
             written.add(spath)
             paths.append(spath)
     if index:

@@ -203,6 +203,9 @@ def command_line_spec(streams: Sequence[str], methods: Sequence[str],
     missing = [s for s in streams if not Path(s).is_file()]
     if missing:
         raise SweepError(f"--streams: no such file {missing[0]}")
+    problem = stream_header_problem(streams)
+    if problem:
+        raise SweepError(f"--streams: {problem}")
     _unique([a.label for a in arms], "--methods")
     exp = ExperimentSpec(name, f"{len(streams)} stream(s), {len(arms)} method(s)",
                          tuple(with_options(a) for a in arms),
@@ -210,6 +213,22 @@ def command_line_spec(streams: Sequence[str], methods: Sequence[str],
                          reference=None if ref is None else with_options(ref),
                          checkpoint_every=checkpoint_every)
     return SweepSpec("<command line>", (exp,))
+
+
+def stream_header_problem(paths: Sequence[str]) -> str:
+    """The reader's message for the first of ``paths`` whose header (its first line only)
+    does not read as a stream's, "" when all do: a file that is not a stream is refused
+    before anything runs; a fault further in is found by its run."""
+    from .errors import StreamFormatError
+    from .stream_file import StreamReader
+
+    for p in paths:
+        try:
+            with StreamReader(p, warn=False):
+                pass
+        except StreamFormatError as exc:
+            return str(exc)
+    return ""
 
 
 def _named_streams(paths: list[str]) -> tuple[tuple[str, str], ...]:
@@ -250,6 +269,37 @@ def _checked_method(m: MethodSpec, where: str) -> MethodSpec:
     except ConfigError as exc:
         raise SweepError(f"{where}: options {dict(m.options)}: {exc}") from None
     return m
+
+
+def scheduler_address_problem(address: str) -> str:
+    """Why ``address`` cannot be a Dask scheduler's address ("" when it can): Dask's own
+    parser (``tcp://host:port``, ``host:port``, ``tls://``, ``inproc://``, ...), and a TCP or
+    TLS port within 1-65535."""
+    from distributed.comm.addressing import parse_address, parse_host_port
+
+    try:
+        scheme, loc = parse_address(address)
+        if scheme in ("tcp", "tls"):
+            _, port = parse_host_port(loc)
+            if not 1 <= int(port) <= 65535:
+                return f"port {port} is not in 1-65535; give e.g. tcp://HOST:8786"
+    except (ValueError, TypeError) as exc:
+        return f"not a Dask scheduler address ({exc}); give e.g. tcp://HOST:8786"
+    return ""
+
+
+def _finite(v: int | float) -> bool:
+    """Whether a TOML number is a finite float (an integer too large for a float is not)."""
+    try:
+        return math.isfinite(v)
+    except OverflowError:
+        return False
+
+
+def _short(v: Any) -> str:
+    """``repr(v)``, cut to 40 characters (a 400-digit number is not quoted whole)."""
+    r = repr(v)
+    return r if len(r) <= 40 else r[:37] + "..."
 
 
 class _Reader:
@@ -312,6 +362,9 @@ class _Reader:
             out["dask_local"] = self.int_(t["dask_local"], "executor.dask_local", 0)
         if "scheduler" in t:
             out["scheduler"] = self.str_(t["scheduler"], "executor.scheduler")
+            problem = scheduler_address_problem(out["scheduler"])
+            if problem:
+                raise self.fail("executor.scheduler", problem)
         return out
 
     def experiment(self, t: Mapping[str, Any], at: str) -> ExperimentSpec:
@@ -359,6 +412,9 @@ class _Reader:
                 raise self.fail(f"{key}[{k}]", f"{pat!r} matches no file (relative to "
                                                f"{self.path.parent.resolve()})")
             paths += [f for f in found if f not in paths]
+        problem = stream_header_problem(paths)
+        if problem:
+            raise self.fail(key, problem)
         return _named_streams(paths)
 
     def world(self, t: Any, key: str, index: int) -> WorldSpec:
@@ -369,9 +425,9 @@ class _Reader:
                 continue
             default = _SIM_FIELDS[k].default
             ok = (isinstance(v, int) if isinstance(default, int) else
-                  isinstance(v, (int, float)) and math.isfinite(v)) and not isinstance(v, bool)
+                  isinstance(v, (int, float)) and _finite(v)) and not isinstance(v, bool)
             if not ok:
-                raise self.fail(f"{key}.{k}", f"must be {'an integer' if isinstance(default, int) else 'a number'}, got {v!r}")
+                raise self.fail(f"{key}.{k}", f"must be {'an integer' if isinstance(default, int) else 'a finite number'}, got {_short(v)}")
             values[k] = float(v) if isinstance(default, float) else v
         try:
             sim = SimConfig(**values)
