@@ -17,7 +17,7 @@ class StreamFormatError(BomgraphError, ValueError):
                  key: str | None = None) -> None:
         where = []
         if path is not None:
-            where.append(str(path))
+            where.append(str(path) or "'' (an empty file name)")
         if line is not None:
             where.append(f"line {line}")
         prefix = ": ".join([", ".join(where)]) if where else ""

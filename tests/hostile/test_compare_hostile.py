@@ -122,3 +122,8 @@ def test_a_stream_malformed_further_in_ends_compare_with_exit_2(work: Path) -> N
     one_error(proc, "1 run(s)", "late.jsonl", "line 8")
     assert "2 runs in" in proc.stdout.decode()      # the table and files are still written
     assert (work / "o" / "results.json").is_file()
+
+
+def test_an_empty_stream_name_is_named(work: Path) -> None:
+    one_error(bomgraph("run", "--method", "triangulate", "--out", work / "e.json", ""),
+              "empty file name", "cannot open")
