@@ -29,6 +29,7 @@ from ..config import resolve
 from ..errors import ConfigError, DegenerateGeometryError
 from ..geometry import dead_reckon
 from ..mapper import MapEstimate
+from ..plausibility import MAX_COORDINATE_M
 from ..stream import Step, StreamHeader
 from .batch import BATCH_STEPS, StepBatch
 from .bundle import (SIGMA_RANGE, PrefixState, WindowBundle, bundle_adjust_window,
@@ -161,6 +162,12 @@ class StmdsMapper:
         brg = step.bearings_rad
         if step.odom_sigma is not None:
             _check_sigmas(step.odom_sigma, f"step {step.t}'s odom_sigma")
+        if step.odom is not None and not math.hypot(step.odom[0], step.odom[1]) \
+                <= MAX_COORDINATE_M:
+            raise DegenerateGeometryError(
+                f"STMDS cannot use step {step.t}'s odometry: it moves "
+                f"{math.hypot(step.odom[0], step.odom[1]):g} m, beyond {MAX_COORDINATE_M:g} m "
+                f"(squared distances leave double precision); fix the stream's odometry")
         if self._batch is not None:
             self._t = step.t
             self._batch.push(ids, brg, step.odom, step.odom_sigma)

@@ -5,6 +5,7 @@ infinite convergence tolerance. Each is one line and exit 2, nothing overwritten
 
 from __future__ import annotations
 
+import json
 import os
 import shutil
 from pathlib import Path
@@ -127,3 +128,16 @@ def test_a_stream_malformed_further_in_ends_compare_with_exit_2(work: Path) -> N
 def test_an_empty_stream_name_is_named(work: Path) -> None:
     one_error(bomgraph("run", "--method", "triangulate", "--out", work / "e.json", ""),
               "empty file name", "cannot open")
+
+
+@pytest.mark.parametrize("method", ["stmds-smacof", "stmds-smacof-loc", "stmds-cs"])
+def test_stmds_refuses_an_odometry_step_beyond_double_precision_squares(work: Path,
+                                                                         method: str) -> None:
+    lines = (work / "s.jsonl").read_text().splitlines(keepends=True)
+    step = json.loads(lines[11])
+    step["odom"] = [1e200, 0.0, 0.0]
+    lines[11] = json.dumps(step) + "\n"
+    (work / "huge.jsonl").write_text("".join(lines))
+    one_error(bomgraph("run", "--method", method, "--out", work / "e.json", work / "huge.jsonl"),
+              "step 10's odometry", "1e+200 m", "fix the stream's odometry")
+    assert not (work / "e.json").exists()
