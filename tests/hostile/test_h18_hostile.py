@@ -1,0 +1,38 @@
+"""The hostile battery of audit h18 (the file-reading and ``--out`` items 07-11 and 13-16),
+each reproduced as a user meets it: ``bomgraph`` in a subprocess on small inputs written by
+the test. Same rule and harness as ``test_io_hostile.py``: a result, or exit 2 with one line
+``bomgraph: error: ...`` naming the file, the line and what to fix; no traceback."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from hostile_helpers import bomgraph, one_error
+
+
+def _run(work: Path, method: str = "triangulate") -> Path:
+    est = work / "e.json"
+    proc = bomgraph("run", work / "s.jsonl", "--method", method, "--out", est)
+    assert proc.returncode == 0, proc.stderr.decode()
+    return est
+
+
+# ---- item 07: export refuses an estimate of another stream, as evaluate does ---------------
+
+def test_h18_07_export_refuses_an_estimate_of_another_stream(work: Path) -> None:
+    est = _run(work)
+    lines = (work / "s.jsonl").read_text().splitlines()
+    steps = [json.loads(ln) for ln in lines[1:]]
+    other = work / "other.jsonl"  # the same steps, each with a time stamp
+    other.write_text("\n".join([lines[0]] + [json.dumps({**s, "time_s": 1000.0 + s["t"]})
+                                             for s in steps]) + "\n")
+    one_error(bomgraph("evaluate", est, other), "another stream")
+    for fmt in ("tum", "csv", "g2o"):
+        out = work / f"e.{fmt}"
+        one_error(bomgraph("export", est, "--stream", other, "--format", fmt, "--out", out),
+                  "e.json", "another stream", "other.jsonl")
+        assert not out.exists()
+    ok = bomgraph("export", est, "--stream", work / "s.jsonl", "--format", "csv", "--out",
+                  work / "ok.csv")
+    assert ok.returncode == 0, ok.stderr.decode()
