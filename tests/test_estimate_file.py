@@ -207,6 +207,49 @@ def test_v2_reader_is_strict(tmp_path: Path, lines, line, key) -> None:
     assert str(p) in msg and f"line {line}" in msg and f"'{key}'" in msg, msg
 
 
+_LM = '{"t": 1, "landmarks": [[1, 0, 0], [2, 1, 1]], "landmark_cov": [[1, 0, 0, 1], %s]}'
+_PS = ('{"t": 2, "landmarks": [], "new_poses": [[0, 0, 0, 0], [1, 0, 0, 0]], '
+       '"new_pose_cov": [[0, 0, 0, 0, 0, 0, 0, 0, 0], %s]}')
+
+
+@pytest.mark.parametrize("lines,line,key,what", [
+    ([_LM % "[-1, 0, 0, -1]"], 2, "landmark_cov[1]", "not positive semi-definite"),
+    ([_LM % "[1, 2, 2, 1]"], 2, "landmark_cov[1]", "not positive semi-definite"),
+    ([_LM % "[1, 0.5, -0.5, 1]"], 2, "landmark_cov[1]", "not symmetric"),
+    ([_LM % "[1, 1e-6, 0, 1]"], 2, "landmark_cov[1]", "not symmetric"),
+    ([_LM % "[1e308, 0, 0, 1e308]"], 2, None, None),        # finite and PSD: accepted
+    ([_LM % "[1, 0, 0, 0]"], 2, None, None),                # singular is PSD
+    (['{"t": 1, "landmarks": []}', _PS % "[1, 0, 0, 0, 1, 0, 0, 0, -1e-3]"], 3,
+     "new_pose_cov[1]", "not positive semi-definite"),
+    (['{"t": 1, "landmarks": []}', _PS % "[1, 0, 0, 0, 1, 0, 1, 0, 1]"], 3, "new_pose_cov[1]",
+     "not symmetric"),
+    (['{"t": 1, "landmarks": [], "poses": [[0, 0, 0, 0]], '
+      '"pose_cov": [[-1, 0, 0, 0, -1, 0, 0, 0, -1]]}'], 2, "pose_cov[0]",
+     "not positive semi-definite"),
+])
+def test_v2_covariances_must_be_symmetric_positive_semidefinite(tmp_path: Path, lines, line,
+                                                                key, what) -> None:
+    """h18 item 08: negative or non-symmetric covariances were read (and gave a negative
+    NEES); refused with the file, line and entry; round-off-level asymmetry (1e-16) and
+    singular or huge finite ones are read."""
+    p = _v2(tmp_path, lines + ['{"timing_s": {}}'])
+    if key is None:
+        read_estimate(p)
+        return
+    with pytest.raises(StreamFormatError) as info:
+        read_estimate(p)
+    msg = str(info.value)
+    assert (str(p) in msg and f"line {line}" in msg and f"'{key}'" in msg
+            and what in msg), msg
+
+
+def test_v2_covariances_with_round_off_asymmetry_are_read(tmp_path: Path) -> None:
+    c = np.array([[0.02, 0.003], [0.003 * (1 + 4e-16), 0.01]])
+    p = _v2(tmp_path, ['{"t": 1, "landmarks": [[1, 0, 0]], "landmark_cov": [[%s]]}'
+                       % ", ".join(repr(float(v)) for v in c.ravel()), '{"timing_s": {}}'])
+    np.testing.assert_array_equal(read_estimate(p).final.landmark_cov[0], c)
+
+
 def test_v1_files_still_read(tmp_path: Path) -> None:
     s = _stream(25)
     result = run(TriangulateMapper(s.header), s.steps, method="triangulate")

@@ -36,3 +36,20 @@ def test_h18_07_export_refuses_an_estimate_of_another_stream(work: Path) -> None
     ok = bomgraph("export", est, "--stream", work / "s.jsonl", "--format", "csv", "--out",
                   work / "ok.csv")
     assert ok.returncode == 0, ok.stderr.decode()
+
+
+# ---- item 08: a negative covariance is refused, not scored as a negative NEES ---------------
+
+def test_h18_08_a_negative_covariance_is_refused_by_line_and_key(work: Path) -> None:
+    est = work / "e.json"
+    proc = bomgraph("run", work / "s.jsonl", "--method", "ekf", "--out", est)
+    assert proc.returncode == 0, proc.stderr.decode()
+    lines = est.read_text().splitlines()
+    k = len(lines) - 2  # the last checkpoint
+    obj = json.loads(lines[k])
+    assert "landmark_cov" in obj
+    obj["landmark_cov"] = [[-1, 0, 0, -1]] * len(obj["landmarks"])
+    lines[k] = json.dumps(obj)
+    est.write_text("\n".join(lines) + "\n")
+    one_error(bomgraph("evaluate", "--json", est, work / "s.jsonl"), "e.json", f"line {k + 1}",
+              "'landmark_cov[0]'", "positive semi-definite")
