@@ -493,6 +493,11 @@ def _read_v2(fh: IO[bytes], header: dict, path: str) -> EstimateFile:
 MAX_V1_BYTES = 128 * 2**20
 
 
+def _where(exc: json.JSONDecodeError) -> str:
+    """The decoder's message and column: ``Expecting ',' delimiter at column 61``."""
+    return f"{exc.msg.removesuffix(' at')} at column {exc.colno}"
+
+
 def read_estimate(path: str | os.PathLike[str]) -> EstimateFile:
     """Read an estimate file written by ``bomgraph run`` (version 2, or version 1), strictly:
     unknown and duplicate keys, non-finite numbers and malformed entries are refused, naming
@@ -504,15 +509,26 @@ def read_estimate(path: str | os.PathLike[str]) -> EstimateFile:
         raise StreamFormatError(f"cannot open: {exc.strerror}", path=path) from None
     with fh:
         first = fh.readline(MAX_LINE_BYTES + 1)
+        if not first.strip() and not fh.read(1 << 16).strip():
+            raise StreamFormatError("empty file; an estimate file is what `bomgraph run --out` "
+                                    "writes", path=path)
+        fh.seek(len(first))
         if len(first) > MAX_LINE_BYTES and not first.lstrip().startswith(b"{"):
             raise line_too_long(path, 1)  # a version-1 file may be one long JSON line
         try:
-            head = loads_strict(first.decode("utf-8"))
-        except (ValueError, DuplicateKeyError, RecursionError, UnicodeDecodeError):
-            head = None
-        if isinstance(head, dict) and head.get("format") == ESTIMATE_FORMAT \
-                and head.get("version") == 2 and is_int(head.get("version")):
-            return _read_v2(fh, head, path)
+            head, head_error = loads_strict(first.rstrip(b"\r\n").decode("utf-8")), None
+        except (ValueError, DuplicateKeyError, RecursionError, UnicodeDecodeError) as exc:
+            head, head_error = None, exc
+        version = head.get("version") if isinstance(head, dict) else None
+        if isinstance(head, dict) and head.get("format") == ESTIMATE_FORMAT:
+            if is_int(version) and version == 2:
+                return _read_v2(fh, head, path)
+            if not (is_int(version) and version == 1):
+                what = ("missing" if version is None else
+                        f"unknown version {json.dumps(version)[:20]}")
+                raise StreamFormatError(f"{what}; this reader knows versions 1 and 2 (a newer "
+                                        f"bomgraph's file? run the method again with this one)",
+                                        path=path, line=1, key="version")
         if isinstance(head, dict) and head.get("format") == "bomgraph-stream":
             raise StreamFormatError("this is a stream file, not an estimate file (arguments "
                                     "swapped? an estimate comes from `bomgraph run`)",
@@ -538,7 +554,18 @@ def read_estimate(path: str | os.PathLike[str]) -> EstimateFile:
         except DuplicateKeyError as exc:
             raise StreamFormatError("appears twice in one object", path=path,
                                     key=str(exc)) from None
-        except (json.JSONDecodeError, UnicodeDecodeError, RecursionError, ValueError) as exc:
+        except json.JSONDecodeError as exc:
+            second = data.split(b"\n", 2)[1:2]
+            if (exc.lineno > 1 and isinstance(head_error, json.JSONDecodeError) and second
+                    and second[0].lstrip().startswith(b'{"t"')):  # a broken version-2 header
+                raise StreamFormatError(f"not valid JSON ({_where(head_error)}); a version-2 "
+                                        f"header is one JSON object on line 1",
+                                        path=path, line=1) from None
+            raise StreamFormatError(f"not valid JSON ({_where(exc)})", path=path,
+                                    line=exc.lineno) from None
+        except UnicodeDecodeError as exc:
+            raise StreamFormatError(f"not UTF-8 text (byte {exc.start})", path=path) from None
+        except (RecursionError, ValueError) as exc:
             raise StreamFormatError(f"not a JSON estimate file ({type(exc).__name__})",
                                     path=path) from None
     if not isinstance(obj, dict) or obj.get("format") != ESTIMATE_FORMAT:

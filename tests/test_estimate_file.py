@@ -250,6 +250,43 @@ def test_v2_covariances_with_round_off_asymmetry_are_read(tmp_path: Path) -> Non
     np.testing.assert_array_equal(read_estimate(p).final.landmark_cov[0], c)
 
 
+_HEAD = '{"format": "bomgraph-estimate", "version": 2, "method": "m"}'
+
+
+@pytest.mark.parametrize("text,needles", [
+    ("", ["empty file"]),
+    ("\n\n", ["empty file"]),
+    (_HEAD.replace("2", "3") + '\n{"t": 1, "landmarks": []}\n{"timing_s": {}}\n',
+     ["line 1", "'version'", "unknown version 3", "versions 1 and 2"]),
+    ('{"format": "bomgraph-estimate", "method": "m"}\n{"timing_s": {}}\n',
+     ["line 1", "'version'", "missing"]),
+    (_HEAD[:-1] + '\n{"t": 1, "landmarks": []}\n{"timing_s": {}}\n',
+     ["line 1", "Expecting ',' delimiter at column 60", "header is one JSON object"]),
+    (_HEAD[:20] + '\n{"t": 1, "landmarks": []}\n',
+     ["line 1", "Invalid control character at column 21"]),
+    ('{"format": "bomgraph-estimate", "version": 1,\n "method": "m",\n "landmarks": [[1, 2, ]]}',
+     ["line 3", "Expecting value at column 23"]),
+])
+def test_reader_messages_name_the_line_and_the_reason(tmp_path: Path, text, needles) -> None:
+    """h18 item 11: an unknown version, a broken line 1 or an empty file said only
+    ``not a JSON estimate file (JSONDecodeError)``."""
+    p = tmp_path / "e.json"
+    p.write_text(text)
+    with pytest.raises(StreamFormatError) as info:
+        read_estimate(p)
+    msg = str(info.value)
+    assert msg.startswith(str(p)) and "JSONDecodeError" not in msg, msg
+    for n in needles:
+        assert n in msg, (n, msg)
+
+
+def test_a_multi_line_version_1_file_is_still_read(tmp_path: Path) -> None:
+    p = tmp_path / "e.json"
+    p.write_text('{"format": "bomgraph-estimate", "version": 1,\n "method": "m",\n'
+                 ' "landmarks": [[1, 2, 3]]}\n')
+    assert read_estimate(p).final.landmark_ids.tolist() == [1]
+
+
 def test_v1_files_still_read(tmp_path: Path) -> None:
     s = _stream(25)
     result = run(TriangulateMapper(s.header), s.steps, method="triangulate")

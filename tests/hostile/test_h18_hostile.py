@@ -53,3 +53,18 @@ def test_h18_08_a_negative_covariance_is_refused_by_line_and_key(work: Path) -> 
     est.write_text("\n".join(lines) + "\n")
     one_error(bomgraph("evaluate", "--json", est, work / "s.jsonl"), "e.json", f"line {k + 1}",
               "'landmark_cov[0]'", "positive semi-definite")
+
+
+# ---- item 11: estimate-file messages name the line, the key and the reason -----------------
+
+def test_h18_11_unknown_version_broken_header_and_empty_file(work: Path) -> None:
+    lines = _run(work).read_text().splitlines()
+    v3, broken, empty = work / "v3.json", work / "broken.json", work / "empty.json"
+    v3.write_text("\n".join([lines[0].replace('"version":2', '"version":3')] + lines[1:]))
+    broken.write_text("\n".join([lines[0].rstrip("}")] + lines[1:]))
+    empty.write_text("")
+    for f, needles in ((v3, ["line 1", "'version'", "unknown version 3"]),
+                       (broken, ["line 1", "not valid JSON", "Expecting ',' delimiter"]),
+                       (empty, ["empty.json", "empty file"])):
+        err = one_error(bomgraph("evaluate", f, work / "s.jsonl"), f.name, *needles)
+        assert "JSONDecodeError" not in err
