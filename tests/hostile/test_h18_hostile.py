@@ -8,6 +8,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import pytest
 from hostile_helpers import bomgraph, one_error
 
 
@@ -68,3 +69,20 @@ def test_h18_11_unknown_version_broken_header_and_empty_file(work: Path) -> None
                        (empty, ["empty.json", "empty file"])):
         err = one_error(bomgraph("evaluate", f, work / "s.jsonl"), f.name, *needles)
         assert "JSONDecodeError" not in err
+
+
+# ---- item 15: a g2o pose vertex cut off the odometry chain is refused, not dropped ------------
+
+def test_h18_15_g2o_pose_off_the_chain_is_refused(tmp_path: Path) -> None:
+    data = Path("/work/shared/data/bearing_only_sim_g2o")
+    src = data / "slam2D_bearing_only_initial_guess.g2o"
+    if not src.exists():
+        pytest.skip("the g2o data set is not on this machine")
+    cut = tmp_path / "cut.g2o"
+    cut.write_text("".join(ln for ln in src.read_text().splitlines(keepends=True)
+                           if not ln.startswith("EDGE_SE2 1200 1201 ")))
+    out = tmp_path / "c.jsonl"
+    one_error(bomgraph("import", "g2o", cut, "--truth",
+                       data / "slam2D_bearing_only_ground_truth.g2o", "--out", out),
+              "cut.g2o", "line", "VERTEX_SE2 1200", "not on the odometry chain")
+    assert not out.exists()
