@@ -53,8 +53,8 @@ import numpy as np
 from ..errors import DatasetError
 from ..plausibility import refuse_implausible
 from ..stream import Step, Stream, StreamHeader, Truth
-from ._text import (chain_order, checked_bearing_sigma, data_lines, dataset_error, file_label,
-                    parse_float, parse_int, read_text)
+from ._text import (chain_order, checked_bearing_sigma, dataset_error, file_label, parse_float,
+                    parse_int, read_lines)
 from .calibration import bearing_residuals, odometry_errors, robust_bearing_stats
 
 _RECORDS = {
@@ -76,7 +76,7 @@ class _G2oFile:
         self.odometry: list[tuple[int, int, int, np.ndarray, np.ndarray]] = []
         self.bearings: list[tuple[int, int, int, float, float]] = []
         self.fixed: list[int] = []
-        for line in data_lines(read_text(self.path)):
+        for line in read_lines(self.path):
             tag = line.tokens[0]
             if tag == "FIX":
                 if len(line.tokens) < 2:

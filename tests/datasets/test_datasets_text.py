@@ -19,3 +19,40 @@ def test_chain_order_follows_edges_not_ids():
         chain_order([(0, 4, 1), (1, 4, 2)], "f")
     with pytest.raises(DatasetError, match="to itself"):
         chain_order([(3, 3, 1)], "f")
+
+
+def test_an_importer_reads_a_dataset_file_in_bounded_memory(tmp_path):
+    """h18 item 09: the whole decompressed file was held several times over (a 40 KB .gz of
+    comment lines cost ~490 MB); now a block of lines at a time."""
+    import gzip
+    import tracemalloc
+
+    from bomgraph.datasets.victoria import import_victoria
+
+    bomb = tmp_path / "bomb.txt.gz"
+    bomb.write_bytes(gzip.compress(b"# a comment line\n" * 500_000, 9))  # 8 MiB in 25 KB
+    tracemalloc.start()
+    try:
+        with pytest.raises(DatasetError, match="bomb.txt.gz"):
+            import_victoria(bomb)
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    assert peak < 16 * 2**20, peak  # one block: 7.5 MiB traced; the old reader: ~45 MiB
+
+
+def test_a_dataset_file_over_the_cap_is_refused(tmp_path, monkeypatch):
+    import gzip
+
+    from bomgraph.datasets import _text
+
+    monkeypatch.setattr(_text, "MAX_DATASET_BYTES", 2**20)
+    big = tmp_path / "big.dat.gz"
+    big.write_bytes(gzip.compress(b"1 2 3\n" * 200_000))  # 1.2 MB decompressed
+    with pytest.raises(DatasetError, match=r"big\.dat\.gz: larger than 1 MiB decompressed, the "
+                                           r"limit for a dataset file"):
+        _text.read_table(big, [("a", "int"), ("b", "int"), ("c", "int")])
+    small = tmp_path / "small.dat"
+    small.write_bytes(b"# c\n1 2 3\r\n\n4 5 6")
+    cols, lines = _text.read_table(small, [("a", "int"), ("b", "int"), ("c", "int")])
+    assert cols["a"].tolist() == [1, 4] and lines.tolist() == [2, 4]
