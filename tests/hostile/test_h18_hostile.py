@@ -86,3 +86,15 @@ def test_h18_15_g2o_pose_off_the_chain_is_refused(tmp_path: Path) -> None:
                        data / "slam2D_bearing_only_ground_truth.g2o", "--out", out),
               "cut.g2o", "line", "VERTEX_SE2 1200", "not on the odometry chain")
     assert not out.exists()
+
+
+# ---- item 10: a step's size is bounded by a bearing count ------------------------------------
+
+def test_h18_10_a_step_of_too_many_bearings_is_one_line(tmp_path: Path) -> None:
+    s = tmp_path / "big.jsonl"
+    head = {"format": "bomgraph-stream", "version": 1, "bearing_sigma_rad": 0.05,
+            "odometry_sigma": [0.03, 0, 0.05]}
+    s.write_text(json.dumps(head) + '\n{"t": 0, "bearings": ['
+                 + ",".join(f"[{i},0]" for i in range(100_001)) + "]}\n")
+    one_error(bomgraph("run", "--method", "triangulate", "--out", tmp_path / "e.json", s),
+              "big.jsonl", "line 2", "'bearings'", "more than 100,000 bearings")
