@@ -98,3 +98,26 @@ def test_h18_10_a_step_of_too_many_bearings_is_one_line(tmp_path: Path) -> None:
                  + ",".join(f"[{i},0]" for i in range(100_001)) + "]}\n")
     one_error(bomgraph("run", "--method", "triangulate", "--out", tmp_path / "e.json", s),
               "big.jsonl", "line 2", "'bearings'", "more than 100,000 bearings")
+
+
+# ---- item 13: --out that cannot be created names --out, not the temporary file ----------------
+
+def test_h18_13_an_uncreatable_out_names_the_path_given(work: Path, monkeypatch) -> None:
+    from bomgraph.stdio import AtomicOutput, OutputPathError
+
+    ro = work / "ro"
+    ro.mkdir()
+    out = ro / "x.json"
+    monkeypatch.setattr("tempfile.mkstemp", lambda **kw: (_ for _ in ()).throw(
+        PermissionError(13, "Permission denied")))
+    with pytest.raises(OutputPathError, match=rf"^{out}: cannot create a file in {ro} "
+                                              rf"\(Permission denied\); choose another --out$"):
+        AtomicOutput(out).open()
+    assert not list(ro.iterdir())
+    if Path("/proc/self").is_dir():  # a folder that passes access() but takes no file (root)
+        for args in (["run", "--method", "triangulate", "--out", "/proc/x.json",
+                      work / "s.jsonl"], ["simulate", "--steps", "5", "--out", "/proc/x.jsonl"]):
+            proc = bomgraph(*args)
+            if proc.returncode == 2:
+                err = one_error(proc, "/proc/x.json")
+                assert ".partial" not in err, err
