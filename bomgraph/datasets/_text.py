@@ -58,21 +58,31 @@ def find_file(directory: str | os.PathLike[str], name: str) -> Path:
     Raises
     ------
     DatasetError
-        When neither exists (the message lists what was tried).
+        When neither exists (the message lists what was tried), or the one there is a
+        directory or a broken or looping link (the message says which).
     """
     d = Path(directory)
-    for candidate in (d / name, d / (name + ".gz")):
+    candidates = (d / name, d / (name + ".gz"))
+    for candidate in candidates:
         if candidate.exists() and not candidate.is_dir():  # a device or FIFO is read, bounded
             return candidate
+    for candidate in candidates:  # there, but not a file: say what it is
+        if candidate.is_dir():
+            raise DatasetError(f"{candidate}: is a directory, not a data file; put the "
+                               f"dataset's {name} there")
+        if candidate.is_symlink():
+            raise DatasetError(f"{candidate}: is a broken or looping link (to "
+                               f"{os.readlink(candidate)}); point it at the data file")
     raise DatasetError(f"{d}: neither {name} nor {name}.gz exists; check the dataset "
                        f"directory (each MRCLAM folder holds Barcodes.dat, "
                        f"Landmark_Groundtruth.dat and RobotN_*.dat)")
 
 
 def has_file(directory: str | os.PathLike[str], name: str) -> bool:
-    """Whether ``directory/name`` or ``directory/name.gz`` exists."""
+    """Whether ``directory/name`` or ``directory/name.gz`` is there, even as something that
+    is not a data file (a directory, a broken link), which :func:`find_file` then names."""
     d = Path(directory)
-    return any(p.exists() and not p.is_dir() for p in (d / name, d / (name + ".gz")))
+    return any(os.path.lexists(p) for p in (d / name, d / (name + ".gz")))
 
 
 #: the first two bytes of every gzip file (RFC 1952).

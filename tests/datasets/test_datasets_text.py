@@ -56,3 +56,23 @@ def test_a_dataset_file_over_the_cap_is_refused(tmp_path, monkeypatch):
     small.write_bytes(b"# c\n1 2 3\r\n\n4 5 6")
     cols, lines = _text.read_table(small, [("a", "int"), ("b", "int"), ("c", "int")])
     assert cols["a"].tolist() == [1, 4] and lines.tolist() == [2, 4]
+
+
+def test_find_file_says_what_is_there_instead_of_a_file(tmp_path):
+    """h18 item 14: a data file that is a directory or a looping link was reported missing."""
+    from bomgraph.datasets._text import find_file, has_file
+
+    (tmp_path / "A.dat").mkdir()
+    (tmp_path / "B.dat").symlink_to("B.dat")          # loops
+    (tmp_path / "C.dat").symlink_to("nowhere.dat")    # broken
+    with pytest.raises(DatasetError, match=r"A\.dat: is a directory, not a data file"):
+        find_file(tmp_path, "A.dat")
+    for name in ("B.dat", "C.dat"):
+        assert has_file(tmp_path, name)
+        with pytest.raises(DatasetError, match=rf"{name}: is a broken or looping link"):
+            find_file(tmp_path, name)
+    with pytest.raises(DatasetError, match="neither D.dat nor D.dat.gz exists"):
+        find_file(tmp_path, "D.dat")
+    assert not has_file(tmp_path, "D.dat")
+    (tmp_path / "A.dat.gz").write_bytes(b"")  # a file beside the directory is still used
+    assert find_file(tmp_path, "A.dat") == tmp_path / "A.dat.gz"

@@ -121,3 +121,21 @@ def test_h18_13_an_uncreatable_out_names_the_path_given(work: Path, monkeypatch)
             if proc.returncode == 2:
                 err = one_error(proc, "/proc/x.json")
                 assert ".partial" not in err, err
+
+
+# ---- item 14: a MRCLAM file that is a directory or a looping link is named as such ------------
+
+def test_h18_14_mrclam_directory_or_looping_link_is_named(tmp_path: Path) -> None:
+    import sys
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "datasets"))
+    from dataset_excerpts import make_mrclam
+
+    for kind, needle in (("dir", "is a directory"), ("loop", "broken or looping link")):
+        mr = tmp_path / kind
+        make_mrclam(mr)
+        meas = mr / "Robot1_Measurement.dat"
+        meas.unlink()
+        meas.mkdir() if kind == "dir" else meas.symlink_to(meas.name)
+        one_error(bomgraph("import", "mrclam", mr, "--robot", "1", "--out",
+                           tmp_path / f"{kind}.jsonl"), "Robot1_Measurement.dat", needle)
