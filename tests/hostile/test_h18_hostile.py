@@ -139,3 +139,27 @@ def test_h18_14_mrclam_directory_or_looping_link_is_named(tmp_path: Path) -> Non
         meas.mkdir() if kind == "dir" else meas.symlink_to(meas.name)
         one_error(bomgraph("import", "mrclam", mr, "--robot", "1", "--out",
                            tmp_path / f"{kind}.jsonl"), "Robot1_Measurement.dat", needle)
+
+
+# ---- item 16: every --out help says an existing file is replaced -----------------------------
+
+def _parsers(parser):
+    import argparse
+
+    yield parser
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for sub in action.choices.values():
+                yield from _parsers(sub)
+
+
+def test_h18_16_every_out_help_says_an_existing_file_is_replaced(tmp_path: Path) -> None:
+    from bomgraph.cli_parser import build_parser
+
+    outs = [(p.prog, a) for p in _parsers(build_parser()) for a in p._actions
+            if "--out" in a.option_strings]
+    assert len(outs) >= 8, [p for p, _ in outs]
+    for prog, action in outs:
+        assert "replaced" in action.help, (prog, action.help)
+    proc = bomgraph("run", "--help")
+    assert proc.returncode == 0 and b"existing file of that name is" in proc.stdout
