@@ -146,6 +146,7 @@ def cmd_export(args: argparse.Namespace) -> int:
     from .estimate_file import read_estimate
     from .errors import ExportError
     from .export import export_text, truth_estimate, write_text_atomic
+    from .file_evaluation import check_stream_identity
     from .stdio import STDIO, input_path
     from .stream_file import read_stream
 
@@ -162,7 +163,11 @@ def cmd_export(args: argparse.Namespace) -> int:
         src = truth_estimate(stream)  # type: ignore[arg-type]
     else:
         with input_path(args.estimate) as ep:
-            src = read_estimate(ep).final
+            est = read_estimate(ep)
+        if stream is not None:  # as evaluate: an estimate of another stream is refused
+            check_stream_identity(est, stream.steps, args.estimate, stream_path,
+                                  error=ExportError)
+        src = est.final
     text = export_text(src, args.format, stream)
     if args.out == "-":
         sys.stdout.write(text)

@@ -13,6 +13,10 @@ from typing import Any, Callable
 
 #: a run over this many steps shows a progress bar (when stderr is a terminal).
 PROGRESS_MIN_STEPS = 1000
+#: said on every --out that names a file: the documented policy (docs/FORMATS.md, "Output
+#: paths"): a regular file there is replaced (written beside it, renamed into place); an input
+#: file is refused; a link is followed, a device or FIFO written to.
+REPLACES = "; an existing file of that name is replaced (never an input file)"
 
 
 def _named(name: str) -> Callable[[Callable[[str], Any]], Callable[[str], Any]]:
@@ -96,14 +100,14 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--prior-fraction", type=_float, default=0.0,
                    help="fraction of landmark pairs with a known distance (Exp. 3: 0.1)")
     s.add_argument("--prior-sigma", type=_float, default=0.03, help="metres per axis")
-    s.add_argument("--out", required=True, help="the stream file to write")
+    s.add_argument("--out", required=True, help="the stream file to write" + REPLACES)
     s.set_defaults(func="cmd_simulate")
 
     r = _command(sub, "run", "run a method on a stream file and write its estimate")
     r.add_argument("stream", help="the stream file ('-': read it from stdin)")
     r.add_argument("--method", required=True, help="see `bomgraph methods`")
     r.add_argument("--out", required=True,
-                   help="the estimate file to write ('-': write it to stdout)")
+                   help="the estimate file to write ('-': write it to stdout)" + REPLACES)
     r.add_argument("--checkpoint-every", type=_positive_int, default=10,
                    help="estimate the map every N steps (default 10) and at the last step")
     r.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
@@ -162,7 +166,9 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--real", default=None, metavar="DATA_DIR",
                    help="every method on the recorded datasets under DATA_DIR (e.g. "
                         "../shared/data) instead of the simulation")
-    c.add_argument("--out", default="compare-results", help="output folder")
+    c.add_argument("--out", default="compare-results",
+                   help="output folder; the result files of an earlier compare in it are "
+                        "replaced")
     c.add_argument("--seed", type=_nonneg_int, help="the paper design's seed (default 0)")
     c.add_argument("--jobs", type=_jobs, help="local processes (-1, the default: one per core)")
     c.add_argument("--scheduler", default=None, metavar="ADDRESS",
@@ -188,7 +194,7 @@ def build_parser() -> argparse.ArgumentParser:
     im.add_argument("dir", help="the dataset folder (.dat or .dat.gz files)")
     im.add_argument("--robot", type=_int, required=True, choices=range(1, 6), metavar="{1..5}",
                     help="the robot number")
-    im.add_argument("--out", required=True, help="the stream file to write")
+    im.add_argument("--out", required=True, help="the stream file to write" + REPLACES)
     im.add_argument("--min-distance", type=_float, help="keyframe distance, metres "
                     "(default: KeyframeConfig's, 0.3)")
     im.add_argument("--min-turn", type=_float, help="keyframe turn, radians (default 0.3)")
@@ -209,13 +215,13 @@ def build_parser() -> argparse.ArgumentParser:
     ig.add_argument("--truth", default=None, help="a g2o file whose vertices are the truth")
     ig.add_argument("--bearing-sigma", type=_float, default=None,
                     help="radians (default: from the bearing edges' information)")
-    ig.add_argument("--out", required=True, help="the stream file to write")
+    ig.add_argument("--out", required=True, help="the stream file to write" + REPLACES)
     ig.set_defaults(func="cmd_import_g2o")
     iv = _command(isub, "victoria", "GTSAM's victoria_park.txt")
     iv.add_argument("file", help="the victoria_park.txt file")
     iv.add_argument("--bearing-sigma", type=_float, default=None,
                     help="radians (default: median propagated point covariance)")
-    iv.add_argument("--out", required=True, help="the stream file to write")
+    iv.add_argument("--out", required=True, help="the stream file to write" + REPLACES)
     iv.set_defaults(func="cmd_import_victoria")
 
     x = _command(sub, "export", "write an estimate (or a stream's truth) as TUM, KITTI, CSV "
@@ -229,13 +235,13 @@ def build_parser() -> argparse.ArgumentParser:
     x.add_argument("--format", required=True, choices=("tum", "kitti", "csv", "g2o"),
                    help="tum: t x y z qx qy qz qw; kitti: 3x4 rows; csv: one file with a kind "
                         "column; g2o: the problem with the estimate as values")
-    x.add_argument("--out", required=True, help="output file, or - for stdout")
+    x.add_argument("--out", required=True, help="output file, or - for stdout" + REPLACES)
     x.set_defaults(func="cmd_export")
 
     pl = _command(sub, "plot", "draw one run over its truth, or a compare folder")
     pl.add_argument("estimate", nargs="?", help="an estimate file (bomgraph run)")
     pl.add_argument("stream", nargs="?", help="its stream file")
-    pl.add_argument("--out", required=True, help="FILE.png, FILE.pdf or FILE.svg")
+    pl.add_argument("--out", required=True, help="FILE.png, FILE.pdf or FILE.svg" + REPLACES)
     pl.add_argument("--t", type=_nonneg_int, default=None,
                     help="draw the checkpoint at this step (default: the final map)")
     pl.add_argument("--align", choices=("landmarks", "trajectory", "both"), default="landmarks",

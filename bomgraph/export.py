@@ -68,12 +68,18 @@ def _r(v: float) -> str:
     return repr(float(v))
 
 
+def _check_pose_steps(pose_t: np.ndarray, n_steps: int) -> None:
+    """Refuse a pose whose step ``t`` is outside ``0 .. n_steps - 1`` of the stream."""
+    outside = pose_t[(pose_t < 0) | (pose_t >= n_steps)]
+    if outside.size:
+        raise ExportError(f"the estimate has a pose at step {int(outside[0])} but the stream "
+                          f"has steps 0..{n_steps - 1}; is it the estimate's stream?")
+
+
 def _times(pose_t: np.ndarray, stream: Stream | None) -> list[float | None]:
     if stream is None or any(s.time_s is None for s in stream.steps):
         return [None] * len(pose_t)
-    if np.any(pose_t >= len(stream.steps)):
-        raise ExportError(f"the estimate has a pose at step {int(pose_t.max())} but the stream "
-                          f"has {len(stream.steps)} steps; is it the estimate's stream?")
+    _check_pose_steps(pose_t, len(stream.steps))
     return [float(stream.steps[int(t)].time_s) for t in pose_t]  # type: ignore[arg-type]
 
 
@@ -144,6 +150,7 @@ def to_g2o(src: MapEstimate, stream: Stream) -> str:
     """The stream's problem with ``src`` as the vertex values (module docstring)."""
     pose_t, poses = _need_poses(src, "g2o")
     n = len(stream.steps)
+    _check_pose_steps(pose_t, n)
     by_t = {int(t): p for t, p in zip(pose_t, poses)}
     missing = [t for t in range(n) if t not in by_t]
     if missing:

@@ -21,10 +21,10 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from .errors import EvaluationError, StreamFormatError
+from .errors import BomgraphError, EvaluationError, StreamFormatError
 from .evaluate import (CheckpointScore, MapScore, error_table, landmark_nees, pose_nees,
                        score_checkpoints, score_estimate)
-from .estimate_file import read_estimate, stream_identity
+from .estimate_file import EstimateFile, read_estimate, stream_identity
 from .jsonio import jsonable
 from .mapper import MapEstimate
 from .stream import Step
@@ -137,15 +137,7 @@ def evaluate_files(estimate_path: str | os.PathLike[str], stream_path: str | os.
                                   f"swapped? usage: bomgraph evaluate ESTIMATE STREAM)") from None
         raise exc from None
     est = read_estimate(estimate_path)
-    if est.stream is not None:
-        ident = stream_identity(stream.steps)
-        if ident != est.stream:
-            what = (f"{est.stream.n_steps} steps recorded, the stream has {ident.n_steps}"
-                    if ident.n_steps != est.stream.n_steps else
-                    f"steps SHA-256 {est.stream.steps_sha256[:12]}... recorded, the stream's "
-                    f"is {ident.steps_sha256[:12]}...")
-            raise EvaluationError(f"{estimate_path} was computed from another stream than "
-                                  f"{stream_path} ({what})")
+    check_stream_identity(est, stream.steps, estimate_path, stream_path)
     last = len(stream.steps) - 1
     beyond = [c.t for c in est.checkpoints if c.t > last]
     if beyond:
@@ -186,6 +178,26 @@ def evaluate_files(estimate_path: str | os.PathLike[str], stream_path: str | os.
                           None if ref_est is None else bearing_consistency(ref_est.final,
                                                                            stream.steps),
                           nl, np_)
+
+
+def check_stream_identity(est: EstimateFile, steps: Sequence[Step],
+                          estimate_path: str | os.PathLike[str],
+                          stream_path: str | os.PathLike[str],
+                          error: type[BomgraphError] = EvaluationError) -> None:
+    """Refuse an estimate whose recorded stream identity (:func:`bomgraph.estimate_file.
+    stream_identity`) is not that of ``steps``: it was computed from another stream. An
+    estimate without a recorded identity (version 1, or written by a library call) passes.
+    Raises ``error`` (``evaluate``: :class:`EvaluationError`; ``export``: ExportError)."""
+    if est.stream is None:
+        return
+    ident = stream_identity(steps)
+    if ident != est.stream:
+        what = (f"{est.stream.n_steps} steps recorded, the stream has {ident.n_steps}"
+                if ident.n_steps != est.stream.n_steps else
+                f"steps SHA-256 {est.stream.steps_sha256[:12]}... recorded, the stream's "
+                f"is {ident.steps_sha256[:12]}...")
+        raise error(f"{estimate_path} was computed from another stream than {stream_path} "
+                    f"({what})")
 
 
 def _is_estimate_file(path: str | os.PathLike[str]) -> bool:
@@ -278,4 +290,5 @@ def _format_truth_free(ev: FileEvaluation, fmt: str) -> str:
 
 
 __all__ = ["EVALUATION_COLUMNS", "TRUTH_FREE_COLUMNS", "BearingConsistency",
-           "bearing_consistency", "FileEvaluation", "evaluate_files", "format_evaluation"]
+           "bearing_consistency", "FileEvaluation", "evaluate_files", "check_stream_identity",
+           "format_evaluation"]

@@ -291,6 +291,18 @@ class AtomicOutput:
         self.fh: IO | None = None
 
     def open(self) -> IO:
+        """The handle to write to; an :class:`OutputPathError` naming the path the user gave
+        (never the temporary file) when it cannot be created."""
+        try:
+            return self._open()
+        except OSError as exc:
+            where = os.path.dirname(self.path) or "."
+            what = ("cannot open it for writing" if self.direct
+                    else f"cannot create a file in {where}")
+            raise OutputPathError(f"{self.given}: {what} ({exc.strerror or exc}); choose "
+                                  f"another --out") from None
+
+    def _open(self) -> IO:
         kw = {} if self._binary else {"encoding": "utf-8", "newline": "\n"}
         mode = "wb" if self._binary else "w"
         if self.direct:

@@ -52,6 +52,10 @@ class _Ctx:
 
 #: Deepest nesting of a header's ``meta`` the reader accepts (importers write 2-3 levels).
 MAX_META_DEPTH = 64
+#: the most bearings one step may hold (docs/FORMATS.md): a real sensor sees at most thousands
+#: of landmarks at a time, and a step line is parsed whole (a 62 MB line of 5.5 M bearings took
+#: 1.4 GB), so 100,000 bounds one step's memory near 30 MB. Counted on the text before parsing.
+MAX_BEARINGS_PER_STEP = 100_000
 
 
 def _depth(value: object) -> int:
@@ -212,6 +216,13 @@ def _parse_truth(v: Any, ctx: _Ctx) -> Truth | None:
     return Truth(np.array(ids, dtype=np.int64), np.array(xy, dtype=float).reshape(-1, 2), poses)
 
 
+def _too_many_bearings(ctx: _Ctx) -> StreamFormatError:
+    return ctx.error("bearings", f"more than {MAX_BEARINGS_PER_STEP:,} bearings in one step "
+                                 f"(the limit, MAX_BEARINGS_PER_STEP: a real sensor sees at "
+                                 f"most thousands of landmarks at a time); split the step or "
+                                 f"drop far landmarks")
+
+
 def _parse_step(obj: dict, expected_t: int, ctx: _Ctx) -> Step:
     if "t" not in obj:
         raise ctx.error("t", "missing required key")
@@ -239,6 +250,8 @@ def _parse_step(obj: dict, expected_t: int, ctx: _Ctx) -> Step:
     brg = obj["bearings"]
     if not isinstance(brg, list):
         raise ctx.error("bearings", "must be a list of [landmark_id, bearing_rad]")
+    if len(brg) > MAX_BEARINGS_PER_STEP:
+        raise _too_many_bearings(ctx)
     ids = np.empty(len(brg), dtype=np.int64)
     vals = np.empty(len(brg), dtype=float)
     for k, e in enumerate(brg):
@@ -335,6 +348,8 @@ class StreamReader:
                 raise _Ctx(self.path, pending_blank).error(
                     None, "blank line; the format has one JSON object per line and no blank "
                           "lines")
+            if text.count("[") > MAX_BEARINGS_PER_STEP + 3:  # one per bearing; odom, sigma
+                raise _too_many_bearings(ctx)
             step = _parse_step(_parse_json_line(text, ctx), t, ctx)
             if not warned and (problem := step_problem(step)) is not None:
                 warned = True

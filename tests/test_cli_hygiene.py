@@ -314,7 +314,10 @@ def test_run_checks_out_before_computing(tmp_path: Path, stream: Path) -> None:
 def test_gz_hint_only_where_the_bytes_say_gzip(tmp_path: Path) -> None:
     import gzip
 
-    from bomgraph.datasets._text import read_text
+    from bomgraph.datasets._text import read_lines
+
+    def read_text(path):
+        return list(read_lines(path))
     from bomgraph.errors import DatasetError
 
     fake = tmp_path / "plain.dat.gz"

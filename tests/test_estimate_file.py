@@ -207,6 +207,86 @@ def test_v2_reader_is_strict(tmp_path: Path, lines, line, key) -> None:
     assert str(p) in msg and f"line {line}" in msg and f"'{key}'" in msg, msg
 
 
+_LM = '{"t": 1, "landmarks": [[1, 0, 0], [2, 1, 1]], "landmark_cov": [[1, 0, 0, 1], %s]}'
+_PS = ('{"t": 2, "landmarks": [], "new_poses": [[0, 0, 0, 0], [1, 0, 0, 0]], '
+       '"new_pose_cov": [[0, 0, 0, 0, 0, 0, 0, 0, 0], %s]}')
+
+
+@pytest.mark.parametrize("lines,line,key,what", [
+    ([_LM % "[-1, 0, 0, -1]"], 2, "landmark_cov[1]", "not positive semi-definite"),
+    ([_LM % "[1, 2, 2, 1]"], 2, "landmark_cov[1]", "not positive semi-definite"),
+    ([_LM % "[1, 0.5, -0.5, 1]"], 2, "landmark_cov[1]", "not symmetric"),
+    ([_LM % "[1, 1e-6, 0, 1]"], 2, "landmark_cov[1]", "not symmetric"),
+    ([_LM % "[1e308, 0, 0, 1e308]"], 2, None, None),        # finite and PSD: accepted
+    ([_LM % "[1, 0, 0, 0]"], 2, None, None),                # singular is PSD
+    (['{"t": 1, "landmarks": []}', _PS % "[1, 0, 0, 0, 1, 0, 0, 0, -1e-3]"], 3,
+     "new_pose_cov[1]", "not positive semi-definite"),
+    (['{"t": 1, "landmarks": []}', _PS % "[1, 0, 0, 0, 1, 0, 1, 0, 1]"], 3, "new_pose_cov[1]",
+     "not symmetric"),
+    (['{"t": 1, "landmarks": [], "poses": [[0, 0, 0, 0]], '
+      '"pose_cov": [[-1, 0, 0, 0, -1, 0, 0, 0, -1]]}'], 2, "pose_cov[0]",
+     "not positive semi-definite"),
+])
+def test_v2_covariances_must_be_symmetric_positive_semidefinite(tmp_path: Path, lines, line,
+                                                                key, what) -> None:
+    """h18 item 08: negative or non-symmetric covariances were read (and gave a negative
+    NEES); refused with the file, line and entry; round-off-level asymmetry (1e-16) and
+    singular or huge finite ones are read."""
+    p = _v2(tmp_path, lines + ['{"timing_s": {}}'])
+    if key is None:
+        read_estimate(p)
+        return
+    with pytest.raises(StreamFormatError) as info:
+        read_estimate(p)
+    msg = str(info.value)
+    assert (str(p) in msg and f"line {line}" in msg and f"'{key}'" in msg
+            and what in msg), msg
+
+
+def test_v2_covariances_with_round_off_asymmetry_are_read(tmp_path: Path) -> None:
+    c = np.array([[0.02, 0.003], [0.003 * (1 + 4e-16), 0.01]])
+    p = _v2(tmp_path, ['{"t": 1, "landmarks": [[1, 0, 0]], "landmark_cov": [[%s]]}'
+                       % ", ".join(repr(float(v)) for v in c.ravel()), '{"timing_s": {}}'])
+    np.testing.assert_array_equal(read_estimate(p).final.landmark_cov[0], c)
+
+
+_HEAD = '{"format": "bomgraph-estimate", "version": 2, "method": "m"}'
+
+
+@pytest.mark.parametrize("text,needles", [
+    ("", ["empty file"]),
+    ("\n\n", ["empty file"]),
+    (_HEAD.replace("2", "3") + '\n{"t": 1, "landmarks": []}\n{"timing_s": {}}\n',
+     ["line 1", "'version'", "unknown version 3", "versions 1 and 2"]),
+    ('{"format": "bomgraph-estimate", "method": "m"}\n{"timing_s": {}}\n',
+     ["line 1", "'version'", "missing"]),
+    (_HEAD[:-1] + '\n{"t": 1, "landmarks": []}\n{"timing_s": {}}\n',
+     ["line 1", "Expecting ',' delimiter at column 60", "header is one JSON object"]),
+    (_HEAD[:20] + '\n{"t": 1, "landmarks": []}\n',
+     ["line 1", "Invalid control character at column 21"]),
+    ('{"format": "bomgraph-estimate", "version": 1,\n "method": "m",\n "landmarks": [[1, 2, ]]}',
+     ["line 3", "Expecting value at column 23"]),
+])
+def test_reader_messages_name_the_line_and_the_reason(tmp_path: Path, text, needles) -> None:
+    """h18 item 11: an unknown version, a broken line 1 or an empty file said only
+    ``not a JSON estimate file (JSONDecodeError)``."""
+    p = tmp_path / "e.json"
+    p.write_text(text)
+    with pytest.raises(StreamFormatError) as info:
+        read_estimate(p)
+    msg = str(info.value)
+    assert msg.startswith(str(p)) and "JSONDecodeError" not in msg, msg
+    for n in needles:
+        assert n in msg, (n, msg)
+
+
+def test_a_multi_line_version_1_file_is_still_read(tmp_path: Path) -> None:
+    p = tmp_path / "e.json"
+    p.write_text('{"format": "bomgraph-estimate", "version": 1,\n "method": "m",\n'
+                 ' "landmarks": [[1, 2, 3]]}\n')
+    assert read_estimate(p).final.landmark_ids.tolist() == [1]
+
+
 def test_v1_files_still_read(tmp_path: Path) -> None:
     s = _stream(25)
     result = run(TriangulateMapper(s.header), s.steps, method="triangulate")

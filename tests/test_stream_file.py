@@ -376,3 +376,33 @@ def test_gzip_data_is_refused_with_the_hint_to_decompress(tmp_path: Path) -> Non
     packed.write_bytes(gzip.compress(plain.read_bytes()))
     with pytest.raises(StreamFormatError, match=r"line 1.*not UTF-8.*gzip data: decompress"):
         read_stream(packed)
+
+
+def test_a_step_with_too_many_bearings_is_refused_before_parsing(tmp_path: Path,
+                                                                  monkeypatch) -> None:
+    """h18 item 10: one step line of 5.5 M bearings (62 MB, under the line cap) took 1.4 GB
+    to read; a step holds at most MAX_BEARINGS_PER_STEP bearings, refused by file, line and
+    key, before the line is parsed."""
+    import bomgraph.stream_file as sf
+
+    monkeypatch.setattr(sf, "MAX_BEARINGS_PER_STEP", 50)
+    head = json.dumps({"format": "bomgraph-stream", "version": 1, "bearing_sigma_rad": 0.05,
+                       "odometry_sigma": [0.03, 0.0, 0.05]})
+
+    def stream(n: int) -> Path:
+        p = tmp_path / f"s{n}.jsonl"
+        p.write_text(head + "\n" + json.dumps({"t": 0, "bearings": [[i, 0.1] for i in range(
+            n)]}) + "\n" + json.dumps({"t": 1, "odom": [0.1, 0, 0], "bearings": []}) + "\n")
+        return p
+
+    assert len(read_stream(stream(50)).steps[0].landmark_ids) == 50
+    parsed = []
+    real = sf._parse_json_line
+    monkeypatch.setattr(sf, "_parse_json_line",
+                        lambda text, ctx: parsed.append(ctx.line) or real(text, ctx))
+    for n in (51, 60):  # 51: counted once parsed; 60: refused on the text, unparsed
+        parsed.clear()
+        with pytest.raises(StreamFormatError, match=rf"s{n}\.jsonl, line 2: 'bearings': more "
+                                                    rf"than 50 bearings in one step"):
+            read_stream(stream(n))
+        assert parsed == ([1, 2] if n == 51 else [1])

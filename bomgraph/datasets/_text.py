@@ -13,21 +13,22 @@ blanks are accepted (a public MRCLAM copy uses them).
 from __future__ import annotations
 
 import gzip
-import io
 import math
 import os
+import zlib
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterator, Literal, Sequence
+from typing import IO, Iterator, Literal, Sequence
 
 import numpy as np
 
 from ..errors import DatasetError
 from ..jsonio import MAX_ID
 from ..plausibility import MAX_BEARING_SIGMA_RAD, MIN_BEARING_SIGMA_RAD
-from ..stdio import copy_bounded
+from ..stdio import MAX_LINE_BYTES, line_too_long
 
 FieldKind = Literal["int", "float"]
+_CHUNK = 2**20
 
 
 def dataset_error(path: str | os.PathLike[str], line: int | None, field: str | None,
@@ -57,67 +58,42 @@ def find_file(directory: str | os.PathLike[str], name: str) -> Path:
     Raises
     ------
     DatasetError
-        When neither exists (the message lists what was tried).
+        When neither exists (the message lists what was tried), or the one there is a
+        directory or a broken or looping link (the message says which).
     """
     d = Path(directory)
-    for candidate in (d / name, d / (name + ".gz")):
+    candidates = (d / name, d / (name + ".gz"))
+    for candidate in candidates:
         if candidate.exists() and not candidate.is_dir():  # a device or FIFO is read, bounded
             return candidate
+    for candidate in candidates:  # there, but not a file: say what it is
+        if candidate.is_dir():
+            raise DatasetError(f"{candidate}: is a directory, not a data file; put the "
+                               f"dataset's {name} there")
+        if candidate.is_symlink():
+            raise DatasetError(f"{candidate}: is a broken or looping link (to "
+                               f"{os.readlink(candidate)}); point it at the data file")
     raise DatasetError(f"{d}: neither {name} nor {name}.gz exists; check the dataset "
                        f"directory (each MRCLAM folder holds Barcodes.dat, "
                        f"Landmark_Groundtruth.dat and RobotN_*.dat)")
 
 
 def has_file(directory: str | os.PathLike[str], name: str) -> bool:
-    """Whether ``directory/name`` or ``directory/name.gz`` exists."""
+    """Whether ``directory/name`` or ``directory/name.gz`` is there, even as something that
+    is not a data file (a directory, a broken link), which :func:`find_file` then names."""
     d = Path(directory)
-    return any(p.exists() and not p.is_dir() for p in (d / name, d / (name + ".gz")))
+    return any(os.path.lexists(p) for p in (d / name, d / (name + ".gz")))
 
 
 #: the first two bytes of every gzip file (RFC 1952).
 GZIP_MAGIC = b"\x1f\x8b"
 
 
-def read_text(path: str | os.PathLike[str]) -> str:
-    """The whole file as text (gzip-decompressed if the name ends in ``.gz``).
-
-    Raises
-    ------
-    DatasetError
-        When the file is missing, unreadable, not gzip despite its name, or not ASCII/UTF-8.
-    """
-    p = Path(path)
-    try:
-        buf = io.BytesIO()
-        with open(p, "rb") as fh:  # bounded: /dev/zero is refused after one line's limit
-            copy_bounded(fh, buf, str(p))
-        data = buf.getvalue()
-    except FileNotFoundError:
-        raise DatasetError(f"{p}: file not found; check the path") from None
-    except OSError as exc:
-        raise DatasetError(f"{p}: cannot read ({exc.strerror or exc})") from None
-    is_gzip = data[:2] == GZIP_MAGIC
-    if p.suffix == ".gz" and not is_gzip:
-        raise DatasetError(f"{p}: named .gz but not gzip data; drop the .gz suffix")
-    try:
-        raw = _gunzip(data, p) if p.suffix == ".gz" else data
-    except (OSError, EOFError) as exc:
-        raise DatasetError(f"{p}: corrupt gzip data ({exc})") from None
-    try:
-        return raw.decode("utf-8")
-    except UnicodeDecodeError as exc:
-        line = raw[:exc.start].count(b"\n") + 1
-        hint = ("it is gzip data: name it with a .gz suffix" if is_gzip else
-                "the file is corrupt or not a text dataset")
-        raise dataset_error(p, line, None, f"not UTF-8 text (byte {exc.start}); {hint}") from None
-
-
-def _gunzip(data: bytes, path: Path) -> bytes:
-    """gzip data decompressed, bounded as every input (a gzip bomb is refused)."""
-    out = io.BytesIO()
-    with gzip.GzipFile(fileobj=io.BytesIO(data)) as src:
-        copy_bounded(src, out, str(path))
-    return out.getvalue()
+#: the largest dataset file read, decompressed. The largest real recording file is 3.4 MB
+#: (MRCLAM dataset 6, Robot4_Groundtruth.dat; ``shared/data/*/SOURCE.md``), so 256 MiB is
+#: 75x that. The text is read a block at a time, but the rows parsed from it are held, so the
+#: cap bounds them too (the general input cap, 4 GiB, would let a 4 MiB .gz ask for it all).
+MAX_DATASET_BYTES = 256 * 2**20
 
 
 @dataclass(frozen=True)
@@ -128,13 +104,81 @@ class Line:
     tokens: list[str]
 
 
-def data_lines(text: str, *, comment: str | None = "#") -> Iterator[Line]:
-    """The non-comment, non-blank lines of ``text`` with their 1-based line numbers."""
-    for number, raw in enumerate(text.splitlines(), start=1):
-        stripped = raw.strip()
-        if not stripped or (comment is not None and stripped.startswith(comment)):
+def read_lines(path: str | os.PathLike[str], *, comment: str | None = "#") -> Iterator[Line]:
+    """The non-comment, non-blank lines of a dataset file with their 1-based line numbers,
+    read a block of lines at a time (gzip-decompressed if the name ends in ``.gz``): memory
+    is one block (about 1 MiB) and one line, whatever the file's size.
+
+    Raises
+    ------
+    DatasetError
+        When the file is missing, unreadable, not gzip despite its name, corrupt gzip, larger
+        than :data:`MAX_DATASET_BYTES` decompressed, or not ASCII/UTF-8.
+    """
+    p = Path(path)
+    try:
+        fh = open(p, "rb")
+    except FileNotFoundError:
+        raise DatasetError(f"{p}: file not found; check the path") from None
+    except OSError as exc:
+        raise DatasetError(f"{p}: cannot read ({exc.strerror or exc})") from None
+    with fh:
+        try:
+            is_gzip = fh.peek(2)[:2] == GZIP_MAGIC
+        except OSError as exc:
+            raise DatasetError(f"{p}: cannot read ({exc.strerror or exc})") from None
+        if p.suffix == ".gz" and not is_gzip:
+            raise DatasetError(f"{p}: named .gz but not gzip data; drop the .gz suffix")
+        src: IO[bytes] = gzip.GzipFile(fileobj=fh) if p.suffix == ".gz" else fh
+        number, offset = 0, 0
+        try:
+            for block in _line_blocks(src, p):
+                try:
+                    text = block.decode("utf-8")
+                except UnicodeDecodeError as exc:
+                    hint = ("it is gzip data: name it with a .gz suffix" if is_gzip else
+                            "the file is corrupt or not a text dataset")
+                    line = number + block[:exc.start].count(b"\n") + 1
+                    raise dataset_error(p, line, None, f"not UTF-8 text (byte "
+                                        f"{offset + exc.start}); {hint}") from None
+                offset += len(block)
+                for part in text.splitlines():  # as str.splitlines of the whole text
+                    number += 1
+                    stripped = part.strip()
+                    if stripped and not (comment is not None and stripped.startswith(comment)):
+                        yield Line(number, stripped.split())
+        except (EOFError, gzip.BadGzipFile, zlib.error) as exc:
+            raise DatasetError(f"{p}: corrupt gzip data ({exc})") from None
+        except OSError as exc:
+            raise DatasetError(f"{p}: cannot read ({exc.strerror or exc})") from None
+
+
+def _line_blocks(src: IO[bytes], p: Path) -> Iterator[bytes]:
+    """``src`` in blocks of whole lines (about 1 MiB each; the last may lack its newline),
+    refusing a line over :data:`bomgraph.stdio.MAX_LINE_BYTES` and a file over
+    :data:`MAX_DATASET_BYTES`. Memory: one block and one line."""
+    pending: list[bytes] = []   # the start of a line longer than the chunk
+    pending_n = total = newlines = 0
+    while chunk := src.read(_CHUNK):
+        total += len(chunk)
+        if total > MAX_DATASET_BYTES:
+            raise DatasetError(
+                f"{p}: larger than {MAX_DATASET_BYTES >> 20} MiB"
+                f"{' decompressed' if p.suffix == '.gz' else ''}, the limit for a dataset file "
+                f"(the largest real recording file is 3.4 MB); split it")
+        cut = chunk.rfind(b"\n")
+        if cut < 0:
+            pending.append(chunk)
+            pending_n += len(chunk)
+            if pending_n > MAX_LINE_BYTES:
+                raise line_too_long(p, newlines + 1)
             continue
-        yield Line(number, stripped.split())
+        block = b"".join(pending + [chunk[:cut + 1]])
+        newlines += block.count(b"\n")
+        pending, pending_n = [chunk[cut + 1:]], len(chunk) - cut - 1
+        yield block
+    if pending_n:
+        yield b"".join(pending)
 
 
 def parse_float(token: str, path: str | os.PathLike[str], line: int, field: str) -> float:
@@ -193,7 +237,7 @@ def read_table(path: str | os.PathLike[str], fields: Sequence[tuple[str, FieldKi
     names = [f for f, _ in fields]
     columns: list[list[float | int]] = [[] for _ in fields]
     numbers: list[int] = []
-    for line in data_lines(read_text(path), comment=comment):
+    for line in read_lines(path, comment=comment):
         numbers.append(line.number)
         if len(line.tokens) != len(fields):
             raise dataset_error(path, line.number, None,
@@ -278,5 +322,5 @@ def file_label(path: str | os.PathLike[str]) -> str:
     return Path(path).name
 
 
-__all__ = ["dataset_error", "find_file", "has_file", "read_text", "Line", "data_lines",
+__all__ = ["dataset_error", "find_file", "has_file", "read_lines", "Line", "MAX_DATASET_BYTES",
            "parse_float", "parse_int", "read_table", "chain_order", "file_label"]

@@ -14,7 +14,10 @@ Robotics" bearing-only SLAM project (``shared/data/bearing_only_sim_g2o/SOURCE.m
 Lines starting with ``#`` and blank lines are skipped; any other record is an error (this is
 not a general g2o reader). Poses become steps in the order of the ``EDGE_SE2`` chain, which
 must be one unbroken chain (no loop closures: the stream format holds one odometry chain).
-Landmark ids are the g2o vertex ids.
+Landmark ids are the g2o vertex ids. Every ``VERTEX_SE2`` of the file must be a pose of that
+chain: g2o itself would optimise a pose vertex without odometry as a free vertex, but in a
+bearing-only odometry file such a vertex means a lost ``EDGE_SE2`` (a stream cannot hold a pose
+without odometry), so it is refused rather than dropped.
 
 **Odometry sigma.** g2o's ``EdgeSE2`` error is ``toVector(Z^-1 (X_i^-1 X_j))`` with ``Z`` the
 measurement: its translation part is the deviation of the predicted translation from the
@@ -50,8 +53,8 @@ import numpy as np
 from ..errors import DatasetError
 from ..plausibility import refuse_implausible
 from ..stream import Step, Stream, StreamHeader, Truth
-from ._text import (chain_order, checked_bearing_sigma, data_lines, dataset_error, file_label,
-                    parse_float, parse_int, read_text)
+from ._text import (chain_order, checked_bearing_sigma, dataset_error, file_label, parse_float,
+                    parse_int, read_lines)
 from .calibration import bearing_residuals, odometry_errors, robust_bearing_stats
 
 _RECORDS = {
@@ -73,7 +76,7 @@ class _G2oFile:
         self.odometry: list[tuple[int, int, int, np.ndarray, np.ndarray]] = []
         self.bearings: list[tuple[int, int, int, float, float]] = []
         self.fixed: list[int] = []
-        for line in data_lines(read_text(self.path)):
+        for line in read_lines(self.path):
             tag = line.tokens[0]
             if tag == "FIX":
                 if len(line.tokens) < 2:
@@ -179,8 +182,9 @@ def import_g2o(path: str | os.PathLike[str], *, truth_path: str | os.PathLike[st
     Raises
     ------
     DatasetError
-        A malformed line (file, line, field), odometry that is not one chain, a bearing from a
-        pose that is not on the chain, a repeated bearing, or truth that misses a pose.
+        A malformed line (file, line, field), odometry that is not one chain, a pose vertex or
+        a bearing from a pose that is not on the chain, a repeated bearing, or truth that
+        misses a pose.
     """
     g = _G2oFile(path)
     edges = [(i, j, line) for i, j, line, _, _ in g.odometry]
@@ -197,6 +201,14 @@ def import_g2o(path: str | os.PathLike[str], *, truth_path: str | os.PathLike[st
         order = observers or [min(g.poses)]
     step_of = {pid: t for t, pid in enumerate(order)}
     pose_ids = set(step_of)
+    off_chain = sorted(set(g.poses) - pose_ids, key=lambda v: g.poses[v][1])
+    if off_chain:
+        vid = off_chain[0]
+        raise dataset_error(g.path, g.poses[vid][1], "id",
+                            f"VERTEX_SE2 {vid} is not on the odometry chain (poses {order[0]} .. "
+                            f"{order[-1]}; {len(off_chain)} pose vertices off it): every pose "
+                            f"becomes a step, so it needs its EDGE_SE2 (restore the missing "
+                            f"edge, or delete the vertex and its bearings)")
 
     # odometry ------------------------------------------------------------------------------
     by_target = {j: (meas, info) for _, j, _, meas, info in g.odometry}

@@ -39,8 +39,8 @@ import numpy as np
 from ..errors import DatasetError
 from ..plausibility import refuse_implausible
 from ..stream import Step, Stream, StreamHeader
-from ._text import (chain_order, checked_bearing_sigma, data_lines, dataset_error, file_label,
-                    parse_float, parse_int, read_text)
+from ._text import (chain_order, checked_bearing_sigma, dataset_error, file_label, parse_float,
+                    parse_int, read_lines)
 
 _RECORDS = {
     "ODOMETRY": ["i", "j", "dx", "dy", "dtheta", "c_xx", "c_xy", "c_xth", "c_yy", "c_yth",
@@ -74,7 +74,7 @@ def import_victoria(path: str | os.PathLike[str], *,
     p = Path(path)
     odo: list[tuple[int, int, int, np.ndarray, np.ndarray]] = []
     obs: list[tuple[int, int, int, float, float, float]] = []
-    for line in data_lines(read_text(p)):
+    for line in read_lines(p):
         tag = line.tokens[0]
         if tag not in _RECORDS:
             raise dataset_error(p, line.number, "tag",

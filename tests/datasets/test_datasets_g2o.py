@@ -118,3 +118,24 @@ def test_real_g2o_set(tmp_path):
     assert np.max(np.abs(r)) < 0.012  # SOURCE.md: max 0.011 rad
     write_stream(s, tmp_path / "g.jsonl")
     assert read_stream(tmp_path / "g.jsonl") == s
+
+
+@pytest.mark.parametrize("where", ["first", "last", "isolated"])
+def test_g2o_a_pose_vertex_off_the_chain_is_refused(tmp_path, sim_stream, where):
+    """h18 item 15: with the first (or last) EDGE_SE2 deleted, its pose vertex was dropped
+    without a word and the stream started at the next pose; an extra pose vertex likewise."""
+    write_g2o(tmp_path / "a.g2o", sim_stream,
+              extra=["VERTEX_SE2 5000 1.0 2.0 0.5"] if where == "isolated" else [])
+    lines = (tmp_path / "a.g2o").read_text().splitlines()
+    n = len(sim_stream.steps)
+    drop = {"first": "EDGE_SE2 1200 1201 ", "last": f"EDGE_SE2 {1198 + n} {1199 + n} ",
+            "isolated": "no such line"}[where]
+    vid = {"first": 1200, "last": 1199 + n, "isolated": 5000}[where]
+    # the bearings of the cut-off pose go too (else they are refused first)
+    kept = [ln for ln in lines if not ln.startswith(drop)
+            and not ln.startswith(f"EDGE_BEARING_SE2_XY {vid} ")]
+    (tmp_path / "a.g2o").write_text("\n".join(kept) + "\n")
+    line = next(k + 1 for k, ln in enumerate(kept) if ln.startswith(f"VERTEX_SE2 {vid} "))
+    with pytest.raises(DatasetError, match=rf"a\.g2o, line {line}: .*VERTEX_SE2 {vid} is not on "
+                                           rf"the odometry chain.*EDGE_SE2"):
+        import_g2o(tmp_path / "a.g2o")
