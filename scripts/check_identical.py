@@ -55,6 +55,9 @@ CONFIGS: list[tuple[str, str, dict[str, Any]]] = [
     ("stmds-smacof@window", "stmds-smacof", {"preset": "window"}),
     ("stmds-smacof@window-lsq", "stmds-smacof", {"preset": "window-lsq"}),
     ("stmds-smacof@window-ba", "stmds-smacof", {"preset": "window-ba"}),
+    # 100-pose windows: the window fit's arrow path (bundle_lm.WindowInverse), which the
+    # 10-pose paper windows never take
+    ("stmds-smacof@window-ba-long", "stmds-smacof", {"preset": "window-ba-long"}),
     ("stmds-smacof@real", "stmds-smacof", {"preset": "real"}),
     ("stmds-smacof@real-keyframes", "stmds-smacof", {"preset": "real-keyframes"}),
     ("stmds-cs-loc", "stmds-cs-loc", {}),
