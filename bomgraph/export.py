@@ -77,9 +77,10 @@ def _check_pose_steps(pose_t: np.ndarray, n_steps: int) -> None:
 
 
 def _times(pose_t: np.ndarray, stream: Stream | None) -> list[float | None]:
+    if stream is not None:  # with or without time stamps, a pose must be one of its steps
+        _check_pose_steps(pose_t, len(stream.steps))
     if stream is None or any(s.time_s is None for s in stream.steps):
         return [None] * len(pose_t)
-    _check_pose_steps(pose_t, len(stream.steps))
     return [float(stream.steps[int(t)].time_s) for t in pose_t]  # type: ignore[arg-type]
 
 
