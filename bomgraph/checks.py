@@ -73,7 +73,7 @@ def row_array(value: Any, width: int, name: str, error: Raise, *,
     if out.size == 0:
         return out.reshape((0, *shape))
     if out.ndim != 1 + len(shape) or out.shape[1:] != shape:
-        hint = (f"; transpose it (.T): points are rows" if out.ndim == 2 and
+        hint = ("; transpose it (.T): points are rows" if out.ndim == 2 and
                 out.shape[0] == shape[0] and len(shape) == 1 else "")
         raise error(f"{name} must have shape {want}, got {out.shape}{hint}")
     return out
