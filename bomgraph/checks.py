@@ -55,11 +55,12 @@ def id_array(value: Any, name: str, error: Raise) -> np.ndarray:
 
 
 def row_array(value: Any, width: int, name: str, error: Raise, *,
-              tail: tuple[int, ...] = ()) -> np.ndarray:
+              tail: tuple[int, ...] = (), copy: bool = True) -> np.ndarray:
     """``value`` as a new float array of shape ``(n, width)`` (or ``(n, *tail)``), refusing
     any other shape rather than reshaping it: a ``(2, n)`` array is not read as ``(n, 2)``.
 
     An empty value (``[]``, ``np.zeros(0)``) gives ``n = 0``. Non-numeric values are refused.
+    ``copy=False`` returns a float input itself (for a read-only use).
     """
     shape = tail or (width,)
     want = f"(n, {', '.join(map(str, shape))})"
@@ -67,7 +68,7 @@ def row_array(value: Any, width: int, name: str, error: Raise, *,
         raw = np.asarray(value)
         if raw.dtype.kind not in "iuf" and not (raw.size == 0 and raw.dtype.kind == "O"):
             raise TypeError(f"{raw.dtype} values" if value is not None else "None")
-        out = np.array(raw, dtype=float)
+        out = np.array(raw, dtype=float) if copy else np.asarray(raw, dtype=float)
     except (TypeError, ValueError) as exc:
         raise error(f"{name} must be numbers of shape {want}, got {exc}") from None
     if out.size == 0:
