@@ -28,6 +28,7 @@ from typing import Any, Callable, Iterable, Iterator, Mapping, Sequence
 
 import numpy as np
 
+from .checks import is_integer
 from .errors import ConfigError, TooFewLandmarksError, UnknownMethodError
 from .estimate_file import stream_identity, write_estimate
 from .evaluate import CheckpointScore, score_checkpoints, score_estimate
@@ -271,6 +272,11 @@ class Executor:
     def __post_init__(self) -> None:
         if self.backend not in ("serial", "processes", "dask"):
             raise ConfigError(f"backend must be serial, processes or dask, got {self.backend!r}")
+        if not (is_integer(self.n_jobs) and self.n_jobs != 0):
+            raise ConfigError(f"n_jobs must be a non-zero integer (-1: one process per core), "
+                              f"got {self.n_jobs!r}")
+        if not (is_integer(self.dask_local) and self.dask_local >= 0):
+            raise ConfigError(f"dask_local must be an integer >= 0, got {self.dask_local!r}")
         if self.backend == "dask" and not (self.scheduler or self.dask_local > 0):
             raise ConfigError("the dask backend needs a scheduler address or dask_local > 0")
         if self.scheduler is not None:
@@ -310,6 +316,13 @@ def execute(tasks: Sequence[Task], executor: Executor = Executor(), *,
     Finished tasks found in ``cache_dir`` are not run again; new results are written there as
     they arrive, so an interrupted sweep resumes where it stopped.
     """
+    if not isinstance(executor, Executor):
+        raise ConfigError(f"execute(): executor must be an Executor (Executor('serial'), "
+                          f"Executor.choose(jobs)), got {type(executor).__name__}")
+    bad = next((t for t in tasks if not isinstance(t, Task)), None)
+    if bad is not None:
+        raise ConfigError(f"execute(): tasks must be Task objects (experiment.tasks()), got "
+                          f"{type(bad).__name__}")
     if executor.backend != "serial":
         refuse_runtime_methods(tasks, executor.backend)
     results: list[dict[str, Any] | None] = [None] * len(tasks)
@@ -496,6 +509,9 @@ def run_file(stream_path: str | os.PathLike[str], method: str,
     """
     from threadpoolctl import threadpool_limits
 
+    if options is not None and not isinstance(options, Mapping):
+        raise ConfigError(f"run_file(): options must be a mapping of option names to values "
+                          f"(or None), got {type(options).__name__}")
     if method_info(method).needs_truth and not allow_truth:
         raise ConfigError(f"method {method!r} reads the ground truth; it is a benchmark "
                           f"bound, not a mapper (pass --allow-truth to run it anyway)")

@@ -59,3 +59,9 @@ class DegenerateGeometryError(BomgraphError, ValueError):
 class ExportError(BomgraphError, ValueError):
     """An export that cannot be written as asked (no poses for a pose format, no stream for
     g2o, an output that is one of the inputs)."""
+
+
+class MethodProtocolError(BomgraphError, TypeError):
+    """A method breaks the :class:`~bomgraph.mapper.Mapper` protocol that :func:`run` relies
+    on (its factory returns no mapper, its ``estimate()`` returns no ``MapEstimate``): the
+    message names the method and what it returned."""

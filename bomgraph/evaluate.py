@@ -21,6 +21,7 @@ from typing import Any, Callable, Sequence, Union
 import numpy as np
 
 from .angles import angle_residual
+from .checks import is_integer, row_array
 from .errors import EvaluationError, TooFewLandmarksError
 from .mapper import Checkpoint, MapEstimate, RunResult
 from .stream import Truth
@@ -47,12 +48,12 @@ class Alignment:
 
     def apply(self, points_xy: np.ndarray) -> np.ndarray:
         """Transform ``(n, 2)`` points (returns a new array)."""
-        p = np.asarray(points_xy, dtype=float).reshape(-1, 2)
+        p = row_array(points_xy, 2, "Alignment.apply(): points_xy", EvaluationError, copy=False)
         return self.scale * p @ self.rotation.T + self.translation
 
     def apply_poses(self, poses: np.ndarray) -> np.ndarray:
         """Transform ``(m, 3)`` poses: positions as points, headings through ``R``."""
-        p = np.asarray(poses, dtype=float).reshape(-1, 3)
+        p = row_array(poses, 3, "Alignment.apply_poses(): poses", EvaluationError, copy=False)
         h = np.column_stack([np.cos(p[:, 2]), np.sin(p[:, 2])]) @ self.rotation.T
         return np.column_stack([self.apply(p[:, :2]), np.arctan2(h[:, 1], h[:, 0])])
 
@@ -84,8 +85,8 @@ def align_candidates(source_xy: np.ndarray, target_xy: np.ndarray, *,
     first is what :func:`align` returns. Points are centred, and scaled by a power of two when
     their magnitude would overflow the products (1e154 and beyond), before the SVD.
     """
-    src = np.asarray(source_xy, dtype=float).reshape(-1, 2)
-    dst = np.asarray(target_xy, dtype=float).reshape(-1, 2)
+    src = row_array(source_xy, 2, "align(): source_xy", EvaluationError, copy=False)
+    dst = row_array(target_xy, 2, "align(): target_xy", EvaluationError, copy=False)
     if not (np.all(np.isfinite(src)) and np.all(np.isfinite(dst))):
         raise EvaluationError("align(): points must be finite")
     if src.shape != dst.shape:
@@ -227,6 +228,20 @@ def _break_tie(cands: tuple[Alignment, ...], keys: list[Callable[[Alignment], fl
     return cands[0], True
 
 
+def _check_pair(estimate: Any, truth: Any, where: str) -> None:
+    """Refuse an estimate that is no MapEstimate and a reference that is neither."""
+    if not isinstance(estimate, MapEstimate):
+        hint = (" (arguments swapped? the estimate comes first)" if isinstance(estimate, Truth)
+                else " (result.final or result.at(t))" if isinstance(estimate, RunResult)
+                else "")
+        raise EvaluationError(f"{where}(): estimate must be a MapEstimate, got "
+                              f"{type(estimate).__name__}{hint}")
+    if not isinstance(truth, (Truth, MapEstimate)):
+        raise EvaluationError(f"{where}(): truth must be a Truth (stream.truth) or a reference "
+                              f"MapEstimate, got {type(truth).__name__}"
+                              + (" (the stream has no truth)" if truth is None else ""))
+
+
 def score_estimate(estimate: MapEstimate, truth: Reference, *, allow_reflection: bool = True,
                    with_scale: bool = False, align_on: str = "landmarks",
                    delta: int = 1) -> MapScore:
@@ -250,6 +265,10 @@ def score_estimate(estimate: MapEstimate, truth: Reference, *, allow_reflection:
         If fewer than 3 landmarks are common to the estimate and the truth (or, for a
         trajectory fit, fewer than 3 common poses).
     """
+    _check_pair(estimate, truth, "score_estimate")
+    if not (is_integer(delta) and delta >= 1):
+        raise EvaluationError(f"delta must be an integer >= 1 (steps between the two poses "
+                              f"of a relative pose error), got {delta!r:.40}")
     if align_on not in ALIGN_ON:
         raise EvaluationError(f"align_on must be one of {', '.join(ALIGN_ON)}, got {align_on!r}")
     common, ie, it = np.intersect1d(estimate.landmark_ids, truth.landmark_ids,
@@ -344,7 +363,18 @@ def score_checkpoints(result: RunResult | Sequence[Checkpoint], truth: Reference
     poses, for a trajectory alignment) gets NaN errors (and its counts); any other evaluation
     error is raised. ``nees=False`` leaves the NEES NaN (as does a reference estimate).
     """
+    if isinstance(result, MapEstimate) or not isinstance(result, (RunResult, Sequence)):
+        raise EvaluationError(f"score_checkpoints(): result must be a RunResult or a sequence "
+                              f"of Checkpoint, got {type(result).__name__}"
+                              + (" (score one map with score_estimate)"
+                                 if isinstance(result, MapEstimate) else ""))
     checkpoints = result.checkpoints if isinstance(result, RunResult) else tuple(result)
+    bad = next((c for c in checkpoints if not isinstance(c, Checkpoint)), None)
+    if bad is not None:
+        raise EvaluationError(f"score_checkpoints(): items must be Checkpoint, got "
+                              f"{type(bad).__name__}")
+    if checkpoints:
+        _check_pair(checkpoints[0].estimate, truth, "score_checkpoints")
     return [_score_checkpoint(c, truth, nees and isinstance(truth, Truth), align_on, delta,
                               with_scale) for c in checkpoints]
 

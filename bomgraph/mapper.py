@@ -14,95 +14,16 @@ from __future__ import annotations
 import dataclasses
 import inspect
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import (Any, Callable, Iterable, Mapping, Protocol, Sequence,
                     runtime_checkable)
 
 import numpy as np
 
-from .errors import BomgraphError, ConfigError, UnknownMethodError
+from .checks import is_integer
+from .errors import BomgraphError, ConfigError, MethodProtocolError, UnknownMethodError
+from .map_estimate import MapEstimate
 from .stream import Step, StreamHeader, Truth
-
-
-def _ro(a: np.ndarray | None, dtype: Any, shape_tail: tuple[int, ...],
-        name: str) -> np.ndarray | None:
-    if a is None:
-        return None
-    raw = np.asarray(a)
-    if dtype is np.int64:
-        if raw.size and (not np.issubdtype(raw.dtype, np.number)
-                         or not np.all(np.isfinite(raw)) or np.any(raw != np.round(raw))):
-            raise ConfigError(f"MapEstimate: {name} must be integers")
-    try:
-        out = np.array(raw, dtype=dtype).reshape((-1, *shape_tail))
-    except ValueError:
-        raise ConfigError(f"MapEstimate: {name} must have shape (n, {', '.join(map(str, shape_tail))})"
-                          ) from None
-    if dtype is float and not np.all(np.isfinite(out)):
-        raise ConfigError(f"MapEstimate: {name} must be finite (a method must leave out what "
-                          f"it cannot estimate, not return NaN)")
-    out.setflags(write=False)
-    return out
-
-
-@dataclass(frozen=True, eq=False)
-class MapEstimate:
-    """What a mapper knows at one moment, in its own frame.
-
-    Attributes
-    ----------
-    landmark_ids : ndarray of shape (n,), int64
-    landmarks_xy : ndarray of shape (n, 2), metres
-    pose_t : ndarray of shape (m,), int64, or None
-        Step indices of the estimated robot poses.
-    poses : ndarray of shape (m, 3) or None
-        ``[x_m, y_m, psi_rad]`` per entry of ``pose_t``.
-    landmark_cov : ndarray of shape (n, 2, 2) or None
-    pose_cov : ndarray of shape (m, 3, 3) or None
-    info : mapping
-        Method diagnostics (convergence, stress, landmarks left out and why, ...).
-    """
-
-    landmark_ids: np.ndarray
-    landmarks_xy: np.ndarray
-    pose_t: np.ndarray | None = None
-    poses: np.ndarray | None = None
-    landmark_cov: np.ndarray | None = None
-    pose_cov: np.ndarray | None = None
-    info: Mapping[str, Any] = field(default_factory=dict)
-
-    def __post_init__(self) -> None:
-        ids = _ro(self.landmark_ids, np.int64, (), "landmark_ids")
-        xy = _ro(self.landmarks_xy, float, (2,), "landmarks_xy")
-        if ids.shape[0] != xy.shape[0]:
-            raise ConfigError(f"MapEstimate: {ids.shape[0]} ids but {xy.shape[0]} positions")
-        if len(np.unique(ids)) != len(ids):
-            raise ConfigError("MapEstimate: a landmark id appears twice")
-        object.__setattr__(self, "landmark_ids", ids)
-        object.__setattr__(self, "landmarks_xy", xy)
-        object.__setattr__(self, "pose_t", _ro(self.pose_t, np.int64, (), "pose_t"))
-        object.__setattr__(self, "poses", _ro(self.poses, float, (3,), "poses"))
-        object.__setattr__(self, "landmark_cov",
-                           _ro(self.landmark_cov, float, (2, 2), "landmark_cov"))
-        object.__setattr__(self, "pose_cov", _ro(self.pose_cov, float, (3, 3), "pose_cov"))
-        if self.pose_t is not None and len(np.unique(self.pose_t)) != len(self.pose_t):
-            raise ConfigError("MapEstimate: a pose step t appears twice")
-        if (self.pose_t is None) != (self.poses is None):
-            raise ConfigError("MapEstimate: pose_t and poses go together")
-        if self.poses is not None and len(self.poses) != len(self.pose_t):
-            raise ConfigError("MapEstimate: pose_t and poses differ in length")
-        if self.landmark_cov is not None and len(self.landmark_cov) != len(ids):
-            raise ConfigError("MapEstimate: one 2x2 covariance per landmark")
-        if self.pose_cov is not None and (self.poses is None or len(self.pose_cov) != len(self.poses)):
-            raise ConfigError("MapEstimate: one 3x3 covariance per pose")
-
-    @classmethod
-    def empty(cls, **info: Any) -> "MapEstimate":
-        """No landmarks yet (``info`` says why)."""
-        return cls(np.zeros(0, np.int64), np.zeros((0, 2)), info=info)
-
-    def __len__(self) -> int:
-        return len(self.landmark_ids)
 
 
 @runtime_checkable
@@ -180,8 +101,8 @@ class RunResult:
 
 def checkpoint_times(n_steps: int, every: int) -> list[int]:
     """Steps after which the map is estimated: ``every, 2*every, ...`` and the last step."""
-    if every < 1:
-        raise ConfigError(f"checkpoint_every must be >= 1, got {every}")
+    if not (is_integer(every) and every >= 1):
+        raise ConfigError(f"checkpoint_every must be an integer >= 1, got {every!r:.40}")
     last = n_steps - 1
     ts = list(range(every, last + 1, every))
     if not ts or ts[-1] != last:
@@ -200,7 +121,13 @@ def _estimate_at(mapper: Mapper, t: int, finish: Callable[[], None] | None,
     t0 = time.perf_counter()
     if finish is not None:
         finish()
-    c = Checkpoint(t, mapper.estimate(), time.perf_counter() - t0)
+    est = mapper.estimate()
+    if not isinstance(est, MapEstimate):
+        raise MethodProtocolError(
+            f"{type(mapper).__name__}.estimate() returned {type(est).__name__} after step {t}; "
+            f"a Mapper's estimate() must return a bomgraph.mapper.MapEstimate(landmark_ids "
+            f"(n,), landmarks_xy (n, 2), ...) (MapEstimate.empty() when it has no map yet)")
+    c = Checkpoint(t, est, time.perf_counter() - t0)
     if on_checkpoint is not None:
         on_checkpoint(c)
     if not keep:
@@ -225,6 +152,41 @@ def _finish_hook(mapper: Mapper) -> Callable[[], Any] | None:
             f"arguments, but run() calls finish() with none, once after the last step (the "
             f"Mapper's end-of-stream hook); give it defaults or rename the method") from None
     return finish
+
+
+def _check_run_arguments(mapper: Any, steps: Any, checkpoint_every: Any,
+                         on_checkpoint: Any) -> None:
+    """Refuse, before the first step, arguments :func:`run` cannot use (naming them)."""
+    if isinstance(mapper, type) or not (callable(getattr(mapper, "step", None))
+                                        and callable(getattr(mapper, "estimate", None))):
+        what = (f"the class {mapper.__name__} (build it first)" if isinstance(mapper, type)
+                else f"a {type(mapper).__name__}")
+        raise MethodProtocolError(f"run(): mapper is {what}, not a Mapper: it needs step(step) "
+                                  f"and estimate() methods (create_mapper(name, header) "
+                                  f"builds one)")
+    if not (is_integer(checkpoint_every) and checkpoint_every >= 1):
+        raise ConfigError(f"checkpoint_every must be an integer >= 1, got "
+                          f"{checkpoint_every!r:.40}")
+    if on_checkpoint is not None and not callable(on_checkpoint):
+        raise ConfigError(f"run(): on_checkpoint must be callable or None, got "
+                          f"{type(on_checkpoint).__name__}")
+    if isinstance(steps, (Step, str, bytes)) or not isinstance(steps, Iterable):
+        hint = (" (pass stream.steps)" if hasattr(steps, "steps") else
+                " (pass [step])" if isinstance(steps, Step) else "")
+        raise ConfigError(f"run(): steps must be an iterable of Step, got "
+                          f"{type(steps).__name__}{hint}")
+
+
+def _step_problem(st: Any, expected_t: int) -> ConfigError:
+    """Why ``st`` cannot be the step ``expected_t`` of a run."""
+    if not isinstance(st, Step):
+        return ConfigError(f"run(): step {expected_t} is a {type(st).__name__}, not a "
+                           f"bomgraph.stream.Step")
+    if st.t != expected_t:
+        return ConfigError(f"run(): steps must come in order t = 0, 1, 2, ...; expected "
+                           f"t = {expected_t}, got t = {st.t} (a mapper cannot skip or "
+                           f"replay steps; start a new mapper for another stream)")
+    return ConfigError(f"run(): step {st.t}: odom must be None at t = 0 and given after")
 
 
 def run(mapper: Mapper, steps: Iterable[Step], *, checkpoint_every: int = 10,
@@ -252,8 +214,7 @@ def run(mapper: Mapper, steps: Iterable[Step], *, checkpoint_every: int = 10,
         False keeps only the latest checkpoint in the result (memory bounded by one map;
         pair it with ``on_checkpoint``). The estimates are the same either way.
     """
-    if checkpoint_every < 1:
-        raise ConfigError(f"checkpoint_every must be >= 1, got {checkpoint_every}")
+    _check_run_arguments(mapper, steps, checkpoint_every, on_checkpoint)
     clock = time.perf_counter
     start = clock()
     step_s: list[float] = []
@@ -263,8 +224,12 @@ def run(mapper: Mapper, steps: Iterable[Step], *, checkpoint_every: int = 10,
     nxt = next(it, _END)
     if nxt is _END:
         raise ConfigError("run(): the stream has no steps")
+    expected_t = 0
     while nxt is not _END:
         st = nxt
+        if not isinstance(st, Step) or st.t != expected_t or (st.odom is None) != (st.t == 0):
+            raise _step_problem(st, expected_t)
+        expected_t += 1
         t0 = clock()
         mapper.step(st)
         step_s.append(clock() - t0)
@@ -319,7 +284,9 @@ def register_method(name: str, target: str, description: str, *,
     see it and :func:`bomgraph.bench.execute` refuses it there; declare it as an entry point
     of the group ``bomgraph.methods`` instead (:mod:`bomgraph.plugins`).
     """
-    if ":" not in target:
+    if not (isinstance(name, str) and name.strip()):
+        raise ConfigError(f"register_method: name must be a non-empty string, got {name!r}")
+    if not isinstance(target, str) or ":" not in target:
         raise ConfigError(f"method target must be 'module:attribute', got {target!r}")
     _REGISTRY[name] = MethodInfo(name, target, description, needs_truth, _origin)
 
@@ -573,6 +540,12 @@ def create_mapper(name: str, header: StreamHeader, *, truth: Truth | None = None
     such a method refuses to run without it.
     """
     info = method_info(name)
+    if not isinstance(header, StreamHeader):
+        raise ConfigError(f"create_mapper({name!r}): header must be a StreamHeader (stream."
+                          f"header), got {type(header).__name__}")
+    if truth is not None and not isinstance(truth, Truth):
+        raise ConfigError(f"create_mapper({name!r}): truth must be a Truth (stream.truth) or "
+                          f"None, got {type(truth).__name__}")
     if info.needs_truth and truth is None:
         raise ConfigError(f"method {name!r} reads the ground truth (a benchmark bound); the "
                           f"stream has none")
@@ -581,10 +554,17 @@ def create_mapper(name: str, header: StreamHeader, *, truth: Truth | None = None
     factory = method_factory(name)
     try:
         if info.needs_truth:
-            return factory(header, truth=truth, **options)
-        return factory(header, **options)
+            mapper = factory(header, truth=truth, **options)
+        else:
+            mapper = factory(header, **options)
     except TypeError as exc:  # an unknown option name or an option of the wrong type
         raise ConfigError(f"method {name!r}: bad options {sorted(options)}: {exc}") from None
+    if isinstance(mapper, type) or not (callable(getattr(mapper, "step", None))
+                                        and callable(getattr(mapper, "estimate", None))):
+        raise MethodProtocolError(f"method {name!r}: its factory {info.target} returned "
+                                  f"{type(mapper).__name__}, not a Mapper (an object with "
+                                  f"step(step) and estimate() methods)")
+    return mapper
 
 
 __all__ = ["MapEstimate", "Mapper", "Checkpoint", "RunResult", "run", "checkpoint_times",

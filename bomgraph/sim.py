@@ -25,6 +25,7 @@ from typing import Sequence
 import numpy as np
 
 from .angles import angle_residual, wrap_angle
+from .checks import is_integer, row_array
 from .config import requirement
 from .errors import ConfigError
 from .geometry import bearings_to
@@ -86,6 +87,9 @@ class SimConfig:
             v = getattr(self, f)
             need(isinstance(v, (int, float)) and _finite(v),
                  f"{f} must be a finite number, got {v!r}")
+        for f in ("n_landmarks", "n_steps"):
+            need(is_integer(getattr(self, f)), f"{f} must be an integer, got "
+                                               f"{getattr(self, f)!r}")
         need(self.arena_m > 0, f"arena_m must be > 0, got {self.arena_m}")
         need(1 <= self.n_landmarks <= MAX_SIM_LANDMARKS,
              f"n_landmarks must be in [1, {MAX_SIM_LANDMARKS:,}], got {self.n_landmarks}")
@@ -216,9 +220,18 @@ def simulate(config: SimConfig, rng: np.random.Generator, *,
     meta : dict, optional
         Extra entries for the header's ``meta``.
     """
+    if not isinstance(config, SimConfig):
+        raise ConfigError(f"simulate(): config must be a SimConfig, got {type(config).__name__}")
+    if not isinstance(rng, np.random.Generator):
+        raise ConfigError(f"simulate(): rng must be a numpy.random.Generator "
+                          f"(np.random.default_rng(seed)), got {type(rng).__name__}")
+    if start_pose is not None and np.shape(start_pose) != (3,):
+        raise ConfigError(f"simulate(): start_pose must be (x_m, y_m, psi_rad), got "
+                          f"{start_pose!r:.60}")
     if landmarks_xy is None:
         landmarks_xy = random_landmarks(config, rng)
-    landmarks_xy = np.asarray(landmarks_xy, dtype=float).reshape(-1, 2)
+    landmarks_xy = row_array(landmarks_xy, 2, "simulate(): landmarks_xy", ConfigError,
+                             copy=False)
     n = len(landmarks_xy)
     ids = np.arange(n, dtype=np.int64)
     poses, motions = simulate_truth(config, rng, start_pose)

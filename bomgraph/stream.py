@@ -14,11 +14,12 @@ from __future__ import annotations
 import json
 import math
 from dataclasses import dataclass, field
-from typing import Any, Mapping
+from typing import Any, Iterable, Mapping
 
 import numpy as np
 
 from .angles import wrap_angle
+from .checks import finite_or_none, id_array, is_integer, real, row_array
 from .errors import StreamFormatError
 from .jsonio import jsonable
 
@@ -64,17 +65,36 @@ class StreamHeader:
     meta: Mapping[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
-        if not (math.isfinite(self.bearing_sigma_rad) and self.bearing_sigma_rad > 0):
+        sigma = real(self.bearing_sigma_rad, "bearing_sigma_rad", StreamFormatError)
+        if not (math.isfinite(sigma) and sigma > 0):
             raise StreamFormatError("must be a finite number > 0", key="bearing_sigma_rad")
-        sig = tuple(float(s) for s in self.odometry_sigma)
+        try:
+            sig = tuple(real(s, "odometry_sigma", StreamFormatError)
+                        for s in self.odometry_sigma)
+        except (TypeError, StreamFormatError):
+            sig = ()
         if len(sig) != 3 or not all(math.isfinite(s) and s >= 0 for s in sig):
-            raise StreamFormatError("must be 3 finite numbers >= 0", key="odometry_sigma")
+            raise StreamFormatError(f"must be 3 finite numbers >= 0 (sigma_dx_m, sigma_dy_m, "
+                                    f"sigma_dpsi_rad), got {self.odometry_sigma!r:.60}",
+                                    key="odometry_sigma")
         object.__setattr__(self, "odometry_sigma", sig)
-        if self.sensor_range_m is not None and not (math.isfinite(self.sensor_range_m)
+        if self.sensor_range_m is not None and not (math.isfinite(
+                real(self.sensor_range_m, "sensor_range_m", StreamFormatError))
                                                     and self.sensor_range_m > 0):
             raise StreamFormatError("must be a finite number > 0 or None", key="sensor_range_m")
-        priors = tuple(self.priors)
+        try:
+            priors = tuple(self.priors)
+        except TypeError:
+            priors = (self.priors,)
         for k, p in enumerate(priors):
+            if not isinstance(p, Prior):
+                raise StreamFormatError(f"must be a Prior(i, j, distance_m, sigma_m), got "
+                                        f"{type(p).__name__} {p!r:.40}", key=f"priors[{k}]")
+            if not (is_integer(p.i) and is_integer(p.j)):
+                raise StreamFormatError(f"landmark ids must be integers, got {p.i!r} and "
+                                        f"{p.j!r}", key=f"priors[{k}]")
+            for name in ("distance_m", "sigma_m"):
+                real(getattr(p, name), f"priors[{k}].{name}", StreamFormatError)
             if p.i == p.j or min(p.i, p.j) < 0:
                 raise StreamFormatError(f"prior joins landmarks {p.i} and {p.j}; need two "
                                         f"different non-negative ids", key=f"priors[{k}]")
@@ -124,9 +144,17 @@ class Step:
     time_s: float | None = None
 
     def __post_init__(self) -> None:
-        ids = _frozen(np.array(self.landmark_ids, dtype=np.int64).reshape(-1))
-        brg = _frozen(np.array(wrap_angle(np.asarray(self.bearings_rad, dtype=float)),
-                               dtype=float).reshape(-1))
+        if not (is_integer(self.t) and self.t >= 0):
+            raise StreamFormatError(f"must be the step index, an integer >= 0, got "
+                                    f"{self.t!r:.40}", key="t")
+        ids = _frozen(id_array(self.landmark_ids, f"step {self.t}: landmark_ids",
+                               lambda m: StreamFormatError(m, key="bearings")))
+        try:
+            raw = np.asarray(self.bearings_rad, dtype=float)
+        except (TypeError, ValueError):
+            raise StreamFormatError(f"step {self.t}: bearings_rad must be numbers, got "
+                                    f"{self.bearings_rad!r:.40}", key="bearings") from None
+        brg = _frozen(np.array(wrap_angle(raw), dtype=float).reshape(-1))
         if ids.shape != brg.shape:
             raise StreamFormatError(f"step {self.t}: {ids.size} landmark ids but "
                                     f"{brg.size} bearings", key="bearings")
@@ -141,14 +169,17 @@ class Step:
             v = getattr(self, key)
             if v is None:
                 continue
-            arr = np.array(v, dtype=float).reshape(-1)
+            try:
+                arr = np.array(v, dtype=float).reshape(-1)
+            except (TypeError, ValueError):
+                arr = np.zeros(0)
             if arr.shape != (3,) or not np.all(np.isfinite(arr)):
                 raise StreamFormatError(f"step {self.t}: must be 3 finite numbers", key=key)
             if key == "odom_sigma" and np.any(arr < 0):
                 raise StreamFormatError(f"step {self.t}: sigmas must be >= 0", key=key)
             object.__setattr__(self, key, _frozen(arr))
-        if self.time_s is not None and not math.isfinite(self.time_s):
-            raise StreamFormatError(f"step {self.t}: must be finite", key="time_s")
+        finite_or_none(self.time_s, f"step {self.t}: time_s",
+                       lambda m: StreamFormatError(m, key="time_s"))
 
     def __eq__(self, other: object) -> bool:
         if not isinstance(other, Step):
@@ -185,8 +216,11 @@ class Truth:
     poses: np.ndarray | None = None
 
     def __post_init__(self) -> None:
-        ids = _frozen(np.array(self.landmark_ids, dtype=np.int64).reshape(-1))
-        xy = _frozen(np.array(self.landmarks_xy, dtype=float).reshape(-1, 2))
+        def bad(message: str) -> StreamFormatError:
+            return StreamFormatError(message, key="truth.landmarks")
+
+        ids = _frozen(id_array(self.landmark_ids, "landmark_ids", bad))
+        xy = _frozen(row_array(self.landmarks_xy, 2, "landmarks_xy", bad))
         if ids.shape[0] != xy.shape[0]:
             raise StreamFormatError("landmark ids and positions differ in number",
                                     key="truth")
@@ -198,7 +232,8 @@ class Truth:
         object.__setattr__(self, "landmark_ids", ids)
         object.__setattr__(self, "landmarks_xy", xy)
         if self.poses is not None:
-            poses = np.array(self.poses, dtype=float).reshape(-1, 3)
+            poses = row_array(self.poses, 3, "poses",
+                              lambda m: StreamFormatError(m, key="truth.poses"))
             if not np.all(np.isfinite(poses)):
                 raise StreamFormatError("poses must be finite", key="truth.poses")
             object.__setattr__(self, "poses", _frozen(poses))
@@ -222,10 +257,22 @@ class Stream:
     truth: Truth | None = None
 
     def __post_init__(self) -> None:
+        if not isinstance(self.header, StreamHeader):
+            raise StreamFormatError(f"must be a StreamHeader, got {type(self.header).__name__}",
+                                    key="header")
+        if self.truth is not None and not isinstance(self.truth, Truth):
+            raise StreamFormatError(f"must be a Truth or None, got {type(self.truth).__name__}",
+                                    key="truth")
+        if isinstance(self.steps, Step) or not isinstance(self.steps, Iterable):
+            raise StreamFormatError(f"must be a sequence of Step, got "
+                                    f"{type(self.steps).__name__}", key="steps")
         object.__setattr__(self, "steps", tuple(self.steps))
         if not self.steps:
             raise StreamFormatError("a stream needs at least the step t = 0", key="t")
         for k, s in enumerate(self.steps):
+            if not isinstance(s, Step):
+                raise StreamFormatError(f"steps[{k}] is a {type(s).__name__}, not a Step",
+                                        key="steps")
             if s.t != k:
                 raise StreamFormatError(f"step {k} has t = {s.t}; steps must be 0, 1, 2, ...",
                                         key="t")

@@ -11,7 +11,7 @@ import pytest
 from bomgraph.bench import Executor, execute, run_task, strip_timings, task_key
 from bomgraph.errors import ConfigError
 from bomgraph.experiments import Arm, Experiment
-from bomgraph.sim import SimConfig
+from bomgraph.sim import SimConfig, paper_design, simulate_run
 
 SMALL = SimConfig(n_steps=40, n_landmarks=20)
 
@@ -205,3 +205,33 @@ def test_run_task_scores_each_checkpoint_as_it_comes_and_keeps_one_map(
                 for s in score_checkpoints(whole, stream.truth)]
     got = [{k: v for k, v in c.items() if k != "estimate_s"} for c in res["checkpoints"]]
     assert json.dumps(got) == json.dumps(expected)
+
+
+@pytest.mark.parametrize("kwargs,match", [
+    ({"n_jobs": 0}, "n_jobs must be a non-zero integer"),
+    ({"n_jobs": "2"}, "n_jobs must be a non-zero integer"),
+    ({"n_jobs": 2.5}, "n_jobs must be a non-zero integer"),
+    ({"backend": "dask", "dask_local": 1.5}, "dask_local must be an integer >= 0"),
+])
+def test_executor_refuses_worker_counts_that_are_not_integers(kwargs: dict, match: str) -> None:
+    """Executor('processes', n_jobs='2') or n_jobs=0 was taken and failed inside joblib."""
+    with pytest.raises(ConfigError, match=match):
+        Executor(**{"backend": "processes", **kwargs})
+
+
+def test_execute_and_run_file_refuse_arguments_of_the_wrong_type(tmp_path: Path) -> None:
+    """execute() with a string executor or non-Task items, run_file() with options as a list:
+    AttributeError / TypeError before."""
+    from bomgraph.bench import run_file
+    from bomgraph.stream_file import write_stream
+
+    with pytest.raises(ConfigError, match="executor must be an Executor"):
+        execute([], "serial")  # type: ignore[arg-type]
+    with pytest.raises(ConfigError, match=r"tasks must be Task objects \(experiment.tasks\(\)\)"
+                                          r", got int"):
+        execute([1], Executor("serial"))  # type: ignore[list-item]
+    path = tmp_path / "s.jsonl"
+    write_stream(simulate_run(paper_design(0)[0], SimConfig(n_steps=12)), path)
+    with pytest.raises(ConfigError, match="options must be a mapping"):
+        run_file(path, "triangulate", options=["min_parallax_rad=0.1"])  # type: ignore[arg-type]
+    assert run_file(path, "triangulate", options={}).checkpoints[-1].t == 12

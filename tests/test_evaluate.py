@@ -151,3 +151,53 @@ def test_pose_nees_of_a_hand_computed_error() -> None:
         assert pose_nees(est, truth, s.alignment) == pytest.approx(3.0, rel=1e-9)
     no_cov = MapEstimate(np.arange(4), lm, pose_t=np.array([1]), poses=truth.poses[1:])
     assert np.isnan(pose_nees(no_cov, truth, score_estimate(no_cov, truth).alignment))
+
+
+def _square() -> tuple[MapEstimate, Truth]:
+    ids = np.array([1, 2, 3, 4])
+    xy = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0], [1.0, 1.0]])
+    est = MapEstimate(ids, xy + 0.01, pose_t=[0, 1, 2], poses=np.zeros((3, 3)))
+    return est, Truth(ids, xy, poses=np.zeros((3, 3)))
+
+
+def test_score_estimate_refuses_swapped_or_wrong_arguments() -> None:
+    """score_estimate(truth, estimate) used to score the truth against the estimate as if
+    nothing were wrong; a RunResult or a missing truth ended in an AttributeError."""
+    est, truth = _square()
+    with pytest.raises(EvaluationError, match="estimate must be a MapEstimate, got Truth "
+                                              r"\(arguments swapped"):
+        score_estimate(truth, est)  # type: ignore[arg-type]
+    result = RunResult("m", (Checkpoint(2, est, 0.0),), np.zeros(3), 0.0)
+    with pytest.raises(EvaluationError, match=r"got RunResult \(result.final"):
+        score_estimate(result, truth)  # type: ignore[arg-type]
+    with pytest.raises(EvaluationError, match=r"truth must be a Truth .* got NoneType \(the "
+                                              r"stream has no truth\)"):
+        score_estimate(est, None)  # type: ignore[arg-type]
+    with pytest.raises(EvaluationError, match="truth must be a Truth"):
+        score_checkpoints(result, None)  # type: ignore[arg-type]
+    with pytest.raises(EvaluationError, match=r"got MapEstimate \(score one map with "):
+        score_checkpoints(est, truth)  # type: ignore[arg-type]
+    with pytest.raises(EvaluationError, match="items must be Checkpoint, got MapEstimate"):
+        score_checkpoints([est], truth)  # type: ignore[list-item]
+    assert score_checkpoints(result, truth)[0].n_common == 4
+
+
+@pytest.mark.parametrize("delta", [0, -1, 1.5, "1"])
+def test_score_estimate_refuses_a_delta_that_is_not_a_positive_integer(delta: object) -> None:
+    """0 and -1 raised trajectory's plain ValueError; 1.5 gave NaN relative errors."""
+    est, truth = _square()
+    with pytest.raises(EvaluationError, match="delta must be an integer >= 1"):
+        score_estimate(est, truth, delta=delta)  # type: ignore[arg-type]
+
+
+def test_align_refuses_points_given_as_columns() -> None:
+    """A (2, n) array was reshaped to (n, 2): a transform of scrambled points."""
+    pts = np.array([[0.0, 1.0, 0.0, 2.0], [0.0, 0.0, 1.0, 1.0]])
+    with pytest.raises(EvaluationError, match=r"source_xy must have shape \(n, 2\), got "
+                                              r"\(2, 4\); transpose"):
+        align(pts, pts)
+    with pytest.raises(EvaluationError, match="must be numbers"):
+        align("ab", "cd")  # type: ignore[arg-type]
+    assert np.allclose(align(pts.T, pts.T).apply(pts.T), pts.T)
+    with pytest.raises(EvaluationError, match=r"points_xy must have shape \(n, 2\)"):
+        align(pts.T, pts.T).apply(pts)

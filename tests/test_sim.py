@@ -132,3 +132,26 @@ def test_priors_for_too_many_landmarks_are_refused_before_the_pairs_are_listed()
     truth = Truth(np.arange(n), np.zeros((n, 2)), None)
     with pytest.raises(ConfigError, match="pairs"):
         make_priors(truth, 0.01, 0.03, np.random.default_rng(0))
+
+
+@pytest.mark.parametrize("kwargs,match", [
+    ({"config": {"n_steps": 3}}, "config must be a SimConfig, got dict"),
+    ({"rng": 0}, r"rng must be a numpy.random.Generator \(np.random.default_rng"),
+    ({"rng": None}, "rng must be a numpy.random.Generator"),
+    ({"landmarks_xy": np.zeros((2, 5))}, r"landmarks_xy must have shape \(n, 2\), got \(2, 5\)"),
+    ({"start_pose": (1.0, 1.0)}, r"start_pose must be \(x_m, y_m, psi_rad\)"),
+])
+def test_simulate_refuses_wrong_arguments_by_name(kwargs: dict, match: str) -> None:
+    """A dict config, an int seed for rng or a (2, N) layout ended in AttributeError or was
+    reshaped into another layout."""
+    args = {"config": SimConfig(n_steps=3), "rng": np.random.default_rng(0), **kwargs}
+    config, rng = args.pop("config"), args.pop("rng")
+    with pytest.raises(ConfigError, match=match):
+        simulate(config, rng, **args)
+
+
+@pytest.mark.parametrize("field", ["n_steps", "n_landmarks"])
+@pytest.mark.parametrize("value", [2.5, 3.0, True])
+def test_sim_config_counts_must_be_integers(field: str, value: object) -> None:
+    with pytest.raises(ConfigError, match=f"{field} must be an integer"):
+        SimConfig(**{field: value})

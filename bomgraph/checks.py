@@ -1,0 +1,105 @@
+"""Checks of the objects a user hands the library (ids, point arrays, numbers).
+
+The library's data classes and entry points (:class:`~bomgraph.stream.Step`,
+:class:`~bomgraph.stream.Truth`, :class:`~bomgraph.mapper.MapEstimate`, :func:`run`,
+:func:`score_estimate`, ...) validate what enters them with these, so a wrong shape or type
+is refused where it enters, naming the argument, instead of failing deep inside or, worse,
+being reshaped into a wrong answer. Each check is O(size) numpy (a step's is on the hot path).
+"""
+
+from __future__ import annotations
+
+import math
+import numbers
+from typing import Any, Callable
+
+import numpy as np
+
+#: An error class taking one message (a :class:`~bomgraph.errors.BomgraphError` subclass).
+Raise = Callable[[str], Exception]
+
+_INT64_MAX = float(np.iinfo(np.int64).max)
+
+
+def is_integer(v: Any) -> bool:
+    """A Python or numpy integer (``True``/``False`` are not)."""
+    return isinstance(v, (numbers.Integral, np.integer)) and not isinstance(v, (bool, np.bool_))
+
+
+def id_array(value: Any, name: str, error: Raise) -> np.ndarray:
+    """``value`` as a new 1-D int64 array, refusing what is not integral.
+
+    Integer arrays and lists pass as they are; floats must be integral and fit int64 (a
+    ``1.5`` would be truncated to ``1`` by a plain cast); booleans, strings, None and NaN are
+    refused. Returns a copy (the caller may freeze it).
+    """
+    try:
+        raw = np.asarray(value)
+    except (TypeError, ValueError) as exc:  # ragged nested lists
+        raise error(f"{name} must be a sequence of integers ({exc})") from None
+    if raw.dtype.kind in "iu":
+        if raw.dtype.kind == "u" and raw.size and raw.max() > _INT64_MAX:
+            raise error(f"{name} must fit int64 (got {int(raw.max())})")
+        return np.array(raw, dtype=np.int64).reshape(-1)
+    if raw.size == 0 and raw.dtype.kind in "fO":  # [] or an empty float array
+        return np.zeros(0, dtype=np.int64)
+    if raw.dtype.kind != "f":
+        got = "None" if value is None else f"{raw.dtype} values"
+        raise error(f"{name} must be integers, got {got}")
+    if not (np.all(np.isfinite(raw)) and np.all(raw == np.round(raw))
+            and np.all(np.abs(raw) <= _INT64_MAX)):
+        bad = raw[~(np.isfinite(raw) & (raw == np.round(raw)))]
+        raise error(f"{name} must be integers, got {bad[0] if bad.size else raw.max()!r} "
+                    f"(ids are never rounded)")
+    return np.array(raw, dtype=np.int64).reshape(-1)
+
+
+def row_array(value: Any, width: int, name: str, error: Raise, *,
+              tail: tuple[int, ...] = (), copy: bool = True) -> np.ndarray:
+    """``value`` as a new float array of shape ``(n, width)`` (or ``(n, *tail)``), refusing
+    any other shape rather than reshaping it: a ``(2, n)`` array is not read as ``(n, 2)``.
+
+    An empty value (``[]``, ``np.zeros(0)``) gives ``n = 0``. Non-numeric values are refused.
+    ``copy=False`` returns a float input itself (for a read-only use).
+    """
+    shape = tail or (width,)
+    want = f"(n, {', '.join(map(str, shape))})"
+    try:
+        raw = np.asarray(value)
+        if raw.dtype.kind not in "iuf" and not (raw.size == 0 and raw.dtype.kind == "O"):
+            raise TypeError(f"{raw.dtype} values" if value is not None else "None")
+        out = np.array(raw, dtype=float) if copy else np.asarray(raw, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise error(f"{name} must be numbers of shape {want}, got {exc}") from None
+    if out.size == 0:
+        return out.reshape((0, *shape))
+    if out.ndim != 1 + len(shape) or out.shape[1:] != shape:
+        hint = ("; transpose it (.T): points are rows" if out.ndim == 2 and
+                out.shape[0] == shape[0] and len(shape) == 1 else "")
+        raise error(f"{name} must have shape {want}, got {out.shape}{hint}")
+    return out
+
+
+def real(value: Any, name: str, error: Raise) -> float:
+    """``value`` as a float, refusing strings, None, booleans and arrays of more than one
+    element (so that the check after it reads a number)."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (numbers.Real, np.ndarray)) \
+            or (isinstance(value, np.ndarray) and value.ndim):
+        raise error(f"{name} must be a number, got {type(value).__name__} {value!r:.40}")
+    try:
+        return float(value)
+    except (TypeError, ValueError):
+        raise error(f"{name} must be a number, got {value!r:.40}") from None
+
+
+def finite_or_none(value: Any, name: str, error: Raise) -> float | None:
+    """``None`` or a finite float."""
+    if value is None:
+        return None
+    v = real(value, name, error)
+    if not math.isfinite(v):
+        raise error(f"{name} must be finite, got {v}")
+    return v
+
+
+__all__ = ["is_integer", "id_array", "row_array", "real", "finite_or_none"]
