@@ -265,7 +265,8 @@ _HEAD = '{"format": "bomgraph-estimate", "version": 2, "method": "m"}'
     (_HEAD[:20] + '\n{"t": 1, "landmarks": []}\n',
      ["line 1", "Invalid control character at column 21"]),
     ('{"format": "bomgraph-estimate", "version": 1,\n "method": "m",\n "landmarks": [[1, 2, ]]}',
-     ["line 3", "Expecting value at column 23"]),
+     # the decoder's words differ between Pythons (3.13: "Illegal trailing comma ...")
+     ["line 3", "not valid JSON (", " at column "]),
 ])
 def test_reader_messages_name_the_line_and_the_reason(tmp_path: Path, text, needles) -> None:
     """h18 item 11: an unknown version, a broken line 1 or an empty file said only
