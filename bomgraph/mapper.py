@@ -558,7 +558,15 @@ def create_mapper(name: str, header: StreamHeader, *, truth: Truth | None = None
         else:
             mapper = factory(header, **options)
     except TypeError as exc:  # an unknown option name or an option of the wrong type
-        raise ConfigError(f"method {name!r}: bad options {sorted(options)}: {exc}") from None
+        try:
+            inspect.signature(factory).bind(header, **(
+                {"truth": truth} if info.needs_truth else {}), **options)
+        except (TypeError, ValueError):  # the call itself does not fit: the options are wrong
+            raise ConfigError(f"method {name!r}: bad options {sorted(options)}: {exc}") from None
+        raise MethodProtocolError(
+            f"method {name!r}: its factory {info.target} raised TypeError while building it "
+            f"with options {sorted(options)}: {exc} (the options fit its signature, so look in "
+            f"the factory)") from exc
     if isinstance(mapper, type) or not (callable(getattr(mapper, "step", None))
                                         and callable(getattr(mapper, "estimate", None))):
         raise MethodProtocolError(f"method {name!r}: its factory {info.target} returned "

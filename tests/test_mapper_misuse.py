@@ -196,3 +196,28 @@ def test_register_method_refuses_a_name_or_target_that_is_not_a_string(
         mapper.register_method(name, target, "d")
     with pytest.raises(errors.UnknownMethodError, match="known methods: triangulate"):
         create_mapper("no-such-method", H)
+
+
+FACTORIES = '''
+def strict(header, *, window=3):
+    raise AssertionError("not reached in these tests")
+
+def buggy(header, **options):
+    return len(None)          # a fault inside the factory: TypeError
+'''
+
+
+def test_a_typeerror_inside_a_factory_is_the_factory_s_not_the_options(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The options were blamed for any TypeError a factory raised ('bad options []')."""
+    (tmp_path / "factories_h18.py").write_text(FACTORIES)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    monkeypatch.setattr(mapper, "_REGISTRY", dict(mapper._REGISTRY))
+    mapper.register_method("strict", "factories_h18:strict", "d")
+    mapper.register_method("buggy", "factories_h18:buggy", "d")
+    with pytest.raises(errors.MethodProtocolError,
+                       match=r"factory factories_h18:buggy raised TypeError .*look in the "
+                             r"factory"):
+        create_mapper("buggy", H)
+    with pytest.raises(ConfigError, match=r"method 'strict': unknown option 'colour'"):
+        create_mapper("strict", H, colour=1)        # a wrong option is still the options'
