@@ -109,7 +109,8 @@ class BearingEkfConfig(Presets):
         keeps the outliers from inflating it; the floor at 1 only ever inflates; only the data
         seen so far are used, vectorised over them (``O(n)`` per update), deterministic. With
         coloured errors only the white part is scaled.
-        Its last value is ``info["bearing_variance_scale"]``.
+        Its last value is ``info["bearing_variance_scale"]``, its largest
+        ``info["bearing_variance_scale_max"]``.
     """
 
     gate_probability: float = 0.999

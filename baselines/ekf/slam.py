@@ -111,6 +111,7 @@ class EkfSlam:
         self._nis = np.empty((2, 256))      # y^2 and H P H^T + var - sigma^2 of the bearings so far
         self._n_nis = 0
         self.variance_scale = 1.0
+        self.variance_scale_max = 1.0
 
     @staticmethod
     def _uses_inverse_depth(config: BearingEkfConfig) -> bool:
@@ -359,6 +360,7 @@ class EkfSlam:
             lam = self.variance_scale
             med = float(np.median(self._nis[0, :n] / (self._nis[1, :n] + lam * s2)))
             self.variance_scale = max(1.0, lam * med / _NIS_MEDIAN)
+            self.variance_scale_max = max(self.variance_scale_max, self.variance_scale)
         return var + (self.variance_scale - 1.0) * self._white_sigma ** 2
 
     def _model_gated_update(self, pose_off: np.ndarray, kinds: np.ndarray,
@@ -635,7 +637,8 @@ class EkfSlam:
                     nonlinear_bearings=self.n_nonlinear, used_bearings=self.n_updates,
                     restarted=self.n_restarted)
         if self._scale_online:
-            info.update(bearing_variance_scale=self.variance_scale)
+            info.update(bearing_variance_scale=self.variance_scale,
+                        bearing_variance_scale_max=self.variance_scale_max)
         if self.n_failures:
             info.update(update_failures=self.n_failures, last_failure=self.last_failure)
         n = self._n_poses
