@@ -25,24 +25,12 @@ from .config import BearingEkfConfig
 from .filter import BearingEkf, BearingModel, FilterNumericalError, JacobianRows
 from .models import (bearing_and_jacobian, invdepth_bearing_and_jacobian, invdepth_to_xy,
                      path_heading_noise, second_order_variance)
-from .rows import feature_rows, landmark_rows
+from .rows import feature_rows, landmark_rows, take_rows
+from .variance_scale import InnovationVarianceScale
 
 _LM, _CLONE, _IDP, _BIAS = "lm", "clone", "idp", "bias"
 _SIZE = {_LM: 2, _CLONE: 3, _IDP: 4, _BIAS: 1}
 _RANGE = np.arange(4)
-#: The median of a chi-square 1-dof variable, the median NIS of a consistent bearing.
-_NIS_MEDIAN = float(chi2.ppf(0.5, 1))
-
-
-def _take_rows(parts: JacobianRows, keep: np.ndarray) -> JacobianRows:
-    """The rows ``keep`` (bool, (k,)) of a sparse Jacobian, renumbered ``0..count(keep)-1``."""
-    new = np.cumsum(keep) - 1
-    out = []
-    for rows, cols, j in parts:
-        m = keep[rows]
-        if m.any():
-            out.append((new[rows[m]], cols[m], j[m]))
-    return out
 
 
 class EkfSlam:
@@ -106,12 +94,8 @@ class EkfSlam:
                                               float(config.correlated_fraction),
                                               float(config.correlation_length_rad))
         self._white_sigma = self._coloured.white_sigma_rad
-        # the online bearing variance scale (bearing_variance_scale="innovation")
-        self._scale_online = config.bearing_variance_scale == "innovation"
-        self._nis = np.empty((2, 256))      # y^2 and H P H^T + var - sigma^2 of the bearings so far
-        self._n_nis = 0
-        self.variance_scale = 1.0
-        self.variance_scale_max = 1.0
+        self._scale = (InnovationVarianceScale(self._white_sigma)
+                       if config.bearing_variance_scale == "innovation" else None)
 
     @staticmethod
     def _uses_inverse_depth(config: BearingEkfConfig) -> bool:
@@ -323,46 +307,6 @@ class EkfSlam:
             return self._plain_gated_update(pose_off, kinds, offsets, z)
         return self._model_gated_update(pose_off, kinds, offsets, z, bias_off, iterations)
 
-    def _scaled_variance(self, innovation: np.ndarray, hph: np.ndarray, var: np.ndarray,
-                         usable: np.ndarray) -> np.ndarray:
-        """The step's bearing variances with the online scale (``bearing_variance_scale=
-        "innovation"``, :class:`~baselines.ekf.config.BearingEkfConfig`).
-
-        Parameters
-        ----------
-        innovation, hph, var : arrays of shape (k,)
-            The wrapped innovations (rad), ``H_i P H_i^T`` and the variances with
-            ``lambda = 1`` (``sigma^2`` plus the second-order term), rad^2.
-        usable : array of shape (k,), bool
-            The bearings within ``max_bearing_nonlinearity``; only they add to the NIS.
-
-        Returns
-        -------
-        ndarray of shape (k,)
-            ``var + (lambda - 1) sigma^2`` with this step's ``lambda``: the previous one
-            times ``median_k(y_k^2 / (a_k + lambda sigma^2)) / chi2.ppf(0.5, 1)``, floored at
-            1, over every usable bearing so far, this step's included (``a_k = H_k P H_k^T +
-            var_k - sigma^2``, as at that bearing's update; stored, ``(2, n)``).
-        """
-        s2 = self._white_sigma ** 2
-        y2, rest = (innovation * innovation)[usable], (hph + var - s2)[usable]
-        ok = np.isfinite(y2) & np.isfinite(rest)
-        y2, rest = y2[ok], np.maximum(rest[ok], 0.0)
-        n, m = self._n_nis, len(y2)
-        if m:
-            if n + m > self._nis.shape[1]:
-                grown = np.empty((2, max(2 * self._nis.shape[1], n + m)))
-                grown[:, :n] = self._nis[:, :n]
-                self._nis = grown
-            self._nis[0, n:n + m], self._nis[1, n:n + m] = y2, rest
-            self._n_nis = n = n + m
-        if n:                       # one fixed-point step of median(NIS_lambda) = chi2 median
-            lam = self.variance_scale
-            med = float(np.median(self._nis[0, :n] / (self._nis[1, :n] + lam * s2)))
-            self.variance_scale = max(1.0, lam * med / _NIS_MEDIAN)
-            self.variance_scale_max = max(self.variance_scale_max, self.variance_scale)
-        return var + (self.variance_scale - 1.0) * self._white_sigma ** 2
-
     def _model_gated_update(self, pose_off: np.ndarray, kinds: np.ndarray,
                             offsets: np.ndarray, z: np.ndarray,
                             bias_off: np.ndarray | None,
@@ -385,8 +329,7 @@ class EkfSlam:
                                                            self._white_sigma)
         usable = index <= self._max_nonlin
         innovation = np.asarray(angle_residual(z, h))
-        if self._scale_online:
-            var = self._scaled_variance(innovation, hph, var, usable)
+        var = var if self._scale is None else self._scale.scaled(innovation, hph, var, usable)
         gated = (innovation ** 2 / (hph + var) > self._gate) & usable
         self.n_nonlinear += int(np.count_nonzero(~usable))
         self.n_gated += int(np.count_nonzero(gated))
@@ -397,7 +340,7 @@ class EkfSlam:
                 kept = model
             else:                           # the kept rows, already evaluated at this x
                 kept = self._model(pose_off[keep], kinds[keep], offsets[keep],
-                                   at=(x, h[keep], _take_rows(parts, keep)),
+                                   at=(x, h[keep], take_rows(parts, keep)),
                                    bias_off=bias_kept)
             plain = (self._model(pose_off[keep], kinds[keep], offsets[keep], constrained=False,
                                  bias_off=bias_kept)
@@ -447,8 +390,7 @@ class EkfSlam:
             index[f] = 0.0
         usable = index <= self._max_nonlin
         innovation = angle_residual(z, h)
-        if self._scale_online:
-            var = self._scaled_variance(innovation, hph, var, usable)
+        var = var if self._scale is None else self._scale.scaled(innovation, hph, var, usable)
         gated = innovation * innovation > self._gate * (hph + var)
         gated &= usable
         n_unusable = k - int(np.count_nonzero(usable))
@@ -636,9 +578,9 @@ class EkfSlam:
         info.update(state_dim=self.filter.dim, gated_bearings=self.n_gated,
                     nonlinear_bearings=self.n_nonlinear, used_bearings=self.n_updates,
                     restarted=self.n_restarted)
-        if self._scale_online:
-            info.update(bearing_variance_scale=self.variance_scale,
-                        bearing_variance_scale_max=self.variance_scale_max)
+        if self._scale is not None:     # bearing_variance_scale="innovation": lambda, last and max
+            info.update(bearing_variance_scale=self._scale.value,
+                        bearing_variance_scale_max=self._scale.max_value)
         if self.n_failures:
             info.update(update_failures=self.n_failures, last_failure=self.last_failure)
         n = self._n_poses

@@ -64,14 +64,14 @@ def test_the_scale_uses_only_the_data_so_far_and_is_deterministic() -> None:
         m = create_mapper("ekf", header, preset="real", bearing_variance_scale="innovation")
         for step in s.steps[:n]:
             m.step(step)
-        return m.variance_scale
+        return m._scale.value
 
     full = create_mapper("ekf", header, preset="real", bearing_variance_scale="innovation")
     seen = []
     for t, step in enumerate(s.steps):
         full.step(step)
         if t + 1 in (60, 120):
-            seen.append(full.variance_scale)
+            seen.append(full._scale.value)
     assert seen == [scale_after(60), scale_after(120)]
     assert seen[-1] > 1.0                          # it did move, so the comparison means something
 
