@@ -21,7 +21,12 @@ after the paper's rigid alignment), the map asked for every 10 steps.
 Usage::
 
     python scripts/bench_sigma_sim.py [--runs 5] [--worlds paper,sparse] [--jobs 2]
-        [--methods stmds-smacof,ekf,...] [--out /tmp/bench_sigma_sim.json]
+        [--methods stmds-smacof,ekf,...] [--option KEY=VALUE ...] [--out /tmp/bench_sigma_sim.json]
+
+``--option KEY=VALUE`` (repeatable; the value read as JSON, else as a string) is passed to
+every method's ``create_mapper`` on top of its preset, e.g. ``--option
+bearing_variance_scale=innovation --methods ekf,ekf-invdepth,oracle`` (the oracle then runs
+without it: it takes no such option).
 
 Prints, per world, preset and method, the mean MPE at each scale, the ratio of the means
 (x0.5 / x1, x2 / x1) and the largest per-run ratio either way (issue 15's measure:
@@ -73,7 +78,7 @@ def world_stream(world: str, k: int, steps: int | None = None) -> Stream:
 
 
 def one(world: str, k: int, method: str, preset: str, scale: float,
-        steps: int | None = None) -> dict[str, Any]:
+        steps: int | None = None, options: dict[str, Any] | None = None) -> dict[str, Any]:
     """One run: ``method`` with ``preset`` on run ``k`` of ``world``, the header's bearing
     sigma multiplied by ``scale`` (nothing else changed); its final map's MPE."""
     stream = world_stream(world, k, steps)
@@ -83,7 +88,8 @@ def one(world: str, k: int, method: str, preset: str, scale: float,
                            "scale": scale}
     t0 = time.process_time()
     try:
-        mapper = create_mapper(method, header, truth=stream.truth, preset=preset)
+        opts = dict(options or {}) if method.startswith("ekf") else {}
+        mapper = create_mapper(method, header, truth=stream.truth, preset=preset, **opts)
         result = run(mapper, stream.steps, checkpoint_every=10, keep_checkpoints=False)
         score = score_estimate(result.final, stream.truth)
         row.update(mpe_cm=100 * score.mpe_m, mapped=len(result.final),
@@ -131,11 +137,20 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--steps", type=int, default=None,
                     help="steps of every run (default: 300 paper, 500 sparse)")
+    ap.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
+                    help="an option of the EKF methods, on top of the preset (repeatable)")
     ap.add_argument("--out", type=Path, default=Path("/tmp/bench_sigma_sim.json"))
     a = ap.parse_args(argv)
+    options: dict[str, Any] = {}
+    for kv in a.option:
+        key, _, value = kv.partition("=")
+        try:
+            options[key] = json.loads(value)
+        except json.JSONDecodeError:
+            options[key] = value
     worlds = [w for w in a.worlds.split(",") if w]
     methods = [m for m in a.methods.split(",") if m]
-    tasks = [(w, k, m, p, s, a.steps) for w in worlds for k in range(a.runs)
+    tasks = [(w, k, m, p, s, a.steps, options) for w in worlds for k in range(a.runs)
              for p in (("real", "paper") if w == "paper" else ("real",))
              for m in methods
              for s in SCALES]

@@ -25,6 +25,9 @@ from bomgraph.errors import ConfigError
 #: The linearisations of :attr:`BearingEkfConfig.jacobians`.
 JACOBIANS = ("oc", "fej", "plain")
 
+#: The choices of :attr:`BearingEkfConfig.bearing_variance_scale`.
+BEARING_VARIANCE_SCALES = ("fixed", "innovation")
+
 
 @dataclass(frozen=True)
 class BearingEkfConfig(Presets):
@@ -89,6 +92,25 @@ class BearingEkfConfig(Presets):
         Gauss-Newton where the prior is wide, the plain update elsewhere. None (every
         preset): ``iterations`` for every update.
     wide_prior_iterations : the iterations of such an update (an integer >= 1).
+    bearing_variance_scale : ``"fixed"`` (every preset): a bearing's variance in the gate and
+        the update is the header's ``sigma^2`` (times ``1 - c`` with coloured errors) plus the
+        second-order term. ``"innovation"``: the ``sigma^2`` part is multiplied by a scale
+        ``lambda >= 1`` estimated online by covariance matching on the normalised innovation
+        squared (NIS). Every usable bearing ``k`` (within ``max_bearing_nonlinearity``, before
+        the gate) keeps its squared innovation ``y_k^2`` (rad^2) and ``a_k = H_k P H_k^T +
+        var_k - sigma^2`` (rad^2: the predicted-state and second-order parts, which the scale
+        leaves alone) from its own update. ``lambda`` solves ``median_k(y_k^2 / (a_k + lambda
+        sigma^2)) = chi2.ppf(0.5, 1) = 0.4549`` (the median NIS of a consistent filter) over
+        all bearings so far, by one fixed-point step per update, ``lambda <- max(1, lambda *
+        median_k(NIS_k(lambda)) / 0.4549)``, from ``lambda = 1``, with this step's bearings
+        included; the step's gate and update then use ``var_k + (lambda - 1) sigma^2``. (With
+        ``a_k = 0`` one step solves it; the map ``lambda -> lambda NIS(lambda)`` grows more
+        slowly than ``lambda``, so the steps approach the root.) The median (not the mean)
+        keeps the outliers from inflating it; the floor at 1 only ever inflates; only the data
+        seen so far are used, vectorised over them (``O(n)`` per update), deterministic. With
+        coloured errors only the white part is scaled.
+        Its last value is ``info["bearing_variance_scale"]``, its largest
+        ``info["bearing_variance_scale_max"]``.
     """
 
     gate_probability: float = 0.999
@@ -106,8 +128,14 @@ class BearingEkfConfig(Presets):
     path_heading_noise: bool = False
     wide_prior_heading_sd_rad: float | None = None
     wide_prior_iterations: int = 10
+    bearing_variance_scale: str = "fixed"
 
     def __post_init__(self) -> None:
+        if self.bearing_variance_scale not in BEARING_VARIANCE_SCALES:
+            raise ConfigError(f"bearing_variance_scale must be one of "
+                              f"{', '.join(BEARING_VARIANCE_SCALES)} (the header's sigma; "
+                              f"scaled online from the innovations), got "
+                              f"{self.bearing_variance_scale!r}")
         wide = self.wide_prior_heading_sd_rad
         if wide is not None and not (math.isfinite(wide) and wide >= 0):
             raise ConfigError(f"wide_prior_heading_sd_rad must be a finite number >= 0 or None "
@@ -214,4 +242,4 @@ class InverseDepthConfig(BearingEkfConfig):
             raise ConfigError("linearity_max must be > 0")
 
 
-__all__ = ["BearingEkfConfig", "EkfConfig", "InverseDepthConfig", "JACOBIANS"]
+__all__ = ["BEARING_VARIANCE_SCALES", "BearingEkfConfig", "EkfConfig", "InverseDepthConfig", "JACOBIANS"]

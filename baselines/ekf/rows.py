@@ -20,6 +20,8 @@ from typing import Callable
 
 import numpy as np
 
+from .filter import JacobianRows
+
 #: ``(jac (m, 5), cols (m, 5)) -> jac (m, 5)``: the general observability constraint (the
 #: projection of :meth:`~baselines.ekf.slam.EkfSlam._constrain`) for rows whose closest
 #: constrained linearisation does not exist.
@@ -147,4 +149,16 @@ def feature_rows(x: np.ndarray, P: np.ndarray, nullspace: np.ndarray,  # noqa: N
     h_rr = -2.0 * cross * (vx * amp[:, 0] + vy * amp[:, 1]) / (q * q)
     var = white_sigma_rad ** 2 + 0.5 * (h_rr * block[:, 6, 6]) ** 2
     return h, j[:, 0], hph, var
-__all__ = ["feature_rows", "landmark_rows"]
+def take_rows(parts: JacobianRows, keep: np.ndarray) -> JacobianRows:
+    """The rows ``keep`` (bool, (k,)) of a sparse Jacobian, renumbered ``0..count(keep)-1``
+    (moved here from slam.py)."""
+    new = np.cumsum(keep) - 1
+    out = []
+    for rows, cols, j in parts:
+        m = keep[rows]
+        if m.any():
+            out.append((new[rows[m]], cols[m], j[m]))
+    return out
+
+
+__all__ = ["feature_rows", "landmark_rows", "take_rows"]

@@ -25,22 +25,12 @@ from .config import BearingEkfConfig
 from .filter import BearingEkf, BearingModel, FilterNumericalError, JacobianRows
 from .models import (bearing_and_jacobian, invdepth_bearing_and_jacobian, invdepth_to_xy,
                      path_heading_noise, second_order_variance)
-from .rows import feature_rows, landmark_rows
+from .rows import feature_rows, landmark_rows, take_rows
+from .variance_scale import InnovationVarianceScale
 
 _LM, _CLONE, _IDP, _BIAS = "lm", "clone", "idp", "bias"
 _SIZE = {_LM: 2, _CLONE: 3, _IDP: 4, _BIAS: 1}
 _RANGE = np.arange(4)
-
-
-def _take_rows(parts: JacobianRows, keep: np.ndarray) -> JacobianRows:
-    """The rows ``keep`` (bool, (k,)) of a sparse Jacobian, renumbered ``0..count(keep)-1``."""
-    new = np.cumsum(keep) - 1
-    out = []
-    for rows, cols, j in parts:
-        m = keep[rows]
-        if m.any():
-            out.append((new[rows[m]], cols[m], j[m]))
-    return out
 
 
 class EkfSlam:
@@ -104,6 +94,8 @@ class EkfSlam:
                                               float(config.correlated_fraction),
                                               float(config.correlation_length_rad))
         self._white_sigma = self._coloured.white_sigma_rad
+        self._scale = (InnovationVarianceScale(self._white_sigma)
+                       if config.bearing_variance_scale == "innovation" else None)
 
     @staticmethod
     def _uses_inverse_depth(config: BearingEkfConfig) -> bool:
@@ -337,6 +329,7 @@ class EkfSlam:
                                                            self._white_sigma)
         usable = index <= self._max_nonlin
         innovation = np.asarray(angle_residual(z, h))
+        var = var if self._scale is None else self._scale.scaled(innovation, hph, var, usable)
         gated = (innovation ** 2 / (hph + var) > self._gate) & usable
         self.n_nonlinear += int(np.count_nonzero(~usable))
         self.n_gated += int(np.count_nonzero(gated))
@@ -347,7 +340,7 @@ class EkfSlam:
                 kept = model
             else:                           # the kept rows, already evaluated at this x
                 kept = self._model(pose_off[keep], kinds[keep], offsets[keep],
-                                   at=(x, h[keep], _take_rows(parts, keep)),
+                                   at=(x, h[keep], take_rows(parts, keep)),
                                    bias_off=bias_kept)
             plain = (self._model(pose_off[keep], kinds[keep], offsets[keep], constrained=False,
                                  bias_off=bias_kept)
@@ -397,6 +390,7 @@ class EkfSlam:
             index[f] = 0.0
         usable = index <= self._max_nonlin
         innovation = angle_residual(z, h)
+        var = var if self._scale is None else self._scale.scaled(innovation, hph, var, usable)
         gated = innovation * innovation > self._gate * (hph + var)
         gated &= usable
         n_unusable = k - int(np.count_nonzero(usable))
@@ -584,6 +578,9 @@ class EkfSlam:
         info.update(state_dim=self.filter.dim, gated_bearings=self.n_gated,
                     nonlinear_bearings=self.n_nonlinear, used_bearings=self.n_updates,
                     restarted=self.n_restarted)
+        if self._scale is not None:     # bearing_variance_scale="innovation": lambda, last and max
+            info.update(bearing_variance_scale=self._scale.value,
+                        bearing_variance_scale_max=self._scale.max_value)
         if self.n_failures:
             info.update(update_failures=self.n_failures, last_failure=self.last_failure)
         n = self._n_poses
