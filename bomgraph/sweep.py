@@ -296,12 +296,6 @@ def _finite(v: int | float) -> bool:
         return False
 
 
-def _short(v: Any) -> str:
-    """``repr(v)``, cut to 40 characters (a 400-digit number is not quoted whole)."""
-    r = repr(v)
-    return r if len(r) <= 40 else r[:37] + "..."
-
-
 class _Reader:
     """Checks the parsed TOML, key by key, naming ``file: key`` in every error."""
 
@@ -427,7 +421,7 @@ class _Reader:
             ok = (isinstance(v, int) if isinstance(default, int) else
                   isinstance(v, (int, float)) and _finite(v)) and not isinstance(v, bool)
             if not ok:
-                raise self.fail(f"{key}.{k}", f"must be {'an integer' if isinstance(default, int) else 'a finite number'}, got {_short(v)}")
+                raise self.fail(f"{key}.{k}", f"must be {'an integer' if isinstance(default, int) else 'a finite number'}, got {v!r:.40}")
             values[k] = float(v) if isinstance(default, float) else v
         try:
             sim = SimConfig(**values)
