@@ -88,7 +88,7 @@ def real(value: Any, name: str, error: Raise) -> float:
         raise error(f"{name} must be a number, got {type(value).__name__} {value!r:.40}")
     try:
         return float(value)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):  # OverflowError: an int beyond a float
         raise error(f"{name} must be a number, got {value!r:.40}") from None
 
 

@@ -100,3 +100,11 @@ def test_stream_refuses_parts_of_the_wrong_type() -> None:
         with pytest.raises(StreamFormatError, match="'steps': must be a sequence of Step"):
             Stream(H, bad)  # type: ignore[arg-type]
     assert len(Stream(H, (s for s in steps))) == 1
+
+
+def test_an_integer_too_large_for_a_float_is_refused_by_name() -> None:
+    """``float(10**400)`` raised OverflowError from inside the header's check."""
+    with pytest.raises(StreamFormatError, match="bearing_sigma_rad must be a number"):
+        StreamHeader(10**400, (0.03, 0.0, 0.05))
+    with pytest.raises(StreamFormatError, match="odometry_sigma"):
+        StreamHeader(0.05, (10**400, 0.0, 0.05))
