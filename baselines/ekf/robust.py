@@ -10,7 +10,9 @@ exactly). Alone in an update its correction is then ``P H^T y / S_eff = P H^T / 
 psi(y_n)`` with Huber's ``psi(u) = u`` for ``|u| <= k``, ``k sign(u)`` beyond: one step of
 iteratively reweighted least squares on the prior and the bearing, the weight taken at the
 prior (Karlgaard and Schaub's Huber-based filter, written as a variance inflation). In a
-batch each bearing is weighted on its own marginal ``S_i``, as the gate is.
+batch each bearing is weighted on its own marginal ``S_i``, as the gate is. The gate stays
+the last line and decides as before: a bearing past it on ``S_i`` (``y^2 > g S_i``) keeps
+``var_i``, so it is still gated (inflating it would widen the gate to ``|y_n| > g / k``).
 """
 
 from __future__ import annotations
@@ -26,7 +28,7 @@ ROBUST_UPDATES = ("none", "huber")
 
 
 def huber_variance(innovation: np.ndarray, hph: np.ndarray, var: np.ndarray,
-                   k: float) -> tuple[np.ndarray, np.ndarray]:
+                   k: float, gate: float = np.inf) -> tuple[np.ndarray, np.ndarray]:
     """The bearing variances with Huber's weight, and which bearings were inflated.
 
     Parameters
@@ -35,19 +37,22 @@ def huber_variance(innovation: np.ndarray, hph: np.ndarray, var: np.ndarray,
         The wrapped innovations ``y`` (rad), ``H_i P H_i^T`` and the variances (rad^2).
     k : float
         The threshold on ``|y| / sqrt(H_i P H_i^T + var_i)``.
+    gate : float
+        The gate's NIS threshold ``g`` (``inf``: no gate): bearings with ``y^2 > g S_i`` are
+        left as they are (the gate drops them).
 
     Returns
     -------
     var_eff : ndarray of shape (m,)
-        ``var_i`` where ``|y_n| <= k`` (the same floats), else ``var_i + (|y_n| / k - 1)
-        S_i``, i.e. an innovation variance ``S_i |y_n| / k``.
+        ``var_i`` where ``|y_n| <= k`` or ``y^2 > g S_i`` (the same floats), else ``var_i +
+        (|y_n| / k - 1) S_i``, i.e. an innovation variance ``S_i |y_n| / k``.
     inflated : ndarray of shape (m,), bool
-        ``|y_n| > k``.
+        ``k < |y_n|`` and ``y^2 <= g S_i``.
     """
     s = hph + var
     with np.errstate(divide="ignore", invalid="ignore"):
         ratio = np.abs(innovation) / (k * np.sqrt(s))          # |y_n| / k
-    inflated = ratio > 1.0
+    inflated = (ratio > 1.0) & ~(innovation * innovation > gate * s)
     if not inflated.any():
         return var, inflated
     return np.where(inflated, var + (ratio - 1.0) * s, var), inflated
@@ -67,8 +72,7 @@ class BearingVariances:
     robust_k : float
         Huber's threshold on the normalised innovation.
     gate : float
-        The gate's NIS threshold (only to count the inflated bearings that pass it, in
-        ``n_downweighted``).
+        The gate's NIS threshold (bearings past it keep their variance).
     """
 
     def __init__(self, scale: InnovationVarianceScale | None, robust_update: str,
@@ -86,10 +90,8 @@ class BearingVariances:
             var = self.scale.scaled(innovation, hph, var, usable)
         if self.k is None:
             return var
-        var, inflated = huber_variance(innovation, hph, var, self.k)
-        if inflated.any():
-            used = inflated & usable & ~(innovation * innovation > self.gate * (hph + var))
-            self.n_downweighted += int(np.count_nonzero(used))
+        var, inflated = huber_variance(innovation, hph, var, self.k, self.gate)
+        self.n_downweighted += int(np.count_nonzero(inflated & usable))
         return var
 
     def info(self) -> dict[str, Any]:
