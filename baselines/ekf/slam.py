@@ -25,6 +25,7 @@ from .config import BearingEkfConfig
 from .filter import BearingEkf, BearingModel, FilterNumericalError, JacobianRows
 from .models import (bearing_and_jacobian, invdepth_bearing_and_jacobian, invdepth_to_xy,
                      path_heading_noise, second_order_variance)
+from .robust import BearingVariances
 from .rows import feature_rows, landmark_rows, take_rows
 from .variance_scale import InnovationVarianceScale
 
@@ -96,6 +97,8 @@ class EkfSlam:
         self._white_sigma = self._coloured.white_sigma_rad
         self._scale = (InnovationVarianceScale(self._white_sigma)
                        if config.bearing_variance_scale == "innovation" else None)
+        self._variances = BearingVariances(self._scale, config.robust_update,
+                                           config.robust_k, self._gate)
 
     @staticmethod
     def _uses_inverse_depth(config: BearingEkfConfig) -> bool:
@@ -329,7 +332,7 @@ class EkfSlam:
                                                            self._white_sigma)
         usable = index <= self._max_nonlin
         innovation = np.asarray(angle_residual(z, h))
-        var = var if self._scale is None else self._scale.scaled(innovation, hph, var, usable)
+        var = self._variances(innovation, hph, var, usable)
         gated = (innovation ** 2 / (hph + var) > self._gate) & usable
         self.n_nonlinear += int(np.count_nonzero(~usable))
         self.n_gated += int(np.count_nonzero(gated))
@@ -390,7 +393,7 @@ class EkfSlam:
             index[f] = 0.0
         usable = index <= self._max_nonlin
         innovation = angle_residual(z, h)
-        var = var if self._scale is None else self._scale.scaled(innovation, hph, var, usable)
+        var = self._variances(innovation, hph, var, usable)
         gated = innovation * innovation > self._gate * (hph + var)
         gated &= usable
         n_unusable = k - int(np.count_nonzero(usable))
@@ -578,9 +581,7 @@ class EkfSlam:
         info.update(state_dim=self.filter.dim, gated_bearings=self.n_gated,
                     nonlinear_bearings=self.n_nonlinear, used_bearings=self.n_updates,
                     restarted=self.n_restarted)
-        if self._scale is not None:     # bearing_variance_scale="innovation": lambda, last and max
-            info.update(bearing_variance_scale=self._scale.value,
-                        bearing_variance_scale_max=self._scale.max_value)
+        info.update(self._variances.info())        # the variance options' own entries
         if self.n_failures:
             info.update(update_failures=self.n_failures, last_failure=self.last_failure)
         n = self._n_poses
