@@ -65,7 +65,7 @@ import sys
 from bomgraph.errors import EvaluationError
 from bomgraph.estimate_file import EstimateWriter, stream_identity
 from bomgraph.evaluate import landmark_nees, pose_nees, score_estimate
-from bomgraph.mapper import Checkpoint, MapEstimate, RunResult
+from bomgraph.mapper import MapEstimate
 from bomgraph.file_evaluation import evaluate_files
 from bomgraph.stream_file import write_stream
 

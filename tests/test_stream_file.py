@@ -228,10 +228,10 @@ def _read_bytes(tmp_dir: Path, data: bytes) -> None:
     except StreamFormatError:
         return
     assert isinstance(s, Stream)
-    assert [st.t for st in s.steps] == list(range(len(s.steps)))
-    for st in s.steps:
-        assert np.all(np.isfinite(st.bearings_rad))
-        assert np.all(st.bearings_rad <= np.pi) and np.all(st.bearings_rad > -np.pi)
+    assert [step.t for step in s.steps] == list(range(len(s.steps)))
+    for step in s.steps:
+        assert np.all(np.isfinite(step.bearings_rad))
+        assert np.all(step.bearings_rad <= np.pi) and np.all(step.bearings_rad > -np.pi)
 
 
 @settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])

@@ -16,7 +16,6 @@ import pytest
 
 from bomgraph.angles import wrap_angle
 from bomgraph.geometry import bearings_to
-from bomgraph.sim import SimConfig, simulate
 
 DATA = Path(os.environ.get("BOMGRAPH_DATA",
                           Path(__file__).resolve().parents[3] / "shared" / "data"))
@@ -183,9 +182,3 @@ LANDMARK 3 2 5 5 0.4 0 0.4
 LANDMARK 3 4 0 -2 0.4 0 0.4
 ODOMETRY 3 5 0.0 0.0 0.0 0.0001 0 0 4e-06 0 4e-06
 """
-
-
-@pytest.fixture(scope="module")
-def sim_stream():
-    """A small simulated stream (25 steps, 20 landmarks) to write as g2o."""
-    return simulate(SimConfig(n_steps=25, n_landmarks=20), np.random.default_rng(4))

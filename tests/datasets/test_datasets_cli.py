@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataset_excerpts import VICTORIA, make_mrclam, sim_stream, write_g2o  # noqa: F401
+from dataset_excerpts import VICTORIA, make_mrclam, write_g2o
 
 from bomgraph.datasets.mrclam import import_mrclam
 from bomgraph.stream_file import read_stream

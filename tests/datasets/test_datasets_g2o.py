@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from dataset_excerpts import DATA, INFO, needs_data, sim_stream, write_g2o  # noqa: F401
+from dataset_excerpts import DATA, INFO, needs_data, write_g2o
 
 from bomgraph.datasets.calibration import bearing_residuals
 from bomgraph.datasets.g2o import import_g2o, odometry_sigma_from_information
