@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import math
 import numbers
+import os
+from collections.abc import Iterable, Mapping
 from typing import Any, Callable
 
 import numpy as np
@@ -102,4 +104,47 @@ def finite_or_none(value: Any, name: str, error: Raise) -> float | None:
     return v
 
 
-__all__ = ["is_integer", "id_array", "row_array", "real", "finite_or_none"]
+def integer(value: Any, name: str, error: Raise, *, minimum: int = 0) -> int:
+    """``value`` as an ``int`` >= ``minimum``, refusing floats (``2.5`` is not truncated),
+    strings, booleans and None."""
+    if not (is_integer(value) and value >= minimum):
+        raise error(f"{name} must be an integer >= {minimum}, got {value!r:.40}")
+    return int(value)
+
+
+def file_name(value: Any, name: str, error: Raise) -> str:
+    """``value`` (a ``str`` or an ``os.PathLike`` naming a ``str``) as a ``str``, refusing
+    None, numbers, bytes and objects that are no file name."""
+    try:
+        path = os.fspath(value)
+    except TypeError:
+        path = None
+    if not isinstance(path, str):
+        raise error(f"{name} must be a file name (a str or a pathlib.Path), got "
+                    f"{type(value).__name__} {value!r:.40}")
+    return path
+
+
+def items(value: Any, kinds: type | tuple[type, ...], name: str, error: Raise, *,
+          want: str | None = None) -> tuple:
+    """``value`` (a list, tuple or other iterable, not a str or a mapping) as a tuple whose
+    items are all ``kinds`` (``want`` says what they are, default their class names): a lone
+    item, a str (read as its characters) or a dict (read as its keys) is refused, naming the
+    first wrong item."""
+    want = want or " or ".join(k.__name__ for k in
+                               (kinds if isinstance(kinds, tuple) else (kinds,)))
+    if isinstance(value, (str, bytes, os.PathLike, kinds)) or isinstance(value, Mapping) \
+            or not isinstance(value, Iterable):
+        hint = " (a list of one: [it])" if isinstance(value, (str, os.PathLike, kinds)) else ""
+        raise error(f"{name} must be a list or tuple of {want}, got {type(value).__name__} "
+                    f"{value!r:.40}{hint}")
+    out = tuple(value)
+    for k, v in enumerate(out):
+        if not isinstance(v, kinds):
+            raise error(f"{name}[{k}] is {type(v).__name__} {v!r:.40}; {name} must hold "
+                        f"{want}")
+    return out
+
+
+__all__ = ["is_integer", "id_array", "row_array", "real", "finite_or_none", "integer",
+           "file_name", "items"]

@@ -24,11 +24,13 @@ from typing import IO, Any, Mapping
 
 import numpy as np
 
+from .checks import file_name
 from .errors import StreamFormatError
 from .jsonio import (DuplicateKeyError, find_nonfinite, is_id, is_int, is_num, jsonable,
                      loads_strict, no_duplicate_keys)
 from .mapper import Checkpoint, MapEstimate, RunResult
-from .stdio import MAX_LINE_BYTES, AtomicOutput, bounded_lines, line_too_long
+from .stdio import (MAX_LINE_BYTES, AtomicOutput, OutputPathError, bounded_lines,
+                    line_too_long)
 from .stream_identity import StreamIdentity, stream_file_identity, stream_identity
 
 
@@ -87,7 +89,7 @@ class EstimateWriter:
                  stream: StreamIdentity | None = None,
                  options: Mapping[str, Any] | None = None,
                  checkpoint_every: int | None = None) -> None:
-        self.path = os.fspath(path)
+        self.path = file_name(path, "--out", OutputPathError)
         self._header: dict[str, Any] = {"format": ESTIMATE_FORMAT,
                                         "version": ESTIMATE_VERSION, "method": str(method)}
         if stream is not None:
@@ -502,7 +504,7 @@ def read_estimate(path: str | os.PathLike[str]) -> EstimateFile:
     """Read an estimate file written by ``bomgraph run`` (version 2, or version 1), strictly:
     unknown and duplicate keys, non-finite numbers and malformed entries are refused, naming
     the file, the line (version 2) and the key."""
-    path = str(path)
+    path = file_name(path, "estimate path", StreamFormatError)
     try:
         fh = open(path, "rb")
     except OSError as exc:

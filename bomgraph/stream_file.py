@@ -16,6 +16,7 @@ from typing import IO, Any, Iterable, Iterator, Sequence
 
 import numpy as np
 
+from .checks import file_name
 from .errors import StreamFormatError
 from .jsonio import (MAX_ID, DuplicateKeyError, decode_utf8, find_nonfinite, is_id, is_int,
                      is_num, loads_strict)
@@ -292,7 +293,7 @@ class StreamReader:
     """
 
     def __init__(self, path: str | os.PathLike[str], *, warn: bool = True) -> None:
-        self.path = str(path)
+        self.path = file_name(path, "stream path", StreamFormatError)
         self._warn = warn
         try:
             self._fh: IO[bytes] = open(self.path, "rb")

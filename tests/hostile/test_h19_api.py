@@ -24,3 +24,68 @@ def test_map_estimate_refuses_negative_landmark_ids(ids: object) -> None:
     refuses, and export wrote it into g2o and csv."""
     with pytest.raises(ConfigError, match="landmark_ids must be non-negative"):
         MapEstimate(ids, [[0.0, 0.0], [1.0, 1.0]])
+
+
+# ---- output paths: a file name, and the inputs as a list ------------------------------------
+
+@pytest.fixture(scope="module")
+def stream() -> Stream:
+    from bomgraph.sim import SimConfig, paper_design, simulate_run
+
+    return simulate_run(paper_design(0)[0], SimConfig(n_steps=25))
+
+
+@pytest.fixture(scope="module")
+def result(stream: Stream) -> object:
+    from bomgraph.mapper import create_mapper, run
+
+    return run(create_mapper("ekf", stream.header), stream.steps)
+
+
+def _writers(stream: Stream, result: object) -> dict:
+    from bomgraph.estimate_file import write_estimate
+    from bomgraph.export import export_text, write_text_atomic
+    from bomgraph.stream_file import write_stream
+
+    text = export_text(result.final, "tum", stream)
+    return {"write_stream": lambda p, **kw: write_stream(stream, p, **kw),
+            "write_estimate": lambda p: write_estimate(result, p),
+            "write_text_atomic": lambda p, **kw: write_text_atomic(text, p, **kw)}
+
+
+@pytest.mark.parametrize("bad", [None, 5, b"out.jsonl"])
+@pytest.mark.parametrize("writer", ["write_stream", "write_estimate", "write_text_atomic"])
+def test_an_output_that_is_no_file_name_is_refused(stream: Stream, result: object, writer: str,
+                                                   bad: object) -> None:
+    """None and a number ended in os.fspath's TypeError; bytes in pathlib's."""
+    with pytest.raises(BomgraphError, match="must be a file name"):
+        _writers(stream, result)[writer](bad)
+
+
+@pytest.mark.parametrize("writer", ["write_stream", "write_text_atomic"])
+@pytest.mark.parametrize("as_path", [False, True])
+def test_inputs_given_as_one_path_are_refused_and_the_input_kept(
+        tmp_path: Path, stream: Stream, result: object, writer: str, as_path: bool) -> None:
+    """``inputs="s.jsonl"`` was read as its characters, so the input itself was overwritten
+    (a Path ended in 'PosixPath is not iterable')."""
+    from bomgraph.stream_file import write_stream
+
+    src = tmp_path / "s.jsonl"
+    write_stream(stream, src)
+    before = src.read_bytes()
+    with pytest.raises(BomgraphError, match=r"inputs \(the files read\) must be a list"):
+        _writers(stream, result)[writer](src, inputs=src if as_path else str(src))
+    assert src.read_bytes() == before
+
+
+def test_readers_name_a_path_that_is_no_file_name(stream: Stream) -> None:
+    """read_stream(None) said 'None: cannot open: No such file or directory'; a Stream was
+    printed whole as if it were a file name."""
+    from bomgraph.estimate_file import read_estimate
+    from bomgraph.stream_file import read_stream
+
+    for bad in (None, stream):
+        with pytest.raises(BomgraphError, match="stream path must be a file name"):
+            read_stream(bad)
+        with pytest.raises(BomgraphError, match="estimate path must be a file name"):
+            read_estimate(bad)
