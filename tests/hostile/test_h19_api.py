@@ -89,3 +89,41 @@ def test_readers_name_a_path_that_is_no_file_name(stream: Stream) -> None:
             read_stream(bad)
         with pytest.raises(BomgraphError, match="estimate path must be a file name"):
             read_estimate(bad)
+
+
+# ---- export: the estimate, the stream and the text are what they say -----------------------
+
+@pytest.mark.parametrize("fmt", ["tum", "kitti", "csv", "g2o"])
+def test_export_refuses_an_estimate_or_stream_of_the_wrong_type(stream: Stream, result: object,
+                                                                fmt: str) -> None:
+    """A RunResult, None or a dict as the estimate, and a file name, the steps or the header
+    as the stream, ended in AttributeError ('RunResult' object has no attribute 'poses')."""
+    from bomgraph.errors import ExportError
+    from bomgraph.export import export_text, to_csv, to_g2o, to_kitti, to_tum
+
+    for bad, hint in [(result, r"result.final"), (None, "NoneType"), ({}, "dict")]:
+        with pytest.raises(ExportError, match=f"the estimate must be a MapEstimate.*{hint}"):
+            export_text(bad, fmt, stream)
+    for bad, hint in [("s.jsonl", "read_stream"), (stream.steps, "not its steps"),
+                      (stream.header, "not its steps or its header")]:
+        with pytest.raises(ExportError, match=f"stream must be a bomgraph Stream.*{hint}"):
+            export_text(result.final, fmt, bad)
+    one = {"tum": lambda e, s: to_tum(e, s), "kitti": lambda e, s: to_kitti(e),
+           "csv": lambda e, s: to_csv(e, s), "g2o": lambda e, s: to_g2o(e, s)}[fmt]
+    with pytest.raises(ExportError, match=f"to_{fmt}\\(\\): the estimate must be a MapEstimate"):
+        one(result, stream)
+
+
+def test_truth_estimate_and_odometry_information_refuse_wrong_arguments() -> None:
+    """truth_estimate("s.jsonl") ended in AttributeError; odometry_information gave inf/NaN
+    information for a zero sigma and numpy's TypeError/ValueError for a str or 2 sigmas."""
+    from bomgraph.errors import ExportError
+    from bomgraph.export import odometry_information, truth_estimate
+
+    with pytest.raises(ExportError, match=r"truth_estimate\(\): stream must be a bomgraph "
+                                          r"Stream, got str \(read the file"):
+        truth_estimate("s.jsonl")
+    for dth, sigma in [(0.1, [0.0, 1.0, 1.0]), (0.1, [1.0, 1.0]), ("a", [1.0, 1.0, 1.0]),
+                       (float("nan"), [1.0, 1.0, 1.0]), (0.1, "abc")]:
+        with pytest.raises(ExportError, match=r"odometry_information\(\)"):
+            odometry_information(dth, sigma)
