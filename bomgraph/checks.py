@@ -9,6 +9,7 @@ being reshaped into a wrong answer. Each check is O(size) numpy (a step's is on 
 
 from __future__ import annotations
 
+import json
 import math
 import numbers
 import os
@@ -146,5 +147,33 @@ def items(value: Any, kinds: type | tuple[type, ...], name: str, error: Raise, *
     return out
 
 
+#: relative tolerance of a covariance's asymmetry and negative eigenvalues, against its largest
+#: |entry|: the methods write round-off (at most 1.6e-16 measured: EKF, inverse-depth EKF and
+#: GTSAM marginals on simulated runs); 1e-9 leaves room for ill-conditioned inversions and
+#: still refuses any real sign or transposition error (the estimate file's reader and writer).
+COV_RTOL = 1e-9
+
+
+def covariance_problem(cov: np.ndarray) -> tuple[int, str] | None:
+    """The first matrix of ``cov`` ``(n, k, k)`` that is not finite, symmetric and positive
+    semi-definite (to :data:`COV_RTOL`, each matrix scaled by its largest |entry|) and what is
+    wrong with it, or None when all are."""
+    finite = np.isfinite(cov).all(axis=(1, 2))
+    c = np.where(finite[:, None, None], cov, 0.0)
+    scale = np.abs(c).max(axis=(1, 2), initial=0.0)
+    c = c / np.where(scale > 0, scale, 1.0)[:, None, None]
+    ct = c.transpose(0, 2, 1)
+    checks = ((~finite, "not finite"),
+              (np.abs(c - ct).max(axis=(1, 2), initial=0.0) > COV_RTOL, "not symmetric"),
+              (np.linalg.eigvalsh((c + ct) / 2)[:, 0] < -COV_RTOL, "not positive semi-definite"))
+    for bad, what in checks:
+        if bad.any():
+            i = int(np.argmax(bad))
+            shown = json.dumps(cov[i].ravel().tolist())[:80]
+            return i, (f"the covariance {shown} is {what}; a covariance must be finite, "
+                       f"symmetric and positive semi-definite")
+    return None
+
+
 __all__ = ["is_integer", "id_array", "row_array", "real", "finite_or_none", "integer",
-           "file_name", "items"]
+           "file_name", "items", "COV_RTOL", "covariance_problem"]

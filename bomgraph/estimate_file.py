@@ -24,7 +24,7 @@ from typing import IO, Any, Mapping
 
 import numpy as np
 
-from .checks import file_name
+from .checks import COV_RTOL, covariance_problem, file_name
 from .errors import StreamFormatError
 from .jsonio import (DuplicateKeyError, find_nonfinite, is_id, is_int, is_num, jsonable,
                      loads_strict, no_duplicate_keys)
@@ -343,31 +343,12 @@ def _rows(v: Any, width: int, key: str, ctx: _Line, what: str, *, int_first: boo
     return np.array(ids, dtype=np.int64), np.array(vals, dtype=float).reshape(-1, n)
 
 
-#: relative tolerance of a covariance's asymmetry and negative eigenvalues, against its largest
-#: |entry|: the methods write round-off (at most 1.6e-16 measured: EKF, inverse-depth EKF and
-#: GTSAM marginals on simulated runs); 1e-9 leaves room for ill-conditioned inversions and
-#: still refuses any real sign or transposition error.
-COV_RTOL = 1e-9
-
-
 def _check_cov(cov: np.ndarray, key: str, ctx: _Line) -> None:
     """Refuse a covariance ``(n, k, k)`` that is not finite, symmetric and positive
-    semi-definite (to :data:`COV_RTOL`, each matrix scaled by its largest |entry|)."""
-    finite = np.isfinite(cov).all(axis=(1, 2))
-    c = np.where(finite[:, None, None], cov, 0.0)
-    scale = np.abs(c).max(axis=(1, 2), initial=0.0)
-    c = c / np.where(scale > 0, scale, 1.0)[:, None, None]
-    ct = c.transpose(0, 2, 1)
-    checks = ((~finite, "not finite"),
-              (np.abs(c - ct).max(axis=(1, 2), initial=0.0) > COV_RTOL, "not symmetric"),
-              (np.linalg.eigvalsh((c + ct) / 2)[:, 0] < -COV_RTOL, "not positive semi-definite"))
-    for bad, what in checks:
-        if bad.any():
-            i = int(np.argmax(bad))
-            shown = json.dumps(cov[i].ravel().tolist())[:80]
-            raise ctx.error(f"{key}[{i}]", f"the covariance {shown} is {what}; a covariance "
-                                           f"must be finite, symmetric and positive "
-                                           f"semi-definite")
+    semi-definite (:func:`bomgraph.checks.covariance_problem`, to :data:`COV_RTOL`)."""
+    bad = covariance_problem(cov)
+    if bad is not None:
+        raise ctx.error(f"{key}[{bad[0]}]", bad[1])
 
 
 def _parse_checkpoint_v2(obj: dict, ctx: _Line, prev: MapEstimate | None
@@ -584,6 +565,6 @@ def read_estimate(path: str | os.PathLike[str]) -> EstimateFile:
     return _read_v1(obj, path)
 
 
-__all__ = ["ESTIMATE_FORMAT", "ESTIMATE_VERSION", "StreamIdentity", "stream_identity",
+__all__ = ["ESTIMATE_FORMAT", "ESTIMATE_VERSION", "COV_RTOL", "StreamIdentity", "stream_identity",
            "stream_file_identity", "EstimateWriter", "EstimateFile", "estimate_to_json",
            "write_estimate", "read_estimate"]
