@@ -95,14 +95,17 @@ def real(value: Any, name: str, error: Raise) -> float:
         raise error(f"{name} must be a number, got {value!r:.40}") from None
 
 
-def finite_or_none(value: Any, name: str, error: Raise) -> float | None:
-    """``None`` or a finite float."""
-    if value is None:
-        return None
+def finite(value: Any, name: str, error: Raise) -> float:
+    """``value`` as a finite float (:func:`real`, then NaN and infinities refused)."""
     v = real(value, name, error)
     if not math.isfinite(v):
         raise error(f"{name} must be finite, got {v}")
     return v
+
+
+def finite_or_none(value: Any, name: str, error: Raise) -> float | None:
+    """``None`` or a finite float."""
+    return None if value is None else finite(value, name, error)
 
 
 def integer(value: Any, name: str, error: Raise, *, minimum: int = 0) -> int:
@@ -175,5 +178,5 @@ def covariance_problem(cov: np.ndarray) -> tuple[int, str] | None:
     return None
 
 
-__all__ = ["is_integer", "id_array", "row_array", "real", "finite_or_none", "integer",
+__all__ = ["is_integer", "id_array", "row_array", "real", "finite", "finite_or_none", "integer",
            "file_name", "items", "COV_RTOL", "covariance_problem"]

@@ -127,3 +127,122 @@ def test_truth_estimate_and_odometry_information_refuse_wrong_arguments() -> Non
                        (float("nan"), [1.0, 1.0, 1.0]), (0.1, "abc")]:
         with pytest.raises(ExportError, match=r"odometry_information\(\)"):
             odometry_information(dth, sigma)
+
+
+# ---- the estimate file's writer: what it writes, its reader reads ---------------------------
+
+def _one(est: MapEstimate, t: int = 3) -> object:
+    from bomgraph.mapper import Checkpoint, RunResult
+
+    return RunResult("m", (Checkpoint(t, est, 0.0),), np.zeros(t + 1), 0.0)
+
+
+def test_write_estimate_refuses_what_is_no_run_result(tmp_path: Path, result: object) -> None:
+    """A MapEstimate, a list of checkpoints or None ended in AttributeError ('no attribute
+    method')."""
+    from bomgraph.estimate_file import estimate_to_json, write_estimate
+
+    for bad, hint in [(result.final, "a MapEstimate is one checkpoint's map"),
+                      (list(result.checkpoints), "got list"), (None, "got NoneType")]:
+        with pytest.raises(ConfigError, match=f"result must be a RunResult.*{hint}"):
+            write_estimate(bad, tmp_path / "e.est")
+        with pytest.raises(ConfigError, match="estimate_to_json.*result must be a RunResult"):
+            estimate_to_json(bad)
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("kwargs,match", [
+    ({"checkpoint_every": 0}, "checkpoint_every must be an integer >= 1"),     # file refused
+    ({"checkpoint_every": 2.5}, "checkpoint_every must be an integer >= 1"),   # written as 2
+    ({"checkpoint_every": "10"}, "checkpoint_every must be an integer >= 1"),
+    ({"stream": "s.jsonl"}, r"stream must be a StreamIdentity.*stream_file_identity\(path\)"),
+    ({"stream": "STREAM"}, r"stream must be a StreamIdentity.*stream_identity\(stream.steps\)"),
+    ({"options": "preset=real"}, "options must be a mapping"),
+    ({"method": None}, "method must be the method's name"),                   # written "None"
+])
+def test_estimate_writer_refuses_a_header_it_cannot_hold(tmp_path: Path, stream: Stream,
+                                                         result: object, kwargs: dict,
+                                                         match: str) -> None:
+    from bomgraph.estimate_file import EstimateWriter
+
+    kwargs = {k: stream if v == "STREAM" else v for k, v in kwargs.items()}
+    method = kwargs.pop("method", "ekf")
+    with pytest.raises(ConfigError, match=match):
+        with EstimateWriter(tmp_path / "e.est", method, **kwargs) as w:
+            w.add(result.checkpoints[-1])
+            w.finish(result)
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("what,kwargs,match", [
+    ("negative step", {"pose_t": [-2], "poses": [[0.0, 0.0, 0.0]]},
+     r"'poses': a pose at step -2"),
+    ("asymmetric covariance", {"landmark_cov": [[[1.0, 0.5], [0.0, 1.0]]]},
+     r"'landmark_cov\[0\]'.*not symmetric"),
+    ("negative covariance", {"landmark_cov": [[[-1.0, 0.0], [0.0, -1.0]]]},
+     r"'landmark_cov\[0\]'.*not positive semi-definite"),
+    ("bad pose covariance", {"pose_t": [0], "poses": [[0.0, 0.0, 0.0]],
+                             "pose_cov": [-np.eye(3)]}, r"'pose_cov\[0\]'.*not positive"),
+])
+def test_the_estimate_writer_refuses_what_its_reader_refuses(tmp_path: Path, what: str,
+                                                             kwargs: dict, match: str) -> None:
+    """These were written, and read_estimate then refused the file."""
+    from bomgraph.estimate_file import write_estimate
+
+    est = MapEstimate([1], [[0.0, 0.0]], **kwargs)
+    with pytest.raises(ConfigError, match=f"{match}.*read_estimate would refuse the file"):
+        write_estimate(_one(est), tmp_path / "e.est")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_estimate_writer_refuses_checkpoints_and_timings_it_cannot_write(
+        tmp_path: Path, result: object) -> None:
+    """A checkpoint at t = 3.5 was written as t = 3; out of order or negative ones raised a
+    plain ValueError, a MapEstimate or None estimate an AttributeError, a NaN time json's
+    ValueError; add() outside the block a plain RuntimeError."""
+    from bomgraph.estimate_file import EstimateWriter
+    from bomgraph.mapper import Checkpoint, RunResult
+
+    est = result.final
+    cases = [([Checkpoint(3.5, est, 0.0)], r"checkpoint's t must be an integer >= 0, got 3.5"),
+             ([Checkpoint(-3, est, 0.0)], r"checkpoint's t must be an integer >= 0"),
+             ([Checkpoint(5, est, 0.0), Checkpoint(5, est, 0.0)], "increasing t: 5 after 5"),
+             ([est], "needs a Checkpoint.*got MapEstimate"),
+             ([Checkpoint(3, None, 0.0)], "got a Checkpoint whose estimate is NoneType"),
+             ([Checkpoint(3, est, float("nan"))], "estimate_s must be finite"),
+             ([Checkpoint(3, est, "fast")], "estimate_s must be a number")]
+    for added, match in cases:
+        with pytest.raises(ConfigError, match=match):
+            with EstimateWriter(tmp_path / "e.est", "m") as w:
+                for c in added:
+                    w.add(c)
+                w.finish()
+    bad_total = RunResult("m", result.checkpoints, result.step_s, float("nan"))
+    with pytest.raises(ConfigError, match="timings must be finite"):
+        with EstimateWriter(tmp_path / "e.est", "m") as w:
+            w.add(result.checkpoints[-1])
+            w.finish(bad_total)
+    with pytest.raises(ConfigError, match="result must be the RunResult or None"):
+        with EstimateWriter(tmp_path / "e.est", "m") as w:
+            w.add(result.checkpoints[-1])
+            w.finish(est)
+    assert list(tmp_path.iterdir()) == []
+    with pytest.raises(ConfigError, match=r"add\(\) outside its with-block"):
+        EstimateWriter(tmp_path / "e.est", "m").add(result.checkpoints[-1])
+
+
+def test_stream_identity_refuses_a_stream_a_path_and_a_bad_identity(stream: Stream) -> None:
+    """stream_identity(stream) raised 'Stream object is not iterable', a path an
+    AttributeError; StreamIdentity("abc", -1) was written into a header its reader refuses."""
+    from bomgraph.estimate_file import StreamIdentity, stream_identity
+
+    for bad, hint in [(stream, r"pass stream.steps"), ("s.jsonl", "stream_file_identity"),
+                      (None, "NoneType"), ([stream.steps[0], "x"], "step 1 is a str")]:
+        with pytest.raises(ConfigError, match=f"stream_identity.*{hint}"):
+            stream_identity(bad)
+    good = stream_identity(stream.steps)
+    for args, match in [(("abc", 3), "steps_sha256 must be the 64 hex digits"),
+                        ((good.steps_sha256, -1), "n_steps must be an integer >= 0"),
+                        ((good.steps_sha256, 2.0), "n_steps must be an integer >= 0")]:
+        with pytest.raises(ConfigError, match=match):
+            StreamIdentity(*args)
