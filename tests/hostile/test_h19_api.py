@@ -246,3 +246,47 @@ def test_stream_identity_refuses_a_stream_a_path_and_a_bad_identity(stream: Stre
                         ((good.steps_sha256, 2.0), "n_steps must be an integer >= 0")]:
         with pytest.raises(ConfigError, match=match):
             StreamIdentity(*args)
+
+
+# ---- the stream writer: what it writes, read_stream reads -----------------------------------
+
+def test_stream_writers_refuse_what_is_no_stream(tmp_path: Path, stream: Stream) -> None:
+    """A header, the steps, a dict or None ended in AttributeError (or 'Stream object is not
+    iterable') in write_stream, write_stream_parts, header_to_json and step_to_json."""
+    from bomgraph.errors import StreamFormatError
+    from bomgraph.stream_file import (header_to_json, step_to_json, write_stream,
+                                      write_stream_parts)
+
+    out = tmp_path / "s.jsonl"
+    for bad in (stream.header, stream.steps, None):
+        with pytest.raises(StreamFormatError, match="'stream': must be a Stream"):
+            write_stream(bad, out)
+    cases = [(({"bearing_sigma_rad": 0.1}, stream.steps), {}, "'header': must be a StreamHeader"),
+             ((stream.header, stream.steps), {"truth": {}}, "'truth': must be a Truth"),
+             ((stream.header, stream), {}, r"must be an iterable of Step.*pass stream.steps"),
+             ((stream.header, [stream.steps[0], "x"]), {}, "steps\\[1\\] is a str, not a Step")]
+    for args, kw, match in cases:
+        with pytest.raises(StreamFormatError, match=match):
+            write_stream_parts(*args, out, **kw)
+    with pytest.raises(StreamFormatError, match="'header': must be a StreamHeader"):
+        header_to_json(None)
+    with pytest.raises(StreamFormatError, match="'step': must be a Step"):
+        step_to_json({"t": 0})
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("how", ["reversed", "late start", "no step", "truth of another run"])
+def test_write_stream_parts_refuses_a_stream_read_stream_refuses(tmp_path: Path,
+                                                                 stream: Stream,
+                                                                 how: str) -> None:
+    """Each was written, and read_stream then refused the file."""
+    from bomgraph.errors import StreamFormatError
+    from bomgraph.stream_file import write_stream_parts
+
+    steps = {"reversed": stream.steps[::-1], "late start": stream.steps[1:], "no step": (),
+             "truth of another run": stream.steps[:5]}[how]
+    match = {"reversed": "step 0 has t = 25", "late start": "step 0 has t = 1",
+             "no step": "no steps", "truth of another run": "26 truth poses for 5 steps"}[how]
+    with pytest.raises(StreamFormatError, match=match):
+        write_stream_parts(stream.header, iter(steps), tmp_path / "s.jsonl", truth=stream.truth)
+    assert list(tmp_path.iterdir()) == []
