@@ -129,14 +129,33 @@ def file_name(value: Any, name: str, error: Raise) -> str:
     return path
 
 
+def _kind_names(kinds: type | tuple[type, ...]) -> str:
+    return " or ".join(k.__name__ for k in (kinds if isinstance(kinds, tuple) else (kinds,)))
+
+
+def instance(value: Any, kinds: type | tuple[type, ...], name: str, error: Raise) -> Any:
+    """``value`` itself when it is one of ``kinds``; else refused, naming what it is."""
+    if not isinstance(value, kinds):
+        raise error(f"{name} must be a {_kind_names(kinds)}, got {type(value).__name__} "
+                    f"{value!r:.40}")
+    return value
+
+
+def fraction(value: Any, name: str, error: Raise) -> float:
+    """``value`` as a float in ``[0, 1]`` (NaN refused)."""
+    v = real(value, name, error)
+    if not 0 <= v <= 1:
+        raise error(f"{name} must be in [0, 1], got {v}")
+    return v
+
+
 def items(value: Any, kinds: type | tuple[type, ...], name: str, error: Raise, *,
           want: str | None = None) -> tuple:
     """``value`` (a list, tuple or other iterable, not a str or a mapping) as a tuple whose
     items are all ``kinds`` (``want`` says what they are, default their class names): a lone
     item, a str (read as its characters) or a dict (read as its keys) is refused, naming the
     first wrong item."""
-    want = want or " or ".join(k.__name__ for k in
-                               (kinds if isinstance(kinds, tuple) else (kinds,)))
+    want = want or _kind_names(kinds)
     if isinstance(value, (str, bytes, os.PathLike, kinds)) or isinstance(value, Mapping) \
             or not isinstance(value, Iterable):
         hint = " (a list of one: [it])" if isinstance(value, (str, os.PathLike, kinds)) else ""
@@ -179,4 +198,4 @@ def covariance_problem(cov: np.ndarray) -> tuple[int, str] | None:
 
 
 __all__ = ["is_integer", "id_array", "row_array", "real", "finite", "finite_or_none", "integer",
-           "file_name", "items", "COV_RTOL", "covariance_problem"]
+           "file_name", "instance", "fraction", "items", "COV_RTOL", "covariance_problem"]

@@ -18,6 +18,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
+from .checks import file_name, fraction, instance, integer, items
 from .errors import ConfigError
 from .mapper import available_methods, method_info
 from .sim import RunSpec, SimConfig, paper_design
@@ -55,6 +56,12 @@ class Arm:
     checkpoint_every: int | None = None
 
     def __post_init__(self) -> None:
+        where = f"arm {self.label!r}"
+        instance(self.label, str, f"{where}: label", ConfigError)
+        instance(self.method, str, f"{where}: method (a method's name)", ConfigError)
+        fraction(self.prior_fraction, f"{where}: prior_fraction", ConfigError)
+        if self.checkpoint_every is not None:
+            integer(self.checkpoint_every, f"{where}: checkpoint_every", ConfigError, minimum=1)
         try:
             json.dumps(dict(self.options), allow_nan=False)
         except (TypeError, ValueError):
@@ -82,6 +89,19 @@ class Experiment:
     sources: tuple[DatasetSource | FileSource, ...] = ()
     worlds: tuple[World, ...] = ()
     reference: Arm | None = None
+
+    def __post_init__(self) -> None:
+        where = f"experiment {self.name!r}"
+        instance(self.name, str, f"{where}: name", ConfigError)
+        for key, kinds in (("arms", Arm), ("sources", (DatasetSource, FileSource)),
+                           ("worlds", World)):
+            value = items(getattr(self, key), kinds, f"{where}: {key}", ConfigError)
+            if not isinstance(getattr(self, key), (list, tuple)):  # an iterator is read once
+                object.__setattr__(self, key, value)
+        instance(self.sim, SimConfig, f"{where}: sim", ConfigError)
+        instance(self.reference, (Arm, type(None)), f"{where}: reference", ConfigError)
+        for key, low in (("seed", 0), ("n_layouts", 1), ("n_starts", 1), ("checkpoint_every", 1)):
+            integer(getattr(self, key), f"{where}: {key}", ConfigError, minimum=low)
 
     @property
     def designed(self) -> bool:
@@ -124,6 +144,13 @@ class Task:
     #: (``compare --estimates``)
     keep_estimate: bool = False
 
+    def __post_init__(self) -> None:
+        instance(self.arm, Arm, "Task: arm", ConfigError)
+        instance(self.source, (SimSource, DatasetSource, FileSource, WorldSource),
+                 "Task: source", ConfigError)
+        instance(self.reference, (Arm, type(None)), "Task: reference", ConfigError)
+        integer(self.checkpoint_every, "Task: checkpoint_every", ConfigError, minimum=1)
+
     def stream(self) -> Stream:
         return self.source.stream()
 
@@ -156,7 +183,7 @@ def designed_variant(experiments: Sequence[Experiment], *, quick: bool = False,
     """``experiments`` with their design (the paper's runs) made quick (2 layouts x 1 start
     of 150 steps) and/or given another ``seed``; experiments on streams or worlds as given."""
     out = []
-    for e in experiments:
+    for e in items(experiments, Experiment, "designed_variant(): experiments", ConfigError):
         if e.designed:
             if quick:
                 e = replace(e, sim=replace(e.sim, n_steps=150), n_layouts=2, n_starts=1)
@@ -229,6 +256,15 @@ def compare_experiments(*, config: str | None = None, streams: Sequence[str] | N
     """
     from .sweep import command_line_spec
 
+    where = "compare_experiments()"
+    if streams is not None:
+        items(streams, (str, os.PathLike), f"{where}: streams", ConfigError,
+              want="stream file names")
+    instance(methods, (str, type(None)), f"{where}: methods ('NAME[@PRESET],...', as "
+                                         f"--methods)", ConfigError)
+    items(options, str, f"{where}: options", ConfigError, want="'NAME:KEY=VALUE' strings")
+    if checkpoint_every is not None:   # 0 used to mean the default, 10
+        integer(checkpoint_every, f"{where}: checkpoint_every", ConfigError, minimum=1)
     given = [n for n, v in (("--config", config), ("--streams", streams), ("--real", real)) if v]
     if len(given) > 1:
         raise ConfigError(f"compare: give one of --config, --streams, --real, not "
@@ -311,7 +347,11 @@ def real_experiments(data_dir: str | os.PathLike[str],
     bearing-only g2o set (``data_dir`` is the shared data folder). Each method runs with its
     defaults (the paper's configuration) and, where one exists, with the variant for
     recordings (:data:`REAL_VARIANTS`). ``methods`` defaults to :func:`real_methods`."""
-    root = Path(data_dir)
+    root = Path(file_name(data_dir, "real_experiments(): data_dir", ConfigError))
+    if methods is not None:
+        for m in items(methods, str, "real_experiments(): methods", ConfigError,
+                       want="method names"):
+            method_info(m)   # an UnknownMethodError naming the known ones
     arms: tuple[Arm, ...] = ()
     for m in (real_methods() if methods is None else methods):
         arms += (Arm(m, m),)
@@ -342,7 +382,9 @@ def select(experiments: Mapping[str, Experiment], names: Sequence[str] = ()) -> 
     ConfigError
         A name is not one of ``experiments``.
     """
-    names = list(names) or list(experiments)
+    instance(experiments, Mapping, "select(): experiments (name -> Experiment)", ConfigError)
+    names = list(items(names, str, "select(): names", ConfigError, want="experiment names")
+                 ) or list(experiments)
     unknown = [n for n in names if n not in experiments]
     if unknown:
         raise ConfigError(f"unknown experiment(s) {unknown}; choose from {list(experiments)}")

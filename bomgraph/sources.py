@@ -17,7 +17,8 @@ from typing import Any, Callable
 
 import numpy as np
 
-from .errors import ConfigError
+from .checks import file_name, fraction, instance, integer, items
+from .errors import ConfigError, StreamFormatError
 from .sim import RunSpec, SimConfig, make_priors, simulate, simulate_run, with_priors
 from .stream import Stream
 
@@ -72,6 +73,11 @@ class SimSource:
     prior_fraction: float = 0.0
     prior_sigma_xy_m: float = 0.03
 
+    def __post_init__(self) -> None:
+        instance(self.spec, RunSpec, "SimSource: spec (paper_design(seed)[k])", ConfigError)
+        instance(self.sim, SimConfig, "SimSource: sim", ConfigError)
+        fraction(self.prior_fraction, "SimSource: prior_fraction", ConfigError)
+
     @property
     def name(self) -> str:
         return self.spec.name
@@ -95,6 +101,11 @@ class DatasetSource:
     robot: int | None = None
     truth_path: str | None = None
     label: str = ""
+
+    def __post_init__(self) -> None:
+        file_name(self.path, f"DatasetSource({self.kind!r}): path", ConfigError)
+        if self.truth_path is not None:
+            file_name(self.truth_path, f"DatasetSource({self.kind!r}): truth_path", ConfigError)
 
     @property
     def name(self) -> str:
@@ -142,14 +153,24 @@ class FileSource:
     def name(self) -> str:
         return self.label or Path(self.path).stem
 
+    def __post_init__(self) -> None:
+        file_name(self.path, "FileSource: path", ConfigError)
+
     def stream(self) -> Stream:
-        st = os.stat(self.path)
+        st = _stat(self.path)
         return _read_stream_file(str(Path(self.path).resolve()), st.st_size, st.st_mtime_ns)
 
     def key(self) -> dict[str, Any]:
-        st = os.stat(self.path)
+        st = _stat(self.path)
         return {"kind": "file", "sha256": _file_sha256(str(Path(self.path).resolve()),
                                                        st.st_size, st.st_mtime_ns)}
+
+
+def _stat(path: str) -> os.stat_result:
+    try:
+        return os.stat(path)
+    except OSError as exc:
+        raise StreamFormatError(f"cannot open: {exc.strerror}", path=str(path)) from None
 
 
 @functools.lru_cache(maxsize=64)
@@ -180,6 +201,11 @@ class WorldSource:
     prior_fraction: float = 0.0
     prior_sigma_xy_m: float = 0.03
 
+    def __post_init__(self) -> None:
+        instance(self.sim, SimConfig, "WorldSource: sim", ConfigError)
+        integer(self.seed, f"WorldSource {self.world!r}: seed", ConfigError)
+        fraction(self.prior_fraction, "WorldSource: prior_fraction", ConfigError)
+
     @property
     def name(self) -> str:
         return f"{self.world}-seed{self.seed}"
@@ -208,6 +234,16 @@ class World:
     sim: SimConfig
     seeds: tuple[int, ...]
     prior_sigma_xy_m: float = 0.03
+
+    def __post_init__(self) -> None:
+        where = f"World {self.name!r}"
+        instance(self.sim, SimConfig, f"{where}: sim", ConfigError)
+        seeds = items(self.seeds, (int, np.integer), f"{where}: seeds", ConfigError,
+                      want="integer seeds >= 0")
+        for k, seed in enumerate(seeds):
+            integer(seed, f"{where}: seeds[{k}]", ConfigError)
+        if not isinstance(self.seeds, (list, tuple)):  # an iterator is read once, here
+            object.__setattr__(self, "seeds", seeds)
 
     def sources(self, prior_fraction: float = 0.0) -> list[WorldSource]:
         return [WorldSource(self.sim, s, self.name, prior_fraction, self.prior_sigma_xy_m)

@@ -290,3 +290,103 @@ def test_write_stream_parts_refuses_a_stream_read_stream_refuses(tmp_path: Path,
     with pytest.raises(StreamFormatError, match=match):
         write_stream_parts(stream.header, iter(steps), tmp_path / "s.jsonl", truth=stream.truth)
     assert list(tmp_path.iterdir()) == []
+
+
+# ---- experiments: the constructors and the functions that build them -----------------------
+
+@pytest.mark.parametrize("kwargs,match", [
+    ({"label": None}, "label must be a str"),
+    ({"method": None}, "method .* must be a str"),
+    ({"prior_fraction": "0.5"}, "prior_fraction must be a number"),
+    ({"prior_fraction": 2.0}, r"prior_fraction must be in \[0, 1\]"),
+    ({"prior_fraction": float("nan")}, r"prior_fraction must be in \[0, 1\]"),
+    ({"checkpoint_every": 0}, "checkpoint_every must be an integer >= 1"),
+    ({"checkpoint_every": "5"}, "checkpoint_every must be an integer >= 1"),
+])
+def test_arm_refuses_fields_of_the_wrong_kind(kwargs: dict, match: str) -> None:
+    """Each was accepted and failed (or ran something else) only when the sweep ran."""
+    from bomgraph.experiments import Arm
+
+    with pytest.raises(ConfigError, match=match):
+        Arm(**{"label": "a", "method": "triangulate", **kwargs})
+
+
+def test_experiment_refuses_arms_sources_and_settings_of_the_wrong_kind(tmp_path: Path
+                                                                        ) -> None:
+    """sources="s.jsonl" made one task per character of the name; arms=Arm(...) and
+    worlds=World(...) ended in 'not iterable', sim={...} in 'unhashable', n_layouts=2.5 and
+    seed=-1 in numpy's errors; checkpoint_every=0 and seed="1" were accepted."""
+    from bomgraph.experiments import Arm, Experiment, World
+    from bomgraph.sim import SimConfig
+
+    arm = Arm("a", "triangulate")
+    cases = [({"arms": arm}, r"arms must be a list or tuple of Arm.*a list of one"),
+             ({"arms": ["triangulate"]}, r"arms\[0\] is str 'triangulate'"),
+             ({"sources": str(tmp_path / "s.jsonl")}, "sources must be a list or tuple"),
+             ({"sources": [str(tmp_path / "s.jsonl")]}, r"sources\[0\] is str"),
+             ({"worlds": World("w", SimConfig(), (1,))}, "worlds must be a list or tuple"),
+             ({"sim": {"n_steps": 5}}, "sim must be a SimConfig"),
+             ({"reference": "ekf"}, "reference must be a Arm or NoneType"),
+             ({"n_layouts": 2.5}, "n_layouts must be an integer >= 1"),
+             ({"seed": -1}, "seed must be an integer >= 0"),
+             ({"seed": "1"}, "seed must be an integer >= 0"),
+             ({"checkpoint_every": 0}, "checkpoint_every must be an integer >= 1")]
+    for kwargs, match in cases:
+        with pytest.raises(ConfigError, match=f"experiment 'e': {match}"):
+            Experiment(**{"name": "e", "title": "t", "arms": (arm,), **kwargs}).tasks()
+
+
+def test_sources_and_tasks_refuse_fields_of_the_wrong_kind(tmp_path: Path) -> None:
+    """SimSource(None) and Task(source=None) ended in AttributeError, WorldSource(seed="1")
+    in numpy's SeedSequence TypeError, World(seeds=3) in 'not iterable', FileSource(None) in
+    os.stat's TypeError and a missing stream file in a raw FileNotFoundError."""
+    from bomgraph.errors import StreamFormatError
+    from bomgraph.experiments import Arm, FileSource, SimSource, Task, World, WorldSource
+    from bomgraph.sim import SimConfig
+
+    sim = SimConfig(n_steps=10)
+    cases = [(lambda: SimSource(None), "SimSource: spec .* must be a RunSpec"),
+             (lambda: WorldSource(sim, "1"), "seed must be an integer >= 0, got '1'"),
+             (lambda: WorldSource(sim, 1.5), "seed must be an integer >= 0, got 1.5"),
+             (lambda: World("w", sim, 3), "seeds must be a list or tuple of integer seeds"),
+             (lambda: World("w", sim, (1, -2)), r"seeds\[1\] must be an integer >= 0"),
+             (lambda: FileSource(None), "FileSource: path must be a file name"),
+             (lambda: Task("e", Arm("a", "triangulate"), None), "Task: source must be a")]
+    for make, match in cases:
+        with pytest.raises(ConfigError, match=match):
+            make()
+    missing = FileSource(str(tmp_path / "gone.jsonl"))
+    for call in (missing.stream, missing.key):
+        with pytest.raises(StreamFormatError, match="gone.jsonl: cannot open"):
+            call()
+
+
+def test_experiment_functions_refuse_arguments_of_the_wrong_kind() -> None:
+    """select(exps, "ab") picked experiments 'a' and 'b' (the characters of the name);
+    real_experiments(dir, methods="ekf") made arms 'e', 'k', 'f'; compare_experiments read a
+    str of streams as its characters, took checkpoint_every=0 as 10 and ended in
+    AttributeError for a list of methods; designed_variant({...}) and load_experiments(None)
+    in AttributeError/TypeError."""
+    from bomgraph.experiments import (compare_experiments, designed_variant, load_experiments,
+                                      real_experiments, select)
+
+    exps = {"a": 1, "b": 2, "ab": 3}
+    cases = [(lambda: select(exps, "ab"), "select\\(\\): names must be a list or tuple"),
+             (lambda: select(list(exps), ["a"]), "select\\(\\): experiments .* Mapping"),
+             (lambda: designed_variant(exps), "designed_variant\\(\\): experiments must be"),
+             (lambda: load_experiments(None), "sweep file .* must be a file name"),
+             (lambda: real_experiments(None), "data_dir must be a file name"),
+             (lambda: real_experiments(".", methods="ekf"), "methods must be a list or tuple"),
+             (lambda: compare_experiments(streams="s.jsonl", methods="ekf"),
+              "streams must be a list or tuple of stream file names"),
+             (lambda: compare_experiments(streams=["s.jsonl"], methods=["ekf"]),
+              "methods .* must be a str"),
+             (lambda: compare_experiments(streams=["s.jsonl"], methods="ekf",
+                                          options="ekf:preset=real"),
+              "options must be a list or tuple"),
+             (lambda: compare_experiments(streams=["s.jsonl"], methods="ekf",
+                                          checkpoint_every=0),
+              "checkpoint_every must be an integer >= 1")]
+    for call, match in cases:
+        with pytest.raises(ConfigError, match=match):
+            call()
