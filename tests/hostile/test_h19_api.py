@@ -390,3 +390,17 @@ def test_experiment_functions_refuse_arguments_of_the_wrong_kind() -> None:
     for call, match in cases:
         with pytest.raises(ConfigError, match=match):
             call()
+
+
+# ---- run() and RunResult --------------------------------------------------------------------
+
+def test_run_refuses_a_method_name_that_is_no_str_and_an_empty_result_has_no_final(
+        stream: Stream) -> None:
+    """run(method=3) made a RunResult whose method 3 the estimate file then held as "3";
+    RunResult(...).final of a result without checkpoints raised IndexError."""
+    from bomgraph.mapper import RunResult, create_mapper, run
+
+    with pytest.raises(ConfigError, match=r"run\(\): method must be the method's name"):
+        run(create_mapper("triangulate", stream.header), stream.steps, method=3)
+    with pytest.raises(ConfigError, match="has no checkpoint, so no final map"):
+        RunResult("m", (), np.zeros(0), 0.0).final
