@@ -6,7 +6,8 @@ checkpoint (the landmarks with optional 2x2 covariances, the poses new since the
 checkpoint, the method's ``info``; the last checkpoint carries its whole trajectory: it is the
 final map) and a last line with the timings. :class:`EstimateWriter` writes it checkpoint by
 checkpoint into a unique temporary file beside the target and renames it into place once
-complete, so an exception or SIGTERM leaves the previous file as it was.
+complete, so an exception or SIGTERM leaves the previous file as it was (the writer is
+:mod:`bomgraph.estimate_writer`, re-exported here).
 
 Version 1 (one JSON object with every checkpoint's whole map) is still read. The reader is
 strict: unknown keys, duplicate keys, non-finite numbers and malformed entries are refused,
@@ -17,182 +18,20 @@ from __future__ import annotations
 
 import json
 import os
-import signal
-import threading
 from dataclasses import dataclass
 from typing import IO, Any, Mapping
 
 import numpy as np
 
+from .checks import COV_RTOL, covariance_problem, file_name
 from .errors import StreamFormatError
-from .jsonio import (DuplicateKeyError, find_nonfinite, is_id, is_int, is_num, jsonable,
-                     loads_strict, no_duplicate_keys)
-from .mapper import Checkpoint, MapEstimate, RunResult
-from .stdio import MAX_LINE_BYTES, AtomicOutput, bounded_lines, line_too_long
+from .estimate_writer import (ESTIMATE_FORMAT, ESTIMATE_VERSION, EstimateWriter,
+                              estimate_to_json, write_estimate)
+from .jsonio import (DuplicateKeyError, find_nonfinite, is_id, is_int, is_num, loads_strict,
+                     no_duplicate_keys)
+from .mapper import Checkpoint, MapEstimate
+from .stdio import MAX_LINE_BYTES, bounded_lines, line_too_long
 from .stream_identity import StreamIdentity, stream_file_identity, stream_identity
-
-
-ESTIMATE_FORMAT = "bomgraph-estimate"
-ESTIMATE_VERSION = 2
-
-
-# --------------------------------------------------------------------------------------------
-# Writing (version 2)
-# --------------------------------------------------------------------------------------------
-
-def _flat(cov: np.ndarray) -> list[list[float]]:
-    return [[float(v) for v in c.ravel()] for c in cov]
-
-
-def _checkpoint_line(c: Checkpoint, since_t: int | None) -> dict[str, Any]:
-    """One checkpoint as a JSON-ready dict: every landmark; the poses with ``t > since_t``
-    as ``new_poses`` (or, with ``since_t`` None, all of them as ``poses``)."""
-    est = c.estimate
-    obj: dict[str, Any] = {"t": int(c.t), "landmarks": [
-        [int(i), float(x), float(y)] for i, (x, y) in zip(est.landmark_ids, est.landmarks_xy)]}
-    if est.landmark_cov is not None:
-        obj["landmark_cov"] = _flat(est.landmark_cov)
-    if est.poses is not None:
-        keep = (np.ones(len(est.pose_t), bool) if since_t is None else est.pose_t > since_t)
-        key = "poses" if since_t is None else "new_poses"
-        obj[key] = [[int(t), float(p[0]), float(p[1]), float(p[2])]
-                    for t, p in zip(est.pose_t[keep], est.poses[keep])]
-        if est.pose_cov is not None:
-            obj[key.replace("poses", "pose_cov")] = _flat(est.pose_cov[keep])
-    if est.info:
-        obj["info"] = jsonable(est.info)
-    obj["estimate_s"] = float(c.estimate_s)
-    return obj
-
-
-def _dumps(obj: Any) -> str:
-    return json.dumps(obj, allow_nan=False, separators=(",", ":")) + "\n"
-
-
-class EstimateWriter:
-    """Writes a version-2 estimate file checkpoint by checkpoint, atomically.
-
-    Use as a context manager and pass :meth:`add` as :func:`bomgraph.mapper.run`'s
-    ``on_checkpoint``; :meth:`finish` writes the timings, flushes to disk and renames the
-    file into place. Until then the data sit in a uniquely named temporary file beside the
-    target (``.NAME.*.partial``), removed if the block exits any other way; while the block
-    runs in the main thread with SIGTERM at its default, SIGTERM raises ``SystemExit(143)`` so
-    the temporary file is removed too. The target is written as every bomgraph output is
-    (:class:`bomgraph.stdio.AtomicOutput`: links followed, devices and FIFOs written
-    directly). Memory: one checkpoint is held back (the last one is written with its whole
-    trajectory).
-    """
-
-    def __init__(self, path: str | os.PathLike[str], method: str, *,
-                 stream: StreamIdentity | None = None,
-                 options: Mapping[str, Any] | None = None,
-                 checkpoint_every: int | None = None) -> None:
-        self.path = os.fspath(path)
-        self._header: dict[str, Any] = {"format": ESTIMATE_FORMAT,
-                                        "version": ESTIMATE_VERSION, "method": str(method)}
-        if stream is not None:
-            self._header["stream"] = stream.as_dict()
-        if options:
-            self._header["options"] = jsonable(dict(options))
-        if checkpoint_every is not None:
-            self._header["checkpoint_every"] = int(checkpoint_every)
-        self._fh: IO[str] | None = None
-        self._out: AtomicOutput | None = None
-        self._held: Checkpoint | None = None
-        self._since_t: int | None = -1
-        self._last_t = -1
-        self._estimate_s: list[float] = []
-        self._old_handler: Any = None
-
-    def __enter__(self) -> "EstimateWriter":
-        self._out = AtomicOutput(self.path)
-        try:  # __exit__ does not run when __enter__ raises
-            self._fh = self._out.open()
-            if (threading.current_thread() is threading.main_thread()
-                    and signal.getsignal(signal.SIGTERM) == signal.SIG_DFL):
-                self._old_handler = signal.signal(signal.SIGTERM, _raise_exit)
-            self._fh.write(_dumps(self._header))
-        except BaseException:
-            self.__exit__()
-            raise
-        return self
-
-    def add(self, c: Checkpoint) -> None:
-        """The next checkpoint (in increasing ``t``)."""
-        if self._fh is None:
-            raise RuntimeError("EstimateWriter.add outside its with-block")
-        if c.t <= self._last_t:
-            raise ValueError(f"checkpoints must come in increasing t: {c.t} after "
-                             f"{self._last_t}")
-        self._last_t = c.t
-        self._estimate_s.append(float(c.estimate_s))
-        if self._held is not None:
-            self._fh.write(_dumps(_checkpoint_line(self._held, self._since_t)))
-            pt = self._held.estimate.pose_t
-            if pt is not None and len(pt):
-                self._since_t = max(self._since_t, int(pt.max()))
-        self._held = c
-
-    def finish(self, result: RunResult | None = None) -> None:
-        """Write the last checkpoint and the timings, and move the file into place."""
-        if self._fh is None or self._held is None:
-            raise ValueError("an estimate file needs at least one checkpoint")
-        self._fh.write(_dumps(_checkpoint_line(self._held, None)))
-        est = np.array(self._estimate_s)
-        timing: dict[str, float] = {}
-        if result is not None:
-            timing = {"total": float(result.total_s), "steps": float(result.step_s.sum()),
-                      "step_median": (float(np.median(result.step_s)) if result.step_s.size
-                                      else 0.0)}
-        timing.update({"estimates": float(est.sum()), "estimate_median": float(np.median(est))})
-        self._fh.write(_dumps({"timing_s": timing}))
-        self._fh = None
-        self._out.commit()
-
-    def __exit__(self, *exc: object) -> None:
-        try:
-            self._fh = None
-            if self._out is not None:
-                self._out.abort()
-        finally:
-            if self._old_handler is not None:
-                signal.signal(signal.SIGTERM, self._old_handler)
-                self._old_handler = None
-
-
-def _raise_exit(signum: int, frame: Any) -> None:
-    raise SystemExit(128 + signum)
-
-
-def write_estimate(result: RunResult, path: str | os.PathLike[str], *,
-                   stream: StreamIdentity | None = None,
-                   options: Mapping[str, Any] | None = None,
-                   checkpoint_every: int | None = None) -> None:
-    """Write a run's estimate file (version 2, atomically)."""
-    with EstimateWriter(path, result.method, stream=stream, options=options,
-                        checkpoint_every=checkpoint_every) as w:
-        for c in result.checkpoints:
-            w.add(c)
-        w.finish(result)
-
-
-def estimate_to_json(result: RunResult) -> dict[str, Any]:
-    """The version-1 object of a run (every checkpoint's whole map; kept for scripts that
-    want one JSON value; files are written as version 2)."""
-    obj: dict[str, Any] = {"format": ESTIMATE_FORMAT, "version": 1, "method": result.method}
-    obj.update(_estimate_parts(result.final))
-    obj["checkpoints"] = [{"t": c.t, **_estimate_parts(c.estimate)} for c in result.checkpoints]
-    obj["timing_s"] = result.timing()
-    return obj
-
-
-def _estimate_parts(est: MapEstimate) -> dict[str, Any]:
-    out: dict[str, Any] = {"landmarks": [[int(i), float(x), float(y)] for i, (x, y)
-                                         in zip(est.landmark_ids, est.landmarks_xy)]}
-    if est.poses is not None:
-        out["poses"] = [[int(t), float(p[0]), float(p[1]), float(p[2])]
-                        for t, p in zip(est.pose_t, est.poses)]
-    return out
 
 
 # --------------------------------------------------------------------------------------------
@@ -341,31 +180,12 @@ def _rows(v: Any, width: int, key: str, ctx: _Line, what: str, *, int_first: boo
     return np.array(ids, dtype=np.int64), np.array(vals, dtype=float).reshape(-1, n)
 
 
-#: relative tolerance of a covariance's asymmetry and negative eigenvalues, against its largest
-#: |entry|: the methods write round-off (at most 1.6e-16 measured: EKF, inverse-depth EKF and
-#: GTSAM marginals on simulated runs); 1e-9 leaves room for ill-conditioned inversions and
-#: still refuses any real sign or transposition error.
-COV_RTOL = 1e-9
-
-
 def _check_cov(cov: np.ndarray, key: str, ctx: _Line) -> None:
     """Refuse a covariance ``(n, k, k)`` that is not finite, symmetric and positive
-    semi-definite (to :data:`COV_RTOL`, each matrix scaled by its largest |entry|)."""
-    finite = np.isfinite(cov).all(axis=(1, 2))
-    c = np.where(finite[:, None, None], cov, 0.0)
-    scale = np.abs(c).max(axis=(1, 2), initial=0.0)
-    c = c / np.where(scale > 0, scale, 1.0)[:, None, None]
-    ct = c.transpose(0, 2, 1)
-    checks = ((~finite, "not finite"),
-              (np.abs(c - ct).max(axis=(1, 2), initial=0.0) > COV_RTOL, "not symmetric"),
-              (np.linalg.eigvalsh((c + ct) / 2)[:, 0] < -COV_RTOL, "not positive semi-definite"))
-    for bad, what in checks:
-        if bad.any():
-            i = int(np.argmax(bad))
-            shown = json.dumps(cov[i].ravel().tolist())[:80]
-            raise ctx.error(f"{key}[{i}]", f"the covariance {shown} is {what}; a covariance "
-                                           f"must be finite, symmetric and positive "
-                                           f"semi-definite")
+    semi-definite (:func:`bomgraph.checks.covariance_problem`, to :data:`COV_RTOL`)."""
+    bad = covariance_problem(cov)
+    if bad is not None:
+        raise ctx.error(f"{key}[{bad[0]}]", bad[1])
 
 
 def _parse_checkpoint_v2(obj: dict, ctx: _Line, prev: MapEstimate | None
@@ -502,7 +322,7 @@ def read_estimate(path: str | os.PathLike[str]) -> EstimateFile:
     """Read an estimate file written by ``bomgraph run`` (version 2, or version 1), strictly:
     unknown and duplicate keys, non-finite numbers and malformed entries are refused, naming
     the file, the line (version 2) and the key."""
-    path = str(path)
+    path = file_name(path, "estimate path", StreamFormatError)
     try:
         fh = open(path, "rb")
     except OSError as exc:
@@ -582,6 +402,6 @@ def read_estimate(path: str | os.PathLike[str]) -> EstimateFile:
     return _read_v1(obj, path)
 
 
-__all__ = ["ESTIMATE_FORMAT", "ESTIMATE_VERSION", "StreamIdentity", "stream_identity",
+__all__ = ["ESTIMATE_FORMAT", "ESTIMATE_VERSION", "COV_RTOL", "StreamIdentity", "stream_identity",
            "stream_file_identity", "EstimateWriter", "EstimateFile", "estimate_to_json",
            "write_estimate", "read_estimate"]

@@ -6,26 +6,24 @@ without prior pairs) crossed with a run design (:func:`bomgraph.sim.paper_design
 recorded :class:`DatasetSource` s. Each (arm, run) pair is a :class:`Task`, a pure description:
 :mod:`bomgraph.bench` runs it, :mod:`bomgraph.evaluate` scores it, :mod:`bomgraph.report`
 summarises it. Arms name presets only (``{"preset": NAME}``), so every configuration the
-comparison shows is one a user can ask for by name.
+comparison shows is one a user can ask for by name. The sources of the runs are
+:mod:`bomgraph.sources` (re-exported here).
 """
 
 from __future__ import annotations
 
-import functools
-import hashlib
 import json
 import os
-from collections import OrderedDict
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any, Callable, Mapping, Sequence
+from typing import Any, Mapping, Sequence
 
-import numpy as np
-
+from .checks import file_name, fraction, instance, integer, items
 from .errors import ConfigError
 from .mapper import available_methods, method_info
-from .sim import (RunSpec, SimConfig, make_priors, paper_design, simulate, simulate_run,
-                  with_priors)
+from .sim import RunSpec, SimConfig, paper_design
+from .sources import (SIMULATED, DatasetSource, FileSource, SimSource, SimulatedStreams, World,
+                      WorldSource)
 from .stream import Stream
 
 #: What the paper reports (simulation, 25 runs), for the tables: (experiment, arm) -> text.
@@ -58,6 +56,12 @@ class Arm:
     checkpoint_every: int | None = None
 
     def __post_init__(self) -> None:
+        where = f"arm {self.label!r}"
+        instance(self.label, str, f"{where}: label", ConfigError)
+        instance(self.method, str, f"{where}: method (a method's name)", ConfigError)
+        fraction(self.prior_fraction, f"{where}: prior_fraction", ConfigError)
+        if self.checkpoint_every is not None:
+            integer(self.checkpoint_every, f"{where}: checkpoint_every", ConfigError, minimum=1)
         try:
             json.dumps(dict(self.options), allow_nan=False)
         except (TypeError, ValueError):
@@ -67,213 +71,6 @@ class Arm:
     def key(self) -> dict[str, Any]:
         return {"label": self.label, "method": self.method, "options": dict(self.options),
                 "prior_fraction": self.prior_fraction}
-
-
-class SimulatedStreams:
-    """The simulated streams of this process, kept for the next task of the same run: an
-    experiment crosses every arm with the same runs, and each task used to simulate its run
-    again (0.036 s of a paper run's 0.06-2 s; 500 times in the main job). A stream is a pure
-    function of its source (seeded), so a kept one is the stream the task would simulate.
-
-    Least recently used first out, at most ``max_steps`` steps in all (a paper stream of 301
-    steps holds about 2 MB; the default keeps about 33 of them, more than the 25 runs of a
-    design), so memory stays bounded whatever the sweep.
-    """
-
-    def __init__(self, max_steps: int = 10_000) -> None:
-        self.max_steps = max_steps
-        self._kept: OrderedDict[Any, Stream] = OrderedDict()
-        self._steps = 0
-
-    def get(self, key: Any, make: Callable[[], Stream]) -> Stream:
-        """The stream of ``key`` (a hashable source), made by ``make()`` if not kept."""
-        stream = self._kept.get(key)
-        if stream is not None:
-            self._kept.move_to_end(key)
-            return stream
-        stream = make()
-        n = len(stream.steps)
-        if n <= self.max_steps:
-            while self._kept and self._steps + n > self.max_steps:
-                _, old = self._kept.popitem(last=False)
-                self._steps -= len(old.steps)
-            self._kept[key] = stream
-            self._steps += n
-        return stream
-
-    def clear(self) -> None:
-        self._kept.clear()
-        self._steps = 0
-
-
-#: This process's kept simulated streams (:class:`SimulatedStreams`).
-SIMULATED = SimulatedStreams()
-
-
-@dataclass(frozen=True)
-class SimSource:
-    """A simulated run of a design (``prior_fraction`` > 0 adds Exp. 3 priors)."""
-
-    spec: RunSpec
-    sim: SimConfig = SimConfig()
-    prior_fraction: float = 0.0
-    prior_sigma_xy_m: float = 0.03
-
-    @property
-    def name(self) -> str:
-        return self.spec.name
-
-    def stream(self) -> Stream:
-        return SIMULATED.get(self, lambda: simulate_run(
-            self.spec, self.sim, prior_fraction=self.prior_fraction,
-            prior_sigma_xy_m=self.prior_sigma_xy_m))
-
-    def key(self) -> dict[str, Any]:
-        return {"spec": asdict(self.spec), "sim": asdict(self.sim),
-                "prior_fraction": self.prior_fraction, "prior_sigma": self.prior_sigma_xy_m}
-
-
-@dataclass(frozen=True)
-class DatasetSource:
-    """A real recording, imported on use: ``kind`` is ``mrclam``, ``g2o`` or ``victoria``."""
-
-    kind: str
-    path: str
-    robot: int | None = None
-    truth_path: str | None = None
-    label: str = ""
-
-    @property
-    def name(self) -> str:
-        if self.label:
-            return self.label
-        base = Path(self.path).name
-        return f"{base}-r{self.robot}" if self.robot is not None else base
-
-    def stream(self) -> Stream:
-        return _load_dataset(self.kind, self.path, self.robot, self.truth_path)
-
-    def key(self) -> dict[str, Any]:
-        return {"kind": self.kind, "path": str(Path(self.path).resolve()), "robot": self.robot,
-                "truth": self.truth_path, "files": _files_stamp(self.path, self.truth_path)}
-
-
-def _files_stamp(*paths: str | None) -> str:
-    """Size and modification time of every file under ``paths`` (a change invalidates the
-    cache)."""
-    h = hashlib.sha256()
-    for p in paths:
-        if p is None:
-            continue
-        root = Path(p)
-        files = sorted(root.rglob("*")) if root.is_dir() else [root]
-        for f in files:
-            if f.is_file():
-                st = f.stat()
-                h.update(f"{f}:{st.st_size}:{st.st_mtime_ns};".encode())
-    return h.hexdigest()[:16]
-
-
-@dataclass(frozen=True)
-class FileSource:
-    """A stream file (any recording or simulation written in the stream format).
-
-    Its cache key is the SHA-256 of the file's bytes, so a moved or renamed copy reuses the
-    cache and an edited file runs again. ``label`` names the run (default: the file stem).
-    """
-
-    path: str
-    label: str = ""
-
-    @property
-    def name(self) -> str:
-        return self.label or Path(self.path).stem
-
-    def stream(self) -> Stream:
-        st = os.stat(self.path)
-        return _read_stream_file(str(Path(self.path).resolve()), st.st_size, st.st_mtime_ns)
-
-    def key(self) -> dict[str, Any]:
-        st = os.stat(self.path)
-        return {"kind": "file", "sha256": _file_sha256(str(Path(self.path).resolve()),
-                                                       st.st_size, st.st_mtime_ns)}
-
-
-@functools.lru_cache(maxsize=64)
-def _file_sha256(path: str, size: int, mtime_ns: int) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for block in iter(lambda: fh.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
-
-
-@functools.lru_cache(maxsize=8)
-def _read_stream_file(path: str, size: int, mtime_ns: int) -> Stream:
-    from .stream_file import read_stream
-
-    return read_stream(path)
-
-
-@dataclass(frozen=True)
-class WorldSource:
-    """A simulated run of a world: ``simulate(sim, default_rng(seed))``, the stream
-    ``bomgraph simulate --seed SEED`` writes for the same settings (priors drawn after it
-    from the same generator when ``prior_fraction`` > 0)."""
-
-    sim: SimConfig
-    seed: int
-    world: str = "world"
-    prior_fraction: float = 0.0
-    prior_sigma_xy_m: float = 0.03
-
-    @property
-    def name(self) -> str:
-        return f"{self.world}-seed{self.seed}"
-
-    def stream(self) -> Stream:
-        return SIMULATED.get(self, self._simulate)
-
-    def _simulate(self) -> Stream:
-        rng = np.random.default_rng(self.seed)
-        stream = simulate(self.sim, rng, meta={"seed": self.seed})
-        if self.prior_fraction > 0:
-            stream = with_priors(stream, make_priors(stream.truth, self.prior_fraction,
-                                                     self.prior_sigma_xy_m, rng))
-        return stream
-
-    def key(self) -> dict[str, Any]:
-        return {"kind": "world", "sim": asdict(self.sim), "seed": self.seed,
-                "prior_fraction": self.prior_fraction, "prior_sigma": self.prior_sigma_xy_m}
-
-
-@dataclass(frozen=True)
-class World:
-    """Simulated runs of one world: a :class:`~bomgraph.sim.SimConfig` and the seeds."""
-
-    name: str
-    sim: SimConfig
-    seeds: tuple[int, ...]
-    prior_sigma_xy_m: float = 0.03
-
-    def sources(self, prior_fraction: float = 0.0) -> list[WorldSource]:
-        return [WorldSource(self.sim, s, self.name, prior_fraction, self.prior_sigma_xy_m)
-                for s in self.seeds]
-
-
-@functools.lru_cache(maxsize=16)
-def _load_dataset(kind: str, path: str, robot: int | None, truth_path: str | None) -> Stream:
-    from . import datasets
-
-    if kind == "mrclam":
-        if robot is None:
-            raise ConfigError("an MRCLAM source needs a robot number (1-5)")
-        return datasets.import_mrclam(path, robot)
-    if kind == "g2o":
-        return datasets.import_g2o(path, truth_path=truth_path)
-    if kind == "victoria":
-        return datasets.import_victoria(path)
-    raise ConfigError(f"unknown dataset kind {kind!r}; use mrclam, g2o or victoria")
 
 
 @dataclass(frozen=True)
@@ -292,6 +89,19 @@ class Experiment:
     sources: tuple[DatasetSource | FileSource, ...] = ()
     worlds: tuple[World, ...] = ()
     reference: Arm | None = None
+
+    def __post_init__(self) -> None:
+        where = f"experiment {self.name!r}"
+        instance(self.name, str, f"{where}: name", ConfigError)
+        for key, kinds in (("arms", Arm), ("sources", (DatasetSource, FileSource)),
+                           ("worlds", World)):
+            value = items(getattr(self, key), kinds, f"{where}: {key}", ConfigError)
+            if not isinstance(getattr(self, key), (list, tuple)):  # an iterator is read once
+                object.__setattr__(self, key, value)
+        instance(self.sim, SimConfig, f"{where}: sim", ConfigError)
+        instance(self.reference, (Arm, type(None)), f"{where}: reference", ConfigError)
+        for key, low in (("seed", 0), ("n_layouts", 1), ("n_starts", 1), ("checkpoint_every", 1)):
+            integer(getattr(self, key), f"{where}: {key}", ConfigError, minimum=low)
 
     @property
     def designed(self) -> bool:
@@ -334,6 +144,13 @@ class Task:
     #: (``compare --estimates``)
     keep_estimate: bool = False
 
+    def __post_init__(self) -> None:
+        instance(self.arm, Arm, "Task: arm", ConfigError)
+        instance(self.source, (SimSource, DatasetSource, FileSource, WorldSource),
+                 "Task: source", ConfigError)
+        instance(self.reference, (Arm, type(None)), "Task: reference", ConfigError)
+        integer(self.checkpoint_every, "Task: checkpoint_every", ConfigError, minimum=1)
+
     def stream(self) -> Stream:
         return self.source.stream()
 
@@ -366,7 +183,7 @@ def designed_variant(experiments: Sequence[Experiment], *, quick: bool = False,
     """``experiments`` with their design (the paper's runs) made quick (2 layouts x 1 start
     of 150 steps) and/or given another ``seed``; experiments on streams or worlds as given."""
     out = []
-    for e in experiments:
+    for e in items(experiments, Experiment, "designed_variant(): experiments", ConfigError):
         if e.designed:
             if quick:
                 e = replace(e, sim=replace(e.sim, n_steps=150), n_layouts=2, n_starts=1)
@@ -439,6 +256,15 @@ def compare_experiments(*, config: str | None = None, streams: Sequence[str] | N
     """
     from .sweep import command_line_spec
 
+    where = "compare_experiments()"
+    if streams is not None:
+        items(streams, (str, os.PathLike), f"{where}: streams", ConfigError,
+              want="stream file names")
+    instance(methods, (str, type(None)), f"{where}: methods ('NAME[@PRESET],...', as "
+                                         f"--methods)", ConfigError)
+    items(options, str, f"{where}: options", ConfigError, want="'NAME:KEY=VALUE' strings")
+    if checkpoint_every is not None:   # 0 used to mean the default, 10
+        integer(checkpoint_every, f"{where}: checkpoint_every", ConfigError, minimum=1)
     given = [n for n, v in (("--config", config), ("--streams", streams), ("--real", real)) if v]
     if len(given) > 1:
         raise ConfigError(f"compare: give one of --config, --streams, --real, not "
@@ -521,7 +347,11 @@ def real_experiments(data_dir: str | os.PathLike[str],
     bearing-only g2o set (``data_dir`` is the shared data folder). Each method runs with its
     defaults (the paper's configuration) and, where one exists, with the variant for
     recordings (:data:`REAL_VARIANTS`). ``methods`` defaults to :func:`real_methods`."""
-    root = Path(data_dir)
+    root = Path(file_name(data_dir, "real_experiments(): data_dir", ConfigError))
+    if methods is not None:
+        for m in items(methods, str, "real_experiments(): methods", ConfigError,
+                       want="method names"):
+            method_info(m)   # an UnknownMethodError naming the known ones
     arms: tuple[Arm, ...] = ()
     for m in (real_methods() if methods is None else methods):
         arms += (Arm(m, m),)
@@ -552,7 +382,9 @@ def select(experiments: Mapping[str, Experiment], names: Sequence[str] = ()) -> 
     ConfigError
         A name is not one of ``experiments``.
     """
-    names = list(names) or list(experiments)
+    instance(experiments, Mapping, "select(): experiments (name -> Experiment)", ConfigError)
+    names = list(items(names, str, "select(): names", ConfigError, want="experiment names")
+                 ) or list(experiments)
     unknown = [n for n in names if n not in experiments]
     if unknown:
         raise ConfigError(f"unknown experiment(s) {unknown}; choose from {list(experiments)}")

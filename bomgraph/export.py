@@ -44,8 +44,9 @@ from typing import Sequence
 
 import numpy as np
 
+from .checks import real
 from .errors import ConfigError, ExportError
-from .mapper import MapEstimate
+from .mapper import MapEstimate, RunResult
 from .stream import Stream
 
 
@@ -56,12 +57,34 @@ ZERO_SIGMA_FLOOR = 1e-4
 def truth_estimate(stream: Stream) -> MapEstimate:
     """The stream's ground truth as a :class:`MapEstimate` (poses at every step when the
     truth has them), so that it exports like any estimate."""
+    _check_stream(stream, "truth_estimate", needed=True)
     if stream.truth is None:
         raise ExportError("the stream has no truth to export")
     tr = stream.truth
     pose_t = None if tr.poses is None else np.arange(len(tr.poses), dtype=np.int64)
     return MapEstimate(tr.landmark_ids, tr.landmarks_xy, pose_t=pose_t, poses=tr.poses,
                        info={"source": "truth"})
+
+
+def _check_estimate(src: object, where: str) -> None:
+    """Refuse an estimate that is no MapEstimate (naming the likely fix)."""
+    if not isinstance(src, MapEstimate):
+        hint = (" (result.final, or result.at(t))" if isinstance(src, RunResult) else
+                " (its .final)" if hasattr(src, "final") else "")
+        raise ExportError(f"{where}(): the estimate must be a MapEstimate, got "
+                          f"{type(src).__name__}{hint}")
+
+
+def _check_stream(stream: object, where: str, *, needed: bool = False) -> None:
+    """Refuse a stream that is no Stream (None passes unless ``needed``)."""
+    if isinstance(stream, Stream) or stream is None and not needed:
+        return
+    hint = (" (read the file with bomgraph.read_stream(path))"
+            if isinstance(stream, (str, os.PathLike)) else
+            " (pass the Stream itself, not its steps or its header)"
+            if isinstance(stream, (tuple, list)) or hasattr(stream, "bearing_sigma_rad") else "")
+    raise ExportError(f"{where}(): stream must be a bomgraph Stream{'' if needed else ' or None'}"
+                      f", got {type(stream).__name__}{hint}")
 
 
 def _r(v: float) -> str:
@@ -97,6 +120,8 @@ def _need_poses(src: MapEstimate, fmt: str) -> tuple[np.ndarray, np.ndarray]:
 
 def to_tum(src: MapEstimate, stream: Stream | None = None) -> str:
     """TUM lines ``t x y z qx qy qz qw`` (module docstring), one per pose in step order."""
+    _check_estimate(src, "to_tum")
+    _check_stream(stream, "to_tum")
     pose_t, poses = _need_poses(src, "tum")
     times = _times(pose_t, stream)
     lines = ["# bomgraph export: t x y z qx qy qz qw (z = 0, rotation about z; t = "
@@ -110,6 +135,7 @@ def to_tum(src: MapEstimate, stream: Stream | None = None) -> str:
 
 def to_kitti(src: MapEstimate) -> str:
     """KITTI lines: the 3x4 ``[R | t]`` of each pose row-major, in step order."""
+    _check_estimate(src, "to_kitti")
     _, poses = _need_poses(src, "kitti")
     lines = []
     for x, y, psi in poses:
@@ -124,6 +150,8 @@ CSV_HEADER = "kind,id,x_m,y_m,psi_rad,time_s"
 
 def to_csv(src: MapEstimate, stream: Stream | None = None) -> str:
     """One CSV with a ``kind`` column (``pose`` rows, then ``landmark`` rows)."""
+    _check_estimate(src, "to_csv")
+    _check_stream(stream, "to_csv")
     lines = [CSV_HEADER]
     if src.poses is not None and src.pose_t is not None:
         pose_t, poses = _need_poses(src, "csv")
@@ -142,13 +170,25 @@ def odometry_information(dth_rad: float, sigma: np.ndarray) -> np.ndarray:
     ``Omega = J^T diag(1/sigma^2) J`` with ``J = diag(R(dth), 1)``, so that
     ``J Omega^-1 J^T = diag(sigma^2)`` (J is orthogonal).
     """
-    c, s = math.cos(dth_rad), math.sin(dth_rad)
+    dth = real(dth_rad, "odometry_information(): dth_rad", ExportError)
+    try:
+        sig = np.asarray(sigma, dtype=float)
+    except (TypeError, ValueError):
+        sig = np.zeros(0)
+    if not (math.isfinite(dth) and sig.shape == (3,) and np.all(np.isfinite(sig))
+            and np.all(sig > 0)):
+        raise ExportError(f"odometry_information(): needs a finite dth_rad and 3 finite sigmas "
+                          f"> 0 (sigma_dx_m, sigma_dy_m, sigma_dpsi_rad; to_g2o floors a 0 at "
+                          f"ZERO_SIGMA_FLOOR), got {dth_rad!r:.20} and {sigma!r:.60}")
+    c, s = math.cos(dth), math.sin(dth)
     jac = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-    return jac.T @ np.diag(1.0 / np.asarray(sigma, dtype=float) ** 2) @ jac
+    return jac.T @ np.diag(1.0 / sig ** 2) @ jac
 
 
 def to_g2o(src: MapEstimate, stream: Stream) -> str:
     """The stream's problem with ``src`` as the vertex values (module docstring)."""
+    _check_estimate(src, "to_g2o")
+    _check_stream(stream, "to_g2o", needed=True)
     pose_t, poses = _need_poses(src, "g2o")
     n = len(stream.steps)
     _check_pose_steps(pose_t, n)
@@ -196,6 +236,8 @@ def to_g2o(src: MapEstimate, stream: Stream) -> str:
 
 def export_text(src: MapEstimate, fmt: str, stream: Stream | None = None) -> str:
     """The text of ``src`` in format ``fmt`` (one of :data:`FORMATS`)."""
+    _check_estimate(src, "export_text")
+    _check_stream(stream, "export_text")
     if fmt == "tum":
         return to_tum(src, stream)
     if fmt == "kitti":

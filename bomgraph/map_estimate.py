@@ -3,7 +3,8 @@
 
 Its constructor validates what a method hands it: ids are integers (never rounded), points are
 ``(n, 2)`` rows and poses ``(m, 3)`` rows (a ``(2, n)`` array is refused, not reshaped), all
-finite, one covariance per row.
+finite, one covariance per row. Landmark ids are non-negative, as in the stream
+(``shared/STREAM_FORMAT.md``) and the estimate file.
 """
 
 from __future__ import annotations
@@ -70,6 +71,9 @@ class MapEstimate:
     def __post_init__(self) -> None:
         ids = _ro(_given(self.landmark_ids, "landmark_ids"), np.int64, (), "landmark_ids")
         xy = _ro(_given(self.landmarks_xy, "landmarks_xy"), float, (2,), "landmarks_xy")
+        if ids.size and ids.min() < 0:
+            raise ConfigError(f"MapEstimate: landmark_ids must be non-negative (landmark ids "
+                              f"are integers >= 0, as in the stream), got {int(ids.min())}")
         if ids.shape[0] != xy.shape[0]:
             raise ConfigError(f"MapEstimate: {ids.shape[0]} ids but {xy.shape[0]} positions")
         if len(np.unique(ids)) != len(ids):

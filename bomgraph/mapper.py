@@ -81,6 +81,8 @@ class RunResult:
 
     @property
     def final(self) -> MapEstimate:
+        if not self.checkpoints:
+            raise ConfigError(f"RunResult {self.method!r} has no checkpoint, so no final map")
         return self.checkpoints[-1].estimate
 
     def at(self, t: int) -> MapEstimate:
@@ -154,7 +156,7 @@ def _finish_hook(mapper: Mapper) -> Callable[[], Any] | None:
     return finish
 
 
-def _check_run_arguments(mapper: Any, steps: Any, checkpoint_every: Any,
+def _check_run_arguments(mapper: Any, steps: Any, checkpoint_every: Any, method: Any,
                          on_checkpoint: Any) -> None:
     """Refuse, before the first step, arguments :func:`run` cannot use (naming them)."""
     if isinstance(mapper, type) or not (callable(getattr(mapper, "step", None))
@@ -167,6 +169,9 @@ def _check_run_arguments(mapper: Any, steps: Any, checkpoint_every: Any,
     if not (is_integer(checkpoint_every) and checkpoint_every >= 1):
         raise ConfigError(f"checkpoint_every must be an integer >= 1, got "
                           f"{checkpoint_every!r:.40}")
+    if method is not None and not isinstance(method, str):
+        raise ConfigError(f"run(): method must be the method's name (a str) or None, got "
+                          f"{type(method).__name__} {method!r:.40}")
     if on_checkpoint is not None and not callable(on_checkpoint):
         raise ConfigError(f"run(): on_checkpoint must be callable or None, got "
                           f"{type(on_checkpoint).__name__}")
@@ -214,7 +219,7 @@ def run(mapper: Mapper, steps: Iterable[Step], *, checkpoint_every: int = 10,
         False keeps only the latest checkpoint in the result (memory bounded by one map;
         pair it with ``on_checkpoint``). The estimates are the same either way.
     """
-    _check_run_arguments(mapper, steps, checkpoint_every, on_checkpoint)
+    _check_run_arguments(mapper, steps, checkpoint_every, method, on_checkpoint)
     clock = time.perf_counter
     start = clock()
     step_s: list[float] = []

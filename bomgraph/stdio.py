@@ -38,6 +38,7 @@ import threading
 from pathlib import Path
 from typing import IO, Callable, Iterator, Sequence
 
+from .checks import file_name, items
 from .errors import BomgraphError
 
 STDIO = "-"
@@ -208,17 +209,20 @@ def check_output_path(path: str | os.PathLike[str],
                       inputs: Sequence[str | os.PathLike[str] | None] = ()) -> None:
     """Refuse an output path before anything is computed.
 
-    Refused: an empty name, a directory, a block device or socket, one of ``inputs`` (the
-    same file, through symbolic or hard links too; an input that is a folder refuses every
-    file in it), a file whose folder does not exist or is not writable, an existing file that
-    is not writable.
+    Refused: a path that is no file name (None, a number), ``inputs`` given as one path
+    instead of a list of them, an empty name, a directory, a block device or socket, one of
+    ``inputs`` (the same file, through symbolic or hard links too; an input that is a folder
+    refuses every file in it), a file whose folder does not exist or is not writable, an
+    existing file that is not writable.
     ``-`` (stdout), character devices and FIFOs pass.
 
     Raises
     ------
     OutputPathError
     """
-    path = os.fspath(path)
+    path = file_name(path, "--out", OutputPathError)
+    inputs = items(inputs, (str, os.PathLike, type(None)), "inputs (the files read)",
+                   OutputPathError, want="file names")
     if path == STDIO:
         return
     if not path:  # os.path.realpath("") is the working folder: the rename would aim at it
@@ -280,8 +284,8 @@ class AtomicOutput:
 
     def __init__(self, path: str | os.PathLike[str], *, binary: bool = False,
                  inputs: Sequence[str | os.PathLike[str] | None] = ()) -> None:
+        check_output_path(path, inputs)
         self.given = os.fspath(path)
-        check_output_path(self.given, inputs)
         st = _stat(self.given)
         self.direct = _direct(self.given, st)
         self.path = self.given if self.direct else os.path.realpath(self.given)

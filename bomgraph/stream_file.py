@@ -16,6 +16,7 @@ from typing import IO, Any, Iterable, Iterator, Sequence
 
 import numpy as np
 
+from .checks import file_name
 from .errors import StreamFormatError
 from .jsonio import (MAX_ID, DuplicateKeyError, decode_utf8, find_nonfinite, is_id, is_int,
                      is_num, loads_strict)
@@ -292,7 +293,7 @@ class StreamReader:
     """
 
     def __init__(self, path: str | os.PathLike[str], *, warn: bool = True) -> None:
-        self.path = str(path)
+        self.path = file_name(path, "stream path", StreamFormatError)
         self._warn = warn
         try:
             self._fh: IO[bytes] = open(self.path, "rb")
@@ -401,6 +402,9 @@ def _f(x: Any) -> float:
 
 def header_to_json(header: StreamHeader, truth: Truth | None = None) -> dict:
     """The header line as a JSON-ready dict, keys in the order of the format document."""
+    _check_type(header, StreamHeader, "header")
+    if truth is not None:
+        _check_type(truth, Truth, "truth")
     obj: dict[str, Any] = {"format": FORMAT_NAME, "version": FORMAT_VERSION,
                            "bearing_sigma_rad": _f(header.bearing_sigma_rad),
                            "odometry_sigma": [_f(s) for s in header.odometry_sigma]}
@@ -422,6 +426,7 @@ def header_to_json(header: StreamHeader, truth: Truth | None = None) -> dict:
 
 def step_to_json(step: Step) -> dict:
     """One step line as a JSON-ready dict."""
+    _check_type(step, Step, "step")
     obj: dict[str, Any] = {"t": int(step.t)}
     if step.odom is not None:
         obj["odom"] = [_f(v) for v in step.odom]
@@ -439,6 +444,7 @@ def write_stream(stream: Stream, path: str | os.PathLike[str], *,
 
     The same Stream always gives the same bytes (see :func:`write_stream_parts`).
     """
+    _check_type(stream, Stream, "stream")
     write_stream_parts(stream.header, stream.steps, path, truth=stream.truth, inputs=inputs)
 
 
@@ -450,11 +456,44 @@ def write_stream_parts(header: StreamHeader, steps: Iterable[Step],
     Written as every bomgraph output is (:func:`bomgraph.stdio.output_file`): a regular file
     appears only when complete (written beside it under a unique name, then renamed), a link
     is followed, a device or FIFO is written directly; ``inputs`` (the files the stream is
-    made from) are refused as ``path``."""
+    made from) are refused as ``path``. What :func:`read_stream` would refuse (steps out of
+    order, odometry against the rule, no step, truth poses that are not one per step) is
+    refused, and no file is left."""
+    _check_type(header, StreamHeader, "header")   # before the output is made
+    if truth is not None:
+        _check_type(truth, Truth, "truth")
+    if isinstance(steps, (Step, Stream, str)) or not isinstance(steps, Iterable):
+        raise StreamFormatError(f"must be an iterable of Step, got {type(steps).__name__}"
+                                + (" (pass stream.steps)" if isinstance(steps, Stream) else ""),
+                                key="steps")
     with output_file(path, inputs=inputs) as fh:
         fh.write(json.dumps(header_to_json(header, truth), allow_nan=False) + "\n")
+        n = 0
         for step in steps:
+            if not isinstance(step, Step):
+                raise StreamFormatError(f"steps[{n}] is a {type(step).__name__}, not a Step",
+                                        key="steps")
+            if step.t != n or (step.odom is None) != (n == 0):
+                raise StreamFormatError(f"step {n} has t = {step.t} and odom "
+                                        f"{'None' if step.odom is None else 'given'}; steps "
+                                        f"must be t = 0, 1, 2, ... with odom None at t = 0 "
+                                        f"only (read_stream would refuse the file)", key="t")
             fh.write(json.dumps(step_to_json(step), allow_nan=False) + "\n")
+            n += 1
+        if n == 0:
+            raise StreamFormatError("no steps; a stream needs at least the step t = 0", key="t")
+        if truth is not None and truth.poses is not None and len(truth.poses) != n:
+            raise StreamFormatError(f"{len(truth.poses)} truth poses for {n} steps; give one "
+                                    f"pose per step", key="truth")
+
+
+def _check_type(value: Any, kind: type, key: str) -> None:
+    if not isinstance(value, kind):
+        hint = (" (write_stream(stream) writes a Stream)" if isinstance(value, Stream) else
+                " (read_stream(path) reads one)" if kind is Stream and isinstance(
+                    value, (str, os.PathLike)) else "")
+        raise StreamFormatError(f"must be a {kind.__name__}, got {type(value).__name__}{hint}",
+                                key=key)
 
 
 __all__ = ["StreamReader", "read_stream", "write_stream", "write_stream_parts", "header_to_json",

@@ -11,6 +11,8 @@ import os
 from dataclasses import dataclass
 from typing import Any, Iterable
 
+from .checks import is_integer
+from .errors import ConfigError
 from .stream import Step
 
 
@@ -26,6 +28,15 @@ class StreamIdentity:
     steps_sha256: str
     n_steps: int
 
+    def __post_init__(self) -> None:  # what an estimate file's reader accepts
+        if not (isinstance(self.steps_sha256, str) and len(self.steps_sha256) == 64):
+            raise ConfigError(f"StreamIdentity: steps_sha256 must be the 64 hex digits of a "
+                              f"SHA-256 (stream_identity(steps) makes it), got "
+                              f"{self.steps_sha256!r:.70}")
+        if not (is_integer(self.n_steps) and self.n_steps >= 0):
+            raise ConfigError(f"StreamIdentity: n_steps must be an integer >= 0, got "
+                              f"{self.n_steps!r:.40}")
+
     def as_dict(self) -> dict[str, Any]:
         return {"steps_sha256": self.steps_sha256, "n_steps": self.n_steps}
 
@@ -34,9 +45,18 @@ def stream_identity(steps: Iterable[Step]) -> StreamIdentity:
     """The :class:`StreamIdentity` of a sequence of steps (a stream's ``steps``, a reader)."""
     from .stream_file import step_to_json
 
+    if isinstance(steps, (str, os.PathLike)) or hasattr(steps, "steps") \
+            or not isinstance(steps, Iterable):
+        hint = (" (stream_file_identity(path) for a file)" if isinstance(steps, (str, os.PathLike))
+                else " (pass stream.steps)" if hasattr(steps, "steps") else "")
+        raise ConfigError(f"stream_identity(): steps must be an iterable of Step, got "
+                          f"{type(steps).__name__}{hint}")
     h = hashlib.sha256()
     n = 0
     for st in steps:
+        if not isinstance(st, Step):
+            raise ConfigError(f"stream_identity(): step {n} is a {type(st).__name__}, not a "
+                              f"bomgraph.stream.Step")
         h.update((json.dumps(step_to_json(st), allow_nan=False) + "\n").encode("utf-8"))
         n += 1
     return StreamIdentity(h.hexdigest(), n)

@@ -47,6 +47,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
+from .checks import file_name
 from .errors import BomgraphError, ConfigError
 from .sim import SimConfig
 
@@ -122,7 +123,7 @@ def shipped() -> list[str]:
 
 def resolve_path(path_or_name: str | os.PathLike[str]) -> Path:
     """A sweep file's path: ``path_or_name`` itself, or a shipped file of that name."""
-    p = Path(path_or_name)
+    p = Path(file_name(path_or_name, "the sweep file (a path or a shipped name)", SweepError))
     if p.is_file():
         return p
     if (SHIPPED_DIR / f"{p}.toml").is_file() and p.suffix != ".toml":
