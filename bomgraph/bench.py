@@ -22,6 +22,7 @@ import math
 import os
 import tempfile
 import time
+import traceback
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any, Callable, Iterable, Iterator, Mapping, Sequence
@@ -35,7 +36,7 @@ from .evaluate import CheckpointScore, score_checkpoints, score_estimate
 from .experiments import Arm, Experiment, SimSource, Task
 from .jsonio import jsonable
 from .mapper import (Checkpoint, MapEstimate, RunResult, checkpoint_times, create_mapper,
-                     method_fingerprint, method_info, run)
+                     method_failure_note, method_fingerprint, method_info, run)
 from .stdio import bounded_lines, output_file
 from .stream import Step, Stream, Truth
 from .stream_file import StreamReader
@@ -208,7 +209,10 @@ def _run_task(task: Task) -> dict[str, Any]:
     try:
         result = _run_method(task, task.arm, stream, score)
     except Exception as exc:  # a failing method is a result, reported with its reason
-        out.update(ok=False, error=f"{type(exc).__name__}: {exc}")
+        note = method_failure_note(exc)
+        out.update(ok=False, error=f"{type(exc).__name__}: {exc}" + (f" ({note})" if note else ""),
+                   traceback="".join(traceback.format_exception(exc, limit=-12)))
+        _log.debug("%s on %s failed:\n%s", task.arm.label, task.source.name, out["traceback"])
         return out
     if unscorable:
         out.update(ok=False, error=unscorable[0])

@@ -182,8 +182,8 @@ def cmd_export(args: argparse.Namespace) -> int:
 
 def cmd_methods(args: argparse.Namespace) -> int:
     from .jsonio import jsonable
-    from .mapper import (available_methods, factory_options, format_method_list,
-                         method_config_class, method_info, method_listing, preset_summary)
+    from .mapper import available_methods, factory_options, method_config_class, method_info
+    from .method_list import format_method_list, method_listing, preset_summary
 
     if args.name is None:
         rows = [method_listing(i) for i in available_methods()]
@@ -279,6 +279,14 @@ def cmd_compare(args: argparse.Namespace) -> int:
         print(f"bomgraph: error: {len(bad)} run(s) stopped on a malformed stream file: "
               f"{bad[0].partition(': ')[2]}", file=sys.stderr)
         return 2
+    failed = [r for r in result.results if not r.get("ok")]
+    if failed:  # a method that raised: the tables say FAILED, the status says so too
+        f = failed[0]
+        print(f"bomgraph: error: {len(failed)} of {len(result.results)} runs failed (first: "
+              f"{f['arm']} on {f['experiment']} {f['run']}: {f.get('error')}); the tables mark "
+              f"them FAILED and {os.path.join(args.out, 'results.json')} holds each error",
+              file=sys.stderr)
+        return 1
     return 0
 
 
@@ -398,8 +406,28 @@ def main(argv: Sequence[str] | None = None) -> int:
         if isinstance(exc, OSError) and exc.filename is None and exc.errno in _WRITE_ERRNOS \
                 and getattr(args, "out", None):  # a write error names no file: name --out
             message = f"--out {args.out}: {exc.strerror}"
-        print(f"bomgraph: error: {display_path(message)}", file=sys.stderr)
+        from .mapper import method_failure_note
+
+        note = method_failure_note(exc)
+        print(f"bomgraph: error: {display_path(message)}" + (f" ({note})" if note else ""),
+              file=sys.stderr)
         return 2
+    except Exception as exc:
+        import traceback
+
+        from .mapper import method_failure_note
+
+        note = method_failure_note(exc)
+        if note is None:   # not a method's own code: bomgraph's bug, whose traceback helps
+            raise
+        # a method (a plugin's, say) raised: one line saying where, the traceback with -v
+        print(f"bomgraph: error: method {getattr(args, 'method', '?')} failed: "
+              f"{type(exc).__name__}: {exc} ({note})"
+              + ("" if getattr(args, "verbose", 0) else "; -v shows the traceback"),
+              file=sys.stderr)
+        if getattr(args, "verbose", 0):
+            traceback.print_exception(exc, file=sys.stderr)
+        return 1
 
 
 if __name__ == "__main__":  # pragma: no cover

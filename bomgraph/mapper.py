@@ -15,13 +15,12 @@ import dataclasses
 import inspect
 import time
 from dataclasses import dataclass
-from typing import (Any, Callable, Iterable, Mapping, Protocol, Sequence,
-                    runtime_checkable)
+from typing import Any, Callable, Iterable, Mapping, Protocol, runtime_checkable
 
 import numpy as np
 
 from .checks import is_integer
-from .errors import BomgraphError, ConfigError, MethodProtocolError, UnknownMethodError
+from .errors import ConfigError, MethodProtocolError, UnknownMethodError
 from .map_estimate import MapEstimate
 from .stream import Step, StreamHeader, Truth
 
@@ -114,6 +113,25 @@ def checkpoint_times(n_steps: int, every: int) -> list[int]:
 
 _END = object()
 
+#: How :func:`run` marks an exception raised inside a method (its ``step``, ``finish`` or
+#: ``estimate``): a note ``"raised in Name.step() at t = 5"`` (``BaseException.add_note``), the
+#: exception itself unchanged; :func:`method_failure_note` reads it back.
+_NOTE_PREFIX = "raised in "
+
+
+def _note_method_failure(exc: BaseException, mapper: Any, call: str, t: int) -> None:
+    if method_failure_note(exc) is None:
+        exc.add_note(f"{_NOTE_PREFIX}{type(mapper).__name__}.{call} at t = {t}")
+
+
+def method_failure_note(exc: BaseException) -> str | None:
+    """Where inside a method :func:`run` saw ``exc`` raised (``"raised in Name.step() at t =
+    5"``), or None if it was not raised by a method's own code."""
+    for note in getattr(exc, "__notes__", ()):
+        if isinstance(note, str) and note.startswith(_NOTE_PREFIX):
+            return note
+    return None
+
 
 def _estimate_at(mapper: Mapper, t: int, finish: Callable[[], None] | None,
                  checkpoints: list[Checkpoint],
@@ -121,9 +139,15 @@ def _estimate_at(mapper: Mapper, t: int, finish: Callable[[], None] | None,
     """Take the checkpoint after step ``t``: ``finish()`` first if given (the last step), its
     time counted in the estimate's."""
     t0 = time.perf_counter()
-    if finish is not None:
-        finish()
-    est = mapper.estimate()
+    call = "finish()"
+    try:
+        if finish is not None:
+            finish()
+        call = "estimate()"
+        est = mapper.estimate()
+    except Exception as exc:
+        _note_method_failure(exc, mapper, call, t)
+        raise
     if not isinstance(est, MapEstimate):
         raise MethodProtocolError(
             f"{type(mapper).__name__}.estimate() returned {type(est).__name__} after step {t}; "
@@ -236,7 +260,11 @@ def run(mapper: Mapper, steps: Iterable[Step], *, checkpoint_every: int = 10,
             raise _step_problem(st, expected_t)
         expected_t += 1
         t0 = clock()
-        mapper.step(st)
+        try:
+            mapper.step(st)
+        except Exception as exc:
+            _note_method_failure(exc, mapper, "step()", st.t)
+            raise
         step_s.append(clock() - t0)
         due = st.t > 0 and st.t % checkpoint_every == 0
         try:     # one step ahead: the last step is known as such before its estimate
@@ -368,44 +396,6 @@ def method_description(name: str) -> str:
     factory = method_factory(name)
     text = getattr(factory, "description", None) or (factory.__doc__ or "").strip()
     return text.splitlines()[0] if text else "(no description)"
-
-
-def preset_summary(overrides: Mapping[str, Any], width: int = 100) -> str:
-    """A preset's field overrides on one line (cut at ``width`` characters)."""
-    text = ", ".join(f"{k}={v!r}" for k, v in overrides.items()) or "the defaults"
-    return text if len(text) <= width else text[:width - 3] + "..."
-
-
-def method_listing(info: MethodInfo) -> dict[str, Any]:
-    """What ``bomgraph methods`` shows of one method (name, description, origin, its
-    distribution and version, presets as field overrides); a plugin that cannot be loaded is
-    listed with the reason in its description, not raised."""
-    row: dict[str, Any] = {"name": info.name, "needs_truth": info.needs_truth,
-                           "origin": info.origin, "distribution": info.distribution,
-                           "version": info.version, "presets": {}}
-    try:
-        row["description"] = method_description(info.name)
-        cls = method_config_class(info.name)
-        row["presets"] = {k: dict(v) for k, v in getattr(cls, "PRESETS", {}).items()}
-    except BomgraphError as exc:
-        row["description"] = f"(cannot be loaded: {exc})"
-    return row
-
-
-def format_method_list(rows: Sequence[Mapping[str, Any]]) -> str:
-    """:func:`method_listing` rows as the text of ``bomgraph methods``: a line per method
-    (name, description, where it comes from), then a line per preset (``@NAME`` and its
-    field overrides)."""
-    lines = []
-    for r in rows:
-        flag = "  (benchmark only: reads the truth)" if r["needs_truth"] else ""
-        if r["origin"] == "plugin":
-            flag += f"  (plugin: {r['distribution'] or '?'} {r['version'] or ''})".rstrip()
-        elif r["origin"] == "runtime":
-            flag += "  (registered at run time: this process only)"
-        lines.append(f"{r['name']:18s} {r['description']}{flag}")
-        lines += [f"  @{name:15s} {preset_summary(o)}" for name, o in r["presets"].items()]
-    return "\n".join(lines)
 
 
 def method_fingerprint(name: str) -> str | None:
@@ -582,6 +572,5 @@ def create_mapper(name: str, header: StreamHeader, *, truth: Truth | None = None
 
 __all__ = ["MapEstimate", "Mapper", "Checkpoint", "RunResult", "run", "checkpoint_times",
            "MethodInfo", "register_method", "available_methods", "method_info",
-           "method_factory", "method_description", "method_fingerprint", "method_listing",
-           "preset_summary", "format_method_list",
+           "method_factory", "method_description", "method_fingerprint",
            "method_config_class", "check_method_options", "factory_options", "create_mapper"]

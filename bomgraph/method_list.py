@@ -1,0 +1,53 @@
+"""What ``bomgraph methods`` shows: each registered method on a line (name, description, where
+it comes from), its presets on a line each as field overrides (:func:`format_method_list`), and
+the same as data for ``--json`` (:func:`method_listing`)."""
+
+from __future__ import annotations
+
+from typing import Any, Mapping, Sequence
+
+from .errors import BomgraphError
+from .mapper import MethodInfo, method_config_class, method_description
+
+
+def preset_summary(overrides: Mapping[str, Any], width: int = 100) -> str:
+    """A preset's field overrides on one line (cut at ``width`` characters)."""
+    text = ", ".join(f"{k}={v!r}" for k, v in overrides.items()) or "the defaults"
+    return text if len(text) <= width else text[:width - 3] + "..."
+
+
+def method_listing(info: MethodInfo) -> dict[str, Any]:
+    """What ``bomgraph methods`` shows of one method (name, description, origin, its
+    distribution and version, presets as field overrides); a plugin that cannot be loaded is
+    listed with the reason in its description, not raised."""
+    row: dict[str, Any] = {"name": info.name, "needs_truth": info.needs_truth,
+                           "origin": info.origin, "distribution": info.distribution,
+                           "version": info.version, "presets": {}}
+    try:
+        row["description"] = method_description(info.name)
+        cls = method_config_class(info.name)
+        row["presets"] = {k: dict(v) for k, v in getattr(cls, "PRESETS", {}).items()}
+    except BomgraphError as exc:
+        row["description"] = f"(cannot be loaded: {exc})"
+    return row
+
+
+def format_method_list(rows: Sequence[Mapping[str, Any]]) -> str:
+    """:func:`method_listing` rows as the text of ``bomgraph methods``: a line per method
+    (name, description, where it comes from), then a line per preset (``@NAME`` and its
+    field overrides)."""
+    lines = []
+    # one column for every preset name (the longest, @real-seed-robust, is 17 characters)
+    width = max([15] + [len(n) for r in rows for n in r["presets"]])
+    for r in rows:
+        flag = "  (benchmark only: reads the truth)" if r["needs_truth"] else ""
+        if r["origin"] == "plugin":
+            flag += f"  (plugin: {r['distribution'] or '?'} {r['version'] or ''})".rstrip()
+        elif r["origin"] == "runtime":
+            flag += "  (registered at run time: this process only)"
+        lines.append(f"{r['name']:18s} {r['description']}{flag}")
+        lines += [f"  @{name:{width}s} {preset_summary(o)}" for name, o in r["presets"].items()]
+    return "\n".join(lines)
+
+
+__all__ = ["preset_summary", "method_listing", "format_method_list"]

@@ -1,0 +1,97 @@
+"""A method that raises: the exception keeps its type and gains a note saying where (``run``),
+``bomgraph run`` says so in one line with exit status 1 (the traceback with ``-v``), and
+``bomgraph compare`` records the place and the traceback and exits 1 when any run failed."""
+
+from __future__ import annotations
+
+import json
+import textwrap
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from bomgraph import mapper
+from bomgraph.cli import main
+from bomgraph.mapper import create_mapper, method_failure_note, run
+from bomgraph.sim import SimConfig, simulate
+from bomgraph.stream_file import write_stream
+
+CRASHER = textwrap.dedent('''
+    from bomgraph.mapper import MapEstimate
+
+
+    class Crasher:
+        """raises in step() at t = at_step, or in estimate() with at_step = -1"""
+
+        def __init__(self, header, *, at_step: int = 5) -> None:
+            self.at_step = at_step
+
+        def step(self, step) -> None:
+            if step.t == self.at_step:
+                raise ValueError(f"boom at {step.t}")
+
+        def estimate(self):
+            if self.at_step < 0:
+                raise ZeroDivisionError("no map")
+            return MapEstimate.empty()
+''')
+
+
+@pytest.fixture()
+def crasher(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
+    (tmp_path / "crasher_plugin.py").write_text(CRASHER)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    monkeypatch.setattr(mapper, "_REGISTRY", dict(mapper._REGISTRY))
+    mapper.register_method("crasher", "crasher_plugin:Crasher", "raises")
+    stream = simulate(SimConfig(n_steps=30, n_landmarks=8), np.random.default_rng(0))
+    write_stream(stream, tmp_path / "s.jsonl")
+    return tmp_path / "s.jsonl"
+
+
+def test_run_notes_where_the_method_raised_and_keeps_its_exception(crasher: Path) -> None:
+    from bomgraph.stream_file import read_stream
+
+    s = read_stream(crasher)
+    with pytest.raises(ValueError, match="boom at 5") as info:
+        run(create_mapper("crasher", s.header), s.steps)
+    assert method_failure_note(info.value) == "raised in Crasher.step() at t = 5"
+    with pytest.raises(ZeroDivisionError) as info:
+        run(create_mapper("crasher", s.header, at_step=-1), s.steps, checkpoint_every=10)
+    assert method_failure_note(info.value) == "raised in Crasher.estimate() at t = 10"
+    assert method_failure_note(ValueError("not from a method")) is None
+
+
+def test_cli_run_says_where_in_one_line_and_exits_1(crasher: Path, tmp_path: Path,
+                                                     capsys) -> None:
+    out = tmp_path / "e.est"
+    assert main(["run", str(crasher), "--method", "crasher", "--out", str(out)]) == 1
+    err = capsys.readouterr().err
+    assert err.strip().splitlines() == [
+        "bomgraph: error: method crasher failed: ValueError: boom at 5 (raised in "
+        "Crasher.step() at t = 5); -v shows the traceback"]
+    assert not out.exists()
+    assert main(["-v", "run", str(crasher), "--method", "crasher", "--out", str(out)]) == 1
+    err = capsys.readouterr().err
+    assert "Traceback (most recent call last)" in err and "crasher_plugin.py" in err
+
+
+def test_compare_records_where_and_exits_1_when_a_run_failed(crasher: Path, tmp_path: Path,
+                                                            capsys) -> None:
+    out = tmp_path / "c"
+    status = main(["compare", "--streams", str(crasher), "--methods", "crasher,triangulate",
+                   "--out", str(out), "--no-figures", "--jobs", "1"])
+    captured = capsys.readouterr()
+    assert status == 1
+    assert "1 of 2 runs failed (first: crasher on" in captured.err
+    assert "ValueError: boom at 5 (raised in Crasher.step() at t = 5)" in captured.err
+    results = json.loads((out / "results.json").read_text())["results"]
+    bad = [r for r in results if not r["ok"]]
+    assert len(bad) == 1 and "crasher_plugin.py" in bad[0]["traceback"]
+    assert [r["ok"] for r in results if r["method"] == "triangulate"] == [True]
+    assert "FAILED" in captured.out
+
+
+def test_compare_exits_0_when_every_run_succeeded(crasher: Path, tmp_path: Path) -> None:
+    assert main(["compare", "--streams", str(crasher), "--methods", "triangulate",
+                 "--out", str(tmp_path / "ok"), "--no-figures", "--jobs", "1"]) == 0
