@@ -525,6 +525,9 @@ def run_file(stream_path: str | os.PathLike[str], method: str,
     with contextlib.ExitStack() as stack:
         reader = stack.enter_context(StreamReader(stream_path))
         stack.enter_context(threadpool_limits(limits=1))
+        if reader.truth is None and method_info(method).needs_truth:
+            raise ConfigError(f"{os.fspath(stream_path)}: method {method!r} reads the ground "
+                              f"truth, and this stream has none (no 'truth' in its header)")
         mapper = create_mapper(method, reader.header, truth=reader.truth, **dict(options or {}))
         steps: Iterable[Step] = reader if progress is None else _reporting(reader, progress)
         _log.info("running %s on %s", method, stream_path)

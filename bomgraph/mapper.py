@@ -308,7 +308,8 @@ _REGISTRY: dict[str, MethodInfo] = {}
 
 
 def register_method(name: str, target: str, description: str, *,
-                    needs_truth: bool = False, _origin: str = "runtime") -> None:
+                    needs_truth: bool = False, replace: bool = False,
+                    _origin: str = "runtime") -> None:
     """Register ``"package.module:Factory"`` under ``name``; the module is imported on use.
 
     The factory is called as ``Factory(header, **options)`` (and ``truth=`` when
@@ -316,12 +317,23 @@ def register_method(name: str, target: str, description: str, *,
     in this process only: serial runs use it, worker processes (a local pool, Dask) do not
     see it and :func:`bomgraph.bench.execute` refuses it there; declare it as an entry point
     of the group ``bomgraph.methods`` instead (:mod:`bomgraph.plugins`).
+
+    A name already taken (a built-in method, an installed plugin, an earlier registration
+    with another target) is refused unless ``replace`` is True; registering the same thing
+    again (a notebook cell run twice) changes nothing.
     """
     if not (isinstance(name, str) and name.strip()):
         raise ConfigError(f"register_method: name must be a non-empty string, got {name!r}")
     if not isinstance(target, str) or ":" not in target:
         raise ConfigError(f"method target must be 'module:attribute', got {target!r}")
-    _REGISTRY[name] = MethodInfo(name, target, description, needs_truth, _origin)
+    info = MethodInfo(name, target, description, needs_truth, _origin)
+    if not replace and _origin == "runtime":
+        taken = _REGISTRY.get(name) or _plugin_infos().get(name)
+        if taken is not None and taken != info:
+            raise ConfigError(f"register_method: {name!r} is taken ({taken.origin} method "
+                              f"{taken.target}); choose another name, or pass replace=True "
+                              f"to replace it in this process")
+    _REGISTRY[name] = info
 
 
 for _name, _target, _desc, _truth in [
@@ -542,8 +554,9 @@ def create_mapper(name: str, header: StreamHeader, *, truth: Truth | None = None
         raise ConfigError(f"create_mapper({name!r}): truth must be a Truth (stream.truth) or "
                           f"None, got {type(truth).__name__}")
     if info.needs_truth and truth is None:
-        raise ConfigError(f"method {name!r} reads the ground truth (a benchmark bound); the "
-                          f"stream has none")
+        raise ConfigError(f"method {name!r} reads the ground truth (a benchmark bound): give "
+                          f"it as create_mapper({name!r}, stream.header, truth=stream.truth) "
+                          f"(a stream without truth cannot run it)")
     if info.origin != "builtin":  # a plugin's own options: refused here in one line
         check_method_options(name, options)
     factory = method_factory(name)

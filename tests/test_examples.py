@@ -57,9 +57,9 @@ def test_every_method_with_the_recording_preset(tmp_path: Path) -> None:
 
 def test_plugin_method_runs_through_bomgraph_run(tmp_path: Path) -> None:
     stream, est = simulated(tmp_path), tmp_path / "e.json"
-    assert "first-sight: " in run_example("plugin_method.py", str(stream), str(est))
+    assert "first-sight-script: " in run_example("plugin_method.py", str(stream), str(est))
     doc = read_estimate(est)
-    assert doc.method == "first-sight" and len(doc.final) > 3
+    assert doc.method == "first-sight-script" and len(doc.final) > 3
 
 
 def test_custom_hybrid_runs_and_its_solve_converges() -> None:

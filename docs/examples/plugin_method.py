@@ -40,10 +40,11 @@ class FirstSightMapper:
 
 
 # "module:attribute" of the factory; this file runs as __main__, so register it from there.
-register_method("first-sight", "__main__:FirstSightMapper",
+# (a name of its own: the installed toy plugin is called first-sight)
+register_method("first-sight-script", "__main__:FirstSightMapper",
                 "each landmark one metre along its first bearing (an example plugin)")
 
 if __name__ == "__main__":
     stream_path, out = sys.argv[1:3]
-    sys.exit(main(["run", stream_path, "--method", "first-sight", "--option", "depth_m=0.5",
+    sys.exit(main(["run", stream_path, "--method", "first-sight-script", "--option", "depth_m=0.5",
                    "--out", out]))
