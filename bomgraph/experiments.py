@@ -20,7 +20,7 @@ from typing import Any, Mapping, Sequence
 
 from .checks import file_name, fraction, instance, integer, items
 from .errors import ConfigError
-from .mapper import available_methods, method_info
+from .mapper import available_methods, method_config_class, method_info
 from .sim import RunSpec, SimConfig, paper_design
 from .sources import (SIMULATED, DatasetSource, FileSource, SimSource, SimulatedStreams, World,
                       WorldSource)
@@ -294,7 +294,7 @@ def compare_experiments(*, config: str | None = None, streams: Sequence[str] | N
 
 def _real_method_names(methods: str) -> list[str]:
     """The methods of ``compare --real --methods A,B``: names only (each runs with its
-    defaults and its recording variants, :data:`REAL_VARIANTS`), each known (plugins
+    defaults and its recording variants, :func:`real_variants`), each known (plugins
     included), none twice."""
     names = [m.strip() for m in methods.split(",") if m.strip()]
     for name in names:
@@ -341,12 +341,23 @@ REAL_VARIANTS: dict[str, tuple[tuple[str, dict[str, Any]], ...]] = {
 }
 
 
+def real_variants(method: str) -> tuple[tuple[str, dict[str, Any]], ...]:
+    """The recording arms of ``method`` beside its defaults: :data:`REAL_VARIANTS` for a
+    built-in method; for any other (a plugin) ``"NAME (real)"`` with ``preset="real"`` when its
+    configuration has a ``real`` preset, else none."""
+    if method in REAL_VARIANTS:
+        return REAL_VARIANTS[method]
+    presets = getattr(method_config_class(method), "PRESETS", None) or {}
+    return ((f"{method} (real)", {"preset": "real"}),) if "real" in presets else ()
+
+
 def real_experiments(data_dir: str | os.PathLike[str],
                      methods: Sequence[str] | None = None) -> dict[str, Experiment]:
     """Every method on the recordings with ground truth: MRCLAM6 robots 1-5 and the
     bearing-only g2o set (``data_dir`` is the shared data folder). Each method runs with its
     defaults (the paper's configuration) and, where one exists, with the variant for
-    recordings (:data:`REAL_VARIANTS`). ``methods`` defaults to :func:`real_methods`."""
+    recordings (:func:`real_variants`: a plugin's ``real`` preset included). ``methods``
+    defaults to :func:`real_methods`."""
     root = Path(file_name(data_dir, "real_experiments(): data_dir", ConfigError))
     if methods is not None:
         for m in items(methods, str, "real_experiments(): methods", ConfigError,
@@ -355,7 +366,7 @@ def real_experiments(data_dir: str | os.PathLike[str],
     arms: tuple[Arm, ...] = ()
     for m in (real_methods() if methods is None else methods):
         arms += (Arm(m, m),)
-        arms += tuple(Arm(label, m, options) for label, options in REAL_VARIANTS.get(m, ()))
+        arms += tuple(Arm(label, m, options) for label, options in real_variants(m))
     exps = {}
     if (root / "mrclam6").is_dir():
         exps["mrclam6"] = Experiment(
@@ -396,5 +407,6 @@ __all__ = ["SimulatedStreams", "SIMULATED", "Arm", "SimSource", "DatasetSource",
            "Experiment", "Task", "Sweep", "load_experiments", "designed_variant",
            "compare_experiments",
            "paper_experiments",
-           "real_experiments", "real_methods", "select", "REAL_VARIANTS", "REAL_SKIPPED",
+           "real_experiments", "real_methods", "real_variants", "select", "REAL_VARIANTS",
+           "REAL_SKIPPED",
            "PAPER_REPORTED"]

@@ -47,3 +47,65 @@ def test_a_method_that_reads_the_truth_says_how_to_give_it(tmp_path: Path, capsy
                  "--out", str(tmp_path / "o.est")]) == 2
     err = capsys.readouterr().err
     assert "nt.jsonl: method 'oracle' reads the ground truth, and this stream has none" in err
+
+
+RAYMEAN = '''
+from dataclasses import dataclass
+from typing import ClassVar, Mapping, Any
+
+from bomgraph.config import Presets, resolve
+from bomgraph.mapper import MapEstimate
+
+
+@dataclass(frozen=True)
+class RaymeanConfig(Presets):
+    """Attributes
+    ----------
+    min_rays : rays before a landmark is mapped
+    """
+
+    min_rays: int = 2
+    PRESETS: ClassVar[Mapping[str, Mapping[str, Any]]] = {"paper": {}, "real": {"min_rays": 4}}
+
+
+class Raymean:
+    """maps nothing (a plugin with a real preset)"""
+
+    config_class = RaymeanConfig
+
+    def __init__(self, header, *, config=None, preset=None, **options) -> None:
+        self.config = resolve(RaymeanConfig, config, preset, **options)
+
+    def step(self, step) -> None:
+        pass
+
+    def estimate(self):
+        return MapEstimate.empty()
+
+
+class Bare(Raymean):
+    """no configuration class"""
+
+    config_class = None
+
+    def __init__(self, header) -> None:
+        pass
+'''
+
+
+def test_compare_real_runs_a_plugins_real_preset_beside_its_defaults(
+        registry, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    from bomgraph.experiments import real_experiments, real_variants
+
+    (tmp_path / "raymean_plugin.py").write_text(RAYMEAN)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    register_method("raymean", "raymean_plugin:Raymean", "d")
+    register_method("plain", "raymean_plugin:Bare", "d")
+    assert real_variants("raymean") == (("raymean (real)", {"preset": "real"}),)
+    assert real_variants("plain") == ()                       # no configuration, no presets
+    assert real_variants("hybrid")[0] == ("hybrid (real seed)", {"preset": "real-seed"})
+    (tmp_path / "data" / "mrclam6").mkdir(parents=True)
+    exps = real_experiments(tmp_path / "data", methods=["raymean", "ekf"])
+    assert [(a.label, dict(a.options)) for a in exps["mrclam6"].arms] == [
+        ("raymean", {}), ("raymean (real)", {"preset": "real"}),
+        ("ekf", {}), ("ekf (real)", {"preset": "real"})]
