@@ -171,8 +171,15 @@ def cmd_export(args: argparse.Namespace) -> int:
     text = export_text(src, args.format, stream)
     if args.out == "-":
         sys.stdout.write(text)
+    else:
+        write_text_atomic(text, args.out,
+                          [p for p in (args.estimate, stream_path) if p and p != STDIO])
+    if args.format == "tum" and stream is None:  # written; no time stamps without the stream
+        print("bomgraph: note: the TUM time stamps are step indices; give --stream FILE to "
+              "use the stream's time_s (as export --truth does), so that evo can pair them",
+              file=sys.stderr)
+    if args.out == "-":
         return 0
-    write_text_atomic(text, args.out, [p for p in (args.estimate, stream_path) if p and p != STDIO])
     held = [f"{0 if src.poses is None else len(src.poses)} poses"]
     if args.format in ("csv", "g2o"):  # TUM and KITTI hold poses only
         held.append(f"{len(src.landmark_ids)} landmarks")

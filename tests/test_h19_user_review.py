@@ -109,3 +109,18 @@ def test_compare_real_runs_a_plugins_real_preset_beside_its_defaults(
     assert [(a.label, dict(a.options)) for a in exps["mrclam6"].arms] == [
         ("raymean", {}), ("raymean (real)", {"preset": "real"}),
         ("ekf", {}), ("ekf (real)", {"preset": "real"})]
+
+
+def test_tum_export_without_the_stream_says_its_stamps_are_step_indices(tmp_path: Path,
+                                                                         capsys) -> None:
+    s = simulate(SimConfig(n_steps=20, n_landmarks=6), np.random.default_rng(2))
+    write_stream(s, tmp_path / "s.jsonl")
+    assert main(["run", str(tmp_path / "s.jsonl"), "--method", "triangulate", "--out",
+                 str(tmp_path / "e.est")]) == 0
+    capsys.readouterr()
+    assert main(["export", str(tmp_path / "e.est"), "--format", "tum", "--out",
+                 str(tmp_path / "a.tum")]) == 0
+    assert "TUM time stamps are step indices; give --stream FILE" in capsys.readouterr().err
+    assert main(["export", str(tmp_path / "e.est"), "--stream", str(tmp_path / "s.jsonl"),
+                 "--format", "tum", "--out", str(tmp_path / "b.tum")]) == 0
+    assert "note" not in capsys.readouterr().err
