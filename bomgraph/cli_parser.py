@@ -153,7 +153,8 @@ def build_parser() -> argparse.ArgumentParser:
                         "preset (stmds-smacof@real); plugins included (`bomgraph methods`); "
                         "with --real: names only, each with its recording variants")
     c.add_argument("--option", action="append", default=[], metavar="NAME:KEY=VALUE",
-                   help="with --streams: an option of method NAME (repeatable)")
+                   help="with --streams: an option of every arm of method NAME, or of "
+                        "one arm with NAME@PRESET (repeatable; a key once per NAME)")
     c.add_argument("--reference", metavar="NAME[@PRESET]", help="with --streams: score "
                    "truth-free streams against this method's final map")
     c.add_argument("--checkpoint-every", type=_positive_int, metavar="N",

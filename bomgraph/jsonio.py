@@ -199,6 +199,8 @@ def parse_options(pairs: Sequence[str]) -> dict[str, Any]:
         k, v = p.split("=", 1)
         if not k:
             raise ConfigError(f"an option needs a name before '=', got {p!r}")
+        if k in out:
+            raise ConfigError(f"option {k} is given twice; give it once")
         try:
             out[k] = parse_option_value(v)
         except ConfigError as exc:

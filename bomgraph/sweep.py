@@ -189,9 +189,16 @@ def command_line_spec(streams: Sequence[str], methods: Sequence[str],
             raise SweepError(f"--option {text}: {target!r} is not one of --methods "
                              f"{','.join(methods)}")
         try:
-            extra.setdefault(target, {}).update(parse_options([pair]))
+            given = parse_options([pair])
         except ConfigError as exc:
             raise SweepError(f"--option {text}: {exc}") from None
+        key = next(iter(given))
+        if key in extra.get(target, {}):
+            raise SweepError(f"--option {text}: {target}:{key} is given twice (one compare "
+                             f"runs one value per method; to compare values, give the "
+                             f"method once per value with a label of its own in a sweep "
+                             f"file)")
+        extra.setdefault(target, {}).update(given)
 
     def with_options(m: MethodSpec) -> MethodSpec:
         opts = dict(m.options)

@@ -124,3 +124,24 @@ def test_tum_export_without_the_stream_says_its_stamps_are_step_indices(tmp_path
     assert main(["export", str(tmp_path / "e.est"), "--stream", str(tmp_path / "s.jsonl"),
                  "--format", "tum", "--out", str(tmp_path / "b.tum")]) == 0
     assert "note" not in capsys.readouterr().err
+
+
+def test_an_option_given_twice_is_refused_not_the_last_kept(tmp_path: Path, capsys) -> None:
+    s = simulate(SimConfig(n_steps=20, n_landmarks=6), np.random.default_rng(3))
+    write_stream(s, tmp_path / "s.jsonl")
+    base = ["compare", "--streams", str(tmp_path / "s.jsonl"), "--out", str(tmp_path / "c"),
+            "--no-figures", "--jobs", "1"]
+    assert main([*base, "--methods", "stmds-cs", "--option", "stmds-cs:tri_window=4",
+                 "--option", "stmds-cs:tri_window=6"]) == 2
+    assert "stmds-cs:tri_window is given twice" in capsys.readouterr().err
+    assert not (tmp_path / "c").exists()
+    assert main(["run", str(tmp_path / "s.jsonl"), "--method", "stmds-cs", "--option",
+                 "tri_window=4", "--option", "tri_window=6", "--out", str(tmp_path / "e.est")]) == 2
+    assert "option tri_window is given twice" in capsys.readouterr().err
+    # one arm by its label, over the method-wide value: allowed, and each arm gets its own
+    from bomgraph.sweep import command_line_spec
+
+    spec = command_line_spec([str(tmp_path / "s.jsonl")], ["stmds-cs", "stmds-cs@real"],
+                             ["stmds-cs:min_degree=4", "stmds-cs@real:min_degree=5"])
+    got = {a.label: a.options.get("min_degree") for a in spec.experiments[0].methods}
+    assert got == {"stmds-cs": 4, "stmds-cs@real": 5}
