@@ -38,13 +38,15 @@ caller (stdout).
 
 from __future__ import annotations
 
+import json
 import math
 import os
-from typing import Sequence
+from typing import Any, Sequence
 
 import numpy as np
 
 from .checks import real
+from .datasets.g2o import G2O_HEADER_PREFIX
 from .errors import ConfigError, ExportError
 from .mapper import MapEstimate, RunResult
 from .stream import Stream
@@ -185,6 +187,18 @@ def odometry_information(dth_rad: float, sigma: np.ndarray) -> np.ndarray:
     return jac.T @ np.diag(1.0 / sig ** 2) @ jac
 
 
+def g2o_header_comment(stream: Stream) -> str:
+    """``# bomgraph header: {"sensor_range_m": ..., "time_s": [...]}`` for ``stream``
+    (``time_s`` only when every step has one): what g2o has no record for, in a comment line
+    (g2o skips ``#`` lines) that ``bomgraph import g2o`` reads back
+    (:data:`~bomgraph.datasets.g2o.G2O_HEADER_PREFIX`)."""
+    extra: dict[str, Any] = {"sensor_range_m": stream.header.sensor_range_m}
+    times = [s.time_s for s in stream.steps]
+    if times and all(v is not None for v in times):
+        extra["time_s"] = [float(v) for v in times]  # type: ignore[arg-type]
+    return G2O_HEADER_PREFIX + json.dumps(extra, allow_nan=False, separators=(",", ":"))
+
+
 def to_g2o(src: MapEstimate, stream: Stream) -> str:
     """The stream's problem with ``src`` as the vertex values (module docstring)."""
     _check_estimate(src, "to_g2o")
@@ -202,7 +216,7 @@ def to_g2o(src: MapEstimate, stream: Stream) -> str:
     base = int(all_ids.max()) + 1 if all_ids.size else 0
     lm = {int(i): xy for i, xy in zip(src.landmark_ids, src.landmarks_xy)}
     lines = ["# bomgraph export: bearing-only 2-D SLAM problem with the estimate as vertex "
-             f"values; pose vertex id = {base} + t"]
+             f"values; pose vertex id = {base} + t", g2o_header_comment(stream)]
     unmapped = [int(i) for i in observed if int(i) not in lm]
     if unmapped:
         lines.append(f"# observed landmarks without an estimate (no VERTEX_XY): "
@@ -264,5 +278,6 @@ def write_text_atomic(text: str, path: str | os.PathLike[str],
         raise ExportError(str(exc)) from None
 
 
-__all__ = ["FORMATS", "ZERO_SIGMA_FLOOR", "CSV_HEADER", "ExportError", "MapEstimate", "export_text", "to_tum",
-           "to_kitti", "to_csv", "to_g2o", "odometry_information", "write_text_atomic"]
+__all__ = ["FORMATS", "ZERO_SIGMA_FLOOR", "CSV_HEADER", "g2o_header_comment", "ExportError",
+           "MapEstimate", "export_text", "to_tum", "to_kitti", "to_csv", "to_g2o",
+           "odometry_information", "write_text_atomic"]

@@ -145,3 +145,53 @@ def test_an_option_given_twice_is_refused_not_the_last_kept(tmp_path: Path, caps
                              ["stmds-cs:min_degree=4", "stmds-cs@real:min_degree=5"])
     got = {a.label: a.options.get("min_degree") for a in spec.experiments[0].methods}
     assert got == {"stmds-cs": 4, "stmds-cs@real": 5}
+
+
+def test_a_g2o_export_reads_back_with_its_sensor_range_and_time_stamps(tmp_path: Path) -> None:
+    from dataclasses import replace
+
+    from bomgraph.datasets.g2o import import_g2o
+    from bomgraph.export import to_g2o
+    from bomgraph.stream import Stream
+
+    s = simulate(SimConfig(n_steps=15, n_landmarks=6), np.random.default_rng(5))
+    s = Stream(replace(s.header, sensor_range_m=7.25),
+               tuple(replace(st, time_s=100.0 + 0.25 * st.t) for st in s.steps), s.truth)
+    est = mapper.MapEstimate(s.truth.landmark_ids, s.truth.landmarks_xy,
+                             pose_t=np.arange(len(s.steps)), poses=s.truth.poses)
+    (tmp_path / "a.g2o").write_text(to_g2o(est, s))
+    back = import_g2o(tmp_path / "a.g2o")
+    assert back.header.sensor_range_m == 7.25
+    assert [st.time_s for st in back.steps] == [st.time_s for st in s.steps]
+    assert all(a.t == b.t and np.array_equal(a.landmark_ids, b.landmark_ids)
+               for a, b in zip(back.steps, s.steps))
+    # what an older export (no header comment) or another tool's file gives: as before
+    text = (tmp_path / "a.g2o").read_text()
+    plain = "".join(ln for ln in text.splitlines(keepends=True)
+                    if not ln.startswith("# bomgraph header: "))
+    (tmp_path / "b.g2o").write_text(plain)
+    old = import_g2o(tmp_path / "b.g2o")
+    assert old.header.sensor_range_m is None and old.steps[3].time_s is None
+
+
+@pytest.mark.parametrize("comment, what", [
+    ('{"sensor_range_m": -1}', "sensor_range_m must be a number > 0"),
+    ('{"sensor_range_m": 5, "time_s": [1, 2]}', "time_s has 2 stamps for 16 poses"),
+    ('{"colour": "red"}', "sensor_range_m and time_s only"),
+    ('{"sensor_range_m": 5', "not JSON"),
+])
+def test_a_bad_bomgraph_header_comment_is_refused_naming_its_line(tmp_path: Path, comment: str,
+                                                                  what: str) -> None:
+    from bomgraph.datasets.g2o import import_g2o
+    from bomgraph.errors import DatasetError
+    from bomgraph.export import to_g2o
+
+    s = simulate(SimConfig(n_steps=15, n_landmarks=6), np.random.default_rng(5))
+    est = mapper.MapEstimate(s.truth.landmark_ids, s.truth.landmarks_xy,
+                             pose_t=np.arange(len(s.steps)), poses=s.truth.poses)
+    lines = to_g2o(est, s).splitlines()
+    k = next(i for i, ln in enumerate(lines) if ln.startswith("# bomgraph header: "))
+    lines[k] = "# bomgraph header: " + comment
+    (tmp_path / "c.g2o").write_text("\n".join(lines) + "\n")
+    with pytest.raises(DatasetError, match=f"c.g2o, line {k + 1}.*{what}"):
+        import_g2o(tmp_path / "c.g2o")

@@ -11,11 +11,14 @@ Robotics" bearing-only SLAM project (``shared/data/bearing_only_sim_g2o/SOURCE.m
                                             with the upper triangle of its INFORMATION matrix
     EDGE_BEARING_SE2_XY i l bearing w       bearing from pose i to landmark l, information w
 
-Lines starting with ``#`` and blank lines are skipped; any other record is an error (this is
-not a general g2o reader). Poses become steps in the order of the ``EDGE_SE2`` chain, which
-must be one unbroken chain (no loop closures: the stream format holds one odometry chain).
-Landmark ids are the g2o vertex ids. Every ``VERTEX_SE2`` of the file must be a pose of that
-chain: g2o itself would optimise a pose vertex without odometry as a free vertex, but in a
+Lines starting with ``#`` and blank lines are skipped, except a ``# bomgraph header: {...}``
+comment before the first record (:data:`G2O_HEADER_PREFIX`, written by ``bomgraph export
+--format g2o``), whose ``sensor_range_m`` and ``time_s`` go back into the stream, so that an
+export reads back to the same stream but its truth (pass ``truth_path``); any other record
+is an error (this is not a general g2o reader). Poses become steps in the order of the
+``EDGE_SE2`` chain, which must be one unbroken chain (no loop closures: the stream format
+holds one odometry chain). Landmark ids are the g2o vertex ids. Every ``VERTEX_SE2`` of the
+file must be a pose of that chain: g2o itself would optimise a pose vertex without odometry as a free vertex, but in a
 bearing-only odometry file such a vertex means a lost ``EDGE_SE2`` (a stream cannot hold a pose
 without odometry), so it is refused rather than dropped.
 
@@ -57,6 +60,11 @@ from ._text import (chain_order, checked_bearing_sigma, dataset_error, file_labe
                     parse_int, read_lines)
 from .calibration import bearing_residuals, odometry_errors, robust_bearing_stats
 
+#: A comment line of the file that carries what g2o has no record for (written by ``bomgraph
+#: export --format g2o``): ``# bomgraph header: {"sensor_range_m": 8.1, "time_s": [...]}``;
+#: read from the comments before the first record.
+G2O_HEADER_PREFIX = "# bomgraph header: "
+
 _RECORDS = {
     "VERTEX_SE2": ["id", "x", "y", "theta"],
     "VERTEX_XY": ["id", "x", "y"],
@@ -64,6 +72,39 @@ _RECORDS = {
     "EDGE_BEARING_SE2_XY": ["i", "l", "bearing", "w"],
 }
 _INT_FIELDS = {"id", "i", "j", "l"}
+
+
+def _bomgraph_header(path: Path) -> tuple[dict[str, Any], int | None]:
+    """The fields of a :data:`G2O_HEADER_PREFIX` comment before the first record (``{}``,
+    None without one) and its line number; each field checked."""
+    from ..jsonio import find_nonfinite, loads_strict
+
+    for line in read_lines(path, comment=None):
+        text = " ".join(line.tokens)
+        if not text.startswith("#"):
+            return {}, None
+        if not text.startswith(G2O_HEADER_PREFIX.strip()):
+            continue
+        try:
+            fields = loads_strict(text[len(G2O_HEADER_PREFIX):])
+        except ValueError as exc:
+            raise dataset_error(path, line.number, "bomgraph header",
+                                f"not JSON ({exc})") from None
+        if not isinstance(fields, dict) or set(fields) - {"sensor_range_m", "time_s"}:
+            raise dataset_error(path, line.number, "bomgraph header",
+                                "an object with sensor_range_m and time_s only")
+        bad = find_nonfinite(fields)
+        rng = fields.get("sensor_range_m")
+        times = fields.get("time_s")
+        if bad is not None or not (rng is None or (isinstance(rng, (int, float))
+                                                   and not isinstance(rng, bool) and rng > 0)) \
+                or not (times is None or (isinstance(times, list) and all(
+                    isinstance(v, (int, float)) and not isinstance(v, bool) for v in times))):
+            raise dataset_error(path, line.number, "bomgraph header",
+                                "sensor_range_m must be a number > 0 or null, time_s a list "
+                                "of finite numbers")
+        return fields, line.number
+    return {}, None
 
 
 class _G2oFile:
@@ -177,7 +218,8 @@ def import_g2o(path: str | os.PathLike[str], *, truth_path: str | os.PathLike[st
     Returns
     -------
     Stream
-        One step per pose along the odometry chain; no time stamps.
+        One step per pose along the odometry chain; time stamps and the sensor range only
+        from a ``# bomgraph header`` comment.
 
     Raises
     ------
@@ -256,12 +298,18 @@ def import_g2o(path: str | os.PathLike[str], *, truth_path: str | os.PathLike[st
         raise dataset_error(g.path, None, None, "no EDGE_BEARING_SE2_XY records, so no bearing "
                                                 "sigma; pass bearing_sigma_rad")
 
+    extra, extra_line = _bomgraph_header(g.path)
+    times = extra.get("time_s")
+    if times is not None and len(times) != len(order):
+        raise dataset_error(g.path, extra_line, "bomgraph header",
+                            f"time_s has {len(times)} stamps for {len(order)} poses")
     steps = []
     for t, lms in enumerate(per_step):
         ids = np.array(sorted(lms), dtype=np.int64)
         steps.append(Step(t=t, odom=None if t == 0 else odoms[t - 1],
                           landmark_ids=ids, bearings_rad=np.array([lms[k] for k in ids.tolist()]),
-                          odom_sigma=None if (t == 0 or uniform) else sig[t - 1]))
+                          odom_sigma=None if (t == 0 or uniform) else sig[t - 1],
+                          time_s=None if times is None else float(times[t])))
 
     meta: dict[str, Any] = {
         "source": "g2o bearing-only SLAM file",
@@ -313,7 +361,10 @@ def import_g2o(path: str | os.PathLike[str], *, truth_path: str | os.PathLike[st
                                        header_odo)
         meta["truth_check"] = check
 
-    header = StreamHeader(bearing_sigma_rad=sigma_b, odometry_sigma=header_odo, meta=meta)
+    if extra_line is not None:
+        meta["bomgraph_header_line"] = extra_line
+    header = StreamHeader(bearing_sigma_rad=sigma_b, odometry_sigma=header_odo,
+                          sensor_range_m=extra.get("sensor_range_m"), meta=meta)
     refuse_implausible(header, steps, DatasetError, str(g.path),
                        landmarks_xy=None if truth is None else truth.landmarks_xy,
                        poses=None if truth is None else truth.poses)
