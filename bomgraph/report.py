@@ -167,6 +167,20 @@ def _cm(v: float | None) -> str:
     return "   -  " if v is None or not math.isfinite(v) else f"{100 * v:6.2f}"
 
 
+def _mpe_cells(r: dict, times: Sequence[int]) -> list[str]:
+    """A summary row's ``mean/median±std`` MPE cells [cm], one per checkpoint time."""
+    cells = []
+    for t in times:
+        m, md, sd = (r.get(f"mpe_mean_m@{t}"), r.get(f"mpe_median_m@{t}"),
+                     r.get(f"mpe_std_m@{t}"))
+        cell = f"{_cm(m).strip()}/{_cm(md).strip()}±{_cm(sd).strip()}"
+        scored, ran = r.get(f"n_scored@{t}", 0), r["runs"] - r["failed"]
+        if scored < ran:  # runs without a map yet are not averaged in: say so
+            cell += f"[{scored}/{ran}]"
+        cells.append(cell)
+    return cells
+
+
 def format_summary(summary: Sequence[dict]) -> str:
     """The comparison table as text: one block per experiment, one row per arm."""
     lines = []
@@ -178,7 +192,9 @@ def format_summary(summary: Sequence[dict]) -> str:
         lines.append(f"\n== {exp} ==  landmark MPE [cm] mean/median±std at t; robot: error "
                      f"[cm] of the latest pose at the end; conv: converged runs; NEES: robot "
                      f"pose; wall time per run; [k/n]: only k of n runs had a map")
-        head = f"{'arm':30s} {'runs':>4s} " + " ".join(f"{'t=' + str(t):>17s}" for t in times)
+        by_row = [_mpe_cells(r, times) for r in rows]
+        w = max([17] + [len(c) for cells in by_row for c in cells])  # wide means widen it
+        head = f"{'arm':30s} {'runs':>4s} " + " ".join(f"{'t=' + str(t):>{w}s}" for t in times)
         head += f" {'robot':>7s} {'conv':>5s} {'NEES':>6s} {'wall s':>7s}  paper"
         free = any("bearing_rms_mean_rad" in r for r in rows)
         if free:  # streams without truth: landmarks mapped, bearing RMS [mrad], reference
@@ -186,23 +202,14 @@ def format_summary(summary: Sequence[dict]) -> str:
                           "of the map and trajectory against the stream (no truth needed)")
             head = head.replace("  paper", f" {'mapped':>6s} {'brg':>6s}  scored against")
         lines.append(head)
-        for r in rows:
-            cells = []
-            for t in times:
-                m, md, sd = (r.get(f"mpe_mean_m@{t}"), r.get(f"mpe_median_m@{t}"),
-                             r.get(f"mpe_std_m@{t}"))
-                cell = f"{_cm(m).strip()}/{_cm(md).strip()}±{_cm(sd).strip()}"
-                scored, ran = r.get(f"n_scored@{t}", 0), r["runs"] - r["failed"]
-                if scored < ran:  # runs without a map yet are not averaged in: say so
-                    cell += f"[{scored}/{ran}]"
-                cells.append(cell)
+        for r, cells in zip(rows, by_row):
             conv = r.get("converged_rate")
             conv_s = "  -  " if conv is None or not math.isfinite(conv) else f"{100 * conv:4.0f}%"
             nees = r.get("nees_pose_mean")
             nees_s = "   -  " if nees is None or not math.isfinite(nees) else f"{nees:6.2f}"
             fail = f"  FAILED {r['failed']}: {'; '.join(r['errors'])[:120]}" if r["failed"] else ""
             lines.append(f"{r['arm'][:30]:30s} {r['runs']:4d} "
-                         + " ".join(f"{c:>17s}" for c in cells)
+                         + " ".join(f"{c:>{w}s}" for c in cells)
                          + f" {_cm(r.get('robot_last_mean_m')):>7s} {conv_s:>5s} {nees_s:>6s}"
                          f" {r.get('wall_s_mean', float('nan')):7.3f}"
                          + (_free_cells(r) if free else f"  {r.get('paper', '')}") + fail)

@@ -195,3 +195,19 @@ def test_a_bad_bomgraph_header_comment_is_refused_naming_its_line(tmp_path: Path
     (tmp_path / "c.g2o").write_text("\n".join(lines) + "\n")
     with pytest.raises(DatasetError, match=f"c.g2o, line {k + 1}.*{what}"):
         import_g2o(tmp_path / "c.g2o")
+
+
+def test_summary_columns_widen_for_wide_cells_and_stay_aligned() -> None:
+    from bomgraph.report import format_summary
+
+    def row(arm: str, mean_m: float) -> dict:
+        return {"experiment": "e", "arm": arm, "method": arm, "runs": 25, "failed": 0,
+                "errors": [], "n_scored@50": 25, "mpe_mean_m@50": mean_m,
+                "mpe_median_m@50": mean_m, "mpe_std_m@50": mean_m * 1.1, "wall_s_mean": 0.1}
+
+    lines = format_summary([row("narrow", 0.012), row("first-sight", 1601.9)]).splitlines()
+    head, narrow, wide = lines[-3:]
+    assert "160190.00/160190.00±176209.00" in wide
+    # each row's MPE cell ends where the header's t=50 ends
+    end = head.index("t=50") + len("t=50")
+    assert narrow[:end].endswith("1.20/1.20±1.32") and wide[:end].endswith("176209.00")
