@@ -21,6 +21,7 @@ import numpy as np
 from bomgraph.config import Presets
 from bomgraph.errors import ConfigError
 
+from .range_prior import RHO_PRIORS
 from .robust import ROBUST_UPDATES
 
 
@@ -47,6 +48,11 @@ class BearingEkfConfig(Presets):
         its std. dev., 1/m; None derives them from the header's sensor range ``R``: ``2/R``
         and ``1/R``, so the 2-sigma interval runs from infinity (Civera's rule) to ``R/4``;
         Civera's ``0.1`` and ``0.5`` per metre when the range is unknown.
+    rho_prior : ``"range"`` (every preset): that prior. ``"empirical"``: the header's range is
+        not used; the prior starts at Civera's ``0.1 +- 0.5`` per m (or the two options above)
+        and, once a few features are Euclidean, is estimated from their inverse depths at
+        conversion, the features still in inverse depth moved to it by a pseudo-measurement
+        (:mod:`baselines.ekf.range_prior`).
     iterations : 1: the EKF update; more: the iterated EKF
         (:meth:`~baselines.ekf.filter.BearingEkf.update`).
     max_state : the largest filter state allowed (robot pose, landmarks ``[x, y]``, pose
@@ -136,6 +142,7 @@ class BearingEkfConfig(Presets):
     max_bearing_nonlinearity: float = 0.2
     rho_init_per_m: float | None = None
     rho_sigma_per_m: float | None = None
+    rho_prior: str = "range"
     iterations: int = 1
     restart_after_gated: int | None = None
     max_state: int = 4000
@@ -193,6 +200,10 @@ class BearingEkfConfig(Presets):
         if not self.max_bearing_nonlinearity > 0:
             raise ConfigError(f"max_bearing_nonlinearity must be > 0 (inf: no limit), got "
                               f"{self.max_bearing_nonlinearity}")
+        if self.rho_prior not in RHO_PRIORS:
+            raise ConfigError(f"rho_prior must be one of {', '.join(RHO_PRIORS)} (from the "
+                              f"header's sensor range; from the depths converged in the run), "
+                              f"got {self.rho_prior!r}")
         for name in ("rho_init_per_m", "rho_sigma_per_m"):
             value = getattr(self, name)
             if value is not None and not (math.isfinite(value) and value > 0):

@@ -79,12 +79,13 @@ from bomgraph.stream import Step, StreamHeader
 
 from .config import EkfConfig, InverseDepthConfig
 from .models import invdepth_conversion_kl, invdepth_to_xy, triangulation_kl
+from .range_prior import RhoPriorMixin
 from .slam import _CLONE, _IDP, _LM, EkfSlam
 
 _R3 = np.arange(3)
 
 
-class EkfMapper(EkfSlam):
+class EkfMapper(RhoPriorMixin, EkfSlam):
     """Bearing-only EKF-SLAM with Bailey's constrained (delayed) initialisation (``ekf``).
 
     Parameters
@@ -225,7 +226,7 @@ class EkfMapper(EkfSlam):
                               **{f"init_rejected_{k}": v for k, v in self.n_rejected.items()}}
 
 
-class InverseDepthEkfMapper(EkfSlam):
+class InverseDepthEkfMapper(RhoPriorMixin, EkfSlam):
     """Bearing-only EKF-SLAM with undelayed inverse-depth features (``ekf-invdepth``).
 
     Parameters
@@ -293,7 +294,7 @@ class InverseDepthEkfMapper(EkfSlam):
             # the bearings must have at least halved the prior std. dev. of rho (from a
             # robot that never moves, or only turns, they carry no depth at all)
             rho_sd = np.sqrt(np.clip(P[bi[:, 3], bi[:, 3]], 0, None))
-            no_depth = rho_sd > 0.5 * self.rho_sigma
+            no_depth = rho_sd > 0.5 * self._rho_prior_sd(keys)
             # ... and the odometry must have moved the robot across the feature's ray by more
             # than the bearing noise subtends at the feature's depth (turning on the spot
             # gives the iterated update a spurious depth, never a baseline)
