@@ -64,7 +64,7 @@ class EkfSlam:
                 self.rho_init, self.rho_sigma ** 2, 1.0 / self.rho_init ** 2))
         except (OverflowError, ZeroDivisionError):
             representable = False
-        if not representable and self._uses_inverse_depth(config):
+        if not representable and self._uses_inverse_depth(config) and config.rho_prior == "range":
             raise ConfigError(f"the inverse-depth prior rho = {self.rho_init:g} +- "
                               f"{self.rho_sigma:g} per m (from sensor_range_m = {rng_m:g}) "
                               f"cannot be represented; set the options rho_init_per_m and "
