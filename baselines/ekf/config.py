@@ -52,9 +52,7 @@ class BearingEkfConfig(Presets):
         not used; the prior starts at Civera's ``0.1 +- 0.5`` per m (or the two options above)
         and, once a few features are Euclidean, is estimated from their inverse depths at
         conversion, the features still in inverse depth moved to it by a pseudo-measurement
-        (:mod:`baselines.ekf.range_prior`). ``"empirical-start"``: the same, with a scale from
-        the odometry and the first rays (two-ray inverse depths on the dead-reckoned path) for
-        the features that start before any is converted.
+        (:mod:`baselines.ekf.range_prior`).
     iterations : 1: the EKF update; more: the iterated EKF
         (:meth:`~baselines.ekf.filter.BearingEkf.update`).
     max_state : the largest filter state allowed (robot pose, landmarks ``[x, y]``, pose

@@ -17,50 +17,19 @@ with the scene's depths in place of the stated range). Features still in inverse
 get the difference as a pseudo-measurement of ``rho`` (information ``1/s_new^2 - 1/s_old^2``
 at the value that makes their prior the new one, the exact change of prior of a linear
 Gaussian model), when the new prior is the narrower; later features start from it.
-
-``"empirical-start"``: ``"empirical"`` with a scale from the robot's own motion for the
-features that start before any is converted (Civera's start is a 10 m mean depth whatever
-the scene). On the dead-reckoned path (odometry alone, as the filter has it before its
-features carry depth), each landmark's first ray and its latest ray give an inverse depth on
-the first ray, ``sin(alpha) / (b x u2)`` (``alpha`` the angle between the rays, ``b`` the
-baseline, ``u2`` the latest ray), linear in the angle's noise (no selection by parallax,
-which would favour the draws that overstate it), with variance ``(2 sigma_b^2 + accumulated
-heading variance) / (b x u2)^2``. Once ``START_MIN`` landmarks have one and the weighted mean
-``m`` is positive with std. error at most ``START_REL_SD m``, the prior becomes ``N(m,
-(m/2)^2)`` (the ``"range"`` prior's shape) and later features start from it; converted
-features update the prior as in ``"empirical"``, before and after. Each change of prior moves
-the pending features to it exactly, in both directions: the pseudo-measurement above when it
-is narrower; when it is wider (a scene nearer than Civera's 10 m: on a 1 m world the scale's
-``2 +- 1`` per m is wider than ``0.1 +- 0.5``) the prior's information ``1/s0^2 - 1/s1^2`` is
-taken out of the state (:meth:`RhoPriorMixin._widen`), which ``"empirical"`` does not do. The search stops after
-``START_MAX_STEPS`` steps (a robot that does not move, or only turns, gives no scale).
 """
 
 from __future__ import annotations
 
 from typing import Any
 
-import math
-
 import numpy as np
 
-from bomgraph.angles import wrap_angle
-from bomgraph.geometry import compose
-
 #: The choices of :attr:`~baselines.ekf.config.BearingEkfConfig.rho_prior`.
-RHO_PRIORS = ("range", "empirical", "empirical-start")
+RHO_PRIORS = ("range", "empirical")
 
 #: Features converted before the empirical prior replaces the range-free start.
 EMPIRICAL_MIN = 1
-
-#: ``"empirical-start"``: landmarks with a two-ray depth before the first features start.
-START_MIN = 3
-
-#: ``"empirical-start"``: the largest std. error of the scale, relative (chosen on MRCLAM6).
-START_REL_SD = 0.2
-
-#: ``"empirical-start"``: steps after which no scale is sought any more.
-START_MAX_STEPS = 100
 
 _CIVERA = (0.1, 0.5)                   # rho_init, rho_sigma per m: range-free (Civera et al.)
 
@@ -85,48 +54,8 @@ class RhoPriorMixin:
             c = self.config
             st = {"prior": (c.rho_init_per_m or _CIVERA[0], c.rho_sigma_per_m or _CIVERA[1]),
                   "feature": {}, "converted": [], "tightened": 0}
-            if c.rho_prior == "empirical-start":
-                st.update(scaled=False, pose=np.zeros(3), var=0.0, steps=0, first={}, two_ray={},
-                          widened=0)
             self._rho_state = st
         return st
-
-    def step(self, step: Any) -> None:
-        st = self._empirical()
-        if st is not None and st.get("scaled") is False:
-            self._start_scale(st, step)
-        super().step(step)                             # type: ignore[misc]
-
-    def _start_scale(self, st: dict[str, Any], step: Any) -> None:
-        """``"empirical-start"``: the two-ray inverse depths on the dead-reckoned path, and the
-        prior from them once their weighted mean is known to ``START_REL_SD``."""
-        if step.odom is not None:
-            st["pose"] = compose(st["pose"], np.asarray(step.odom, float))
-            st["var"] += float(np.ravel(step.odometry_sigma(self._header))[2]) ** 2
-        st["steps"] += 1
-        x, y, psi = st["pose"].tolist()
-        b2 = 2.0 * self._header.bearing_sigma_rad ** 2
-        for i, zi in zip(step.landmark_ids.tolist(), step.bearings_rad.tolist()):
-            th = psi + zi
-            f = st["first"].get(i)
-            if f is None:
-                st["first"][i] = (x, y, th, st["var"])
-                continue
-            across = (x - f[0]) * math.sin(th) - (y - f[1]) * math.cos(th)    # b x u2
-            if abs(across) > 1e-9:             # inverse depth on the first ray, its variance
-                st["two_ray"][i] = (math.sin(float(wrap_angle(th - f[2]))) / across,
-                                  (b2 + st["var"] - f[3]) / across ** 2)
-        if len(st["two_ray"]) >= START_MIN:
-            r, v = np.array(list(st["two_ray"].values())).T
-            w = 1.0 / v
-            m = float(np.sum(w * r) / np.sum(w))
-            if m > 0 and 1.0 / math.sqrt(float(np.sum(w))) <= START_REL_SD * m:
-                st["prior"], st["scaled"] = (m, 0.5 * m), True
-                st["start_depth_m"], st["start_step"] = 1.0 / m, st["steps"]
-                self._tighten(st)
-                return
-        if st["steps"] >= START_MAX_STEPS:
-            st["scaled"] = None
 
     def _add_inverse_depth(self, ids: np.ndarray, z: np.ndarray) -> None:
         st = self._empirical()
@@ -164,16 +93,9 @@ class RhoPriorMixin:
         j1 = 1.0 / (s1 * s1)
         cols, ys, vs, ids = [], [], [], []
         x = self.filter.x
-        widen = self.config.rho_prior == "empirical-start"
         for i, (m0, s0) in st["feature"].items():
             j0 = 1.0 / (s0 * s0)
-            if ("idp", i) not in self._offset:
-                continue
-            if j1 <= j0 * 1.000001:
-                if widen and j1 < j0 * 0.999999:
-                    self._widen(self._offset[("idp", i)] + 3, j0, m0, j1, m1)
-                    st["feature"][i] = (m1, s1)
-                    st["widened"] += 1
+            if j1 <= j0 * 1.000001 or ("idp", i) not in self._offset:
                 continue
             c = self._offset[("idp", i)] + 3
             cols.append(c)
@@ -187,20 +109,6 @@ class RhoPriorMixin:
                 st["feature"][i] = (m1, s1)
             st["tightened"] += len(ids)
 
-    def _widen(self, c: int, j0: float, m0: float, j1: float, m1: float) -> None:
-        """The exact change of a feature's ``rho`` prior from ``N(m0, 1/j0)`` to the wider
-        ``N(m1, 1/j1)`` (information ``j0 - j1`` taken away, Woodbury; the state's other
-        information is kept): ``P' = P + P e (1/(j0 - j1) - P_cc)^-1 e^T P``,
-        ``x' = x + P' e (j1 (m1 - x_c) - j0 (m0 - x_c))``. ``P_cc <= 1/j0`` (the prior is part
-        of it) keeps ``P'`` positive definite."""
-        f = self.filter
-        P, x = f.P, f.x
-        pe = P[:, c].copy()
-        P += np.outer(pe, pe) / (1.0 / (j0 - j1) - pe[c])
-        x += P[:, c] * (j1 * (m1 - x[c]) - j0 * (m0 - x[c]))
-        x[f._angle_index] = wrap_angle(x[f._angle_index])
-        f.version += 1
-
     def _rho_prior_sd(self, keys: list[tuple[str, int]]) -> Any:
         """The prior std. dev. of ``rho`` of the features ``keys`` (a scalar with
         ``"range"``)."""
@@ -210,5 +118,4 @@ class RhoPriorMixin:
         return np.array([st["feature"].get(k[1], st["prior"])[1] for k in keys])
 
 
-__all__ = ["EMPIRICAL_MIN", "RHO_PRIORS", "RhoPriorMixin", "START_MAX_STEPS", "START_MIN",
-           "START_REL_SD"]
+__all__ = ["EMPIRICAL_MIN", "RHO_PRIORS", "RhoPriorMixin"]

@@ -6,10 +6,7 @@ simulated stream its maps change with the stated range, while ``"empirical"`` gi
 map bit for bit whatever range the header states (None, true, x2, x0.5) and maps as many
 landmarks (not as well on this 1 m world); its prior is the median of the converted features' inverse depths; its
 pseudo-measurement turns a fresh feature's prior into the new one exactly; bad values are
-refused. ``"empirical-start"`` (a start scale from the odometry and the first rays) also gives
-the same map under every stated range, finds a scale of this 1 m world within a few steps,
-maps better than ``"empirical"`` here and within 3x of the true range's prior (not within 2x
-for ``ekf-invdepth``: 4.2 against 1.6 cm), and widens a fresh feature's prior exactly.
+refused.
 """
 
 from __future__ import annotations
@@ -20,7 +17,7 @@ import numpy as np
 import pytest
 
 from baselines.ekf import EkfConfig, InverseDepthConfig
-from baselines.ekf.range_prior import EMPIRICAL_MIN, RHO_PRIORS
+from baselines.ekf.range_prior import EMPIRICAL_MIN
 from bomgraph.errors import ConfigError
 from bomgraph.evaluate import score_estimate
 from bomgraph.mapper import create_mapper, run
@@ -108,41 +105,3 @@ def test_pseudo_measurement_sets_the_new_prior(stream):
 def test_bad_rho_prior_refused(cls):
     with pytest.raises(ConfigError, match="rho_prior"):
         cls(rho_prior="guess")
-
-
-@pytest.mark.parametrize("method", METHODS)
-def test_empirical_start_ignores_the_stated_range(stream, method):
-    assert "empirical-start" in RHO_PRIORS
-    m, first = _final(stream, method, 1.0, rho_prior="empirical-start")
-    for f in (None, 2.0, 0.5):
-        assert _same(first, _final(stream, method, f, rho_prior="empirical-start")[1])
-    st = m._rho_state
-    assert st["scaled"] is True and st["start_step"] <= 10
-    assert 0.25 < st["start_depth_m"] < 1.0           # landmarks 0.1-1 m from the robot
-
-
-@pytest.mark.parametrize("method", METHODS)
-def test_empirical_start_accuracy(stream, method):
-    """Where the range is true: better than ``"empirical"`` (10 m start), within 3x of the
-    range prior (ekf 0.9 / 2.2 / 2.4 cm, ekf-invdepth 4.2 / 11.8 / 1.6 cm)."""
-    mpe = {p: score_estimate(_final(stream, method, 1.0, rho_prior=p)[1], stream.truth).mpe_m
-           for p in RHO_PRIORS}
-    assert mpe["empirical-start"] < mpe["empirical"]
-    assert mpe["empirical-start"] < 3.0 * mpe["range"]
-
-
-def test_widening_sets_the_new_prior(stream):
-    mapper = create_mapper("ekf-invdepth", stream.header, preset="real",
-                           rho_prior="empirical-start")
-    mapper._add_inverse_depth(np.array([7]), np.array([0.3]))
-    st = mapper._rho_state
-    off = mapper._offset[("idp", 7)] + 3
-    assert mapper.filter.x[off] == 0.1 and mapper.filter.P[off, off] == pytest.approx(0.25)
-    p0 = mapper.filter.P.copy()
-    st["prior"] = (2.0, 1.0)                          # wider than Civera's 0.1 +- 0.5
-    mapper._tighten(st)
-    assert mapper.filter.x[off] == pytest.approx(2.0)
-    assert mapper.filter.P[off, off] == pytest.approx(1.0)
-    assert np.array_equal(np.delete(np.delete(mapper.filter.P, off, 0), off, 1),
-                          np.delete(np.delete(p0, off, 0), off, 1))   # nothing else changes
-    assert st["feature"][7] == (2.0, 1.0) and st["widened"] == 1
