@@ -50,9 +50,9 @@ class BearingEkfConfig(Presets):
         Civera's ``0.1`` and ``0.5`` per metre when the range is unknown.
     rho_prior : ``"range"`` (every preset): that prior. ``"empirical"``: the header's range is
         not used; the prior starts at Civera's ``0.1 +- 0.5`` per m (or the two options above)
-        and, once a few features are Euclidean, is estimated from their inverse depths at
-        conversion, the features still in inverse depth moved to it by a pseudo-measurement
-        (:mod:`baselines.ekf.range_prior`).
+        and, once one feature is Euclidean (``EMPIRICAL_MIN``), is estimated from the inverse
+        depths of the converted features at conversion, the features still in inverse depth
+        moved to it by a pseudo-measurement (:mod:`baselines.ekf.range_prior`).
     iterations : 1: the EKF update; more: the iterated EKF
         (:meth:`~baselines.ekf.filter.BearingEkf.update`).
     max_state : the largest filter state allowed (robot pose, landmarks ``[x, y]``, pose
