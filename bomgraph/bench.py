@@ -163,6 +163,17 @@ def _stale_plugin(task: Task) -> str:
     return ""
 
 
+def _failure(exc: BaseException) -> str:
+    """``"Type: message (raised in Name.step() at t = 5)"``: a failed run's error."""
+    note = method_failure_note(exc)
+    return f"{type(exc).__name__}: {exc}" + (f" ({note})" if note else "")
+
+
+def _traceback(exc: BaseException) -> str:
+    """The last frames of ``exc``'s traceback (its notes included), for results.json."""
+    return "".join(traceback.format_exception(exc, limit=-12))
+
+
 def _run_task(task: Task) -> dict[str, Any]:
     out: dict[str, Any] = {"experiment": task.experiment, "arm": task.arm.label,
                            "method": task.arm.method, "run": task.source.name,
@@ -183,7 +194,7 @@ def _run_task(task: Task) -> dict[str, Any]:
             truth = _reference_map(task, stream)
         except Exception as exc:  # no reference, no score: a failed run with the reason
             out.update(ok=False, error=f"reference {task.reference.label} failed: "
-                                       f"{type(exc).__name__}: {exc}")
+                                       + _failure(exc), traceback=_traceback(exc))
             return out
         out["scored_against"] = f"reference {task.reference.label}"
     elif truth is None:
@@ -209,9 +220,7 @@ def _run_task(task: Task) -> dict[str, Any]:
     try:
         result = _run_method(task, task.arm, stream, score)
     except Exception as exc:  # a failing method is a result, reported with its reason
-        note = method_failure_note(exc)
-        out.update(ok=False, error=f"{type(exc).__name__}: {exc}" + (f" ({note})" if note else ""),
-                   traceback="".join(traceback.format_exception(exc, limit=-12)))
+        out.update(ok=False, error=_failure(exc), traceback=_traceback(exc))
         _log.debug("%s on %s failed:\n%s", task.arm.label, task.source.name, out["traceback"])
         return out
     if unscorable:

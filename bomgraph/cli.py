@@ -174,7 +174,7 @@ def cmd_export(args: argparse.Namespace) -> int:
     else:
         write_text_atomic(text, args.out,
                           [p for p in (args.estimate, stream_path) if p and p != STDIO])
-    if args.format == "tum" and stream is None:  # written; no time stamps without the stream
+    if args.format == "tum" and stream is None and not getattr(args, "quiet", False):
         print("bomgraph: note: the TUM time stamps are step indices; give --stream FILE to "
               "use the stream's time_s (as export --truth does), so that evo can pair them",
               file=sys.stderr)
@@ -280,14 +280,14 @@ def cmd_compare(args: argparse.Namespace) -> int:
     if streams:
         wrote.append(f"{len(streams)} stream files under {os.path.join(args.out, 'streams')}")
     print(f"\n{len(result.results)} runs in {result.wall_s:.1f} s; wrote {', '.join(wrote)}")
-    bad = [r["error"] for r in result.results
-           if not r.get("ok") and str(r.get("error", "")).startswith("StreamFormatError: ")]
+    bad = [r["error"] for r in result.results if not r.get("ok") and str(
+        r.get("error", "")).startswith(("StreamFormatError: ", "DatasetError: "))]
     if bad:  # a malformed input is the user's to fix, not a method's failure
-        print(f"bomgraph: error: {len(bad)} run(s) stopped on a malformed stream file: "
-              f"{bad[0].partition(': ')[2]}", file=sys.stderr)
+        print(f"bomgraph: error: {len(bad)} run(s) stopped on an input file that cannot be "
+              f"read: {bad[0].partition(': ')[2]}", file=sys.stderr)
         return 2
     failed = [r for r in result.results if not r.get("ok")]
-    if failed:  # a method that raised: the tables say FAILED, the status says so too
+    if failed:  # a method (or a reference) raised, or a worker was stale: status 1
         f = failed[0]
         print(f"bomgraph: error: {len(failed)} of {len(result.results)} runs failed (first: "
               f"{f['arm']} on {f['experiment']} {f['run']}: {f.get('error')}); the tables mark "
@@ -406,35 +406,38 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("bomgraph: interrupted", file=sys.stderr)
         return 130
-    except (BomgraphError, OSError) as exc:
-        from .stdio import display_path
-
-        message = str(exc)
-        if isinstance(exc, OSError) and exc.filename is None and exc.errno in _WRITE_ERRNOS \
-                and getattr(args, "out", None):  # a write error names no file: name --out
-            message = f"--out {args.out}: {exc.strerror}"
-        from .mapper import method_failure_note
-
-        note = method_failure_note(exc)
-        print(f"bomgraph: error: {display_path(message)}" + (f" ({note})" if note else ""),
-              file=sys.stderr)
-        return 2
     except Exception as exc:
-        import traceback
-
         from .mapper import method_failure_note
 
         note = method_failure_note(exc)
+        if isinstance(exc, BomgraphError) or (isinstance(exc, OSError) and note is None):
+            # a refusal, with what to fix (also one a method made, then with where): exit 2
+            from .stdio import display_path
+
+            message = str(exc)
+            if isinstance(exc, OSError) and exc.filename is None \
+                    and exc.errno in _WRITE_ERRNOS and getattr(args, "out", None):
+                message = f"--out {args.out}: {exc.strerror}"  # a write error names no file
+            print(f"bomgraph: error: {display_path(message)}" + (f" ({note})" if note else ""),
+                  file=sys.stderr)
+            return 2
         if note is None:   # not a method's own code: bomgraph's bug, whose traceback helps
             raise
-        # a method (a plugin's, say) raised: one line saying where, the traceback with -v
-        print(f"bomgraph: error: method {getattr(args, 'method', '?')} failed: "
-              f"{type(exc).__name__}: {exc} ({note})"
-              + ("" if getattr(args, "verbose", 0) else "; -v shows the traceback"),
-              file=sys.stderr)
-        if getattr(args, "verbose", 0):
-            traceback.print_exception(exc, file=sys.stderr)
-        return 1
+        return _method_failed(args, exc, note)
+
+
+def _method_failed(args: argparse.Namespace, exc: BaseException, note: str) -> int:
+    """A method (a plugin's, say) raised what is no refusal: one line saying where, the
+    traceback with ``-v``; exit status 1."""
+    import traceback
+
+    verbose = getattr(args, "verbose", 0)
+    print(f"bomgraph: error: method {getattr(args, 'method', '?')} failed: "
+          f"{type(exc).__name__}: {exc} ({note})" + ("" if verbose else "; -v shows the traceback"),
+          file=sys.stderr)
+    if verbose:
+        traceback.print_exception(exc, file=sys.stderr)
+    return 1
 
 
 if __name__ == "__main__":  # pragma: no cover

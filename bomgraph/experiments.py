@@ -343,10 +343,11 @@ REAL_VARIANTS: dict[str, tuple[tuple[str, dict[str, Any]], ...]] = {
 
 def real_variants(method: str) -> tuple[tuple[str, dict[str, Any]], ...]:
     """The recording arms of ``method`` beside its defaults: :data:`REAL_VARIANTS` for a
-    built-in method; for any other (a plugin) ``"NAME (real)"`` with ``preset="real"`` when its
+    built-in method (none for one it does not list, e.g. ``triangulate``); for any other (a
+    plugin, a method registered at run time) ``"NAME (real)"`` with ``preset="real"`` when its
     configuration has a ``real`` preset, else none."""
-    if method in REAL_VARIANTS:
-        return REAL_VARIANTS[method]
+    if method in REAL_VARIANTS or method_info(method).origin == "builtin":
+        return REAL_VARIANTS.get(method, ())
     presets = getattr(method_config_class(method), "PRESETS", None) or {}
     return ((f"{method} (real)", {"preset": "real"}),) if "real" in presets else ()
 

@@ -319,8 +319,8 @@ def register_method(name: str, target: str, description: str, *,
     of the group ``bomgraph.methods`` instead (:mod:`bomgraph.plugins`).
 
     A name already taken (a built-in method, an installed plugin, an earlier registration
-    with another target) is refused unless ``replace`` is True; registering the same thing
-    again (a notebook cell run twice) changes nothing.
+    with another target or ``needs_truth``) is refused unless ``replace`` is True; the same
+    target again (a notebook cell run twice, its description edited) is registered anew.
     """
     if not (isinstance(name, str) and name.strip()):
         raise ConfigError(f"register_method: name must be a non-empty string, got {name!r}")
@@ -329,10 +329,13 @@ def register_method(name: str, target: str, description: str, *,
     info = MethodInfo(name, target, description, needs_truth, _origin)
     if not replace and _origin == "runtime":
         taken = _REGISTRY.get(name) or _plugin_infos().get(name)
-        if taken is not None and taken != info:
+        if taken is not None and (taken.origin, taken.target, taken.needs_truth) != (
+                "runtime", target, needs_truth):
+            what = (f"{taken.target}, needs_truth={taken.needs_truth}"
+                    if (taken.origin, taken.target) == ("runtime", target) else taken.target)
             raise ConfigError(f"register_method: {name!r} is taken ({taken.origin} method "
-                              f"{taken.target}); choose another name, or pass replace=True "
-                              f"to replace it in this process")
+                              f"{what}); choose another name, or pass replace=True to "
+                              f"replace it in this process")
     _REGISTRY[name] = info
 
 

@@ -47,6 +47,10 @@ def test_real_experiments_hold_every_method_and_its_real_variant(tmp_path: Path)
             assert dict(labels[label].options) == options
             assert set(options) == {"preset"}
     assert {"ekf-invdepth", "gtsam-isam2", "oracle"} <= set(labels)
+    # exactly each built-in method's defaults and the variants of the table, nothing more
+    expected = [lab for m in real_methods() for lab in
+                [m, *(label for label, _ in REAL_VARIANTS.get(m, ()))]]
+    assert [a.label for a in exps["mrclam6"].arms] == expected and len(expected) == 22
     with pytest.raises(ConfigError, match="no dataset folders"):
         real_experiments(tmp_path / "nothing")
 

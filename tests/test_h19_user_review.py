@@ -211,3 +211,108 @@ def test_summary_columns_widen_for_wide_cells_and_stay_aligned() -> None:
     # each row's MPE cell ends where the header's t=50 ends
     end = head.index("t=50") + len("t=50")
     assert narrow[:end].endswith("1.20/1.20±1.32") and wide[:end].endswith("176209.00")
+
+
+CRASH_KINDS = '''
+from bomgraph.errors import ConfigError
+from bomgraph.mapper import MapEstimate
+
+
+class Refuses:
+    """refuses its stream at t = 3 (a BomgraphError: the user's to fix)"""
+
+    def __init__(self, header) -> None:
+        pass
+
+    def step(self, step) -> None:
+        if step.t == 3:
+            raise ConfigError("this stream has no odometry sigma for me")
+
+    def estimate(self):
+        return MapEstimate.empty()
+
+
+class Disk(Refuses):
+    """an OSError from inside the method"""
+
+    def step(self, step) -> None:
+        if step.t == 3:
+            raise OSError(28, "No space left on device")
+'''
+
+
+def test_a_refusal_from_a_method_exits_2_an_oserror_from_it_exits_1(
+        registry, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys) -> None:
+    (tmp_path / "crash_kinds.py").write_text(CRASH_KINDS)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    register_method("refuses", "crash_kinds:Refuses", "d")
+    register_method("disk", "crash_kinds:Disk", "d")
+    s = simulate(SimConfig(n_steps=10, n_landmarks=5), np.random.default_rng(6))
+    write_stream(s, tmp_path / "s.jsonl")
+    out = tmp_path / "e.est"
+    assert main(["run", str(tmp_path / "s.jsonl"), "--method", "refuses", "--out", str(out)]) == 2
+    assert capsys.readouterr().err.strip() == (
+        "bomgraph: error: this stream has no odometry sigma for me (raised in Refuses.step() "
+        "at t = 3)")
+    assert main(["run", str(tmp_path / "s.jsonl"), "--method", "disk", "--out", str(out)]) == 1
+    err = capsys.readouterr().err
+    assert "method disk failed: OSError: [Errno 28] No space left on device (raised in " \
+           "Disk.step() at t = 3)" in err and "--out" not in err
+    # a failing reference (used on a stream without truth): FAILED with where, exit 1
+    from bomgraph.stream import Stream
+
+    write_stream(Stream(s.header, s.steps, None), tmp_path / "nt.jsonl")
+    assert main(["compare", "--streams", str(tmp_path / "nt.jsonl"), "--methods", "triangulate",
+                 "--reference", "disk", "--out", str(tmp_path / "c"), "--no-figures",
+                 "--jobs", "1"]) == 1
+    assert "reference disk failed: OSError: [Errno 28] No space left on device (raised in " \
+           "Disk.step() at t = 3)" in capsys.readouterr().err
+
+
+def test_register_method_same_target_again_is_kept_other_needs_truth_refused(registry) -> None:
+    register_method("mine2", "baselines.triangulate:TriangulateMapper", "first words")
+    register_method("mine2", "baselines.triangulate:TriangulateMapper", "edited words")
+    assert method_info("mine2").description == "edited words"
+    with pytest.raises(ConfigError, match=r"'mine2' is taken \(runtime method baselines"
+                                          r"\.triangulate:TriangulateMapper, needs_truth=False"):
+        register_method("mine2", "baselines.triangulate:TriangulateMapper", "d",
+                        needs_truth=True)
+
+
+def test_the_empirical_prior_needs_inverse_depth_and_reports_itself() -> None:
+    s = simulate(SimConfig(n_steps=40), np.random.default_rng(7))
+    with pytest.raises(ConfigError, match="rho_prior='empirical' needs candidates="):
+        create_mapper("ekf", s.header, rho_prior="empirical")
+    from bomgraph.mapper import run
+
+    info = run(create_mapper("ekf-invdepth", s.header, rho_prior="empirical"), s.steps).final.info
+    rho, sd = info["rho_prior_per_m"]
+    assert info["rho_prior_from_features"] >= 1 and 0 < sd <= rho      # sd = max(rho/2, MAD)
+    assert "rho_prior_per_m" not in run(create_mapper("ekf-invdepth", s.header),
+                                        s.steps).final.info
+
+
+@pytest.mark.parametrize("line", ['#bomgraph header:{"sensor_range_m":7.25}',
+                                  '#  bomgraph header:   {"sensor_range_m": 7.25}'])
+def test_the_g2o_header_comment_is_read_however_it_is_spaced(tmp_path: Path, line: str) -> None:
+    from bomgraph.datasets.g2o import import_g2o
+    from bomgraph.export import to_g2o
+
+    s = simulate(SimConfig(n_steps=8, n_landmarks=5), np.random.default_rng(8))
+    est = mapper.MapEstimate(s.truth.landmark_ids, s.truth.landmarks_xy,
+                             pose_t=np.arange(len(s.steps)), poses=s.truth.poses)
+    text = "\n".join(line if ln.startswith("# bomgraph header: ") else ln
+                     for ln in to_g2o(est, s).splitlines()) + "\n"
+    (tmp_path / "h.g2o").write_text(text)
+    assert import_g2o(tmp_path / "h.g2o").header.sensor_range_m == 7.25
+
+
+def test_the_tum_note_is_quiet_with_q(tmp_path: Path, capsys) -> None:
+    s = simulate(SimConfig(n_steps=12, n_landmarks=5), np.random.default_rng(9))
+    write_stream(s, tmp_path / "s.jsonl")
+    assert main(["run", str(tmp_path / "s.jsonl"), "--method", "triangulate", "--out",
+                 str(tmp_path / "e.est")]) == 0
+    capsys.readouterr()
+    assert main(["-q", "export", str(tmp_path / "e.est"), "--format", "tum", "--out",
+                 str(tmp_path / "a.tum")]) == 0
+    assert capsys.readouterr().err == ""

@@ -258,6 +258,9 @@ class EkfConfig(BearingEkfConfig):
         if self.correlated_fraction > 0 and self.candidates == "clones":
             raise ConfigError("correlated_fraction > 0 needs candidates='inverse-depth' (the "
                               "clone candidates keep their bearings outside the filter)")
+        if self.rho_prior != "range" and self.candidates == "clones":
+            raise ConfigError(f"rho_prior={self.rho_prior!r} needs candidates='inverse-depth' "
+                              f"(preset 'real'): the clone candidates have no inverse depth")
         if self.candidates not in ("clones", "inverse-depth"):
             raise ConfigError(f"candidates must be 'clones' (Bailey: pose clones, the bearings "
                               f"wait) or 'inverse-depth' (updated at once, made Euclidean when "

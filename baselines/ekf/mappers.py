@@ -222,7 +222,7 @@ class EkfMapper(RhoPriorMixin, EkfSlam):
         ids, xy, cov, _ = super()._landmarks()
         pending = sorted(self._candidates) + sorted(k[1] for k in self._sizes if k[0] == _IDP)
         return ids, xy, cov, {"pending": pending, "reanchored": self.n_reanchored,
-                              "converted": self.n_converted,
+                              "converted": self.n_converted, **self._rho_prior_info(),
                               **{f"init_rejected_{k}": v for k, v in self.n_rejected.items()}}
 
 
@@ -312,7 +312,8 @@ class InverseDepthEkfMapper(RhoPriorMixin, EkfSlam):
                 xy = np.concatenate([xy, pts])
                 cov = np.concatenate([cov, c])
         return ids, xy, cov, {"inverse_depth": int(len(keys)), "left_out": left_out,
-                              "left_out_no_depth": n_no_depth, "converted": self.n_converted}
+                              "left_out_no_depth": n_no_depth, "converted": self.n_converted,
+                              **self._rho_prior_info()}
 
 
 __all__ = ["EkfMapper", "InverseDepthEkfMapper"]

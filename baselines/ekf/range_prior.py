@@ -109,6 +109,17 @@ class RhoPriorMixin:
                 st["feature"][i] = (m1, s1)
             st["tightened"] += len(ids)
 
+    def _rho_prior_info(self) -> dict[str, Any]:
+        """The estimate's entries of ``"empirical"`` (none with ``"range"``): the prior in use
+        ``[rho, sd]`` per m, the features it was estimated from, the pending features moved
+        to it."""
+        st = self._empirical()
+        if st is None:
+            return {}
+        return {"rho_prior_per_m": [float(v) for v in st["prior"]],
+                "rho_prior_from_features": len(st["converted"]),
+                "rho_prior_moved_features": int(st["tightened"])}
+
     def _rho_prior_sd(self, keys: list[tuple[str, int]]) -> Any:
         """The prior std. dev. of ``rho`` of the features ``keys`` (a scalar with
         ``"range"``)."""

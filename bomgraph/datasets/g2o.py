@@ -48,6 +48,7 @@ from __future__ import annotations
 
 import math
 import os
+import re
 from pathlib import Path
 from typing import Any
 
@@ -62,8 +63,10 @@ from .calibration import bearing_residuals, odometry_errors, robust_bearing_stat
 
 #: A comment line of the file that carries what g2o has no record for (written by ``bomgraph
 #: export --format g2o``): ``# bomgraph header: {"sensor_range_m": 8.1, "time_s": [...]}``;
-#: read from the comments before the first record.
+#: read from the comments before the first record (one after it is not read).
 G2O_HEADER_PREFIX = "# bomgraph header: "
+
+_HEADER_COMMENT = re.compile(r"#\s*bomgraph header:\s*(.*)")
 
 _RECORDS = {
     "VERTEX_SE2": ["id", "x", "y", "theta"],
@@ -83,10 +86,11 @@ def _bomgraph_header(path: Path) -> tuple[dict[str, Any], int | None]:
         text = " ".join(line.tokens)
         if not text.startswith("#"):
             return {}, None
-        if not text.startswith(G2O_HEADER_PREFIX.strip()):
+        found = _HEADER_COMMENT.match(text)   # spacing as a hand edit may leave it
+        if found is None:
             continue
         try:
-            fields = loads_strict(text[len(G2O_HEADER_PREFIX):])
+            fields = loads_strict(found.group(1))
         except ValueError as exc:
             raise dataset_error(path, line.number, "bomgraph header",
                                 f"not JSON ({exc})") from None

@@ -149,9 +149,10 @@ def shortest_path_completion(n: int, first: np.ndarray, second: np.ndarray,
         d = np.maximum(np.asarray(distance_m, float), _MIN_EDGE_M)
         w[first, second] = d
         w[second, first] = d
-        # handed over masked (the non-edges, inf): scipy's own conversion of a dense graph
-        # finds its null entries with ``masked_values``, a third of this call at n = 50
-        full = floyd_warshall(np.ma.MaskedArray(w, mask=np.isinf(w)), directed=True,
+        # handed over masked (the non-edges: inf, and NaN as scipy's dense conversion takes
+        # it): that conversion finds its null entries with ``masked_values``, a third of
+        # this call at n = 50
+        full = floyd_warshall(np.ma.MaskedArray(w, mask=~np.isfinite(w)), directed=True,
                               overwrite=True)
     else:
         # the graph is stored symmetric, so the directed search gives the undirected answer
