@@ -7,16 +7,17 @@ twice the depth and its 2-sigma near bound beyond the near landmarks, whose bear
 no range leaves the depth to the parallax alone (docs/measurements.md, "The inverse-depth
 prior and the stated sensor range").
 
-``"empirical"``: the header's range is not read. The first features start from Civera's
-range-free ``0.1 +- 0.5`` per m (or the options ``rho_init_per_m``, ``rho_sigma_per_m``);
-once ``EMPIRICAL_MIN`` (1, chosen on MRCLAM6) features have become Euclidean points in this run (their depths set by
-the bearings: Bailey's or Civera's test passed), the prior is estimated from the inverse
-depths they had when they were converted (empirical Bayes): mean ``m = median(rho_k)``, std.
-dev. ``max(m / 2, 1.4826 MAD(rho_k))`` (the ``"range"`` prior's shape, ``sigma = mean / 2``,
-with the scene's depths in place of the stated range). Features still in inverse depth then
-get the difference as a pseudo-measurement of ``rho`` (information ``1/s_new^2 - 1/s_old^2``
-at the value that makes their prior the new one, the exact change of prior of a linear
-Gaussian model), when the new prior is the narrower; later features start from it.
+``"empirical"``: the header's range is not read. The first features start from Civera's range-
+free ``0.1 +- 0.5`` per m (or the options ``rho_init_per_m``, ``rho_sigma_per_m``); once
+``EMPIRICAL_MIN`` (1, chosen on MRCLAM6) features have become Euclidean points in this run
+(their depths set by the bearings: Bailey's or Civera's test passed), the prior is estimated
+from the inverse depths they had when they were converted (empirical Bayes): mean ``m =
+median(rho_k)``, std. dev. ``max(m / 2, 1.4826 MAD(rho_k))`` (the ``"range"`` prior's shape,
+``sigma = mean / 2``, with the scene's depths in place of the stated range). Features still in
+inverse depth then get the difference as a pseudo-measurement of ``rho`` (information
+``1/s_new^2 - 1/s_old^2`` at the value that makes their prior the new one, the exact change of
+prior of a linear Gaussian model), when the new prior is the narrower; later features start from
+it.
 """
 
 from __future__ import annotations

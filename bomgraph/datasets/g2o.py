@@ -14,11 +14,11 @@ Robotics" bearing-only SLAM project (``shared/data/bearing_only_sim_g2o/SOURCE.m
 Lines starting with ``#`` and blank lines are skipped, except a ``# bomgraph header: {...}``
 comment before the first record (:data:`G2O_HEADER_PREFIX`, written by ``bomgraph export
 --format g2o``), whose ``sensor_range_m`` and ``time_s`` go back into the stream, so that an
-export reads back to the same stream but its truth (pass ``truth_path``); any other record
-is an error (this is not a general g2o reader). Poses become steps in the order of the
-``EDGE_SE2`` chain, which must be one unbroken chain (no loop closures: the stream format
-holds one odometry chain). Landmark ids are the g2o vertex ids. Every ``VERTEX_SE2`` of the
-file must be a pose of that chain: g2o itself would optimise a pose vertex without odometry as a free vertex, but in a
+export reads back to the same stream but its truth (pass ``truth_path``); any other record is an
+error (this is not a general g2o reader). Poses become steps in the order of the ``EDGE_SE2``
+chain, which must be one unbroken chain (no loop closures: the stream format holds one odometry
+chain). Landmark ids are the g2o vertex ids. Every ``VERTEX_SE2`` of the file must be a pose of
+that chain: g2o itself would optimise a pose vertex without odometry as a free vertex, but in a
 bearing-only odometry file such a vertex means a lost ``EDGE_SE2`` (a stream cannot hold a pose
 without odometry), so it is refused rather than dropped.
 
