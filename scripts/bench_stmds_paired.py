@@ -40,6 +40,18 @@ from bomgraph.sim import SimConfig, paper_design, simulate_run  # noqa: E402
 from bomgraph.stmds.mapper import make_stmds_smacof  # noqa: E402
 
 
+def _as_old(stream, old_pkg: str):
+    """``stream`` in the old package's types: written by this checkout, read by the old one."""
+    import tempfile
+
+    from bomgraph.stream_file import write_stream
+
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "s.jsonl"
+        write_stream(stream, path)
+        return importlib.import_module(f"{old_pkg}.stream_file").read_stream(path)
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--old", type=Path, required=True, help="the old package folder")
@@ -56,19 +68,23 @@ def main(argv: list[str] | None = None) -> int:
     if args.stmds_step:
         return stmds_step(old_make, args.runs, args.repeats)
     streams = [simulate_run(spec) for spec in paper_design(0)[:args.runs]]
+    old_streams = [_as_old(stream, old_pkg) for stream in streams]
     for preset in args.presets:
         opts = {} if preset == "paper" else {"preset": preset}
         cpu: dict[str, list[float]] = {"old": [], "new": []}
         ratios, same = [], True
-        for i, stream in enumerate(streams * args.repeats):
+        for i, (stream, old_stream) in enumerate(list(zip(streams, old_streams))
+                                                 * args.repeats):
             finals = {}
             order = ("old", "new") if i % 2 == 0 else ("new", "old")
             per = {}
             for which in order:
                 make, go = (old_make, old_run) if which == "old" else (make_stmds_smacof, run)
-                mapper = make(stream.header, **opts)
+                # the old package runs on its own Step type (its run() checks the type)
+                src = old_stream if which == "old" else stream
+                mapper = make(src.header, **opts)
                 c0 = time.process_time()
-                res = go(mapper, stream.steps, checkpoint_every=10, keep_checkpoints=False)
+                res = go(mapper, src.steps, checkpoint_every=10, keep_checkpoints=False)
                 per[which] = time.process_time() - c0
                 finals[which] = res.final
             for k in per:
