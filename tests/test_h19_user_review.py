@@ -288,8 +288,18 @@ def test_the_empirical_prior_needs_inverse_depth_and_reports_itself() -> None:
     info = run(create_mapper("ekf-invdepth", s.header, rho_prior="empirical"), s.steps).final.info
     rho, sd = info["rho_prior_per_m"]
     assert info["rho_prior_from_features"] >= 1 and 0 < sd <= rho      # sd = max(rho/2, MAD)
-    assert "rho_prior_per_m" not in run(create_mapper("ekf-invdepth", s.header),
-                                        s.steps).final.info
+    assert info["rho_prior_from"] == "empirical"
+    # the range prior says where it came from: the stated range, or Civera's default without
+    from dataclasses import replace
+
+    r = s.header.sensor_range_m
+    info = run(create_mapper("ekf-invdepth", s.header), s.steps).final.info
+    assert info["rho_prior_per_m"] == [2.0 / r, 1.0 / r] and info["rho_prior_from"] == \
+        "sensor_range_m"
+    info = run(create_mapper("ekf-invdepth", replace(s.header, sensor_range_m=None)),
+               s.steps).final.info
+    assert info["rho_prior_per_m"] == [0.1, 0.5] and "no sensor_range_m" in info["rho_prior_from"]
+    assert "rho_prior_from" not in run(create_mapper("ekf", s.header), s.steps).final.info
 
 
 @pytest.mark.parametrize("line", ['#bomgraph header:{"sensor_range_m":7.25}',

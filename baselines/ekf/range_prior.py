@@ -44,6 +44,7 @@ class RhoPriorMixin:
     filter: Any
     rho_init: float
     rho_sigma: float
+    header_range_m: float | None
     _sizes: dict
     _offset: dict
 
@@ -111,13 +112,24 @@ class RhoPriorMixin:
             st["tightened"] += len(ids)
 
     def _rho_prior_info(self) -> dict[str, Any]:
-        """The estimate's entries of ``"empirical"`` (none with ``"range"``): the prior in use
-        ``[rho, sd]`` per m, the features it was estimated from, the pending features moved
-        to it."""
+        """The estimate's entries on the inverse-depth prior in use, ``[rho, sd]`` per m, and
+        where it came from (none for the clone candidates, which have no inverse depth): with
+        ``"range"`` the header's ``sensor_range_m``, the options, or Civera's default when the
+        stream states no range (the maps follow the stated range: docs/measurements.md); with
+        ``"empirical"`` the features it was estimated from and the pending features moved to
+        it."""
+        if not self._uses_inverse_depth(self.config):     # type: ignore[attr-defined]
+            return {}
         st = self._empirical()
         if st is None:
-            return {}
+            c = self.config
+            source = ("options" if c.rho_init_per_m or c.rho_sigma_per_m else
+                      "sensor_range_m" if self.header_range_m else
+                      "Civera's default: the stream states no sensor_range_m")
+            return {"rho_prior_per_m": [float(self.rho_init), float(self.rho_sigma)],
+                    "rho_prior_from": source}
         return {"rho_prior_per_m": [float(v) for v in st["prior"]],
+                "rho_prior_from": "empirical",
                 "rho_prior_from_features": len(st["converted"]),
                 "rho_prior_moved_features": int(st["tightened"])}
 

@@ -56,7 +56,7 @@ class EkfSlam:
         wide = config.wide_prior_heading_sd_rad
         self._wide_var = None if wide is None else float(wide) ** 2
         self._wide_iterations = int(config.wide_prior_iterations)
-        rng_m = header.sensor_range_m
+        rng_m = self.header_range_m = header.sensor_range_m
         self.rho_init = config.rho_init_per_m or (2.0 / rng_m if rng_m else 0.1)
         self.rho_sigma = config.rho_sigma_per_m or (1.0 / rng_m if rng_m else 0.5)
         try:
