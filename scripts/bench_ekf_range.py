@@ -14,44 +14,30 @@ Usage::
 
 from __future__ import annotations
 
-import os
+import argparse
+import json
+import sys
+from pathlib import Path
+from typing import Any, Sequence
 
-for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
-    os.environ.setdefault(_v, "1")
-
-import argparse  # noqa: E402
-import json  # noqa: E402
-from pathlib import Path  # noqa: E402
-from typing import Any, Sequence  # noqa: E402
-
-FAMILIES = ("m6", "m6dense", "m6sigx0.5", "m6sigx2", "m1", "m1dense")
-METHODS = ("ekf", "ekf-invdepth")
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _ekf_options import FAMILIES, METHODS, scored_run, stream_path  # noqa: E402
 PRIORS = ("range", "empirical")
 VARIANTS = ("as is", "None", "x2", "x0.5")
 
 
 def one(path: str, method: str, prior: str, variant: str) -> dict[str, Any]:
     """One run with the header's range replaced as ``variant`` says."""
-    import dataclasses
+    from bomgraph.stream_file import StreamReader
 
-    from bomgraph.errors import TooFewLandmarksError
-    from bomgraph.evaluate import score_estimate
-    from bomgraph.mapper import create_mapper, run
-    from bomgraph.stream_file import read_stream
-
-    s = read_stream(path)
-    rng = s.header.sensor_range_m
+    with StreamReader(path, warn=False) as reader:
+        rng = reader.header.sensor_range_m
     new = {"as is": rng, "None": None, "x2": None if rng is None else 2 * rng,
            "x0.5": None if rng is None else 0.5 * rng}[variant]
-    header = dataclasses.replace(s.header, sensor_range_m=new)
-    mapper = create_mapper(method, header, preset="real", rho_prior=prior)
-    est = run(mapper, s.steps, checkpoint_every=10).final
-    try:
-        mpe = 100 * score_estimate(est, s.truth).mpe_m
-    except TooFewLandmarksError:          # fewer than 3 landmarks mapped: counted as nan
-        mpe = float("nan")
-    return {"stream": Path(path).stem, "method": method, "prior": prior, "variant": variant,
-            "mpe_cm": mpe, "mapped": len(est)}
+    r = scored_run(path, method, {"preset": "real", "rho_prior": prior},
+                   {"sensor_range_m": new})
+    return {"stream": r["stream"], "method": method, "prior": prior, "variant": variant,
+            "mpe_cm": r["mpe_cm"], "mapped": r["mapped"]}
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -65,9 +51,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     from joblib import Parallel, delayed
 
     others = [f for f in a.families.split(",") if f != a.select]
-    tasks = [(str(a.dir / f"{a.select}_r{r}.jsonl"), m, p, v) for r in range(1, 6)
+    tasks = [(stream_path(a.dir, a.select, r), m, p, v) for r in range(1, 6)
              for m in METHODS for p in PRIORS for v in VARIANTS]
-    tasks += [(str(a.dir / f"{f}_r{r}.jsonl"), m, p, "as is") for f in others
+    tasks += [(stream_path(a.dir, f, r), m, p, "as is") for f in others
               for r in range(1, 6) for m in METHODS for p in PRIORS]
     rows = Parallel(n_jobs=a.jobs)(delayed(one)(*t) for t in tasks)
     by = {(r["stream"], r["method"], r["prior"], r["variant"]): r for r in rows}

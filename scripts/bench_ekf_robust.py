@@ -18,43 +18,30 @@ Usage::
 
 from __future__ import annotations
 
-import os
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+from typing import Any, Sequence
 
-for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
-    os.environ.setdefault(_v, "1")
-
-import argparse  # noqa: E402
-import json  # noqa: E402
-import time  # noqa: E402
-from pathlib import Path  # noqa: E402
-from typing import Any, Sequence  # noqa: E402
-
-FAMILIES = ("m6", "m6dense", "m6sigx0.5", "m6sigx2", "m1", "m1dense")
-METHODS = ("ekf", "ekf-invdepth")
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _ekf_options import (FAMILIES, METHODS, oracle_table, scored_run,  # noqa: E402
+                          stream_path)
 
 
 def one(path: str, method: str, k: float | None) -> dict[str, Any]:
     """One run: ``k`` None is the option off (the preset as it is)."""
-    from bomgraph.bench import run_file
-    from bomgraph.evaluate import score_estimate
-    from bomgraph.stream_file import read_stream
-
-    t0 = time.process_time()
     opts: dict[str, Any] = {"preset": "real"}
     if k is not None:
         opts.update(robust_update="huber", robust_k=k)
-    result = run_file(path, method, opts)
-    score = score_estimate(result.final, read_stream(path).truth)
-    return {"stream": Path(path).stem, "method": method, "k": k,
-            "mpe_cm": 100 * score.mpe_m, "mapped": len(result.final),
-            "downweighted": result.final.info.get("robust_downweighted"),
-            "gated": result.final.info.get("gated_bearings"),
-            "cpu_s": time.process_time() - t0}
+    r = scored_run(path, method, opts)
+    info = r.pop("info")
+    return {**r, "method": method, "k": k, "downweighted": info.get("robust_downweighted"),
+            "gated": info.get("gated_bearings")}
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    from bench_variance_scale import oracle_table      # the same README table
-
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("dir", type=Path)
     ap.add_argument("--jobs", type=int, default=2)
@@ -67,12 +54,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     families = [f for f in a.families.split(",") if f != a.select]
     from joblib import Parallel, delayed
 
-    def stream(fam: str, r: int) -> str:
-        return str(a.dir / f"{fam}_r{r}.jsonl")
-
     t0 = time.perf_counter()
     # 1. selection: every k (and off) on the selection family only
-    tasks = [(stream(a.select, r), m, k) for r in range(1, 6) for m in METHODS
+    tasks = [(stream_path(a.dir, a.select, r), m, k) for r in range(1, 6) for m in METHODS
              for k in [None, *ks]]
     rows = Parallel(n_jobs=a.jobs)(delayed(one)(*t) for t in tasks)
     by = {(r["stream"], r["method"], r["k"]): r for r in rows}
@@ -91,7 +75,7 @@ def main(argv: Sequence[str] | None = None) -> int:
               + " | ".join(f"{s:.1f}" for s in sums) + " |")
     print("chosen k: " + ", ".join(f"{m} {k:g}" for m, k in chosen.items()) + "\n")
     # 2. the chosen k, unchanged, on the other families
-    tasks = [(stream(f, r), m, k) for f in families for r in range(1, 6) for m in METHODS
+    tasks = [(stream_path(a.dir, f, r), m, k) for f in families for r in range(1, 6) for m in METHODS
              for k in (None, chosen[m])]
     more = Parallel(n_jobs=a.jobs)(delayed(one)(*t) for t in tasks)
     rows += more

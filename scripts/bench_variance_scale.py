@@ -14,47 +14,25 @@ Usage::
 
 from __future__ import annotations
 
-import os
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+from typing import Any, Sequence
 
-for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
-    os.environ.setdefault(_v, "1")
-
-import argparse  # noqa: E402
-import json  # noqa: E402
-import re  # noqa: E402
-import time  # noqa: E402
-from pathlib import Path  # noqa: E402
-from typing import Any, Sequence  # noqa: E402
-
-FAMILIES = ("m6", "m6dense", "m6sigx0.5", "m6sigx2", "m1", "m1dense")
-METHODS = ("ekf", "ekf-invdepth")
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _ekf_options import (FAMILIES, METHODS, oracle_table, scored_run,  # noqa: E402
+                          stream_path)
 MODES = ("fixed", "innovation")
 
 
 def one(path: str, method: str, mode: str) -> dict[str, Any]:
-    from bomgraph.bench import run_file
-    from bomgraph.evaluate import score_estimate
-    from bomgraph.stream_file import read_stream
-
-    t0 = time.process_time()
-    result = run_file(path, method, {"preset": "real", "bearing_variance_scale": mode})
-    truth = read_stream(path).truth
-    score = score_estimate(result.final, truth)
-    return {"stream": Path(path).stem, "method": method, "mode": mode,
-            "mpe_cm": 100 * score.mpe_m, "mapped": len(result.final),
-            "scale": result.final.info.get("bearing_variance_scale"),
-            "scale_max": result.final.info.get("bearing_variance_scale_max"),
-            "cpu_s": time.process_time() - t0}
-
-
-def oracle_table(readme: Path) -> dict[str, float]:
-    """Stream -> the oracle's MPE (cm) in README.md's generality table."""
-    out = {}
-    for line in readme.read_text().splitlines():
-        m = re.match(r"\| (m[0-9a-z.]+_r\d) \|.*\| ([0-9.]+) \(\d+\) \|$", line)
-        if m:
-            out[m.group(1)] = float(m.group(2))
-    return out
+    r = scored_run(path, method, {"preset": "real", "bearing_variance_scale": mode})
+    info = r.pop("info")
+    return {**r, "method": method, "mode": mode,
+            "scale": info.get("bearing_variance_scale"),
+            "scale_max": info.get("bearing_variance_scale_max")}
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -64,7 +42,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--families", default=",".join(FAMILIES))
     ap.add_argument("--out", type=Path, default=Path("/tmp/bench_variance_scale.json"))
     a = ap.parse_args(argv)
-    streams = [str(a.dir / f"{f}_r{r}.jsonl") for f in a.families.split(",") for r in range(1, 6)]
+    streams = [stream_path(a.dir, f, r) for f in a.families.split(",") for r in range(1, 6)]
     tasks = [(s, m, o) for s in streams for m in METHODS for o in MODES]
     from joblib import Parallel, delayed
 

@@ -1,7 +1,7 @@
-"""The EKF option benchmarks (``scripts/bench_ekf_robust.py``, ``scripts/bench_variance_scale.py``)
-end to end on small simulated streams named as the generality imports are: every run is
-written, the threshold is chosen on the selection family alone, and the README's oracle column
-is read."""
+"""The EKF option benchmarks (``bench_ekf_robust.py``, ``bench_variance_scale.py``,
+``bench_ekf_range.py``, sharing ``_ekf_options.py``) end to end on small simulated streams named
+as the generality imports are: every run is written, the threshold is chosen on the selection
+family alone, and the README's oracle column is read."""
 
 from __future__ import annotations
 
@@ -62,3 +62,26 @@ def test_variance_scale_runs_every_stream_both_ways(streams: Path, tmp_path: Pat
         (f"m1_r{r}", m, o) for r in range(1, 6) for m in ("ekf", "ekf-invdepth")
         for o in ("fixed", "innovation")}
     assert all(r["scale"] >= 1.0 for r in rows if r["mode"] == "innovation")
+
+
+def test_ekf_range_runs_every_variant_and_the_shared_run(streams: Path, tmp_path: Path,
+                                                         capsys) -> None:
+    """``bench_ekf_range.py``: the selection family under the four header ranges, the other at
+    the stated one; each row is what the shared scored run gives for that header."""
+    mod = load_script("bench_ekf_range")
+    out = tmp_path / "g.json"
+    assert mod.main([str(streams), "--jobs", "1", "--families", "m6,m1",
+                     "--out", str(out)]) == 0
+    rows = json.loads(out.read_text())
+    keys = {(r["stream"], r["method"], r["prior"], r["variant"]) for r in rows}
+    assert len(rows) == len(keys) == 5 * 2 * 2 * 4 + 5 * 2 * 2
+    assert {v for s, _, _, v in keys if s.startswith("m1")} == {"as is"}
+    shared = load_script("_ekf_options")
+    path = str(streams / "m6_r2.jsonl")
+    ref = shared.scored_run(path, "ekf-invdepth", {"preset": "real", "rho_prior": "range"},
+                            {"sensor_range_m": None})
+    row = next(r for r in rows if (r["stream"], r["method"], r["prior"], r["variant"])
+               == ("m6_r2", "ekf-invdepth", "range", "None"))
+    assert (row["mpe_cm"], row["mapped"]) == (ref["mpe_cm"], ref["mapped"])
+    assert ref["info"]["rho_prior_from"] != "sensor_range_m"      # the header's range is gone
+    assert "worst" in capsys.readouterr().out
