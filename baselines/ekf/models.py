@@ -228,17 +228,18 @@ def triangulate_two_bearings(pose_a: np.ndarray, pose_b: np.ndarray, bearing_a: 
     pts, (c1, s1, c2, s2, dx, dy, s, n, r1) = _two_ray_point(pose_a, pose_b, bearing_a,
                                                              bearing_b)
     cd = c1 * c2 + s1 * s2           # cos(a2 - a1)
-    with np.errstate(divide="ignore", invalid="ignore"):
+    jac = np.zeros((len(s), 2, 8))
+    # parallel rays (s = 0) give infinite or NaN entries, as the point: no warning
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         d1 = np.stack([c1, s1], -1)
         w = np.stack([s2, -c2], -1) / s[:, None]
         dr_da1 = n * cd / (s * s)
         dr_da2 = (dx * c2 + dy * s2) / s - n * cd / (s * s)
-    jac = np.zeros((len(s), 2, 8))
-    outer = d1[:, :, None] * w[:, None, :]
-    jac[:, :, 0:2] = np.eye(2) - outer
-    jac[:, :, 3:5] = outer
-    j_a1 = dr_da1[:, None] * d1 + r1[:, None] * np.stack([-s1, c1], -1)
-    j_a2 = dr_da2[:, None] * d1
+        outer = d1[:, :, None] * w[:, None, :]
+        jac[:, :, 0:2] = np.eye(2) - outer
+        jac[:, :, 3:5] = outer
+        j_a1 = dr_da1[:, None] * d1 + r1[:, None] * np.stack([-s1, c1], -1)
+        j_a2 = dr_da2[:, None] * d1
     jac[:, :, 2] = jac[:, :, 6] = j_a1
     jac[:, :, 5] = jac[:, :, 7] = j_a2
     return pts, jac
@@ -284,7 +285,8 @@ def triangulation_kl(inputs: np.ndarray, cov: np.ndarray
     """
     pts, jac = triangulate_two_bearings(inputs[:, 0:3], inputs[:, 3:6], inputs[:, 6],
                                         inputs[:, 7])
-    cov_lin = jac @ cov @ jac.transpose(0, 2, 1)
+    with np.errstate(invalid="ignore", over="ignore"):       # parallel rays: kl = inf below
+        cov_lin = jac @ cov @ jac.transpose(0, 2, 1)
     sig = _sigma_points(inputs, cov)                                      # (m, 16, 8)
     sp, _ = _two_ray_point(sig[..., 0:3], sig[..., 3:6], sig[..., 6], sig[..., 7])
     with np.errstate(invalid="ignore", over="ignore"):

@@ -109,6 +109,18 @@ def test_triangulation_kl_is_near_zero_for_small_noise_and_grows_with_it() -> No
     assert kls[0] < 1e-6 and kls[0] < kls[1] < kls[2] < np.inf
 
 
+@pytest.mark.filterwarnings("error::RuntimeWarning")
+def test_parallel_rays_give_a_non_finite_point_and_an_infinite_kl_without_warnings() -> None:
+    """Two rays along one line (s = sin(a2 - a1) = 0): the point and its Jacobian are not
+    finite, the Gaussianity test says inf, and numpy is not asked to warn about it."""
+    pa, pb = np.array([[0.0, 0.0, 0.0]]), np.array([[1.0, 0.0, 0.0]])
+    u = np.array([[0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0]])
+    pts, jac = triangulate_two_bearings(pa, pb, u[:, 6], u[:, 7])
+    assert not np.all(np.isfinite(pts)) and not np.all(np.isfinite(jac))
+    _, _, kl = triangulation_kl(u, np.diag([1e-4] * 8)[None])
+    assert kl[0] == np.inf
+
+
 def test_gaussian_kl_known_values() -> None:
     m = np.zeros((1, 2))
     c = np.eye(2)[None]
