@@ -105,3 +105,54 @@ def test_trilaterate_with_noisy_ranges_is_the_weighted_least_squares_minimum() -
         np.testing.assert_allclose(est, ref, rtol=0, atol=1e-7)
         solved += 1
     assert solved == 20
+
+
+def _floyd_warshall(n: int, f: np.ndarray, s: np.ndarray, d: np.ndarray) -> np.ndarray:
+    """The textbook triple loop (vectorised over one index), for reference."""
+    w = np.full((n, n), np.inf)
+    np.fill_diagonal(w, 0.0)
+    w[f, s] = np.minimum(w[f, s], d)
+    w[s, f] = w[f, s]
+    for k in range(n):
+        w = np.minimum(w, w[:, k:k + 1] + w[k:k + 1, :])
+    return w
+
+
+def test_dmc_spl_is_floyd_warshall_with_the_known_pairs_kept_on_both_solvers() -> None:
+    from bomgraph.stmds.completion import DENSE_PATHS_MAX, shortest_path_completion
+
+    for n in (40, DENSE_PATHS_MAX + 20):                 # the dense and the sparse solver
+        rng, x, f, s, d = _graph(n, 45, radius=0.6 if n > 100 else 1.0)
+        d = d * (1 + 0.2 * rng.uniform(-1, 1, len(d)))   # known pairs not metric
+        ref = _floyd_warshall(n, f, s, d)
+        ref[f, s] = ref[s, f] = d                         # the paper: known pairs kept
+        got = shortest_path_completion(n, f, s, d)
+        np.testing.assert_allclose(got, ref, rtol=1e-12, atol=0)
+        assert (got[f, s] > _floyd_warshall(n, f, s, d)[f, s]).any()   # the rule bites
+
+
+def test_prune_low_degree_is_the_k_core_by_peeling_one_vertex_at_a_time() -> None:
+    from bomgraph.stmds.completion import prune_low_degree
+
+    rng = np.random.default_rng(46)
+    sizes = []
+    for _ in range(20):
+        n = 30
+        i, j = np.triu_indices(n, 1)
+        keep = rng.random(i.size) < rng.uniform(0.07, 0.16)      # cores from empty to most
+        f, s = i[keep], j[keep]
+        alive = np.zeros(n, bool)
+        alive[f] = alive[s] = True
+        k = min(3, int(alive.sum()) - 1)
+        adj = np.zeros((n, n), bool)
+        adj[f, s] = adj[s, f] = True
+        changed = True
+        while changed:                                   # one vertex at a time
+            changed = False
+            for v in range(n):
+                if alive[v] and adj[v, alive].sum() < k:
+                    alive[v] = False
+                    changed = True
+        np.testing.assert_array_equal(prune_low_degree(n, f, s, 3), alive)
+        sizes.append(int(alive.sum()))
+    assert min(sizes) == 0 and 10 < np.median(sizes) < 30
