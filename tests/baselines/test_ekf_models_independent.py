@@ -119,3 +119,45 @@ def test_gaussian_kl_2d_is_the_general_formula() -> None:
         want = 0.5 * (np.trace(qi @ cp[k]) + d @ qi @ d - 2
                       + np.log(np.linalg.det(cq[k]) / np.linalg.det(cp[k])))
         assert got[k] == pytest.approx(want, rel=1e-10, abs=1e-12)
+
+
+def test_sigma_points_carry_the_mean_and_covariance_exactly() -> None:
+    """The 2d symmetric, equally weighted sigma points of Bailey's test reproduce the
+    Gaussian's mean and covariance (so a linear map gives KL 0)."""
+    from baselines.ekf.models import _sample_moments, _sigma_points
+
+    rng = np.random.default_rng(65)
+    for d in (2, 4, 8):
+        a = rng.normal(size=(5, d, d))
+        cov = a @ a.transpose(0, 2, 1)
+        mean = rng.normal(size=(5, d))
+        pts = _sigma_points(mean, cov)
+        assert pts.shape == (5, 2 * d, d)
+        np.testing.assert_allclose(pts.mean(1), mean, atol=1e-12)
+        dev = pts - mean[:, None]
+        np.testing.assert_allclose(np.einsum("msi,msj->mij", dev, dev) / (2 * d), cov,
+                                   atol=1e-10)
+        if d == 2:
+            m2, c2 = _sample_moments(pts)
+            np.testing.assert_allclose(m2, mean, atol=1e-12)
+            np.testing.assert_allclose(c2, cov, atol=1e-10)
+
+
+def test_ekf_two_ray_triangulation_is_the_stmds_triangulation() -> None:
+    """Two implementations of eq. 1 written apart (world frame here, the first pose's frame
+    in bomgraph.stmds) give the same point."""
+    from baselines.ekf.models import triangulate_two_bearings
+    from bomgraph.geometry import between, bearings_to, to_world
+    from bomgraph.stmds.triangulation import triangulate_rays
+
+    rng = np.random.default_rng(66)
+    pa = np.column_stack([rng.uniform(-1, 1, (20, 2)), rng.uniform(-3, 3, 20)])
+    pb = pa + np.column_stack([rng.uniform(-0.3, 0.3, (20, 2)), rng.uniform(-0.5, 0.5, 20)])
+    pts = rng.uniform(-2, 2, (20, 2))
+    za = np.array([bearings_to(p, q[None])[0] for p, q in zip(pa, pts)])
+    zb = np.array([bearings_to(p, q[None])[0] for p, q in zip(pb, pts)])
+    zb = zb + rng.normal(0, 0.02, 20)
+    ekf, _ = triangulate_two_bearings(pa, pb, za, zb)
+    for k in range(20):
+        local = triangulate_rays(between(pa[k], pb[k]), za[k:k + 1], zb[k:k + 1]).points_xy
+        np.testing.assert_allclose(ekf[k], to_world(pa[k], local)[0], rtol=1e-9, atol=1e-9)
