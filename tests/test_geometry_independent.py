@@ -12,6 +12,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 
 from bomgraph.angles import angle_residual
 from bomgraph.geometry import (between, bearings_to, compose, direction_span, intersect_rays,
@@ -123,3 +124,18 @@ def test_bearings_to_a_point_behind_is_plus_pi_and_follows_the_heading_branch() 
         pts = np.array([[2.0, 3.0], [-1.0, 0.5], [1.0, -4.0]])
         np.testing.assert_allclose(bearings_to(shifted, pts), bearings_to(pose, pts),
                                    atol=1e-12)
+
+
+def test_effective_parallax_is_the_smallest_eigenvalue_of_the_mean_ray_normal() -> None:
+    """The docstring's identity: ``lambda_min(mean(I - u u^T)) = (1 - |mean exp(2 i a)|) / 2``,
+    so ``effective_parallax = arccos(1 - 2 lambda_min)``, checked with eigvalsh."""
+    from bomgraph.geometry import effective_parallax
+
+    rng = np.random.default_rng(36)
+    counts = rng.integers(2, 9, 30)
+    owner = np.repeat(np.arange(30), counts)
+    d = rng.uniform(-math.pi, math.pi, owner.size)
+    got = effective_parallax(d, owner, 30)
+    for i in range(30):
+        lam = np.linalg.eigvalsh(ray_normals(d[owner == i]).mean(0))[0]
+        assert got[i] == pytest.approx(math.acos(1 - 2 * lam), abs=1e-7)
