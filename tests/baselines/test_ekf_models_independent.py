@@ -70,21 +70,25 @@ def test_without_heading_variance_it_is_the_second_order_term_of_the_bearing() -
         assert extra == pytest.approx(0.5 * np.trace(h @ c @ h @ c), rel=1e-6)
 
 
-@pytest.mark.xfail(strict=True, reason="audit h20: the heading is linearised into the robot-"
-                   "frame vector before the second-order term is taken, so an uncertain "
-                   "heading adds C_rr var_psi / |r|^2, though the bearing atan2(l - p) - psi "
-                   "is linear in psi (a documented modelling choice; see the h20 report)")
-def test_an_independent_heading_variance_adds_no_second_order_variance() -> None:
-    """The bearing is ``atan2(l - p) - psi``: with ``psi`` independent of ``p`` and ``l`` its
-    variance is exactly ``var(atan2(l - p)) + var(psi)``, so the second-order variance
-    cannot depend on ``var(psi)``."""
-    v = np.array([0.0, 0.0, 0.0, 1.5, 0.0])
-    with_psi = np.diag([1e-6, 1e-6, 0.01, 0.04, 1e-4])
-    without = with_psi.copy()
-    without[2, 2] = 0.0
-    a = second_order_variance(v[None], with_psi[None], 0.01)[0][0]
-    b = second_order_variance(v[None], without[None], 0.01)[0][0]
-    assert a == pytest.approx(b, rel=1e-6)
+def test_second_order_variance_ignores_a_rotation_of_map_and_robot_together() -> None:
+    """The documented choice of :func:`ray_covariance`: a heading error shared by the map (a
+    rotation of map and robot together leaves every bearing unchanged) adds nothing, so only
+    the radial variance is left and the second-order term vanishes.
+
+    The other side of that choice (audit h20, ``docs/measurements.md``): a heading variance
+    *independent* of the map still adds ``C_rr var_psi / |r|^2`` (1.8e-4 rad^2 for the case
+    below with the heading's correlations removed), though the bearing ``atan2(l - p) - psi`` is
+    linear in ``psi``; on the paper's runs most heading variance is shared with the map."""
+    dist, var_psi, var_radial = 1.5, 0.01, 0.04
+    v = np.array([0.0, 0.0, 0.0, dist, 0.0])
+    j = np.array([0.0, 0.0, 1.0, 0.0, dist])          # d[x, y, psi, lx, ly] / d(rotation)
+    shared = var_psi * np.outer(j, j)
+    shared[3, 3] += var_radial
+    extra = second_order_variance(v[None], shared[None], 0.01)[0][0] - 0.01 ** 2
+    assert abs(extra) < 1e-15
+    independent = np.diag([0.0, 0.0, var_psi, var_radial, 0.0])
+    extra = second_order_variance(v[None], independent[None], 0.01)[0][0] - 0.01 ** 2
+    assert extra == pytest.approx(var_radial * var_psi / dist ** 2, rel=1e-12)
 
 
 def test_invdepth_second_order_variance_is_the_rho_rho_term() -> None:
