@@ -25,6 +25,7 @@ import hashlib
 import importlib
 import logging
 import sys
+import traceback
 from dataclasses import dataclass
 from importlib import metadata
 from pathlib import Path
@@ -110,6 +111,15 @@ def load(target: str, name: str) -> object:
     except (ImportError, AttributeError) as exc:
         raise UnknownMethodError(f"method {name!r} is registered as {target!r} but cannot be "
                                  f"loaded: {exc}") from exc
+    except Exception as exc:  # the module itself raised (a SyntaxError, a bad dataclass, ...)
+        top = module.split(".")[0]  # the last line of the plugin's own code that ran
+        frames = [f for f in traceback.extract_tb(exc.__traceback__)
+                  if top in Path(f.filename).parts or Path(f.filename).stem == top]
+        where = ("" if isinstance(exc, SyntaxError) or not frames
+                 else f" (at {frames[-1].filename}, line {frames[-1].lineno})")
+        raise UnknownMethodError(f"method {name!r} is registered as {target!r} but cannot be "
+                                 f"loaded: importing it raised {type(exc).__name__}: {exc}"
+                                 f"{where}") from exc
     return obj
 
 
