@@ -102,6 +102,13 @@ class Experiment:
         instance(self.reference, (Arm, type(None)), f"{where}: reference", ConfigError)
         for key, low in (("seed", 0), ("n_layouts", 1), ("n_starts", 1), ("checkpoint_every", 1)):
             integer(getattr(self, key), f"{where}: {key}", ConfigError, minimum=low)
+        runs = [s.name for s in self.sources] + [s.name for w in self.worlds
+                                                 for s in w.sources(0.0)]
+        twice = sorted({r for r in runs if runs.count(r) > 1})
+        if twice:  # a run's name keys its estimate file, its table column and its figure
+            raise ConfigError(f"{where}: two runs are named {twice[0]!r} (a source's label and "
+                              f"a world's run WORLD-seedN, or two sources): their estimates and "
+                              f"table columns would collide; rename the world or the source")
 
     @property
     def designed(self) -> bool:
