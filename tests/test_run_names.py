@@ -5,6 +5,7 @@ while ``estimates/index.csv`` paired both streams with the one file (h20)."""
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -53,3 +54,23 @@ def test_an_experiment_refuses_two_runs_of_one_name(tmp_path: Path) -> None:
                    sources=(FileSource(str(tmp_path / "x.jsonl"), "w-seed0"),), worlds=(world,))
     Experiment("e", "e", (Arm("triangulate", "triangulate"),),
                sources=(FileSource(str(tmp_path / "x.jsonl"), "x"),), worlds=(world,))
+
+
+def test_arm_labels_that_make_one_folder_name_keep_their_estimates_apart(
+        tmp_path: Path) -> None:
+    """``tri (x)`` and ``tri_x`` both made the folder ``tri_x``: one estimate was lost."""
+    import csv
+
+    write_stream(simulate(SimConfig(n_steps=20), np.random.default_rng(5)), tmp_path / "s.jsonl")
+    (tmp_path / "l.toml").write_text(
+        'streams = ["s.jsonl"]\n[[methods]]\nname = "triangulate"\nlabel = "tri (x)"\n'
+        '[[methods]]\nname = "stmds-cs"\nlabel = "tri_x"\n')
+    out = tmp_path / "out"
+    assert main(["compare", "--config", str(tmp_path / "l.toml"), "--estimates", "--jobs", "1",
+                 "--no-progress", "--no-figures", "--out", str(out)]) == 0
+    with open(out / "estimates" / "index.csv") as f:
+        rows = list(csv.DictReader(f))
+    files = [out / r["estimate"] for r in rows]
+    assert len(set(files)) == 2 and all(f.exists() for f in files)
+    for r, f in zip(rows, files):  # each file is its own arm's (the header names the arm)
+        assert json.loads(f.read_text().splitlines()[0])["method"] == r["arm"]
