@@ -227,11 +227,23 @@ def seed_landmarks(state: BatchState, estimate: MapEstimate, *, trim: float = 3.
     value of every graph landmark the map has is replaced by its map position.
 
     Returns the :class:`AlignedMap`; raises :class:`TooFewLandmarksError` if fewer than 3
-    graph landmarks are in the map (build the graph with ``admit=True``).
+    graph landmarks are in the map (build the graph with ``admit=True``; on a drifting
+    recording the dead-reckoned rays of a whole run may admit none: the hybrid aligns on the
+    early trajectory and resects every pose, ``HybridMapper(header, seed_mapper=...)``).
     """
     problem = state.problem
     ids = np.array(sorted(problem.landmark_ids), np.int64)
     ref_xy = landmarks_from_values(state.values, ids)
+    n_common = np.intersect1d(ids, estimate.landmark_ids).size
+    if n_common < 3:
+        raise TooFewLandmarksError(
+            f"seed_landmarks: the graph holds {ids.size} landmarks, {n_common} of them in the "
+            f"map ({len(estimate)}), and 3 are needed to align the map onto them; "
+            f"{len(problem.pending())} landmarks are pending (their rays on the dead-reckoned "
+            f"poses do not intersect yet, as on a drifting recording): build the graph with "
+            f"admit=True, or let the hybrid align the map on the "
+            f"early trajectory and resect every pose: "
+            f"baselines.hybrid.HybridMapper(header, seed_mapper=YOUR_MAPPER)")
     aligned = align_map(estimate, ids, ref_xy, trim=trim)
     where = aligned.as_dict()
     for lid, n_rays in sorted(problem.pending().items()):

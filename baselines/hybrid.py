@@ -36,7 +36,7 @@ from bomgraph.config import requirement, resolve
 from bomgraph.errors import BomgraphError, ConfigError
 from bomgraph.evaluate import Alignment, align
 from bomgraph.geometry import dead_reckon, intersect_rays, rotation
-from bomgraph.mapper import MapEstimate, Mapper, create_mapper
+from bomgraph.mapper import MapEstimate, Mapper, check_method_options, create_mapper
 from bomgraph.stream import Step, StreamHeader
 
 from .bearing_graph import FactorGraphConfig, insert_pose, landmark_key, landmarks_from_values
@@ -122,6 +122,7 @@ class HybridConfig(FactorGraphConfig):
              f"seed_method must name a registered non-hybrid mapper, got {self.seed_method!r}")
         need(self.seed_options is None or isinstance(self.seed_options, Mapping),
              "seed_options must be a mapping of the seed mapper's options")
+        check_seed("HybridConfig", self.seed_method, self.seed_options)
         need(self.align_steps >= 2, "align_steps must be >= 2")
         need(self.align_trim > 1, "align_trim must be > 1")
         need(self.map_sigma_m >= 0, "map_sigma_m must be >= 0")
@@ -130,6 +131,23 @@ class HybridConfig(FactorGraphConfig):
         need(self.n_headings >= 4, "n_headings must be >= 4")
         need(self.resection_huber_k > 0, "resection_huber_k must be > 0")
         need(self.start_tol_m >= 0, "start_tol_m must be >= 0")
+
+
+def check_seed(owner: str, seed_method: str, seed_options: Mapping[str, Any] | None) -> None:
+    """Refuse a ``seed_method`` that is not a registered method, or ``seed_options`` its
+    configuration refuses, where the hybrid's configuration is made: before any run of
+    ``compare`` (:func:`bomgraph.mapper.check_method_options`), not at every run.
+
+    Raises
+    ------
+    ConfigError
+        Naming ``owner``'s option and what the seed method refused.
+    """
+    try:
+        check_method_options(seed_method, dict(seed_options or {}))
+    except BomgraphError as exc:
+        raise ConfigError(f"{owner}: seed_method={seed_method!r}, seed_options="
+                          f"{dict(seed_options or {})}: {exc}") from None
 
 
 # --------------------------------------------------------------------------------------------
@@ -396,4 +414,4 @@ class HybridMapper(ScheduledSolver):
         return float(np.max(np.hypot(*(seed_xy - xy[have]).T)))
 
 
-__all__ = ["HybridConfig", "HybridMapper", "SeedStart", "trimmed_align"]
+__all__ = ["HybridConfig", "HybridMapper", "SeedStart", "check_seed", "trimmed_align"]

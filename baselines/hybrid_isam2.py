@@ -52,6 +52,7 @@ from bomgraph.stream import Step, StreamHeader
 
 from .bearing_graph import BearingGraph, landmark_key, landmarks_from_values
 from .gtsam_tools import align_map
+from .hybrid import check_seed
 from .isam2 import Isam2Config, Isam2Mapper
 
 _REAL_SEED = {"seed_options": {"preset": "real"}}
@@ -118,6 +119,7 @@ class HybridIsam2Config(Isam2Config):
              f"seed_method must name a registered non-hybrid mapper, got {self.seed_method!r}")
         need(self.seed_options is None or isinstance(self.seed_options, Mapping),
              "seed_options must be a mapping of the seed mapper's options")
+        check_seed("HybridIsam2Config", self.seed_method, self.seed_options)
         need(self.seed_every >= 1, "seed_every must be >= 1")
         need(self.seed_sigma_m is None or self.seed_sigma_m > 0,
              "seed_sigma_m must be > 0 or None")

@@ -67,10 +67,10 @@ def code_fingerprint() -> str:
 
 
 def _method_code(task: Task) -> dict[str, str]:
-    """The fingerprints of the task's non-built-in methods (the arm's, the reference's), by
-    method name: empty for built-in methods, so their keys are as before plugins existed."""
-    methods = [task.arm.method] + ([task.reference.method] if task.reference else [])
-    return {m: fp for m in methods if (fp := method_fingerprint(m)) is not None}
+    """The fingerprints of the task's non-built-in methods (the arm's, the reference's, a
+    seed's: :meth:`Task.methods`), by method name: empty for built-in methods, so their keys
+    are as before plugins existed."""
+    return {m: fp for m in task.methods() if (fp := method_fingerprint(m)) is not None}
 
 
 def task_key(task: Task) -> str:
@@ -152,7 +152,7 @@ def _stale_plugin(task: Task) -> str:
     while the client keys the task with the new sources."""
     from .plugins import source_fingerprint
 
-    for m in [task.arm.method] + ([task.reference.method] if task.reference else []):
+    for m in task.methods():
         loaded = method_fingerprint(m)
         info = method_info(m)
         if loaded is not None and source_fingerprint.__wrapped__(info.target,
@@ -375,7 +375,7 @@ def execute(tasks: Sequence[Task], executor: Executor = Executor(), *,
 
 
 def refuse_runtime_methods(tasks: Sequence[Task], backend: str) -> None:
-    """Raise when a task's method (or reference) was registered at run time: worker
+    """Raise when a method of a task (:meth:`Task.methods`) was registered at run time: worker
     processes start from the installed packages and never see such a registration.
 
     Raises
@@ -383,8 +383,7 @@ def refuse_runtime_methods(tasks: Sequence[Task], backend: str) -> None:
     ConfigError
         Naming the method and how to make it a plugin (or to run serially).
     """
-    names = dict.fromkeys(m for t in tasks
-                          for m in (t.arm.method, *([t.reference.method] if t.reference else [])))
+    names = dict.fromkeys(m for t in tasks for m in t.methods())
     for name in names:
         try:
             info = method_info(name)

@@ -135,7 +135,7 @@ def _attribute_docs(cls: type) -> dict[str, str]:
     body: list[str] = []
 
     def flush() -> None:
-        sentence = re.split(r"(?<=\.)\s+(?=[A-Z(])", " ".join(body).strip(), maxsplit=1)[0]
+        sentence = _first_sentence(" ".join(body).strip())
         for n in names:
             docs[n] = sentence.rstrip(".")
 
@@ -154,6 +154,19 @@ def _attribute_docs(cls: type) -> dict[str, str]:
             body.append(ln.strip())
     flush()
     return docs
+
+
+#: Abbreviations whose full stop does not end a sentence ("std. dev. (m) of ...").
+_ABBREVIATIONS = re.compile(r"\b(?:std|dev|e\.g|i\.e|cf|approx|eq|eqs|fig|vs)\.$", re.I)
+
+
+def _first_sentence(text: str) -> str:
+    """``text`` up to its first full stop followed by a capital or ``(``, skipping the full
+    stops of :data:`_ABBREVIATIONS`."""
+    for m in re.finditer(r"(?<=\.)\s+(?=[A-Z(])", text):
+        if not _ABBREVIATIONS.search(text[:m.start()]):
+            return text[:m.start()]
+    return text
 
 
 def describe_options(config_cls: type) -> list[OptionDoc]:

@@ -19,7 +19,7 @@ from pathlib import Path
 from typing import Any, Mapping, Sequence
 
 from .checks import file_name, fraction, instance, integer, items
-from .errors import ConfigError
+from .errors import ConfigError, UnknownMethodError
 from .mapper import available_methods, method_config_class, method_info
 from .sim import RunSpec, SimConfig, paper_design
 from .sources import (SIMULATED, DatasetSource, FileSource, SimSource, SimulatedStreams, World,
@@ -102,6 +102,13 @@ class Experiment:
         instance(self.reference, (Arm, type(None)), f"{where}: reference", ConfigError)
         for key, low in (("seed", 0), ("n_layouts", 1), ("n_starts", 1), ("checkpoint_every", 1)):
             integer(getattr(self, key), f"{where}: {key}", ConfigError, minimum=low)
+        runs = [s.name for s in self.sources] + [s.name for w in self.worlds
+                                                 for s in w.sources(0.0)]
+        twice = sorted({r for r in runs if runs.count(r) > 1})
+        if twice:  # a run's name keys its estimate file, its table column and its figure
+            raise ConfigError(f"{where}: two runs are named {twice[0]!r} (a source's label and "
+                              f"a world's run WORLD-seedN, or two sources): their estimates and "
+                              f"table columns would collide; rename the world or the source")
 
     @property
     def designed(self) -> bool:
@@ -154,6 +161,13 @@ class Task:
     def stream(self) -> Stream:
         return self.source.stream()
 
+    def methods(self) -> list[str]:
+        """Every method the task runs: the arm's, the reference's, and the registered methods
+        its options name (a ``*method`` key, nested tables too: ``hybrid``'s ``seed_method``),
+        so that a plugin run as a seed is in the cache key and the worker checks too."""
+        arms = [self.arm] + ([self.reference] if self.reference is not None else [])
+        return list(dict.fromkeys(m for a in arms for m in (a.method, *_named_methods(a.options))))
+
     def identity(self) -> dict[str, Any]:
         """What makes the task what it is (the arm, the source, the checkpoints, the
         reference method, whether the estimate is kept): the runner hashes it with the code's
@@ -165,6 +179,21 @@ class Task:
         if self.keep_estimate:
             out["estimate"] = True
         return out
+
+
+def _named_methods(options: Any) -> list[str]:
+    """The registered methods named by ``options``' ``*method`` keys, at any depth."""
+    out: list[str] = []
+    for key, value in (options.items() if isinstance(options, Mapping) else ()):
+        if isinstance(value, Mapping):
+            out += _named_methods(value)
+        elif isinstance(value, str) and str(key).endswith("method"):
+            try:
+                method_info(value)
+            except UnknownMethodError:  # not a method's name (``tri_method="ba"``)
+                continue
+            out.append(value)
+    return out
 
 
 def paper_experiments(*, quick: bool = False, seed: int = 0) -> dict[str, Experiment]:

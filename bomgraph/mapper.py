@@ -322,8 +322,11 @@ def register_method(name: str, target: str, description: str, *,
     with another target or ``needs_truth``) is refused unless ``replace`` is True; the same
     target again (a notebook cell run twice, its description edited) is registered anew.
     """
+    from .plugins import warn_name
+
     if not (isinstance(name, str) and name.strip()):
         raise ConfigError(f"register_method: name must be a non-empty string, got {name!r}")
+    warn_name(name, "register_method")
     if not isinstance(target, str) or ":" not in target:
         raise ConfigError(f"method target must be 'module:attribute', got {target!r}")
     info = MethodInfo(name, target, description, needs_truth, _origin)

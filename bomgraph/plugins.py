@@ -25,6 +25,7 @@ import hashlib
 import importlib
 import logging
 import sys
+import traceback
 from dataclasses import dataclass
 from importlib import metadata
 from pathlib import Path
@@ -48,6 +49,26 @@ class PluginEntry:
     version: str | None
 
 
+def name_problem(name: str) -> str:
+    """Why ``name`` cannot be a method's name ("" when it can): ``compare --methods
+    NAME@PRESET,...`` and ``--option NAME:KEY=VALUE`` split on ``@``, ``,`` and ``:``, so a
+    name holding one (or a space) could be listed but never run from the command line."""
+    bad = sorted({c for c in name if c in "@,:" or c.isspace()})
+    if bad:
+        return (f"method name {name!r} holds {', '.join(repr(c) for c in bad)}, which "
+                f"`compare --methods NAME@PRESET,...` and `--option NAME:KEY=VALUE` split on, "
+                f"so compare cannot run it; rename it (letters, digits, '-', '_', '.')")
+    return ""
+
+
+def warn_name(name: str, where: str) -> None:
+    """Log a warning when ``name`` is a method name ``compare`` cannot run (:func:`name_problem`;
+    ``bomgraph run --method`` still can, so the method is kept)."""
+    problem = name_problem(name)
+    if problem:
+        _log.warning("%s: %s", where, problem)
+
+
 @functools.lru_cache(maxsize=1)
 def discover() -> dict[str, PluginEntry]:
     """The installed plugins by method name (read once per process; :func:`refresh` reads
@@ -57,6 +78,8 @@ def discover() -> dict[str, PluginEntry]:
         dist = getattr(ep, "dist", None)
         entry = PluginEntry(ep.name, ep.value, dist.name if dist else None,
                             dist.version if dist else None)
+        warn_name(ep.name, f"method plugin of {entry.distribution or 'an unknown distribution'}"
+                           f" (entry point group {GROUP!r})")
         if ep.name in found and found[ep.name].target != entry.target:
             _log.warning("method plugin %r is declared twice (%s and %s); using %s", ep.name,
                          found[ep.name].target, entry.target, found[ep.name].target)
@@ -88,6 +111,15 @@ def load(target: str, name: str) -> object:
     except (ImportError, AttributeError) as exc:
         raise UnknownMethodError(f"method {name!r} is registered as {target!r} but cannot be "
                                  f"loaded: {exc}") from exc
+    except Exception as exc:  # the module itself raised (a SyntaxError, a bad dataclass, ...)
+        top = module.split(".")[0]  # the last line of the plugin's own code that ran
+        frames = [f for f in traceback.extract_tb(exc.__traceback__)
+                  if top in Path(f.filename).parts or Path(f.filename).stem == top]
+        where = ("" if isinstance(exc, SyntaxError) or not frames
+                 else f" (at {frames[-1].filename}, line {frames[-1].lineno})")
+        raise UnknownMethodError(f"method {name!r} is registered as {target!r} but cannot be "
+                                 f"loaded: importing it raised {type(exc).__name__}: {exc}"
+                                 f"{where}") from exc
     return obj
 
 

@@ -376,6 +376,15 @@ def _slug(name: str) -> str:
     return re.sub(r"[^A-Za-z0-9._@-]+", "_", name).strip("_") or "_"
 
 
+def _unique_slugs(names: Sequence[str]) -> dict[str, str]:
+    """Each name's :func:`_slug`; names whose slugs coincide (``tri (x)`` and ``tri_x``) get
+    their own short hash appended, so no two share a file."""
+    slugs = {n: _slug(n) for n in dict.fromkeys(names)}
+    shared = {v for v in slugs.values() if list(slugs.values()).count(v) > 1}
+    return {n: (f"{v}-{hashlib.sha256(n.encode()).hexdigest()[:8]}" if v in shared else v)
+            for n, v in slugs.items()}
+
+
 def write_estimate_files(out: Path, tasks: Sequence[Task], results: Sequence[dict[str, Any]]
                          ) -> list[Path]:
     """Write each run's final estimate (a result's ``estimate_file`` text, taken out of the
@@ -385,8 +394,8 @@ def write_estimate_files(out: Path, tasks: Sequence[Task], results: Sequence[dic
     priors, gets its stream's short hash in the name), so that ``bomgraph evaluate EST
     STREAM`` pairs them; ``out/estimates/index.csv`` lists each run's estimate and stream
     (paths relative to ``out``, a user's stream file as given). Names keep letters, digits
-    and ``.-_@``, the rest turned to ``_``. Returns the paths; a failed run has no estimate
-    and gets none."""
+    and ``.-_@``, the rest turned to ``_``; names that coincide so get a short hash each.
+    Returns the paths; a failed run has no estimate and gets none."""
     from .stream_file import write_stream
 
     paths: list[Path] = []
@@ -396,12 +405,15 @@ def write_estimate_files(out: Path, tasks: Sequence[Task], results: Sequence[dic
         names.setdefault((t.experiment, t.source.name), set()).add(_source_hash(t))
     written: set[Path] = set()
     inputs = sorted({t.source.path for t in tasks if isinstance(t.source, FileSource)})
+    exps = _unique_slugs([t.experiment for t in tasks])
+    arms = {e: _unique_slugs([t.arm.label for t in tasks if t.experiment == e]) for e in exps}
+    runs = {e: _unique_slugs([t.source.name for t in tasks if t.experiment == e]) for e in exps}
     for t, r in zip(tasks, results):
         text = r.pop("estimate_file", None)
         if text is None:
             continue
-        exp, run = _slug(t.experiment), _slug(t.source.name)
-        path = out / "estimates" / exp / _slug(t.arm.label) / f"{run}.est"
+        exp, run = exps[t.experiment], runs[t.experiment][t.source.name]
+        path = out / "estimates" / exp / arms[t.experiment][t.arm.label] / f"{run}.est"
         path.parent.mkdir(parents=True, exist_ok=True)
         write_text(path, text)
         paths.append(path)

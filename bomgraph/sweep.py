@@ -386,6 +386,13 @@ class _Reader:
         if not streams and not worlds:
             raise self.fail(f"{at}streams", "give streams or [[worlds]] to run the methods on")
         _unique_or(self, [w.name for w in worlds], f"{at}worlds[].name")
+        runs = {f"{w.name}-seed{seed}": w.name for w in worlds for seed in w.seeds}
+        for path, label in streams:
+            if label in runs:
+                raise self.fail(f"{at}worlds", f"world {runs[label]!r} has a run named "
+                                               f"{label!r}, as is the stream {path}: their "
+                                               f"estimates and table columns would collide; "
+                                               f"rename the world")
         methods = t.get("methods")
         if not isinstance(methods, list) or not methods:
             raise self.fail(f"{at}methods", "give at least one method ([[methods]] with a "

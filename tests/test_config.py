@@ -102,3 +102,30 @@ def test_informal_and_inherited_attribute_docs_are_read() -> None:
     docs = {o.name: o.doc for o in describe_options(Child)}
     assert docs == {"a": "the first option", "b": "two options sharing one line",
                     "c": "two options sharing one line", "d": "The fourth one"}
+
+
+def test_an_abbreviation_does_not_end_an_option_doc() -> None:
+    """``std. dev. (m)`` is not the end of a sentence: ``bomgraph methods hybrid-isam2`` showed
+    ``seed_sigma_m`` as "Std. dev" and the EKFs' ``wide_prior_heading_sd_rad`` as "... heading
+    std. dev" (h20)."""
+    from bomgraph.config import describe_options
+    from bomgraph.mapper import method_config_class
+
+    @dataclass(frozen=True)
+    class Opts(Presets):
+        """Options.
+
+        Attributes
+        ----------
+        s : float
+            Std. dev. (m) of a prior, e.g. (here) one. Then more.
+        """
+
+        s: float = 1.0
+
+    assert {o.name: o.doc for o in describe_options(Opts)} == {
+        "s": "Std. dev. (m) of a prior, e.g. (here) one"}
+    seed = {o.name: o.doc for o in describe_options(method_config_class("hybrid-isam2"))}
+    assert seed["seed_sigma_m"].startswith("Std. dev. (m) of a prior put on a seeded landmark")
+    ekf = {o.name: o.doc for o in describe_options(method_config_class("ekf"))}
+    assert "std. dev. (rad) exceeds this" in ekf["wide_prior_heading_sd_rad"]

@@ -77,6 +77,20 @@ def test_seeding_from_a_mirrored_map_recovers_the_truth(noise_free: Stream) -> N
     assert score.max_m < 1e-6
 
 
+def test_seeding_a_graph_without_landmarks_says_what_to_do(noise_free: Stream) -> None:
+    """On MRCLAM6 robot 3 the dead-reckoned rays of the whole run admit no landmark, and the
+    README's recipe (build_graph, seed_landmarks) raised "admit more landmarks to the graph
+    first", which build_graph(admit=True) had tried (h20): the message now counts the graph's
+    and the pending landmarks and names the hybrid, which aligns and resects for you."""
+    state = gt.build_graph(noise_free.header, noise_free.steps, admit=False)
+    with pytest.raises(TooFewLandmarksError) as err:
+        gt.seed_landmarks(state, _mirrored(noise_free))
+    text = str(err.value)
+    assert text.startswith("seed_landmarks: the graph holds 0 landmarks, 0 of them in the map")
+    assert f"{len(state.problem.pending())} landmarks are pending" in text
+    assert "HybridMapper(header, seed_mapper=YOUR_MAPPER)" in text
+
+
 def test_diagnose_a_good_graph(noisy: Stream) -> None:
     state = gt.build_graph(noisy.header, noisy.steps[:30])
     d = gt.diagnose(state.graph, state.values)
