@@ -31,7 +31,7 @@ import numpy as np
 
 from .checks import is_integer
 from .errors import ConfigError, TooFewLandmarksError, UnknownMethodError
-from .estimate_file import stream_identity, write_estimate
+from .estimate_file import stream_identity, untimed_estimate_text, write_estimate
 from .evaluate import CheckpointScore, score_checkpoints, score_estimate
 from .experiments import Arm, Experiment, SimSource, Task
 from .jsonio import jsonable
@@ -499,6 +499,8 @@ def strip_timings(results: Iterable[Mapping[str, Any]]) -> list[dict[str, Any]]:
                                  for c in r2["checkpoints"]]
         if "info" in r2 and isinstance(r2["info"], dict):
             r2["info"] = {k: v for k, v in r2["info"].items() if not k.endswith("_s")}
+        if isinstance(r2.get("estimate_file"), str):  # and a kept estimate's own
+            r2["estimate_file"] = untimed_estimate_text(r2["estimate_file"])
         out.append(r2)
     return out
 
