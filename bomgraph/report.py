@@ -350,6 +350,7 @@ def _compare(experiments: Sequence[Experiment], out: Path, executor: Executor,
     results = execute(tasks, executor, cache_dir=out / "cache" if use_cache else None,
                       progress=progress)
     written = write_estimate_files(out, tasks, results) if estimates else []
+    _drop_earlier_estimates(out, written)
     summary = summarise(results)
     wall = time.perf_counter() - start
     files = [out / n for n in ("results.json", "results.csv", "summary.csv", "final_by_run.csv")]
@@ -368,6 +369,19 @@ def _compare(experiments: Sequence[Experiment], out: Path, executor: Executor,
     if figures:
         files += write_compare_figures(out, experiments, results)
     return CompareResult(tuple(results), tuple(summary), tuple(str(f) for f in files), wall)
+
+
+def _drop_earlier_estimates(out: Path, written: Sequence[Path]) -> None:
+    """Remove the estimate files (and index) an earlier compare left in ``out/estimates``
+    that this one did not write: beside this compare's results they would no longer match
+    them. Other files there are left, and so is ``out/streams`` (inputs, not results)."""
+    keep = {os.path.realpath(p) for p in written}
+    for p in sorted((out / "estimates").rglob("*"), reverse=True):
+        if p.is_file() and (p.suffix == ".est" or p == out / "estimates" / "index.csv") \
+                and os.path.realpath(p) not in keep:
+            p.unlink()
+        elif p.is_dir() and not p.is_symlink() and not any(p.iterdir()):
+            p.rmdir()
 
 
 def _slug(name: str) -> str:
