@@ -368,6 +368,7 @@ def _compare(experiments: Sequence[Experiment], out: Path, executor: Executor,
     write_csv(out / "final_by_run.csv", final_by_run(results))
     if figures:
         files += write_compare_figures(out, experiments, results)
+    _drop_earlier_figures(out, files)
     return CompareResult(tuple(results), tuple(summary), tuple(str(f) for f in files), wall)
 
 
@@ -382,6 +383,20 @@ def _drop_earlier_estimates(out: Path, written: Sequence[Path]) -> None:
             p.unlink()
         elif p.is_dir() and not p.is_symlink() and not any(p.iterdir()):
             p.rmdir()
+
+
+#: The names of compare's figures (``write_compare_figures``), for :func:`_drop_earlier_figures`.
+FIGURE_NAMES = ("*_error_vs_time.png", "*_maps.png", "example_map.png", "example_map.txt")
+
+
+def _drop_earlier_figures(out: Path, written: Sequence[Path]) -> None:
+    """Remove the figures an earlier compare drew in ``out`` (named as compare names them)
+    that this one did not draw: beside this compare's results they would no longer match."""
+    keep = {os.path.realpath(p) for p in written}
+    for pattern in FIGURE_NAMES:
+        for p in out.glob(pattern):
+            if p.is_file() and os.path.realpath(p) not in keep:
+                p.unlink()
 
 
 def _slug(name: str) -> str:
