@@ -118,18 +118,20 @@ class DatasetSource:
         return _load_dataset(self.kind, self.path, self.robot, self.truth_path)
 
     def key(self) -> dict[str, Any]:
+        truth = None if self.truth_path is None else str(Path(self.truth_path).resolve())
         return {"kind": self.kind, "path": str(Path(self.path).resolve()), "robot": self.robot,
-                "truth": self.truth_path, "files": _files_stamp(self.path, self.truth_path)}
+                "truth": truth, "files": _files_stamp(self.path, self.truth_path)}
 
 
 def _files_stamp(*paths: str | None) -> str:
     """Size and modification time of every file under ``paths`` (a change invalidates the
-    cache)."""
+    cache), each file named by its resolved path: the same files however they are spelled
+    (relative or absolute) have the same stamp."""
     h = hashlib.sha256()
     for p in paths:
         if p is None:
             continue
-        root = Path(p)
+        root = Path(p).resolve()
         files = sorted(root.rglob("*")) if root.is_dir() else [root]
         for f in files:
             if f.is_file():
