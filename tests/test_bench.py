@@ -268,3 +268,25 @@ def test_strip_timings_also_strips_the_timings_of_a_kept_estimate() -> None:
     lines = text.splitlines()
     changed = {**res, "estimate_file": "\n".join([lines[0], json.dumps(moved)] + lines[2:])}
     assert strip_timings([res]) != strip_timings([changed])
+
+
+@pytest.mark.parametrize("library", ["numpy", "scipy", "gtsam", "filterpy"])
+def test_the_cache_key_covers_the_libraries_that_compute_the_numbers(
+        monkeypatch: pytest.MonkeyPatch, library: str) -> None:
+    """Another numpy, scipy, gtsam or filterpy can give other bits for the same code (GTSAM's
+    last bits differ between machines, scripts/check_identical.py); the key held only the
+    bomgraph and baselines sources, so a warm cache returned what a cold run would not."""
+    from importlib import metadata
+
+    import bomgraph.bench as bench
+
+    task = _exp((Arm("tri", "triangulate"),)).tasks()[0]
+    before = task_key(task)
+    real = metadata.version
+    monkeypatch.setattr(metadata, "version",
+                        lambda name: "0.0.other" if name == library else real(name))
+    bench.code_fingerprint.cache_clear()
+    try:
+        assert task_key(task) != before
+    finally:
+        bench.code_fingerprint.cache_clear()
