@@ -115,7 +115,8 @@ class DatasetSource:
         return f"{base}-r{self.robot}" if self.robot is not None else base
 
     def stream(self) -> Stream:
-        return _load_dataset(self.kind, self.path, self.robot, self.truth_path)
+        return _load_dataset(self.kind, self.path, self.robot, self.truth_path,
+                             _files_stamp(self.path, self.truth_path))
 
     def key(self) -> dict[str, Any]:
         truth = None if self.truth_path is None else str(Path(self.truth_path).resolve())
@@ -253,7 +254,10 @@ class World:
 
 
 @functools.lru_cache(maxsize=16)
-def _load_dataset(kind: str, path: str, robot: int | None, truth_path: str | None) -> Stream:
+def _load_dataset(kind: str, path: str, robot: int | None, truth_path: str | None,
+                  stamp: str) -> Stream:
+    """The recording, kept per process by its files' ``stamp`` too (:func:`_files_stamp`, as
+    in the cache key): a changed file is read again."""
     from . import datasets
 
     if kind == "mrclam":
