@@ -14,7 +14,6 @@ The core never prints: progress is reported through a callback.
 from __future__ import annotations
 
 import contextlib
-import functools
 import hashlib
 import json
 import logging
@@ -31,12 +30,13 @@ import numpy as np
 
 from .checks import is_integer
 from .errors import ConfigError, TooFewLandmarksError, UnknownMethodError
-from .estimate_file import stream_identity, write_estimate
+from .estimate_file import stream_identity, untimed_estimate_text, write_estimate
 from .evaluate import CheckpointScore, score_checkpoints, score_estimate
 from .experiments import Arm, Experiment, SimSource, Task
 from .jsonio import jsonable
 from .mapper import (Checkpoint, MapEstimate, RunResult, checkpoint_times, create_mapper,
                      method_failure_note, method_fingerprint, method_info, run)
+from .plugins import code_fingerprint
 from .stdio import bounded_lines, output_file
 from .stream import Step, Stream, Truth
 from .stream_file import StreamReader
@@ -46,24 +46,6 @@ from .trajectory import bearing_residuals
 #: Bump to invalidate every cached result (the code fingerprint covers code changes).
 _log = logging.getLogger(__name__)
 CACHE_VERSION = 1
-
-
-@functools.lru_cache(maxsize=1)
-def code_fingerprint() -> str:
-    """A hash of the installed ``bomgraph`` and ``baselines`` sources: a cached result is
-    reused only by the code that produced it."""
-    import importlib.util
-
-    h = hashlib.sha256()
-    for pkg in ("bomgraph", "baselines"):
-        spec = importlib.util.find_spec(pkg)
-        if spec is None or not spec.submodule_search_locations:
-            continue
-        root = Path(list(spec.submodule_search_locations)[0])
-        for f in sorted(root.rglob("*.py")):
-            h.update(str(f.relative_to(root)).encode())
-            h.update(f.read_bytes())
-    return h.hexdigest()[:16]
 
 
 def _method_code(task: Task) -> dict[str, str]:
@@ -498,6 +480,8 @@ def strip_timings(results: Iterable[Mapping[str, Any]]) -> list[dict[str, Any]]:
                                  for c in r2["checkpoints"]]
         if "info" in r2 and isinstance(r2["info"], dict):
             r2["info"] = {k: v for k, v in r2["info"].items() if not k.endswith("_s")}
+        if isinstance(r2.get("estimate_file"), str):  # and a kept estimate's own
+            r2["estimate_file"] = untimed_estimate_text(r2["estimate_file"])
         out.append(r2)
     return out
 

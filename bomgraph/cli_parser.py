@@ -169,7 +169,8 @@ def build_parser() -> argparse.ArgumentParser:
                         "../shared/data) instead of the simulation")
     c.add_argument("--out", default="compare-results",
                    help="output folder; the result files of an earlier compare in it are "
-                        "replaced")
+                        "replaced, and its figures and estimate files that this one does not "
+                        "write are removed (the cache is kept)")
     c.add_argument("--seed", type=_nonneg_int, help="the paper design's seed (default 0)")
     c.add_argument("--jobs", type=_jobs, help="local processes (-1, the default: one per core)")
     c.add_argument("--scheduler", default=None, metavar="ADDRESS",

@@ -402,6 +402,18 @@ def read_estimate(path: str | os.PathLike[str]) -> EstimateFile:
     return _read_v1(obj, path)
 
 
+def untimed_estimate_text(text: str) -> str:
+    """An estimate file's text without its timings (each checkpoint's ``estimate_s``, the
+    last line's ``timing_s``; a line left empty is dropped), each line written compactly:
+    what two runs of the same method on the same stream agree on bit for bit."""
+    lines = []
+    for line in text.splitlines():
+        obj = {k: v for k, v in json.loads(line).items() if k not in ("estimate_s", "timing_s")}
+        if obj:
+            lines.append(json.dumps(obj, separators=(",", ":")) + "\n")
+    return "".join(lines)
+
+
 __all__ = ["ESTIMATE_FORMAT", "ESTIMATE_VERSION", "COV_RTOL", "StreamIdentity", "stream_identity",
            "stream_file_identity", "EstimateWriter", "EstimateFile", "estimate_to_json",
-           "write_estimate", "read_estimate"]
+           "write_estimate", "read_estimate", "untimed_estimate_text"]

@@ -12,10 +12,12 @@ entry points (not the memory of the process that started the sweep). The factory
 ``Factory(header, **options)`` and returns a :class:`bomgraph.mapper.Mapper`; an optional
 ``description`` attribute (else the first docstring line) is what ``bomgraph methods`` shows.
 
-:func:`source_fingerprint` hashes a method's code (every ``.py`` file of the top-level package
-of its module, or the module's one file) with the distribution's version: the runner puts it
-in the cache key, so editing a plugin re-runs it. This module imports nothing from bomgraph
-but the errors (the registry in :mod:`bomgraph.mapper` builds on it).
+:func:`code_fingerprint` hashes the code of bomgraph and baselines and the versions of the
+libraries that compute their numbers; :func:`source_fingerprint` hashes a method's code (every
+``.py`` file of the top-level package of its module, or the module's one file) with the
+distribution's version. The runner puts both in the cache key, so editing a plugin (or
+upgrading numpy, scipy, gtsam or filterpy) re-runs it. This module imports nothing from
+bomgraph but the errors (the registry in :mod:`bomgraph.mapper` builds on it).
 """
 
 from __future__ import annotations
@@ -23,6 +25,7 @@ from __future__ import annotations
 import functools
 import hashlib
 import importlib
+import importlib.util
 import logging
 import sys
 import traceback
@@ -136,6 +139,33 @@ def _source_files(module_name: str) -> list[tuple[str, Path]]:
     return sorted(out)
 
 
+#: The libraries whose versions :func:`code_fingerprint` holds: they compute the numbers, and
+#: another version of one can give other bits for the same bomgraph code.
+NUMERIC_LIBRARIES = ("numpy", "scipy", "gtsam", "filterpy")
+
+
+@functools.lru_cache(maxsize=1)
+def code_fingerprint() -> str:
+    """A hash of the installed ``bomgraph`` and ``baselines`` sources and of the versions of
+    :data:`NUMERIC_LIBRARIES`: the runner's cache key (:func:`bomgraph.bench.task_key`), so a
+    cached result is reused only by the code that produced it. 16 hex digits."""
+    h = hashlib.sha256()
+    for pkg in ("bomgraph", "baselines"):
+        spec = importlib.util.find_spec(pkg)
+        if spec is None or not spec.submodule_search_locations:
+            continue
+        root = Path(list(spec.submodule_search_locations)[0])
+        for f in sorted(root.rglob("*.py")):
+            h.update(str(f.relative_to(root)).encode())
+            h.update(f.read_bytes())
+    for lib in NUMERIC_LIBRARIES:
+        try:
+            h.update(f"{lib}=={metadata.version(lib)};".encode())
+        except metadata.PackageNotFoundError:
+            h.update(f"{lib} missing;".encode())
+    return h.hexdigest()[:16]
+
+
 @functools.lru_cache(maxsize=64)
 def source_fingerprint(target: str, version: str | None = None) -> str:
     """A hash of the code behind ``"module:attribute"``: every ``.py`` file of the module's
@@ -163,4 +193,5 @@ def source_fingerprint(target: str, version: str | None = None) -> str:
     return h.hexdigest()[:16]
 
 
-__all__ = ["GROUP", "PluginEntry", "discover", "refresh", "load", "source_fingerprint"]
+__all__ = ["GROUP", "PluginEntry", "discover", "refresh", "load", "source_fingerprint",
+           "code_fingerprint", "NUMERIC_LIBRARIES"]

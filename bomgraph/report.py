@@ -350,6 +350,7 @@ def _compare(experiments: Sequence[Experiment], out: Path, executor: Executor,
     results = execute(tasks, executor, cache_dir=out / "cache" if use_cache else None,
                       progress=progress)
     written = write_estimate_files(out, tasks, results) if estimates else []
+    _drop_earlier_estimates(out, written)
     summary = summarise(results)
     wall = time.perf_counter() - start
     files = [out / n for n in ("results.json", "results.csv", "summary.csv", "final_by_run.csv")]
@@ -367,7 +368,35 @@ def _compare(experiments: Sequence[Experiment], out: Path, executor: Executor,
     write_csv(out / "final_by_run.csv", final_by_run(results))
     if figures:
         files += write_compare_figures(out, experiments, results)
+    _drop_earlier_figures(out, files)
     return CompareResult(tuple(results), tuple(summary), tuple(str(f) for f in files), wall)
+
+
+def _drop_earlier_estimates(out: Path, written: Sequence[Path]) -> None:
+    """Remove the estimate files (and index) an earlier compare left in ``out/estimates``
+    that this one did not write: beside this compare's results they would no longer match
+    them. Other files there are left, and so is ``out/streams`` (inputs, not results)."""
+    keep = {os.path.realpath(p) for p in written}
+    for p in sorted((out / "estimates").rglob("*"), reverse=True):
+        if p.is_file() and (p.suffix == ".est" or p == out / "estimates" / "index.csv") \
+                and os.path.realpath(p) not in keep:
+            p.unlink()
+        elif p.is_dir() and not p.is_symlink() and not any(p.iterdir()):
+            p.rmdir()
+
+
+#: The names of compare's figures (``write_compare_figures``), for :func:`_drop_earlier_figures`.
+FIGURE_NAMES = ("*_error_vs_time.png", "*_maps.png", "example_map.png", "example_map.txt")
+
+
+def _drop_earlier_figures(out: Path, written: Sequence[Path]) -> None:
+    """Remove the figures an earlier compare drew in ``out`` (named as compare names them)
+    that this one did not draw: beside this compare's results they would no longer match."""
+    keep = {os.path.realpath(p) for p in written}
+    for pattern in FIGURE_NAMES:
+        for p in out.glob(pattern):
+            if p.is_file() and os.path.realpath(p) not in keep:
+                p.unlink()
 
 
 def _slug(name: str) -> str:

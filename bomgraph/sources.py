@@ -115,21 +115,24 @@ class DatasetSource:
         return f"{base}-r{self.robot}" if self.robot is not None else base
 
     def stream(self) -> Stream:
-        return _load_dataset(self.kind, self.path, self.robot, self.truth_path)
+        return _load_dataset(self.kind, self.path, self.robot, self.truth_path,
+                             _files_stamp(self.path, self.truth_path))
 
     def key(self) -> dict[str, Any]:
+        truth = None if self.truth_path is None else str(Path(self.truth_path).resolve())
         return {"kind": self.kind, "path": str(Path(self.path).resolve()), "robot": self.robot,
-                "truth": self.truth_path, "files": _files_stamp(self.path, self.truth_path)}
+                "truth": truth, "files": _files_stamp(self.path, self.truth_path)}
 
 
 def _files_stamp(*paths: str | None) -> str:
     """Size and modification time of every file under ``paths`` (a change invalidates the
-    cache)."""
+    cache), each file named by its resolved path: the same files however they are spelled
+    (relative or absolute) have the same stamp."""
     h = hashlib.sha256()
     for p in paths:
         if p is None:
             continue
-        root = Path(p)
+        root = Path(p).resolve()
         files = sorted(root.rglob("*")) if root.is_dir() else [root]
         for f in files:
             if f.is_file():
@@ -251,7 +254,10 @@ class World:
 
 
 @functools.lru_cache(maxsize=16)
-def _load_dataset(kind: str, path: str, robot: int | None, truth_path: str | None) -> Stream:
+def _load_dataset(kind: str, path: str, robot: int | None, truth_path: str | None,
+                  stamp: str) -> Stream:
+    """The recording, kept per process by its files' ``stamp`` too (:func:`_files_stamp`, as
+    in the cache key): a changed file is read again."""
     from . import datasets
 
     if kind == "mrclam":

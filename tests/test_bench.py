@@ -235,3 +235,58 @@ def test_execute_and_run_file_refuse_arguments_of_the_wrong_type(tmp_path: Path)
     with pytest.raises(ConfigError, match="options must be a mapping"):
         run_file(path, "triangulate", options=["min_parallax_rad=0.1"])  # type: ignore[arg-type]
     assert run_file(path, "triangulate", options={}).checkpoints[-1].t == 12
+
+
+def _retimed(text: str, scale: float) -> str:
+    """An estimate file's text with every timing (``estimate_s``, ``timing_s``) scaled."""
+    lines = []
+    for line in text.splitlines():
+        obj = json.loads(line)
+        if "estimate_s" in obj:
+            obj["estimate_s"] *= scale
+        if "timing_s" in obj:
+            obj["timing_s"] = {k: v * scale for k, v in obj["timing_s"].items()}
+        lines.append(json.dumps(obj, separators=(",", ":")))
+    return "\n".join(lines) + "\n"
+
+
+def test_strip_timings_also_strips_the_timings_of_a_kept_estimate() -> None:
+    """With ``keep_estimate`` (compare --estimates) a result carries its estimate file's
+    text, whose checkpoint lines hold ``estimate_s`` and whose last line ``timing_s``:
+    strip_timings left them, so two runs of the same task never compared equal."""
+    from dataclasses import replace
+
+    task = replace(_exp((Arm("tri", "triangulate"),)).tasks()[0], keep_estimate=True)
+    res = run_task(task)
+    text = res["estimate_file"]
+    assert "timing_s" in text and "estimate_s" in text
+    other = {**res, "estimate_file": _retimed(text, 2.0)}
+    assert strip_timings([res]) == strip_timings([other])
+    # a map that differs still differs
+    first = json.loads(text.splitlines()[1])
+    moved = {**first, "landmarks": [[i, x + 1e-12, y] for i, x, y in first["landmarks"]]}
+    lines = text.splitlines()
+    changed = {**res, "estimate_file": "\n".join([lines[0], json.dumps(moved)] + lines[2:])}
+    assert strip_timings([res]) != strip_timings([changed])
+
+
+@pytest.mark.parametrize("library", ["numpy", "scipy", "gtsam", "filterpy"])
+def test_the_cache_key_covers_the_libraries_that_compute_the_numbers(
+        monkeypatch: pytest.MonkeyPatch, library: str) -> None:
+    """Another numpy, scipy, gtsam or filterpy can give other bits for the same code (GTSAM's
+    last bits differ between machines, scripts/check_identical.py); the key held only the
+    bomgraph and baselines sources, so a warm cache returned what a cold run would not."""
+    from importlib import metadata
+
+    import bomgraph.bench as bench
+
+    task = _exp((Arm("tri", "triangulate"),)).tasks()[0]
+    before = task_key(task)
+    real = metadata.version
+    monkeypatch.setattr(metadata, "version",
+                        lambda name: "0.0.other" if name == library else real(name))
+    bench.code_fingerprint.cache_clear()
+    try:
+        assert task_key(task) != before
+    finally:
+        bench.code_fingerprint.cache_clear()

@@ -58,3 +58,21 @@ def test_a_user_stream_is_named_not_copied(tmp_path: Path) -> None:
     assert {r["stream"] for r in rows} == {str(s)} and not (out / "streams").exists()
     for row in rows:
         assert evaluate_files(out / row["estimate"], s).score.n_common > 3
+
+
+def test_a_later_compare_leaves_no_estimate_of_an_earlier_one(tmp_path: Path) -> None:
+    """The estimates of an earlier compare in the same folder (other arms, or none asked for
+    now) were left there with its index.csv, beside a results.json they no longer match."""
+    s = tmp_path / "mine.jsonl"
+    assert main(["simulate", "--seed", "4", "--steps", "60", "--out", str(s), "-q"]) == 0
+    out = tmp_path / "c"
+    args = ["compare", "--streams", str(s), "--jobs", "1", "--no-figures", "--no-progress",
+            "--out", str(out), "-q"]
+    assert main(args + ["--methods", "triangulate,ekf", "--estimates"]) == 0
+    assert len(list((out / "estimates").rglob("*.est"))) == 2
+    assert main(args + ["--methods", "triangulate", "--estimates"]) == 0
+    assert [r["arm"] for r in _index(out)] == ["triangulate"]
+    assert [p.relative_to(out).as_posix() for p in sorted((out / "estimates").rglob("*.est"))
+            ] == [_index(out)[0]["estimate"]]
+    assert main(args + ["--methods", "triangulate"]) == 0
+    assert not [p for p in (out / "estimates").rglob("*") if p.is_file()]

@@ -148,3 +148,26 @@ def _simulate(source):
 
     return simulate_run(source.spec, source.sim, prior_fraction=source.prior_fraction,
                         prior_sigma_xy_m=source.prior_sigma_xy_m)
+
+
+def test_a_recording_has_one_cache_key_however_its_path_is_spelled(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """``compare --real shared/data`` and ``--real /work/shared/data`` keyed the same files
+    differently: the truth path went into the key as given and the files' stamp hashed their
+    names as given, so results.json's keys differed and the cache was missed."""
+    from bomgraph.sources import DatasetSource
+
+    (tmp_path / "d").mkdir()
+    for name in ("run.g2o", "truth.g2o"):
+        (tmp_path / "d" / name).write_text("x\n")
+    monkeypatch.chdir(tmp_path)
+    rel = DatasetSource("g2o", "d/run.g2o", truth_path="d/truth.g2o")
+    full = DatasetSource("g2o", str(tmp_path / "d" / "run.g2o"),
+                         truth_path=str(tmp_path / "d" / "truth.g2o"))
+    dotted = DatasetSource("g2o", "./d/../d/run.g2o", truth_path="d//truth.g2o")
+    assert rel.key() == full.key() == dotted.key()
+    folder = DatasetSource("mrclam", "d", robot=1)
+    assert folder.key() == DatasetSource("mrclam", str(tmp_path / "d") + "/", robot=1).key()
+    before = rel.key()
+    (tmp_path / "d" / "truth.g2o").write_text("changed\n")   # a changed file still tells
+    assert rel.key() != before

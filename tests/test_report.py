@@ -63,6 +63,24 @@ def test_compare_writes_tables_and_figures(tmp_path: Path) -> None:
     assert (tmp_path / "final_by_run.csv").exists()
 
 
+def test_a_later_compare_leaves_no_figure_of_an_earlier_one(tmp_path: Path) -> None:
+    """The figures of an earlier compare in the same folder (another experiment, or none
+    drawn now) were left beside a results.json they no longer matched."""
+    exp = _exp((Arm("tri", "triangulate"),))
+    compare([exp], tmp_path, executor=Executor("serial"))
+    mine = tmp_path / "notes.png"   # not a name compare writes: left alone
+    mine.write_bytes(b"mine")
+    drawn = {p.name for p in tmp_path.iterdir() if p.name.startswith(("t_", "example_map"))}
+    assert "t_error_vs_time.png" in drawn and len(drawn) == 2
+    other = Experiment("u", "other", exp.arms, SMALL, seed=3, n_layouts=1, n_starts=1)
+    compare([other], tmp_path, executor=Executor("serial"))
+    assert not (tmp_path / "t_error_vs_time.png").exists()
+    assert (tmp_path / "u_error_vs_time.png").exists()
+    compare([other], tmp_path, executor=Executor("serial"), figures=False)
+    assert sorted(p.name for p in tmp_path.iterdir() if p.suffix in (".png", ".txt")) == [
+        "notes.png"]
+
+
 def test_error_curves_of_streams_of_different_lengths_do_not_depend_on_their_order(
         tmp_path: Path) -> None:
     """The curves span every run's checkpoints, whatever run comes first; a run that has ended

@@ -139,3 +139,22 @@ def test_g2o_a_pose_vertex_off_the_chain_is_refused(tmp_path, sim_stream, where)
     with pytest.raises(DatasetError, match=rf"a\.g2o, line {line}: .*VERTEX_SE2 {vid} is not on "
                                            rf"the odometry chain.*EDGE_SE2"):
         import_g2o(tmp_path / "a.g2o")
+
+
+def test_a_dataset_source_reads_its_files_again_when_they_change(tmp_path, sim_stream):
+    """A recording read once was kept by (kind, path, robot, truth path) only: after its files
+    changed, a process that had read it (a Dask worker kept running, a library session) ran
+    the old stream, keyed and cached under the new files' key."""
+    from bomgraph.sources import DatasetSource
+
+    path = tmp_path / "a.g2o"
+    write_g2o(path, sim_stream)
+    src = DatasetSource("g2o", str(path))
+    first = src.stream()
+    assert src.stream() is first   # kept while the files are unchanged
+    lines = path.read_text().splitlines()
+    drop = next(k for k, ln in enumerate(lines) if ln.startswith("EDGE_BEARING_SE2_XY"))
+    path.write_text("\n".join(lines[:drop] + lines[drop + 1:]) + "\n")
+    second = src.stream()
+    n_bearings = [sum(len(st.landmark_ids) for st in s.steps) for s in (first, second)]
+    assert n_bearings[1] == n_bearings[0] - 1
