@@ -309,6 +309,17 @@ COMPARE_FILES = ("results.json", "results.csv", "summary.csv", "final_by_run.csv
 COMPARE_FOLDERS = ("cache", "estimates")
 
 
+def _input_paths(experiments: Sequence[Experiment]) -> dict[str, str]:
+    """The stream files and recordings ``experiments`` read: real path -> path as given."""
+    inputs: dict[str, str] = {}
+    for e in experiments:
+        for src in e.sources:
+            paths = ([src.path] if isinstance(src, FileSource) else
+                     [src.path, src.truth_path] if isinstance(src, DatasetSource) else [])
+            inputs.update((os.path.realpath(p), str(p)) for p in paths if p is not None)
+    return inputs
+
+
 def refuse_inputs_among_outputs(out: Path, experiments: Sequence[Experiment]) -> None:
     """Refuse, before anything runs, a stream file or recording that ``compare`` would
     overwrite in ``out``: one of :data:`COMPARE_FILES`, a ``.png`` in it or a file under one
@@ -319,12 +330,7 @@ def refuse_inputs_among_outputs(out: Path, experiments: Sequence[Experiment]) ->
     OutputPathError
         Naming the input and what to do.
     """
-    inputs: dict[str, str] = {}
-    for e in experiments:
-        for src in e.sources:
-            paths = ([src.path] if isinstance(src, FileSource) else
-                     [src.path, src.truth_path] if isinstance(src, DatasetSource) else [])
-            inputs.update((os.path.realpath(p), str(p)) for p in paths if p is not None)
+    inputs = _input_paths(experiments)
     if not inputs or not out.is_dir():
         return
     folder = os.path.realpath(out)
@@ -350,7 +356,6 @@ def _compare(experiments: Sequence[Experiment], out: Path, executor: Executor,
     results = execute(tasks, executor, cache_dir=out / "cache" if use_cache else None,
                       progress=progress)
     written = write_estimate_files(out, tasks, results) if estimates else []
-    _drop_earlier_estimates(out, written)
     summary = summarise(results)
     wall = time.perf_counter() - start
     files = [out / n for n in ("results.json", "results.csv", "summary.csv", "final_by_run.csv")]
@@ -368,35 +373,43 @@ def _compare(experiments: Sequence[Experiment], out: Path, executor: Executor,
     write_csv(out / "final_by_run.csv", final_by_run(results))
     if figures:
         files += write_compare_figures(out, experiments, results)
-    _drop_earlier_figures(out, files)
+    _drop_earlier_outputs(out, files, experiments)
     return CompareResult(tuple(results), tuple(summary), tuple(str(f) for f in files), wall)
 
 
-def _drop_earlier_estimates(out: Path, written: Sequence[Path]) -> None:
-    """Remove the estimate files (and index) an earlier compare left in ``out/estimates``
-    that this one did not write: beside this compare's results they would no longer match
-    them. Other files there are left, and so is ``out/streams`` (inputs, not results)."""
-    keep = {os.path.realpath(p) for p in written}
-    for p in sorted((out / "estimates").rglob("*"), reverse=True):
-        if p.is_file() and (p.suffix == ".est" or p == out / "estimates" / "index.csv") \
-                and os.path.realpath(p) not in keep:
-            p.unlink()
-        elif p.is_dir() and not p.is_symlink() and not any(p.iterdir()):
-            p.rmdir()
+#: The list of files a compare wrote in its folder (relative paths, one a line), written last:
+#: the next compare there removes those of them it does not write again, and nothing else.
+MANIFEST = ".bomgraph-compare-files"
 
 
-#: The names of compare's figures (``write_compare_figures``), for :func:`_drop_earlier_figures`.
-FIGURE_NAMES = ("*_error_vs_time.png", "*_maps.png", "example_map.png", "example_map.txt")
+def _drop_earlier_outputs(out: Path, written: Sequence[Path],
+                          experiments: Sequence[Experiment]) -> None:
+    """Remove the files the previous compare in ``out`` wrote (its :data:`MANIFEST`) that this
+    one did not write (estimate files, streams, figures of other arms, runs or experiments:
+    beside this compare's results they would no longer match them), then record this one's.
 
-
-def _drop_earlier_figures(out: Path, written: Sequence[Path]) -> None:
-    """Remove the figures an earlier compare drew in ``out`` (named as compare names them)
-    that this one did not draw: beside this compare's results they would no longer match."""
-    keep = {os.path.realpath(p) for p in written}
-    for pattern in FIGURE_NAMES:
-        for p in out.glob(pattern):
-            if p.is_file() and os.path.realpath(p) not in keep:
-                p.unlink()
+    A file compare did not write itself is never removed (a user's own figure in the folder),
+    nor one this compare reads (a stream an earlier compare wrote, given as an input), nor
+    anything outside ``out``; folders the removals empty go too.
+    """
+    root = os.path.realpath(out)
+    keep = {os.path.realpath(p) for p in written} | set(_input_paths(experiments))
+    try:
+        earlier = (out / MANIFEST).read_text(encoding="utf-8").splitlines()
+    except (OSError, UnicodeDecodeError):
+        earlier = []
+    for rel in earlier:
+        path = out / rel
+        real = os.path.realpath(path)
+        if (not rel or os.path.isabs(rel) or not real.startswith(root + os.sep)
+                or real in keep or path.is_symlink() or not path.is_file()):
+            continue
+        path.unlink()
+        parent = path.parent
+        while os.path.realpath(parent) != root and parent.is_dir() and not any(parent.iterdir()):
+            parent.rmdir()
+            parent = parent.parent
+    write_text(out / MANIFEST, "".join(f"{os.path.relpath(p, out)}\n" for p in written))
 
 
 def _slug(name: str) -> str:

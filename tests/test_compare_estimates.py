@@ -76,3 +76,17 @@ def test_a_later_compare_leaves_no_estimate_of_an_earlier_one(tmp_path: Path) ->
             ] == [_index(out)[0]["estimate"]]
     assert main(args + ["--methods", "triangulate"]) == 0
     assert not [p for p in (out / "estimates").rglob("*") if p.is_file()]
+
+
+def test_a_stream_an_earlier_compare_wrote_is_kept_when_a_later_one_reads_it(tmp_path: Path
+                                                                           ) -> None:
+    """The simulated streams compare writes beside its estimates are its own files, but a later
+    compare that reads one of them as its input does not remove it."""
+    out = tmp_path / "c"
+    base = ["compare", "--jobs", "1", "--no-figures", "--no-progress", "--out", str(out), "-q"]
+    assert main(base + ["--quick", "--experiments", "exp1", "--estimates"]) == 0
+    streams = sorted((out / "streams").rglob("*.jsonl"))
+    assert streams
+    assert main(base + ["--streams", str(streams[0]), "--methods", "triangulate"]) == 0
+    assert streams[0].exists()
+    assert not [p for p in streams[1:] if p.exists()]      # the others were its own

@@ -8,7 +8,7 @@ import numpy as np
 
 from bomgraph.bench import Executor, execute
 from bomgraph.experiments import Arm, Experiment
-from bomgraph.report import (compare, error_curves, final_by_run, format_by_run,
+from bomgraph.report import (MANIFEST, compare, error_curves, final_by_run, format_by_run,
                              format_summary, results_to_csv_rows, summarise)
 from bomgraph.sim import SimConfig
 
@@ -79,6 +79,24 @@ def test_a_later_compare_leaves_no_figure_of_an_earlier_one(tmp_path: Path) -> N
     compare([other], tmp_path, executor=Executor("serial"), figures=False)
     assert sorted(p.name for p in tmp_path.iterdir() if p.suffix in (".png", ".txt")) == [
         "notes.png"]
+
+
+def test_a_later_compare_removes_only_files_an_earlier_compare_wrote(tmp_path: Path) -> None:
+    """A user's own file named as compare names its figures (``victoria_park_maps.png``) is
+    not compare's to remove: only the files the earlier compare listed in its manifest go."""
+    exp = _exp((Arm("tri", "triangulate"),))
+    mine = tmp_path / "victoria_park_maps.png"
+    mine.write_bytes(b"mine")
+    compare([exp], tmp_path, executor=Executor("serial"))
+    listed = (tmp_path / MANIFEST).read_text().splitlines()
+    assert "t_error_vs_time.png" in listed and "victoria_park_maps.png" not in listed
+    compare([exp], tmp_path, executor=Executor("serial"), figures=False)
+    assert mine.read_bytes() == b"mine" and not (tmp_path / "t_error_vs_time.png").exists()
+    outside = tmp_path.parent / f"{tmp_path.name}-outside.png"
+    outside.write_bytes(b"x")
+    (tmp_path / MANIFEST).write_text(f"../{outside.name}\n{outside}\n")
+    compare([exp], tmp_path, executor=Executor("serial"), figures=False)
+    assert outside.exists() and mine.exists()            # a manifest never reaches outside
 
 
 def test_error_curves_of_streams_of_different_lengths_do_not_depend_on_their_order(
