@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 from typing import Any, Iterator, Mapping, Sequence
 
 import numpy as np
@@ -30,9 +31,11 @@ _INFINITIES = {"inf": math.inf, "+inf": math.inf, "infinity": math.inf, "+infini
 def jsonable(value: Any, *, max_items: int | None = None, strict: bool = False) -> Any:
     """``value`` as plain JSON data.
 
-    Numpy scalars become Python numbers, arrays/tuples/lists become lists, mappings become
-    dicts with string keys, non-finite floats become ``None``. A sequence longer than
-    ``max_items`` (when given) and any other object become ``None``.
+    Numpy scalars become Python numbers, arrays/tuples/lists become lists, sets sorted lists
+    (by value, or by ``repr`` where the values do not compare) and paths strings (not with
+    ``strict``: they would not read back as they were), mappings dicts with string keys,
+    non-finite floats ``None``. A sequence longer than ``max_items`` (when given) and any other
+    object become ``None``.
 
     With ``strict=True`` a non-finite float raises ``ValueError`` and an object JSON cannot
     hold raises ``TypeError`` (for data that must survive a file unchanged, e.g. stream meta).
@@ -55,6 +58,13 @@ def jsonable(value: Any, *, max_items: int | None = None, strict: bool = False) 
     if isinstance(value, Mapping):
         return {str(k): jsonable(v, max_items=max_items, strict=strict)
                 for k, v in value.items()}
+    if not strict and isinstance(value, (set, frozenset)):
+        try:
+            value = sorted(value)
+        except TypeError:                       # values that do not compare (1 and "a")
+            value = sorted(value, key=repr)
+    if not strict and isinstance(value, os.PathLike):
+        return os.fspath(value)
     if isinstance(value, (list, tuple, np.ndarray)):
         if max_items is not None and len(value) > max_items:
             return None

@@ -23,6 +23,18 @@ def test_jsonable_plain_values_numpy_and_non_finite() -> None:
         jsonable({"x": object()}, strict=True)
 
 
+def test_jsonable_keeps_sets_and_paths_a_plugin_puts_in_info() -> None:
+    """A set or a path in a method's ``info`` became ``null``: now a sorted list and a string
+    (in order whatever the set's hash order), and still refused where data must read back."""
+    from pathlib import Path
+
+    assert jsonable({"ids": {3, 1, 2}, "f": frozenset({"b", "a"}), "p": Path("/x/y.est")}) == {
+        "ids": [1, 2, 3], "f": ["a", "b"], "p": "/x/y.est"}
+    assert jsonable({1, "a"}) == ["a", 1]                      # by repr: "'a'" < "1"
+    with pytest.raises(TypeError):
+        jsonable({"ids": {1, 2}}, strict=True)
+
+
 def test_strict_reading_refuses_duplicates_and_finds_non_finite() -> None:
     with pytest.raises(DuplicateKeyError):
         loads_strict('{"a": 1, "a": 2}')
