@@ -35,7 +35,9 @@ What is here, each the same object the baselines run (re-exported, never copied)
   :class:`bomgraph.mapper.MapEstimate`, e.g. a BOM-STMDS map, into the graph frame: rigid
   fit with reflection, trimmed: :func:`trimmed_align`) and :func:`seed_landmarks` (the
   aligned map as the start of the graph's landmarks, and landmarks the rays do not yet
-  determine entered at their map position);
+  determine entered at their map position); :func:`resect_pose` and
+  :func:`resect_trajectory` (poses from their bearings to a map, :mod:`baselines.resection`:
+  how the hybrid starts the graph's poses);
 * **diagnosis**: :func:`diagnose` names, before any solve, the landmarks with fewer than two
   bearings or too little parallax, the poses with no path to a prior, the variables without
   values, and checks the rank of the linearised system (:class:`Diagnosis`);
@@ -72,6 +74,7 @@ from .bearing_graph import (BearingGraph, FactorGraphConfig, NewFactors, bearing
 from .factor_graph import (GTSAM_ERRORS, BatchState, SolveReport, estimate_from_values,
                            gauss_newton_check, lm_params, marginal_covariances, solve_lm)
 from .hybrid import _triangulate, trimmed_align
+from .resection import resect_pose, resect_trajectory
 
 
 class UnconstrainedGraphError(BomgraphError, ValueError):
@@ -516,6 +519,7 @@ __all__ = [
     "landmark_key", "insert_pose", "poses_from_values", "landmarks_from_values",
     # initialisation
     "triangulate_landmarks", "align_map", "AlignedMap", "seed_landmarks", "trimmed_align",
+    "resect_pose", "resect_trajectory",
     # diagnosis
     "diagnose", "Diagnosis", "key_name", "UnconstrainedGraphError",
     # solving

@@ -10,7 +10,7 @@ import gtsam
 import numpy as np
 import pytest
 
-from baselines import bearing_graph, factor_graph, gtsam_tools as gt, hybrid
+from baselines import bearing_graph, factor_graph, gtsam_tools as gt, hybrid, resection
 from bomgraph.errors import TooFewLandmarksError
 from bomgraph.evaluate import score_estimate
 from bomgraph.mapper import MapEstimate
@@ -40,6 +40,8 @@ def test_the_helpers_are_the_baselines_own_objects() -> None:
     assert gt.solve_lm is factor_graph.solve_lm and gt.SolveReport is factor_graph.SolveReport
     assert gt.BatchState is factor_graph.BatchState
     assert gt.BearingGraph is bearing_graph.BearingGraph
+    assert gt.resect_trajectory is resection.resect_trajectory
+    assert gt.resect_pose is resection.resect_pose
     assert gt.odometry_factors is bearing_graph.odometry_factors
     assert gt.trimmed_align is hybrid.trimmed_align
     assert set(gt.__all__) <= set(dir(gt))
