@@ -22,7 +22,7 @@ import os
 import tempfile
 import time
 import traceback
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any, Callable, Iterable, Iterator, Mapping, Sequence
 
@@ -234,11 +234,14 @@ def _run_task(task: Task) -> dict[str, Any]:
 
 def _estimate_text(task: Task, stream: Stream, result: RunResult) -> str:
     """The run's final estimate as the text of an estimate file (version 2: the final map
-    and trajectory, covariances if any, the stream's identity and the arm's options), written
-    by the canonical writer on the worker (remote or not) and handed back in the result."""
+    and trajectory, covariances if any, the stream's identity, the method's registered name
+    and the arm's options: what ``bomgraph run --method`` takes to redo it; the arm's label is
+    in ``index.csv``), written by the canonical writer on the worker (remote or not) and
+    handed back in the result."""
     with tempfile.TemporaryDirectory(prefix="bomgraph-est-") as d:
         path = os.path.join(d, "final.est")
-        write_estimate(result, path, stream=stream_identity(stream.steps),
+        write_estimate(replace(result, method=task.arm.method), path,
+                       stream=stream_identity(stream.steps),
                        options=dict(task.arm.options),
                        checkpoint_every=task.arm.checkpoint_every or task.checkpoint_every)
         with open(path, encoding="utf-8") as fh:

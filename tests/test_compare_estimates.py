@@ -90,3 +90,24 @@ def test_a_stream_an_earlier_compare_wrote_is_kept_when_a_later_one_reads_it(tmp
     assert main(base + ["--streams", str(streams[0]), "--methods", "triangulate"]) == 0
     assert streams[0].exists()
     assert not [p for p in streams[1:] if p.exists()]      # the others were its own
+
+
+def test_an_estimate_file_names_the_method_and_options_that_redo_it(tmp_path: Path) -> None:
+    """The header held the arm's label ("ekf@real"), which no --method takes: it now holds
+    the registered method and the arm's options, and running those again gives the same map."""
+    from bomgraph.bench import run_file
+
+    s = tmp_path / "mine.jsonl"
+    assert main(["simulate", "--seed", "5", "--steps", "60", "--out", str(s), "-q"]) == 0
+    out = tmp_path / "c"
+    assert main(["compare", "--streams", str(s), "--methods", "ekf@real,triangulate",
+                 "--jobs", "1", "--no-figures", "--no-progress", "--out", str(out),
+                 "--estimates", "-q"]) == 0
+    rows = {r["arm"]: r for r in _index(out)}
+    assert set(rows) == {"ekf@real", "triangulate"}
+    est = read_estimate(out / rows["ekf@real"]["estimate"])
+    assert (est.method, dict(est.options or {})) == ("ekf", {"preset": "real"})
+    again = run_file(s, est.method, est.options).final
+    assert list(again.landmark_ids) == list(est.final.landmark_ids)
+    assert (again.landmarks_xy == est.final.landmarks_xy).all()
+    assert read_estimate(out / rows["triangulate"]["estimate"]).method == "triangulate"
