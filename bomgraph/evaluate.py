@@ -192,6 +192,12 @@ class MapScore:
         out["reflected"] = self.alignment.reflected
         return out
 
+    def __repr__(self) -> str:
+        """The scalars only (the per-landmark arrays and pose errors are attributes)."""
+        head = ", ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v!r}"
+                         for k, v in self.as_dict().items())
+        return f"MapScore({head})"
+
 
 def _reference_poses(ref: Reference, est: MapEstimate) -> tuple[np.ndarray, np.ndarray,
                                                                np.ndarray] | None:

@@ -201,3 +201,11 @@ def test_align_refuses_points_given_as_columns() -> None:
     assert np.allclose(align(pts.T, pts.T).apply(pts.T), pts.T)
     with pytest.raises(EvaluationError, match=r"points_xy must have shape \(n, 2\)"):
         align(pts.T, pts.T).apply(pts)
+
+
+def test_a_score_prints_its_numbers_not_its_arrays(truth: Truth) -> None:
+    """``repr(MapScore)`` printed every per-landmark error and the alignment's arrays."""
+    est = MapEstimate(truth.landmark_ids, truth.landmarks_xy + 0.01)
+    text = repr(score_estimate(est, truth))
+    assert text.startswith("MapScore(mpe_m=") and "n_common=20" in text
+    assert "array(" not in text and "\n" not in text
