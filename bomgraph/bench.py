@@ -306,6 +306,11 @@ def _cache_path(cache_dir: Path, task: Task) -> Path:
     return cache_dir / f"{task_key(task)}.json"
 
 
+def is_cached(task: Task, cache_dir: str | os.PathLike[str]) -> bool:
+    """Whether :func:`execute` would take ``task``'s result from ``cache_dir`` (not run it)."""
+    return _read_cached(_cache_path(Path(cache_dir), task)) is not None
+
+
 def execute(tasks: Sequence[Task], executor: Executor = Executor(), *,
             cache_dir: str | os.PathLike[str] | None = None,
             progress: Callable[[int, int], None] | None = None) -> list[dict[str, Any]]:
@@ -579,5 +584,6 @@ def run_example(method: str, experiment: Experiment, *, run_index: int = 0,
     return stream, (res.final if t is None else res.at(t))
 
 
-__all__ = ["Executor", "run_task", "execute", "refuse_runtime_methods", "task_key", "code_fingerprint", "strip_timings",
-           "run_file", "count_steps", "run_example", "CACHE_VERSION"]
+__all__ = ["Executor", "run_task", "execute", "is_cached", "refuse_runtime_methods", "task_key",
+           "code_fingerprint", "strip_timings", "run_file", "count_steps", "run_example",
+           "CACHE_VERSION"]

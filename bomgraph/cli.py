@@ -229,13 +229,16 @@ def cmd_methods(args: argparse.Namespace) -> int:
 def cmd_compare(args: argparse.Namespace) -> int:
     from .bench import Executor
     from .experiments import compare_experiments
-    from .report import compare, final_by_run, format_by_run, format_summary
+    from .report import compare, final_by_run, format_by_run, format_summary, plan_compare
 
     chosen, settings = compare_experiments(
         config=args.config, streams=args.streams, methods=args.methods, options=args.option,
         reference=args.reference, checkpoint_every=args.checkpoint_every, real=args.real,
         quick=args.quick, seed=args.seed,
         names=args.experiments.split(",") if args.experiments else ())
+    if args.dry_run:
+        return _print_plan(plan_compare(chosen, args.out, use_cache=not args.no_cache,
+                                        estimates=args.estimates), args.out)
     executor = Executor.choose(args.jobs, args.scheduler, args.dask_local, defaults=settings)
     show = sys.stderr.isatty() if args.progress is None else args.progress
     bar = None
@@ -294,6 +297,20 @@ def cmd_compare(args: argparse.Namespace) -> int:
               f"them FAILED and {os.path.join(args.out, 'results.json')} holds each error",
               file=sys.stderr)
         return 1
+    return 0
+
+
+def _print_plan(rows: list[dict[str, Any]], out: str) -> int:
+    """``compare --dry-run``: the runs per experiment and arm, and how many are cached."""
+    groups: dict[tuple[str, str], list[bool]] = {}
+    for r in rows:
+        groups.setdefault((r["experiment"], r["arm"]), []).append(r["cached"])
+    width = max([len(a) for _, a in groups] + [3])
+    for (exp, arm), cached in groups.items():
+        print(f"{exp:12s} {arm:{width}s} {len(cached):6d} runs, {sum(cached):6d} cached")
+    done = sum(r["cached"] for r in rows)
+    print(f"\n{len(rows)} runs: {len(rows) - done} to run, {done} in "
+          f"{os.path.join(out, 'cache')}; nothing was run or written (--dry-run)")
     return 0
 
 

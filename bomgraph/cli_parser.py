@@ -179,6 +179,9 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--dask-local", type=_nonneg_int, metavar="N",
                    help="start a local Dask cluster of N worker processes")
     c.add_argument("--no-cache", action="store_true", help="ignore and do not write the cache")
+    c.add_argument("--dry-run", action="store_true",
+                   help="list what would run (per experiment and arm: runs, and how many are "
+                        "in --out's cache already) and stop; nothing runs or is written")
     c.add_argument("--no-figures", action="store_true", help="write no figures")
     c.add_argument("--estimates", action="store_true",
                    help="also write each run's final estimate file (map, trajectory, "

@@ -23,7 +23,7 @@ from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 
-from .bench import Executor, execute, run_example
+from .bench import Executor, execute, is_cached, run_example
 from .evaluate import score_estimate
 from .experiments import PAPER_REPORTED, DatasetSource, Experiment, FileSource, Task
 from .plots import MapPanel, error_vs_time_figure, final_maps_figure, map_figure
@@ -320,6 +320,18 @@ def _input_paths(experiments: Sequence[Experiment]) -> dict[str, str]:
     return inputs
 
 
+def plan_compare(experiments: Sequence[Experiment], out_dir: str | os.PathLike[str], *,
+                 use_cache: bool = True, estimates: bool = False) -> list[dict[str, Any]]:
+    """What :func:`compare` would run, without running or writing anything: one row per task
+    (``experiment``, ``arm``, ``run``, ``cached``: its result is in ``out_dir/cache``, so it
+    would not run again), in the order compare runs them."""
+    cache = Path(out_dir) / "cache"
+    tasks = [replace(t, keep_estimate=estimates) for e in experiments for t in e.tasks()]
+    return [{"experiment": t.experiment, "arm": t.arm.label, "run": t.source.name,
+             "cached": bool(use_cache and cache.is_dir() and is_cached(t, cache))}
+            for t in tasks]
+
+
 def refuse_inputs_among_outputs(out: Path, experiments: Sequence[Experiment]) -> None:
     """Refuse, before anything runs, a stream file or recording that ``compare`` would
     overwrite in ``out``: one of :data:`COMPARE_FILES`, a ``.png`` in it or a file under one
@@ -564,4 +576,4 @@ def _map_panel(r: Mapping[str, Any]) -> MapPanel:
 
 __all__ = ["REPORT_TIMES", "summarise", "final_by_run", "error_curves", "results_to_csv_rows",
            "format_summary", "format_by_run", "write_csv", "CompareResult", "compare",
-           "write_compare_figures", "write_estimate_files"]
+           "plan_compare", "write_compare_figures", "write_estimate_files"]

@@ -111,3 +111,23 @@ def test_an_estimate_file_names_the_method_and_options_that_redo_it(tmp_path: Pa
     assert list(again.landmark_ids) == list(est.final.landmark_ids)
     assert (again.landmarks_xy == est.final.landmarks_xy).all()
     assert read_estimate(out / rows["triangulate"]["estimate"]).method == "triangulate"
+
+
+def test_dry_run_lists_the_runs_and_the_cached_ones_and_writes_nothing(tmp_path: Path,
+                                                                      capsys) -> None:
+    s = tmp_path / "mine.jsonl"
+    assert main(["simulate", "--seed", "6", "--steps", "40", "--out", str(s), "-q"]) == 0
+    out = tmp_path / "c"
+    args = ["compare", "--streams", str(s), "--methods", "triangulate,ekf", "--jobs", "1",
+            "--no-figures", "--no-progress", "--out", str(out), "-q"]
+    capsys.readouterr()
+    assert main(args + ["--dry-run"]) == 0
+    assert not out.exists()                                   # nothing written
+    text = capsys.readouterr().out
+    assert "2 runs: 2 to run, 0 in" in text and "triangulate" in text
+    assert main(args[:4] + ["triangulate"] + args[5:]) == 0   # run one arm only
+    capsys.readouterr()
+    assert main(args + ["--dry-run"]) == 0
+    assert "2 runs: 1 to run, 1 in" in capsys.readouterr().out
+    assert main(args + ["--dry-run", "--no-cache"]) == 0
+    assert "2 runs: 2 to run, 0 in" in capsys.readouterr().out
