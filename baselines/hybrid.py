@@ -24,6 +24,7 @@ poses. Measured effects: ``docs/measurements.md``.
 
 from __future__ import annotations
 
+import json
 import math
 from dataclasses import dataclass
 from typing import Any, ClassVar, Mapping, Sequence
@@ -36,6 +37,7 @@ from bomgraph.config import requirement, resolve
 from bomgraph.errors import BomgraphError, ConfigError
 from bomgraph.evaluate import Alignment, align
 from bomgraph.geometry import dead_reckon, intersect_rays, rotation
+from bomgraph.jsonio import jsonable
 from bomgraph.mapper import MapEstimate, Mapper, check_method_options, create_mapper
 from bomgraph.stream import Step, StreamHeader
 
@@ -143,11 +145,21 @@ def check_seed(owner: str, seed_method: str, seed_options: Mapping[str, Any] | N
     ConfigError
         Naming ``owner``'s option and what the seed method refused.
     """
+    options = dict(seed_options or {})
+    key = (seed_method, json.dumps(jsonable(options), sort_keys=True))
+    if key in _SEEDS_CHECKED:
+        return
     try:
-        check_method_options(seed_method, dict(seed_options or {}))
+        check_method_options(seed_method, options)
     except BomgraphError as exc:
-        raise ConfigError(f"{owner}: seed_method={seed_method!r}, seed_options="
-                          f"{dict(seed_options or {})}: {exc}") from None
+        raise ConfigError(f"{owner}: seed_method={seed_method!r}, seed_options={options}: "
+                          f"{exc}") from None
+    _SEEDS_CHECKED.add(key)
+
+
+#: Seeds and options :func:`check_seed` accepted: a ``dataclasses.replace`` of the
+#: configuration (the warm solve makes one at every checkpoint) does not check them again.
+_SEEDS_CHECKED: set[tuple[str, str]] = set()
 
 
 # --------------------------------------------------------------------------------------------
