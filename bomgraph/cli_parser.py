@@ -171,7 +171,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="output folder; the result files of an earlier compare in it are "
                         "replaced, and the other files it wrote there (figures, estimates, "
                         "streams; listed in OUT/.bomgraph-compare-files) that this one does not "
-                        "write are removed; nothing else (the cache is kept)")
+                        "write and nobody changed since are removed; nothing else (the cache "
+                        "is kept)")
     c.add_argument("--seed", type=_nonneg_int, help="the paper design's seed (default 0)")
     c.add_argument("--jobs", type=_jobs, help="local processes (-1, the default: one per core)")
     c.add_argument("--scheduler", default=None, metavar="ADDRESS",

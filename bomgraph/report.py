@@ -15,7 +15,6 @@ import hashlib
 import json
 import math
 import os
-import re
 import time
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -25,9 +24,10 @@ import numpy as np
 
 from .bench import Executor, execute, is_cached, run_example
 from .evaluate import score_estimate
-from .experiments import PAPER_REPORTED, DatasetSource, Experiment, FileSource, Task
+from .experiments import PAPER_REPORTED, Experiment, FileSource, Task
 from .plots import MapPanel, error_vs_time_figure, final_maps_figure, map_figure
-from .stdio import OutputPathError, folder_lock, make_folder, output_file, write_text
+from .out_folder import drop_earlier_outputs, refuse_inputs_among_outputs, slug, unique_slugs
+from .stdio import folder_lock, make_folder, output_file, write_text
 
 #: The checkpoints the summary reports (and the last one of each experiment).
 REPORT_TIMES = (50, 100, 200, 300)
@@ -300,64 +300,17 @@ def compare(experiments: Sequence[Experiment], out_dir: str | os.PathLike[str], 
         return _compare(experiments, out, executor, use_cache, figures, progress, estimates)
 
 
-#: What :func:`compare` writes into its folder: these files, every ``.png`` there, and
-#: everything under these sub-folders (``streams/`` is not among them: compare writes there
-#: only the streams of simulated and imported runs, never over a stream file it reads, which
-#: :func:`write_estimate_files` refuses as it writes).
-COMPARE_FILES = ("results.json", "results.csv", "summary.csv", "final_by_run.csv",
-                 "example_map.txt")
-COMPARE_FOLDERS = ("cache", "estimates")
-
-
-def _input_paths(experiments: Sequence[Experiment]) -> dict[str, str]:
-    """The stream files and recordings ``experiments`` read: real path -> path as given."""
-    inputs: dict[str, str] = {}
-    for e in experiments:
-        for src in e.sources:
-            paths = ([src.path] if isinstance(src, FileSource) else
-                     [src.path, src.truth_path] if isinstance(src, DatasetSource) else [])
-            inputs.update((os.path.realpath(p), str(p)) for p in paths if p is not None)
-    return inputs
-
-
 def plan_compare(experiments: Sequence[Experiment], out_dir: str | os.PathLike[str], *,
                  use_cache: bool = True, estimates: bool = False) -> list[dict[str, Any]]:
     """What :func:`compare` would run, without running or writing anything: one row per task
     (``experiment``, ``arm``, ``run``, ``cached``: its result is in ``out_dir/cache``, so it
     would not run again), in the order compare runs them."""
+    refuse_inputs_among_outputs(Path(out_dir), experiments)
     cache = Path(out_dir) / "cache"
     tasks = [replace(t, keep_estimate=estimates) for e in experiments for t in e.tasks()]
     return [{"experiment": t.experiment, "arm": t.arm.label, "run": t.source.name,
              "cached": bool(use_cache and cache.is_dir() and is_cached(t, cache))}
             for t in tasks]
-
-
-def refuse_inputs_among_outputs(out: Path, experiments: Sequence[Experiment]) -> None:
-    """Refuse, before anything runs, a stream file or recording that ``compare`` would
-    overwrite in ``out``: one of :data:`COMPARE_FILES`, a ``.png`` in it or a file under one
-    of :data:`COMPARE_FOLDERS`, or a link there to an input (outputs follow links).
-
-    Raises
-    ------
-    OutputPathError
-        Naming the input and what to do.
-    """
-    inputs = _input_paths(experiments)
-    if not inputs or not out.is_dir():
-        return
-    folder = os.path.realpath(out)
-    if folder in inputs:
-        raise OutputPathError(f"--out {out}: is the input {inputs[folder]}; compare writes its "
-                              f"results there: choose another folder")
-    written = [out / n for n in COMPARE_FILES] + list(out.glob("*.png"))
-    for sub in COMPARE_FOLDERS:
-        written += [p for p in (out / sub).rglob("*") if not p.is_dir()]
-    for path in written:
-        real = os.path.realpath(path)
-        if real in inputs:
-            raise OutputPathError(f"--out {out}: compare writes {path}, which is the input "
-                                  f"{inputs[real]}; refusing to overwrite an input: move it "
-                                  f"or choose another folder")
 
 
 def _compare(experiments: Sequence[Experiment], out: Path, executor: Executor,
@@ -385,58 +338,8 @@ def _compare(experiments: Sequence[Experiment], out: Path, executor: Executor,
     write_csv(out / "final_by_run.csv", final_by_run(results))
     if figures:
         files += write_compare_figures(out, experiments, results)
-    _drop_earlier_outputs(out, files, experiments)
+    drop_earlier_outputs(out, files, experiments)
     return CompareResult(tuple(results), tuple(summary), tuple(str(f) for f in files), wall)
-
-
-#: The list of files a compare wrote in its folder (relative paths, one a line), written last:
-#: the next compare there removes those of them it does not write again, and nothing else.
-MANIFEST = ".bomgraph-compare-files"
-
-
-def _drop_earlier_outputs(out: Path, written: Sequence[Path],
-                          experiments: Sequence[Experiment]) -> None:
-    """Remove the files the previous compare in ``out`` wrote (its :data:`MANIFEST`) that this
-    one did not write (estimate files, streams, figures of other arms, runs or experiments:
-    beside this compare's results they would no longer match them), then record this one's.
-
-    A file compare did not write itself is never removed (a user's own figure in the folder),
-    nor one this compare reads (a stream an earlier compare wrote, given as an input), nor
-    anything outside ``out``; folders the removals empty go too.
-    """
-    root = os.path.realpath(out)
-    keep = {os.path.realpath(p) for p in written} | set(_input_paths(experiments))
-    try:
-        earlier = (out / MANIFEST).read_text(encoding="utf-8").splitlines()
-    except (OSError, UnicodeDecodeError):
-        earlier = []
-    for rel in earlier:
-        path = out / rel
-        real = os.path.realpath(path)
-        if (not rel or os.path.isabs(rel) or not real.startswith(root + os.sep)
-                or real in keep or path.is_symlink() or not path.is_file()):
-            continue
-        path.unlink()
-        parent = path.parent
-        while os.path.realpath(parent) != root and parent.is_dir() and not any(parent.iterdir()):
-            parent.rmdir()
-            parent = parent.parent
-    write_text(out / MANIFEST, "".join(f"{os.path.relpath(p, out)}\n" for p in written))
-
-
-def _slug(name: str) -> str:
-    """``name`` as a file or folder name: letters, digits, ``.``, ``-``, ``_``, ``@``, the
-    rest ``_``."""
-    return re.sub(r"[^A-Za-z0-9._@-]+", "_", name).strip("_") or "_"
-
-
-def _unique_slugs(names: Sequence[str]) -> dict[str, str]:
-    """Each name's :func:`_slug`; names whose slugs coincide (``tri (x)`` and ``tri_x``) get
-    their own short hash appended, so no two share a file."""
-    slugs = {n: _slug(n) for n in dict.fromkeys(names)}
-    shared = {v for v in slugs.values() if list(slugs.values()).count(v) > 1}
-    return {n: (f"{v}-{hashlib.sha256(n.encode()).hexdigest()[:8]}" if v in shared else v)
-            for n, v in slugs.items()}
 
 
 def write_estimate_files(out: Path, tasks: Sequence[Task], results: Sequence[dict[str, Any]]
@@ -459,9 +362,9 @@ def write_estimate_files(out: Path, tasks: Sequence[Task], results: Sequence[dic
         names.setdefault((t.experiment, t.source.name), set()).add(_source_hash(t))
     written: set[Path] = set()
     inputs = sorted({t.source.path for t in tasks if isinstance(t.source, FileSource)})
-    exps = _unique_slugs([t.experiment for t in tasks])
-    arms = {e: _unique_slugs([t.arm.label for t in tasks if t.experiment == e]) for e in exps}
-    runs = {e: _unique_slugs([t.source.name for t in tasks if t.experiment == e]) for e in exps}
+    exps = unique_slugs([t.experiment for t in tasks])
+    arms = {e: unique_slugs([t.arm.label for t in tasks if t.experiment == e]) for e in exps}
+    runs = {e: unique_slugs([t.source.name for t in tasks if t.experiment == e]) for e in exps}
     for t, r in zip(tasks, results):
         text = r.pop("estimate_file", None)
         if text is None:
@@ -517,7 +420,7 @@ def write_compare_figures(out_dir: str | os.PathLike[str], experiments: Sequence
                if e == exp.name and np.any(np.isfinite(c[1]))}
         fig = error_vs_time_figure(curves, robot_curves=rob,
                                    title=f"{exp.title}: landmarks ({exp.n_runs()} runs)")
-        path = out / f"{exp.name}_error_vs_time.png"
+        path = out / f"{slug(exp.name)}_error_vs_time.png"
         fig.savefig(path, dpi=120)
         files.append(path)
     for exp in experiments:
@@ -557,7 +460,7 @@ def _write_source_maps(out: Path, exp: Experiment,
             continue
         fig = final_maps_figure(truth, [_map_panel(r) for r in rs],
                                 title=f"{exp.title}: {src.name}")
-        path = out / f"{exp.name}_{src.name}_maps.png"
+        path = out / f"{slug(exp.name)}_{slug(src.name)}_maps.png"
         fig.savefig(path, dpi=100)
         files.append(path)
     return files

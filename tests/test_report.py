@@ -2,15 +2,18 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
 
 from bomgraph.bench import Executor, execute
-from bomgraph.experiments import Arm, Experiment
-from bomgraph.report import (MANIFEST, compare, error_curves, final_by_run, format_by_run,
+from bomgraph.experiments import Arm, Experiment, FileSource
+from bomgraph.out_folder import MANIFEST, drop_earlier_outputs, unique_slugs
+from bomgraph.report import (compare, error_curves, final_by_run, format_by_run,
                              format_summary, results_to_csv_rows, summarise)
-from bomgraph.sim import SimConfig
+from bomgraph.sim import SimConfig, simulate
+from bomgraph.stream_file import write_stream
 
 SMALL = SimConfig(n_steps=40, n_landmarks=20)
 
@@ -81,22 +84,61 @@ def test_a_later_compare_leaves_no_figure_of_an_earlier_one(tmp_path: Path) -> N
         "notes.png"]
 
 
+def _listed(folder: Path) -> dict[str, dict]:
+    return {e["path"]: e for e in json.loads((folder / MANIFEST).read_text())["files"]}
+
+
 def test_a_later_compare_removes_only_files_an_earlier_compare_wrote(tmp_path: Path) -> None:
     """A user's own file named as compare names its figures (``victoria_park_maps.png``) is
-    not compare's to remove: only the files the earlier compare listed in its manifest go."""
+    not compare's to remove: only the files the earlier compare listed in its manifest go,
+    and of those only the ones nobody changed since."""
     exp = _exp((Arm("tri", "triangulate"),))
     mine = tmp_path / "victoria_park_maps.png"
     mine.write_bytes(b"mine")
     compare([exp], tmp_path, executor=Executor("serial"))
-    listed = (tmp_path / MANIFEST).read_text().splitlines()
+    listed = _listed(tmp_path)
     assert "t_error_vs_time.png" in listed and "victoria_park_maps.png" not in listed
+    edited = tmp_path / "example_map.png"                # compare's, then changed by the user
+    edited.write_bytes(b"my annotated version")
     compare([exp], tmp_path, executor=Executor("serial"), figures=False)
     assert mine.read_bytes() == b"mine" and not (tmp_path / "t_error_vs_time.png").exists()
-    outside = tmp_path.parent / f"{tmp_path.name}-outside.png"
-    outside.write_bytes(b"x")
-    (tmp_path / MANIFEST).write_text(f"../{outside.name}\n{outside}\n")
-    compare([exp], tmp_path, executor=Executor("serial"), figures=False)
-    assert outside.exists() and mine.exists()            # a manifest never reaches outside
+    assert edited.read_bytes() == b"my annotated version"
+
+
+def test_a_manifest_never_reaches_outside_its_folder_or_through_a_link(tmp_path: Path
+                                                                       ) -> None:
+    out = tmp_path / "out"
+    (out / "other").mkdir(parents=True)
+    outside = tmp_path / "outside.png"
+    for f in (outside, out / "other" / "r.est"):
+        f.write_bytes(b"x")
+    (out / "estimates").mkdir()
+    (out / "estimates" / "e").symlink_to(out / "other")  # a folder link inside OUT
+    entries = [{"path": p, "size": 1, "mtime_ns": f.stat().st_mtime_ns}
+               for p, f in (("../outside.png", outside), (str(outside), outside),
+                            ("estimates/e/r.est", out / "other" / "r.est"))]
+    (out / MANIFEST).write_text(json.dumps({"format": "bomgraph-compare-files", "version": 1,
+                                            "files": entries}))
+    drop_earlier_outputs(out, [], [])
+    assert outside.exists() and (out / "other" / "r.est").exists()
+    assert _listed(out) == {}                            # and this compare wrote nothing
+    (out / MANIFEST).write_text("estimates/e/r.est\n")    # not a manifest: ignored
+    drop_earlier_outputs(out, [], [])
+    assert (out / "other" / "r.est").exists()
+
+
+def test_names_make_files_without_separators_and_differ_beyond_case(tmp_path: Path) -> None:
+    """A run labelled with a newline made a figure name of two lines; arms differing in case
+    only shared one folder on a case-insensitive disk."""
+    got = unique_slugs(["EKF", "ekf", "tri"])
+    assert got["tri"] == "tri" and got["EKF"].casefold() != got["ekf"].casefold()
+    src = tmp_path / "s.jsonl"
+    write_stream(simulate(SMALL, np.random.default_rng(3)), src)
+    exp = Experiment("e", "e", (Arm("tri", "triangulate"),),
+                     sources=(FileSource(str(src), "thesis.tex\nz"),))
+    compare([exp], tmp_path / "out", executor=Executor("serial"))
+    names = [p.name for p in (tmp_path / "out").iterdir()]
+    assert "e_thesis.tex_z_maps.png" in names and not [n for n in names if "\n" in n]
 
 
 def test_error_curves_of_streams_of_different_lengths_do_not_depend_on_their_order(
