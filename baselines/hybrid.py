@@ -24,7 +24,6 @@ poses. Measured effects: ``docs/measurements.md``.
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass
 from typing import Any, ClassVar, Mapping, Sequence
@@ -37,8 +36,8 @@ from bomgraph.config import requirement, resolve
 from bomgraph.errors import BomgraphError, ConfigError
 from bomgraph.evaluate import Alignment, align
 from bomgraph.geometry import dead_reckon, intersect_rays, rotation
-from bomgraph.jsonio import jsonable
-from bomgraph.mapper import MapEstimate, Mapper, check_method_options, create_mapper
+from bomgraph.mapper import (MapEstimate, Mapper, check_method_options, create_mapper,
+                             method_info)
 from bomgraph.stream import Step, StreamHeader
 
 from .bearing_graph import FactorGraphConfig, insert_pose, landmark_key, landmarks_from_values
@@ -146,7 +145,11 @@ def check_seed(owner: str, seed_method: str, seed_options: Mapping[str, Any] | N
         Naming ``owner``'s option and what the seed method refused.
     """
     options = dict(seed_options or {})
-    key = (seed_method, json.dumps(jsonable(options), sort_keys=True))
+    try:
+        target = method_info(seed_method).target
+    except BomgraphError:
+        target = None                       # refused by check_method_options below
+    key = (seed_method, target, _canonical(options))
     if key in _SEEDS_CHECKED:
         return
     try:
@@ -157,9 +160,21 @@ def check_seed(owner: str, seed_method: str, seed_options: Mapping[str, Any] | N
     _SEEDS_CHECKED.add(key)
 
 
-#: Seeds and options :func:`check_seed` accepted: a ``dataclasses.replace`` of the
-#: configuration (the warm solve makes one at every checkpoint) does not check them again.
-_SEEDS_CHECKED: set[tuple[str, str]] = set()
+#: Seeds (name, registered target) and options :func:`check_seed` accepted: a
+#: ``dataclasses.replace`` of the configuration (the warm solve makes one at every checkpoint)
+#: does not check them again.
+_SEEDS_CHECKED: set[tuple[str, str | None, str]] = set()
+
+
+def _canonical(value: Any) -> str:
+    """``value`` as a string that tells apart what the option checks tell apart (types, nan,
+    tuples from lists), mappings in key order."""
+    if isinstance(value, Mapping):
+        return "{" + ", ".join(f"{k!r}: {_canonical(v)}" for k, v in sorted(
+            value.items(), key=lambda kv: repr(kv[0]))) + "}"
+    if isinstance(value, (list, tuple)):
+        return type(value).__name__ + "(" + ", ".join(_canonical(v) for v in value) + ")"
+    return f"{type(value).__name__}:{value!r}"
 
 
 # --------------------------------------------------------------------------------------------

@@ -41,3 +41,18 @@ def test_compare_refuses_a_bad_seed_before_anything_runs(
     assert code == 2
     assert len(err) == 1 and "seed_method='stmds-smacfo'" in err[0]
     assert not (out / "results.json").exists()
+
+
+def test_a_seed_checked_once_is_not_taken_for_another() -> None:
+    """Each seed and its options are checked once per process (the warm solve replaces the
+    configuration at every checkpoint); options the checks tell apart (None and nan, a tuple
+    and a list) are not taken for one another (helper-26's review: nan passed after None)."""
+    import math
+
+    from baselines.hybrid import HybridConfig, check_seed
+
+    check_seed("X", "stmds-smacof", {"tri_parallax_rad": None})
+    with pytest.raises(ConfigError, match="nan"):
+        check_seed("X", "stmds-smacof", {"tri_parallax_rad": math.nan})
+    with pytest.raises(ConfigError):
+        HybridConfig(seed_method="stmds-smacof", seed_options={"tri_parallax_rad": math.nan})
