@@ -22,7 +22,6 @@ from typing import Any  # noqa: E402
 FAMILIES = ("m6", "m6dense", "m6sigx0.5", "m6sigx2", "m1", "m1dense")
 #: The filters these benchmarks compare.
 METHODS = ("ekf", "ekf-invdepth")
-ROBOTS = range(1, 6)
 
 
 def stream_path(folder: Path, family: str, robot: int) -> str:

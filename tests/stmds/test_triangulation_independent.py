@@ -138,7 +138,7 @@ def _reflect_pose(p: np.ndarray) -> np.ndarray:
     return np.array([p[0], -p[1], -p[2]])
 
 
-def test_pair_distances_do_not_depend_on_the_world_frame_the_order_or_the_wrap() -> None:
+def test_pair_distances_do_not_depend_on_a_mirrored_world_the_order_or_the_wrap() -> None:
     rng = np.random.default_rng(15)
     pose_a, pose_b, pts = _scene(rng, 6)
     sig_odo, sig_b = np.array([0.03, 0.01, 0.05]), 0.05
@@ -149,16 +149,9 @@ def test_pair_distances_do_not_depend_on_the_world_frame_the_order_or_the_wrap()
         return pair_squared_distances(tri, sig_odo, sig_b)
 
     base = estimate(pose_a, pose_b, pts)
-    # rotation and translation of the world: odometry and bearings are unchanged
-    ang, t = 2.2, np.array([-3.0, 5.0])
-    rot = np.array([[np.cos(ang), -np.sin(ang)], [np.sin(ang), np.cos(ang)]])
-
-    def move(p):
-        return np.array([*(rot @ p[:2] + t), p[2] + ang])
-
-    moved = estimate(move(pose_a), move(pose_b), pts @ rot.T + t)
-    np.testing.assert_allclose(moved.squared_distance_m2, base.squared_distance_m2, rtol=1e-9)
-    np.testing.assert_allclose(moved.variance_m4, base.variance_m4, rtol=1e-8)
+    # (a rotation or translation of the world is not checked here: the estimate takes only
+    # the odometry and bearings, which such a move leaves equal to 2e-16 -- a check of
+    # ``between`` and ``bearings_to``, not of the pair estimates, so it could not fail)
     # reflection (y -> -y): bearings, dy and dpsi change sign; distances and variances don't
     # (the odometry sigmas of dx and dy stay with their components)
     mirrored = estimate(_reflect_pose(pose_a), _reflect_pose(pose_b), pts * [1.0, -1.0])
