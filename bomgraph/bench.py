@@ -453,24 +453,17 @@ def _dispatch(tasks: list[Task], index: list[int],
 
 def _dispatch_dask(tasks: list[Task], index: list[int],
                    executor: Executor) -> Iterator[tuple[int, dict[str, Any]]]:
-    from distributed import Client, LocalCluster, as_completed
+    from .cluster import dispatch
 
-    cluster = None
-    if executor.scheduler:
-        client = Client(executor.scheduler)
-    else:
-        cluster = LocalCluster(n_workers=_local_workers(executor.dask_local, len(tasks)),
-                               threads_per_worker=1,
-                               processes=True, host="127.0.0.1", dashboard_address=None)
-        client = Client(cluster)
-    try:
-        futures = client.map(_indexed, index, tasks, pure=False)
-        for fut in as_completed(futures):
-            yield fut.result()
-    finally:
-        client.close()
-        if cluster is not None:
-            cluster.close()
+    by_k = dict(zip(index, tasks))
+
+    def failed(k: int, error: str) -> dict[str, Any]:  # the cluster could not run the task
+        t = by_k[k]
+        return {"experiment": t.experiment, "arm": t.arm.label, "method": t.arm.method,
+                "run": t.source.name, "key": task_key(t), "ok": False, "error": error}
+
+    yield from dispatch(_indexed, index, tasks, scheduler=executor.scheduler,
+                        n_local=_local_workers(executor.dask_local, len(tasks)), failed=failed)
 
 
 def strip_timings(results: Iterable[Mapping[str, Any]]) -> list[dict[str, Any]]:
