@@ -342,11 +342,11 @@ def execute(tasks: Sequence[Task], executor: Executor = Executor(), *,
     done = len(tasks) - sum(len(ks) for ks in twins.values())
     if progress:
         progress(done, len(tasks))
+    other_key: list[str] = []
     for k, res in _dispatch([tasks[k] for k in todo], todo, executor):
         if res.get("key") != task_key(tasks[k]):  # kept, but a later read would refuse it
-            _log.warning("%s on %s: the worker keyed the task %s, this process %s (other code "
-                         "or data files there); the result is not cached", tasks[k].arm.label,
-                         tasks[k].source.name, res.get("key"), task_key(tasks[k]))
+            if res.get("ok"):  # a failure is never cached, and says why itself
+                other_key.append(f"{tasks[k].arm.label} on {tasks[k].source.name}")
         elif cache is not None and res.get("ok"):  # failures are re-run next time
             _write_cached(_cache_path(cache, tasks[k]), res)
         for j in twins[task_key(tasks[k])]:
@@ -356,6 +356,11 @@ def execute(tasks: Sequence[Task], executor: Executor = Executor(), *,
             done += 1
         if progress:
             progress(done, len(tasks))
+    if other_key:  # one line, not one a run
+        _log.warning("%d run(s) not cached (first: %s): the workers keyed them otherwise than "
+                     "this process: other bomgraph or plugin code, library versions or data "
+                     "files there; give them this process's (and restart them)",
+                     len(other_key), other_key[0])
     return [r for r in results if r is not None]
 
 

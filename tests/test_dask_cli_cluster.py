@@ -21,6 +21,7 @@ from __future__ import annotations
 import contextlib
 import json
 import os
+import shutil
 import socket
 import subprocess
 import sys
@@ -37,6 +38,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 MAPPER = '''\
 import os
+import shutil
 
 import numpy as np
 
@@ -227,3 +229,46 @@ def test_an_http_address_is_refused_before_connecting(setup: dict) -> None:
     line = _one_line(proc)
     assert proc.returncode == 2
     assert "not a Dask scheduler address (unknown address scheme 'http'" in line
+
+
+def test_a_stale_worker_is_one_line_and_nothing_is_cached(setup: dict) -> None:
+    """After an edit of the plugin while the workers run, each run fails saying to restart
+    the workers: one line (it was also one warning a run about its key), nothing cached."""
+    out = setup["root"] / "stale"
+    source = Path(setup["env"]["PYTHONPATH"].split(os.pathsep)[1]) / "crashy" / "mapper.py"
+    text = source.read_text()
+    with _cluster(setup, setup["env"]) as address:
+        assert _compare(setup, address, "crashy", out).returncode == 0
+        try:
+            source.write_text(text + "\n# edited while the workers run\n")
+            proc = _compare(setup, address, "crashy", out)
+        finally:
+            source.write_text(text)
+    line = _one_line(proc)
+    assert proc.returncode == 1
+    assert "stale worker: restart the workers and run again" in line
+    assert len(list((out / "cache").glob("*.json"))) == 2  # the first compare's only
+
+
+def test_workers_with_other_bomgraph_code_log_one_line_and_cache_nothing(
+        setup: dict, tmp_path: Path) -> None:
+    """A worker importing another copy of bomgraph (another checkout, other library versions:
+    another code fingerprint) keys every run otherwise: its results are reported, not cached,
+    and said so in one line (it was one a run)."""
+    other = tmp_path / "other"
+    for pkg in ("bomgraph", "baselines"):
+        shutil.copytree(ROOT / pkg, other / pkg,
+                        ignore=shutil.ignore_patterns("__pycache__"))
+    with open(other / "bomgraph" / "angles.py", "a") as fh:
+        fh.write("\n# another checkout\n")
+    env = {**setup["env"], "PYTHONPATH": os.pathsep.join(
+        [str(other), setup["env"]["PYTHONPATH"].split(os.pathsep)[1]])}
+    out = tmp_path / "out"
+    with _cluster(setup, env) as address:
+        proc = _compare(setup, address, "triangulate,crashy", out)
+    line = _one_line(proc)
+    assert proc.returncode == 0
+    assert "WARNING: 4 run(s) not cached (first: " in line
+    assert "the workers keyed them otherwise than this process" in line
+    assert list((out / "cache").glob("*.json")) == []
+    assert all(_ok_runs(out).values())
