@@ -13,7 +13,9 @@ from __future__ import annotations
 
 import asyncio
 import concurrent.futures
+import contextlib
 import logging
+from concurrent.futures import CancelledError
 from typing import Any, Callable, Iterator, Sequence
 
 from .errors import ConfigError, UnknownMethodError
@@ -79,6 +81,11 @@ def worker_failure(exc: BaseException) -> str:
     """A failed run's error for a task the cluster could not run (one line)."""
     from distributed.scheduler import KilledWorker
 
+    if isinstance(exc, CancelledError):
+        reason = getattr(exc, "reason", None) or "cancelled"
+        return (f"the Dask scheduler dropped it ({reason}: the scheduler stopped or the "
+                f"connection to it was lost); finished runs are cached: start the scheduler "
+                f"and run again")
     if isinstance(exc, KilledWorker):
         return ("KilledWorker: every Dask worker that ran it died (a crash in native code, "
                 "the out-of-memory killer, or a worker stopped); see the workers' logs, then "
@@ -92,12 +99,33 @@ def worker_failure(exc: BaseException) -> str:
     return f"on a Dask worker, {reason}"
 
 
+@contextlib.contextmanager
+def _quiet_dask() -> Iterator[None]:
+    """Dask's own log lines (its client reconnecting with a traceback, "Couldn't gather")
+    only with ``-v``: without it a failure is the failed runs' one line. Not restored: the
+    client's reconnect task logs its traceback when the process ends."""
+    if not logging.getLogger("bomgraph").isEnabledFor(logging.INFO):
+        for name in ["distributed", *logging.root.manager.loggerDict]:  # some set a level
+            if name.split(".")[0] == "distributed":
+                logging.getLogger(name).setLevel(logging.CRITICAL)
+    yield
+
+
 def dispatch(func: Callable[[int, Any], tuple[int, dict[str, Any]]], index: Sequence[int],
              tasks: Sequence[Any], *, scheduler: str | None, n_local: int,
              failed: Callable[[int, str], dict[str, Any]]
              ) -> Iterator[tuple[int, dict[str, Any]]]:
     """``func(k, task)`` for each pair on the cluster, yielded as they finish; a task the
     cluster could not run is ``(k, failed(k, reason))``."""
+    with _quiet_dask():
+        yield from _dispatch(func, index, tasks, scheduler=scheduler, n_local=n_local,
+                             failed=failed)
+
+
+def _dispatch(func: Callable[[int, Any], tuple[int, dict[str, Any]]], index: Sequence[int],
+              tasks: Sequence[Any], *, scheduler: str | None, n_local: int,
+              failed: Callable[[int, str], dict[str, Any]]
+              ) -> Iterator[tuple[int, dict[str, Any]]]:
     from distributed import Client, LocalCluster, wait
 
     cluster = None
@@ -119,8 +147,13 @@ def dispatch(func: Callable[[int, Any], tuple[int, dict[str, Any]]], index: Sequ
         while pending:
             try:
                 done, pending = wait(pending, timeout=POLL_S, return_when="FIRST_COMPLETED")
+            except CancelledError:  # the scheduler is gone: what finished, and failed runs
+                done, pending = pending, set()
             except TimeoutError:
-                idle = not client.nthreads()
+                try:
+                    idle = not client.nthreads()
+                except Exception:  # the scheduler is going: its futures say so
+                    continue
                 if idle and not alone:
                     _log.warning("no Dask worker left at %s: the runs wait for one (start "
                                  "`dask worker %s`, or Ctrl-C: finished runs are cached)",

@@ -38,6 +38,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 MAPPER = '''\
 import os
+import time
 import shutil
 
 import numpy as np
@@ -48,13 +49,15 @@ from bomgraph.mapper import MapEstimate
 class Crashy:
     """first bearings at 1 m; crash=True ends its process (a crash in native code)"""
 
-    def __init__(self, header, *, crash: bool = False) -> None:
+    def __init__(self, header, *, crash: bool = False, slow_s: float = 0.0) -> None:
         self.crash = crash
+        self.slow_s = slow_s
         self.seen = {}
 
     def step(self, step) -> None:
         if self.crash and step.t == 3:
             os._exit(3)
+        time.sleep(self.slow_s)
         for lid, b in zip(step.landmark_ids.tolist(), step.bearings_rad.tolist()):
             self.seen.setdefault(lid, (np.cos(b), np.sin(b)))
 
@@ -98,35 +101,41 @@ def setup(tmp_path_factory: pytest.TempPathFactory) -> dict:
             "cwd": elsewhere}
 
 
+def _stop(p: subprocess.Popen) -> None:
+    p.terminate()
+    try:
+        p.wait(timeout=20)
+    except subprocess.TimeoutExpired:
+        p.kill()
+        p.wait()
+
+
 @contextlib.contextmanager
-def _cluster(setup: dict, worker_env: dict) -> Iterator[str]:
-    """``dask scheduler`` and one ``dask worker`` (1 thread, in another folder): the
-    scheduler's address, both stopped at the end."""
+def _cluster(setup: dict, worker_env: dict, workers: int = 1) -> Iterator[str]:
+    """``dask scheduler`` and ``workers`` ``dask worker`` (1 thread, in another folder):
+    the scheduler's address, all stopped at the end (``setup["cluster"]``: the processes)."""
     address = f"tcp://127.0.0.1:{_free_port()}"
-    procs = []
+    procs: list[subprocess.Popen] = []
+    setup["cluster"] = procs
     try:
         procs.append(subprocess.Popen(
             [sys.executable, "-m", "distributed.cli.dask_scheduler", "--host", "127.0.0.1",
              "--port", address.rsplit(":", 1)[1], "--dashboard-address", ":0", "--no-show"],
             env=setup["env"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
-        procs.append(subprocess.Popen(
-            [sys.executable, "-m", "distributed.cli.dask_worker", address, "--nthreads", "1",
-             "--no-dashboard"], env=worker_env, cwd=setup["cwd"],
-            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
+        for _ in range(workers):
+            procs.append(subprocess.Popen(
+                [sys.executable, "-m", "distributed.cli.dask_worker", address, "--nthreads",
+                 "1", "--no-dashboard"], env=worker_env, cwd=setup["cwd"],
+                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
         from distributed import Client
 
-        with Client(address, timeout=60) as client:  # the worker has registered
-            client.wait_for_workers(1, timeout=60)
+        with Client(address, timeout=60) as client:  # the workers have registered
+            if workers:
+                client.wait_for_workers(workers, timeout=60)
         yield address
     finally:
         for p in reversed(procs):
-            p.terminate()
-        for p in procs:
-            try:
-                p.wait(timeout=20)
-            except subprocess.TimeoutExpired:
-                p.kill()
-                p.wait()
+            _stop(p)
 
 
 def _compare(setup: dict, address: str, methods: str, out: Path, *more: str,
@@ -272,3 +281,46 @@ def test_workers_with_other_bomgraph_code_log_one_line_and_cache_nothing(
     assert "the workers keyed them otherwise than this process" in line
     assert list((out / "cache").glob("*.json")) == []
     assert all(_ok_runs(out).values())
+
+
+def test_a_lost_scheduler_fails_the_runs_in_flight_in_one_line_and_keeps_the_rest(
+        setup: dict) -> None:
+    """The scheduler stopped mid-compare: a FuturesCancelledError traceback, with Dask's
+    reconnect traceback; now the runs it dropped are failed runs (exit 1, one line), the ones
+    that finished are cached, and a compare started on a scheduler without workers says so
+    (it waits for them)."""
+    out = setup["root"] / "lost"
+    with _cluster(setup, setup["env"]) as address:
+        procs = subprocess.Popen(  # a slow run for the scheduler to drop
+            [sys.executable, "-m", "bomgraph", "compare", "--streams", *setup["streams"],
+             "--methods", "triangulate,crashy", "--option", "crashy:slow_s=0.5",
+             "--scheduler", address, "--no-figures", "--out", str(out)], env=setup["env"],
+            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        deadline = time.monotonic() + 60
+        while len(list((out / "cache").glob("*.json"))) < 2:  # triangulate's runs are done
+            assert time.monotonic() < deadline and procs.poll() is None
+            time.sleep(0.2)
+        _stop(setup["cluster"][0])  # the scheduler
+        stdout, stderr = procs.communicate(timeout=60)
+    proc = subprocess.CompletedProcess(procs.args, procs.returncode, stdout, stderr)
+    line = _one_line(proc)
+    assert proc.returncode == 1
+    assert "the Dask scheduler dropped it (scheduler-connection-lost" in line
+    assert _ok_runs(out) == {("triangulate", "s1"): True, ("triangulate", "s2"): True,
+                             ("crashy", "s1"): False, ("crashy", "s2"): False}
+
+
+def test_a_scheduler_without_workers_is_said_once(setup: dict) -> None:
+    with _cluster(setup, setup["env"], workers=0) as address:
+        procs = subprocess.Popen(
+            [sys.executable, "-m", "bomgraph", "compare", "--streams", *setup["streams"],
+             "--methods", "triangulate", "--scheduler", address, "--no-figures", "--out",
+             str(setup["root"] / "alone")], env=setup["env"],
+            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+        try:
+            first = procs.stderr.readline()
+        finally:
+            procs.kill()
+            procs.communicate(timeout=30)
+    assert first.startswith(f"bomgraph: WARNING: the Dask scheduler at {address} has no "
+                            f"workers: the runs wait for one (start `dask worker {address}`)")
