@@ -347,11 +347,11 @@ def execute(tasks: Sequence[Task], executor: Executor = Executor(), *,
     done = len(tasks) - sum(len(ks) for ks in twins.values())
     if progress:
         progress(done, len(tasks))
+    other_key: list[str] = []
     for k, res in _dispatch([tasks[k] for k in todo], todo, executor):
         if res.get("key") != task_key(tasks[k]):  # kept, but a later read would refuse it
-            _log.warning("%s on %s: the worker keyed the task %s, this process %s (other code "
-                         "or data files there); the result is not cached", tasks[k].arm.label,
-                         tasks[k].source.name, res.get("key"), task_key(tasks[k]))
+            if res.get("ok"):  # a failure is never cached, and says why itself
+                other_key.append(f"{tasks[k].arm.label} on {tasks[k].source.name}")
         elif cache is not None and res.get("ok"):  # failures are re-run next time
             _write_cached(_cache_path(cache, tasks[k]), res)
         for j in twins[task_key(tasks[k])]:
@@ -361,6 +361,11 @@ def execute(tasks: Sequence[Task], executor: Executor = Executor(), *,
             done += 1
         if progress:
             progress(done, len(tasks))
+    if other_key:  # one line, not one a run
+        _log.warning("%d run(s) not cached (first: %s): the workers keyed them otherwise than "
+                     "this process: other bomgraph or plugin code, library versions or data "
+                     "files there; give them this process's (and restart them)",
+                     len(other_key), other_key[0])
     return [r for r in results if r is not None]
 
 
@@ -458,24 +463,17 @@ def _dispatch(tasks: list[Task], index: list[int],
 
 def _dispatch_dask(tasks: list[Task], index: list[int],
                    executor: Executor) -> Iterator[tuple[int, dict[str, Any]]]:
-    from distributed import Client, LocalCluster, as_completed
+    from .cluster import dispatch
 
-    cluster = None
-    if executor.scheduler:
-        client = Client(executor.scheduler)
-    else:
-        cluster = LocalCluster(n_workers=_local_workers(executor.dask_local, len(tasks)),
-                               threads_per_worker=1,
-                               processes=True, host="127.0.0.1", dashboard_address=None)
-        client = Client(cluster)
-    try:
-        futures = client.map(_indexed, index, tasks, pure=False)
-        for fut in as_completed(futures):
-            yield fut.result()
-    finally:
-        client.close()
-        if cluster is not None:
-            cluster.close()
+    by_k = dict(zip(index, tasks))
+
+    def failed(k: int, error: str) -> dict[str, Any]:  # the cluster could not run the task
+        t = by_k[k]
+        return {"experiment": t.experiment, "arm": t.arm.label, "method": t.arm.method,
+                "run": t.source.name, "key": task_key(t), "ok": False, "error": error}
+
+    yield from dispatch(_indexed, index, tasks, scheduler=executor.scheduler,
+                        n_local=_local_workers(executor.dask_local, len(tasks)), failed=failed)
 
 
 def strip_timings(results: Iterable[Mapping[str, Any]]) -> list[dict[str, Any]]:

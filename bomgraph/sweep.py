@@ -284,14 +284,16 @@ def scheduler_address_problem(address: str) -> str:
     parser (``tcp://host:port``, ``host:port``, ``tls://``, ``inproc://``, ...), and a TCP or
     TLS port within 1-65535."""
     from distributed.comm.addressing import parse_address, parse_host_port
+    from distributed.comm.registry import get_backend
 
     try:
         scheme, loc = parse_address(address)
+        get_backend(scheme)  # http:// (a dashboard's) is none of Dask's
         if scheme in ("tcp", "tls"):
             _, port = parse_host_port(loc)
             if not 1 <= int(port) <= 65535:
                 return f"port {port} is not in 1-65535; give e.g. tcp://HOST:8786"
-    except (ValueError, TypeError) as exc:
+    except (ValueError, TypeError, ImportError) as exc:
         return f"not a Dask scheduler address ({exc}); give e.g. tcp://HOST:8786"
     return ""
 

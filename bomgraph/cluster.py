@@ -1,0 +1,176 @@
+"""Tasks on a Dask cluster: a local one (``--dask-local N``) or an existing scheduler
+(``--scheduler ADDRESS``, e.g. ``dask scheduler`` and ``dask worker`` started by hand).
+
+Before connecting, the scheduler is asked who it is within Dask's connect timeout
+(:func:`check_scheduler`): ``distributed.Client`` waits forever on a port that accepts the
+connection and never answers (a dashboard's), and dies with a traceback on one that answers
+something else. A task that fails on the cluster itself (every worker that ran it died, or a
+worker could not import it) becomes a failed run with the reason, so the other runs finish and
+are cached. Imports nothing from bomgraph but the errors.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import concurrent.futures
+import contextlib
+import logging
+from concurrent.futures import CancelledError
+from typing import Any, Callable, Iterator, Sequence
+
+from .errors import ConfigError, UnknownMethodError
+
+_log = logging.getLogger(__name__)
+
+#: seconds between looks at the cluster while no run finishes (for the no-worker warning)
+POLL_S = 5.0
+
+
+def connect_timeout() -> float:
+    """Dask's connect timeout (``distributed.comm.timeouts.connect``, 30 s by default) [s]."""
+    import dask.config
+    from dask.utils import parse_timedelta
+
+    return float(parse_timedelta(dask.config.get("distributed.comm.timeouts.connect"),
+                                 default="seconds"))
+
+
+async def _identity(address: str, timeout: float) -> Any:
+    from distributed.comm import connect
+
+    comm = await asyncio.wait_for(connect(address, timeout=timeout), timeout)
+    try:
+        await asyncio.wait_for(comm.write({"op": "identity"}), timeout)
+        return await asyncio.wait_for(comm.read(), timeout)
+    finally:
+        comm.abort()
+
+
+def check_scheduler(address: str, timeout: float | None = None) -> int:
+    """The number of workers of the Dask scheduler at ``address``, asked within ``timeout``
+    seconds (default :func:`connect_timeout`).
+
+    Raises
+    ------
+    ConfigError
+        Nothing answers there in time, or what answers is no Dask scheduler (a worker, a
+        dashboard, another service): one line saying which, and what to check.
+    """
+    timeout = connect_timeout() if timeout is None else timeout
+    hint = ("is `dask scheduler` running, and is this the address it printed (not its "
+            "dashboard's or a worker's)?")
+    with concurrent.futures.ThreadPoolExecutor(1) as pool:  # also under a running event loop
+        try:
+            reply = pool.submit(asyncio.run, _identity(address, timeout)).result()
+        except (asyncio.TimeoutError, TimeoutError):
+            raise ConfigError(f"--scheduler {address}: no Dask scheduler answered within "
+                              f"{timeout:g} s; {hint}") from None
+        except Exception as exc:  # refused, unresolvable, or a reply Dask cannot read
+            reason = ((str(exc).splitlines() or [type(exc).__name__])[0]
+                      if isinstance(exc, OSError) else "what answers speaks no Dask")
+            raise ConfigError(f"--scheduler {address}: no Dask scheduler there ({reason}); "
+                              f"{hint}") from None
+    kind = reply.get("type") if isinstance(reply, dict) else None
+    if kind != "Scheduler":
+        raise ConfigError(f"--scheduler {address}: that is a Dask {kind or 'service'}, not a "
+                          f"scheduler; give the address `dask scheduler` printed")
+    return int(reply.get("n_workers", len(reply.get("workers", {}))))
+
+
+def worker_failure(exc: BaseException) -> str:
+    """A failed run's error for a task the cluster could not run (one line)."""
+    from distributed.scheduler import KilledWorker
+
+    if isinstance(exc, CancelledError):
+        reason = getattr(exc, "reason", None) or "cancelled"
+        return (f"the Dask scheduler dropped it ({reason}: the scheduler stopped or the "
+                f"connection to it was lost); finished runs are cached: start the scheduler "
+                f"and run again")
+    if isinstance(exc, KilledWorker):
+        return ("KilledWorker: every Dask worker that ran it died (a crash in native code, "
+                "the out-of-memory killer, or a worker stopped); see the workers' logs, then "
+                "run again (finished runs are cached)")
+    first = (str(exc).splitlines() or [""])[0].split("; known methods")[0]
+    reason = f"{type(exc).__name__}: {first}" if first else type(exc).__name__
+    if isinstance(exc, (UnknownMethodError, ImportError)):
+        return (f"on a Dask worker, {reason}; every worker needs bomgraph and your plugins "
+                f"importable (installed there, or on the PYTHONPATH `dask worker` starts "
+                f"with): fix that and restart the workers")
+    return f"on a Dask worker, {reason}"
+
+
+@contextlib.contextmanager
+def _quiet_dask() -> Iterator[None]:
+    """Dask's own log lines (its client reconnecting with a traceback, "Couldn't gather")
+    only with ``-v``: without it a failure is the failed runs' one line. Not restored: the
+    client's reconnect task logs its traceback when the process ends."""
+    if not logging.getLogger("bomgraph").isEnabledFor(logging.INFO):
+        for name in ["distributed", *logging.root.manager.loggerDict]:  # some set a level
+            if name.split(".")[0] == "distributed":
+                logging.getLogger(name).setLevel(logging.CRITICAL)
+    yield
+
+
+def dispatch(func: Callable[[int, Any], tuple[int, dict[str, Any]]], index: Sequence[int],
+             tasks: Sequence[Any], *, scheduler: str | None, n_local: int,
+             failed: Callable[[int, str], dict[str, Any]]
+             ) -> Iterator[tuple[int, dict[str, Any]]]:
+    """``func(k, task)`` for each pair on the cluster, yielded as they finish; a task the
+    cluster could not run is ``(k, failed(k, reason))``."""
+    with _quiet_dask():
+        yield from _dispatch(func, index, tasks, scheduler=scheduler, n_local=n_local,
+                             failed=failed)
+
+
+def _dispatch(func: Callable[[int, Any], tuple[int, dict[str, Any]]], index: Sequence[int],
+              tasks: Sequence[Any], *, scheduler: str | None, n_local: int,
+              failed: Callable[[int, str], dict[str, Any]]
+              ) -> Iterator[tuple[int, dict[str, Any]]]:
+    from distributed import Client, LocalCluster, wait
+
+    cluster = None
+    alone = False  # warned that no worker is there
+    if scheduler:
+        alone = check_scheduler(scheduler) == 0
+        if alone:
+            _log.warning("the Dask scheduler at %s has no workers: the runs wait for one "
+                         "(start `dask worker %s`)", scheduler, scheduler)
+        client = Client(scheduler, timeout=connect_timeout())
+    else:
+        cluster = LocalCluster(n_workers=n_local, threads_per_worker=1, processes=True,
+                               host="127.0.0.1", dashboard_address=None)
+        client = Client(cluster)
+    try:
+        futures = client.map(func, list(index), list(tasks), pure=False)
+        which = {f.key: k for f, k in zip(futures, index)}
+        pending = set(futures)
+        while pending:
+            try:
+                done, pending = wait(pending, timeout=POLL_S, return_when="FIRST_COMPLETED")
+            except CancelledError:  # the scheduler is gone: what finished, and failed runs
+                done, pending = pending, set()
+            except TimeoutError:
+                try:
+                    idle = not client.nthreads()
+                except Exception:  # the scheduler is going: its futures say so
+                    continue
+                if idle and not alone:
+                    _log.warning("no Dask worker left at %s: the runs wait for one (start "
+                                 "`dask worker %s`, or Ctrl-C: finished runs are cached)",
+                                 client.scheduler.address, client.scheduler.address)
+                alone = idle
+                continue
+            for fut in done:
+                try:
+                    out = fut.result()
+                except Exception as exc:  # the cluster's failure, not the method's
+                    _log.debug("task %s failed on the cluster", fut.key, exc_info=exc)
+                    out = (which[fut.key], failed(which[fut.key], worker_failure(exc)))
+                yield out
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+
+
+__all__ = ["check_scheduler", "connect_timeout", "dispatch", "worker_failure"]
