@@ -240,6 +240,10 @@ def cmd_compare(args: argparse.Namespace) -> int:
         return _print_plan(plan_compare(chosen, args.out, use_cache=not args.no_cache,
                                         estimates=args.estimates), args.out)
     executor = Executor.choose(args.jobs, args.scheduler, args.dask_local, defaults=settings)
+    if executor.backend == "dask" and not getattr(args, "verbose", 0):
+        from .cluster import quiet_dask_logging
+
+        quiet_dask_logging()    # a cluster's failure is the failed runs' line, Dask's with -v
     show = sys.stderr.isatty() if args.progress is None else args.progress
     bar = None
     seen = {"done": 0}

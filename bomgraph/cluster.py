@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import asyncio
 import concurrent.futures
-import contextlib
+import importlib
 import logging
 from concurrent.futures import CancelledError
 from typing import Any, Callable, Iterator, Sequence
@@ -99,16 +99,16 @@ def worker_failure(exc: BaseException) -> str:
     return f"on a Dask worker, {reason}"
 
 
-@contextlib.contextmanager
-def _quiet_dask() -> Iterator[None]:
-    """Dask's own log lines (its client reconnecting with a traceback, "Couldn't gather")
-    only with ``-v``: without it a failure is the failed runs' one line. Not restored: the
-    client's reconnect task logs its traceback when the process ends."""
-    if not logging.getLogger("bomgraph").isEnabledFor(logging.INFO):
-        for name in ["distributed", *logging.root.manager.loggerDict]:  # some set a level
-            if name.split(".")[0] == "distributed":
-                logging.getLogger(name).setLevel(logging.CRITICAL)
-    yield
+def quiet_dask_logging() -> None:
+    """Dask's own log lines (its client reconnecting with a traceback, "Couldn't gather") at
+    CRITICAL only, so that a failure is the failed runs' one line: for the command line without
+    ``-v`` (:mod:`bomgraph.cli`), never called by the library itself, since it is not
+    restored (the client's reconnect task logs its traceback when the process ends)."""
+    importlib.import_module("distributed")  # its logging configuration first, ours over it
+
+    for name in ["distributed", *logging.root.manager.loggerDict]:  # some set a level
+        if name.split(".")[0] == "distributed":
+            logging.getLogger(name).setLevel(logging.CRITICAL)
 
 
 def dispatch(func: Callable[[int, Any], tuple[int, dict[str, Any]]], index: Sequence[int],
@@ -117,9 +117,8 @@ def dispatch(func: Callable[[int, Any], tuple[int, dict[str, Any]]], index: Sequ
              ) -> Iterator[tuple[int, dict[str, Any]]]:
     """``func(k, task)`` for each pair on the cluster, yielded as they finish; a task the
     cluster could not run is ``(k, failed(k, reason))``."""
-    with _quiet_dask():
-        yield from _dispatch(func, index, tasks, scheduler=scheduler, n_local=n_local,
-                             failed=failed)
+    yield from _dispatch(func, index, tasks, scheduler=scheduler, n_local=n_local,
+                         failed=failed)
 
 
 def _dispatch(func: Callable[[int, Any], tuple[int, dict[str, Any]]], index: Sequence[int],

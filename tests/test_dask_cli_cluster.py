@@ -324,3 +324,26 @@ def test_a_scheduler_without_workers_is_said_once(setup: dict) -> None:
             procs.communicate(timeout=30)
     assert first.startswith(f"bomgraph: WARNING: the Dask scheduler at {address} has no "
                             f"workers: the runs wait for one (start `dask worker {address}`)")
+
+
+def test_the_library_leaves_dasks_loggers_alone(tmp_path: Path) -> None:
+    """Quieting Dask's own log lines is the command line's choice (without ``-v``), and it is
+    not undone: the library's ``execute`` on a cluster must not change them for its caller."""
+    import importlib
+    import logging
+
+    import numpy as np
+
+    from bomgraph.bench import Executor, execute
+    from bomgraph.experiments import Arm, Experiment, FileSource
+    from bomgraph.sim import SimConfig, simulate
+    from bomgraph.stream_file import write_stream
+
+    s = tmp_path / "s.jsonl"
+    write_stream(simulate(SimConfig(n_steps=20, n_landmarks=8), np.random.default_rng(2)), s)
+    exp = Experiment("e", "e", (Arm("tri", "triangulate"),), sources=(FileSource(str(s)),))
+    importlib.import_module("distributed")  # Dask sets its own levels when imported
+    levels = {n: logging.getLogger(n).level for n in ("distributed", "distributed.client")}
+    out = execute(exp.tasks(), Executor("dask", dask_local=1))
+    assert out[0]["ok"]
+    assert {n: logging.getLogger(n).level for n in levels} == levels
