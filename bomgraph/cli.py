@@ -240,6 +240,10 @@ def cmd_compare(args: argparse.Namespace) -> int:
         return _print_plan(plan_compare(chosen, args.out, use_cache=not args.no_cache,
                                         estimates=args.estimates), args.out)
     executor = Executor.choose(args.jobs, args.scheduler, args.dask_local, defaults=settings)
+    if executor.backend == "dask" and args.jobs is not None and not getattr(args, "quiet", False):
+        print(f"bomgraph: note: --jobs {args.jobs} is not used: the Dask cluster's workers run "
+              f"the tasks (--dask-local N workers, or those started for --scheduler)",
+              file=sys.stderr)
     if executor.backend == "dask" and not getattr(args, "verbose", 0):
         from .cluster import quiet_dask_logging
 

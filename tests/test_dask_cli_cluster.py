@@ -347,3 +347,14 @@ def test_the_library_leaves_dasks_loggers_alone(tmp_path: Path) -> None:
     out = execute(exp.tasks(), Executor("dask", dask_local=1))
     assert out[0]["ok"]
     assert {n: logging.getLogger(n).level for n in levels} == levels
+
+
+def test_jobs_beside_a_cluster_is_noted_not_silently_dropped(tmp_path: Path, capsys) -> None:
+    s = tmp_path / "s.jsonl"
+    assert main(["simulate", "--seed", "1", "--steps", "20", "--out", str(s), "-q"]) == 0
+    args = ["compare", "--streams", str(s), "--methods", "triangulate", "--dask-local", "1",
+            "--jobs", "3", "--no-figures", "--no-progress", "--out", str(tmp_path / "o")]
+    assert main(args) == 0
+    assert "--jobs 3 is not used" in capsys.readouterr().err
+    assert main(args + ["-q"]) == 0
+    assert "--jobs" not in capsys.readouterr().err
