@@ -96,8 +96,10 @@ def _earlier_entries(out: Path) -> list[dict[str, Any]]:
         obj = json.loads((out / MANIFEST).read_text(encoding="utf-8"))
     except (OSError, UnicodeDecodeError, ValueError):
         return []
-    files = obj.get("files") if isinstance(obj, dict) else None
-    if obj.get("format") != _MANIFEST_FORMAT or not isinstance(files, list):
+    if not isinstance(obj, dict) or obj.get("format") != _MANIFEST_FORMAT:
+        return []
+    files = obj.get("files")
+    if not isinstance(files, list):
         return []
     return [e for e in files if isinstance(e, dict) and isinstance(e.get("path"), str)
             and isinstance(e.get("size"), int) and isinstance(e.get("mtime_ns"), int)]

@@ -122,9 +122,10 @@ def test_a_manifest_never_reaches_outside_its_folder_or_through_a_link(tmp_path:
     drop_earlier_outputs(out, [], [])
     assert outside.exists() and (out / "other" / "r.est").exists()
     assert _listed(out) == {}                            # and this compare wrote nothing
-    (out / MANIFEST).write_text("estimates/e/r.est\n")    # not a manifest: ignored
-    drop_earlier_outputs(out, [], [])
-    assert (out / "other" / "r.est").exists()
+    for text in ("estimates/e/r.est\n", "[1, 2]", "null", '{"format": 3}'):  # not manifests
+        (out / MANIFEST).write_text(text)
+        drop_earlier_outputs(out, [], [])
+        assert (out / "other" / "r.est").exists()
 
 
 def test_names_make_files_without_separators_and_differ_beyond_case(tmp_path: Path) -> None:
