@@ -1,12 +1,11 @@
 """The Mapper protocol, the MapEstimate it returns, the runner, and the registry of methods.
 
-Every method (BOM-STMDS, the baselines) is a Mapper: it is built from a
+Every method (BOM-STMDS, the baselines) is a Mapper: built from a
 :class:`~bomgraph.stream.StreamHeader` (never the truth), fed one :class:`~bomgraph.stream.Step`
-at a time, and asked for a :class:`MapEstimate` at checkpoints (the paper updates its map every
-10 steps). :func:`run` drives a mapper over a stream and records estimates and wall times.
-
-Methods are found by name through a registry of ``"module:attribute"`` strings imported only on
-use, so ``bomgraph`` names the ``baselines`` methods without importing them.
+at a time, asked for a :class:`MapEstimate` at checkpoints (the paper: every 10 steps).
+:func:`run` drives a mapper over a stream and records estimates and wall times. Methods are
+found by name through a registry of ``"module:attribute"`` strings imported only on use, so
+``bomgraph`` names the ``baselines`` methods without importing them.
 """
 
 from __future__ import annotations
@@ -20,7 +19,7 @@ from typing import Any, Callable, Iterable, Mapping, Protocol, runtime_checkable
 import numpy as np
 
 from .checks import is_integer
-from .errors import ConfigError, MethodProtocolError, UnknownMethodError
+from .errors import BomgraphError, ConfigError, MethodProtocolError, UnknownMethodError
 from .map_estimate import MapEstimate
 from .stream import Step, StreamHeader, Truth
 
@@ -375,8 +374,7 @@ def _plugin_infos() -> dict[str, MethodInfo]:
     """The installed plugins not shadowed by a registered method of the same name."""
     from . import plugins
 
-    return {e.name: MethodInfo(e.name, e.target, "", False, "plugin", e.distribution,
-                               e.version)
+    return {e.name: MethodInfo(e.name, e.target, "", False, "plugin", e.distribution, e.version)
             for e in plugins.discover().values() if e.name not in _REGISTRY}
 
 
@@ -386,7 +384,8 @@ def available_methods() -> list[MethodInfo]:
 
 
 def method_info(name: str) -> MethodInfo:
-    """The method called ``name``: a registered one, else an installed plugin."""
+    """The method called ``name``: a registered one, else an installed plugin (a bound, given
+    ``truth=`` as ``oracle``, if its factory has ``needs_truth = True``)."""
     if name in _REGISTRY:
         return _REGISTRY[name]
     found = _plugin_infos().get(name)
@@ -395,7 +394,13 @@ def method_info(name: str) -> MethodInfo:
         raise UnknownMethodError(f"unknown method {name!r}; known methods: {known} (your own "
                                  f"method: install a package declaring it in the entry-point "
                                  f"group 'bomgraph.methods')")
-    return found
+    from .plugins import load
+
+    try:  # one that cannot be loaded says so where it is run
+        bound = getattr(load(found.target, name), "needs_truth", False) is True
+    except BomgraphError:
+        return found
+    return dataclasses.replace(found, needs_truth=True) if bound else found
 
 
 def method_factory(name: str) -> Callable[..., Mapper]:
@@ -590,6 +595,6 @@ def create_mapper(name: str, header: StreamHeader, *, truth: Truth | None = None
 
 
 __all__ = ["MapEstimate", "Mapper", "Checkpoint", "RunResult", "run", "checkpoint_times",
-           "MethodInfo", "register_method", "available_methods", "method_info",
-           "method_factory", "method_description", "method_fingerprint",
-           "method_config_class", "check_method_options", "factory_options", "create_mapper"]
+           "MethodInfo", "register_method", "available_methods", "method_info", "method_factory",
+           "method_description", "method_fingerprint", "method_config_class",
+           "check_method_options", "factory_options", "create_mapper"]

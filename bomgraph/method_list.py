@@ -7,7 +7,7 @@ from __future__ import annotations
 from typing import Any, Mapping, Sequence
 
 from .errors import BomgraphError
-from .mapper import MethodInfo, method_config_class, method_description
+from .mapper import MethodInfo, method_config_class, method_description, method_info
 
 
 def preset_summary(overrides: Mapping[str, Any], width: int = 100) -> str:
@@ -24,6 +24,7 @@ def method_listing(info: MethodInfo) -> dict[str, Any]:
                            "origin": info.origin, "distribution": info.distribution,
                            "version": info.version, "presets": {}}
     try:
+        row["needs_truth"] = method_info(info.name).needs_truth   # a plugin's factory says
         row["description"] = method_description(info.name)
         cls = method_config_class(info.name)
         row["presets"] = {k: dict(v) for k, v in getattr(cls, "PRESETS", {}).items()}
