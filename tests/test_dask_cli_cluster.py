@@ -31,6 +31,7 @@ from pathlib import Path
 from typing import Iterator
 
 import pytest
+from _plugin_dist import write_dist_info
 
 from bomgraph.cli import main
 
@@ -80,10 +81,7 @@ def setup(tmp_path_factory: pytest.TempPathFactory) -> dict:
     (plug / "crashy").mkdir(parents=True)
     (plug / "crashy" / "__init__.py").write_text("")
     (plug / "crashy" / "mapper.py").write_text(MAPPER)
-    dist = plug / "crashy-0.1.dist-info"
-    dist.mkdir()
-    (dist / "METADATA").write_text("Metadata-Version: 2.1\nName: crashy\nVersion: 0.1\n")
-    (dist / "entry_points.txt").write_text("[bomgraph.methods]\ncrashy = crashy.mapper:Crashy\n")
+    write_dist_info(plug, "crashy", {"crashy": "crashy.mapper:Crashy"})
     streams = []
     for seed in (1, 2):
         path = root / f"s{seed}.jsonl"

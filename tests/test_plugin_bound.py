@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from _plugin_dist import write_dist_info
 
 from bomgraph import mapper, plugins
 from bomgraph.bench import run_file
@@ -47,11 +48,8 @@ class Plain(TruthMap):
 @pytest.fixture()
 def bound(tmp_path: Path, monkeypatch: pytest.MonkeyPatch):
     (tmp_path / "h20bound.py").write_text(MODULE)
-    dist = tmp_path / "h20bound-0.1.dist-info"
-    dist.mkdir()
-    (dist / "METADATA").write_text("Metadata-Version: 2.1\nName: h20bound\nVersion: 0.1\n")
-    (dist / "entry_points.txt").write_text(
-        "[bomgraph.methods]\ntruth-map = h20bound:TruthMap\nplain-map = h20bound:Plain\n")
+    write_dist_info(tmp_path, "h20bound", {"truth-map": "h20bound:TruthMap",
+                                           "plain-map": "h20bound:Plain"})
     monkeypatch.syspath_prepend(str(tmp_path))
     plugins.refresh()
     yield tmp_path

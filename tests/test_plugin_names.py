@@ -9,6 +9,7 @@ import logging
 from pathlib import Path
 
 import pytest
+from _plugin_dist import write_dist_info
 
 from bomgraph import mapper, plugins
 
@@ -16,11 +17,7 @@ from bomgraph import mapper, plugins
 def test_an_installed_plugin_with_an_unusable_name_is_warned_about(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture
 ) -> None:
-    dist = tmp_path / "badnames-0.1.dist-info"
-    dist.mkdir()
-    (dist / "METADATA").write_text("Metadata-Version: 2.1\nName: badnames\nVersion: 0.1\n")
-    (dist / "entry_points.txt").write_text(
-        "[bomgraph.methods]\nesl@x = m:F\ngood-name_2.0 = m:F\n")
+    write_dist_info(tmp_path, "badnames", {"esl@x": "m:F", "good-name_2.0": "m:F"})
     monkeypatch.syspath_prepend(str(tmp_path))
     plugins.refresh()
     try:
