@@ -249,15 +249,32 @@ def all_poses(values: gtsam.Values, n: int) -> np.ndarray:
 def marginal_covariances(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values,
                          pose_t: np.ndarray, landmark_ids: np.ndarray
                          ) -> tuple[np.ndarray | None, np.ndarray | None]:
-    """Marginal covariances ``(n, 2, 2)`` of the landmarks and ``(m, 3, 3)`` of the poses
-    (pose covariances in GTSAM's body frame convention), or ``(None, None)`` if singular."""
+    """Marginal covariances ``(n, 2, 2)`` of the landmarks and ``(m, 3, 3)`` of the poses at
+    ``pose_t``, or ``(None, None)`` if singular; all in the world frame, as a ``MapEstimate``
+    holds them (poses over ``(x_m, y_m, psi_rad)``, the order of ``MapEstimate.poses``).
+
+    ``gtsam.Marginals`` gives a ``Pose2``'s covariance in its tangent space at the pose, whose
+    translation axes are the robot's own (GTSAM retracts as ``T * Exp(d)``); to first order a
+    body-frame perturbation ``(d_x, d_y, d_psi)`` moves the pose by ``(R(psi) [d_x, d_y],
+    d_psi)`` in the world, so each is turned by ``J = diag(R(psi), 1)``: ``J P J^T``. A
+    ``Point2``'s tangent space is the world's.
+    """
     try:
         marg = gtsam.Marginals(graph, values)
         lc = np.array([marg.marginalCovariance(landmark_key(int(i))) for i in landmark_ids])
         pc = np.array([marg.marginalCovariance(pose_key(int(t))) for t in pose_t])
     except GTSAM_ERRORS:
         return None, None
-    return lc.reshape(-1, 2, 2), pc.reshape(-1, 3, 3)
+    pc = pc.reshape(-1, 3, 3)
+    if len(pc):
+        psi = np.array([values.atPose2(pose_key(int(t))).theta() for t in pose_t])
+        c, s = np.cos(psi), np.sin(psi)
+        turn = np.zeros_like(pc)
+        turn[:, 0, 0], turn[:, 0, 1], turn[:, 1, 0], turn[:, 1, 1] = c, -s, s, c
+        turn[:, 2, 2] = 1.0
+        pc = turn @ pc @ turn.transpose(0, 2, 1)
+        pc = 0.5 * (pc + pc.transpose(0, 2, 1))
+    return lc.reshape(-1, 2, 2), pc
 
 
 def estimate_from_values(graph: BearingGraph, values: gtsam.Values,

@@ -55,7 +55,11 @@ class MapEstimate:
     poses : ndarray of shape (m, 3) or None
         ``[x_m, y_m, psi_rad]`` per entry of ``pose_t``.
     landmark_cov : ndarray of shape (n, 2, 2) or None
+        Covariance of each landmark (m^2), in the estimate's frame.
     pose_cov : ndarray of shape (m, 3, 3) or None
+        Covariance of each pose over ``[x_m, y_m, psi_rad]``, in the estimate's frame (not
+        the robot's: a GTSAM tangent-space covariance is turned by its heading first,
+        :func:`baselines.lm_report.marginal_covariances`).
     info : mapping
         Method diagnostics (convergence, stress, landmarks left out and why, ...).
     """
