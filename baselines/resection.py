@@ -20,7 +20,7 @@ import numpy as np
 
 from bomgraph.angles import angle_residual, wrap_angle
 from bomgraph.errors import ConfigError
-from bomgraph.geometry import compose, inverse, ray_normals
+from bomgraph.geometry import compose, inverse, ray_normals, rotation
 
 
 def resection_jacobian(pose: np.ndarray, landmarks_xy: np.ndarray) -> np.ndarray:
@@ -57,12 +57,14 @@ def resect_poses(owner: np.ndarray, landmarks_xy: np.ndarray, bearings_rad: np.n
                  sigma_rad: np.ndarray, n_poses: int, *,
                  prior_poses: np.ndarray | None = None,
                  prior_sigma: np.ndarray | None = None,
+                 prior_cov: np.ndarray | None = None,
                  initial_poses: np.ndarray | None = None, n_headings: int = 72,
                  huber_k: float = 2.0, iterations: int = 10
                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Robot poses that best explain bearings to known landmarks, all poses at once.
 
-    For each pose minimises ``sum_j 2 rho(r_j / sigma_j) + |(pose - prior) / prior_sigma|^2``
+    For each pose minimises ``sum_j 2 rho(r_j / sigma_j) + e^T C^-1 e``, ``e = pose - prior``
+    (heading wrapped), ``C = diag(prior_sigma^2)`` or ``prior_cov``
     (``r_j`` the wrapped bearing residual, ``rho`` Huber): every heading of a grid gets its
     best position in closed form (the least-squares intersection of the lines through the
     landmarks along the bearings), the best grid point is polished by Gauss-Newton with
@@ -80,7 +82,9 @@ def resect_poses(owner: np.ndarray, landmarks_xy: np.ndarray, bearings_rad: np.n
     prior_poses : array of shape (n_poses, 3), optional
         A prior per pose (NaN rows: none).
     prior_sigma : array of shape (n_poses, 3) or (3,), optional
-        Std. dev. of the priors (metres, metres, radians).
+        Std. dev. of the priors (metres, metres, radians), independent in world x, y, psi.
+    prior_cov : array of shape (n_poses, 3, 3), optional
+        Instead of ``prior_sigma``: the priors' covariances over world ``(x, y, psi)``.
     initial_poses : array of shape (n_poses, 3), optional
         Starting points for Gauss-Newton; the heading grid is searched only for the rows that
         have none (NaN).
@@ -106,9 +110,16 @@ def resect_poses(owner: np.ndarray, landmarks_xy: np.ndarray, bearings_rad: np.n
     prior = (np.full((n_poses, 3), np.nan) if prior_poses is None
              else np.asarray(prior_poses, dtype=float).reshape(n_poses, 3))
     has_prior = np.all(np.isfinite(prior), axis=1)
-    ps = np.broadcast_to(np.asarray(1.0 if prior_sigma is None else prior_sigma, dtype=float),
-                         (n_poses, 3))
-    info = np.where(has_prior[:, None], 1.0 / ps ** 2, 0.0)            # (T, 3)
+    if prior_cov is not None and prior_sigma is not None:
+        raise ConfigError("resect_poses: give prior_sigma or prior_cov, not both")
+    if prior_cov is not None:
+        pc = np.asarray(prior_cov, dtype=float).reshape(n_poses, 3, 3)
+        pc = np.where(has_prior[:, None, None], pc, np.eye(3))
+    else:
+        ps = np.broadcast_to(np.asarray(1.0 if prior_sigma is None else prior_sigma,
+                                        dtype=float), (n_poses, 3))
+        pc = np.eye(3) * (ps ** 2)[:, None, :]
+    info = np.where(has_prior[:, None, None], np.linalg.inv(pc), 0.0)  # (T, 3, 3)
     prior0 = np.where(has_prior[:, None], prior, 0.0)
     n_b = np.bincount(own, minlength=n_poses)
     valid = (n_b >= 2) | has_prior
@@ -126,7 +137,7 @@ def resect_poses(owner: np.ndarray, landmarks_xy: np.ndarray, bearings_rad: np.n
         e = cands - prior0[rows][:, None, :]
         e[..., 2] = angle_residual(cands[..., 2], prior0[rows][:, None, 2])
         return (2 * _group_sum(o, _huber_rho(r, huber_k), len(rows))
-                + (e * e * info[rows][:, None, :]).sum(-1))
+                + np.einsum("rhi,rij,rhj->rh", e, info[rows], e))
 
     poses = np.zeros((n_poses, 3))
     cost = np.full(n_poses, np.inf)
@@ -149,9 +160,11 @@ def resect_poses(owner: np.ndarray, landmarks_xy: np.ndarray, bearings_rad: np.n
         w = 1.0 / sig[sel] ** 2
         a = _group_sum(g_own, w[:, None, None, None] * n, len(rows))     # (G, H, 2, 2)
         rhs = _group_sum(g_own, np.einsum("j,jhab,jb->jha", w, n, lm[sel]), len(rows))
-        a[..., 0, 0] += info[rows, None, 0]
-        a[..., 1, 1] += info[rows, None, 1]
-        rhs += (info[rows, :2] * prior0[rows, :2])[:, None, :]
+        # the prior at the grid heading: I_pp (xy - prior_xy) + I_pq e_psi, e_psi fixed
+        a += info[rows, None, :2, :2]
+        e_psi = angle_residual(psi, prior0[rows, 2:3])                  # (G, H)
+        rhs += (np.einsum("gij,gj->gi", info[rows, :2, :2], prior0[rows, :2])[:, None, :]
+                - info[rows, None, :2, 2] * e_psi[..., None])
         det = a[..., 0, 0] * a[..., 1, 1] - a[..., 0, 1] * a[..., 1, 0]
         ok = det > 1e-12 * np.maximum(a[..., 0, 0] + a[..., 1, 1], 1e-300) ** 2
         safe = np.where(ok, det, 1.0)
@@ -181,8 +194,8 @@ def resect_poses(owner: np.ndarray, landmarks_xy: np.ndarray, bearings_rad: np.n
         g = _group_sum(o, (wr * r)[:, None] * jac, len(idx))
         e = np.column_stack([p[:, :2] - prior0[idx, :2],
                              angle_residual(p[:, 2], prior0[idx, 2])])
-        h[:, [0, 1, 2], [0, 1, 2]] += info[idx]
-        g += info[idx] * e
+        h += info[idx]
+        g += np.einsum("nij,nj->ni", info[idx], e)
         try:
             step = -np.linalg.solve(h, g[..., None])[..., 0]
         except np.linalg.LinAlgError:
@@ -234,7 +247,9 @@ def resect_trajectory(owner: np.ndarray, landmark_ids: np.ndarray, bearings_rad:
     Pass 1 resects each pose with at least 3 mapped bearings on its own (from ``start`` if
     given; a pose whose fit is then poor, more than 9 per bearing, is redone from the heading
     grid); pass 2 again with the odometry prediction from the pass-1 pose before it as a prior
-    (std. dev. ``prior_sigma`` and the step's odometry sigma in quadrature), each bearing's
+    (covariance ``diag(prior_sigma^2) + G diag(odometry_sigma^2) G^T``, ``G =
+    blockdiag(R(psi_{t-1}), 1)``: the odometry sigmas are in the frame of the pose before,
+    turned into the world by its pass-1 heading), each bearing's
     std. dev. ``sqrt(sigma^2 + (map_sigma_m / r)^2)`` at its range ``r`` (the map's error).
     Poses left undetermined are chained from their neighbours by the odometry.
 
@@ -250,7 +265,7 @@ def resect_trajectory(owner: np.ndarray, landmark_ids: np.ndarray, bearings_rad:
         Row ``t`` is the increment ``[dx_m, dy_m, dpsi_rad]`` from pose ``t-1`` to ``t`` (row 0
         unused).
     odometry_sigma : array of shape (T, 3)
-        Std. dev. of each row of ``odoms``.
+        Std. dev. of each row of ``odoms`` (its components, in the frame of pose ``t-1``).
     start : array of shape (T, 3), optional
         Starting poses of pass 1 (else the heading grid).
     n_headings, huber_k : heading grid size and Huber threshold of :func:`resect_poses`.
@@ -277,13 +292,20 @@ def resect_trajectory(owner: np.ndarray, landmark_ids: np.ndarray, bearings_rad:
     prior = np.full((n_t, 3), np.nan)
     prev_ok = np.flatnonzero(ok1[:-1]) + 1
     prior[prev_ok] = compose(p1[prev_ok - 1], odoms[prev_ok])
-    prior_sig = np.sqrt(np.asarray(prior_sigma) ** 2 + odometry_sigma ** 2)
+    psi_prev = np.zeros(n_t)
+    psi_prev[prev_ok] = p1[prev_ok - 1, 2]
+    g = np.zeros((n_t, 3, 3))
+    g[:, :2, :2] = rotation(psi_prev)
+    g[:, 2, 2] = 1.0
+    odo_var = np.asarray(odometry_sigma, dtype=float).reshape(n_t, 3) ** 2
+    prior_cov = (np.eye(3) * np.asarray(prior_sigma, dtype=float) ** 2
+                 + np.einsum("nij,nj,nkj->nik", g, odo_var, g))
     ref = np.where(ok1[:, None], p1, prior)[own, :2]
     rng = np.hypot(*(lm - ref).T)
     sig = np.where(np.isfinite(rng),
                    np.sqrt(sig_b ** 2 + (map_sigma_m / np.maximum(rng, 0.05)) ** 2),
                    2 * sig_b)
-    poses, _, _ = resect_poses(own, lm, b, sig, n_t, prior_poses=prior, prior_sigma=prior_sig,
+    poses, _, _ = resect_poses(own, lm, b, sig, n_t, prior_poses=prior, prior_cov=prior_cov,
                                initial_poses=np.where(ok1[:, None], p1, np.nan), **kw)
     ok = np.all(np.isfinite(poses), axis=1) & ((n_b >= 3) | np.isfinite(prior[:, 0]))
     if not ok.any():
