@@ -9,10 +9,12 @@ order of the landmarks.
 
 from __future__ import annotations
 
+from typing import Callable
+
 import numpy as np
 import pytest
 
-from bomgraph.evaluate import align, landmark_nees, score_estimate
+from bomgraph.evaluate import align, landmark_nees, pose_nees, score_estimate
 from bomgraph.mapper import MapEstimate
 from bomgraph.stream import Truth
 
@@ -83,3 +85,60 @@ def test_mpe_and_landmark_nees_do_not_depend_on_the_estimates_frame_or_order() -
     rc = s0.alignment.rotation
     ref = [float(ei @ np.linalg.solve(rc @ ci @ rc.T, ei)) for ei, ci in zip(e, cov)]
     np.testing.assert_allclose(nees0, ref, rtol=1e-10)
+
+
+
+def _numeric_jacobian(f: Callable[[np.ndarray], np.ndarray], x: np.ndarray,
+                      wrap: int | None = None) -> np.ndarray:
+    """Central differences of ``f`` at ``x`` (output component ``wrap`` taken as an angle)."""
+    h = 1e-6
+    cols = []
+    for k in range(len(x)):
+        d = np.zeros(len(x))
+        d[k] = h
+        diff = f(x + d) - f(x - d)
+        if wrap is not None:
+            diff[wrap] = np.angle(np.exp(1j * diff[wrap]))
+        cols.append(diff / (2 * h))
+    return np.column_stack(cols)
+
+
+@pytest.mark.parametrize("mirror", [False, True])
+def test_nees_under_a_similarity_alignment_carries_the_covariance_with_the_map(
+        mirror: bool) -> None:
+    """Scored with a similarity alignment, an estimate at twice the truth's scale (turned,
+    shifted, maybe mirrored) has the NEES ``e^T (J P J^T)^-1 e`` with ``J`` the numeric
+    Jacobian of the alignment applied to its points and poses: the covariances scale with
+    the map (before the twenty-first session only the rotation was applied to them, so at
+    the fitted scale ``s = 0.5`` the NEES came out ``s^2``, a quarter, of its value)."""
+    rng = np.random.default_rng(53)
+    n = 10
+    truth_xy = rng.uniform(0, 2.5, (n, 2))
+    true_pose = np.array([1.0, 0.5, 0.8])
+    truth = Truth(np.arange(n), truth_xy, np.array([[0.0, 0.0, 0.0], true_pose]))
+    a = rng.normal(size=(n, 2, 2))
+    cov = a @ a.transpose(0, 2, 1) * 1e-2 + np.eye(2) * 1e-3
+    r = _rot(0.7) @ (np.diag([1.0, -1.0]) if mirror else np.eye(2))
+    t = np.array([0.4, -2.0])
+    # the estimate in the frame x' = 2 R^T (x - t), with errors
+    xy = 2.0 * (truth_xy - t) @ r + rng.normal(0, 0.05, (n, 2))
+    h = np.array([np.cos(true_pose[2]), np.sin(true_pose[2])]) @ r
+    pose = np.array([*(2.0 * (true_pose[:2] - t) @ r), np.arctan2(h[1], h[0])]) \
+        + np.array([0.05, -0.04, 0.03])
+    b = rng.normal(size=(3, 3))
+    pcov = b @ b.T * 1e-3 + np.eye(3) * 1e-4
+    est = MapEstimate(np.arange(n), xy, landmark_cov=cov, pose_t=np.array([1]),
+                      poses=pose[None], pose_cov=pcov[None])
+    al = score_estimate(est, truth, with_scale=True).alignment
+    assert al.scale == pytest.approx(0.5, rel=0.05) and al.reflected == mirror
+    want_l = []
+    for x, c in zip(xy, cov):
+        j = _numeric_jacobian(lambda v: al.apply(v[None])[0], x)
+        e = al.apply(x[None])[0] - truth_xy[len(want_l)]
+        want_l.append(float(e @ np.linalg.solve(j @ c @ j.T, e)))
+    np.testing.assert_allclose(landmark_nees(est, truth, al), want_l, rtol=1e-6)
+    j = _numeric_jacobian(lambda v: al.apply_poses(v[None])[0], pose, wrap=2)
+    moved = al.apply_poses(pose[None])[0]
+    e = np.array([*(moved[:2] - true_pose[:2]), np.angle(np.exp(1j * (moved[2] - true_pose[2])))])
+    assert pose_nees(est, truth, al) == pytest.approx(
+        float(e @ np.linalg.solve(j @ pcov @ j.T, e)), rel=1e-6)
