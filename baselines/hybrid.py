@@ -76,8 +76,9 @@ class HybridConfig(FactorGraphConfig):
         Assumed position error of the seed map: a bearing to a landmark at range ``r`` has
         std. dev. ``sqrt(sigma_theta^2 + (map_sigma_m / r)^2)`` in the resection.
     prior_sigma : (m, m, rad)
-        Std. dev. of the odometry prediction used as the resection prior, added in quadrature
-        to the step's odometry sigma.
+        Std. dev. of the odometry prediction used as the resection prior (world x, y, psi),
+        added to the step's odometry covariance turned into the world by the heading of the
+        pose before (:func:`~baselines.resection.resect_trajectory`).
     n_headings : int
         Grid over the heading in the resection.
     resection_huber_k : float
