@@ -425,7 +425,8 @@ def error_table(result: RunResult | Sequence[Checkpoint], truth: Truth) -> dict[
 def landmark_nees(estimate: MapEstimate, truth: Truth, alignment: Alignment) -> np.ndarray:
     """Per-landmark NEES ``e^T P^-1 e`` (in the aligned frame), for estimates with covariances.
 
-    The covariance is rotated with the alignment; values are only meaningful when the method's
+    The covariance is carried with the alignment ``x -> s R x + c``: ``s^2 R P R^T`` (``s`` is
+    1 unless the alignment fitted a scale); values are only meaningful when the method's
     frame is anchored like the truth's (a rigid alignment of a consistent estimate).
     Returns shape ``(n_common,)``.
     """
@@ -434,7 +435,7 @@ def landmark_nees(estimate: MapEstimate, truth: Truth, alignment: Alignment) -> 
     common, ie, it = np.intersect1d(estimate.landmark_ids, truth.landmark_ids,
                                     return_indices=True)
     e = alignment.apply(estimate.landmarks_xy[ie]) - truth.landmarks_xy[it]
-    r = alignment.rotation
+    r = alignment.scale * alignment.rotation
     cov = r @ estimate.landmark_cov[ie] @ r.T
     return np.einsum("ni,nij,nj->n", e, np.linalg.inv(cov), e)
 
@@ -453,7 +454,8 @@ def pose_nees(estimate: MapEstimate, truth: Truth, alignment: Alignment) -> floa
     """NEES ``e^T P^-1 e`` of the latest estimated pose (x, y, psi) in the aligned frame.
 
     The error is ``(dx [m], dy [m], dpsi [rad])``; the 3x3 pose covariance is transformed by
-    ``diag(R, det R)`` of the alignment (a reflection negates the heading). NaN when the
+    ``diag(s R, det R)`` of the alignment (a reflection negates the heading; ``s`` is 1 unless
+    the alignment fitted a scale, which scales the position and not the heading). NaN when the
     estimate has no poses or no pose covariances, the truth has no poses, or the covariance is
     singular.
     """
@@ -465,7 +467,7 @@ def pose_nees(estimate: MapEstimate, truth: Truth, alignment: Alignment) -> floa
     true = truth.poses[estimate.pose_t[k]]
     e = np.array([p[0] - true[0], p[1] - true[1], float(angle_residual(p[2], true[2]))])
     t = np.eye(3)
-    t[:2, :2] = alignment.rotation
+    t[:2, :2] = alignment.scale * alignment.rotation
     t[2, 2] = np.linalg.det(alignment.rotation)
     cov = t @ estimate.pose_cov[k] @ t.T
     try:
