@@ -376,6 +376,10 @@ class HybridMapper(ScheduledSolver):
         seed_map: dict[int, np.ndarray] = {}
         warm = gtsam.Values(state.values)
         solved: list[tuple[str, gtsam.Values, SolveReport]] = []
+        # the graph each start's solve solved (BatchState.solved_graph: past lag_after_steps
+        # a whole-graph solve leaves out the near bearings, a window solve does not): the
+        # kept solution's covariances are that graph's
+        graph_of: dict[str, gtsam.NonlinearFactorGraph] = {}
         starts: list[str] = []
         incremental = found is not None and self.config.warm_start and self._have_solution
         if found is not None and not incremental:
@@ -398,6 +402,7 @@ class HybridMapper(ScheduledSolver):
             starts.append("warm")
             solved.append(("warm", *state.solve(self._with_landmarks(warm, {}),
                                                 warm=self._have_solution)))
+            graph_of["warm"] = state.solved_graph
         if incremental:
             assert found is not None
             # the seed start only where it could lead elsewhere than the warm solution
@@ -409,6 +414,7 @@ class HybridMapper(ScheduledSolver):
             starts.append("seed")
             solved.append(("seed", *state.solve(self._with_landmarks(seed.values,
                                                                      seed.landmarks))))
+            graph_of["seed"] = state.solved_graph
         # a start whose solution puts landmarks out of the sensor's reach of every pose (a
         # weakly seen landmark slid far along its rays: a converged but wrong minimum) loses
         # to one that does not, whatever the costs
@@ -416,6 +422,7 @@ class HybridMapper(ScheduledSolver):
         name, values, report = min(solved, key=lambda s: (far_of[s[0]].size > 0,
                                                            s[2].final_error))
         state.set_values(values)
+        state.solved_graph = graph_of[name]
         self._have_solution = True
         info.update(report.as_info())
         info["start"] = name
