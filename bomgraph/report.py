@@ -191,7 +191,8 @@ def format_summary(summary: Sequence[dict]) -> str:
             times = []  # no truth, no reference: no MPE to show
         lines.append(f"\n== {exp} ==  landmark MPE [cm] mean/median±std at t; robot: error "
                      f"[cm] of the latest pose at the end; conv: converged runs; NEES: robot "
-                     f"pose; wall time per run; [k/n]: only k of n runs had a map")
+                     f"pose, after the alignment on the landmarks; wall time per run; [k/n]: "
+                     f"only k of n runs had a map")
         by_row = [_mpe_cells(r, times) for r in rows]
         w = max([17] + [len(c) for cells in by_row for c in cells])  # wide means widen it
         head = f"{'arm':30s} {'runs':>4s} " + " ".join(f"{'t=' + str(t):>{w}s}" for t in times)
