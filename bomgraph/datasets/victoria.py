@@ -15,8 +15,12 @@ Conversion:
   pose ids skip the landmark ids, so the chain, not the id, gives the step index). Landmark
   ids in the stream are the file's landmark ids.
 - Bearing ``atan2(y, x)``; the range ``hypot(x, y)`` is dropped (bearing-only).
-- Odometry sigmas are the square roots of the covariance diagonal (the file's off-diagonal
-  entries are all zero; the largest dropped correlation goes to meta). Uniform sigmas go to
+- Odometry sigmas: the covariance is that of a GTSAM ``BetweenFactor<Pose2>``, whose error
+  is in the frame of the measured pose j; it is turned by ``dtheta`` into the frame of pose i,
+  where a stream's ``[dx, dy, dpsi]`` sigmas are (the same mapping as the g2o importer's,
+  :func:`.g2o.odometry_sigma_from_information`), and the square roots of that diagonal are
+  kept (the file's off-diagonal entries are all zero, but the turn correlates dx and dy when
+  their sigmas differ; the largest dropped correlation goes to meta). Uniform sigmas go to
   the header; otherwise each step carries its own ``odom_sigma``.
 - Bearing sigma: the point covariance ``C`` propagated to the bearing,
   ``var = g C g^T`` with ``g = [-y, x] / r^2``; the header holds the median over all
@@ -39,6 +43,7 @@ import numpy as np
 from ..errors import DatasetError
 from ..plausibility import refuse_implausible
 from ..stream import Step, Stream, StreamHeader
+from .g2o import odometry_sigma_from_information
 from ._text import (chain_order, checked_bearing_sigma, dataset_error, file_label, parse_float,
                     parse_int, read_lines)
 
@@ -131,9 +136,8 @@ def import_victoria(path: str | os.PathLike[str], *,
     for t, pid in enumerate(order[1:]):
         meas, cov = by_target[pid]
         odoms[t] = meas
-        sig[t] = np.sqrt(np.diag(cov))
-        corr = cov / np.outer(sig[t], sig[t])
-        max_corr = max(max_corr, float(np.max(np.abs(corr[np.triu_indices(3, 1)]))))
+        sig[t], corr = odometry_sigma_from_information(float(meas[2]), np.linalg.inv(cov))
+        max_corr = max(max_corr, corr)
     uniform = len(sig) == 0 or bool(np.allclose(sig, sig[0], rtol=1e-9, atol=0.0))
     header_odo = (tuple(float(s) for s in (sig[0] if uniform else np.median(sig, axis=0)))
                   if len(sig) else (0.0, 0.0, 0.0))

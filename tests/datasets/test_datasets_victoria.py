@@ -22,7 +22,20 @@ def test_victoria_excerpt(tmp_path):
     np.testing.assert_array_equal(s.steps[2].landmark_ids, [2, 4])
     np.testing.assert_allclose(s.steps[2].bearings_rad, [math.pi / 4, -math.pi / 2])
     np.testing.assert_allclose(s.steps[2].odom, [0.5, 0.01, -0.2])
-    assert s.header.odometry_sigma == pytest.approx((0.01, 0.002, 0.002))
+    # the file's covariance diag(0.01^2, 0.002^2, 0.002^2) is a GTSAM BetweenFactor's, in the
+    # frame of the measured pose j: turned by dtheta into pose i's frame, var_dx = c^2 a^2 +
+    # s^2 b^2 and var_dy = s^2 a^2 + c^2 b^2 (dtheta 0.1, -0.2, 0: the medians are at 0.1)
+    def turned(th: float) -> tuple[float, float, float]:
+        c, sn = math.cos(th), math.sin(th)
+        return (math.sqrt(c * c * 1e-4 + sn * sn * 4e-6), math.sqrt(sn * sn * 1e-4 + c * c * 4e-6),
+                0.002)
+
+    assert s.header.odometry_sigma == pytest.approx(turned(0.1), rel=1e-12)
+    np.testing.assert_allclose(s.steps[2].odom_sigma, turned(-0.2), rtol=1e-12)
+    sx, sy, _ = turned(-0.2)
+    c, sn = math.cos(-0.2), math.sin(-0.2)
+    assert s.header.meta["odometry_max_dropped_correlation"] == pytest.approx(
+        abs(c * sn * (1e-4 - 4e-6)) / (sx * sy), rel=1e-12)
     # propagated point sigma sqrt(0.4) / range: 0.063, 0.089, 0.316 -> median 0.089
     assert s.header.bearing_sigma_rad == pytest.approx(math.sqrt(0.4) / math.hypot(5, 5))
     assert s.header.meta["bearing_sigma_gtsam_example_rad"] == pytest.approx(0.2)
@@ -54,3 +67,19 @@ def test_real_victoria_park(tmp_path):
     assert -1.23 < b.min() < -1.2 and 1.3 < b.max() < 1.33  # SOURCE.md: -1.22..+1.32 rad
     write_stream(s, tmp_path / "v.jsonl")
     assert read_stream(tmp_path / "v.jsonl") == s
+
+
+def test_gtsam_between_factor_error_is_in_the_measured_pose_frame():
+    """What the importer assumes of the file's covariance (GTSAM's ``load2D`` makes it a
+    ``BetweenFactor<Pose2>``'s noise): the factor's error is in the frame of the measured pose
+    j, so moving pose j by ``d`` along pose i's x axis gives the error ``R(dtheta)^T d``."""
+    import gtsam
+
+    th, h = 0.5, 1e-6
+    measured = gtsam.Pose2(1.0, 0.2, th)
+    factor = gtsam.BetweenFactorPose2(0, 1, measured, gtsam.noiseModel.Unit.Create(3))
+    values = gtsam.Values()
+    values.insert(0, gtsam.Pose2())
+    values.insert(1, gtsam.Pose2(1.0 + h, 0.2, th))
+    err = factor.unwhitenedError(values)
+    np.testing.assert_allclose(err, [math.cos(th) * h, -math.sin(th) * h, 0.0], atol=1e-12)
