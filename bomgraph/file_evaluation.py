@@ -127,7 +127,8 @@ def evaluate_files(estimate_path: str | os.PathLike[str], stream_path: str | os.
         with the truth or reference.
 
     The NEES against the truth (landmarks: the mean over the common ones; pose: the latest)
-    come from the file's covariances and are NaN without them.
+    come from the file's covariances, carried by the alignment (its scale too, with
+    ``with_scale``, as in the checkpoint rows), and are NaN without them.
     """
     try:
         stream = read_stream(stream_path)
@@ -165,7 +166,7 @@ def evaluate_files(estimate_path: str | os.PathLike[str], stream_path: str | os.
     table = (error_table(est.checkpoints, stream.truth)
              if est.checkpoints and ref_est is None and align_on == "landmarks" else None)
     nl = np_ = math.nan
-    if ref_est is None and not with_scale:
+    if ref_est is None:  # the alignment's scale, if fitted, is carried (landmark_nees)
         if est.final.landmark_cov is not None:
             try:
                 nl = float(np.mean(landmark_nees(est.final, stream.truth, score.alignment)))

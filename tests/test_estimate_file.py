@@ -356,6 +356,27 @@ def test_nees_from_file_equals_in_memory(tmp_path: Path) -> None:
     assert ev.nees_pose == pytest.approx(want_p, rel=1e-12)
 
 
+def test_nees_under_similarity_is_given_once_for_the_final_map(tmp_path: Path) -> None:
+    """``evaluate --similarity``: the headline NEES of the final map is the similarity
+    alignment's (as its checkpoint row's), not left out. Before the twenty-first session's
+    report audit the headline was NaN (a guard from before the NEES carried the scale, 7ccbf2b)
+    while the last row of the same output gave the NEES of the same map."""
+    s = _stream(60)
+    write_stream(s, tmp_path / "s.jsonl")
+    result = run(_CovMapper(s.header), s.steps, method="cov")
+    write_estimate(result, tmp_path / "e.est", stream=stream_identity(s.steps))
+    ev = evaluate_files(tmp_path / "e.est", tmp_path / "s.jsonl", with_scale=True)
+    al = score_estimate(result.final, s.truth, with_scale=True).alignment
+    assert al.scale != 1.0
+    want_l = float(np.mean(landmark_nees(result.final, s.truth, al)))
+    want_p = pose_nees(result.final, s.truth, al)
+    assert np.isfinite(want_l) and np.isfinite(want_p)
+    assert ev.nees_landmark == pytest.approx(want_l, rel=1e-12)
+    assert ev.nees_pose == pytest.approx(want_p, rel=1e-12)
+    assert ev.rows[-1].nees_landmark == pytest.approx(ev.nees_landmark, rel=1e-12)
+    assert ev.rows[-1].nees_pose == pytest.approx(ev.nees_pose, rel=1e-12)
+
+
 def test_run_streaming_writer_matches_in_memory(tmp_path: Path) -> None:
     s = _stream(45)
     write_stream(s, tmp_path / "s.jsonl")
