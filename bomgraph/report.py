@@ -235,7 +235,9 @@ def format_by_run(rows: Sequence[dict]) -> str:
         arms = list(dict.fromkeys(r["arm"] for r in rs))
         cell = {(r["arm"], r["run"]): r for r in rs}
         lines.append(f"\n== {exp}, final map per run ==  landmark MPE [cm] (landmarks mapped); "
-                     f"'no map': fewer than 3 landmarks; FAILED: the run raised; mrad: no "
+                     f"'no map': fewer than 3 landmarks; 'unscored': a map, but nothing to "
+                     f"score it by (fewer than 3 landmarks in common with the truth or "
+                     f"reference; without either, no poses); FAILED: the run raised; mrad: no "
                      f"truth or reference, RMS bearing residual")
         lines.append(f"{'arm':30s} " + " ".join(f"{r[-14:]:>14s}" for r in runs))
         for arm in arms:
@@ -248,6 +250,8 @@ def format_by_run(rows: Sequence[dict]) -> str:
                     cells.append("FAILED")
                 elif not math.isfinite(r["mpe_m"]) and math.isfinite(r["bearing_rms_rad"]):
                     cells.append(f"{1000 * r['bearing_rms_rad']:.1f}mrad ({r['n_mapped']})")
+                elif not math.isfinite(r["mpe_m"]) and r["n_mapped"] >= 3:
+                    cells.append(f"unscored ({r['n_mapped']})")
                 elif not math.isfinite(r["mpe_m"]):
                     cells.append(f"no map ({r['n_mapped']})")
                 else:

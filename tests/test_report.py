@@ -167,3 +167,20 @@ def test_error_curves_of_streams_of_different_lengths_do_not_depend_on_their_ord
     (t2, vals2), = curves[1].values()
     assert t2.tolist() == t.tolist()
     np.testing.assert_array_equal(vals2[::-1], vals)
+
+
+def test_a_map_with_nothing_to_score_it_by_is_not_called_no_map() -> None:
+    """``final_by_run``'s text: a run on a stream without truth or reference whose method
+    mapped landmarks but has no poses (so no bearing residual) was shown ``no map (50)``,
+    which the legend defines as fewer than 3 landmarks. It now reads ``unscored (50)``;
+    a run with fewer than 3 landmarks stays ``no map``."""
+    def result(run: str, n: int) -> dict:
+        nan = float("nan")
+        return {"experiment": "streams", "arm": "stmds-smacof", "run": run, "ok": True,
+                "scored_against": "none", "converged": None, "total_s": 0.1,
+                "checkpoints": [{"t": 120, "n_mapped": n, "mpe_m": nan, "robot_last_m": nan,
+                                 "bearing_rms_rad": nan}]}
+    text = format_by_run(final_by_run([result("a", 50), result("b", 2)]))
+    line = next(s for s in text.splitlines() if s.startswith("stmds-smacof "))
+    assert line.split()[1:] == ["unscored", "(50)", "no", "map", "(2)"]
+    assert "'unscored'" in text
