@@ -333,10 +333,17 @@ def _import(args: argparse.Namespace, make: Callable[[], Any], *inputs: str | No
     n_brg = sum(len(st.landmark_ids) for st in stream.steps)
     truth = "no truth" if stream.truth is None else (
         "truth: landmarks only" if stream.truth.poses is None else "truth: poses + landmarks")
+    odo, per_step = stream.header.odometry_sigma, ""
+    if any(st.odom_sigma is not None for st in stream.steps):  # each step has its own
+        import numpy as np
+
+        odo = np.median([st.odometry_sigma(stream.header) for st in stream.steps
+                         if st.odom is not None], axis=0)
+        per_step = "per step, median "
     _say(f"wrote {args.out}: {len(stream.steps)} steps, {n_brg} bearings, "
          f"{len(stream.landmark_ids())} landmarks; bearing sigma "
-         f"{stream.header.bearing_sigma_rad:.4f} rad, odometry sigma "
-         f"{', '.join(f'{v:.4f}' for v in stream.header.odometry_sigma)}; {truth}",
+         f"{stream.header.bearing_sigma_rad:.4f} rad, odometry sigma {per_step}"
+         f"{odo[0]:.4f} m, {odo[1]:.4f} m, {odo[2]:.4f} rad; {truth}",
          to_stderr=is_stdout(args.out))
     return 0
 

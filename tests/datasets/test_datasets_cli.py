@@ -45,3 +45,34 @@ def test_cli_import_mrclam_odometry_scale(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "odometry_scale must be a number in [0.5, 2]" in err and err.count("\n") == 1
     assert not (tmp_path / "x.jsonl").exists()
+
+
+def test_import_summary_line_gives_units_and_says_when_each_step_has_its_own_sigma(
+        tmp_path, sim_stream, capsys):
+    """The line ``bomgraph import`` prints: the odometry sigmas with their units (m, m, rad),
+    and, when the steps carry their own sigmas (the calibrated MRCLAM import: a model per
+    step), that the figures are their median. Before the twenty-first session's report audit
+    it printed ``odometry sigma 0.0408, 0.0106, 0.0486`` with no unit, the header's median
+    of per-step sigmas spanning 0.005-0.24 m on MRCLAM6 robot 3, as if it were the sigma."""
+    import numpy as np
+
+    from bomgraph.cli import main
+
+    make_mrclam(tmp_path / "m")
+    assert main(["import", "mrclam", str(tmp_path / "m"), "--robot", "1", "--out",
+                 str(tmp_path / "m.jsonl")]) == 0
+    s = read_stream(tmp_path / "m.jsonl")
+    own = np.array([st.odometry_sigma(s.header) for st in s.steps if st.odom is not None])
+    assert any(st.odom_sigma is not None for st in s.steps)
+    med = np.median(own, axis=0)
+    out = capsys.readouterr().out
+    assert (f"odometry sigma per step, median {med[0]:.4f} m, {med[1]:.4f} m, "
+            f"{med[2]:.4f} rad;") in out
+    write_g2o(tmp_path / "a.g2o", sim_stream)
+    assert main(["import", "g2o", str(tmp_path / "a.g2o"), "--out",
+                 str(tmp_path / "g.jsonl")]) == 0
+    g = read_stream(tmp_path / "g.jsonl")
+    assert all(st.odom_sigma is None for st in g.steps)
+    sig = g.header.odometry_sigma
+    assert (f"odometry sigma {sig[0]:.4f} m, {sig[1]:.4f} m, {sig[2]:.4f} rad;"
+            in capsys.readouterr().out)
