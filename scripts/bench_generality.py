@@ -256,7 +256,11 @@ def summarise(rows: list[dict[str, Any]], methods: list[str], robots: list[int],
                       "keyframing_vs_bound": worst(dense_rel),
                       "sigma_x0.5_vs_bound": worst(sig_lo_rel),
                       "sigma_x2_vs_bound": worst(sig_hi_rel),
-                      "failed_runs": sum(1 for x in vs_bound if math.isnan(x))}
+                      # the method's own runs printed "fail" (not a stream whose bound
+                      # failed, where the ratio is NaN too)
+                      "failed_runs": sum(1 for r in robots for fam in families if not
+                                         math.isfinite(mpe.get((f"{fam}_r{r}", m, 10),
+                                                               math.nan)))}
     return summary
 
 

@@ -107,3 +107,17 @@ def test_summary_table_has_the_common_set_column_beside_the_whole_map_one(capsys
     assert row[0] == "stmds-smacof"
     assert row[1] == f"{summary['stmds-smacof']['max_vs_bound']:.2f}"
     assert row[2] == "2.00"
+
+
+def test_failed_runs_counts_the_methods_own_failures_not_its_bounds() -> None:
+    """``failed_runs`` is the number of the method's runs the table prints as ``fail``. It
+    counted the streams whose ratio to the bound was NaN, so a stream where the bound (the
+    oracle) failed was counted as a failure of every method that mapped it."""
+    rows = [{"stream": s, "method": m, "checkpoint_every": 10, "mpe_m": v}
+            for s, m, v in (("m6_r1", "ekf", 0.10), ("m6_r1", "oracle", math.nan),
+                            ("m6_r2", "ekf", math.nan), ("m6_r2", "oracle", 0.05),
+                            ("m6_r3", "ekf", 0.12), ("m6_r3", "oracle", 0.06))]
+    summary = bench.summarise(rows, ["ekf", "oracle"], [1, 2, 3], ("m6",))
+    assert summary["ekf"]["failed_runs"] == 1      # m6_r2; it was 2 (m6_r1 too)
+    assert summary["oracle"]["failed_runs"] == 1   # m6_r1
+    assert math.isclose(summary["ekf"]["max_vs_bound"], 2.0)
