@@ -195,7 +195,8 @@ def format_summary(summary: Sequence[dict]) -> str:
                      f"only k of n runs had a map")
         by_row = [_mpe_cells(r, times) for r in rows]
         w = max([17] + [len(c) for cells in by_row for c in cells])  # wide means widen it
-        head = f"{'arm':30s} {'runs':>4s} " + " ".join(f"{'t=' + str(t):>{w}s}" for t in times)
+        aw = max([30] + [len(r["arm"]) for r in rows])  # never cut two labels into one
+        head = f"{'arm':{aw}s} {'runs':>4s} " + " ".join(f"{'t=' + str(t):>{w}s}" for t in times)
         head += f" {'robot':>7s} {'conv':>5s} {'NEES':>6s} {'wall s':>7s}  paper"
         free = any("bearing_rms_mean_rad" in r for r in rows)
         if free:  # streams without truth: landmarks mapped, bearing RMS [mrad], reference
@@ -209,7 +210,7 @@ def format_summary(summary: Sequence[dict]) -> str:
             nees = r.get("nees_pose_mean")
             nees_s = "   -  " if nees is None or not math.isfinite(nees) else f"{nees:6.2f}"
             fail = f"  FAILED {r['failed']}: {'; '.join(r['errors'])[:120]}" if r["failed"] else ""
-            lines.append(f"{r['arm'][:30]:30s} {r['runs']:4d} "
+            lines.append(f"{r['arm']:{aw}s} {r['runs']:4d} "
                          + " ".join(f"{c:>{w}s}" for c in cells)
                          + f" {_cm(r.get('robot_last_mean_m')):>7s} {conv_s:>5s} {nees_s:>6s}"
                          f" {r.get('wall_s_mean', float('nan')):7.3f}"
@@ -239,7 +240,9 @@ def format_by_run(rows: Sequence[dict]) -> str:
                      f"score it by (fewer than 3 landmarks in common with the truth or "
                      f"reference; without either, no poses); FAILED: the run raised; mrad: no "
                      f"truth or reference, RMS bearing residual")
-        lines.append(f"{'arm':30s} " + " ".join(f"{r[-14:]:>14s}" for r in runs))
+        aw = max([30] + [len(a) for a in arms])  # names in full: never two alike
+        rw = max([14] + [len(r) for r in runs])
+        lines.append(f"{'arm':{aw}s} " + " ".join(f"{r:>{rw}s}" for r in runs))
         for arm in arms:
             cells = []
             for run_name in runs:
@@ -256,7 +259,7 @@ def format_by_run(rows: Sequence[dict]) -> str:
                     cells.append(f"no map ({r['n_mapped']})")
                 else:
                     cells.append(f"{100 * r['mpe_m']:.1f} ({r['n_mapped']})")
-            lines.append(f"{arm[:30]:30s} " + " ".join(f"{c:>14s}" for c in cells))
+            lines.append(f"{arm:{aw}s} " + " ".join(f"{c:>{rw}s}" for c in cells))
     return "\n".join(lines)
 
 

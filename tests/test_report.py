@@ -184,3 +184,27 @@ def test_a_map_with_nothing_to_score_it_by_is_not_called_no_map() -> None:
     line = next(s for s in text.splitlines() if s.startswith("stmds-smacof "))
     assert line.split()[1:] == ["unscored", "(50)", "no", "map", "(2)"]
     assert "'unscored'" in text
+
+
+def test_long_arm_and_run_names_are_not_cut_into_the_same_label() -> None:
+    """The text tables cut arm labels to 30 characters and run names to their last 14, so
+    two arms or two streams differing only beyond the cut got the same label and their
+    numbers could not be told apart; the columns now widen to the longest name."""
+    arms = ("stmds-smacof-loc@window-ba-long", "stmds-smacof-loc@window-ba-lon")
+    runs = ("lab-a-mrclam6-robot3-keyframed", "lab-b-mrclam6-robot3-keyframed")
+
+    def result(arm: str, run: str, mpe: float) -> dict:
+        return {"experiment": "streams", "arm": arm, "method": "stmds-smacof-loc", "run": run,
+                "ok": True, "converged": None, "total_s": 0.1,
+                "checkpoints": [{"t": 100, "n_mapped": 15, "mpe_m": mpe, "robot_last_m": 0.1,
+                                 "nees_pose": float("nan"), "nees_landmark": float("nan")}]}
+    results = [result(a, r, 0.01 * (i + 1) * (j + 2)) for i, a in enumerate(arms)
+               for j, r in enumerate(runs)]
+    by_run = format_by_run(final_by_run(results)).splitlines()
+    head = next(s for s in by_run if s.startswith("arm "))
+    assert all(r in head.split() for r in runs)
+    for a in arms:
+        assert sum(s.split()[:1] == [a] for s in by_run) == 1
+    summary = format_summary(summarise(results)).splitlines()
+    for a in arms:
+        assert sum(s.split()[:1] == [a] for s in summary) == 1
