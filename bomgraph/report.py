@@ -337,9 +337,8 @@ def _compare(experiments: Sequence[Experiment], out: Path, executor: Executor,
     # 0.5 s against 1.6 s indented, docs/measurements.md, "The main job against ...")
     write_text(out / "results.json", json.dumps(
         {"experiments": [{"name": e.name, "title": e.title,
-                          "arms": [a.key() for a in e.arms], "seed": e.seed,
-                          "runs": e.n_runs(), "n_steps": e.sim.n_steps}
-                         for e in experiments],
+                          "arms": [a.key() for a in e.arms], **_design(e),
+                          "runs": e.n_runs()} for e in experiments],
          "summary": summary, "results": results, "wall_s": wall}, allow_nan=True))
     write_csv(out / "results.csv", results_to_csv_rows(results))
     write_csv(out / "summary.csv", summary)
@@ -348,6 +347,17 @@ def _compare(experiments: Sequence[Experiment], out: Path, executor: Executor,
         files += write_compare_figures(out, experiments, results)
     drop_earlier_outputs(out, files, experiments)
     return CompareResult(tuple(results), tuple(summary), tuple(str(f) for f in files), wall)
+
+
+def _design(e: Experiment) -> dict[str, Any]:
+    """``seed`` and ``n_steps`` of an experiment's simulated design for results.json: the
+    paper design's; a simulated world's steps when every world has the same; else null (an
+    experiment on stream files has no seed, and its streams have their own lengths)."""
+    if e.designed:
+        return {"seed": e.seed, "n_steps": e.sim.n_steps}
+    steps = {w.sim.n_steps for w in e.worlds}
+    return {"seed": None,
+            "n_steps": steps.pop() if len(steps) == 1 and not e.sources else None}
 
 
 def write_estimate_files(out: Path, tasks: Sequence[Task], results: Sequence[dict[str, Any]]

@@ -208,3 +208,18 @@ def test_long_arm_and_run_names_are_not_cut_into_the_same_label() -> None:
     summary = format_summary(summarise(results)).splitlines()
     for a in arms:
         assert sum(s.split()[:1] == [a] for s in summary) == 1
+
+
+def test_results_json_gives_no_simulated_design_for_stream_experiments(tmp_path: Path) -> None:
+    """results.json's ``experiments`` entries: an experiment on stream files said ``n_steps``
+    300 and ``seed`` 0 (the default simulation's, which it never ran) whatever its streams
+    held; they are now null there, and the design's for the paper's experiments."""
+    src = tmp_path / "s25.jsonl"
+    write_stream(simulate(SimConfig(n_steps=25, n_landmarks=12), np.random.default_rng(5)), src)
+    exp = Experiment("f", "files", (Arm("tri", "triangulate"),),
+                     sources=(FileSource(str(src)),))
+    compare([exp, _exp((Arm("tri", "triangulate"),))], tmp_path / "out",
+            executor=Executor("serial"), figures=False)
+    files, design = json.loads((tmp_path / "out" / "results.json").read_text())["experiments"]
+    assert files["n_steps"] is None and files["seed"] is None and files["runs"] == 1
+    assert design["n_steps"] == 40 and design["seed"] == 3 and design["runs"] == 4
