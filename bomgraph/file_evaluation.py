@@ -16,7 +16,7 @@ from __future__ import annotations
 import json
 import math
 import os
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from typing import Any, Sequence
 
 import numpy as np
@@ -89,6 +89,7 @@ class FileEvaluation:
     nees_landmark: float = math.nan
     nees_pose: float = math.nan
     free_rows: tuple[dict[str, Any], ...] = ()
+    poses_revised: bool = False
 
     def as_dict(self) -> dict[str, Any]:
         if self.score is None:
@@ -98,7 +99,8 @@ class FileEvaluation:
                                     for c in TRUTH_FREE_COLUMNS}}
         out: dict[str, Any] = {"method": self.method, "reference": self.reference,
                                **self.score.as_dict(), "nees_landmark": self.nees_landmark,
-                               "nees_pose": self.nees_pose}
+                               "nees_pose": self.nees_pose,
+                               "poses_revised": self.poses_revised}
         for name, b in (("bearing", self.bearing), ("reference_bearing", self.reference_bearing)):
             if b is not None:
                 out[f"{name}_rms_rad"] = b.rms_rad
@@ -163,6 +165,9 @@ def evaluate_files(estimate_path: str | os.PathLike[str], stream_path: str | os.
     kw = dict(with_scale=with_scale, align_on=align_on, delta=delta)
     score = score_estimate(est.final, target, **kw)
     rows = tuple(score_checkpoints(est.checkpoints, target, **kw)) if est.checkpoints else ()
+    revised = est.version >= 2 and _poses_revised(est)
+    if revised:  # the earlier rows' trajectories are first estimates, not the method's then
+        rows = tuple(_without_trajectory(r, align_on) for r in rows[:-1]) + rows[-1:]
     table = (error_table(est.checkpoints, stream.truth)
              if est.checkpoints and ref_est is None and align_on == "landmarks" else None)
     nl = np_ = math.nan
@@ -178,7 +183,37 @@ def evaluate_files(estimate_path: str | os.PathLike[str], stream_path: str | os.
                           bearing_consistency(est.final, stream.steps),
                           None if ref_est is None else bearing_consistency(ref_est.final,
                                                                            stream.steps),
-                          nl, np_)
+                          nl, np_, poses_revised=revised)
+
+
+def _poses_revised(est: EstimateFile) -> bool:
+    """Whether the method revised or dropped poses after first estimating them: the final
+    trajectory differs from the one an earlier checkpoint reads back (version 2 keeps each
+    pose of an earlier checkpoint as first estimated, docs/FORMATS.md), so the trajectories
+    of the earlier checkpoints are not the ones the method held then."""
+    if len(est.checkpoints) < 2:
+        return False
+    before, final = est.checkpoints[-2].estimate, est.final
+    if before.poses is None or not len(before.poses):
+        return False
+    if final.poses is None:
+        return True
+    at = {int(t): k for k, t in enumerate(final.pose_t)}
+    idx = [at.get(int(t), -1) for t in before.pose_t]
+    return -1 in idx or not np.array_equal(final.poses[idx], before.poses)
+
+
+def _without_trajectory(row: CheckpointScore, align_on: str) -> CheckpointScore:
+    """``row`` without what its read-back trajectory decides: APE, RPE and the mean robot
+    error; with an alignment fitted on the trajectory, every error."""
+    nan = math.nan
+    if align_on != "landmarks":
+        return replace(row, mpe_m=nan, rmse_m=nan, median_m=nan, max_m=nan,
+                       robot_last_m=nan, robot_mean_m=nan, nees_landmark=nan, nees_pose=nan,
+                       ape_trans_rmse_m=nan, ape_heading_rmse_rad=nan, rpe_trans_rmse_m=nan,
+                       rpe_heading_rmse_rad=nan)
+    return replace(row, robot_mean_m=nan, ape_trans_rmse_m=nan, ape_heading_rmse_rad=nan,
+                   rpe_trans_rmse_m=nan, rpe_heading_rmse_rad=nan)
 
 
 def check_stream_identity(est: EstimateFile, steps: Sequence[Step],
@@ -218,6 +253,12 @@ def _is_estimate_file(path: str | os.PathLike[str]) -> bool:
     return True
 
 
+#: Said where the rows before the last leave out what their trajectories decide.
+_REVISED_NOTE = ("before the last checkpoint no APE or RPE ('-'; aligned on the trajectory, "
+                 "no error): the method revised its poses later and the file keeps each pose "
+                 "only as first estimated")
+
+
 def format_evaluation(ev: FileEvaluation, fmt: str = "text") -> str:
     """The evaluation as ``fmt`` (:data:`bomgraph.tables.FORMATS`): text gives counts,
     landmark errors [cm], robot errors and the per-checkpoint table; JSON the whole
@@ -228,7 +269,8 @@ def format_evaluation(ev: FileEvaluation, fmt: str = "text") -> str:
     rows = [asdict(r) for r in ev.rows] or [{**ev.score.as_dict(), "t": None}]
     against = f"reference {ev.reference}" if ev.reference else "truth"
     title = (f"{ev.method} against the {against}, aligned on {ev.score.align_on}; RPE over "
-             f"{ev.score.rpe_delta} step(s)")
+             f"{ev.score.rpe_delta} step(s)" + (f"; {_REVISED_NOTE}" if ev.poses_revised
+                                               and len(ev.rows) > 1 else ""))
     if fmt == "json":
         return json.dumps(jsonable(ev.as_dict()), allow_nan=False)
     if fmt != "text":
@@ -263,6 +305,8 @@ def format_evaluation(ev: FileEvaluation, fmt: str = "text") -> str:
                          f"{b.mirrored_rms_rad:.4f} rad)")
     if len(ev.rows) > 1:
         lines.append("")
+        if ev.poses_revised:
+            lines.append(_REVISED_NOTE)
         lines.append(format_table(EVALUATION_COLUMNS, rows, "text"))
     return "\n".join(lines)
 

@@ -419,3 +419,43 @@ def test_run_refuses_out_equal_to_the_stream(tmp_path: Path) -> None:
         run_file(tmp_path / "s.jsonl", "triangulate", out=tmp_path / "s.jsonl")
     assert (tmp_path / "s.jsonl").read_bytes() == before
     assert sorted(os.listdir(tmp_path)) == ["s.jsonl"]
+
+
+class _Smoother(_CovMapper):
+    """Triangulation whose every estimate moves all its poses (as a smoother revises them)."""
+
+    def estimate(self):
+        e = self.inner.estimate()
+        return MapEstimate(e.landmark_ids, e.landmarks_xy, pose_t=e.pose_t,
+                           poses=e.poses + [0.002 * self.n, 0.0, 0.0])
+
+
+def test_evaluate_gives_no_ape_rpe_of_a_trajectory_the_method_never_had(tmp_path: Path) -> None:
+    """An estimate file keeps each pose of an earlier checkpoint as first estimated (the
+    format's rule), so for a method that revises its poses the trajectory of an earlier
+    checkpoint read back is not the one the method held then. ``evaluate`` printed the APE and
+    RPE of that stitched trajectory under "APE"/"RPE" (gtsam-batch on MRCLAM6 robot 3 at
+    t = 150: 24.1 cm, where compare, scoring the map the method held, gives 12.6); those
+    cells are now left out ('-') before the last checkpoint, and said so. A method that never
+    revises (triangulate) keeps them, equal to the scores of the maps held in memory."""
+    from bomgraph.evaluate import score_checkpoints
+    from bomgraph.file_evaluation import format_evaluation
+
+    s = _stream(40)
+    write_stream(s, tmp_path / "s.jsonl")
+    for mapper, revised in ((_Smoother(s.header), True), (TriangulateMapper(s.header), False)):
+        result = run(mapper, s.steps, method="m")
+        write_estimate(result, tmp_path / "e.est", stream=stream_identity(s.steps))
+        ev = evaluate_files(tmp_path / "e.est", tmp_path / "s.jsonl")
+        live = score_checkpoints(result, s.truth)
+        assert len(ev.rows) == len(live) == 4 and ev.poses_revised == revised
+        for got, want in zip(ev.rows, live):
+            assert got.mpe_m == pytest.approx(want.mpe_m, rel=1e-9)
+            assert got.robot_last_m == pytest.approx(want.robot_last_m, rel=1e-9)
+            if revised and got is not ev.rows[-1]:
+                assert np.isnan(got.ape_trans_rmse_m) and np.isnan(got.rpe_heading_rmse_rad)
+            else:
+                assert got.ape_trans_rmse_m == pytest.approx(want.ape_trans_rmse_m, rel=1e-9)
+                assert got.rpe_trans_rmse_m == pytest.approx(want.rpe_trans_rmse_m, rel=1e-9)
+        text = format_evaluation(ev)
+        assert ("revised" in text) == revised
