@@ -16,6 +16,7 @@ import numpy as np
 
 from .errors import BomgraphError, ConfigError, EvaluationError
 from .estimate_file import read_estimate
+from .file_evaluation import poses_revised
 from .evaluate import score_estimate
 from .plots import results_figure, run_figure
 from .report import error_curves
@@ -58,18 +59,28 @@ def plot_run(estimate_path: str | os.PathLike[str], stream_path: str | os.PathLi
             raise EvaluationError(f"{estimate_path}: no checkpoint at t = {t}; it has "
                                   f"{', '.join(map(str, sorted(cps))) or 'none'}")
         est, at = cps[t].estimate, f"t = {t}"
+    # an earlier checkpoint of a method that revised its poses: its trajectory read back is
+    # each pose as first estimated, not the method's at t (file_evaluation.poses_revised)
+    first = (t is not None and t != est_file.checkpoints[-1].t and est_file.version >= 2
+             and poses_revised(est_file))
     truth = stream.truth
     label = est_file.method or "estimate"
     if truth is None:
         fig = run_figure(None, est, None, label=label, landmark_cov=est.landmark_cov,
                          title=f"{label}, {at} (no truth: the estimate's own frame)")
         return _save(fig, path, dpi)
+    if first and align_on != "landmarks":
+        raise EvaluationError(f"{estimate_path}: the poses at t = {t} are as first estimated "
+                              f"(the method revised them later), so they cannot place the "
+                              f"map: use --align landmarks, or plot the final map")
     s = score_estimate(est, truth, align_on=align_on)
     if truth.poses is not None and t is not None:
         truth = type(truth)(truth.landmark_ids, truth.landmarks_xy, truth.poses[:t + 1])
-    pe = None if s.ape is None else (s.ape.t, s.ape.translation_m, s.ape.heading_rad)
+    pe = None if s.ape is None or first else (s.ape.t, s.ape.translation_m, s.ape.heading_rad)
     cm = (lambda v: "-" if not math.isfinite(v) else f"{100 * v:.2f} cm")
-    robot = f", robot APE {cm(s.ape_trans_rmse_m)}" if s.ape is not None else ""
+    robot = f", robot APE {cm(s.ape_trans_rmse_m)}" if pe is not None else ""
+    if first:
+        robot = ", poses as first estimated (revised later): no robot APE"
     title = (f"{label}, {at}: landmark MPE {cm(s.mpe_m)} ({s.n_common} of {s.n_truth})"
              f"{robot}; aligned on {align_on}{', reflected' if s.alignment.reflected else ''}")
     errors = {int(i): float(e) for i, e in zip(s.landmark_ids, s.errors_m)}

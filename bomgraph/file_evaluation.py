@@ -165,7 +165,7 @@ def evaluate_files(estimate_path: str | os.PathLike[str], stream_path: str | os.
     kw = dict(with_scale=with_scale, align_on=align_on, delta=delta)
     score = score_estimate(est.final, target, **kw)
     rows = tuple(score_checkpoints(est.checkpoints, target, **kw)) if est.checkpoints else ()
-    revised = est.version >= 2 and _poses_revised(est)
+    revised = est.version >= 2 and poses_revised(est)
     if revised:  # the earlier rows' trajectories are first estimates, not the method's then
         rows = tuple(_without_trajectory(r, align_on) for r in rows[:-1]) + rows[-1:]
     table = (error_table(est.checkpoints, stream.truth)
@@ -186,7 +186,7 @@ def evaluate_files(estimate_path: str | os.PathLike[str], stream_path: str | os.
                           nl, np_, poses_revised=revised)
 
 
-def _poses_revised(est: EstimateFile) -> bool:
+def poses_revised(est: EstimateFile) -> bool:
     """Whether the method revised or dropped poses after first estimating them: the final
     trajectory differs from the one an earlier checkpoint reads back (version 2 keeps each
     pose of an earlier checkpoint as first estimated, docs/FORMATS.md), so the trajectories
@@ -336,4 +336,4 @@ def _format_truth_free(ev: FileEvaluation, fmt: str) -> str:
 
 __all__ = ["EVALUATION_COLUMNS", "TRUTH_FREE_COLUMNS", "BearingConsistency",
            "bearing_consistency", "FileEvaluation", "evaluate_files", "check_stream_identity",
-           "format_evaluation"]
+           "poses_revised", "format_evaluation"]

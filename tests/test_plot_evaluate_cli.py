@@ -6,6 +6,7 @@ from __future__ import annotations
 import csv
 import io
 import json
+import re
 from pathlib import Path
 
 import numpy as np
@@ -165,3 +166,30 @@ def test_a_stream_without_truth_gets_the_truth_free_measures(files, tmp_path, ca
     assert main(["evaluate", str(e), str(bare), "--similarity"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "nothing to align to" in err[0]
+
+
+def test_plot_of_an_earlier_checkpoint_claims_no_robot_ape_of_revised_poses(
+        files, tmp_path, monkeypatch) -> None:
+    """``bomgraph plot --t T`` of a method that revises its poses (gtsam-batch): the file keeps
+    each pose of an earlier checkpoint as first estimated, so the title's "robot APE" and the
+    pose-error panel at T were of a trajectory the method never held; they are left out
+    there and the title says why. A method that keeps its poses (ekf) keeps them."""
+    import bomgraph.figures as figures
+
+    s, e, _ = files
+    g = tmp_path / "g.est"
+    assert main(["run", str(s), "--method", "gtsam-batch", "--out", str(g)]) == 0
+    seen = []
+    real = figures.run_figure
+    monkeypatch.setattr(figures, "run_figure",
+                        lambda *a, **k: seen.append(k) or real(*a, **k))
+    for est, revised in ((g, True), (e, False)):
+        seen.clear()
+        assert main(["plot", str(est), str(s), "--t", "20", "--out",
+                     str(tmp_path / "p.png")]) == 0
+        title, pe = seen[0]["title"], seen[0]["pose_errors"]
+        assert (re.search(r"robot APE \d", title) is None) == revised
+        assert (pe is None) == revised
+        assert ("first estimated" in title) == revised
+    assert main(["plot", str(g), str(s), "--align", "trajectory", "--t", "20", "--out",
+                 str(tmp_path / "p.png")]) == 2
