@@ -84,14 +84,17 @@ def summarise(results: Sequence[Mapping[str, Any]],
                                      else math.nan)
         robot = np.array([_value_at(r, last_t, "robot_last_m") for r in ok])
         row["robot_last_mean_m"] = _finite_stat(np.nanmean, robot)
+        row["n_robot"] = int(np.sum(np.isfinite(robot)))
         rm = np.array([np.nanmean([c["robot_last_m"] for c in r["checkpoints"]])
                        if any(np.isfinite(c["robot_last_m"]) for c in r["checkpoints"])
                        else math.nan for r in ok])
         row["robot_over_time_mean_m"] = _finite_stat(np.nanmean, rm)
         conv = [r.get("converged") for r in ok if r.get("converged") is not None]
         row["converged_rate"] = float(np.mean(conv)) if conv else math.nan
+        row["n_converged_known"] = len(conv)
         nees = np.array([_value_at(r, last_t, "nees_pose") for r in ok])
         row["nees_pose_mean"] = _finite_stat(np.nanmean, nees)
+        row["n_nees_pose"] = int(np.sum(np.isfinite(nees)))
         nl = np.array([_value_at(r, last_t, "nees_landmark") for r in ok])
         row["nees_landmark_mean"] = _finite_stat(np.nanmean, nl)
         wall = np.array([r["total_s"] for r in ok])
@@ -192,7 +195,7 @@ def format_summary(summary: Sequence[dict]) -> str:
         lines.append(f"\n== {exp} ==  landmark MPE [cm] mean/median±std at t; robot: error "
                      f"[cm] of the latest pose at the end; conv: converged runs; NEES: robot "
                      f"pose, after the alignment on the landmarks; wall time per run; [k/n]: "
-                     f"only k of n runs had a map")
+                     f"only k of n runs had a map (robot, conv, NEES: a value)")
         by_row = [_mpe_cells(r, times) for r in rows]
         w = max([17] + [len(c) for cells in by_row for c in cells])  # wide means widen it
         aw = max([30] + [len(r["arm"]) for r in rows])  # never cut two labels into one
@@ -209,10 +212,16 @@ def format_summary(summary: Sequence[dict]) -> str:
             conv_s = "  -  " if conv is None or not math.isfinite(conv) else f"{100 * conv:4.0f}%"
             nees = r.get("nees_pose_mean")
             nees_s = "   -  " if nees is None or not math.isfinite(nees) else f"{nees:6.2f}"
+            robot_s = _cm(r.get("robot_last_mean_m"))
+            ran = r["runs"] - r["failed"]
+            robot_s, conv_s, nees_s = (  # averaged over fewer runs than ran: say so
+                v + (f"[{r[k]}/{ran}]" if 0 < r.get(k, ran) < ran else "")
+                for v, k in ((robot_s, "n_robot"), (conv_s, "n_converged_known"),
+                             (nees_s, "n_nees_pose")))
             fail = f"  FAILED {r['failed']}: {'; '.join(r['errors'])[:120]}" if r["failed"] else ""
             lines.append(f"{r['arm']:{aw}s} {r['runs']:4d} "
                          + " ".join(f"{c:>{w}s}" for c in cells)
-                         + f" {_cm(r.get('robot_last_mean_m')):>7s} {conv_s:>5s} {nees_s:>6s}"
+                         + f" {robot_s:>7s} {conv_s:>5s} {nees_s:>6s}"
                          f" {r.get('wall_s_mean', float('nan')):7.3f}"
                          + (_free_cells(r) if free else f"  {r.get('paper', '')}") + fail)
     return "\n".join(lines)

@@ -223,3 +223,24 @@ def test_results_json_gives_no_simulated_design_for_stream_experiments(tmp_path:
     files, design = json.loads((tmp_path / "out" / "results.json").read_text())["experiments"]
     assert files["n_steps"] is None and files["seed"] is None and files["runs"] == 1
     assert design["n_steps"] == 40 and design["seed"] == 3 and design["runs"] == 4
+
+
+def test_robot_conv_and_nees_cells_say_when_only_some_runs_have_one() -> None:
+    """The MPE cells say ``[k/n]`` when only k of the n runs that ran had a map; the robot,
+    conv and NEES cells averaged over the runs that had a value without saying so (two ekf
+    runs, one without a map at the end: its robot error 3.20 cm was shown as the row's)."""
+    nan = float("nan")
+
+    def result(run: str, robot: float, nees: float, conv) -> dict:
+        return {"experiment": "e", "arm": "m", "method": "m", "run": run, "ok": True,
+                "converged": conv, "total_s": 0.1,
+                "checkpoints": [{"t": 50, "n_mapped": 15, "mpe_m": 0.05 if robot == robot
+                                 else nan, "robot_last_m": robot, "nees_pose": nees,
+                                 "nees_landmark": nan}]}
+    rows = summarise([result("a", 0.032, 1.5, True), result("b", nan, nan, None)])
+    line = format_summary(rows).splitlines()[-1].split()
+    assert line[:3] == ["m", "2", "5.00/5.00±-[1/2]"]
+    assert line[3:6] == ["3.20[1/2]", "100%[1/2]", "1.50[1/2]"]
+    full = format_summary(summarise([result("a", 0.032, 1.5, True),
+                                     result("b", 0.04, 2.5, False)])).splitlines()[-1]
+    assert "[" not in full and " 3.60 " in full and " 50% " in full
