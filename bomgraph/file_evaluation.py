@@ -170,6 +170,8 @@ def evaluate_files(estimate_path: str | os.PathLike[str], stream_path: str | os.
         rows = tuple(_without_trajectory(r, align_on) for r in rows[:-1]) + rows[-1:]
     table = (error_table(est.checkpoints, stream.truth)
              if est.checkpoints and ref_est is None and align_on == "landmarks" else None)
+    if revised and table is not None:  # as in the rows: no mean over first estimates
+        table["robot_mean_m"][:-1] = math.nan
     nl = np_ = math.nan
     if ref_est is None:  # the alignment's scale, if fitted, is carried (landmark_nees)
         if est.final.landmark_cov is not None:

@@ -459,3 +459,10 @@ def test_evaluate_gives_no_ape_rpe_of_a_trajectory_the_method_never_had(tmp_path
                 assert got.rpe_trans_rmse_m == pytest.approx(want.rpe_trans_rmse_m, rel=1e-9)
         text = format_evaluation(ev)
         assert ("revised" in text) == revised
+        want_mean = [w.robot_mean_m for w in live]
+        got_mean = ev.table["robot_mean_m"]           # the library's table, likewise
+        assert got_mean[-1] == pytest.approx(want_mean[-1], rel=1e-9)
+        if revised:
+            assert np.isnan(got_mean[:-1]).all()
+        else:
+            np.testing.assert_allclose(got_mean, want_mean, rtol=1e-9)
