@@ -20,6 +20,7 @@ import gtsam
 import numpy as np
 
 from bomgraph.errors import ConfigError
+from bomgraph.geometry import rotation
 from bomgraph.mapper import MapEstimate
 
 from .bearing_graph import (BearingGraph, FactorGraphConfig, landmark_key, landmarks_from_values,
@@ -268,9 +269,8 @@ def marginal_covariances(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values
     pc = pc.reshape(-1, 3, 3)
     if len(pc):
         psi = np.array([values.atPose2(pose_key(int(t))).theta() for t in pose_t])
-        c, s = np.cos(psi), np.sin(psi)
         turn = np.zeros_like(pc)
-        turn[:, 0, 0], turn[:, 0, 1], turn[:, 1, 0], turn[:, 1, 1] = c, -s, s, c
+        turn[:, :2, :2] = rotation(psi)
         turn[:, 2, 2] = 1.0
         pc = turn @ pc @ turn.transpose(0, 2, 1)
         pc = 0.5 * (pc + pc.transpose(0, 2, 1))
