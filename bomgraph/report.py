@@ -25,6 +25,7 @@ import numpy as np
 from .bench import Executor, execute, is_cached, run_example
 from .evaluate import score_estimate
 from .experiments import PAPER_REPORTED, Experiment, FileSource, Task
+from .jsonio import jsonable
 from .plots import MapPanel, error_vs_time_figure, final_maps_figure, map_figure
 from .out_folder import drop_earlier_outputs, refuse_inputs_among_outputs, slug, unique_slugs
 from .stdio import folder_lock, make_folder, output_file, write_text
@@ -343,12 +344,15 @@ def _compare(experiments: Sequence[Experiment], out: Path, executor: Executor,
     files = [out / n for n in ("results.json", "results.csv", "summary.csv", "final_by_run.csv")]
     files += written
     # compact: without ``indent`` json.dumps takes CPython's C encoder (the main job's file:
-    # 0.5 s against 1.6 s indented, docs/measurements.md, "The main job against ...")
-    write_text(out / "results.json", json.dumps(
+    # 0.5 s against 1.6 s indented, docs/measurements.md, "The main job against ...").
+    # Strict JSON: a value that is not a number (a run without a map, a robot error of a
+    # stream without robot truth) is null, not the bare NaN that jq, JavaScript and R's
+    # jsonlite refuse to read.
+    write_text(out / "results.json", json.dumps(jsonable(
         {"experiments": [{"name": e.name, "title": e.title,
                           "arms": [a.key() for a in e.arms], **_design(e),
                           "runs": e.n_runs()} for e in experiments],
-         "summary": summary, "results": results, "wall_s": wall}, allow_nan=True))
+         "summary": summary, "results": results, "wall_s": wall}), allow_nan=False))
     write_csv(out / "results.csv", results_to_csv_rows(results))
     write_csv(out / "summary.csv", summary)
     write_csv(out / "final_by_run.csv", final_by_run(results))

@@ -244,3 +244,26 @@ def test_robot_conv_and_nees_cells_say_when_only_some_runs_have_one() -> None:
     full = format_summary(summarise([result("a", 0.032, 1.5, True),
                                      result("b", 0.04, 2.5, False)])).splitlines()[-1]
     assert "[" not in full and " 3.60 " in full and " 50% " in full
+
+
+def test_results_json_is_strict_json(tmp_path: Path) -> None:
+    """results.json held bare ``NaN`` for every value that is not a number (1,976 of them in
+    ``compare --quick --experiments exp1``: robot errors of runs without robot NEES, scores
+    before a map), which jq, JavaScript's JSON.parse and R's jsonlite refuse. They are null
+    now; the figures read null as a missing value."""
+    src = tmp_path / "s25.jsonl"
+    write_stream(simulate(SimConfig(n_steps=25, n_landmarks=12), np.random.default_rng(5)), src)
+    exp = Experiment("f", "files", (Arm("tri", "triangulate"), Arm("bad", "triangulate",
+                                                                    {"min_parallax_rad": -1.0})),
+                     sources=(FileSource(str(src)),))
+    compare([exp], tmp_path / "out", executor=Executor("serial"), figures=False)
+
+    def refuse(token: str) -> None:
+        raise AssertionError(f"results.json holds the non-JSON constant {token}")
+
+    data = json.loads((tmp_path / "out" / "results.json").read_text(), parse_constant=refuse)
+    rows = {r["arm"]: r for r in data["summary"]}
+    assert rows["bad"]["failed"] == 1 and rows["tri"]["failed"] == 0
+    # the values that were NaN are there, as null (nothing dropped)
+    nulls = [k for r in data["summary"] for k, v in r.items() if v is None]
+    assert nulls, "the summary of a run without robot NEES has missing values"
