@@ -11,6 +11,7 @@ import csv
 import io
 import json
 import math
+import re
 from dataclasses import dataclass
 from typing import Any, Mapping, Sequence
 
@@ -38,11 +39,25 @@ def _shown(v: Any, col: Column) -> str:
     return format(float(v) * col.scale, col.fmt)
 
 
+#: LaTeX's ten special characters and what prints each as itself (a method name or file name
+#: in a caption may hold any of them).
+_LATEX_SPECIAL = {"\\": r"\textbackslash{}", "&": r"\&", "%": r"\%", "$": r"\$", "#": r"\#",
+                  "_": r"\_", "{": r"\{", "}": r"\}", "~": r"\textasciitilde{}",
+                  "^": r"\textasciicircum{}"}
+_LATEX_RE = re.compile("|".join(re.escape(c) for c in _LATEX_SPECIAL))
+
+
 def _latex_escape(s: str) -> str:
-    for a, b in (("\\", r"\textbackslash{}"), ("&", r"\&"), ("%", r"\%"), ("_", r"\_"),
-                 ("#", r"\#"), ("$", r"\$")):
-        s = s.replace(a, b)
-    return s
+    """``s`` with each of LaTeX's special characters replaced in one pass (replacing them one
+    after another escaped the braces of ``\\textbackslash{}`` again)."""
+    return _LATEX_RE.sub(lambda m: _LATEX_SPECIAL[m.group()], s)
+
+
+def _markdown_escape(s: str) -> str:
+    """``s`` with the characters that Markdown may read as markup backslash-escaped, so a
+    method or file name in a title shows as written (``*x*`` was shown as italics and ended
+    the title's bold early)."""
+    return re.sub(r"([\\`*_{}\[\]<>|#])", r"\\\1", s)
 
 
 def _json_value(v: Any) -> Any:
@@ -72,7 +87,7 @@ def format_table(columns: Sequence[Column], rows: Sequence[Mapping[str, Any]], f
     cells = [[_shown(r.get(c.name), c) for c in columns] for r in rows]
     heads = [c.header for c in columns]
     if fmt == "markdown":
-        lines = ([f"**{title}**", ""] if title else []) + [
+        lines = ([f"**{_markdown_escape(title)}**", ""] if title else []) + [
             "| " + " | ".join(heads) + " |", "|" + "---|" * len(heads)]
         lines += ["| " + " | ".join(row) + " |" for row in cells]
         return "\n".join(lines)

@@ -1,0 +1,67 @@
+"""Tables: a title or cell holding characters that LaTeX or Markdown treat as markup prints
+as written. Checked by reading the output back with a small reader written apart from the
+escaping (not by comparing with the escaping's own table)."""
+
+from __future__ import annotations
+
+import re
+
+import pytest
+
+from bomgraph.tables import Column, format_table
+
+#: every printable ASCII character, LaTeX's ten specials and Markdown's markup among them
+HOSTILE = "".join(chr(c) for c in range(32, 127)) + " méthode σ"
+
+#: how LaTeX prints each escape sequence (what a reader of the compiled table sees)
+_LATEX_PRINTS = {r"\textbackslash{}": "\\", r"\textasciitilde{}": "~",
+                 r"\textasciicircum{}": "^"}
+
+
+def _latex_read(text: str) -> str:
+    """What LaTeX typesets for ``text`` in text mode, for the constructs an escaped string may
+    hold; raises where a special character would act as markup instead of printing."""
+    out, k = [], 0
+    while k < len(text):
+        word = next((w for w in _LATEX_PRINTS if text.startswith(w, k)), None)
+        if word is not None:
+            out.append(_LATEX_PRINTS[word])
+            k += len(word)
+        elif text[k] == "\\":
+            assert text[k + 1] in "&%$#_{}", f"control sequence at {text[k:k + 12]!r}"
+            out.append(text[k + 1])
+            k += 2
+        else:
+            assert text[k] not in "&%$#_{}~^\\", f"unescaped {text[k]!r} at {k}"
+            out.append(text[k])
+            k += 1
+    return "".join(out)
+
+
+def test_latex_caption_prints_every_character_as_written() -> None:
+    tex = format_table([Column("mpe_m", "MPE [cm]", 100, ".2f")], [{"mpe_m": 0.0123}],
+                       "latex", title=HOSTILE)
+    caption = re.search(r"^\\caption\{(.*)\}$", tex, re.M)
+    assert caption is not None
+    assert _latex_read(caption.group(1)) == HOSTILE
+    assert "1.23 \\\\" in tex
+
+
+def test_latex_backslash_then_brace() -> None:
+    """The old escaping replaced ``\\`` by ``\\textbackslash{}`` first; a later pass over
+    braces would have escaped those braces too. One pass keeps them."""
+    tex = format_table([Column("t", "t")], [{"t": 1}], "latex", title="a\\{b}")
+    assert _latex_read(re.search(r"\\caption\{(.*)\}", tex).group(1)) == "a\\{b}"
+
+
+@pytest.mark.parametrize("title", [HOSTILE, "*my* method_v2 | [x](y) `z`"])
+def test_markdown_title_shows_as_written(title: str) -> None:
+    md = format_table([Column("t", "t")], [{"t": 1}], "markdown", title=title)
+    first = md.splitlines()[0]
+    assert first.startswith("**") and first.endswith("**")
+    inner = first[2:-2]
+    # CommonMark: a backslash before an ASCII punctuation character prints that character
+    unescaped = re.sub(r"\\([!-/:-@\[-`{-~])", r"\1", inner)
+    assert unescaped == title
+    # and no markup character is left bare in the title
+    assert not re.search(r"(?<!\\)[*_`|\[\]<>]", re.sub(r"\\\\", "", inner))
