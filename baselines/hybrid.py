@@ -412,8 +412,17 @@ class HybridMapper(ScheduledSolver):
                 seed = self._seed_start(*found)
         if seed is not None:
             starts.append("seed")
-            solved.append(("seed", *state.solve(self._with_landmarks(seed.values,
-                                                                     seed.landmarks))))
+            # the two starts must solve the same problem for their costs to compare: a warm
+            # whole-graph solve sets the graph's last whole size to now, after which the
+            # schedule would send the seed start to a window, whose cost (the window's
+            # factors and its marginal) is not the whole graph's and is always the lower
+            whole = bool(solved) and solved[0][2].passes[:1] != ("window",)
+            previous, state.whole_only = state.whole_only, state.whole_only or whole
+            try:
+                solved.append(("seed", *state.solve(self._with_landmarks(seed.values,
+                                                                         seed.landmarks))))
+            finally:
+                state.whole_only = previous
             graph_of["seed"] = state.solved_graph
         # a start whose solution puts landmarks out of the sensor's reach of every pose (a
         # weakly seen landmark slid far along its rays: a converged but wrong minimum) loses
