@@ -206,3 +206,47 @@ def test_the_default_reference_is_the_bound_or_the_reference_arm_else_the_first(
     assert references_for(exps, "oracle") == {"a": "oracle", "b": "tri"}
     with pytest.raises(ConfigError, match="'ekf' is not an arm of any experiment"):
         references_for(exps, "ekf")
+
+
+def test_compare_writes_paired_csv_and_prints_the_table(tmp_path, capsys) -> None:
+    """End to end through the command line: six short simulated streams, three methods, the
+    oracle as the default reference; then the same runs (from the cache) paired against
+    another arm, and an arm that is none refused before anything runs."""
+    import csv
+
+    from bomgraph.cli import main
+
+    streams = []
+    for seed in range(6):
+        streams.append(str(tmp_path / f"s{seed}.jsonl"))
+        assert main(["simulate", "--seed", str(seed), "--steps", "40", "--landmarks", "15",
+                     "--out", streams[-1]]) == 0
+    out = tmp_path / "out"
+    cmd = ["compare", "--streams", *streams, "--methods", "triangulate,stmds-smacof,oracle",
+           "--jobs", "1", "--no-figures", "--no-progress", "--out", str(out)]
+    capsys.readouterr()
+    assert main(cmd) == 0
+    printed = capsys.readouterr().out
+    assert "paired against oracle" in printed
+    with open(out / "paired.csv", newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    assert [(r["arm"], r["reference"], r["n_pairs"]) for r in rows] == [
+        ("triangulate", "oracle", "6"), ("stmds-smacof", "oracle", "6")]
+    assert all(float(r["ratio_ci_low"]) <= float(r["ratio_of_means"]) <= float(r["ratio_ci_high"])
+               for r in rows)
+
+    def refuse(token: str) -> None:
+        raise AssertionError(f"results.json holds the non-JSON constant {token}")
+
+    data = json.loads((out / "results.json").read_text(), parse_constant=refuse)
+    assert [r["arm"] for r in data["paired"]["rows"]] == ["triangulate", "stmds-smacof"]
+    assert data["paired"]["rows"][0]["ratio_of_means"] == float(rows[0]["ratio_of_means"])
+    manifest = json.loads((out / ".bomgraph-compare-files").read_text())
+    assert "paired.csv" in [f["path"] for f in manifest["files"]]
+
+    assert main(cmd + ["--paired-reference", "triangulate"]) == 0
+    with open(out / "paired.csv", newline="") as fh:
+        assert [(r["arm"], r["reference"]) for r in csv.DictReader(fh)] == [
+            ("stmds-smacof", "triangulate"), ("oracle", "triangulate")]
+    assert main(cmd + ["--paired-reference", "ekf"]) == 2
+    assert "'ekf' is not an arm of any experiment" in capsys.readouterr().err
