@@ -97,37 +97,26 @@ class PairedRow:
         return asdict(self)
 
 
-def log_ratio_se(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Delta-method standard error of ``log(mean(a) / mean(b))`` for paired samples.
-
-    Parameters
-    ----------
-    a, b : ndarray, shape ``(..., n)``
-        Paired values (the last axis: runs), ``n >= 2``.
-
-    Returns
-    -------
-    ndarray, shape ``(...)``
-        ``sqrt(sum(u**2) / (n (n - 1)))`` with ``u = a / mean(a) - b / mean(b)``.
-    """
-    n = a.shape[-1]
-    u = a / a.mean(-1, keepdims=True) - b / b.mean(-1, keepdims=True)
-    return np.sqrt(np.sum(u * u, axis=-1) / (n * (n - 1)))
-
-
 def ratio_of_means_ci(a: np.ndarray, b: np.ndarray, idx: np.ndarray, confidence: float
                       ) -> tuple[float, float]:
-    """Studentized (bootstrap-t) interval of ``mean(a) / mean(b)``, on the log scale.
+    """Expanded percentile bootstrap interval of ``mean(a) / mean(b)`` (Hesterberg, "What
+    teachers should know about the bootstrap", The American Statistician 69, 2015).
 
-    The percentile interval of the resampled ratios covers too rarely on a few runs: 92.6 %
-    for a nominal 95 % at 25 runs, against 94.6 % for this one, on the same 4,000 simulated
-    experiments (log-normal per-run ratios, 2,000 resamples; ``tests/test_paired.py`` checks
-    the coverage on 400).
+    The plain percentile interval of the resampled ratios is too narrow on a few runs (it
+    takes the spread with divisor n, and normal quantiles); the expanded one reads the
+    resampled ratios at the tail probability ``Phi(-sqrt(n / (n - 1)) t_{n-1})`` instead of
+    ``(1 - confidence) / 2``. On 4,000 simulated experiments of 25 runs (log-normal per-run
+    ratios, 2,000 resamples) a nominal 95 % covered 94.1 %, the plain percentile 92.6 %; a
+    studentized (bootstrap-t) interval covered 94.6 % there, but on the paper's runs, where
+    ``gtsam-batch`` equals the oracle to the micrometre on 23 runs and not on 2, it gave
+    [1.00, 47] for a ratio of 1.04 (resamples without those two have no spread), this one
+    [1.00, 1.11]. ``tests/test_paired.py`` checks the coverage on 400 experiments.
 
     Parameters
     ----------
     a, b : ndarray, shape ``(n,)``
-        Paired positive values (MPE of the arm and of the reference, per run).
+        Paired values, ``n >= 2`` (MPE [m] of the arm and of the reference, per run), with
+        ``mean(b) > 0``.
     idx : ndarray of int, shape ``(B, n)``
         Bootstrap resamples: row k picks the runs of resample k (``a`` and ``b`` together).
     confidence : float
@@ -135,19 +124,17 @@ def ratio_of_means_ci(a: np.ndarray, b: np.ndarray, idx: np.ndarray, confidence:
 
     Returns
     -------
-    (low, high) : the interval's ends; both equal the ratio when ``a`` is exactly
-        proportional to ``b`` (no spread to resample).
+    (low, high) : the interval's ends (both the ratio itself when ``a`` is ``b`` times a
+        constant: no spread to resample).
     """
-    est = math.log(a.mean() / b.mean())
-    se = float(log_ratio_se(a, b))
-    if se == 0:
-        return math.exp(est), math.exp(est)
-    ra, rb = a[idx], b[idx]
+    from scipy.special import ndtr, stdtrit
+
+    n = a.shape[0]
     with np.errstate(divide="ignore", invalid="ignore"):
-        t = (np.log(ra.mean(1) / rb.mean(1)) - est) / log_ratio_se(ra, rb)
-    t = t[np.isfinite(t)]  # a resample of one run repeated has no spread: no t
-    t_upper, t_lower = np.quantile(t, [(1 + confidence) / 2, (1 - confidence) / 2])
-    return math.exp(est - t_upper * se), math.exp(est - t_lower * se)
+        ratios = a[idx].mean(axis=1) / b[idx].mean(axis=1)
+    tail = float(ndtr(-math.sqrt(n / (n - 1)) * stdtrit(n - 1, (1 + confidence) / 2)))
+    low, high = np.quantile(ratios[~np.isnan(ratios)], [tail, 1 - tail])
+    return float(low), float(high)
 
 
 def wilcoxon_p(diff: np.ndarray) -> tuple[float | None, str]:
@@ -332,5 +319,5 @@ def format_paired(rows: Sequence[PairedRow], confidence: float = 0.95) -> str:
 
 
 __all__ = ["MIN_NONZERO_WILCOXON", "MIN_PAIRS_CI", "PairedConfig", "PairedRow",
-           "default_reference", "format_paired", "log_ratio_se", "paired_comparison",
+           "default_reference", "format_paired", "paired_comparison",
            "ratio_of_means_ci", "references_for", "wilcoxon_p"]
