@@ -229,6 +229,7 @@ def cmd_methods(args: argparse.Namespace) -> int:
 def cmd_compare(args: argparse.Namespace) -> int:
     from .bench import Executor
     from .experiments import compare_experiments
+    from .paired import format_paired
     from .report import compare, final_by_run, format_by_run, format_summary, plan_compare
 
     chosen, settings = compare_experiments(
@@ -267,7 +268,7 @@ def cmd_compare(args: argparse.Namespace) -> int:
     try:
         result = compare(chosen, args.out, executor=executor, use_cache=not args.no_cache,
                          figures=not args.no_figures, progress=progress,
-                         estimates=args.estimates)
+                         estimates=args.estimates, paired_reference=args.paired_reference)
     except KeyboardInterrupt:
         if bar is not None:
             bar.close()
@@ -279,6 +280,8 @@ def cmd_compare(args: argparse.Namespace) -> int:
         if bar is not None:
             bar.close()
     print(format_summary(result.summary))
+    if result.paired and not getattr(args, "quiet", False):
+        print(format_paired(result.paired))
     recorded = {e.name for e in chosen if not e.designed}
     if recorded:
         print(format_by_run(final_by_run([r for r in result.results

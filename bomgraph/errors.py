@@ -65,3 +65,8 @@ class MethodProtocolError(BomgraphError, TypeError):
     """A method breaks the :class:`~bomgraph.mapper.Mapper` protocol that :func:`run` relies
     on (its factory returns no mapper, its ``estimate()`` returns no ``MapEstimate``): the
     message names the method and what it returned."""
+
+
+class PairingError(BomgraphError, ValueError):
+    """Per-run results that cannot be paired between arms (a run twice for one arm, a
+    reference arm that is not in its experiment)."""

@@ -29,7 +29,7 @@ _log = logging.getLogger(__name__)
 #: only the streams of simulated and imported runs, never over a stream file it reads, which
 #: :func:`write_estimate_files` refuses as it writes).
 COMPARE_FILES = ("results.json", "results.csv", "summary.csv", "final_by_run.csv",
-                 "example_map.txt")
+                 "paired.csv", "example_map.txt")
 COMPARE_FOLDERS = ("cache", "estimates")
 
 

@@ -26,6 +26,7 @@ from .bench import Executor, execute, is_cached, run_example
 from .evaluate import score_estimate
 from .experiments import PAPER_REPORTED, Experiment, FileSource, Task
 from .jsonio import jsonable
+from .paired import PairedConfig, PairedRow, paired_comparison, references_for
 from .plots import MapPanel, error_vs_time_figure, final_maps_figure, map_figure
 from .out_folder import drop_earlier_outputs, refuse_inputs_among_outputs, slug, unique_slugs
 from .stdio import folder_lock, make_folder, output_file, write_text
@@ -275,12 +276,14 @@ def format_by_run(rows: Sequence[dict]) -> str:
 
 @dataclass(frozen=True)
 class CompareResult:
-    """What :func:`compare` produced: raw results, the summary table and the files written."""
+    """What :func:`compare` produced: raw results, the summary table, the files written and
+    the paired comparison of each arm with its experiment's reference arm."""
 
     results: tuple[dict[str, Any], ...]
     summary: tuple[dict[str, Any], ...]
     files: tuple[str, ...]
     wall_s: float
+    paired: tuple[PairedRow, ...] = ()
 
 
 def write_csv(path: str | os.PathLike[str], rows: Sequence[Mapping[str, Any]],
@@ -304,18 +307,24 @@ def write_csv(path: str | os.PathLike[str], rows: Sequence[Mapping[str, Any]],
 def compare(experiments: Sequence[Experiment], out_dir: str | os.PathLike[str], *,
             executor: Executor = Executor(), use_cache: bool = True, figures: bool = True,
             progress: Callable[[int, int], None] | None = None,
-            estimates: bool = False) -> CompareResult:
-    """Run ``experiments``, write ``results.json``, ``results.csv``, ``summary.csv`` and the
-    figures (PNG) into ``out_dir``, and return the summary. With ``estimates``, also each
-    run's final estimate file and its stream (:func:`write_estimate_files`).
+            estimates: bool = False, paired_reference: str | None = None,
+            paired: PairedConfig = PairedConfig()) -> CompareResult:
+    """Run ``experiments``, write ``results.json``, ``results.csv``, ``summary.csv``,
+    ``final_by_run.csv``, ``paired.csv`` and the figures (PNG) into ``out_dir``, and return
+    the summary. With ``estimates``, also each run's final estimate file and its stream
+    (:func:`write_estimate_files`). ``paired.csv`` compares each arm with its experiment's
+    reference arm run by run (:func:`bomgraph.paired.paired_comparison`): the arm labelled
+    ``paired_reference`` where there is one, else :func:`bomgraph.paired.default_reference`.
 
     Finished runs are cached in ``out_dir/cache`` so an interrupted sweep resumes.
     """
     out = Path(out_dir)
+    refs = references_for(experiments, paired_reference)  # a wrong label: before anything runs
     refuse_inputs_among_outputs(out, experiments)
     make_folder(out)
     with folder_lock(out, "`bomgraph compare`"):
-        return _compare(experiments, out, executor, use_cache, figures, progress, estimates)
+        return _compare(experiments, out, executor, use_cache, figures, progress, estimates,
+                        refs, paired)
 
 
 def plan_compare(experiments: Sequence[Experiment], out_dir: str | os.PathLike[str], *,
@@ -333,15 +342,19 @@ def plan_compare(experiments: Sequence[Experiment], out_dir: str | os.PathLike[s
 
 def _compare(experiments: Sequence[Experiment], out: Path, executor: Executor,
              use_cache: bool, figures: bool,
-             progress: Callable[[int, int], None] | None, estimates: bool) -> CompareResult:
+             progress: Callable[[int, int], None] | None, estimates: bool,
+             references: Mapping[str, str], paired_config: PairedConfig) -> CompareResult:
     start = time.perf_counter()
     tasks = [replace(t, keep_estimate=estimates) for e in experiments for t in e.tasks()]
     results = execute(tasks, executor, cache_dir=out / "cache" if use_cache else None,
                       progress=progress)
     written = write_estimate_files(out, tasks, results) if estimates else []
     summary = summarise(results)
+    by_run = final_by_run(results)
+    paired = paired_comparison(by_run, references, paired_config)
     wall = time.perf_counter() - start
-    files = [out / n for n in ("results.json", "results.csv", "summary.csv", "final_by_run.csv")]
+    files = [out / n for n in ("results.json", "results.csv", "summary.csv", "final_by_run.csv",
+                               "paired.csv")]
     files += written
     # compact: without ``indent`` json.dumps takes CPython's C encoder (the main job's file:
     # 0.5 s against 1.6 s indented, docs/measurements.md, "The main job against ...").
@@ -352,14 +365,21 @@ def _compare(experiments: Sequence[Experiment], out: Path, executor: Executor,
         {"experiments": [{"name": e.name, "title": e.title,
                           "arms": [a.key() for a in e.arms], **_design(e),
                           "runs": e.n_runs()} for e in experiments],
-         "summary": summary, "results": results, "wall_s": wall}), allow_nan=False))
+         "summary": summary,
+         "paired": {"n_bootstrap": paired_config.n_bootstrap,
+                    "confidence": paired_config.confidence, "seed": paired_config.seed,
+                    "rows": [p.as_dict() for p in paired]},
+         "results": results, "wall_s": wall}), allow_nan=False))
     write_csv(out / "results.csv", results_to_csv_rows(results))
     write_csv(out / "summary.csv", summary)
-    write_csv(out / "final_by_run.csv", final_by_run(results))
+    write_csv(out / "final_by_run.csv", by_run)
+    write_csv(out / "paired.csv", [p.as_dict() for p in paired],
+              columns=list(PairedRow.__dataclass_fields__))
     if figures:
         files += write_compare_figures(out, experiments, results)
     drop_earlier_outputs(out, files, experiments)
-    return CompareResult(tuple(results), tuple(summary), tuple(str(f) for f in files), wall)
+    return CompareResult(tuple(results), tuple(summary), tuple(str(f) for f in files), wall,
+                         tuple(paired))
 
 
 def _design(e: Experiment) -> dict[str, Any]:
