@@ -229,7 +229,7 @@ def cmd_methods(args: argparse.Namespace) -> int:
 def cmd_compare(args: argparse.Namespace) -> int:
     from .bench import Executor
     from .experiments import compare_experiments
-    from .paired import format_paired
+    from .paired import format_paired, references_for
     from .report import compare, final_by_run, format_by_run, format_summary, plan_compare
 
     chosen, settings = compare_experiments(
@@ -238,6 +238,7 @@ def cmd_compare(args: argparse.Namespace) -> int:
         quick=args.quick, seed=args.seed,
         names=args.experiments.split(",") if args.experiments else ())
     if args.dry_run:
+        references_for(chosen, args.paired_reference)    # a wrong arm: refused here too
         return _print_plan(plan_compare(chosen, args.out, use_cache=not args.no_cache,
                                         estimates=args.estimates), args.out)
     executor = Executor.choose(args.jobs, args.scheduler, args.dask_local, defaults=settings)

@@ -242,3 +242,6 @@ def test_compare_writes_paired_csv_and_prints_the_table(tmp_path, capsys) -> Non
             ("stmds-smacof", "triangulate"), ("oracle", "triangulate")]
     assert main(cmd + ["--paired-reference", "ekf"]) == 2
     assert "'ekf' is not an arm of any experiment" in capsys.readouterr().err
+    # --dry-run refuses it too (it ran the plan before)
+    assert main(cmd + ["--paired-reference", "ekf", "--dry-run"]) == 2
+    assert "'ekf' is not an arm of any experiment" in capsys.readouterr().err
