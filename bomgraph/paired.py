@@ -298,10 +298,7 @@ def format_paired(rows: Sequence[PairedRow], confidence: float = 0.95) -> str:
     pct = f"{100 * confidence:g}%"
     for exp in dict.fromkeys(r.experiment for r in rows):
         rs = [r for r in rows if r.experiment == exp]
-        lines.append(f"\n== {exp}, paired against {rs[0].reference} ==  final landmark MPE on "
-                     f"the runs both scored: ratio of means [{pct} CI], median per-run ratio, "
-                     f"median difference [cm], wins/ties/losses (lower wins), Wilcoxon p; "
-                     f"[k out]: runs left out (failed, unscored or unmatched)")
+        lines.append(f"\n== {exp}, paired against {rs[0].reference} ==")
         aw = max([30] + [len(r.arm) for r in rs])
         lines.append(f"{'arm':{aw}s} {'pairs':>9s} {'ratio [CI]':>20s} {'med ratio':>9s} "
                      f"{'med diff':>9s} {'W/T/L':>9s} {'p':>8s}")
@@ -315,6 +312,11 @@ def format_paired(rows: Sequence[PairedRow], confidence: float = 0.95) -> str:
                          f"{_num(r.diff_median_m, '+.2f', 100):>9s} "
                          f"{f'{r.wins}/{r.ties}/{r.losses}':>9s} {_num(r.wilcoxon_p, '.2g'):>8s}"
                          + (f"  ({r.note})" if r.note else ""))
+    if lines:   # the legend once, after the blocks
+        lines.append(f"\npaired: final landmark MPE on the runs both arms scored; ratio of "
+                     f"means (arm / reference) [{pct} CI], median per-run ratio, median "
+                     f"difference [cm], wins/ties/losses (lower MPE wins), Wilcoxon p; "
+                     f"[k out]: runs left out (failed, unscored or unmatched); paired.csv")
     return "\n".join(lines)
 
 
