@@ -328,7 +328,8 @@ def _smacof_single(z: np.ndarray, first: np.ndarray, second: np.ndarray, delta: 
         bz = np.bincount(slot, flat, 2 * n).view(np.complex128)
         g = solver.solve(bz)
         z_new = g if relaxation == 1.0 else z + relaxation * (g - z)
-        diff_new = z_new[first] - z_new[second]
+        at_ends = z_new[ends]                    # both ends of every edge in one gather
+        diff_new = at_ends[:e] - at_ends[e:]
         dist_new = np.abs(diff_new)
         r = dist_new - delta
         s_new = float(np.dot(weights, r * r))
