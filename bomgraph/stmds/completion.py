@@ -59,6 +59,8 @@ def largest_component(n: int, first: np.ndarray, second: np.ndarray,
     if n == 0:
         return Component(np.zeros(0, np.int64), np.zeros(0, np.int64), 0)
     labels = component_labels(n, first, second)
+    if not labels.any():             # one component (every vertex labelled 0): keep them all
+        return Component(np.arange(n), np.zeros(0, np.int64), 1)
     roots, labels = np.unique(labels, return_inverse=True)
     sizes = np.bincount(labels, weights=size_weight, minlength=len(roots))
     best = int(np.argmax(sizes))   # argmax takes the first maximum: the smallest vertex

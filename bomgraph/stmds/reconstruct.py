@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from ..evaluate import align
-from .completion import (largest_component, pivot_shortest_paths, prune_low_degree,
+from .completion import (Component, largest_component, pivot_shortest_paths, prune_low_degree,
                          shortest_path_completion)
 from .config import StmdsConfig
 from .mds import LaplacianSolver, classical_scaling, landmark_scaling, smacof, stress1
@@ -120,18 +120,10 @@ def reconstruct(config: StmdsConfig, n_nodes: int, n_landmarks: int, first: np.n
     lf, ls = local[first], local[second]
     # the component with the most landmarks (robot positions do not count)
     comp = largest_component(len(nodes), lf, ls, (nodes < n_lm).astype(float))
-    keep = np.zeros(len(nodes), bool)
-    keep[comp.kept] = True
-    sel = keep[lf] & keep[ls]
-    kept_nodes = nodes[comp.kept]
-    renum = np.full(len(nodes), -1, np.int64)
-    renum[comp.kept] = np.arange(len(comp.kept))
-    ef, es = renum[lf[sel]], renum[ls[sel]]
-    ed, ev = dist[sel], var[sel]
+    kept_nodes, ef, es, ed, ev = _restrict(comp, nodes, lf, ls, dist, var)
     n = len(kept_nodes)
     left = np.concatenate([nodes[comp.left_out], np.flatnonzero(~touched)])
-    info: dict[str, Any] = {"n_components": comp.n_components,
-                            "n_mapped_pairs": int(sel.sum())}
+    info: dict[str, Any] = {"n_components": comp.n_components, "n_mapped_pairs": len(ef)}
 
     use_smacof = cfg.method == "smacof" and t >= cfg.smacof_from_t and n >= 2
     w = np.ones(len(ed)) if cfg.weights == "binary" else _inverse_variance(ev)
@@ -175,6 +167,21 @@ def reconstruct(config: StmdsConfig, n_nodes: int, n_landmarks: int, first: np.n
     assert xy is not None
     info["stress1"] = stress1(xy, ef, es, ed, w) if len(ed) else 0.0
     return Reconstruction(kept_nodes, xy, left, use_smacof, info)
+
+
+def _restrict(comp: Component, nodes: np.ndarray, first: np.ndarray, second: np.ndarray,
+              dist: np.ndarray, var: np.ndarray) -> tuple[np.ndarray, ...]:
+    """The kept component's nodes and its pairs renumbered ``0 .. n-1`` (``first``,
+    ``second``: local indices into ``nodes``): ``(kept nodes, first, second, distances,
+    variances)``; the arrays as given when the component is the whole graph."""
+    if len(comp.left_out) == 0:
+        return nodes, first, second, dist, var
+    keep = np.zeros(len(nodes), bool)
+    keep[comp.kept] = True
+    sel = keep[first] & keep[second]
+    renum = np.full(len(nodes), -1, np.int64)
+    renum[comp.kept] = np.arange(len(comp.kept))
+    return (nodes[comp.kept], renum[first[sel]], renum[second[sel]], dist[sel], var[sel])
 
 
 def _inverse_variance(var: np.ndarray) -> np.ndarray:
