@@ -488,4 +488,5 @@ def pose_nees(estimate: MapEstimate, truth: Truth, alignment: Alignment) -> floa
 
 
 __all__ = ["Alignment", "RANK_TOL", "align_candidates", "align", "ALIGN_ON", "Reference", "MapScore", "score_estimate", "CheckpointScore",
-           "score_checkpoints", "ERROR_COLUMNS", "error_table", "landmark_nees", "mean_landmark_nees", "pose_nees"]
+           "score_checkpoints", "ERROR_COLUMNS", "error_table", "landmark_nees",
+           "mean_landmark_nees", "pose_nees"]

@@ -2,7 +2,7 @@
 defined, ``baselines.lm_report.marginal_covariances``), through every consumer: the estimate
 file (``null`` for such a block, read back as NaN), evaluate's NEES (the mean over the
 landmarks that have one; NaN for a pose that has none), compare's per-checkpoint NEES and the
-run figure. Before the thirty-second session ``MapEstimate`` refused such an estimate outright
+run figure. Before helper h32-marginals' change ``MapEstimate`` refused such an estimate outright
 ("must be finite"), so a method could only drop every covariance of the run.
 
 The expected NEES is computed here by hand from the alignment the evaluator reports.

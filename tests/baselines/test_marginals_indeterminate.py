@@ -3,9 +3,9 @@
 When a landmark's estimate lies micrometres from a pose that took a bearing of it, that
 bearing's whitened Jacobian is ``1 / (rho sigma)`` (10^6 and more) and the Cholesky of a clique
 holding it loses its pivots: ``gtsam.Marginals`` raised "Indeterminate linear system" for a few
-variables, and before the thirty-second session the run then reported no covariance for any
+variables, and before helper h32-marginals' change the run then reported no covariance for any
 variable (``info["covariances"]`` False), though the graph's ``J^T J`` is invertible. Now every
-block then comes from an SVD of the whole whitened Jacobian, and a variable whose marginal is
+block comes from an SVD of the whole whitened Jacobian, and a variable whose marginal is
 truly not defined (moved by the Jacobian's null space) gets an all-NaN block, listed with the
 reason in ``info``, never a number.
 
