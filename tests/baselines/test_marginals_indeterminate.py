@@ -181,12 +181,11 @@ def test_fallback_equals_a_numeric_covariance_at_zero_residual(solved: tuple) ->
                          at, 1e-6)
 
 
-def test_a_variable_without_a_defined_marginal_gets_nan_and_a_reason() -> None:
-    """Three poses on a line, two landmarks: l1 seen from two poses, l2 from one only (it can
-    slide along that ray: ``J^T J`` is singular and ``gtsam.Marginals`` raises). l2's block is
-    NaN and listed with the reason; the poses and l1 keep their covariances, which equal the
-    numeric ``(J^T J)^-1`` of the graph without l2's bearing (a lone bearing of a free landmark
-    tells nothing of the poses)."""
+def _one_landmark_seen_once() -> tuple[gtsam.NonlinearFactorGraph, gtsam.NonlinearFactorGraph,
+                                       gtsam.Values]:
+    """Three poses, two landmarks: l1 seen from two poses, l2 from one only (it can slide
+    along that ray). Returns the graph, the graph without l2's bearing, and the values (at
+    zero residual)."""
     noise_b = gtsam.noiseModel.Isotropic.Sigma(1, 0.02)
     noise_o = gtsam.noiseModel.Diagonal.Sigmas([0.05, 0.02, 0.03])
     graph = gtsam.NonlinearFactorGraph()
@@ -209,6 +208,15 @@ def test_a_variable_without_a_defined_marginal_gets_nan_and_a_reason() -> None:
         without.add(f)
     graph.add(gtsam.BearingFactor2D(pose_key(1), landmark_key(2), poses[1].bearing(l2),
                                     noise_b))
+    return graph, without, values
+
+
+def test_a_variable_without_a_defined_marginal_gets_nan_and_a_reason() -> None:
+    """l2 is seen from one pose only: ``J^T J`` is singular and ``gtsam.Marginals`` raises.
+    l2's block is NaN and listed with the reason; the poses and l1 keep their covariances,
+    which equal the numeric ``(J^T J)^-1`` of the graph without l2's bearing (a lone bearing
+    of a free landmark tells nothing of the poses)."""
+    graph, without, values = _one_landmark_seen_once()
     with pytest.raises((RuntimeError, UnicodeDecodeError)):
         gtsam.Marginals(graph, values).marginalCovariance(landmark_key(2))
     pose_t, ids = np.arange(3), np.array([1, 2])
@@ -222,3 +230,33 @@ def test_a_variable_without_a_defined_marginal_gets_nan_and_a_reason() -> None:
     assert info["covariances_undefined"]["landmarks"] == [2]
     cov, at = _numeric_covariance(without, values)
     _assert_blocks_equal(marg.landmark_cov[:1], marg.pose_cov, ids[:1], pose_t, cov, at, 1e-6)
+
+
+def test_above_the_svd_limit_the_failed_variables_are_nan_and_the_rest_gtsams(
+        solved: tuple, monkeypatch: pytest.MonkeyPatch) -> None:
+    """With the SVD out of reach (``DENSE_MARGINALS_MAX`` below the graph's unknowns), the
+    blocks ``gtsam.Marginals`` gave are kept (equal to the numeric covariance to 1e-5 at zero
+    residual: its Cholesky's blocks were up to 3e-6 off beside the near landmark) and the one
+    it raised on, x39, is NaN with the reason: never a number made up for it. On the graph
+    with a landmark seen once, where it raises on every variable, none has one
+    (``covariances`` False)."""
+    import baselines.lm_report as lm_report
+
+    monkeypatch.setattr(lm_report, "DENSE_MARGINALS_MAX", 100)
+    est, graph, values = solved
+    exact = _exact_graph(graph, values)
+    marg = marginal_covariances(exact, values, est.pose_t, est.landmark_ids)
+    assert marg.source == "gtsam.Marginals" and marg.marginals_failed == 1
+    assert marg.undefined_poses == (39,) and marg.undefined_landmarks == ()
+    assert "more unknowns than the SVD check's 100" in marg.reason
+    assert marg.as_info()["covariances"] == "partial"
+    assert np.isnan(marg.pose_cov[39]).all()
+    keep = est.pose_t != 39
+    cov, at = _numeric_covariance(exact, values)
+    _assert_blocks_equal(marg.landmark_cov, marg.pose_cov[keep], est.landmark_ids,
+                         est.pose_t[keep], cov, at, 1e-5)
+    monkeypatch.setattr(lm_report, "DENSE_MARGINALS_MAX", 12)    # it has 13 unknowns
+    graph1, _, values1 = _one_landmark_seen_once()
+    none = marginal_covariances(graph1, values1, np.arange(3), np.array([1, 2]))
+    assert none.as_info()["covariances"] is False
+    assert np.isnan(none.landmark_cov).all() and np.isnan(none.pose_cov).all()
