@@ -248,9 +248,9 @@ def all_poses(values: gtsam.Values, n: int) -> np.ndarray:
 
 
 #: Above this many unknowns (the graph's tangent-space dimension) the SVD of
-#: :func:`marginal_covariances` is not tried (it is O(m n^2): 3 s for 700 unknowns, about a
-#: minute for 2,000): the variables ``gtsam.Marginals`` raised on are then reported without a
-#: covariance.
+#: :func:`marginal_covariances` is not tried (it is O(m n^2), single-threaded here: 2-3 s for
+#: the 700 unknowns of a 100-step paper world, about 30 s for the 1,900 of a 300-step one):
+#: the variables ``gtsam.Marginals`` raised on are then reported without a covariance.
 DENSE_MARGINALS_MAX = 2000
 
 
