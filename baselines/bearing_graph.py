@@ -144,7 +144,9 @@ class FactorGraphConfig(Presets):
         convergence (a large value calls more solutions converged; the report gives the
         predicted decrease beside ``converged``), so it must be finite.
     covariances : bool
-        Fill ``landmark_cov`` and ``pose_cov`` through ``gtsam.Marginals`` (costs time).
+        Fill ``landmark_cov`` and ``pose_cov`` through ``gtsam.Marginals`` (costs time; an
+        SVD of the whole graph where it fails, all-NaN blocks where a marginal is not
+        defined: :func:`baselines.lm_report.marginal_covariances`).
     warm_relative_error_tol : float
         ``relative_error_tol`` of the scheduled solves of ``gtsam-batch``, ``oracle`` and
         ``hybrid`` (warm starts a few steps apart; 1e-8 cost 3x the iterations for the same

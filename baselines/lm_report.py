@@ -247,34 +247,166 @@ def all_poses(values: gtsam.Values, n: int) -> np.ndarray:
     return p[len(p) - n:]
 
 
+#: Above this many unknowns (the graph's tangent-space dimension) the SVD of
+#: :func:`marginal_covariances` is not tried (it is O(m n^2), single-threaded here: 2-3 s for
+#: the 700 unknowns of a 100-step paper world, about 30 s for the 1,900 of a 300-step one):
+#: the variables ``gtsam.Marginals`` raised on are then reported without a covariance.
+DENSE_MARGINALS_MAX = 2000
+
+
+@dataclass(frozen=True)
+class MarginalCovariances:
+    """World-frame marginal covariances of a solution (:func:`marginal_covariances`).
+
+    ``landmark_cov`` ``(n, 2, 2)`` (m^2) and ``pose_cov`` ``(m, 3, 3)`` over ``(x_m, y_m,
+    psi_rad)``, in the order asked for; the block of a variable whose marginal is not
+    reported is all NaN and the variable is listed in ``undefined_landmarks`` /
+    ``undefined_poses`` with ``reason``. ``source`` says where the blocks came from
+    (``"gtsam.Marginals"``, or ``"svd"``: the SVD of the whitened Jacobian gave every block)
+    and ``marginals_failed`` on how many variables ``gtsam.Marginals`` raised.
+    """
+
+    landmark_cov: np.ndarray
+    pose_cov: np.ndarray
+    undefined_landmarks: tuple[int, ...] = ()
+    undefined_poses: tuple[int, ...] = ()
+    source: str = "gtsam.Marginals"
+    marginals_failed: int = 0
+    reason: str = ""
+
+    @property
+    def complete(self) -> bool:
+        """Whether every variable asked for has its covariance."""
+        return not (self.undefined_landmarks or self.undefined_poses)
+
+    def as_info(self) -> dict[str, Any]:
+        """What ``MapEstimate.info`` says of them: ``covariances`` (True when every variable
+        has one, ``"partial"`` when some do, False when none does); when some have none,
+        ``covariances_undefined`` (their landmark ids and pose steps, and why); when
+        ``gtsam.Marginals`` raised, ``marginals_failed`` and ``covariances_from``."""
+        n_undefined = len(self.undefined_landmarks) + len(self.undefined_poses)
+        total = len(self.landmark_cov) + len(self.pose_cov)
+        info: dict[str, Any] = {"covariances": (True if n_undefined == 0 else
+                                                False if n_undefined == total else "partial")}
+        if n_undefined:
+            info["covariances_undefined"] = {"landmarks": list(self.undefined_landmarks),
+                                             "poses": list(self.undefined_poses),
+                                             "reason": self.reason}
+        if self.marginals_failed:
+            info["marginals_failed"] = self.marginals_failed
+            info["covariances_from"] = self.source
+        return info
+
+
+def _tangent_dims(keys: list[int]) -> np.ndarray:
+    """The tangent dimension of each key: 3 for a ``Pose2`` (symbols ``x``, ``m``), else 2
+    (a ``Point2`` landmark, symbol ``l``)."""
+    return np.array([3 if chr(gtsam.Symbol(k).chr()) in ("x", "m") else 2 for k in keys],
+                    dtype=np.int64)
+
+
+def _svd_marginals(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values,
+                   want: list[int]) -> tuple[dict[int, np.ndarray], str] | None:
+    """The tangent-space marginal covariance of each key of ``want`` from an SVD of the
+    whole whitened Jacobian ``J`` at ``values``: the blocks of ``V_r diag(1/s_r^2) V_r^T``
+    over the singular values above numpy's rank tolerance (``s_max * max(m, n) * eps``), i.e.
+    ``(J^T J)^-1`` when ``J`` has full column rank. A key that the null space of ``J`` moves
+    (a block of its basis with norm above ``sqrt(eps)``), or that no factor holds, has no
+    defined marginal and is left out. Returns ``({key: block}, reason)``, the reason saying
+    why keys were left out ("" if none was), or None above :data:`DENSE_MARGINALS_MAX`
+    unknowns (not tried)."""
+    keys = [int(k) for k in graph.keyVector()]
+    dims = _tangent_dims(keys)
+    if int(dims.sum()) > DENSE_MARGINALS_MAX:
+        return None
+    a, _ = graph.linearize(values).jacobian(gtsam.Ordering(keys))
+    if a.shape[0] < a.shape[1]:   # zero rows, so that vt spans the null space too
+        a = np.vstack([a, np.zeros((a.shape[1] - a.shape[0], a.shape[1]))])
+    _, s, vt = np.linalg.svd(a, full_matrices=False)
+    tol = (s[0] if s.size else 0.0) * max(a.shape) * np.finfo(float).eps
+    r = int(np.sum(s > tol))
+    w = vt[:r].T / s[:r]                   # V_r diag(1/s_r): the covariance is w w^T
+    null = vt[r:].T
+    start = dict(zip(keys, np.r_[0, np.cumsum(dims)[:-1]].tolist()))
+    dim = dict(zip(keys, dims.tolist()))
+    out: dict[int, np.ndarray] = {}
+    for k in want:
+        if k not in start:
+            continue
+        rows = slice(start[k], start[k] + dim[k])
+        if null.shape[1] and np.linalg.norm(null[rows]) > np.sqrt(np.finfo(float).eps):
+            continue
+        out[k] = w[rows] @ w[rows].T
+    reason = ("" if len(out) == len(want) else
+              f"the whitened Jacobian at the solution has rank {r} of {a.shape[1]} and its "
+              f"null space moves them (or no factor holds them): their marginal is not "
+              f"defined")
+    return out, reason
+
+
 def marginal_covariances(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values,
-                         pose_t: np.ndarray, landmark_ids: np.ndarray
-                         ) -> tuple[np.ndarray | None, np.ndarray | None]:
-    """Marginal covariances ``(n, 2, 2)`` of the landmarks and ``(m, 3, 3)`` of the poses at
-    ``pose_t``, or ``(None, None)`` if singular; all in the world frame, as a ``MapEstimate``
-    holds them (poses over ``(x_m, y_m, psi_rad)``, the order of ``MapEstimate.poses``).
+                         pose_t: np.ndarray, landmark_ids: np.ndarray) -> MarginalCovariances:
+    """Marginal covariances of the landmarks ``landmark_ids`` and the poses at ``pose_t``,
+    in the world frame, as a ``MapEstimate`` holds them (poses over ``(x_m, y_m,
+    psi_rad)``, the order of ``MapEstimate.poses``): the blocks of the Gauss-Newton
+    covariance ``(J^T J)^-1`` of ``graph``'s whitened factors at ``values``.
+
+    The blocks come from ``gtsam.Marginals`` (a Cholesky of the graph). Where it raises on
+    any variable (an "indeterminate" system: a landmark micrometres from a pose that took a
+    bearing of it makes that bearing's whitened Jacobian ``1 / (rho sigma)``, 10^6 and more,
+    and the Cholesky of a clique holding it loses its pivots), every block is taken instead
+    from an SVD of the whole whitened Jacobian (:func:`_svd_marginals`: the same matrix, and
+    more accurate than the Cholesky's blocks near such a bearing, where ``J^T J`` has a
+    condition number of 10^12 or more), which also tells a variable whose marginal is truly
+    not defined (moved by the Jacobian's null space): that variable's block is NaN and listed
+    with the reason, never filled in. Above :data:`DENSE_MARGINALS_MAX` unknowns the SVD is
+    not tried: the blocks ``gtsam.Marginals`` gave are kept and the variables it raised on
+    are left NaN likewise.
 
     ``gtsam.Marginals`` gives a ``Pose2``'s covariance in its tangent space at the pose, whose
     translation axes are the robot's own (GTSAM retracts as ``T * Exp(d)``); to first order a
     body-frame perturbation ``(d_x, d_y, d_psi)`` moves the pose by ``(R(psi) [d_x, d_y],
     d_psi)`` in the world, so each is turned by ``J = diag(R(psi), 1)``: ``J P J^T``. A
-    ``Point2``'s tangent space is the world's.
+    ``Point2``'s tangent space is the world's. The SVD works in the same tangent spaces.
     """
+    lkeys = [landmark_key(int(i)) for i in landmark_ids]
+    pkeys = [pose_key(int(t)) for t in pose_t]
+    blocks: dict[int, np.ndarray] = {}
+    failed: list[int] = []
     try:
         marg = gtsam.Marginals(graph, values)
-        lc = np.array([marg.marginalCovariance(landmark_key(int(i))) for i in landmark_ids])
-        pc = np.array([marg.marginalCovariance(pose_key(int(t))) for t in pose_t])
     except GTSAM_ERRORS:
-        return None, None
-    pc = pc.reshape(-1, 3, 3)
+        failed = lkeys + pkeys
+    else:
+        for k in lkeys + pkeys:
+            try:
+                blocks[k] = np.asarray(marg.marginalCovariance(k), dtype=float)
+            except GTSAM_ERRORS:
+                failed.append(k)
+    reason, source = "", "gtsam.Marginals"
+    if failed:
+        svd = _svd_marginals(graph, values, lkeys + pkeys)
+        if svd is None:
+            reason = (f"gtsam.Marginals found the linear system indeterminate near them, and "
+                      f"the graph has more unknowns than the SVD check's {DENSE_MARGINALS_MAX}")
+        else:
+            (blocks, reason), source = svd, "svd"
+    lc = (np.stack([blocks.get(k, np.full((2, 2), np.nan)) for k in lkeys]) if lkeys
+          else np.zeros((0, 2, 2)))
+    pc = (np.stack([blocks.get(k, np.full((3, 3), np.nan)) for k in pkeys]) if pkeys
+          else np.zeros((0, 3, 3)))
     if len(pc):
-        psi = np.array([values.atPose2(pose_key(int(t))).theta() for t in pose_t])
+        psi = np.array([values.atPose2(k).theta() if values.exists(k) else 0.0
+                        for k in pkeys])
         turn = np.zeros_like(pc)
         turn[:, :2, :2] = rotation(psi)
         turn[:, 2, 2] = 1.0
         pc = turn @ pc @ turn.transpose(0, 2, 1)
         pc = 0.5 * (pc + pc.transpose(0, 2, 1))
-    return lc.reshape(-1, 2, 2), pc
+    return MarginalCovariances(
+        lc, pc, tuple(int(i) for i, k in zip(landmark_ids, lkeys) if k not in blocks),
+        tuple(int(t) for t, k in zip(pose_t, pkeys) if k not in blocks), source, len(failed),
+        reason)
 
 
 def estimate_from_values(graph: BearingGraph, values: gtsam.Values,
@@ -292,14 +424,17 @@ def estimate_from_values(graph: BearingGraph, values: gtsam.Values,
                  "n_prior_factors": graph.n_prior_factors, "n_factors": int(solved.size())})
     lc = pc = None
     if covariances and ids.size:
-        lc, pc = marginal_covariances(solved, values, pose_t, ids)
-        info["covariances"] = lc is not None
+        marg = marginal_covariances(solved, values, pose_t, ids)
+        info.update(marg.as_info())
+        if info["covariances"] is not False:   # NaN blocks mark the undefined ones
+            lc, pc = marg.landmark_cov, marg.pose_cov
     if ids.size == 0:
         info.setdefault("reason", "no landmark has two bearings with enough parallax yet")
     return MapEstimate(ids, xy, pose_t=pose_t, poses=poses, landmark_cov=lc, pose_cov=pc,
                        info=info)
 
 
-__all__ = ["GTSAM_ERRORS", "ABSURD_STEP", "SolveReport", "lm_params", "solve_lm",
+__all__ = ["GTSAM_ERRORS", "ABSURD_STEP", "DENSE_MARGINALS_MAX", "MarginalCovariances",
+           "SolveReport", "lm_params", "solve_lm",
            "gauss_newton_check", "polish", "all_poses", "marginal_covariances",
            "estimate_from_values"]

@@ -179,13 +179,15 @@ COV_RTOL = 1e-9
 def covariance_problem(cov: np.ndarray) -> tuple[int, str] | None:
     """The first matrix of ``cov`` ``(n, k, k)`` that is not finite, symmetric and positive
     semi-definite (to :data:`COV_RTOL`, each matrix scaled by its largest |entry|) and what is
-    wrong with it, or None when all are."""
+    wrong with it, or None when all are. A matrix all NaN is no problem: it marks a variable
+    whose covariance is not defined (``MapEstimate``; ``null`` in an estimate file)."""
     finite = np.isfinite(cov).all(axis=(1, 2))
+    undefined = np.isnan(cov).all(axis=(1, 2))
     c = np.where(finite[:, None, None], cov, 0.0)
     scale = np.abs(c).max(axis=(1, 2), initial=0.0)
     c = c / np.where(scale > 0, scale, 1.0)[:, None, None]
     ct = c.transpose(0, 2, 1)
-    checks = ((~finite, "not finite"),
+    checks = ((~(finite | undefined), "not finite"),
               (np.abs(c - ct).max(axis=(1, 2), initial=0.0) > COV_RTOL, "not symmetric"),
               (np.linalg.eigvalsh((c + ct) / 2)[:, 0] < -COV_RTOL, "not positive semi-definite"))
     for bad, what in checks:

@@ -17,6 +17,7 @@ naming the file, the line and the key.
 from __future__ import annotations
 
 import json
+import math
 import os
 from dataclasses import dataclass
 from typing import IO, Any, Mapping
@@ -159,13 +160,17 @@ def _parse_line(text: str, ctx: _Line) -> dict:
     return obj
 
 
-def _rows(v: Any, width: int, key: str, ctx: _Line, what: str, *, int_first: bool
-          ) -> tuple[np.ndarray, np.ndarray]:
-    """``[[id, v1, ...], ...]`` (``int_first``) or ``[[v1, ...], ...]`` as (ids, values)."""
+def _rows(v: Any, width: int, key: str, ctx: _Line, what: str, *, int_first: bool,
+          null: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """``[[id, v1, ...], ...]`` (``int_first``) or ``[[v1, ...], ...]`` as (ids, values);
+    with ``null``, an entry ``null`` is a row of NaN (a covariance not defined)."""
     if not isinstance(v, list):
         raise ctx.error(key, f"must be a list of {what}")
     ids, vals = [], []
     for k, e in enumerate(v):
+        if null and e is None:
+            vals.append([math.nan] * width)
+            continue
         ok = isinstance(e, list) and len(e) == width
         if ok and int_first:
             ok = is_id(e[0]) and all(is_num(x) for x in e[1:])
@@ -204,7 +209,7 @@ def _parse_checkpoint_v2(obj: dict, ctx: _Line, prev: MapEstimate | None
     lcov = None
     if "landmark_cov" in obj:
         _, lc = _rows(obj["landmark_cov"], 4, "landmark_cov", ctx,
-                      "[xx, xy, yx, yy] (m^2)", int_first=False)
+                      "[xx, xy, yx, yy] (m^2) or null", int_first=False, null=True)
         if len(lc) != len(ids):
             raise ctx.error("landmark_cov", f"{len(lc)} covariances for {len(ids)} landmarks")
         lcov = lc.reshape(-1, 2, 2)
@@ -220,7 +225,8 @@ def _parse_checkpoint_v2(obj: dict, ctx: _Line, prev: MapEstimate | None
         pose_t, poses = _rows(obj[key], 4, key, ctx, "[t, x_m, y_m, psi_rad]", int_first=True)
         ck = key.replace("poses", "pose_cov")
         if ck in obj:
-            _, pc = _rows(obj[ck], 9, ck, ctx, "9 numbers (row-major 3x3)", int_first=False)
+            _, pc = _rows(obj[ck], 9, ck, ctx, "9 numbers (row-major 3x3) or null",
+                          int_first=False, null=True)
             if len(pc) != len(pose_t):
                 raise ctx.error(ck, f"{len(pc)} covariances for {len(pose_t)} poses")
             pcov = pc.reshape(-1, 3, 3)

@@ -33,8 +33,9 @@ ESTIMATE_FORMAT = "bomgraph-estimate"
 ESTIMATE_VERSION = 2
 
 
-def _flat(cov: np.ndarray) -> list[list[float]]:
-    return [[float(v) for v in c.ravel()] for c in cov]
+def _flat(cov: np.ndarray) -> list[list[float] | None]:
+    """Each matrix row-major; ``None`` (JSON ``null``) for one all NaN: not defined."""
+    return [None if np.isnan(c).all() else [float(v) for v in c.ravel()] for c in cov]
 
 
 def _unreadable(c: Checkpoint, key: str, what: str) -> ConfigError:
@@ -42,7 +43,7 @@ def _unreadable(c: Checkpoint, key: str, what: str) -> ConfigError:
                        f"read_estimate would refuse the file, so it is not written")
 
 
-def _writable_cov(cov: np.ndarray, key: str, c: Checkpoint) -> list[list[float]]:
+def _writable_cov(cov: np.ndarray, key: str, c: Checkpoint) -> list[list[float] | None]:
     bad = covariance_problem(cov)
     if bad is not None:
         raise _unreadable(c, f"{key}[{bad[0]}]", bad[1])

@@ -400,7 +400,7 @@ def _score_checkpoint(c: Checkpoint, truth: Reference, nees: bool, align_on: str
                                int(common), nan, nan, nan, nan)
     nl = np_ = nan
     if nees:
-        nl, np_ = _mean_landmark_nees(c.estimate, truth, s.alignment), pose_nees(
+        nl, np_ = mean_landmark_nees(c.estimate, truth, s.alignment), pose_nees(
             c.estimate, truth, s.alignment)
     return CheckpointScore(c.t, len(c.estimate), c.estimate_s, s.mpe_m, s.rmse_m, s.median_m,
                            s.max_m, s.n_common, s.robot_last_m, s.robot_mean_m, nl, np_,
@@ -428,7 +428,8 @@ def landmark_nees(estimate: MapEstimate, truth: Truth, alignment: Alignment) -> 
     The covariance is carried with the map, ``(s R) P (s R)^T`` for the alignment's rotation
     ``R`` and scale ``s``; values are only meaningful when the method's frame is anchored like
     the truth's (a rigid alignment of a consistent estimate).
-    Returns shape ``(n_common,)``.
+    Returns shape ``(n_common,)``, NaN for a landmark whose covariance block is all NaN (the
+    method reports none for it: not defined).
     """
     if estimate.landmark_cov is None:
         raise EvaluationError("the estimate has no landmark covariances")
@@ -437,17 +438,25 @@ def landmark_nees(estimate: MapEstimate, truth: Truth, alignment: Alignment) -> 
     e = alignment.apply(estimate.landmarks_xy[ie]) - truth.landmarks_xy[it]
     r = alignment.scale * alignment.rotation
     cov = r @ estimate.landmark_cov[ie] @ r.T
-    return np.einsum("ni,nij,nj->n", e, np.linalg.inv(cov), e)
+    out = np.full(len(ie), math.nan)
+    defined = ~np.isnan(cov).all(axis=(1, 2))
+    out[defined] = np.einsum("ni,nij,nj->n", e[defined], np.linalg.inv(cov[defined]),
+                             e[defined])
+    return out
 
 
-def _mean_landmark_nees(estimate: MapEstimate, truth: Truth, alignment: Alignment) -> float:
-    """The mean of :func:`landmark_nees`, NaN without covariances or with a singular one."""
+def mean_landmark_nees(estimate: MapEstimate, truth: Truth, alignment: Alignment) -> float:
+    """The mean of :func:`landmark_nees` over the common landmarks that have a covariance
+    (those without one, all-NaN blocks, are left out, never counted as a value); NaN without
+    covariances, with none defined, or with a singular one."""
     if estimate.landmark_cov is None:
         return math.nan
     try:
-        return float(np.mean(landmark_nees(estimate, truth, alignment)))
+        nees = landmark_nees(estimate, truth, alignment)
     except np.linalg.LinAlgError:
         return math.nan
+    nees = nees[np.isfinite(nees)]
+    return float(np.mean(nees)) if nees.size else math.nan
 
 
 def pose_nees(estimate: MapEstimate, truth: Truth, alignment: Alignment) -> float:
@@ -457,7 +466,7 @@ def pose_nees(estimate: MapEstimate, truth: Truth, alignment: Alignment) -> floa
     ``diag(s R, det R)`` of the alignment (a reflection negates the heading; a similarity's
     scale ``s`` scales the position, not the heading). NaN when the
     estimate has no poses or no pose covariances, the truth has no poses, or the covariance is
-    singular.
+    singular or not defined (all NaN).
     """
     if (estimate.pose_cov is None or estimate.poses is None or truth.poses is None
             or not len(estimate.poses)):
@@ -469,6 +478,8 @@ def pose_nees(estimate: MapEstimate, truth: Truth, alignment: Alignment) -> floa
     t = np.eye(3)
     t[:2, :2] = alignment.scale * alignment.rotation
     t[2, 2] = np.linalg.det(alignment.rotation)
+    if np.isnan(estimate.pose_cov[k]).all():
+        return math.nan
     cov = t @ estimate.pose_cov[k] @ t.T
     try:
         return float(e @ np.linalg.solve(cov, e))
@@ -477,4 +488,5 @@ def pose_nees(estimate: MapEstimate, truth: Truth, alignment: Alignment) -> floa
 
 
 __all__ = ["Alignment", "RANK_TOL", "align_candidates", "align", "ALIGN_ON", "Reference", "MapScore", "score_estimate", "CheckpointScore",
-           "score_checkpoints", "ERROR_COLUMNS", "error_table", "landmark_nees", "pose_nees"]
+           "score_checkpoints", "ERROR_COLUMNS", "error_table", "landmark_nees",
+           "mean_landmark_nees", "pose_nees"]

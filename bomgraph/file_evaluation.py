@@ -22,12 +22,12 @@ from typing import Any, Sequence
 import numpy as np
 
 from .errors import BomgraphError, EvaluationError, StreamFormatError
-from .evaluate import (CheckpointScore, MapScore, error_table, landmark_nees, pose_nees,
+from .evaluate import (CheckpointScore, MapScore, error_table, mean_landmark_nees, pose_nees,
                        score_checkpoints, score_estimate)
 from .estimate_file import EstimateFile, read_estimate, stream_identity
 from .jsonio import jsonable
 from .mapper import MapEstimate
-from .stream import Step
+from .stream import Step, Truth
 from .stream_file import read_stream
 from .tables import Column, format_table
 from .trajectory import bearing_residuals
@@ -88,6 +88,7 @@ class FileEvaluation:
     reference_bearing: BearingConsistency | None = None
     nees_landmark: float = math.nan
     nees_pose: float = math.nan
+    nees_undefined: tuple[int, bool] = (0, False)
     free_rows: tuple[dict[str, Any], ...] = ()
     poses_revised: bool = False
 
@@ -100,6 +101,8 @@ class FileEvaluation:
         out: dict[str, Any] = {"method": self.method, "reference": self.reference,
                                **self.score.as_dict(), "nees_landmark": self.nees_landmark,
                                "nees_pose": self.nees_pose,
+                               "nees_landmarks_without_cov": self.nees_undefined[0],
+                               "nees_pose_without_cov": self.nees_undefined[1],
                                "poses_revised": self.poses_revised}
         for name, b in (("bearing", self.bearing), ("reference_bearing", self.reference_bearing)):
             if b is not None:
@@ -173,19 +176,29 @@ def evaluate_files(estimate_path: str | os.PathLike[str], stream_path: str | os.
     if revised and table is not None:  # as in the rows: no mean over first estimates
         table["robot_mean_m"][:-1] = math.nan
     nl = np_ = math.nan
+    undefined = (0, False)
     if ref_est is None:  # the alignment's scale, if fitted, is carried (landmark_nees)
-        if est.final.landmark_cov is not None:
-            try:
-                nl = float(np.mean(landmark_nees(est.final, stream.truth, score.alignment)))
-            except np.linalg.LinAlgError:
-                nl = math.nan
+        nl = mean_landmark_nees(est.final, stream.truth, score.alignment)
+        undefined = _undefined_covariances(est.final, stream.truth)
         np_ = pose_nees(est.final, stream.truth, score.alignment)
     return FileEvaluation(est.method, score, table, rows,
                           None if ref_est is None else (ref_est.method or str(reference_path)),
                           bearing_consistency(est.final, stream.steps),
                           None if ref_est is None else bearing_consistency(ref_est.final,
                                                                            stream.steps),
-                          nl, np_, poses_revised=revised)
+                          nl, np_, undefined, poses_revised=revised)
+
+
+def _undefined_covariances(final: MapEstimate, truth: Truth) -> tuple[int, bool]:
+    """How many common landmarks have an all-NaN covariance block (no covariance: left out
+    of the landmark NEES) and whether the latest pose has one (no pose NEES)."""
+    n_lm = 0
+    if final.landmark_cov is not None:
+        _, ie, _ = np.intersect1d(final.landmark_ids, truth.landmark_ids, return_indices=True)
+        n_lm = int(np.isnan(final.landmark_cov[ie]).all(axis=(1, 2)).sum())
+    pose = bool(final.pose_cov is not None and len(final.pose_cov) and
+                np.isnan(final.pose_cov[int(np.argmax(final.pose_t))]).all())
+    return n_lm, pose
 
 
 def poses_revised(est: EstimateFile) -> bool:
@@ -295,9 +308,12 @@ def format_evaluation(ev: FileEvaluation, fmt: str = "text") -> str:
                      f"(delta {s.rpe_delta}, {s.n_rpe_pairs} pairs) RMSE "
                      f"{na(s.rpe_trans_rmse_m)}, heading "
                      f"{na(s.rpe_heading_rmse_rad, 180 / math.pi, '.3f', ' deg')}")
-    nees = [f"{name} {v:.2f}" for name, v in (("landmark (mean)", ev.nees_landmark),
-                                                ("latest pose", ev.nees_pose))
-            if math.isfinite(v)]
+    n_lm, pose = ev.nees_undefined
+    nees = [f"{name} {v:.2f}" for name, v in (
+        ("landmark (mean" + (f"; {n_lm} without a covariance left out)" if n_lm else ")"),
+         ev.nees_landmark), ("latest pose", ev.nees_pose)) if math.isfinite(v)]
+    if pose:
+        nees.append("latest pose none (it has no covariance)")
     if nees:
         lines.append(f"  NEES from the file's covariances: {', '.join(nees)}")
     for name, b in (("estimate", ev.bearing), ("reference", ev.reference_bearing)):

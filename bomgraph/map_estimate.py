@@ -3,7 +3,8 @@
 
 Its constructor validates what a method hands it: ids are integers (never rounded), points are
 ``(n, 2)`` rows and poses ``(m, 3)`` rows (a ``(2, n)`` array is refused, not reshaped), all
-finite, one covariance per row. Landmark ids are non-negative, as in the stream
+finite, one covariance per row (a covariance block may be all NaN: not defined for that
+variable). Landmark ids are non-negative, as in the stream
 (``shared/STREAM_FORMAT.md``) and the estimate file.
 """
 
@@ -28,7 +29,12 @@ def _ro(a: np.ndarray | None, dtype: Any, shape_tail: tuple[int, ...],
 
     out = (id_array(a, name, bad) if dtype is np.int64 else
            row_array(a, shape_tail[0], name, bad, tail=shape_tail))
-    if dtype is float and not np.all(np.isfinite(out)):
+    if name.endswith("_cov"):
+        undefined = np.isnan(out).all(axis=(1, 2))
+        if not np.all(np.isfinite(out[~undefined])):
+            raise ConfigError(f"MapEstimate: {name} must be finite, or a block all NaN for a "
+                              f"variable whose covariance is not defined")
+    elif dtype is float and not np.all(np.isfinite(out)):
         raise ConfigError(f"MapEstimate: {name} must be finite (a method must leave out what "
                           f"it cannot estimate, not return NaN)")
     out.setflags(write=False)
@@ -62,11 +68,14 @@ class MapEstimate:
     poses : ndarray of shape (m, 3) or None
         ``[x_m, y_m, psi_rad]`` per entry of ``pose_t``.
     landmark_cov : ndarray of shape (n, 2, 2) or None
-        Covariance of each landmark (m^2), in the estimate's frame.
+        Covariance of each landmark (m^2), in the estimate's frame. A block that is all NaN
+        marks a landmark whose covariance the method does not report (its marginal is not
+        defined; ``info["covariances_undefined"]`` says why); every other block is finite.
     pose_cov : ndarray of shape (m, 3, 3) or None
         Covariance of each pose over ``[x_m, y_m, psi_rad]``, in the estimate's frame (not
         the robot's: a GTSAM tangent-space covariance is turned by its heading first,
-        :func:`baselines.lm_report.marginal_covariances`).
+        :func:`baselines.lm_report.marginal_covariances`). All-NaN blocks as in
+        ``landmark_cov``.
     info : mapping
         Method diagnostics (convergence, stress, landmarks left out and why, ...).
     """

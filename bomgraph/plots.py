@@ -407,7 +407,9 @@ def run_figure(truth: TruthLike | None, estimate: EstimateLike, alignment: Align
     if landmark_cov is not None:
         rot = np.asarray(getattr(alignment, "rotation", np.eye(2)), float)
         sc = float(getattr(alignment, "scale", 1.0))
-        for k, (c, cov) in enumerate(zip(xy, np.asarray(landmark_cov, float))):
+        cov_xy = np.asarray(landmark_cov, float)
+        defined = ~np.isnan(cov_xy).all(axis=(1, 2))   # all NaN: no covariance, no ellipse
+        for k, (c, cov) in enumerate(zip(xy[defined], cov_xy[defined])):
             e = _ellipse_xy(c, sc * sc * rot @ cov @ rot.T)
             ax.plot(e[:, 0], e[:, 1], "-", color=colour, lw=0.6, alpha=0.8,
                     label="95 % ellipses" if k == 0 else None)

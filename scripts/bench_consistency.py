@@ -12,8 +12,9 @@ per method the mean over runs of the final pose's NEES (3 dof; its position and 
 and of each run's mean landmark NEES (2 dof), with the 95 % band of a mean of that many
 independent chi-square draws (for the landmarks a lower bound on the width: a run's landmarks
 are correlated), beside the evaluator's NEES after its Procrustes alignment on the landmarks
-(which absorbs part of the error). Runs without covariances (``gtsam.Marginals`` finding the
-system indeterminate) are counted and left out.
+(which absorbs part of the error). Runs without covariances, or without one for the final
+pose, are counted and left out; landmarks without one (an all-NaN block: not defined) are
+left out of their run's mean.
 
 The twenty-first session's table (150 runs of 100 steps) is in docs/measurements.md,
 "Covariances against an anchored Monte Carlo".
@@ -31,7 +32,7 @@ from scipy.stats import chi2
 
 from bomgraph import create_mapper, run
 from bomgraph.angles import angle_residual
-from bomgraph.evaluate import landmark_nees, pose_nees, score_estimate
+from bomgraph.evaluate import mean_landmark_nees, pose_nees, score_estimate
 from bomgraph.geometry import rotation
 from bomgraph.map_estimate import MapEstimate
 from bomgraph.sim import SimConfig, simulate
@@ -55,6 +56,8 @@ def anchored_nees(est: MapEstimate, truth: Truth) -> dict[str, Any]:
     err = np.r_[rot @ p[:2] + shift - q[:2], angle_residual(p[2] + turn, q[2])]
     cov = jac @ est.pose_cov[-1] @ jac.T
     _, ie, it = np.intersect1d(est.landmark_ids, truth.landmark_ids, return_indices=True)
+    defined = ~np.isnan(est.landmark_cov[ie]).all(axis=(1, 2))   # all NaN: no covariance
+    ie, it = ie[defined], it[defined]
     lm_err = est.landmarks_xy[ie] @ rot.T + shift - truth.landmarks_xy[it]
     lm_cov = rot @ est.landmark_cov[ie] @ rot.T
     lm = np.einsum("ni,nij,nj->n", lm_err, np.linalg.inv(lm_cov), lm_err)
@@ -77,13 +80,14 @@ def one_run(method: str, seed: int, steps: int, landmarks: int,
         kw["truth"] = stream.truth
     est = run(create_mapper(method, stream.header, **kw), stream.steps,
               checkpoint_every=10 ** 6).final
-    if est.pose_cov is None or est.landmark_cov is None or len(est.landmark_ids) < 3:
+    if (est.pose_cov is None or est.landmark_cov is None or len(est.landmark_ids) < 3
+            or np.isnan(est.pose_cov[-1]).all()):
         return None
     out = {"seed": seed, **anchored_nees(est, stream.truth)}
     score = score_estimate(est, stream.truth)
-    out["evaluator_landmarks"] = float(np.mean(landmark_nees(est, stream.truth,
-                                                             score.alignment)))
+    out["evaluator_landmarks"] = mean_landmark_nees(est, stream.truth, score.alignment)
     out["evaluator_pose"] = pose_nees(est, stream.truth, score.alignment)
+    out["covariances_from"] = est.info.get("covariances_from", "")
     return out
 
 
@@ -92,7 +96,8 @@ def summary_line(method: str, rows: list[dict[str, Any] | None], steps: int) -> 
     k = len(ok)
     if not k:
         return f"{method:14s} no run with covariances ({len(rows)} runs)"
-    mean = {key: float(np.mean([r[key] for r in ok])) for key in ok[0] if key != "seed"}
+    mean = {key: float(np.mean([r[key] for r in ok])) for key in ok[0]
+            if key not in ("seed", "covariances_from")}
     pb = chi2.ppf([0.025, 0.975], 3 * k) / k
     lb = chi2.ppf([0.025, 0.975], 2 * k) / k
     return (f"{method:14s} runs {k:3d}/{len(rows)}, {steps} steps | pose NEES "

@@ -50,7 +50,9 @@ def test_hybrid_covariances_are_those_of_the_kept_solutions_graph(
     assert est.info["near_bearings_left_out"] >= 1
     graph = solved[id(kept)][1]
     assert graph.nrFactors() < mapper.state.graph.nrFactors()
-    lc, pc = marginal_covariances(graph, kept, est.pose_t, est.landmark_ids)
+    marg = marginal_covariances(graph, kept, est.pose_t, est.landmark_ids)
+    assert marg.complete
+    lc, pc = marg.landmark_cov, marg.pose_cov
     assert est.landmark_cov is not None and est.pose_cov is not None
     np.testing.assert_allclose(est.landmark_cov, lc, rtol=1e-7, atol=1e-12)
     np.testing.assert_allclose(est.pose_cov, pc, rtol=1e-7, atol=1e-12)

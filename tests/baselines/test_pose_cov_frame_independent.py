@@ -35,7 +35,7 @@ def test_heading_along_y_swaps_forward_and_lateral() -> None:
                                        gtsam.noiseModel.Diagonal.Sigmas([0.01, 0.1, 1e-3])))
     values.insert(pose_key(0), anchor)
     values.insert(pose_key(1), gtsam.Pose2(0.0, 1.0, np.pi / 2))
-    _, pc = marginal_covariances(graph, values, np.array([0, 1]), np.zeros(0, np.int64))
+    pc = marginal_covariances(graph, values, np.array([0, 1]), np.zeros(0, np.int64)).pose_cov
     var_x, var_y, var_psi = np.diag(pc[1])
     assert var_x == pytest.approx(0.1 ** 2 + 1e-6 + 1e-6, rel=1e-6)   # lateral
     assert var_y == pytest.approx(0.01 ** 2 + 1e-6, rel=1e-6)         # forward
