@@ -344,14 +344,15 @@ class AtomicOutput:
             _fsync_dir(os.path.dirname(self.path))
 
     def abort(self) -> None:
-        if self.fh is not None:
-            with contextlib.suppress(OSError):
-                self.fh.close()
-            self.fh = None
-        if self._tmp is not None:
-            with contextlib.suppress(OSError):
-                os.unlink(self._tmp)
-            self._tmp = None
+        with _signals_held():  # a second Ctrl-C must not stop the cleanup of the first
+            if self.fh is not None:
+                with contextlib.suppress(OSError):
+                    self.fh.close()
+                self.fh = None
+            if self._tmp is not None:
+                with contextlib.suppress(OSError):
+                    os.unlink(self._tmp)
+                self._tmp = None
 
 
 @contextlib.contextmanager
@@ -364,10 +365,10 @@ def output_file(path: str | os.PathLike[str], *, binary: bool = False,
     try:
         fh = out.open()
         yield fh
+        out.commit()  # inside: an interrupt during its flush and fsync removes the file too
     except BaseException:
         out.abort()
         raise
-    out.commit()
 
 
 def write_text(path: str | os.PathLike[str], text: str,
