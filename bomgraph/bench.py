@@ -37,7 +37,7 @@ from .jsonio import jsonable
 from .mapper import (Checkpoint, MapEstimate, RunResult, checkpoint_times, create_mapper,
                      method_failure_note, method_fingerprint, method_info, run)
 from .plugins import code_fingerprint
-from .stdio import bounded_lines, output_file
+from .stdio import signals_held, bounded_lines, output_file
 from .stream import Step, Stream, Truth
 from .stream_file import StreamReader
 from .sweep import scheduler_address_problem
@@ -454,11 +454,32 @@ def _dispatch(tasks: list[Task], index: list[int],
     elif executor.backend == "processes":
         from joblib import Parallel, delayed
 
-        par = Parallel(n_jobs=_local_workers(executor.n_jobs, len(tasks)),
-                       return_as="generator_unordered")
-        yield from par(delayed(_indexed)(k, t) for k, t in zip(index, tasks))
+        with Parallel(n_jobs=_local_workers(executor.n_jobs, len(tasks)),
+                      return_as="generator_unordered") as par:
+            _start_workers(par)
+            yield from par(delayed(_indexed)(k, t) for k, t in zip(index, tasks))
     else:
         yield from _dispatch_dask(tasks, index, executor)
+
+
+def _start_workers(par: Any) -> None:
+    """Start the worker processes of joblib's ``par`` (its loky executor) with SIGINT and
+    SIGTERM blocked, which they keep (and so do the workers that joblib's thread, made here
+    too, starts later): a Ctrl-C reaches the whole process group, and workers that took it
+    printed their own KeyboardInterrupt tracebacks (while they start: importing numpy) or
+    failed their runs; this process alone stops, and ends them. A signal that comes while
+    they are started is this process's, once they are. Without a loky executor (another
+    joblib backend or version) nothing is started ahead."""
+    from multiprocessing import resource_tracker
+
+    workers = getattr(getattr(par, "_backend", None), "_workers", None)
+    if workers is None or not callable(getattr(workers, "submit", None)):
+        return
+    # started first: Python 3.11's starts its process with SIGINT and SIGTERM unblocked
+    # after (SIG_UNBLOCK, not the mask it found), which would undo the hold below
+    resource_tracker.ensure_running()
+    with signals_held():
+        workers.submit(int)  # the first task starts the processes, in this thread
 
 
 def _dispatch_dask(tasks: list[Task], index: list[int],

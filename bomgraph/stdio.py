@@ -262,7 +262,7 @@ def check_output_path(path: str | os.PathLike[str],
 
 
 @contextlib.contextmanager
-def _signals_held() -> Iterator[None]:
+def signals_held() -> Iterator[None]:
     """Block SIGTERM and SIGINT for the block (main thread, POSIX); a signal that came
     meanwhile is delivered, and its handler run, when the block ends."""
     if (not hasattr(signal, "pthread_sigmask")
@@ -316,7 +316,7 @@ class AtomicOutput:
         # SIGTERM/SIGINT are held back from the temporary file's creation until the handle
         # owns it: a signal raising mid-way would leave a file nobody removes, or close the
         # descriptor twice (EBADF). Delivered at the unmask, the handle is in place for abort.
-        with _signals_held():
+        with signals_held():
             fd, self._tmp = tempfile.mkstemp(prefix=f".{name}.", suffix=".partial", dir=d)
             try:
                 os.chmod(fd, self._mode)  # as open() would (or as the file was), not 0600
@@ -344,7 +344,7 @@ class AtomicOutput:
             _fsync_dir(os.path.dirname(self.path))
 
     def abort(self) -> None:
-        with _signals_held():  # a second Ctrl-C must not stop the cleanup of the first
+        with signals_held():  # a second Ctrl-C must not stop the cleanup of the first
             if self.fh is not None:
                 with contextlib.suppress(OSError):
                     self.fh.close()
@@ -446,4 +446,4 @@ __all__ = ["STDIO", "MAX_LINE_BYTES", "MAX_INPUT_BYTES", "OutputPathError",
            "InputTooLargeError", "line_too_long", "input_too_large", "bounded_lines",
            "read_bounded", "copy_bounded", "display_path", "input_path", "write_output",
            "is_stdout", "check_output_path", "AtomicOutput", "output_file", "write_text",
-           "FolderBusyError", "make_folder", "folder_lock"]
+           "FolderBusyError", "make_folder", "folder_lock", "signals_held"]
