@@ -54,8 +54,11 @@ def _default_sigint() -> None:  # a shell's background job inherits SIGINT ignor
 
 
 def _results(folder: Path) -> list[dict[str, Any]]:
+    """The results without timings, nor the cache keys (which hash the code: they change
+    when the code is edited between the reference and a trial)."""
     with open(folder / "results.json", encoding="utf-8") as fh:
-        return strip_timings(json.load(fh)["results"])
+        return [{k: v for k, v in r.items() if k != "key"}
+                for r in strip_timings(json.load(fh)["results"])]
 
 
 def _complete(path: Path) -> str:

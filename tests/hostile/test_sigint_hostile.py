@@ -21,7 +21,7 @@ from pathlib import Path
 
 import pytest
 
-from hostile_helpers import ENV, ROOT
+from hostile_helpers import ENV
 
 from bomgraph.bench import strip_timings
 
@@ -302,3 +302,63 @@ def test_sigterm_and_double_sigint_at_a_cache_write_then_the_rerun_gives_the_sam
     rerun = _compare(streams, out)
     assert rerun.returncode == 0, rerun.stderr.decode()
     assert results(out) == results(reference)
+
+
+def _children(pid: int) -> list[int]:
+    kids = []
+    for entry in Path("/proc").iterdir():
+        try:
+            stat = (entry / "stat").read_text()
+        except (OSError, ValueError):
+            continue
+        if int(stat.rpartition(")")[2].split()[1]) == pid:
+            kids.append(int(entry.name))
+    return kids
+
+
+@pytest.mark.skipif(not Path("/proc/self/status").exists(), reason="reads /proc")
+def test_ctrl_c_to_the_process_group_with_worker_processes_is_one_line(
+        tmp_path: Path, streams: list[Path]) -> None:
+    # a terminal's Ctrl-C reaches the joblib workers too: they printed their own
+    # KeyboardInterrupt tracebacks (while starting, or between tasks); they now start with
+    # SIGINT and SIGTERM blocked, and the command alone stops, and ends them
+    env = dict(ENV)
+    site = tmp_path / "site"
+    site.mkdir()
+    (site / "sitecustomize.py").write_text(textwrap.dedent("""
+        import bomgraph.bench as bench
+        _run_task = bench.run_task
+        def run_task(task):  # in the workers: long enough runs to signal amid them
+            import time
+            time.sleep(2)
+            return _run_task(task)
+        bench.run_task = run_task
+        """))
+    env["PYTHONPATH"] = os.pathsep.join([str(site), env["PYTHONPATH"]])
+    out = tmp_path / "out"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "bomgraph", "compare", "--streams", *map(str, streams),
+         "--methods", "triangulate,stmds-cs", "--jobs", "2", "--no-figures", "--no-progress",
+         "--out", str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env,
+        start_new_session=True, preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    try:
+        workers: list[int] = []
+        for _ in range(1200):
+            workers = [k for k in _children(proc.pid)
+                       if b"popen_loky_posix" in Path(f"/proc/{k}/cmdline").read_bytes()]
+            if len(workers) == 2 or proc.poll() is not None:
+                break
+            threading.Event().wait(0.05)
+        assert len(workers) == 2, proc.communicate()
+        for k in workers:
+            blocked = int(Path(f"/proc/{k}/status").read_text().split("SigBlk:")[1].split()[0],
+                          16)
+            assert blocked & (1 << (signal.SIGINT - 1)) and blocked & (1 << (signal.SIGTERM - 1))
+        os.killpg(proc.pid, signal.SIGINT)
+        stdout, stderr = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.communicate()
+    _one_line(subprocess.CompletedProcess(proc.args, proc.returncode, stdout, stderr))
+    _no_temporary_files(out)
