@@ -22,6 +22,7 @@ import os
 import tempfile
 import time
 import traceback
+import warnings
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any, Callable, Iterable, Iterator, Mapping, Sequence
@@ -348,19 +349,21 @@ def execute(tasks: Sequence[Task], executor: Executor = Executor(), *,
     if progress:
         progress(done, len(tasks))
     other_key: list[str] = []
-    for k, res in _dispatch([tasks[k] for k in todo], todo, executor):
-        if res.get("key") != task_key(tasks[k]):  # kept, but a later read would refuse it
-            if res.get("ok"):  # a failure is never cached, and says why itself
-                other_key.append(f"{tasks[k].arm.label} on {tasks[k].source.name}")
-        elif cache is not None and res.get("ok"):  # failures are re-run next time
-            _write_cached(_cache_path(cache, tasks[k]), res)
-        for j in twins[task_key(tasks[k])]:
-            t = tasks[j]
-            results[j] = res if j == k else {**res, "experiment": t.experiment,
-                                             "arm": t.arm.label, "run": t.source.name}
-            done += 1
-        if progress:
-            progress(done, len(tasks))
+    # closed here, not by the garbage collector, when the loop is left early (an interrupt)
+    with contextlib.closing(_dispatch([tasks[k] for k in todo], todo, executor)) as dispatched:
+        for k, res in dispatched:
+            if res.get("key") != task_key(tasks[k]):  # kept, but a later read would refuse it
+                if res.get("ok"):  # a failure is never cached, and says why itself
+                    other_key.append(f"{tasks[k].arm.label} on {tasks[k].source.name}")
+            elif cache is not None and res.get("ok"):  # failures are re-run next time
+                _write_cached(_cache_path(cache, tasks[k]), res)
+            for j in twins[task_key(tasks[k])]:
+                t = tasks[j]
+                results[j] = res if j == k else {**res, "experiment": t.experiment,
+                                                 "arm": t.arm.label, "run": t.source.name}
+                done += 1
+            if progress:
+                progress(done, len(tasks))
     if other_key:  # one line, not one a run
         _log.warning("%d run(s) not cached (first: %s): the workers keyed them otherwise than "
                      "this process: other bomgraph or plugin code, library versions or data "
@@ -457,7 +460,15 @@ def _dispatch(tasks: list[Task], index: list[int],
         with Parallel(n_jobs=_local_workers(executor.n_jobs, len(tasks)),
                       return_as="generator_unordered") as par:
             _start_workers(par)
-            yield from par(delayed(_indexed)(k, t) for k, t in zip(index, tasks))
+            results = par(delayed(_indexed)(k, t) for k, t in zip(index, tasks))
+            try:
+                for item in results:
+                    yield item
+            except GeneratorExit:  # the caller stopped (Ctrl-C): the tasks in flight are
+                with warnings.catch_warnings():  # cancelled, as meant; joblib warns of it
+                    warnings.simplefilter("ignore", UserWarning)
+                    results.close()
+                raise
     else:
         yield from _dispatch_dask(tasks, index, executor)
 

@@ -362,3 +362,21 @@ def test_ctrl_c_to_the_process_group_with_worker_processes_is_one_line(
             proc.communicate()
     _one_line(subprocess.CompletedProcess(proc.args, proc.returncode, stdout, stderr))
     _no_temporary_files(out)
+
+
+def test_runs_left_early_by_ctrl_c_close_the_workers_without_joblib_s_warning(
+        streams: list[Path], recwarn: pytest.WarningsRecorder) -> None:
+    # a Ctrl-C while compare handles a result (writes its cache file) closes joblib's
+    # generator from outside, and joblib warned "N tasks which were still being processed by
+    # the workers have been cancelled ...": two more lines on stderr, through logging
+    from bomgraph.bench import Executor, _dispatch
+    from bomgraph.experiments import compare_experiments
+
+    chosen, _ = compare_experiments(streams=[str(s) for s in streams],
+                                    methods="triangulate,stmds-cs")
+    tasks = [t for e in chosen for t in e.tasks()]
+    runs = _dispatch(tasks, list(range(len(tasks))), Executor("processes", n_jobs=2))
+    assert next(runs)[1]["ok"]
+    runs.close()
+    assert not [w for w in recwarn if "cancelled" in str(w.message)
+                or "not used" in str(w.message)], [str(w.message) for w in recwarn]
