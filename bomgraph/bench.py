@@ -22,7 +22,6 @@ import os
 import tempfile
 import time
 import traceback
-import warnings
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any, Callable, Iterable, Iterator, Mapping, Sequence
@@ -38,7 +37,7 @@ from .jsonio import jsonable
 from .mapper import (Checkpoint, MapEstimate, RunResult, checkpoint_times, create_mapper,
                      method_failure_note, method_fingerprint, method_info, run)
 from .plugins import code_fingerprint
-from .stdio import signals_held, bounded_lines, output_file
+from .stdio import bounded_lines, output_file
 from .stream import Step, Stream, Truth
 from .stream_file import StreamReader
 from .sweep import scheduler_address_problem
@@ -349,8 +348,8 @@ def execute(tasks: Sequence[Task], executor: Executor = Executor(), *,
     if progress:
         progress(done, len(tasks))
     other_key: list[str] = []
-    # closed here, not by the garbage collector, when the loop is left early (an interrupt)
-    with contextlib.closing(_dispatch([tasks[k] for k in todo], todo, executor)) as dispatched:
+    with contextlib.closing(  # closed here when left early (Ctrl-C), not by the collector
+            _dispatch([tasks[k] for k in todo], todo, executor)) as dispatched:
         for k, res in dispatched:
             if res.get("key") != task_key(tasks[k]):  # kept, but a later read would refuse it
                 if res.get("ok"):  # a failure is never cached, and says why itself
@@ -455,42 +454,11 @@ def _dispatch(tasks: list[Task], index: list[int],
         for k, t in zip(index, tasks):
             yield k, run_task(t)
     elif executor.backend == "processes":
-        from joblib import Parallel, delayed
+        from .processes import dispatch
 
-        with Parallel(n_jobs=_local_workers(executor.n_jobs, len(tasks)),
-                      return_as="generator_unordered") as par:
-            _start_workers(par)
-            results = par(delayed(_indexed)(k, t) for k, t in zip(index, tasks))
-            try:
-                for item in results:
-                    yield item
-            except GeneratorExit:  # the caller stopped (Ctrl-C): the tasks in flight are
-                with warnings.catch_warnings():  # cancelled, as meant; joblib warns of it
-                    warnings.simplefilter("ignore", UserWarning)
-                    results.close()
-                raise
+        yield from dispatch(_indexed, index, tasks, _local_workers(executor.n_jobs, len(tasks)))
     else:
         yield from _dispatch_dask(tasks, index, executor)
-
-
-def _start_workers(par: Any) -> None:
-    """Start the worker processes of joblib's ``par`` (its loky executor) with SIGINT and
-    SIGTERM blocked, which they keep (and so do the workers that joblib's thread, made here
-    too, starts later): a Ctrl-C reaches the whole process group, and workers that took it
-    printed their own KeyboardInterrupt tracebacks (while they start: importing numpy) or
-    failed their runs; this process alone stops, and ends them. A signal that comes while
-    they are started is this process's, once they are. Without a loky executor (another
-    joblib backend or version) nothing is started ahead."""
-    from multiprocessing import resource_tracker
-
-    workers = getattr(getattr(par, "_backend", None), "_workers", None)
-    if workers is None or not callable(getattr(workers, "submit", None)):
-        return
-    # started first: Python 3.11's starts its process with SIGINT and SIGTERM unblocked
-    # after (SIG_UNBLOCK, not the mask it found), which would undo the hold below
-    resource_tracker.ensure_running()
-    with signals_held():
-        workers.submit(int)  # the first task starts the processes, in this thread
 
 
 def _dispatch_dask(tasks: list[Task], index: list[int],

@@ -9,15 +9,12 @@ The paper's figures: fig. 3/5 (map and trajectory), fig. 4/6/7/8 (errors against
 
 from __future__ import annotations
 
-import os
 import textwrap
 import warnings
 from dataclasses import dataclass
-from typing import Any, Mapping, Protocol, Sequence
+from typing import Mapping, Protocol, Sequence
 
 import numpy as np
-
-from .stdio import output_file
 
 
 # What the figures read of the library's types, so that plots imports none of them (no mapper,
@@ -515,16 +512,6 @@ def results_figure(final: Mapping[str, Mapping[str, np.ndarray]],
     return fig
 
 
-def save_figure(fig: Any, path: str | os.PathLike[str], dpi: int) -> str:
-    """Write ``fig`` to ``path`` (its format by the suffix: .png, .pdf, .svg) as every output is
-    written (:func:`bomgraph.stdio.output_file`: atomically, links followed), so an interrupted
-    save leaves the earlier figure, not half of one; returns the path."""
-    with output_file(path, binary=True) as fh:
-        fig.savefig(fh, format=os.fspath(path).rsplit(".", 1)[-1].lower(), dpi=dpi,
-                    facecolor="white")
-    return str(path)
-
-
 __all__ = ["METHOD_COLOURS", "method_colour", "method_linestyle", "CHI2_2D_95", "run_figure",
            "results_figure", "plot_error_vs_time_on_axes", "plot_map_on_axes", "error_vs_time_figure",
-           "map_figure", "MapPanel", "final_maps_figure", "map_comparison_figure", "save_figure"]
+           "map_figure", "MapPanel", "final_maps_figure", "map_comparison_figure"]

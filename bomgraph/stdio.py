@@ -36,7 +36,7 @@ import sys
 import tempfile
 import threading
 from pathlib import Path
-from typing import IO, Callable, Iterator, Sequence
+from typing import IO, Any, Callable, Iterator, Sequence
 
 from .checks import file_name, items
 from .errors import BomgraphError
@@ -378,6 +378,16 @@ def write_text(path: str | os.PathLike[str], text: str,
         fh.write(text)
 
 
+def write_figure(fig: Any, path: str | os.PathLike[str], dpi: int) -> str:
+    """A matplotlib figure into ``path`` through :func:`output_file` (its format by the
+    suffix: .png, .pdf, .svg), so an interrupted save leaves the earlier figure, not half of
+    one; returns the path."""
+    with output_file(path, binary=True) as fh:
+        fig.savefig(fh, format=os.fspath(path).rsplit(".", 1)[-1].lower(), dpi=dpi,
+                    facecolor="white")
+    return os.fspath(path)
+
+
 class FolderBusyError(BomgraphError):
     """Another process holds the lock of an output folder."""
 
@@ -446,4 +456,4 @@ __all__ = ["STDIO", "MAX_LINE_BYTES", "MAX_INPUT_BYTES", "OutputPathError",
            "InputTooLargeError", "line_too_long", "input_too_large", "bounded_lines",
            "read_bounded", "copy_bounded", "display_path", "input_path", "write_output",
            "is_stdout", "check_output_path", "AtomicOutput", "output_file", "write_text",
-           "FolderBusyError", "make_folder", "folder_lock", "signals_held"]
+           "write_figure", "FolderBusyError", "make_folder", "folder_lock", "signals_held"]
