@@ -4,13 +4,33 @@ BOM-STMDS (sequential triangulation + multi-dimensional scaling) next to EKF and
 baselines, all reading one measurement stream and scored by one Procrustes evaluator.
 """
 
+from importlib import import_module
+from typing import Any
+
 from .errors import (BomgraphError, ConfigError, DatasetError, DegenerateGeometryError,
                      EvaluationError, StreamFormatError, UnknownMethodError)
-from .mapper import MapEstimate, Mapper, RunResult, create_mapper, run
-from .stream import Prior, Step, Stream, StreamHeader, Truth
-from .stream_file import read_stream, write_stream
 
 __version__ = "0.1.0"
+
+#: the rest of the API, imported when first used (PEP 562): ``python -m bomgraph`` and the
+#: ``bomgraph`` command import this package before their Ctrl-C handler is in place, so it
+#: must not take half a second of numpy imports to load.
+_LAZY = {**dict.fromkeys(("MapEstimate", "Mapper", "RunResult", "create_mapper", "run"),
+                         "mapper"),
+         **dict.fromkeys(("Prior", "Step", "Stream", "StreamHeader", "Truth"), "stream"),
+         **dict.fromkeys(("read_stream", "write_stream"), "stream_file")}
+
+
+def __getattr__(name: str) -> Any:
+    if name not in _LAZY:
+        raise AttributeError(f"module 'bomgraph' has no attribute {name!r}")
+    value = getattr(import_module(f".{_LAZY[name]}", __name__), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted({*globals(), *_LAZY})
 
 __all__ = ["BomgraphError", "ConfigError", "DatasetError", "DegenerateGeometryError",
            "EvaluationError", "StreamFormatError", "UnknownMethodError", "MapEstimate",

@@ -348,19 +348,21 @@ def execute(tasks: Sequence[Task], executor: Executor = Executor(), *,
     if progress:
         progress(done, len(tasks))
     other_key: list[str] = []
-    for k, res in _dispatch([tasks[k] for k in todo], todo, executor):
-        if res.get("key") != task_key(tasks[k]):  # kept, but a later read would refuse it
-            if res.get("ok"):  # a failure is never cached, and says why itself
-                other_key.append(f"{tasks[k].arm.label} on {tasks[k].source.name}")
-        elif cache is not None and res.get("ok"):  # failures are re-run next time
-            _write_cached(_cache_path(cache, tasks[k]), res)
-        for j in twins[task_key(tasks[k])]:
-            t = tasks[j]
-            results[j] = res if j == k else {**res, "experiment": t.experiment,
-                                             "arm": t.arm.label, "run": t.source.name}
-            done += 1
-        if progress:
-            progress(done, len(tasks))
+    with contextlib.closing(  # closed here when left early (Ctrl-C), not by the collector
+            _dispatch([tasks[k] for k in todo], todo, executor)) as dispatched:
+        for k, res in dispatched:
+            if res.get("key") != task_key(tasks[k]):  # kept, but a later read would refuse it
+                if res.get("ok"):  # a failure is never cached, and says why itself
+                    other_key.append(f"{tasks[k].arm.label} on {tasks[k].source.name}")
+            elif cache is not None and res.get("ok"):  # failures are re-run next time
+                _write_cached(_cache_path(cache, tasks[k]), res)
+            for j in twins[task_key(tasks[k])]:
+                t = tasks[j]
+                results[j] = res if j == k else {**res, "experiment": t.experiment,
+                                                 "arm": t.arm.label, "run": t.source.name}
+                done += 1
+            if progress:
+                progress(done, len(tasks))
     if other_key:  # one line, not one a run
         _log.warning("%d run(s) not cached (first: %s): the workers keyed them otherwise than "
                      "this process: other bomgraph or plugin code, library versions or data "
@@ -452,11 +454,9 @@ def _dispatch(tasks: list[Task], index: list[int],
         for k, t in zip(index, tasks):
             yield k, run_task(t)
     elif executor.backend == "processes":
-        from joblib import Parallel, delayed
+        from .processes import dispatch
 
-        par = Parallel(n_jobs=_local_workers(executor.n_jobs, len(tasks)),
-                       return_as="generator_unordered")
-        yield from par(delayed(_indexed)(k, t) for k, t in zip(index, tasks))
+        yield from dispatch(_indexed, index, tasks, _local_workers(executor.n_jobs, len(tasks)))
     else:
         yield from _dispatch_dask(tasks, index, executor)
 

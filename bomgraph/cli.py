@@ -20,8 +20,6 @@ import signal
 import sys
 from typing import Any, Callable, Sequence
 
-import numpy as np
-
 from .cli_parser import PROGRESS_MIN_STEPS, build_parser
 from .errors import BomgraphError, ConfigError
 
@@ -37,6 +35,8 @@ def _say(text: str, *, to_stderr: bool = False) -> None:
 # --------------------------------------------------------------------------------------------
 
 def cmd_simulate(args: argparse.Namespace) -> int:
+    import numpy as np
+
     from .sim import SimConfig, make_priors, simulate, with_priors
     from .stdio import check_output_path, is_stdout
     from .stream_file import write_stream
@@ -227,6 +227,16 @@ def cmd_methods(args: argparse.Namespace) -> int:
 
 
 def cmd_compare(args: argparse.Namespace) -> int:
+    seen = {"done": 0}
+    try:
+        return _compare(args, seen)
+    except (KeyboardInterrupt, Terminated) as exc:  # anywhere: imports, runs, writes, printing
+        cached = "" if args.no_cache else f"; {seen['done']} runs cached, rerun to resume"
+        print(f"bomgraph: {_stopped(exc)}{cached}", file=sys.stderr)
+        return _status(exc)
+
+
+def _compare(args: argparse.Namespace, seen: dict[str, int]) -> int:
     from .bench import Executor
     from .experiments import compare_experiments
     from .paired import format_paired, references_for
@@ -252,7 +262,6 @@ def cmd_compare(args: argparse.Namespace) -> int:
         quiet_dask_logging()    # a cluster's failure is the failed runs' line, Dask's with -v
     show = sys.stderr.isatty() if args.progress is None else args.progress
     bar = None
-    seen = {"done": 0}
 
     def progress(done: int, total: int) -> None:  # the bar starts when the total is known
         nonlocal bar
@@ -270,13 +279,6 @@ def cmd_compare(args: argparse.Namespace) -> int:
         result = compare(chosen, args.out, executor=executor, use_cache=not args.no_cache,
                          figures=not args.no_figures, progress=progress,
                          estimates=args.estimates, paired_reference=args.paired_reference)
-    except KeyboardInterrupt:
-        if bar is not None:
-            bar.close()
-            bar = None
-        cached = "" if args.no_cache else f"; {seen['done']} runs cached, rerun to resume"
-        print(f"bomgraph: interrupted{cached}", file=sys.stderr)
-        return 130
     finally:
         if bar is not None:
             bar.close()
@@ -399,8 +401,60 @@ def configure_logging(verbose: int = 0, quiet: bool = False) -> None:
         warnings.simplefilter("ignore")
 
 
-def _on_sigterm(signum: int, frame: Any) -> None:
-    raise SystemExit(128 + signum)  # unwinds, so partial files are removed
+class Terminated(SystemExit):
+    """SIGTERM, raised in the main thread: unwinds (so partial files are removed) and exits
+    with status 143."""
+
+
+def _on_signal(signum: int, frame: Any) -> None:
+    """SIGINT raises KeyboardInterrupt, SIGTERM :class:`Terminated`; a later SIGINT or
+    SIGTERM is ignored, as the command is stopping already: raised in the middle of the
+    cleanup of the first (an ``except`` or ``finally`` block), it would stop that cleanup or
+    end in a traceback."""
+    for s in _SIGNALS:
+        signal.signal(s, signal.SIG_IGN)
+    if signum == signal.SIGINT:
+        raise KeyboardInterrupt
+    raise Terminated(128 + signum)
+
+
+def _on_unraisable(unraisable: Any, previous: Callable[[Any], None]) -> None:
+    """``sys.unraisablehook``: a SIGINT or SIGTERM whose exception was raised inside a
+    ``__del__`` or a finaliser (a generator closed by the garbage collector, say) is dropped
+    by Python after printing "Exception ignored in ...", and the command would carry on with
+    the signals ignored; it is delivered again instead, a moment later, by another thread, so
+    that it is raised in the main thread's own code."""
+    exc = unraisable.exc_value
+    if not isinstance(exc, (KeyboardInterrupt, Terminated)):
+        previous(unraisable)
+        return
+    import _thread
+    import threading
+
+    signum = signal.SIGINT if isinstance(exc, KeyboardInterrupt) else signal.SIGTERM
+    for s in _SIGNALS:
+        signal.signal(s, _on_signal)
+    try:
+        threading.Timer(0.01, _thread.interrupt_main, (signum,)).start()
+    except RuntimeError:  # the interpreter is shutting down: the command has ended
+        pass
+
+
+def _stopped(exc: BaseException) -> str:
+    return "terminated" if isinstance(exc, Terminated) else "interrupted"
+
+
+def _status(exc: BaseException) -> int:
+    return 128 + (signal.SIGTERM if isinstance(exc, Terminated) else signal.SIGINT)
+
+
+def _forget_unhandled_interrupt() -> None:
+    """Under ``python -m bomgraph``, a KeyboardInterrupt that came out of code run from a
+    string (the functions ``dataclasses`` and ``namedtuple`` make, in an import) leaves a
+    flag in CPython that makes the process kill itself with SIGINT at exit, once the
+    interrupt has been handled and the status set (status -2, not 130). Running any string
+    clears that flag."""
+    exec("None")
 
 
 def _stdout_closed() -> int:
@@ -416,6 +470,9 @@ def _stdout_closed() -> int:
 #: errors of a write (a full disk, a quota, a file size limit): the OSError names no file.
 _WRITE_ERRNOS = {errno.ENOSPC, errno.EDQUOT, errno.EFBIG}
 
+#: the signals that stop a command (:func:`_on_signal`).
+_SIGNALS = tuple(getattr(signal, n) for n in ("SIGINT", "SIGTERM") if hasattr(signal, n))
+
 #: the handler of each subcommand, by the name :func:`build_parser` gives it.
 _COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {
     f.__name__: f for f in (cmd_simulate, cmd_run, cmd_evaluate, cmd_plot, cmd_export,
@@ -424,14 +481,55 @@ _COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    """The ``bomgraph`` command with ``argv`` (default: ``sys.argv[1:]``); returns the exit
+    status. SIGINT and SIGTERM are handled from the start (:func:`_on_signal`); when called
+    with ``argv``, the handlers in place before are restored at the end; as the program
+    (``argv`` None), both signals are left ignored: the command is over, and a signal during
+    the interpreter's exit would turn it into a traceback or a death by signal."""
+    hook = sys.unraisablehook
+    owned = _own_signals(hook)
+    try:
+        try:
+            status = _main(argv)
+        except (KeyboardInterrupt, Terminated) as exc:  # before a command ran, or after
+            command = next((a for a in (sys.argv[1:] if argv is None else argv)
+                            if not a.startswith("-")), "")
+            print(f"bomgraph: {_stopped(exc)}" + ("; rerun to resume" if command == "compare"
+                                                  else ""), file=sys.stderr)
+            status = _status(exc)
+        finally:
+            for s in owned:
+                signal.signal(s, signal.SIG_IGN)
+        if status in (130, 143):
+            _forget_unhandled_interrupt()
+        return status
+    finally:
+        if owned and argv is not None:
+            for s, previous in owned.items():
+                signal.signal(s, previous)
+            sys.unraisablehook = hook
+
+
+def _own_signals(hook: Callable[[Any], None]) -> dict[int, Any]:
+    """Install :func:`_on_signal` for SIGINT and SIGTERM and :func:`_on_unraisable` before
+    ``hook`` (main thread only); the signal handlers it replaced."""
+    import functools
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        return {}
+    previous = {s: signal.signal(s, _on_signal) for s in _SIGNALS}
+    sys.unraisablehook = functools.partial(_on_unraisable, previous=hook)
+    return previous
+
+
+def _main(argv: Sequence[str] | None) -> int:
     parser = build_parser()
     try:
         args = parser.parse_args(argv)
     except BrokenPipeError:  # `bomgraph --help | head -1`
         return _stdout_closed()
     configure_logging(getattr(args, "verbose", 0), getattr(args, "quiet", False))
-    if hasattr(signal, "SIGTERM"):
-        signal.signal(signal.SIGTERM, _on_sigterm)
     func: Callable[[argparse.Namespace], int] = _COMMANDS[args.func]
     try:
         status = func(args)
@@ -439,9 +537,6 @@ def main(argv: Sequence[str] | None = None) -> int:
         return status
     except BrokenPipeError:
         return _stdout_closed()
-    except KeyboardInterrupt:
-        print("bomgraph: interrupted", file=sys.stderr)
-        return 130
     except Exception as exc:
         from .mapper import method_failure_note
 

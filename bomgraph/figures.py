@@ -20,7 +20,7 @@ from .file_evaluation import poses_revised
 from .evaluate import score_estimate
 from .plots import results_figure, run_figure
 from .report import error_curves
-from .stdio import check_output_path, output_file
+from .stdio import check_output_path, write_figure
 from .stream_file import read_stream
 
 FIGURE_SUFFIXES = (".png", ".pdf", ".svg")
@@ -33,12 +33,6 @@ def _check_out(out: str | os.PathLike[str], *inputs: str | os.PathLike[str]) -> 
                           f"{', '.join(FIGURE_SUFFIXES)}")
     check_output_path(path, inputs)
     return path
-
-
-def _save(fig: Any, path: Path, dpi: int) -> str:
-    with output_file(path, binary=True) as fh:  # as every output: atomic, links followed
-        fig.savefig(fh, format=path.suffix.lower()[1:], dpi=dpi, facecolor="white")
-    return str(path)
 
 
 def plot_run(estimate_path: str | os.PathLike[str], stream_path: str | os.PathLike[str],
@@ -68,7 +62,7 @@ def plot_run(estimate_path: str | os.PathLike[str], stream_path: str | os.PathLi
     if truth is None:
         fig = run_figure(None, est, None, label=label, landmark_cov=est.landmark_cov,
                          title=f"{label}, {at} (no truth: the estimate's own frame)")
-        return _save(fig, path, dpi)
+        return write_figure(fig, path, dpi)
     if first and align_on != "landmarks":
         raise EvaluationError(f"{estimate_path}: the poses at t = {t} are as first estimated "
                               f"(the method revised them later), so they cannot place the "
@@ -86,7 +80,7 @@ def plot_run(estimate_path: str | os.PathLike[str], stream_path: str | os.PathLi
     errors = {int(i): float(e) for i, e in zip(s.landmark_ids, s.errors_m)}
     fig = run_figure(truth, est, s.alignment, label=label, errors_m=errors, pose_errors=pe,
                      landmark_cov=est.landmark_cov, title=title)
-    return _save(fig, path, dpi)
+    return write_figure(fig, path, dpi)
 
 
 def plot_results(results_dir: str | os.PathLike[str], out: str | os.PathLike[str], *,
@@ -106,7 +100,7 @@ def plot_results(results_dir: str | os.PathLike[str], out: str | os.PathLike[str
     except (ValueError, KeyError, TypeError, AttributeError, IndexError,
             RecursionError) as exc:  # a row of the wrong shape anywhere in the file
         raise ConfigError(f"{src}: not a compare results file ({type(exc).__name__})") from None
-    return _save(results_figure(final, curves, kind=kind, titles=titles), path, dpi)
+    return write_figure(results_figure(final, curves, kind=kind, titles=titles), path, dpi)
 
 
 def _results_data(obj: Any, src: Path, experiments: Sequence[str]) -> tuple[

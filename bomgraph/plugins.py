@@ -112,9 +112,11 @@ def load(target: str, name: str) -> object:
         for part in attr.split("."):
             obj = getattr(obj, part)
     except (ImportError, AttributeError) as exc:
+        _reraise_interrupt(exc)
         raise UnknownMethodError(f"method {name!r} is registered as {target!r} but cannot be "
                                  f"loaded: {exc}") from exc
     except Exception as exc:  # the module itself raised (a SyntaxError, a bad dataclass, ...)
+        _reraise_interrupt(exc)
         top = module.split(".")[0]  # the last line of the plugin's own code that ran
         frames = [f for f in traceback.extract_tb(exc.__traceback__)
                   if top in Path(f.filename).parts or Path(f.filename).stem == top]
@@ -124,6 +126,18 @@ def load(target: str, name: str) -> object:
                                  f"loaded: importing it raised {type(exc).__name__}: {exc}"
                                  f"{where}") from exc
     return obj
+
+
+def _reraise_interrupt(exc: BaseException) -> None:
+    """Raise the Ctrl-C (or the CLI's SIGTERM exit) that ``exc`` stands for, if any: an
+    extension module whose initialisation is interrupted (pybind11's: GTSAM) reports
+    ``ImportError: initialization failed`` caused by the KeyboardInterrupt, which must stop
+    the command, not be taken for a method that cannot be loaded."""
+    seen: BaseException | None = exc
+    while seen is not None:
+        if isinstance(seen, (KeyboardInterrupt, SystemExit)):
+            raise seen
+        seen = seen.__cause__ or seen.__context__
 
 
 def _source_files(module_name: str) -> list[tuple[str, Path]]:
@@ -181,6 +195,7 @@ def source_fingerprint(target: str, version: str | None = None) -> str:
     try:
         files = _source_files(module)
     except ImportError as exc:
+        _reraise_interrupt(exc)
         raise UnknownMethodError(f"cannot read the source of {target!r}: {exc}") from exc
     h = hashlib.sha256(f"version={version};".encode())
     for rel, f in files:

@@ -29,7 +29,7 @@ from .jsonio import jsonable
 from .paired import PairedConfig, PairedRow, paired_comparison, references_for
 from .plots import MapPanel, error_vs_time_figure, final_maps_figure, map_figure
 from .out_folder import drop_earlier_outputs, refuse_inputs_among_outputs, slug, unique_slugs
-from .stdio import folder_lock, make_folder, output_file, write_text
+from .stdio import folder_lock, make_folder, output_file, write_figure, write_text
 
 #: The checkpoints the summary reports (and the last one of each experiment).
 REPORT_TIMES = (50, 100, 200, 300)
@@ -472,7 +472,7 @@ def write_compare_figures(out_dir: str | os.PathLike[str], experiments: Sequence
         fig = error_vs_time_figure(curves, robot_curves=rob,
                                    title=f"{exp.title}: landmarks ({exp.n_runs()} runs)")
         path = out / f"{slug(exp.name)}_error_vs_time.png"
-        fig.savefig(path, dpi=120)
+        write_figure(fig, path, dpi=120)
         files.append(path)
     for exp in experiments:
         if exp.sources:
@@ -491,11 +491,11 @@ def write_compare_figures(out_dir: str | os.PathLike[str], experiments: Sequence
                          title=f"stmds-smacof-loc, run {exp.runs()[0].name}, "
                                f"t = {t_show or exp.sim.n_steps}")
         path = out / "example_map.png"
-        fig.savefig(path, dpi=120)
+        write_figure(fig, path, dpi=120)
         files.append(path)
     except Exception as exc:  # the map figure is optional; say why it is missing
-        (out / "example_map.txt").write_text(f"example map not drawn: {type(exc).__name__}: "
-                                             f"{exc}\n")
+        write_text(out / "example_map.txt", f"example map not drawn: {type(exc).__name__}: "
+                                            f"{exc}\n")
         files.append(out / "example_map.txt")
     return files
 
@@ -512,7 +512,7 @@ def _write_source_maps(out: Path, exp: Experiment,
         fig = final_maps_figure(truth, [_map_panel(r) for r in rs],
                                 title=f"{exp.title}: {src.name}")
         path = out / f"{slug(exp.name)}_{slug(src.name)}_maps.png"
-        fig.savefig(path, dpi=100)
+        write_figure(fig, path, dpi=100)
         files.append(path)
     return files
 

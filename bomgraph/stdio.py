@@ -36,7 +36,7 @@ import sys
 import tempfile
 import threading
 from pathlib import Path
-from typing import IO, Callable, Iterator, Sequence
+from typing import IO, Any, Callable, Iterator, Sequence
 
 from .checks import file_name, items
 from .errors import BomgraphError
@@ -262,7 +262,7 @@ def check_output_path(path: str | os.PathLike[str],
 
 
 @contextlib.contextmanager
-def _signals_held() -> Iterator[None]:
+def signals_held() -> Iterator[None]:
     """Block SIGTERM and SIGINT for the block (main thread, POSIX); a signal that came
     meanwhile is delivered, and its handler run, when the block ends."""
     if (not hasattr(signal, "pthread_sigmask")
@@ -316,7 +316,7 @@ class AtomicOutput:
         # SIGTERM/SIGINT are held back from the temporary file's creation until the handle
         # owns it: a signal raising mid-way would leave a file nobody removes, or close the
         # descriptor twice (EBADF). Delivered at the unmask, the handle is in place for abort.
-        with _signals_held():
+        with signals_held():
             fd, self._tmp = tempfile.mkstemp(prefix=f".{name}.", suffix=".partial", dir=d)
             try:
                 os.chmod(fd, self._mode)  # as open() would (or as the file was), not 0600
@@ -344,14 +344,15 @@ class AtomicOutput:
             _fsync_dir(os.path.dirname(self.path))
 
     def abort(self) -> None:
-        if self.fh is not None:
-            with contextlib.suppress(OSError):
-                self.fh.close()
-            self.fh = None
-        if self._tmp is not None:
-            with contextlib.suppress(OSError):
-                os.unlink(self._tmp)
-            self._tmp = None
+        with signals_held():  # a second Ctrl-C must not stop the cleanup of the first
+            if self.fh is not None:
+                with contextlib.suppress(OSError):
+                    self.fh.close()
+                self.fh = None
+            if self._tmp is not None:
+                with contextlib.suppress(OSError):
+                    os.unlink(self._tmp)
+                self._tmp = None
 
 
 @contextlib.contextmanager
@@ -364,10 +365,10 @@ def output_file(path: str | os.PathLike[str], *, binary: bool = False,
     try:
         fh = out.open()
         yield fh
+        out.commit()  # inside: an interrupt during its flush and fsync removes the file too
     except BaseException:
         out.abort()
         raise
-    out.commit()
 
 
 def write_text(path: str | os.PathLike[str], text: str,
@@ -375,6 +376,16 @@ def write_text(path: str | os.PathLike[str], text: str,
     """``text`` into ``path`` through :func:`output_file`."""
     with output_file(path, inputs=inputs) as fh:
         fh.write(text)
+
+
+def write_figure(fig: Any, path: str | os.PathLike[str], dpi: int) -> str:
+    """A matplotlib figure into ``path`` through :func:`output_file` (its format by the
+    suffix: .png, .pdf, .svg), so an interrupted save leaves the earlier figure, not half of
+    one; returns the path."""
+    with output_file(path, binary=True) as fh:
+        fig.savefig(fh, format=os.fspath(path).rsplit(".", 1)[-1].lower(), dpi=dpi,
+                    facecolor="white")
+    return os.fspath(path)
 
 
 class FolderBusyError(BomgraphError):
@@ -445,4 +456,4 @@ __all__ = ["STDIO", "MAX_LINE_BYTES", "MAX_INPUT_BYTES", "OutputPathError",
            "InputTooLargeError", "line_too_long", "input_too_large", "bounded_lines",
            "read_bounded", "copy_bounded", "display_path", "input_path", "write_output",
            "is_stdout", "check_output_path", "AtomicOutput", "output_file", "write_text",
-           "FolderBusyError", "make_folder", "folder_lock"]
+           "write_figure", "FolderBusyError", "make_folder", "folder_lock", "signals_held"]

@@ -110,6 +110,12 @@ def test_local_processes_are_bounded_by_the_tasks_and_the_cores(
         def __call__(self, jobs):
             return iter(())
 
+        def __enter__(self):  # bench uses Parallel as joblib's context manager
+            return self
+
+        def __exit__(self, *exc) -> None:
+            pass
+
     monkeypatch.setattr(joblib, "Parallel", Recorder)
     monkeypatch.setattr(os, "cpu_count", lambda: 2)
     tasks = [object()] * 3
