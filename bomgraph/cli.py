@@ -483,11 +483,23 @@ _COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """The ``bomgraph`` command with ``argv`` (default: ``sys.argv[1:]``); returns the exit
-    status. SIGINT and SIGTERM are handled from the start (:func:`_on_signal`); when called
-    with ``argv``, the handlers in place before are restored at the end; as the program
-    (``argv`` None), both signals are left ignored: the command is over, and a signal during
-    the interpreter's exit would turn it into a traceback or a death by signal."""
+    """The ``bomgraph`` command with ``argv`` (default: ``sys.argv[1:]``), for a caller in
+    the same process (a test, a notebook, a script); returns the exit status. SIGINT and
+    SIGTERM are handled from the start (:func:`_on_signal`), and the handlers and
+    ``sys.unraisablehook`` in place before are restored at the end, so the caller's Ctrl-C
+    works as before. The installed command is :func:`program`."""
+    return _run(argv, program=False)
+
+
+def program() -> int:
+    """The ``bomgraph`` command as a program (the console script and ``python -m
+    bomgraph``): :func:`main` on ``sys.argv[1:]``, except that SIGINT and SIGTERM are left
+    ignored at the end: the command is over, and a signal during the interpreter's exit
+    would turn into a traceback or a death by signal."""
+    return _run(None, program=True)
+
+
+def _run(argv: Sequence[str] | None, program: bool) -> int:
     hook = sys.unraisablehook
     owned = _own_signals(hook)
     try:
@@ -506,7 +518,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             _forget_unhandled_interrupt()
         return status
     finally:
-        if argv is not None:
+        if not program:
             for s, previous in owned.items():
                 signal.signal(s, previous)
             sys.unraisablehook = hook

@@ -36,3 +36,27 @@ def test_an_ignored_signal_stays_ignored_during_the_command(monkeypatch, signum)
         signal.signal(signum, previous)
     assert seen["handler"] is signal.SIG_IGN
     assert sys.unraisablehook is hook
+
+
+def test_main_without_argv_in_process_restores_the_callers_handlers(monkeypatch):
+    """``main()`` as a test or notebook calls it (argv from ``sys.argv``) left SIGINT and
+    SIGTERM ignored and its unraisable hook in place: the caller's Ctrl-C stopped working.
+    Only :func:`bomgraph.cli.program` (the installed command) leaves them ignored."""
+    monkeypatch.setitem(cli._COMMANDS, "cmd_methods", lambda args: 0)
+    monkeypatch.setattr(sys, "argv", ["bomgraph", "methods"])
+    before = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
+    hook = sys.unraisablehook
+    assert cli.main() == 0
+    assert {s: signal.getsignal(s) for s in before} == before
+    assert sys.unraisablehook is hook
+
+
+def test_the_installed_command_is_program():
+    """The console script and ``python -m bomgraph`` run :func:`bomgraph.cli.program`."""
+    import tomllib
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    scripts = tomllib.loads((root / "pyproject.toml").read_text())["project"]["scripts"]
+    assert scripts["bomgraph"] == "bomgraph.cli:program"
+    assert "sys.exit(program())" in (root / "bomgraph" / "__main__.py").read_text()
