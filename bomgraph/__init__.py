@@ -23,6 +23,14 @@ _LAZY = {**dict.fromkeys(("MapEstimate", "Mapper", "RunResult", "create_mapper",
 
 def __getattr__(name: str) -> Any:
     if name not in _LAZY:
+        # a submodule, as ``import bomgraph`` made them attributes before the API was lazy
+        # (README: ``bomgraph.mapper.register_method``, ``bomgraph.stream_file.read_stream``)
+        if not name.startswith("_"):
+            try:
+                return import_module(f".{name}", __name__)
+            except ModuleNotFoundError as exc:
+                if exc.name != f"{__name__}.{name}":
+                    raise
         raise AttributeError(f"module 'bomgraph' has no attribute {name!r}")
     value = getattr(import_module(f".{_LAZY[name]}", __name__), name)
     globals()[name] = value

@@ -401,6 +401,10 @@ def configure_logging(verbose: int = 0, quiet: bool = False) -> None:
         warnings.simplefilter("ignore")
 
 
+#: the signals that stop a command (:func:`_on_signal`).
+_SIGNALS = tuple(getattr(signal, n) for n in ("SIGINT", "SIGTERM") if hasattr(signal, n))
+
+
 class Terminated(SystemExit):
     """SIGTERM, raised in the main thread: unwinds (so partial files are removed) and exits
     with status 143."""
@@ -418,7 +422,8 @@ def _on_signal(signum: int, frame: Any) -> None:
     raise Terminated(128 + signum)
 
 
-def _on_unraisable(unraisable: Any, previous: Callable[[Any], None]) -> None:
+def _on_unraisable(unraisable: Any, previous: Callable[[Any], None],
+                   signals: tuple[int, ...] = _SIGNALS) -> None:
     """``sys.unraisablehook``: a SIGINT or SIGTERM whose exception was raised inside a
     ``__del__`` or a finaliser (a generator closed by the garbage collector, say) is dropped
     by Python after printing "Exception ignored in ...", and the command would carry on with
@@ -432,7 +437,7 @@ def _on_unraisable(unraisable: Any, previous: Callable[[Any], None]) -> None:
     import threading
 
     signum = signal.SIGINT if isinstance(exc, KeyboardInterrupt) else signal.SIGTERM
-    for s in _SIGNALS:
+    for s in signals:   # those the command handles (not one ignored when it started)
         signal.signal(s, _on_signal)
     try:
         threading.Timer(0.01, _thread.interrupt_main, (signum,)).start()
@@ -470,9 +475,6 @@ def _stdout_closed() -> int:
 #: errors of a write (a full disk, a quota, a file size limit): the OSError names no file.
 _WRITE_ERRNOS = {errno.ENOSPC, errno.EDQUOT, errno.EFBIG}
 
-#: the signals that stop a command (:func:`_on_signal`).
-_SIGNALS = tuple(getattr(signal, n) for n in ("SIGINT", "SIGTERM") if hasattr(signal, n))
-
 #: the handler of each subcommand, by the name :func:`build_parser` gives it.
 _COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {
     f.__name__: f for f in (cmd_simulate, cmd_run, cmd_evaluate, cmd_plot, cmd_export,
@@ -481,11 +483,23 @@ _COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """The ``bomgraph`` command with ``argv`` (default: ``sys.argv[1:]``); returns the exit
-    status. SIGINT and SIGTERM are handled from the start (:func:`_on_signal`); when called
-    with ``argv``, the handlers in place before are restored at the end; as the program
-    (``argv`` None), both signals are left ignored: the command is over, and a signal during
-    the interpreter's exit would turn it into a traceback or a death by signal."""
+    """The ``bomgraph`` command with ``argv`` (default: ``sys.argv[1:]``), for a caller in
+    the same process (a test, a notebook, a script); returns the exit status. SIGINT and
+    SIGTERM are handled from the start (:func:`_on_signal`), and the handlers and
+    ``sys.unraisablehook`` in place before are restored at the end, so the caller's Ctrl-C
+    works as before. The installed command is :func:`program`."""
+    return _run(argv, program=False)
+
+
+def program() -> int:
+    """The ``bomgraph`` command as a program (the console script and ``python -m
+    bomgraph``): :func:`main` on ``sys.argv[1:]``, except that SIGINT and SIGTERM are left
+    ignored at the end: the command is over, and a signal during the interpreter's exit
+    would turn into a traceback or a death by signal."""
+    return _run(None, program=True)
+
+
+def _run(argv: Sequence[str] | None, program: bool) -> int:
     hook = sys.unraisablehook
     owned = _own_signals(hook)
     try:
@@ -504,7 +518,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             _forget_unhandled_interrupt()
         return status
     finally:
-        if owned and argv is not None:
+        if not program:
             for s, previous in owned.items():
                 signal.signal(s, previous)
             sys.unraisablehook = hook
@@ -518,8 +532,12 @@ def _own_signals(hook: Callable[[Any], None]) -> dict[int, Any]:
 
     if threading.current_thread() is not threading.main_thread():
         return {}
-    previous = {s: signal.signal(s, _on_signal) for s in _SIGNALS}
-    sys.unraisablehook = functools.partial(_on_unraisable, previous=hook)
+    # a signal ignored when the command started (a background job of a non-interactive
+    # shell ignores SIGINT, so a Ctrl-C at the terminal is not its) stays ignored
+    previous = {s: signal.signal(s, _on_signal) for s in _SIGNALS
+                if signal.getsignal(s) is not signal.SIG_IGN}
+    sys.unraisablehook = functools.partial(_on_unraisable, previous=hook,
+                                           signals=tuple(previous))
     return previous
 
 

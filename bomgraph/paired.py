@@ -161,7 +161,9 @@ def _pair_rng(config: PairedConfig, experiment: str, arm: str, reference: str
 
 def _pair_row(experiment: str, arm: str, reference: str, mine: Mapping[str, Mapping],
               ref: Mapping[str, Mapping], config: PairedConfig) -> PairedRow:
-    runs = sorted(set(mine) | set(ref))  # sorted: the pairs' order is the runs', not the rows'
+    # sorted (by name, so ids of mixed types from the Python API compare): the pairs' order
+    # is the runs', not the rows'
+    runs = sorted(set(mine) | set(ref), key=str)
     both = [r for r in runs if r in mine and r in ref]
     ran = [r for r in both if mine[r]["ok"] and ref[r]["ok"]]
     a = np.array([_mpe(mine[r]) for r in ran], dtype=float)

@@ -245,3 +245,15 @@ def test_compare_writes_paired_csv_and_prints_the_table(tmp_path, capsys) -> Non
     # --dry-run refuses it too (it ran the plan before)
     assert main(cmd + ["--paired-reference", "ekf", "--dry-run"]) == 2
     assert "'ekf' is not an arm of any experiment" in capsys.readouterr().err
+
+
+def test_run_ids_of_mixed_types_pair_without_a_traceback() -> None:
+    """Rows from the Python API may name runs by int in one arm and str in another (a raw
+    TypeError from sorting them before); they pair by equality, as given."""
+    from bomgraph.paired import paired_comparison
+
+    rows = ([{"experiment": "e", "arm": "a", "run": k, "ok": True, "mpe_m": 0.02} for k in
+             range(3)] + [{"experiment": "e", "arm": "b", "run": str(k), "ok": True,
+                           "mpe_m": 0.01} for k in range(3)])
+    (row,) = paired_comparison(rows, {"e": "a"})
+    assert row.n_pairs == 0 and row.unmatched == 6
