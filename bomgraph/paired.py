@@ -133,7 +133,8 @@ def ratio_of_means_ci(a: np.ndarray, b: np.ndarray, idx: np.ndarray, confidence:
     with np.errstate(divide="ignore", invalid="ignore"):
         ratios = a[idx].mean(axis=1) / b[idx].mean(axis=1)
     tail = float(ndtr(-math.sqrt(n / (n - 1)) * stdtrit(n - 1, (1 + confidence) / 2)))
-    low, high = np.quantile(ratios[~np.isnan(ratios)], [tail, 1 - tail])
+    with np.errstate(invalid="ignore"):    # inf - inf between infinite ratios: NaN, no end
+        low, high = np.quantile(ratios[~np.isnan(ratios)], [tail, 1 - tail])
     return float(low), float(high)
 
 
@@ -193,8 +194,11 @@ def _pair_row(experiment: str, arm: str, reference: str, mine: Mapping[str, Mapp
     elif stats["ratio_of_means"] is not None:
         idx = _pair_rng(config, experiment, arm, reference).integers(
             0, n, size=(config.n_bootstrap, n))
-        stats["ratio_ci_low"], stats["ratio_ci_high"] = ratio_of_means_ci(
-            a, b, idx, config.confidence)
+        low, high = ratio_of_means_ci(a, b, idx, config.confidence)
+        if math.isfinite(low) and math.isfinite(high):
+            stats["ratio_ci_low"], stats["ratio_ci_high"] = low, high
+        else:   # resamples of only the runs where the reference scored 0: no upper end
+            notes.append("interval: unbounded (the reference's MPE is 0 on too many runs)")
     p, why = wilcoxon_p(d) if n else (None, "")
     notes += [why] if why else []
     return PairedRow(experiment, arm, reference, runs=len(runs), n_pairs=n,

@@ -257,3 +257,21 @@ def test_run_ids_of_mixed_types_pair_without_a_traceback() -> None:
                            "mpe_m": 0.01} for k in range(3)])
     (row,) = paired_comparison(rows, {"e": "a"})
     assert row.n_pairs == 0 and row.unmatched == 6
+
+
+def test_an_unbounded_interval_is_none_with_a_note_in_csv_and_json_alike() -> None:
+    """With the reference's MPE exactly 0 on 4 of 6 runs, about 9 % of the resamples have a
+    reference mean of 0 and an infinite ratio: the interval's upper end was ``inf``, written
+    as inf in paired.csv and as null in results.json. Now both ends are None and the note
+    says why."""
+    from bomgraph.paired import paired_comparison
+
+    mpe_ref = [0.0, 0.0, 0.0, 0.0, 0.01, 0.02]
+    rows = ([{"experiment": "e", "arm": "ref", "run": f"r{k}", "ok": True, "mpe_m": v}
+             for k, v in enumerate(mpe_ref)]
+            + [{"experiment": "e", "arm": "a", "run": f"r{k}", "ok": True, "mpe_m": 0.01}
+               for k in range(6)])
+    (row,) = paired_comparison(rows, {"e": "ref"})
+    assert row.n_pairs == 6 and row.ratio_of_means == pytest.approx(0.01 / 0.005)
+    assert row.ratio_ci_low is None and row.ratio_ci_high is None
+    assert "unbounded" in row.note
