@@ -39,12 +39,18 @@ def landmark_keys(ids: np.ndarray) -> np.ndarray:
     return np.where(i < np.uint64(_SYMBOL_INDEX_LIMIT), symbol_keys("l", i), _WIDE_LANDMARK | i)
 
 
+def is_pose_key(keys: np.ndarray) -> np.ndarray:
+    """Whether each of ``keys`` ((k,) uint64, any keys of the graph) is a pose's (symbols
+    ``x``, ``m``; every other key is a landmark's): (k,) bool."""
+    char = np.asarray(keys, dtype=np.uint64) >> _CHAR_SHIFT
+    return (char == ord("x")) | (char == ord("m"))
+
+
 def key_landmark_ids(keys: np.ndarray) -> np.ndarray:
     """The landmark ids of the landmark keys among ``keys`` ((k,) uint64, any keys of the
     graph: poses ``x``, ``m`` are left out), in the order given: (n,) int64."""
     k = np.asarray(keys, dtype=np.uint64)
-    char = k >> _CHAR_SHIFT
-    k = k[(char != ord("x")) & (char != ord("m"))]
+    k = k[~is_pose_key(k)]
     wide = (k >> np.uint64(63)).astype(bool)
     return np.where(wide, k ^ _WIDE_LANDMARK, k & np.uint64(_SYMBOL_INDEX_LIMIT - 1)
                     ).astype(np.int64)
@@ -76,4 +82,5 @@ def points_at(values: gtsam.Values, ids: Sequence[int] | np.ndarray) -> np.ndarr
                  gtsam.utilities.extractPoint2, 2)
 
 
-__all__ = ["symbol_keys", "landmark_keys", "key_landmark_ids", "poses_at", "points_at"]
+__all__ = ["symbol_keys", "landmark_keys", "is_pose_key", "key_landmark_ids", "poses_at",
+           "points_at"]

@@ -25,6 +25,7 @@ from bomgraph.mapper import MapEstimate
 
 from .bearing_graph import (BearingGraph, FactorGraphConfig, landmark_key, landmarks_from_values,
                             pose_key)
+from .graph_values import is_pose_key
 
 #: What a failing GTSAM call raises in Python: its C++ exceptions arrive as RuntimeError,
 #: except one whose message is not UTF-8 (an indeterminate-system message naming a key by a
@@ -298,13 +299,6 @@ class MarginalCovariances:
         return info
 
 
-def _tangent_dims(keys: list[int]) -> np.ndarray:
-    """The tangent dimension of each key: 3 for a ``Pose2`` (symbols ``x``, ``m``), else 2
-    (a ``Point2`` landmark, symbol ``l``)."""
-    return np.array([3 if chr(gtsam.Symbol(k).chr()) in ("x", "m") else 2 for k in keys],
-                    dtype=np.int64)
-
-
 def _svd_marginals(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values,
                    want: list[int]) -> tuple[dict[int, np.ndarray], str] | None:
     """The tangent-space marginal covariance of each key of ``want`` from an SVD of the
@@ -316,7 +310,7 @@ def _svd_marginals(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values,
     why keys were left out ("" if none was), or None above :data:`DENSE_MARGINALS_MAX`
     unknowns (not tried)."""
     keys = [int(k) for k in graph.keyVector()]
-    dims = _tangent_dims(keys)
+    dims = np.where(is_pose_key(np.array(keys, dtype=np.uint64)), 3, 2)  # Pose2, Point2
     if int(dims.sum()) > DENSE_MARGINALS_MAX:
         return None
     a, _ = graph.linearize(values).jacobian(gtsam.Ordering(keys))
