@@ -55,8 +55,8 @@ def _latex_escape(s: str) -> str:
 
 def _markdown_escape(s: str) -> str:
     """``s`` with the characters that Markdown may read as markup backslash-escaped, so a
-    method or file name in a title shows as written (``*x*`` was shown as italics and ended
-    the title's bold early)."""
+    method or file name in a title or a cell shows as written (``*x*`` was shown as italics
+    and ended the title's bold early; a ``|`` in a cell split it in two)."""
     return re.sub(r"([\\`*_{}\[\]<>|#])", r"\\\1", s)
 
 
@@ -88,8 +88,9 @@ def format_table(columns: Sequence[Column], rows: Sequence[Mapping[str, Any]], f
     heads = [c.header for c in columns]
     if fmt == "markdown":
         lines = ([f"**{_markdown_escape(title)}**", ""] if title else []) + [
-            "| " + " | ".join(heads) + " |", "|" + "---|" * len(heads)]
-        lines += ["| " + " | ".join(row) + " |" for row in cells]
+            "| " + " | ".join(_markdown_escape(h) for h in heads) + " |",
+            "|" + "---|" * len(heads)]
+        lines += ["| " + " | ".join(_markdown_escape(c) for c in row) + " |" for row in cells]
         return "\n".join(lines)
     if fmt == "latex":
         lines = [r"\begin{table}[t]", r"\centering"]

@@ -65,3 +65,24 @@ def test_markdown_title_shows_as_written(title: str) -> None:
     assert unescaped == title
     # and no markup character is left bare in the title
     assert not re.search(r"(?<!\\)[*_`|\[\]<>]", re.sub(r"\\\\", "", inner))
+
+
+def _gfm_cells(line: str) -> list[str]:
+    """The cells of one GitHub-flavoured Markdown table row, as a reader splits them: on
+    every ``|`` not preceded by a backslash, the outer pipes dropped, each cell stripped and
+    its backslash escapes of ASCII punctuation undone."""
+    parts = re.split(r"(?<!\\)\|", line.strip())
+    assert parts[0] == "" and parts[-1] == "", f"row not fenced by pipes: {line!r}"
+    return [re.sub(r"\\([!-/:-@\[-`{-~])", r"\1", p.strip()) for p in parts[1:-1]]
+
+
+@pytest.mark.parametrize("name", ["my|method", "*my* method_v2 | [x](y) `z`", HOSTILE.strip()])
+def test_markdown_cells_and_headers_show_as_written(name: str) -> None:
+    """A method (or file) name in a cell or a header keeps its table row's shape: a bare
+    ``|`` split the cell in two and shifted every column after it."""
+    md = format_table([Column("arm", name), Column("mpe_m", "MPE [cm]", 100, ".2f")],
+                      [{"arm": name, "mpe_m": 0.0123}], "markdown")
+    head, rule, row = md.splitlines()
+    assert _gfm_cells(head) == [name, "MPE [cm]"]
+    assert _gfm_cells(row) == [name, "1.23"]
+    assert rule == "|---|---|"
