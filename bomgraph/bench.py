@@ -34,8 +34,9 @@ from .estimate_file import stream_identity, untimed_estimate_text, write_estimat
 from .evaluate import CheckpointScore, score_checkpoints, score_estimate
 from .experiments import Arm, Experiment, SimSource, Task
 from .jsonio import jsonable
-from .mapper import (Checkpoint, MapEstimate, RunResult, checkpoint_times, create_mapper,
-                     method_failure_note, method_fingerprint, method_info, run)
+from .mapper import (NO_SOURCE, Checkpoint, MapEstimate, RunResult, checkpoint_times,
+                     create_mapper, method_failure_note, method_fingerprint,
+                     method_has_source, method_info, run)
 from .plugins import code_fingerprint
 from .stdio import bounded_lines, output_file
 from .stream import Step, Stream, Truth
@@ -137,8 +138,8 @@ def _stale_plugin(task: Task) -> str:
     for m in task.methods():
         loaded = method_fingerprint(m)
         info = method_info(m)
-        if loaded is not None and source_fingerprint.__wrapped__(info.target,
-                                                                 info.version) != loaded:
+        if loaded not in (None, NO_SOURCE) and source_fingerprint.__wrapped__(
+                info.target, info.version) != loaded:
             return (f"stale worker: restart the workers and run again (Dask: client.restart(),"
                     f" or restart `dask worker`); method {m!r} was edited since this worker "
                     f"imported it, and a worker does not reload a module")
@@ -301,14 +302,32 @@ class Executor:
         return cls("processes", n_jobs=jobs)
 
 
-def _cache_path(cache_dir: Path, task: Task) -> Path:
-    """One file per (arm, source, code): experiments that share an arm share its runs."""
-    return cache_dir / f"{task_key(task)}.json"
+def _cache_path(cache_dir: Path, task: Task) -> Path | None:
+    """One file per (arm, source, code): experiments that share an arm share its runs. None
+    for a task whose method has no source file to hash (:func:`_sourceless`): its results are
+    neither read from nor written to the cache."""
+    return None if _sourceless(task) else cache_dir / f"{task_key(task)}.json"
+
+
+def _sourceless(task: Task) -> list[str]:
+    """The task's methods whose code has no source file (a class defined in a notebook cell
+    or in ``python -c``, :func:`bomgraph.mapper.method_has_source`): no key can follow an
+    edit of such code, so a cached result could be the old code's."""
+    return [m for m in task.methods() if _known(m) and not method_has_source(m)]
+
+
+def _known(name: str) -> bool:
+    try:
+        method_info(name)
+    except UnknownMethodError:  # recorded as a failed run, with the reason
+        return False
+    return True
 
 
 def is_cached(task: Task, cache_dir: str | os.PathLike[str]) -> bool:
     """Whether :func:`execute` would take ``task``'s result from ``cache_dir`` (not run it)."""
-    return _read_cached(_cache_path(Path(cache_dir), task)) is not None
+    path = _cache_path(Path(cache_dir), task)
+    return path is not None and _read_cached(path) is not None
 
 
 def execute(tasks: Sequence[Task], executor: Executor = Executor(), *,
@@ -332,8 +351,10 @@ def execute(tasks: Sequence[Task], executor: Executor = Executor(), *,
     cache = Path(cache_dir) if cache_dir is not None else None
     if cache is not None:
         cache.mkdir(parents=True, exist_ok=True)
+        _warn_sourceless(tasks)
         for k, t in enumerate(tasks):
-            cached = _read_cached(_cache_path(cache, t))
+            path = _cache_path(cache, t)
+            cached = None if path is None else _read_cached(path)
             if cached is not None:
                 cached.update(experiment=t.experiment, arm=t.arm.label, run=t.source.name)
                 results[k] = cached
@@ -354,8 +375,9 @@ def execute(tasks: Sequence[Task], executor: Executor = Executor(), *,
             if res.get("key") != task_key(tasks[k]):  # kept, but a later read would refuse it
                 if res.get("ok"):  # a failure is never cached, and says why itself
                     other_key.append(f"{tasks[k].arm.label} on {tasks[k].source.name}")
-            elif cache is not None and res.get("ok"):  # failures are re-run next time
-                _write_cached(_cache_path(cache, tasks[k]), res)
+            elif (cache is not None and res.get("ok")  # failures are re-run next time
+                  and (path := _cache_path(cache, tasks[k])) is not None):
+                _write_cached(path, res)
             for j in twins[task_key(tasks[k])]:
                 t = tasks[j]
                 results[j] = res if j == k else {**res, "experiment": t.experiment,
@@ -369,6 +391,17 @@ def execute(tasks: Sequence[Task], executor: Executor = Executor(), *,
                      "files there; give them this process's (and restart them)",
                      len(other_key), other_key[0])
     return [r for r in results if r is not None]
+
+
+def _warn_sourceless(tasks: Sequence[Task]) -> None:
+    """One log line for the runs left out of the cache by :func:`_sourceless`."""
+    names = dict.fromkeys(m for t in tasks for m in _sourceless(t))
+    if names:
+        n = sum(1 for t in tasks if _sourceless(t))
+        _log.warning("%d run(s) not cached: method(s) %s have no source file to hash (defined "
+                     "in a notebook cell or `python -c`), so a cached result could be from "
+                     "before an edit; put the class in a .py module to cache its runs",
+                     n, ", ".join(repr(m) for m in names))
 
 
 def refuse_runtime_methods(tasks: Sequence[Task], backend: str) -> None:

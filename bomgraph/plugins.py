@@ -181,10 +181,12 @@ def code_fingerprint() -> str:
 
 
 @functools.lru_cache(maxsize=64)
-def source_fingerprint(target: str, version: str | None = None) -> str:
+def source_fingerprint(target: str, version: str | None = None) -> str | None:
     """A hash of the code behind ``"module:attribute"``: every ``.py`` file of the module's
     top-level package (path relative to the package and contents; the module's own file for
-    a single-file module) and ``version``. 16 hex digits.
+    a single-file module) and ``version``. 16 hex digits; None when the module has no source
+    file (a class defined in a notebook cell or in ``python -c``): there is nothing to hash,
+    and the runner does not cache such a method's runs (:func:`bomgraph.bench.execute`).
 
     Raises
     ------
@@ -197,6 +199,8 @@ def source_fingerprint(target: str, version: str | None = None) -> str:
     except ImportError as exc:
         _reraise_interrupt(exc)
         raise UnknownMethodError(f"cannot read the source of {target!r}: {exc}") from exc
+    if not files:
+        return None
     h = hashlib.sha256(f"version={version};".encode())
     for rel, f in files:
         try:
