@@ -37,7 +37,7 @@ from .jsonio import jsonable
 from .mapper import (NO_SOURCE, Checkpoint, MapEstimate, RunResult, checkpoint_times,
                      create_mapper, method_failure_note, method_fingerprint,
                      method_has_source, method_info, run)
-from .plugins import code_fingerprint
+from .plugins import code_fingerprint, source_fingerprint
 from .stdio import bounded_lines, output_file
 from .stream import Step, Stream, Truth
 from .stream_file import StreamReader
@@ -133,15 +133,16 @@ def _stale_plugin(task: Task) -> str:
     Python does not reload a module, so a worker that imported a plugin (its sources hashed
     then, :func:`bomgraph.mapper.method_fingerprint`) keeps running that code after an edit,
     while the client keys the task with the new sources."""
-    from .plugins import source_fingerprint
+    from .plugins import disk_fingerprint
 
     for m in task.methods():
         loaded = method_fingerprint(m)
         info = method_info(m)
-        if loaded not in (None, NO_SOURCE) and source_fingerprint.__wrapped__(
-                info.target, info.version) != loaded:
+        if loaded not in (None, NO_SOURCE) and disk_fingerprint(info.target,
+                                                                info.version) != loaded:
             return (f"stale worker: restart the workers and run again (Dask: client.restart(),"
-                    f" or restart `dask worker`); method {m!r} was edited since this worker "
+                    f" or restart `dask worker`; in a notebook run serially: reload the module"
+                    f" or restart the kernel); method {m!r} was edited since this worker "
                     f"imported it, and a worker does not reload a module")
     return ""
 
@@ -347,6 +348,7 @@ def execute(tasks: Sequence[Task], executor: Executor = Executor(), *,
                           f"{type(bad).__name__}")
     if executor.backend != "serial":
         refuse_runtime_methods(tasks, executor.backend)
+    source_fingerprint.cache_clear()  # a plugin module reloaded since the last sweep: new keys
     results: list[dict[str, Any] | None] = [None] * len(tasks)
     cache = Path(cache_dir) if cache_dir is not None else None
     if cache is not None:

@@ -27,6 +27,7 @@ import hashlib
 import importlib
 import importlib.util
 import logging
+import marshal
 import sys
 import traceback
 from dataclasses import dataclass
@@ -92,9 +93,11 @@ def discover() -> dict[str, PluginEntry]:
 
 
 def refresh() -> None:
-    """Forget what :func:`discover` read (after installing a plugin in a running process)."""
+    """Forget what :func:`discover` read (after installing a plugin in a running process),
+    and the source contents :func:`source_fingerprint` kept for loaded modules."""
     discover.cache_clear()
     source_fingerprint.cache_clear()
+    _LOADED.clear()
     importlib.invalidate_caches()
 
 
@@ -182,17 +185,40 @@ def code_fingerprint() -> str:
 
 @functools.lru_cache(maxsize=64)
 def source_fingerprint(target: str, version: str | None = None) -> str | None:
-    """A hash of the code behind ``"module:attribute"``: every ``.py`` file of the module's
-    top-level package (path relative to the package and contents; the module's own file for
-    a single-file module) and ``version``. 16 hex digits; None when the module has no source
-    file (a class defined in a notebook cell or in ``python -c``): there is nothing to hash,
-    and the runner does not cache such a method's runs (:func:`bomgraph.bench.execute`).
+    """A hash of the code behind ``"module:attribute"`` as this process would run it: every
+    ``.py`` file of the module's top-level package (path relative to the package and
+    contents; the module's own file for a single-file module) and ``version``. 16 hex
+    digits; None when the module has no source file (a class defined in a notebook cell or
+    in ``python -c``): there is nothing to hash, and the runner does not cache such a
+    method's runs (:func:`bomgraph.bench.execute`).
+
+    A file whose module is loaded counts with the contents it had when this process first
+    hashed it, until the module is reloaded (``importlib.reload``, IPython's autoreload:
+    its code or its constants change), so the key follows the code that runs, not an edit
+    the process has not loaded (:func:`disk_fingerprint` is the file as it is now). Kept
+    for the process; :func:`bomgraph.bench.execute` forgets it at each call, so a reload
+    between two sweeps is seen; :func:`refresh` forgets the loaded contents too.
 
     Raises
     ------
     UnknownMethodError
         The module cannot be imported.
     """
+    return _fingerprint(target, version, loaded=True)
+
+
+def disk_fingerprint(target: str, version: str | None = None) -> str | None:
+    """:func:`source_fingerprint` of the files as they are on disk now: what a process that
+    imports the method from now on runs."""
+    return _fingerprint(target, version, loaded=False)
+
+
+#: Per source file of a loaded module: the digest of its contents when this process first
+#: hashed it, and :func:`_code_digest` of the module then (a change of that: a reload).
+_LOADED: dict[Path, tuple[bytes, str]] = {}
+
+
+def _fingerprint(target: str, version: str | None, loaded: bool) -> str | None:
     module = target.partition(":")[0]
     try:
         files = _source_files(module)
@@ -201,16 +227,68 @@ def source_fingerprint(target: str, version: str | None = None) -> str | None:
         raise UnknownMethodError(f"cannot read the source of {target!r}: {exc}") from exc
     if not files:
         return None
+    top = module.split(".")[0]
+    modules = {Path(m.__file__).resolve(): m for name, m in list(sys.modules.items())
+               if (name == top or name.startswith(top + ".") or name == "__main__")
+               and isinstance(getattr(m, "__file__", None), str)} if loaded else {}
     h = hashlib.sha256(f"version={version};".encode())
     for rel, f in files:
-        try:
-            data = f.read_bytes()
-        except OSError:  # a file removed while we read: hash its name only
-            data = b""
-        h.update(f"{rel}\0{len(data)}\0".encode())
-        h.update(data)
+        h.update(f"{rel}\0".encode())
+        h.update(_file_digest(f, modules.get(f.resolve())))
     return h.hexdigest()[:16]
 
 
+def _file_digest(path: Path, module: object | None) -> bytes:
+    """The digest of a source file's contents: as read now, or for a loaded ``module`` as
+    read when this process first hashed it, as long as the module's code is the same."""
+    code = None if module is None else _code_digest(module)
+    seen = _LOADED.get(path)
+    if code is not None and seen is not None and seen[1] == code:
+        return seen[0]
+    try:
+        data = path.read_bytes()
+    except OSError:  # a file removed while we read: hash its name only
+        data = b""
+    digest = hashlib.sha256(f"{len(data)}\0".encode() + data).digest()
+    if code is not None:
+        _LOADED[path] = (digest, code)
+    return digest
+
+
+_PLAIN = (int, float, complex, str, bytes, bool, type(None))
+
+
+def _code_digest(module: object) -> str:
+    """A digest of what a reload of ``module`` changes: the byte code of the functions and
+    classes defined in it (their methods, properties, defaults) and its plain constants
+    (numbers, strings and tuples of them). Only compared within one process."""
+    h = hashlib.sha256()
+    name = getattr(module, "__name__", "")
+
+    def add(key: str, value: object, depth: int = 0) -> None:
+        if isinstance(value, (staticmethod, classmethod)):
+            value = value.__func__
+        if isinstance(value, property):
+            for part in (value.fget, value.fset, value.fdel):
+                add(key, part, depth)
+            return
+        if isinstance(value, _PLAIN) or (isinstance(value, tuple)
+                                         and all(isinstance(v, _PLAIN) for v in value)):
+            h.update(f"{key}={value!r};".encode())
+        elif callable(value) and getattr(value, "__module__", None) == name:
+            code = getattr(value, "__code__", None)
+            if code is not None:
+                h.update(key.encode() + marshal.dumps(code))
+                add(key + ".__defaults__", getattr(value, "__defaults__", None), depth)
+            elif isinstance(value, type) and depth < 4:
+                for k, v in sorted(vars(value).items()):
+                    add(f"{key}.{k}", v, depth + 1)
+
+    for k, v in sorted(vars(module).items()):
+        add(k, v)
+    return h.hexdigest()
+
+
 __all__ = ["GROUP", "PluginEntry", "discover", "refresh", "load", "source_fingerprint",
+           "disk_fingerprint",
            "code_fingerprint", "NUMERIC_LIBRARIES"]

@@ -29,6 +29,7 @@ from .jsonio import jsonable
 from .paired import PairedConfig, PairedRow, paired_comparison, references_for
 from .plots import MapPanel, error_vs_time_figure, final_maps_figure, map_figure
 from .out_folder import drop_earlier_outputs, refuse_inputs_among_outputs, slug, unique_slugs
+from .plugins import source_fingerprint
 from .stdio import folder_lock, make_folder, output_file, write_figure, write_text
 
 #: The checkpoints the summary reports (and the last one of each experiment).
@@ -333,6 +334,7 @@ def plan_compare(experiments: Sequence[Experiment], out_dir: str | os.PathLike[s
     (``experiment``, ``arm``, ``run``, ``cached``: its result is in ``out_dir/cache``, so it
     would not run again), in the order compare runs them."""
     refuse_inputs_among_outputs(Path(out_dir), experiments)
+    source_fingerprint.cache_clear()  # as execute() does: a plugin module reloaded since
     cache = Path(out_dir) / "cache"
     tasks = [replace(t, keep_estimate=estimates) for e in experiments for t in e.tasks()]
     return [{"experiment": t.experiment, "arm": t.arm.label, "run": t.source.name,

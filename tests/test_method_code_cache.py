@@ -1,0 +1,141 @@
+"""The cache key follows the method code that this process runs, in a notebook too.
+
+- A method whose class has no source file (defined in a notebook cell or in ``python -c``) is
+  run, never taken from the cache: no key can follow an edit of code that is not in a file.
+  Before, its key held only the method's name, so a sweep re-run after an edit of the cell
+  silently returned the old code's results.
+- A method in a module file, edited and reloaded (``importlib.reload``, IPython's
+  autoreload) between two sweeps of one process, is keyed with the new code. Before, the
+  process kept the first hash: the second sweep returned the old code's cached result, and
+  without the cache failed as a "stale worker".
+- Edited and not reloaded, the process still runs the old code: a serial run fails saying
+  so, and nothing is cached under the edited file's key."""
+
+from __future__ import annotations
+
+import importlib
+import logging
+import sys
+import types
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from bomgraph import mapper
+from bomgraph.bench import Executor, execute, is_cached, task_key
+from bomgraph.experiments import Arm, Experiment, FileSource
+from bomgraph.sim import SimConfig, simulate
+from bomgraph.stream_file import write_stream
+
+CELL = '''
+import numpy as np
+from bomgraph.geometry import compose
+from bomgraph.mapper import MapEstimate
+
+class CellMapper:
+    """each landmark DEPTH metres along its first bearing"""
+    def __init__(self, header, **options):
+        self.pose, self.seen = np.zeros(3), {}
+    def step(self, step):
+        if step.odom is not None:
+            self.pose = compose(self.pose, step.odom)
+        for lid, b in zip(step.landmark_ids.tolist(), step.bearings_rad.tolist()):
+            a = self.pose[2] + b
+            self.seen.setdefault(lid, self.pose[:2] + DEPTH * np.array([np.cos(a), np.sin(a)]))
+    def estimate(self):
+        ids = np.array(sorted(self.seen), dtype=np.int64)
+        return MapEstimate(ids, np.array([self.seen[i] for i in ids.tolist()]).reshape(-1, 2))
+'''
+
+
+@pytest.fixture
+def cell_module(monkeypatch: pytest.MonkeyPatch) -> types.ModuleType:
+    """A module like a notebook's ``__main__``: code run from a string, no ``__file__``."""
+    mod = types.ModuleType("bomgraph_test_cell")
+    monkeypatch.setitem(sys.modules, mod.__name__, mod)
+    monkeypatch.setattr(mapper, "_REGISTRY", dict(mapper._REGISTRY))
+    mapper.register_method("cell-method", f"{mod.__name__}:CellMapper", "defined in a cell")
+    return mod
+
+
+def _run_cell(mod: types.ModuleType, depth_m: float, exp: Experiment, cache: Path) -> dict:
+    exec(compile(CELL.replace("DEPTH *", f"{depth_m!r} *"), "<cell>", "exec"), mod.__dict__)
+    (res,) = execute(exp.tasks(), Executor("serial"), cache_dir=cache)
+    assert res["ok"], res.get("error")
+    return res
+
+
+def test_a_method_without_source_file_is_never_taken_from_the_cache(
+        cell_module: types.ModuleType, tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    stream = tmp_path / "s.jsonl"
+    write_stream(simulate(SimConfig(n_steps=40), np.random.default_rng(3)), stream)
+    exp = Experiment("cell", "cell", (Arm("cell-method", "cell-method"),),
+                     sources=(FileSource(str(stream)),))
+    cache = tmp_path / "cache"
+    with caplog.at_level(logging.WARNING, logger="bomgraph"):
+        first = _run_cell(cell_module, 1.0, exp, cache)
+    assert "not cached" in caplog.text and "'cell-method'" in caplog.text
+    assert not any(cache.iterdir()), "a result of code without a source file was cached"
+    assert not is_cached(exp.tasks()[0], cache)
+    edited = _run_cell(cell_module, 3.0, exp, cache)   # the cell edited and run again
+    mpe = [r["checkpoints"][-1]["mpe_m"] for r in (first, edited)]
+    assert mpe[0] != mpe[1], "the edited cell's run returned the old code's result"
+    assert first["key"] == task_key(exp.tasks()[0])    # the key itself is still made
+    assert mapper.method_fingerprint("cell-method") == mapper.NO_SOURCE
+    assert not mapper.method_has_source("cell-method")
+
+
+FILE_METHOD = CELL.replace("DEPTH *", "DEPTH_M *") + "\nDEPTH_M = 1.0\n"
+
+
+@pytest.fixture
+def file_method(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> tuple[Path, Experiment]:
+    """A method in a module file of its own, registered at run time, and a one-run sweep."""
+    src = tmp_path / "code" / "bomgraph_test_filemethod.py"
+    src.parent.mkdir()
+    src.write_text(FILE_METHOD)
+    monkeypatch.syspath_prepend(str(src.parent))
+    monkeypatch.delitem(sys.modules, src.stem, raising=False)
+    monkeypatch.setattr(mapper, "_REGISTRY", dict(mapper._REGISTRY))
+    mapper.register_method("file-method", f"{src.stem}:CellMapper", "in a file")
+    stream = tmp_path / "s.jsonl"
+    write_stream(simulate(SimConfig(n_steps=40), np.random.default_rng(3)), stream)
+    yield src, Experiment("file", "file", (Arm("file-method", "file-method"),),
+                          sources=(FileSource(str(stream)),))
+    sys.modules.pop(src.stem, None)
+
+
+def _final_mpe(exp: Experiment, cache: Path | None) -> dict:
+    (res,) = execute(exp.tasks(), Executor("serial"), cache_dir=cache)
+    return res
+
+
+def test_an_edited_and_reloaded_module_is_keyed_with_its_new_code(
+        file_method: tuple[Path, Experiment], tmp_path: Path) -> None:
+    src, exp = file_method
+    cache = tmp_path / "cache"
+    first = _final_mpe(exp, cache)
+    module = importlib.import_module(src.stem)
+    src.write_text(FILE_METHOD.replace("DEPTH_M = 1.0", "DEPTH_M = 3.0"))
+    importlib.reload(module)
+    again = _final_mpe(exp, cache)
+    fresh = _final_mpe(exp, None)
+    assert first["ok"] and again["ok"] and fresh["ok"], (again.get("error"), fresh.get("error"))
+    assert again["key"] != first["key"]
+    mpe = [r["checkpoints"][-1]["mpe_m"] for r in (first, again, fresh)]
+    assert mpe[1] == mpe[2] != mpe[0], "the reloaded code's sweep returned the old result"
+    assert len(list(cache.glob("*.json"))) == 2
+
+
+def test_an_edit_not_reloaded_fails_the_serial_run_and_caches_nothing_new(
+        file_method: tuple[Path, Experiment], tmp_path: Path) -> None:
+    src, exp = file_method
+    first = _final_mpe(exp, None)
+    src.write_text(FILE_METHOD.replace("DEPTH_M = 1.0", "DEPTH_M = 3.0"))  # no reload
+    cache = tmp_path / "cache"
+    second = _final_mpe(exp, cache)
+    assert first["ok"] and not second["ok"]
+    assert "was edited since" in second["error"] and "reload the module" in second["error"]
+    assert list(cache.glob("*.json")) == []
