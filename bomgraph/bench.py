@@ -488,27 +488,25 @@ def _dispatch(tasks: list[Task], index: list[int],
     if executor.backend == "serial":
         for k, t in zip(index, tasks):
             yield k, run_task(t)
-    elif executor.backend == "processes":
-        from .processes import dispatch
-
-        yield from dispatch(_indexed, index, tasks, _local_workers(executor.n_jobs, len(tasks)))
-    else:
-        yield from _dispatch_dask(tasks, index, executor)
-
-
-def _dispatch_dask(tasks: list[Task], index: list[int],
-                   executor: Executor) -> Iterator[tuple[int, dict[str, Any]]]:
-    from .cluster import dispatch
-
+        return
     by_k = dict(zip(index, tasks))
 
-    def failed(k: int, error: str) -> dict[str, Any]:  # the cluster could not run the task
+    def failed(k: int, error: str) -> dict[str, Any]:  # the workers could not run the task
         t = by_k[k]
         return {"experiment": t.experiment, "arm": t.arm.label, "method": t.arm.method,
                 "run": t.source.name, "key": task_key(t), "ok": False, "error": error}
 
-    yield from dispatch(_indexed, index, tasks, scheduler=executor.scheduler,
-                        n_local=_local_workers(executor.dask_local, len(tasks)), failed=failed)
+    if executor.backend == "processes":
+        from .processes import dispatch
+
+        yield from dispatch(_indexed, index, tasks, _local_workers(executor.n_jobs, len(tasks)),
+                            failed)
+    else:
+        from .cluster import dispatch as dispatch_dask
+
+        yield from dispatch_dask(_indexed, index, tasks, scheduler=executor.scheduler,
+                                 n_local=_local_workers(executor.dask_local, len(tasks)),
+                                 failed=failed)
 
 
 def strip_timings(results: Iterable[Mapping[str, Any]]) -> list[dict[str, Any]]:

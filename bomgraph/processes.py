@@ -10,6 +10,10 @@ signal and ends them. Imports nothing from bomgraph but :mod:`bomgraph.stdio`.
 
 from __future__ import annotations
 
+import contextlib
+import os
+import re
+import tempfile
 import warnings
 from typing import Any, Callable, Iterator, Sequence
 
@@ -17,15 +21,58 @@ from .stdio import signals_held
 
 
 def dispatch(func: Callable[[int, Any], tuple[int, dict[str, Any]]], index: Sequence[int],
-             tasks: Sequence[Any], n_jobs: int) -> Iterator[tuple[int, dict[str, Any]]]:
+             tasks: Sequence[Any], n_jobs: int,
+             failed: Callable[[int, str], dict[str, Any]]
+             ) -> Iterator[tuple[int, dict[str, Any]]]:
     """``func(k, task)`` for each ``k`` of ``index`` and its task, in ``n_jobs`` worker
     processes (-1: one per core), as they finish. Closed early (the caller interrupted), the
-    runs in flight are cancelled, without joblib's warning that they were."""
+    runs in flight are cancelled, without joblib's warning that they were.
+
+    A worker that dies (a crash in native code, the out-of-memory killer, ``os._exit`` in a
+    plugin) breaks joblib's whole pool. The tasks it and the other workers were running
+    (each worker marks its task in a folder while it runs it) are then run again one at a
+    time, each in a pool of its own: the one whose worker dies again is ``failed(k, why)``,
+    the others give their results; the rest of the sweep goes on in a new pool.
+    """
+    from joblib.externals.loky.process_executor import BrokenProcessPool
+
+    pending = dict(zip(index, tasks))
+    with tempfile.TemporaryDirectory(prefix="bomgraph-running-") as marks:
+        while pending:
+            before = len(pending)
+            try:
+                with contextlib.closing(_pool(func, pending, n_jobs, marks)) as results:
+                    for k, res in results:
+                        del pending[k]
+                        yield k, res
+                continue
+            except BrokenProcessPool as exc:
+                running = [k for k in pending if os.path.exists(_mark(marks, k))]
+                why = _died(exc)
+            _clear(marks)
+            if not running and len(pending) == before:  # no task started: workers cannot
+                for k in list(pending):
+                    del pending[k]
+                    yield k, failed(k, why)
+            for k in running:   # each alone, to tell the task that kills its worker
+                try:
+                    # two workers for one task: joblib runs n_jobs=1 in this process
+                    with contextlib.closing(_pool(func, {k: pending[k]}, 2, marks)) as alone:
+                        ((_, res),) = list(alone)
+                except BrokenProcessPool as exc:
+                    res = failed(k, _died(exc))
+                    _clear(marks)
+                del pending[k]
+                yield k, res
+
+
+def _pool(func: Callable[[int, Any], tuple[int, dict[str, Any]]], pending: dict[int, Any],
+          n_jobs: int, marks: str) -> Iterator[tuple[int, dict[str, Any]]]:
     from joblib import Parallel, delayed
 
     with Parallel(n_jobs=n_jobs, return_as="generator_unordered") as par:
         _start_workers(par)
-        results = par(delayed(func)(k, t) for k, t in zip(index, tasks))
+        results = par(delayed(_marked)(func, marks, k, t) for k, t in list(pending.items()))
         try:
             for item in results:
                 yield item
@@ -34,6 +81,38 @@ def dispatch(func: Callable[[int, Any], tuple[int, dict[str, Any]]], index: Sequ
                 warnings.simplefilter("ignore", UserWarning)
                 results.close()
             raise
+
+
+def _mark(marks: str, k: int) -> str:
+    return os.path.join(marks, str(k))
+
+
+def _marked(func: Callable[[int, Any], tuple[int, dict[str, Any]]], marks: str, k: int,
+            task: Any) -> tuple[int, dict[str, Any]]:
+    """In a worker: ``func(k, task)``, with a file named ``k`` in ``marks`` while it runs (left
+    behind when the worker dies in it)."""
+    path = _mark(marks, k)
+    with open(path, "w"):
+        pass
+    out = func(k, task)
+    os.unlink(path)
+    return out
+
+
+def _clear(marks: str) -> None:
+    for name in os.listdir(marks):
+        os.unlink(os.path.join(marks, name))
+
+
+def _died(exc: BaseException) -> str:
+    """A failed run's error for a task whose worker process died, with the exit codes that
+    joblib gives (``SIGSEGV(-11)``: a crash in native code; ``SIGKILL(-9)``: often the
+    out-of-memory killer)."""
+    codes = re.search(r"exit codes of the workers are (\{[^}]*\})", str(exc))
+    return (f"WorkerDied: the worker process that ran it died"
+            f"{f' (exit codes {codes.group(1)})' if codes else ''}: a crash in native "
+            f"code, the out-of-memory killer, or os._exit in the method; run it alone with "
+            f"`bomgraph run STREAM --method NAME` to see (finished runs are cached)")
 
 
 def _start_workers(par: Any) -> None:
