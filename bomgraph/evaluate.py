@@ -279,17 +279,21 @@ def score_estimate(estimate: MapEstimate, truth: Reference, *, allow_reflection:
         raise EvaluationError(f"align_on must be one of {', '.join(ALIGN_ON)}, got {align_on!r}")
     common, ie, it = np.intersect1d(estimate.landmark_ids, truth.landmark_ids,
                                     return_indices=True)
+    whose = "reference estimate" if isinstance(truth, MapEstimate) else "truth"
     if common.size < 3 and align_on != "trajectory":
-        raise TooFewLandmarksError(f"the estimate shares {common.size} landmark(s) with the truth; "
-                              f"alignment needs at least 3")
+        raise TooFewLandmarksError(f"the estimate shares {common.size} landmark(s) with the "
+                                   f"{whose}; alignment needs at least 3")
     est_xy = estimate.landmarks_xy[ie]
     true_xy = truth.landmarks_xy[it]
     pr = _reference_poses(truth, estimate)
     est_p = estimate.poses[pr[0]] if pr is not None else np.zeros((0, 3))
     ref_p = pr[2] if pr is not None else np.zeros((0, 3))
     if align_on == "trajectory" and len(est_p) < 3:
+        without = ("estimate" if estimate.poses is None or not len(estimate.poses) else
+                   whose if truth.poses is None or not len(truth.poses) else None)
         raise EvaluationError(f"a trajectory alignment needs at least 3 common poses, got "
-                              f"{len(est_p)}")
+                              f"{len(est_p)}" + (f" (the {without} has no poses: align on "
+                                                 f"landmarks)" if without else ""))
     src = {"landmarks": est_xy, "trajectory": est_p[:, :2],
            "both": np.vstack([est_xy, est_p[:, :2]])}[align_on]
     dst = {"landmarks": true_xy, "trajectory": ref_p[:, :2],
