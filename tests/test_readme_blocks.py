@@ -40,7 +40,8 @@ RUN = {
 }
 LEFT_OUT = {
     ("README.md", "python3 -m venv .venv && . .venv/bin/activate && pip install . &&"):
-        "a fresh venv and the 2-minute main job (`compare --quick` runs in tests/test_cli.py)",
+        "a fresh venv and the 2-minute main job (`compare --quick` runs in "
+        "tests/test_compare_estimates.py)",
     ("README.md", "python3 -m venv .venv && . .venv/bin/activate && pip install '.[test]'"):
         "the test suite itself",
     ("README.md", "python scripts/bench_generality.py"): "280 runs, minutes on two cores",
