@@ -22,7 +22,7 @@ import numpy as np
 
 from .angles import angle_residual
 from .checks import is_integer, row_array
-from .errors import EvaluationError, TooFewLandmarksError
+from .errors import EvaluationError, TooFewLandmarksError, UndeterminedAlignmentError
 from .mapper import Checkpoint, MapEstimate, RunResult
 from .stream import Truth
 from .trajectory import PoseErrors, _rms, absolute_pose_errors, relative_pose_errors
@@ -113,7 +113,8 @@ def align_candidates(source_xy: np.ndarray, target_xy: np.ndarray, *,
         if with_scale:
             var = float((a ** 2).sum())
             if var == 0:
-                raise EvaluationError("align(): all source points coincide; scale is undefined")
+                raise UndeterminedAlignmentError("align(): all source points coincide; scale "
+                                                 "is undefined")
             scale = float((sv * dd).sum() / var)
         out.append(Alignment(r, mu_d - scale * r @ mu_s, scale, rank))
     return tuple(out)
@@ -267,9 +268,11 @@ def score_estimate(estimate: MapEstimate, truth: Reference, *, allow_reflection:
 
     Raises
     ------
-    EvaluationError
-        If fewer than 3 landmarks are common to the estimate and the truth (or, for a
-        trajectory fit, fewer than 3 common poses).
+    TooFewLandmarksError
+        If fewer than 3 landmarks are common to the estimate and the truth.
+    UndeterminedAlignmentError
+        For a trajectory fit, fewer than 3 common poses; with ``with_scale``, every fitted
+        point of the estimate at one place.
     """
     _check_pair(estimate, truth, "score_estimate")
     if not (is_integer(delta) and delta >= 1):
@@ -291,9 +294,9 @@ def score_estimate(estimate: MapEstimate, truth: Reference, *, allow_reflection:
     if align_on == "trajectory" and len(est_p) < 3:
         without = ("estimate" if estimate.poses is None or not len(estimate.poses) else
                    whose if truth.poses is None or not len(truth.poses) else None)
-        raise EvaluationError(f"a trajectory alignment needs at least 3 common poses, got "
-                              f"{len(est_p)}" + (f" (the {without} has no poses: align on "
-                                                 f"landmarks)" if without else ""))
+        raise UndeterminedAlignmentError(
+            f"a trajectory alignment needs at least 3 common poses, got {len(est_p)}"
+            + (f" (the {without} has no poses: align on landmarks)" if without else ""))
     src = {"landmarks": est_xy, "trajectory": est_p[:, :2],
            "both": np.vstack([est_xy, est_p[:, :2]])}[align_on]
     dst = {"landmarks": true_xy, "trajectory": ref_p[:, :2],
@@ -370,8 +373,9 @@ def score_checkpoints(result: RunResult | Sequence[Checkpoint], truth: Reference
     reference estimate), aligned as :func:`score_estimate` with ``align_on``.
 
     A checkpoint whose map shares fewer than 3 landmarks with the truth (or fewer than 3
-    poses, for a trajectory alignment) gets NaN errors (and its counts); any other evaluation
-    error is raised. ``nees=False`` leaves the NEES NaN (as does a reference estimate).
+    poses, for a trajectory alignment; or, with ``with_scale``, whose landmarks all sit at one
+    point) gets NaN errors (and its counts); any other evaluation error is raised.
+    ``nees=False`` leaves the NEES NaN (as does a reference estimate).
     """
     if isinstance(result, MapEstimate) or not isinstance(result, (RunResult, Sequence)):
         raise EvaluationError(f"score_checkpoints(): result must be a RunResult or a sequence "
@@ -395,10 +399,7 @@ def _score_checkpoint(c: Checkpoint, truth: Reference, nees: bool, align_on: str
     try:
         s = score_estimate(c.estimate, truth, align_on=align_on, delta=delta,
                            with_scale=with_scale)
-    except EvaluationError as exc:
-        if not isinstance(exc, TooFewLandmarksError) and not (
-                align_on == "trajectory" and "common poses" in str(exc)):
-            raise
+    except (TooFewLandmarksError, UndeterminedAlignmentError):
         common = np.intersect1d(c.estimate.landmark_ids, truth.landmark_ids).size
         return CheckpointScore(c.t, len(c.estimate), c.estimate_s, nan, nan, nan, nan,
                                int(common), nan, nan, nan, nan)

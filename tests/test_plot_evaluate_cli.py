@@ -285,3 +285,26 @@ def test_duplicate_and_foreign_landmark_ids(tmp_path, capsys) -> None:
     code, out, err = _evaluate(capsys, dup, s)
     assert code == 2 and len(err) == 1 and f"{dup}, line 2: 'landmarks'" in err[0], err
     assert "appears twice" in err[0]
+
+
+def test_similarity_with_an_earlier_map_at_one_point_scores_the_rest(tmp_path, capsys) -> None:
+    """``evaluate --similarity``: a checkpoint whose landmarks all sit at one point has no
+    scale; its row is '-' like a map of too few landmarks, and the rest is scored (the whole
+    evaluation stopped at it with "align(): all source points coincide", naming neither the
+    file nor the checkpoint)."""
+    s, stream = _line_world(tmp_path)
+    t = stream.truth
+    first = MapEstimate(t.landmark_ids, np.ones((6, 2)))
+    final = MapEstimate(t.landmark_ids, 2.0 * t.landmarks_xy)
+    est = tmp_path / "e.est"
+    write_estimate(RunResult("mine", (Checkpoint(5, first, 0.0), Checkpoint(11, final, 0.0)),
+                             np.zeros(1), 0.0), est)
+    code, out, err = _evaluate(capsys, est, s, "--similarity", "--format", "csv")
+    assert code == 0, err
+    rows = list(csv.DictReader(io.StringIO(out)))
+    assert [r["t"] for r in rows] == ["5", "11"] and rows[0]["mpe_m"] == ""
+    assert float(rows[1]["mpe_m"]) < 1e-12  # the final map is the truth at twice the scale
+    one = _est_file(tmp_path / "one.est", first, 11)
+    code, _, err = _evaluate(capsys, one, s, "--similarity")
+    assert code == 2 and len(err) == 1 and f"{one}: the final map (t = 11)" in err[0], err
+    assert "scale is undefined" in err[0]
