@@ -1,4 +1,4 @@
-"""The code blocks of README.md and docs/FORMATS.md, run as a reader would run them, with what
+"""The code blocks of README.md and docs/*.md, run as a reader would run them, with what
 they print checked against what the text says (h37 audit). Every block is either run here or
 named in LEFT_OUT with the reason, so a new block cannot go untried."""
 
@@ -18,7 +18,7 @@ import pytest
 from _plugin_dist import write_dist_info
 
 ROOT = Path(__file__).resolve().parents[1]
-DOCS = ("README.md", "docs/FORMATS.md")
+DOCS = ("README.md", "docs/FORMATS.md", "docs/measurements.md")
 DATA = Path(os.environ.get("BOMGRAPH_DATA", ROOT.parent / "shared" / "data"))
 BOMGRAPH = f'"{sys.executable}" -m bomgraph'
 
@@ -37,6 +37,8 @@ RUN = {
     ("docs/FORMATS.md", '{"format": "bomgraph-stream"'): "test_formats_stream_blocks",
     ("docs/FORMATS.md", "import numpy as np\nfrom bomgraph.stream import"):
         "test_formats_stream_blocks",
+    ("docs/measurements.md", 'checkpoint_every = 10\n[[experiments]]\nname = "lw1"'):
+        "test_measurement_sweep_block_plans",
 }
 LEFT_OUT = {
     ("README.md", "python3 -m venv .venv && . .venv/bin/activate && pip install . &&"):
@@ -186,3 +188,11 @@ def test_formats_stream_blocks(tmp_path: Path) -> None:
     mine = read_stream(tmp_path / "mine.jsonl")
     assert [list(s.landmark_ids) for s in mine.steps] == [[4, 7], [4]]
     assert mine.header.meta == {"robot": "mine"} and mine.steps[1].time_s == 0.5
+
+
+def test_measurement_sweep_block_plans(tmp_path: Path) -> None:
+    """docs/measurements.md's one sweep file (window-ba-long's min_count) is still one that
+    compare reads: 5 runs each of its two arms (its numbers are history, of the code then)."""
+    (tmp_path / "lw.toml").write_text(block("docs/measurements.md", "checkpoint_every = 10\n"))
+    out = shell(f"{BOMGRAPH} compare --config lw.toml --dry-run --out lw", tmp_path).stdout
+    assert re.search(r"lw1 +long-mc3 +5 runs", out) and re.search(r"lw1 +oracle +5 runs", out)
