@@ -41,6 +41,11 @@ class TooFewLandmarksError(EvaluationError):
     """Fewer than 3 landmarks are common to an estimate and the truth: no alignment exists."""
 
 
+class UndeterminedAlignmentError(EvaluationError):
+    """The points to align do not fix the transform asked for: fewer than 3 common poses for
+    a trajectory fit, or every source point at one place for a similarity (no scale)."""
+
+
 class UnknownMethodError(BomgraphError, KeyError):
     """A method name is not in the registry."""
 

@@ -22,7 +22,7 @@ import numpy as np
 
 from .angles import angle_residual
 from .checks import is_integer, row_array
-from .errors import EvaluationError, TooFewLandmarksError
+from .errors import EvaluationError, TooFewLandmarksError, UndeterminedAlignmentError
 from .mapper import Checkpoint, MapEstimate, RunResult
 from .stream import Truth
 from .trajectory import PoseErrors, _rms, absolute_pose_errors, relative_pose_errors
@@ -113,7 +113,8 @@ def align_candidates(source_xy: np.ndarray, target_xy: np.ndarray, *,
         if with_scale:
             var = float((a ** 2).sum())
             if var == 0:
-                raise EvaluationError("align(): all source points coincide; scale is undefined")
+                raise UndeterminedAlignmentError("align(): all source points coincide; scale "
+                                                 "is undefined")
             scale = float((sv * dd).sum() / var)
         out.append(Alignment(r, mu_d - scale * r @ mu_s, scale, rank))
     return tuple(out)
@@ -267,9 +268,11 @@ def score_estimate(estimate: MapEstimate, truth: Reference, *, allow_reflection:
 
     Raises
     ------
-    EvaluationError
-        If fewer than 3 landmarks are common to the estimate and the truth (or, for a
-        trajectory fit, fewer than 3 common poses).
+    TooFewLandmarksError
+        If fewer than 3 landmarks are common to the estimate and the truth.
+    UndeterminedAlignmentError
+        For a trajectory fit, fewer than 3 common poses; with ``with_scale``, every fitted
+        point of the estimate at one place.
     """
     _check_pair(estimate, truth, "score_estimate")
     if not (is_integer(delta) and delta >= 1):
@@ -279,17 +282,21 @@ def score_estimate(estimate: MapEstimate, truth: Reference, *, allow_reflection:
         raise EvaluationError(f"align_on must be one of {', '.join(ALIGN_ON)}, got {align_on!r}")
     common, ie, it = np.intersect1d(estimate.landmark_ids, truth.landmark_ids,
                                     return_indices=True)
+    whose = "reference estimate" if isinstance(truth, MapEstimate) else "truth"
     if common.size < 3 and align_on != "trajectory":
-        raise TooFewLandmarksError(f"the estimate shares {common.size} landmark(s) with the truth; "
-                              f"alignment needs at least 3")
+        raise TooFewLandmarksError(f"the estimate shares {common.size} landmark(s) with the "
+                                   f"{whose}; alignment needs at least 3")
     est_xy = estimate.landmarks_xy[ie]
     true_xy = truth.landmarks_xy[it]
     pr = _reference_poses(truth, estimate)
     est_p = estimate.poses[pr[0]] if pr is not None else np.zeros((0, 3))
     ref_p = pr[2] if pr is not None else np.zeros((0, 3))
     if align_on == "trajectory" and len(est_p) < 3:
-        raise EvaluationError(f"a trajectory alignment needs at least 3 common poses, got "
-                              f"{len(est_p)}")
+        without = ("estimate" if estimate.poses is None or not len(estimate.poses) else
+                   whose if truth.poses is None or not len(truth.poses) else None)
+        raise UndeterminedAlignmentError(
+            f"a trajectory alignment needs at least 3 common poses, got {len(est_p)}"
+            + (f" (the {without} has no poses: align on landmarks)" if without else ""))
     src = {"landmarks": est_xy, "trajectory": est_p[:, :2],
            "both": np.vstack([est_xy, est_p[:, :2]])}[align_on]
     dst = {"landmarks": true_xy, "trajectory": ref_p[:, :2],
@@ -366,8 +373,9 @@ def score_checkpoints(result: RunResult | Sequence[Checkpoint], truth: Reference
     reference estimate), aligned as :func:`score_estimate` with ``align_on``.
 
     A checkpoint whose map shares fewer than 3 landmarks with the truth (or fewer than 3
-    poses, for a trajectory alignment) gets NaN errors (and its counts); any other evaluation
-    error is raised. ``nees=False`` leaves the NEES NaN (as does a reference estimate).
+    poses, for a trajectory alignment; or, with ``with_scale``, whose landmarks all sit at one
+    point) gets NaN errors (and its counts); any other evaluation error is raised.
+    ``nees=False`` leaves the NEES NaN (as does a reference estimate).
     """
     if isinstance(result, MapEstimate) or not isinstance(result, (RunResult, Sequence)):
         raise EvaluationError(f"score_checkpoints(): result must be a RunResult or a sequence "
@@ -391,10 +399,7 @@ def _score_checkpoint(c: Checkpoint, truth: Reference, nees: bool, align_on: str
     try:
         s = score_estimate(c.estimate, truth, align_on=align_on, delta=delta,
                            with_scale=with_scale)
-    except EvaluationError as exc:
-        if not isinstance(exc, TooFewLandmarksError) and not (
-                align_on == "trajectory" and "common poses" in str(exc)):
-            raise
+    except (TooFewLandmarksError, UndeterminedAlignmentError):
         common = np.intersect1d(c.estimate.landmark_ids, truth.landmark_ids).size
         return CheckpointScore(c.t, len(c.estimate), c.estimate_s, nan, nan, nan, nan,
                                int(common), nan, nan, nan, nan)

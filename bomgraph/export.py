@@ -25,7 +25,9 @@ rotation about ``z`` only:
     are the landmark ids; pose vertex ids are ``max landmark id + 1 + t``. The importer
     (:func:`bomgraph.datasets.import_g2o`) reads the file back to the same steps. A landmark that
     is observed but not in the estimate gets no vertex (its edges stay; a comment line lists
-    it). Needs an estimate pose at every step. An odometry sigma of 0 (the simulator's
+    it). The stream's sensor range, time stamps and known landmark distances (priors, for
+    which g2o has no edge) go into a ``# bomgraph header`` comment that the importer reads.
+    Needs an estimate pose at every step. An odometry sigma of 0 (the simulator's
     ``sigma_dy``: its robot moves straight, then turns) has no finite information; it is written
     as :data:`ZERO_SIGMA_FLOOR` (1e-4 m or rad, information 1e8) and a comment line says so, so
     the importer reads that floor back where the stream had 0.
@@ -50,6 +52,7 @@ from .datasets.g2o import G2O_HEADER_PREFIX
 from .errors import ConfigError, ExportError
 from .mapper import MapEstimate, RunResult
 from .stream import Stream
+from .stream_file import header_to_json
 
 
 FORMATS = ("tum", "kitti", "csv", "g2o")
@@ -188,14 +191,16 @@ def odometry_information(dth_rad: float, sigma: np.ndarray) -> np.ndarray:
 
 
 def g2o_header_comment(stream: Stream) -> str:
-    """``# bomgraph header: {"sensor_range_m": ..., "time_s": [...]}`` for ``stream``
-    (``time_s`` only when every step has one): what g2o has no record for, in a comment line
-    (g2o skips ``#`` lines) that ``bomgraph import g2o`` reads back
-    (:data:`~bomgraph.datasets.g2o.G2O_HEADER_PREFIX`)."""
+    """``# bomgraph header: {"sensor_range_m": ..., "time_s": [...], "priors": [...]}`` for
+    ``stream`` (``time_s`` only when every step has one, ``priors`` when the stream has known
+    landmark distances): what g2o has no record for, in a comment line (g2o skips ``#`` lines)
+    that ``bomgraph import g2o`` reads back (:data:`~bomgraph.datasets.g2o.G2O_HEADER_PREFIX`)."""
     extra: dict[str, Any] = {"sensor_range_m": stream.header.sensor_range_m}
     times = [s.time_s for s in stream.steps]
     if times and all(v is not None for v in times):
         extra["time_s"] = [float(v) for v in times]  # type: ignore[arg-type]
+    if stream.header.priors:  # as the stream file writes them
+        extra["priors"] = header_to_json(stream.header)["priors"]
     return G2O_HEADER_PREFIX + json.dumps(extra, allow_nan=False, separators=(",", ":"))
 
 
@@ -217,6 +222,9 @@ def to_g2o(src: MapEstimate, stream: Stream) -> str:
     lm = {int(i): xy for i, xy in zip(src.landmark_ids, src.landmarks_xy)}
     lines = ["# bomgraph export: bearing-only 2-D SLAM problem with the estimate as vertex "
              f"values; pose vertex id = {base} + t", g2o_header_comment(stream)]
+    if stream.header.priors:
+        lines.append(f"# {len(stream.header.priors)} known landmark distances (the stream's "
+                     f"priors) are in the bomgraph header only: g2o has no edge for them")
     unmapped = [int(i) for i in observed if int(i) not in lm]
     if unmapped:
         lines.append(f"# observed landmarks without an estimate (no VERTEX_XY): "

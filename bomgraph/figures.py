@@ -67,7 +67,11 @@ def plot_run(estimate_path: str | os.PathLike[str], stream_path: str | os.PathLi
         raise EvaluationError(f"{estimate_path}: the poses at t = {t} are as first estimated "
                               f"(the method revised them later), so they cannot place the "
                               f"map: use --align landmarks, or plot the final map")
-    s = score_estimate(est, truth, align_on=align_on)
+    try:
+        s = score_estimate(est, truth, align_on=align_on)
+    except EvaluationError as exc:  # say which file and map, as evaluate does
+        which = "the final map" if t is None else f"the map at {at}"
+        raise type(exc)(f"{estimate_path}: {which}: {exc}") from None
     if truth.poses is not None and t is not None:
         truth = type(truth)(truth.landmark_ids, truth.landmarks_xy, truth.poses[:t + 1])
     pe = None if s.ape is None or first else (s.ape.t, s.ape.translation_m, s.ape.heading_rad)

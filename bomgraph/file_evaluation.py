@@ -166,7 +166,11 @@ def evaluate_files(estimate_path: str | os.PathLike[str], stream_path: str | os.
             est.final, stream.steps), free_rows=tuple(free))
     target = ref_est.final if ref_est is not None else stream.truth
     kw = dict(with_scale=with_scale, align_on=align_on, delta=delta)
-    score = score_estimate(est.final, target, **kw)
+    try:
+        score = score_estimate(est.final, target, **kw)
+    except EvaluationError as exc:  # say which file and map; the checkpoint rows say '-'
+        at = f" (t = {est.checkpoints[-1].t})" if est.checkpoints else ""
+        raise type(exc)(f"{estimate_path}: the final map{at}: {exc}") from None
     rows = tuple(score_checkpoints(est.checkpoints, target, **kw)) if est.checkpoints else ()
     revised = est.version >= 2 and poses_revised(est)
     if revised:  # the earlier rows' trajectories are first estimates, not the method's then
@@ -274,6 +278,21 @@ _REVISED_NOTE = ("before the last checkpoint no APE or RPE ('-'; aligned on the 
                  "only as first estimated")
 
 
+def _fit_note(s: MapScore) -> str:
+    """What a rank-deficient fit (:class:`~bomgraph.evaluate.Alignment` ``rank`` < 2) leaves
+    undefined, as :func:`~bomgraph.evaluate.score_estimate` decides it: a set at one point
+    fixes no rotation; a collinear one has a mirror tie, broken by what was not fitted or by
+    the headings, or not at all."""
+    undefined = f"{'robot' if s.align_on == 'landmarks' else 'landmark'} errors undefined"
+    if s.alignment.rank == 0:
+        return f"the fitted set is one point: the rotation is undetermined, {undefined}"
+    if s.ambiguous:
+        return f"the fitted set is collinear: the mirror tie is unbroken, {undefined}"
+    by = {"landmarks": "the robot positions or headings",
+          "trajectory": "the landmarks or the headings", "both": "the headings"}[s.align_on]
+    return f"the fitted set is collinear: mirror tie broken by {by}"
+
+
 def format_evaluation(ev: FileEvaluation, fmt: str = "text") -> str:
     """The evaluation as ``fmt`` (:data:`bomgraph.tables.FORMATS`): text gives counts,
     landmark errors [cm], robot errors and the per-checkpoint table; JSON the whole
@@ -298,8 +317,7 @@ def format_evaluation(ev: FileEvaluation, fmt: str = "text") -> str:
              f"  landmark MPE {na(s.mpe_m)}, RMSE {na(s.rmse_m)}, "
              f"median {na(s.median_m)}, max {na(s.max_m)}"]
     if s.alignment.rank < 2:
-        lines.append(f"  the fitted set is {'collinear' if s.alignment.rank == 1 else 'one point'}"
-                     f": {'the mirror tie is unbroken, robot errors undefined' if s.ambiguous else 'mirror tie broken by the poses'}")
+        lines.append(f"  {_fit_note(s)}")
     if s.n_poses:
         lines.append(f"  robot position error: last {na(s.robot_last_m)}, mean over "
                      f"{s.n_poses} poses {na(s.robot_mean_m)}")

@@ -157,6 +157,12 @@ def _parse_header(obj: dict, ctx: _Ctx) -> tuple[StreamHeader, Truth | None]:
     return header, truth
 
 
+def parse_priors(value: Any, path: str | os.PathLike[str], line: int) -> tuple[Prior, ...]:
+    """A header's ``priors`` (JSON data; None: none) as :class:`Prior`, checked as the stream
+    reader checks them; a :class:`StreamFormatError` names ``path``, ``line`` and the key."""
+    return _parse_priors(value, _Ctx(str(path), line))
+
+
 def _parse_priors(v: Any, ctx: _Ctx) -> tuple[Prior, ...]:
     if v is None:
         return ()
@@ -497,4 +503,4 @@ def _check_type(value: Any, kind: type, key: str) -> None:
 
 
 __all__ = ["StreamReader", "read_stream", "write_stream", "write_stream_parts", "header_to_json",
-           "step_to_json", "FORMAT_NAME", "FORMAT_VERSION"]
+           "step_to_json", "parse_priors", "FORMAT_NAME", "FORMAT_VERSION"]

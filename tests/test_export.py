@@ -5,6 +5,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import os
+import re
 from pathlib import Path
 
 import numpy as np
@@ -261,3 +262,41 @@ def test_a_pose_outside_the_stream_steps_is_refused_by_every_format(
         for fmt, s in (("g2o", stream), ("tum", _with_times(stream)), ("tum", stream)):
             with pytest.raises(ExportError, match=f"pose at step {bad_t} .*estimate's stream"):
                 export_text(extra, fmt, s)
+
+
+def test_g2o_round_trip_keeps_the_streams_priors(tmp_path: Path, stream: Stream,
+                                                 estimate: MapEstimate) -> None:
+    """Exp. 3's known landmark distances: g2o has no landmark-landmark distance edge, so
+    they go into the bomgraph header comment (a comment line says so) and come back through
+    the importer; the export dropped them without a word (h37 audit: 123 priors of
+    ``simulate --prior-fraction 0.1`` became 0 after export and import)."""
+    from bomgraph.sim import make_priors, with_priors
+
+    with_p = with_priors(stream, make_priors(stream.truth, 0.2, 0.03, np.random.default_rng(2)))
+    assert len(with_p.header.priors) > 5
+    path = tmp_path / "p.g2o"
+    path.write_text(export_text(estimate, "g2o", with_p))
+    assert f"# {len(with_p.header.priors)} known landmark distances" in path.read_text()
+    back = import_g2o(path)
+    assert back.header.priors == with_p.header.priors
+    assert back.header.meta["fixed_steps"] == [0]
+    path.write_text(export_text(estimate, "g2o", stream))  # none: no word of them
+    assert import_g2o(path).header.priors == () and "distances" not in path.read_text()
+
+
+@pytest.mark.parametrize("bad, key", [
+    ('[{"i": 1, "j": 1, "distance_m": 1.0, "sigma_m": 0.1}]', "'priors[0]'"),
+    ('[{"i": 1, "j": 2, "distance_m": 1.0, "sigma_m": 0}]', "'priors[0].sigma_m'"),
+    ('{"i": 1}', "'priors'")])
+def test_g2o_header_priors_are_checked_like_a_streams(tmp_path: Path, stream: Stream,
+                                                      estimate: MapEstimate, bad: str,
+                                                      key: str) -> None:
+    from bomgraph.errors import DatasetError
+
+    text = export_text(estimate, "g2o", stream).replace(
+        '# bomgraph header: {', f'# bomgraph header: {{"priors":{bad},', 1)
+    path = tmp_path / "p.g2o"
+    path.write_text(text)
+    line = next(k for k, ln in enumerate(text.splitlines(), 1) if "bomgraph header" in ln)
+    with pytest.raises(DatasetError, match=rf"p\.g2o, line {line}: .*{re.escape(key)}"):
+        import_g2o(path)

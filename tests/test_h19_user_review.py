@@ -177,7 +177,7 @@ def test_a_g2o_export_reads_back_with_its_sensor_range_and_time_stamps(tmp_path:
 @pytest.mark.parametrize("comment, what", [
     ('{"sensor_range_m": -1}', "sensor_range_m must be a number > 0"),
     ('{"sensor_range_m": 5, "time_s": [1, 2]}', "time_s has 2 stamps for 16 poses"),
-    ('{"colour": "red"}', "sensor_range_m and time_s only"),
+    ('{"colour": "red"}', "sensor_range_m, time_s and priors only"),
     ('{"sensor_range_m": 5', "not JSON"),
 ])
 def test_a_bad_bomgraph_header_comment_is_refused_naming_its_line(tmp_path: Path, comment: str,

@@ -13,9 +13,11 @@ import numpy as np
 import pytest
 
 from bomgraph.cli import main
-from bomgraph.mapper import MapEstimate
+from bomgraph.estimate_file import write_estimate
+from bomgraph.mapper import Checkpoint, MapEstimate, RunResult
 from bomgraph.plots import method_colour, run_figure, results_figure
-from bomgraph.stream import Truth
+from bomgraph.stream import Step, Stream, StreamHeader, Truth
+from bomgraph.stream_file import write_stream
 
 
 @pytest.fixture(scope="module")
@@ -193,3 +195,116 @@ def test_plot_of_an_earlier_checkpoint_claims_no_robot_ape_of_revised_poses(
         assert ("first estimated" in title) == revised
     assert main(["plot", str(g), str(s), "--align", "trajectory", "--t", "20", "--out",
                  str(tmp_path / "p.png")]) == 2
+
+
+# ---- evaluate on awkward estimate files (h37 audit) -----------------------------------------
+
+def _line_world(tmp_path: Path) -> tuple[Path, Stream]:
+    """12 poses along y = -0.5 heading +x (a collinear trajectory whose headings lie along
+    it), 6 landmarks off the line, bearings exact."""
+    lm = np.array([[0.0, 1.0], [1.0, 2.0], [2.0, 0.8], [3.0, 1.7], [1.5, -2.0], [2.5, -1.1]])
+    poses = np.column_stack([np.linspace(0.0, 3.0, 12), np.full(12, -0.5), np.zeros(12)])
+    steps = tuple(Step(t, None if t == 0 else [3 / 11, 0.0, 0.0], np.arange(6),
+                       np.arctan2(lm[:, 1] - poses[t, 1], lm[:, 0] - poses[t, 0]))
+                  for t in range(12))
+    stream = Stream(StreamHeader(0.01, (0.01, 0.0, 0.01)), steps,
+                    Truth(np.arange(6), lm, poses))
+    write_stream(stream, tmp_path / "line.jsonl")
+    return tmp_path / "line.jsonl", stream
+
+
+def _est_file(path: Path, est: MapEstimate, t: int) -> Path:
+    write_estimate(RunResult("mine", (Checkpoint(t, est, 0.0),), np.zeros(1), 0.0), path)
+    return path
+
+
+def _evaluate(capsys, *argv) -> tuple[int, str, list[str]]:
+    capsys.readouterr()
+    code = main(["evaluate", *map(str, argv)])
+    out, err = capsys.readouterr()
+    return code, out, err.strip().splitlines()
+
+
+def test_too_few_common_landmarks_names_the_file_the_map_and_whom(tmp_path, capsys) -> None:
+    """A final map sharing 2 landmarks with the truth, or with a --reference estimate: one
+    line naming the estimate file and the final map, and the truth or the reference (it
+    said "with the truth" against a reference, and named no file)."""
+    s, stream = _line_world(tmp_path)
+    t = stream.truth
+    two = _est_file(tmp_path / "two.est", MapEstimate(t.landmark_ids[:2], t.landmarks_xy[:2]), 11)
+    full = _est_file(tmp_path / "full.est", MapEstimate(t.landmark_ids, t.landmarks_xy), 11)
+    code, out, err = _evaluate(capsys, two, s)
+    assert code == 2 and out == "" and len(err) == 1, err
+    assert str(two) in err[0] and "final map (t = 11)" in err[0]
+    assert "2 landmark(s) with the truth" in err[0]
+    code, out, err = _evaluate(capsys, full, s, "--reference", two)
+    assert code == 2 and len(err) == 1 and str(full) in err[0], err
+    assert "with the reference estimate" in err[0] and "truth" not in err[0], err
+    code, _, err = _evaluate(capsys, full, s, "--align", "trajectory")
+    assert code == 2 and "the estimate has no poses: align on landmarks" in err[0], err
+    assert main(["plot", str(two), str(s), "--out", str(tmp_path / "p.png")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and f"{two}: the final map: the estimate shares 2" in err[0], err
+
+
+def test_coincident_and_collinear_fits_say_what_is_undefined(tmp_path, capsys) -> None:
+    """Rank 0 (every landmark of the estimate at one point) leaves the rotation undetermined,
+    not a mirror tie; a collinear trajectory fit whose tie nothing breaks leaves the landmark
+    errors undefined, not the robot's (which it prints)."""
+    s, stream = _line_world(tmp_path)
+    t = stream.truth
+    one_point = _est_file(tmp_path / "p.est", MapEstimate(t.landmark_ids, np.ones((6, 2)),
+                                                         np.arange(12), t.poses), 11)
+    code, out, _ = _evaluate(capsys, one_point, s)
+    assert code == 0
+    assert "rotation is undetermined" in out and "mirror tie" not in out, out
+    assert "robot position error" not in out  # undefined: not printed
+    # the trajectory alone (no common landmark, headings along the line): the mirror tie stays
+    line = _est_file(tmp_path / "l.est", MapEstimate(np.arange(100, 103), t.landmarks_xy[:3],
+                                                     np.arange(12), t.poses), 11)
+    code, out, _ = _evaluate(capsys, line, s, "--align", "trajectory")
+    assert code == 0 and "robot position error: last 0.00 cm" in out, out
+    assert "landmark errors undefined" in out and "robot errors undefined" not in out, out
+
+
+def test_duplicate_and_foreign_landmark_ids(tmp_path, capsys) -> None:
+    """An estimate line with a landmark id twice is refused by file, line and key; ids the
+    truth lacks are counted in the estimate and left out of the score."""
+    s, stream = _line_world(tmp_path)
+    t = stream.truth
+    good = _est_file(tmp_path / "g.est", MapEstimate(
+        np.r_[t.landmark_ids, 50, 51], np.vstack([t.landmarks_xy, [[9.0, 9.0], [8.0, 1.0]]])), 11)
+    code, out, _ = _evaluate(capsys, good, s)
+    assert code == 0 and "6 of 6 landmarks of the truth mapped (8 in the estimate)" in out, out
+    assert "landmark MPE 0.00 cm" in out
+    lines = good.read_text().splitlines()
+    row = json.loads(lines[1])
+    row["landmarks"].append(row["landmarks"][0])
+    dup = tmp_path / "dup.est"
+    dup.write_text("\n".join([lines[0], json.dumps(row), *lines[2:]]) + "\n")
+    code, out, err = _evaluate(capsys, dup, s)
+    assert code == 2 and len(err) == 1 and f"{dup}, line 2: 'landmarks'" in err[0], err
+    assert "appears twice" in err[0]
+
+
+def test_similarity_with_an_earlier_map_at_one_point_scores_the_rest(tmp_path, capsys) -> None:
+    """``evaluate --similarity``: a checkpoint whose landmarks all sit at one point has no
+    scale; its row is '-' like a map of too few landmarks, and the rest is scored (the whole
+    evaluation stopped at it with "align(): all source points coincide", naming neither the
+    file nor the checkpoint)."""
+    s, stream = _line_world(tmp_path)
+    t = stream.truth
+    first = MapEstimate(t.landmark_ids, np.ones((6, 2)))
+    final = MapEstimate(t.landmark_ids, 2.0 * t.landmarks_xy)
+    est = tmp_path / "e.est"
+    write_estimate(RunResult("mine", (Checkpoint(5, first, 0.0), Checkpoint(11, final, 0.0)),
+                             np.zeros(1), 0.0), est)
+    code, out, err = _evaluate(capsys, est, s, "--similarity", "--format", "csv")
+    assert code == 0, err
+    rows = list(csv.DictReader(io.StringIO(out)))
+    assert [r["t"] for r in rows] == ["5", "11"] and rows[0]["mpe_m"] == ""
+    assert float(rows[1]["mpe_m"]) < 1e-12  # the final map is the truth at twice the scale
+    one = _est_file(tmp_path / "one.est", first, 11)
+    code, _, err = _evaluate(capsys, one, s, "--similarity")
+    assert code == 2 and len(err) == 1 and f"{one}: the final map (t = 11)" in err[0], err
+    assert "scale is undefined" in err[0]

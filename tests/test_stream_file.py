@@ -170,6 +170,49 @@ REFUSALS = [
     ("unknown step key", [H, {**STEPS[0], "range": 3}], 2, "range", "unknown key"),
     ("blank line between", [H, STEPS[0], "", STEPS[1]], 3, None, "blank line"),
     ("no steps", [H], 2, None, "no step lines"),
+    # the rest of the format's list (h37 audit: each clause, where it was not yet fed)
+    ("missing version", [{k: v for k, v in H.items() if k != "version"}, *STEPS], 1,
+     "version", "missing"),
+    ("-Infinity in odom", [H, STEPS[0], json.dumps(STEPS[1]).replace("0.15", "-Infinity")], 3,
+     "odom[0]", "non-finite"),
+    ("NaN in odom_sigma", [H, STEPS[0], json.dumps({**STEPS[1], "odom_sigma": [0.1, 0.0, 0.1]})
+                           .replace("0.0, 0.1]", "NaN, 0.1]")], 3, "odom_sigma[1]",
+     "non-finite"),
+    ("NaN in time_s", [H, json.dumps({**STEPS[0], "time_s": 0.5}).replace("0.5", "NaN"),
+                       STEPS[1]], 2, "time_s", "non-finite"),
+    ("NaN in sensor range", [json.dumps(H).replace('"sensor_range_m": 1.0',
+                                                   '"sensor_range_m": NaN'), *STEPS], 1,
+     "sensor_range_m", "non-finite"),
+    ("NaN in truth landmarks", [json.dumps(HEADER).replace("[0, 0.4, 1.2]", "[0, NaN, 1.2]"),
+                                *STEPS], 1, "truth.landmarks[0][1]", "non-finite"),
+    ("Infinity in truth poses", [json.dumps(HEADER).replace("[1.15, 1.0, 0.2]",
+                                                            "[1.15, Infinity, 0.2]"), *STEPS],
+     1, "truth.poses[1][1]", "non-finite"),
+    ("NaN in a prior", [json.dumps({**H, "priors": [{"i": 3, "j": 4, "distance_m": 0.5,
+                                                     "sigma_m": 0.1}]}).replace("0.5", "NaN"),
+                        *STEPS], 1, "priors[0].distance_m", "non-finite"),
+    ("NaN in meta", [json.dumps({**H, "meta": {"gain": [0.5]}}).replace("0.5", "NaN"), *STEPS],
+     1, "meta.gain[0]", "non-finite"),
+    ("t repeated", [H, STEPS[0], {**STEPS[1], "t": 0}], 3, "t", "expected 1, got 0"),
+    ("t as a float", [H, STEPS[0], {**STEPS[1], "t": 1.0}], 3, "t", "integer"),
+    ("odom entry not a number", [H, STEPS[0], {**STEPS[1], "odom": [0.15, "0", 0.2]}], 3,
+     "odom", "must be a number"),
+    ("bearing entry of one", [H, {"t": 0, "bearings": [[0]]}], 2, "bearings[0]",
+     "[int, number]"),
+    ("bearing value null", [H, {"t": 0, "bearings": [[0, None]]}], 2, "bearings[0]",
+     "[int, number]"),
+    ("negative id later in a step", [H, STEPS[0], {**STEPS[1], "bearings": [[0, 1.0],
+                                                                             [-1, 0.3]]}], 3,
+     "bearings[1]", ">= 0"),
+    ("prior negative distance", [{**H, "priors": [{"i": 3, "j": 4, "distance_m": -1.0,
+                                                    "sigma_m": 0.1}]}, *STEPS], 1,
+     "priors[0].distance_m", "> 0"),
+    ("prior zero sigma", [{**H, "priors": [{"i": 3, "j": 4, "distance_m": 1.0,
+                                             "sigma_m": 0.0}]}, *STEPS], 1,
+     "priors[0].sigma_m", "> 0"),
+    ("truth poses too many", [{**HEADER, "truth": {**HEADER["truth"],
+                                                   "poses": HEADER["truth"]["poses"] * 2}},
+                              *STEPS], 1, "truth.poses", "4 truth poses"),
 ]
 
 
@@ -177,6 +220,50 @@ REFUSALS = [
 def test_every_refusal_names_file_line_and_key(tmp_path: Path, case: tuple) -> None:
     _, lines, line, key, text = case
     _refusal(tmp_path, lines, line, key, text)
+
+
+@pytest.fixture(scope="module")
+def good_estimate(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """An estimate file of the format's example stream (for ``evaluate EST BAD``)."""
+    from bomgraph.cli import main
+
+    d = tmp_path_factory.mktemp("good")
+    assert main(["run", str(write_lines(d / "s.jsonl", [HEADER, *STEPS])), "--method",
+                 "triangulate", "--out", str(d / "e.est")]) == 0
+    return d / "e.est"
+
+
+CLI_READERS = {  # every command that reads a stream given on its command line
+    "run": lambda bad, out, est: ["run", bad, "--method", "triangulate", "--out", out],
+    "evaluate": lambda bad, out, est: ["evaluate", est, bad],
+    "export": lambda bad, out, est: ["export", "--truth", bad, "--format", "csv", "--out", out],
+    "export --stream": lambda bad, out, est: ["export", est, "--stream", bad, "--format", "tum",
+                                              "--out", out],
+    "plot": lambda bad, out, est: ["plot", est, bad, "--out", out + ".png"],
+}
+
+
+@pytest.mark.parametrize("command", list(CLI_READERS))
+@pytest.mark.parametrize("case", REFUSALS, ids=[c[0] for c in REFUSALS])
+def test_every_refusal_through_the_cli_is_one_line_and_exit_2(
+        tmp_path: Path, case: tuple, command: str, good_estimate: Path,
+        capsys: pytest.CaptureFixture) -> None:
+    """Each refusal of the format fed to each command that reads a stream: status 2, one line
+    on stderr naming the file, the line and the key, nothing on stdout, no output file (only
+    ``run`` with one malformed value went through the CLI before the h37 audit)."""
+    from bomgraph.cli import main
+
+    _, lines, line, key, text = case
+    bad = write_lines(tmp_path / "bad.jsonl", lines)
+    out = tmp_path / "out"
+    capsys.readouterr()
+    assert main(CLI_READERS[command](str(bad), str(out), str(good_estimate))) == 2
+    captured = capsys.readouterr()
+    err = captured.err.strip().splitlines()
+    assert len(err) == 1 and captured.out == "", captured
+    assert f"{bad}, line {line}: " in err[0] and text in err[0], err[0]
+    assert key is None or f"'{key}'" in err[0], err[0]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["bad.jsonl"]
 
 
 def test_empty_file_and_bad_utf8(tmp_path: Path) -> None:

@@ -13,7 +13,8 @@ Robotics" bearing-only SLAM project (``shared/data/bearing_only_sim_g2o/SOURCE.m
 
 Lines starting with ``#`` and blank lines are skipped, except a ``# bomgraph header: {...}``
 comment before the first record (:data:`G2O_HEADER_PREFIX`, written by ``bomgraph export
---format g2o``), whose ``sensor_range_m`` and ``time_s`` go back into the stream, so that an
+--format g2o``), whose ``sensor_range_m``, ``time_s`` and ``priors`` (known landmark
+distances, for which g2o has no edge) go back into the stream, so that an
 export reads back to the same stream but its truth (pass ``truth_path``); any other record is an
 error (this is not a general g2o reader). Poses become steps in the order of the ``EDGE_SE2``
 chain, which must be one unbroken chain (no loop closures: the stream format holds one odometry
@@ -54,15 +55,17 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import DatasetError
+from ..errors import DatasetError, StreamFormatError
 from ..plausibility import refuse_implausible
 from ..stream import Step, Stream, StreamHeader, Truth
+from ..stream_file import parse_priors
 from ._text import (chain_order, checked_bearing_sigma, dataset_error, file_label, parse_float,
                     parse_int, read_lines)
 from .calibration import bearing_residuals, odometry_errors, robust_bearing_stats
 
 #: A comment line of the file that carries what g2o has no record for (written by ``bomgraph
-#: export --format g2o``): ``# bomgraph header: {"sensor_range_m": 8.1, "time_s": [...]}``;
+#: export --format g2o``): ``# bomgraph header: {"sensor_range_m": 8.1, "time_s": [...],
+#: "priors": [...]}``;
 #: read from the comments before the first record (one after it is not read).
 G2O_HEADER_PREFIX = "# bomgraph header: "
 
@@ -94,9 +97,9 @@ def _bomgraph_header(path: Path) -> tuple[dict[str, Any], int | None]:
         except ValueError as exc:
             raise dataset_error(path, line.number, "bomgraph header",
                                 f"not JSON ({exc})") from None
-        if not isinstance(fields, dict) or set(fields) - {"sensor_range_m", "time_s"}:
+        if not isinstance(fields, dict) or set(fields) - {"sensor_range_m", "time_s", "priors"}:
             raise dataset_error(path, line.number, "bomgraph header",
-                                "an object with sensor_range_m and time_s only")
+                                "an object with sensor_range_m, time_s and priors only")
         bad = find_nonfinite(fields)
         rng = fields.get("sensor_range_m")
         times = fields.get("time_s")
@@ -107,6 +110,10 @@ def _bomgraph_header(path: Path) -> tuple[dict[str, Any], int | None]:
             raise dataset_error(path, line.number, "bomgraph header",
                                 "sensor_range_m must be a number > 0 or null, time_s a list "
                                 "of finite numbers")
+        try:  # checked as a stream file's header checks them
+            fields["priors"] = parse_priors(fields.get("priors"), path, line.number)
+        except StreamFormatError as exc:
+            raise DatasetError(str(exc)) from None
         return fields, line.number
     return {}, None
 
@@ -368,7 +375,8 @@ def import_g2o(path: str | os.PathLike[str], *, truth_path: str | os.PathLike[st
     if extra_line is not None:
         meta["bomgraph_header_line"] = extra_line
     header = StreamHeader(bearing_sigma_rad=sigma_b, odometry_sigma=header_odo,
-                          sensor_range_m=extra.get("sensor_range_m"), meta=meta)
+                          sensor_range_m=extra.get("sensor_range_m"),
+                          priors=extra.get("priors", ()), meta=meta)
     refuse_implausible(header, steps, DatasetError, str(g.path),
                        landmarks_xy=None if truth is None else truth.landmarks_xy,
                        poses=None if truth is None else truth.poses)

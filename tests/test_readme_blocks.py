@@ -1,0 +1,198 @@
+"""The code blocks of README.md and docs/*.md, run as a reader would run them, with what
+they print checked against what the text says (h37 audit). Every block is either run here or
+named in LEFT_OUT with the reason, so a new block cannot go untried."""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import shutil
+import subprocess
+import sys
+import tomllib
+from pathlib import Path
+
+import pytest
+
+from _plugin_dist import write_dist_info
+
+ROOT = Path(__file__).resolve().parents[1]
+DOCS = ("README.md", "docs/FORMATS.md", "docs/measurements.md")
+DATA = Path(os.environ.get("BOMGRAPH_DATA", ROOT.parent / "shared" / "data"))
+BOMGRAPH = f'"{sys.executable}" -m bomgraph'
+
+# (document, how the block starts): the test that runs it, or why it is left out
+RUN = {
+    ("README.md", "bomgraph simulate --seed 0 --out s.jsonl;"): "test_export_block",
+    ("README.md", "bomgraph import mrclam"): "test_benchmark_your_own_method_blocks",
+    ("README.md", "== streams, final map per run =="): "test_benchmark_your_own_method_blocks",
+    ("README.md", '[project.entry-points."bomgraph.methods"]'):
+        "test_benchmark_your_own_method_blocks",
+    ("README.md", 'name = "mine"'): "test_benchmark_your_own_method_blocks",
+    ("README.md", "import numpy as np\nfrom bomgraph import create_mapper"):
+        "test_library_use_and_gtsam_helper_blocks",
+    ("README.md", "from baselines import gtsam_tools as gt"):
+        "test_library_use_and_gtsam_helper_blocks",
+    ("docs/FORMATS.md", '{"format": "bomgraph-stream"'): "test_formats_stream_blocks",
+    ("docs/FORMATS.md", "import numpy as np\nfrom bomgraph.stream import"):
+        "test_formats_stream_blocks",
+    ("docs/measurements.md", 'checkpoint_every = 10\n[[experiments]]\nname = "lw1"'):
+        "test_measurement_sweep_block_plans",
+}
+LEFT_OUT = {
+    ("README.md", "python3 -m venv .venv && . .venv/bin/activate && pip install . &&"):
+        "a fresh venv and the 2-minute main job (`compare --quick` runs in "
+        "tests/test_compare_estimates.py)",
+    ("README.md", "python3 -m venv .venv && . .venv/bin/activate && pip install '.[test]'"):
+        "the test suite itself",
+    ("README.md", "python scripts/bench_generality.py"): "280 runs, minutes on two cores",
+    ("docs/FORMATS.md", '{"format": "bomgraph-estimate"'):
+        "an annotated schema, not a file (the reader's tests: tests/test_estimate_file.py)",
+    ("docs/FORMATS.md", '{"t": 10,'): "an annotated schema, not a file",
+}
+
+
+def blocks(doc: str) -> list[str]:
+    """The fenced code blocks of ``doc``, in order."""
+    return re.findall(r"```\w*\n(.*?)```", (ROOT / doc).read_text(), re.S)
+
+
+def block(doc: str, start: str) -> str:
+    found = [b for b in blocks(doc) if b.startswith(start)]
+    assert len(found) == 1, (doc, start, len(found))
+    return found[0]
+
+
+def shell(script: str, cwd: Path, env: dict | None = None) -> subprocess.CompletedProcess:
+    """Run shell lines as written, ``bomgraph`` being this tree's (``python -m bomgraph``)."""
+    script = re.sub(r"(^|; |&& )bomgraph ", rf"\g<1>{BOMGRAPH} ", script, flags=re.M)
+    env = env or {**os.environ, "PYTHONPATH": str(ROOT), "OMP_NUM_THREADS": "1"}
+    proc = subprocess.run(["bash", "-e", "-c", script], cwd=cwd, env=env, capture_output=True,
+                          text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    return proc
+
+
+def test_every_block_is_run_or_left_out_with_a_reason() -> None:
+    for doc in DOCS:
+        for text in blocks(doc):
+            keys = [k for k in [*RUN, *LEFT_OUT] if k[0] == doc and text.startswith(k[1])]
+            assert len(keys) == 1, f"{doc}: a block neither run nor left out:\n{text[:200]}"
+    for doc, start in [*RUN, *LEFT_OUT]:
+        block(doc, start)  # each entry names one block that is still there
+    assert set(RUN.values()) <= set(globals())
+
+
+def test_export_block(tmp_path: Path) -> None:
+    """README, "Export": the commands as written; evo's figures (its comment) are bomgraph's
+    APE and mean robot error aligned on the trajectory, when evo is not installed; and the
+    mirrored estimate's "landmark MPE 1.68 cm, robot 1.04 cm mean" is what evaluate prints."""
+    text = block("README.md", "bomgraph simulate --seed 0 --out s.jsonl;")
+    commands, evo = text.rsplit("\n", 2)[0], text.splitlines()[-1]
+    shell(commands, tmp_path)
+    rows = [r.split() for r in (tmp_path / "est.tum").read_text().splitlines()
+            if not r.startswith("#")]
+    assert len(rows) == 301 and all(len(r) == 8 for r in rows)
+    rmse, mean = map(float, re.search(r"# rmse ([\d.]+), mean ([\d.]+) \(m\)", evo).groups())
+    if shutil.which("evo_ape"):
+        out = shell(evo.split("#")[0], tmp_path).stdout
+        assert f"rmse\t{rmse:.6f}" in out and f"mean\t{mean:.6f}" in out, out
+    ev = json.loads(shell(f"{BOMGRAPH} evaluate e.est s.jsonl --align trajectory --json",
+                          tmp_path).stdout)
+    assert (round(ev["ape_trans_rmse_m"], 6), round(ev["robot_mean_m"], 6)) == (rmse, mean)
+    readme = (ROOT / "README.md").read_text()
+    mpe, robot = re.search(r"unchanged \(landmark MPE ([\d.]+) cm, robot ([\d.]+) cm mean",
+                           readme).groups()
+    out = shell(f"{BOMGRAPH} evaluate e.est s.jsonl", tmp_path).stdout
+    assert f"landmark MPE {mpe} cm" in out and f"mean over 301 poses {robot} cm" in out, out
+
+
+def test_library_use_and_gtsam_helper_blocks(tmp_path: Path) -> None:
+    """README, "Library use" then "GTSAM helpers", with ``stmds_map`` as the text after the
+    second block defines it; the second prints what its comment says."""
+    lib = block("README.md", "import numpy as np\nfrom bomgraph import create_mapper")
+    gt = block("README.md", "from baselines import gtsam_tools as gt")
+    defined = 'run(create_mapper("stmds-smacof", stream.header), stream.steps).final'
+    assert f"`stmds_map` any `MapEstimate` (e.g. `{defined}`)" in " ".join(
+        (ROOT / "README.md").read_text().split())
+    (tmp_path / "lib.py").write_text(f"{lib}\nstmds_map = {defined}\n{gt}")
+    out = shell(f'"{sys.executable}" lib.py', tmp_path).stdout.splitlines()
+    assert len(out) == 2 and 0 < float(out[0]) < 0.1, out
+    assert f'# "{out[1]}"' in gt, out
+
+
+@pytest.mark.skipif(not (DATA / "mrclam6").is_dir(), reason=f"no MRCLAM6 at {DATA}")
+def test_benchmark_your_own_method_blocks(tmp_path: Path) -> None:
+    """README, "Benchmark your own method on your own data": the four commands (the plugin
+    installed as pip would, from its pyproject.toml, whose entry point is the README's; one
+    worker, not two) print the final-map table the README shows; the sweep file shown
+    further down plans its runs; its three quoted mistakes are the messages given."""
+    readme = block("README.md", "bomgraph import mrclam")
+    entry = tomllib.loads(block("README.md", '[project.entry-points."bomgraph.methods"]'))
+    plugin = ROOT / "docs" / "examples" / "toy_plugin"
+    project = tomllib.loads((plugin / "pyproject.toml").read_text())
+    methods = project["project"]["entry-points"]["bomgraph.methods"]
+    assert entry["project"]["entry-points"]["bomgraph.methods"] == methods
+    site = tmp_path / "site"
+    write_dist_info(site, "bomgraph_toy_plugin", methods)
+    env = {**os.environ, "OMP_NUM_THREADS": "1",
+           "PYTHONPATH": os.pathsep.join(map(str, (ROOT, site, plugin)))}
+    lines = readme.splitlines()
+    assert lines[1] == "pip install ./docs/examples/toy_plugin" and "--jobs 2" in lines[2]
+    script = "\n".join([lines[0].replace("../shared/data", str(DATA)),
+                        lines[2].replace("--jobs 2", "--jobs 1")])
+    out = shell(script, tmp_path, env).stdout
+    assert (tmp_path / "mine" / "final_by_run.csv").is_file()  # what `column` shows
+    shown = block("README.md", "== streams, final map per run ==").splitlines()
+    printed = out.split("== streams, final map per run ==")[1].splitlines()
+    rows = [r.split() for r in printed[1:len(shown)]]
+    assert rows == [r.split() for r in shown[1:]], out
+
+    (tmp_path / "sweep.toml").write_text(block("README.md", 'name = "mine"'))
+    (tmp_path / "runs").mkdir()
+    shutil.copy(tmp_path / "sim7.jsonl", tmp_path / "runs" / "a.jsonl")
+    out = shell(f"{BOMGRAPH} compare --config sweep.toml --dry-run --out plan", tmp_path,
+                env).stdout
+    assert re.search(r"mine +first-sight +5 runs", out), out
+    assert re.search(r"mine +stmds-smacof@real +5 runs", out), out
+
+    text = " ".join((ROOT / "README.md").read_text().split())
+    quoted = re.findall(r"`(sweep\.toml: [^`]+)`", text)
+    mistakes = ['methods = ["triangulate", "stmds-cs@fast"]\nstreams = ["sim7.jsonl"]\n',
+                'methods = ["triangulate"]\n[[worlds]]\nname = "w"\nn_steps = "many"\n',
+                'methods = ["triangulate"]\nstreams = ["runs/*.jsonl"]\n']
+    shutil.rmtree(tmp_path / "runs")
+    assert len(quoted) == len(mistakes)
+    for message, toml in zip(quoted, mistakes):
+        (tmp_path / "sweep.toml").write_text(toml)
+        proc = subprocess.run([sys.executable, "-m", "bomgraph", "compare", "--config",
+                               "sweep.toml", "--dry-run"], cwd=tmp_path, env=env,
+                              capture_output=True, text=True)
+        assert proc.returncode == 2 and proc.stderr.startswith(f"bomgraph: error: {message}"), (
+            message, proc.stderr)
+
+
+def test_formats_stream_blocks(tmp_path: Path) -> None:
+    """docs/FORMATS.md: the example stream reads and runs; the writer for your own recording
+    writes a stream that reads back as its steps."""
+    from bomgraph.stream_file import read_stream
+
+    (tmp_path / "ex.jsonl").write_text(block("docs/FORMATS.md", '{"format": "bomgraph-stream"'))
+    ex = read_stream(tmp_path / "ex.jsonl")
+    assert len(ex.steps) == 2 and list(ex.truth.landmark_ids) == [0, 1]
+    shell(f"{BOMGRAPH} run ex.jsonl --method triangulate --out ex.est", tmp_path)
+    writer = block("docs/FORMATS.md", "import numpy as np\nfrom bomgraph.stream import")
+    (tmp_path / "writer.py").write_text(writer)
+    shell(f'"{sys.executable}" writer.py', tmp_path)
+    mine = read_stream(tmp_path / "mine.jsonl")
+    assert [list(s.landmark_ids) for s in mine.steps] == [[4, 7], [4]]
+    assert mine.header.meta == {"robot": "mine"} and mine.steps[1].time_s == 0.5
+
+
+def test_measurement_sweep_block_plans(tmp_path: Path) -> None:
+    """docs/measurements.md's one sweep file (window-ba-long's min_count) is still one that
+    compare reads: 5 runs each of its two arms (its numbers are history, of the code then)."""
+    (tmp_path / "lw.toml").write_text(block("docs/measurements.md", "checkpoint_every = 10\n"))
+    out = shell(f"{BOMGRAPH} compare --config lw.toml --dry-run --out lw", tmp_path).stdout
+    assert re.search(r"lw1 +long-mc3 +5 runs", out) and re.search(r"lw1 +oracle +5 runs", out)
