@@ -258,7 +258,8 @@ def score_estimate(estimate: MapEstimate, truth: Reference, *, allow_reflection:
     ----------
     truth : Truth, or a MapEstimate used as the reference (poses matched by step)
     align_on : ``"landmarks"`` (the paper's: the common landmarks), ``"trajectory"`` (the
-        positions of the common poses, evo's APE alignment) or ``"both"``
+        positions of the common poses, evo's APE alignment) or ``"both"`` (with no common
+        pose, the landmarks alone, and the score's ``align_on`` says ``"landmarks"``)
     delta : steps between the two poses of a relative pose error
 
     A collinear fitting set (``Alignment.rank`` 1) has two mirror-image fits of equal cost:
@@ -297,6 +298,8 @@ def score_estimate(estimate: MapEstimate, truth: Reference, *, allow_reflection:
         raise UndeterminedAlignmentError(
             f"a trajectory alignment needs at least 3 common poses, got {len(est_p)}"
             + (f" (the {without} has no poses: align on landmarks)" if without else ""))
+    if align_on == "both" and not len(est_p):  # no common poses: a fit on the landmarks,
+        align_on = "landmarks"                  # and said so (MapScore.align_on)
     src = {"landmarks": est_xy, "trajectory": est_p[:, :2],
            "both": np.vstack([est_xy, est_p[:, :2]])}[align_on]
     dst = {"landmarks": true_xy, "trajectory": ref_p[:, :2],

@@ -58,6 +58,18 @@ def test_trajectory_alignment_equals_an_independent_umeyama_on_the_poses() -> No
     s_lm = score_estimate(est, truth, align_on="landmarks")
     s_both = score_estimate(est, truth, align_on="both")
     assert s.ape_trans_rmse_m < s_both.ape_trans_rmse_m < s_lm.ape_trans_rmse_m
+    assert (s.align_on, s_both.align_on, s_lm.align_on) == ("trajectory", "both", "landmarks")
+
+
+def test_both_without_poses_is_a_landmark_fit_and_says_so() -> None:
+    """An estimate without poses has nothing but its landmarks to fit under ``"both"``: the
+    score was labelled "aligned on both" over a landmark fit."""
+    rng, truth = _world()
+    est = MapEstimate(truth.landmark_ids, truth.landmarks_xy + rng.normal(0, .1, (12, 2)))
+    s_both = score_estimate(est, truth, align_on="both")
+    s_lm = score_estimate(est, truth, align_on="landmarks")
+    assert s_both.align_on == "landmarks"
+    np.testing.assert_array_equal(s_both.errors_m, s_lm.errors_m)
 
 
 def test_rpe_equals_a_hand_computation_on_five_poses() -> None:
