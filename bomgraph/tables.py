@@ -36,7 +36,14 @@ def _shown(v: Any, col: Column) -> str:
         return str(v)
     if isinstance(v, int) and col.scale == 1.0:
         return str(v)
-    return format(float(v) * col.scale, col.fmt)
+    x = float(v) * col.scale
+    if abs(x) >= HUGE and col.fmt.endswith("f"):  # a 1e300 m map: not 300 digits of cm
+        return format(x, ".3e")
+    return format(x, col.fmt)
+
+
+#: the magnitude from which a fixed-point column shows its value in exponent form.
+HUGE = 1e9
 
 
 #: LaTeX's ten special characters and what prints each as itself (a method name or file name

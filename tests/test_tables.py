@@ -86,3 +86,13 @@ def test_markdown_cells_and_headers_show_as_written(name: str) -> None:
     assert _gfm_cells(head) == [name, "MPE [cm]"]
     assert _gfm_cells(row) == [name, "1.23"]
     assert rule == "|---|---|"
+
+
+def test_a_huge_value_in_a_fixed_point_column_prints_in_exponent_form() -> None:
+    """A diverged map 1e300 m away printed 300 digits of centimetres in the text table."""
+    cols = [Column("mpe_m", "MPE [cm]", 100, ".2f"), Column("n", "n")]
+    txt = format_table(cols, [{"mpe_m": 1e300, "n": 3}, {"mpe_m": 0.0123, "n": 4}], "text")
+    assert "1.000e+302" in txt and "1.23" in txt
+    assert max(len(line) for line in txt.splitlines()) < 40
+    # the machine-readable formats keep the value itself
+    assert '"mpe_m": 1e+300' in format_table(cols, [{"mpe_m": 1e300, "n": 3}], "json")
