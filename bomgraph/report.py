@@ -31,6 +31,7 @@ from .plots import MapPanel, error_vs_time_figure, final_maps_figure, map_figure
 from .out_folder import drop_earlier_outputs, refuse_inputs_among_outputs, slug, unique_slugs
 from .plugins import source_fingerprint
 from .stdio import folder_lock, make_folder, output_file, write_figure, write_text
+from .tables import HUGE
 
 #: The checkpoints the summary reports (and the last one of each experiment).
 REPORT_TIMES = (50, 100, 200, 300)
@@ -169,8 +170,12 @@ def results_to_csv_rows(results: Sequence[Mapping[str, Any]]) -> list[dict[str, 
     return rows
 
 
-def _cm(v: float | None) -> str:
-    return "   -  " if v is None or not math.isfinite(v) else f"{100 * v:6.2f}"
+def _cm(v: float | None, fmt: str = "6.2f") -> str:
+    """``v`` [m] in cm for the printed tables; from 1e9 cm in exponent form (a diverged map
+    8.7e8 m away printed as 87000000000.00)."""
+    if v is None or not math.isfinite(v):
+        return "   -  "
+    return f"{100 * v:{'6.1e' if abs(100 * v) >= HUGE else fmt}}"
 
 
 def _mpe_cells(r: dict, times: Sequence[int]) -> list[str]:
@@ -270,7 +275,7 @@ def format_by_run(rows: Sequence[dict]) -> str:
                 elif not math.isfinite(r["mpe_m"]):
                     cells.append(f"no map ({r['n_mapped']})")
                 else:
-                    cells.append(f"{100 * r['mpe_m']:.1f} ({r['n_mapped']})")
+                    cells.append(f"{_cm(r['mpe_m'], '.1f')} ({r['n_mapped']})")
             lines.append(f"{arm:{aw}s} " + " ".join(f"{c:>{rw}s}" for c in cells))
     return "\n".join(lines)
 

@@ -267,3 +267,18 @@ def test_results_json_is_strict_json(tmp_path: Path) -> None:
     # the values that were NaN are there, as null (nothing dropped)
     nulls = [k for r in data["summary"] for k, v in r.items() if v is None]
     assert nulls, "the summary of a run without robot NEES has missing values"
+
+
+def test_a_diverged_map_prints_in_exponent_form_in_both_tables() -> None:
+    """A map 8.7e8 m away (the hybrid once kept such landmarks on Victoria Park) printed as
+    87000000000.00 cm in the summary and the per-run table."""
+    def result(run: str, mpe: float) -> dict:
+        return {"experiment": "e", "arm": "m", "method": "m", "run": run, "ok": True,
+                "converged": True, "total_s": 0.1,
+                "checkpoints": [{"t": 50, "n_mapped": 15, "mpe_m": mpe, "robot_last_m": 0.1,
+                                 "nees_pose": float("nan"), "nees_landmark": float("nan")}]}
+    results = [result("a", 8.7e8), result("b", 0.05)]
+    summary = format_summary(summarise(results)).splitlines()[-1]
+    assert "4.4e+10/4.4e+10±6.2e+10" in summary, summary
+    by_run = format_by_run(final_by_run(results))
+    assert "8.7e+10 (15)" in by_run and "5.0 (15)" in by_run, by_run
