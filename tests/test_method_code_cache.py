@@ -139,3 +139,99 @@ def test_an_edit_not_reloaded_fails_the_serial_run_and_caches_nothing_new(
     assert first["ok"] and not second["ok"]
     assert "was edited since" in second["error"] and "reload the module" in second["error"]
     assert list(cache.glob("*.json")) == []
+
+
+def _module_with(src: Path, text: str) -> types.ModuleType:
+    src.write_text(text)
+    return importlib.import_module(src.stem)
+
+
+DICT_METHOD = CELL.replace("DEPTH *", "DEPTH['m'] *") + "\nDEPTH = {'m': 1.0}\n"
+
+
+@pytest.mark.parametrize("how", ["importlib.reload", "in place"])
+def test_a_reload_that_changes_only_a_dict_constant_moves_the_key(
+        file_method: tuple[Path, Experiment], tmp_path: Path, how: str) -> None:
+    """A dict (list, array, object) constant edited and reloaded: the key was the old code's,
+    so the second sweep returned the first's cached result. "in place" is what IPython 9's
+    autoreload does by default: it runs the edited assignment again in the loaded module."""
+    src, exp = file_method
+    module = _module_with(src, DICT_METHOD)
+    cache = tmp_path / "cache"
+    first = _final_mpe(exp, cache)
+    src.write_text(DICT_METHOD.replace("{'m': 1.0}", "{'m': 3.0}"))
+    if how == "importlib.reload":
+        importlib.reload(module)
+    else:
+        module.DEPTH = {"m": 3.0}
+    again = _final_mpe(exp, cache)
+    fresh = _final_mpe(exp, None)
+    assert again["ok"] and fresh["ok"], (again.get("error"), fresh.get("error"))
+    assert again["key"] != first["key"]
+    mpe = [r["checkpoints"][-1]["mpe_m"] for r in (first, again, fresh)]
+    assert mpe[1] == mpe[2] != mpe[0], "the reloaded code's sweep returned the old result"
+
+
+INFO_METHOD = FILE_METHOD.replace(
+    "return MapEstimate(ids, np.array([self.seen[i] for i in ids.tolist()]).reshape(-1, 2))",
+    "return MapEstimate(ids, np.array([self.seen[i] for i in ids.tolist()]).reshape(-1, 2),\n"
+    "                           info={'solver': 'depth along the first bearing'})")
+
+
+def test_an_edit_not_reloaded_fails_though_the_results_hold_a_constant_of_the_code(
+        file_method: tuple[Path, Experiment], tmp_path: Path) -> None:
+    """The results kept a string constant of the method's code (its info): the byte code was
+    compared through marshal, whose output follows reference counts, so the module looked
+    reloaded and the edited file's key was taken for the old code's result, and cached."""
+    src, exp = file_method
+    _module_with(src, INFO_METHOD)
+    first = _final_mpe(exp, None)
+    assert first["ok"] and first["info"]["solver"] == "depth along the first bearing"
+    src.write_text(INFO_METHOD.replace("DEPTH_M = 1.0", "DEPTH_M = 3.0"))  # no reload
+    cache = tmp_path / "cache"
+    second = _final_mpe(exp, cache)
+    assert not second["ok"] and "was edited since" in second["error"], second.get("error")
+    assert list(cache.glob("*.json")) == []
+
+
+ODD = '''
+class _RaisesOnModule:
+    def __call__(self):
+        pass
+    @property
+    def __module__(self):
+        raise RuntimeError("not configured")
+
+
+class _LazyProxy:  # as django.conf.settings before it is configured
+    @property
+    def __class__(self):
+        raise LookupError("settings are not configured")
+
+
+class _GetattrRaises:
+    def __call__(self):
+        pass
+    def __getattr__(self, key):
+        raise KeyError(key)
+
+
+ODD = (_RaisesOnModule(), _LazyProxy(), _GetattrRaises())
+A, B, C = ODD
+globals()[3] = "a key that is not a string"
+'''
+
+
+def test_odd_module_contents_do_not_stop_the_key(
+        file_method: tuple[Path, Experiment], tmp_path: Path) -> None:
+    """Objects whose attributes raise (a lazy settings proxy, a ``__module__`` property) and a
+    global that is not a string: computing the key read their attributes, or sorted the
+    globals, and raised out of the sweep."""
+    src, exp = file_method
+    module = _module_with(src, FILE_METHOD + ODD)
+    first = _final_mpe(exp, tmp_path / "cache")
+    assert first["ok"], first.get("error")
+    src.write_text(FILE_METHOD.replace("DEPTH_M = 1.0", "DEPTH_M = 3.0") + ODD)
+    importlib.reload(module)
+    again = _final_mpe(exp, tmp_path / "cache")
+    assert again["ok"] and again["key"] != first["key"]
