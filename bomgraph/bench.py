@@ -481,6 +481,32 @@ def _local_workers(requested: int, n_tasks: int) -> int:
     return max(min(requested, cap), 1)
 
 
+#: The code of each plugin method (:func:`bomgraph.plugins.disk_fingerprint`) when the local
+#: worker processes, which joblib keeps from one sweep to the next, last ran it.
+_POOL_CODE: dict[str, str | None] = {}
+
+
+def _workers_outdated(tasks: Sequence[Task]) -> bool:
+    """Whether a plugin method of ``tasks`` was edited since the local workers last ran it: a
+    worker keeps the code it imported, so after an edit (and a reload in a notebook) the next
+    sweep's runs failed as stale workers until the workers ended."""
+    from .plugins import disk_fingerprint
+
+    now: dict[str, str | None] = {}
+    for m in dict.fromkeys(m for t in tasks for m in t.methods()):
+        if not _known(m) or (info := method_info(m)).origin == "builtin":
+            continue
+        try:
+            now[m] = disk_fingerprint(info.target, info.version)
+        except UnknownMethodError:  # its runs fail with the reason
+            continue
+    outdated = any(_POOL_CODE.get(m, fp) != fp for m, fp in now.items())
+    if outdated:
+        _POOL_CODE.clear()
+    _POOL_CODE.update(now)
+    return outdated
+
+
 def _dispatch(tasks: list[Task], index: list[int],
               executor: Executor) -> Iterator[tuple[int, dict[str, Any]]]:
     if not tasks:
@@ -500,7 +526,7 @@ def _dispatch(tasks: list[Task], index: list[int],
         from .processes import dispatch
 
         yield from dispatch(_indexed, index, tasks, _local_workers(executor.n_jobs, len(tasks)),
-                            failed)
+                            failed, fresh=_workers_outdated(tasks))
     else:
         from .cluster import dispatch as dispatch_dask
 

@@ -22,11 +22,13 @@ from .stdio import signals_held
 
 def dispatch(func: Callable[[int, Any], tuple[int, dict[str, Any]]], index: Sequence[int],
              tasks: Sequence[Any], n_jobs: int,
-             failed: Callable[[int, str], dict[str, Any]]
+             failed: Callable[[int, str], dict[str, Any]], *, fresh: bool = False
              ) -> Iterator[tuple[int, dict[str, Any]]]:
     """``func(k, task)`` for each ``k`` of ``index`` and its task, in ``n_jobs`` worker
     processes (-1: one per core), as they finish. Closed early (the caller interrupted), the
-    runs in flight are cancelled, without joblib's warning that they were.
+    runs in flight are cancelled, without joblib's warning that they were. ``fresh``: the
+    worker processes joblib kept from an earlier call end first (they keep the code they
+    imported then).
 
     A worker that dies (a crash in native code, the out-of-memory killer, ``os._exit`` in a
     plugin) breaks joblib's whole pool. The tasks it and the other workers were running
@@ -42,6 +44,8 @@ def dispatch(func: Callable[[int, Any], tuple[int, dict[str, Any]]], index: Sequ
     """
     from joblib.externals.loky.process_executor import BrokenProcessPool
 
+    if fresh:
+        _end_kept_workers()
     pending = dict(zip(index, tasks))
     stalled = False
     with tempfile.TemporaryDirectory(prefix="bomgraph-running-") as marks:
@@ -95,6 +99,15 @@ def _pool(func: Callable[[int, Any], tuple[int, dict[str, Any]]], pending: dict[
                 warnings.simplefilter("ignore", UserWarning)
                 results.close()
             raise
+
+
+def _end_kept_workers() -> None:
+    """End the worker processes of joblib's reusable loky executor, kept for the next pool."""
+    from joblib.externals.loky import reusable_executor
+
+    kept = getattr(reusable_executor, "_executor", None)
+    if kept is not None:
+        kept.shutdown(wait=True, kill_workers=True)
 
 
 def _mark(marks: str, k: int) -> str:

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import importlib
 import logging
+import os
 import sys
 import types
 from pathlib import Path
@@ -235,3 +236,46 @@ def test_odd_module_contents_do_not_stop_the_key(
     importlib.reload(module)
     again = _final_mpe(exp, tmp_path / "cache")
     assert again["ok"] and again["key"] != first["key"]
+
+
+def test_a_plugin_edited_and_reloaded_between_two_sweeps_in_worker_processes(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The default executor's worker processes are kept by joblib from one sweep to the next
+    and keep the code they imported: after an edit and a reload (a notebook), every run of
+    the next sweep failed as a stale worker. The workers are now ended when a plugin's code
+    changed since they ran it, and the sweep gives the serial run's results."""
+    from _plugin_dist import write_dist_info
+
+    from bomgraph import plugins
+
+    site = tmp_path / "site"
+    (site / "h39plug").mkdir(parents=True)
+    (site / "h39plug" / "__init__.py").write_text("")
+    src = site / "h39plug" / "mapper.py"
+    src.write_text(FILE_METHOD)
+    write_dist_info(site, "h39plug", {"h39-plug": "h39plug.mapper:CellMapper"})
+    monkeypatch.syspath_prepend(str(site))
+    monkeypatch.setenv("PYTHONPATH", os.pathsep.join([str(site), os.environ.get("PYTHONPATH", "")]))
+    plugins.refresh()
+    streams = []
+    for seed in range(2):
+        streams.append(tmp_path / f"s{seed}.jsonl")
+        write_stream(simulate(SimConfig(n_steps=40), np.random.default_rng(seed)), streams[-1])
+    exp = Experiment("plug", "plug", (Arm("h39-plug", "h39-plug"),),
+                     sources=tuple(FileSource(str(p)) for p in streams))
+    try:
+        first = execute(exp.tasks(), Executor("processes", n_jobs=2))
+        module = importlib.import_module("h39plug.mapper")
+        src.write_text(FILE_METHOD.replace("DEPTH_M = 1.0", "DEPTH_M = 3.0"))
+        importlib.reload(module)
+        again = execute(exp.tasks(), Executor("processes", n_jobs=2))
+        serial = execute(exp.tasks(), Executor("serial"))
+    finally:
+        for name in ("h39plug.mapper", "h39plug"):
+            sys.modules.pop(name, None)
+        plugins.refresh()
+    assert all(r["ok"] for r in first)
+    assert all(r["ok"] for r in again), [r.get("error") for r in again]
+    assert [r["key"] for r in again] == [r["key"] for r in serial] != [r["key"] for r in first]
+    assert ([r["checkpoints"][-1]["mpe_m"] for r in again]
+            == [r["checkpoints"][-1]["mpe_m"] for r in serial])
