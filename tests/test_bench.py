@@ -118,10 +118,10 @@ def test_local_processes_are_bounded_by_the_tasks_and_the_cores(
 
     monkeypatch.setattr(joblib, "Parallel", Recorder)
     monkeypatch.setattr(os, "cpu_count", lambda: 2)
-    tasks = [object()] * 3
+    task = _exp((Arm("tri", "triangulate"),)).tasks()[0]  # never run: the pool is fake
     for n_jobs in (100_000, 2, -1):
-        list(bench._dispatch(tasks, [0, 1, 2], Executor("processes", n_jobs=n_jobs)))
-    list(bench._dispatch([object()] * 50, list(range(50)), Executor("processes", n_jobs=10**5)))
+        list(bench._dispatch([task] * 3, [0, 1, 2], Executor("processes", n_jobs=n_jobs)))
+    list(bench._dispatch([task] * 50, list(range(50)), Executor("processes", n_jobs=10**5)))
     assert asked == [3, 2, -1, 8]
 
 
