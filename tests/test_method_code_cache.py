@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bomgraph import mapper
+from bomgraph import mapper, method_code
 from bomgraph.bench import Executor, execute, is_cached, task_key
 from bomgraph.experiments import Arm, Experiment, FileSource
 from bomgraph.sim import SimConfig, simulate
@@ -84,8 +84,8 @@ def test_a_method_without_source_file_is_never_taken_from_the_cache(
     mpe = [r["checkpoints"][-1]["mpe_m"] for r in (first, edited)]
     assert mpe[0] != mpe[1], "the edited cell's run returned the old code's result"
     assert first["key"] == task_key(exp.tasks()[0])    # the key itself is still made
-    assert mapper.method_fingerprint("cell-method") == mapper.NO_SOURCE
-    assert not mapper.method_has_source("cell-method")
+    assert method_code.method_fingerprint("cell-method") == method_code.NO_SOURCE
+    assert not method_code.method_has_source("cell-method")
 
 
 FILE_METHOD = CELL.replace("DEPTH *", "DEPTH_M *") + "\nDEPTH_M = 1.0\n"
