@@ -128,9 +128,10 @@ _POOL_CODE: dict[str, str | None] = {}
 
 
 def workers_outdated(tasks: Sequence[Task]) -> bool:
-    """Whether a plugin method of ``tasks`` was edited since the local workers last ran it: a
-    worker keeps the code it imported, so after an edit (and a reload in a notebook) the next
-    sweep's runs failed as stale workers until the workers ended."""
+    """Whether a plugin method of ``tasks`` was edited since the local workers last ran it, or
+    was never run by them: a worker keeps the code it imported, so after an edit (and a
+    reload in a notebook) the next sweep's runs failed as stale workers until the workers
+    ended, and a plugin installed after they started is unknown to them."""
     now: dict[str, str | None] = {}
     for m in dict.fromkeys(m for t in tasks for m in t.methods()):
         if not _known(m) or (info := method_info(m)).origin == "builtin":
@@ -139,7 +140,7 @@ def workers_outdated(tasks: Sequence[Task]) -> bool:
             now[m] = disk_fingerprint(info.target, info.version)
         except UnknownMethodError:  # its runs fail with the reason
             continue
-    outdated = any(_POOL_CODE.get(m, fp) != fp for m, fp in now.items())
+    outdated = any(m not in _POOL_CODE or _POOL_CODE[m] != fp for m, fp in now.items())
     if outdated:
         _POOL_CODE.clear()
     _POOL_CODE.update(now)
