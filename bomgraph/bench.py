@@ -29,14 +29,15 @@ from typing import Any, Callable, Iterable, Iterator, Mapping, Sequence
 import numpy as np
 
 from .checks import is_integer
-from .errors import ConfigError, TooFewLandmarksError, UnknownMethodError
+from .errors import ConfigError, TooFewLandmarksError
 from .estimate_file import stream_identity, untimed_estimate_text, write_estimate
 from .evaluate import CheckpointScore, score_checkpoints, score_estimate
 from .experiments import Arm, Experiment, SimSource, Task
 from .jsonio import jsonable
-from .mapper import (NO_SOURCE, Checkpoint, MapEstimate, RunResult, checkpoint_times,
-                     create_mapper, method_failure_note, method_fingerprint,
-                     method_has_source, method_info, run)
+from .mapper import (Checkpoint, MapEstimate, RunResult, checkpoint_times, create_mapper,
+                     method_failure_note, method_info, run)
+from .method_code import (method_code, refuse_runtime_methods, sourceless, stale_plugin,
+                          warn_sourceless, workers_outdated)
 from .plugins import code_fingerprint, source_fingerprint
 from .stdio import bounded_lines, output_file
 from .stream import Step, Stream, Truth
@@ -49,20 +50,13 @@ _log = logging.getLogger(__name__)
 CACHE_VERSION = 1
 
 
-def _method_code(task: Task) -> dict[str, str]:
-    """The fingerprints of the task's non-built-in methods (the arm's, the reference's, a
-    seed's: :meth:`Task.methods`), by method name: empty for built-in methods, so their keys
-    are as before plugins existed."""
-    return {m: fp for m in task.methods() if (fp := method_fingerprint(m)) is not None}
-
-
 def task_key(task: Task) -> str:
     """A content hash of the task, the cache version and the code: the same task run by the
     same code always has the same key (its cache file name). The code is the bomgraph and
     baselines sources and, for a plugin or a method registered at run time, the sources of
-    its package and its version (:func:`bomgraph.mapper.method_fingerprint`)."""
+    its package and its version (:func:`bomgraph.method_code.method_fingerprint`)."""
     ident: dict[str, Any] = {**task.identity(), "v": CACHE_VERSION, "code": code_fingerprint()}
-    plugin_code = _method_code(task)
+    plugin_code = method_code(task)
     if plugin_code:
         ident["method_code"] = plugin_code
     blob = json.dumps(ident, sort_keys=True)
@@ -128,25 +122,6 @@ def _bearing_rms(estimate: MapEstimate, stream: Stream) -> float:
     return float(np.sqrt(np.mean(r ** 2))) if r.size else math.nan
 
 
-def _stale_plugin(task: Task) -> str:
-    """Why this process cannot run the task's plugin as it is now on disk ("" when it can):
-    Python does not reload a module, so a worker that imported a plugin (its sources hashed
-    then, :func:`bomgraph.mapper.method_fingerprint`) keeps running that code after an edit,
-    while the client keys the task with the new sources."""
-    from .plugins import disk_fingerprint
-
-    for m in task.methods():
-        loaded = method_fingerprint(m)
-        info = method_info(m)
-        if loaded not in (None, NO_SOURCE) and disk_fingerprint(info.target,
-                                                                info.version) != loaded:
-            return (f"stale worker: restart the workers and run again (Dask: client.restart(),"
-                    f" or restart `dask worker`; in a notebook run serially: reload the module"
-                    f" or restart the kernel); method {m!r} was edited since this worker "
-                    f"imported it, and a worker does not reload a module")
-    return ""
-
-
 def _failure(exc: BaseException) -> str:
     """``"Type: message (raised in Name.step() at t = 5)"``: a failed run's error."""
     note = method_failure_note(exc)
@@ -162,7 +137,7 @@ def _run_task(task: Task) -> dict[str, Any]:
     out: dict[str, Any] = {"experiment": task.experiment, "arm": task.arm.label,
                            "method": task.arm.method, "run": task.source.name,
                            "key": task_key(task)}
-    stale = _stale_plugin(task)
+    stale = stale_plugin(task)
     if stale:
         out.update(ok=False, error=stale)
         return out
@@ -305,24 +280,9 @@ class Executor:
 
 def _cache_path(cache_dir: Path, task: Task) -> Path | None:
     """One file per (arm, source, code): experiments that share an arm share its runs. None
-    for a task whose method has no source file to hash (:func:`_sourceless`): its results are
+    for a task whose method has no source file to hash (:func:`~bomgraph.method_code.sourceless`): its results are
     neither read from nor written to the cache."""
-    return None if _sourceless(task) else cache_dir / f"{task_key(task)}.json"
-
-
-def _sourceless(task: Task) -> list[str]:
-    """The task's methods whose code has no source file (a class defined in a notebook cell
-    or in ``python -c``, :func:`bomgraph.mapper.method_has_source`): no key can follow an
-    edit of such code, so a cached result could be the old code's."""
-    return [m for m in task.methods() if _known(m) and not method_has_source(m)]
-
-
-def _known(name: str) -> bool:
-    try:
-        method_info(name)
-    except UnknownMethodError:  # recorded as a failed run, with the reason
-        return False
-    return True
+    return None if sourceless(task) else cache_dir / f"{task_key(task)}.json"
 
 
 def is_cached(task: Task, cache_dir: str | os.PathLike[str]) -> bool:
@@ -353,7 +313,7 @@ def execute(tasks: Sequence[Task], executor: Executor = Executor(), *,
     cache = Path(cache_dir) if cache_dir is not None else None
     if cache is not None:
         cache.mkdir(parents=True, exist_ok=True)
-        _warn_sourceless(tasks)
+        warn_sourceless(tasks)
         for k, t in enumerate(tasks):
             path = _cache_path(cache, t)
             cached = None if path is None else _read_cached(path)
@@ -393,43 +353,6 @@ def execute(tasks: Sequence[Task], executor: Executor = Executor(), *,
                      "files there; give them this process's (and restart them)",
                      len(other_key), other_key[0])
     return [r for r in results if r is not None]
-
-
-def _warn_sourceless(tasks: Sequence[Task]) -> None:
-    """One log line for the runs left out of the cache by :func:`_sourceless`."""
-    names = dict.fromkeys(m for t in tasks for m in _sourceless(t))
-    if names:
-        n = sum(1 for t in tasks if _sourceless(t))
-        _log.warning("%d run(s) not cached: method(s) %s have no source file to hash (defined "
-                     "in a notebook cell or `python -c`), so a cached result could be from "
-                     "before an edit; put the class in a .py module to cache its runs",
-                     n, ", ".join(repr(m) for m in names))
-
-
-def refuse_runtime_methods(tasks: Sequence[Task], backend: str) -> None:
-    """Raise when a method of a task (:meth:`Task.methods`) was registered at run time: worker
-    processes start from the installed packages and never see such a registration.
-
-    Raises
-    ------
-    ConfigError
-        Naming the method and how to make it a plugin (or to run serially).
-    """
-    names = dict.fromkeys(m for t in tasks for m in t.methods())
-    for name in names:
-        try:
-            info = method_info(name)
-        except UnknownMethodError:  # recorded as a failed run, with the reason
-            continue
-        target = ("yourpackage.module:Factory" if info.target.startswith("__main__:")
-                  else info.target)
-        if info.origin == "runtime":
-            raise ConfigError(
-                f"method {name!r} was registered at run time (register_method) and the "
-                f"{backend} workers cannot see it; make it a plugin: in your package's "
-                f"pyproject.toml add [project.entry-points.\"bomgraph.methods\"] "
-                f"{name} = \"{target}\", then `pip install -e .` it (or run serially: "
-                f"--jobs 1, Executor('serial'))")
 
 
 def _read_cached(path: Path) -> dict[str, Any] | None:
@@ -500,7 +423,7 @@ def _dispatch(tasks: list[Task], index: list[int],
         from .processes import dispatch
 
         yield from dispatch(_indexed, index, tasks, _local_workers(executor.n_jobs, len(tasks)),
-                            failed)
+                            failed, fresh=workers_outdated(tasks))
     else:
         from .cluster import dispatch as dispatch_dask
 

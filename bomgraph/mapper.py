@@ -421,33 +421,6 @@ def method_description(name: str) -> str:
     return text.splitlines()[0] if text else "(no description)"
 
 
-def method_fingerprint(name: str) -> str | None:
-    """A hash of the method's own code for the cache key, or None for a built-in method
-    (whose code the runner's :func:`bomgraph.bench.code_fingerprint` of the bomgraph and
-    baselines sources covers already, so the paper's cache keys stay as they were). For a
-    plugin: its package's sources and its distribution's version; for a method registered
-    at run time: the sources of its target's top-level package (:mod:`bomgraph.plugins`),
-    or :data:`NO_SOURCE` when that module has no source file (:func:`method_has_source`)."""
-    from .plugins import source_fingerprint
-
-    info = method_info(name)
-    if info.origin == "builtin":
-        return None
-    fp = source_fingerprint(info.target, info.version)
-    return NO_SOURCE if fp is None else fp
-
-
-#: :func:`method_fingerprint` of a method whose module has no source file to hash.
-NO_SOURCE = "no-source"
-
-
-def method_has_source(name: str) -> bool:
-    """Whether the code of ``name`` can be hashed for the cache key: False for a method
-    registered at run time from a module without a source file (a class defined in a
-    notebook cell or in ``python -c``), whose edits no key could follow."""
-    return method_fingerprint(name) != NO_SOURCE
-
-
 def method_config_class(name: str) -> type | None:
     """The configuration dataclass of the method registered under ``name``: the ``config``
     parameter's annotation of its factory, or the factory's ``config_class`` attribute
@@ -609,5 +582,4 @@ def create_mapper(name: str, header: StreamHeader, *, truth: Truth | None = None
 
 __all__ = ["MapEstimate", "Mapper", "Checkpoint", "RunResult", "run", "checkpoint_times",
            "MethodInfo", "register_method", "available_methods", "method_info", "method_factory",
-           "method_description", "method_fingerprint", "method_has_source", "NO_SOURCE",
-           "method_config_class", "check_method_options", "factory_options", "create_mapper"]
+           "method_description", "method_config_class", "check_method_options", "factory_options", "create_mapper"]

@@ -27,12 +27,13 @@ import hashlib
 import importlib
 import importlib.util
 import logging
-import marshal
 import sys
 import traceback
+import types
 from dataclasses import dataclass
 from importlib import metadata
 from pathlib import Path
+from typing import Any
 
 from .errors import UnknownMethodError
 
@@ -214,8 +215,8 @@ def disk_fingerprint(target: str, version: str | None = None) -> str | None:
 
 
 #: Per source file of a loaded module: the digest of its contents when this process first
-#: hashed it, and :func:`_code_digest` of the module then (a change of that: a reload).
-_LOADED: dict[Path, tuple[bytes, str]] = {}
+#: hashed it, and :func:`_module_state` of the module then (a change of that: a reload).
+_LOADED: dict[Path, tuple[bytes, dict[Any, tuple[str, object]]]] = {}
 
 
 def _fingerprint(target: str, version: str | None, loaded: bool) -> str | None:
@@ -240,53 +241,81 @@ def _fingerprint(target: str, version: str | None, loaded: bool) -> str | None:
 
 def _file_digest(path: Path, module: object | None) -> bytes:
     """The digest of a source file's contents: as read now, or for a loaded ``module`` as
-    read when this process first hashed it, as long as the module's code is the same."""
-    code = None if module is None else _code_digest(module)
+    read when this process first hashed it, as long as the module is as it was then."""
+    state = None if module is None else _module_state(module)
     seen = _LOADED.get(path)
-    if code is not None and seen is not None and seen[1] == code:
+    if state is not None and seen is not None and _same_state(seen[1], state):
         return seen[0]
     try:
         data = path.read_bytes()
     except OSError:  # a file removed while we read: hash its name only
         data = b""
     digest = hashlib.sha256(f"{len(data)}\0".encode() + data).digest()
-    if code is not None:
-        _LOADED[path] = (digest, code)
+    if state is not None:
+        _LOADED[path] = (digest, state)
     return digest
 
 
 _PLAIN = (int, float, complex, str, bytes, bool, type(None))
 
 
-def _code_digest(module: object) -> str:
-    """A digest of what a reload of ``module`` changes: the byte code of the functions and
-    classes defined in it (their methods, properties, defaults) and its plain constants
-    (numbers, strings and tuples of them). Only compared within one process."""
-    h = hashlib.sha256()
-    name = getattr(module, "__name__", "")
+def _module_state(module: object) -> dict[Any, tuple[str, object]]:
+    """What a reload of ``module`` changes, to be compared within this process
+    (:func:`_same_state`): each global, a plain constant (numbers, strings and tuples of them)
+    by value and anything else by identity (an assignment run again binds a new object;
+    ``importlib.reload``, and IPython's autoreload through it, give the module a new
+    ``__spec__``), and the code and defaults of the functions and of the classes' functions
+    defined in it (IPython 9's autoreload replaces those in place). The objects are held, so
+    that no identity is reused; only a function's or a class's own attributes are read (an
+    arbitrary object's may raise)."""
+    name = getattr(module, "__name__", None)
+    out: dict[Any, tuple[str, object]] = {}
 
-    def add(key: str, value: object, depth: int = 0) -> None:
-        if isinstance(value, (staticmethod, classmethod)):
-            value = value.__func__
-        if isinstance(value, property):
-            for part in (value.fget, value.fset, value.fdel):
-                add(key, part, depth)
-            return
-        if isinstance(value, _PLAIN) or (isinstance(value, tuple)
-                                         and all(isinstance(v, _PLAIN) for v in value)):
-            h.update(f"{key}={value!r};".encode())
-        elif callable(value) and getattr(value, "__module__", None) == name:
-            code = getattr(value, "__code__", None)
-            if code is not None:
-                h.update(key.encode() + marshal.dumps(code))
-                add(key + ".__defaults__", getattr(value, "__defaults__", None), depth)
-            elif isinstance(value, type) and depth < 4:
-                for k, v in sorted(vars(value).items()):
-                    add(f"{key}.{k}", v, depth + 1)
+    def add(key: Any, value: object, depth: int = 0) -> None:
+        kind = type(value)
+        try:
+            plain = issubclass(kind, _PLAIN) or (issubclass(kind, tuple) and all(
+                issubclass(type(v), _PLAIN) for v in value))  # type: ignore[attr-defined]
+        except Exception:  # a tuple subclass whose iteration raises
+            plain = False
+        out[key] = ("=" if plain else "is", value)
+        try:
+            if issubclass(kind, (staticmethod, classmethod)):
+                add((key, "__func__"), value.__func__, depth)  # type: ignore[attr-defined]
+            elif issubclass(kind, property):
+                for part in ("fget", "fset", "fdel"):
+                    add((key, part), getattr(value, part), depth)
+            elif issubclass(kind, types.FunctionType) and value.__module__ == name:
+                for part in ("__code__", "__defaults__", "__kwdefaults__"):
+                    out[(key, part)] = ("is", getattr(value, part))
+            elif issubclass(kind, type) and depth < 4 and value.__dict__.get(
+                    "__module__") == name:
+                for k, v in list(value.__dict__.items()):
+                    add((key, k), v, depth + 1)
+        except Exception:  # an attribute that raises: the object's identity stands alone
+            pass
 
-    for k, v in sorted(vars(module).items()):
+    for k, v in list(vars(module).items()):
         add(k, v)
-    return h.hexdigest()
+    return out
+
+
+def _same_state(a: dict[Any, tuple[str, object]], b: dict[Any, tuple[str, object]]) -> bool:
+    """Whether two :func:`_module_state` are of the same loaded code."""
+    if a.keys() != b.keys():
+        return False
+    for k, (how, x) in a.items():
+        how_b, y = b[k]
+        if x is y:
+            continue
+        if how != "=" or how_b != "=" or type(x) is not type(y):
+            return False
+        try:
+            if not x == y:  # a float NaN bound anew counts as a change (a reload, or not)
+                return False
+        except Exception:
+            return False
+    return True
 
 
 __all__ = ["GROUP", "PluginEntry", "discover", "refresh", "load", "source_fingerprint",

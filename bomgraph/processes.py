@@ -22,21 +22,32 @@ from .stdio import signals_held
 
 def dispatch(func: Callable[[int, Any], tuple[int, dict[str, Any]]], index: Sequence[int],
              tasks: Sequence[Any], n_jobs: int,
-             failed: Callable[[int, str], dict[str, Any]]
+             failed: Callable[[int, str], dict[str, Any]], *, fresh: bool = False
              ) -> Iterator[tuple[int, dict[str, Any]]]:
     """``func(k, task)`` for each ``k`` of ``index`` and its task, in ``n_jobs`` worker
     processes (-1: one per core), as they finish. Closed early (the caller interrupted), the
-    runs in flight are cancelled, without joblib's warning that they were.
+    runs in flight are cancelled, without joblib's warning that they were. ``fresh``: the
+    worker processes joblib kept from an earlier call end first (they keep the code they
+    imported then).
 
     A worker that dies (a crash in native code, the out-of-memory killer, ``os._exit`` in a
     plugin) breaks joblib's whole pool. The tasks it and the other workers were running
     (each worker marks its task in a folder while it runs it) are then run again one at a
     time, each in a pool of its own: the one whose worker dies again is ``failed(k, why)``,
-    the others give their results; the rest of the sweep goes on in a new pool.
+    the others give their results; the rest of the sweep goes on in a new pool. A pool whose
+    workers die before any task began or ended is tried once more; twice in a row, the
+    workers cannot start, and every task left is ``failed``.
+
+    No task runs in this process, where one that ends its process would end the caller: one
+    worker asked for (``n_jobs`` 1, or -1 on one core), which joblib would run here, is two
+    given one task at a time (:func:`_pool`).
     """
     from joblib.externals.loky.process_executor import BrokenProcessPool
 
+    if fresh:
+        _end_kept_workers()
     pending = dict(zip(index, tasks))
+    stalled = False
     with tempfile.TemporaryDirectory(prefix="bomgraph-running-") as marks:
         while pending:
             before = len(pending)
@@ -45,19 +56,24 @@ def dispatch(func: Callable[[int, Any], tuple[int, dict[str, Any]]], index: Sequ
                     for k, res in results:
                         del pending[k]
                         yield k, res
-                continue
             except BrokenProcessPool as exc:
                 running = [k for k in pending if os.path.exists(_mark(marks, k))]
                 why = _died(exc)
+            else:  # a pool that ended without a task's result (never joblib's): not a loop
+                for k in list(pending):
+                    del pending[k]
+                    yield k, failed(k, "the worker pool ended without its result")
+                continue
             _clear(marks)
-            if not running and len(pending) == before:  # no task started: workers cannot
+            idle = not running and len(pending) == before
+            if idle and stalled:  # twice in a row no task began or ended: workers cannot start
                 for k in list(pending):
                     del pending[k]
                     yield k, failed(k, why)
+            stalled = idle
             for k in running:   # each alone, to tell the task that kills its worker
                 try:
-                    # two workers for one task: joblib runs n_jobs=1 in this process
-                    with contextlib.closing(_pool(func, {k: pending[k]}, 2, marks)) as alone:
+                    with contextlib.closing(_pool(func, {k: pending[k]}, 1, marks)) as alone:
                         ((_, res),) = list(alone)
                 except BrokenProcessPool as exc:
                     res = failed(k, _died(exc))
@@ -68,9 +84,11 @@ def dispatch(func: Callable[[int, Any], tuple[int, dict[str, Any]]], index: Sequ
 
 def _pool(func: Callable[[int, Any], tuple[int, dict[str, Any]]], pending: dict[int, Any],
           n_jobs: int, marks: str) -> Iterator[tuple[int, dict[str, Any]]]:
-    from joblib import Parallel, delayed
+    from joblib import Parallel, delayed, effective_n_jobs
 
-    with Parallel(n_jobs=n_jobs, return_as="generator_unordered") as par:
+    # joblib runs a pool of one worker in this process: two workers, one task at a time
+    one = dict(n_jobs=2, pre_dispatch=1, batch_size=1) if effective_n_jobs(n_jobs) == 1 else {}
+    with Parallel(**{"n_jobs": n_jobs, **one}, return_as="generator_unordered") as par:
         _start_workers(par)
         results = par(delayed(_marked)(func, marks, k, t) for k, t in list(pending.items()))
         try:
@@ -81,6 +99,15 @@ def _pool(func: Callable[[int, Any], tuple[int, dict[str, Any]]], pending: dict[
                 warnings.simplefilter("ignore", UserWarning)
                 results.close()
             raise
+
+
+def _end_kept_workers() -> None:
+    """End the worker processes of joblib's reusable loky executor, kept for the next pool."""
+    from joblib.externals.loky import reusable_executor
+
+    kept = getattr(reusable_executor, "_executor", None)
+    if kept is not None:
+        kept.shutdown(wait=True, kill_workers=True)
 
 
 def _mark(marks: str, k: int) -> str:

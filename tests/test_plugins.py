@@ -25,6 +25,7 @@ from bomgraph.bench import Executor, execute, task_key
 from bomgraph.cli import main
 from bomgraph.errors import ConfigError
 from bomgraph.experiments import Arm, Experiment, FileSource
+from bomgraph.method_code import method_fingerprint
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLE = ROOT / "docs" / "examples" / "toy_plugin"
@@ -177,8 +178,8 @@ def test_a_method_registered_at_run_time_runs_serially_and_is_refused_by_workers
     (res,) = execute(exp.tasks(), Executor("serial"))
     assert res["ok"] and res["checkpoints"][-1]["n_mapped"] > 0
     # its code is in the cache key (a built-in method's is covered by the package hash)
-    assert mapper.method_fingerprint("first-sight-rt") is not None
-    assert mapper.method_fingerprint("triangulate") is None
+    assert method_fingerprint("first-sight-rt") is not None
+    assert method_fingerprint("triangulate") is None
     assert task_key(exp.tasks()[0]) == res["key"]
 
 

@@ -29,7 +29,7 @@ RUN = {
     ("README.md", "== streams, final map per run =="): "test_benchmark_your_own_method_blocks",
     ("README.md", '[project.entry-points."bomgraph.methods"]'):
         "test_benchmark_your_own_method_blocks",
-    ("README.md", 'name = "mine"'): "test_benchmark_your_own_method_blocks",
+    ("README.md", 'name = "mine"'): "test_sweep_file_block_plans_and_its_quoted_mistakes",
     ("README.md", "import numpy as np\nfrom bomgraph import create_mapper"):
         "test_library_use_and_gtsam_helper_blocks",
     ("README.md", "from baselines import gtsam_tools as gt"):
@@ -122,13 +122,9 @@ def test_library_use_and_gtsam_helper_blocks(tmp_path: Path) -> None:
     assert f'# "{out[1]}"' in gt, out
 
 
-@pytest.mark.skipif(not (DATA / "mrclam6").is_dir(), reason=f"no MRCLAM6 at {DATA}")
-def test_benchmark_your_own_method_blocks(tmp_path: Path) -> None:
-    """README, "Benchmark your own method on your own data": the four commands (the plugin
-    installed as pip would, from its pyproject.toml, whose entry point is the README's; one
-    worker, not two) print the final-map table the README shows; the sweep file shown
-    further down plans its runs; its three quoted mistakes are the messages given."""
-    readme = block("README.md", "bomgraph import mrclam")
+def _toy_plugin_env(tmp_path: Path) -> dict:
+    """An environment with the README's toy plugin installed as pip would, from its
+    pyproject.toml, whose entry point is the README's."""
     entry = tomllib.loads(block("README.md", '[project.entry-points."bomgraph.methods"]'))
     plugin = ROOT / "docs" / "examples" / "toy_plugin"
     project = tomllib.loads((plugin / "pyproject.toml").read_text())
@@ -136,8 +132,17 @@ def test_benchmark_your_own_method_blocks(tmp_path: Path) -> None:
     assert entry["project"]["entry-points"]["bomgraph.methods"] == methods
     site = tmp_path / "site"
     write_dist_info(site, "bomgraph_toy_plugin", methods)
-    env = {**os.environ, "OMP_NUM_THREADS": "1",
-           "PYTHONPATH": os.pathsep.join(map(str, (ROOT, site, plugin)))}
+    return {**os.environ, "OMP_NUM_THREADS": "1",
+            "PYTHONPATH": os.pathsep.join(map(str, (ROOT, site, plugin)))}
+
+
+@pytest.mark.skipif(not (DATA / "mrclam6").is_dir(), reason=f"no MRCLAM6 at {DATA}")
+def test_benchmark_your_own_method_blocks(tmp_path: Path) -> None:
+    """README, "Benchmark your own method on your own data": the four commands (the plugin
+    installed as pip would; one worker, not two) print the final-map table the README
+    shows."""
+    readme = block("README.md", "bomgraph import mrclam")
+    env = _toy_plugin_env(tmp_path)
     lines = readme.splitlines()
     assert lines[1] == "pip install ./docs/examples/toy_plugin" and "--jobs 2" in lines[2]
     script = "\n".join([lines[0].replace("../shared/data", str(DATA)),
@@ -149,6 +154,14 @@ def test_benchmark_your_own_method_blocks(tmp_path: Path) -> None:
     rows = [r.split() for r in printed[1:len(shown)]]
     assert rows == [r.split() for r in shown[1:]], out
 
+
+def test_sweep_file_block_plans_and_its_quoted_mistakes(tmp_path: Path) -> None:
+    """README, the sweep file further down plans its runs, and its three quoted mistakes are
+    the messages given (no data needed: a simulated stream stands in for MRCLAM6's robot 3,
+    which the file names but a plan does not read)."""
+    for name, seed in (("sim7.jsonl", 7), ("m6r3.jsonl", 3)):
+        shell(f"{BOMGRAPH} simulate --seed {seed} --out {name}", tmp_path)
+    env = _toy_plugin_env(tmp_path)
     (tmp_path / "sweep.toml").write_text(block("README.md", 'name = "mine"'))
     (tmp_path / "runs").mkdir()
     shutil.copy(tmp_path / "sim7.jsonl", tmp_path / "runs" / "a.jsonl")

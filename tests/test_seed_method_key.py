@@ -9,10 +9,11 @@ from pathlib import Path
 
 import pytest
 
-from bomgraph import bench, mapper
+from bomgraph import mapper
 from bomgraph.bench import Executor, execute, task_key
 from bomgraph.errors import ConfigError
 from bomgraph.experiments import Arm, Experiment, FileSource, Task
+from bomgraph.method_code import method_code
 
 SEED = '''\
 """A seed method for the test."""
@@ -71,7 +72,7 @@ def test_a_seed_plugin_is_in_the_cache_key_and_an_edit_changes_it(
     assert plain.methods() == ["stmds-smacof"]
     builtin_seed = _task("hybrid", {"seed_method": "ekf"}, tmp_path)
     assert builtin_seed.methods() == ["hybrid", "ekf"]
-    assert bench._method_code(builtin_seed) == {} and bench._method_code(task)
+    assert method_code(builtin_seed) == {} and method_code(task)
 
 
 def test_a_seed_registered_at_run_time_is_refused_by_workers(

@@ -13,19 +13,24 @@ import json
 import os
 import subprocess
 import sys
+import textwrap
+import time
 from pathlib import Path
 
 import numpy as np
+import pytest
 from _plugin_dist import write_dist_info
 from hostile_helpers import ENV, no_traceback
 
 from bomgraph.bench import strip_timings
+from bomgraph.processes import dispatch
 from bomgraph.sim import SimConfig, simulate
 from bomgraph.stream_file import write_stream
 
 DYING = '''\
 import os
 import numpy as np
+import pytest
 from bomgraph.mapper import MapEstimate
 
 class Dying:
@@ -52,14 +57,20 @@ def _compare(tmp_path: Path, out: str, methods: str, jobs: str,
     return proc, (json.loads(results.read_text())["results"] if results.exists() else [])
 
 
-def test_a_dying_worker_fails_its_run_and_the_sweep_goes_on(tmp_path: Path) -> None:
+def _dying_plugin(tmp_path: Path, n_streams: int) -> list[Path]:
+    """The ``dying`` plugin in ``tmp_path/site``; ``n_streams`` simulated streams."""
     (tmp_path / "site" / "dyingplugin").mkdir(parents=True)
     (tmp_path / "site" / "dyingplugin" / "__init__.py").write_text(DYING)
     write_dist_info(tmp_path / "site", "dyingplugin", {"dying": "dyingplugin:Dying"})
     streams = []
-    for seed in range(3):
+    for seed in range(n_streams):
         streams.append(tmp_path / f"s{seed}.jsonl")
         write_stream(simulate(SimConfig(n_steps=40), np.random.default_rng(seed)), streams[-1])
+    return streams
+
+
+def test_a_dying_worker_fails_its_run_and_the_sweep_goes_on(tmp_path: Path) -> None:
+    streams = _dying_plugin(tmp_path, 3)
 
     proc, results = _compare(tmp_path, "par", "dying,triangulate,ekf", "2", streams)
     err = no_traceback(proc)
@@ -77,3 +88,63 @@ def test_a_dying_worker_fails_its_run_and_the_sweep_goes_on(tmp_path: Path) -> N
     assert all(r["ok"] for r in mine.values())
     for k in alone:
         assert mine[k]["checkpoints"] == alone[k]["checkpoints"], k
+
+
+def test_one_run_left_for_two_workers_still_runs_in_a_worker(tmp_path: Path) -> None:
+    """``--jobs 2`` and one run to do (one stream; or all others cached): joblib was given one
+    worker, which it runs in the calling process, and the dying method ended the command
+    itself (exit 7, no line, no results)."""
+    streams = _dying_plugin(tmp_path, 1)
+    proc, results = _compare(tmp_path, "one", "dying", "2", streams)
+    err = no_traceback(proc)
+    assert proc.returncode == 1, (proc.returncode, err)
+    assert "1 of 1 runs failed" in err and "WorkerDied" in err, err
+    assert [r["ok"] for r in results] == [False]
+
+
+def _alone(k: int, lock: str) -> tuple[int, dict]:
+    """In a worker: a task that fails when another runs beside it."""
+    try:
+        fd = os.open(lock, os.O_CREAT | os.O_EXCL)
+    except FileExistsError:
+        return k, {"pid": os.getpid(), "alone": False}
+    time.sleep(0.05)
+    os.close(fd)
+    os.unlink(lock)
+    return k, {"pid": os.getpid(), "alone": True}
+
+
+@pytest.mark.parametrize("n_jobs", [1, 2])
+def test_dispatch_never_runs_a_task_in_this_process(tmp_path: Path, n_jobs: int) -> None:
+    """One worker asked for (``Executor('processes', n_jobs=1)``, ``--jobs -1`` on one core,
+    ``--jobs N`` for one task): two worker processes, one task at a time."""
+    lock = str(tmp_path / "running")
+    out = dict(dispatch(_alone, [0, 1, 2, 3], [lock] * 4, n_jobs,
+                        lambda k, why: {"failed": why}))
+    assert sorted(out) == [0, 1, 2, 3]
+    assert os.getpid() not in {r["pid"] for r in out.values()}
+    if n_jobs == 1:
+        assert all(r["alone"] for r in out.values()), out
+
+
+def test_workers_that_die_once_before_any_run_do_not_fail_the_sweep(tmp_path: Path) -> None:
+    """The first worker process ends as it starts (before it takes a run: the out-of-memory
+    killer, a crash at start): every run was failed, as if no worker could ever start; now a
+    second pool is tried, and only workers that die before any run twice in a row fail
+    the runs."""
+    streams = _dying_plugin(tmp_path, 2)
+    (tmp_path / "site" / "sitecustomize.py").write_text(textwrap.dedent(f"""\
+        import os, sys
+        if any("popen_loky" in a for a in sys.orig_argv):  # a joblib worker: the first one dies
+            try:
+                os.close(os.open({str(tmp_path / "died")!r}, os.O_CREAT | os.O_EXCL))
+            except FileExistsError:
+                pass
+            else:
+                os._exit(9)
+        """))
+    proc, results = _compare(tmp_path, "once", "triangulate", "2", streams)
+    err = no_traceback(proc)
+    assert (tmp_path / "died").exists()
+    assert proc.returncode == 0, err
+    assert len(results) == 2 and all(r["ok"] for r in results), err

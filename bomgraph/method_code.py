@@ -1,0 +1,151 @@
+"""The code a task's methods run, as the runner (:mod:`bomgraph.bench`) keys and checks it.
+
+A plugin's or a method registered at run time's code is part of its cache key
+(:func:`method_code`; built-in methods are covered by the runner's hash of the bomgraph and
+baselines sources). The code that runs must be the code keyed: a method without a source file
+is never cached (:func:`sourceless`), a worker that imported a plugin before an edit does not
+run it (:func:`stale_plugin`), the local workers that joblib keeps between sweeps are ended
+when a plugin changed since they ran it (:func:`workers_outdated`), and a method registered at
+run time is refused to workers, which cannot see it (:func:`refuse_runtime_methods`).
+"""
+
+from __future__ import annotations
+
+import logging
+from typing import Sequence
+
+from .errors import ConfigError, UnknownMethodError
+from .experiments import Task
+from .mapper import method_info
+from .plugins import disk_fingerprint, source_fingerprint
+
+_log = logging.getLogger(__name__)
+
+#: :func:`method_fingerprint` of a method whose module has no source file to hash.
+NO_SOURCE = "no-source"
+
+
+def method_fingerprint(name: str) -> str | None:
+    """A hash of the method's own code for the cache key, or None for a built-in method
+    (whose code the runner's :func:`bomgraph.plugins.code_fingerprint` of the bomgraph and
+    baselines sources covers already, so the paper's cache keys stay as they were). For a
+    plugin: its package's sources and its distribution's version; for a method registered
+    at run time: the sources of its target's top-level package (:mod:`bomgraph.plugins`),
+    or :data:`NO_SOURCE` when that module has no source file (:func:`method_has_source`)."""
+    info = method_info(name)
+    if info.origin == "builtin":
+        return None
+    fp = source_fingerprint(info.target, info.version)
+    return NO_SOURCE if fp is None else fp
+
+
+def method_has_source(name: str) -> bool:
+    """Whether the code of ``name`` can be hashed for the cache key: False for a method
+    registered at run time from a module without a source file (a class defined in a
+    notebook cell or in ``python -c``), whose edits no key could follow."""
+    return method_fingerprint(name) != NO_SOURCE
+
+
+def method_code(task: Task) -> dict[str, str]:
+    """The fingerprints of the task's non-built-in methods (the arm's, the reference's, a
+    seed's: :meth:`Task.methods`), by method name: empty for built-in methods, so their keys
+    are as before plugins existed."""
+    return {m: fp for m in task.methods() if (fp := method_fingerprint(m)) is not None}
+
+
+def stale_plugin(task: Task) -> str:
+    """Why this process cannot run the task's plugin as it is now on disk ("" when it can):
+    Python does not reload a module, so a worker that imported a plugin (its sources hashed
+    then, :func:`method_fingerprint`) keeps running that code after an edit, while the
+    client keys the task with the new sources."""
+    for m in task.methods():
+        loaded = method_fingerprint(m)
+        info = method_info(m)
+        if loaded not in (None, NO_SOURCE) and disk_fingerprint(info.target,
+                                                                info.version) != loaded:
+            return (f"stale worker: restart the workers and run again (Dask: client.restart(),"
+                    f" or restart `dask worker`; in a notebook run serially: reload the module"
+                    f" or restart the kernel); method {m!r} was edited since this worker "
+                    f"imported it, and a worker does not reload a module")
+    return ""
+
+
+def _known(name: str) -> bool:
+    try:
+        method_info(name)
+    except UnknownMethodError:  # recorded as a failed run, with the reason
+        return False
+    return True
+
+
+def sourceless(task: Task) -> list[str]:
+    """The task's methods whose code has no source file (a class defined in a notebook cell
+    or in ``python -c``, :func:`method_has_source`): no key can follow an edit of such code,
+    so a cached result could be the old code's."""
+    return [m for m in task.methods() if _known(m) and not method_has_source(m)]
+
+
+def warn_sourceless(tasks: Sequence[Task]) -> None:
+    """One log line for the runs left out of the cache by :func:`sourceless`."""
+    names = dict.fromkeys(m for t in tasks for m in sourceless(t))
+    if names:
+        n = sum(1 for t in tasks if sourceless(t))
+        _log.warning("%d run(s) not cached: method(s) %s have no source file to hash (defined "
+                     "in a notebook cell or `python -c`), so a cached result could be from "
+                     "before an edit; put the class in a .py module to cache its runs",
+                     n, ", ".join(repr(m) for m in names))
+
+
+def refuse_runtime_methods(tasks: Sequence[Task], backend: str) -> None:
+    """Raise when a method of a task (:meth:`Task.methods`) was registered at run time: worker
+    processes start from the installed packages and never see such a registration.
+
+    Raises
+    ------
+    ConfigError
+        Naming the method and how to make it a plugin (or to run serially).
+    """
+    names = dict.fromkeys(m for t in tasks for m in t.methods())
+    for name in names:
+        try:
+            info = method_info(name)
+        except UnknownMethodError:  # recorded as a failed run, with the reason
+            continue
+        target = ("yourpackage.module:Factory" if info.target.startswith("__main__:")
+                  else info.target)
+        if info.origin == "runtime":
+            raise ConfigError(
+                f"method {name!r} was registered at run time (register_method) and the "
+                f"{backend} workers cannot see it; make it a plugin: in your package's "
+                f"pyproject.toml add [project.entry-points.\"bomgraph.methods\"] "
+                f"{name} = \"{target}\", then `pip install -e .` it (or run serially: "
+                f"--jobs 1, Executor('serial'))")
+
+
+#: The code of each plugin method (:func:`bomgraph.plugins.disk_fingerprint`) when the local
+#: worker processes, which joblib keeps from one sweep to the next, last ran it.
+_POOL_CODE: dict[str, str | None] = {}
+
+
+def workers_outdated(tasks: Sequence[Task]) -> bool:
+    """Whether a plugin method of ``tasks`` was edited since the local workers last ran it, or
+    was never run by them: a worker keeps the code it imported, so after an edit (and a
+    reload in a notebook) the next sweep's runs failed as stale workers until the workers
+    ended, and a plugin installed after they started is unknown to them."""
+    now: dict[str, str | None] = {}
+    for m in dict.fromkeys(m for t in tasks for m in t.methods()):
+        if not _known(m) or (info := method_info(m)).origin == "builtin":
+            continue
+        try:
+            now[m] = disk_fingerprint(info.target, info.version)
+        except UnknownMethodError:  # its runs fail with the reason
+            continue
+    outdated = any(m not in _POOL_CODE or _POOL_CODE[m] != fp for m, fp in now.items())
+    if outdated:
+        _POOL_CODE.clear()
+    _POOL_CODE.update(now)
+    return outdated
+
+
+__all__ = ["NO_SOURCE", "method_fingerprint", "method_has_source", "method_code", "stale_plugin",
+           "sourceless", "warn_sourceless", "refuse_runtime_methods", "workers_outdated"]
