@@ -236,13 +236,21 @@ class LaplacianSolver:
         lap = coo_matrix((vals, (rows, cols)), shape=(n, n)).tocsc()
         self._lu = splu(lap[1:, 1:].tocsc())
 
+    def complex_inverse(self) -> np.ndarray | None:
+        """``(V + 1 1^T / n)^-1`` cast to complex, shape (n, n) (cast once, kept), for a
+        caller that multiplies complex ``b`` itself; None on the sparse path (use :meth:`solve`).
+        """
+        if self._minv is None:
+            return None
+        if self._minv_complex is None:
+            self._minv_complex = self._minv.astype(np.complex128)
+        return self._minv_complex
+
     def solve(self, b: np.ndarray) -> np.ndarray:
         """``V^+ b`` for ``b`` of shape (n,) or (n, k), real or complex, with zero (column) sums."""
         if self._minv is not None:
             if np.iscomplexobj(b):
-                if self._minv_complex is None:
-                    self._minv_complex = self._minv.astype(np.complex128)
-                return self._minv_complex @ b
+                return self.complex_inverse() @ b
             return self._minv @ b
         if self._lu is None:
             return np.zeros_like(b)
@@ -289,33 +297,33 @@ def _smacof_single(z: np.ndarray, first: np.ndarray, second: np.ndarray, delta: 
     """The SMACOF loop on points as complex numbers ``x + i y`` (one vectorised Guttman
     transform per iteration, no loop over pairs).
 
-    ``B(X) X`` at vertex ``i`` is ``sum_j w_ij delta_ij / d_ij (z_i - z_j)``: one ``bincount``
-    over both ends of every edge, on the real and imaginary parts interleaved. Returns the
-    final points, the raw stress history (starting point first) and whether the relative
-    decrease fell below ``tol``. An iterate whose stress rose (only possible through round-off
-    at a stationary point) is not accepted.
+    ``B(X) X`` at vertex ``i`` is ``sum_j w_ij delta_ij / d_ij (z_i - z_j)``: one complex
+    ``np.add.at`` over the first ends of the edges and one ``np.subtract.at`` over the second
+    ends, into a fresh ``(n,)`` complex array (the sums of a ``bincount`` over both ends of
+    ``(v, -v)``, in the same order: the same bits). The Laplacian's complex inverse is taken
+    once, and every per-iteration array is a buffer allocated here (fresh and contiguous:
+    ``ufunc.at`` is slow on arrays read back from a pickle). Returns the final points, the
+    raw stress history (starting point first) and whether the relative decrease fell below
+    ``tol``. An iterate whose stress rose (only possible through round-off at a stationary
+    point) is not accepted.
     """
     n = z.shape[0]
     e = first.size
     wd = weights * delta
-    # vertex index of each (edge end, real/imaginary part), matching the float view of
-    # concatenate((v, -v)): [2 first, 2 first + 1, ..., 2 second, 2 second + 1, ...]
+    # both ends of every edge in one fresh int64 array: one gather per iteration
     ends = np.concatenate((first, second))
-    slot = np.empty(4 * e, np.int64)
-    slot[0::2] = 2 * ends
-    slot[1::2] = 2 * ends + 1
+    first, second = ends[:e], ends[e:]
+    minv = solver.complex_inverse()               # (n, n) complex, None: the sparse LU
+    relaxed = relaxation != 1.0
     z = z - z.mean()
     diff = z[first] - z[second]
     dist = np.abs(diff)
-    r = dist - delta
-    s = float(np.dot(weights, r * r))
+    r = np.empty(e)
+    np.subtract(dist, delta, out=r)
+    s = float(np.dot(weights, np.multiply(r, r, out=r)))
     history = [s]
     ratio = np.zeros(e)
-    both = np.empty(2 * e, np.complex128)        # (v, -v), reused by every iteration
-    v = both[:e]
-    flat = both.view(np.float64)
-    # -v negated as real and imaginary parts: the same bits as a complex negate, faster
-    v_parts, minus_v_parts = flat[:2 * e], flat[2 * e:]
+    v = np.empty(e, np.complex128)
     for _ in range(max_iter):
         if s == 0.0:
             return z, history, True
@@ -324,15 +332,16 @@ def _smacof_single(z: np.ndarray, first: np.ndarray, second: np.ndarray, delta: 
         else:
             np.divide(wd, dist, out=ratio, where=dist > 0)
         np.multiply(ratio, diff, out=v)
-        np.negative(v_parts, out=minus_v_parts)
-        bz = np.bincount(slot, flat, 2 * n).view(np.complex128)
-        g = solver.solve(bz)
-        z_new = g if relaxation == 1.0 else z + relaxation * (g - z)
+        bz = np.zeros(n, np.complex128)
+        np.add.at(bz, first, v)
+        np.subtract.at(bz, second, v)
+        g = minv @ bz if minv is not None else solver.solve(bz)
+        z_new = z + relaxation * (g - z) if relaxed else g
         at_ends = z_new[ends]                    # both ends of every edge in one gather
-        diff_new = at_ends[:e] - at_ends[e:]
+        diff_new = np.subtract(at_ends[:e], at_ends[e:], out=at_ends[:e])
         dist_new = np.abs(diff_new)
-        r = dist_new - delta
-        s_new = float(np.dot(weights, r * r))
+        np.subtract(dist_new, delta, out=r)
+        s_new = float(np.dot(weights, np.multiply(r, r, out=r)))
         if s_new > s:
             return z, history, True
         z, diff, dist = z_new, diff_new, dist_new
