@@ -86,10 +86,10 @@ def component_labels(n: int, first: np.ndarray, second: np.ndarray) -> np.ndarra
         np.minimum.at(new, second, low)
         while True:                      # pointer jumping: follow labels to their roots
             jumped = new[new]
-            if np.array_equal(jumped, new):
+            if not (jumped != new).any():
                 break
             new = jumped
-        if np.array_equal(new, label):
+        if not (new != label).any():
             return label
         label = new
 
@@ -112,15 +112,16 @@ def prune_low_degree(n: int, first: np.ndarray, second: np.ndarray,
     second = np.asarray(second, np.int64)
     alive = np.zeros(n, bool)
     alive[first] = alive[second] = True
-    k = min(int(min_degree), max(int(alive.sum()) - 1, 0))
-    edge = np.ones(len(first), bool)
+    k = min(int(min_degree), max(int(np.count_nonzero(alive)) - 1, 0))
+    ef, es = first, second               # the edges between live vertices
     while True:
-        deg = np.bincount(first[edge], minlength=n) + np.bincount(second[edge], minlength=n)
+        deg = np.bincount(ef, minlength=n) + np.bincount(es, minlength=n)
         drop = alive & (deg < k)
         if not drop.any():
             return alive
         alive &= ~drop
-        edge &= alive[first] & alive[second]
+        edge = alive[first] & alive[second]
+        ef, es = first[edge], second[edge]
 
 
 def shortest_path_completion(n: int, first: np.ndarray, second: np.ndarray,

@@ -20,6 +20,7 @@ variances of the fused distances (an option, chosen by the caller). Stress-1 is
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -224,10 +225,12 @@ class LaplacianSolver:
         w = np.asarray(weights, float)
         deg = np.bincount(first, w, n) + np.bincount(second, w, n)
         if n <= dense_max:
-            lap = np.zeros((n, n))
-            lap[first, second] = -w
-            lap[second, first] = -w
-            lap.flat[::n + 1] = deg
+            lap = np.zeros(n * n)                  # (n, n), filled through flat indices
+            neg = -w
+            lap[first * n + second] = neg
+            lap[second * n + first] = neg
+            lap[::n + 1] = deg
+            lap = lap.reshape(n, n)
             self._minv = np.linalg.inv(lap + 1.0 / n)
             return
         rows = np.concatenate([first, second, np.arange(n)])
@@ -393,7 +396,11 @@ def smacof(n: int, first: np.ndarray, second: np.ndarray, dissimilarity: np.ndar
         raise ConfigError(f"smacof: init must have shape (n={n}, 2), got {x0.shape}")
     if not (first.shape == second.shape == delta.shape == w.shape):
         raise ConfigError("smacof: first, second, dissimilarity and weights differ in length")
-    if np.any(w <= 0) or not np.all(np.isfinite(w)):
+    # all positive and finite checked by two reductions (NaN fails the minimum, inf the sum; an
+    # overflowing sum of finite weights only sends the check to the element-wise test)
+    with np.errstate(over="ignore"):
+        weights_ok = w.size == 0 or (w.min() > 0 and math.isfinite(w.sum()))
+    if not weights_ok and (np.any(w <= 0) or not np.all(np.isfinite(w))):
         raise ConfigError("smacof: weights must be finite and > 0 (leave unknown pairs out)")
     if not 0 < relaxation < 2:
         raise ConfigError(f"smacof: relaxation must be in (0, 2), got {relaxation}")
@@ -403,7 +410,7 @@ def smacof(n: int, first: np.ndarray, second: np.ndarray, dissimilarity: np.ndar
         solver = LaplacianSolver(n, first, second, w)
     z, hist, conv = _smacof_single(x0[:, 0] + 1j * x0[:, 1], first, second, delta, w, solver,
                                    max_iter, tol, relaxation)
-    x = np.column_stack([z.real, z.imag])
+    x = z.view(np.float64).reshape(n, 2)          # (x, y) rows: the parts of the fresh z
     norm = float(np.dot(w, delta * delta))
     s1 = float(np.sqrt(hist[-1] / norm)) if norm > 0 else 0.0
     return SmacofResult(x, s1, hist[-1], len(hist) - 1, conv, np.array(hist))
