@@ -79,8 +79,8 @@ def component_labels(n: int, first: np.ndarray, second: np.ndarray) -> np.ndarra
     first = np.asarray(first, np.int64)
     second = np.asarray(second, np.int64)
     label = np.arange(n)
+    low = np.minimum(first, second)      # the first pass: every label is its vertex
     while True:
-        low = np.minimum(label[first], label[second])
         new = label.copy()
         np.minimum.at(new, first, low)
         np.minimum.at(new, second, low)
@@ -92,6 +92,7 @@ def component_labels(n: int, first: np.ndarray, second: np.ndarray) -> np.ndarra
         if not (new != label).any():
             return label
         label = new
+        low = np.minimum(label[first], label[second])
 
 
 def prune_low_degree(n: int, first: np.ndarray, second: np.ndarray,
@@ -110,18 +111,16 @@ def prune_low_degree(n: int, first: np.ndarray, second: np.ndarray,
     """
     first = np.asarray(first, np.int64)
     second = np.asarray(second, np.int64)
-    alive = np.zeros(n, bool)
-    alive[first] = alive[second] = True
+    deg = np.bincount(first, minlength=n) + np.bincount(second, minlength=n)
+    alive = deg > 0                      # the vertices with an edge
     k = min(int(min_degree), max(int(np.count_nonzero(alive)) - 1, 0))
-    ef, es = first, second               # the edges between live vertices
     while True:
-        deg = np.bincount(ef, minlength=n) + np.bincount(es, minlength=n)
         drop = alive & (deg < k)
         if not drop.any():
             return alive
         alive &= ~drop
-        edge = alive[first] & alive[second]
-        ef, es = first[edge], second[edge]
+        edge = alive[first] & alive[second]  # the edges between live vertices
+        deg = np.bincount(first[edge], minlength=n) + np.bincount(second[edge], minlength=n)
 
 
 def shortest_path_completion(n: int, first: np.ndarray, second: np.ndarray,

@@ -101,16 +101,19 @@ def reconstruct(config: StmdsConfig, n_nodes: int, n_landmarks: int, first: np.n
         seen[:n_lm] = False
         m_seen = min(len(triangulated), n_lm)
         seen[:m_seen] = triangulated[:m_seen]
-        first, second, distance_m, variance_m2, measured = _select(
-            seen[first] & seen[second], first, second, distance_m, variance_m2, measured)
+        if not seen.all():
+            first, second, distance_m, variance_m2, measured = _select(
+                seen[first] & seen[second], first, second, distance_m, variance_m2, measured)
         # which landmarks are mapped is decided by triangulated distances alone; priors
         # then constrain the mapped ones (a landmark held only by priors is left out)
         touched = prune_low_degree(n_nodes, *_select(measured, first, second),
                                    cfg.min_degree)
     else:
         touched = prune_low_degree(n_nodes, first, second, cfg.min_degree)
-    first, second, dist, var = _select(touched[first] & touched[second], first, second,
-                                       distance_m, variance_m2)
+    first, second, dist, var = first, second, distance_m, variance_m2
+    if not touched.all():
+        first, second, dist, var = _select(touched[first] & touched[second], first, second,
+                                           dist, var)
     if len(first) == 0:
         return _empty(f"no landmarks with {cfg.min_degree} known distances yet")
     nodes = np.flatnonzero(touched)
