@@ -303,12 +303,14 @@ def _smacof_single(z: np.ndarray, first: np.ndarray, second: np.ndarray, delta: 
     ``B(X) X`` at vertex ``i`` is ``sum_j w_ij delta_ij / d_ij (z_i - z_j)``: one complex
     ``np.add.at`` over the first ends of the edges and one ``np.subtract.at`` over the second
     ends, into a fresh ``(n,)`` complex array (the sums of a ``bincount`` over both ends of
-    ``(v, -v)``, in the same order: the same bits). The Laplacian's complex inverse is taken
-    once, and every per-iteration array is a buffer allocated here (fresh and contiguous:
-    ``ufunc.at`` is slow on arrays read back from a pickle). Returns the final points, the
-    raw stress history (starting point first) and whether the relative decrease fell below
-    ``tol``. An iterate whose stress rose (only possible through round-off at a stationary
-    point) is not accepted.
+    ``(v, -v)``, in the same order: the same bits). The scatter's target and indices are
+    arrays made here (fresh and contiguous: ``ufunc.at`` is slow on arrays read back from a
+    pickle); the Laplacian's complex inverse is taken once, outside the loop. Plain operators
+    rather than ``out=`` keywords: numpy reuses their temporaries, and parsing the keyword
+    costs more than the allocation at these sizes. Returns the final points, the raw stress
+    history (starting point first) and whether the relative decrease fell below ``tol``. An
+    iterate whose stress rose (only possible through round-off at a stationary point) is not
+    accepted.
     """
     n = z.shape[0]
     e = first.size
@@ -321,30 +323,28 @@ def _smacof_single(z: np.ndarray, first: np.ndarray, second: np.ndarray, delta: 
     z = z - z.mean()
     diff = z[first] - z[second]
     dist = np.abs(diff)
-    r = np.empty(e)
-    np.subtract(dist, delta, out=r)
-    s = float(np.dot(weights, np.multiply(r, r, out=r)))
+    r = dist - delta
+    s = float(np.dot(weights, r * r))
     history = [s]
     ratio = np.zeros(e)
-    v = np.empty(e, np.complex128)
     for _ in range(max_iter):
         if s == 0.0:
             return z, history, True
         if dist.min() > 0:                       # no coincident points: no mask needed
-            np.divide(wd, dist, out=ratio)
-        else:
+            ratio = wd / dist
+        else:                                    # (coincident: the last ratio kept there)
             np.divide(wd, dist, out=ratio, where=dist > 0)
-        np.multiply(ratio, diff, out=v)
+        v = ratio * diff
         bz = np.zeros(n, np.complex128)
         np.add.at(bz, first, v)
         np.subtract.at(bz, second, v)
         g = minv @ bz if minv is not None else solver.solve(bz)
         z_new = z + relaxation * (g - z) if relaxed else g
         at_ends = z_new[ends]                    # both ends of every edge in one gather
-        diff_new = np.subtract(at_ends[:e], at_ends[e:], out=at_ends[:e])
+        diff_new = at_ends[:e] - at_ends[e:]
         dist_new = np.abs(diff_new)
-        np.subtract(dist_new, delta, out=r)
-        s_new = float(np.dot(weights, np.multiply(r, r, out=r)))
+        r = dist_new - delta
+        s_new = float(np.dot(weights, r * r))
         if s_new > s:
             return z, history, True
         z, diff, dist = z_new, diff_new, dist_new
