@@ -239,7 +239,7 @@ class LaplacianSolver:
         lap = coo_matrix((vals, (rows, cols)), shape=(n, n)).tocsc()
         self._lu = splu(lap[1:, 1:].tocsc())
 
-    def complex_inverse(self) -> np.ndarray | None:
+    def _complex_inverse(self) -> np.ndarray | None:
         """``(V + 1 1^T / n)^-1`` cast to complex, shape (n, n) (cast once, kept), for a
         caller that multiplies complex ``b`` itself; None on the sparse path (use :meth:`solve`).
         """
@@ -253,7 +253,7 @@ class LaplacianSolver:
         """``V^+ b`` for ``b`` of shape (n,) or (n, k), real or complex, with zero (column) sums."""
         if self._minv is not None:
             if np.iscomplexobj(b):
-                return self.complex_inverse() @ b
+                return self._complex_inverse() @ b
             return self._minv @ b
         if self._lu is None:
             return np.zeros_like(b)
@@ -318,7 +318,7 @@ def _smacof_single(z: np.ndarray, first: np.ndarray, second: np.ndarray, delta: 
     # both ends of every edge in one fresh int64 array: one gather per iteration
     ends = np.concatenate((first, second))
     first, second = ends[:e], ends[e:]
-    minv = solver.complex_inverse()               # (n, n) complex, None: the sparse LU
+    minv = solver._complex_inverse()               # (n, n) complex, None: the sparse LU
     relaxed = relaxation != 1.0
     z = z - z.mean()
     diff = z[first] - z[second]
@@ -396,11 +396,9 @@ def smacof(n: int, first: np.ndarray, second: np.ndarray, dissimilarity: np.ndar
         raise ConfigError(f"smacof: init must have shape (n={n}, 2), got {x0.shape}")
     if not (first.shape == second.shape == delta.shape == w.shape):
         raise ConfigError("smacof: first, second, dissimilarity and weights differ in length")
-    # all positive and finite checked by two reductions (NaN fails the minimum, inf the sum; an
-    # overflowing sum of finite weights only sends the check to the element-wise test)
-    with np.errstate(over="ignore"):
-        weights_ok = w.size == 0 or (w.min() > 0 and math.isfinite(w.sum()))
-    if not weights_ok and (np.any(w <= 0) or not np.all(np.isfinite(w))):
+    # all positive and finite checked by two reductions (NaN fails both comparisons)
+    weights_ok = w.size == 0 or (w.min() > 0 and w.max() < math.inf)
+    if not weights_ok:
         raise ConfigError("smacof: weights must be finite and > 0 (leave unknown pairs out)")
     if not 0 < relaxation < 2:
         raise ConfigError(f"smacof: relaxation must be in (0, 2), got {relaxation}")

@@ -110,7 +110,7 @@ def reconstruct(config: StmdsConfig, n_nodes: int, n_landmarks: int, first: np.n
                                    cfg.min_degree)
     else:
         touched = prune_low_degree(n_nodes, first, second, cfg.min_degree)
-    first, second, dist, var = first, second, distance_m, variance_m2
+    dist, var = distance_m, variance_m2
     if not touched.all():
         first, second, dist, var = _select(touched[first] & touched[second], first, second,
                                            dist, var)
