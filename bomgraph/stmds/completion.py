@@ -75,24 +75,26 @@ def component_labels(n: int, first: np.ndarray, second: np.ndarray) -> np.ndarra
     Minimum-label propagation along the edges with pointer jumping (``label[label]``), a few
     vectorised passes (about the log of the diameter), no loop over vertices or edges. Much
     cheaper than building a ``scipy.sparse`` graph for the small graphs mapped at every step.
+    The labels are final once both ends of every edge carry the same one (a pass would then
+    change nothing: the labels are already their own roots), so that is checked between
+    passes instead of running one more.
     """
     first = np.asarray(first, np.int64)
     second = np.asarray(second, np.int64)
     label = np.arange(n)
     low = np.minimum(first, second)      # the first pass: every label is its vertex
     while True:
-        new = label.copy()
-        np.minimum.at(new, first, low)
-        np.minimum.at(new, second, low)
+        np.minimum.at(label, first, low)
+        np.minimum.at(label, second, low)
         while True:                      # pointer jumping: follow labels to their roots
-            jumped = new[new]
-            if not (jumped != new).any():
+            jumped = label[label]
+            if not (jumped != label).any():
                 break
-            new = jumped
-        if not (new != label).any():
+            label = jumped
+        at_first, at_second = label[first], label[second]
+        if not (at_first != at_second).any():
             return label
-        label = new
-        low = np.minimum(label[first], label[second])
+        low = np.minimum(at_first, at_second)
 
 
 def prune_low_degree(n: int, first: np.ndarray, second: np.ndarray,
