@@ -75,23 +75,26 @@ def component_labels(n: int, first: np.ndarray, second: np.ndarray) -> np.ndarra
     Minimum-label propagation along the edges with pointer jumping (``label[label]``), a few
     vectorised passes (about the log of the diameter), no loop over vertices or edges. Much
     cheaper than building a ``scipy.sparse`` graph for the small graphs mapped at every step.
+    The labels are final once both ends of every edge carry the same one (a pass would then
+    change nothing: the labels are already their own roots), so that is checked between
+    passes instead of running one more.
     """
     first = np.asarray(first, np.int64)
     second = np.asarray(second, np.int64)
     label = np.arange(n)
+    low = np.minimum(first, second)      # the first pass: every label is its vertex
     while True:
-        low = np.minimum(label[first], label[second])
-        new = label.copy()
-        np.minimum.at(new, first, low)
-        np.minimum.at(new, second, low)
+        np.minimum.at(label, first, low)
+        np.minimum.at(label, second, low)
         while True:                      # pointer jumping: follow labels to their roots
-            jumped = new[new]
-            if np.array_equal(jumped, new):
+            jumped = label[label]
+            if not (jumped != label).any():
                 break
-            new = jumped
-        if np.array_equal(new, label):
+            label = jumped
+        at_first, at_second = label[first], label[second]
+        if not (at_first != at_second).any():
             return label
-        label = new
+        low = np.minimum(at_first, at_second)
 
 
 def prune_low_degree(n: int, first: np.ndarray, second: np.ndarray,
@@ -110,17 +113,16 @@ def prune_low_degree(n: int, first: np.ndarray, second: np.ndarray,
     """
     first = np.asarray(first, np.int64)
     second = np.asarray(second, np.int64)
-    alive = np.zeros(n, bool)
-    alive[first] = alive[second] = True
-    k = min(int(min_degree), max(int(alive.sum()) - 1, 0))
-    edge = np.ones(len(first), bool)
+    deg = np.bincount(first, minlength=n) + np.bincount(second, minlength=n)
+    alive = deg > 0                      # the vertices with an edge
+    k = min(int(min_degree), max(int(np.count_nonzero(alive)) - 1, 0))
     while True:
-        deg = np.bincount(first[edge], minlength=n) + np.bincount(second[edge], minlength=n)
         drop = alive & (deg < k)
         if not drop.any():
             return alive
         alive &= ~drop
-        edge &= alive[first] & alive[second]
+        edge = alive[first] & alive[second]  # the edges between live vertices
+        deg = np.bincount(first[edge], minlength=n) + np.bincount(second[edge], minlength=n)
 
 
 def shortest_path_completion(n: int, first: np.ndarray, second: np.ndarray,

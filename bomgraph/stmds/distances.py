@@ -403,6 +403,9 @@ class DistanceStore:
         n = self._n
         ok = self._prior[:n] | (self._count[:n] >= self.min_count)
         d, v = self.fused()
+        if ok.all():                     # every pair known: copies of the slots, in order
+            return KnownPairs(self._a[:n].copy(), self._b[:n].copy(), d, v,
+                              self._count[:n].copy())
         idx = np.flatnonzero(ok)
         return KnownPairs(self._a[idx], self._b[idx], d[idx], v[idx], self._count[idx])
 

@@ -20,6 +20,7 @@ variances of the fused distances (an option, chosen by the caller). Stress-1 is
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -224,10 +225,12 @@ class LaplacianSolver:
         w = np.asarray(weights, float)
         deg = np.bincount(first, w, n) + np.bincount(second, w, n)
         if n <= dense_max:
-            lap = np.zeros((n, n))
-            lap[first, second] = -w
-            lap[second, first] = -w
-            lap.flat[::n + 1] = deg
+            lap = np.zeros(n * n)                  # (n, n), filled through flat indices
+            neg = -w
+            lap[first * n + second] = neg
+            lap[second * n + first] = neg
+            lap[::n + 1] = deg
+            lap = lap.reshape(n, n)
             self._minv = np.linalg.inv(lap + 1.0 / n)
             return
         rows = np.concatenate([first, second, np.arange(n)])
@@ -236,13 +239,21 @@ class LaplacianSolver:
         lap = coo_matrix((vals, (rows, cols)), shape=(n, n)).tocsc()
         self._lu = splu(lap[1:, 1:].tocsc())
 
+    def _complex_inverse(self) -> np.ndarray | None:
+        """``(V + 1 1^T / n)^-1`` cast to complex, shape (n, n) (cast once, kept), for a
+        caller that multiplies complex ``b`` itself; None on the sparse path (use :meth:`solve`).
+        """
+        if self._minv is None:
+            return None
+        if self._minv_complex is None:
+            self._minv_complex = self._minv.astype(np.complex128)
+        return self._minv_complex
+
     def solve(self, b: np.ndarray) -> np.ndarray:
         """``V^+ b`` for ``b`` of shape (n,) or (n, k), real or complex, with zero (column) sums."""
         if self._minv is not None:
             if np.iscomplexobj(b):
-                if self._minv_complex is None:
-                    self._minv_complex = self._minv.astype(np.complex128)
-                return self._minv_complex @ b
+                return self._complex_inverse() @ b
             return self._minv @ b
         if self._lu is None:
             return np.zeros_like(b)
@@ -289,21 +300,26 @@ def _smacof_single(z: np.ndarray, first: np.ndarray, second: np.ndarray, delta: 
     """The SMACOF loop on points as complex numbers ``x + i y`` (one vectorised Guttman
     transform per iteration, no loop over pairs).
 
-    ``B(X) X`` at vertex ``i`` is ``sum_j w_ij delta_ij / d_ij (z_i - z_j)``: one ``bincount``
-    over both ends of every edge, on the real and imaginary parts interleaved. Returns the
-    final points, the raw stress history (starting point first) and whether the relative
-    decrease fell below ``tol``. An iterate whose stress rose (only possible through round-off
-    at a stationary point) is not accepted.
+    ``B(X) X`` at vertex ``i`` is ``sum_j w_ij delta_ij / d_ij (z_i - z_j)``: one complex
+    ``np.add.at`` over the first ends of the edges and one ``np.subtract.at`` over the second
+    ends, into a fresh ``(n,)`` complex array (the sums of a ``bincount`` over both ends of
+    ``(v, -v)``, in the same order: the same bits). The scatter's target and indices are
+    arrays made here (fresh and contiguous: ``ufunc.at`` is slow on arrays read back from a
+    pickle); the Laplacian's complex inverse is taken once, outside the loop. Plain operators
+    rather than ``out=`` keywords: numpy reuses their temporaries, and parsing the keyword
+    costs more than the allocation at these sizes. Returns the final points, the raw stress
+    history (starting point first) and whether the relative decrease fell below ``tol``. An
+    iterate whose stress rose (only possible through round-off at a stationary point) is not
+    accepted.
     """
     n = z.shape[0]
     e = first.size
     wd = weights * delta
-    # vertex index of each (edge end, real/imaginary part), matching the float view of
-    # concatenate((v, -v)): [2 first, 2 first + 1, ..., 2 second, 2 second + 1, ...]
+    # both ends of every edge in one fresh int64 array: one gather per iteration
     ends = np.concatenate((first, second))
-    slot = np.empty(4 * e, np.int64)
-    slot[0::2] = 2 * ends
-    slot[1::2] = 2 * ends + 1
+    first, second = ends[:e], ends[e:]
+    minv = solver._complex_inverse()               # (n, n) complex, None: the sparse LU
+    relaxed = relaxation != 1.0
     z = z - z.mean()
     diff = z[first] - z[second]
     dist = np.abs(diff)
@@ -311,23 +327,19 @@ def _smacof_single(z: np.ndarray, first: np.ndarray, second: np.ndarray, delta: 
     s = float(np.dot(weights, r * r))
     history = [s]
     ratio = np.zeros(e)
-    both = np.empty(2 * e, np.complex128)        # (v, -v), reused by every iteration
-    v = both[:e]
-    flat = both.view(np.float64)
-    # -v negated as real and imaginary parts: the same bits as a complex negate, faster
-    v_parts, minus_v_parts = flat[:2 * e], flat[2 * e:]
     for _ in range(max_iter):
         if s == 0.0:
             return z, history, True
         if dist.min() > 0:                       # no coincident points: no mask needed
-            np.divide(wd, dist, out=ratio)
-        else:
+            ratio = wd / dist
+        else:                                    # (coincident: the last ratio kept there)
             np.divide(wd, dist, out=ratio, where=dist > 0)
-        np.multiply(ratio, diff, out=v)
-        np.negative(v_parts, out=minus_v_parts)
-        bz = np.bincount(slot, flat, 2 * n).view(np.complex128)
-        g = solver.solve(bz)
-        z_new = g if relaxation == 1.0 else z + relaxation * (g - z)
+        v = ratio * diff
+        bz = np.zeros(n, np.complex128)
+        np.add.at(bz, first, v)
+        np.subtract.at(bz, second, v)
+        g = minv @ bz if minv is not None else solver.solve(bz)
+        z_new = z + relaxation * (g - z) if relaxed else g
         at_ends = z_new[ends]                    # both ends of every edge in one gather
         diff_new = at_ends[:e] - at_ends[e:]
         dist_new = np.abs(diff_new)
@@ -384,7 +396,9 @@ def smacof(n: int, first: np.ndarray, second: np.ndarray, dissimilarity: np.ndar
         raise ConfigError(f"smacof: init must have shape (n={n}, 2), got {x0.shape}")
     if not (first.shape == second.shape == delta.shape == w.shape):
         raise ConfigError("smacof: first, second, dissimilarity and weights differ in length")
-    if np.any(w <= 0) or not np.all(np.isfinite(w)):
+    # all positive and finite checked by two reductions (NaN fails both comparisons)
+    weights_ok = w.size == 0 or (w.min() > 0 and w.max() < math.inf)
+    if not weights_ok:
         raise ConfigError("smacof: weights must be finite and > 0 (leave unknown pairs out)")
     if not 0 < relaxation < 2:
         raise ConfigError(f"smacof: relaxation must be in (0, 2), got {relaxation}")
@@ -394,7 +408,7 @@ def smacof(n: int, first: np.ndarray, second: np.ndarray, dissimilarity: np.ndar
         solver = LaplacianSolver(n, first, second, w)
     z, hist, conv = _smacof_single(x0[:, 0] + 1j * x0[:, 1], first, second, delta, w, solver,
                                    max_iter, tol, relaxation)
-    x = np.column_stack([z.real, z.imag])
+    x = z.view(np.float64).reshape(n, 2)          # (x, y) rows: the parts of the fresh z
     norm = float(np.dot(w, delta * delta))
     s1 = float(np.sqrt(hist[-1] / norm)) if norm > 0 else 0.0
     return SmacofResult(x, s1, hist[-1], len(hist) - 1, conv, np.array(hist))

@@ -101,23 +101,28 @@ def reconstruct(config: StmdsConfig, n_nodes: int, n_landmarks: int, first: np.n
         seen[:n_lm] = False
         m_seen = min(len(triangulated), n_lm)
         seen[:m_seen] = triangulated[:m_seen]
-        live = seen[first] & seen[second]
-        first, second = first[live], second[live]
-        distance_m, variance_m2, measured = distance_m[live], variance_m2[live], measured[live]
+        if not seen.all():
+            first, second, distance_m, variance_m2, measured = _select(
+                seen[first] & seen[second], first, second, distance_m, variance_m2, measured)
         # which landmarks are mapped is decided by triangulated distances alone; priors
         # then constrain the mapped ones (a landmark held only by priors is left out)
-        touched = prune_low_degree(n_nodes, first[measured], second[measured], cfg.min_degree)
+        touched = prune_low_degree(n_nodes, *_select(measured, first, second),
+                                   cfg.min_degree)
     else:
         touched = prune_low_degree(n_nodes, first, second, cfg.min_degree)
-    live = touched[first] & touched[second]
-    first, second = first[live], second[live]
-    dist, var = distance_m[live], variance_m2[live]
+    dist, var = distance_m, variance_m2
+    if not touched.all():
+        first, second, dist, var = _select(touched[first] & touched[second], first, second,
+                                           dist, var)
     if len(first) == 0:
         return _empty(f"no landmarks with {cfg.min_degree} known distances yet")
     nodes = np.flatnonzero(touched)
-    local = np.full(n_nodes, -1, np.int64)
-    local[nodes] = np.arange(len(nodes))
-    lf, ls = local[first], local[second]
+    if len(nodes) == n_nodes:                  # every node kept: local indices are the nodes
+        lf, ls = first, second
+    else:
+        local = np.full(n_nodes, -1, np.int64)
+        local[nodes] = np.arange(len(nodes))
+        lf, ls = local[first], local[second]
     # the component with the most landmarks (robot positions do not count)
     comp = largest_component(len(nodes), lf, ls, (nodes < n_lm).astype(float))
     kept_nodes, ef, es, ed, ev = _restrict(comp, nodes, lf, ls, dist, var)
@@ -167,6 +172,14 @@ def reconstruct(config: StmdsConfig, n_nodes: int, n_landmarks: int, first: np.n
     assert xy is not None
     info["stress1"] = stress1(xy, ef, es, ed, w) if len(ed) else 0.0
     return Reconstruction(kept_nodes, xy, left, use_smacof, info)
+
+
+def _select(mask: np.ndarray, *arrays: np.ndarray) -> tuple[np.ndarray, ...]:
+    """``arrays`` at the entries where the bool ``mask`` (shape (P,)) holds; the arrays
+    themselves (not copies: nothing here writes to them) when it holds everywhere."""
+    if mask.all():
+        return arrays
+    return tuple(a[mask] for a in arrays)
 
 
 def _restrict(comp: Component, nodes: np.ndarray, first: np.ndarray, second: np.ndarray,
