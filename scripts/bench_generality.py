@@ -54,7 +54,7 @@ from bomgraph.datasets.calibration import odometry_length_ratio
 from bomgraph.errors import BomgraphError
 from bomgraph.evaluate import score_estimate
 from bomgraph.jsonio import jsonable
-from bomgraph.mapper import MapEstimate, available_methods, method_config_class
+from bomgraph.mapper import MapEstimate, available_methods, method_config_class, method_info
 from bomgraph.stream_file import StreamReader
 
 FAMILIES = ("m6", "m6dense", "m6sigx0.5", "m6sigx2", "m1", "m1dense", "m1cal", "m1densecal")
@@ -130,6 +130,12 @@ def one_run(stream: Path, method: str, checkpoint_every: int) -> dict[str, Any]:
                            "preset": options.get("preset", "default"),
                            "checkpoint_every": checkpoint_every}
     t0 = time.process_time()
+    if method_info(method).needs_truth:
+        with StreamReader(stream) as reader:
+            truth = reader.truth
+        if truth is None or truth.poses is None:  # not run, not a failure: printed "no truth"
+            row.update(mpe_m=math.nan, n_mapped=0, no_truth=True, cpu_s=0.0)
+            return row
     try:
         result = run_file(stream, method, options, checkpoint_every=checkpoint_every,
                           allow_truth=True)
@@ -207,6 +213,7 @@ def summarise(rows: list[dict[str, Any]], methods: list[str], robots: list[int],
     odometry sets)."""
     mpe = {(r["stream"], r["method"], r["checkpoint_every"]): r.get(key, math.nan)
            for r in rows}
+    no_truth = {(r["stream"], r["method"]) for r in rows if r.get("no_truth")}
 
     def bound_of(s: str) -> float:  # the oracle; on MRCLAM1 (no robot truth) the best method
         if s.startswith("m1"):
@@ -260,7 +267,8 @@ def summarise(rows: list[dict[str, Any]], methods: list[str], robots: list[int],
                       # failed, where the ratio is NaN too)
                       "failed_runs": sum(1 for r in robots for fam in families if not
                                          math.isfinite(mpe.get((f"{fam}_r{r}", m, 10),
-                                                               math.nan)))}
+                                                               math.nan))
+                                         and (f"{fam}_r{r}", m) not in no_truth)}
     return summary
 
 
@@ -292,7 +300,9 @@ def print_tables(rows: list[dict[str, Any]], methods: list[str], robots: list[in
             cells = []
             for m in methods:
                 row = by.get((s, m))
-                if row is None or not math.isfinite(row["mpe_m"]):
+                if row is not None and row.get("no_truth"):  # a bound without the truth
+                    cells.append("no truth".rjust(width + 5))
+                elif row is None or not math.isfinite(row["mpe_m"]):
                     cells.append("fail".rjust(width + 5))
                 else:
                     cells.append(f"{100 * row['mpe_m']:.1f} ({row['n_mapped']})"

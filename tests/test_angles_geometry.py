@@ -114,3 +114,22 @@ def test_ray_groups_are_intersect_rays_point_by_point_bit_for_bit() -> None:
             a, b = n.sum(0), np.einsum("kij,kj->i", n, origins[owner == i])
             assert np.array_equal(np.linalg.solve(a[None], b[None, :, None])[0, :, 0], xy[i])
     assert ok[counts > 1].sum() > 25 and refused >= 3 and not ok[3] and not ok[5]
+
+
+def test_wrap_leaves_an_angle_in_range_exactly_as_it_is() -> None:
+    """(-pi, pi] is the range: an angle in it comes back bit for bit, as an array, one float
+    and through a residual of zero length turn (``pi - mod(pi - a, 2 pi)`` moved 0.31 to
+    0.31000000000000005, and a fifth of uniform angles by an ulp)."""
+    rng = np.random.default_rng(7)
+    a = np.concatenate([rng.uniform(-np.pi, np.pi, 20_000), [0.31, np.pi, np.nextafter(-np.pi, 0),
+                                                             1e-300, -0.0, 3.0]])
+    assert np.array_equal(wrap_angle(a), a)
+    assert all(wrap_angle(float(x)) == x for x in a[-6:])
+    assert wrap_angle(0.31) == 0.31
+    assert np.array_equal(angle_residual(a, 0.0), a)
+    # outside the range it still wraps, to (-pi, pi]
+    out = np.concatenate([a + 2 * np.pi, a - 4 * np.pi, [-np.pi, 7.0]])
+    w = wrap_angle(out)
+    assert np.all((w > -np.pi) & (w <= np.pi))
+    np.testing.assert_allclose(np.cos(w), np.cos(out), atol=1e-12)
+    np.testing.assert_allclose(np.sin(w), np.sin(out), atol=1e-12)

@@ -121,3 +121,25 @@ def test_failed_runs_counts_the_methods_own_failures_not_its_bounds() -> None:
     assert summary["ekf"]["failed_runs"] == 1      # m6_r2; it was 2 (m6_r1 too)
     assert summary["oracle"]["failed_runs"] == 1   # m6_r1
     assert math.isclose(summary["ekf"]["max_vs_bound"], 2.0)
+
+
+def test_a_bound_on_a_stream_without_robot_truth_is_no_truth_not_a_failure(tmp_path,
+                                                                           capsys) -> None:
+    """MRCLAM1 has landmark truth only: the oracle cannot run there. Its cell printed ``fail``
+    and its 10 such streams counted as 10 failed runs; the README's table says ``no truth``."""
+    from bomgraph.sim import SimConfig, paper_design, simulate_run
+    from bomgraph.stream import Stream
+    from bomgraph.stream_file import write_stream
+
+    s = simulate_run(paper_design(0)[0], SimConfig(n_steps=30))
+    landmarks_only = Truth(s.truth.landmark_ids, s.truth.landmarks_xy, None)
+    path = tmp_path / "m1_r1.jsonl"
+    write_stream(Stream(s.header, s.steps, landmarks_only), path)
+    rows = [bench.one_run(path, m, 10) for m in ("ekf", "oracle")]
+    assert rows[1].get("no_truth") and "error" not in rows[1]
+    assert math.isfinite(rows[0]["mpe_m"])
+    summary = bench.summarise(rows, ["ekf", "oracle"], [1], ("m1",))
+    assert summary["oracle"]["failed_runs"] == 0
+    bench.print_tables(rows, ["ekf", "oracle"], [1], summary, ("m1",))
+    line = next(ln for ln in capsys.readouterr().out.splitlines() if ln.startswith("m1_r1"))
+    assert line.split()[-2:] == ["no", "truth"]

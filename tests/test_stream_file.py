@@ -68,6 +68,19 @@ def test_bearings_are_wrapped_on_read(tmp_path: Path) -> None:
                                                          np.pi])
 
 
+def test_bearings_in_range_are_read_exactly_and_written_back_as_they_were(tmp_path: Path) -> None:
+    """A bearing already in (-pi, pi] is the file's value bit for bit (wrapping it anyway moved
+    0.31 to 0.31000000000000005, so a stream read and written again changed)."""
+    values = [0.31, -1.02, 1.84, 2.9, -0.7, np.pi]
+    steps = [{"t": 0, "bearings": [[i, v] for i, v in enumerate(values)]}]
+    src = write_lines(tmp_path / "in.jsonl", [{**HEADER, "truth": None}, *steps])
+    s = read_stream(src)
+    assert s.steps[0].bearings_rad.tolist() == values
+    write_stream(s, tmp_path / "out.jsonl")
+    back = [json.loads(ln) for ln in (tmp_path / "out.jsonl").read_text().splitlines()]
+    assert [b for _, b in back[-1]["bearings"]] == values
+
+
 def test_lazy_reader_yields_steps_one_by_one(tmp_path: Path) -> None:
     path = write_lines(tmp_path / "ex.jsonl", [HEADER, *STEPS])
     with StreamReader(path) as reader:
