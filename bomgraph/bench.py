@@ -19,6 +19,7 @@ import json
 import logging
 import math
 import os
+import socket
 import tempfile
 import time
 import traceback
@@ -128,6 +129,17 @@ def _failure(exc: BaseException) -> str:
     return f"{type(exc).__name__}: {exc}" + (f" ({note})" if note else "")
 
 
+def _unloadable(exc: BaseException) -> str:
+    """A failed run's error for a task whose methods this process cannot load or hash, though
+    the process that made the task could (a worker without the plugin, or one that imports
+    the plugin after an edit that broke it)."""
+    first = (str(exc).splitlines() or [""])[0].split("; known methods")[0]
+    where = f"process {os.getpid()} on {socket.gethostname()}"
+    return (f"{type(exc).__name__}: {first}, in the {where}, which ran it; every worker needs "
+            f"bomgraph and your plugins importable (installed there, or on the PYTHONPATH the "
+            f"workers start with): fix that and restart the workers (finished runs are cached)")
+
+
 def _traceback(exc: BaseException) -> str:
     """The last frames of ``exc``'s traceback (its notes included), for results.json."""
     return "".join(traceback.format_exception(exc, limit=-12))
@@ -135,9 +147,13 @@ def _traceback(exc: BaseException) -> str:
 
 def _run_task(task: Task) -> dict[str, Any]:
     out: dict[str, Any] = {"experiment": task.experiment, "arm": task.arm.label,
-                           "method": task.arm.method, "run": task.source.name,
-                           "key": task_key(task)}
-    stale = stale_plugin(task)
+                           "method": task.arm.method, "run": task.source.name, "key": None}
+    try:  # a worker that cannot load a method the client could: a failed run, not a raise
+        out["key"] = task_key(task)
+        stale = stale_plugin(task)
+    except Exception as exc:
+        out.update(ok=False, error=_unloadable(exc))
+        return out
     if stale:
         out.update(ok=False, error=stale)
         return out
