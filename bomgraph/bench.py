@@ -14,6 +14,7 @@ The core never prints: progress is reported through a callback.
 from __future__ import annotations
 
 import contextlib
+import contextvars
 import hashlib
 import json
 import logging
@@ -84,6 +85,11 @@ def run_task(task: Task) -> dict[str, Any]:
         return _run_task(task)
 
 
+#: True while :func:`_indexed` runs a task: in a worker (local or Dask), not in the process
+#: that made the task (a serial run), for what a failure tells to do.
+_IN_WORKER: contextvars.ContextVar[bool] = contextvars.ContextVar("in_worker", default=False)
+
+
 def _run_method(task: Task, arm: Arm, stream: Stream,
                 on_checkpoint: Callable[[Checkpoint], None]) -> RunResult:
     """The arm on the stream, each checkpoint handed to ``on_checkpoint`` as it is taken and
@@ -150,7 +156,7 @@ def _run_task(task: Task) -> dict[str, Any]:
                            "method": task.arm.method, "run": task.source.name, "key": None}
     try:  # a worker that cannot load a method the client could: a failed run, not a raise
         out["key"] = task_key(task)
-        stale = stale_plugin(task)
+        stale = stale_plugin(task, worker=_IN_WORKER.get())
     except Exception as exc:
         out.update(ok=False, error=_unloadable(exc))
         return out
@@ -400,7 +406,12 @@ def _write_cached(path: Path, result: Mapping[str, Any]) -> None:
 
 
 def _indexed(k: int, task: Task) -> tuple[int, dict[str, Any]]:
-    return k, run_task(task)
+    """In a worker: ``k`` and the task's result."""
+    token = _IN_WORKER.set(True)
+    try:
+        return k, run_task(task)
+    finally:
+        _IN_WORKER.reset(token)
 
 
 #: local worker processes per core at most: a typo (``--jobs 100000``) started that many.
