@@ -418,17 +418,21 @@ def _indexed(k: int, task: Task) -> tuple[int, dict[str, Any]]:
 MAX_WORKERS_PER_CORE = 4
 
 
-def _local_workers(requested: int, n_tasks: int) -> int:
+def _local_workers(requested: int, n_tasks: int, *, two_for_one: bool = False) -> int:
     """Local worker processes for ``n_tasks`` tasks: ``requested`` (-1, joblib's one per
     core, is passed on), but never more than the tasks nor :data:`MAX_WORKERS_PER_CORE` per
-    core."""
+    core. ``two_for_one``: a pool of one is started as two processes that take one task at
+    a time (:func:`bomgraph.processes.dispatch`), as the log line says."""
     if requested < 1:
         return requested
     cap = min(n_tasks, MAX_WORKERS_PER_CORE * (os.cpu_count() or 1))
+    n = max(min(requested, cap), 1)
     if requested > cap:
-        _log.info("%d worker processes asked for %d task(s) on %d core(s): starting %d",
-                  requested, n_tasks, os.cpu_count() or 1, max(cap, 1))
-    return max(min(requested, cap), 1)
+        started = ("2, one task at a time (a pool of one would run it in this process)"
+                   if two_for_one and n == 1 else str(n))
+        _log.info("%d worker processes asked for %d task(s) on %d core(s): starting %s",
+                  requested, n_tasks, os.cpu_count() or 1, started)
+    return n
 
 
 def _dispatch(tasks: list[Task], index: list[int],
@@ -449,7 +453,8 @@ def _dispatch(tasks: list[Task], index: list[int],
     if executor.backend == "processes":
         from .processes import dispatch
 
-        yield from dispatch(_indexed, index, tasks, _local_workers(executor.n_jobs, len(tasks)),
+        yield from dispatch(_indexed, index, tasks,
+                            _local_workers(executor.n_jobs, len(tasks), two_for_one=True),
                             failed, fresh=workers_outdated(tasks))
     else:
         from .cluster import dispatch as dispatch_dask
