@@ -58,7 +58,7 @@ def dispatch(func: Callable[[int, Any], tuple[int, dict[str, Any]]], index: Sequ
                         yield k, res
             except BrokenProcessPool as exc:
                 running = [k for k in pending if os.path.exists(_mark(marks, k))]
-                why = _died(exc)
+                why = _died(exc, began=False)  # for workers that cannot start
             else:  # a pool that ended without a task's result (never joblib's): not a loop
                 for k in list(pending):
                     del pending[k]
@@ -131,13 +131,20 @@ def _clear(marks: str) -> None:
         os.unlink(os.path.join(marks, name))
 
 
-def _died(exc: BaseException) -> str:
+def _died(exc: BaseException, began: bool = True) -> str:
     """A failed run's error for a task whose worker process died, with the exit codes that
     joblib gives (``SIGSEGV(-11)``: a crash in native code; ``SIGKILL(-9)``: often the
-    out-of-memory killer)."""
+    out-of-memory killer). ``began``: False when the workers of two pools in a row died
+    before any task began, so no worker ran this one: they cannot start here."""
     codes = re.search(r"exit codes of the workers are (\{[^}]*\})", str(exc))
-    return (f"WorkerDied: the worker process that ran it died"
-            f"{f' (exit codes {codes.group(1)})' if codes else ''}: a crash in native "
+    codes_text = f" (exit codes {codes.group(1)})" if codes else ""
+    if not began:
+        return (f"WorkerDied: the worker processes died before any run began, twice in a "
+                f"row{codes_text}, so they cannot start here: something at their start kills "
+                f"them (a sitecustomize or .pth file, a memory limit, the out-of-memory "
+                f"killer); fix that, or run serially (--jobs 1, Executor('serial')); finished "
+                f"runs are cached")
+    return (f"WorkerDied: the worker process that ran it died{codes_text}: a crash in native "
             f"code, the out-of-memory killer, or os._exit in the method; run it alone with "
             f"`bomgraph run STREAM --method NAME` to see (finished runs are cached)")
 

@@ -148,3 +148,24 @@ def test_workers_that_die_once_before_any_run_do_not_fail_the_sweep(tmp_path: Pa
     assert (tmp_path / "died").exists()
     assert proc.returncode == 0, err
     assert len(results) == 2 and all(r["ok"] for r in results), err
+
+
+def test_workers_that_never_start_say_so_not_that_a_worker_ran_the_run(tmp_path: Path) -> None:
+    """Every worker process dies as it starts, in two pools in a row: every run fails, and
+    its error said "the worker process that ran it died ... os._exit in the method; run it
+    alone with `bomgraph run`", though no worker ran it (h41): now it says the workers
+    cannot start, and what to do."""
+    streams = _dying_plugin(tmp_path, 2)
+    (tmp_path / "site" / "sitecustomize.py").write_text(textwrap.dedent("""\
+        import os, sys
+        if any("popen_loky" in a for a in sys.orig_argv):  # every joblib worker dies
+            os._exit(9)
+        """))
+    proc, results = _compare(tmp_path, "never", "triangulate", "2", streams)
+    err = no_traceback(proc)
+    assert proc.returncode == 1, err
+    assert len(results) == 2 and not any(r["ok"] for r in results), err
+    for r in results:
+        assert r["error"].startswith("WorkerDied: the worker processes died before any run "
+                                     "began, twice in a row"), r["error"]
+        assert "EXIT(9)" in r["error"] and "ran it" not in r["error"], r["error"]
