@@ -169,3 +169,36 @@ def test_workers_that_never_start_say_so_not_that_a_worker_ran_the_run(tmp_path:
         assert r["error"].startswith("WorkerDied: the worker processes died before any run "
                                      "began, twice in a row"), r["error"]
         assert "EXIT(9)" in r["error"] and "ran it" not in r["error"], r["error"]
+
+
+def _pid_of(k: int, _: object) -> tuple[int, dict]:
+    return k, {"pid": os.getpid()}
+
+
+def test_marks_folders_of_a_killed_dispatch_are_removed_by_the_next_only(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A compare ended by SIGKILL left its ``bomgraph-running-*`` folder in the temporary
+    folder (h41, after ``kill -9`` of ``compare --jobs 2``: the folder and the marks of its
+    two runs in flight). The next dispatch removes such a folder when its owner file names a
+    process of this host and pid namespace that is gone, and no other."""
+    import tempfile
+
+    from bomgraph import processes
+
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+    me = processes._owner()
+    gone = subprocess.Popen([sys.executable, "-c", "pass"])
+    gone.wait()
+    folders = {"dead": {**me, "pid": gone.pid}, "live": me, "other-host": {
+        **me, "pid": gone.pid, "host": me["host"] + "-x"}, "other-ns": {
+        **me, "pid": gone.pid, "pid_ns": "pid:[1]"}, "no-owner": None}
+    for name, owner in folders.items():
+        folder = tmp_path / f"{processes.MARKS_PREFIX}{name}"
+        folder.mkdir()
+        (folder / "3").write_text("")  # a run's mark
+        if owner is not None:
+            (folder / processes.OWNER).write_text(json.dumps(owner))
+    out = dict(dispatch(_pid_of, [0, 1], [None, None], 2, lambda k, why: {"failed": why}))
+    assert sorted(out) == [0, 1] and "failed" not in out[0], out
+    left = sorted(p.name for p in tmp_path.iterdir() if p.name.startswith("bomgraph-running"))
+    assert left == [f"{processes.MARKS_PREFIX}{n}" for n in sorted(folders) if n != "dead"]
