@@ -31,7 +31,8 @@ from typing import Any, Callable, Iterable, Iterator, Mapping, Sequence
 import numpy as np
 
 from .checks import is_integer
-from .errors import ConfigError, TooFewLandmarksError
+from .errors import (ConfigError, StreamFormatError, TooFewLandmarksError,
+                     UnknownMethodError)
 from .estimate_file import stream_identity, untimed_estimate_text, write_estimate
 from .evaluate import CheckpointScore, score_checkpoints, score_estimate
 from .experiments import Arm, Experiment, SimSource, Task
@@ -136,14 +137,21 @@ def _failure(exc: BaseException) -> str:
 
 
 def _unloadable(exc: BaseException) -> str:
-    """A failed run's error for a task whose methods this process cannot load or hash, though
-    the process that made the task could (a worker without the plugin, or one that imports
-    the plugin after an edit that broke it)."""
+    """A failed run's error for a task that a worker cannot key, though the process that made
+    the task could: a method it cannot load or hash (no plugin there, or one broken by an
+    edit since), a stream file it cannot read, or another error (its traceback is kept)."""
     first = (str(exc).splitlines() or [""])[0].split("; known methods")[0]
-    where = f"process {os.getpid()} on {socket.gethostname()}"
-    return (f"{type(exc).__name__}: {first}, in the {where}, which ran it; every worker needs "
-            f"bomgraph and your plugins importable (installed there, or on the PYTHONPATH the "
-            f"workers start with): fix that and restart the workers (finished runs are cached)")
+    where = (f"{type(exc).__name__}: {first}, in the process {os.getpid()} on "
+             f"{socket.gethostname()}, which ran it")
+    if isinstance(exc, (UnknownMethodError, ImportError)):
+        return (f"{where}; every worker needs bomgraph and your plugins importable (installed "
+                f"there, or on the PYTHONPATH the workers start with): fix that and restart "
+                f"the workers (finished runs are cached)")
+    if isinstance(exc, (StreamFormatError, OSError)):  # FileSource.key hashes the file
+        return (f"{where}; every worker reads the stream files at the paths the sweep gives "
+                f"(a folder shared at the same path): make the file readable there and run "
+                f"again (finished runs are cached)")
+    return f"{where} (traceback in results.json)"
 
 
 def _traceback(exc: BaseException) -> str:
@@ -154,11 +162,15 @@ def _traceback(exc: BaseException) -> str:
 def _run_task(task: Task) -> dict[str, Any]:
     out: dict[str, Any] = {"experiment": task.experiment, "arm": task.arm.label,
                            "method": task.arm.method, "run": task.source.name, "key": None}
-    try:  # a worker that cannot load a method the client could: a failed run, not a raise
+    try:  # in a worker, what the client could key and it cannot: a failed run, not a raise
         out["key"] = task_key(task)
         stale = stale_plugin(task, worker=_IN_WORKER.get())
     except Exception as exc:
+        if not _IN_WORKER.get():  # the process that made the task: its error, as it keyed it
+            raise
         out.update(ok=False, error=_unloadable(exc))
+        if not isinstance(exc, (UnknownMethodError, ImportError, StreamFormatError, OSError)):
+            out["traceback"] = _traceback(exc)
         return out
     if stale:
         out.update(ok=False, error=stale)

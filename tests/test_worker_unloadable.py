@@ -87,3 +87,53 @@ def test_a_plugin_package_that_raises_on_import_is_an_unknown_method_error(
                        "FirstSightMapper': importing it raised NameError: name "
                        "'undefined_name_h41' is not defined"):
         execute(exp.tasks(), Executor("serial"))
+
+
+def test_run_task_outside_a_worker_raises_what_keying_raised(tmp_path: Path) -> None:
+    """Outside a worker (``run_task`` called directly, a serial run), a task whose method
+    cannot be loaded raised UnknownMethodError, as on main; h41's branch returned a failed run
+    saying "every worker needs ... restart the workers", with no worker (h42)."""
+    from bomgraph.bench import run_task
+
+    stream = tmp_path / "s.jsonl"
+    write_stream(simulate(SimConfig(n_steps=20), np.random.default_rng(0)), stream)
+    exp = Experiment("e", "e", (Arm("nope", "no-such-method-h42"),),
+                     sources=(FileSource(str(stream)),))
+    with pytest.raises(UnknownMethodError, match="unknown method 'no-such-method-h42'"):
+        run_task(exp.tasks()[0])
+
+
+def test_a_stream_file_a_worker_cannot_read_is_not_blamed_on_the_plugins(
+        tmp_path: Path) -> None:
+    """A worker that cannot read a task's stream file (a Dask worker on another machine, a
+    file removed during the sweep) fails the run when keying it: h41's branch told to make
+    the plugins importable and restart the workers; now it names the file (h42)."""
+    from bomgraph.bench import _dispatch
+
+    gone = tmp_path / "gone.jsonl"
+    exp = Experiment("e", "e", (Arm("tri", "triangulate"),), sources=(FileSource(str(gone)),))
+    ((_, res),) = list(_dispatch(exp.tasks(), [0], Executor("processes", n_jobs=2)))
+    assert not res["ok"] and "\n" not in res["error"], res
+    assert res["error"].startswith(f"StreamFormatError: {gone}: cannot open: No such file"), \
+        res["error"]
+    assert "in the process " in res["error"] and "every worker reads" in res["error"]
+    assert "plugins importable" not in res["error"], res["error"]
+
+
+class _BrokenKey(FileSource):
+    def key(self) -> dict:
+        raise TypeError("a bug in a source's key (h42)")
+
+
+def test_an_unexpected_error_keying_in_a_worker_keeps_its_traceback(tmp_path: Path) -> None:
+    """Any other exception keying a task in a worker (a bug) is a failed run with its
+    traceback in the result, not blamed on the plugins (h42)."""
+    from bomgraph.bench import _indexed
+
+    exp = Experiment("e", "e", (Arm("tri", "triangulate"),),
+                     sources=(_BrokenKey(str(tmp_path / "s.jsonl")),))
+    _, res = _indexed(0, exp.tasks()[0])
+    assert not res["ok"]
+    assert res["error"].startswith("TypeError: a bug in a source's key (h42), in the process")
+    assert "plugins importable" not in res["error"], res["error"]
+    assert "in key\n" in res.get("traceback", ""), res
