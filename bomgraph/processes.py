@@ -148,25 +148,31 @@ def _clear(marks: str) -> None:
 
 
 def _owner() -> dict[str, Any]:
-    """This process, as a marks folder's :data:`OWNER` file names it: its pid, and the host
-    and pid namespace in which that pid means this process."""
+    """This process, as a marks folder's :data:`OWNER` file names it: its pid, and the host,
+    kernel boot and pid namespace in which that pid means this process (the namespace's link
+    alone is the same on every machine for its first processes, ``pid:[4026531836]``: the
+    boot id tells two machines of one name apart)."""
     try:
         namespace: str | None = os.readlink("/proc/self/ns/pid")
+        with open("/proc/sys/kernel/random/boot_id", encoding="ascii") as fh:
+            boot: str | None = fh.read().strip() or None
     except OSError:  # not Linux: no namespace to compare, no folder is ever removed
-        namespace = None
-    return {"pid": os.getpid(), "host": socket.gethostname(), "pid_ns": namespace}
+        namespace = boot = None
+    return {"pid": os.getpid(), "host": socket.gethostname(), "pid_ns": namespace,
+            "boot_id": boot}
 
 
 def _remove_stale_marks() -> None:
     """Remove the marks folders that a dispatch ended by SIGKILL (or a power cut) left in the
     temporary folder: only those of this user whose :data:`OWNER` file names a process of
-    this host and pid namespace that is no longer there. A folder without that file (being
-    made, or made by an older bomgraph), of another user, host or container, or of a live
-    process (or of a pid taken again since) is left alone."""
+    this host, kernel boot and pid namespace that is no longer there. A folder without that
+    file (being made, or made by an older bomgraph), of another user, host, machine of the
+    same name or container, or of a live process (or of a pid taken again since) is left
+    alone."""
     me = _owner()
     uid = getattr(os, "getuid", lambda: None)()
     root = tempfile.gettempdir()
-    if me["pid_ns"] is None or uid is None:
+    if me["pid_ns"] is None or me["boot_id"] is None or uid is None:
         return
     try:
         names = [n for n in os.listdir(root) if n.startswith(MARKS_PREFIX)]
@@ -184,7 +190,8 @@ def _remove_stale_marks() -> None:
             continue
         pid = owner.get("pid") if isinstance(owner, dict) else None
         if (type(pid) is int and pid > 0 and owner.get("host") == me["host"]
-                and owner.get("pid_ns") == me["pid_ns"] and not _alive(pid)):
+                and owner.get("pid_ns") == me["pid_ns"]
+                and owner.get("boot_id") == me["boot_id"] and not _alive(pid)):
             shutil.rmtree(path, ignore_errors=True)
             _log.debug("removed %s, left by process %d, which is gone", path, pid)
 

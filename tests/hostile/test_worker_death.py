@@ -202,3 +202,31 @@ def test_marks_folders_of_a_killed_dispatch_are_removed_by_the_next_only(
     assert sorted(out) == [0, 1] and "failed" not in out[0], out
     left = sorted(p.name for p in tmp_path.iterdir() if p.name.startswith("bomgraph-running"))
     assert left == [f"{processes.MARKS_PREFIX}{n}" for n in sorted(folders) if n != "dead"]
+
+
+def test_a_marks_folder_of_another_kernel_is_left_alone(tmp_path: Path,
+                                                        monkeypatch: pytest.MonkeyPatch) -> None:
+    """The pid namespace of every host's first processes is the same link
+    (``pid:[4026531836]``, the kernel's constant for the initial namespace), so two machines
+    of one name that share the temporary folder (a network file system) could not be told
+    apart: a dispatch on one removed the live marks folder of a sweep on the other, whose
+    next task then raised FileNotFoundError out of ``execute`` (h42). The owner file now
+    names the kernel's boot id too, and a folder of another boot is left alone."""
+    import tempfile
+
+    from bomgraph import processes
+
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+    me = processes._owner()
+    gone = subprocess.Popen([sys.executable, "-c", "pass"])
+    gone.wait()
+    folders = {"dead": {**me, "pid": gone.pid},
+               "other-boot": {**me, "pid": gone.pid, "boot_id": "another-machine"}}
+    for name, owner in folders.items():
+        folder = tmp_path / f"{processes.MARKS_PREFIX}{name}"
+        folder.mkdir()
+        (folder / processes.OWNER).write_text(json.dumps(owner))
+    out = dict(dispatch(_pid_of, [0], [None], 2, lambda k, why: {"failed": why}))
+    assert "failed" not in out[0], out
+    left = sorted(p.name for p in tmp_path.iterdir() if p.name.startswith("bomgraph-running"))
+    assert left == [f"{processes.MARKS_PREFIX}other-boot"], left
