@@ -105,9 +105,10 @@ def test_run_task_outside_a_worker_raises_what_keying_raised(tmp_path: Path) -> 
 
 def test_a_stream_file_a_worker_cannot_read_is_not_blamed_on_the_plugins(
         tmp_path: Path) -> None:
-    """A worker that cannot read a task's stream file (a Dask worker on another machine, a
-    file removed during the sweep) fails the run when keying it: h41's branch told to make
-    the plugins importable and restart the workers; now it names the file (h42)."""
+    """A worker that cannot read a task's stream file (a Dask worker on another machine
+    without it; here ``_dispatch`` alone, which does not key the task first) fails the run
+    when keying it: h41's branch told to make the plugins importable and restart the
+    workers; now it names the file and says the workers read it there (h42)."""
     from bomgraph.bench import _dispatch
 
     gone = tmp_path / "gone.jsonl"
