@@ -14,11 +14,13 @@ The core never prints: progress is reported through a callback.
 from __future__ import annotations
 
 import contextlib
+import contextvars
 import hashlib
 import json
 import logging
 import math
 import os
+import socket
 import tempfile
 import time
 import traceback
@@ -29,7 +31,8 @@ from typing import Any, Callable, Iterable, Iterator, Mapping, Sequence
 import numpy as np
 
 from .checks import is_integer
-from .errors import ConfigError, TooFewLandmarksError
+from .errors import (ConfigError, StreamFormatError, TooFewLandmarksError,
+                     UnknownMethodError)
 from .estimate_file import stream_identity, untimed_estimate_text, write_estimate
 from .evaluate import CheckpointScore, score_checkpoints, score_estimate
 from .experiments import Arm, Experiment, SimSource, Task
@@ -83,6 +86,11 @@ def run_task(task: Task) -> dict[str, Any]:
         return _run_task(task)
 
 
+#: True while :func:`_indexed` runs a task: in a worker (local or Dask), not in the process
+#: that made the task (a serial run), for what a failure tells to do.
+_IN_WORKER: contextvars.ContextVar[bool] = contextvars.ContextVar("in_worker", default=False)
+
+
 def _run_method(task: Task, arm: Arm, stream: Stream,
                 on_checkpoint: Callable[[Checkpoint], None]) -> RunResult:
     """The arm on the stream, each checkpoint handed to ``on_checkpoint`` as it is taken and
@@ -128,6 +136,24 @@ def _failure(exc: BaseException) -> str:
     return f"{type(exc).__name__}: {exc}" + (f" ({note})" if note else "")
 
 
+def _unloadable(exc: BaseException) -> str:
+    """A failed run's error for a task that a worker cannot key, though the process that made
+    the task could: a method it cannot load or hash (no plugin there, or one broken by an
+    edit since), a stream file it cannot read, or another error (its traceback is kept)."""
+    first = (str(exc).splitlines() or [""])[0].split("; known methods")[0]
+    where = (f"{type(exc).__name__}: {first}, in the process {os.getpid()} on "
+             f"{socket.gethostname()}, which ran it")
+    if isinstance(exc, (UnknownMethodError, ImportError)):
+        return (f"{where}; every worker needs bomgraph and your plugins importable (installed "
+                f"there, or on the PYTHONPATH the workers start with): fix that and restart "
+                f"the workers (finished runs are cached)")
+    if isinstance(exc, (StreamFormatError, OSError)):  # FileSource.key hashes the file
+        return (f"{where}; every worker reads the stream files at the paths the sweep gives "
+                f"(a folder shared at the same path): make the file readable there and run "
+                f"again (finished runs are cached)")
+    return f"{where} (traceback in results.json)"
+
+
 def _traceback(exc: BaseException) -> str:
     """The last frames of ``exc``'s traceback (its notes included), for results.json."""
     return "".join(traceback.format_exception(exc, limit=-12))
@@ -135,9 +161,17 @@ def _traceback(exc: BaseException) -> str:
 
 def _run_task(task: Task) -> dict[str, Any]:
     out: dict[str, Any] = {"experiment": task.experiment, "arm": task.arm.label,
-                           "method": task.arm.method, "run": task.source.name,
-                           "key": task_key(task)}
-    stale = stale_plugin(task)
+                           "method": task.arm.method, "run": task.source.name, "key": None}
+    try:  # in a worker, what the client could key and it cannot: a failed run, not a raise
+        out["key"] = task_key(task)
+        stale = stale_plugin(task, worker=_IN_WORKER.get())
+    except Exception as exc:
+        if not _IN_WORKER.get():  # the process that made the task: its error, as it keyed it
+            raise
+        out.update(ok=False, error=_unloadable(exc))
+        if not isinstance(exc, (UnknownMethodError, ImportError, StreamFormatError, OSError)):
+            out["traceback"] = _traceback(exc)
+        return out
     if stale:
         out.update(ok=False, error=stale)
         return out
@@ -384,24 +418,33 @@ def _write_cached(path: Path, result: Mapping[str, Any]) -> None:
 
 
 def _indexed(k: int, task: Task) -> tuple[int, dict[str, Any]]:
-    return k, run_task(task)
+    """In a worker: ``k`` and the task's result."""
+    token = _IN_WORKER.set(True)
+    try:
+        return k, run_task(task)
+    finally:
+        _IN_WORKER.reset(token)
 
 
 #: local worker processes per core at most: a typo (``--jobs 100000``) started that many.
 MAX_WORKERS_PER_CORE = 4
 
 
-def _local_workers(requested: int, n_tasks: int) -> int:
+def _local_workers(requested: int, n_tasks: int, *, two_for_one: bool = False) -> int:
     """Local worker processes for ``n_tasks`` tasks: ``requested`` (-1, joblib's one per
     core, is passed on), but never more than the tasks nor :data:`MAX_WORKERS_PER_CORE` per
-    core."""
+    core. ``two_for_one``: a pool of one is started as two processes that take one task at
+    a time (:func:`bomgraph.processes.dispatch`), as the log line says."""
     if requested < 1:
         return requested
     cap = min(n_tasks, MAX_WORKERS_PER_CORE * (os.cpu_count() or 1))
+    n = max(min(requested, cap), 1)
     if requested > cap:
-        _log.info("%d worker processes asked for %d task(s) on %d core(s): starting %d",
-                  requested, n_tasks, os.cpu_count() or 1, max(cap, 1))
-    return max(min(requested, cap), 1)
+        started = ("2, one task at a time (a pool of one would run it in this process)"
+                   if two_for_one and n == 1 else str(n))
+        _log.info("%d worker processes asked for %d task(s) on %d core(s): starting %s",
+                  requested, n_tasks, os.cpu_count() or 1, started)
+    return n
 
 
 def _dispatch(tasks: list[Task], index: list[int],
@@ -422,7 +465,8 @@ def _dispatch(tasks: list[Task], index: list[int],
     if executor.backend == "processes":
         from .processes import dispatch
 
-        yield from dispatch(_indexed, index, tasks, _local_workers(executor.n_jobs, len(tasks)),
+        yield from dispatch(_indexed, index, tasks,
+                            _local_workers(executor.n_jobs, len(tasks), two_for_one=True),
                             failed, fresh=workers_outdated(tasks))
     else:
         from .cluster import dispatch as dispatch_dask

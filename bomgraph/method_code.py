@@ -53,16 +53,23 @@ def method_code(task: Task) -> dict[str, str]:
     return {m: fp for m in task.methods() if (fp := method_fingerprint(m)) is not None}
 
 
-def stale_plugin(task: Task) -> str:
+def stale_plugin(task: Task, *, worker: bool) -> str:
     """Why this process cannot run the task's plugin as it is now on disk ("" when it can):
-    Python does not reload a module, so a worker that imported a plugin (its sources hashed
+    Python does not reload a module, so a process that imported a plugin (its sources hashed
     then, :func:`method_fingerprint`) keeps running that code after an edit, while the
-    client keys the task with the new sources."""
+    client keys the task with the new sources. ``worker``: this process is a worker (local
+    or Dask), to be restarted; else it is the one that made the task (a serial run), where
+    the module is to be reloaded."""
     for m in task.methods():
         loaded = method_fingerprint(m)
         info = method_info(m)
         if loaded not in (None, NO_SOURCE) and disk_fingerprint(info.target,
                                                                 info.version) != loaded:
+            if not worker:
+                return (f"method {m!r} was edited since this process imported it, and Python "
+                        f"does not reload a module: reload the module (importlib.reload, "
+                        f"IPython's %autoreload) or restart this process (a notebook's "
+                        f"kernel), then run again")
             return (f"stale worker: restart the workers and run again (Dask: client.restart(),"
                     f" or restart `dask worker`; in a notebook run serially: reload the module"
                     f" or restart the kernel); method {m!r} was edited since this worker "

@@ -226,6 +226,10 @@ def _fingerprint(target: str, version: str | None, loaded: bool) -> str | None:
     except ImportError as exc:
         _reraise_interrupt(exc)
         raise UnknownMethodError(f"cannot read the source of {target!r}: {exc}") from exc
+    except Exception as exc:  # its package raised while imported (an edit that broke it)
+        _reraise_interrupt(exc)
+        raise UnknownMethodError(f"cannot read the source of {target!r}: importing it raised "
+                                 f"{type(exc).__name__}: {exc}") from exc
     if not files:
         return None
     top = module.split(".")[0]

@@ -11,13 +11,25 @@ signal and ends them. Imports nothing from bomgraph but :mod:`bomgraph.stdio`.
 from __future__ import annotations
 
 import contextlib
+import json
+import logging
 import os
 import re
+import shutil
+import socket
+import stat
 import tempfile
 import warnings
 from typing import Any, Callable, Iterator, Sequence
 
 from .stdio import signals_held
+
+_log = logging.getLogger(__name__)
+
+#: The folder of a dispatch's marks (:func:`_marked`), in the temporary folder, and the file
+#: in it naming the process that made it (:func:`_remove_stale_marks`).
+MARKS_PREFIX = "bomgraph-running-"
+OWNER = "owner.json"
 
 
 def dispatch(func: Callable[[int, Any], tuple[int, dict[str, Any]]], index: Sequence[int],
@@ -46,9 +58,12 @@ def dispatch(func: Callable[[int, Any], tuple[int, dict[str, Any]]], index: Sequ
 
     if fresh:
         _end_kept_workers()
+    _remove_stale_marks()
     pending = dict(zip(index, tasks))
     stalled = False
-    with tempfile.TemporaryDirectory(prefix="bomgraph-running-") as marks:
+    with tempfile.TemporaryDirectory(prefix=MARKS_PREFIX) as marks:
+        with open(os.path.join(marks, OWNER), "w", encoding="utf-8") as fh:
+            json.dump(_owner(), fh)
         while pending:
             before = len(pending)
             try:
@@ -58,7 +73,7 @@ def dispatch(func: Callable[[int, Any], tuple[int, dict[str, Any]]], index: Sequ
                         yield k, res
             except BrokenProcessPool as exc:
                 running = [k for k in pending if os.path.exists(_mark(marks, k))]
-                why = _died(exc)
+                why = _died(exc, began=False)  # for workers that cannot start
             else:  # a pool that ended without a task's result (never joblib's): not a loop
                 for k in list(pending):
                     del pending[k]
@@ -128,16 +143,84 @@ def _marked(func: Callable[[int, Any], tuple[int, dict[str, Any]]], marks: str, 
 
 def _clear(marks: str) -> None:
     for name in os.listdir(marks):
-        os.unlink(os.path.join(marks, name))
+        if name != OWNER:
+            os.unlink(os.path.join(marks, name))
 
 
-def _died(exc: BaseException) -> str:
+def _owner() -> dict[str, Any]:
+    """This process, as a marks folder's :data:`OWNER` file names it: its pid, and the host,
+    kernel boot and pid namespace in which that pid means this process (the namespace's link
+    alone is the same on every machine for its first processes, ``pid:[4026531836]``: the
+    boot id tells two machines of one name apart)."""
+    try:
+        namespace: str | None = os.readlink("/proc/self/ns/pid")
+        with open("/proc/sys/kernel/random/boot_id", encoding="ascii") as fh:
+            boot: str | None = fh.read().strip() or None
+    except OSError:  # not Linux: no namespace to compare, no folder is ever removed
+        namespace = boot = None
+    return {"pid": os.getpid(), "host": socket.gethostname(), "pid_ns": namespace,
+            "boot_id": boot}
+
+
+def _remove_stale_marks() -> None:
+    """Remove the marks folders that a dispatch ended by SIGKILL (or a power cut) left in the
+    temporary folder: only those of this user whose :data:`OWNER` file names a process of
+    this host, kernel boot and pid namespace that is no longer there. A folder without that
+    file (being made, or made by an older bomgraph), of another user, host, machine of the
+    same name or container, or of a live process (or of a pid taken again since) is left
+    alone."""
+    me = _owner()
+    uid = getattr(os, "getuid", lambda: None)()
+    root = tempfile.gettempdir()
+    if me["pid_ns"] is None or me["boot_id"] is None or uid is None:
+        return
+    try:
+        names = [n for n in os.listdir(root) if n.startswith(MARKS_PREFIX)]
+    except OSError:
+        return
+    for name in names:
+        path = os.path.join(root, name)
+        try:
+            st = os.stat(path, follow_symlinks=False)
+            if st.st_uid != uid or not stat.S_ISDIR(st.st_mode):
+                continue
+            with open(os.path.join(path, OWNER), encoding="utf-8") as fh:
+                owner = json.load(fh)
+        except (OSError, ValueError):
+            continue
+        pid = owner.get("pid") if isinstance(owner, dict) else None
+        if (type(pid) is int and pid > 0 and owner.get("host") == me["host"]
+                and owner.get("pid_ns") == me["pid_ns"]
+                and owner.get("boot_id") == me["boot_id"] and not _alive(pid)):
+            shutil.rmtree(path, ignore_errors=True)
+            _log.debug("removed %s, left by process %d, which is gone", path, pid)
+
+
+def _alive(pid: int) -> bool:
+    """Whether a process ``pid`` exists (another user's too; a zombie too)."""
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:  # PermissionError: it exists, another user's
+        return True
+    return True
+
+
+def _died(exc: BaseException, began: bool = True) -> str:
     """A failed run's error for a task whose worker process died, with the exit codes that
     joblib gives (``SIGSEGV(-11)``: a crash in native code; ``SIGKILL(-9)``: often the
-    out-of-memory killer)."""
+    out-of-memory killer). ``began``: False when the workers of two pools in a row died
+    before any task began, so no worker ran this one: they cannot start here."""
     codes = re.search(r"exit codes of the workers are (\{[^}]*\})", str(exc))
-    return (f"WorkerDied: the worker process that ran it died"
-            f"{f' (exit codes {codes.group(1)})' if codes else ''}: a crash in native "
+    codes_text = f" (exit codes {codes.group(1)})" if codes else ""
+    if not began:
+        return (f"WorkerDied: the worker processes died before any run began, twice in a "
+                f"row{codes_text}, so they cannot start here: something at their start kills "
+                f"them (a sitecustomize or .pth file, a memory limit, the out-of-memory "
+                f"killer); fix that, or run serially (--jobs 1, Executor('serial')); finished "
+                f"runs are cached")
+    return (f"WorkerDied: the worker process that ran it died{codes_text}: a crash in native "
             f"code, the out-of-memory killer, or os._exit in the method; run it alone with "
             f"`bomgraph run STREAM --method NAME` to see (finished runs are cached)")
 

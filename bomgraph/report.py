@@ -101,6 +101,10 @@ def summarise(results: Sequence[Mapping[str, Any]],
         row["n_nees_pose"] = int(np.sum(np.isfinite(nees)))
         nl = np.array([_value_at(r, last_t, "nees_landmark") for r in ok])
         row["nees_landmark_mean"] = _finite_stat(np.nanmean, nl)
+        row["n_nees_landmark"] = int(np.sum(np.isfinite(nl)))
+        row["n_nees_landmark_partial"] = sum(  # landmarks without a covariance left out
+            1 for r, v in zip(ok, nl)
+            if math.isfinite(v) and (r.get("info") or {}).get("covariances") == "partial")
         wall = np.array([r["total_s"] for r in ok])
         row["wall_s_mean"] = float(wall.mean()) if wall.size else math.nan
         row["paper"] = PAPER_REPORTED.get((exp, arm), "")
@@ -232,7 +236,28 @@ def format_summary(summary: Sequence[dict]) -> str:
                          + f" {robot_s:>7s} {conv_s:>5s} {nees_s:>6s}"
                          f" {r.get('wall_s_mean', float('nan')):7.3f}"
                          + (_free_cells(r) if free else f"  {r.get('paper', '')}") + fail)
+        lines += _nees_landmark_note(rows)
     return "\n".join(lines)
+
+
+def _nees_landmark_note(rows: Sequence[Mapping[str, Any]]) -> list[str]:
+    """A note line when the landmark NEES of ``summary.csv`` (not in the table) leaves values
+    out: runs without one (no covariances, a singular one) beside runs with one, and runs
+    whose final map has landmarks without a covariance (``info["covariances"]`` is
+    ``"partial"``: their NEES is the mean over the others)."""
+    parts = []
+    for r in rows:
+        ran, n = r["runs"] - r["failed"], r.get("n_nees_landmark", 0)
+        partial = r.get("n_nees_landmark_partial", 0)
+        what = ([f"{ran - n} of {ran} runs without one"] if 0 < n < ran else []) + (
+            [f"{partial} run(s) leaving out landmarks without a covariance "
+             f"(info covariances_undefined)"] if partial else [])
+        if what:
+            parts.append(f"{r['arm']}: {', '.join(what)}")
+    if not parts:
+        return []
+    return [f"note: the landmark NEES (summary.csv nees_landmark_mean) is the mean over the "
+            f"values there are; left out: {'; '.join(parts)}"]
 
 
 def _free_cells(r: Mapping[str, Any]) -> str:

@@ -46,6 +46,7 @@ from scipy.stats import chi2
 
 from bomgraph.angles import angle_residual, wrap_angle
 from bomgraph.datasets.victoria import import_victoria
+from bomgraph.errors import DatasetError, StreamFormatError
 from bomgraph.estimate_file import read_estimate
 from bomgraph.geometry import between, chain_odometry
 from bomgraph.jsonio import parse_options
@@ -283,6 +284,14 @@ def _nees(herr: np.ndarray, hsd: np.ndarray) -> float:
     return float(np.mean(herr[ok] ** 2 / hsd[ok] ** 2))
 
 
+def _data_error(path: str, exc: Exception) -> int:
+    """One line on stderr for input that cannot be read (no traceback), and exit status 2."""
+    hint = ("" if Path(path).exists() else "; the default is $BOMGRAPH_DATA/victoria_park/"
+            "victoria_park.txt: set BOMGRAPH_DATA to the shared data folder, or pass --data FILE")
+    print(f"{Path(__file__).name}: error: {exc}{hint}", file=sys.stderr)
+    return 2
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -298,8 +307,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     a = ap.parse_args(argv)
     extra = parse_options(a.filter_option)
     filters = [(lab, m, {**o, **extra}) for lab, m, o in FILTERS]
-    stream = import_victoria(a.data)
-    ref = reference(stream, a.reference)
+    try:
+        stream = import_victoria(a.data)
+        ref = reference(stream, a.reference)
+    except (DatasetError, StreamFormatError) as exc:  # the data or the reference file
+        return _data_error(a.data, exc)
     if ref.poses is None or len(ref.pose_t) != len(stream.steps):
         ap.error("the reference must hold a pose for every step of the stream")
     poses = ref.poses

@@ -50,7 +50,7 @@ from typing import Any, Callable, Iterable, Iterator, Mapping, Sequence
 import numpy as np
 
 from bomgraph.datasets.victoria import import_victoria
-from bomgraph.errors import BomgraphError, TooFewLandmarksError
+from bomgraph.errors import BomgraphError, DatasetError, TooFewLandmarksError
 from bomgraph.evaluate import Alignment, score_estimate
 from bomgraph.experiments import Arm
 from bomgraph.jsonio import jsonable
@@ -323,6 +323,14 @@ def format_table(rows: Sequence[dict[str, Any]]) -> str:
     return "\n".join(lines)
 
 
+def _data_error(path: str, exc: Exception) -> int:
+    """One line on stderr for input that cannot be read (no traceback), and exit status 2."""
+    hint = ("" if Path(path).exists() else "; the default is $BOMGRAPH_DATA/victoria_park/"
+            "victoria_park.txt: set BOMGRAPH_DATA to the shared data folder, or pass --data FILE")
+    print(f"{Path(__file__).name}: error: {exc}{hint}", file=sys.stderr)
+    return 2
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -343,7 +351,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     unknown = [m for m in a.methods.split(",") if m not in METHODS]
     if unknown:
         ap.error(f"unknown method(s) {unknown}; choose from {', '.join(METHODS)}")
-    stream = import_victoria(a.data, bearing_sigma_rad=a.bearing_sigma)
+    try:
+        stream = import_victoria(a.data, bearing_sigma_rad=a.bearing_sigma)
+    except DatasetError as exc:
+        return _data_error(a.data, exc)
     if a.steps is not None:
         if a.steps < 2:
             ap.error("--steps must be >= 2")

@@ -324,3 +324,19 @@ def test_the_cache_key_covers_the_libraries_that_compute_the_numbers(
         assert task_key(task) != before
     finally:
         bench.code_fingerprint.cache_clear()
+
+
+def test_the_log_line_of_a_capped_pool_of_one_says_two_processes_start(
+        caplog: pytest.LogCaptureFixture) -> None:
+    """A pool of one is two worker processes taking one task at a time (joblib would run a
+    pool of one in this process); the log line of ``--jobs 4`` for one run said "starting 1"
+    while two processes started (h41)."""
+    import logging
+
+    task = _exp((Arm("tri", "triangulate"),)).tasks()[0]
+    with caplog.at_level(logging.INFO, logger="bomgraph.bench"):
+        (res,) = execute([task], Executor("processes", n_jobs=4))
+    assert res["ok"], res.get("error")
+    line = next(r.getMessage() for r in caplog.records if "asked for" in r.getMessage())
+    assert line.endswith("starting 2, one task at a time (a pool of one would run it in this "
+                         "process)"), line

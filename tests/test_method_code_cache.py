@@ -139,6 +139,9 @@ def test_an_edit_not_reloaded_fails_the_serial_run_and_caches_nothing_new(
     second = _final_mpe(exp, cache)
     assert first["ok"] and not second["ok"]
     assert "was edited since" in second["error"] and "reload the module" in second["error"]
+    # a serial run has no workers: it said "stale worker: restart the workers" (h41)
+    assert "worker" not in second["error"], second["error"]
+    assert "since this process imported it" in second["error"]
     assert list(cache.glob("*.json")) == []
 
 

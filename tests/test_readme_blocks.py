@@ -53,14 +53,38 @@ LEFT_OUT = {
 }
 
 
+#: what to do when a block is new, or its entry no longer names one block
+HOW = ("in tests/test_readme_blocks.py, add the block's first line(s) to RUN with the test that "
+       "runs it, or to LEFT_OUT with the reason it is not run")
+
+
 def blocks(doc: str) -> list[str]:
-    """The fenced code blocks of ``doc``, in order."""
-    return re.findall(r"```\w*\n(.*?)```", (ROOT / doc).read_text(), re.S)
+    """The fenced code blocks of ``doc``, in order: the lines between a line opening with
+    ```` ``` ```` (any info string after it, ```` ```toml title="x" ```` too) and the next such
+    line. A fence left open is an error naming its line."""
+    out: list[str] = []
+    body: list[str] | None = None
+    opened = 0
+    for n, line in enumerate((ROOT / doc).read_text().splitlines(), 1):
+        if line.lstrip().startswith("```"):
+            if body is None:
+                body, opened = [], n
+            else:
+                out.append("".join(f"{b}\n" for b in body))
+                body = None
+        elif body is not None:
+            body.append(line)
+    assert body is None, f"{doc}, line {opened}: a code fence is opened and never closed"
+    return out
 
 
 def block(doc: str, start: str) -> str:
     found = [b for b in blocks(doc) if b.startswith(start)]
-    assert len(found) == 1, (doc, start, len(found))
+    assert found, (f"{doc}: no code block starts with {start!r} any more (changed or "
+                   f"removed): update or remove its entry in RUN or LEFT_OUT")
+    assert len(found) == 1, (f"{doc}: {len(found)} code blocks start with {start!r}: give "
+                             f"its entry in RUN or LEFT_OUT a longer start, one that names "
+                             f"one block, and {HOW} for the other")
     return found[0]
 
 
@@ -78,7 +102,12 @@ def test_every_block_is_run_or_left_out_with_a_reason() -> None:
     for doc in DOCS:
         for text in blocks(doc):
             keys = [k for k in [*RUN, *LEFT_OUT] if k[0] == doc and text.startswith(k[1])]
-            assert len(keys) == 1, f"{doc}: a block neither run nor left out:\n{text[:200]}"
+            assert keys, (f"{doc}: a code block is neither run nor left out (a new one?); "
+                          f"{HOW}. It starts:\n{text[:200]}")
+            assert len(keys) == 1, (f"{doc}: a code block starts as {len(keys)} entries of "
+                                    f"RUN and LEFT_OUT do ({[k[1] for k in keys]}): make "
+                                    f"them longer, so that one names it. It starts:\n"
+                                    f"{text[:200]}")
     for doc, start in [*RUN, *LEFT_OUT]:
         block(doc, start)  # each entry names one block that is still there
     assert set(RUN.values()) <= set(globals())
@@ -209,3 +238,25 @@ def test_measurement_sweep_block_plans(tmp_path: Path) -> None:
     (tmp_path / "lw.toml").write_text(block("docs/measurements.md", "checkpoint_every = 10\n"))
     out = shell(f"{BOMGRAPH} compare --config lw.toml --dry-run --out lw", tmp_path).stdout
     assert re.search(r"lw1 +long-mc3 +5 runs", out) and re.search(r"lw1 +oracle +5 runs", out)
+
+
+@pytest.mark.parametrize("added, says", [
+    ("```\npython scripts/bench_speed.py --quick\n```\n", "a new one?); " + HOW),
+    ('```text title="x"\nhello\n```\n', "a new one?); " + HOW),
+    ("```toml\ncheckpoint_every = 10\n[[experiments]]\nname = \"lw1\"\nx = 1\n```\n",
+     "2 code blocks start with 'checkpoint_every = 10\\n[[experiments]]\\nname = \"lw1\"'"),
+    ("```\nnever closed\n", "a code fence is opened and never closed")])
+def test_a_block_added_to_the_docs_fails_saying_what_to_do(
+        added: str, says: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A block added to docs/measurements.md failed with ``assert 0 == 1`` under "a block
+    neither run nor left out", or, starting as a listed one, with a bare tuple; one whose
+    fence has more than a word after it (```` ```text title="x" ````) went unseen (h41)."""
+    for doc in DOCS:
+        (tmp_path / doc).parent.mkdir(parents=True, exist_ok=True)
+        shutil.copy(ROOT / doc, tmp_path / doc)
+    with open(tmp_path / "docs" / "measurements.md", "a") as fh:
+        fh.write(f"\nMore text.\n\n{added}\nThe end.\n")
+    monkeypatch.setattr(sys.modules[__name__], "ROOT", tmp_path)
+    with pytest.raises(AssertionError) as caught:
+        test_every_block_is_run_or_left_out_with_a_reason()
+    assert says in str(caught.value), str(caught.value)

@@ -282,3 +282,30 @@ def test_a_diverged_map_prints_in_exponent_form_in_both_tables() -> None:
     assert "4.4e+10/4.4e+10±6.2e+10" in summary, summary
     by_run = format_by_run(final_by_run(results))
     assert "8.7e+10 (15)" in by_run and "5.0 (15)" in by_run, by_run
+
+
+def test_the_summary_says_when_landmark_nees_values_were_left_out() -> None:
+    """The landmark NEES of summary.csv is a mean over the values there are: runs without one
+    (no covariances, a singular one) and landmarks without a covariance in a run's map
+    (``info["covariances"] == "partial"``) were left out without a word (h41); a note line
+    under the table now says which, and summary.csv counts the runs with one."""
+    nan = float("nan")
+
+    def result(arm: str, run: str, nees_landmark: float, covariances) -> dict:
+        return {"experiment": "e", "arm": arm, "method": arm, "run": run, "ok": True,
+                "converged": True, "total_s": 0.1, "info": {"covariances": covariances},
+                "checkpoints": [{"t": 50, "n_mapped": 15, "mpe_m": 0.05, "robot_last_m": 0.03,
+                                 "nees_pose": 2.0, "nees_landmark": nees_landmark}]}
+    rows = summarise([result("g", "a", 1.0, True), result("g", "b", 3.0, "partial"),
+                      result("g", "c", nan, False), result("k", "a", 2.0, None),
+                      result("k", "b", 2.0, None)])
+    g, k = rows
+    assert (g["nees_landmark_mean"], g["n_nees_landmark"], g["n_nees_landmark_partial"]) == (
+        2.0, 2, 1)
+    assert (k["n_nees_landmark"], k["n_nees_landmark_partial"]) == (2, 0)
+    note = format_summary(rows).splitlines()[-1]
+    assert note == ("note: the landmark NEES (summary.csv nees_landmark_mean) is the mean over "
+                    "the values there are; left out: g: 1 of 3 runs without one, 1 run(s) "
+                    "leaving out landmarks without a covariance (info covariances_undefined)")
+    every = summarise([result("k", "a", 2.0, None), result("k", "b", 2.0, None)])
+    assert not format_summary(every).splitlines()[-1].startswith("note:")

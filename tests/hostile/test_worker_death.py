@@ -148,3 +148,85 @@ def test_workers_that_die_once_before_any_run_do_not_fail_the_sweep(tmp_path: Pa
     assert (tmp_path / "died").exists()
     assert proc.returncode == 0, err
     assert len(results) == 2 and all(r["ok"] for r in results), err
+
+
+def test_workers_that_never_start_say_so_not_that_a_worker_ran_the_run(tmp_path: Path) -> None:
+    """Every worker process dies as it starts, in two pools in a row: every run fails, and
+    its error said "the worker process that ran it died ... os._exit in the method; run it
+    alone with `bomgraph run`", though no worker ran it (h41): now it says the workers
+    cannot start, and what to do."""
+    streams = _dying_plugin(tmp_path, 2)
+    (tmp_path / "site" / "sitecustomize.py").write_text(textwrap.dedent("""\
+        import os, sys
+        if any("popen_loky" in a for a in sys.orig_argv):  # every joblib worker dies
+            os._exit(9)
+        """))
+    proc, results = _compare(tmp_path, "never", "triangulate", "2", streams)
+    err = no_traceback(proc)
+    assert proc.returncode == 1, err
+    assert len(results) == 2 and not any(r["ok"] for r in results), err
+    for r in results:
+        assert r["error"].startswith("WorkerDied: the worker processes died before any run "
+                                     "began, twice in a row"), r["error"]
+        assert "EXIT(9)" in r["error"] and "ran it" not in r["error"], r["error"]
+
+
+def _pid_of(k: int, _: object) -> tuple[int, dict]:
+    return k, {"pid": os.getpid()}
+
+
+def test_marks_folders_of_a_killed_dispatch_are_removed_by_the_next_only(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A compare ended by SIGKILL left its ``bomgraph-running-*`` folder in the temporary
+    folder (h41, after ``kill -9`` of ``compare --jobs 2``: the folder and the marks of its
+    two runs in flight). The next dispatch removes such a folder when its owner file names a
+    process of this host and pid namespace that is gone, and no other."""
+    import tempfile
+
+    from bomgraph import processes
+
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+    me = processes._owner()
+    gone = subprocess.Popen([sys.executable, "-c", "pass"])
+    gone.wait()
+    folders = {"dead": {**me, "pid": gone.pid}, "live": me, "other-host": {
+        **me, "pid": gone.pid, "host": me["host"] + "-x"}, "other-ns": {
+        **me, "pid": gone.pid, "pid_ns": "pid:[1]"}, "no-owner": None}
+    for name, owner in folders.items():
+        folder = tmp_path / f"{processes.MARKS_PREFIX}{name}"
+        folder.mkdir()
+        (folder / "3").write_text("")  # a run's mark
+        if owner is not None:
+            (folder / processes.OWNER).write_text(json.dumps(owner))
+    out = dict(dispatch(_pid_of, [0, 1], [None, None], 2, lambda k, why: {"failed": why}))
+    assert sorted(out) == [0, 1] and "failed" not in out[0], out
+    left = sorted(p.name for p in tmp_path.iterdir() if p.name.startswith("bomgraph-running"))
+    assert left == [f"{processes.MARKS_PREFIX}{n}" for n in sorted(folders) if n != "dead"]
+
+
+def test_a_marks_folder_of_another_kernel_is_left_alone(tmp_path: Path,
+                                                        monkeypatch: pytest.MonkeyPatch) -> None:
+    """The pid namespace of every host's first processes is the same link
+    (``pid:[4026531836]``, the kernel's constant for the initial namespace), so two machines
+    of one name that share the temporary folder (a network file system) could not be told
+    apart: a dispatch on one removed the live marks folder of a sweep on the other, whose
+    next task then raised FileNotFoundError out of ``execute`` (h42). The owner file now
+    names the kernel's boot id too, and a folder of another boot is left alone."""
+    import tempfile
+
+    from bomgraph import processes
+
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+    me = processes._owner()
+    gone = subprocess.Popen([sys.executable, "-c", "pass"])
+    gone.wait()
+    folders = {"dead": {**me, "pid": gone.pid},
+               "other-boot": {**me, "pid": gone.pid, "boot_id": "another-machine"}}
+    for name, owner in folders.items():
+        folder = tmp_path / f"{processes.MARKS_PREFIX}{name}"
+        folder.mkdir()
+        (folder / processes.OWNER).write_text(json.dumps(owner))
+    out = dict(dispatch(_pid_of, [0], [None], 2, lambda k, why: {"failed": why}))
+    assert "failed" not in out[0], out
+    left = sorted(p.name for p in tmp_path.iterdir() if p.name.startswith("bomgraph-running"))
+    assert left == [f"{processes.MARKS_PREFIX}other-boot"], left
