@@ -167,7 +167,12 @@ def _run_task(task: Task) -> dict[str, Any]:
         stale = stale_plugin(task, worker=_IN_WORKER.get())
     except Exception as exc:
         if not _IN_WORKER.get():  # the process that made the task: its error, as it keyed it
-            raise
+            if not isinstance(exc, (StreamFormatError, OSError)):
+                raise
+            # its stream file went (or changed into garbage) during the sweep: a source that
+            # cannot be read is a failed run, as below
+            out.update(ok=False, error=f"{type(exc).__name__}: {exc}")
+            return out
         out.update(ok=False, error=_unloadable(exc))
         if not isinstance(exc, (UnknownMethodError, ImportError, StreamFormatError, OSError)):
             out["traceback"] = _traceback(exc)
@@ -312,11 +317,12 @@ class Executor:
         return cls("processes", n_jobs=jobs)
 
 
-def _cache_path(cache_dir: Path, task: Task) -> Path | None:
-    """One file per (arm, source, code): experiments that share an arm share its runs. None
-    for a task whose method has no source file to hash (:func:`~bomgraph.method_code.sourceless`): its results are
+def _cache_path(cache_dir: Path, task: Task, key: str | None = None) -> Path | None:
+    """One file per (arm, source, code) (``key``: the task's :func:`task_key`, computed when
+    not given): experiments that share an arm share its runs. None for a task whose method
+    has no source file to hash (:func:`~bomgraph.method_code.sourceless`): its results are
     neither read from nor written to the cache."""
-    return None if sourceless(task) else cache_dir / f"{task_key(task)}.json"
+    return None if sourceless(task) else cache_dir / f"{key or task_key(task)}.json"
 
 
 def is_cached(task: Task, cache_dir: str | os.PathLike[str]) -> bool:
@@ -344,12 +350,15 @@ def execute(tasks: Sequence[Task], executor: Executor = Executor(), *,
         refuse_runtime_methods(tasks, executor.backend)
     source_fingerprint.cache_clear()  # a plugin module reloaded since the last sweep: new keys
     results: list[dict[str, Any] | None] = [None] * len(tasks)
+    # each task keyed once, before any runs: a stream file removed or rewritten during the
+    # sweep fails or re-keys only the runs that read it then (in the worker), never the sweep
+    keys = [task_key(t) for t in tasks]
     cache = Path(cache_dir) if cache_dir is not None else None
     if cache is not None:
         cache.mkdir(parents=True, exist_ok=True)
         warn_sourceless(tasks)
         for k, t in enumerate(tasks):
-            path = _cache_path(cache, t)
+            path = _cache_path(cache, t, keys[k])
             cached = None if path is None else _read_cached(path)
             if cached is not None:
                 cached.update(experiment=t.experiment, arm=t.arm.label, run=t.source.name)
@@ -359,22 +368,23 @@ def execute(tasks: Sequence[Task], executor: Executor = Executor(), *,
     twins: dict[str, list[int]] = {}
     for k, r in enumerate(results):
         if r is None:
-            twins.setdefault(task_key(tasks[k]), []).append(k)
+            twins.setdefault(keys[k], []).append(k)
     todo = [ks[0] for ks in twins.values()]
     done = len(tasks) - sum(len(ks) for ks in twins.values())
     if progress:
         progress(done, len(tasks))
     other_key: list[str] = []
     with contextlib.closing(  # closed here when left early (Ctrl-C), not by the collector
-            _dispatch([tasks[k] for k in todo], todo, executor)) as dispatched:
+            _dispatch([tasks[k] for k in todo], todo, executor,
+                      [keys[k] for k in todo])) as dispatched:
         for k, res in dispatched:
-            if res.get("key") != task_key(tasks[k]):  # kept, but a later read would refuse it
+            if res.get("key") != keys[k]:  # kept, but a later read would refuse it
                 if res.get("ok"):  # a failure is never cached, and says why itself
                     other_key.append(f"{tasks[k].arm.label} on {tasks[k].source.name}")
             elif (cache is not None and res.get("ok")  # failures are re-run next time
-                  and (path := _cache_path(cache, tasks[k])) is not None):
+                  and (path := _cache_path(cache, tasks[k], keys[k])) is not None):
                 _write_cached(path, res)
-            for j in twins[task_key(tasks[k])]:
+            for j in twins[keys[k]]:
                 t = tasks[j]
                 results[j] = res if j == k else {**res, "experiment": t.experiment,
                                                  "arm": t.arm.label, "run": t.source.name}
@@ -447,8 +457,8 @@ def _local_workers(requested: int, n_tasks: int, *, two_for_one: bool = False) -
     return n
 
 
-def _dispatch(tasks: list[Task], index: list[int],
-              executor: Executor) -> Iterator[tuple[int, dict[str, Any]]]:
+def _dispatch(tasks: list[Task], index: list[int], executor: Executor,
+              keys: Sequence[str] | None = None) -> Iterator[tuple[int, dict[str, Any]]]:
     if not tasks:
         return
     if executor.backend == "serial":
@@ -456,11 +466,13 @@ def _dispatch(tasks: list[Task], index: list[int],
             yield k, run_task(t)
         return
     by_k = dict(zip(index, tasks))
+    key_of = dict(zip(index, keys)) if keys is not None else {}
 
     def failed(k: int, error: str) -> dict[str, Any]:  # the workers could not run the task
         t = by_k[k]
         return {"experiment": t.experiment, "arm": t.arm.label, "method": t.arm.method,
-                "run": t.source.name, "key": task_key(t), "ok": False, "error": error}
+                "run": t.source.name, "key": key_of.get(k) or task_key(t), "ok": False,
+                "error": error}
 
     if executor.backend == "processes":
         from .processes import dispatch

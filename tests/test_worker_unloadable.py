@@ -138,3 +138,34 @@ def test_an_unexpected_error_keying_in_a_worker_keeps_its_traceback(tmp_path: Pa
     assert res["error"].startswith("TypeError: a bug in a source's key (h42), in the process")
     assert "plugins importable" not in res["error"], res["error"]
     assert "in key\n" in res.get("traceback", ""), res
+
+
+@pytest.mark.parametrize("jobs", [1, 2])
+def test_a_stream_file_removed_during_the_sweep_fails_its_runs_not_the_sweep(
+        tmp_path: Path, jobs: int) -> None:
+    """A stream file removed while the sweep runs (after the first result): execute keyed
+    every finished task again from its file, so the sweep raised StreamFormatError in its own
+    process and every run not yet returned was lost (h42 noticed). Now each task is keyed
+    once, before any runs; the runs of the removed file that had not read it fail with the
+    reason, the others give their maps."""
+    streams = []
+    for seed in range(4):
+        streams.append(tmp_path / f"s{seed}.jsonl")
+        write_stream(simulate(SimConfig(n_steps=30), np.random.default_rng(seed)), streams[-1])
+    exp = Experiment("e", "e", (Arm("tri", "triangulate"), Arm("cs", "stmds-cs")),
+                     sources=tuple(FileSource(str(p)) for p in streams))
+
+    def progress(done: int, total: int) -> None:
+        if done >= 1 and streams[2].exists():
+            streams[2].unlink()
+
+    out = execute(exp.tasks(), Executor.choose(jobs), cache_dir=tmp_path / "cache",
+                  progress=progress)
+    assert len(out) == 8
+    mine = [r for r in out if r["run"] == "s2"]
+    assert all(r["ok"] for r in out if r["run"] != "s2"), [r.get("error") for r in out]
+    for r in mine:
+        assert r["ok"] or (r["error"].startswith("StreamFormatError: ")
+                           and "\n" not in r["error"]), r["error"]
+    if jobs == 1:  # in order: s2's runs come after the removal
+        assert not any(r["ok"] for r in mine)
