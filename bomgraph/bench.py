@@ -42,7 +42,8 @@ from .mapper import (Checkpoint, MapEstimate, RunResult, checkpoint_times, creat
 from .method_code import (method_code, refuse_runtime_methods, sourceless, stale_plugin,
                           warn_sourceless, workers_outdated)
 from .plugins import code_fingerprint, source_fingerprint
-from .stdio import bounded_lines, output_file
+from .result_cache import read_cached, write_cached
+from .stdio import bounded_lines
 from .stream import Step, Stream, Truth
 from .stream_file import StreamReader
 from .sweep import scheduler_address_problem
@@ -328,7 +329,7 @@ def _cache_path(cache_dir: Path, task: Task, key: str | None = None) -> Path | N
 def is_cached(task: Task, cache_dir: str | os.PathLike[str]) -> bool:
     """Whether :func:`execute` would take ``task``'s result from ``cache_dir`` (not run it)."""
     path = _cache_path(Path(cache_dir), task)
-    return path is not None and _read_cached(path) is not None
+    return path is not None and read_cached(path) is not None
 
 
 def execute(tasks: Sequence[Task], executor: Executor = Executor(), *,
@@ -359,7 +360,7 @@ def execute(tasks: Sequence[Task], executor: Executor = Executor(), *,
         warn_sourceless(tasks)
         for k, t in enumerate(tasks):
             path = _cache_path(cache, t, keys[k])
-            cached = None if path is None else _read_cached(path)
+            cached = None if path is None else read_cached(path)
             if cached is not None:
                 cached.update(experiment=t.experiment, arm=t.arm.label, run=t.source.name)
                 results[k] = cached
@@ -383,7 +384,7 @@ def execute(tasks: Sequence[Task], executor: Executor = Executor(), *,
                     other_key.append(f"{tasks[k].arm.label} on {tasks[k].source.name}")
             elif (cache is not None and res.get("ok")  # failures are re-run next time
                   and (path := _cache_path(cache, tasks[k], keys[k])) is not None):
-                _write_cached(path, res)
+                write_cached(path, res)
             for j in twins[keys[k]]:
                 t = tasks[j]
                 results[j] = res if j == k else {**res, "experiment": t.experiment,
@@ -397,34 +398,6 @@ def execute(tasks: Sequence[Task], executor: Executor = Executor(), *,
                      "files there; give them this process's (and restart them)",
                      len(other_key), other_key[0])
     return [r for r in results if r is not None]
-
-
-def _read_cached(path: Path) -> dict[str, Any] | None:
-    """A cached result, or None when there is none or it is unreadable (a corrupt file, not
-    UTF-8, or JSON of the wrong shape is a cache miss, logged with its name, and is
-    overwritten when the task has run again)."""
-    if not path.exists():
-        return None
-    try:
-        cached = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, ValueError) as exc:
-        _log.warning("ignoring the unreadable cache file %s (%s); the task runs again", path,
-                     type(exc).__name__)
-        return None
-    if not (isinstance(cached, dict) and cached.get("ok") is True
-            and cached.get("key") == path.stem):
-        _log.warning("ignoring the cache file %s: not a result of this task; the task runs "
-                     "again", path)
-        return None
-    return cached
-
-
-def _write_cached(path: Path, result: Mapping[str, Any]) -> None:
-    """Write a result as every output is (:func:`bomgraph.stdio.output_file`: under a unique
-    temporary name beside ``path``, then renamed): two sweeps sharing a folder never write the
-    same temporary file, and a reader never sees half a file."""
-    with output_file(path) as fh:
-        fh.write(json.dumps(result, allow_nan=True))
 
 
 def _indexed(k: int, task: Task) -> tuple[int, dict[str, Any]]:

@@ -45,7 +45,7 @@ def _sigint_default() -> None:
                                      b"{truncated"])
 def test_item13_a_corrupt_cache_file_is_a_named_miss(tmp_path: Path, content: bytes,
                                                      caplog: pytest.LogCaptureFixture) -> None:
-    from bomgraph.bench import _read_cached
+    from bomgraph.result_cache import read_cached as _read_cached
 
     path = tmp_path / "abc123.json"
     path.write_bytes(content)

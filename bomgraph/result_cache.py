@@ -1,0 +1,44 @@
+"""The sweep cache's files: one JSON result per task key (:func:`bomgraph.bench.task_key`),
+read back only when it is a successful result of that key and written atomically."""
+
+from __future__ import annotations
+
+import json
+import logging
+from pathlib import Path
+from typing import Any, Mapping
+
+from .stdio import output_file
+
+_log = logging.getLogger(__name__)
+
+
+def read_cached(path: Path) -> dict[str, Any] | None:
+    """A cached result, or None when there is none or it is unreadable (a corrupt file, not
+    UTF-8, or JSON of the wrong shape is a cache miss, logged with its name, and is
+    overwritten when the task has run again)."""
+    if not path.exists():
+        return None
+    try:
+        cached = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, ValueError) as exc:
+        _log.warning("ignoring the unreadable cache file %s (%s); the task runs again", path,
+                     type(exc).__name__)
+        return None
+    if not (isinstance(cached, dict) and cached.get("ok") is True
+            and cached.get("key") == path.stem):
+        _log.warning("ignoring the cache file %s: not a result of this task; the task runs "
+                     "again", path)
+        return None
+    return cached
+
+
+def write_cached(path: Path, result: Mapping[str, Any]) -> None:
+    """Write a result as every output is (:func:`bomgraph.stdio.output_file`: under a unique
+    temporary name beside ``path``, then renamed): two sweeps sharing a folder never write the
+    same temporary file, and a reader never sees half a file."""
+    with output_file(path) as fh:
+        fh.write(json.dumps(result, allow_nan=True))
+
+
+__all__ = ["read_cached", "write_cached"]
