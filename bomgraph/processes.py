@@ -6,8 +6,8 @@ KeyboardInterrupt tracebacks (while they start, importing numpy; between tasks) 
 command's one line. They start with SIGINT and SIGTERM blocked, which they keep, as do the
 workers they start later (a worker replaced after a memory leak); the command stops on the
 signal and ends them. A worker whose command is gone (``kill -9``: nothing could end its
-workers) ends within a second, at once even in a task (:func:`_watch_parent`), where before
-it finished its task and waited out joblib's idle timeout, about five minutes. Imports nothing
+workers) ends within a second, in a task or idle (:func:`_watch_parent`), where before it
+finished its task and waited out joblib's idle timeout, about five minutes. Imports nothing
 from bomgraph but :mod:`bomgraph.stdio`.
 """
 
@@ -132,8 +132,9 @@ def _watch_parent(owner: int) -> None:
     is gone, which is when the kernel gives it another parent (pid 1 or a subreaper). The
     command's SIGKILL is the case: the workers hold SIGINT and SIGTERM and, left alone,
     finished their task and waited out joblib's idle timeout. ``owner`` is the dispatching
-    process; the parent is normally it (loky starts the workers itself), or a start method's
-    server process (``JOBLIB_START_METHOD=forkserver``), which ends with it.
+    process, the workers' parent (loky starts them itself, also with ``JOBLIB_START_METHOD``
+    spawn or forkserver); were it another process (a start method's server), that parent is
+    the one watched.
 
     A thread polls ``os.getppid()``: Linux's ``PR_SET_PDEATHSIG`` would fire when the *thread*
     that started the worker ends, and loky also starts workers from its own threads and the
