@@ -136,16 +136,43 @@ def _watch_parent(owner: int) -> None:
     spawn or forkserver); were it another process (a start method's server), that parent is
     the one watched.
 
-    A thread polls ``os.getppid()``: Linux's ``PR_SET_PDEATHSIG`` would fire when the *thread*
-    that started the worker ends, and loky also starts workers from its own threads and the
-    caller's (a notebook's worker thread), which end while the process and its kept workers
-    go on. The thread needs the GIL: a worker in a long native call without releasing it
-    ends when the call returns."""
+    A thread polls ``os.getppid()``. It needs the GIL, which GTSAM holds through a whole
+    optimisation (5 s of one, measured), so a worker started by the parent's main thread (the
+    command's, a notebook's) also asks Linux for SIGKILL when that thread ends
+    (``PR_SET_PDEATHSIG``). Only then: the signal follows the *thread* that started the
+    worker, and loky also starts workers from its own threads and the caller's (dispatch
+    called in a thread), which can end while the process and its kept workers go on."""
     parent = os.getppid()
     if parent != owner and not _alive(owner):  # gone before this worker got here
         os._exit(1)
+    if _started_by_main_thread(parent):
+        _kill_me_with_my_parent()
+        if os.getppid() != parent:  # gone meanwhile
+            os._exit(1)
     threading.Thread(target=_exit_when_orphaned, args=(parent,), daemon=True,
                      name="bomgraph-parent-watch").start()
+
+
+def _started_by_main_thread(parent: int) -> bool:
+    """Whether ``parent``'s main thread started this process (Linux lists a process's children
+    under the thread that started them; elsewhere, or unreadable: False)."""
+    try:
+        with open(f"/proc/{parent}/task/{parent}/children", encoding="ascii") as fh:
+            return str(os.getpid()) in fh.read().split()
+    except OSError:
+        return False
+
+
+def _kill_me_with_my_parent() -> None:
+    """``prctl(PR_SET_PDEATHSIG, SIGKILL)``: Linux ends this process when the thread that
+    started it ends (no libc or no prctl: nothing; the polling thread remains)."""
+    import ctypes
+    import signal
+
+    try:
+        ctypes.CDLL(None, use_errno=True).prctl(1, int(signal.SIGKILL))  # 1: PR_SET_PDEATHSIG
+    except (OSError, AttributeError):
+        pass
 
 
 def _exit_when_orphaned(parent: int) -> None:

@@ -3,7 +3,9 @@
 so they finished the task they were running, re-parented to pid 1, and then waited out
 joblib's idle timeout, five minutes and more of memory (and of CPU while in a task) nobody
 asked for. Each worker now watches that the process that started it is still its parent
-(:func:`bomgraph.processes._watch_parent`), busy in a task or idle between sweeps.
+(:func:`bomgraph.processes._watch_parent`), busy in a task or idle between sweeps; started by
+the parent's main thread, as here, Linux also kills it when that thread ends, which ends a
+worker in a native call that holds the GIL (the watching thread cannot run then).
 
 The bound below is on liveness (that they end), not on speed: they end in about half a
 second, and lived over 300 s before."""
@@ -23,25 +25,28 @@ from hostile_helpers import ENV
 pytestmark = pytest.mark.skipif(not os.path.isdir("/proc/self"), reason="needs Linux /proc")
 
 #: Two workers, two tasks; each task writes its worker's pid and waits for the other's (so
-#: they ran in two workers), then sleeps (busy) or returns (idle: the workers are kept, and
-#: this process sleeps beside them), until the test kills this process.
+#: they ran in two workers), then sleeps (busy), runs a regular expression that holds the GIL
+#: for hours (native: as GTSAM holds it through an optimisation), or returns (idle: the
+#: workers are kept, and this process sleeps beside them), until the test kills this process.
 SCRIPT = '''\
-import os, sys, time
+import os, re, sys, time
 from bomgraph.processes import dispatch
 
 def task(k, arg):
-    folder, busy = arg
+    folder, state = arg
     with open(os.path.join(folder, f"tmp{k}"), "w") as fh:
         fh.write(str(os.getpid()))
     os.replace(os.path.join(folder, f"tmp{k}"), os.path.join(folder, f"pid{k}"))
     while not os.path.exists(os.path.join(folder, f"pid{1 - k}")):
         time.sleep(0.05)
-    while busy:
+    while state == "busy":
         time.sleep(1)
+    if state == "native":
+        re.match(r"(a+)+$", "a" * 45 + "b")
     return k, {}
 
-folder, busy = sys.argv[1], sys.argv[2] == "busy"
-for _ in dispatch(task, [0, 1], [(folder, busy)] * 2, 2, lambda k, why: {"failed": why}):
+folder, state = sys.argv[1], sys.argv[2]
+for _ in dispatch(task, [0, 1], [(folder, state)] * 2, 2, lambda k, why: {"failed": why}):
     pass
 open(os.path.join(folder, "idle"), "w").close()
 time.sleep(3600)
@@ -70,7 +75,7 @@ def _wait_for(path: Path, proc: subprocess.Popen) -> None:
         time.sleep(0.05)
 
 
-@pytest.mark.parametrize("state", ["busy", "idle"])
+@pytest.mark.parametrize("state", ["busy", "native", "idle"])
 def test_workers_end_when_the_process_that_started_them_is_killed(tmp_path: Path,
                                                                    state: str) -> None:
     # output to a file: the workers inherit it, and a pipe would stay open while they live
