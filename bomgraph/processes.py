@@ -5,7 +5,10 @@ A terminal's Ctrl-C reaches the whole process group: workers that took it printe
 KeyboardInterrupt tracebacks (while they start, importing numpy; between tasks) beside the
 command's one line. They start with SIGINT and SIGTERM blocked, which they keep, as do the
 workers they start later (a worker replaced after a memory leak); the command stops on the
-signal and ends them. Imports nothing from bomgraph but :mod:`bomgraph.stdio`.
+signal and ends them. A worker whose command is gone (``kill -9``: nothing could end its
+workers) ends within a second, in a task or idle (:func:`_watch_parent`), where before it
+finished its task and waited out joblib's idle timeout, about five minutes. Imports nothing
+from bomgraph but :mod:`bomgraph.stdio`.
 """
 
 from __future__ import annotations
@@ -19,12 +22,17 @@ import shutil
 import socket
 import stat
 import tempfile
+import threading
+import time
 import warnings
 from typing import Any, Callable, Iterator, Sequence
 
 from .stdio import signals_held
 
 _log = logging.getLogger(__name__)
+
+#: How often, in seconds, a worker checks that the process that started it is there.
+PARENT_POLL_S = 0.25
 
 #: The folder of a dispatch's marks (:func:`_marked`), in the temporary folder, and the file
 #: in it naming the process that made it (:func:`_remove_stale_marks`).
@@ -103,7 +111,10 @@ def _pool(func: Callable[[int, Any], tuple[int, dict[str, Any]]], pending: dict[
 
     # joblib runs a pool of one worker in this process: two workers, one task at a time
     one = dict(n_jobs=2, pre_dispatch=1, batch_size=1) if effective_n_jobs(n_jobs) == 1 else {}
-    with Parallel(**{"n_jobs": n_jobs, **one}, return_as="generator_unordered") as par:
+    # initializer: each worker loky starts (joblib passes it on; other backends ignore it);
+    # the same function and pid each time, so joblib keeps its workers for the next call
+    with Parallel(**{"n_jobs": n_jobs, **one}, return_as="generator_unordered",
+                  initializer=_watch_parent, initargs=(os.getpid(),)) as par:
         _start_workers(par)
         results = par(delayed(_marked)(func, marks, k, t) for k, t in list(pending.items()))
         try:
@@ -114,6 +125,60 @@ def _pool(func: Callable[[int, Any], tuple[int, dict[str, Any]]], pending: dict[
                 warnings.simplefilter("ignore", UserWarning)
                 results.close()
             raise
+
+
+def _watch_parent(owner: int) -> None:
+    """In a worker, as it starts: end it (``os._exit``) as soon as the process that started it
+    is gone, which is when the kernel gives it another parent (pid 1 or a subreaper). The
+    command's SIGKILL is the case: the workers hold SIGINT and SIGTERM and, left alone,
+    finished their task and waited out joblib's idle timeout. ``owner`` is the dispatching
+    process, the workers' parent (loky starts them itself, also with ``JOBLIB_START_METHOD``
+    spawn or forkserver); were it another process (a start method's server), that parent is
+    the one watched.
+
+    A thread polls ``os.getppid()``. It needs the GIL, which GTSAM holds through a whole
+    optimisation (5 s of one, measured), so a worker started by the parent's main thread (the
+    command's, a notebook's) also asks Linux for SIGKILL when that thread ends
+    (``PR_SET_PDEATHSIG``). Only then: the signal follows the *thread* that started the
+    worker, and loky also starts workers from its own threads and the caller's (dispatch
+    called in a thread), which can end while the process and its kept workers go on."""
+    parent = os.getppid()
+    if parent != owner and not _alive(owner):  # gone before this worker got here
+        os._exit(1)
+    if _started_by_main_thread(parent):
+        _kill_me_with_my_parent()
+        if os.getppid() != parent:  # gone meanwhile
+            os._exit(1)
+    threading.Thread(target=_exit_when_orphaned, args=(parent,), daemon=True,
+                     name="bomgraph-parent-watch").start()
+
+
+def _started_by_main_thread(parent: int) -> bool:
+    """Whether ``parent``'s main thread started this process (Linux lists a process's children
+    under the thread that started them; elsewhere, or unreadable: False)."""
+    try:
+        with open(f"/proc/{parent}/task/{parent}/children", encoding="ascii") as fh:
+            return str(os.getpid()) in fh.read().split()
+    except OSError:
+        return False
+
+
+def _kill_me_with_my_parent() -> None:
+    """``prctl(PR_SET_PDEATHSIG, SIGKILL)``: Linux ends this process when the thread that
+    started it ends (no libc or no prctl: nothing; the polling thread remains)."""
+    import ctypes
+    import signal
+
+    try:
+        ctypes.CDLL(None, use_errno=True).prctl(1, int(signal.SIGKILL))  # 1: PR_SET_PDEATHSIG
+    except (OSError, AttributeError):
+        pass
+
+
+def _exit_when_orphaned(parent: int) -> None:
+    while os.getppid() == parent:
+        time.sleep(PARENT_POLL_S)
+    os._exit(1)  # no output: the command's terminal has moved on
 
 
 def _end_kept_workers() -> None:
