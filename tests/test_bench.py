@@ -68,7 +68,7 @@ def test_a_corrupt_cache_file_is_a_miss_and_is_rewritten(tmp_path: Path, corrupt
     first = strip_timings(execute(tasks, Executor("serial"), cache_dir=tmp_path))
     bad = tmp_path / f"{task_key(tasks[0])}.json"
     bad.write_bytes(corrupt)
-    with caplog.at_level("WARNING", logger="bomgraph.bench"):
+    with caplog.at_level("WARNING", logger="bomgraph.result_cache"):
         again = strip_timings(execute(tasks, Executor("serial"), cache_dir=tmp_path))
     assert json.dumps(again) == json.dumps(first)
     assert str(bad) in caplog.text
