@@ -370,7 +370,14 @@ class BearingEkf:
             y = np.asarray(angle_residual(z, h)) - hu @ self._difference(x0, xi)[cols]
             hp = hu @ P[cols]                                     # H P, (k, n)
             s = hp[:, cols] @ hu.T + np.diag(var)
-            x_next = x0 + np.linalg.solve(s, y) @ hp
+            # A singular S fails like _apply's check: the state is untouched (numpy 2.0-2.3
+            # raise here after the 1e12 m step of tests/baselines/test_ekf_hostile.py)
+            try:
+                x_next = x0 + np.linalg.solve(s, y) @ hp
+            except np.linalg.LinAlgError:
+                raise FilterNumericalError(
+                    "the innovation covariance of the bearing update is not positive definite "
+                    "or not finite (the update is skipped)") from None
             x_next[self._is_angle] = wrap_angle(x_next[self._is_angle])
             converged = np.max(np.abs(self._difference(x_next, xi))) < 1e-10
             xi = x_next
