@@ -13,7 +13,6 @@ import argparse
 import contextlib
 import errno
 import json
-import logging
 import math
 import os
 import signal
@@ -387,20 +386,6 @@ def cmd_import_victoria(args: argparse.Namespace) -> int:
 # Parser
 # --------------------------------------------------------------------------------------------
 
-def configure_logging(verbose: int = 0, quiet: bool = False) -> None:
-    """The root handler on stderr: WARNING by default, INFO with -v, DEBUG with -vv, ERROR
-    with -q."""
-    level = (logging.ERROR if quiet else logging.DEBUG if verbose >= 2
-             else logging.INFO if verbose == 1 else logging.WARNING)
-    logging.basicConfig(level=level, format="bomgraph: %(levelname)s: %(message)s",
-                        stream=sys.stderr, force=True)
-    logging.captureWarnings(True)
-    if quiet:
-        import warnings
-
-        warnings.simplefilter("ignore")
-
-
 #: the signals that stop a command (:func:`_on_signal`).
 _SIGNALS = tuple(getattr(signal, n) for n in ("SIGINT", "SIGTERM") if hasattr(signal, n))
 
@@ -501,6 +486,11 @@ def program() -> int:
 
 def _run(argv: Sequence[str] | None, program: bool) -> int:
     hook = sys.unraisablehook
+    from .stdio import logging_restored
+
+    kept = contextlib.ExitStack()
+    if not program:  # the caller's logging and warnings, which the command replaces
+        kept.enter_context(logging_restored())
     owned = _own_signals(hook)
     try:
         try:
@@ -522,6 +512,7 @@ def _run(argv: Sequence[str] | None, program: bool) -> int:
             for s, previous in owned.items():
                 signal.signal(s, previous)
             sys.unraisablehook = hook
+            kept.close()
 
 
 def _own_signals(hook: Callable[[Any], None]) -> dict[int, Any]:
@@ -547,6 +538,8 @@ def _main(argv: Sequence[str] | None) -> int:
         args = parser.parse_args(argv)
     except BrokenPipeError:  # `bomgraph --help | head -1`
         return _stdout_closed()
+    from .stdio import configure_logging
+
     configure_logging(getattr(args, "verbose", 0), getattr(args, "quiet", False))
     func: Callable[[argparse.Namespace], int] = _COMMANDS[args.func]
     try:

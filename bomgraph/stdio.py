@@ -28,6 +28,7 @@ streams for :mod:`bomgraph.cli` and raise :class:`~bomgraph.errors.BomgraphError
 from __future__ import annotations
 
 import contextlib
+import logging
 import os
 import re
 import signal
@@ -35,6 +36,7 @@ import stat
 import sys
 import tempfile
 import threading
+import warnings
 from pathlib import Path
 from typing import IO, Any, Callable, Iterator, Sequence
 
@@ -452,8 +454,49 @@ def _fsync_dir(d: str) -> None:
         os.close(fd)
 
 
+def configure_logging(verbose: int = 0, quiet: bool = False) -> None:
+    """The root handler on stderr: WARNING by default, INFO with -v, DEBUG with -vv, ERROR
+    with -q."""
+    level = (logging.ERROR if quiet else logging.DEBUG if verbose >= 2
+             else logging.INFO if verbose == 1 else logging.WARNING)
+    root = logging.getLogger()
+    for h in root.handlers[:]:  # set aside, not closed: main() puts them back
+        # (:func:`logging_restored`)
+        root.removeHandler(h)
+    handler = logging.StreamHandler(sys.stderr)
+    handler.setFormatter(logging.Formatter("bomgraph: %(levelname)s: %(message)s"))
+    root.addHandler(handler)
+    root.setLevel(level)
+    logging.captureWarnings(True)
+    if quiet:
+        warnings.simplefilter("ignore")
+
+
+@contextlib.contextmanager
+def logging_restored() -> Iterator[None]:
+    """The root logger's level and handlers and the warnings' filters and ``showwarning`` as
+    they were before, when the block ends: for the command run in its caller's process
+    (:func:`bomgraph.cli.main`), whose ``-q`` left the caller's root logger at ERROR, its
+    handlers removed, and every warning ignored."""
+    root = logging.getLogger()
+    level, handlers = root.level, root.handlers[:]
+    with warnings.catch_warnings():
+        try:
+            yield
+        finally:
+            for h in root.handlers[:]:  # the block's handlers go, the caller's come back
+                if h not in handlers:
+                    root.removeHandler(h)
+                    h.close()
+            for h in handlers:
+                if h not in root.handlers:
+                    root.addHandler(h)
+            root.setLevel(level)
+
+
 __all__ = ["STDIO", "MAX_LINE_BYTES", "MAX_INPUT_BYTES", "OutputPathError",
            "InputTooLargeError", "line_too_long", "input_too_large", "bounded_lines",
            "read_bounded", "copy_bounded", "display_path", "input_path", "write_output",
            "is_stdout", "check_output_path", "AtomicOutput", "output_file", "write_text",
-           "write_figure", "FolderBusyError", "make_folder", "folder_lock", "signals_held"]
+           "write_figure", "FolderBusyError", "make_folder", "folder_lock", "signals_held",
+           "configure_logging", "logging_restored"]
