@@ -246,11 +246,11 @@ def _compare(args: argparse.Namespace, seen: dict[str, int]) -> int:
         reference=args.reference, checkpoint_every=args.checkpoint_every, real=args.real,
         quick=args.quick, seed=args.seed,
         names=args.experiments.split(",") if args.experiments else ())
+    executor = Executor.choose(args.jobs, args.scheduler, args.dask_local, defaults=settings)
     if args.dry_run:
         references_for(chosen, args.paired_reference)    # a wrong arm: refused here too
         return _print_plan(plan_compare(chosen, args.out, use_cache=not args.no_cache,
-                                        estimates=args.estimates), args.out)
-    executor = Executor.choose(args.jobs, args.scheduler, args.dask_local, defaults=settings)
+                                        estimates=args.estimates, executor=executor), args.out)
     if executor.backend == "dask" and args.jobs is not None and not getattr(args, "quiet", False):
         print(f"bomgraph: note: --jobs {args.jobs} is not used: the Dask cluster's workers run "
               f"the tasks (--dask-local N workers, or those started for --scheduler)",
