@@ -159,6 +159,9 @@ def cmd_export(args: argparse.Namespace) -> int:
     with input_path(stream_path) if stream_path else contextlib.nullcontext() as sp:
         stream = None if sp is None else read_stream(sp)
     if args.truth is not None:
+        if stream is not None and stream.truth is None:
+            raise ExportError(f"{args.truth}, line 1: no 'truth' in the header: the stream "
+                              f"has no ground truth to export")
         src = truth_estimate(stream)  # type: ignore[arg-type]
     else:
         with input_path(args.estimate) as ep:

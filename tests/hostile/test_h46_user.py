@@ -4,6 +4,7 @@ computed from is refused by every command that reads the two together, not only 
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -41,3 +42,16 @@ def test_evaluate_refuses_a_reference_of_another_stream(work: Path) -> None:
     ref = _estimate_of_another_stream(work)
     one_error(bomgraph("evaluate", mine, work / "s.jsonl", "--reference", ref),
               "another stream", str(ref), "s.jsonl")
+
+
+def test_export_truth_of_a_stream_without_truth_names_the_file(work: Path) -> None:
+    """``export --truth`` of a recording without truth said "the stream has no truth to
+    export", naming no file."""
+    lines = (work / "s.jsonl").read_text().splitlines()
+    header = json.loads(lines[0])
+    del header["truth"]
+    bare = work / "bare.jsonl"
+    bare.write_text("\n".join([json.dumps(header)] + lines[1:]) + "\n")
+    one_error(bomgraph("export", "--truth", bare, "--format", "tum", "--out", work / "t.tum"),
+              str(bare), "line 1", "truth")
+    assert not (work / "t.tum").exists()
