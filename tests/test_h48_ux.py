@@ -72,3 +72,84 @@ def test_an_estimate_version_that_is_not_an_integer_says_what_to_write(
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and str(est) in err[0] and "line 1" in err[0]
     assert "'version'" in err[0] and says in err[0], err[0]
+
+
+BOUND = '''
+from bomgraph.mapper import MapEstimate
+
+
+class TruthMap:
+    """the true landmarks, seen or not (a bound)
+
+    More text that is not the description."""
+
+    needs_truth = True
+
+    def __init__(self, header, *, truth):
+        self.truth = truth
+
+    def step(self, step):
+        pass
+
+    def estimate(self):
+        return MapEstimate(self.truth.landmark_ids, self.truth.landmarks_xy)
+
+
+class Described(TruthMap):
+    description = "its own description attribute"
+    needs_truth = "yes"             # not True: not a bound, as for a plugin
+
+    def __init__(self, header):
+        self.truth = None
+'''
+
+
+@pytest.fixture()
+def h48_methods(tmp_path: Path, monkeypatch: pytest.MonkeyPatch):
+    import sys
+
+    from bomgraph import mapper
+
+    (tmp_path / "h48bound.py").write_text(BOUND)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    monkeypatch.delitem(sys.modules, "h48bound", raising=False)
+    monkeypatch.setattr(mapper, "_REGISTRY", dict(mapper._REGISTRY))
+    return mapper
+
+
+def test_register_method_honours_a_factory_s_needs_truth_as_plugins_do(h48_methods) -> None:
+    """A class with ``needs_truth = True`` registered without needs_truth=True was not given
+    the truth: create_mapper failed with "bad options []: ... missing ... 'truth'"."""
+    import numpy as np
+
+    from bomgraph.errors import ConfigError
+    from bomgraph.sim import SimConfig, simulate
+
+    mapper = h48_methods
+    mapper.register_method("h48-truth", "h48bound:TruthMap", "a bound")
+    mapper.register_method("h48-plain", "h48bound:Described", "not a bound")
+    assert mapper.method_info("h48-truth").needs_truth is True
+    assert mapper.method_info("h48-plain").needs_truth is False
+    stream = simulate(SimConfig(n_steps=10, n_landmarks=6), np.random.default_rng(1))
+    with pytest.raises(ConfigError, match="reads the ground truth"):
+        mapper.create_mapper("h48-truth", stream.header)
+    est = mapper.run(mapper.create_mapper("h48-truth", stream.header, truth=stream.truth),
+                     stream.steps).final
+    assert np.array_equal(est.landmarks_xy, stream.truth.landmarks_xy)
+
+
+def test_register_method_falls_back_to_the_factory_s_description(h48_methods) -> None:
+    """register_method required a description where a plugin falls back to its factory's
+    ``description`` attribute, else the first line of its docstring."""
+    from bomgraph.method_list import method_listing
+
+    mapper = h48_methods
+    mapper.register_method("h48-doc", "h48bound:TruthMap")
+    mapper.register_method("h48-attr", "h48bound:Described")
+    mapper.register_method("h48-given", "h48bound:Described", "given here")
+    assert mapper.method_description("h48-doc") == "the true landmarks, seen or not (a bound)"
+    assert mapper.method_description("h48-attr") == "its own description attribute"
+    assert mapper.method_description("h48-given") == "given here"
+    row = method_listing(mapper.method_info("h48-doc"))
+    assert row["description"] == "the true landmarks, seen or not (a bound)"
+    assert row["needs_truth"] is True and row["origin"] == "runtime"
