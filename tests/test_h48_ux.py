@@ -153,3 +153,19 @@ def test_register_method_falls_back_to_the_factory_s_description(h48_methods) ->
     row = method_listing(mapper.method_info("h48-doc"))
     assert row["description"] == "the true landmarks, seen or not (a bound)"
     assert row["needs_truth"] is True and row["origin"] == "runtime"
+
+
+def test_the_package_namespace_shows_no_implementation_names() -> None:
+    """``dir(bomgraph)`` listed ``Any`` and ``import_module`` (its own imports)."""
+    import subprocess
+    import sys
+
+    code = ("import bomgraph; d = dir(bomgraph); print(sorted({'Any', 'import_module'} & "
+            "set(d))); ns = {}; exec('from bomgraph import *', ns); "
+            "print(sorted(set(bomgraph.__all__) - set(ns))); "
+            "print(all(n in d for n in bomgraph.__all__)); "
+            "print(bomgraph.mapper.register_method.__name__, "
+            "bomgraph.stream_file.read_stream.__name__, bomgraph.run.__name__)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True).stdout.split("\n")
+    assert out[:4] == ["[]", "[]", "True", "register_method read_stream run"]
