@@ -234,4 +234,5 @@ def parse_options(pairs: Sequence[str]) -> dict[str, Any]:
 
 
 __all__ = ["jsonable", "parse_option_value", "parse_options", "MAX_ID", "is_int", "is_id",
-           "is_num", "version_problem", "DuplicateKeyError", "no_duplicate_keys", "loads_strict", "find_nonfinite"]
+           "is_num", "version_problem", "DuplicateKeyError", "no_duplicate_keys", "loads_strict",
+           "find_nonfinite"]
