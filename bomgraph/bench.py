@@ -43,9 +43,8 @@ from .method_code import (method_code, refuse_runtime_methods, sourceless, stale
                           stale_plugin, warn_sourceless, workers_outdated)
 from .plugins import code_fingerprint, source_fingerprint
 from .result_cache import read_cached, write_cached
-from .stdio import bounded_lines
 from .stream import Step, Stream, Truth
-from .stream_file import StreamReader
+from .stream_file import StreamReader, count_steps  # re-exported: bench.count_steps
 from .sweep import scheduler_address_problem
 from .trajectory import bearing_residuals
 
@@ -570,14 +569,6 @@ def _reporting(steps: Iterable[Step], progress: Callable[[int], None]) -> Iterat
     for st in steps:
         yield st
         progress(st.t)
-
-
-def count_steps(stream_path: str | os.PathLike[str]) -> int:
-    """The number of step lines of a stream file (its lines after the header), without
-    parsing them: for a progress bar's total."""
-    with open(stream_path, "rb") as fh:  # bounded: /dev/zero is refused, not counted forever
-        n = sum(1 for _ in bounded_lines(fh, stream_path))
-    return max(n - 1, 0)
 
 
 def run_example(method: str, experiment: Experiment, *, run_index: int = 0,
