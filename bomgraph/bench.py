@@ -330,17 +330,17 @@ def _cache_path(cache_dir: Path, task: Task, key: str | None = None) -> Path | N
 
 
 def is_cached(task: Task, cache_dir: str | os.PathLike[str],
-              executor: Executor | None = None) -> bool:
-    """Whether :func:`execute` with ``executor`` (None: serial, in this process) would take
-    ``task``'s result from ``cache_dir`` (not run it)."""
+              executor: Executor = Executor()) -> bool:
+    """Whether :func:`execute` with ``executor`` (its default too) would take ``task``'s
+    result from ``cache_dir`` (not run it)."""
     return which_cached([task], cache_dir, executor)[0]
 
 
 def which_cached(tasks: Sequence[Task], cache_dir: str | os.PathLike[str],
-                 executor: Executor | None = None) -> list[bool]:
+                 executor: Executor = Executor()) -> list[bool]:
     """:func:`is_cached` of each task, keyed as one :func:`execute` sweep keys them (each
     plugin's package hashed once)."""
-    disk = executor is not None and executor.backend != "serial"
+    disk = executor.backend != "serial"
     memo: dict[str, str | None] = {}
     stale: dict[tuple[str, ...], bool] = {}
     paths = [None if not disk and stale_here(t, stale) else

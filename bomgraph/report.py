@@ -366,8 +366,8 @@ def compare(experiments: Sequence[Experiment], out_dir: str | os.PathLike[str], 
 
 def plan_compare(experiments: Sequence[Experiment], out_dir: str | os.PathLike[str], *,
                  use_cache: bool = True, estimates: bool = False,
-                 executor: Executor | None = None) -> list[dict[str, Any]]:
-    """What :func:`compare` with ``executor`` (None: serial) would run, without running or
+                 executor: Executor = Executor()) -> list[dict[str, Any]]:
+    """What :func:`compare` with ``executor`` (its default too) would run, without running or
     writing anything: one row per task (``experiment``, ``arm``, ``run``, ``cached``: its
     result is in ``out_dir/cache``, so it would not run again), in the order compare runs
     them."""

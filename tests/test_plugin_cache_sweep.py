@@ -2,12 +2,18 @@
 and Dask workers' runs are keyed with the plugin's sources on disk, a serial run's with the
 code loaded here.
 
+- :func:`bomgraph.report.plan_compare` and :func:`bomgraph.bench.is_cached` answer for the
+  same executor as :func:`bomgraph.report.compare` and :func:`bomgraph.bench.execute` by
+  default: they answered for a serial run while the run used local processes, so in a
+  notebook holding an edited, not reloaded plugin the plan said "not cached" of runs the
+  sweep then took from the cache.
 - A sweep hashes each plugin's package once, not once per task: keyed with the sources on
   disk, the keys read the whole package for every task (800 tasks of a 301-file package:
   18.8 s before the first run, 0.09 s before h46's change)."""
 
 from __future__ import annotations
 
+import importlib
 import os
 import sys
 from pathlib import Path
@@ -19,7 +25,7 @@ import pytest
 from _plugin_dist import write_dist_info
 
 from bomgraph import plugins
-from bomgraph.bench import Executor, execute
+from bomgraph.bench import Executor, execute, is_cached
 from bomgraph.experiments import Arm, Experiment, FileSource
 from bomgraph.report import plan_compare
 from bomgraph.sim import SimConfig, simulate
@@ -79,6 +85,31 @@ def _taken_from_cache(exp: Experiment, out: Path, **kw: Executor) -> int:
     seen: list[int] = []
     execute(exp.tasks(), cache_dir=out / "cache", progress=lambda d, n: seen.append(d), **kw)
     return seen[0]
+
+
+def test_the_plan_answers_for_the_executor_that_compare_uses_by_default(
+        plugin: tuple[Path, Experiment], tmp_path: Path) -> None:
+    """A notebook: the plugin ran serially with the code now on disk (B), was reloaded to
+    A and ran, then was edited back to B without a reload. The default executor (local
+    processes) runs B, whose results are cached: compare/execute take them; the plan and
+    is_cached said no (they answered for a serial run, which refuses the stale module)."""
+    src, exp = plugin
+    out = tmp_path / "out"
+    edited = CODE.replace("DEPTH_M = 1.0", "DEPTH_M = 3.0")
+    src.write_text(edited)
+    module = importlib.import_module("h47plug.mapper")
+    execute(exp.tasks(), Executor("serial"), cache_dir=out / "cache")   # B's results cached
+    src.write_text(CODE)
+    importlib.reload(module)
+    execute(exp.tasks(), Executor("serial"), cache_dir=out / "cache")   # A ran and cached
+    src.write_text(edited)                                              # B on disk, no reload
+    plan = [r["cached"] for r in plan_compare([exp], out)]
+    single = is_cached(exp.tasks()[0], out / "cache")
+    assert _taken_from_cache(exp, out) == 4            # the default executor: no run
+    assert plan == [True] * 4 and single, "the plan answered for a serial run"
+    serial = Executor("serial")                        # which refuses the stale module
+    assert [r["cached"] for r in plan_compare([exp], out, executor=serial)] == [False] * 4
+    assert _taken_from_cache(exp, out, executor=serial) == 0
 
 
 def test_a_sweep_hashes_a_plugin_package_once_not_once_a_task(
