@@ -23,7 +23,8 @@ from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 
-from .bench import Executor, execute_counted, run_example, which_cached
+from .bench import (Executor, execute_counted, refuse_runtime_methods, run_example,
+                    which_cached)
 from .errors import StreamFormatError
 from .evaluate import score_estimate
 from .experiments import PAPER_REPORTED, Experiment, FileSource, Task
@@ -375,6 +376,8 @@ def plan_compare(experiments: Sequence[Experiment], out_dir: str | os.PathLike[s
     source_fingerprint.cache_clear()  # as execute() does: a plugin module reloaded since
     cache = Path(out_dir) / "cache"
     tasks = [replace(t, keep_estimate=estimates) for e in experiments for t in e.tasks()]
+    if executor.backend != "serial":  # as execute() refuses them
+        refuse_runtime_methods(tasks, executor.backend)
     cached = (which_cached(tasks, cache, executor) if use_cache and cache.is_dir()
               else [False] * len(tasks))
     return [{"experiment": t.experiment, "arm": t.arm.label, "run": t.source.name,

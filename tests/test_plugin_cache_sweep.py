@@ -9,7 +9,8 @@ code loaded here.
   sweep then took from the cache.
 - A sweep hashes each plugin's package once, not once per task: keyed with the sources on
   disk, the keys read the whole package for every task (800 tasks of a 301-file package:
-  18.8 s before the first run, 0.09 s before h46's change)."""
+  18.8 s before the first run, 0.09 s before h46's change).
+- The plan with workers refuses a method registered at run time, as the sweep does."""
 
 from __future__ import annotations
 
@@ -135,3 +136,20 @@ def test_a_sweep_hashes_a_plugin_package_once_not_once_a_task(
             else:
                 assert all(r["cached"] for r in plan_compare([exp], out, executor=ex))
             assert len(reads) <= 2, (how, ex.backend, len(reads))   # loaded, and on disk once
+
+
+def test_the_plan_refuses_a_run_time_method_for_workers_as_compare_does(
+        plugin: tuple[Path, Experiment], monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
+    """``plan_compare`` with local processes listed the runs of a method registered at run
+    time, which ``compare`` with the same executor then refused (its workers cannot see it)."""
+    from bomgraph import mapper
+    from bomgraph.errors import ConfigError
+
+    monkeypatch.setattr(mapper, "_REGISTRY", dict(mapper._REGISTRY))
+    mapper.register_method("h47-runtime", "h47plug.mapper:DepthMapper", "registered here")
+    _, exp = plugin
+    exp = Experiment("rt", "rt", (Arm("h47-runtime", "h47-runtime"),), sources=exp.sources)
+    assert len(plan_compare([exp], tmp_path / "out", executor=Executor("serial"))) == 4
+    with pytest.raises(ConfigError, match="registered at run time"):
+        plan_compare([exp], tmp_path / "out", executor=Executor("processes", n_jobs=2))
