@@ -225,8 +225,9 @@ def _run_task(task: Task) -> dict[str, Any]:
         out.update(ok=False, error=_failure(exc), traceback=_traceback(exc))
         _log.debug("%s on %s failed:\n%s", task.arm.label, task.source.name, out["traceback"])
         return out
-    if unscorable:
-        out.update(ok=False, error=unscorable[0])
+    # its package edited during the run (a module it imported since): code of neither key
+    if unscorable or (stale := stale_plugin(task, worker=_IN_WORKER.get())):
+        out.update(ok=False, error=unscorable[0] if unscorable else stale)
         return out
     info = jsonable(dict(result.final.info), max_items=64)
     final = result.final
@@ -329,10 +330,9 @@ def _cache_path(cache_dir: Path, task: Task, key: str | None = None) -> Path | N
     return None if sourceless(task) else cache_dir / f"{key or task_key(task)}.json"
 
 
-def is_cached(task: Task, cache_dir: str | os.PathLike[str],
-              executor: Executor = Executor()) -> bool:
-    """Whether :func:`execute` with ``executor`` (its default too) would take ``task``'s
-    result from ``cache_dir`` (not run it)."""
+def is_cached(task: Task, cache_dir: str | os.PathLike[str], executor: Executor = Executor()
+              ) -> bool:
+    """Whether :func:`execute` with ``executor`` would take ``task``'s result from the cache."""
     return which_cached([task], cache_dir, executor)[0]
 
 

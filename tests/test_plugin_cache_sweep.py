@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import importlib
 import os
+from dataclasses import replace
 import sys
 from pathlib import Path
 from typing import Iterator
@@ -153,3 +154,33 @@ def test_the_plan_refuses_a_run_time_method_for_workers_as_compare_does(
     assert len(plan_compare([exp], tmp_path / "out", executor=Executor("serial"))) == 4
     with pytest.raises(ConfigError, match="registered at run time"):
         plan_compare([exp], tmp_path / "out", executor=Executor("processes", n_jobs=2))
+
+
+LAZY = CODE.replace("DEPTH_M * np.array", "self.depth * np.array").replace(
+    "        self.pose, self.seen = np.zeros(3), {}\n", '''        self.pose, self.seen = np.zeros(3), {}
+        import os
+        from pathlib import Path
+        if os.environ.get("H47_SAVE_DURING_RUN") == "1":  # the user's save lands mid-run
+            os.environ["H47_SAVE_DURING_RUN"] = "0"
+            Path(__file__).with_name("helper.py").write_text("DEPTH_M = 3.0\\n")
+        from h47plug import helper       # a module of the package, imported when needed
+        self.depth = helper.DEPTH_M
+''')
+
+
+def test_a_run_during_which_its_package_was_edited_is_not_cached(
+        plugin: tuple[Path, Experiment], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The key is taken before the run: a module of the plugin's package that the run imports
+    later was read after an edit saved meanwhile, and the result of the new code was cached
+    under the key of the old (a later sweep of the old code got it: MPE 1.93 m for 0.25 m)."""
+    src, exp = plugin
+    src.write_text(LAZY)
+    helper = src.with_name("helper.py")
+    helper.write_text("DEPTH_M = 1.0\n")
+    exp = replace(exp, sources=exp.sources[:1])
+    cache = tmp_path / "cache"
+    monkeypatch.setenv("H47_SAVE_DURING_RUN", "1")
+    (during,) = execute(exp.tasks(), Executor("serial"), cache_dir=cache)
+    assert not during["ok"] and "was edited since" in during["error"], during
+    assert list(cache.glob("*.json")) == [], "a result was cached under another code's key"
