@@ -43,9 +43,8 @@ from .method_code import (method_code, refuse_runtime_methods, sourceless, stale
                           stale_plugin, warn_sourceless, workers_outdated)
 from .plugins import code_fingerprint, source_fingerprint
 from .result_cache import read_cached, write_cached
-from .stdio import bounded_lines
 from .stream import Step, Stream, Truth
-from .stream_file import StreamReader
+from .stream_file import StreamReader, count_steps  # re-exported: bench.count_steps
 from .sweep import scheduler_address_problem
 from .trajectory import bearing_residuals
 
@@ -54,15 +53,17 @@ _log = logging.getLogger(__name__)
 CACHE_VERSION = 1
 
 
-def task_key(task: Task, *, disk: bool = False) -> str:
+def task_key(task: Task, *, disk: bool = False,
+             memo: dict[str, str | None] | None = None) -> str:
     """A content hash of the task, the cache version and the code: the same task run by the
     same code always has the same key (its cache file name). The code is the bomgraph and
     baselines sources and, for a plugin or a method registered at run time, the sources of
     its package and its version (:func:`bomgraph.method_code.method_fingerprint`): as this
     process runs them, or with ``disk`` as a worker process that imports them now runs
-    them (they differ after an edit that this process has not reloaded)."""
+    them (they differ after an edit that this process has not reloaded). ``memo``: as
+    :func:`bomgraph.method_code.method_code` (one dict per sweep and ``disk``)."""
     ident: dict[str, Any] = {**task.identity(), "v": CACHE_VERSION, "code": code_fingerprint()}
-    plugin_code = method_code(task, disk=disk)
+    plugin_code = method_code(task, disk=disk, memo=memo)
     if plugin_code:
         ident["method_code"] = plugin_code
     blob = json.dumps(ident, sort_keys=True)
@@ -224,8 +225,9 @@ def _run_task(task: Task) -> dict[str, Any]:
         out.update(ok=False, error=_failure(exc), traceback=_traceback(exc))
         _log.debug("%s on %s failed:\n%s", task.arm.label, task.source.name, out["traceback"])
         return out
-    if unscorable:
-        out.update(ok=False, error=unscorable[0])
+    # its package edited during the run (a module it imported since): code of neither key
+    if unscorable or (stale := stale_plugin(task, worker=_IN_WORKER.get())):
+        out.update(ok=False, error=unscorable[0] if unscorable else stale)
         return out
     info = jsonable(dict(result.final.info), max_items=64)
     final = result.final
@@ -328,15 +330,22 @@ def _cache_path(cache_dir: Path, task: Task, key: str | None = None) -> Path | N
     return None if sourceless(task) else cache_dir / f"{key or task_key(task)}.json"
 
 
-def is_cached(task: Task, cache_dir: str | os.PathLike[str],
-              executor: Executor | None = None) -> bool:
-    """Whether :func:`execute` with ``executor`` (None: serial, in this process) would take
-    ``task``'s result from ``cache_dir`` (not run it)."""
-    disk = executor is not None and executor.backend != "serial"
-    if not disk and stale_here(task, {}):
-        return False
-    path = _cache_path(Path(cache_dir), task, task_key(task, disk=disk))
-    return path is not None and read_cached(path) is not None
+def is_cached(task: Task, cache_dir: str | os.PathLike[str], executor: Executor = Executor()
+              ) -> bool:
+    """Whether :func:`execute` with ``executor`` would take ``task``'s result from the cache."""
+    return which_cached([task], cache_dir, executor)[0]
+
+
+def which_cached(tasks: Sequence[Task], cache_dir: str | os.PathLike[str],
+                 executor: Executor = Executor()) -> list[bool]:
+    """:func:`is_cached` of each task, keyed as one :func:`execute` sweep keys them (each
+    plugin's package hashed once)."""
+    disk = executor.backend != "serial"
+    memo: dict[str, str | None] = {}
+    stale: dict[tuple[str, ...], bool] = {}
+    paths = [None if not disk and stale_here(t, stale) else
+             _cache_path(Path(cache_dir), t, task_key(t, disk=disk, memo=memo)) for t in tasks]
+    return [p is not None and read_cached(p) is not None for p in paths]
 
 
 def execute(tasks: Sequence[Task], executor: Executor = Executor(), *,
@@ -372,7 +381,8 @@ def execute_counted(tasks: Sequence[Task], executor: Executor = Executor(), *,
     # restarted, stale Dask workers refuse), so their runs are keyed with it; a serial run
     # runs the code loaded here, and refuses it if edited since without a reload
     disk = executor.backend != "serial"
-    keys = [task_key(t, disk=disk) for t in tasks]
+    memo: dict[str, str | None] = {}  # each plugin's package hashed once, not once a task
+    keys = [task_key(t, disk=disk, memo=memo) for t in tasks]
     cache = Path(cache_dir) if cache_dir is not None else None
     if cache is not None:
         cache.mkdir(parents=True, exist_ok=True)
@@ -572,14 +582,6 @@ def _reporting(steps: Iterable[Step], progress: Callable[[int], None]) -> Iterat
         progress(st.t)
 
 
-def count_steps(stream_path: str | os.PathLike[str]) -> int:
-    """The number of step lines of a stream file (its lines after the header), without
-    parsing them: for a progress bar's total."""
-    with open(stream_path, "rb") as fh:  # bounded: /dev/zero is refused, not counted forever
-        n = sum(1 for _ in bounded_lines(fh, stream_path))
-    return max(n - 1, 0)
-
-
 def run_example(method: str, experiment: Experiment, *, run_index: int = 0,
                 t: int | None = None) -> tuple[Stream, MapEstimate]:
     """``method`` (default options) on run ``run_index`` of a simulated experiment, without
@@ -592,6 +594,6 @@ def run_example(method: str, experiment: Experiment, *, run_index: int = 0,
     return stream, (res.final if t is None else res.at(t))
 
 
-__all__ = ["Executor", "run_task", "execute", "execute_counted", "is_cached",
+__all__ = ["Executor", "run_task", "execute", "execute_counted", "is_cached", "which_cached",
            "refuse_runtime_methods", "task_key", "code_fingerprint", "strip_timings", "run_file",
            "count_steps", "run_example", "CACHE_VERSION"]

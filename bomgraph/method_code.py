@@ -48,12 +48,18 @@ def method_has_source(name: str) -> bool:
     return method_fingerprint(name) != NO_SOURCE
 
 
-def method_code(task: Task, *, disk: bool = False) -> dict[str, str]:
+def method_code(task: Task, *, disk: bool = False,
+                memo: dict[str, str | None] | None = None) -> dict[str, str]:
     """The fingerprints of the task's non-built-in methods (the arm's, the reference's, a
     seed's: :meth:`Task.methods`), by method name: empty for built-in methods, so their keys
-    are as before plugins existed. ``disk``: as :func:`method_fingerprint`."""
-    return {m: fp for m in task.methods()
-            if (fp := method_fingerprint(m, disk=disk)) is not None}
+    are as before plugins existed. ``disk``: as :func:`method_fingerprint`. ``memo``: the
+    fingerprints (of the same ``disk``) already taken by this sweep, by method name, filled
+    here: a plugin's package is hashed once per sweep, not once per task."""
+    memo = {} if memo is None else memo
+    for m in task.methods():
+        if m not in memo:
+            memo[m] = method_fingerprint(m, disk=disk)
+    return {m: fp for m in task.methods() if (fp := memo[m]) is not None}
 
 
 def stale_plugin(task: Task, *, worker: bool) -> str:

@@ -23,7 +23,8 @@ from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 
-from .bench import Executor, execute_counted, is_cached, run_example
+from .bench import (Executor, execute_counted, refuse_runtime_methods, run_example,
+                    which_cached)
 from .errors import StreamFormatError
 from .evaluate import score_estimate
 from .experiments import PAPER_REPORTED, Experiment, FileSource, Task
@@ -366,8 +367,8 @@ def compare(experiments: Sequence[Experiment], out_dir: str | os.PathLike[str], 
 
 def plan_compare(experiments: Sequence[Experiment], out_dir: str | os.PathLike[str], *,
                  use_cache: bool = True, estimates: bool = False,
-                 executor: Executor | None = None) -> list[dict[str, Any]]:
-    """What :func:`compare` with ``executor`` (None: serial) would run, without running or
+                 executor: Executor = Executor()) -> list[dict[str, Any]]:
+    """What :func:`compare` with ``executor`` (its default too) would run, without running or
     writing anything: one row per task (``experiment``, ``arm``, ``run``, ``cached``: its
     result is in ``out_dir/cache``, so it would not run again), in the order compare runs
     them."""
@@ -375,9 +376,12 @@ def plan_compare(experiments: Sequence[Experiment], out_dir: str | os.PathLike[s
     source_fingerprint.cache_clear()  # as execute() does: a plugin module reloaded since
     cache = Path(out_dir) / "cache"
     tasks = [replace(t, keep_estimate=estimates) for e in experiments for t in e.tasks()]
+    if executor.backend != "serial":  # as execute() refuses them
+        refuse_runtime_methods(tasks, executor.backend)
+    cached = (which_cached(tasks, cache, executor) if use_cache and cache.is_dir()
+              else [False] * len(tasks))
     return [{"experiment": t.experiment, "arm": t.arm.label, "run": t.source.name,
-             "cached": bool(use_cache and cache.is_dir() and is_cached(t, cache, executor))}
-            for t in tasks]
+             "cached": c} for t, c in zip(tasks, cached)]
 
 
 def _compare(experiments: Sequence[Experiment], out: Path, executor: Executor,

@@ -502,5 +502,13 @@ def _check_type(value: Any, kind: type, key: str) -> None:
                                 key=key)
 
 
+def count_steps(stream_path: str | os.PathLike[str]) -> int:
+    """The number of step lines of a stream file (its lines after the header), without
+    parsing them: for a progress bar's total."""
+    with open(stream_path, "rb") as fh:  # bounded: /dev/zero is refused, not counted forever
+        n = sum(1 for _ in bounded_lines(fh, stream_path))
+    return max(n - 1, 0)
+
+
 __all__ = ["StreamReader", "read_stream", "write_stream", "write_stream_parts", "header_to_json",
-           "step_to_json", "parse_priors", "FORMAT_NAME", "FORMAT_VERSION"]
+           "step_to_json", "parse_priors", "count_steps", "FORMAT_NAME", "FORMAT_VERSION"]

@@ -79,7 +79,7 @@ def test_a_method_without_source_file_is_never_taken_from_the_cache(
         first = _run_cell(cell_module, 1.0, exp, cache)
     assert "not cached" in caplog.text and "'cell-method'" in caplog.text
     assert not any(cache.iterdir()), "a result of code without a source file was cached"
-    assert not is_cached(exp.tasks()[0], cache)
+    assert not is_cached(exp.tasks()[0], cache, Executor("serial"))
     edited = _run_cell(cell_module, 3.0, exp, cache)   # the cell edited and run again
     mpe = [r["checkpoints"][-1]["mpe_m"] for r in (first, edited)]
     assert mpe[0] != mpe[1], "the edited cell's run returned the old code's result"
@@ -298,7 +298,7 @@ def test_an_edit_not_reloaded_is_not_served_from_the_cache_of_the_old_code(
     second = _final_mpe(exp, cache)
     assert first["ok"] and not second["ok"], "the old code's cached result was returned"
     assert "was edited since this process imported it" in second["error"], second["error"]
-    assert not is_cached(exp.tasks()[0], cache)
+    assert not is_cached(exp.tasks()[0], cache, Executor("serial"))
     assert len(list(cache.glob("*.json"))) == 1
 
 
