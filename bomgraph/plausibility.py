@@ -39,6 +39,9 @@ SENSOR_RANGE_LIMITS_M = (1e-6, 1e6)
 MAX_STEP_M = 1e5
 #: a truth coordinate further than this from the origin.
 MAX_COORDINATE_M = 1e9
+#: a bearing as written in a stream, or a step's turn, beyond a full turn: the format's angles
+#: are radians (and bearings are wrapped on reading), so such a value is most likely degrees.
+MAX_ABS_ANGLE_RAD = 2 * math.pi
 
 
 def header_problems(header: StreamHeader) -> list[tuple[str, str]]:
@@ -67,6 +70,18 @@ def header_problems(header: StreamHeader) -> list[tuple[str, str]]:
     return out
 
 
+def bearings_problem(t: int, bearings_rad: np.ndarray) -> tuple[str, str] | None:
+    """``(key, message)`` if a bearing of step ``t`` *as written* (before wrapping) is beyond a
+    full turn (:data:`MAX_ABS_ANGLE_RAD`), else None: bearings in degrees. The reader checks
+    the values it parsed; a :class:`~bomgraph.stream.Step` holds them wrapped."""
+    if bearings_rad.size:
+        worst = float(np.max(np.abs(bearings_rad)))
+        if not worst <= MAX_ABS_ANGLE_RAD:
+            return ("bearings", f"step {t}: a bearing of {worst:g} is more than a full turn; "
+                                f"bearings are radians (degrees?)")
+    return None
+
+
 def step_problem(step: Step) -> tuple[str, str] | None:
     """``(key, message)`` if ``step``'s odometry is implausible, else None."""
     if step.odom is not None:
@@ -74,6 +89,9 @@ def step_problem(step: Step) -> tuple[str, str] | None:
         if length > MAX_STEP_M:
             return ("odom", f"step {step.t} moves {length:g} m, more than {MAX_STEP_M:g} m "
                             f"in one step (a corrupt velocity, time stamp or unit?)")
+        if abs(float(step.odom[2])) > MAX_ABS_ANGLE_RAD:
+            return ("odom", f"step {step.t} turns {float(step.odom[2]):g} rad, more than a full "
+                            f"turn in one step; dpsi_rad is radians (degrees?)")
     if step.odom_sigma is not None:
         for name, value, limit in zip(("sigma_dx_m", "sigma_dy_m", "sigma_dpsi_rad"),
                                       step.odom_sigma, MAX_ODOMETRY_SIGMA):
@@ -112,5 +130,6 @@ def refuse_implausible(header: StreamHeader, steps: Iterable[Step],
 
 
 __all__ = ["MAX_BEARING_SIGMA_RAD", "MAX_ODOMETRY_SIGMA", "SENSOR_RANGE_LIMITS_M", "MAX_STEP_M",
-           "MAX_COORDINATE_M", "header_problems", "step_problem", "truth_problem",
+           "MAX_COORDINATE_M", "MAX_ABS_ANGLE_RAD", "header_problems", "bearings_problem",
+           "step_problem", "truth_problem",
            "refuse_implausible"]

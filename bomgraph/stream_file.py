@@ -20,7 +20,7 @@ from .checks import file_name
 from .errors import StreamFormatError
 from .jsonio import (MAX_ID, DuplicateKeyError, decode_utf8, find_nonfinite, is_id, is_int,
                      is_num, loads_strict, version_problem)
-from .plausibility import header_problems, step_problem, truth_problem
+from .plausibility import bearings_problem, header_problems, step_problem, truth_problem
 from .stdio import MAX_LINE_BYTES, bounded_lines, line_too_long, output_file
 from .stream import Prior, Step, Stream, StreamHeader, Truth
 
@@ -230,7 +230,10 @@ def _too_many_bearings(ctx: _Ctx) -> StreamFormatError:
                                  f"drop far landmarks")
 
 
-def _parse_step(obj: dict, expected_t: int, ctx: _Ctx) -> Step:
+def _parse_step(obj: dict, expected_t: int, ctx: _Ctx,
+                problems: list[tuple[str, str]] | None = None) -> Step:
+    """The step of line ``ctx.line``; with ``problems``, the bearings' plausibility as written
+    (:func:`~bomgraph.plausibility.bearings_problem`; the step holds them wrapped) is added."""
     if "t" not in obj:
         raise ctx.error("t", "missing required key")
     t = obj["t"]
@@ -278,6 +281,8 @@ def _parse_step(obj: dict, expected_t: int, ctx: _Ctx) -> Step:
     time_s = obj.get("time_s")
     if time_s is not None:
         time_s = _num(obj, "time_s", ctx)
+    if problems is not None and (problem := bearings_problem(t, vals)) is not None:
+        problems.append(problem)
     return Step(t=t, odom=odom, landmark_ids=ids, bearings_rad=vals, odom_sigma=odom_sigma,
                 time_s=time_s)
 
@@ -357,8 +362,9 @@ class StreamReader:
                           "lines")
             if text.count("[") > MAX_BEARINGS_PER_STEP + 3:  # one per bearing; odom, sigma
                 raise _too_many_bearings(ctx)
-            step = _parse_step(_parse_json_line(text, ctx), t, ctx)
-            if not warned and (problem := step_problem(step)) is not None:
+            raw: list[tuple[str, str]] | None = None if warned else []
+            step = _parse_step(_parse_json_line(text, ctx), t, ctx, raw)
+            if not warned and (problem := (raw or [None])[0] or step_problem(step)) is not None:
                 warned = True
                 _log.warning("%s, line %d: '%s': %s (implausible; later steps are not "
                              "checked)", self.path, line_no, *problem)

@@ -315,7 +315,7 @@ def test_item20_mrclam_refuses_a_corrupt_velocity_and_a_swapped_truth(tmp_path: 
     assert not out.exists()
 
 
-@pytest.mark.parametrize("case", ["sigma", "tiny sigma", "range", "step"])
+@pytest.mark.parametrize("case", ["sigma", "tiny sigma", "range", "step", "degrees", "turn"])
 def test_item11_the_reader_warns_about_valid_but_absurd_values(tmp_path: Path,
                                                                case: str) -> None:
     header = dict(HEADER)
@@ -329,12 +329,20 @@ def test_item11_the_reader_warns_about_valid_but_absurd_values(tmp_path: Path,
         header["bearing_sigma_rad"] = 1e-300
     elif case == "range":
         header["sensor_range_m"] = 1e-300
-    else:
+    elif case == "step":
         steps[15]["odom"] = [1e12, 0.0, 0.0]
+    elif case == "degrees":  # a writer's bearings in degrees from step 20 (wrapped, they run)
+        for st in steps[20:]:
+            st["bearings"] = [[i, float(np.degrees(b))] for i, b in st["bearings"]]
+    else:                    # a turn in degrees
+        steps[12]["odom"] = [0.1, 0.0, 10.0]
     s = write_jsonl(tmp_path / "x.jsonl", header, steps)
     proc = bomgraph("run", s, "--method", "triangulate", "--out", tmp_path / "e.jsonl")
     err = ok_or_one_error(proc)
-    key = {"sigma": "'bearing_sigma_rad'", "tiny sigma": "below 1e-09", "range": "'sensor_range_m'", "step": "line 17"}[case]
+    key = {"sigma": "'bearing_sigma_rad'", "tiny sigma": "below 1e-09",
+           "range": "'sensor_range_m'", "step": "line 17",
+           "degrees": "line 22: 'bearings': step 20: a bearing of 51.5662 is more than a full",
+           "turn": "line 14: 'odom': step 12 turns 10 rad"}[case]
     warning = [ln for ln in err.splitlines() if "WARNING" in ln and "x.jsonl" in ln]
     assert len(warning) == 1 and key in warning[0], err  # once, though the file is read twice
 
