@@ -13,6 +13,7 @@ from __future__ import annotations
 import csv
 import hashlib
 import json
+import logging
 import math
 import os
 import time
@@ -23,6 +24,7 @@ from typing import Any, Callable, Mapping, Sequence
 import numpy as np
 
 from .bench import Executor, execute, is_cached, run_example
+from .errors import StreamFormatError
 from .evaluate import score_estimate
 from .experiments import PAPER_REPORTED, Experiment, FileSource, Task
 from .jsonio import jsonable
@@ -32,6 +34,8 @@ from .out_folder import drop_earlier_outputs, refuse_inputs_among_outputs, slug,
 from .plugins import source_fingerprint
 from .stdio import folder_lock, make_folder, output_file, write_figure, write_text
 from .tables import HUGE
+
+_log = logging.getLogger(__name__)
 
 #: The checkpoints the summary reports (and the last one of each experiment).
 REPORT_TIMES = (50, 100, 200, 300)
@@ -441,8 +445,9 @@ def write_estimate_files(out: Path, tasks: Sequence[Task], results: Sequence[dic
     paths: list[Path] = []
     index: list[dict[str, Any]] = []
     names: dict[tuple[str, str], set[str]] = {}
-    for t in tasks:
-        names.setdefault((t.experiment, t.source.name), set()).add(_source_hash(t))
+    for t in tasks:  # a stream file is not hashed again (it may be gone since its runs)
+        if not isinstance(t.source, FileSource):
+            names.setdefault((t.experiment, t.source.name), set()).add(_source_hash(t))
     written: set[Path] = set()
     inputs = sorted({t.source.path for t in tasks if isinstance(t.source, FileSource)})
     exps = unique_slugs([t.experiment for t in tasks])
@@ -537,9 +542,15 @@ def _write_source_maps(out: Path, exp: Experiment,
     """One figure per recorded source: every method's final map (aligned) over the truth."""
     files = []
     for src in exp.sources:
-        truth = src.stream().truth
         rs = [r for r in results if r["experiment"] == exp.name and r["run"] == src.name]
-        if not rs or truth is None:
+        if not rs:
+            continue
+        try:
+            truth = src.stream().truth
+        except (StreamFormatError, OSError) as exc:  # removed or rewritten since its runs
+            _log.warning("no map figure for %s: %s", src.name, exc)
+            continue
+        if truth is None:
             continue
         fig = final_maps_figure(truth, [_map_panel(r) for r in rs],
                                 title=f"{exp.title}: {src.name}")

@@ -480,18 +480,24 @@ def logging_restored() -> Iterator[None]:
     handlers removed, and every warning ignored."""
     root = logging.getLogger()
     level, handlers = root.level, root.handlers[:]
-    with warnings.catch_warnings():
-        try:
+    # logging.captureWarnings keeps the showwarning it replaced, and installs its own only
+    # when it holds none: catch_warnings puts showwarning back, so that is put back too (else
+    # the caller's captureWarnings(True) afterwards, and the next main()'s, did nothing)
+    captured = getattr(logging, "_warnings_showwarning", None)
+    try:
+        with warnings.catch_warnings():
             yield
-        finally:
-            for h in root.handlers[:]:  # the block's handlers go, the caller's come back
-                if h not in handlers:
-                    root.removeHandler(h)
-                    h.close()
-            for h in handlers:
-                if h not in root.handlers:
-                    root.addHandler(h)
-            root.setLevel(level)
+    finally:
+        if hasattr(logging, "_warnings_showwarning"):
+            logging._warnings_showwarning = captured
+        for h in root.handlers[:]:  # the block's handlers go, the caller's come back
+            if h not in handlers:
+                root.removeHandler(h)
+                h.close()
+        for h in handlers:
+            if h not in root.handlers:
+                root.addHandler(h)
+        root.setLevel(level)
 
 
 __all__ = ["STDIO", "MAX_LINE_BYTES", "MAX_INPUT_BYTES", "OutputPathError",

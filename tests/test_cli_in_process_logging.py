@@ -32,3 +32,22 @@ def test_main_restores_the_callers_root_logger_and_warnings(capsys) -> None:
         root.removeHandler(mine)
         root.setLevel(level)
     capsys.readouterr()
+
+
+def test_the_callers_capture_of_warnings_works_after_main(capsys) -> None:
+    """main()'s logging.captureWarnings(True) was undone by putting showwarning back, while
+    logging still held the function it had replaced: the caller's own
+    logging.captureWarnings(True) afterwards did nothing (its warnings went to stderr, not to
+    its logging), and a second main() in the process printed warnings unformatted."""
+    showwarning = warnings.showwarning
+    try:
+        assert main(["methods"]) == 0
+        assert warnings.showwarning is showwarning
+        logging.captureWarnings(True)
+        assert warnings.showwarning is not showwarning  # warnings now go to logging
+        logging.captureWarnings(False)
+        assert warnings.showwarning is showwarning
+    finally:
+        logging.captureWarnings(False)
+        warnings.showwarning = showwarning
+    capsys.readouterr()

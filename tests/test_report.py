@@ -309,3 +309,33 @@ def test_the_summary_says_when_landmark_nees_values_were_left_out() -> None:
                     "leaving out landmarks without a covariance (info covariances_undefined)")
     every = summarise([result("k", "a", 2.0, None), result("k", "b", 2.0, None)])
     assert not format_summary(every).splitlines()[-1].startswith("note:")
+
+
+def test_a_stream_file_removed_during_compare_fails_its_runs_not_the_compare(
+        tmp_path: Path) -> None:
+    """A stream file removed while compare runs (after the first result) fails its runs in
+    execute (h42/h43); compare then read it again for its map figure and, with estimates,
+    for the names of the estimate files, and raised StreamFormatError after every run: no
+    summary and the command's exit 2 (h45). Now those runs are failed runs in the outputs,
+    the other sources' figures and estimates are written, and the removed one has no map
+    figure."""
+    streams = []
+    for seed in range(3):
+        streams.append(tmp_path / f"s{seed}.jsonl")
+        write_stream(simulate(SMALL, np.random.default_rng(seed)), streams[-1])
+    exp = Experiment("e", "e", (Arm("tri", "triangulate"),),
+                     sources=tuple(FileSource(str(p)) for p in streams))
+
+    def progress(done: int, total: int) -> None:
+        if done >= 1 and streams[2].exists():
+            streams[2].unlink()
+
+    result = compare([exp], tmp_path / "out", executor=Executor("serial"), progress=progress,
+                     estimates=True)
+    by_run = {r["run"]: r for r in result.results}
+    assert by_run["s0"]["ok"] and by_run["s1"]["ok"], by_run
+    assert not by_run["s2"]["ok"] and by_run["s2"]["error"].startswith("StreamFormatError")
+    out = tmp_path / "out"
+    assert (out / "e_s0_maps.png").exists() and (out / "e_s1_maps.png").exists()
+    assert not (out / "e_s2_maps.png").exists()
+    assert len(list((out / "estimates").rglob("*.est"))) == 2
