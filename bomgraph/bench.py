@@ -39,8 +39,8 @@ from .experiments import Arm, Experiment, SimSource, Task
 from .jsonio import jsonable
 from .mapper import (Checkpoint, MapEstimate, RunResult, checkpoint_times, create_mapper,
                      method_failure_note, method_info, run)
-from .method_code import (method_code, refuse_runtime_methods, sourceless, stale_plugin,
-                          warn_sourceless, workers_outdated)
+from .method_code import (method_code, refuse_runtime_methods, sourceless, stale_here,
+                          stale_plugin, warn_sourceless, workers_outdated)
 from .plugins import code_fingerprint, source_fingerprint
 from .result_cache import read_cached, write_cached
 from .stdio import bounded_lines
@@ -54,13 +54,15 @@ _log = logging.getLogger(__name__)
 CACHE_VERSION = 1
 
 
-def task_key(task: Task) -> str:
+def task_key(task: Task, *, disk: bool = False) -> str:
     """A content hash of the task, the cache version and the code: the same task run by the
     same code always has the same key (its cache file name). The code is the bomgraph and
     baselines sources and, for a plugin or a method registered at run time, the sources of
-    its package and its version (:func:`bomgraph.method_code.method_fingerprint`)."""
+    its package and its version (:func:`bomgraph.method_code.method_fingerprint`): as this
+    process runs them, or with ``disk`` as a worker process that imports them now runs
+    them (they differ after an edit that this process has not reloaded)."""
     ident: dict[str, Any] = {**task.identity(), "v": CACHE_VERSION, "code": code_fingerprint()}
-    plugin_code = method_code(task)
+    plugin_code = method_code(task, disk=disk)
     if plugin_code:
         ident["method_code"] = plugin_code
     blob = json.dumps(ident, sort_keys=True)
@@ -326,9 +328,14 @@ def _cache_path(cache_dir: Path, task: Task, key: str | None = None) -> Path | N
     return None if sourceless(task) else cache_dir / f"{key or task_key(task)}.json"
 
 
-def is_cached(task: Task, cache_dir: str | os.PathLike[str]) -> bool:
-    """Whether :func:`execute` would take ``task``'s result from ``cache_dir`` (not run it)."""
-    path = _cache_path(Path(cache_dir), task)
+def is_cached(task: Task, cache_dir: str | os.PathLike[str],
+              executor: Executor | None = None) -> bool:
+    """Whether :func:`execute` with ``executor`` (None: serial, in this process) would take
+    ``task``'s result from ``cache_dir`` (not run it)."""
+    disk = executor is not None and executor.backend != "serial"
+    if not disk and stale_here(task, {}):
+        return False
+    path = _cache_path(Path(cache_dir), task, task_key(task, disk=disk))
     return path is not None and read_cached(path) is not None
 
 
@@ -353,12 +360,19 @@ def execute(tasks: Sequence[Task], executor: Executor = Executor(), *,
     results: list[dict[str, Any] | None] = [None] * len(tasks)
     # each task keyed once, before any runs: a stream file removed or rewritten during the
     # sweep fails or re-keys only the runs that read it then (in the worker), never the sweep
-    keys = [task_key(t) for t in tasks]
+    # worker processes import the plugins' code as it is on disk (outdated local workers are
+    # restarted, stale Dask workers refuse), so their runs are keyed with it; a serial run
+    # runs the code loaded here, and refuses it if edited since without a reload
+    disk = executor.backend != "serial"
+    keys = [task_key(t, disk=disk) for t in tasks]
     cache = Path(cache_dir) if cache_dir is not None else None
     if cache is not None:
         cache.mkdir(parents=True, exist_ok=True)
         warn_sourceless(tasks)
+        stale: dict[tuple[str, ...], bool] = {}
         for k, t in enumerate(tasks):
+            if not disk and stale_here(t, stale):
+                continue
             path = _cache_path(cache, t, keys[k])
             cached = None if path is None else read_cached(path)
             if cached is not None:

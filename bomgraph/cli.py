@@ -159,6 +159,9 @@ def cmd_export(args: argparse.Namespace) -> int:
     with input_path(stream_path) if stream_path else contextlib.nullcontext() as sp:
         stream = None if sp is None else read_stream(sp)
     if args.truth is not None:
+        if stream is not None and stream.truth is None:
+            raise ExportError(f"{args.truth}, line 1: no 'truth' in the header: the stream "
+                              f"has no ground truth to export")
         src = truth_estimate(stream)  # type: ignore[arg-type]
     else:
         with input_path(args.estimate) as ep:
@@ -246,11 +249,11 @@ def _compare(args: argparse.Namespace, seen: dict[str, int]) -> int:
         reference=args.reference, checkpoint_every=args.checkpoint_every, real=args.real,
         quick=args.quick, seed=args.seed,
         names=args.experiments.split(",") if args.experiments else ())
+    executor = Executor.choose(args.jobs, args.scheduler, args.dask_local, defaults=settings)
     if args.dry_run:
         references_for(chosen, args.paired_reference)    # a wrong arm: refused here too
         return _print_plan(plan_compare(chosen, args.out, use_cache=not args.no_cache,
-                                        estimates=args.estimates), args.out)
-    executor = Executor.choose(args.jobs, args.scheduler, args.dask_local, defaults=settings)
+                                        estimates=args.estimates, executor=executor), args.out)
     if executor.backend == "dask" and args.jobs is not None and not getattr(args, "quiet", False):
         print(f"bomgraph: note: --jobs {args.jobs} is not used: the Dask cluster's workers run "
               f"the tasks (--dask-local N workers, or those started for --scheduler)",

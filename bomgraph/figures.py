@@ -16,7 +16,7 @@ import numpy as np
 
 from .errors import BomgraphError, ConfigError, EvaluationError
 from .estimate_file import read_estimate
-from .file_evaluation import poses_revised
+from .file_evaluation import check_stream_identity, poses_revised
 from .evaluate import score_estimate
 from .plots import results_figure, run_figure
 from .report import error_curves
@@ -46,6 +46,7 @@ def plot_run(estimate_path: str | os.PathLike[str], stream_path: str | os.PathLi
     path = _check_out(out, estimate_path, stream_path)
     est_file = read_estimate(estimate_path)
     stream = read_stream(stream_path)
+    check_stream_identity(est_file, stream.steps, estimate_path, stream_path)
     est, at = est_file.final, "final"
     if t is not None:
         cps = {c.t: c for c in est_file.checkpoints}

@@ -127,9 +127,9 @@ def evaluate_files(estimate_path: str | os.PathLike[str], stream_path: str | os.
     Raises
     ------
     EvaluationError
-        The estimate was computed from another stream (its recorded identity differs) or has
-        checkpoints beyond the stream's last step, or the map shares fewer than 3 landmarks
-        with the truth or reference.
+        The estimate (or the reference) was computed from another stream (its recorded
+        identity differs), or the estimate has checkpoints beyond the stream's last step, or
+        the map shares fewer than 3 landmarks with the truth or reference.
 
     The NEES against the truth (landmarks: the mean over the common ones; pose: the latest)
     come from the file's covariances, carried by the alignment (its scale too, with
@@ -150,6 +150,8 @@ def evaluate_files(estimate_path: str | os.PathLike[str], stream_path: str | os.
         raise EvaluationError(f"{estimate_path}: checkpoint t = {beyond[0]} is beyond the last "
                               f"step t = {last} of {stream_path}")
     ref_est = read_estimate(reference_path) if reference_path is not None else None
+    if ref_est is not None:  # scored against its final map: it must be of the same stream
+        check_stream_identity(ref_est, stream.steps, reference_path, stream_path)
     if ref_est is None and stream.truth is None:
         if with_scale or align_on != "landmarks" or delta != 1:
             raise EvaluationError(f"{stream_path}: the stream has no ground truth, so there is "

@@ -25,17 +25,19 @@ _log = logging.getLogger(__name__)
 NO_SOURCE = "no-source"
 
 
-def method_fingerprint(name: str) -> str | None:
+def method_fingerprint(name: str, *, disk: bool = False) -> str | None:
     """A hash of the method's own code for the cache key, or None for a built-in method
     (whose code the runner's :func:`bomgraph.plugins.code_fingerprint` of the bomgraph and
     baselines sources covers already, so the paper's cache keys stay as they were). For a
     plugin: its package's sources and its distribution's version; for a method registered
     at run time: the sources of its target's top-level package (:mod:`bomgraph.plugins`),
-    or :data:`NO_SOURCE` when that module has no source file (:func:`method_has_source`)."""
+    or :data:`NO_SOURCE` when that module has no source file (:func:`method_has_source`).
+    The sources as this process runs them, or with ``disk`` as they are on disk now (what
+    a worker process that imports them runs)."""
     info = method_info(name)
     if info.origin == "builtin":
         return None
-    fp = source_fingerprint(info.target, info.version)
+    fp = (disk_fingerprint if disk else source_fingerprint)(info.target, info.version)
     return NO_SOURCE if fp is None else fp
 
 
@@ -46,11 +48,12 @@ def method_has_source(name: str) -> bool:
     return method_fingerprint(name) != NO_SOURCE
 
 
-def method_code(task: Task) -> dict[str, str]:
+def method_code(task: Task, *, disk: bool = False) -> dict[str, str]:
     """The fingerprints of the task's non-built-in methods (the arm's, the reference's, a
     seed's: :meth:`Task.methods`), by method name: empty for built-in methods, so their keys
-    are as before plugins existed."""
-    return {m: fp for m in task.methods() if (fp := method_fingerprint(m)) is not None}
+    are as before plugins existed. ``disk``: as :func:`method_fingerprint`."""
+    return {m: fp for m in task.methods()
+            if (fp := method_fingerprint(m, disk=disk)) is not None}
 
 
 def stale_plugin(task: Task, *, worker: bool) -> str:
@@ -75,6 +78,19 @@ def stale_plugin(task: Task, *, worker: bool) -> str:
                     f" or restart the kernel); method {m!r} was edited since this worker "
                     f"imported it, and a worker does not reload a module")
     return ""
+
+
+def stale_here(task: Task, seen: dict[tuple[str, ...], bool]) -> bool:
+    """Whether a method of ``task`` was edited since this process imported it and not
+    reloaded (:func:`stale_plugin`): run here, it fails saying so, so the old code's cached
+    result is not to be returned instead. ``seen``: the answers so far, per method set."""
+    methods = tuple(task.methods())
+    if methods not in seen:
+        try:
+            seen[methods] = bool(stale_plugin(task, worker=False))
+        except UnknownMethodError:  # the run fails with the reason
+            seen[methods] = True
+    return seen[methods]
 
 
 def _known(name: str) -> bool:
@@ -155,4 +171,4 @@ def workers_outdated(tasks: Sequence[Task]) -> bool:
 
 
 __all__ = ["NO_SOURCE", "method_fingerprint", "method_has_source", "method_code", "stale_plugin",
-           "sourceless", "warn_sourceless", "refuse_runtime_methods", "workers_outdated"]
+           "stale_here", "sourceless", "warn_sourceless", "refuse_runtime_methods", "workers_outdated"]

@@ -363,16 +363,18 @@ def compare(experiments: Sequence[Experiment], out_dir: str | os.PathLike[str], 
 
 
 def plan_compare(experiments: Sequence[Experiment], out_dir: str | os.PathLike[str], *,
-                 use_cache: bool = True, estimates: bool = False) -> list[dict[str, Any]]:
-    """What :func:`compare` would run, without running or writing anything: one row per task
-    (``experiment``, ``arm``, ``run``, ``cached``: its result is in ``out_dir/cache``, so it
-    would not run again), in the order compare runs them."""
+                 use_cache: bool = True, estimates: bool = False,
+                 executor: Executor | None = None) -> list[dict[str, Any]]:
+    """What :func:`compare` with ``executor`` (None: serial) would run, without running or
+    writing anything: one row per task (``experiment``, ``arm``, ``run``, ``cached``: its
+    result is in ``out_dir/cache``, so it would not run again), in the order compare runs
+    them."""
     refuse_inputs_among_outputs(Path(out_dir), experiments)
     source_fingerprint.cache_clear()  # as execute() does: a plugin module reloaded since
     cache = Path(out_dir) / "cache"
     tasks = [replace(t, keep_estimate=estimates) for e in experiments for t in e.tasks()]
     return [{"experiment": t.experiment, "arm": t.arm.label, "run": t.source.name,
-             "cached": bool(use_cache and cache.is_dir() and is_cached(t, cache))}
+             "cached": bool(use_cache and cache.is_dir() and is_cached(t, cache, executor))}
             for t in tasks]
 
 

@@ -282,3 +282,67 @@ def test_a_plugin_edited_and_reloaded_between_two_sweeps_in_worker_processes(
     assert [r["key"] for r in again] == [r["key"] for r in serial] != [r["key"] for r in first]
     assert ([r["checkpoints"][-1]["mpe_m"] for r in again]
             == [r["checkpoints"][-1]["mpe_m"] for r in serial])
+
+
+def test_an_edit_not_reloaded_is_not_served_from_the_cache_of_the_old_code(
+        file_method: tuple[Path, Experiment], tmp_path: Path) -> None:
+    """The same sweep twice in one process with a cache (a notebook), the module edited and
+    not reloaded between: the second sweep keyed the task with the code still loaded, found
+    the first sweep's result and returned it, where without that cache entry the run fails
+    saying to reload (the README: "edited and not reloaded, its runs fail saying so")."""
+    src, exp = file_method
+    cache = tmp_path / "cache"
+    first = _final_mpe(exp, cache)
+    importlib.import_module(src.stem)
+    src.write_text(FILE_METHOD.replace("DEPTH_M = 1.0", "DEPTH_M = 3.0"))  # no reload
+    second = _final_mpe(exp, cache)
+    assert first["ok"] and not second["ok"], "the old code's cached result was returned"
+    assert "was edited since this process imported it" in second["error"], second["error"]
+    assert not is_cached(exp.tasks()[0], cache)
+    assert len(list(cache.glob("*.json"))) == 1
+
+
+def test_worker_processes_run_the_edited_plugin_though_this_process_holds_the_old(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A plugin imported in the sweeping process (a notebook that used it), then edited and
+    not reloaded there: the local workers are restarted and run the code on disk, but the
+    tasks were keyed with the code loaded here, so the first sweep's cached results of the
+    old code came back (and without the cache, the new results were run and not cached:
+    "the workers keyed them otherwise"). Worker runs are keyed with the code on disk."""
+    from _plugin_dist import write_dist_info
+
+    from bomgraph import plugins
+
+    site = tmp_path / "site"
+    (site / "h46plug").mkdir(parents=True)
+    (site / "h46plug" / "__init__.py").write_text("")
+    src = site / "h46plug" / "mapper.py"
+    src.write_text(FILE_METHOD)
+    write_dist_info(site, "h46plug", {"h46-plug": "h46plug.mapper:CellMapper"})
+    monkeypatch.syspath_prepend(str(site))
+    monkeypatch.setenv("PYTHONPATH", os.pathsep.join([str(site), os.environ.get("PYTHONPATH", "")]))
+    plugins.refresh()
+    streams = []
+    for seed in range(2):
+        streams.append(tmp_path / f"s{seed}.jsonl")
+        write_stream(simulate(SimConfig(n_steps=40), np.random.default_rng(seed)), streams[-1])
+    exp = Experiment("plug", "plug", (Arm("h46-plug", "h46-plug"),),
+                     sources=tuple(FileSource(str(p)) for p in streams))
+    cache = tmp_path / "cache"
+    workers = Executor("processes", n_jobs=2)
+    try:
+        importlib.import_module("h46plug.mapper")  # used here too, before the edit
+        first = execute(exp.tasks(), workers, cache_dir=cache)
+        src.write_text(FILE_METHOD.replace("DEPTH_M = 1.0", "DEPTH_M = 3.0"))  # no reload
+        again = execute(exp.tasks(), workers, cache_dir=cache)
+        cached = is_cached(exp.tasks()[0], cache, workers)
+        uncached = execute(exp.tasks(), workers)
+    finally:
+        for name in ("h46plug.mapper", "h46plug"):
+            sys.modules.pop(name, None)
+        plugins.refresh()
+    assert all(r["ok"] for r in first + again + uncached), [r.get("error") for r in again]
+    mpe = [[r["checkpoints"][-1]["mpe_m"] for r in rs] for rs in (first, again, uncached)]
+    assert mpe[1] == mpe[2] != mpe[0], "the old code's cached results were returned"
+    assert [r["key"] for r in again] == [r["key"] for r in uncached]
+    assert cached and len(list(cache.glob("*.json"))) == 4  # both codes' results kept
