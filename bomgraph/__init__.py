@@ -4,8 +4,8 @@ BOM-STMDS (sequential triangulation + multi-dimensional scaling) next to EKF and
 baselines, all reading one measurement stream and scored by one Procrustes evaluator.
 """
 
-from importlib import import_module
-from typing import Any
+from importlib import import_module as _import_module
+from typing import Any as _Any
 
 from .errors import (BomgraphError, ConfigError, DatasetError, DegenerateGeometryError,
                      EvaluationError, StreamFormatError, UnknownMethodError)
@@ -21,18 +21,18 @@ _LAZY = {**dict.fromkeys(("MapEstimate", "Mapper", "RunResult", "create_mapper",
          **dict.fromkeys(("read_stream", "write_stream"), "stream_file")}
 
 
-def __getattr__(name: str) -> Any:
+def __getattr__(name: str) -> _Any:
     if name not in _LAZY:
         # a submodule, as ``import bomgraph`` made them attributes before the API was lazy
         # (README: ``bomgraph.mapper.register_method``, ``bomgraph.stream_file.read_stream``)
         if not name.startswith("_"):
             try:
-                return import_module(f".{name}", __name__)
+                return _import_module(f".{name}", __name__)
             except ModuleNotFoundError as exc:
                 if exc.name != f"{__name__}.{name}":
                     raise
         raise AttributeError(f"module 'bomgraph' has no attribute {name!r}")
-    value = getattr(import_module(f".{_LAZY[name]}", __name__), name)
+    value = getattr(_import_module(f".{_LAZY[name]}", __name__), name)
     globals()[name] = value
     return value
 

@@ -347,6 +347,14 @@ def execute(tasks: Sequence[Task], executor: Executor = Executor(), *,
     Finished tasks found in ``cache_dir`` are not run again; new results are written there as
     they arrive, so an interrupted sweep resumes where it stopped.
     """
+    return execute_counted(tasks, executor, cache_dir=cache_dir, progress=progress)[0]
+
+
+def execute_counted(tasks: Sequence[Task], executor: Executor = Executor(), *,
+                    cache_dir: str | os.PathLike[str] | None = None,
+                    progress: Callable[[int, int], None] | None = None
+                    ) -> tuple[list[dict[str, Any]], int]:
+    """:func:`execute`'s results, and how many of them were read from ``cache_dir``."""
     if not isinstance(executor, Executor):
         raise ConfigError(f"execute(): executor must be an Executor (Executor('serial'), "
                           f"Executor.choose(jobs)), got {type(executor).__name__}")
@@ -378,6 +386,9 @@ def execute(tasks: Sequence[Task], executor: Executor = Executor(), *,
             if cached is not None:
                 cached.update(experiment=t.experiment, arm=t.arm.label, run=t.source.name)
                 results[k] = cached
+    n_cached = sum(r is not None for r in results)
+    if cache is not None:
+        _log.info("%d of %d runs from the cache %s", n_cached, len(tasks), cache)
     # Experiments that share an arm share its runs: a task whose key another task of this
     # sweep already has runs once, and its result is given to both.
     twins: dict[str, list[int]] = {}
@@ -411,7 +422,7 @@ def execute(tasks: Sequence[Task], executor: Executor = Executor(), *,
                      "this process: other bomgraph or plugin code, library versions or data "
                      "files there; give them this process's (and restart them)",
                      len(other_key), other_key[0])
-    return [r for r in results if r is not None]
+    return [r for r in results if r is not None], n_cached
 
 
 def _indexed(k: int, task: Task) -> tuple[int, dict[str, Any]]:
@@ -581,6 +592,6 @@ def run_example(method: str, experiment: Experiment, *, run_index: int = 0,
     return stream, (res.final if t is None else res.at(t))
 
 
-__all__ = ["Executor", "run_task", "execute", "is_cached", "refuse_runtime_methods", "task_key",
-           "code_fingerprint", "strip_timings", "run_file", "count_steps", "run_example",
-           "CACHE_VERSION"]
+__all__ = ["Executor", "run_task", "execute", "execute_counted", "is_cached",
+           "refuse_runtime_methods", "task_key", "code_fingerprint", "strip_timings", "run_file",
+           "count_steps", "run_example", "CACHE_VERSION"]

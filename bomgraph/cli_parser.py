@@ -125,11 +125,15 @@ def build_parser() -> argparse.ArgumentParser:
                         "benchmark bound, not a mapper)")
     r.set_defaults(func="cmd_run")
 
-    e = _command(sub, "evaluate", "score an estimate file against a stream's truth")
+    e = _command(sub, "evaluate", "score an estimate file at every checkpoint: against the "
+                 "stream's truth (or --reference), else truth-free measures (landmarks mapped, "
+                 "bearing residuals)")
     e.add_argument("estimate", help="the estimate file ('-': stdin)")
-    e.add_argument("stream", help="the stream file with the truth ('-': stdin; not both)")
-    e.add_argument("--json", action="store_true", help="print one JSON object")
-    e.add_argument("--similarity", action="store_true", help="also fit a scale")
+    e.add_argument("stream", help="the stream file it was run on ('-': stdin; not both)")
+    e.add_argument("--json", action="store_true", help="print one JSON object (--format json)")
+    e.add_argument("--similarity", action="store_true",
+                   help="align with a scale too (a similarity transform; default rigid, with "
+                        "reflection)")
     e.add_argument("--align", choices=("landmarks", "trajectory", "both"), default="landmarks",
                    help="fit the alignment on the common landmarks (default), the robot "
                         "positions (as evo), or both together")
@@ -250,7 +254,8 @@ def build_parser() -> argparse.ArgumentParser:
     x.add_argument("--out", required=True, help="output file, or - for stdout" + REPLACES)
     x.set_defaults(func="cmd_export")
 
-    pl = _command(sub, "plot", "draw one run over its truth, or a compare folder")
+    pl = _command(sub, "plot", "draw one run over its truth (without truth: in its own "
+                  "frame), or a compare folder")
     pl.add_argument("estimate", nargs="?", help="an estimate file (bomgraph run)")
     pl.add_argument("stream", nargs="?", help="its stream file")
     pl.add_argument("--out", required=True, help="FILE.png, FILE.pdf or FILE.svg" + REPLACES)

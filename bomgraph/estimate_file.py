@@ -29,7 +29,7 @@ from .errors import StreamFormatError
 from .estimate_writer import (ESTIMATE_FORMAT, ESTIMATE_VERSION, EstimateWriter,
                               estimate_to_json, write_estimate)
 from .jsonio import (DuplicateKeyError, find_nonfinite, is_id, is_int, is_num, loads_strict,
-                     no_duplicate_keys)
+                     no_duplicate_keys, version_problem)
 from .mapper import Checkpoint, MapEstimate
 from .stdio import MAX_LINE_BYTES, bounded_lines, line_too_long
 from .stream_identity import StreamIdentity, stream_file_identity, stream_identity
@@ -350,10 +350,10 @@ def read_estimate(path: str | os.PathLike[str]) -> EstimateFile:
             if is_int(version) and version == 2:
                 return _read_v2(fh, head, path)
             if not (is_int(version) and version == 1):
-                what = ("missing" if version is None else
-                        f"unknown version {json.dumps(version)[:20]}")
-                raise StreamFormatError(f"{what}; this reader knows versions 1 and 2 (a newer "
-                                        f"bomgraph's file? run the method again with this one)",
+                what = ("missing; this reader knows versions 1 and 2" if "version" not in head
+                        else version_problem(version, (1, 2)))
+                newer = " (a newer bomgraph's file? run the method again with this one)"
+                raise StreamFormatError(f"{what}{newer if is_int(version) else ''}",
                                         path=path, line=1, key="version")
         if isinstance(head, dict) and head.get("format") == "bomgraph-stream":
             raise StreamFormatError("this is a stream file, not an estimate file (arguments "
@@ -399,7 +399,9 @@ def read_estimate(path: str | os.PathLike[str]) -> EstimateFile:
                                 path=path, key="format")
     version = obj.get("version")
     if not (is_int(version) and version == 1):
-        raise StreamFormatError("unknown version; this reader knows versions 1 and 2",
+        problem = (version_problem(version, (1, 2)) if "version" in obj
+                   else "missing required key")
+        raise StreamFormatError(problem or "a version-2 header is one JSON object on line 1",
                                 path=path, key="version")
     bad = find_nonfinite(obj)
     if bad is not None:

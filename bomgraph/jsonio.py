@@ -87,6 +87,21 @@ def is_int(v: Any) -> bool:
     return isinstance(v, int) and not isinstance(v, bool)
 
 
+def version_problem(version: Any, known: Sequence[int]) -> str | None:
+    """What is wrong with a header's ``version`` (None: it is one of ``known``): a value that
+    is not a JSON integer is told which integer to write (``"1"`` was refused as an "unknown
+    version" by a reader that "knows version 1"), an integer outside ``known`` is unknown."""
+    if is_int(version) and version in known:
+        return None
+    if not is_int(version):
+        got = json.dumps(version)[:20]
+        return (f"must be the integer {' or '.join(map(str, known))}, not "
+                f"{'the string ' if isinstance(version, str) else ''}{got}")
+    knows = (f"versions {', '.join(map(str, known[:-1]))} and {known[-1]}" if len(known) > 1
+             else f"version {known[0]}")
+    return f"unknown version {version}; this reader knows {knows}"
+
+
 def is_id(v: Any) -> bool:
     """A landmark id or step index: a JSON integer in ``[0, MAX_ID]``."""
     return is_int(v) and 0 <= v <= MAX_ID
@@ -219,4 +234,5 @@ def parse_options(pairs: Sequence[str]) -> dict[str, Any]:
 
 
 __all__ = ["jsonable", "parse_option_value", "parse_options", "MAX_ID", "is_int", "is_id",
-           "is_num", "DuplicateKeyError", "no_duplicate_keys", "loads_strict", "find_nonfinite"]
+           "is_num", "version_problem", "DuplicateKeyError", "no_duplicate_keys", "loads_strict",
+           "find_nonfinite"]

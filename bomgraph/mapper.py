@@ -306,13 +306,15 @@ class MethodInfo:
 _REGISTRY: dict[str, MethodInfo] = {}
 
 
-def register_method(name: str, target: str, description: str, *,
+def register_method(name: str, target: str, description: str = "", *,
                     needs_truth: bool = False, replace: bool = False,
                     _origin: str = "runtime") -> None:
     """Register ``"package.module:Factory"`` under ``name``; the module is imported on use.
 
     The factory is called as ``Factory(header, **options)`` (and ``truth=`` when
-    ``needs_truth``) and must return a :class:`Mapper`. A method registered this way exists
+    ``needs_truth`` or, as for a plugin, the factory says ``needs_truth = True``) and must
+    return a :class:`Mapper`; without a ``description`` the factory's ``description``
+    attribute, else its docstring's first line, is shown. A method registered this way exists
     in this process only: serial runs use it, worker processes (a local pool, Dask) do not
     see it and :func:`bomgraph.bench.execute` refuses it there; declare it as an entry point
     of the group ``bomgraph.methods`` instead (:mod:`bomgraph.plugins`).
@@ -384,16 +386,17 @@ def available_methods() -> list[MethodInfo]:
 
 
 def method_info(name: str) -> MethodInfo:
-    """The method called ``name``: a registered one, else an installed plugin (a bound, given
-    ``truth=`` as ``oracle``, if its factory has ``needs_truth = True``)."""
-    if name in _REGISTRY:
-        return _REGISTRY[name]
-    found = _plugin_infos().get(name)
+    """The method called ``name``: a registered one, else an installed plugin (a plugin's or
+    a :func:`register_method` one's is a bound, given ``truth=`` as ``oracle``, if its
+    factory has ``needs_truth = True``)."""
+    found = _REGISTRY.get(name) or _plugin_infos().get(name)
     if found is None:
         known = ", ".join(m.name for m in available_methods())
         raise UnknownMethodError(f"unknown method {name!r}; known methods: {known} (your own "
                                  f"method: install a package declaring it in the entry-point "
                                  f"group 'bomgraph.methods')")
+    if found.origin == "builtin" or found.needs_truth:
+        return found
     from .plugins import load
 
     try:  # one that cannot be loaded says so where it is run

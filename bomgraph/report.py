@@ -23,7 +23,7 @@ from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 
-from .bench import Executor, execute, is_cached, run_example
+from .bench import Executor, execute_counted, is_cached, run_example
 from .errors import StreamFormatError
 from .evaluate import score_estimate
 from .experiments import PAPER_REPORTED, Experiment, FileSource, Task
@@ -311,14 +311,16 @@ def format_by_run(rows: Sequence[dict]) -> str:
 
 @dataclass(frozen=True)
 class CompareResult:
-    """What :func:`compare` produced: raw results, the summary table, the files written and
-    the paired comparison of each arm with its experiment's reference arm."""
+    """What :func:`compare` produced: raw results, the summary table, the files written,
+    the paired comparison of each arm with its experiment's reference arm, and how many of
+    the results were read from the cache (not run)."""
 
     results: tuple[dict[str, Any], ...]
     summary: tuple[dict[str, Any], ...]
     files: tuple[str, ...]
     wall_s: float
     paired: tuple[PairedRow, ...] = ()
+    n_cached: int = 0
 
 
 def write_csv(path: str | os.PathLike[str], rows: Sequence[Mapping[str, Any]],
@@ -384,8 +386,8 @@ def _compare(experiments: Sequence[Experiment], out: Path, executor: Executor,
              references: Mapping[str, str], paired_config: PairedConfig) -> CompareResult:
     start = time.perf_counter()
     tasks = [replace(t, keep_estimate=estimates) for e in experiments for t in e.tasks()]
-    results = execute(tasks, executor, cache_dir=out / "cache" if use_cache else None,
-                      progress=progress)
+    results, n_cached = execute_counted(tasks, executor, progress=progress,
+                                        cache_dir=out / "cache" if use_cache else None)
     written = write_estimate_files(out, tasks, results) if estimates else []
     summary = summarise(results)
     by_run = final_by_run(results)
@@ -417,7 +419,7 @@ def _compare(experiments: Sequence[Experiment], out: Path, executor: Executor,
         files += write_compare_figures(out, experiments, results)
     drop_earlier_outputs(out, files, experiments)
     return CompareResult(tuple(results), tuple(summary), tuple(str(f) for f in files), wall,
-                         tuple(paired))
+                         tuple(paired), n_cached)
 
 
 def _design(e: Experiment) -> dict[str, Any]:

@@ -19,7 +19,7 @@ import numpy as np
 from .checks import file_name
 from .errors import StreamFormatError
 from .jsonio import (MAX_ID, DuplicateKeyError, decode_utf8, find_nonfinite, is_id, is_int,
-                     is_num, loads_strict)
+                     is_num, loads_strict, version_problem)
 from .plausibility import header_problems, step_problem, truth_problem
 from .stdio import MAX_LINE_BYTES, bounded_lines, line_too_long, output_file
 from .stream import Prior, Step, Stream, StreamHeader, Truth
@@ -131,9 +131,9 @@ def _parse_header(obj: dict, ctx: _Ctx) -> tuple[StreamHeader, Truth | None]:
         raise ctx.error("format", f"must be \"{FORMAT_NAME}\", got {json.dumps(obj['format'])[:60]}")
     if "version" not in obj:
         raise ctx.error("version", "missing required key")
-    if not is_int(obj["version"]) or obj["version"] != FORMAT_VERSION:
-        raise ctx.error("version", f"unknown version {json.dumps(obj['version'])[:40]}; this "
-                                   f"reader knows version {FORMAT_VERSION}")
+    problem = version_problem(obj["version"], (FORMAT_VERSION,))
+    if problem:
+        raise ctx.error("version", problem)
     _check_keys(obj, _HEADER_KEYS, ctx, "the header")
     for key in ("bearing_sigma_rad", "odometry_sigma"):
         if key not in obj:
