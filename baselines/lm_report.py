@@ -85,14 +85,17 @@ def lm_params(config: FactorGraphConfig) -> gtsam.LevenbergMarquardtParams:
     return p
 
 
-def gauss_newton_check(graph: gtsam.NonlinearFactorGraph,
-                       values: gtsam.Values) -> tuple[float, float]:
+def gauss_newton_check(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values,
+                       ordering: gtsam.Ordering | None = None) -> tuple[float, float]:
     """The Gauss-Newton step at ``values``: its max-norm (metres or radians) and the decrease
     of the error (``graph.error``, i.e. chi^2 / 2) its linear model predicts; ``(inf, inf)``
-    if the linear system is singular."""
+    if the linear system is singular. ``ordering``: the elimination ordering, if the caller
+    already has the graph's COLAMD ordering (:func:`solve_lm`: the one its LM pass used);
+    without it the linear graph's own COLAMD ordering is computed, which is the same one
+    (so the step is the same bit for bit)."""
     try:
         linear = graph.linearize(values)
-        delta = linear.optimize()
+        delta = linear.optimize() if ordering is None else linear.optimize(ordering)
     except GTSAM_ERRORS:
         return math.inf, math.inf
     zero = gtsam.VectorValues(delta)
@@ -116,13 +119,18 @@ def polish(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, iterations: 
     step predicting at most ``decrease_tol`` the polish stops. Returns ``(values, max-norm of
     the last step, the decrease its linear model predicted, graph.error(values))``; ``(values,
     inf, inf, error)`` if the linear system is singular. With ``iterations = 0`` it is only the
-    check."""
+    check. Every step eliminates in the first linearisation's COLAMD ordering (computed once:
+    the graph's structure does not change between steps, so it is the ordering each step's
+    own ``optimize()`` would compute, and the steps are the same bit for bit)."""
     error = float(graph.error(values))
     step = decrease = math.inf
+    ordering = None
     for _ in range(max(iterations, 1)):
         try:
             linear = graph.linearize(values)
-            delta = linear.optimize()
+            if ordering is None:
+                ordering = gtsam.Ordering.ColamdGaussianFactorGraph(linear)
+            delta = linear.optimize(ordering)
         except GTSAM_ERRORS:
             return values, math.inf, math.inf, error
         v = delta.vector()
@@ -161,6 +169,18 @@ def solve_lm(graph: gtsam.NonlinearFactorGraph, initial: gtsam.Values,
     (:class:`SolveReport`).
     """
     params = lm_params(config)
+    # the plain passes and the Gauss-Newton check all eliminate ``graph``: its COLAMD ordering,
+    # computed once, is the one each would compute for itself (results the same bit for bit)
+    plain: list[tuple[gtsam.LevenbergMarquardtParams, gtsam.Ordering]] = []
+
+    def plain_params() -> tuple[gtsam.LevenbergMarquardtParams, gtsam.Ordering]:
+        if not plain:
+            ordering = gtsam.Ordering.ColamdNonlinearFactorGraph(graph)
+            p = lm_params(config)
+            p.setOrdering(ordering)
+            plain.append((p, ordering))
+        return plain[0]
+
     iterations = 0
     passes: list[str] = []
     messages: list[str] = []
@@ -177,7 +197,8 @@ def solve_lm(graph: gtsam.NonlinearFactorGraph, initial: gtsam.Values,
             ) -> tuple[gtsam.Values, str] | None:
         nonlocal iterations
         try:
-            opt = gtsam.LevenbergMarquardtOptimizer(g, start, params)
+            opt = gtsam.LevenbergMarquardtOptimizer(
+                g, start, plain_params()[0] if g is graph else params)
             if g is graph:
                 errors.setdefault(id(start), (start, float(opt.error())))
             result = opt.optimize()
@@ -218,7 +239,8 @@ def solve_lm(graph: gtsam.NonlinearFactorGraph, initial: gtsam.Values,
     e0 = plain_error(initial)
     values, stop = best if best is not None else (initial, "failed")
     e1 = plain_error(values)
-    step, decrease = gauss_newton_check(graph, values) if check else (math.nan, math.nan)
+    step, decrease = (gauss_newton_check(graph, values, plain_params()[1]) if check
+                      else (math.nan, math.nan))
     gn_ok = not check or (step <= ABSURD_STEP and (stop == "tolerance"
                                                    or decrease <= config.decrease_tol))
     converged = bool(stop != "failed" and math.isfinite(e1)

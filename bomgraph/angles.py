@@ -39,10 +39,13 @@ def wrap_angle(angle_rad: ArrayLike) -> np.ndarray:
         w = math.pi - (math.pi - x) % TWO_PI
         return np.float64(w + TWO_PI if w <= -math.pi else w)
     a = np.asarray(angle_rad, dtype=float)
+    inside = (a > -np.pi) & (a <= np.pi)
+    if inside.all():   # the usual case (bearings, residuals): a copy, never the input itself
+        return a.copy()[()]
     w = np.pi - np.mod(np.pi - a, TWO_PI)
     # rounding can land exactly on -pi (e.g. just above +pi); the interval is (-pi, pi]
     w = np.where(w <= -np.pi, w + TWO_PI, w)
-    return np.where((a > -np.pi) & (a <= np.pi), a, w)[()]
+    return np.where(inside, a, w)[()]
 
 
 def angle_residual(a_rad: ArrayLike, b_rad: ArrayLike) -> np.ndarray:

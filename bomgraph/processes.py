@@ -111,9 +111,12 @@ def _pool(func: Callable[[int, Any], tuple[int, dict[str, Any]]], pending: dict[
 
     # joblib runs a pool of one worker in this process: two workers, one task at a time
     one = dict(n_jobs=2, pre_dispatch=1, batch_size=1) if effective_n_jobs(n_jobs) == 1 else {}
-    # initializer: each worker loky starts (joblib passes it on; other backends ignore it);
-    # the same function and pid each time, so joblib keeps its workers for the next call
-    with Parallel(**{"n_jobs": n_jobs, **one}, return_as="generator_unordered",
+    # initializer: each worker loky starts, the same function and pid each time, so joblib
+    # keeps its workers for the next call; backend: loky by name, whatever the caller's
+    # joblib.parallel_config says (threading ran the tasks in this process; multiprocessing
+    # refuses return_as)
+    with Parallel(**{"n_jobs": n_jobs, **one}, backend="loky",
+                  return_as="generator_unordered",
                   initializer=_watch_parent, initargs=(os.getpid(),)) as par:
         _start_workers(par)
         results = par(delayed(_marked)(func, marks, k, t) for k, t in list(pending.items()))

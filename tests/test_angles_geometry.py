@@ -133,3 +133,19 @@ def test_wrap_leaves_an_angle_in_range_exactly_as_it_is() -> None:
     assert np.all((w > -np.pi) & (w <= np.pi))
     np.testing.assert_allclose(np.cos(w), np.cos(out), atol=1e-12)
     np.testing.assert_allclose(np.sin(w), np.sin(out), atol=1e-12)
+
+
+def test_wrap_of_an_array_in_range_is_a_copy_not_the_input() -> None:
+    """The shortcut for an array wholly in (-pi, pi] returns a new array (writing to the
+    result leaves the input alone), a scalar for a 0-d input, and a mixed array still wraps
+    only its angles out of range."""
+    a = np.array([0.31, -1.0, np.pi])
+    w = wrap_angle(a)
+    assert w is not a and np.array_equal(w, a)
+    w[0] = 9.0
+    assert a[0] == 0.31
+    assert type(wrap_angle(np.array(0.31))) is np.float64 and wrap_angle(np.array(0.31)) == 0.31
+    assert wrap_angle(np.zeros(0)).shape == (0,)
+    mixed = wrap_angle(np.array([0.31, -np.pi, np.nan, 4.0]))
+    assert mixed[0] == 0.31 and mixed[1] == np.pi and np.isnan(mixed[2])
+    assert mixed[3] == 4.0 - 2 * np.pi

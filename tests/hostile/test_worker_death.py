@@ -127,6 +127,21 @@ def test_dispatch_never_runs_a_task_in_this_process(tmp_path: Path, n_jobs: int)
         assert all(r["alone"] for r in out.values()), out
 
 
+@pytest.mark.parametrize("backend", ["threading", "multiprocessing"])
+def test_dispatch_keeps_its_processes_under_a_callers_joblib_backend(
+        tmp_path: Path, backend: str) -> None:
+    """A caller's ``joblib.parallel_config(backend=...)`` around a sweep (their own code's
+    choice) ran every task in the caller's process (threading: a dying method would end the
+    caller) or raised ValueError (multiprocessing refuses ``return_as``): dispatch names
+    loky itself (h45)."""
+    from joblib import parallel_config
+    lock = str(tmp_path / "running")
+    with parallel_config(backend=backend):
+        out = dict(dispatch(_alone, [0, 1, 2], [lock] * 3, 2, lambda k, why: {"failed": why}))
+    assert sorted(out) == [0, 1, 2] and not any("failed" in r for r in out.values()), out
+    assert os.getpid() not in {r["pid"] for r in out.values()}
+
+
 def test_workers_that_die_once_before_any_run_do_not_fail_the_sweep(tmp_path: Path) -> None:
     """The first worker process ends as it starts (before it takes a run: the out-of-memory
     killer, a crash at start): every run was failed, as if no worker could ever start; now a

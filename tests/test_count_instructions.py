@@ -1,0 +1,32 @@
+"""``scripts/count_instructions.py``: the child's map digest is the map's, bit for bit, and the
+script refuses to overwrite its output (before it looks for valgrind)."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+SCRIPT = Path(__file__).resolve().parents[1] / "scripts" / "count_instructions.py"
+
+
+def _child(method: str, run: int) -> str:
+    out = subprocess.run([sys.executable, str(SCRIPT), "--child", method, "--run", str(run)],
+                         capture_output=True, text=True, check=True).stdout
+    return out.strip().splitlines()[-1]
+
+
+def test_the_child_digest_names_the_map() -> None:
+    a, b = _child("ekf", 0), _child("ekf", 0)
+    assert a == b and a.startswith("digest ") and a.endswith("landmarks 50")
+    assert _child("ekf", 1) != a          # another world, another map
+    assert _child("stmds-smacof", 0) != a  # another method, another map
+
+
+def test_an_existing_output_is_refused(tmp_path: Path) -> None:
+    out = tmp_path / "counts.json"
+    out.write_text("keep me")
+    proc = subprocess.run([sys.executable, str(SCRIPT), "--out", str(out)],
+                          capture_output=True, text=True)
+    assert proc.returncode == 2 and "exists" in proc.stderr
+    assert out.read_text() == "keep me"
