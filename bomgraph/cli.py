@@ -81,6 +81,14 @@ def cmd_run(args: argparse.Namespace) -> int:
     from .stdio import STDIO, check_output_path, input_path, write_output
 
     options = parse_options(args.option)
+    if "@" in args.method:  # NAME@PRESET, as compare --methods takes it
+        from .sweep import parse_method
+
+        spec = parse_method(args.method, "--method")
+        if "preset" in options:
+            raise ConfigError(f"--method {args.method} and --option preset=...: give the "
+                              f"preset once")
+        args.method, options = spec.method, {**spec.options, **options}
     check_output_path(args.out, inputs=(args.stream,))
     with input_path(args.stream) as stream_path:
         bar = _step_bar(stream_path, args.method, args.progress)
@@ -222,7 +230,7 @@ def cmd_methods(args: argparse.Namespace) -> int:
     if not r["presets"]:
         print("\npresets: none (NAME@PRESET is refused)")
         return 0
-    print("\npresets (--option preset=NAME, or NAME@PRESET in compare --methods):")
+    print("\npresets (NAME@PRESET, or --option preset=PRESET):")
     for name, overrides in r["presets"].items():
         print(f"  {name}: {preset_summary(overrides, 1000)}")
     return 0

@@ -105,7 +105,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     r = _command(sub, "run", "run a method on a stream file and write its estimate")
     r.add_argument("stream", help="the stream file ('-': read it from stdin)")
-    r.add_argument("--method", required=True, help="see `bomgraph methods`")
+    r.add_argument("--method", required=True, metavar="NAME[@PRESET]",
+                   help="see `bomgraph methods`; NAME@PRESET is --option preset=PRESET")
     r.add_argument("--out", required=True,
                    help="the estimate file to write ('-': write it to stdout)" + REPLACES)
     r.add_argument("--checkpoint-every", type=_positive_int, default=10,

@@ -71,6 +71,14 @@ def bearing_consistency(estimate: MapEstimate, steps: Sequence[Step]) -> Bearing
     return BearingConsistency(int(r.size), rms(r), rms(m))
 
 
+def method_label(est: EstimateFile) -> str:
+    """The method that wrote ``est`` as ``--methods`` names it: ``NAME@PRESET`` when its
+    header's options name a preset (``compare --estimates`` of ``stmds-smacof@improved``),
+    else ``NAME``."""
+    preset = (est.options or {}).get("preset")
+    return f"{est.method}@{preset}" if est.method and isinstance(preset, str) else est.method
+
+
 @dataclass(frozen=True)
 class FileEvaluation:
     """An estimate file scored against a stream file's truth or a reference estimate: the
@@ -164,7 +172,7 @@ def evaluate_files(estimate_path: str | os.PathLike[str], stream_path: str | os.
                                                        else c.t + 1)])
             free.append({"t": None if c is None else c.t, "n_mapped": len(e),
                          "n_bearings": b.n, "bearing_rms_rad": b.rms_rad})
-        return FileEvaluation(est.method, None, None, bearing=bearing_consistency(
+        return FileEvaluation(method_label(est), None, None, bearing=bearing_consistency(
             est.final, stream.steps), free_rows=tuple(free))
     target = ref_est.final if ref_est is not None else stream.truth
     kw = dict(with_scale=with_scale, align_on=align_on, delta=delta)
@@ -187,8 +195,9 @@ def evaluate_files(estimate_path: str | os.PathLike[str], stream_path: str | os.
         nl = mean_landmark_nees(est.final, stream.truth, score.alignment)
         undefined = _undefined_covariances(est.final, stream.truth)
         np_ = pose_nees(est.final, stream.truth, score.alignment)
-    return FileEvaluation(est.method, score, table, rows,
-                          None if ref_est is None else (ref_est.method or str(reference_path)),
+    return FileEvaluation(method_label(est), score, table, rows,
+                          None if ref_est is None else (method_label(ref_est)
+                                                        or str(reference_path)),
                           bearing_consistency(est.final, stream.steps),
                           None if ref_est is None else bearing_consistency(ref_est.final,
                                                                            stream.steps),

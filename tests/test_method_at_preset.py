@@ -1,0 +1,61 @@
+"""``NAME@PRESET`` means the same everywhere: ``run --method stmds-smacof@improved`` (it was
+an unknown method there, though ``compare --methods`` takes it), and ``evaluate`` names the
+estimate's method with its preset (it said ``stmds-smacof`` of an ``@improved`` estimate)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from bomgraph.cli import main
+from bomgraph.estimate_file import read_estimate
+
+
+@pytest.fixture
+def stream(tmp_path: Path) -> Path:
+    s = tmp_path / "s.jsonl"
+    assert main(["simulate", "--steps", "60", "--landmarks", "15", "--out", str(s)]) == 0
+    return s
+
+
+def test_run_takes_name_at_preset_as_the_preset_option(stream: Path, tmp_path: Path,
+                                                       capsys: pytest.CaptureFixture) -> None:
+    at, opt = tmp_path / "at.est", tmp_path / "opt.est"
+    assert main(["run", str(stream), "--method", "stmds-smacof@improved", "--out", str(at)]) == 0
+    assert main(["run", str(stream), "--method", "stmds-smacof", "--option", "preset=improved",
+                 "--out", str(opt)]) == 0
+    a, b = read_estimate(at), read_estimate(opt)
+    assert a.method == b.method == "stmds-smacof" and a.options == b.options == {
+        "preset": "improved"}
+    assert (a.final.landmarks_xy == b.final.landmarks_xy).all()
+    capsys.readouterr()
+    # the evaluation names the setting, in text and JSON, for the estimate and a reference
+    assert main(["evaluate", str(at), str(stream)]) == 0
+    assert "method stmds-smacof@improved:" in capsys.readouterr().out
+    assert main(["evaluate", str(at), str(stream), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["method"] == "stmds-smacof@improved"
+    plain = tmp_path / "plain.est"
+    assert main(["run", str(stream), "--method", "ekf", "--out", str(plain)]) == 0
+    capsys.readouterr()
+    assert main(["evaluate", str(plain), str(stream), "--reference", str(at), "--json"]) == 0
+    got = json.loads(capsys.readouterr().out)
+    assert got["method"] == "ekf" and got["reference"] == "stmds-smacof@improved"
+
+
+@pytest.mark.parametrize("method, says", [
+    ("stmds-smacof@nope", "unknown preset 'nope' of stmds-smacof"),
+    ("stmds-smacof@", "is not NAME or NAME@PRESET"),
+    ("nosuch@real", "unknown method 'nosuch'")])
+def test_run_refuses_a_bad_name_at_preset_in_one_line(stream: Path, tmp_path: Path,
+                                                      capsys: pytest.CaptureFixture,
+                                                      method: str, says: str) -> None:
+    out = tmp_path / "e.est"
+    assert main(["run", str(stream), "--method", method, "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and says in err[0] and "--method" in err[0], err
+    assert not out.exists()
+    assert main(["run", str(stream), "--method", "stmds-smacof@improved", "--option",
+                 "preset=paper", "--out", str(out)]) == 2
+    assert "give the preset once" in capsys.readouterr().err
