@@ -1,0 +1,75 @@
+"""h49's review of the h47/h48/ord/units merges: what it found, each test failing before."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from bomgraph import mapper
+from bomgraph.bench import Executor, execute
+from bomgraph.experiments import Arm, Experiment, FileSource
+from bomgraph.sim import SimConfig, simulate
+from bomgraph.stream_file import write_stream
+
+TWO_METHODS = '''
+import numpy as np
+from bomgraph.geometry import compose
+from bomgraph.mapper import MapEstimate
+
+class Near:
+    """each landmark DEPTH metres along its first bearing"""
+    DEPTH = 1.0
+    def __init__(self, header, **options):
+        self.pose, self.seen = np.zeros(3), {}
+    def step(self, step):
+        if step.odom is not None:
+            self.pose = compose(self.pose, step.odom)
+        for lid, b in zip(step.landmark_ids.tolist(), step.bearings_rad.tolist()):
+            a = self.pose[2] + b
+            self.seen.setdefault(lid, self.pose[:2] + self.DEPTH * np.array([np.cos(a),
+                                                                            np.sin(a)]))
+    def estimate(self):
+        ids = np.array(sorted(self.seen), dtype=np.int64)
+        return MapEstimate(ids, np.array([self.seen[i] for i in ids.tolist()]).reshape(-1, 2))
+
+class Far(Near):
+    DEPTH = 3.0
+'''
+
+
+@pytest.fixture
+def two_targets(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Experiment:
+    """A module file with two factories, and a one-run sweep of the run-time method "m"."""
+    src = tmp_path / "code" / "bomgraph_h49_two.py"
+    src.parent.mkdir()
+    src.write_text(TWO_METHODS)
+    monkeypatch.syspath_prepend(str(src.parent))
+    monkeypatch.setattr(mapper, "_REGISTRY", dict(mapper._REGISTRY))
+    stream = tmp_path / "s.jsonl"
+    write_stream(simulate(SimConfig(n_steps=40), np.random.default_rng(3)), stream)
+    yield Experiment("e", "e", (Arm("m", "m"),), sources=(FileSource(str(stream)),))
+    sys.modules.pop(src.stem, None)
+
+
+def test_a_method_registered_anew_with_another_target_is_not_the_cached_one(
+        two_targets: Experiment, tmp_path: Path) -> None:
+    """The key held the sources of the target's package, not the target: "m" registered
+    again (replace=True) as another factory of the same module took the first one's cached
+    result."""
+    cache = tmp_path / "cache"
+    mapper.register_method("m", "bomgraph_h49_two:Near")
+    (near,) = execute(two_targets.tasks(), Executor("serial"), cache_dir=cache)
+    mapper.register_method("m", "bomgraph_h49_two:Far", replace=True)
+    (far,) = execute(two_targets.tasks(), Executor("serial"), cache_dir=cache)
+    (fresh,) = execute(two_targets.tasks(), Executor("serial"))
+    assert near["ok"] and far["ok"] and fresh["ok"]
+    mpe = [r["checkpoints"][-1]["mpe_m"] for r in (near, far, fresh)]
+    assert mpe[1] == mpe[2] != mpe[0], "the other factory's cached result was returned"
+    assert far["key"] != near["key"]
+    # the same factory given the truth (a bound) is another method too
+    mapper.register_method("m", "bomgraph_h49_two:Far", needs_truth=True, replace=True)
+    (bound,) = execute(two_targets.tasks(), Executor("serial"), cache_dir=cache)
+    assert bound["ok"] and bound["key"] != far["key"]
