@@ -73,3 +73,20 @@ def test_a_method_registered_anew_with_another_target_is_not_the_cached_one(
     mapper.register_method("m", "bomgraph_h49_two:Far", needs_truth=True, replace=True)
     (bound,) = execute(two_targets.tasks(), Executor("serial"), cache_dir=cache)
     assert bound["ok"] and bound["key"] != far["key"]
+
+
+def test_a_huge_integer_version_is_cut_in_the_message(tmp_path: Path) -> None:
+    """version_problem printed an unknown integer version whole: a header's version of 4,000
+    digits gave a 4,000-character error line (the reader cut it at 40 before h48)."""
+    from bomgraph.errors import StreamFormatError
+    from bomgraph.jsonio import version_problem
+    from bomgraph.stream_file import read_stream
+
+    assert len(version_problem(10 ** 4000, (1,))) < 120
+    stream = tmp_path / "s.jsonl"
+    write_stream(simulate(SimConfig(n_steps=3), np.random.default_rng(3)), stream)
+    head, rest = stream.read_text().split("\n", 1)
+    stream.write_text(head.replace('"version": 1', '"version": ' + "9" * 4000) + "\n" + rest)
+    with pytest.raises(StreamFormatError) as err:
+        read_stream(stream)
+    assert "unknown version 999" in str(err.value) and len(str(err.value)) < 300
