@@ -90,3 +90,35 @@ def test_a_huge_integer_version_is_cut_in_the_message(tmp_path: Path) -> None:
     with pytest.raises(StreamFormatError) as err:
         read_stream(stream)
     assert "unknown version 999" in str(err.value) and len(str(err.value)) < 300
+
+
+def test_a_noisy_simulated_stream_is_not_taken_for_degrees(
+        tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    """`bomgraph simulate --noise-scale 55` (accepted: its bearing sigma is below pi) states a
+    dpsi sigma of 2.9 rad, so a turn beyond a full turn is a 2-3 sigma draw of its odometry;
+    the reader warned "more than a full turn in one step; dpsi_rad is radians (degrees?)"
+    at such a step. A turn is now taken for degrees only beyond 5 stated sigmas too."""
+    import logging
+
+    from bomgraph.stream_file import read_stream
+
+    stream = tmp_path / "n55.jsonl"
+    sim = simulate(SimConfig(n_steps=300, noise_scale=55), np.random.default_rng(0))
+    assert max(abs(s.odom[2]) for s in sim.steps if s.odom is not None) > 2 * np.pi
+    write_stream(sim, stream)
+    with caplog.at_level(logging.WARNING, logger="bomgraph"):
+        read_stream(stream)
+    assert "full turn" not in caplog.text, caplog.text
+    # the paper's noise: a turn of 10 (degrees) is still one
+    import json
+
+    paper = tmp_path / "deg.jsonl"
+    write_stream(simulate(SimConfig(n_steps=3), np.random.default_rng(0)), paper)
+    head, *steps = paper.read_text().splitlines()
+    step = json.loads(steps[1])
+    step["odom"] = [0.1, 0.0, 10.0]
+    paper.write_text("\n".join([head, steps[0], json.dumps(step), *steps[2:]]) + "\n")
+    caplog.clear()
+    with caplog.at_level(logging.WARNING, logger="bomgraph"):
+        read_stream(paper)
+    assert "turns 10 rad, more than a full turn" in caplog.text
