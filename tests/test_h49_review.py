@@ -122,3 +122,22 @@ def test_a_noisy_simulated_stream_is_not_taken_for_degrees(
     with caplog.at_level(logging.WARNING, logger="bomgraph"):
         read_stream(paper)
     assert "turns 10 rad, more than a full turn" in caplog.text
+
+
+def test_plan_compare_and_is_cached_refuse_a_none_executor_in_one_line(tmp_path: Path) -> None:
+    """``executor=None`` (documented as "serial" before h47) raised AttributeError: 'NoneType'
+    object has no attribute 'backend'; compare() and execute() refuse it with a ConfigError
+    saying what to pass, and so do these now."""
+    from bomgraph.bench import is_cached
+    from bomgraph.errors import ConfigError
+    from bomgraph.report import plan_compare
+
+    stream = tmp_path / "s.jsonl"
+    write_stream(simulate(SimConfig(n_steps=3), np.random.default_rng(3)), stream)
+    exp = Experiment("e", "e", (Arm("triangulate", "triangulate"),),
+                     sources=(FileSource(str(stream)),))
+    (tmp_path / "out" / "cache").mkdir(parents=True)
+    with pytest.raises(ConfigError, match="executor must be an? Executor.*NoneType"):
+        plan_compare([exp], tmp_path / "out", executor=None)
+    with pytest.raises(ConfigError, match="executor must be an? Executor.*NoneType"):
+        is_cached(exp.tasks()[0], tmp_path / "out" / "cache", None)
