@@ -30,7 +30,7 @@ from typing import Any, Callable, Iterable, Iterator, Mapping, Sequence
 
 import numpy as np
 
-from .checks import is_integer
+from .checks import instance, is_integer
 from .errors import (ConfigError, StreamFormatError, TooFewLandmarksError,
                      UnknownMethodError)
 from .estimate_file import stream_identity, untimed_estimate_text, write_estimate
@@ -340,7 +340,7 @@ def which_cached(tasks: Sequence[Task], cache_dir: str | os.PathLike[str],
                  executor: Executor = Executor()) -> list[bool]:
     """:func:`is_cached` of each task, keyed as one :func:`execute` sweep keys them (each
     plugin's package hashed once)."""
-    disk = executor.backend != "serial"
+    disk = instance(executor, Executor, "is_cached(): executor", ConfigError).backend != "serial"
     memo: dict[str, str | None] = {}
     stale: dict[tuple[str, ...], bool] = {}
     paths = [None if not disk and stale_here(t, stale) else

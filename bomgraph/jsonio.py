@@ -99,7 +99,8 @@ def version_problem(version: Any, known: Sequence[int]) -> str | None:
                 f"{'the string ' if isinstance(version, str) else ''}{got}")
     knows = (f"versions {', '.join(map(str, known[:-1]))} and {known[-1]}" if len(known) > 1
              else f"version {known[0]}")
-    return f"unknown version {version}; this reader knows {knows}"
+    got = str(version) if len(str(version)) <= 20 else f"{str(version)[:20]}..."
+    return f"unknown version {got}; this reader knows {knows}"
 
 
 def is_id(v: Any) -> bool:

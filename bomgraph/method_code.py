@@ -54,12 +54,23 @@ def method_code(task: Task, *, disk: bool = False,
     seed's: :meth:`Task.methods`), by method name: empty for built-in methods, so their keys
     are as before plugins existed. ``disk``: as :func:`method_fingerprint`. ``memo``: the
     fingerprints (of the same ``disk``) already taken by this sweep, by method name, filled
-    here: a plugin's package is hashed once per sweep, not once per task."""
+    here: a plugin's package is hashed once per sweep, not once per task. Each fingerprint
+    names the method's target too, and ``truth`` when it is given the truth."""
     memo = {} if memo is None else memo
     for m in task.methods():
         if m not in memo:
-            memo[m] = method_fingerprint(m, disk=disk)
+            memo[m] = _keyed(m, method_fingerprint(m, disk=disk))
     return {m: fp for m in task.methods() if (fp := memo[m]) is not None}
+
+
+def _keyed(name: str, fingerprint: str | None) -> str | None:
+    """A method's fingerprint with what its package's sources do not tell: its target (the
+    same name registered again as another factory of the package) and whether it is given
+    the truth (registered with ``needs_truth``, or its factory says so)."""
+    if fingerprint is None:
+        return None
+    info = method_info(name)
+    return f"{fingerprint} {info.target}" + (" truth" if info.needs_truth else "")
 
 
 def stale_plugin(task: Task, *, worker: bool) -> str:

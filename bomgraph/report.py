@@ -25,7 +25,8 @@ import numpy as np
 
 from .bench import (Executor, execute_counted, refuse_runtime_methods, run_example,
                     which_cached)
-from .errors import StreamFormatError
+from .checks import instance
+from .errors import ConfigError, StreamFormatError
 from .evaluate import score_estimate
 from .experiments import PAPER_REPORTED, Experiment, FileSource, Task
 from .jsonio import jsonable
@@ -372,6 +373,7 @@ def plan_compare(experiments: Sequence[Experiment], out_dir: str | os.PathLike[s
     writing anything: one row per task (``experiment``, ``arm``, ``run``, ``cached``: its
     result is in ``out_dir/cache``, so it would not run again), in the order compare runs
     them."""
+    instance(executor, Executor, "plan_compare(): executor", ConfigError)  # as compare's
     refuse_inputs_among_outputs(Path(out_dir), experiments)
     source_fingerprint.cache_clear()  # as execute() does: a plugin module reloaded since
     cache = Path(out_dir) / "cache"

@@ -364,7 +364,8 @@ class StreamReader:
                 raise _too_many_bearings(ctx)
             raw: list[tuple[str, str]] | None = None if warned else []
             step = _parse_step(_parse_json_line(text, ctx), t, ctx, raw)
-            if not warned and (problem := (raw or [None])[0] or step_problem(step)) is not None:
+            if not warned and (problem := (raw or [None])[0] or step_problem(
+                    step, self.header.odometry_sigma[2])) is not None:
                 warned = True
                 _log.warning("%s, line %d: '%s': %s (implausible; later steps are not "
                              "checked)", self.path, line_no, *problem)

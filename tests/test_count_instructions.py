@@ -23,6 +23,13 @@ def test_the_child_digest_names_the_map() -> None:
     assert _child("stmds-smacof", 0) != a  # another method, another map
 
 
+def test_the_digest_of_a_map_without_poses_is_the_same_in_every_process() -> None:
+    # stmds-smacof maps without poses: None's bytes were hashed (its address, other in each
+    # process), so one tree's runs disagreed with themselves
+    a, b = _child("stmds-smacof", 0), _child("stmds-smacof", 0)
+    assert a == b and a.endswith("landmarks 50")
+
+
 def test_an_existing_output_is_refused(tmp_path: Path) -> None:
     out = tmp_path / "counts.json"
     out.write_text("keep me")
