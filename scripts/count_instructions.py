@@ -35,6 +35,10 @@ def child(method: str, run_index: int) -> None:
     sys.path.insert(0, str(ROOT))
     import numpy as np
 
+    # the libraries a method's run imports, imported by the ``none`` run too: no count
+    # includes their import
+    import filterpy.kalman  # noqa: F401
+    import gtsam  # noqa: F401
     from bomgraph.mapper import create_mapper, run
     from bomgraph.sim import paper_design, simulate_run
     stream = simulate_run(paper_design(0)[run_index])
