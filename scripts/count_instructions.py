@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import argparse
 import hashlib
+import importlib
 import json
 import os
 import re
@@ -37,8 +38,8 @@ def child(method: str, run_index: int) -> None:
 
     # the libraries a method's run imports, imported by the ``none`` run too: no count
     # includes their import
-    import filterpy.kalman  # noqa: F401
-    import gtsam  # noqa: F401
+    for library in ("gtsam", "filterpy.kalman"):
+        importlib.import_module(library)
     from bomgraph.mapper import create_mapper, run
     from bomgraph.sim import paper_design, simulate_run
     stream = simulate_run(paper_design(0)[run_index])
