@@ -24,6 +24,7 @@ from typing import Iterator
 import numpy as np
 import pytest
 
+from _depth_mapper import depth_mapper
 from _plugin_dist import write_dist_info
 
 from bomgraph import plugins
@@ -33,27 +34,7 @@ from bomgraph.report import plan_compare
 from bomgraph.sim import SimConfig, simulate
 from bomgraph.stream_file import write_stream
 
-CODE = '''
-import numpy as np
-from bomgraph.geometry import compose
-from bomgraph.mapper import MapEstimate
-
-class DepthMapper:
-    """each landmark DEPTH_M metres along its first bearing"""
-    def __init__(self, header, **options):
-        self.pose, self.seen = np.zeros(3), {}
-    def step(self, step):
-        if step.odom is not None:
-            self.pose = compose(self.pose, step.odom)
-        for lid, b in zip(step.landmark_ids.tolist(), step.bearings_rad.tolist()):
-            a = self.pose[2] + b
-            self.seen.setdefault(lid, self.pose[:2] + DEPTH_M * np.array([np.cos(a), np.sin(a)]))
-    def estimate(self):
-        ids = np.array(sorted(self.seen), dtype=np.int64)
-        return MapEstimate(ids, np.array([self.seen[i] for i in ids.tolist()]).reshape(-1, 2))
-
-DEPTH_M = 1.0
-'''
+CODE = depth_mapper("DEPTH_M") + "\nDEPTH_M = 1.0\n"
 
 
 @pytest.fixture
