@@ -165,3 +165,17 @@ def test_a_run_during_which_its_package_was_edited_is_not_cached(
     (during,) = execute(exp.tasks(), Executor("serial"), cache_dir=cache)
     assert not during["ok"] and "was edited since" in during["error"], during
     assert list(cache.glob("*.json")) == [], "a result was cached under another code's key"
+
+
+def test_a_check_after_the_run_that_fails_fails_the_run_not_the_sweep(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """The stale check after a run was outside any try (h49): had it raised (a package
+    broken meanwhile), the exception left the task. It is now the run's error."""
+    from bomgraph import method_code
+
+    def broken(task, *, worker):
+        raise RuntimeError("the package went away")
+
+    monkeypatch.setattr(method_code, "stale_plugin", broken)
+    why = method_code.stale_after_run(object(), worker=True)
+    assert "could not be checked after the run" in why and "went away" in why
