@@ -39,8 +39,8 @@ from .experiments import Arm, Experiment, SimSource, Task
 from .jsonio import jsonable
 from .mapper import (Checkpoint, MapEstimate, RunResult, checkpoint_times, create_mapper,
                      method_failure_note, method_info, run)
-from .method_code import (method_code, refuse_runtime_methods, sourceless, stale_here,
-                          stale_plugin, warn_sourceless, workers_outdated)
+from .method_code import (method_code, refuse_runtime_methods, sourceless, stale_after_run,
+                          stale_here, stale_plugin, warn_sourceless, workers_outdated)
 from .plugins import code_fingerprint, source_fingerprint
 from .result_cache import read_cached, write_cached
 from .stream import Step, Stream, Truth
@@ -226,7 +226,7 @@ def _run_task(task: Task) -> dict[str, Any]:
         _log.debug("%s on %s failed:\n%s", task.arm.label, task.source.name, out["traceback"])
         return out
     # its package edited during the run (a module it imported since): code of neither key
-    if unscorable or (stale := stale_plugin(task, worker=_IN_WORKER.get())):
+    if unscorable or (stale := stale_after_run(task, worker=_IN_WORKER.get())):
         out.update(ok=False, error=unscorable[0] if unscorable else stale)
         return out
     info = jsonable(dict(result.final.info), max_items=64)

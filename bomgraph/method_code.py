@@ -97,6 +97,17 @@ def stale_plugin(task: Task, *, worker: bool) -> str:
     return ""
 
 
+def stale_after_run(task: Task, *, worker: bool) -> str:
+    """:func:`stale_plugin` once a run has ended (its package edited during the run: the
+    result is of neither key's code), and why the check itself failed if it did (the
+    package removed or broken meanwhile): "" only when the code is still the keyed one."""
+    try:
+        return stale_plugin(task, worker=worker)
+    except Exception as exc:  # a run that cannot be tied to its code is not cached
+        return (f"the method's code could not be checked after the run ({type(exc).__name__}: "
+                f"{exc}); run again once its package can be read")
+
+
 def stale_here(task: Task, seen: dict[tuple[str, ...], bool]) -> bool:
     """Whether a method of ``task`` was edited since this process imported it and not
     reloaded (:func:`stale_plugin`): run here, it fails saying so, so the old code's cached
@@ -188,4 +199,5 @@ def workers_outdated(tasks: Sequence[Task]) -> bool:
 
 
 __all__ = ["NO_SOURCE", "method_fingerprint", "method_has_source", "method_code", "stale_plugin",
-           "stale_here", "sourceless", "warn_sourceless", "refuse_runtime_methods", "workers_outdated"]
+           "stale_after_run", "stale_here", "sourceless", "warn_sourceless",
+           "refuse_runtime_methods", "workers_outdated"]

@@ -107,10 +107,13 @@ def dispatch(func: Callable[[int, Any], tuple[int, dict[str, Any]]], index: Sequ
 
 def _pool(func: Callable[[int, Any], tuple[int, dict[str, Any]]], pending: dict[int, Any],
           n_jobs: int, marks: str) -> Iterator[tuple[int, dict[str, Any]]]:
-    from joblib import Parallel, delayed, effective_n_jobs
+    from joblib import Parallel, delayed, effective_n_jobs, parallel_config
 
     # joblib runs a pool of one worker in this process: two workers, one task at a time
-    one = dict(n_jobs=2, pre_dispatch=1, batch_size=1) if effective_n_jobs(n_jobs) == 1 else {}
+    # (counted for loky, whatever backend a caller's parallel_config names)
+    with parallel_config(backend="loky"):
+        alone = effective_n_jobs(n_jobs) == 1
+    one = dict(n_jobs=2, pre_dispatch=1, batch_size=1) if alone else {}
     # initializer: each worker loky starts, the same function and pid each time, so joblib
     # keeps its workers for the next call; backend: loky by name, whatever the caller's
     # joblib.parallel_config says (threading ran the tasks in this process; multiprocessing

@@ -125,6 +125,38 @@ def test_local_processes_are_bounded_by_the_tasks_and_the_cores(
     assert asked == [3, 2, -1, 8]
 
 
+def test_a_callers_sequential_joblib_backend_leaves_the_pool_its_workers(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    # under joblib.parallel_config(backend="sequential") effective_n_jobs said 1, and a pool
+    # of 3 workers became 2 running one task at a time (h49)
+    import joblib
+
+    from bomgraph import processes
+
+    kwargs: list[dict] = []
+
+    class Recorder:
+        def __init__(self, **kw) -> None:
+            kwargs.append(kw)
+
+        def __call__(self, jobs):
+            return iter([(args[2], {}) for _, args, _ in jobs])
+
+        def __enter__(self):
+            return self
+
+        def __exit__(self, *exc) -> None:
+            pass
+
+    monkeypatch.setattr(joblib, "Parallel", Recorder)
+    with joblib.parallel_config(backend="sequential"):
+        out = list(processes.dispatch(lambda k, t: (k, {}), [0, 1, 2], ["a", "b", "c"], 3,
+                                      lambda k, why: {"failed": why}))
+    assert sorted(k for k, _ in out) == [0, 1, 2]
+    assert [(kw["n_jobs"], kw["backend"], "pre_dispatch" in kw) for kw in kwargs] == [
+        (3, "loky", False)]
+
+
 def test_a_pool_that_ends_without_every_result_fails_the_rest_and_ends(
         monkeypatch: pytest.MonkeyPatch) -> None:
     # dispatch ran the tasks without a result again in a new pool, forever: this test's

@@ -8,36 +8,18 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from _depth_mapper import depth_mapper
+
 from bomgraph import mapper
 from bomgraph.bench import Executor, execute
 from bomgraph.experiments import Arm, Experiment, FileSource
 from bomgraph.sim import SimConfig, simulate
 from bomgraph.stream_file import write_stream
 
-TWO_METHODS = '''
-import numpy as np
-from bomgraph.geometry import compose
-from bomgraph.mapper import MapEstimate
-
-class Near:
-    """each landmark DEPTH metres along its first bearing"""
-    DEPTH = 1.0
-    def __init__(self, header, **options):
-        self.pose, self.seen = np.zeros(3), {}
-    def step(self, step):
-        if step.odom is not None:
-            self.pose = compose(self.pose, step.odom)
-        for lid, b in zip(step.landmark_ids.tolist(), step.bearings_rad.tolist()):
-            a = self.pose[2] + b
-            self.seen.setdefault(lid, self.pose[:2] + self.DEPTH * np.array([np.cos(a),
-                                                                            np.sin(a)]))
-    def estimate(self):
-        ids = np.array(sorted(self.seen), dtype=np.int64)
-        return MapEstimate(ids, np.array([self.seen[i] for i in ids.tolist()]).reshape(-1, 2))
-
+TWO_METHODS = depth_mapper("self.DEPTH", "Near", attrs="DEPTH = 1.0") + """
 class Far(Near):
     DEPTH = 3.0
-'''
+"""
 
 
 @pytest.fixture

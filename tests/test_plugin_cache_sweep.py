@@ -24,6 +24,7 @@ from typing import Iterator
 import numpy as np
 import pytest
 
+from _depth_mapper import depth_mapper
 from _plugin_dist import write_dist_info
 
 from bomgraph import plugins
@@ -33,27 +34,7 @@ from bomgraph.report import plan_compare
 from bomgraph.sim import SimConfig, simulate
 from bomgraph.stream_file import write_stream
 
-CODE = '''
-import numpy as np
-from bomgraph.geometry import compose
-from bomgraph.mapper import MapEstimate
-
-class DepthMapper:
-    """each landmark DEPTH_M metres along its first bearing"""
-    def __init__(self, header, **options):
-        self.pose, self.seen = np.zeros(3), {}
-    def step(self, step):
-        if step.odom is not None:
-            self.pose = compose(self.pose, step.odom)
-        for lid, b in zip(step.landmark_ids.tolist(), step.bearings_rad.tolist()):
-            a = self.pose[2] + b
-            self.seen.setdefault(lid, self.pose[:2] + DEPTH_M * np.array([np.cos(a), np.sin(a)]))
-    def estimate(self):
-        ids = np.array(sorted(self.seen), dtype=np.int64)
-        return MapEstimate(ids, np.array([self.seen[i] for i in ids.tolist()]).reshape(-1, 2))
-
-DEPTH_M = 1.0
-'''
+CODE = depth_mapper("DEPTH_M") + "\nDEPTH_M = 1.0\n"
 
 
 @pytest.fixture
@@ -184,3 +165,17 @@ def test_a_run_during_which_its_package_was_edited_is_not_cached(
     (during,) = execute(exp.tasks(), Executor("serial"), cache_dir=cache)
     assert not during["ok"] and "was edited since" in during["error"], during
     assert list(cache.glob("*.json")) == [], "a result was cached under another code's key"
+
+
+def test_a_check_after_the_run_that_fails_fails_the_run_not_the_sweep(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """The stale check after a run was outside any try (h49): had it raised (a package
+    broken meanwhile), the exception left the task. It is now the run's error."""
+    from bomgraph import method_code
+
+    def broken(task, *, worker):
+        raise RuntimeError("the package went away")
+
+    monkeypatch.setattr(method_code, "stale_plugin", broken)
+    why = method_code.stale_after_run(object(), worker=True)
+    assert "could not be checked after the run" in why and "went away" in why

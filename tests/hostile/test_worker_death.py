@@ -127,7 +127,7 @@ def test_dispatch_never_runs_a_task_in_this_process(tmp_path: Path, n_jobs: int)
         assert all(r["alone"] for r in out.values()), out
 
 
-@pytest.mark.parametrize("backend", ["threading", "multiprocessing"])
+@pytest.mark.parametrize("backend", ["threading", "multiprocessing", "sequential"])
 def test_dispatch_keeps_its_processes_under_a_callers_joblib_backend(
         tmp_path: Path, backend: str) -> None:
     """A caller's ``joblib.parallel_config(backend=...)`` around a sweep (their own code's
