@@ -105,12 +105,18 @@ def refresh() -> None:
 def load(target: str, name: str) -> object:
     """Import ``"module:attribute"`` and return the attribute.
 
+    When this call imports the module, the contents of its package's loaded files are
+    recorded at once (:func:`source_fingerprint` keys a loaded file by the contents it had
+    when first hashed): an edit made after the import and before the first key is then seen
+    as an edit not reloaded, not taken for the code that runs.
+
     Raises
     ------
     UnknownMethodError
         The module cannot be imported or has no such attribute (the message says which).
     """
     module, _, attr = target.partition(":")
+    fresh = module not in sys.modules
     try:
         obj: object = importlib.import_module(module)
         for part in attr.split("."):
@@ -129,6 +135,11 @@ def load(target: str, name: str) -> object:
         raise UnknownMethodError(f"method {name!r} is registered as {target!r} but cannot be "
                                  f"loaded: importing it raised {type(exc).__name__}: {exc}"
                                  f"{where}") from exc
+    if fresh:  # its files as imported now, not as first hashed later (an edit in between)
+        try:
+            _fingerprint(target, None, loaded=True)
+        except UnknownMethodError:  # said again where its key is taken
+            pass
     return obj
 
 

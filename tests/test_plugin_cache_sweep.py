@@ -179,3 +179,23 @@ def test_a_check_after_the_run_that_fails_fails_the_run_not_the_sweep(
     monkeypatch.setattr(method_code, "stale_plugin", broken)
     why = method_code.stale_after_run(object(), worker=True)
     assert "could not be checked after the run" in why and "went away" in why
+
+
+def test_an_edit_between_import_and_first_key_is_not_taken_for_the_code_that_runs(
+        plugin: tuple[Path, Experiment], tmp_path: Path) -> None:
+    """bomgraph imported the plugin (``method_info``: ``bomgraph methods``, building a sweep),
+    the file was then edited without a reload, and the first serial sweep ran the old code
+    but cached it under the new code's key, because a loaded file was first read when first
+    hashed (h47). Its contents are now recorded when bomgraph imports it: the serial run
+    refuses the stale module, and nothing is cached."""
+    from bomgraph.mapper import method_info
+
+    src, exp = plugin
+    method_info("h47-plug")                        # imports h47plug.mapper (DEPTH_M 1.0)
+    assert "h47plug.mapper" in sys.modules
+    src.write_text(CODE.replace("DEPTH_M = 1.0", "DEPTH_M = 3.0"))   # no reload
+    out = tmp_path / "out"
+    results = execute(exp.tasks()[:1], Executor("serial"), cache_dir=out / "cache")
+    assert not results[0]["ok"] and "edited since this process imported it" in (
+        results[0]["error"]), results[0]
+    assert not list((out / "cache").glob("*.json"))
