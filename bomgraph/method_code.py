@@ -85,15 +85,17 @@ def stale_plugin(task: Task, *, worker: bool) -> str:
         info = method_info(m)
         if loaded not in (None, NO_SOURCE) and disk_fingerprint(info.target,
                                                                 info.version) != loaded:
+            # the package is hashed whole: the edit may be in another module of it
+            where = f" (a file of its package {info.target.split(':')[0].split('.')[0]!r})"
             if not worker:
-                return (f"method {m!r} was edited since this process imported it, and Python "
-                        f"does not reload a module: reload the module (importlib.reload, "
+                return (f"method {m!r} was edited since this process imported it{where}, and "
+                        f"Python does not reload a module: reload the module (importlib.reload, "
                         f"IPython's %autoreload) or restart this process (a notebook's "
                         f"kernel), then run again")
             return (f"stale worker: restart the workers and run again (Dask: client.restart(),"
                     f" or restart `dask worker`; in a notebook run serially: reload the module"
                     f" or restart the kernel); method {m!r} was edited since this worker "
-                    f"imported it, and a worker does not reload a module")
+                    f"imported it{where}, and a worker does not reload a module")
     return ""
 
 
