@@ -125,7 +125,9 @@ def refuse_implausible(header: StreamHeader, steps: Iterable[Step],
         key, msg = problems[0]
         raise error(f"{source}: '{key}': {msg}; refusing to write an implausible stream")
     for st in steps:
-        p = step_problem(st, header.odometry_sigma[2])
+        # a turn is not judged here: importers compute turns from their data or read them
+        # from a format that wraps angles (g2o), so one beyond 2 pi is valid there
+        p = step_problem(st, math.inf)
         if p is not None:
             raise error(f"{source}: '{p[0]}': {p[1]}; refusing to write an implausible stream")
     msg = truth_problem(np.zeros((0, 2)) if landmarks_xy is None else landmarks_xy, poses)

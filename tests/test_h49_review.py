@@ -123,3 +123,23 @@ def test_plan_compare_and_is_cached_refuse_a_none_executor_in_one_line(tmp_path:
         plan_compare([exp], tmp_path / "out", executor=None)
     with pytest.raises(ConfigError, match="executor must be an? Executor.*NoneType"):
         is_cached(exp.tasks()[0], tmp_path / "out" / "cache", None)
+
+
+def test_an_importer_does_not_refuse_a_turn_beyond_a_full_turn() -> None:
+    """Importers refuse implausible streams, and for a while that included a turn beyond 2 pi
+    (h49 noticed: g2o wraps angles, so an EDGE_SE2 of 7 rad is a valid file). The reader
+    still warns of it; an importer makes the stream."""
+    from bomgraph.errors import DatasetError
+    from bomgraph.plausibility import refuse_implausible, step_problem
+
+    sim = simulate(SimConfig(n_steps=5), np.random.default_rng(1))
+    st = sim.steps[2]
+    turned = type(st)(t=st.t, odom=np.array([0.1, 0.0, 7.0]), landmark_ids=st.landmark_ids,
+                      bearings_rad=st.bearings_rad)
+    steps = [*sim.steps[:2], turned, *sim.steps[3:]]
+    refuse_implausible(sim.header, steps, DatasetError, "test")      # no raise
+    assert step_problem(turned, 0.0)[0] == "odom"                   # the reader's warning
+    far = type(st)(t=st.t, odom=np.array([1e6, 0.0, 0.0]), landmark_ids=st.landmark_ids,
+                   bearings_rad=st.bearings_rad)
+    with pytest.raises(DatasetError, match="more than"):             # other checks stay
+        refuse_implausible(sim.header, [*sim.steps[:2], far], DatasetError, "test")
