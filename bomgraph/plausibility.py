@@ -82,18 +82,19 @@ def bearings_problem(t: int, bearings_rad: np.ndarray) -> tuple[str, str] | None
     return None
 
 
-def step_problem(step: Step, sigma_dpsi_rad: float = 0.0) -> tuple[str, str] | None:
+def step_problem(step: Step, sigma_dpsi_rad: float = 0.0, *,
+                 turn: bool = True) -> tuple[str, str] | None:
     """``(key, message)`` if ``step``'s odometry is implausible, else None. A turn is taken
     for degrees beyond a full turn and beyond 5 of its stated sigmas (the step's, else
     ``sigma_dpsi_rad``, the header's): a simulated stream of a large noise scale draws such
-    turns from its own noise."""
+    turns from its own noise. ``turn`` False: the turn is not judged at all."""
     if step.odom is not None:
         length = math.hypot(float(step.odom[0]), float(step.odom[1]))
         if length > MAX_STEP_M:
             return ("odom", f"step {step.t} moves {length:g} m, more than {MAX_STEP_M:g} m "
                             f"in one step (a corrupt velocity, time stamp or unit?)")
         sigma = float(step.odom_sigma[2]) if step.odom_sigma is not None else sigma_dpsi_rad
-        if abs(float(step.odom[2])) > max(MAX_ABS_ANGLE_RAD, 5 * sigma):
+        if turn and abs(float(step.odom[2])) > max(MAX_ABS_ANGLE_RAD, 5 * sigma):
             return ("odom", f"step {step.t} turns {float(step.odom[2]):g} rad, more than a full "
                             f"turn in one step; dpsi_rad is radians (degrees?)")
     if step.odom_sigma is not None:
@@ -126,8 +127,9 @@ def refuse_implausible(header: StreamHeader, steps: Iterable[Step],
         raise error(f"{source}: '{key}': {msg}; refusing to write an implausible stream")
     for st in steps:
         # a turn is not judged here: importers compute turns from their data or read them
-        # from a format that wraps angles (g2o), so one beyond 2 pi is valid there
-        p = step_problem(st, math.inf)
+        # from a format that wraps angles (g2o), so one beyond 2 pi is valid there (whatever
+        # sigma the step states: an infinite header sigma did not stop a step's own)
+        p = step_problem(st, turn=False)
         if p is not None:
             raise error(f"{source}: '{p[0]}': {p[1]}; refusing to write an implausible stream")
     msg = truth_problem(np.zeros((0, 2)) if landmarks_xy is None else landmarks_xy, poses)

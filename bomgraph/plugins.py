@@ -99,16 +99,19 @@ def refresh() -> None:
     discover.cache_clear()
     source_fingerprint.cache_clear()
     _LOADED.clear()
+    _RECORDED.clear()
     importlib.invalidate_caches()
 
 
-def load(target: str, name: str) -> object:
+def load(target: str, name: str, *, record: bool = True) -> object:
     """Import ``"module:attribute"`` and return the attribute.
 
-    When this call imports the module, the contents of its package's loaded files are
-    recorded at once (:func:`source_fingerprint` keys a loaded file by the contents it had
-    when first hashed): an edit made after the import and before the first key is then seen
-    as an edit not reloaded, not taken for the code that runs.
+    The first time this process loads the module (whoever imported it: this call, another
+    plugin's module, the user), the contents of its package's loaded files are recorded
+    (:func:`source_fingerprint` keys a loaded file by the contents it had when first hashed):
+    an edit made after that and before the first key is then seen as an edit not reloaded,
+    not taken for the code that runs. ``record`` False (a built-in method, whose code the
+    runner keys whole by :func:`code_fingerprint`): nothing is recorded.
 
     Raises
     ------
@@ -116,7 +119,6 @@ def load(target: str, name: str) -> object:
         The module cannot be imported or has no such attribute (the message says which).
     """
     module, _, attr = target.partition(":")
-    fresh = module not in sys.modules
     try:
         obj: object = importlib.import_module(module)
         for part in attr.split("."):
@@ -135,12 +137,17 @@ def load(target: str, name: str) -> object:
         raise UnknownMethodError(f"method {name!r} is registered as {target!r} but cannot be "
                                  f"loaded: importing it raised {type(exc).__name__}: {exc}"
                                  f"{where}") from exc
-    if fresh:  # its files as imported now, not as first hashed later (an edit in between)
+    if record and module not in _RECORDED:  # its files now, not as first hashed later
         try:
             _fingerprint(target, None, loaded=True)
+            _RECORDED.add(module)
         except UnknownMethodError:  # said again where its key is taken
             pass
     return obj
+
+
+#: The modules whose package's loaded files :func:`load` recorded (:func:`refresh` forgets).
+_RECORDED: set[str] = set()
 
 
 def _reraise_interrupt(exc: BaseException) -> None:
