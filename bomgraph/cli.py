@@ -80,7 +80,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     from .mapper import checkpoint_times
     from .stdio import STDIO, check_output_path, input_path, write_output
 
-    options = parse_options(args.option)
+    options, method = parse_options(args.option), args.method  # args.method: the label
     if "@" in args.method:  # NAME@PRESET, as compare --methods takes it
         from .sweep import parse_method
 
@@ -88,7 +88,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         if "preset" in options:
             raise ConfigError(f"--method {args.method} and --option preset=...: give the "
                               f"preset once")
-        args.method, options = spec.method, {**spec.options, **options}
+        method, options = spec.method, {**spec.options, **options}
     check_output_path(args.out, inputs=(args.stream,))
     with input_path(args.stream) as stream_path:
         bar = _step_bar(stream_path, args.method, args.progress)
@@ -96,7 +96,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         done: list = []
 
         def compute(out_path: str) -> None:  # the estimate is written as the run goes
-            done.append(run_file(stream_path, args.method, options,
+            done.append(run_file(stream_path, method, options,
                                  checkpoint_every=args.checkpoint_every,
                                  allow_truth=args.allow_truth, progress=progress,
                                  out=out_path))

@@ -86,7 +86,7 @@ def stale_plugin(task: Task, *, worker: bool) -> str:
         if loaded not in (None, NO_SOURCE) and disk_fingerprint(info.target,
                                                                 info.version) != loaded:
             # the package is hashed whole: the edit may be in another module of it
-            where = f" (a file of its package {info.target.split(':')[0].split('.')[0]!r})"
+            where = f" (a source file of {info.target.split(':')[0].split('.')[0]!r})"
             if not worker:
                 return (f"method {m!r} was edited since this process imported it{where}, and "
                         f"Python does not reload a module: reload the module (importlib.reload, "

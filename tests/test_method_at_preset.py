@@ -24,6 +24,7 @@ def test_run_takes_name_at_preset_as_the_preset_option(stream: Path, tmp_path: P
                                                        capsys: pytest.CaptureFixture) -> None:
     at, opt = tmp_path / "at.est", tmp_path / "opt.est"
     assert main(["run", str(stream), "--method", "stmds-smacof@improved", "--out", str(at)]) == 0
+    assert capsys.readouterr().out.startswith("stmds-smacof@improved: ")  # the label, as given
     assert main(["run", str(stream), "--method", "stmds-smacof", "--option", "preset=improved",
                  "--out", str(opt)]) == 0
     a, b = read_estimate(at), read_estimate(opt)

@@ -200,4 +200,4 @@ def test_an_edit_between_import_and_first_key_is_not_taken_for_the_code_that_run
         results[0]["error"]), results[0]
     assert not list((out / "cache").glob("*.json"))
     # the package is hashed whole (the edit may be in another of its modules): it is named
-    assert "(a file of its package 'h47plug')" in results[0]["error"]
+    assert "(a source file of 'h47plug')" in results[0]["error"]
