@@ -209,8 +209,8 @@ def resolve(cls: type[C], config: C | None = None, preset: str | None = None,
     if config is not None:
         if preset is not None or options:
             raise ConfigError(f"give either config= or preset= and options, not both "
-                              f"(got config= with {['preset'] if preset else []}"
-                              f"{sorted(options)})")
+                              f"(got config= with "
+                              f"{', '.join((['preset'] if preset else []) + sorted(options))})")
         if not isinstance(config, cls):
             raise ConfigError(f"config= must be a {cls.__name__}, got {type(config).__name__}")
         return config

@@ -16,7 +16,7 @@ import numpy as np
 
 from .errors import BomgraphError, ConfigError, EvaluationError
 from .estimate_file import read_estimate
-from .file_evaluation import check_stream_identity, poses_revised
+from .file_evaluation import check_stream_identity, method_label, poses_revised
 from .evaluate import score_estimate
 from .plots import results_figure, run_figure
 from .report import error_curves
@@ -59,7 +59,7 @@ def plot_run(estimate_path: str | os.PathLike[str], stream_path: str | os.PathLi
     first = (t is not None and t != est_file.checkpoints[-1].t and est_file.version >= 2
              and poses_revised(est_file))
     truth = stream.truth
-    label = est_file.method or "estimate"
+    label = method_label(est_file) or "estimate"
     if truth is None:
         fig = run_figure(None, est, None, label=label, landmark_cov=est.landmark_cov,
                          title=f"{label}, {at} (no truth: the estimate's own frame)")

@@ -60,3 +60,36 @@ def test_run_refuses_a_bad_name_at_preset_in_one_line(stream: Path, tmp_path: Pa
     assert main(["run", str(stream), "--method", "stmds-smacof@improved", "--option",
                  "preset=paper", "--out", str(out)]) == 2
     assert "give the preset once" in capsys.readouterr().err
+
+
+def test_plot_titles_the_estimate_with_its_preset(stream: Path, tmp_path: Path,
+                                                  monkeypatch: pytest.MonkeyPatch) -> None:
+    """``plot`` titled an ``@improved`` estimate ``stmds-smacof``, unlike ``evaluate``."""
+    from bomgraph import figures
+
+    est = tmp_path / "at.est"
+    assert main(["run", str(stream), "--method", "stmds-smacof@improved", "--out", str(est)]) == 0
+    titles: list[str] = []
+    real = figures.write_figure
+
+    def keep_title(fig, path, dpi):
+        titles.append(" ".join(t.get_text() for ax in fig.axes for t in [ax.title]
+                               ) + " " + (fig._suptitle.get_text() if fig._suptitle else ""))
+        return real(fig, path, dpi)
+
+    monkeypatch.setattr(figures, "write_figure", keep_title)
+    figures.plot_run(est, stream, tmp_path / "m.png")
+    assert titles and "stmds-smacof@improved" in titles[0], titles
+
+
+def test_config_and_preset_together_are_refused_in_a_readable_line() -> None:
+    """The message glued two lists: "got config= with ['preset'][]" (h50 noticed)."""
+    from bomgraph.config import resolve
+    from bomgraph.errors import ConfigError
+    from bomgraph.stmds.config import StmdsConfig
+
+    cfg = StmdsConfig.preset("paper")
+    with pytest.raises(ConfigError, match=r"\(got config= with preset\)$"):
+        resolve(StmdsConfig, cfg, "improved")
+    with pytest.raises(ConfigError, match=r"\(got config= with preset, window\)$"):
+        resolve(StmdsConfig, cfg, "improved", {"window": 3})
