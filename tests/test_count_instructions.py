@@ -37,3 +37,10 @@ def test_an_existing_output_is_refused(tmp_path: Path) -> None:
                           capture_output=True, text=True)
     assert proc.returncode == 2 and "exists" in proc.stderr
     assert out.read_text() == "keep me"
+
+
+def test_the_subtracted_run_imports_the_method_and_maps_nothing() -> None:
+    """The subtracted run imported gtsam and filterpy but not the method's own module, so
+    each count included that import (h50): ``import:METHOD`` imports the method's factory."""
+    assert _child("import:gtsam-isam2", 0) == "digest import baselines.isam2"
+    assert _child("import:ekf", 0).startswith("digest import baselines.")
