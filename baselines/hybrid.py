@@ -136,8 +136,8 @@ class HybridConfig(FactorGraphConfig):
 
 
 def check_seed(owner: str, seed_method: str, seed_options: Mapping[str, Any] | None) -> None:
-    """Refuse a ``seed_method`` that is not a registered method, or ``seed_options`` its
-    configuration refuses, where the hybrid's configuration is made: before any run of
+    """Refuse a ``seed_method`` that is not a registered method or is a bound (it needs the
+    truth), or ``seed_options`` its configuration refuses, where the hybrid's configuration is made: before any run of
     ``compare`` (:func:`bomgraph.mapper.check_method_options`), not at every run.
 
     Raises
@@ -147,9 +147,14 @@ def check_seed(owner: str, seed_method: str, seed_options: Mapping[str, Any] | N
     """
     options = dict(seed_options or {})
     try:
-        target = method_info(seed_method).target
+        info = method_info(seed_method)
     except BomgraphError:
-        target = None                       # refused by check_method_options below
+        info = None                         # refused by check_method_options below
+    if info is not None and info.needs_truth:   # the seed runs beside the hybrid, truthless
+        raise ConfigError(f"{owner}: seed_method={seed_method!r} is a bound (it needs the "
+                          f"truth, as oracle does), and a seed maps from the stream alone: "
+                          f"choose a method that does (e.g. stmds-smacof)")
+    target = None if info is None else info.target
     key = (seed_method, target, _canonical(options))
     if key in _SEEDS_CHECKED:
         return

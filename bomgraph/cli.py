@@ -200,7 +200,7 @@ def cmd_export(args: argparse.Namespace) -> int:
 def cmd_methods(args: argparse.Namespace) -> int:
     from .jsonio import jsonable
     from .mapper import available_methods, factory_options, method_config_class, method_info
-    from .method_list import format_method_list, method_listing, preset_summary
+    from .method_list import format_method_list, method_listing, no_presets_line, preset_summary
 
     if args.name is None:
         rows = [method_listing(i) for i in available_methods()]
@@ -228,7 +228,7 @@ def cmd_methods(args: argparse.Namespace) -> int:
         print(f"  {o.name:{width}s}  {o.type}, default {o.default!r}"
               + (f": {o.doc}" if o.doc else ""))
     if not r["presets"]:
-        print("\npresets: none (NAME@PRESET is refused)")
+        print(f"\n{no_presets_line(args.name)}")
         return 0
     print("\npresets (NAME@PRESET, or --option preset=PRESET):")
     for name, overrides in r["presets"].items():

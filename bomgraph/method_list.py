@@ -51,4 +51,16 @@ def format_method_list(rows: Sequence[Mapping[str, Any]]) -> str:
     return "\n".join(lines)
 
 
-__all__ = ["preset_summary", "method_listing", "format_method_list"]
+def no_presets_line(name: str) -> str:
+    """What ``bomgraph methods NAME`` says of a method that declares no presets: whether
+    ``NAME@PRESET`` is refused, or passed on to a factory that takes any option."""
+    from .mapper import check_method_options
+
+    try:
+        check_method_options(name, {"preset": "PRESET"})
+    except BomgraphError:
+        return "presets: none (NAME@PRESET is refused)"
+    return "presets: none declared (NAME@PRESET is passed on to the factory as preset=PRESET)"
+
+
+__all__ = ["preset_summary", "method_listing", "format_method_list", "no_presets_line"]

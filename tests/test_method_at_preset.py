@@ -93,3 +93,22 @@ def test_config_and_preset_together_are_refused_in_a_readable_line() -> None:
         resolve(StmdsConfig, cfg, "improved")
     with pytest.raises(ConfigError, match=r"\(got config= with preset, window\)$"):
         resolve(StmdsConfig, cfg, "improved", {"window": 3})
+
+
+def test_methods_says_what_name_at_preset_does_for_a_method_without_presets(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+        capsys: pytest.CaptureFixture) -> None:
+    """``bomgraph methods NAME`` said "NAME@PRESET is refused" of every method without
+    presets, though a factory taking ``**options`` gets ``preset=PRESET`` and runs (h50)."""
+    from _depth_mapper import depth_mapper
+
+    from bomgraph import mapper
+
+    (tmp_path / "h25_any.py").write_text(depth_mapper("1.0"))
+    monkeypatch.syspath_prepend(str(tmp_path))
+    monkeypatch.setattr(mapper, "_REGISTRY", dict(mapper._REGISTRY))
+    mapper.register_method("any-options", "h25_any:DepthMapper", "takes any option")
+    capsys.readouterr()
+    assert main(["methods", "any-options"]) == 0
+    assert capsys.readouterr().out.rstrip().endswith(
+        "presets: none declared (NAME@PRESET is passed on to the factory as preset=PRESET)")

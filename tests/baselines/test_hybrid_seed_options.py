@@ -56,3 +56,19 @@ def test_a_seed_checked_once_is_not_taken_for_another() -> None:
         check_seed("X", "stmds-smacof", {"tri_parallax_rad": math.nan})
     with pytest.raises(ConfigError):
         HybridConfig(seed_method="stmds-smacof", seed_options={"tri_parallax_rad": math.nan})
+
+
+@pytest.mark.parametrize("method", ["hybrid", "hybrid-isam2"])
+def test_a_seed_that_needs_the_truth_is_refused_by_the_config(
+        method: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Only "oracle" was refused by name: a run-time method or plugin whose factory needs the
+    truth passed the check and failed every hybrid run, advising ``create_mapper(truth=)``,
+    which the hybrid cannot follow (h49 noticed)."""
+    from bomgraph import mapper
+
+    monkeypatch.setattr(mapper, "_REGISTRY", dict(mapper._REGISTRY))
+    mapper.register_method("bound-seed", "baselines.factor_graph:OracleMapper", "a bound",
+                           needs_truth=True)
+    with pytest.raises(ConfigError, match=r"seed_method='bound-seed' is a bound \(it needs "
+                                          r"the truth"):
+        check_method_options(method, {"seed_method": "bound-seed"})
