@@ -93,6 +93,8 @@ def test_config_and_preset_together_are_refused_in_a_readable_line() -> None:
         resolve(StmdsConfig, cfg, "improved")
     with pytest.raises(ConfigError, match=r"\(got config= with preset, window\)$"):
         resolve(StmdsConfig, cfg, "improved", {"window": 3})
+    with pytest.raises(ConfigError, match=r"\(got config= with preset\)$"):  # was "with )"
+        resolve(StmdsConfig, cfg, "")
 
 
 def test_methods_says_what_name_at_preset_does_for_a_method_without_presets(
