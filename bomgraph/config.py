@@ -208,9 +208,9 @@ def resolve(cls: type[C], config: C | None = None, preset: str | None = None,
     options = dict(options or {})
     if config is not None:
         if preset is not None or options:
+            given = (["preset"] if preset is not None else []) + sorted(options)
             raise ConfigError(f"give either config= or preset= and options, not both "
-                              f"(got config= with "
-                              f"{', '.join((['preset'] if preset else []) + sorted(options))})")
+                              f"(got config= with {', '.join(given)})")
         if not isinstance(config, cls):
             raise ConfigError(f"config= must be a {cls.__name__}, got {type(config).__name__}")
         return config

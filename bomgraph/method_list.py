@@ -53,9 +53,18 @@ def format_method_list(rows: Sequence[Mapping[str, Any]]) -> str:
 
 def no_presets_line(name: str) -> str:
     """What ``bomgraph methods NAME`` says of a method that declares no presets: whether
-    ``NAME@PRESET`` is refused, or passed on to a factory that takes any option."""
-    from .mapper import check_method_options
+    ``NAME@PRESET`` is refused, passed on to a factory that takes any option, or is an option
+    ``preset`` of the factory's (or of its configuration's) own."""
+    import dataclasses
 
+    from .config import describe_options
+    from .mapper import check_method_options, factory_options
+
+    cls = method_config_class(name)
+    docs = describe_options(cls) if cls is not None and dataclasses.is_dataclass(cls) else []
+    own = next((o for o in [*docs, *factory_options(name)] if o.name == "preset"), None)
+    if own is not None:  # its values may refuse the word PRESET: lit@fast of Literal["fast"]
+        return f"presets: none declared (NAME@PRESET gives its option preset: {own.type})"
     try:
         check_method_options(name, {"preset": "PRESET"})
     except BomgraphError:

@@ -3,12 +3,12 @@
 A machine-independent measure of a change's cost where wall or CPU time is too noisy (the
 machines are shared): each method's run of ``paper_design(0)[RUN]`` (a map every 10 steps)
 is run in a fresh ``python`` under ``valgrind --tool=callgrind`` with ``PYTHONHASHSEED=0``,
-and a run that only simulates and imports the method (``import:METHOD``: bomgraph, the
-method's module, gtsam or filterpy) is subtracted. Each child also prints a
-digest of its final map (landmarks and poses, bit for bit), so two trees' counts are compared
-only where they give the same map. Valgrind emulates the CPU: the maps it gives can differ in
-the last bits from a native run's, and a run takes about 50x its native time (about 8 minutes
-for ``gtsam-isam2``).
+and a run that only simulates, imports the method and builds its mapper (``import:METHOD``:
+bomgraph, the method's module, gtsam or filterpy, a hybrid's seed) is subtracted. Each child
+also prints a digest of its final map (landmarks and poses, bit for bit), so two trees'
+counts are compared only where they give the same map. Valgrind emulates the CPU: the maps
+it gives can differ in the last bits from a native run's, and a run takes about 50x its
+native time (about 8 minutes for ``gtsam-isam2``).
 
     python scripts/count_instructions.py --methods gtsam-isam2,gtsam-batch --out counts.json
 
@@ -32,9 +32,9 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def child(method: str, run_index: int) -> None:
-    """The measured process: simulate the run and import ``method``'s factory (with it the
-    libraries it uses), then map the run with it; ``import:METHOD``: all but the map, the
-    run subtracted from ``METHOD``'s."""
+    """The measured process: simulate the run, import ``method``'s factory (with it the
+    libraries it uses) and build its mapper (a hybrid's seed with it), then map the run with
+    it; ``import:METHOD``: all but the map, the run subtracted from ``METHOD``'s."""
     sys.path.insert(0, str(ROOT))
     import numpy as np
 
@@ -44,10 +44,11 @@ def child(method: str, run_index: int) -> None:
     only_import = method.startswith("import:")
     method = method.removeprefix("import:")
     factory = method_factory(method)
+    # built in both runs: a hybrid imports its seed's module (bomgraph.stmds) as it builds it
+    mapper = create_mapper(method, stream.header, truth=stream.truth)
     if only_import:
         print(f"digest import {factory.__module__}")
         return
-    mapper = create_mapper(method, stream.header, truth=stream.truth)
     final = run(mapper, stream.steps, checkpoint_every=10, keep_checkpoints=False).final
     # a map without poses (stmds-cs, stmds-smacof) hashes no poses: the bytes of
     # np.asarray(None) are None's address, another in every process

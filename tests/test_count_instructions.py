@@ -44,3 +44,21 @@ def test_the_subtracted_run_imports_the_method_and_maps_nothing() -> None:
     each count included that import (h50): ``import:METHOD`` imports the method's factory."""
     assert _child("import:gtsam-isam2", 0) == "digest import baselines.isam2"
     assert _child("import:ekf", 0).startswith("digest import baselines.")
+
+
+def _modules(method: str) -> set[str]:
+    """The modules loaded when the child of ``method`` ends."""
+    code = (f"import runpy, sys\nrunpy.run_path({str(SCRIPT)!r})['child']({method!r}, 0)\n"
+            "print(' '.join(sorted(sys.modules)))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True).stdout
+    return set(out.strip().splitlines()[-1].split())
+
+
+def test_the_subtracted_run_imports_all_that_the_run_imports() -> None:
+    """``import:hybrid-isam2`` imported the hybrid's module, not its seed's (bomgraph.stmds
+    and scipy.sparse.csgraph, 59 modules), which the hybrid imports when it builds its seed:
+    each hybrid's count still included that import (h51)."""
+    ran, subtracted = _modules("hybrid-isam2"), _modules("import:hybrid-isam2")
+    assert "bomgraph.stmds.mapper" in ran
+    assert ran - subtracted == set()

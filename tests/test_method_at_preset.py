@@ -93,6 +93,8 @@ def test_config_and_preset_together_are_refused_in_a_readable_line() -> None:
         resolve(StmdsConfig, cfg, "improved")
     with pytest.raises(ConfigError, match=r"\(got config= with preset, window\)$"):
         resolve(StmdsConfig, cfg, "improved", {"window": 3})
+    with pytest.raises(ConfigError, match=r"\(got config= with preset\)$"):  # was "with )"
+        resolve(StmdsConfig, cfg, "")
 
 
 def test_methods_says_what_name_at_preset_does_for_a_method_without_presets(
@@ -112,3 +114,26 @@ def test_methods_says_what_name_at_preset_does_for_a_method_without_presets(
     assert main(["methods", "any-options"]) == 0
     assert capsys.readouterr().out.rstrip().endswith(
         "presets: none declared (NAME@PRESET is passed on to the factory as preset=PRESET)")
+
+
+def test_methods_does_not_call_a_preset_parameter_of_the_factory_refused(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+        capsys: pytest.CaptureFixture) -> None:
+    """A factory's own ``preset: Literal["fast", "slow"]`` parameter refuses the value
+    "PRESET" the line was checked with, so ``methods NAME`` said "NAME@PRESET is refused"
+    though ``NAME@fast`` runs (h51)."""
+    from bomgraph import mapper
+
+    (tmp_path / "h51_lit.py").write_text(
+        "from typing import Literal\n"
+        "class LitMapper:\n"
+        "    def __init__(self, header, *, preset: Literal['fast', 'slow'] = 'fast'):\n"
+        "        pass\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    monkeypatch.setattr(mapper, "_REGISTRY", dict(mapper._REGISTRY))
+    mapper.register_method("lit", "h51_lit:LitMapper", "a preset parameter")
+    mapper.check_method_options("lit", {"preset": "fast"})      # lit@fast is taken
+    capsys.readouterr()
+    assert main(["methods", "lit"]) == 0
+    last = capsys.readouterr().out.rstrip().splitlines()[-1]
+    assert "refused" not in last and "preset" in last, last
