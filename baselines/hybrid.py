@@ -120,7 +120,8 @@ class HybridConfig(FactorGraphConfig):
         need = requirement("HybridConfig")
 
         need(self.huber_k is None, "the hybrid runs no Huber pass; huber_k must be None")
-        need(isinstance(self.seed_method, str) and self.seed_method not in ("hybrid", "oracle"),
+        need(isinstance(self.seed_method, str)
+             and self.seed_method not in ("hybrid", "hybrid-isam2", "oracle"),
              f"seed_method must name a registered non-hybrid mapper, got {self.seed_method!r}")
         need(self.seed_options is None or isinstance(self.seed_options, Mapping),
              "seed_options must be a mapping of the seed mapper's options")

@@ -72,3 +72,12 @@ def test_a_seed_that_needs_the_truth_is_refused_by_the_config(
     with pytest.raises(ConfigError, match=r"seed_method='bound-seed' is a bound \(it needs "
                                           r"the truth"):
         check_method_options(method, {"seed_method": "bound-seed"})
+
+
+@pytest.mark.parametrize("method", ["hybrid", "hybrid-isam2"])
+@pytest.mark.parametrize("seed", ["hybrid", "hybrid-isam2"])
+def test_a_hybrid_is_no_seed(method: str, seed: str) -> None:
+    """HybridConfig refused "hybrid" but took "hybrid-isam2" as its seed, though its message
+    says a seed is a non-hybrid mapper (h51 noticed)."""
+    with pytest.raises(ConfigError, match="non-hybrid mapper"):
+        check_method_options(method, {"seed_method": seed})
