@@ -362,9 +362,9 @@ class StreamReader:
                           "lines")
             if text.count("[") > MAX_BEARINGS_PER_STEP + 3:  # one per bearing; odom, sigma
                 raise _too_many_bearings(ctx)
-            raw: list[tuple[str, str]] | None = None if warned else []
-            step = _parse_step(_parse_json_line(text, ctx), t, ctx, raw)
-            if not warned and (problem := (raw or [None])[0] or step_problem(
+            as_written: list[tuple[str, str]] | None = None if warned else []
+            step = _parse_step(_parse_json_line(text, ctx), t, ctx, as_written)
+            if not warned and (problem := (as_written or [None])[0] or step_problem(
                     step, self.header.odometry_sigma[2])) is not None:
                 warned = True
                 _log.warning("%s, line %d: '%s': %s (implausible; later steps are not "
