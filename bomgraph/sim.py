@@ -117,7 +117,8 @@ class SimConfig:
              f"data give noise_scale 0)")
         need(sigma_theta <= MAX_BEARING_SIGMA_RAD,
              f"noise_scale {self.noise_scale:g} gives a bearing sigma of {sigma_theta:g} rad, "
-             f"above pi: such bearings carry no information (the paper's noise is 1)")
+             f"above pi/sqrt(3) = {MAX_BEARING_SIGMA_RAD:.3g} rad, the spread of a bearing "
+             f"uniform on the circle: no information (the paper's noise is 1)")
         need(all(v <= lim for v, lim in zip(odo, MAX_ODOMETRY_SIGMA)),
              f"noise_scale {self.noise_scale:g} gives odometry sigmas {odo}: no information")
         lo, hi = SENSOR_RANGE_LIMITS_M

@@ -4,14 +4,19 @@ its fix."""
 
 from __future__ import annotations
 
+import json
+import sys
 from pathlib import Path
 
 import pytest
 
-from hostile_helpers import bomgraph, one_error
+from hostile_helpers import ROOT, bomgraph, one_error
 
-from bomgraph.errors import StreamFormatError
-from bomgraph.estimate_file import read_estimate
+sys.path.insert(0, str(ROOT / "tests" / "datasets"))
+from dataset_excerpts import write_g2o  # noqa: E402
+
+from bomgraph.errors import StreamFormatError  # noqa: E402
+from bomgraph.estimate_file import read_estimate  # noqa: E402
 
 # ---- version-1 estimate files: every refusal names the line ---------------------------------
 
@@ -135,3 +140,116 @@ def test_a_version_2_line_with_a_huge_integer_says_so(tmp_path: Path) -> None:
                  '{"timing_s": {}}\n')
     with pytest.raises(StreamFormatError, match=r"line 2: not valid JSON \(an integer of 5000"):
         read_estimate(p)
+
+
+# ---- stated noise a stream's own numbers contradict: a warning, not a refusal ----------------
+
+def _warnings(proc) -> list[str]:
+    assert proc.returncode == 0, proc.stderr.decode()
+    return [ln for ln in proc.stderr.decode().splitlines() if ln.startswith("bomgraph: WARNING")]
+
+
+def _restated(work: Path, name: str, header: dict | None = None,
+              step_sigma: list[float] | None = None, n: int | None = None,
+              straight: bool = False) -> Path:
+    """``s.jsonl`` (60 simulated steps, the paper's noise) with its header's values replaced,
+    each step stating ``step_sigma``, or only its first ``n`` steps; ``straight``: every turn
+    +-0.01 rad."""
+    head, *steps = (work / "s.jsonl").read_text().splitlines()
+    obj = {**json.loads(head), **(header or {})}
+    obj.pop("truth", None)
+    steps = steps[:n]
+    if step_sigma is not None or straight:
+        lines = [json.loads(s) for s in steps]
+        for st in lines[1:]:
+            if step_sigma is not None:
+                st["odom_sigma"] = step_sigma
+            if straight:
+                st["odom"][2] = 0.01 * (-1) ** st["t"]
+        steps = [json.dumps(st) for st in lines]
+    (work / name).write_text("\n".join([json.dumps(obj), *steps]) + "\n")
+    return work / name
+
+
+@pytest.mark.parametrize("header,step_sigma,straight,needles", [
+    ({"bearing_sigma_rad": 3.0}, None, False,
+     ["line 1: 'bearing_sigma_rad': 3 rad is above pi/sqrt(3)"]),
+    ({"odometry_sigma": [0.03, 0.0, 3.0]}, None, False,
+     ["line 1: 'odometry_sigma': sigma_dpsi_rad = 3 is above 1.81", "degrees?"]),
+    ({"odometry_sigma": [5.0, 5.0, 0.0524]}, None, False,
+     ["line 1: 'odometry_sigma': the 60 steps move 0.1", "centimetres?"]),
+    ({"odometry_sigma": [0.03, 0.0, 30.0 / 57.3]}, None, False, None),  # 30 degrees: possible
+    (None, [3.0, 0.0, 0.0524], False, ["line 3: 'odom_sigma': the 60 steps move",
+                                       "centimetres?"]),
+    ({"odometry_sigma": [0.03, 0.0, 1.0]}, None, True,
+     ["line 1: 'odometry_sigma': the 60 steps turn 0.01 rad", "degrees?"]),
+    ({"odometry_sigma": [0.03, 0.0, 0.0524]}, None, True, None),  # straight, paper's noise
+])
+def test_stated_noise_the_stream_contradicts_is_warned_of(work: Path, header, step_sigma,
+                                                         straight, needles) -> None:
+    """A bearing sigma of 3 rad (below pi, the old limit), a turn sigma of 3 (degrees) or a
+    translation sigma of 5 (centimetres) for steps of 0.15 m were read silently. The run goes
+    on (the file is valid); the warning names the line and the key, once."""
+    stream = _restated(work, "x.jsonl", header, step_sigma, straight=straight)
+    warned = _warnings(bomgraph("run", stream, "--method", "triangulate", "--out",
+                                work / "e.json"))
+    if needles is None:
+        assert warned == []
+        return
+    assert len(warned) == 1, warned
+    for n in needles:
+        assert n in warned[0], (n, warned[0])
+    assert warned[0].startswith(f"bomgraph: WARNING: {stream}, line ")
+
+
+def test_too_few_steps_are_not_judged(work: Path) -> None:
+    """Nine steps of pure noise average below a tenth of the bound once in about 1e5."""
+    stream = _restated(work, "x.jsonl", {"odometry_sigma": [5.0, 5.0, 0.0524]}, n=10)
+    assert _warnings(bomgraph("run", stream, "--method", "triangulate", "--out",
+                              work / "e.json")) == []
+
+
+@pytest.mark.parametrize("noise_scale,steps,seed", [
+    ("0", "300", "0"), ("1", "300", "0"), ("10", "300", "1"), ("34", "2000", "0"),
+    ("34.6", "300", "2"),
+])
+def test_simulate_makes_no_stream_the_reader_warns_of(tmp_path: Path, noise_scale, steps,
+                                                       seed) -> None:
+    """Noise scale 34 over 2000 steps drew a turn of 9.1 rad (5.1 of its sigmas, then the
+    limit of a turn taken for degrees)."""
+    out = tmp_path / "s.jsonl"
+    assert _warnings(bomgraph("simulate", "--noise-scale", noise_scale, "--steps", steps,
+                              "--seed", seed, "--out", out)) == []
+    assert _warnings(bomgraph("run", out, "--method", "triangulate", "--out",
+                              tmp_path / "e.json")) == []
+
+
+def test_simulate_refuses_a_noise_scale_whose_bearings_mean_nothing(tmp_path: Path) -> None:
+    """Scales 35 to 60 (bearing sigma 1.83 to pi rad) were written; the reader now warns of
+    such a stream, so simulate refuses to make one, as it refuses scales above 60."""
+    one_error(bomgraph("simulate", "--noise-scale", "35", "--out", tmp_path / "s.jsonl"),
+              "noise_scale 35", "pi/sqrt(3)")
+    assert not (tmp_path / "s.jsonl").exists()
+
+
+# ---- a g2o bearing written in degrees -------------------------------------------------------
+
+def test_a_g2o_bearing_beyond_a_full_turn_is_warned_of(tmp_path: Path, sim) -> None:
+    """``bomgraph import g2o`` wrapped a bearing written in degrees silently (the stream then
+    held a valid, wrong bearing, which its reader cannot tell); it is still wrapped (g2o
+    wraps angles), with one warning naming the file, the line and the field."""
+    g2o = tmp_path / "data.g2o"
+    write_g2o(g2o, sim)
+    lines = g2o.read_text().splitlines()
+    k = next(n for n, ln in enumerate(lines) if ln.startswith("EDGE_BEARING_SE2_XY"))
+    rec = lines[k].split()
+    rec[3] = "57.0"                                             # degrees
+    lines[k] = " ".join(rec)
+    g2o.write_text("\n".join(lines) + "\n")
+    proc = bomgraph("import", "g2o", g2o, "--out", tmp_path / "s.jsonl")
+    warned = _warnings(proc)
+    assert len(warned) == 1 and warned[0].startswith(
+        f"bomgraph: WARNING: {g2o}, line {k + 1}: field 'bearing': 57 is more than a full "
+        f"turn"), warned
+    assert _warnings(bomgraph("run", tmp_path / "s.jsonl", "--method", "triangulate", "--out",
+                              tmp_path / "e.json")) == []
