@@ -291,8 +291,10 @@ def parse_option_value(text: str) -> Any:
         raise ConfigError(f"option value {text!r}: NaN is not a valid option value")
     try:
         return json.loads(text, parse_constant=_refuse_constant)
-    except json.JSONDecodeError:
-        return text
+    except ConfigError:
+        raise
+    except (ValueError, RecursionError):   # not JSON, or JSON Python will not parse (an
+        return text                        # integer of 5000 digits, nesting 3000 deep)
 
 
 def _refuse_constant(name: str) -> float:

@@ -22,7 +22,7 @@ a warning, as the stream is valid).
 from __future__ import annotations
 
 import math
-from typing import Iterable
+from typing import Iterable, Sequence
 
 import numpy as np
 
@@ -55,6 +55,9 @@ MIN_MOTION_PER_NOISE = 0.1
 MIN_SCALE_STEPS = 10
 #: a sensor reaching less than a micrometre or further than 1000 km.
 SENSOR_RANGE_LIMITS_M = (1e-6, 1e6)
+#: a prior's sigma outside these metres: below, its weight 1/sigma^2 overflows (a prior of
+#: sigma 1e-300 m made every BOM-STMDS weight inf); above, it carries no information
+PRIOR_SIGMA_LIMITS_M = (1e-9, 1e5)
 #: one step (the motion between two consecutive poses) longer than 100 km.
 MAX_STEP_M = 1e5
 #: a truth coordinate further than this from the origin.
@@ -69,7 +72,8 @@ _DEGREES = (" (pi/sqrt(3), the spread of a heading uniform on the circle; a sigm
 
 
 def header_problems(header: StreamHeader) -> list[tuple[str, str]]:
-    """``(key, message)`` for each implausible value of ``header`` (empty when plausible)."""
+    """``(key, message)`` for each implausible value of ``header`` (empty when plausible;
+    of its priors, the first implausible one)."""
     out: list[tuple[str, str]] = []
     if header.bearing_sigma_rad > MAX_BEARING_SIGMA_RAD:
         out.append(("bearing_sigma_rad",
@@ -93,6 +97,19 @@ def header_problems(header: StreamHeader) -> list[tuple[str, str]]:
     if r is not None and not lo <= r <= hi:
         out.append(("sensor_range_m", f"{r:g} m is outside [{lo:g}, {hi:g}] m: no sensor "
                                       f"reaches that (give null if the range is unknown)"))
+    for k, p in enumerate(header.priors):   # the first implausible prior
+        if not PRIOR_SIGMA_LIMITS_M[0] <= p.sigma_m <= PRIOR_SIGMA_LIMITS_M[1]:
+            out.append((f"priors[{k}].sigma_m", f"{p.sigma_m:g} m is outside "
+                                                f"[{PRIOR_SIGMA_LIMITS_M[0]:g}, "
+                                                f"{PRIOR_SIGMA_LIMITS_M[1]:g}] m: no "
+                                                f"measurement of a distance is that precise "
+                                                f"(or that vague)"))
+            break
+        if p.distance_m > MAX_COORDINATE_M:
+            out.append((f"priors[{k}].distance_m", f"{p.distance_m:g} m is beyond "
+                                                   f"{MAX_COORDINATE_M:g} m (squared, it leaves "
+                                                   f"double precision)"))
+            break
     return out
 
 
@@ -195,21 +212,27 @@ def truth_problem(landmarks_xy: np.ndarray, poses: np.ndarray | None) -> str | N
 def refuse_implausible(header: StreamHeader, steps: Iterable[Step],
                        error: type[BomgraphError], source: str, *,
                        landmarks_xy: np.ndarray | None = None,
-                       poses: np.ndarray | None = None) -> None:
+                       poses: np.ndarray | None = None, odom_lines: Sequence[int] = (),
+                       priors_line: int | None = None) -> None:
     """Raise ``error`` naming the first implausible value of a stream being made by
     ``source`` (an importer, the simulator): the header's sigmas and range, each step's
-    odometry, the truth's coordinates."""
+    odometry, the truth's coordinates. Where the importer says where a value was read
+    (``odom_lines[t - 1]``: the line of step ``t``'s odometry record; ``priors_line``: of the
+    priors), the message names that line of ``source``."""
     problems = header_problems(header)
     if problems:
         key, msg = problems[0]
-        raise error(f"{source}: '{key}': {msg}; refusing to write an implausible stream")
+        at = f", line {priors_line}" if priors_line and key.startswith("priors") else ""
+        raise error(f"{source}{at}: '{key}': {msg}; refusing to write an implausible stream")
     for st in steps:
         # a turn is not judged here: importers compute turns from their data or read them
         # from a format that wraps angles (g2o), so one beyond 2 pi is valid there (whatever
         # sigma the step states: an infinite header sigma did not stop a step's own)
         p = step_problem(st, turn=False)
         if p is not None:
-            raise error(f"{source}: '{p[0]}': {p[1]}; refusing to write an implausible stream")
+            at = f", line {odom_lines[st.t - 1]}" if 0 < st.t <= len(odom_lines) else ""
+            raise error(f"{source}{at}: '{p[0]}': {p[1]}; refusing to write an implausible "
+                        f"stream")
     msg = truth_problem(np.zeros((0, 2)) if landmarks_xy is None else landmarks_xy, poses)
     if msg is not None:
         raise error(f"{source}: {msg}; refusing to write an implausible stream")
@@ -217,5 +240,6 @@ def refuse_implausible(header: StreamHeader, steps: Iterable[Step],
 
 __all__ = ["MAX_ANGLE_SIGMA_RAD", "MAX_BEARING_SIGMA_RAD", "MAX_ODOMETRY_SIGMA",
            "MIN_MOTION_PER_NOISE", "MIN_SCALE_STEPS", "TURN_SIGMAS", "SENSOR_RANGE_LIMITS_M",
+           "PRIOR_SIGMA_LIMITS_M",
            "MAX_STEP_M", "MAX_COORDINATE_M", "MAX_ABS_ANGLE_RAD", "OdometryScale", "header_problems",
            "bearings_problem", "step_problem", "truth_problem", "refuse_implausible"]

@@ -88,7 +88,7 @@ _INT_FIELDS = {"id", "i", "j", "l"}
 def _bomgraph_header(path: Path) -> tuple[dict[str, Any], int | None]:
     """The fields of a :data:`G2O_HEADER_PREFIX` comment before the first record (``{}``,
     None without one) and its line number; each field checked."""
-    from ..jsonio import find_nonfinite, loads_strict
+    from ..jsonio import DuplicateKeyError, find_nonfinite, loads_strict
 
     for line in read_lines(path, comment=None):
         text = " ".join(line.tokens)
@@ -99,7 +99,10 @@ def _bomgraph_header(path: Path) -> tuple[dict[str, Any], int | None]:
             continue
         try:
             fields = loads_strict(found.group(1))
-        except ValueError as exc:
+        except DuplicateKeyError as exc:
+            raise dataset_error(path, line.number, "bomgraph header",
+                                f"key '{exc}' appears twice") from None
+        except (ValueError, RecursionError) as exc:
             raise dataset_error(path, line.number, "bomgraph header",
                                 f"not JSON ({exc})") from None
         if not isinstance(fields, dict) or set(fields) - {"sensor_range_m", "time_s", "priors"}:
@@ -270,6 +273,8 @@ def import_g2o(path: str | os.PathLike[str], *, truth_path: str | os.PathLike[st
 
     # odometry ------------------------------------------------------------------------------
     by_target = {j: (meas, info) for _, j, _, meas, info in g.odometry}
+    line_of = {j: n for _, j, n, _, _ in g.odometry}
+    odom_lines = [line_of[pid] for pid in order[1:]]
     odoms = np.zeros((len(order) - 1, 3))
     sig = np.zeros((len(order) - 1, 3))
     max_corr = 0.0
@@ -391,7 +396,8 @@ def import_g2o(path: str | os.PathLike[str], *, truth_path: str | os.PathLike[st
                           priors=extra.get("priors", ()), meta=meta)
     refuse_implausible(header, steps, DatasetError, str(g.path),
                        landmarks_xy=None if truth is None else truth.landmarks_xy,
-                       poses=None if truth is None else truth.poses)
+                       poses=None if truth is None else truth.poses, odom_lines=odom_lines,
+                       priors_line=extra_line)
     return Stream(header, tuple(steps), truth)
 
 
