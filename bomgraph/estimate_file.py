@@ -19,8 +19,6 @@ from __future__ import annotations
 import json
 import math
 import os
-import re
-import sys
 from dataclasses import dataclass
 from typing import IO, Any, Mapping
 
@@ -31,7 +29,7 @@ from .errors import StreamFormatError
 from .estimate_writer import (ESTIMATE_FORMAT, ESTIMATE_VERSION, EstimateWriter,
                               estimate_to_json, write_estimate)
 from .jsonio import (DuplicateKeyError, find_nonfinite, is_id, is_int, is_num, line_of_key,
-                     loads_strict, path_of, version_problem)
+                     loads_strict, path_of, unparsable_at, version_problem)
 from .mapper import Checkpoint, MapEstimate
 from .stdio import MAX_LINE_BYTES, bounded_lines, line_too_long
 from .stream_identity import StreamIdentity, stream_file_identity, stream_identity
@@ -173,7 +171,7 @@ def _parse_line(text: str, ctx: _Line) -> dict:
     except DuplicateKeyError as exc:
         raise ctx.error(str(exc), "appears twice in one object") from None
     except (json.JSONDecodeError, RecursionError, ValueError) as exc:
-        why = getattr(exc, "msg", None) or _unparsable_at(text)[1]
+        why = getattr(exc, "msg", None) or unparsable_at(text)[1]
         raise ctx.error(None, f"not valid JSON ({why or type(exc).__name__})") from None
     if not isinstance(obj, dict):
         raise ctx.error(None, f"expected a JSON object, got {type(obj).__name__}")
@@ -426,7 +424,7 @@ def read_estimate(path: str | os.PathLike[str]) -> EstimateFile:
             raise StreamFormatError(f"not valid JSON ({_where(exc)})", path=path,
                                     line=exc.lineno) from None
         except (RecursionError, ValueError) as exc:
-            line, why = _unparsable_at(text)
+            line, why = unparsable_at(text)
             raise StreamFormatError(f"not a JSON estimate file ({why or type(exc).__name__})",
                                     path=path, line=line) from None
     ctx = _Whole(path, text)
@@ -464,33 +462,6 @@ class _FirstRepeat:
         return out
 
 
-#: nesting deeper than this is where a version-1 file is said to be too deep (:mod:`json`
-#: gives up near the interpreter's recursion limit, 1000 by default)
-_DEEP = 500
-_STRING_OR_BRACKET = r'"(?:[^"\\]|\\.)*"|[\[\]{}]'
-_TOKEN = re.compile(_STRING_OR_BRACKET + (r"|(?<![\d.eE+\-])-?\d{%d,}(?![\d.eE])"
-                                          % (sys.get_int_max_str_digits() + 1)
-                                          if sys.get_int_max_str_digits() else ""))
-
-
-def _unparsable_at(text: str) -> tuple[int | None, str | None]:
-    """Where valid JSON that :mod:`json` cannot parse first defeats it: the line of the first
-    nesting deeper than :data:`_DEEP` or of the first integer longer than Python converts,
-    and what it is; ``(None, None)`` if neither is found."""
-    depth = 0
-    for m in _TOKEN.finditer(text):
-        tok = m[0]
-        if tok in ("[", "{"):
-            depth += 1
-            if depth > _DEEP:
-                return text.count("\n", 0, m.start()) + 1, f"nested more than {_DEEP} deep"
-        elif tok in ("]", "}"):
-            depth -= 1
-        elif tok[0] != '"':
-            return (text.count("\n", 0, m.start()) + 1,
-                    f"an integer of {len(tok.lstrip('-'))} digits; Python converts at most "
-                    f"{sys.get_int_max_str_digits()}")
-    return None, None
 
 
 def untimed_estimate_text(text: str) -> str:

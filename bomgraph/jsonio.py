@@ -21,6 +21,7 @@ import json
 import math
 import os
 import re
+import sys
 from json.decoder import scanstring
 from typing import Any, Iterator, Mapping, Sequence
 
@@ -277,6 +278,35 @@ def line_of_key(text: str, key: str | None) -> int:
     return text.count("\n", 0, pos) + 1
 
 
+#: nesting deeper than this is where a JSON text is said to be too deep (:mod:`json`
+#: gives up near the interpreter's recursion limit, 1000 by default)
+_DEEP = 500
+_STRING_OR_BRACKET = r'"(?:[^"\\]|\\.)*"|[\[\]{}]'
+_TOKEN = re.compile(_STRING_OR_BRACKET + (r"|(?<![\d.eE+\-])-?\d{%d,}(?![\d.eE])"
+                                          % (sys.get_int_max_str_digits() + 1)
+                                          if sys.get_int_max_str_digits() else ""))
+
+
+def unparsable_at(text: str) -> tuple[int | None, str | None]:
+    """Where valid JSON that :mod:`json` cannot parse first defeats it: the line of the first
+    nesting deeper than :data:`_DEEP` or of the first integer longer than Python converts,
+    and what it is; ``(None, None)`` if neither is found."""
+    depth = 0
+    for m in _TOKEN.finditer(text):
+        tok = m[0]
+        if tok in ("[", "{"):
+            depth += 1
+            if depth > _DEEP:
+                return text.count("\n", 0, m.start()) + 1, f"nested more than {_DEEP} deep"
+        elif tok in ("]", "}"):
+            depth -= 1
+        elif tok[0] != '"':
+            return (text.count("\n", 0, m.start()) + 1,
+                    f"an integer of {len(tok.lstrip('-'))} digits; Python converts at most "
+                    f"{sys.get_int_max_str_digits()}")
+    return None, None
+
+
 def decode_utf8(raw: bytes) -> str:
     """One raw line as text; ``UnicodeDecodeError`` says at which byte it is not UTF-8."""
     return raw.decode("utf-8")
@@ -323,4 +353,4 @@ def parse_options(pairs: Sequence[str]) -> dict[str, Any]:
 
 __all__ = ["jsonable", "parse_option_value", "parse_options", "MAX_ID", "is_int", "is_id",
            "is_num", "version_problem", "DuplicateKeyError", "no_duplicate_keys", "loads_strict",
-           "find_nonfinite", "path_of", "line_of_key"]
+           "find_nonfinite", "path_of", "line_of_key", "unparsable_at"]

@@ -175,3 +175,13 @@ def test_a_prior_sigma_no_measurement_has_is_warned_of_and_not_made(work: Path, 
     one_error(bomgraph("import", "g2o", g2o, "--out", work / "g.jsonl"),
               f"{g2o}, line 1: 'priors[0].sigma_m'")
     assert not os.path.exists(work / "g.jsonl")
+
+
+def test_a_stream_integer_python_will_not_convert_is_named_for_the_user(work: Path) -> None:
+    """The message told the user to call ``sys.set_int_max_str_digits()``."""
+    head = (work / "s.jsonl").read_text().splitlines()[0]
+    (work / "i.jsonl").write_text(head + '\n{"t": 0, "bearings": [[1, ' + LONG_INT + ']]}\n')
+    line = one_error(bomgraph("run", work / "i.jsonl", "--method", "triangulate", "--out",
+                              work / "e.json"),
+                     "i.jsonl, line 2: not valid JSON (an integer of 5000 digits")
+    assert "set_int_max_str_digits" not in line
