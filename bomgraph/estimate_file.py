@@ -11,7 +11,7 @@ complete, so an exception or SIGTERM leaves the previous file as it was (the wri
 
 Version 1 (one JSON object with every checkpoint's whole map) is still read. The reader is
 strict: unknown keys, duplicate keys, non-finite numbers and malformed entries are refused,
-naming the file, the line and the key.
+naming the file, the line and the key (in version 1, the line on which the key is found).
 """
 
 from __future__ import annotations
@@ -28,8 +28,8 @@ from .checks import COV_RTOL, covariance_problem, file_name
 from .errors import StreamFormatError
 from .estimate_writer import (ESTIMATE_FORMAT, ESTIMATE_VERSION, EstimateWriter,
                               estimate_to_json, write_estimate)
-from .jsonio import (DuplicateKeyError, find_nonfinite, is_id, is_int, is_num, loads_strict,
-                     no_duplicate_keys, version_problem)
+from .jsonio import (DuplicateKeyError, find_nonfinite, is_id, is_int, is_num, line_of_key,
+                     loads_strict, path_of, unparsable_at, version_problem)
 from .mapper import Checkpoint, MapEstimate
 from .stdio import MAX_LINE_BYTES, bounded_lines, line_too_long
 from .stream_identity import StreamIdentity, stream_file_identity, stream_identity
@@ -58,9 +58,21 @@ _ESTIMATE_KEYS = {"format", "version", "method", "landmarks", "poses", "checkpoi
 _CHECKPOINT_KEYS = {"t", "landmarks", "poses"}
 
 
-def _parse_estimate_parts(obj: Mapping[str, Any], path: str, where: str) -> MapEstimate:
+class _Whole:
+    """Where we are in a version-1 file (one JSON value, maybe over many lines), for error
+    messages: the line is found from the key (:func:`bomgraph.jsonio.line_of_key`)."""
+
+    def __init__(self, path: str, text: str) -> None:
+        self.path, self.text = path, text
+
+    def error(self, key: str | None, message: str) -> StreamFormatError:
+        return StreamFormatError(message, path=self.path, line=line_of_key(self.text, key),
+                                 key=key)
+
+
+def _parse_estimate_parts(obj: Mapping[str, Any], ctx: _Whole, where: str) -> MapEstimate:
     def bad(key: str, msg: str) -> StreamFormatError:
-        return StreamFormatError(msg, path=path, key=f"{where}{key}")
+        return ctx.error(f"{where}{key}", msg)
 
     lms = obj.get("landmarks")
     if not isinstance(lms, list):
@@ -74,7 +86,8 @@ def _parse_estimate_parts(obj: Mapping[str, Any], path: str, where: str) -> MapE
         ids.append(e[0])
         xy.append((float(e[1]), float(e[2])))
     if len(set(ids)) != len(ids):
-        raise bad("landmarks", "a landmark id appears twice")
+        k = _second(ids)
+        raise bad(f"landmarks[{k}]", f"landmark id {ids[k]} appears twice")
     pose_t = poses = None
     if obj.get("poses") is not None:
         if not isinstance(obj["poses"], list):
@@ -88,43 +101,52 @@ def _parse_estimate_parts(obj: Mapping[str, Any], path: str, where: str) -> MapE
             ts.append(e[0])
             ps.append([float(v) for v in e[1:]])
         if len(set(ts)) != len(ts):
-            raise bad("poses", "a step t appears twice")
+            k = _second(ts)
+            raise bad(f"poses[{k}]", f"step t = {ts[k]} appears twice")
         pose_t, poses = np.array(ts, dtype=np.int64), np.array(ps).reshape(-1, 3)
     return MapEstimate(np.array(ids, dtype=np.int64), np.array(xy).reshape(-1, 2),
                        pose_t=pose_t, poses=poses)
 
 
-def _read_v1(obj: dict, path: str) -> EstimateFile:
+def _second(values: list[int]) -> int:
+    """The index of the first value that appeared before."""
+    seen: set[int] = set()
+    for k, v in enumerate(values):
+        if v in seen:
+            return k
+        seen.add(v)
+    raise ValueError("no value appears twice")
+
+
+def _read_v1(obj: dict, ctx: _Whole) -> EstimateFile:
     """A version-1 file (one JSON object) already parsed."""
     unknown = sorted(set(obj) - _ESTIMATE_KEYS)
     if unknown:
-        raise StreamFormatError(f"unknown key; allowed: {', '.join(sorted(_ESTIMATE_KEYS))}",
-                                path=path, key=unknown[0])
+        raise ctx.error(unknown[0], f"unknown key; allowed: {', '.join(sorted(_ESTIMATE_KEYS))}")
     if not isinstance(obj.get("method", ""), str):
-        raise StreamFormatError("must be a string", path=path, key="method")
-    final = _parse_estimate_parts(obj, path, "")
+        raise ctx.error("method", "must be a string")
+    final = _parse_estimate_parts(obj, ctx, "")
     raw_cps = obj.get("checkpoints") or []
     if not isinstance(raw_cps, list):
-        raise StreamFormatError("must be a list of {t, landmarks, poses}", path=path,
-                                key="checkpoints")
+        raise ctx.error("checkpoints", "must be a list of {t, landmarks, poses}")
     cps = []
     for k, c in enumerate(raw_cps):
         if not isinstance(c, dict) or not is_id(c.get("t")):
-            raise StreamFormatError("each checkpoint needs an integer t >= 0", path=path,
-                                    key=f"checkpoints[{k}].t")
+            raise ctx.error(f"checkpoints[{k}]" + (".t" if isinstance(c, dict) else ""),
+                            "each checkpoint needs an integer t >= 0")
         extra = sorted(set(c) - _CHECKPOINT_KEYS)
         if extra:
-            raise StreamFormatError("unknown key in a checkpoint", path=path,
-                                    key=f"checkpoints[{k}].{extra[0]}")
+            raise ctx.error(f"checkpoints[{k}].{extra[0]}", "unknown key in a checkpoint")
         if cps and c["t"] <= cps[-1].t:
-            raise StreamFormatError("checkpoints must be in increasing t", path=path,
-                                    key=f"checkpoints[{k}].t")
-        cps.append(Checkpoint(c["t"], _parse_estimate_parts(c, path, f"checkpoints[{k}]."),
+            raise ctx.error(f"checkpoints[{k}].t", "checkpoints must be in increasing t")
+        cps.append(Checkpoint(c["t"], _parse_estimate_parts(c, ctx, f"checkpoints[{k}]."),
                               0.0))
     timing = obj.get("timing_s") or {}
-    if not isinstance(timing, dict) or not all(
-            isinstance(v, (int, float)) and not isinstance(v, bool) for v in timing.values()):
-        raise StreamFormatError("must be an object of numbers", path=path, key="timing_s")
+    if not isinstance(timing, dict):
+        raise ctx.error("timing_s", "must be an object of numbers")
+    for name, v in timing.items():
+        if not (isinstance(v, (int, float)) and not isinstance(v, bool)):
+            raise ctx.error(f"timing_s.{name}", "must be a number (seconds)")
     return EstimateFile(str(obj.get("method", "")), final, tuple(cps), dict(timing))
 
 
@@ -149,8 +171,8 @@ def _parse_line(text: str, ctx: _Line) -> dict:
     except DuplicateKeyError as exc:
         raise ctx.error(str(exc), "appears twice in one object") from None
     except (json.JSONDecodeError, RecursionError, ValueError) as exc:
-        raise ctx.error(None, f"not valid JSON ({getattr(exc, 'msg', type(exc).__name__)})"
-                        ) from None
+        why = getattr(exc, "msg", None) or unparsable_at(text)[1]
+        raise ctx.error(None, f"not valid JSON ({why or type(exc).__name__})") from None
     if not isinstance(obj, dict):
         raise ctx.error(None, f"expected a JSON object, got {type(obj).__name__}")
     bad = find_nonfinite(obj)
@@ -254,6 +276,10 @@ def _parse_checkpoint_v2(obj: dict, ctx: _Line, prev: MapEstimate | None
 
 
 def _parse_header_v2(obj: dict, ctx: _Line) -> tuple[str, StreamIdentity | None, Any]:
+    bad = find_nonfinite(obj)
+    if bad is not None:
+        raise ctx.error(bad, "non-finite number (NaN or Infinity) in the header; an estimate "
+                             "file holds finite numbers only")
     unknown = sorted(set(obj) - _HEADER_KEYS_V2)
     if unknown:
         raise ctx.error(unknown[0], f"unknown key in the header; allowed: "
@@ -327,7 +353,8 @@ def _where(exc: json.JSONDecodeError) -> str:
 def read_estimate(path: str | os.PathLike[str]) -> EstimateFile:
     """Read an estimate file written by ``bomgraph run`` (version 2, or version 1), strictly:
     unknown and duplicate keys, non-finite numbers and malformed entries are refused, naming
-    the file, the line (version 2) and the key."""
+    the file, the line and the key (of a version-1 file, one JSON value over any number of
+    lines, the line the key is on)."""
     path = file_name(path, "estimate path", StreamFormatError)
     try:
         fh = open(path, "rb")
@@ -337,7 +364,7 @@ def read_estimate(path: str | os.PathLike[str]) -> EstimateFile:
         first = fh.readline(MAX_LINE_BYTES + 1)
         if not first.strip() and not fh.read(1 << 16).strip():
             raise StreamFormatError("empty file; an estimate file is what `bomgraph run --out` "
-                                    "writes", path=path)
+                                    "writes", path=path, line=1)
         fh.seek(len(first))
         if len(first) > MAX_LINE_BYTES and not first.lstrip().startswith(b"{"):
             raise line_too_long(path, 1)  # a version-1 file may be one long JSON line
@@ -373,41 +400,68 @@ def read_estimate(path: str | os.PathLike[str]) -> EstimateFile:
                         path=path)
                 chunks.append(chunk)
             data = b"".join(chunks)
-            obj = json.loads(data.decode("utf-8"), parse_constant=float,
-                             object_pairs_hook=no_duplicate_keys)
+            del chunks
+            try:
+                text = data.decode("utf-8")
+            except UnicodeDecodeError as exc:
+                raise StreamFormatError(f"not UTF-8 text (byte {exc.start})", path=path,
+                                        line=data.count(b"\n", 0, exc.start) + 1) from None
+            del data   # the text is kept (for the lines of messages), not a copy of it too
+            repeated = _FirstRepeat()
+            obj = json.loads(text, parse_constant=float, object_pairs_hook=repeated)
         except StreamFormatError:
             raise
-        except DuplicateKeyError as exc:
-            raise StreamFormatError("appears twice in one object", path=path,
-                                    key=str(exc)) from None
         except json.JSONDecodeError as exc:
-            second = data.split(b"\n", 2)[1:2]
+            if exc.lineno > 1 and isinstance(head_error, DuplicateKeyError):  # a v2 header
+                raise StreamFormatError("appears twice in one object", path=path, line=1,
+                                        key=str(head_error)) from None
+            second = text.split("\n", 2)[1:2]
             if (exc.lineno > 1 and isinstance(head_error, json.JSONDecodeError) and second
-                    and second[0].lstrip().startswith(b'{"t"')):  # a broken version-2 header
+                    and second[0].lstrip().startswith('{"t"')):  # a broken version-2 header
                 raise StreamFormatError(f"not valid JSON ({_where(head_error)}); a version-2 "
                                         f"header is one JSON object on line 1",
                                         path=path, line=1) from None
             raise StreamFormatError(f"not valid JSON ({_where(exc)})", path=path,
                                     line=exc.lineno) from None
-        except UnicodeDecodeError as exc:
-            raise StreamFormatError(f"not UTF-8 text (byte {exc.start})", path=path) from None
         except (RecursionError, ValueError) as exc:
-            raise StreamFormatError(f"not a JSON estimate file ({type(exc).__name__})",
-                                    path=path) from None
+            line, why = unparsable_at(text)
+            raise StreamFormatError(f"not a JSON estimate file ({why or type(exc).__name__})",
+                                    path=path, line=line) from None
+    ctx = _Whole(path, text)
+    if repeated.first is not None:
+        where, name = path_of(obj, repeated.first[0]), repeated.first[1]
+        raise ctx.error(f"{where}.{name}" if where else name, "appears twice in one object")
     if not isinstance(obj, dict) or obj.get("format") != ESTIMATE_FORMAT:
-        raise StreamFormatError(f"must be a JSON object with \"format\": \"{ESTIMATE_FORMAT}\"",
-                                path=path, key="format")
+        raise ctx.error("format", f"must be a JSON object with \"format\": "
+                                  f"\"{ESTIMATE_FORMAT}\"")
     version = obj.get("version")
     if not (is_int(version) and version == 1):
         problem = (version_problem(version, (1, 2)) if "version" in obj
                    else "missing required key")
-        raise StreamFormatError(problem or "a version-2 header is one JSON object on line 1",
-                                path=path, key="version")
+        raise ctx.error("version", problem or "a version-2 header is one JSON object on line 1")
     bad = find_nonfinite(obj)
     if bad is not None:
-        raise StreamFormatError("non-finite number (NaN or Infinity) in the file; an estimate "
-                                "file holds finite numbers only", path=path, key=bad)
-    return _read_v1(obj, path)
+        raise ctx.error(bad, "non-finite number (NaN or Infinity) in the file; an estimate "
+                             "file holds finite numbers only")
+    return _read_v1(obj, ctx)
+
+
+class _FirstRepeat:
+    """``object_pairs_hook`` that notes the first repeated key (``first``: the object and the
+    key) rather than raising, so that the reader can say where it is."""
+
+    def __init__(self) -> None:
+        self.first: tuple[dict, str] | None = None
+
+    def __call__(self, pairs: list[tuple[str, Any]]) -> dict:
+        out: dict = {}
+        for k, v in pairs:
+            if k in out and self.first is None:
+                self.first = (out, k)
+            out[k] = v
+        return out
+
+
 
 
 def untimed_estimate_text(text: str) -> str:

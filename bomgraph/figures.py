@@ -20,13 +20,15 @@ from .file_evaluation import check_stream_identity, method_label, poses_revised
 from .evaluate import score_estimate
 from .plots import results_figure, run_figure
 from .report import error_curves
-from .stdio import check_output_path, write_figure
+from .stdio import check_output_path, read_regular_file, write_figure
 from .stream_file import read_stream
 
 FIGURE_SUFFIXES = (".png", ".pdf", ".svg")
 
 
 def _check_out(out: str | os.PathLike[str], *inputs: str | os.PathLike[str]) -> Path:
+    if not os.fspath(out):
+        check_output_path(out, inputs)   # refuses it: "--out is empty" (Path('') is '.')
     path = Path(out)
     if path.suffix.lower() not in FIGURE_SUFFIXES:
         raise ConfigError(f"{out}: the figure's file name must end in "
@@ -95,8 +97,8 @@ def plot_results(results_dir: str | os.PathLike[str], out: str | os.PathLike[str
     path = _check_out(out)
     src = Path(results_dir) / "results.json"
     try:
-        final, curves, titles = _results_data(json.loads(src.read_text(encoding="utf-8")),
-                                              src, experiments)
+        final, curves, titles = _results_data(json.loads(read_regular_file(src)), src,
+                                              experiments)
     except OSError as exc:
         raise ConfigError(f"{src}: cannot read ({exc.strerror}); give a `bomgraph compare` "
                           f"output folder") from None

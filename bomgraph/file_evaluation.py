@@ -274,7 +274,7 @@ def _is_estimate_file(path: str | os.PathLike[str]) -> bool:
             head = json.loads(fh.readline(2**16))
         if isinstance(head, dict) and head.get("format") == "bomgraph-estimate":
             return True
-    except (OSError, ValueError):
+    except (OSError, ValueError, RecursionError):   # RecursionError: a line nested too deep
         pass
     try:
         read_estimate(path)

@@ -7,6 +7,8 @@
   (:class:`DuplicateKeyError`); :func:`find_nonfinite` names the first NaN/Infinity in parsed
   data; :func:`is_int`, :func:`is_id`, :func:`is_num` test JSON values without accepting
   booleans as numbers; :func:`decode_utf8` turns a raw line into text.
+- :func:`line_of_key` finds the line of a JSON text on which a path (``a.b[2]``) lies, for
+  messages about a multi-line JSON document; :func:`path_of` spells where a container is.
 - :func:`parse_option_value` / :func:`parse_options`: the one parser of ``key=value`` method
   options (from ``--option`` and from scripts). Values are JSON where they parse as JSON;
   ``inf``, ``+inf``, ``-inf``, ``Infinity`` and ``-Infinity`` are infinities; anything else is
@@ -18,6 +20,9 @@ from __future__ import annotations
 import json
 import math
 import os
+import re
+import sys
+from json.decoder import scanstring
 from typing import Any, Iterator, Mapping, Sequence
 
 import numpy as np
@@ -192,6 +197,116 @@ def _spell(where: str, link: Any) -> str:
     return at
 
 
+def path_of(root: Any, target: dict | list) -> str | None:
+    """The path (``a.b[2]``; ``""`` for the root) of the container ``target``, found by
+    identity in parsed JSON data ``root``, or None. Iterative, as :func:`find_nonfinite`."""
+    if root is target:
+        return ""
+    if not isinstance(root, (dict, list)):
+        return None
+    stack: list[tuple[Iterator[tuple[Any, Any]], Any]] = [(_items(root), None)]
+    while stack:
+        items, link = stack[-1]
+        in_dict = isinstance(items, _DICT_ITEMS)
+        for key, value in items:
+            if isinstance(value, (dict, list)):
+                if value is target:
+                    return _spell("", (link, key, in_dict))
+                stack.append((_items(value), (link, key, in_dict)))
+                break
+        else:
+            stack.pop()
+    return None
+
+
+_WS = re.compile(r"[ \t\n\r]*")
+_INDEX = re.compile(r"\[(\d+)\]")
+_SKIP = json.JSONDecoder(parse_constant=float)  # steps over a value (C speed, no key checks)
+
+
+def line_of_key(text: str, key: str | None) -> int:
+    """The line (from 1) of ``text``, one JSON value, on which the value that ``key`` names
+    begins: ``key`` is a path as :func:`find_nonfinite` spells it (``a.b[2]``; a key holding
+    ``.`` or ``[`` is matched whole); a path ending in an object's key gives the line of that
+    key (of its last occurrence, if it is repeated). Only the path is walked, the values
+    beside it are stepped over; where the path leaves the data (or the text is not JSON) the
+    line is that of the last value reached, so line 1 for a ``key`` of None."""
+    end = len(text)
+    while end and text[end - 1] in " \t\r\n":
+        end -= 1
+    if text.find("\n", 0, end) < 0:
+        return 1                          # one line (as bomgraph wrote version 1): no walk
+    pos = _WS.match(text).end()
+    rest = key or ""
+    try:
+        while rest:
+            if text.startswith("[", pos) and (m := _INDEX.match(rest)):
+                at = _WS.match(text, pos + 1).end()
+                for _ in range(int(m[1])):
+                    at = _WS.match(text, _SKIP.raw_decode(text, at)[1]).end()
+                    if not text.startswith(",", at):
+                        break
+                    at = _WS.match(text, at + 1).end()
+                else:
+                    pos, rest = at, rest[m.end():]
+                    continue
+                break
+            if not text.startswith("{", pos):
+                break
+            rest = rest.removeprefix(".")
+            best: tuple[str, int, int] | None = None   # (key, where it is, where its value is)
+            at = _WS.match(text, pos + 1).end()
+            while text.startswith('"', at):
+                name, end = scanstring(text, at + 1)
+                value = _WS.match(text, _WS.match(text, end).end() + 1).end()
+                if (rest == name or rest.startswith((name + ".", name + "["))) and (
+                        best is None or len(name) >= len(best[0])):
+                    best = (name, at, value)
+                try:
+                    at = _WS.match(text, _SKIP.raw_decode(text, value)[1]).end()
+                except (ValueError, RecursionError):
+                    break
+                if not text.startswith(",", at):
+                    break
+                at = _WS.match(text, at + 1).end()
+            if best is None:
+                break
+            rest = rest[len(best[0]):]
+            pos = best[2] if rest else best[1]
+    except (ValueError, RecursionError):   # not JSON beyond here: the line reached so far
+        pass
+    return text.count("\n", 0, pos) + 1
+
+
+#: nesting deeper than this is where a JSON text is said to be too deep (:mod:`json`
+#: gives up near the interpreter's recursion limit, 1000 by default)
+_DEEP = 500
+_STRING_OR_BRACKET = r'"(?:[^"\\]|\\.)*"|[\[\]{}]'
+_TOKEN = re.compile(_STRING_OR_BRACKET + (r"|(?<![\d.eE+\-])-?\d{%d,}(?![\d.eE])"
+                                          % (sys.get_int_max_str_digits() + 1)
+                                          if sys.get_int_max_str_digits() else ""))
+
+
+def unparsable_at(text: str) -> tuple[int | None, str | None]:
+    """Where valid JSON that :mod:`json` cannot parse first defeats it: the line of the first
+    nesting deeper than :data:`_DEEP` or of the first integer longer than Python converts,
+    and what it is; ``(None, None)`` if neither is found."""
+    depth = 0
+    for m in _TOKEN.finditer(text):
+        tok = m[0]
+        if tok in ("[", "{"):
+            depth += 1
+            if depth > _DEEP:
+                return text.count("\n", 0, m.start()) + 1, f"nested more than {_DEEP} deep"
+        elif tok in ("]", "}"):
+            depth -= 1
+        elif tok[0] != '"':
+            return (text.count("\n", 0, m.start()) + 1,
+                    f"an integer of {len(tok.lstrip('-'))} digits; Python converts at most "
+                    f"{sys.get_int_max_str_digits()}")
+    return None, None
+
+
 def decode_utf8(raw: bytes) -> str:
     """One raw line as text; ``UnicodeDecodeError`` says at which byte it is not UTF-8."""
     return raw.decode("utf-8")
@@ -206,8 +321,10 @@ def parse_option_value(text: str) -> Any:
         raise ConfigError(f"option value {text!r}: NaN is not a valid option value")
     try:
         return json.loads(text, parse_constant=_refuse_constant)
-    except json.JSONDecodeError:
-        return text
+    except ConfigError:
+        raise
+    except (ValueError, RecursionError):   # not JSON, or JSON Python will not parse (an
+        return text                        # integer of 5000 digits, nesting 3000 deep)
 
 
 def _refuse_constant(name: str) -> float:
@@ -236,4 +353,4 @@ def parse_options(pairs: Sequence[str]) -> dict[str, Any]:
 
 __all__ = ["jsonable", "parse_option_value", "parse_options", "MAX_ID", "is_int", "is_id",
            "is_num", "version_problem", "DuplicateKeyError", "no_duplicate_keys", "loads_strict",
-           "find_nonfinite"]
+           "find_nonfinite", "path_of", "line_of_key", "unparsable_at"]

@@ -19,7 +19,7 @@ from pathlib import Path
 from typing import Any, Sequence
 
 from .experiments import DatasetSource, Experiment, FileSource
-from .stdio import OutputPathError, write_text
+from .stdio import InputTooLargeError, OutputPathError, read_regular_file, write_text
 
 _log = logging.getLogger(__name__)
 
@@ -93,8 +93,8 @@ def _earlier_entries(out: Path) -> list[dict[str, Any]]:
     """The previous manifest's entries; none if it is missing or not one (a foreign or
     damaged file is never acted on)."""
     try:
-        obj = json.loads((out / MANIFEST).read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, ValueError):
+        obj = json.loads(read_regular_file(out / MANIFEST).decode("utf-8"))
+    except (OSError, UnicodeDecodeError, ValueError, RecursionError, InputTooLargeError):
         return []
     if not isinstance(obj, dict) or obj.get("format") != _MANIFEST_FORMAT:
         return []

@@ -12,29 +12,52 @@ velocity), and no method can use them. The rule:
   (:func:`refuse_implausible`), naming the cause.
 
 The limits are deliberately wide (orders of magnitude beyond any recording bomgraph knows):
-they catch absurd values, not unusual ones.
+they catch absurd values, not unusual ones. Two are set by what the numbers can mean rather
+than by magnitude: an angle's sigma above the spread of an angle uniform on the circle
+(:data:`MAX_ANGLE_SIGMA_RAD`), and odometry that moves or turns far less than its stated noise
+alone would move it (:class:`OdometryScale`, judged by the reader only, after the last step:
+a warning, as the stream is valid).
 """
 
 from __future__ import annotations
 
 import math
-from typing import Iterable
+from typing import Iterable, Sequence
 
 import numpy as np
 
 from .errors import BomgraphError
 from .stream import Step, StreamHeader
 
-#: a bearing sigma above pi: the bearings are uniform on the circle, they carry no information.
-MAX_BEARING_SIGMA_RAD = math.pi
+#: pi/sqrt(3) (1.81 rad), the standard deviation of an angle uniform on the circle. An angle
+#: error wrapped to (-pi, pi] (every method wraps bearing and heading residuals) that is
+#: symmetric and unimodal spreads at most this much, and that much only when it carries no
+#: information; so a stated bearing or turn sigma above it is the spread of no such error: a
+#: sigma in degrees, or a noise scale off by orders of magnitude (the paper's is 0.0524 rad).
+MAX_ANGLE_SIGMA_RAD = math.pi / math.sqrt(3)
+#: a bearing sigma above :data:`MAX_ANGLE_SIGMA_RAD`
+MAX_BEARING_SIGMA_RAD = MAX_ANGLE_SIGMA_RAD
 #: a bearing sigma below a nanoradian (the finest star trackers reach about 1e-7 rad): a
 #: sigma typed with a wrong exponent. At 1e-300 its square underflows to 0 and every method's
 #: weights 1 / sigma^2 overflow.
 MIN_BEARING_SIGMA_RAD = 1e-9
-#: an odometry sigma above this (metres for dx, dy; radians for dpsi): no information.
-MAX_ODOMETRY_SIGMA = (1e5, 1e5, 2 * math.pi)
+#: an odometry sigma above this (metres for dx, dy; radians for dpsi, as for a bearing)
+MAX_ODOMETRY_SIGMA = (1e5, 1e5, MAX_ANGLE_SIGMA_RAD)
+#: a turn beyond this many of its stated sigmas (and a full turn) is taken for degrees: once
+#: in 4e11 steps a draw of the noise (5 sigmas, once in 1.7 million, were drawn by a 2000-step
+#: simulation at noise scale 34, whose turn sigma is 1.78 rad)
+TURN_SIGMAS = 7.0
+#: odometry that moves (or turns), on average over a stream, less than this fraction of what
+#: its stated noise alone would move it (:class:`OdometryScale`): sigmas in cm or degrees
+MIN_MOTION_PER_NOISE = 0.1
+#: the fewest odometry steps :class:`OdometryScale` judges (with 10 steps of pure noise,
+#: the chance of averaging below a tenth of the bound is about 3e-9)
+MIN_SCALE_STEPS = 10
 #: a sensor reaching less than a micrometre or further than 1000 km.
 SENSOR_RANGE_LIMITS_M = (1e-6, 1e6)
+#: a prior's sigma outside these metres: below, its weight 1/sigma^2 overflows (a prior of
+#: sigma 1e-300 m made every BOM-STMDS weight inf); above, it carries no information
+PRIOR_SIGMA_LIMITS_M = (1e-9, 1e5)
 #: one step (the motion between two consecutive poses) longer than 100 km.
 MAX_STEP_M = 1e5
 #: a truth coordinate further than this from the origin.
@@ -44,14 +67,20 @@ MAX_COORDINATE_M = 1e9
 MAX_ABS_ANGLE_RAD = 2 * math.pi
 
 
+_DEGREES = (" (pi/sqrt(3), the spread of a heading uniform on the circle; a sigma in "
+            "degrees?)")
+
+
 def header_problems(header: StreamHeader) -> list[tuple[str, str]]:
-    """``(key, message)`` for each implausible value of ``header`` (empty when plausible)."""
+    """``(key, message)`` for each implausible value of ``header`` (empty when plausible;
+    of its priors, the first implausible one)."""
     out: list[tuple[str, str]] = []
     if header.bearing_sigma_rad > MAX_BEARING_SIGMA_RAD:
         out.append(("bearing_sigma_rad",
-                    f"{header.bearing_sigma_rad:g} rad is above pi: bearings that uncertain "
-                    f"carry no information (a noise scale or sigma off by orders of "
-                    f"magnitude?)"))
+                    f"{header.bearing_sigma_rad:g} rad is above pi/sqrt(3) = "
+                    f"{MAX_BEARING_SIGMA_RAD:.3g} rad, the spread of a bearing uniform on the "
+                    f"circle: no bearing error spreads more (a sigma in degrees, or off by "
+                    f"orders of magnitude?)"))
     elif header.bearing_sigma_rad < MIN_BEARING_SIGMA_RAD:
         out.append(("bearing_sigma_rad",
                     f"{header.bearing_sigma_rad:g} rad is below {MIN_BEARING_SIGMA_RAD:g}: no "
@@ -60,13 +89,27 @@ def header_problems(header: StreamHeader) -> list[tuple[str, str]]:
     for name, value, limit in zip(("sigma_dx_m", "sigma_dy_m", "sigma_dpsi_rad"),
                                   header.odometry_sigma, MAX_ODOMETRY_SIGMA):
         if value > limit:
-            out.append(("odometry_sigma", f"{name} = {value:g} is above {limit:g}: odometry "
-                                          f"that uncertain carries no information"))
+            out.append(("odometry_sigma", f"{name} = {value:g} is above {limit:.3g}: odometry "
+                                          f"that uncertain carries no information"
+                                          + _DEGREES * (name == "sigma_dpsi_rad")))
     lo, hi = SENSOR_RANGE_LIMITS_M
     r = header.sensor_range_m
     if r is not None and not lo <= r <= hi:
         out.append(("sensor_range_m", f"{r:g} m is outside [{lo:g}, {hi:g}] m: no sensor "
                                       f"reaches that (give null if the range is unknown)"))
+    for k, p in enumerate(header.priors):   # the first implausible prior
+        if not PRIOR_SIGMA_LIMITS_M[0] <= p.sigma_m <= PRIOR_SIGMA_LIMITS_M[1]:
+            out.append((f"priors[{k}].sigma_m", f"{p.sigma_m:g} m is outside "
+                                                f"[{PRIOR_SIGMA_LIMITS_M[0]:g}, "
+                                                f"{PRIOR_SIGMA_LIMITS_M[1]:g}] m: no "
+                                                f"measurement of a distance is that precise "
+                                                f"(or that vague)"))
+            break
+        if p.distance_m > MAX_COORDINATE_M:
+            out.append((f"priors[{k}].distance_m", f"{p.distance_m:g} m is beyond "
+                                                   f"{MAX_COORDINATE_M:g} m (squared, it leaves "
+                                                   f"double precision)"))
+            break
     return out
 
 
@@ -85,24 +128,76 @@ def bearings_problem(t: int, bearings_rad: np.ndarray) -> tuple[str, str] | None
 def step_problem(step: Step, sigma_dpsi_rad: float = 0.0, *,
                  turn: bool = True) -> tuple[str, str] | None:
     """``(key, message)`` if ``step``'s odometry is implausible, else None. A turn is taken
-    for degrees beyond a full turn and beyond 5 of its stated sigmas (the step's, else
-    ``sigma_dpsi_rad``, the header's): a simulated stream of a large noise scale draws such
-    turns from its own noise. ``turn`` False: the turn is not judged at all."""
+    for degrees beyond a full turn and beyond :data:`TURN_SIGMAS` of its stated sigmas (the
+    step's, else ``sigma_dpsi_rad``, the header's): a simulated stream of a large noise scale
+    draws such turns from its own noise. ``turn`` False: the turn is not judged at all."""
     if step.odom is not None:
         length = math.hypot(float(step.odom[0]), float(step.odom[1]))
         if length > MAX_STEP_M:
             return ("odom", f"step {step.t} moves {length:g} m, more than {MAX_STEP_M:g} m "
                             f"in one step (a corrupt velocity, time stamp or unit?)")
         sigma = float(step.odom_sigma[2]) if step.odom_sigma is not None else sigma_dpsi_rad
-        if turn and abs(float(step.odom[2])) > max(MAX_ABS_ANGLE_RAD, 5 * sigma):
+        if turn and abs(float(step.odom[2])) > max(MAX_ABS_ANGLE_RAD, TURN_SIGMAS * sigma):
             return ("odom", f"step {step.t} turns {float(step.odom[2]):g} rad, more than a full "
                             f"turn in one step; dpsi_rad is radians (degrees?)")
     if step.odom_sigma is not None:
         for name, value, limit in zip(("sigma_dx_m", "sigma_dy_m", "sigma_dpsi_rad"),
                                       step.odom_sigma, MAX_ODOMETRY_SIGMA):
             if value > limit:
-                return ("odom_sigma", f"step {step.t}: {name} = {value:g} is above {limit:g}")
+                return ("odom_sigma", f"step {step.t}: {name} = {value:g} is above {limit:.3g}"
+                                      + _DEGREES * (name == "sigma_dpsi_rad"))
     return None
+
+
+class OdometryScale:
+    """Whether a stream's stated odometry sigmas fit its odometry: :meth:`add` each step,
+    then :meth:`problem`.
+
+    Whatever the true motion, odometry with zero-mean symmetric noise moves on average at
+    least as far as the noise alone (``E|d + n| >= E|n|``: ``|.|`` is convex and even), and
+    ``E|n| >= sqrt(2/pi) sigma`` for the larger translation sigma (and for the turn's). So
+    simulated streams sit near that bound at large noise scales and above it otherwise (0.97
+    to 101 times it, translation and turn, at noise scales 0 to 34.6), the shipped recordings
+    imported as the README does and with other keyframes at 2.7 to 72 times it. Odometry moving on average less than :data:`MIN_MOTION_PER_NOISE` of the
+    bound, over at least :data:`MIN_SCALE_STEPS` steps, contradicts its stated sigmas:
+    centimetres for metres or degrees for radians, most likely. A stream that never moves
+    (or never turns) is not judged: nothing says what its noise would be."""
+
+    def __init__(self, odometry_sigma: tuple[float, float, float]) -> None:
+        self._header = odometry_sigma
+        self.n = 0
+        self.own_sigma = False   # some step states its own odom_sigma
+        self._moved = self._noise = self._turned = self._turn_noise = 0.0
+
+    def add(self, step: Step) -> None:
+        if step.odom is None:
+            return
+        sigma = self._header if step.odom_sigma is None else step.odom_sigma
+        self.own_sigma |= step.odom_sigma is not None
+        self.n += 1
+        self._moved += math.hypot(float(step.odom[0]), float(step.odom[1]))
+        self._noise += max(float(sigma[0]), float(sigma[1]))
+        self._turned += abs(float(step.odom[2]))
+        self._turn_noise += float(sigma[2])
+
+    def problem(self) -> tuple[str, str] | None:
+        """``(key, message)`` if the odometry contradicts its stated sigmas, else None; the
+        key is ``odom_sigma`` if a step states its own, else ``odometry_sigma``."""
+        if self.n < MIN_SCALE_STEPS:
+            return None
+        k = math.sqrt(2 / math.pi)
+        key = "odom_sigma" if self.own_sigma else "odometry_sigma"
+        for what, done, noise, unit, other in (("move", self._moved, self._noise, "m",
+                                                "centimetres"),
+                                               ("turn", self._turned, self._turn_noise, "rad",
+                                                "degrees")):
+            bound = k * noise / self.n
+            if 0 < done / self.n < MIN_MOTION_PER_NOISE * bound:
+                return (key, f"the {self.n} steps {what} {done / self.n:.3g} {unit} on "
+                             f"average, but noise of the stated sigmas alone would {what} them "
+                             f"{bound:.3g} {unit} or more: sigmas in {other}? (or noise-free "
+                             f"odometry with nominal sigmas)")
+        return None
 
 
 def truth_problem(landmarks_xy: np.ndarray, poses: np.ndarray | None) -> str | None:
@@ -117,27 +212,34 @@ def truth_problem(landmarks_xy: np.ndarray, poses: np.ndarray | None) -> str | N
 def refuse_implausible(header: StreamHeader, steps: Iterable[Step],
                        error: type[BomgraphError], source: str, *,
                        landmarks_xy: np.ndarray | None = None,
-                       poses: np.ndarray | None = None) -> None:
+                       poses: np.ndarray | None = None, odom_lines: Sequence[int] = (),
+                       priors_line: int | None = None) -> None:
     """Raise ``error`` naming the first implausible value of a stream being made by
     ``source`` (an importer, the simulator): the header's sigmas and range, each step's
-    odometry, the truth's coordinates."""
+    odometry, the truth's coordinates. Where the importer says where a value was read
+    (``odom_lines[t - 1]``: the line of step ``t``'s odometry record; ``priors_line``: of the
+    priors), the message names that line of ``source``."""
     problems = header_problems(header)
     if problems:
         key, msg = problems[0]
-        raise error(f"{source}: '{key}': {msg}; refusing to write an implausible stream")
+        at = f", line {priors_line}" if priors_line and key.startswith("priors") else ""
+        raise error(f"{source}{at}: '{key}': {msg}; refusing to write an implausible stream")
     for st in steps:
         # a turn is not judged here: importers compute turns from their data or read them
         # from a format that wraps angles (g2o), so one beyond 2 pi is valid there (whatever
         # sigma the step states: an infinite header sigma did not stop a step's own)
         p = step_problem(st, turn=False)
         if p is not None:
-            raise error(f"{source}: '{p[0]}': {p[1]}; refusing to write an implausible stream")
+            at = f", line {odom_lines[st.t - 1]}" if 0 < st.t <= len(odom_lines) else ""
+            raise error(f"{source}{at}: '{p[0]}': {p[1]}; refusing to write an implausible "
+                        f"stream")
     msg = truth_problem(np.zeros((0, 2)) if landmarks_xy is None else landmarks_xy, poses)
     if msg is not None:
         raise error(f"{source}: {msg}; refusing to write an implausible stream")
 
 
-__all__ = ["MAX_BEARING_SIGMA_RAD", "MAX_ODOMETRY_SIGMA", "SENSOR_RANGE_LIMITS_M", "MAX_STEP_M",
-           "MAX_COORDINATE_M", "MAX_ABS_ANGLE_RAD", "header_problems", "bearings_problem",
-           "step_problem", "truth_problem",
-           "refuse_implausible"]
+__all__ = ["MAX_ANGLE_SIGMA_RAD", "MAX_BEARING_SIGMA_RAD", "MAX_ODOMETRY_SIGMA",
+           "MIN_MOTION_PER_NOISE", "MIN_SCALE_STEPS", "TURN_SIGMAS", "SENSOR_RANGE_LIMITS_M",
+           "PRIOR_SIGMA_LIMITS_M",
+           "MAX_STEP_M", "MAX_COORDINATE_M", "MAX_ABS_ANGLE_RAD", "OdometryScale", "header_problems",
+           "bearings_problem", "step_problem", "truth_problem", "refuse_implausible"]

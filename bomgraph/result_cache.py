@@ -8,7 +8,7 @@ import logging
 from pathlib import Path
 from typing import Any, Mapping
 
-from .stdio import output_file
+from .stdio import InputTooLargeError, output_file, read_regular_file
 
 _log = logging.getLogger(__name__)
 
@@ -20,8 +20,9 @@ def read_cached(path: Path) -> dict[str, Any] | None:
     if not path.exists():
         return None
     try:
-        cached = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, ValueError) as exc:
+        cached = json.loads(read_regular_file(path).decode("utf-8"))
+    except (OSError, UnicodeDecodeError, ValueError, RecursionError,
+            InputTooLargeError) as exc:
         _log.warning("ignoring the unreadable cache file %s (%s); the task runs again", path,
                      type(exc).__name__)
         return None

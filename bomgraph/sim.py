@@ -30,7 +30,7 @@ from .config import requirement
 from .errors import ConfigError
 from .geometry import bearings_to
 from .plausibility import (MAX_BEARING_SIGMA_RAD, MIN_BEARING_SIGMA_RAD, MAX_COORDINATE_M, MAX_ODOMETRY_SIGMA,
-                           MAX_STEP_M, SENSOR_RANGE_LIMITS_M)
+                           MAX_STEP_M, PRIOR_SIGMA_LIMITS_M, SENSOR_RANGE_LIMITS_M)
 from .stream import Prior, Step, Stream, StreamHeader, Truth
 
 DEG = math.pi / 180.0
@@ -117,7 +117,8 @@ class SimConfig:
              f"data give noise_scale 0)")
         need(sigma_theta <= MAX_BEARING_SIGMA_RAD,
              f"noise_scale {self.noise_scale:g} gives a bearing sigma of {sigma_theta:g} rad, "
-             f"above pi: such bearings carry no information (the paper's noise is 1)")
+             f"above pi/sqrt(3) = {MAX_BEARING_SIGMA_RAD:.3g} rad, the spread of a bearing "
+             f"uniform on the circle: no information (the paper's noise is 1)")
         need(all(v <= lim for v, lim in zip(odo, MAX_ODOMETRY_SIGMA)),
              f"noise_scale {self.noise_scale:g} gives odometry sigmas {odo}: no information")
         lo, hi = SENSOR_RANGE_LIMITS_M
@@ -343,8 +344,10 @@ def make_priors(truth: Truth, fraction: float, sigma_xy_m: float,
     """
     if not (math.isfinite(fraction) and 0 < fraction <= 1):
         raise ConfigError(f"prior fraction must be in (0, 1], got {fraction}")
-    if not (math.isfinite(sigma_xy_m) and sigma_xy_m > 0):
-        raise ConfigError(f"prior sigma must be > 0, got {sigma_xy_m}")
+    lo, hi = PRIOR_SIGMA_LIMITS_M
+    if not (math.isfinite(sigma_xy_m) and lo <= sigma_xy_m <= hi):
+        raise ConfigError(f"prior sigma must be in [{lo:g}, {hi:g}] m (the paper's is 0.03; "
+                          f"bomgraph.plausibility), got {sigma_xy_m:g}")
     n = len(truth.landmark_ids)
     if n * (n - 1) // 2 > MAX_PRIOR_PAIRS or n_prior_pairs(n, fraction) > MAX_PRIORS:
         raise ConfigError(f"priors for {n:,} landmarks: {n * (n - 1) // 2:,} pairs to draw "

@@ -28,6 +28,7 @@ streams for :mod:`bomgraph.cli` and raise :class:`~bomgraph.errors.BomgraphError
 from __future__ import annotations
 
 import contextlib
+import errno
 import logging
 import os
 import re
@@ -104,6 +105,26 @@ def bounded_lines(fh: IO[bytes], path: str | os.PathLike[str], *,
 def read_bounded(fh: IO[bytes], path: str | os.PathLike[str]) -> bytes:
     """All of a binary file, refusing it as :func:`bounded_lines` does."""
     return b"".join(bounded_lines(fh, path))
+
+
+def read_regular_file(path: str | os.PathLike[str]) -> bytes:
+    """All of the regular file ``path`` (a JSON file bomgraph wrote: results, cache, manifest),
+    refusing anything else before reading: ``OSError`` for a directory, device or FIFO (a
+    results.json linked to /dev/zero filled the memory), :class:`InputTooLargeError` for a file
+    over :data:`MAX_INPUT_BYTES`."""
+    with open(path, "rb") as fh:
+        st = os.fstat(fh.fileno())
+        if not stat.S_ISREG(st.st_mode):
+            raise OSError(errno.EINVAL, "not a regular file")
+        if st.st_size > MAX_INPUT_BYTES:
+            raise input_too_large(path)
+        chunks, size = [], 0
+        while chunk := fh.read(1 << 20):   # read(4 GiB) would reserve 4 GiB at once
+            size += len(chunk)
+            if size > MAX_INPUT_BYTES:       # it grew while read
+                raise input_too_large(path)
+            chunks.append(chunk)
+    return b"".join(chunks)
 
 
 def copy_bounded(src: IO[bytes], dst: IO[bytes], path: str) -> None:
@@ -468,8 +489,19 @@ def configure_logging(verbose: int = 0, quiet: bool = False) -> None:
     root.addHandler(handler)
     root.setLevel(level)
     logging.captureWarnings(True)
+    captured = logging.getLogger("py.warnings")
+    if _first_line not in captured.filters:
+        captured.addFilter(_first_line)
     if quiet:
         warnings.simplefilter("ignore")
+
+
+def _first_line(record: logging.LogRecord) -> bool:
+    """A Python warning as :func:`logging.captureWarnings` logs it, cut to its first line
+    (``FILE:LINE: Category: text``): the source line below it made one warning three lines."""
+    lines = record.getMessage().strip().splitlines()
+    record.msg, record.args = (lines[0] if lines else ""), ()
+    return True
 
 
 @contextlib.contextmanager
@@ -502,7 +534,7 @@ def logging_restored() -> Iterator[None]:
 
 __all__ = ["STDIO", "MAX_LINE_BYTES", "MAX_INPUT_BYTES", "OutputPathError",
            "InputTooLargeError", "line_too_long", "input_too_large", "bounded_lines",
-           "read_bounded", "copy_bounded", "display_path", "input_path", "write_output",
+           "read_bounded", "read_regular_file", "copy_bounded", "display_path", "input_path", "write_output",
            "is_stdout", "check_output_path", "AtomicOutput", "output_file", "write_text",
            "write_figure", "FolderBusyError", "make_folder", "folder_lock", "signals_held",
            "configure_logging", "logging_restored"]

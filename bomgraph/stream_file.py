@@ -19,8 +19,9 @@ import numpy as np
 from .checks import file_name
 from .errors import StreamFormatError
 from .jsonio import (MAX_ID, DuplicateKeyError, decode_utf8, find_nonfinite, is_id, is_int,
-                     is_num, loads_strict, version_problem)
-from .plausibility import bearings_problem, header_problems, step_problem, truth_problem
+                     is_num, loads_strict, unparsable_at, version_problem)
+from .plausibility import (OdometryScale, bearings_problem, header_problems, step_problem,
+                           truth_problem)
 from .stdio import MAX_LINE_BYTES, bounded_lines, line_too_long, output_file
 from .stream import Prior, Step, Stream, StreamHeader, Truth
 
@@ -82,7 +83,7 @@ def _parse_json_line(text: str, ctx: _Ctx) -> dict:
         raise ctx.error(str(exc), "appears twice in one object; a reader never drops data")
     except (json.JSONDecodeError, RecursionError, ValueError) as exc:
         msg = getattr(exc, "msg", None) or ("too deeply nested" if isinstance(exc, RecursionError)
-                                            else str(exc))
+                                            else unparsable_at(text)[1] or str(exc))
         raise ctx.error(None, f"not valid JSON ({msg})") from None
     if not isinstance(obj, dict):
         raise ctx.error(None, f"expected a JSON object, got {type(obj).__name__}")
@@ -300,7 +301,8 @@ class StreamReader:
     The truth-pose count is checked once the last step has been read. Lines are bounded
     (:data:`bomgraph.stdio.MAX_LINE_BYTES`, :data:`~bomgraph.stdio.MAX_INPUT_BYTES`). With
     ``warn`` (default) implausible but valid values (:mod:`bomgraph.plausibility`) are logged
-    as warnings naming the line and the key: the header's, and the first implausible step's.
+    as warnings naming the line and the key: the header's, the first implausible step's, and
+    (after the last step) odometry that contradicts its stated sigmas.
     """
 
     def __init__(self, path: str | os.PathLike[str], *, warn: bool = True) -> None:
@@ -349,6 +351,8 @@ class StreamReader:
         t = 0
         pending_blank: int | None = None
         warned = not self._warn
+        scale = OdometryScale(self.header.odometry_sigma)
+        own_sigma_line: int | None = None     # of the first step stating its own odom_sigma
         for raw in bounded_lines(self._fh, self.path, first_line=2):
             line_no += 1
             ctx = _Ctx(self.path, line_no)
@@ -369,6 +373,10 @@ class StreamReader:
                 warned = True
                 _log.warning("%s, line %d: '%s': %s (implausible; later steps are not "
                              "checked)", self.path, line_no, *problem)
+            if self._warn:
+                scale.add(step)
+                if own_sigma_line is None and step.odom_sigma is not None:
+                    own_sigma_line = line_no
             yield step
             t += 1
         if pending_blank is not None:
@@ -382,6 +390,8 @@ class StreamReader:
             raise StreamFormatError(f"the header has {len(self.truth.poses)} truth poses but "
                                     f"the file has {t} steps; give one pose per step",
                                     path=self.path, line=1, key="truth.poses")
+        if (problem := scale.problem()) is not None:
+            _log.warning("%s, line %d: '%s': %s", self.path, own_sigma_line or 1, *problem)
 
 
 def _decode(raw: bytes, ctx: _Ctx) -> str:

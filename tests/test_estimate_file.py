@@ -37,7 +37,7 @@ def test_estimate_file_round_trip(tmp_path: Path) -> None:
     ('"landmarks": [[true, 1.5, 2.5]]', "landmarks[0]"),
     ('"landmarks": [[1e30, 1.5, 2.5]]', "landmarks[0]"),
     ('"landmarks": [], "poses": [[2.7, 0, 0, 0]]', "poses[0]"),
-    ('"landmarks": [], "poses": [[1, 0, 0, 0], [1, 0, 0, 0]]', "poses"),
+    ('"landmarks": [], "poses": [[1, 0, 0, 0], [1, 0, 0, 0]]', "poses[1]"),
     ('"landmarks": [], "checkpionts": []', "checkpionts"),
     ('"landmarks": [], "checkpoints": 5', "checkpoints"),
     ('"landmarks": [], "checkpoints": [{"t": true, "landmarks": []}]', "checkpoints[0].t"),

@@ -79,13 +79,15 @@ def test_a_noisy_simulated_stream_is_not_taken_for_degrees(
     """`bomgraph simulate --noise-scale 55` (accepted: its bearing sigma is below pi) states a
     dpsi sigma of 2.9 rad, so a turn beyond a full turn is a 2-3 sigma draw of its odometry;
     the reader warned "more than a full turn in one step; dpsi_rad is radians (degrees?)"
-    at such a step. A turn is now taken for degrees only beyond 5 stated sigmas too."""
+    at such a step. A turn is now taken for degrees only beyond 5 stated sigmas too (h52: 7;
+    and the largest noise scale is now 34.6, where the turn sigma is pi/sqrt(3), so the
+    stream is 34's, longer)."""
     import logging
 
     from bomgraph.stream_file import read_stream
 
     stream = tmp_path / "n55.jsonl"
-    sim = simulate(SimConfig(n_steps=300, noise_scale=55), np.random.default_rng(0))
+    sim = simulate(SimConfig(n_steps=1000, noise_scale=34), np.random.default_rng(2))
     assert max(abs(s.odom[2]) for s in sim.steps if s.odom is not None) > 2 * np.pi
     write_stream(sim, stream)
     with caplog.at_level(logging.WARNING, logger="bomgraph"):

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import math
 
 import numpy as np
@@ -9,7 +10,8 @@ import pytest
 
 from bomgraph.errors import ConfigError
 from bomgraph.jsonio import (DuplicateKeyError, find_nonfinite, is_id, is_num, jsonable,
-                             loads_strict, parse_option_value, parse_options)
+                             line_of_key, loads_strict, parse_option_value, parse_options,
+                             path_of)
 
 
 def test_jsonable_plain_values_numpy_and_non_finite() -> None:
@@ -78,3 +80,19 @@ def test_option_parser_accepts_infinity_and_refuses_nan() -> None:
     for bad in ("novalue", "=3"):
         with pytest.raises(ConfigError):
             parse_options([bad])
+
+
+def test_line_of_key_follows_the_path_and_nothing_else() -> None:
+    data = {"a": 1, "b": {"c": [1, [2, 3], {"d": 4}]}, "x.y": 5, "x": {"y": 6}}
+    text = json.dumps(data, indent=1)
+    lines = text.split("\n")
+    for key, needle in [("a", '"a"'), ("b.c", '"c"'), ("b.c[1][1]", "3"), ("b.c[2].d", '"d"'),
+                        ("x.y", '"x.y"'), ("x", '"x": {')]:
+        line = line_of_key(text, key)
+        assert needle in lines[line - 1], (key, line)
+    assert line_of_key(text, "b.c[9]") == line_of_key(text, "b.c")   # as far as it goes
+    assert line_of_key(text, None) == line_of_key(text, "zz") == 1
+    assert line_of_key('{"a": 1,\n "a": 2}', "a") == 2                 # the repeat
+    assert line_of_key('{"a": [1,\n 2, oops', "a[1]") == 2              # not JSON beyond
+    assert path_of(data, data["b"]["c"][2]) == "b.c[2]" and path_of(data, data) == ""
+    assert path_of(data, []) is None

@@ -43,12 +43,14 @@ def dataset_error(path: str | os.PathLike[str], line: int | None, field: str | N
 
 
 def checked_bearing_sigma(bearing_sigma_rad: float) -> float:
-    """A caller-given bearing sigma, refused unless finite and in [1e-9, pi] rad (above, the
-    bearings would carry no information; below, no sensor: :mod:`bomgraph.plausibility`)."""
+    """A caller-given bearing sigma, refused unless finite and in [1e-9, pi/sqrt(3)] rad
+    (above, the spread of a bearing uniform on the circle; below, no sensor:
+    :mod:`bomgraph.plausibility`)."""
     if not (math.isfinite(bearing_sigma_rad) and MIN_BEARING_SIGMA_RAD <= bearing_sigma_rad
             <= MAX_BEARING_SIGMA_RAD):
         raise DatasetError(f"bearing sigma must be a finite number in [{MIN_BEARING_SIGMA_RAD:g}, "
-                           f"pi] rad, got {bearing_sigma_rad!r} (radians: 3 degrees is 0.0524)")
+                           f"pi/sqrt(3) = {MAX_BEARING_SIGMA_RAD:.3g}] rad, got "
+                           f"{bearing_sigma_rad!r} (radians: 3 degrees is 0.0524)")
     return float(bearing_sigma_rad)
 
 

@@ -36,8 +36,10 @@ holds the per-component median.
 
 **Bearing sigma.** ``1 / sqrt(w)`` of the bearing edges (their median if they differ; the
 spread goes to meta). The project's notes call ``w`` a placeholder: pass ``bearing_sigma_rad``
-to override it. With ``truth_path`` the residuals against the truth are measured and recorded
-in ``meta["truth_check"]`` (they are not used for the header).
+to override it. A bearing written beyond a full turn is wrapped, as g2o wraps angles, with a
+warning naming the first one's line (degrees, most likely). With ``truth_path`` the residuals
+against the truth are measured and recorded in ``meta["truth_check"]`` (they are not used for
+the header).
 
 **Truth.** ``truth_path`` is read for its ``VERTEX_SE2`` (one per step, matched by id) and
 ``VERTEX_XY`` lines; its edges are ignored (the project's ground-truth file repeats the noisy
@@ -47,6 +49,7 @@ used.
 
 from __future__ import annotations
 
+import logging
 import math
 import os
 import re
@@ -56,7 +59,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import DatasetError, StreamFormatError
-from ..plausibility import refuse_implausible
+from ..plausibility import MAX_ABS_ANGLE_RAD, refuse_implausible
 from ..stream import Step, Stream, StreamHeader, Truth
 from ..stream_file import parse_priors
 from ._text import (chain_order, checked_bearing_sigma, dataset_error, file_label, parse_float,
@@ -68,6 +71,8 @@ from .calibration import bearing_residuals, odometry_errors, robust_bearing_stat
 #: "priors": [...]}``;
 #: read from the comments before the first record (one after it is not read).
 G2O_HEADER_PREFIX = "# bomgraph header: "
+
+_log = logging.getLogger(__name__)
 
 _HEADER_COMMENT = re.compile(r"#\s*bomgraph header:\s*(.*)")
 
@@ -83,7 +88,7 @@ _INT_FIELDS = {"id", "i", "j", "l"}
 def _bomgraph_header(path: Path) -> tuple[dict[str, Any], int | None]:
     """The fields of a :data:`G2O_HEADER_PREFIX` comment before the first record (``{}``,
     None without one) and its line number; each field checked."""
-    from ..jsonio import find_nonfinite, loads_strict
+    from ..jsonio import DuplicateKeyError, find_nonfinite, loads_strict
 
     for line in read_lines(path, comment=None):
         text = " ".join(line.tokens)
@@ -94,7 +99,10 @@ def _bomgraph_header(path: Path) -> tuple[dict[str, Any], int | None]:
             continue
         try:
             fields = loads_strict(found.group(1))
-        except ValueError as exc:
+        except DuplicateKeyError as exc:
+            raise dataset_error(path, line.number, "bomgraph header",
+                                f"key '{exc}' appears twice") from None
+        except (ValueError, RecursionError) as exc:
             raise dataset_error(path, line.number, "bomgraph header",
                                 f"not JSON ({exc})") from None
         if not isinstance(fields, dict) or set(fields) - {"sensor_range_m", "time_s", "priors"}:
@@ -265,6 +273,8 @@ def import_g2o(path: str | os.PathLike[str], *, truth_path: str | os.PathLike[st
 
     # odometry ------------------------------------------------------------------------------
     by_target = {j: (meas, info) for _, j, _, meas, info in g.odometry}
+    line_of = {j: n for _, j, n, _, _ in g.odometry}
+    odom_lines = [line_of[pid] for pid in order[1:]]
     odoms = np.zeros((len(order) - 1, 3))
     sig = np.zeros((len(order) - 1, 3))
     max_corr = 0.0
@@ -282,6 +292,7 @@ def import_g2o(path: str | os.PathLike[str], *, truth_path: str | os.PathLike[st
     per_step: list[dict[int, float]] = [{} for _ in order]
     first_line: dict[tuple[int, int], int] = {}
     weights = []
+    beyond: list[tuple[int, float]] = []    # (line, bearing) written beyond a full turn
     for i, lid, line, brg, w in g.bearings:
         if i not in step_of:
             kind = "a landmark" if i in g.landmarks else "not on the odometry chain"
@@ -298,6 +309,12 @@ def import_g2o(path: str | os.PathLike[str], *, truth_path: str | os.PathLike[st
         first_line[(i, lid)] = line
         per_step[step_of[i]][lid] = brg
         weights.append(w)
+        if abs(brg) > MAX_ABS_ANGLE_RAD:
+            beyond.append((line, brg))
+    if beyond:   # valid (g2o wraps angles, and so does a Step), but most likely degrees
+        _log.warning("%s, line %d: field 'bearing': %g is more than a full turn (%d such "
+                     "bearing(s) in the file); bearings are radians (degrees?); wrapped to "
+                     "(-pi, pi]", g.path, beyond[0][0], beyond[0][1], len(beyond))
     w_arr = np.array(weights, dtype=float)
     if bearing_sigma_rad is not None:
         sigma_b = checked_bearing_sigma(bearing_sigma_rad)
@@ -379,7 +396,8 @@ def import_g2o(path: str | os.PathLike[str], *, truth_path: str | os.PathLike[st
                           priors=extra.get("priors", ()), meta=meta)
     refuse_implausible(header, steps, DatasetError, str(g.path),
                        landmarks_xy=None if truth is None else truth.landmarks_xy,
-                       poses=None if truth is None else truth.poses)
+                       poses=None if truth is None else truth.poses, odom_lines=odom_lines,
+                       priors_line=extra_line)
     return Stream(header, tuple(steps), truth)
 
 

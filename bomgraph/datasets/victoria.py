@@ -130,6 +130,7 @@ def import_victoria(path: str | os.PathLike[str], *,
     step_of = {pid: t for t, pid in enumerate(order)}
 
     by_target = {j: (meas, cov) for _, j, _, meas, cov in odo}
+    line_of = {j: n for _, j, n, _, _ in odo}
     odoms = np.zeros((len(order) - 1, 3))
     sig = np.zeros((len(order) - 1, 3))
     max_corr = 0.0
@@ -198,7 +199,8 @@ def import_victoria(path: str | os.PathLike[str], *,
         "ground_truth": "none",
     }
     header = StreamHeader(bearing_sigma_rad=sigma_b, odometry_sigma=header_odo, meta=meta)
-    refuse_implausible(header, steps, DatasetError, str(p))
+    refuse_implausible(header, steps, DatasetError, str(p),
+                       odom_lines=[line_of[pid] for pid in order[1:]])
     return Stream(header, tuple(steps), None)
 
 

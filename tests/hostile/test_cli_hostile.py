@@ -262,12 +262,12 @@ def test_item20_g2o_refuses_an_absurd_sigma_and_a_reversed_chain(tmp_path: Path,
     assert bomgraph("import", "g2o", g2o, "--truth", truth, "--out", out).returncode == 0
     out.unlink()
     one_error(bomgraph("import", "g2o", g2o, "--bearing-sigma", "1e300", "--out", out),
-              "bearing sigma", "[1e-09, pi]")
+              "bearing sigma", "[1e-09, pi/sqrt(3)")
     tiny = tmp_path / "tiny_w.g2o"  # bearing information 1e-300: sigma 1e150 rad
     write_g2o(tiny, sim, w=1e-300)
     one_error(bomgraph("import", "g2o", tiny, "--out", out), "bearing_sigma_rad", "above pi")
     one_error(bomgraph("import", "g2o", g2o, "--bearing-sigma", "1e-300", "--out", out),
-              "bearing sigma", "[1e-09, pi]")
+              "bearing sigma", "[1e-09, pi/sqrt(3)")
     huge_w = tmp_path / "huge_w.g2o"  # bearing information 1e300: sigma 1e-150 rad
     write_g2o(huge_w, sim, w=1e300)
     one_error(bomgraph("import", "g2o", huge_w, "--out", out), "bearing_sigma_rad", "below 1e-09")
