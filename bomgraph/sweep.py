@@ -165,6 +165,27 @@ def parse_method(token: str, where: str = "methods") -> MethodSpec:
     return _checked_method(MethodSpec(token, name, {"preset": preset} if preset else {}), where)
 
 
+def run_method(token: str, options: Mapping[str, Any]) -> tuple[str, str, dict[str, Any]]:
+    """``bomgraph run --method TOKEN --option KEY=VALUE...`` as (label, method, options):
+    ``NAME@PRESET`` (as ``compare --methods`` takes it) is ``NAME`` with ``preset=PRESET``,
+    and ``NAME`` with a ``preset`` option is labelled ``NAME@PRESET`` too, as ``evaluate``
+    names either estimate.
+
+    Raises
+    ------
+    ConfigError
+        The preset is given twice, or ``TOKEN`` is not ``NAME`` or ``NAME@PRESET``.
+    """
+    options = dict(options)
+    if "@" not in token:
+        preset = options.get("preset")
+        return (f"{token}@{preset}" if isinstance(preset, str) else token), token, options
+    spec = parse_method(token, "--method")
+    if "preset" in options:
+        raise ConfigError(f"--method {token} and --option preset=...: give the preset once")
+    return token, spec.method, {**spec.options, **options}
+
+
 def command_line_spec(streams: Sequence[str], methods: Sequence[str],
                       options: Sequence[str] = (), *, reference: str | None = None,
                       checkpoint_every: int = 10, name: str = "streams") -> SweepSpec:

@@ -137,3 +137,17 @@ def test_methods_does_not_call_a_preset_parameter_of_the_factory_refused(
     assert main(["methods", "lit"]) == 0
     last = capsys.readouterr().out.rstrip().splitlines()[-1]
     assert "refused" not in last and "preset" in last, last
+
+
+@pytest.mark.parametrize("args", [["--method", "stmds-smacof@improved"],
+                                  ["--method", "stmds-smacof", "--option", "preset=improved"]])
+def test_run_names_the_preset_however_it_is_given(stream: Path, tmp_path: Path, args: list,
+                                                  capsys: pytest.CaptureFixture) -> None:
+    """``run --method X --option preset=P`` said ``X: N landmarks ...`` (and ``"method": "X"``
+    in ``--json``) where ``--method X@P`` said ``X@P``, for the same run, and ``evaluate`` of
+    either estimate says ``X@P`` (h53); fails before for the ``--option`` form."""
+    est = tmp_path / "e.est"
+    assert main(["run", str(stream), *args, "--out", str(est)]) == 0
+    assert capsys.readouterr().out.startswith("stmds-smacof@improved: ")
+    assert main(["run", str(stream), *args, "--out", str(est), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["method"] == "stmds-smacof@improved"
