@@ -27,7 +27,9 @@ import hashlib
 import importlib
 import importlib.util
 import logging
+import os
 import sys
+import time
 import traceback
 import types
 from dataclasses import dataclass
@@ -100,6 +102,8 @@ def refresh() -> None:
     source_fingerprint.cache_clear()
     _LOADED.clear()
     _RECORDED.clear()
+    _DISK.clear()
+    _LISTED.clear()
     importlib.invalidate_caches()
 
 
@@ -169,10 +173,46 @@ def _source_files(module_name: str) -> list[tuple[str, Path]]:
     mod = sys.modules.get(top) or importlib.import_module(top)
     out: list[tuple[str, Path]] = []
     for root in sorted(getattr(mod, "__path__", []) or []):
-        out += [(f.relative_to(root).as_posix(), f) for f in Path(root).rglob("*.py")]
+        out += _py_files(root)
     if not out and getattr(mod, "__file__", None):
         out = [(Path(mod.__file__).name, Path(mod.__file__))]
     return sorted(out)
+
+
+def _py_files(root: str) -> list[tuple[str, Path]]:
+    """``Path(root).rglob("*.py")``'s paths, each with its path relative to ``root`` (as
+    ``relative_to(root).as_posix()``); no link to a folder is followed. Listed again only
+    when a folder's status changed (a file added, removed or renamed in it) since the last
+    listing, within :data:`RACY_NS` too: a worker lists a plugin's package before and after
+    each run."""
+    seen = _LISTED.get(root)
+    if seen is not None and all(_stat_signature(Path(d)) == sig for d, sig in seen[0]):
+        return list(seen[1])
+    out: list[tuple[str, Path]] = []
+    folders, signatures = [("", root)], []
+    while folders:
+        prefix, folder = folders.pop()
+        signatures.append((folder, _stat_signature(Path(folder))))  # before its listing
+        try:
+            entries = list(os.scandir(folder))
+        except OSError:  # gone or unreadable meanwhile, as rglob skips it
+            continue
+        for e in entries:
+            if os.path.normcase(e.name).endswith(".py"):
+                out.append((prefix + e.name, Path(e.path)))
+            try:
+                if e.is_dir() and not e.is_symlink():
+                    folders.append((prefix + e.name + "/", e.path))
+            except OSError:
+                continue
+    if all(sig is not None and _aged(sig) for _, sig in signatures):
+        _LISTED[root] = (signatures, list(out))
+    return out
+
+
+#: Per package folder: the :func:`_stat_signature` of each of its folders and its listing.
+_LISTED: dict[str, tuple[list[tuple[str, tuple[int, ...] | None]],
+                         list[tuple[str, Path]]]] = {}
 
 
 #: The libraries whose versions :func:`code_fingerprint` holds: they compute the numbers, and
@@ -257,7 +297,7 @@ def _fingerprint(target: str, version: str | None, loaded: bool) -> str | None:
     h = hashlib.sha256(f"version={version};".encode())
     for rel, f in files:
         h.update(f"{rel}\0".encode())
-        h.update(_file_digest(f, modules.get(f.resolve())))
+        h.update(_file_digest(f, modules.get(f.resolve()) if modules else None))
     return h.hexdigest()[:16]
 
 
@@ -268,13 +308,51 @@ def _file_digest(path: Path, module: object | None) -> bytes:
     seen = _LOADED.get(path)
     if state is not None and seen is not None and _same_state(seen[1], state):
         return seen[0]
+    digest = _disk_digest(path)
+    if state is not None:
+        _LOADED[path] = (digest, state)
+    return digest
+
+
+#: Per source file: its :func:`_stat_signature` and the digest of the contents read after it.
+_DISK: dict[Path, tuple[tuple[int, ...], bytes]] = {}
+
+#: A file whose status changed less than this long [ns] before it was read is read again the
+#: next time: a write within the same tick of the file system's clock keeps the signature.
+RACY_NS = 2_000_000_000
+
+
+def _stat_signature(path: Path) -> tuple[int, ...] | None:
+    try:
+        st = path.stat()
+    except OSError:
+        return None
+    return (st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns, st.st_ctime_ns)
+
+
+def _aged(sig: tuple[int, ...]) -> bool:
+    """Whether a :func:`_stat_signature` is older than :data:`RACY_NS` (mtime and ctime)."""
+    return time.time_ns() - max(sig[3], sig[4]) > RACY_NS
+
+
+def _disk_digest(path: Path) -> bytes:
+    """The digest of a source file's contents as they are now. Read again only when its
+    status changed since it was last read (a worker checks a plugin's package before and
+    after each run: a package of 300 files took 7 ms a check): any write changes the
+    ctime, which no tool sets (an edit that keeps the size and puts the mtime back, an
+    archive's fixed mtimes), and a file changed within :data:`RACY_NS` of its read is read
+    again (as git's "racy" index entries), so an edit is seen at the next check."""
+    sig = _stat_signature(path)  # before the read: an edit after it changes it
+    seen = _DISK.get(path)
+    if sig is not None and seen is not None and seen[0] == sig:
+        return seen[1]
     try:
         data = path.read_bytes()
     except OSError:  # a file removed while we read: hash its name only
         data = b""
     digest = hashlib.sha256(f"{len(data)}\0".encode() + data).digest()
-    if state is not None:
-        _LOADED[path] = (digest, state)
+    if sig is not None and _aged(sig):
+        _DISK[path] = (sig, digest)
     return digest
 
 
