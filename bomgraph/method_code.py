@@ -88,8 +88,8 @@ def stale_plugin(task: Task, *, worker: bool) -> str:
             # the package is hashed whole: the edit may be in another module of it
             where = f" (a source file of {info.target.split(':')[0].split('.')[0]!r})"
             if not worker:
-                return (f"method {m!r} was edited since this process imported it{where}, and "
-                        f"Python does not reload a module: reload the module (importlib.reload, "
+                return (f"method {m!r} was edited since this process imported it{where} (or "
+                        f"a constant of it set in memory), and Python does not reload a module: reload the module (importlib.reload, "
                         f"IPython's %autoreload) or restart this process (a notebook's "
                         f"kernel), then run again")
             return (f"stale worker: restart the workers and run again (Dask: client.restart(),"

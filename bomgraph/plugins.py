@@ -124,6 +124,7 @@ def load(target: str, name: str, *, record: bool = True) -> object:
     """
     module, _, attr = target.partition(":")
     try:
+        before = set(sys.modules)
         obj: object = importlib.import_module(module)
         for part in attr.split("."):
             obj = getattr(obj, part)
@@ -143,7 +144,8 @@ def load(target: str, name: str, *, record: bool = True) -> object:
                                  f"{where}") from exc
     if record and module not in _RECORDED:  # its files now, not as first hashed later
         try:
-            _fingerprint(target, None, loaded=True)
+            # the modules this import loaded run their files' code: not compared again
+            _fingerprint(target, None, loaded=True, fresh=set(sys.modules) - before)
             _RECORDED.add(module)
         except UnknownMethodError:  # said again where its key is taken
             pass
@@ -277,7 +279,8 @@ def disk_fingerprint(target: str, version: str | None = None) -> str | None:
 _LOADED: dict[Path, tuple[bytes, dict[Any, tuple[str, object]]]] = {}
 
 
-def _fingerprint(target: str, version: str | None, loaded: bool) -> str | None:
+def _fingerprint(target: str, version: str | None, loaded: bool,
+                 fresh: set[str] | frozenset[str] = frozenset()) -> str | None:
     module = target.partition(":")[0]
     try:
         files = _source_files(module)
@@ -297,21 +300,43 @@ def _fingerprint(target: str, version: str | None, loaded: bool) -> str | None:
     h = hashlib.sha256(f"version={version};".encode())
     for rel, f in files:
         h.update(f"{rel}\0".encode())
-        h.update(_file_digest(f, modules.get(f.resolve()) if modules else None))
+        mod = modules.get(f.resolve()) if modules else None
+        h.update(_file_digest(f, mod, getattr(mod, "__name__", None) not in fresh))
     return h.hexdigest()[:16]
 
 
-def _file_digest(path: Path, module: object | None) -> bytes:
+def _file_digest(path: Path, module: object | None, check: bool = True) -> bytes:
     """The digest of a source file's contents: as read now, or for a loaded ``module`` as
-    read when this process first hashed it, as long as the module is as it was then."""
+    read when this process first hashed it, as long as the module is as it was then.
+    ``check``: whether the module may have been loaded before (not by the import that has
+    just loaded it), so its code is compared with the file's (:mod:`.loaded_code`)."""
     state = None if module is None else _module_state(module)
     seen = _LOADED.get(path)
     if state is not None and seen is not None and _same_state(seen[1], state):
         return seen[0]
-    digest = _disk_digest(path)
-    if state is not None:
-        _LOADED[path] = (digest, state)
+    if state is None:
+        return _disk_digest(path)
+    from .loaded_code import runs_file
+
+    data = _read(path)
+    digest = _digest(data)
+    # imported before this first hash (by the user, in a notebook), and edited between: the
+    # file is not the code that runs, which no file's key is then to stand for
+    if check and data and not runs_file(module, data):  # type: ignore[arg-type]
+        digest = hashlib.sha256(b"loaded code is not the file's\0" + digest).digest()
+    _LOADED[path] = (digest, state)
     return digest
+
+
+def _read(path: Path) -> bytes:
+    try:
+        return path.read_bytes()
+    except OSError:  # a file removed while we read: hash its name only
+        return b""
+
+
+def _digest(data: bytes) -> bytes:
+    return hashlib.sha256(f"{len(data)}\0".encode() + data).digest()
 
 
 #: Per source file: its :func:`_stat_signature` and the digest of the contents read after it.
@@ -346,11 +371,7 @@ def _disk_digest(path: Path) -> bytes:
     seen = _DISK.get(path)
     if sig is not None and seen is not None and seen[0] == sig:
         return seen[1]
-    try:
-        data = path.read_bytes()
-    except OSError:  # a file removed while we read: hash its name only
-        data = b""
-    digest = hashlib.sha256(f"{len(data)}\0".encode() + data).digest()
+    digest = _digest(_read(path))
     if sig is not None and _aged(sig):
         _DISK[path] = (sig, digest)
     return digest

@@ -4,17 +4,29 @@
   every file of it: 20 ms a check on a package of 300 files (800 runs: 33 s of CPU). A file
   is now read again only when its status changed, a folder listed again only when its
   status changed; an edit is still seen at the next check, however it is made.
+- A module the user imported before bomgraph first loaded it (a notebook: ``import mymethod``,
+  then a sweep), edited in between: its file was taken for the code that runs, so the old
+  code's result was cached under the edited file's key, and served to that code later. Its
+  code is now compared with the file's: a serial run fails saying to reload, caching nothing.
 """
 
 from __future__ import annotations
 
+import importlib
 import os
+import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
+from _depth_mapper import depth_mapper
 
-from bomgraph import plugins
+from bomgraph import mapper, plugins
+from bomgraph.bench import Executor, execute
+from bomgraph.experiments import Arm, Experiment, FileSource
+from bomgraph.sim import SimConfig, simulate
+from bomgraph.stream_file import write_stream
 
 
 @pytest.fixture
@@ -33,7 +45,6 @@ def package(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
     plugins.refresh()
     yield pkg
     plugins.refresh()
-    import sys
     for name in [n for n in sys.modules if n == "h53pkg" or n.startswith("h53pkg.")]:
         del sys.modules[name]
 
@@ -81,3 +92,59 @@ def test_every_edit_is_seen_at_the_next_check(package: Path, edit: str) -> None:
     else:
         target.rename(package / "sub" / "s9.py")
     assert _fp() != first, edit
+
+
+METHOD = depth_mapper("DEPTH_M", "Mine") + "\nDEPTH_M = 1.0\n"
+
+
+@pytest.fixture
+def imported_first(tmp_path: Path, monkeypatch: pytest.MonkeyPatch):
+    """A method module the user imported before bomgraph loaded it, registered at run time,
+    and a one-run sweep of it with a cache."""
+    src = tmp_path / "code" / f"h53mine_{tmp_path.name}.py"
+    src.parent.mkdir()
+    src.write_text(METHOD)
+    monkeypatch.syspath_prepend(str(src.parent))
+    monkeypatch.setattr(mapper, "_REGISTRY", dict(mapper._REGISTRY))
+    importlib.import_module(src.stem)  # the notebook's first cell
+    mapper.register_method("mine", f"{src.stem}:Mine")
+    stream = tmp_path / "s.jsonl"
+    write_stream(simulate(SimConfig(n_steps=40), np.random.default_rng(3)), stream)
+    exp = Experiment("e", "e", (Arm("mine", "mine"),), sources=(FileSource(str(stream)),))
+    yield src, exp, tmp_path / "cache"
+    sys.modules.pop(src.stem, None)
+
+
+@pytest.mark.parametrize("edit", [("DEPTH_M = 1.0", "DEPTH_M = 3.0"),
+                                  ("+ DEPTH_M *", "+ 3.0 * DEPTH_M *")])
+def test_an_edit_before_the_first_load_is_not_taken_for_the_code_that_runs(
+        imported_first: tuple[Path, Experiment, Path], edit: tuple[str, str]) -> None:
+    src, exp, cache = imported_first
+    assert edit[0] in METHOD
+    src.write_text(METHOD.replace(*edit))  # edited, not reloaded; then the sweep
+    (res,) = execute(exp.tasks(), Executor("serial"), cache_dir=cache)
+    assert not res["ok"], "the old code's result was taken for the edited file's"
+    assert "was edited since this process imported it" in res["error"], res["error"]
+    assert list(cache.glob("*.json")) == []
+
+
+def test_an_unedited_or_only_moved_module_imported_first_runs_and_is_cached(
+        imported_first: tuple[Path, Experiment, Path]) -> None:
+    src, exp, cache = imported_first
+    src.write_text("# a comment and a blank line move every line down\n\n" + METHOD)
+    (res,) = execute(exp.tasks(), Executor("serial"), cache_dir=cache)
+    assert res["ok"], res.get("error")
+    assert len(list(cache.glob("*.json"))) == 1
+
+
+def test_a_constant_set_in_memory_is_not_keyed_as_the_files(
+        imported_first: tuple[Path, Experiment, Path]) -> None:
+    """``mymethod.DEPTH_M = 3.0`` in a notebook between two sweeps, the file unchanged: the
+    module looked reloaded, its file (1.0) was keyed again, and the second sweep returned
+    the first's cached result of 1.0 for code that runs 3.0."""
+    src, exp, cache = imported_first
+    (first,) = execute(exp.tasks(), Executor("serial"), cache_dir=cache)
+    sys.modules[src.stem].DEPTH_M = 3.0
+    (second,) = execute(exp.tasks(), Executor("serial"), cache_dir=cache)
+    assert first["ok"] and not second["ok"], "the 1.0 code's cached result was returned"
+    assert "set in memory" in second["error"], second["error"]
