@@ -29,8 +29,9 @@ def method_fingerprint(name: str, *, disk: bool = False) -> str | None:
     """A hash of the method's own code for the cache key, or None for a built-in method
     (whose code the runner's :func:`bomgraph.plugins.code_fingerprint` of the bomgraph and
     baselines sources covers already, so the paper's cache keys stay as they were). For a
-    plugin: its package's sources and its distribution's version; for a method registered
-    at run time: the sources of its target's top-level package (:mod:`bomgraph.plugins`),
+    plugin: the sources of its package that its module imports and its distribution's
+    version; for a method registered at run time: the sources of its target's top-level
+    package that its module imports (:mod:`bomgraph.plugins`),
     or :data:`NO_SOURCE` when that module has no source file (:func:`method_has_source`).
     The sources as this process runs them, or with ``disk`` as they are on disk now (what
     a worker process that imports them runs)."""
@@ -85,7 +86,7 @@ def stale_plugin(task: Task, *, worker: bool) -> str:
         info = method_info(m)
         if loaded not in (None, NO_SOURCE) and disk_fingerprint(info.target,
                                                                 info.version) != loaded:
-            # the package is hashed whole: the edit may be in another module of it
+            # the edit may be in another module of the package, which the method imports
             where = f" (a source file of {info.target.split(':')[0].split('.')[0]!r})"
             if not worker:
                 return (f"method {m!r} was edited since this process imported it{where} (or "

@@ -13,9 +13,10 @@ entry points (not the memory of the process that started the sweep). The factory
 ``description`` attribute (else the first docstring line) is what ``bomgraph methods`` shows.
 
 :func:`code_fingerprint` hashes the code of bomgraph and baselines and the versions of the
-libraries that compute their numbers; :func:`source_fingerprint` hashes a method's code (every
-``.py`` file of the top-level package of its module, or the module's one file) with the
-distribution's version. The runner puts both in the cache key, so editing a plugin (or
+libraries that compute their numbers; :func:`source_fingerprint` hashes a method's code (the
+``.py`` files of the top-level package of its module that the module imports, or the whole
+package when one of them imports by name: :mod:`bomgraph.import_closure`; or the module's one
+file) with the distribution's version. The runner puts both in the cache key, so editing a plugin (or
 upgrading numpy, scipy, gtsam or filterpy) re-runs it. This module imports nothing from
 bomgraph but the errors (the registry in :mod:`bomgraph.mapper` builds on it).
 """
@@ -104,6 +105,9 @@ def refresh() -> None:
     _RECORDED.clear()
     _DISK.clear()
     _LISTED.clear()
+    from .import_closure import _PARSED
+
+    _PARSED.clear()
     importlib.invalidate_caches()
 
 
@@ -168,17 +172,19 @@ def _reraise_interrupt(exc: BaseException) -> None:
         seen = seen.__cause__ or seen.__context__
 
 
-def _source_files(module_name: str) -> list[tuple[str, Path]]:
+def _source_files(module_name: str) -> tuple[list[tuple[str, Path]], bool]:
     """The ``.py`` files of the top-level package of ``module_name`` (or its one file), each
-    with its name relative to the package folder, in a fixed order."""
+    with its name relative to the package folder, in a fixed order; and whether the package
+    is spread over several folders."""
     top = module_name.split(".")[0]
     mod = sys.modules.get(top) or importlib.import_module(top)
     out: list[tuple[str, Path]] = []
-    for root in sorted(getattr(mod, "__path__", []) or []):
+    roots = sorted(getattr(mod, "__path__", []) or [])
+    for root in roots:
         out += _py_files(root)
     if not out and getattr(mod, "__file__", None):
-        out = [(Path(mod.__file__).name, Path(mod.__file__))]
-    return sorted(out)
+        return [(Path(mod.__file__).name, Path(mod.__file__))], False
+    return sorted(out), len(roots) > 1
 
 
 def _py_files(root: str) -> list[tuple[str, Path]]:
@@ -246,9 +252,10 @@ def code_fingerprint() -> str:
 
 @functools.lru_cache(maxsize=64)
 def source_fingerprint(target: str, version: str | None = None) -> str | None:
-    """A hash of the code behind ``"module:attribute"`` as this process would run it: every
-    ``.py`` file of the module's top-level package (path relative to the package and
-    contents; the module's own file for a single-file module) and ``version``. 16 hex
+    """A hash of the code behind ``"module:attribute"`` as this process would run it: the
+    ``.py`` files of the module's top-level package that importing it can run
+    (:func:`bomgraph.import_closure.closure`: path relative to the package and contents;
+    the module's own file for a single-file module) and ``version``. 16 hex
     digits; None when the module has no source file (a class defined in a notebook cell or
     in ``python -c``): there is nothing to hash, and the runner does not cache such a
     method's runs (:func:`bomgraph.bench.execute`).
@@ -281,9 +288,11 @@ _LOADED: dict[Path, tuple[bytes, dict[Any, tuple[str, object]]]] = {}
 
 def _fingerprint(target: str, version: str | None, loaded: bool,
                  fresh: set[str] | frozenset[str] = frozenset()) -> str | None:
+    from .import_closure import closure
+
     module = target.partition(":")[0]
     try:
-        files = _source_files(module)
+        files, several_roots = _source_files(module)
     except ImportError as exc:
         _reraise_interrupt(exc)
         raise UnknownMethodError(f"cannot read the source of {target!r}: {exc}") from exc
@@ -293,6 +302,9 @@ def _fingerprint(target: str, version: str | None, loaded: bool,
                                  f"{type(exc).__name__}: {exc}") from exc
     if not files:
         return None
+    disk = {f: _disk_digest(f) for _, f in files}
+    # the files importing the module can run (not another method's module of the package)
+    files = closure(module, files, disk, several_roots=several_roots)
     top = module.split(".")[0]
     modules = {Path(m.__file__).resolve(): m for name, m in list(sys.modules.items())
                if (name == top or name.startswith(top + ".") or name == "__main__")
@@ -301,7 +313,8 @@ def _fingerprint(target: str, version: str | None, loaded: bool,
     for rel, f in files:
         h.update(f"{rel}\0".encode())
         mod = modules.get(f.resolve()) if modules else None
-        h.update(_file_digest(f, mod, getattr(mod, "__name__", None) not in fresh))
+        h.update(disk[f] if mod is None else
+                 _file_digest(f, mod, getattr(mod, "__name__", None) not in fresh))
     return h.hexdigest()[:16]
 
 

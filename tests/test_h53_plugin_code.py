@@ -8,6 +8,10 @@
   then a sweep), edited in between: its file was taken for the code that runs, so the old
   code's result was cached under the edited file's key, and served to that code later. Its
   code is now compared with the file's: a serial run fails saying to reload, caching nothing.
+- Two methods of one package were keyed with the whole package: an edit of one's module
+  re-ran the other's every run, and in a notebook failed the other's runs as edited. A key
+  now holds the modules of the package that the method's module imports (a shared helper:
+  both keys), the whole package when one of those imports by name.
 """
 
 from __future__ import annotations
@@ -40,6 +44,9 @@ def package(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
     for i in range(5):
         (pkg / f"m{i}.py").write_text(f"X = {i}\n")
         (pkg / "sub" / f"s{i}.py").write_text(f"Y = {i}\n")
+    # the method's module, parsed (never run): the modules below are in its key
+    (pkg / "m0.py").write_text("from .sub import s0, s1, s2, s3, s4, s9, new\n"
+                               "from .sub.deeper import d\nX = 0\n")
     monkeypatch.syspath_prepend(str(pkg.parent))
     monkeypatch.setattr(plugins, "RACY_NS", 0, raising=False)
     plugins.refresh()
@@ -148,3 +155,68 @@ def test_a_constant_set_in_memory_is_not_keyed_as_the_files(
     (second,) = execute(exp.tasks(), Executor("serial"), cache_dir=cache)
     assert first["ok"] and not second["ok"], "the 1.0 code's cached result was returned"
     assert "set in memory" in second["error"], second["error"]
+
+
+PAIR = {"__init__.py": "",
+        "helpers.py": "SCALE = 1.0\n",
+        "a.py": depth_mapper("DEPTH_M * SCALE", "AMapper") + "\nfrom .helpers import SCALE\n"
+                "DEPTH_M = 1.0\n",
+        "b.py": depth_mapper("DEPTH_M * helpers.SCALE", "BMapper") + "\nfrom . import helpers\n"
+                "DEPTH_M = 2.0\n",
+        "c.py": "import importlib\nLATER = importlib.import_module('h53pair.d')\n",
+        "d.py": "X = 1\n"}
+
+
+@pytest.fixture
+def pair(tmp_path: Path, monkeypatch: pytest.MonkeyPatch):
+    """A package of two methods sharing a helper module, registered at run time."""
+    pkg = tmp_path / "site" / "h53pair"
+    pkg.mkdir(parents=True)
+    for name, text in PAIR.items():
+        (pkg / name).write_text(text)
+    monkeypatch.syspath_prepend(str(pkg.parent))
+    monkeypatch.setattr(mapper, "_REGISTRY", dict(mapper._REGISTRY))
+    mapper.register_method("meth-a", "h53pair.a:AMapper")
+    mapper.register_method("meth-b", "h53pair.b:BMapper")
+    mapper.register_method("meth-c", "h53pair.c:LATER")
+    plugins.refresh()
+    yield pkg
+    for name in [n for n in sys.modules if n == "h53pair" or n.startswith("h53pair.")]:
+        del sys.modules[name]
+    plugins.refresh()
+
+
+def _keys() -> dict[str, str]:
+    from bomgraph.method_code import method_fingerprint
+
+    return {m: method_fingerprint(m, disk=True) for m in ("meth-a", "meth-b", "meth-c")}
+
+
+# meth-c imports by name (importlib): its key is the whole package's, moved by every edit
+@pytest.mark.parametrize("edited, moved", [("a.py", {"meth-a"}), ("b.py", {"meth-b"}),
+                                           ("helpers.py", {"meth-a", "meth-b"}),
+                                           ("d.py", set()), ("new.py", set())])
+def test_a_methods_key_holds_the_modules_it_imports(pair: Path, edited: str,
+                                                    moved: set) -> None:
+    moved = moved | {"meth-c"}
+    before = _keys()
+    _later()
+    path = pair / edited
+    path.write_text((path.read_text() if path.exists() else "") + "# edited\n")
+    after = _keys()
+    assert {m for m in before if before[m] != after[m]} == moved, edited
+
+
+def test_an_edit_of_one_method_does_not_fail_the_others_runs_in_a_notebook(
+        pair: Path, tmp_path: Path) -> None:
+    stream = tmp_path / "s.jsonl"
+    write_stream(simulate(SimConfig(n_steps=40), np.random.default_rng(3)), stream)
+    exp = Experiment("e", "e", (Arm("meth-a", "meth-a"), Arm("meth-b", "meth-b")),
+                     sources=(FileSource(str(stream)),))
+    first = execute(exp.tasks(), Executor("serial"))
+    (pair / "a.py").write_text(PAIR["a.py"].replace("DEPTH_M = 1.0", "DEPTH_M = 3.0"))
+    a, b = execute(exp.tasks(), Executor("serial"))  # a.py edited, not reloaded
+    assert all(r["ok"] for r in first)
+    assert not a["ok"] and "edited since" in a["error"]
+    assert b["ok"], b.get("error")
+    assert b["key"] == first[1]["key"]
