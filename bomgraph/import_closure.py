@@ -16,6 +16,7 @@ the whole package again, as does a package spread over several folders.
 from __future__ import annotations
 
 import ast
+import warnings
 from pathlib import Path
 from typing import Iterable, Mapping, Sequence
 
@@ -101,7 +102,9 @@ def _imports(path: Path, name: str, is_package: bool,
     if digest is not None and seen is not None and seen[0] == digest:
         return seen[1]
     try:
-        tree = ast.parse(path.read_bytes(), str(path))
+        with warnings.catch_warnings():  # the module's import says them (SyntaxWarning)
+            warnings.simplefilter("ignore")
+            tree = ast.parse(path.read_bytes(), str(path))
     except (OSError, SyntaxError, ValueError, RecursionError, MemoryError):
         return None
     package = name if is_package else name.rpartition(".")[0]

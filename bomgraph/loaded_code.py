@@ -19,6 +19,7 @@ from __future__ import annotations
 import ast
 import inspect
 import types
+import warnings
 from typing import Any, Iterator
 
 #: Literal values compared by value: what no code of the module can change in place.
@@ -37,8 +38,10 @@ def runs_file(module: types.ModuleType, source: bytes) -> bool:
     if not isinstance(filename, str):
         return True
     try:
-        fresh = compile(source, filename, "exec", dont_inherit=True)
-        tree = ast.parse(source, filename)
+        with warnings.catch_warnings():  # its import said them (SyntaxWarning: "\\d")
+            warnings.simplefilter("ignore")
+            fresh = compile(source, filename, "exec", dont_inherit=True)
+            tree = ast.parse(source, filename)
     except (SyntaxError, ValueError):  # the file does not compile now: not the loaded code
         return False
     compiled: dict[str, set[Any]] = {}

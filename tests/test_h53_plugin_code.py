@@ -220,3 +220,32 @@ def test_an_edit_of_one_method_does_not_fail_the_others_runs_in_a_notebook(
     assert not a["ok"] and "edited since" in a["error"]
     assert b["ok"], b.get("error")
     assert b["key"] == first[1]["key"]
+
+
+def test_keying_a_module_with_an_invalid_escape_prints_no_warning(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Keying parses the method's modules (the imports they name, :mod:`import_closure`) and
+    compiles one loaded before (:mod:`loaded_code`): a ``"\\d"`` in a string made each print
+    its SyntaxWarning (3.12+; DeprecationWarning in 3.11), which the module's import had
+    said once already. Fails before."""
+    import warnings
+
+    pkg = tmp_path / "site" / "h53esc"
+    pkg.mkdir(parents=True)
+    (pkg / "__init__.py").write_text("")
+    (pkg / "m.py").write_text('import re\nPAT = re.compile("\\d+")\nX = 1\n')
+    assert '("\\d+")' in (pkg / "m.py").read_text()
+    monkeypatch.syspath_prepend(str(pkg.parent))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        importlib.import_module("h53esc.m")  # the user's import, before bomgraph's first hash
+    try:
+        with warnings.catch_warnings(record=True) as said:
+            warnings.simplefilter("always")
+            plugins.disk_fingerprint("h53esc.m:X")
+            plugins.source_fingerprint("h53esc.m:X")
+    finally:
+        for name in ("h53esc.m", "h53esc"):
+            sys.modules.pop(name, None)
+        plugins.refresh()
+    assert [str(w.message) for w in said] == []
