@@ -369,8 +369,10 @@ def _stat_signature(path: Path) -> tuple[int, ...] | None:
 
 
 def _aged(sig: tuple[int, ...]) -> bool:
-    """Whether a :func:`_stat_signature` is older than :data:`RACY_NS` (mtime and ctime)."""
-    return time.time_ns() - max(sig[3], sig[4]) > RACY_NS
+    """Whether a :func:`_stat_signature` is older than :data:`RACY_NS` (mtime and ctime), so
+    that it can stand for the contents read after it: never on Windows, where ``st_ctime``
+    is the creation time, which a write does not change."""
+    return os.name != "nt" and time.time_ns() - max(sig[3], sig[4]) > RACY_NS
 
 
 def _disk_digest(path: Path) -> bytes:
