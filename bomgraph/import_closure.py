@@ -26,7 +26,7 @@ DYNAMIC = frozenset({
     "import_module", "__import__", "iter_modules", "walk_packages", "run_module", "run_path",
     "exec", "eval", "spec_from_file_location", "module_from_spec", "exec_module",
     "load_module", "find_spec", "entry_points", "Unpickler", "create_mapper",
-    "method_factory", "register_method", "reload"})
+    "method_factory", "register_method", "reload", "extend_path"})
 
 #: Modules whose ``load``/``loads`` unpickle, importing the module of each object's class.
 PICKLERS = frozenset({"pickle", "_pickle", "cPickle", "dill", "cloudpickle", "joblib",
@@ -74,7 +74,11 @@ def closure(module: str, files: Sequence[tuple[str, Path]], digests: Mapping[Pat
             imported = _imports(path, up, rel.endswith("__init__.py"), digests.get(path))
             if imported is None:
                 return list(files)
-            todo += [m for m in imported if m == top or m.startswith(top + ".")]
+            for m in imported:
+                if m.endswith(".*"):  # every module of that package: __all__ is strings
+                    todo += [n for n in by_name if n.rpartition(".")[0] == m[:-2]]
+                elif m == top or m.startswith(top + "."):
+                    todo.append(m)
     keep = {by_name[m][1] for m in kept}
     return [(rel, path) for rel, path in files if path in keep]
 
@@ -119,7 +123,8 @@ def _imports(path: Path, name: str, is_package: bool,
                 if node.level - 1 >= len(up):
                     continue  # beyond the top-level package: not its code
                 base = ".".join(up[:len(up) - (node.level - 1)] + ([base] if base else []))
-            out += [base] + [f"{base}.{a.name}" for a in node.names if a.name != "*"]
+            # a star import also imports the submodules its package's __all__ names
+            out += [base] + [f"{base}.{a.name}" for a in node.names]
         elif _dynamic(node):
             out = None
             break

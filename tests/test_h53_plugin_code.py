@@ -164,7 +164,10 @@ PAIR = {"__init__.py": "",
         "b.py": depth_mapper("DEPTH_M * helpers.SCALE", "BMapper") + "\nfrom . import helpers\n"
                 "DEPTH_M = 2.0\n",
         "c.py": "import importlib\nLATER = importlib.import_module('h53pair.d')\n",
-        "d.py": "X = 1\n"}
+        "d.py": "X = 1\n",
+        "e.py": "from .pkg import *\nX = 1\n",  # imports pkg/f.py through pkg's __all__
+        "pkg/__init__.py": "__all__ = ['f']\n",
+        "pkg/f.py": "Y = 1\n"}
 
 
 @pytest.fixture
@@ -172,6 +175,7 @@ def pair(tmp_path: Path, monkeypatch: pytest.MonkeyPatch):
     """A package of two methods sharing a helper module, registered at run time."""
     pkg = tmp_path / "site" / "h53pair"
     pkg.mkdir(parents=True)
+    (pkg / "pkg").mkdir()
     for name, text in PAIR.items():
         (pkg / name).write_text(text)
     monkeypatch.syspath_prepend(str(pkg.parent))
@@ -179,6 +183,7 @@ def pair(tmp_path: Path, monkeypatch: pytest.MonkeyPatch):
     mapper.register_method("meth-a", "h53pair.a:AMapper")
     mapper.register_method("meth-b", "h53pair.b:BMapper")
     mapper.register_method("meth-c", "h53pair.c:LATER")
+    mapper.register_method("meth-e", "h53pair.e:X")
     plugins.refresh()
     yield pkg
     for name in [n for n in sys.modules if n == "h53pair" or n.startswith("h53pair.")]:
@@ -189,13 +194,15 @@ def pair(tmp_path: Path, monkeypatch: pytest.MonkeyPatch):
 def _keys() -> dict[str, str]:
     from bomgraph.method_code import method_fingerprint
 
-    return {m: method_fingerprint(m, disk=True) for m in ("meth-a", "meth-b", "meth-c")}
+    return {m: method_fingerprint(m, disk=True) for m in ("meth-a", "meth-b", "meth-c",
+                                                          "meth-e")}
 
 
 # meth-c imports by name (importlib): its key is the whole package's, moved by every edit
 @pytest.mark.parametrize("edited, moved", [("a.py", {"meth-a"}), ("b.py", {"meth-b"}),
                                            ("helpers.py", {"meth-a", "meth-b"}),
-                                           ("d.py", set()), ("new.py", set())])
+                                           ("d.py", set()), ("new.py", set()),
+                                           ("pkg/f.py", {"meth-e"})])
 def test_a_methods_key_holds_the_modules_it_imports(pair: Path, edited: str,
                                                     moved: set) -> None:
     moved = moved | {"meth-c"}
