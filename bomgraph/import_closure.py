@@ -117,6 +117,10 @@ def _imports(path: Path, name: str, is_package: bool,
         if isinstance(node, ast.Import):
             out += [a.name for a in node.names]
         elif isinstance(node, ast.ImportFrom):
+            if any(a.name in DYNAMIC or (a.name in ("load", "loads") and (
+                    node.module or "").split(".")[0] in PICKLERS) for a in node.names):
+                out = None  # under another name (from importlib import import_module as im)
+                break
             base = node.module or ""
             if node.level:
                 up = package.split(".")
