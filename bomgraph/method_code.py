@@ -17,7 +17,7 @@ from typing import Sequence
 from .errors import ConfigError, UnknownMethodError
 from .experiments import Task
 from .mapper import method_info
-from .plugins import disk_fingerprint, source_fingerprint
+from .plugins import code_changed, disk_fingerprint, source_fingerprint
 
 _log = logging.getLogger(__name__)
 
@@ -150,6 +150,20 @@ def warn_sourceless(tasks: Sequence[Task]) -> None:
                      n, ", ".join(repr(m) for m in names))
 
 
+def bomgraph_edited() -> bool:
+    """Whether bomgraph's or baselines' sources changed since this process first keyed a run
+    (:func:`bomgraph.plugins.code_changed`), logged once a call: the keys are of the code as
+    first hashed, while the code that runs may be the new one (a module reloaded:
+    ``%autoreload``; a worker started since), so the cache is not to be used."""
+    if not code_changed():
+        return False
+    _log.warning("bomgraph's or baselines' sources changed since this process first keyed a "
+                 "run, so its keys no longer tell which code runs: runs are neither read "
+                 "from nor written to the cache; restart this process (a notebook's kernel) "
+                 "to use it again")
+    return True
+
+
 def refuse_runtime_methods(tasks: Sequence[Task], backend: str) -> None:
     """Raise when a method of a task (:meth:`Task.methods`) was registered at run time: worker
     processes start from the installed packages and never see such a registration.
@@ -201,6 +215,6 @@ def workers_outdated(tasks: Sequence[Task]) -> bool:
     return outdated
 
 
-__all__ = ["NO_SOURCE", "method_fingerprint", "method_has_source", "method_code", "stale_plugin",
+__all__ = ["NO_SOURCE", "bomgraph_edited", "method_fingerprint", "method_has_source", "method_code", "stale_plugin",
            "stale_after_run", "stale_here", "sourceless", "warn_sourceless",
            "refuse_runtime_methods", "workers_outdated"]

@@ -232,13 +232,12 @@ NUMERIC_LIBRARIES = ("numpy", "scipy", "gtsam", "filterpy")
 def code_fingerprint() -> str:
     """A hash of the installed ``bomgraph`` and ``baselines`` sources and of the versions of
     :data:`NUMERIC_LIBRARIES`: the runner's cache key (:func:`bomgraph.bench.task_key`), so a
-    cached result is reused only by the code that produced it. 16 hex digits."""
+    cached result is reused only by the code that produced it. 16 hex digits. Taken once
+    per process (:func:`code_changed` tells when the sources changed since)."""
+    global _CODE_AT_KEY
+    _CODE_AT_KEY = _code_state()
     h = hashlib.sha256()
-    for pkg in ("bomgraph", "baselines"):
-        spec = importlib.util.find_spec(pkg)
-        if spec is None or not spec.submodule_search_locations:
-            continue
-        root = Path(list(spec.submodule_search_locations)[0])
+    for root in _code_roots():
         for f in sorted(root.rglob("*.py")):
             h.update(str(f.relative_to(root)).encode())
             h.update(f.read_bytes())
@@ -248,6 +247,32 @@ def code_fingerprint() -> str:
         except metadata.PackageNotFoundError:
             h.update(f"{lib} missing;".encode())
     return h.hexdigest()[:16]
+
+
+def _code_roots() -> list[Path]:
+    roots = []
+    for pkg in ("bomgraph", "baselines"):
+        spec = importlib.util.find_spec(pkg)
+        if spec is not None and spec.submodule_search_locations:
+            roots.append(Path(list(spec.submodule_search_locations)[0]))
+    return roots
+
+
+def _code_state() -> list[tuple[str, bytes]]:
+    return [(f"{root}/{rel}", _disk_digest(f)) for root in _code_roots()
+            for rel, f in sorted(_py_files(str(root)))]
+
+
+#: :func:`_code_state` when :func:`code_fingerprint` hashed the sources.
+_CODE_AT_KEY: list[tuple[str, bytes]] | None = None
+
+
+def code_changed() -> bool:
+    """Whether the ``bomgraph`` or ``baselines`` sources changed since this process took
+    :func:`code_fingerprint` (once, for every key it makes): its keys then no longer tell
+    which code a run ran (this process's, reloaded or not, or a new worker's)."""
+    code_fingerprint()
+    return _code_state() != _CODE_AT_KEY
 
 
 @functools.lru_cache(maxsize=64)
@@ -456,4 +481,4 @@ def _same_state(a: dict[Any, tuple[str, object]], b: dict[Any, tuple[str, object
 
 __all__ = ["GROUP", "PluginEntry", "discover", "refresh", "load", "source_fingerprint",
            "disk_fingerprint",
-           "code_fingerprint", "NUMERIC_LIBRARIES"]
+           "code_fingerprint", "code_changed", "NUMERIC_LIBRARIES"]
