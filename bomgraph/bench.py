@@ -33,16 +33,17 @@ import numpy as np
 from .checks import instance, is_integer
 from .errors import (ConfigError, StreamFormatError, TooFewLandmarksError,
                      UnknownMethodError)
-from .estimate_file import stream_identity, untimed_estimate_text, write_estimate
+from .estimate_file import stream_identity, write_estimate
 from .evaluate import CheckpointScore, score_checkpoints, score_estimate
 from .experiments import Arm, Experiment, SimSource, Task
 from .jsonio import jsonable
 from .mapper import (Checkpoint, MapEstimate, RunResult, checkpoint_times, create_mapper,
                      method_failure_note, method_info, run)
-from .method_code import (method_code, refuse_runtime_methods, sourceless, stale_after_run,
-                          stale_here, stale_plugin, warn_sourceless, workers_outdated)
+from .method_code import (bomgraph_edited, method_code, refuse_runtime_methods, sourceless,
+                          stale_after_run, stale_here, stale_plugin, warn_sourceless,
+                          workers_outdated)
 from .plugins import code_fingerprint, source_fingerprint
-from .result_cache import read_cached, write_cached
+from .result_cache import read_cached, strip_timings, write_cached  # re-exported
 from .stream import Step, Stream, Truth
 from .stream_file import StreamReader, count_steps  # re-exported: bench.count_steps
 from .sweep import scheduler_address_problem
@@ -341,6 +342,8 @@ def which_cached(tasks: Sequence[Task], cache_dir: str | os.PathLike[str],
     """:func:`is_cached` of each task, keyed as one :func:`execute` sweep keys them (each
     plugin's package hashed once)."""
     disk = instance(executor, Executor, "is_cached(): executor", ConfigError).backend != "serial"
+    if bomgraph_edited():
+        return [False] * len(tasks)
     memo: dict[str, str | None] = {}
     stale: dict[tuple[str, ...], bool] = {}
     paths = [None if not disk and stale_here(t, stale) else
@@ -374,6 +377,8 @@ def execute_counted(tasks: Sequence[Task], executor: Executor = Executor(), *,
     if executor.backend != "serial":
         refuse_runtime_methods(tasks, executor.backend)
     source_fingerprint.cache_clear()  # a plugin module reloaded since the last sweep: new keys
+    if cache_dir is not None and bomgraph_edited():
+        cache_dir = None
     results: list[dict[str, Any] | None] = [None] * len(tasks)
     # each task keyed once, before any runs: a stream file removed or rewritten during the
     # sweep fails or re-keys only the runs that read it then (in the worker), never the sweep
@@ -494,22 +499,6 @@ def _dispatch(tasks: list[Task], index: list[int], executor: Executor,
         yield from dispatch_dask(_indexed, index, tasks, scheduler=executor.scheduler,
                                  n_local=_local_workers(executor.dask_local, len(tasks)),
                                  failed=failed)
-
-
-def strip_timings(results: Iterable[Mapping[str, Any]]) -> list[dict[str, Any]]:
-    """Results without wall times (which differ between runs), for reproducibility checks."""
-    out = []
-    for r in results:
-        r2 = {k: v for k, v in r.items() if k not in ("total_s", "step_median_s")}
-        if "checkpoints" in r2:
-            r2["checkpoints"] = [{k: v for k, v in c.items() if k != "estimate_s"}
-                                 for c in r2["checkpoints"]]
-        if "info" in r2 and isinstance(r2["info"], dict):
-            r2["info"] = {k: v for k, v in r2["info"].items() if not k.endswith("_s")}
-        if isinstance(r2.get("estimate_file"), str):  # and a kept estimate's own
-            r2["estimate_file"] = untimed_estimate_text(r2["estimate_file"])
-        out.append(r2)
-    return out
 
 
 def run_file(stream_path: str | os.PathLike[str], method: str,

@@ -80,18 +80,12 @@ def cmd_run(args: argparse.Namespace) -> int:
     from .mapper import checkpoint_times
     from .stdio import STDIO, check_output_path, input_path, write_output
 
-    options, method = parse_options(args.option), args.method  # args.method: the label
-    if "@" in args.method:  # NAME@PRESET, as compare --methods takes it
-        from .sweep import parse_method
+    from .sweep import run_method
 
-        spec = parse_method(args.method, "--method")
-        if "preset" in options:
-            raise ConfigError(f"--method {args.method} and --option preset=...: give the "
-                              f"preset once")
-        method, options = spec.method, {**spec.options, **options}
+    label, method, options = run_method(args.method, parse_options(args.option))
     check_output_path(args.out, inputs=(args.stream,))
     with input_path(args.stream) as stream_path:
-        bar = _step_bar(stream_path, args.method, args.progress)
+        bar = _step_bar(stream_path, label, args.progress)
         progress = None if bar is None else (lambda t: bar.update(t + 1 - bar.n))
         done: list = []
 
@@ -109,12 +103,12 @@ def cmd_run(args: argparse.Namespace) -> int:
     to_stderr = args.out == STDIO
     if args.json:  # the result keeps only the last checkpoint; the file has all of them
         written = len(checkpoint_times(result.checkpoints[-1].t + 1, args.checkpoint_every))
-        _say(json.dumps({"method": args.method, "stream": args.stream, "out": args.out,
+        _say(json.dumps({"method": label, "stream": args.stream, "out": args.out,
                          "landmarks": len(result.final), "t": result.checkpoints[-1].t,
                          "checkpoints": written,
                          "total_s": round(result.total_s, 6)}), to_stderr=to_stderr)
     else:
-        _say(f"{args.method}: {len(result.final)} landmarks mapped at t = "
+        _say(f"{label}: {len(result.final)} landmarks mapped at t = "
              f"{result.checkpoints[-1].t} in {result.total_s:.3f} s; wrote {args.out}",
              to_stderr=to_stderr)
     return 0

@@ -17,7 +17,7 @@ from typing import Sequence
 from .errors import ConfigError, UnknownMethodError
 from .experiments import Task
 from .mapper import method_info
-from .plugins import disk_fingerprint, source_fingerprint
+from .plugins import code_changed, disk_fingerprint, source_fingerprint
 
 _log = logging.getLogger(__name__)
 
@@ -29,8 +29,9 @@ def method_fingerprint(name: str, *, disk: bool = False) -> str | None:
     """A hash of the method's own code for the cache key, or None for a built-in method
     (whose code the runner's :func:`bomgraph.plugins.code_fingerprint` of the bomgraph and
     baselines sources covers already, so the paper's cache keys stay as they were). For a
-    plugin: its package's sources and its distribution's version; for a method registered
-    at run time: the sources of its target's top-level package (:mod:`bomgraph.plugins`),
+    plugin: the sources of its package that its module imports and its distribution's
+    version; for a method registered at run time: the sources of its target's top-level
+    package that its module imports (:mod:`bomgraph.plugins`),
     or :data:`NO_SOURCE` when that module has no source file (:func:`method_has_source`).
     The sources as this process runs them, or with ``disk`` as they are on disk now (what
     a worker process that imports them runs)."""
@@ -85,11 +86,11 @@ def stale_plugin(task: Task, *, worker: bool) -> str:
         info = method_info(m)
         if loaded not in (None, NO_SOURCE) and disk_fingerprint(info.target,
                                                                 info.version) != loaded:
-            # the package is hashed whole: the edit may be in another module of it
+            # the edit may be in another module of the package, which the method imports
             where = f" (a source file of {info.target.split(':')[0].split('.')[0]!r})"
             if not worker:
-                return (f"method {m!r} was edited since this process imported it{where}, and "
-                        f"Python does not reload a module: reload the module (importlib.reload, "
+                return (f"method {m!r} was edited since this process imported it{where} (or "
+                        f"a constant of it set in memory), and Python does not reload a module: reload the module (importlib.reload, "
                         f"IPython's %autoreload) or restart this process (a notebook's "
                         f"kernel), then run again")
             return (f"stale worker: restart the workers and run again (Dask: client.restart(),"
@@ -149,6 +150,20 @@ def warn_sourceless(tasks: Sequence[Task]) -> None:
                      n, ", ".join(repr(m) for m in names))
 
 
+def bomgraph_edited() -> bool:
+    """Whether bomgraph's or baselines' sources changed since this process first keyed a run
+    (:func:`bomgraph.plugins.code_changed`), logged once a call: the keys are of the code as
+    first hashed, while the code that runs may be the new one (a module reloaded:
+    ``%autoreload``; a worker started since), so the cache is not to be used."""
+    if not code_changed():
+        return False
+    _log.warning("bomgraph's or baselines' sources changed since this process first keyed a "
+                 "run, so its keys no longer tell which code runs: runs are neither read "
+                 "from nor written to the cache; restart this process (a notebook's kernel) "
+                 "to use it again")
+    return True
+
+
 def refuse_runtime_methods(tasks: Sequence[Task], backend: str) -> None:
     """Raise when a method of a task (:meth:`Task.methods`) was registered at run time: worker
     processes start from the installed packages and never see such a registration.
@@ -200,6 +215,6 @@ def workers_outdated(tasks: Sequence[Task]) -> bool:
     return outdated
 
 
-__all__ = ["NO_SOURCE", "method_fingerprint", "method_has_source", "method_code", "stale_plugin",
+__all__ = ["NO_SOURCE", "bomgraph_edited", "method_fingerprint", "method_has_source", "method_code", "stale_plugin",
            "stale_after_run", "stale_here", "sourceless", "warn_sourceless",
            "refuse_runtime_methods", "workers_outdated"]

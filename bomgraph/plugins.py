@@ -13,9 +13,10 @@ entry points (not the memory of the process that started the sweep). The factory
 ``description`` attribute (else the first docstring line) is what ``bomgraph methods`` shows.
 
 :func:`code_fingerprint` hashes the code of bomgraph and baselines and the versions of the
-libraries that compute their numbers; :func:`source_fingerprint` hashes a method's code (every
-``.py`` file of the top-level package of its module, or the module's one file) with the
-distribution's version. The runner puts both in the cache key, so editing a plugin (or
+libraries that compute their numbers; :func:`source_fingerprint` hashes a method's code (the
+``.py`` files of the top-level package of its module that the module imports, or the whole
+package when one of them imports by name: :mod:`bomgraph.import_closure`; or the module's one
+file) with the distribution's version. The runner puts both in the cache key, so editing a plugin (or
 upgrading numpy, scipy, gtsam or filterpy) re-runs it. This module imports nothing from
 bomgraph but the errors (the registry in :mod:`bomgraph.mapper` builds on it).
 """
@@ -27,7 +28,9 @@ import hashlib
 import importlib
 import importlib.util
 import logging
+import os
 import sys
+import time
 import traceback
 import types
 from dataclasses import dataclass
@@ -100,6 +103,11 @@ def refresh() -> None:
     source_fingerprint.cache_clear()
     _LOADED.clear()
     _RECORDED.clear()
+    _DISK.clear()
+    _LISTED.clear()
+    from .import_closure import _PARSED
+
+    _PARSED.clear()
     importlib.invalidate_caches()
 
 
@@ -120,6 +128,7 @@ def load(target: str, name: str, *, record: bool = True) -> object:
     """
     module, _, attr = target.partition(":")
     try:
+        before = set(sys.modules)
         obj: object = importlib.import_module(module)
         for part in attr.split("."):
             obj = getattr(obj, part)
@@ -139,7 +148,8 @@ def load(target: str, name: str, *, record: bool = True) -> object:
                                  f"{where}") from exc
     if record and module not in _RECORDED:  # its files now, not as first hashed later
         try:
-            _fingerprint(target, None, loaded=True)
+            # the modules this import loaded run their files' code: not compared again
+            _fingerprint(target, None, loaded=True, fresh=set(sys.modules) - before)
             _RECORDED.add(module)
         except UnknownMethodError:  # said again where its key is taken
             pass
@@ -162,17 +172,55 @@ def _reraise_interrupt(exc: BaseException) -> None:
         seen = seen.__cause__ or seen.__context__
 
 
-def _source_files(module_name: str) -> list[tuple[str, Path]]:
+def _source_files(module_name: str) -> tuple[list[tuple[str, Path]], bool]:
     """The ``.py`` files of the top-level package of ``module_name`` (or its one file), each
-    with its name relative to the package folder, in a fixed order."""
+    with its name relative to the package folder, in a fixed order; and whether the package
+    is spread over several folders."""
     top = module_name.split(".")[0]
     mod = sys.modules.get(top) or importlib.import_module(top)
     out: list[tuple[str, Path]] = []
-    for root in sorted(getattr(mod, "__path__", []) or []):
-        out += [(f.relative_to(root).as_posix(), f) for f in Path(root).rglob("*.py")]
+    roots = sorted(getattr(mod, "__path__", []) or [])
+    for root in roots:
+        out += _py_files(root)
     if not out and getattr(mod, "__file__", None):
-        out = [(Path(mod.__file__).name, Path(mod.__file__))]
-    return sorted(out)
+        return [(Path(mod.__file__).name, Path(mod.__file__))], False
+    return sorted(out), len(roots) > 1
+
+
+def _py_files(root: str) -> list[tuple[str, Path]]:
+    """``Path(root).rglob("*.py")``'s paths, each with its path relative to ``root`` (as
+    ``relative_to(root).as_posix()``); no link to a folder is followed. Listed again only
+    when a folder's status changed (a file added, removed or renamed in it) since the last
+    listing, within :data:`RACY_NS` too: a worker lists a plugin's package before and after
+    each run."""
+    seen = _LISTED.get(root)
+    if seen is not None and all(_stat_signature(Path(d)) == sig for d, sig in seen[0]):
+        return list(seen[1])
+    out: list[tuple[str, Path]] = []
+    folders, signatures = [("", root)], []
+    while folders:
+        prefix, folder = folders.pop()
+        signatures.append((folder, _stat_signature(Path(folder))))  # before its listing
+        try:
+            entries = list(os.scandir(folder))
+        except OSError:  # gone or unreadable meanwhile, as rglob skips it
+            continue
+        for e in entries:
+            if os.path.normcase(e.name).endswith(".py"):
+                out.append((prefix + e.name, Path(e.path)))
+            try:
+                if e.is_dir() and not e.is_symlink():
+                    folders.append((prefix + e.name + "/", e.path))
+            except OSError:
+                continue
+    if all(sig is not None and _aged(sig) for _, sig in signatures):
+        _LISTED[root] = (signatures, list(out))
+    return out
+
+
+#: Per package folder: the :func:`_stat_signature` of each of its folders and its listing.
+_LISTED: dict[str, tuple[list[tuple[str, tuple[int, ...] | None]],
+                         list[tuple[str, Path]]]] = {}
 
 
 #: The libraries whose versions :func:`code_fingerprint` holds: they compute the numbers, and
@@ -184,13 +232,12 @@ NUMERIC_LIBRARIES = ("numpy", "scipy", "gtsam", "filterpy")
 def code_fingerprint() -> str:
     """A hash of the installed ``bomgraph`` and ``baselines`` sources and of the versions of
     :data:`NUMERIC_LIBRARIES`: the runner's cache key (:func:`bomgraph.bench.task_key`), so a
-    cached result is reused only by the code that produced it. 16 hex digits."""
+    cached result is reused only by the code that produced it. 16 hex digits. Taken once
+    per process (:func:`code_changed` tells when the sources changed since)."""
+    global _CODE_AT_KEY
+    _CODE_AT_KEY = _code_state()
     h = hashlib.sha256()
-    for pkg in ("bomgraph", "baselines"):
-        spec = importlib.util.find_spec(pkg)
-        if spec is None or not spec.submodule_search_locations:
-            continue
-        root = Path(list(spec.submodule_search_locations)[0])
+    for root in _code_roots():
         for f in sorted(root.rglob("*.py")):
             h.update(str(f.relative_to(root)).encode())
             h.update(f.read_bytes())
@@ -202,11 +249,38 @@ def code_fingerprint() -> str:
     return h.hexdigest()[:16]
 
 
+def _code_roots() -> list[Path]:
+    roots = []
+    for pkg in ("bomgraph", "baselines"):
+        spec = importlib.util.find_spec(pkg)
+        if spec is not None and spec.submodule_search_locations:
+            roots.append(Path(list(spec.submodule_search_locations)[0]))
+    return roots
+
+
+def _code_state() -> list[tuple[str, bytes]]:
+    return [(f"{root}/{rel}", _disk_digest(f)) for root in _code_roots()
+            for rel, f in sorted(_py_files(str(root)))]
+
+
+#: :func:`_code_state` when :func:`code_fingerprint` hashed the sources.
+_CODE_AT_KEY: list[tuple[str, bytes]] | None = None
+
+
+def code_changed() -> bool:
+    """Whether the ``bomgraph`` or ``baselines`` sources changed since this process took
+    :func:`code_fingerprint` (once, for every key it makes): its keys then no longer tell
+    which code a run ran (this process's, reloaded or not, or a new worker's)."""
+    code_fingerprint()
+    return _code_state() != _CODE_AT_KEY
+
+
 @functools.lru_cache(maxsize=64)
 def source_fingerprint(target: str, version: str | None = None) -> str | None:
-    """A hash of the code behind ``"module:attribute"`` as this process would run it: every
-    ``.py`` file of the module's top-level package (path relative to the package and
-    contents; the module's own file for a single-file module) and ``version``. 16 hex
+    """A hash of the code behind ``"module:attribute"`` as this process would run it: the
+    ``.py`` files of the module's top-level package that importing it can run
+    (:func:`bomgraph.import_closure.closure`: path relative to the package and contents;
+    the module's own file for a single-file module) and ``version``. 16 hex
     digits; None when the module has no source file (a class defined in a notebook cell or
     in ``python -c``): there is nothing to hash, and the runner does not cache such a
     method's runs (:func:`bomgraph.bench.execute`).
@@ -237,10 +311,13 @@ def disk_fingerprint(target: str, version: str | None = None) -> str | None:
 _LOADED: dict[Path, tuple[bytes, dict[Any, tuple[str, object]]]] = {}
 
 
-def _fingerprint(target: str, version: str | None, loaded: bool) -> str | None:
+def _fingerprint(target: str, version: str | None, loaded: bool,
+                 fresh: set[str] | frozenset[str] = frozenset()) -> str | None:
+    from .import_closure import closure
+
     module = target.partition(":")[0]
     try:
-        files = _source_files(module)
+        files, several_roots = _source_files(module)
     except ImportError as exc:
         _reraise_interrupt(exc)
         raise UnknownMethodError(f"cannot read the source of {target!r}: {exc}") from exc
@@ -250,6 +327,9 @@ def _fingerprint(target: str, version: str | None, loaded: bool) -> str | None:
                                  f"{type(exc).__name__}: {exc}") from exc
     if not files:
         return None
+    disk = {f: _disk_digest(f) for _, f in files}
+    # the files importing the module can run (not another method's module of the package)
+    files = closure(module, files, disk, several_roots=several_roots)
     top = module.split(".")[0]
     modules = {Path(m.__file__).resolve(): m for name, m in list(sys.modules.items())
                if (name == top or name.startswith(top + ".") or name == "__main__")
@@ -257,24 +337,83 @@ def _fingerprint(target: str, version: str | None, loaded: bool) -> str | None:
     h = hashlib.sha256(f"version={version};".encode())
     for rel, f in files:
         h.update(f"{rel}\0".encode())
-        h.update(_file_digest(f, modules.get(f.resolve())))
+        mod = modules.get(f.resolve()) if modules else None
+        h.update(disk[f] if mod is None else
+                 _file_digest(f, mod, getattr(mod, "__name__", None) not in fresh))
     return h.hexdigest()[:16]
 
 
-def _file_digest(path: Path, module: object | None) -> bytes:
+def _file_digest(path: Path, module: object | None, check: bool = True) -> bytes:
     """The digest of a source file's contents: as read now, or for a loaded ``module`` as
-    read when this process first hashed it, as long as the module is as it was then."""
+    read when this process first hashed it, as long as the module is as it was then.
+    ``check``: whether the module may have been loaded before (not by the import that has
+    just loaded it), so its code is compared with the file's (:mod:`.loaded_code`)."""
     state = None if module is None else _module_state(module)
     seen = _LOADED.get(path)
     if state is not None and seen is not None and _same_state(seen[1], state):
         return seen[0]
+    if state is None:
+        return _disk_digest(path)
+    from .loaded_code import runs_file
+
+    data = _read(path)
+    digest = _digest(data)
+    # imported before this first hash (by the user, in a notebook), and edited between: the
+    # file is not the code that runs, which no file's key is then to stand for
+    if check and data and not runs_file(module, data):  # type: ignore[arg-type]
+        digest = hashlib.sha256(b"loaded code is not the file's\0" + digest).digest()
+    _LOADED[path] = (digest, state)
+    return digest
+
+
+def _read(path: Path) -> bytes:
     try:
-        data = path.read_bytes()
+        return path.read_bytes()
     except OSError:  # a file removed while we read: hash its name only
-        data = b""
-    digest = hashlib.sha256(f"{len(data)}\0".encode() + data).digest()
-    if state is not None:
-        _LOADED[path] = (digest, state)
+        return b""
+
+
+def _digest(data: bytes) -> bytes:
+    return hashlib.sha256(f"{len(data)}\0".encode() + data).digest()
+
+
+#: Per source file: its :func:`_stat_signature` and the digest of the contents read after it.
+_DISK: dict[Path, tuple[tuple[int, ...], bytes]] = {}
+
+#: A file whose status changed less than this long [ns] before it was read is read again the
+#: next time: a write within the same tick of the file system's clock keeps the signature.
+RACY_NS = 2_000_000_000
+
+
+def _stat_signature(path: Path) -> tuple[int, ...] | None:
+    try:
+        st = path.stat()
+    except OSError:
+        return None
+    return (st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns, st.st_ctime_ns)
+
+
+def _aged(sig: tuple[int, ...]) -> bool:
+    """Whether a :func:`_stat_signature` is older than :data:`RACY_NS` (mtime and ctime), so
+    that it can stand for the contents read after it: never on Windows, where ``st_ctime``
+    is the creation time, which a write does not change."""
+    return os.name != "nt" and time.time_ns() - max(sig[3], sig[4]) > RACY_NS
+
+
+def _disk_digest(path: Path) -> bytes:
+    """The digest of a source file's contents as they are now. Read again only when its
+    status changed since it was last read (a worker checks a plugin's package before and
+    after each run: a package of 300 files took 7 ms a check): any write changes the
+    ctime, which no tool sets (an edit that keeps the size and puts the mtime back, an
+    archive's fixed mtimes), and a file changed within :data:`RACY_NS` of its read is read
+    again (as git's "racy" index entries), so an edit is seen at the next check."""
+    sig = _stat_signature(path)  # before the read: an edit after it changes it
+    seen = _DISK.get(path)
+    if sig is not None and seen is not None and seen[0] == sig:
+        return seen[1]
+    digest = _digest(_read(path))
+    if sig is not None and _aged(sig):
+        _DISK[path] = (sig, digest)
     return digest
 
 
@@ -342,4 +481,4 @@ def _same_state(a: dict[Any, tuple[str, object]], b: dict[Any, tuple[str, object
 
 __all__ = ["GROUP", "PluginEntry", "discover", "refresh", "load", "source_fingerprint",
            "disk_fingerprint",
-           "code_fingerprint", "NUMERIC_LIBRARIES"]
+           "code_fingerprint", "code_changed", "NUMERIC_LIBRARIES"]

@@ -107,18 +107,20 @@ def dispatch(func: Callable[[int, Any], tuple[int, dict[str, Any]]], index: Sequ
 
 def _pool(func: Callable[[int, Any], tuple[int, dict[str, Any]]], pending: dict[int, Any],
           n_jobs: int, marks: str) -> Iterator[tuple[int, dict[str, Any]]]:
-    from joblib import Parallel, delayed, effective_n_jobs, parallel_config
+    from joblib import Parallel, delayed
+    from joblib._parallel_backends import LokyBackend
 
+    # backend: loky, whatever the caller's joblib.parallel_config says (threading ran the
+    # tasks in this process; multiprocessing refuses return_as), at nesting level 0: joblib
+    # caps a loky pool called from one of its threading workers at one job, run in this
+    # process (loky starts its workers by fork+exec, safe from any thread)
+    loky = LokyBackend(nesting_level=0)
     # joblib runs a pool of one worker in this process: two workers, one task at a time
-    # (counted for loky, whatever backend a caller's parallel_config names)
-    with parallel_config(backend="loky"):
-        alone = effective_n_jobs(n_jobs) == 1
-    one = dict(n_jobs=2, pre_dispatch=1, batch_size=1) if alone else {}
+    one = dict(n_jobs=2, pre_dispatch=1, batch_size=1) if loky.effective_n_jobs(
+        n_jobs) == 1 else {}
     # initializer: each worker loky starts, the same function and pid each time, so joblib
-    # keeps its workers for the next call; backend: loky by name, whatever the caller's
-    # joblib.parallel_config says (threading ran the tasks in this process; multiprocessing
-    # refuses return_as)
-    with Parallel(**{"n_jobs": n_jobs, **one}, backend="loky",
+    # keeps its workers for the next call
+    with Parallel(**{"n_jobs": n_jobs, **one}, backend=loky,
                   return_as="generator_unordered",
                   initializer=_watch_parent, initargs=(os.getpid(),)) as par:
         _start_workers(par)

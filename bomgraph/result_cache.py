@@ -6,8 +6,9 @@ from __future__ import annotations
 import json
 import logging
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any, Iterable, Mapping
 
+from .estimate_file import untimed_estimate_text
 from .stdio import InputTooLargeError, output_file, read_regular_file
 
 _log = logging.getLogger(__name__)
@@ -42,4 +43,20 @@ def write_cached(path: Path, result: Mapping[str, Any]) -> None:
         fh.write(json.dumps(result, allow_nan=True))
 
 
-__all__ = ["read_cached", "write_cached"]
+def strip_timings(results: Iterable[Mapping[str, Any]]) -> list[dict[str, Any]]:
+    """Results without wall times (which differ between runs), for reproducibility checks."""
+    out = []
+    for r in results:
+        r2 = {k: v for k, v in r.items() if k not in ("total_s", "step_median_s")}
+        if "checkpoints" in r2:
+            r2["checkpoints"] = [{k: v for k, v in c.items() if k != "estimate_s"}
+                                 for c in r2["checkpoints"]]
+        if "info" in r2 and isinstance(r2["info"], dict):
+            r2["info"] = {k: v for k, v in r2["info"].items() if not k.endswith("_s")}
+        if isinstance(r2.get("estimate_file"), str):  # and a kept estimate's own
+            r2["estimate_file"] = untimed_estimate_text(r2["estimate_file"])
+        out.append(r2)
+    return out
+
+
+__all__ = ["read_cached", "write_cached", "strip_timings"]

@@ -165,6 +165,27 @@ def parse_method(token: str, where: str = "methods") -> MethodSpec:
     return _checked_method(MethodSpec(token, name, {"preset": preset} if preset else {}), where)
 
 
+def run_method(token: str, options: Mapping[str, Any]) -> tuple[str, str, dict[str, Any]]:
+    """``bomgraph run --method TOKEN --option KEY=VALUE...`` as (label, method, options):
+    ``NAME@PRESET`` (as ``compare --methods`` takes it) is ``NAME`` with ``preset=PRESET``,
+    and ``NAME`` with a ``preset`` option is labelled ``NAME@PRESET`` too, as ``evaluate``
+    names either estimate.
+
+    Raises
+    ------
+    ConfigError
+        The preset is given twice, or ``TOKEN`` is not ``NAME`` or ``NAME@PRESET``.
+    """
+    options = dict(options)
+    if "@" not in token:
+        preset = options.get("preset")
+        return (f"{token}@{preset}" if isinstance(preset, str) else token), token, options
+    spec = parse_method(token, "--method")
+    if "preset" in options:
+        raise ConfigError(f"--method {token} and --option preset=...: give the preset once")
+    return token, spec.method, {**spec.options, **options}
+
+
 def command_line_spec(streams: Sequence[str], methods: Sequence[str],
                       options: Sequence[str] = (), *, reference: str | None = None,
                       checkpoint_every: int = 10, name: str = "streams") -> SweepSpec:
@@ -201,12 +222,20 @@ def command_line_spec(streams: Sequence[str], methods: Sequence[str],
         extra.setdefault(target, {}).update(given)
 
     def with_options(m: MethodSpec) -> MethodSpec:
-        opts = dict(m.options)
+        added: dict[str, Any] = {}
         for target in (m.method, m.label):
-            opts.update(extra.get(target, {}))
-        if opts == dict(m.options):
+            added.update(extra.get(target, {}))
+        if not added:
             return m
-        return _checked_method(dataclasses.replace(m, options=opts), f"--option {m.label}")
+        label = m.label
+        if "preset" in added:  # labelled as NAME@PRESET is, never by another preset
+            if "preset" in m.options:
+                raise SweepError(f"--option {m.method}:preset=...: --methods {m.label} names "
+                                 f"its preset already; give the preset once")
+            if isinstance(added["preset"], str):
+                label = f"{m.label}@{added['preset']}"
+        return _checked_method(dataclasses.replace(m, label=label, options={
+            **m.options, **added}), f"--option {m.label}")
 
     missing = [s for s in streams if not Path(s).is_file()]
     if missing:
@@ -214,9 +243,10 @@ def command_line_spec(streams: Sequence[str], methods: Sequence[str],
     problem = stream_header_problem(streams)
     if problem:
         raise SweepError(f"--streams: {problem}")
+    arms = [with_options(a) for a in arms]
     _unique([a.label for a in arms], "--methods")
     exp = ExperimentSpec(name, f"{len(streams)} stream(s), {len(arms)} method(s)",
-                         tuple(with_options(a) for a in arms),
+                         tuple(arms),
                          streams=_named_streams([str(Path(s).resolve()) for s in streams]),
                          reference=None if ref is None else with_options(ref),
                          checkpoint_every=checkpoint_every)
@@ -494,7 +524,8 @@ class _Reader:
             if "preset" in options:
                 raise self.fail(f"{key}.preset", "given twice (here and in options)")
             options["preset"] = self.str_(t["preset"], f"{key}.preset")
-        label = t.get("label", f"{name}@{t['preset']}" if "preset" in t else name)
+        preset = options.get("preset")  # preset = "P" or options = { preset = "P" }
+        label = t.get("label", f"{name}@{preset}" if isinstance(preset, str) else name)
         frac = t.get("prior_fraction", 0.0)
         if isinstance(frac, bool) or not isinstance(frac, (int, float)) or not 0 <= frac <= 1:
             raise self.fail(f"{key}.prior_fraction", f"must be in [0, 1], got {frac!r}")

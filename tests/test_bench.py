@@ -153,8 +153,10 @@ def test_a_callers_sequential_joblib_backend_leaves_the_pool_its_workers(
         out = list(processes.dispatch(lambda k, t: (k, {}), [0, 1, 2], ["a", "b", "c"], 3,
                                       lambda k, why: {"failed": why}))
     assert sorted(k for k, _ in out) == [0, 1, 2]
-    assert [(kw["n_jobs"], kw["backend"], "pre_dispatch" in kw) for kw in kwargs] == [
-        (3, "loky", False)]
+    from joblib._parallel_backends import LokyBackend
+
+    assert [(kw["n_jobs"], type(kw["backend"]), "pre_dispatch" in kw) for kw in kwargs] == [
+        (3, LokyBackend, False)]
 
 
 def test_a_pool_that_ends_without_every_result_fails_the_rest_and_ends(

@@ -137,3 +137,38 @@ def test_methods_does_not_call_a_preset_parameter_of_the_factory_refused(
     assert main(["methods", "lit"]) == 0
     last = capsys.readouterr().out.rstrip().splitlines()[-1]
     assert "refused" not in last and "preset" in last, last
+
+
+@pytest.mark.parametrize("args", [["--method", "stmds-smacof@improved"],
+                                  ["--method", "stmds-smacof", "--option", "preset=improved"]])
+def test_run_names_the_preset_however_it_is_given(stream: Path, tmp_path: Path, args: list,
+                                                  capsys: pytest.CaptureFixture) -> None:
+    """``run --method X --option preset=P`` said ``X: N landmarks ...`` (and ``"method": "X"``
+    in ``--json``) where ``--method X@P`` said ``X@P``, for the same run, and ``evaluate`` of
+    either estimate says ``X@P`` (h53); fails before for the ``--option`` form."""
+    est = tmp_path / "e.est"
+    assert main(["run", str(stream), *args, "--out", str(est)]) == 0
+    assert capsys.readouterr().out.startswith("stmds-smacof@improved: ")
+    assert main(["run", str(stream), *args, "--out", str(est), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["method"] == "stmds-smacof@improved"
+
+
+def test_compare_labels_a_preset_option_as_name_at_preset(stream: Path, tmp_path: Path) -> None:
+    """``compare --methods X@paper,X@improved --option X:preset=real`` ran both arms with
+    ``real`` under their ``@paper`` and ``@improved`` labels (two identical rows named as
+    two settings); ``--option X:preset=P`` on ``--methods X`` and a sweep file's
+    ``options = { preset = "P" }`` labelled the arm ``X`` (h53). Fails before."""
+    from bomgraph.sweep import SweepError, command_line_spec, read_sweep
+
+    with pytest.raises(SweepError, match="give the preset once"):
+        command_line_spec([str(stream)], ["stmds-smacof@paper", "stmds-smacof@improved"],
+                          ["stmds-smacof:preset=real"])
+    spec = command_line_spec([str(stream)], ["stmds-smacof", "ekf"],
+                             ["stmds-smacof:preset=improved"])
+    assert [(m.label, dict(m.options)) for m in spec.experiments[0].methods] == [
+        ("stmds-smacof@improved", {"preset": "improved"}), ("ekf", {})]
+    toml = tmp_path / "s.toml"
+    toml.write_text(f'streams = ["{stream.name}"]\n[[methods]]\nname = "stmds-smacof"\n'
+                    f'options = {{ preset = "improved" }}\n')
+    (exp,) = read_sweep(toml).experiments
+    assert [m.label for m in exp.methods] == ["stmds-smacof@improved"]

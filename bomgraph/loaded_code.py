@@ -1,0 +1,166 @@
+"""Whether a loaded module runs the code that its source file holds now.
+
+:mod:`bomgraph.plugins` keys a loaded module's file by its contents when it first hashes it,
+taken for the code that runs. A module imported before that (by the user, in a notebook:
+``import mymethod``, then ``import bomgraph`` and a sweep) may have been edited in between:
+the file is then not the code that runs, and a result of the old code would be cached under
+the new file's key (and served to the new code later). :func:`runs_file` compares the code
+the module runs with a compilation of the file's text: every function's and method's byte
+code, names and constants (line numbers aside: moving code changes no result), and the
+constants bound once by a plain literal at module or class level (``DEPTH_M = 1.0``).
+
+Not seen: an edit between import and first hash of a value that is not such a literal
+(``W = np.array([1, 2])``, a dict or list, which the module may fill at run time), nor of code
+a function does not hold (a module-level statement's side effects).
+"""
+
+from __future__ import annotations
+
+import ast
+import inspect
+import types
+import warnings
+from typing import Any, Iterator
+
+#: Literal values compared by value: what no code of the module can change in place.
+_IMMUTABLE = (int, float, complex, str, bytes, bool, type(None), tuple, frozenset)
+
+
+#: ``co_flags`` bits that a decorator sets on a loaded function's code (``types.coroutine``).
+_SET_BY_DECORATORS = inspect.CO_ITERABLE_COROUTINE
+
+
+def runs_file(module: types.ModuleType, source: bytes) -> bool:
+    """Whether ``module`` (loaded) runs the code of ``source`` (its file's contents now).
+    False also when the text no longer compiles; True when the module's file name or code
+    cannot be read (nothing to compare)."""
+    filename = getattr(module, "__file__", None)
+    if not isinstance(filename, str):
+        return True
+    try:
+        with warnings.catch_warnings():  # its import said them (SyntaxWarning: "\\d")
+            warnings.simplefilter("ignore")
+            fresh = compile(source, filename, "exec", dont_inherit=True)
+            tree = ast.parse(source, filename)
+    except (SyntaxError, ValueError):  # the file does not compile now: not the loaded code
+        return False
+    compiled: dict[str, set[Any]] = {}
+    for code in _nested(fresh):
+        compiled.setdefault(code.co_qualname, set()).add(_shape(code))
+    for code in _loaded_code(module, filename):
+        if _shape(code) not in compiled.get(code.co_qualname, ()):
+            return False
+    return _same_literals(module, tree)
+
+
+def _nested(code: types.CodeType) -> Iterator[types.CodeType]:
+    for c in code.co_consts:
+        if isinstance(c, types.CodeType):
+            yield c
+            yield from _nested(c)
+
+
+def _shape(code: types.CodeType) -> tuple[Any, ...]:
+    """What a code object computes: all but its line numbers."""
+    consts = tuple(_shape(c) if isinstance(c, types.CodeType) else _const(c)
+                   for c in code.co_consts)
+    return (code.co_qualname, code.co_code, code.co_names, code.co_varnames,
+            code.co_freevars, code.co_cellvars, code.co_argcount, code.co_posonlyargcount,
+            code.co_kwonlyargcount, code.co_flags & ~_SET_BY_DECORATORS,
+            code.co_exceptiontable, consts)
+
+
+def _const(value: object) -> tuple[str, str]:
+    if isinstance(value, frozenset):
+        return ("frozenset", repr(sorted(map(repr, value))))
+    return (type(value).__qualname__, repr(value))
+
+
+def _loaded_code(module: types.ModuleType, filename: str) -> Iterator[types.CodeType]:
+    """The code objects of the functions ``module`` defines (its own file's), at module
+    level and in its classes, through decorators that keep ``__wrapped__``."""
+    seen: set[int] = set()
+
+    def walk(obj: object, depth: int) -> Iterator[types.CodeType]:
+        if id(obj) in seen or depth > 6:
+            return
+        seen.add(id(obj))
+        try:
+            if isinstance(obj, types.FunctionType):
+                if obj.__code__.co_filename == filename:
+                    yield obj.__code__
+            elif isinstance(obj, (staticmethod, classmethod)):
+                yield from walk(obj.__func__, depth + 1)
+            elif isinstance(obj, property):
+                for part in (obj.fget, obj.fset, obj.fdel):
+                    yield from walk(part, depth + 1)
+            elif isinstance(obj, type):
+                if obj.__dict__.get("__module__") == module.__name__:
+                    for v in list(obj.__dict__.values()):
+                        yield from walk(v, depth + 1)
+                return
+            wrapped = getattr(obj, "__wrapped__", None) if not isinstance(
+                obj, types.ModuleType) else None
+            if wrapped is not None:
+                yield from walk(wrapped, depth + 1)
+        except Exception:  # an object whose attributes raise: nothing to compare
+            return
+
+    for value in list(vars(module).values()):
+        yield from walk(value, 0)
+
+
+def _same_literals(module: types.ModuleType, tree: ast.Module) -> bool:
+    """Whether each name bound once in the file, by an immutable literal at module level or
+    in a module-level class's body, has that value in the loaded module."""
+    stores: dict[str, int] = {}
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Name) and isinstance(node.ctx, ast.Store):
+            stores[node.id] = stores.get(node.id, 0) + 1
+        elif isinstance(node, ast.Attribute) and isinstance(node.ctx, ast.Store):
+            stores[node.attr] = 2  # set again by the module's code (``Cls.X = ...``)
+        elif isinstance(node, ast.Call) and getattr(node.func, "id", None) == "setattr" and len(
+                node.args) > 1 and isinstance(node.args[1], ast.Constant):
+            stores[str(node.args[1].value)] = 2
+        elif isinstance(node, (ast.Global, ast.Nonlocal)):
+            for name in node.names:
+                stores[name] = 2  # bound elsewhere too
+        elif isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)):
+            stores[node.name] = stores.get(node.name, 0) + 1
+        elif isinstance(node, ast.alias):
+            name = (node.asname or node.name).split(".")[0]
+            stores[name] = stores.get(name, 0) + 1
+
+    def same(body: list[ast.stmt], where: dict[str, Any]) -> bool:
+        for stmt in body:
+            target = (stmt.targets[0] if isinstance(stmt, ast.Assign) and len(stmt.targets) == 1
+                      else stmt.target if isinstance(stmt, ast.AnnAssign) else None)
+            value = getattr(stmt, "value", None)
+            if not (isinstance(target, ast.Name) and value is not None
+                    and stores.get(target.id) == 1 and target.id in where):
+                continue
+            try:
+                literal = ast.literal_eval(value)
+            except (ValueError, TypeError, SyntaxError, MemoryError, RecursionError):
+                continue
+            if not isinstance(literal, _IMMUTABLE):
+                continue
+            loaded = where[target.id]
+            if type(loaded) not in _IMMUTABLE:  # made another object (an Enum's member)
+                continue
+            if type(loaded) is not type(literal) or _const(loaded) != _const(literal):
+                return False
+        return True
+
+    names = vars(module)
+    if not same(tree.body, names):
+        return False
+    for stmt in tree.body:
+        cls = names.get(stmt.name) if isinstance(stmt, ast.ClassDef) else None
+        if isinstance(cls, type) and stores.get(stmt.name) == 1 and not same(
+                stmt.body, dict(cls.__dict__)):
+            return False
+    return True
+
+
+__all__ = ["runs_file"]
