@@ -107,17 +107,24 @@ def dispatch(func: Callable[[int, Any], tuple[int, dict[str, Any]]], index: Sequ
 
 def _pool(func: Callable[[int, Any], tuple[int, dict[str, Any]]], pending: dict[int, Any],
           n_jobs: int, marks: str) -> Iterator[tuple[int, dict[str, Any]]]:
-    from joblib import Parallel, delayed
-    from joblib._parallel_backends import LokyBackend
+    from joblib import Parallel, delayed, effective_n_jobs, parallel_config
+    try:     # joblib's own module, not its public API: a joblib without it runs as before
+        from joblib._parallel_backends import LokyBackend
+    except ImportError:   # pragma: no cover - joblib >= 1.5 has it
+        LokyBackend = None
 
     # backend: loky, whatever the caller's joblib.parallel_config says (threading ran the
     # tasks in this process; multiprocessing refuses return_as), at nesting level 0: joblib
     # caps a loky pool called from one of its threading workers at one job, run in this
     # process (loky starts its workers by fork+exec, safe from any thread)
-    loky = LokyBackend(nesting_level=0)
+    loky: Any = "loky" if LokyBackend is None else LokyBackend(nesting_level=0)
     # joblib runs a pool of one worker in this process: two workers, one task at a time
-    one = dict(n_jobs=2, pre_dispatch=1, batch_size=1) if loky.effective_n_jobs(
-        n_jobs) == 1 else {}
+    if LokyBackend is None:
+        with parallel_config(backend="loky"):
+            alone = effective_n_jobs(n_jobs) == 1
+    else:
+        alone = loky.effective_n_jobs(n_jobs) == 1
+    one = dict(n_jobs=2, pre_dispatch=1, batch_size=1) if alone else {}
     # initializer: each worker loky starts, the same function and pid each time, so joblib
     # keeps its workers for the next call
     with Parallel(**{"n_jobs": n_jobs, **one}, backend=loky,
