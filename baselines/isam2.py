@@ -22,7 +22,7 @@ from .bearing_graph import (BearingGraph, BearingLog, FactorGraphConfig, insert_
                             mid_key, pose_key)
 from .lm_report import GTSAM_ERRORS, _first_line, estimate_from_values, solve_lm
 from .isam2_window import WindowLongMode
-from .lm_report import polish
+from .lm_report import plain_gaussian, polish
 from .lm_window import StepChunks
 
 
@@ -226,6 +226,9 @@ class Isam2Mapper(WindowLongMode):
         self._buffer_values = gtsam.Values()
         self._external = gtsam.NonlinearFactorGraph()
         self._external_values = gtsam.Values()
+        # every factor so far plain Gaussian (lm_report.plain_gaussian): the polish reads the
+        # errors from its linearisations
+        self._gaussian = True
         self.failures: list[str] = []
         self.rebuilds = 0
         self.updates = 0
@@ -273,6 +276,7 @@ class Isam2Mapper(WindowLongMode):
         """Queue external factors (and initial values of new variables they bring) for the
         next update, e.g. known constraints. If they make the update fail they are dropped
         and counted in ``info["dropped_external_factors"]``."""
+        self._gaussian = self._gaussian and plain_gaussian(factors)
         self._external.push_back(factors)
         if values is not None:
             self._external_values.insert(values)
@@ -296,6 +300,8 @@ class Isam2Mapper(WindowLongMode):
         insert_pose(self._buffer_values, t, self.problem.predict_pose(t, prev), prev)
         self.problem.admit(self._poses, only_fresh=True)
         new = self.problem.take_new()
+        self._gaussian = (self._gaussian and plain_gaussian(new.core)
+                          and plain_gaussian(new.landmark))
         self._buffer.push_back(new.core)
         self._buffer.push_back(new.landmark)
         self._buffer_values.insert(new.landmark_values)
@@ -423,7 +429,7 @@ class Isam2Mapper(WindowLongMode):
         (``info["lm_restarts"]``)."""
         self._long_full = self.problem.n_steps
         _, step, decrease, cost = polish(self.accepted, self.estimate_values, 0,
-                                         self.config.decrease_tol)
+                                         self.config.decrease_tol, gaussian=self._gaussian)
         converged = decrease <= self.config.decrease_tol and math.isfinite(step)
         if not converged:
             values, report = solve_lm(self.accepted, self.estimate_values, self.config)
@@ -435,7 +441,8 @@ class Isam2Mapper(WindowLongMode):
                     self.estimate_values = self._isam.calculateEstimate()
                     self.lm_restarts += 1
                     _, step, decrease, cost = polish(self.accepted, self.estimate_values, 0,
-                                                     self.config.decrease_tol)
+                                                     self.config.decrease_tol,
+                                                     gaussian=self._gaussian)
                     converged = decrease <= self.config.decrease_tol and math.isfinite(step)
                 except GTSAM_ERRORS as exc:   # the old solver is still usable
                     self.failures.append(_first_line(exc))
@@ -523,7 +530,8 @@ class Isam2Mapper(WindowLongMode):
             check = self._long_report(graph is self.accepted)
         else:
             values, step, decrease, cost = polish(graph, values, self.config.isam2_polish,
-                                                  self.config.decrease_tol)
+                                                  self.config.decrease_tol,
+                                                  gaussian=self._gaussian)
             check = {"converged": bool(decrease <= self.config.decrease_tol
                                        and math.isfinite(step)),
                      "cost": cost, "gn_step": step, "predicted_decrease": decrease}

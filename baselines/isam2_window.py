@@ -33,6 +33,7 @@ class WindowLongMode:
     accepted: gtsam.NonlinearFactorGraph
     estimate_values: gtsam.Values
     _chunks: StepChunks | None
+    _gaussian: bool        # every factor plain Gaussian (lm_report.plain_gaussian)
 
     def _file(self, step: Step, core: gtsam.NonlinearFactorGraph,
               weak: gtsam.NonlinearFactorGraph, entered: list[int]) -> None:
@@ -113,14 +114,16 @@ class WindowLongMode:
         cfg = self.config
         self._long_full = self.problem.n_steps
         values, step, decrease, cost = polish(self.accepted, self.current_values(),
-                                              cfg.isam2_polish, cfg.decrease_tol)
+                                              cfg.isam2_polish, cfg.decrease_tol,
+                                              gaussian=self._gaussian)
         converged = decrease <= cfg.decrease_tol and math.isfinite(step)
         if not converged:
             lm, report = solve_lm(self.accepted, values, cfg)
             if report.final_error < cost:
                 self.lm_restarts += 1
                 values = lm
-                _, step, decrease, cost = polish(self.accepted, values, 0, cfg.decrease_tol)
+                _, step, decrease, cost = polish(self.accepted, values, 0, cfg.decrease_tol,
+                                                 gaussian=self._gaussian)
                 converged = decrease <= cfg.decrease_tol and math.isfinite(step)
         self.estimate_values = values
         self._chunks.reset_folds()

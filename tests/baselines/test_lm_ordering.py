@@ -1,6 +1,7 @@
 """The elimination ordering computed once and shared (``baselines/lm_report.py``) changes no
 number: :func:`polish` and :func:`solve_lm` against the same steps written out with GTSAM's
-own per-call orderings (``linear.optimize()``, an LM optimizer left to order for itself)."""
+own per-call orderings (``linear.optimize()``, an LM optimizer left to order for itself). The
+polish that reads its errors from its linearisations (``gaussian=True``) takes the same steps."""
 
 from __future__ import annotations
 
@@ -8,10 +9,11 @@ import math
 
 import gtsam
 import numpy as np
+import pytest
 
 from baselines.bearing_graph import FactorGraphConfig
 from baselines.factor_graph import BatchMapper
-from baselines.lm_report import gauss_newton_check, lm_params, polish, solve_lm
+from baselines.lm_report import gauss_newton_check, lm_params, plain_gaussian, polish, solve_lm
 from bomgraph.sim import SimConfig, simulate
 
 
@@ -71,6 +73,45 @@ def test_polish_takes_the_steps_of_plain_gauss_newton_bit_for_bit() -> None:
     values, step, decrease, cost = polish(graph, start, 8, 1e-6)
     assert _same(values, ref[0])
     assert (step, decrease, cost) == ref[1:4]
+
+
+def test_polish_with_errors_from_its_linearisations_takes_the_same_steps() -> None:
+    graph, raw, robust = _raw_graph()
+    assert plain_gaussian(graph) and not plain_gaussian(robust)
+    params = lm_params(FactorGraphConfig())
+    params.setMaxIterations(2)
+    start = gtsam.LevenbergMarquardtOptimizer(graph, raw, params).optimize()
+    for iterations, tol in ((8, 1e-6), (2, 1e-6), (8, 1e3), (0, 1e-6)):
+        ref = polish(graph, start, iterations, tol)
+        values, step, decrease, cost = polish(graph, start, iterations, tol, gaussian=True)
+        assert _same(values, ref[0])
+        assert (step, decrease) == ref[1:3]
+        assert cost == pytest.approx(ref[3], rel=1e-12)
+    # from the dead-reckoned start: steps that raise the error are refused the same way
+    ref = _reference_polish(graph, raw, 8, 1e-6)
+    values, step, decrease, cost = polish(graph, raw, 8, 1e-6, gaussian=True)
+    assert _same(values, ref[0]) and (step, decrease) == ref[1:3]
+    assert cost == pytest.approx(ref[3], rel=1e-12)
+
+
+def test_plain_gaussian_refuses_kernels_constraints_and_factors_without_a_noise_model() -> None:
+    key = gtsam.symbol("x", 0)
+    plain = gtsam.NonlinearFactorGraph()
+    assert plain_gaussian(plain)
+    plain.add(gtsam.PriorFactorPose2(key, gtsam.Pose2(), gtsam.noiseModel.Diagonal.Sigmas(
+        [1.0, 2.0, 3.0])))
+    assert plain_gaussian(plain)
+    robust = gtsam.NonlinearFactorGraph(plain)
+    robust.add(gtsam.PriorFactorPose2(key, gtsam.Pose2(), gtsam.noiseModel.Robust.Create(
+        gtsam.noiseModel.mEstimator.Cauchy.Create(3.0), gtsam.noiseModel.Unit.Create(3))))
+    assert not plain_gaussian(robust)
+    hard = gtsam.NonlinearFactorGraph(plain)
+    hard.add(gtsam.PriorFactorPose2(key, gtsam.Pose2(), gtsam.noiseModel.Constrained.All(3)))
+    assert not plain_gaussian(hard)
+    other = gtsam.NonlinearFactorGraph(plain)
+    other.add(gtsam.LinearContainerFactor(gtsam.JacobianFactor(
+        key, np.eye(3), np.zeros(3), gtsam.noiseModel.Unit.Create(3)), gtsam.Values()))
+    assert not plain_gaussian(other)
 
 
 def test_solve_lm_is_gtsam_lm_and_its_check_bit_for_bit() -> None:
