@@ -41,3 +41,31 @@ def test_a_cache_file_that_is_a_fifo_is_a_miss(tmp_path: Path) -> None:
                           capture_output=True)
     assert proc.returncode == 0, proc.stderr.decode()
     assert "ignoring the unreadable cache file" in proc.stderr.decode()
+
+
+# ---- version-1 estimate: the line of a repeated key ------------------------------------------
+
+_V1 = {"format": "bomgraph-estimate", "version": 1, "method": "x",
+       "landmarks": [[1, 0.0, 1.0], [2, 3.0, 4.0]], "poses": None,
+       "checkpoints": [{"t": 0, "landmarks": [[1, 0, 1]], "poses": None}],
+       "timing_s": {"total": 1.0}}
+
+
+def _refusal(path: Path) -> str:
+    with pytest.raises(StreamFormatError) as info:
+        read_estimate(path)
+    return str(info.value)
+
+
+def test_a_repeat_inside_a_value_an_outer_repeat_replaced_names_a_real_line(
+        tmp_path: Path) -> None:
+    """The first repeated key was in an object a later repeat of ``checkpoints`` replaced:
+    it was not in the parsed data, so its path was lost and the message said ``line 1: 't'``,
+    a key the file's top level does not have; now the repeat that replaced it is named."""
+    text = json.dumps(_V1, indent=1).replace('"t": 0,', '"t": 0,\n  "t": 0,').replace(
+        '"timing_s"', '"checkpoints": [],\n "timing_s"')
+    path = tmp_path / "e.json"
+    path.write_text(text)
+    lines = text.splitlines()
+    want = next(n for n, ln in enumerate(lines, 1) if ln.startswith(' "checkpoints": []'))
+    assert f"line {want}: 'checkpoints': appears twice" in _refusal(path)
