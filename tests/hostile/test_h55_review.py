@@ -69,3 +69,12 @@ def test_a_repeat_inside_a_value_an_outer_repeat_replaced_names_a_real_line(
     lines = text.splitlines()
     want = next(n for n, ln in enumerate(lines, 1) if ln.startswith(' "checkpoints": []'))
     assert f"line {want}: 'checkpoints': appears twice" in _refusal(path)
+
+
+def test_an_unknown_empty_key_is_named_on_its_line(tmp_path: Path) -> None:
+    """The key ``""`` was taken for no key: line 1."""
+    text = json.dumps({**_V1, "": 1}, indent=1)
+    path = tmp_path / "e.json"
+    path.write_text(text)
+    want = next(n for n, ln in enumerate(text.splitlines(), 1) if ln.startswith(' "": 1'))
+    assert want > 1 and f"line {want}: '': unknown key" in _refusal(path)
