@@ -4,17 +4,22 @@ failed before its fix."""
 from __future__ import annotations
 
 import json
+import logging
 import os
 import subprocess
 import sys
+from dataclasses import replace
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from hostile_helpers import ENV, bomgraph, one_error
 
 from bomgraph.errors import StreamFormatError
 from bomgraph.estimate_file import read_estimate
+from bomgraph.stream import Stream
+from bomgraph.stream_file import write_stream
 
 
 # ---- read_regular_file: a FIFO ----------------------------------------------------------------
@@ -78,3 +83,42 @@ def test_an_unknown_empty_key_is_named_on_its_line(tmp_path: Path) -> None:
     path.write_text(text)
     want = next(n for n, ln in enumerate(text.splitlines(), 1) if ln.startswith(' "": 1'))
     assert want > 1 and f"line {want}: '': unknown key" in _refusal(path)
+
+
+# ---- OdometryScale: a false warning of stated noise ------------------------------------------
+
+def _warned(path: Path, caplog: pytest.LogCaptureFixture) -> list[str]:
+    from bomgraph.stream_file import read_stream
+
+    caplog.clear()
+    with caplog.at_level(logging.WARNING):
+        read_stream(path)
+    return [r.getMessage() for r in caplog.records if r.levelno >= logging.WARNING]
+
+
+def test_one_step_of_unknown_odometry_is_no_unit_error(tmp_path: Path, sim: Stream,
+                                                       caplog: pytest.LogCaptureFixture) -> None:
+    """One step stating a huge sigma (its odometry lost: 'do not trust this one', as a weak
+    g2o edge says) made the average stated noise that of that step, and the reader warned
+    that every sigma was in centimetres: the sums were compared, not each step's motion with
+    its own noise."""
+    steps = list(sim.steps)
+    steps[30] = replace(steps[30], odom_sigma=np.array([1000.0, 1000.0, 1.0]))
+    write_stream(replace(sim, steps=tuple(steps)), tmp_path / "s.jsonl")
+    assert _warned(tmp_path / "s.jsonl", caplog) == []
+
+
+def test_a_robot_standing_still_is_not_judged(tmp_path: Path, sim: Stream,
+                                              caplog: pytest.LogCaptureFixture) -> None:
+    """A robot parked after its run (steps by time, each reading exactly 0: noise never does)
+    diluted the average motion until the reader warned of sigmas in centimetres; a stream
+    that never moves was not judged, one that mostly stands still was."""
+    last = sim.steps[-1]
+    parked = [replace(last, t=len(sim.steps) + k, odom=np.zeros(3)) for k in range(5000)]
+    write_stream(Stream(sim.header, (*sim.steps, *parked), None), tmp_path / "s.jsonl")
+    assert _warned(tmp_path / "s.jsonl", caplog) == []
+    # still judged: the moving steps' sigmas in centimetres
+    head = replace(sim.header, odometry_sigma=(5.0, 5.0, sim.header.odometry_sigma[2]))
+    write_stream(Stream(head, (*sim.steps, *parked), None), tmp_path / "cm.jsonl")
+    warned = _warned(tmp_path / "cm.jsonl", caplog)
+    assert len(warned) == 1 and "centimetres?" in warned[0], warned
