@@ -430,6 +430,8 @@ def read_estimate(path: str | os.PathLike[str]) -> EstimateFile:
     ctx = _Whole(path, text)
     if repeated.first is not None:
         where, name = path_of(obj, repeated.first[0]), repeated.first[1]
+        if where is None:   # in an object a repeat of an outer key replaced: name that one
+            where, name = path_of(obj, repeated.last[0]), repeated.last[1]
         raise ctx.error(f"{where}.{name}" if where else name, "appears twice in one object")
     if not isinstance(obj, dict) or obj.get("format") != ESTIMATE_FORMAT:
         raise ctx.error("format", f"must be a JSON object with \"format\": "
@@ -448,17 +450,26 @@ def read_estimate(path: str | os.PathLike[str]) -> EstimateFile:
 
 class _FirstRepeat:
     """``object_pairs_hook`` that notes the first repeated key (``first``: the object and the
-    key) rather than raising, so that the reader can say where it is."""
+    key) rather than raising, so that the reader can say where it is; and the last object
+    closed with a repeated key (``last``), which is always in the parsed data: an object
+    that is not (its value replaced by a repeat of an outer key) has a later-closed
+    ancestor with a repeat."""
 
     def __init__(self) -> None:
         self.first: tuple[dict, str] | None = None
+        self.last: tuple[dict, str] | None = None
 
     def __call__(self, pairs: list[tuple[str, Any]]) -> dict:
         out: dict = {}
+        repeat = None
         for k, v in pairs:
-            if k in out and self.first is None:
-                self.first = (out, k)
+            if repeat is None and k in out:
+                repeat = (out, k)
             out[k] = v
+        if repeat is not None:
+            self.last = repeat
+            if self.first is None:
+                self.first = repeat
         return out
 
 

@@ -238,8 +238,10 @@ def line_of_key(text: str, key: str | None) -> int:
         return 1                          # one line (as bomgraph wrote version 1): no walk
     pos = _WS.match(text).end()
     rest = key or ""
+    top_empty = key == ""                 # the top-level key "" (the root is never named "")
     try:
-        while rest:
+        while rest or top_empty:
+            top_empty = False
             if text.startswith("[", pos) and (m := _INDEX.match(rest)):
                 at = _WS.match(text, pos + 1).end()
                 for _ in range(int(m[1])):

@@ -111,8 +111,10 @@ def read_regular_file(path: str | os.PathLike[str]) -> bytes:
     """All of the regular file ``path`` (a JSON file bomgraph wrote: results, cache, manifest),
     refusing anything else before reading: ``OSError`` for a directory, device or FIFO (a
     results.json linked to /dev/zero filled the memory), :class:`InputTooLargeError` for a file
-    over :data:`MAX_INPUT_BYTES`."""
-    with open(path, "rb") as fh:
+    over :data:`MAX_INPUT_BYTES`. Opened without blocking: opening a FIFO for reading waits
+    for a writer (``bomgraph plot --results`` on a results.json that is a FIFO hung)."""
+    fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_BINARY", 0))
+    with open(fd, "rb") as fh:
         st = os.fstat(fh.fileno())
         if not stat.S_ISREG(st.st_mode):
             raise OSError(errno.EINVAL, "not a regular file")
