@@ -188,8 +188,10 @@ def _source_files(module_name: str) -> tuple[list[tuple[str, Path]], bool]:
 
 
 def _py_files(root: str) -> list[tuple[str, Path]]:
-    """``Path(root).rglob("*.py")``'s paths, each with its path relative to ``root`` (as
-    ``relative_to(root).as_posix()``); no link to a folder is followed. Listed again only
+    """The ``.py`` files under ``root`` (links to nothing left out: an editor's lock
+    ``.#m.py``), each with its path relative to ``root`` (as ``relative_to(root)
+    .as_posix()``); a link to a folder is followed (a helper folder linked into the
+    package is imported through it), unless to a folder already listed or above. Listed again only
     when a folder's status changed (a file added, removed or renamed in it) since the last
     listing, within :data:`RACY_NS` too: a worker lists a plugin's package before and after
     each run."""
@@ -198,6 +200,7 @@ def _py_files(root: str) -> list[tuple[str, Path]]:
         return list(seen[1])
     out: list[tuple[str, Path]] = []
     folders, signatures = [("", root)], []
+    real = {os.path.realpath(root)}
     while folders:
         prefix, folder = folders.pop()
         signatures.append((folder, _stat_signature(Path(folder))))  # before its listing
@@ -206,16 +209,28 @@ def _py_files(root: str) -> list[tuple[str, Path]]:
         except OSError:  # gone or unreadable meanwhile, as rglob skips it
             continue
         for e in entries:
-            if os.path.normcase(e.name).endswith(".py"):
-                out.append((prefix + e.name, Path(e.path)))
             try:
-                if e.is_dir() and not e.is_symlink():
+                if os.path.normcase(e.name).endswith(".py") and e.is_file():
+                    out.append((prefix + e.name, Path(e.path)))
+                elif e.is_dir() and _new_folder(e, real):
                     folders.append((prefix + e.name + "/", e.path))
             except OSError:
                 continue
     if all(sig is not None and _aged(sig) for _, sig in signatures):
         _LISTED[root] = (signatures, list(out))
     return out
+
+
+def _new_folder(entry: os.DirEntry[str], real: set[str]) -> bool:
+    """Whether to list the folder ``entry`` (a link: not to a folder of ``real``, those
+    listed, nor to one above them, a loop); adds its real path to ``real``."""
+    if not entry.is_symlink():
+        return True
+    path = os.path.realpath(entry.path)
+    if any(path == r or r.startswith(path.rstrip(os.sep) + os.sep) for r in real):
+        return False
+    real.add(path)
+    return True
 
 
 #: Per package folder: the :func:`_stat_signature` of each of its folders and its listing.
@@ -238,9 +253,10 @@ def code_fingerprint() -> str:
     _CODE_AT_KEY = _code_state()
     h = hashlib.sha256()
     for root in _code_roots():
-        for f in sorted(root.rglob("*.py")):
-            h.update(str(f.relative_to(root)).encode())
-            h.update(f.read_bytes())
+        # as rglob's order (the paper's keys kept), no editor's lock (a link to nothing)
+        for rel, f in sorted(_py_files(str(root)), key=lambda rf: rf[1]):
+            h.update(rel.encode())
+            h.update(_read(f))
     for lib in NUMERIC_LIBRARIES:
         try:
             h.update(f"{lib}=={metadata.version(lib)};".encode())
