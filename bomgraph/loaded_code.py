@@ -9,6 +9,9 @@ the module runs with a compilation of the file's text: every function's and meth
 code, names and constants (line numbers aside: moving code changes no result), and the
 constants bound once by a plain literal at module or class level (``DEPTH_M = 1.0``).
 
+A module whose asserts pytest rewrote on import (a test module) is compared with the file
+compiled both plainly and as pytest rewrites it.
+
 Not seen: an edit between import and first hash of a value that is not such a literal
 (``W = np.array([1, 2])``, a dict or list, which the module may fill at run time), nor of code
 a function does not hold (a module-level statement's side effects).
@@ -42,15 +45,33 @@ def runs_file(module: types.ModuleType, source: bytes) -> bool:
             warnings.simplefilter("ignore")
             fresh = compile(source, filename, "exec", dont_inherit=True)
             tree = ast.parse(source, filename)
+            rewritten = _pytest_rewritten(module, source, filename)
     except (SyntaxError, ValueError):  # the file does not compile now: not the loaded code
         return False
     compiled: dict[str, set[Any]] = {}
-    for code in _nested(fresh):
+    for code in _nested(fresh) if rewritten is None else (*_nested(fresh), *_nested(rewritten)):
         compiled.setdefault(code.co_qualname, set()).add(_shape(code))
     for code in _loaded_code(module, filename):
         if _shape(code) not in compiled.get(code.co_qualname, ()):
             return False
     return _same_literals(module, tree)
+
+
+def _pytest_rewritten(module: types.ModuleType, source: bytes,
+                      filename: str) -> types.CodeType | None:
+    """``source`` compiled as pytest compiles a module whose asserts it rewrites (a test
+    module, a conftest, a ``register_assert_rewrite`` one), when ``module`` is one such
+    (its globals hold ``@pytest_ar``): its functions' code is then not the plain file's."""
+    if "@pytest_ar" not in vars(module):
+        return None
+    try:
+        from _pytest.assertion.rewrite import rewrite_asserts
+
+        tree = ast.parse(source, filename)
+        rewrite_asserts(tree, source, filename)
+        return compile(tree, filename, "exec", dont_inherit=True)
+    except (ImportError, SyntaxError, ValueError, TypeError):  # another pytest: compared plainly
+        return None
 
 
 def _nested(code: types.CodeType) -> Iterator[types.CodeType]:

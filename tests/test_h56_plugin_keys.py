@@ -4,6 +4,9 @@
   two plugins): the listing followed no link to a folder, so the linked modules were in no
   key: an edit of them, or of a method module inside one, re-ran nothing (a stale cached
   result).
+- A method defined in a pytest test module (or a module pytest rewrites the asserts of):
+  its loaded code is the rewritten one, never the file's compiled plainly, so every serial
+  run with a cache failed as "edited since this process imported it" on unedited code.
 - An editor's lock file (Emacs: ``.#bench.py``, a link to nothing) in bomgraph's or a
   plugin's folder: ``code_fingerprint`` read it and every sweep failed with
   ``No such file or directory``.
@@ -14,6 +17,7 @@ from __future__ import annotations
 import os
 import subprocess
 import sys
+import textwrap
 import time
 from pathlib import Path
 
@@ -81,3 +85,44 @@ def test_bomgraphs_key_reads_no_link_to_nothing(tmp_path: Path) -> None:
                          capture_output=True, text=True)
     assert out.returncode == 0, out.stderr[-300:]
     assert out.stdout.split()[1] == "False"
+
+
+METHOD = textwrap.dedent('''
+    import numpy as np
+    from bomgraph import mapper
+    from bomgraph.bench import Executor, execute
+    from bomgraph.experiments import Arm, Experiment, FileSource
+    from bomgraph.mapper import MapEstimate
+    from bomgraph.sim import SimConfig, simulate
+    from bomgraph.stream_file import write_stream
+
+    class AssertMapper:
+        def __init__(self, header, **options):
+            self.seen = {}
+        def step(self, step):
+            assert step is not None, "a step"
+            for lid, b in zip(step.landmark_ids.tolist(), step.bearings_rad.tolist()):
+                self.seen.setdefault(lid, np.array([np.cos(b), np.sin(b)]))
+        def estimate(self):
+            ids = np.array(sorted(self.seen), dtype=np.int64)
+            return MapEstimate(ids, np.array([self.seen[i] for i in ids.tolist()]).reshape(-1, 2))
+
+    def test_cached(tmp_path):
+        stream = tmp_path / "s.jsonl"
+        write_stream(simulate(SimConfig(n_steps=20), np.random.default_rng(3)), stream)
+        mapper.register_method("h56-rw", f"{__name__}:AssertMapper")
+        exp = Experiment("e", "e", (Arm("h56-rw", "h56-rw"),), sources=(FileSource(str(stream)),))
+        for _ in range(2):
+            (r,) = execute(exp.tasks(), Executor("serial"), cache_dir=tmp_path / "c")
+            assert r["ok"], r.get("error")
+        assert len(list((tmp_path / "c").glob("*.json"))) == 1
+''')
+
+
+def test_a_method_in_a_module_pytest_rewrote_runs_and_is_cached(tmp_path: Path) -> None:
+    (tmp_path / "test_h56_rewritten.py").write_text(METHOD)
+    repo = Path(__file__).resolve().parents[1]
+    out = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider",
+                          "test_h56_rewritten.py"], cwd=tmp_path, capture_output=True,
+                         text=True, env={**os.environ, "PYTHONPATH": str(repo)})
+    assert out.returncode == 0, out.stdout[-600:]
