@@ -131,6 +131,29 @@ def _loaded_code(module: types.ModuleType, filename: str) -> Iterator[types.Code
         yield from walk(value, 0)
 
 
+def rebound_at_run_time(source: bytes) -> tuple[frozenset[str], frozenset[str]]:
+    """The globals and the attributes that the code of ``source`` (a module's file) may
+    rebind after its import: declared ``global`` in a function; set as an attribute
+    (``cls.NAME = ...``, ``setattr(obj, "NAME", ...)``). Empty when it does not parse."""
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            tree = ast.parse(source)
+    except (SyntaxError, ValueError, RecursionError, MemoryError):
+        return frozenset(), frozenset()
+    names: set[str] = set()
+    attrs: set[str] = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Global):
+            names.update(node.names)
+        elif isinstance(node, ast.Attribute) and isinstance(node.ctx, ast.Store):
+            attrs.add(node.attr)
+        elif isinstance(node, ast.Call) and getattr(node.func, "id", None) == "setattr" and len(
+                node.args) > 1 and isinstance(node.args[1], ast.Constant):
+            attrs.add(str(node.args[1].value))
+    return frozenset(names), frozenset(attrs)
+
+
 def _same_literals(module: types.ModuleType, tree: ast.Module) -> bool:
     """Whether each name bound once in the file, by an immutable literal at module level or
     in a module-level class's body, has that value in the loaded module."""
@@ -184,4 +207,4 @@ def _same_literals(module: types.ModuleType, tree: ast.Module) -> bool:
     return True
 
 
-__all__ = ["runs_file"]
+__all__ = ["runs_file", "rebound_at_run_time"]

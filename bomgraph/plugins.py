@@ -374,6 +374,12 @@ def _file_digest(path: Path, module: object | None, check: bool = True) -> bytes
 
     data = _read(path)
     digest = _digest(data)
+    if seen is not None and digest != seen[0] and not _reloaded(seen[1], state, data):
+        # only globals its own code rebinds changed (a lazy cache: ``global _MODEL``), not a
+        # reload: it runs the code first hashed, not the file edited since (whose changes to
+        # values that are not literals, ``W = np.array(...)``, the comparison cannot see)
+        _LOADED[path] = (seen[0], state)
+        return seen[0]
     # imported before this first hash (by the user, in a notebook), and edited between: the
     # file is not the code that runs, which no file's key is then to stand for
     if check and data and not runs_file(module, data):  # type: ignore[arg-type]
@@ -475,6 +481,28 @@ def _module_state(module: object) -> dict[Any, tuple[str, object]]:
     for k, v in list(vars(module).items()):
         add(k, v)
     return out
+
+
+def _reloaded(a: dict[Any, tuple[str, object]], b: dict[Any, tuple[str, object]],
+              source: bytes) -> bool:
+    """Whether the module of :func:`_module_state` ``a``, now ``b``, may run other code than
+    then: a global (or a class attribute) changed that its ``source`` does not rebind at run
+    time (``global NAME`` in a function, ``obj.NAME = ...``): a reload (a new ``__spec__``,
+    new functions; IPython 9's autoreload runs an edited assignment again in place), or a
+    constant set in memory by the user."""
+    from .loaded_code import rebound_at_run_time
+
+    names, attrs = rebound_at_run_time(source)
+    for k in a.keys() | b.keys():
+        if k in a and k in b and _same_state({k: a[k]}, {k: b[k]}):
+            continue
+        if isinstance(k, str) and k in names:
+            continue  # global NAME in a function
+        if (isinstance(k, tuple) and len(k) == 2 and isinstance(k[0], str) and k[1] in attrs
+                and not k[1].startswith("__")):
+            continue  # a class attribute: cls.NAME = ...
+        return True
+    return False
 
 
 def _same_state(a: dict[Any, tuple[str, object]], b: dict[Any, tuple[str, object]]) -> bool:

@@ -10,10 +10,13 @@
 - An editor's lock file (Emacs: ``.#bench.py``, a link to nothing) in bomgraph's or a
   plugin's folder: ``code_fingerprint`` read it and every sweep failed with
   ``No such file or directory``.
+- A module whose own code rebinds a global (``global _MODEL``: a lazy cache) looked
+  reloaded at the next sweep: an edit made and not reloaded was keyed as the code that runs.
 """
 
 from __future__ import annotations
 
+import importlib
 import os
 import subprocess
 import sys
@@ -21,9 +24,15 @@ import textwrap
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
+from _depth_mapper import depth_mapper
 
-from bomgraph import plugins
+from bomgraph import mapper, plugins
+from bomgraph.bench import Executor, execute
+from bomgraph.experiments import Arm, Experiment, FileSource
+from bomgraph.sim import SimConfig, simulate
+from bomgraph.stream_file import write_stream
 
 
 @pytest.fixture
@@ -126,3 +135,49 @@ def test_a_method_in_a_module_pytest_rewrote_runs_and_is_cached(tmp_path: Path) 
                           "test_h56_rewritten.py"], cwd=tmp_path, capture_output=True,
                          text=True, env={**os.environ, "PYTHONPATH": str(repo)})
     assert out.returncode == 0, out.stdout[-600:]
+
+
+LAZY = depth_mapper("DEPTH_M", "Mine", attrs="pass").replace(
+    "self.pose, self.seen = np.zeros(3), {}",
+    "self.pose, self.seen = np.zeros(3), {}\n        global _CALLS\n        _CALLS = (_CALLS or 0) + 1"
+) + "\n_CALLS = None\nDEPTH_M = float(np.float64(1.0))\n"
+# the same, counting in a class attribute (a tuple: rebound, not changed in place)
+COUNTED = depth_mapper("DEPTH_M", "Mine", attrs="RUNS = ()").replace(
+    "self.pose, self.seen = np.zeros(3), {}",
+    "self.pose, self.seen = np.zeros(3), {}\n        Mine.RUNS += (object(),)"
+) + "\nDEPTH_M = float(np.float64(1.0))\n"
+
+
+@pytest.mark.parametrize("text", [LAZY, COUNTED], ids=["global", "class attribute"])
+def test_an_edit_not_reloaded_of_a_module_with_a_lazy_global_is_not_keyed_as_run(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch, text: str) -> None:
+    """A module whose code rebinds a global (a lazy cache, a counter), edited and not
+    reloaded between two sweeps where the loaded-code comparison cannot see it (a value not
+    a literal): the rebinding looked like a reload, the edited file was keyed, and the old
+    code's result (MPE 0.22 m) was cached under it, served to a fresh process that runs the
+    edit (2.13 m). Fails before this commit; a reload still runs the edit."""
+    src = tmp_path / "code" / f"h56lazy_{tmp_path.name}.py"
+    _write(src, text)
+    monkeypatch.syspath_prepend(str(src.parent))
+    monkeypatch.setattr(mapper, "_REGISTRY", dict(mapper._REGISTRY))
+    mapper.register_method("mine", f"{src.stem}:Mine")
+    stream = tmp_path / "s.jsonl"
+    write_stream(simulate(SimConfig(n_steps=40), np.random.default_rng(3)), stream)
+    exp = Experiment("e", "e", (Arm("mine", "mine"),), sources=(FileSource(str(stream)),))
+    cache = tmp_path / "cache"
+    try:
+        (first,) = execute(exp.tasks(), Executor("serial"), cache_dir=cache)
+        time.sleep(0.05)
+        src.write_text(text.replace("np.float64(1.0)", "np.float64(3.0)"))
+        (second,) = execute(exp.tasks(), Executor("serial"), cache_dir=cache)
+        assert first["ok"] and not second["ok"], "the old code's result was keyed as the edit's"
+        assert "edited since" in second["error"], second["error"]
+        importlib.reload(sys.modules[src.stem])
+        (third,) = execute(exp.tasks(), Executor("serial"), cache_dir=cache)
+        (fresh,) = execute(exp.tasks(), Executor("serial"))
+    finally:
+        sys.modules.pop(src.stem, None)
+        plugins.refresh()
+    assert third["ok"] and third["key"] != first["key"]
+    assert third["checkpoints"][-1]["mpe_m"] == fresh["checkpoints"][-1]["mpe_m"]
+    assert third["checkpoints"][-1]["mpe_m"] != first["checkpoints"][-1]["mpe_m"]
