@@ -21,9 +21,10 @@ from __future__ import annotations
 
 import ast
 import inspect
+import sys
 import types
 import warnings
-from typing import Any, Iterator
+from typing import Any, Callable, Iterator
 
 #: Literal values compared by value: what no code of the module can change in place.
 _IMMUTABLE = (int, float, complex, str, bytes, bool, type(None), tuple, frozenset)
@@ -154,6 +155,119 @@ def rebound_at_run_time(source: bytes) -> tuple[frozenset[str], frozenset[str]]:
     return frozenset(names), frozenset(attrs)
 
 
+#: Per source digest: its module-level ``from M import NAME`` bindings (M absolute, NAME,
+#: the name bound), those of names the file binds nowhere else.
+_FROM: dict[bytes, tuple[tuple[str, str, str], ...]] = {}
+
+
+def stale_imports(module: types.ModuleType, source: Callable[[], bytes], digest: bytes,
+                  top: str) -> list[str]:
+    """The names ``module`` bound at its import by ``from M import NAME`` (at module level,
+    ``M`` a module of package ``top``; ``source()``: the file's text, of ``digest``) that no
+    longer hold what ``M`` holds: ``M`` was reloaded (``importlib.reload``, IPython's
+    autoreload of an edited ``M``) and ``module`` was not, so it still runs ``M``'s old
+    ``NAME`` (a constant, a function, a class). Each as ``"module.NAME (M)"``."""
+    if digest not in _FROM:
+        _FROM[digest] = _from_imports(source(), getattr(module, "__name__", ""),
+                                      hasattr(module, "__path__"))
+    out, names = [], vars(module)
+    for src, name, bound in _FROM[digest]:
+        origin = sys.modules.get(src)
+        if (origin is None or src.split(".")[0] != top or bound not in names
+                or name not in vars(origin)):
+            continue
+        if not _same_object(names[bound], vars(origin)[name]) and (
+                name not in rebound_globals(origin)):  # M's own code rebinds it: not stale
+            out.append(f"{getattr(module, '__name__', '?')}.{bound} ({src})")
+    return out
+
+
+def rebound_globals(module: types.ModuleType) -> frozenset[str]:
+    """:func:`rebound_at_run_time`'s globals of a loaded module's file (none unreadable)."""
+    try:
+        with open(module.__file__, "rb") as fh:  # type: ignore[arg-type]
+            return rebound_at_run_time(fh.read())[0]
+    except (OSError, TypeError, AttributeError):
+        return frozenset()
+
+
+def _from_imports(source: bytes, name: str, is_package: bool) -> tuple[tuple[str, str, str], ...]:
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            tree = ast.parse(source)
+    except (SyntaxError, ValueError, RecursionError, MemoryError):
+        return ()
+    stores: dict[str, int] = {}
+    for node in ast.walk(tree):
+        bound = (node.id if isinstance(node, ast.Name) and isinstance(node.ctx, ast.Store)
+                 else node.name if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef,
+                                                     ast.ClassDef))
+                 else (node.asname or node.name).split(".")[0] if isinstance(node, ast.alias)
+                 else None)
+        if bound is not None:
+            stores[bound] = stores.get(bound, 0) + 1
+        elif isinstance(node, ast.Global):
+            for n in node.names:
+                stores[n] = 2
+    package = name if is_package else name.rpartition(".")[0]
+    out = []
+    body = list(tree.body)
+    while body:  # module level, in if/try blocks too, not in functions or classes
+        stmt = body.pop()
+        if isinstance(stmt, (ast.If, ast.Try, ast.With)):
+            body += [*stmt.body, *getattr(stmt, "orelse", []), *getattr(stmt, "finalbody", []),
+                     *[s for h in getattr(stmt, "handlers", []) for s in h.body]]
+        if not isinstance(stmt, ast.ImportFrom):
+            continue
+        base = stmt.module or ""
+        if stmt.level:
+            up = package.split(".")
+            if stmt.level - 1 >= len(up):
+                continue
+            base = ".".join(up[:len(up) - (stmt.level - 1)] + ([base] if base else []))
+        out += [(base, a.name, a.asname or a.name) for a in stmt.names
+                if a.name != "*" and stores.get(a.asname or a.name) == 1]
+    return tuple(out)
+
+
+def _same_object(old: object, new: object, depth: int = 0) -> bool:
+    """Whether ``old`` (bound before a reload) computes what ``new`` does: the same object;
+    equal plain constants; functions of the same code (line numbers aside) and defaults;
+    classes whose functions and constants are such."""
+    if old is new:
+        return True
+    if type(old) is not type(new):
+        return False
+    if isinstance(old, _IMMUTABLE) and not isinstance(old, (tuple, frozenset)):
+        return _const(old) == _const(new)
+    if isinstance(old, tuple):
+        return len(old) == len(new) and all(  # type: ignore[arg-type]
+            _same_object(a, b, depth) for a, b in zip(old, new))  # type: ignore[call-overload]
+    if isinstance(old, types.FunctionType):
+        return (_shape(old.__code__) == _shape(new.__code__)  # type: ignore[attr-defined]
+                and _same_object(old.__defaults__, new.__defaults__, depth)  # type: ignore
+                and _same_object(old.__kwdefaults__, new.__kwdefaults__, depth + 1))  # type: ignore
+    if isinstance(old, dict) and depth > 0:  # a function's keyword defaults
+        return old.keys() == new.keys() and all(  # type: ignore[attr-defined]
+            _same_object(v, new[k], depth) for k, v in old.items())  # type: ignore[index]
+    if isinstance(old, (staticmethod, classmethod)):
+        return _same_object(old.__func__, new.__func__, depth)  # type: ignore[attr-defined]
+    if isinstance(old, property):
+        return all(_same_object(getattr(old, p), getattr(new, p), depth)
+                   for p in ("fget", "fset", "fdel"))
+    if isinstance(old, type) and depth < 2:
+        a, b = dict(old.__dict__), dict(new.__dict__)  # type: ignore[attr-defined]
+        skip = {"__dict__", "__weakref__", "__module__", "__doc__", "__firstlineno__",
+                "__static_attributes__", "__annotations__", "__qualname__", "__parameters__",
+                "__orig_bases__"}
+        return a.keys() == b.keys() and all(
+            _same_object(a[k], b[k], depth + 1) or not isinstance(
+                a[k], (types.FunctionType, staticmethod, classmethod, property, type,
+                       *_IMMUTABLE)) for k in a if k not in skip)
+    return False
+
+
 def _same_literals(module: types.ModuleType, tree: ast.Module) -> bool:
     """Whether each name bound once in the file, by an immutable literal at module level or
     in a module-level class's body, has that value in the loaded module."""
@@ -207,4 +321,4 @@ def _same_literals(module: types.ModuleType, tree: ast.Module) -> bool:
     return True
 
 
-__all__ = ["runs_file", "rebound_at_run_time"]
+__all__ = ["runs_file", "rebound_at_run_time", "stale_imports"]

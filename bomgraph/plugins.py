@@ -106,8 +106,10 @@ def refresh() -> None:
     _DISK.clear()
     _LISTED.clear()
     from .import_closure import _PARSED
+    from .loaded_code import _FROM
 
     _PARSED.clear()
+    _FROM.clear()
     importlib.invalidate_caches()
 
 
@@ -356,7 +358,20 @@ def _fingerprint(target: str, version: str | None, loaded: bool,
         mod = modules.get(f.resolve()) if modules else None
         h.update(disk[f] if mod is None else
                  _file_digest(f, mod, getattr(mod, "__name__", None) not in fresh))
+        if mod is not None and _stale_imports(mod, f, disk[f], top):
+            # it holds a name of a module reloaded since (from .helpers import SCALE): it
+            # runs that module's old code, which no file holds now
+            h.update(b"holds names of a module reloaded since")
     return h.hexdigest()[:16]
+
+
+def _stale_imports(module: types.ModuleType, path: Path, digest: bytes, top: str) -> bool:
+    from .loaded_code import stale_imports
+
+    try:
+        return bool(stale_imports(module, lambda: _read(path), digest, top))
+    except Exception:  # a loaded object whose comparison raises: taken as the file's
+        return False
 
 
 def _file_digest(path: Path, module: object | None, check: bool = True) -> bytes:

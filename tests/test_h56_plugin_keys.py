@@ -181,3 +181,39 @@ def test_an_edit_not_reloaded_of_a_module_with_a_lazy_global_is_not_keyed_as_run
     assert third["ok"] and third["key"] != first["key"]
     assert third["checkpoints"][-1]["mpe_m"] == fresh["checkpoints"][-1]["mpe_m"]
     assert third["checkpoints"][-1]["mpe_m"] != first["checkpoints"][-1]["mpe_m"]
+
+
+@pytest.mark.parametrize("edit, stale", [("SCALE = 3.0\n", True),
+                                         ("SCALE = 1.0\n# a comment\n", False),
+                                         ("SCALE = 1.0\ndef unused():\n    return 2\n", False)])
+def test_a_name_imported_from_a_module_reloaded_alone_is_not_keyed_as_its_new_code(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch, edit: str, stale: bool) -> None:
+    """``from .helpers import SCALE`` in the method's module, helpers.py edited and reloaded
+    (importlib.reload), the method's module not: it still runs the old SCALE, but was keyed
+    with helpers' new file, so the old result (MPE 0.22 m) was cached under the key of the
+    edit (2.13 m in a fresh process). Now its serial run fails saying to reload it too; a
+    reload that changes no imported name runs. Fails before this commit."""
+    pkg = tmp_path / "site" / "h56fi"
+    _write(pkg / "__init__.py", "")
+    _write(pkg / "helpers.py", "SCALE = 1.0\n")
+    _write(pkg / "a.py", depth_mapper("DEPTH_M * SCALE", "Mine")
+           + "\nfrom .helpers import SCALE\nDEPTH_M = 1.0\n")
+    monkeypatch.syspath_prepend(str(pkg.parent))
+    monkeypatch.setattr(mapper, "_REGISTRY", dict(mapper._REGISTRY))
+    mapper.register_method("mine", "h56fi.a:Mine")
+    stream = tmp_path / "s.jsonl"
+    write_stream(simulate(SimConfig(n_steps=40), np.random.default_rng(3)), stream)
+    exp = Experiment("e", "e", (Arm("mine", "mine"),), sources=(FileSource(str(stream)),))
+    try:
+        (first,) = execute(exp.tasks(), Executor("serial"), cache_dir=tmp_path / "cache")
+        time.sleep(0.05)
+        (pkg / "helpers.py").write_text(edit)
+        importlib.reload(sys.modules["h56fi.helpers"])
+        (second,) = execute(exp.tasks(), Executor("serial"), cache_dir=tmp_path / "cache")
+    finally:
+        for name in [n for n in sys.modules if n.split(".")[0] == "h56fi"]:
+            del sys.modules[name]
+        plugins.refresh()
+    assert first["ok"] and second["ok"] is not stale, second.get("error")
+    if stale:
+        assert "reloaded since: reload it too" in second["error"], second["error"]
