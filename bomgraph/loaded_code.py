@@ -20,6 +20,7 @@ a function does not hold (a module-level statement's side effects).
 from __future__ import annotations
 
 import ast
+import functools
 import inspect
 import sys
 import types
@@ -232,40 +233,59 @@ def _from_imports(source: bytes, name: str, is_package: bool) -> tuple[tuple[str
 
 
 def _same_object(old: object, new: object, depth: int = 0) -> bool:
-    """Whether ``old`` (bound before a reload) computes what ``new`` does: the same object;
-    equal plain constants; functions of the same code (line numbers aside) and defaults;
-    classes whose functions and constants are such."""
+    """Whether ``old`` (bound before a reload) computes what ``new`` does, as far as
+    :func:`runs_file` compares code: equal plain constants (and tuples, frozensets of them);
+    functions of the same code (line numbers aside) and defaults, through decorators that
+    keep ``__wrapped__`` and ``functools.partial``; classes whose functions and constants
+    are such. Any other value (a list, an array, an instance) is taken for the same: not
+    seen, as a module's own such values are not."""
     if old is new:
         return True
+    if isinstance(old, type) and isinstance(new, type):
+        if old.__qualname__ != new.__qualname__ or depth >= 2:
+            return old.__qualname__ == new.__qualname__
+        a, b = dict(old.__dict__), dict(new.__dict__)
+        return a.keys() == b.keys() and all(_same_object(a[k], b[k], depth + 1) for k in a
+                                            if k not in _CLASS_BOOKKEEPING)
     if type(old) is not type(new):
-        return False
-    if isinstance(old, _IMMUTABLE) and not isinstance(old, (tuple, frozenset)):
+        # another type: a plain one (1 -> 1.0), or one the reload made again (an Enum's)
+        return not (type(old) in _IMMUTABLE or type(new) in _IMMUTABLE) and (
+            type(old).__qualname__ == type(new).__qualname__)
+    if type(old) in (tuple, frozenset):
+        return (len(old) == len(new) and all(  # type: ignore[arg-type]
+            _same_object(x, y, depth) for x, y in zip(old, new))  # type: ignore[call-overload]
+            if type(old) is tuple else _const(old) == _const(new))
+    if type(old) in _IMMUTABLE:
         return _const(old) == _const(new)
-    if isinstance(old, tuple):
-        return len(old) == len(new) and all(  # type: ignore[arg-type]
-            _same_object(a, b, depth) for a, b in zip(old, new))  # type: ignore[call-overload]
     if isinstance(old, types.FunctionType):
         return (_shape(old.__code__) == _shape(new.__code__)  # type: ignore[attr-defined]
                 and _same_object(old.__defaults__, new.__defaults__, depth)  # type: ignore
-                and _same_object(old.__kwdefaults__, new.__kwdefaults__, depth + 1))  # type: ignore
-    if isinstance(old, dict) and depth > 0:  # a function's keyword defaults
+                and _same_object(old.__kwdefaults__, new.__kwdefaults__, depth)  # type: ignore
+                and _same_object(getattr(old, "__wrapped__", None),  # functools.wraps
+                                 getattr(new, "__wrapped__", None), depth))
+    if isinstance(old, dict) and depth == 0:  # a function's keyword defaults
         return old.keys() == new.keys() and all(  # type: ignore[attr-defined]
-            _same_object(v, new[k], depth) for k, v in old.items())  # type: ignore[index]
+            _same_object(v, new[k], 1) for k, v in old.items())  # type: ignore[index]
     if isinstance(old, (staticmethod, classmethod)):
         return _same_object(old.__func__, new.__func__, depth)  # type: ignore[attr-defined]
     if isinstance(old, property):
         return all(_same_object(getattr(old, p), getattr(new, p), depth)
                    for p in ("fget", "fset", "fdel"))
-    if isinstance(old, type) and depth < 2:
-        a, b = dict(old.__dict__), dict(new.__dict__)  # type: ignore[attr-defined]
-        skip = {"__dict__", "__weakref__", "__module__", "__doc__", "__firstlineno__",
-                "__static_attributes__", "__annotations__", "__qualname__", "__parameters__",
-                "__orig_bases__"}
-        return a.keys() == b.keys() and all(
-            _same_object(a[k], b[k], depth + 1) or not isinstance(
-                a[k], (types.FunctionType, staticmethod, classmethod, property, type,
-                       *_IMMUTABLE)) for k in a if k not in skip)
-    return False
+    if isinstance(old, functools.partial):
+        return _same_object((old.func, old.args), (new.func, new.args),  # type: ignore
+                            depth) and _same_object(old.keywords, new.keywords, 0)  # type: ignore
+    try:
+        wrapped = getattr(old, "__wrapped__", None), getattr(new, "__wrapped__", None)
+    except Exception:  # an object whose attributes raise
+        return True
+    return True if wrapped[0] is None else _same_object(*wrapped, depth)
+
+
+#: A class's attributes that say where and how it was made, not what it computes.
+_CLASS_BOOKKEEPING = frozenset({
+    "__dict__", "__weakref__", "__module__", "__doc__", "__firstlineno__",
+    "__static_attributes__", "__annotations__", "__qualname__", "__parameters__",
+    "__orig_bases__", "_abc_impl"})
 
 
 def _same_literals(module: types.ModuleType, tree: ast.Module) -> bool:

@@ -183,9 +183,31 @@ def test_an_edit_not_reloaded_of_a_module_with_a_lazy_global_is_not_keyed_as_run
     assert third["checkpoints"][-1]["mpe_m"] != first["checkpoints"][-1]["mpe_m"]
 
 
-@pytest.mark.parametrize("edit, stale", [("SCALE = 3.0\n", True),
-                                         ("SCALE = 1.0\n# a comment\n", False),
-                                         ("SCALE = 1.0\ndef unused():\n    return 2\n", False)])
+HELPERS = """
+import dataclasses, enum, functools
+
+SCALE = 1.0
+TABLE = {"a": [1, 2]}
+ALL = frozenset({"a", "b"})
+
+class Kind(enum.IntFlag):
+    A = 1
+
+@dataclasses.dataclass(frozen=True)
+class Cfg:
+    a: float = 1.0
+
+@functools.lru_cache(maxsize=None)
+def cached(x):
+    return x
+
+PARTIAL = functools.partial(cached, 2)
+"""
+
+
+@pytest.mark.parametrize("edit, stale", [
+    ("SCALE = 3.0\n", True), ("def cached(x):\n    return x", True),
+    ("SCALE = 1.0\n# a comment\n", False), ("SCALE = 1.0\ndef unused():\n    return 2\n", False)])
 def test_a_name_imported_from_a_module_reloaded_alone_is_not_keyed_as_its_new_code(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch, edit: str, stale: bool) -> None:
     """``from .helpers import SCALE`` in the method's module, helpers.py edited and reloaded
@@ -195,9 +217,9 @@ def test_a_name_imported_from_a_module_reloaded_alone_is_not_keyed_as_its_new_co
     reload that changes no imported name runs. Fails before this commit."""
     pkg = tmp_path / "site" / "h56fi"
     _write(pkg / "__init__.py", "")
-    _write(pkg / "helpers.py", "SCALE = 1.0\n")
+    _write(pkg / "helpers.py", HELPERS)
     _write(pkg / "a.py", depth_mapper("DEPTH_M * SCALE", "Mine")
-           + "\nfrom .helpers import SCALE\nDEPTH_M = 1.0\n")
+           + "\nfrom .helpers import SCALE, TABLE, ALL, Kind, Cfg, cached, PARTIAL\nDEPTH_M = 1.0\n")
     monkeypatch.syspath_prepend(str(pkg.parent))
     monkeypatch.setattr(mapper, "_REGISTRY", dict(mapper._REGISTRY))
     mapper.register_method("mine", "h56fi.a:Mine")
@@ -207,7 +229,8 @@ def test_a_name_imported_from_a_module_reloaded_alone_is_not_keyed_as_its_new_co
     try:
         (first,) = execute(exp.tasks(), Executor("serial"), cache_dir=tmp_path / "cache")
         time.sleep(0.05)
-        (pkg / "helpers.py").write_text(edit)
+        edited = {"def cached(x):\n    return x": HELPERS.replace("return x", "return -x")}
+        (pkg / "helpers.py").write_text(edited.get(edit, HELPERS.replace("SCALE = 1.0\n", edit)))
         importlib.reload(sys.modules["h56fi.helpers"])
         (second,) = execute(exp.tasks(), Executor("serial"), cache_dir=tmp_path / "cache")
     finally:
