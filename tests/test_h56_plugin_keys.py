@@ -139,7 +139,8 @@ def test_a_method_in_a_module_pytest_rewrote_runs_and_is_cached(tmp_path: Path) 
 
 LAZY = depth_mapper("DEPTH_M", "Mine", attrs="pass").replace(
     "self.pose, self.seen = np.zeros(3), {}",
-    "self.pose, self.seen = np.zeros(3), {}\n        global _CALLS\n        _CALLS = (_CALLS or 0) + 1"
+    "self.pose, self.seen = np.zeros(3), {}\n"
+    "        global _CALLS\n        _CALLS = (_CALLS or 0) + 1"
 ) + "\n_CALLS = None\nDEPTH_M = float(np.float64(1.0))\n"
 # the same, counting in a class attribute (a tuple: rebound, not changed in place)
 COUNTED = depth_mapper("DEPTH_M", "Mine", attrs="RUNS = ()").replace(
@@ -219,7 +220,8 @@ def test_a_name_imported_from_a_module_reloaded_alone_is_not_keyed_as_its_new_co
     _write(pkg / "__init__.py", "")
     _write(pkg / "helpers.py", HELPERS)
     _write(pkg / "a.py", depth_mapper("DEPTH_M * SCALE", "Mine")
-           + "\nfrom .helpers import SCALE, TABLE, ALL, Kind, Cfg, cached, PARTIAL\nDEPTH_M = 1.0\n")
+           + "\nfrom .helpers import SCALE, TABLE, ALL, Kind, Cfg, cached, PARTIAL\n"
+           "DEPTH_M = 1.0\n")
     monkeypatch.syspath_prepend(str(pkg.parent))
     monkeypatch.setattr(mapper, "_REGISTRY", dict(mapper._REGISTRY))
     mapper.register_method("mine", "h56fi.a:Mine")
