@@ -192,8 +192,8 @@ def _source_files(module_name: str) -> tuple[list[tuple[str, Path]], bool]:
 def _py_files(root: str) -> list[tuple[str, Path]]:
     """The ``.py`` files under ``root`` (links to nothing left out: an editor's lock
     ``.#m.py``), each with its path relative to ``root`` (as ``relative_to(root)
-    .as_posix()``); a link to a folder is followed (a helper folder linked into the
-    package is imported through it), unless to a folder already listed or above. Listed again only
+    .as_posix()``); a link to a folder of code is followed (a helper folder linked into
+    the package is imported through it), unless to a folder already listed or above. Listed again only
     when a folder's status changed (a file added, removed or renamed in it) since the last
     listing, within :data:`RACY_NS` too: a worker lists a plugin's package before and after
     each run."""
@@ -224,12 +224,15 @@ def _py_files(root: str) -> list[tuple[str, Path]]:
 
 
 def _new_folder(entry: os.DirEntry[str], real: set[str]) -> bool:
-    """Whether to list the folder ``entry`` (a link: not to a folder of ``real``, those
-    listed, nor to one above them, a loop); adds its real path to ``real``."""
+    """Whether to list the folder ``entry``; a link: to a folder of Python code (a ``.py``
+    file at its top, not a linked data set), not to a folder of ``real`` (those listed) nor
+    to one above them (a loop); its real path is then added to ``real``."""
     if not entry.is_symlink():
         return True
     path = os.path.realpath(entry.path)
     if any(path == r or r.startswith(path.rstrip(os.sep) + os.sep) for r in real):
+        return False
+    if not any(os.path.normcase(n).endswith(".py") for n in os.listdir(path)):
         return False
     real.add(path)
     return True

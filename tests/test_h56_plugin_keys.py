@@ -66,10 +66,14 @@ def test_an_edit_in_a_linked_folder_of_the_package_moves_the_key(
     os.symlink(tmp_path / "shared", site / "h56ln" / "shared")
     os.symlink(tmp_path / "inner", site / "h56ln" / "inner")
     os.symlink(site, site / "h56ln" / "loop")  # a link up the tree is not followed
+    _write(tmp_path / "data" / "deep" / "x.csv", "1\n")  # nor one to a data folder
+    os.symlink(tmp_path / "data", site / "h56ln" / "data")
     before = plugins.disk_fingerprint(target)
     time.sleep(0.05)
     (tmp_path / edited).write_text((tmp_path / edited).read_text() + "K = 2\n")
     assert plugins.disk_fingerprint(target) != before, f"an edit of {edited} re-ran nothing"
+    listed = {Path(d).name for d, _ in plugins._LISTED[str(site / "h56ln")][0]}
+    assert listed == {"h56ln", "shared", "inner"}, listed
 
 
 def test_a_link_to_nothing_named_py_is_not_read(site: Path) -> None:
