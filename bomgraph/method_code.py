@@ -90,9 +90,10 @@ def stale_plugin(task: Task, *, worker: bool) -> str:
             where = f" (a source file of {info.target.split(':')[0].split('.')[0]!r})"
             if not worker:
                 return (f"method {m!r} was edited since this process imported it{where} (or "
-                        f"a constant of it set in memory), and Python does not reload a module: reload the module (importlib.reload, "
-                        f"IPython's %autoreload) or restart this process (a notebook's "
-                        f"kernel), then run again")
+                        f"a constant of it set in memory, or it holds a name imported from a "
+                        f"module reloaded since: reload it too), and Python does not reload a "
+                        f"module: reload the module (importlib.reload, IPython's %autoreload) "
+                        f"or restart this process (a notebook's kernel), then run again")
             return (f"stale worker: restart the workers and run again (Dask: client.restart(),"
                     f" or restart `dask worker`; in a notebook run serially: reload the module"
                     f" or restart the kernel); method {m!r} was edited since this worker "

@@ -106,8 +106,10 @@ def refresh() -> None:
     _DISK.clear()
     _LISTED.clear()
     from .import_closure import _PARSED
+    from .loaded_code import _FROM
 
     _PARSED.clear()
+    _FROM.clear()
     importlib.invalidate_caches()
 
 
@@ -188,8 +190,10 @@ def _source_files(module_name: str) -> tuple[list[tuple[str, Path]], bool]:
 
 
 def _py_files(root: str) -> list[tuple[str, Path]]:
-    """``Path(root).rglob("*.py")``'s paths, each with its path relative to ``root`` (as
-    ``relative_to(root).as_posix()``); no link to a folder is followed. Listed again only
+    """The ``.py`` files under ``root`` (links to nothing left out: an editor's lock
+    ``.#m.py``), each with its path relative to ``root`` (as ``relative_to(root)
+    .as_posix()``); a link to a folder of code is followed (a helper folder linked into
+    the package is imported through it), unless to a folder already listed or above. Listed again only
     when a folder's status changed (a file added, removed or renamed in it) since the last
     listing, within :data:`RACY_NS` too: a worker lists a plugin's package before and after
     each run."""
@@ -198,6 +202,7 @@ def _py_files(root: str) -> list[tuple[str, Path]]:
         return list(seen[1])
     out: list[tuple[str, Path]] = []
     folders, signatures = [("", root)], []
+    real = {os.path.realpath(root)}
     while folders:
         prefix, folder = folders.pop()
         signatures.append((folder, _stat_signature(Path(folder))))  # before its listing
@@ -206,16 +211,31 @@ def _py_files(root: str) -> list[tuple[str, Path]]:
         except OSError:  # gone or unreadable meanwhile, as rglob skips it
             continue
         for e in entries:
-            if os.path.normcase(e.name).endswith(".py"):
-                out.append((prefix + e.name, Path(e.path)))
             try:
-                if e.is_dir() and not e.is_symlink():
+                if os.path.normcase(e.name).endswith(".py") and e.is_file():
+                    out.append((prefix + e.name, Path(e.path)))
+                elif e.is_dir() and _new_folder(e, real):
                     folders.append((prefix + e.name + "/", e.path))
             except OSError:
                 continue
     if all(sig is not None and _aged(sig) for _, sig in signatures):
         _LISTED[root] = (signatures, list(out))
     return out
+
+
+def _new_folder(entry: os.DirEntry[str], real: set[str]) -> bool:
+    """Whether to list the folder ``entry``; a link: to a folder of Python code (a ``.py``
+    file at its top, not a linked data set), not to a folder of ``real`` (those listed) nor
+    to one above them (a loop); its real path is then added to ``real``."""
+    if not entry.is_symlink():
+        return True
+    path = os.path.realpath(entry.path)
+    if any(path == r or r.startswith(path.rstrip(os.sep) + os.sep) for r in real):
+        return False
+    if not any(os.path.normcase(n).endswith(".py") for n in os.listdir(path)):
+        return False
+    real.add(path)
+    return True
 
 
 #: Per package folder: the :func:`_stat_signature` of each of its folders and its listing.
@@ -238,9 +258,10 @@ def code_fingerprint() -> str:
     _CODE_AT_KEY = _code_state()
     h = hashlib.sha256()
     for root in _code_roots():
-        for f in sorted(root.rglob("*.py")):
-            h.update(str(f.relative_to(root)).encode())
-            h.update(f.read_bytes())
+        # as rglob's order (the paper's keys kept), no editor's lock (a link to nothing)
+        for rel, f in sorted(_py_files(str(root)), key=lambda rf: rf[1]):
+            h.update(rel.encode())
+            h.update(_read(f))
     for lib in NUMERIC_LIBRARIES:
         try:
             h.update(f"{lib}=={metadata.version(lib)};".encode())
@@ -340,7 +361,20 @@ def _fingerprint(target: str, version: str | None, loaded: bool,
         mod = modules.get(f.resolve()) if modules else None
         h.update(disk[f] if mod is None else
                  _file_digest(f, mod, getattr(mod, "__name__", None) not in fresh))
+        if mod is not None and _stale_imports(mod, f, disk[f], top):
+            # it holds a name of a module reloaded since (from .helpers import SCALE): it
+            # runs that module's old code, which no file holds now
+            h.update(b"holds names of a module reloaded since")
     return h.hexdigest()[:16]
+
+
+def _stale_imports(module: types.ModuleType, path: Path, digest: bytes, top: str) -> bool:
+    from .loaded_code import stale_imports
+
+    try:
+        return bool(stale_imports(module, lambda: _read(path), digest, top))
+    except Exception:  # a loaded object whose comparison raises: taken as the file's
+        return False
 
 
 def _file_digest(path: Path, module: object | None, check: bool = True) -> bytes:
@@ -358,6 +392,12 @@ def _file_digest(path: Path, module: object | None, check: bool = True) -> bytes
 
     data = _read(path)
     digest = _digest(data)
+    if seen is not None and digest != seen[0] and not _reloaded(seen[1], state, data):
+        # only globals its own code rebinds changed (a lazy cache: ``global _MODEL``), not a
+        # reload: it runs the code first hashed, not the file edited since (whose changes to
+        # values that are not literals, ``W = np.array(...)``, the comparison cannot see)
+        _LOADED[path] = (seen[0], state)
+        return seen[0]
     # imported before this first hash (by the user, in a notebook), and edited between: the
     # file is not the code that runs, which no file's key is then to stand for
     if check and data and not runs_file(module, data):  # type: ignore[arg-type]
@@ -459,6 +499,28 @@ def _module_state(module: object) -> dict[Any, tuple[str, object]]:
     for k, v in list(vars(module).items()):
         add(k, v)
     return out
+
+
+def _reloaded(a: dict[Any, tuple[str, object]], b: dict[Any, tuple[str, object]],
+              source: bytes) -> bool:
+    """Whether the module of :func:`_module_state` ``a``, now ``b``, may run other code than
+    then: a global (or a class attribute) changed that its ``source`` does not rebind at run
+    time (``global NAME`` in a function, ``obj.NAME = ...``): a reload (a new ``__spec__``,
+    new functions; IPython 9's autoreload runs an edited assignment again in place), or a
+    constant set in memory by the user."""
+    from .loaded_code import rebound_at_run_time
+
+    names, attrs = rebound_at_run_time(source)
+    for k in a.keys() | b.keys():
+        if k in a and k in b and _same_state({k: a[k]}, {k: b[k]}):
+            continue
+        if isinstance(k, str) and k in names:
+            continue  # global NAME in a function
+        if (isinstance(k, tuple) and len(k) == 2 and isinstance(k[0], str) and k[1] in attrs
+                and not k[1].startswith("__")):
+            continue  # a class attribute: cls.NAME = ...
+        return True
+    return False
 
 
 def _same_state(a: dict[Any, tuple[str, object]], b: dict[Any, tuple[str, object]]) -> bool:

@@ -223,14 +223,16 @@ def command_line_spec(streams: Sequence[str], methods: Sequence[str],
 
     def with_options(m: MethodSpec) -> MethodSpec:
         added: dict[str, Any] = {}
+        by = m.method  # the --option target that gives the preset (the user's spelling)
         for target in (m.method, m.label):
             added.update(extra.get(target, {}))
+            by = target if "preset" in extra.get(target, {}) else by
         if not added:
             return m
         label = m.label
         if "preset" in added:  # labelled as NAME@PRESET is, never by another preset
             if "preset" in m.options:
-                raise SweepError(f"--option {m.method}:preset=...: --methods {m.label} names "
+                raise SweepError(f"--option {by}:preset=...: --methods {m.label} names "
                                  f"its preset already; give the preset once")
             if isinstance(added["preset"], str):
                 label = f"{m.label}@{added['preset']}"

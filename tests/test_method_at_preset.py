@@ -172,3 +172,14 @@ def test_compare_labels_a_preset_option_as_name_at_preset(stream: Path, tmp_path
                     f'options = {{ preset = "improved" }}\n')
     (exp,) = read_sweep(toml).experiments
     assert [m.label for m in exp.methods] == ["stmds-smacof@improved"]
+
+
+def test_a_preset_given_twice_names_the_option_as_written(stream: Path, tmp_path: Path,
+                                                          capsys: pytest.CaptureFixture) -> None:
+    """It named ``--option stmds-cs:preset=...`` for ``--option stmds-cs@improved:preset=``
+    (h56); fails before."""
+    assert main(["compare", "--streams", str(stream), "--methods", "stmds-cs@improved",
+                 "--option", "stmds-cs@improved:preset=paper", "--out", str(tmp_path / "o"),
+                 "--dry-run"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--option stmds-cs@improved:preset=..." in err[0], err
