@@ -34,6 +34,7 @@ RUN = {
         "test_library_use_and_gtsam_helper_blocks",
     ("README.md", "from baselines import gtsam_tools as gt"):
         "test_library_use_and_gtsam_helper_blocks",
+    ("README.md", "from bomgraph.bench import Executor"): "test_library_sweep_block",
     ("docs/FORMATS.md", '{"format": "bomgraph-stream"'): "test_formats_stream_blocks",
     ("docs/FORMATS.md", "import numpy as np\nfrom bomgraph.stream import"):
         "test_formats_stream_blocks",
@@ -149,6 +150,19 @@ def test_library_use_and_gtsam_helper_blocks(tmp_path: Path) -> None:
     out = shell(f'"{sys.executable}" lib.py', tmp_path).stdout.splitlines()
     assert len(out) == 2 and 0 < float(out[0]) < 0.1, out
     assert f'# "{out[1]}"' in gt, out
+
+
+def test_library_sweep_block(tmp_path: Path) -> None:
+    """README, "Library use", "A sweep from Python": a method registered in-process and the
+    toy plugin's class, swept serially twice through the library, print what its comment
+    says (the second time from the cache); the numbers are the README's final-map table's."""
+    code = block("README.md", "from bomgraph.bench import Executor")
+    shell("bomgraph simulate --seed 7 --out sim7.jsonl", tmp_path)
+    (tmp_path / "sweep.py").write_text(code)
+    out = shell(f'"{sys.executable}" sweep.py', tmp_path, _toy_plugin_env(tmp_path)).stdout
+    said = " ".join(ln.lstrip("# ") for ln in code.splitlines()[-2:])
+    assert [s.strip() for s in said.split(" / ")] == out.splitlines(), out
+    assert (tmp_path / "mine-py" / "results.json").is_file()
 
 
 def _toy_plugin_env(tmp_path: Path) -> dict:
