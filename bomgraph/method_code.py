@@ -185,7 +185,8 @@ def refuse_runtime_methods(tasks: Sequence[Task], backend: str) -> None:
         if info.origin == "runtime":
             raise ConfigError(
                 f"method {name!r} was registered at run time (register_method) and the "
-                f"{backend} workers cannot see it; make it a plugin: in your package's "
+                f"workers of executor {backend!r} cannot see it; make it a plugin: in your "
+                f"package's "
                 f"pyproject.toml add [project.entry-points.\"bomgraph.methods\"] "
                 f"{name} = \"{target}\", then `pip install -e .` it (or run serially: "
                 f"--jobs 1, Executor('serial'))")
