@@ -429,10 +429,14 @@ def read_estimate(path: str | os.PathLike[str]) -> EstimateFile:
                                     path=path, line=line) from None
     ctx = _Whole(path, text)
     if repeated.first is not None:
-        where, name = path_of(obj, repeated.first[0]), repeated.first[1]
+        holder, name = repeated.first
+        where = path_of(obj, holder)
         if where is None:   # in an object a repeat of an outer key replaced: name that one
-            where, name = path_of(obj, repeated.last[0]), repeated.last[1]
-        raise ctx.error(f"{where}.{name}" if where else name, "appears twice in one object")
+            holder, name = repeated.last
+            where = path_of(obj, holder)
+        # the root's keys bare ("" is also the path of the root's key "": "".b is ".b")
+        raise ctx.error(name if holder is obj else f"{where}.{name}",
+                        "appears twice in one object")
     if not isinstance(obj, dict) or obj.get("format") != ESTIMATE_FORMAT:
         raise ctx.error("format", f"must be a JSON object with \"format\": "
                                   f"\"{ESTIMATE_FORMAT}\"")

@@ -191,9 +191,10 @@ def _spell(where: str, link: Any) -> str:
     while link is not None:
         link, key, in_dict = link
         keys.append((key, in_dict))
-    at = where
+    at, root = where, not where   # the root's keys are spelled bare, even the key ""
     for key, in_dict in reversed(keys):
-        at = (f"{at}.{key}" if at else str(key)) if in_dict else f"{at}[{key}]"
+        at = (str(key) if root else f"{at}.{key}") if in_dict else f"{at}[{key}]"
+        root = False
     return at
 
 
@@ -239,6 +240,7 @@ def line_of_key(text: str, key: str | None) -> int:
     pos = _WS.match(text).end()
     rest = key or ""
     top_empty = key == ""                 # the top-level key "" (the root is never named "")
+    at_root = True                        # a root key is not after a "." (".x" is key ".x")
     try:
         while rest or top_empty:
             top_empty = False
@@ -250,12 +252,14 @@ def line_of_key(text: str, key: str | None) -> int:
                         break
                     at = _WS.match(text, at + 1).end()
                 else:
-                    pos, rest = at, rest[m.end():]
+                    pos, rest, at_root = at, rest[m.end():], False
                     continue
                 break
             if not text.startswith("{", pos):
                 break
-            rest = rest.removeprefix(".")
+            if not at_root:
+                rest = rest.removeprefix(".")
+            at_root = False
             best: tuple[str, int, int] | None = None   # (key, where it is, where its value is)
             at = _WS.match(text, pos + 1).end()
             while text.startswith('"', at):

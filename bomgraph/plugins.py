@@ -214,8 +214,12 @@ def _py_files(root: str) -> list[tuple[str, Path]]:
             try:
                 if os.path.normcase(e.name).endswith(".py") and e.is_file():
                     out.append((prefix + e.name, Path(e.path)))
-                elif e.is_dir() and _new_folder(e, real):
-                    folders.append((prefix + e.name + "/", e.path))
+                elif e.is_dir():
+                    follow = _new_folder(e, real)
+                    if follow:
+                        folders.append((prefix + e.name + "/", e.path))
+                    elif follow is None:   # watched: code written into it lists it
+                        signatures.append((e.path, _stat_signature(Path(e.path))))
             except OSError:
                 continue
     if all(sig is not None and _aged(sig) for _, sig in signatures):
@@ -223,17 +227,23 @@ def _py_files(root: str) -> list[tuple[str, Path]]:
     return out
 
 
-def _new_folder(entry: os.DirEntry[str], real: set[str]) -> bool:
+def _new_folder(entry: os.DirEntry[str], real: set[str]) -> bool | None:
     """Whether to list the folder ``entry``; a link: to a folder of Python code (a ``.py``
     file at its top, not a linked data set), not to a folder of ``real`` (those listed) nor
-    to one above them (a loop); its real path is then added to ``real``."""
+    to one above them (a loop); its real path is then added to ``real``. None for a link
+    to a folder passed over for holding no code (or unreadable): its status is to be
+    watched, as the first module written into it (or its permissions given) lists it."""
     if not entry.is_symlink():
         return True
     path = os.path.realpath(entry.path)
     if any(path == r or r.startswith(path.rstrip(os.sep) + os.sep) for r in real):
         return False
-    if not any(os.path.normcase(n).endswith(".py") for n in os.listdir(path)):
-        return False
+    try:
+        names = os.listdir(path)
+    except OSError:
+        return None
+    if not any(os.path.normcase(n).endswith(".py") for n in names):
+        return None
     real.add(path)
     return True
 

@@ -114,10 +114,15 @@ def read_regular_file(path: str | os.PathLike[str]) -> bytes:
     over :data:`MAX_INPUT_BYTES`. Opened without blocking: opening a FIFO for reading waits
     for a writer (``bomgraph plot --results`` on a results.json that is a FIFO hung)."""
     fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_BINARY", 0))
-    with open(fd, "rb") as fh:
-        st = os.fstat(fh.fileno())
+    try:   # judged on the descriptor: open(fd) of a folder raises and leaves fd open
+        st = os.fstat(fd)
         if not stat.S_ISREG(st.st_mode):
             raise OSError(errno.EINVAL, "not a regular file")
+        fh = open(fd, "rb")
+    except BaseException:
+        os.close(fd)
+        raise
+    with fh:
         if st.st_size > MAX_INPUT_BYTES:
             raise input_too_large(path)
         chunks, size = [], 0
