@@ -134,17 +134,20 @@ def test_a_g2o_edge_of_weak_rotation_imports_and_reads_without_a_warning(tmp_pat
     g2o = src / "bearing_only_sim_g2o" / "slam2D_bearing_only_initial_guess.g2o"
     if not g2o.exists():
         pytest.fail(f"{g2o} is missing: the shipped recordings are needed (BOMGRAPH_DATA)")
-    lines = g2o.read_text().splitlines()
-    k = next(i for i, ln in enumerate(lines) if ln.startswith("EDGE_SE2 "))
-    f = lines[k].split()
-    f[-1] = "0.1"          # I33: rotation information 0.1
-    lines[k] = " ".join(f)
-    weak = tmp_path / "weak.g2o"
-    weak.write_text("\n".join(lines) + "\n")
-    out = tmp_path / "weak.jsonl"
-    proc = bomgraph("import", "g2o", str(weak), "--out", str(out))
-    assert proc.returncode == 0, proc.stderr
-    assert b"WARNING" not in proc.stderr, proc.stderr
-    proc = bomgraph("run", str(out), "--method", "triangulate", "--out", str(tmp_path / "e.est"))
-    assert proc.returncode == 0, proc.stderr
-    assert b"WARNING" not in proc.stderr, proc.stderr
+    for every in (False, True):   # one weak edge; every edge weak (the header's sigma then)
+        lines = g2o.read_text().splitlines()
+        for k in [i for i, ln in enumerate(lines) if ln.startswith("EDGE_SE2 ")][
+                :None if every else 1]:
+            f = lines[k].split()
+            f[-1] = "0.1"          # I33: rotation information 0.1
+            lines[k] = " ".join(f)
+        weak = tmp_path / f"weak{every}.g2o"
+        weak.write_text("\n".join(lines) + "\n")
+        out = tmp_path / f"weak{every}.jsonl"
+        proc = bomgraph("import", "g2o", str(weak), "--out", str(out))
+        assert proc.returncode == 0, proc.stderr
+        assert b"WARNING" not in proc.stderr, proc.stderr
+        proc = bomgraph("run", str(out), "--method", "triangulate", "--out",
+                        str(tmp_path / f"e{every}.est"))
+        assert proc.returncode == 0, proc.stderr
+        assert b"WARNING" not in proc.stderr, proc.stderr
