@@ -28,7 +28,7 @@ from .bench import (Executor, execute_counted, refuse_runtime_methods, run_examp
 from .checks import instance
 from .errors import ConfigError, StreamFormatError
 from .evaluate import score_estimate
-from .experiments import PAPER_REPORTED, Experiment, FileSource, Task
+from .experiments import PAPER_REPORTED, Arm, Experiment, FileSource, Task
 from .jsonio import jsonable
 from .paired import PairedConfig, PairedRow, paired_comparison, references_for
 from .plots import MapPanel, error_vs_time_figure, final_maps_figure, map_figure
@@ -154,13 +154,16 @@ def final_by_run(results: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
     return rows
 
 
-def _pairable(by_run: Sequence[Mapping[str, Any]], results: Sequence[Mapping[str, Any]]
-              ) -> list[dict[str, Any]]:
-    """``by_run`` without the score of a run scored against its own arm's map (a stream
-    without truth, the arm being ``--reference``): its error there is rounding (~1e-16 m),
-    and a ratio over it was ~1e15 in the paired table (h58)."""
-    own = {(r["experiment"], r["arm"], r["run"]) for r in results
-           if r.get("scored_against") == f"reference {r['arm']}"}
+def _pairable(by_run: Sequence[Mapping[str, Any]], results: Sequence[Mapping[str, Any]],
+              experiments: Sequence[Experiment]) -> list[dict[str, Any]]:
+    """``by_run`` without a run scored against its own arm's map (no truth, the arm *is* the
+    reference, options too: h59): its error is rounding, a ratio over it ~1e15 (h58)."""
+    as_run: Callable[[Arm], tuple] = lambda a: (a.label, a.method, dict(a.options),
+                                                 a.prior_fraction)
+    selves = {(e.name, a.label) for e in experiments for a in e.arms
+              if e.reference is not None and as_run(a) == as_run(e.reference)}
+    own = {(r["experiment"], r["arm"], r["run"]) for r in results if (r["experiment"], r[
+        "arm"]) in selves and r.get("scored_against") == f"reference {r['arm']}"}
     return [{**r, "mpe_m": math.nan} if (r["experiment"], r["arm"], r["run"]) in own
             else dict(r) for r in by_run]
 
@@ -408,7 +411,7 @@ def _compare(experiments: Sequence[Experiment], out: Path, executor: Executor,
     written = write_estimate_files(out, tasks, results) if estimates else []
     summary = summarise(results)
     by_run = final_by_run(results)
-    paired = paired_comparison(_pairable(by_run, results), references, paired_config)
+    paired = paired_comparison(_pairable(by_run, results, experiments), references, paired_config)
     wall = time.perf_counter() - start
     files = [out / n for n in ("results.json", "results.csv", "summary.csv", "final_by_run.csv",
                                "paired.csv")]
