@@ -41,12 +41,13 @@ MAX_BEARING_SIGMA_RAD = MAX_ANGLE_SIGMA_RAD
 #: sigma typed with a wrong exponent. At 1e-300 its square underflows to 0 and every method's
 #: weights 1 / sigma^2 overflow.
 MIN_BEARING_SIGMA_RAD = 1e-9
-#: an odometry sigma above this (metres for dx, dy; radians for dpsi). The turn's limit is a
-#: full turn, not :data:`MAX_ANGLE_SIGMA_RAD`: a heading sigma that large is a valid "turn
-#: unknown" (a g2o edge whose rotation information is below 0.3 states one, and the g2o
-#: importer puts the edges' sigmas in the header when they agree); a turn sigma in degrees is
-#: left to :class:`OdometryScale`
-MAX_ODOMETRY_SIGMA = (1e5, 1e5, 2 * math.pi)
+#: the header's odometry sigmas above this (metres for dx, dy; radians for dpsi, as for a
+#: bearing): a header's turn sigma above pi/sqrt(3) is most likely degrees
+MAX_ODOMETRY_SIGMA = (1e5, 1e5, MAX_ANGLE_SIGMA_RAD)
+#: a step's own odometry sigmas above this: one step's turn sigma up to a full turn is a
+#: valid "turn unknown" (a g2o edge whose rotation information is below 0.3 states one; the
+#: g2o importer keeps such sigmas on the steps, not in the header)
+MAX_STEP_ODOMETRY_SIGMA = (1e5, 1e5, 2 * math.pi)
 #: a turn beyond this many of its stated sigmas (and a full turn) is taken for degrees: once
 #: in 4e11 steps a draw of the noise (5 sigmas, once in 1.7 million, were drawn by a 2000-step
 #: simulation at noise scale 34, whose turn sigma is 1.78 rad)
@@ -71,7 +72,8 @@ MAX_COORDINATE_M = 1e9
 MAX_ABS_ANGLE_RAD = 2 * math.pi
 
 
-_DEGREES = " (a full turn; a sigma in degrees?)"
+_DEGREES = (" (pi/sqrt(3), the spread of a heading uniform on the circle; a sigma in "
+            "degrees?)")
 
 
 def header_problems(header: StreamHeader) -> list[tuple[str, str]]:
@@ -145,7 +147,7 @@ def step_problem(step: Step, sigma_dpsi_rad: float = 0.0, *,
                             f"turn in one step; dpsi_rad is radians (degrees?)")
     if step.odom_sigma is not None:
         for name, value, limit in zip(("sigma_dx_m", "sigma_dy_m", "sigma_dpsi_rad"),
-                                      step.odom_sigma, MAX_ODOMETRY_SIGMA):
+                                      step.odom_sigma, MAX_STEP_ODOMETRY_SIGMA):
             if value > limit:
                 return ("odom_sigma", f"step {step.t}: {name} = {value:g} is above {limit:.3g}"
                                       + " (a full turn; degrees?)" * (name == "sigma_dpsi_rad"))
@@ -271,6 +273,7 @@ def refuse_implausible(header: StreamHeader, steps: Iterable[Step],
 
 
 __all__ = ["MAX_ANGLE_SIGMA_RAD", "MAX_BEARING_SIGMA_RAD", "MAX_ODOMETRY_SIGMA",
+           "MAX_STEP_ODOMETRY_SIGMA",
            "MIN_MOTION_PER_NOISE", "MIN_SCALE_STEPS", "TURN_SIGMAS", "SENSOR_RANGE_LIMITS_M",
            "PRIOR_SIGMA_LIMITS_M",
            "MAX_STEP_M", "MAX_COORDINATE_M", "MAX_ABS_ANGLE_RAD", "OdometryScale", "header_problems",

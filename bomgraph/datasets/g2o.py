@@ -32,7 +32,9 @@ in the frame of pose i, so the covariance ``Omega^-1`` is mapped by ``J = diag(R
 stream keeps no correlations; the largest dropped correlation coefficient goes to
 ``meta["odometry_max_dropped_correlation"]``. If every edge gives the same sigmas they are the
 header's ``odometry_sigma``; otherwise each step carries its own ``odom_sigma`` and the header
-holds the per-component median.
+holds the per-component median. A header turn sigma above pi/sqrt(3) (edges of rotation
+information below 0.3: "turn unknown") would read as degrees: the steps then carry their own
+and the header's is capped at pi/sqrt(3).
 
 **Bearing sigma.** ``1 / sqrt(w)`` of the bearing edges (their median if they differ; the
 spread goes to meta). The project's notes call ``w`` a placeholder: pass ``bearing_sigma_rad``
@@ -59,7 +61,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import DatasetError, StreamFormatError
-from ..plausibility import MAX_ABS_ANGLE_RAD, refuse_implausible
+from ..plausibility import MAX_ABS_ANGLE_RAD, MAX_ODOMETRY_SIGMA, refuse_implausible
 from ..stream import Step, Stream, StreamHeader, Truth
 from ..stream_file import parse_priors
 from ._text import (chain_order, checked_bearing_sigma, dataset_error, file_label, parse_float,
@@ -287,6 +289,12 @@ def import_g2o(path: str | os.PathLike[str], *, truth_path: str | os.PathLike[st
     header_odo = (tuple(float(v) for v in sig[0]) if len(sig) and uniform
                   else tuple(float(v) for v in np.median(sig, axis=0)) if len(sig)
                   else (0.0, 0.0, 0.0))
+    if header_odo[2] > MAX_ODOMETRY_SIGMA[2]:
+        # edges whose rotation is unknown (information below 0.3): valid on a step, but a
+        # header's turn sigma that large reads as degrees, so the steps keep their own and
+        # the header's is capped
+        uniform = False
+        header_odo = (header_odo[0], header_odo[1], MAX_ODOMETRY_SIGMA[2])
 
     # bearings ------------------------------------------------------------------------------
     per_step: list[dict[int, float]] = [{} for _ in order]

@@ -174,10 +174,8 @@ def _restated(work: Path, name: str, header: dict | None = None,
 @pytest.mark.parametrize("header,step_sigma,straight,needles", [
     ({"bearing_sigma_rad": 3.0}, None, False,
      ["line 1: 'bearing_sigma_rad': 3 rad is above pi/sqrt(3)"]),
-    # a turn sigma of 3 (degrees) on a robot turning little: the odometry-scale check (the
-    # header's limit is a full turn: a larger turn sigma is a valid 'turn unknown')
-    ({"odometry_sigma": [0.03, 0.0, 3.0]}, None, True,
-     ["line 1: 'odometry_sigma': the 60 steps turn", "degrees?"]),
+    ({"odometry_sigma": [0.03, 0.0, 3.0]}, None, False,
+     ["line 1: 'odometry_sigma': sigma_dpsi_rad = 3 is above 1.81", "degrees?"]),
     ({"odometry_sigma": [5.0, 5.0, 0.0524]}, None, False,
      ["line 1: 'odometry_sigma': the 60 steps move 0.1", "centimetres?"]),
     ({"odometry_sigma": [0.03, 0.0, 30.0 / 57.3]}, None, False, None),  # 30 degrees: possible
