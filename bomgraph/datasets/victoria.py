@@ -21,7 +21,9 @@ Conversion:
   :func:`.g2o.odometry_sigma_from_information`), and the square roots of that diagonal are
   kept (the file's off-diagonal entries are all zero, but the turn correlates dx and dy when
   their sigmas differ; the largest dropped correlation goes to meta). Uniform sigmas go to
-  the header; otherwise each step carries its own ``odom_sigma``.
+  the header; otherwise each step carries its own ``odom_sigma``. A header turn sigma above
+  pi/sqrt(3) ("turn unknown") would read as degrees: the steps then carry their own and the
+  header's is capped at pi/sqrt(3), as in the g2o importer.
 - Bearing sigma: the point covariance ``C`` propagated to the bearing,
   ``var = g C g^T`` with ``g = [-y, x] / r^2``; the header holds the median over all
   measurements (a stream has one bearing sigma; the spread goes to meta). GTSAM's own example
@@ -41,7 +43,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import DatasetError
-from ..plausibility import refuse_implausible
+from ..plausibility import MAX_ODOMETRY_SIGMA, refuse_implausible
 from ..stream import Step, Stream, StreamHeader
 from .g2o import odometry_sigma_from_information
 from ._text import (chain_order, checked_bearing_sigma, dataset_error, file_label, parse_float,
@@ -142,6 +144,12 @@ def import_victoria(path: str | os.PathLike[str], *,
     uniform = len(sig) == 0 or bool(np.allclose(sig, sig[0], rtol=1e-9, atol=0.0))
     header_odo = (tuple(float(s) for s in (sig[0] if uniform else np.median(sig, axis=0)))
                   if len(sig) else (0.0, 0.0, 0.0))
+    if header_odo[2] > MAX_ODOMETRY_SIGMA[2]:
+        # as the g2o importer: a turn sigma above pi/sqrt(3) ("turn unknown") is valid on a
+        # step, but in the header it reads as degrees: the steps keep theirs, the header's
+        # is capped
+        uniform = False
+        header_odo = (header_odo[0], header_odo[1], MAX_ODOMETRY_SIGMA[2])
 
     per_step: list[dict[int, float]] = [{} for _ in order]
     first_line: dict[tuple[int, int], int] = {}

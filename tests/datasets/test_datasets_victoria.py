@@ -83,3 +83,20 @@ def test_gtsam_between_factor_error_is_in_the_measured_pose_frame():
     values.insert(1, gtsam.Pose2(1.0 + h, 0.2, th))
     err = factor.unwhitenedError(values)
     np.testing.assert_allclose(err, [math.cos(th) * h, -math.sin(th) * h, 0.0], atol=1e-12)
+
+
+def test_victoria_weak_rotation_keeps_the_steps_sigmas_and_caps_the_header(tmp_path):
+    """ODOMETRY records whose turn variance is 10 (sigma 3.16 rad: 'turn unknown', valid) were
+    refused by the importer once 27c0b72 limited the header's turn sigma to pi/sqrt(3) (only
+    the g2o importer capped it; h60 noticed): the steps keep their own, the header's is
+    capped, and the stream reads back without a warning."""
+    from bomgraph.plausibility import MAX_ODOMETRY_SIGMA
+    text = VICTORIA.replace(" 4e-06 0 4e-06\n", " 4e-06 0 10\n")
+    (tmp_path / "v.txt").write_text(text)
+    s = import_victoria(tmp_path / "v.txt")
+    assert s.header.odometry_sigma[2] == MAX_ODOMETRY_SIGMA[2]
+    assert s.header.meta["odometry_sigma_per_step"] is True
+    assert [float(st.odom_sigma[2]) for st in s.steps[1:]] == pytest.approx([math.sqrt(10)] * 3)
+    write_stream(s, tmp_path / "v.jsonl")
+    back = read_stream(tmp_path / "v.jsonl")
+    assert back.header.odometry_sigma[2] == MAX_ODOMETRY_SIGMA[2]

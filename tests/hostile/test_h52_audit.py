@@ -18,7 +18,7 @@ sys.path.insert(0, str(ROOT / "tests" / "datasets"))
 from dataset_excerpts import write_g2o  # noqa: E402
 
 #: JSON Python's parser gives up on (RecursionError), and an integer it will not convert
-#: (ValueError): both valid JSON. 100,000 deep: Python 3.13's parser reads 3,000 (3.11's gave
+#: (ValueError): both valid JSON. 20,000 deep: Python 3.13's parser reads 3,000 (3.11's gave
 #: up there), and gives up by 10,000; 20,000 is still a command line argument (< 128 KiB)
 DEEP = "[" * 20_000 + "]" * 20_000
 LONG_INT = "9" * 5000
