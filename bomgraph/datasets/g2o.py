@@ -196,6 +196,20 @@ class _G2oFile:
             self.bearings.append((v["i"], v["l"], line, v["bearing"], v["w"]))
 
 
+def header_odometry_sigma(sig: np.ndarray) -> tuple[tuple[float, float, float], bool]:
+    """The header's ``odometry_sigma`` from the steps' sigmas ``sig`` (T, 3), and whether they
+    are all the same (then the steps need none of their own): their common value, else the
+    per-component median. A turn sigma above :data:`MAX_ODOMETRY_SIGMA` (pi/sqrt(3), edges
+    whose rotation is unknown: information below 0.3) is valid on a step, but a header's that
+    large reads as degrees: the steps then keep their own and the header's is capped."""
+    uniform = len(sig) == 0 or bool(np.allclose(sig, sig[0], rtol=1e-9, atol=0.0))
+    header = (tuple(float(v) for v in (sig[0] if uniform else np.median(sig, axis=0)))
+              if len(sig) else (0.0, 0.0, 0.0))
+    if header[2] > MAX_ODOMETRY_SIGMA[2]:
+        return (header[0], header[1], MAX_ODOMETRY_SIGMA[2]), False
+    return header, uniform
+
+
 def odometry_sigma_from_information(dth_rad: float, information: np.ndarray
                                     ) -> tuple[np.ndarray, float]:
     """Independent ``[dx, dy, dpsi]`` sigmas of a g2o ``EDGE_SE2`` (module docstring).
@@ -285,16 +299,7 @@ def import_g2o(path: str | os.PathLike[str], *, truth_path: str | os.PathLike[st
         odoms[t] = meas
         sig[t], corr = odometry_sigma_from_information(meas[2], info)
         max_corr = max(max_corr, corr)
-    uniform = len(sig) == 0 or bool(np.allclose(sig, sig[0], rtol=1e-9, atol=0.0))
-    header_odo = (tuple(float(v) for v in sig[0]) if len(sig) and uniform
-                  else tuple(float(v) for v in np.median(sig, axis=0)) if len(sig)
-                  else (0.0, 0.0, 0.0))
-    if header_odo[2] > MAX_ODOMETRY_SIGMA[2]:
-        # edges whose rotation is unknown (information below 0.3): valid on a step, but a
-        # header's turn sigma that large reads as degrees, so the steps keep their own and
-        # the header's is capped
-        uniform = False
-        header_odo = (header_odo[0], header_odo[1], MAX_ODOMETRY_SIGMA[2])
+    header_odo, uniform = header_odometry_sigma(sig)
 
     # bearings ------------------------------------------------------------------------------
     per_step: list[dict[int, float]] = [{} for _ in order]

@@ -43,9 +43,9 @@ from typing import Any
 import numpy as np
 
 from ..errors import DatasetError
-from ..plausibility import MAX_ODOMETRY_SIGMA, refuse_implausible
+from ..plausibility import refuse_implausible
 from ..stream import Step, Stream, StreamHeader
-from .g2o import odometry_sigma_from_information
+from .g2o import header_odometry_sigma, odometry_sigma_from_information
 from ._text import (chain_order, checked_bearing_sigma, dataset_error, file_label, parse_float,
                     parse_int, read_lines)
 
@@ -141,15 +141,7 @@ def import_victoria(path: str | os.PathLike[str], *,
         odoms[t] = meas
         sig[t], corr = odometry_sigma_from_information(float(meas[2]), np.linalg.inv(cov))
         max_corr = max(max_corr, corr)
-    uniform = len(sig) == 0 or bool(np.allclose(sig, sig[0], rtol=1e-9, atol=0.0))
-    header_odo = (tuple(float(s) for s in (sig[0] if uniform else np.median(sig, axis=0)))
-                  if len(sig) else (0.0, 0.0, 0.0))
-    if header_odo[2] > MAX_ODOMETRY_SIGMA[2]:
-        # as the g2o importer: a turn sigma above pi/sqrt(3) ("turn unknown") is valid on a
-        # step, but in the header it reads as degrees: the steps keep theirs, the header's
-        # is capped
-        uniform = False
-        header_odo = (header_odo[0], header_odo[1], MAX_ODOMETRY_SIGMA[2])
+    header_odo, uniform = header_odometry_sigma(sig)
 
     per_step: list[dict[int, float]] = [{} for _ in order]
     first_line: dict[tuple[int, int], int] = {}
