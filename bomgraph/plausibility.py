@@ -233,7 +233,7 @@ class OdometryScale:
         states its own, else ``odometry_sigma``."""
         k = _K
         key = "odom_sigma" if self.own_sigma else "odometry_sigma"
-        if 2 * len(self._unknown_turns) > self.n:   # no division (and n >= 1 here)
+        if 2 * len(self._unknown_turns) > self.n:   # no division; False without odometry
             u = self._unknown_turns
             span = f"{min(u):g}" + (f" to {max(u):g}" if max(u) > min(u) else "")
             return (key, f"{len(u)} of the {self.n} steps state a turn sigma above pi/sqrt(3) = "

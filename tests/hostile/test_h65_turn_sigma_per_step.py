@@ -26,11 +26,12 @@ def _warned(path: Path, caplog: pytest.LogCaptureFixture) -> list[str]:
     return [r.getMessage() for r in caplog.records if r.levelno >= logging.WARNING]
 
 
-def _per_step(sim: Stream, path: Path, sigma: tuple[float, float, float], *,
+def _per_step(sim: Stream, path: Path, sigma: tuple[float, float, float] | None, *,
               turn: str = "as simulated", header: tuple[float, float, float] | None = None
               ) -> Path:
-    """``sim`` with every step stating ``sigma``; ``turn``: 'none' (a straight line: every turn
-    exactly 0), 'little' (+-0.01 rad) or 'in place' (every translation exactly 0)."""
+    """``sim`` with every step stating ``sigma`` (None: none, the header's are used); ``turn``:
+    'none' (a straight line: every turn exactly 0), 'little' (+-0.01 rad) or 'in place'
+    (every translation exactly 0)."""
     steps = []
     for st in sim.steps:
         if st.odom is not None:
@@ -41,7 +42,8 @@ def _per_step(sim: Stream, path: Path, sigma: tuple[float, float, float], *,
                 odom[2] = 0.01 * (-1) ** st.t
             elif turn == "in place":
                 odom[:2] = 0.0
-            st = replace(st, odom=odom, odom_sigma=np.array(sigma, dtype=float))
+            st = replace(st, odom=odom,
+                         odom_sigma=None if sigma is None else np.array(sigma, dtype=float))
         steps.append(st)
     head = sim.header if header is None else replace(sim.header, odometry_sigma=header)
     write_stream(Stream(head, tuple(steps), None), path)
@@ -80,14 +82,15 @@ def test_per_step_turn_sigmas_in_degrees_on_a_robot_that_does_not_turn(
 
 @pytest.mark.parametrize("turn,sigma", [
     (turn, sigma) for turn in ("as simulated", "none", "little", "in place")
-    for sigma in ((0.03, 0.0, 0.0524), (0.03, 0.03, 0.0524), (0.0, 0.0, 0.0), (0.03, 0.0, 1.8))
-    if (turn, sigma[2]) != ("little", 1.8)])   # +-0.01 rad: a tenth of 1.8's bound, warned of
+    for sigma in (None, (0.03, 0.0, 0.0524), (0.03, 0.03, 0.0524), (0.0, 0.0, 0.0),
+                  (0.03, 0.0, 1.8))
+    if (turn, sigma and sigma[2]) != ("little", 1.8)])   # +-0.01 rad: a tenth of 1.8's bound
 def test_plausible_per_step_sigmas_on_any_motion_are_not_warned_of(
         tmp_path: Path, sim: Stream, caplog: pytest.LogCaptureFixture, turn: str,
-        sigma: tuple[float, float, float]) -> None:
+        sigma: tuple[float, float, float] | None) -> None:
     """No false warning and no division by zero: a straight line (no turn judged), a robot
     turning in place (no translation judged), sigmas of 0 (nothing judged), a turn sigma just
-    below pi/sqrt(3)."""
+    below pi/sqrt(3); the header's sigmas (None) alike."""
     assert _warned(_per_step(sim, tmp_path / "ok.jsonl", sigma, turn=turn), caplog) == []
 
 
@@ -135,3 +138,13 @@ def test_the_cli_warns_of_the_per_step_degrees_stream(tmp_path: Path) -> None:
     assert proc.returncode == 0, proc.stderr
     warned = [ln for ln in proc.stderr.decode().splitlines() if "WARNING" in ln]
     assert len(warned) == 1 and "degrees?" in warned[0], warned
+
+
+def test_no_odometry_step_is_not_judged() -> None:
+    """A stream of the step t = 0 alone, or of steps without odometry: nothing judged (and no
+    division by the zero steps)."""
+    from bomgraph.plausibility import OdometryScale
+    from bomgraph.stream import Step
+    scale = OdometryScale((0.03, 0.0, 5.0))
+    scale.add(Step(0, None, np.zeros(0, np.int64), np.zeros(0)))
+    assert scale.n == 0 and scale.problem() is None
