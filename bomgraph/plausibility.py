@@ -202,7 +202,8 @@ class OdometryScale:
         self._n_move = self._n_turn = 0             # the steps judged
         self._move_ratio = self._turn_ratio = 0.0   # sums of min(motion / bound, 1)
         self._move_noise = self._turn_noise = 0.0   # sums of sigma
-        self._unknown_turns: list[float] = []      # steps' own turn sigmas above pi/sqrt(3)
+        self._n_unknown = 0                         # steps' own turn sigmas above pi/sqrt(3),
+        self._unknown_span = (math.inf, -math.inf)  # and their least and greatest
 
     def add(self, step: Step) -> None:
         if step.odom is None:
@@ -212,7 +213,9 @@ class OdometryScale:
         self.n += 1
         if step.odom_sigma is not None and \
                 MAX_ODOMETRY_SIGMA[2] < float(sigma[2]) <= MAX_STEP_ODOMETRY_SIGMA[2]:
-            self._unknown_turns.append(float(sigma[2]))
+            lo, hi = self._unknown_span
+            self._n_unknown += 1
+            self._unknown_span = (min(lo, float(sigma[2])), max(hi, float(sigma[2])))
         moved = math.hypot(float(step.odom[0]), float(step.odom[1]))
         noise = max(float(sigma[0]), float(sigma[1]))
         if moved and noise:
@@ -233,10 +236,10 @@ class OdometryScale:
         states its own, else ``odometry_sigma``."""
         k = _K
         key = "odom_sigma" if self.own_sigma else "odometry_sigma"
-        if 2 * len(self._unknown_turns) > self.n:   # no division; False without odometry
-            u = self._unknown_turns
-            span = f"{min(u):g}" + (f" to {max(u):g}" if max(u) > min(u) else "")
-            return (key, f"{len(u)} of the {self.n} steps state a turn sigma above pi/sqrt(3) = "
+        if 2 * self._n_unknown > self.n:   # no division; False without odometry
+            lo, hi = self._unknown_span
+            span = f"{lo:g}" + (f" to {hi:g}" if hi > lo else "")
+            return (key, f"{self._n_unknown} of the {self.n} steps state a turn sigma above pi/sqrt(3) = "
                          f"{MAX_ODOMETRY_SIGMA[2]:.3g} rad ({span}), the spread of a heading "
                          f"uniform on the circle: a step may state its turn unknown, but most "
                          f"steps doing so leave the odometry no turn; sigmas in degrees?")
