@@ -182,7 +182,17 @@ class OdometryScale:
     centimetres for metres or degrees for radians, most likely. A step whose translation (or
     turn) reads exactly 0 is not judged for it (a robot standing still: noise never reads
     exactly 0, and nothing says what it would be), nor one stating a sigma of 0; so a stream
-    that never moves (or never turns) is not judged."""
+    that never moves (or never turns) is not judged.
+
+    Turns are also judged by their stated sigmas alone, as the header's are
+    (:func:`header_problems`): a step's own turn sigma may be above pi/sqrt(3) (a 'turn
+    unknown', :data:`MAX_STEP_ODOMETRY_SIGMA`), but when more than half the odometry steps
+    state one, it is the stream's turn sigma, and a sigma in degrees, most likely (as the
+    header's). Their turns cannot tell: on a turning robot, turn sigmas in degrees are 57
+    times the noise but only some 6 to 10 times the turns (the simulator's robot turns about
+    10 of its sigmas a step: 3 or 5 written for degrees averaged 0.11 to 0.19 of the bound,
+    above the tenth), as a g2o file stating every edge's rotation 'unknown' (0.185), which
+    this now warns of too. A step's above a full turn is :func:`step_problem`'s, not counted."""
 
     def __init__(self, odometry_sigma: tuple[float, float, float]) -> None:
         self._header = odometry_sigma
@@ -192,6 +202,8 @@ class OdometryScale:
         self._n_move = self._n_turn = 0             # the steps judged
         self._move_ratio = self._turn_ratio = 0.0   # sums of min(motion / bound, 1)
         self._move_noise = self._turn_noise = 0.0   # sums of sigma
+        self._n_unknown = 0                         # steps' own turn sigmas above pi/sqrt(3),
+        self._unknown_span = (math.inf, -math.inf)  # and their least and greatest
 
     def add(self, step: Step) -> None:
         if step.odom is None:
@@ -199,6 +211,11 @@ class OdometryScale:
         sigma = self._header if step.odom_sigma is None else step.odom_sigma
         self.own_sigma |= step.odom_sigma is not None
         self.n += 1
+        if step.odom_sigma is not None and \
+                MAX_ODOMETRY_SIGMA[2] < float(sigma[2]) <= MAX_STEP_ODOMETRY_SIGMA[2]:
+            lo, hi = self._unknown_span
+            self._n_unknown += 1
+            self._unknown_span = (min(lo, float(sigma[2])), max(hi, float(sigma[2])))
         moved = math.hypot(float(step.odom[0]), float(step.odom[1]))
         noise = max(float(sigma[0]), float(sigma[1]))
         if moved and noise:
@@ -214,10 +231,18 @@ class OdometryScale:
             self._turn_ratio += min(turned / (_K * turn_noise), 1.0)
 
     def problem(self) -> tuple[str, str] | None:
-        """``(key, message)`` if the odometry contradicts its stated sigmas, else None; the
-        key is ``odom_sigma`` if a step states its own, else ``odometry_sigma``."""
+        """``(key, message)`` if the odometry contradicts its stated sigmas, or most steps
+        state a turn sigma above pi/sqrt(3), else None; the key is ``odom_sigma`` if a step
+        states its own, else ``odometry_sigma``."""
         k = _K
         key = "odom_sigma" if self.own_sigma else "odometry_sigma"
+        if 2 * self._n_unknown > self.n:   # no division; False without odometry
+            lo, hi = self._unknown_span
+            span = f"{lo:g}" + (f" to {hi:g}" if hi > lo else "")
+            return (key, f"{self._n_unknown} of the {self.n} steps state a turn sigma above pi/sqrt(3) = "
+                         f"{MAX_ODOMETRY_SIGMA[2]:.3g} rad ({span}), the spread of a heading "
+                         f"uniform on the circle: a step may state its turn unknown, but most "
+                         f"steps doing so leave the odometry no turn; sigmas in degrees?")
         for what, n, done, noise, ratio, unit, other in (
                 ("move", self._n_move, self._moved, self._move_noise, self._move_ratio, "m",
                  "centimetres"),

@@ -201,7 +201,9 @@ def header_odometry_sigma(sig: np.ndarray) -> tuple[tuple[float, float, float], 
     are all the same (then the steps need none of their own): their common value, else the
     per-component median. A turn sigma above :data:`MAX_ODOMETRY_SIGMA` (pi/sqrt(3), edges
     whose rotation is unknown: information below 0.3) is valid on a step, but a header's that
-    large reads as degrees: the steps then keep their own and the header's is capped."""
+    large reads as degrees: the steps then keep their own and the header's is capped (the
+    stream reader still warns when more than half the steps state one, as of a header's:
+    :class:`~bomgraph.plausibility.OdometryScale`)."""
     uniform = len(sig) == 0 or bool(np.allclose(sig, sig[0], rtol=1e-9, atol=0.0))
     header = (tuple(float(v) for v in (sig[0] if uniform else np.median(sig, axis=0)))
               if len(sig) else (0.0, 0.0, 0.0))
