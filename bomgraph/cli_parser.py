@@ -178,11 +178,13 @@ def build_parser() -> argparse.ArgumentParser:
                    help="every method on the recorded datasets under DATA_DIR (e.g. "
                         "../shared/data) instead of the simulation")
     c.add_argument("--out", default="compare-results",
-                   help="output folder; the result files of an earlier compare in it are "
-                        "replaced, and the other files it wrote there (figures, estimates, "
-                        "streams; listed in OUT/.bomgraph-compare-files) that this one does not "
+                   help="output folder; the files an earlier compare wrote in it (listed in "
+                        "OUT/.bomgraph-compare-files) are replaced, and those this one does not "
                         "write and nobody changed since are removed; nothing else (the cache "
-                        "is kept)")
+                        "is kept). Any other file at a name compare writes (results.csv, a "
+                        "figure, estimates/index.csv; all of them in a folder from a bomgraph "
+                        "without that list) is refused before anything runs: move it or "
+                        "choose another folder")
     c.add_argument("--seed", type=_nonneg_int, help="the paper design's seed (default 0)")
     c.add_argument("--jobs", type=_jobs, help="local processes (-1, the default: one per core)")
     c.add_argument("--scheduler", default=None, metavar="ADDRESS",
