@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import argparse
 import math
-from typing import Any, Callable
+from typing import Any, Callable, NoReturn, Sequence
 
 #: a run over this many steps shows a progress bar (when stderr is a terminal).
 PROGRESS_MIN_STEPS = 1000
@@ -17,6 +17,28 @@ PROGRESS_MIN_STEPS = 1000
 #: paths"): a regular file there is replaced (written beside it, renamed into place); an input
 #: file is refused; a link is followed, a device or FIFO written to.
 REPLACES = "; an existing file of that name is replaced (never an input file)"
+
+
+class _Parser(argparse.ArgumentParser):
+    """An argument parser whose usage errors are one line and exit 2 (bad input gets one
+    line): ``bomgraph run: error: the following arguments are required: stream; see bomgraph
+    run --help``, not the usage block first. Its subcommands' parsers are of this class too
+    (argparse makes them of their parent's)."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: error: {' '.join(message.split())}; see {self.prog} "
+                     f"--help\n")
+
+    def parse_known_args(self, args: Sequence[str] | None = None,  # type: ignore[override]
+                         namespace: argparse.Namespace | None = None
+                         ) -> tuple[argparse.Namespace, list[str]]:
+        """As argparse's, but an argument left over is refused here, by the innermost
+        (sub)command's parser, so the error names that command (argparse's top parser said
+        ``bomgraph: error: unrecognized arguments``)."""
+        ns, extras = super().parse_known_args(args, namespace)
+        if extras:
+            self.error(f"unrecognized arguments: {' '.join(extras)}")
+        return ns, extras
 
 
 def _named(name: str) -> Callable[[Callable[[str], Any]], Callable[[str], Any]]:
@@ -79,7 +101,7 @@ def _version() -> str:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="bomgraph", description="Bearing-only mapping toolkit: "
+    p = _Parser(prog="bomgraph", description="Bearing-only mapping toolkit: "
                                 "BOM-STMDS and SLAM baselines side by side.")
     p.add_argument("--version", action="version", version=f"bomgraph {_version()}",
                    help="print the version and exit")
