@@ -301,7 +301,9 @@ def _compare(args: argparse.Namespace, seen: dict[str, int]) -> int:
     if streams:
         wrote.append(f"{len(streams)} stream files under {os.path.join(args.out, 'streams')}")
     cache = f" ({result.n_cached} from the cache)" if result.n_cached else ""
-    print(f"\n{len(result.results)} runs in {result.wall_s:.1f} s{cache}; wrote {', '.join(wrote)}")
+    n = len(result.results)
+    print(f"\n{n} run{'' if n == 1 else 's'} in {result.wall_s:.1f} s{cache}; wrote "
+          f"{', '.join(wrote)}")
     bad = [r["error"] for r in result.results if not r.get("ok") and str(
         r.get("error", "")).startswith(("StreamFormatError: ", "DatasetError: "))]
     if bad:  # a malformed input is the user's to fix, not a method's failure

@@ -80,3 +80,4 @@ def test_the_installed_command_too() -> None:
     assert proc.stderr.splitlines() == [
         "bomgraph run: error: the following arguments are required: stream, --method, --out; "
         "see bomgraph run --help"]
+
