@@ -255,7 +255,8 @@ def _compare(args: argparse.Namespace, seen: dict[str, int]) -> int:
     if args.dry_run:
         references_for(chosen, args.paired_reference)    # a wrong arm: refused here too
         return _print_plan(plan_compare(chosen, args.out, use_cache=not args.no_cache,
-                                        estimates=args.estimates, executor=executor), args.out)
+                                        estimates=args.estimates, executor=executor,
+                                        figures=not args.no_figures), args.out)
     if executor.backend == "dask" and args.jobs is not None and not getattr(args, "quiet", False):
         print(f"bomgraph: note: --jobs {args.jobs} is not used: the Dask cluster's workers run "
               f"the tasks (--dask-local N workers, or those started for --scheduler)",

@@ -181,3 +181,17 @@ def test_a_users_file_named_as_the_folder_lock_is_not_emptied(tmp_path: Path) ->
     assert (out / ".bomgraph.lock").read_text() == "my notes\n"
     (out / ".bomgraph.lock").write_text("12345\n")                # a lock of an earlier run
     compare([_exp()], out, executor=Executor("serial"), figures=False)
+
+
+def test_dry_run_refuses_what_compare_would(tmp_path: Path, stream: Path,
+                                            capsys: pytest.CaptureFixture) -> None:
+    """--dry-run says what compare would refuse; a user's figure is no clash without
+    figures."""
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "streams_s_maps.png").write_bytes(b"mine")
+    assert main(_cmd(stream, out, "--dry-run")) == 2
+    assert "streams_s_maps.png, which compare did not write" in capsys.readouterr().err
+    assert main(_cmd(stream, out, "--dry-run", "--no-figures")) == 0
+    assert main(_cmd(stream, out, "--no-figures")) == 0
+    assert (out / "streams_s_maps.png").read_bytes() == b"mine"
