@@ -255,7 +255,8 @@ def _compare(args: argparse.Namespace, seen: dict[str, int]) -> int:
     if args.dry_run:
         references_for(chosen, args.paired_reference)    # a wrong arm: refused here too
         return _print_plan(plan_compare(chosen, args.out, use_cache=not args.no_cache,
-                                        estimates=args.estimates, executor=executor), args.out)
+                                        estimates=args.estimates, executor=executor,
+                                        figures=not args.no_figures), args.out)
     if executor.backend == "dask" and args.jobs is not None and not getattr(args, "quiet", False):
         print(f"bomgraph: note: --jobs {args.jobs} is not used: the Dask cluster's workers run "
               f"the tasks (--dask-local N workers, or those started for --scheduler)",
@@ -301,7 +302,9 @@ def _compare(args: argparse.Namespace, seen: dict[str, int]) -> int:
     if streams:
         wrote.append(f"{len(streams)} stream files under {os.path.join(args.out, 'streams')}")
     cache = f" ({result.n_cached} from the cache)" if result.n_cached else ""
-    print(f"\n{len(result.results)} runs in {result.wall_s:.1f} s{cache}; wrote {', '.join(wrote)}")
+    n = len(result.results)
+    print(f"\n{n} run{'' if n == 1 else 's'} in {result.wall_s:.1f} s{cache}; wrote "
+          f"{', '.join(wrote)}")
     bad = [r["error"] for r in result.results if not r.get("ok") and str(
         r.get("error", "")).startswith(("StreamFormatError: ", "DatasetError: "))]
     if bad:  # a malformed input is the user's to fix, not a method's failure

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import argparse
 import math
-from typing import Any, Callable
+from typing import Any, Callable, NoReturn, Sequence
 
 #: a run over this many steps shows a progress bar (when stderr is a terminal).
 PROGRESS_MIN_STEPS = 1000
@@ -17,6 +17,28 @@ PROGRESS_MIN_STEPS = 1000
 #: paths"): a regular file there is replaced (written beside it, renamed into place); an input
 #: file is refused; a link is followed, a device or FIFO written to.
 REPLACES = "; an existing file of that name is replaced (never an input file)"
+
+
+class _Parser(argparse.ArgumentParser):
+    """An argument parser whose usage errors are one line and exit 2 (bad input gets one
+    line): ``bomgraph run: error: the following arguments are required: stream; see bomgraph
+    run --help``, not the usage block first. Its subcommands' parsers are of this class too
+    (argparse makes them of their parent's)."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: error: {' '.join(message.split())}; see {self.prog} "
+                     f"--help\n")
+
+    def parse_known_args(self, args: Sequence[str] | None = None,  # type: ignore[override]
+                         namespace: argparse.Namespace | None = None
+                         ) -> tuple[argparse.Namespace, list[str]]:
+        """As argparse's, but an argument left over is refused here, by the innermost
+        (sub)command's parser, so the error names that command (argparse's top parser said
+        ``bomgraph: error: unrecognized arguments``)."""
+        ns, extras = super().parse_known_args(args, namespace)
+        if extras:
+            self.error(f"unrecognized arguments: {' '.join(extras)}")
+        return ns, extras
 
 
 def _named(name: str) -> Callable[[Callable[[str], Any]], Callable[[str], Any]]:
@@ -79,7 +101,7 @@ def _version() -> str:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="bomgraph", description="Bearing-only mapping toolkit: "
+    p = _Parser(prog="bomgraph", description="Bearing-only mapping toolkit: "
                                 "BOM-STMDS and SLAM baselines side by side.")
     p.add_argument("--version", action="version", version=f"bomgraph {_version()}",
                    help="print the version and exit")
@@ -178,11 +200,13 @@ def build_parser() -> argparse.ArgumentParser:
                    help="every method on the recorded datasets under DATA_DIR (e.g. "
                         "../shared/data) instead of the simulation")
     c.add_argument("--out", default="compare-results",
-                   help="output folder; the result files of an earlier compare in it are "
-                        "replaced, and the other files it wrote there (figures, estimates, "
-                        "streams; listed in OUT/.bomgraph-compare-files) that this one does not "
+                   help="output folder; the files an earlier compare wrote in it (listed in "
+                        "OUT/.bomgraph-compare-files) are replaced, and those this one does not "
                         "write and nobody changed since are removed; nothing else (the cache "
-                        "is kept)")
+                        "is kept). Any other file at a name compare writes (results.csv, a "
+                        "figure, estimates/index.csv; all of them in a folder from a bomgraph "
+                        "without that list) is refused before anything runs: move it or "
+                        "choose another folder")
     c.add_argument("--seed", type=_nonneg_int, help="the paper design's seed (default 0)")
     c.add_argument("--jobs", type=_jobs, help="local processes (-1, the default: one per core)")
     c.add_argument("--scheduler", default=None, metavar="ADDRESS",

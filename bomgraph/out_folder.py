@@ -3,34 +3,99 @@
 * the names it writes: :data:`COMPARE_FILES`, :data:`COMPARE_FOLDERS`, file and folder names
   made from experiment, arm and run names (:func:`slug`, :func:`unique_slugs`);
 * the inputs it must never overwrite (:func:`refuse_inputs_among_outputs`);
-* the manifest of what it wrote (:data:`MANIFEST`): the next compare in the folder removes the
-  files of it that it does not write again, if nobody changed them since, and nothing else
-  (:func:`drop_earlier_outputs`).
+* the manifest of what it wrote (:data:`MANIFEST`), kept as a journal (:class:`OutputRecord`):
+  a file is listed, with its size and SHA-256, as soon as it is written, so the manifest
+  proves which files of the folder are compare's, after an interrupted compare too;
+* what it refuses to replace (:meth:`OutputRecord.refuse_foreign`): a file at one of the
+  names it would write that the manifest does not show compare wrote, unchanged since (a
+  user's ``results.csv``; a folder from a bomgraph older than the manifest);
+* what the next compare removes: the files the manifest lists that it does not write again,
+  if nobody changed them since, and nothing else (:func:`drop_earlier_outputs`).
 """
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import logging
 import os
 import re
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any, Mapping, Sequence
 
-from .experiments import DatasetSource, Experiment, FileSource
+from .experiments import DatasetSource, Experiment, FileSource, Task
 from .stdio import InputTooLargeError, OutputPathError, read_regular_file, write_text
 
 _log = logging.getLogger(__name__)
 
 
-#: What :func:`compare` writes into its folder: these files, every ``.png`` there, and
-#: everything under these sub-folders (``streams/`` is not among them: compare writes there
-#: only the streams of simulated and imported runs, never over a stream file it reads, which
-#: :func:`write_estimate_files` refuses as it writes).
+#: What :func:`compare` writes into its folder: these files (``example_map.txt`` when the
+#: example map cannot be drawn), ``.png`` figures, and files under these sub-folders
+#: (``streams/`` is not among them: compare writes there only the streams of simulated and
+#: imported runs, never over a stream file it reads, which :func:`write_estimate_files`
+#: refuses as it writes). :func:`planned_outputs` names each file.
 COMPARE_FILES = ("results.json", "results.csv", "summary.csv", "final_by_run.csv",
                  "paired.csv", "example_map.txt")
+RESULT_FILES = COMPARE_FILES[:5]
 COMPARE_FOLDERS = ("cache", "estimates")
+
+
+def figure_paths(out: Path, experiments: Sequence[Experiment]) -> list[Path]:
+    """The figures :func:`write_compare_figures` may write (and ``example_map.txt``, which
+    stands for the example map when it cannot be drawn)."""
+    paths = [out / f"{slug(e.name)}_error_vs_time.png" for e in experiments]
+    paths += [out / f"{slug(e.name)}_{slug(src.name)}_maps.png"
+              for e in experiments for src in e.sources]
+    if any(e.designed for e in experiments):
+        paths += [out / "example_map.png", out / "example_map.txt"]
+    return paths
+
+
+def source_hash(task: Task) -> str:
+    """A short hash of a task's source: it tells apart the streams a run's arms saw."""
+    return hashlib.sha256(json.dumps(task.source.key(), sort_keys=True).encode()).hexdigest()[:8]
+
+
+def estimate_paths(out: Path, tasks: Sequence[Task]) -> list[tuple[Path, Path | None]]:
+    """Where :func:`write_estimate_files` writes each task's estimate and, unless it read a
+    stream file the user has, its stream: ``out/estimates/EXPERIMENT/ARM/RUN.est`` and
+    ``out/streams/EXPERIMENT/RUN.jsonl`` (a run whose arms saw different streams, e.g. with
+    priors, gets its stream's short hash in the name). Names keep letters, digits and
+    ``.-_@``, the rest turned to ``_``; names that coincide so get a short hash each."""
+    names: dict[tuple[str, str], set[str]] = {}
+    for t in tasks:  # a stream file is not hashed again (it may be gone since its runs)
+        if not isinstance(t.source, FileSource):
+            names.setdefault((t.experiment, t.source.name), set()).add(source_hash(t))
+    exps = unique_slugs([t.experiment for t in tasks])
+    arms = {e: unique_slugs([t.arm.label for t in tasks if t.experiment == e]) for e in exps}
+    runs = {e: unique_slugs([t.source.name for t in tasks if t.experiment == e]) for e in exps}
+    paths: list[tuple[Path, Path | None]] = []
+    for t in tasks:
+        exp, run = exps[t.experiment], runs[t.experiment][t.source.name]
+        est = out / "estimates" / exp / arms[t.experiment][t.arm.label] / f"{run}.est"
+        if isinstance(t.source, FileSource):
+            paths.append((est, None))
+            continue
+        stem = (run if len(names[(t.experiment, t.source.name)]) == 1
+                else f"{run}-{source_hash(t)}")
+        paths.append((est, out / "streams" / exp / f"{stem}.jsonl"))
+    return paths
+
+
+def planned_outputs(out: Path, experiments: Sequence[Experiment], *, estimates: bool,
+                    figures: bool) -> list[Path]:
+    """Every file :func:`compare` with these settings may write in ``out``, but the cache's
+    (named by a hash of the task and the code: a file there is only ever replaced by a result
+    of that task, when it is not one)."""
+    paths = [out / n for n in RESULT_FILES]
+    if estimates:
+        tasks = [t for e in experiments for t in e.tasks()]
+        paths += [p for pair in estimate_paths(out, tasks) for p in pair if p is not None]
+        paths.append(out / "estimates" / "index.csv")
+    if figures:
+        paths += figure_paths(out, experiments)
+    return list(dict.fromkeys(paths))
 
 
 def input_paths(experiments: Sequence[Experiment]) -> dict[str, str]:
@@ -72,11 +137,15 @@ def refuse_inputs_among_outputs(out: Path, experiments: Sequence[Experiment]) ->
                                   f"or choose another folder")
 
 
-#: The files a compare wrote in its folder, written last (JSON: each file's path relative to
-#: the folder, size and modification time): the next compare there removes those it does not
-#: write again and nobody changed since, and nothing else.
+#: The record of the files a compare wrote in its folder: each one's path relative to the
+#: folder, size, modification time and SHA-256. While compare writes it is a journal (a JSON
+#: header line, then one JSON line per file, appended as soon as the file is written); when it
+#: is done, one JSON object (``files``: the entries). It proves which files of the folder are
+#: compare's, unchanged since: those the next compare may replace, or remove when it does not
+#: write them again; nothing else.
 MANIFEST = ".bomgraph-compare-files"
 _MANIFEST_FORMAT = "bomgraph-compare-files"
+_VERSION = 2  # 1: entries without sha256, proved by size and modification time
 
 
 def _file_id(path: str | os.PathLike[str]) -> tuple[int, int] | None:
@@ -89,30 +158,160 @@ def _file_id(path: str | os.PathLike[str]) -> tuple[int, int] | None:
     return st.st_dev, st.st_ino
 
 
-def _earlier_entries(out: Path) -> list[dict[str, Any]]:
-    """The previous manifest's entries; none if it is missing or not one (a foreign or
-    damaged file is never acted on)."""
+def _sha256(path: str | os.PathLike[str]) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        while chunk := fh.read(2**20):
+            h.update(chunk)
+    return h.hexdigest()
+
+
+def _entry(out: Path, path: Path) -> dict[str, Any] | None:
     try:
-        obj = json.loads(read_regular_file(out / MANIFEST).decode("utf-8"))
-    except (OSError, UnicodeDecodeError, ValueError, RecursionError, InputTooLargeError):
-        return []
-    if not isinstance(obj, dict) or obj.get("format") != _MANIFEST_FORMAT:
-        return []
-    files = obj.get("files")
-    if not isinstance(files, list):
-        return []
+        st = os.stat(path)
+        digest = _sha256(path)
+    except OSError:
+        return None
+    return {"path": os.path.relpath(path, out), "size": st.st_size,
+            "mtime_ns": st.st_mtime_ns, "sha256": digest}
+
+
+def _parse_manifest(data: bytes) -> list[dict[str, Any]] | None:
+    """A manifest's entries (either form); None when ``data`` is not a manifest."""
+    try:
+        text = data.decode("utf-8")
+        try:
+            obj = json.loads(text)
+        except ValueError:  # a journal: its last line may be cut by an interruption
+            obj = None
+        if isinstance(obj, dict) and "files" in obj:
+            head, files = obj, obj["files"]
+        else:
+            lines = text.splitlines()
+            head = json.loads(lines[0]) if lines else None
+            files = []
+            for line in lines[1:]:
+                with contextlib.suppress(ValueError):
+                    files.append(json.loads(line))
+    except (UnicodeDecodeError, ValueError, RecursionError):
+        return None
+    if (not isinstance(head, dict) or head.get("format") != _MANIFEST_FORMAT
+            or not isinstance(files, list)):
+        return None
     return [e for e in files if isinstance(e, dict) and isinstance(e.get("path"), str)
-            and isinstance(e.get("size"), int) and isinstance(e.get("mtime_ns"), int)]
+            and isinstance(e.get("size"), int) and isinstance(e.get("mtime_ns"), int)
+            and isinstance(e.get("sha256", ""), str)]
+
+
+def _read_manifest(out: Path) -> list[dict[str, Any]] | None:
+    """The manifest's entries: none when there is none; None when the file is there but
+    is not one (a foreign or damaged file is never acted on)."""
+    path = out / MANIFEST
+    if not os.path.lexists(path):
+        return []
+    try:
+        return _parse_manifest(read_regular_file(path))
+    except (OSError, InputTooLargeError):
+        return None
+
+
+def _earlier_entries(out: Path) -> list[dict[str, Any]]:
+    return _read_manifest(out) or []
+
+
+def _unchanged(path: str | os.PathLike[str], entry: Mapping[str, Any]) -> bool:
+    """Whether ``path`` holds what compare wrote when it listed ``entry``: the same size and
+    SHA-256 (an entry of version 1: the same size and modification time)."""
+    try:
+        st = os.stat(path)
+        if st.st_size != entry["size"]:
+            return False
+        if "sha256" in entry:
+            return _sha256(path) == entry["sha256"]
+    except OSError:
+        return False
+    return st.st_mtime_ns == entry["mtime_ns"]
+
+
+class OutputRecord:
+    """This compare's :data:`MANIFEST` in ``out``: :meth:`refuse_foreign` before anything
+    runs and again before anything is written, :meth:`begin` just before writing, :meth:`add`
+    after each file, :meth:`finish` at the end."""
+
+    def __init__(self, out: Path) -> None:
+        self.out = out
+        self.path = out / MANIFEST
+        self.entries: list[dict[str, Any]] = []
+
+    def refuse_foreign(self, paths: Sequence[Path], folders: Sequence[Path] = ()) -> None:
+        """Refuse, naming the first, a file at one of ``paths`` (the names this compare may
+        write) that the manifest does not show compare wrote, unchanged since: a user's own
+        file, or one of a compare without a manifest (an older bomgraph); a folder there, a
+        file where compare makes a folder (one of ``folders``, or on the way to a path).
+
+        Raises
+        ------
+        OutputPathError
+            Naming the file and what to do: move it or choose another folder.
+        """
+        out, todo = self.out, "move it or choose another folder"
+        listed = _read_manifest(out)
+        if listed is None:
+            raise OutputPathError(f"--out {out}: {self.path} is not the list of files bomgraph "
+                                  f"compare keeps there; {todo}")
+        by_path: dict[str, list[dict[str, Any]]] = {}
+        for e in listed:
+            by_path.setdefault(os.path.normpath(e["path"]), []).append(e)
+        for folder in [*folders, *sorted({q for p in paths for q in p.parents if out in q.parents})]:
+            if os.path.lexists(folder) and not folder.is_dir():
+                raise OutputPathError(f"--out {out}: compare writes a folder {folder}, which "
+                                      f"is a file; {todo}")
+        for p in paths:
+            if not os.path.lexists(p):
+                continue
+            if p.is_dir():
+                raise OutputPathError(f"--out {out}: compare writes the file {p}, which is a "
+                                      f"folder; {todo}")
+            rel = os.path.normpath(os.path.relpath(p, out))
+            if any(_unchanged(p, e) for e in by_path.get(rel, ())):
+                continue
+            why = ("which was changed since an earlier compare wrote it" if rel in by_path else
+                   f"which compare did not write (not in {MANIFEST})" if listed or
+                   os.path.lexists(self.path) else
+                   f"which compare did not write (the folder has no {MANIFEST}: not "
+                   f"compare's, or an older bomgraph's)")
+            raise OutputPathError(f"--out {out}: compare would replace {p}, {why}; {todo}")
+
+    def begin(self) -> None:
+        """The manifest as a journal: the earlier entries (so an interrupted compare leaves
+        every file of compare's still proved), then each file as it is written."""
+        lines = [json.dumps({"format": _MANIFEST_FORMAT, "version": _VERSION})]
+        lines += [json.dumps(e) for e in _earlier_entries(self.out)]
+        write_text(self.path, "\n".join(lines) + "\n")
+
+    def add(self, paths: Sequence[Path]) -> None:
+        """List ``paths``, just written, in the journal."""
+        new = [e for p in paths if (e := _entry(self.out, p)) is not None]
+        self.entries += new
+        with open(self.path, "a", encoding="utf-8") as fh:
+            fh.write("".join(json.dumps(e) + "\n" for e in new))
+
+    def finish(self, written: Sequence[Path], experiments: Sequence[Experiment]) -> None:
+        """Remove what an earlier compare wrote and this one did not
+        (:func:`drop_earlier_outputs`); the manifest lists this compare's files only."""
+        drop_earlier_outputs(self.out, written, experiments, self.entries)
 
 
 def drop_earlier_outputs(out: Path, written: Sequence[Path],
-                         experiments: Sequence[Experiment]) -> None:
+                         experiments: Sequence[Experiment],
+                         entries: Sequence[Mapping[str, Any]] | None = None) -> None:
     """Remove the files the previous compare in ``out`` wrote (its :data:`MANIFEST`) that this
     one did not write (estimate files, streams, figures of other arms, runs or experiments:
-    beside this compare's results they would no longer match them), then record this one's.
+    beside this compare's results they would no longer match them), then record this one's
+    (``entries``: :meth:`OutputRecord.add`'s, else taken from ``written`` now).
 
     Left alone: a file compare did not write (a user's own figure in the folder); one changed
-    since compare wrote it (its size or modification time differ); one this compare wrote or
+    since compare wrote it (its size or SHA-256 differ); one this compare wrote or
     reads (compared as files, not names: a case-insensitive disk or a link is no escape); any
     entry that is not plainly inside ``out`` (``..``, an absolute path, a link on the way).
     Folders the removals empty go too. A removal that fails is logged, never raised: the
@@ -127,9 +326,7 @@ def drop_earlier_outputs(out: Path, written: Sequence[Path],
         if (not rel or os.path.isabs(rel) or os.path.realpath(plain) != plain
                 or not plain.startswith(root + os.sep) or not path.is_file()):
             continue
-        st = path.stat()
-        if (st.st_dev, st.st_ino) in keep or (st.st_size, st.st_mtime_ns) != (
-                entry["size"], entry["mtime_ns"]):
+        if _file_id(path) in keep or not _unchanged(path, entry):
             continue
         try:
             path.unlink()
@@ -139,16 +336,10 @@ def drop_earlier_outputs(out: Path, written: Sequence[Path],
                 parent = parent.parent
         except OSError as exc:
             _log.warning("could not remove %s, an earlier compare's output: %s", path, exc)
-    entries = []
-    for p in written:
-        try:
-            st = os.stat(p)
-        except OSError:
-            continue
-        entries.append({"path": os.path.relpath(p, out), "size": st.st_size,
-                        "mtime_ns": st.st_mtime_ns})
-    write_text(out / MANIFEST, json.dumps({"format": _MANIFEST_FORMAT, "version": 1,
-                                           "files": entries}, indent=0) + "\n")
+    if entries is None:
+        entries = [e for p in written if (e := _entry(out, p)) is not None]
+    write_text(out / MANIFEST, json.dumps({"format": _MANIFEST_FORMAT, "version": _VERSION,
+                                           "files": list(entries)}, indent=0) + "\n")
 
 
 def slug(name: str) -> str:
@@ -167,5 +358,7 @@ def unique_slugs(names: Sequence[str]) -> dict[str, str]:
                 if folded.count(v.casefold()) > 1 else v) for n, v in slugs.items()}
 
 
-__all__ = ["COMPARE_FILES", "COMPARE_FOLDERS", "MANIFEST", "drop_earlier_outputs",
-           "input_paths", "refuse_inputs_among_outputs", "slug", "unique_slugs"]
+__all__ = ["COMPARE_FILES", "COMPARE_FOLDERS", "MANIFEST", "OutputRecord", "RESULT_FILES",
+           "drop_earlier_outputs", "estimate_paths", "figure_paths", "input_paths",
+           "planned_outputs", "refuse_inputs_among_outputs", "slug", "source_hash",
+           "unique_slugs"]

@@ -10,8 +10,6 @@ A result is the dict of :func:`bomgraph.bench.run_task`; its ``checkpoints`` are
 
 from __future__ import annotations
 
-import csv
-import hashlib
 import json
 import logging
 import math
@@ -32,10 +30,11 @@ from .experiments import PAPER_REPORTED, Arm, Experiment, FileSource, Task
 from .jsonio import jsonable
 from .paired import PairedConfig, PairedRow, paired_comparison, references_for
 from .plots import MapPanel, error_vs_time_figure, final_maps_figure, map_figure
-from .out_folder import drop_earlier_outputs, refuse_inputs_among_outputs, slug, unique_slugs
+from .out_folder import (RESULT_FILES, OutputRecord, estimate_paths, planned_outputs,
+                         refuse_inputs_among_outputs, slug)
 from .plugins import source_fingerprint
-from .stdio import folder_lock, make_folder, output_file, write_figure, write_text
-from .tables import HUGE
+from .stdio import folder_lock, make_folder, write_figure, write_text
+from .tables import HUGE, write_csv
 
 _log = logging.getLogger(__name__)
 
@@ -339,24 +338,6 @@ class CompareResult:
     n_cached: int = 0
 
 
-def write_csv(path: str | os.PathLike[str], rows: Sequence[Mapping[str, Any]],
-              columns: Sequence[str] | None = None) -> None:
-    """``rows`` as a CSV file: ``columns`` (default: every key, in order of appearance; keys
-    outside ``columns`` are left out); list values joined with ``;``."""
-    cols: list[str] = list(columns or ())
-    if columns is None:
-        for r in rows:
-            for k in r:
-                if k not in cols:
-                    cols.append(k)
-    with output_file(path) as fh:  # atomically: a reader never sees half a table
-        w = csv.DictWriter(fh, fieldnames=cols, extrasaction="ignore", lineterminator="\r\n")
-        w.writeheader()
-        for r in rows:
-            w.writerow({k: (";".join(map(str, v)) if isinstance(v, list) else v)
-                        for k, v in r.items()})
-
-
 def compare(experiments: Sequence[Experiment], out_dir: str | os.PathLike[str], *,
             executor: Executor = Executor(), use_cache: bool = True, figures: bool = True,
             progress: Callable[[int, int], None] | None = None,
@@ -369,26 +350,34 @@ def compare(experiments: Sequence[Experiment], out_dir: str | os.PathLike[str], 
     reference arm run by run (:func:`bomgraph.paired.paired_comparison`): the arm labelled
     ``paired_reference`` where there is one, else :func:`bomgraph.paired.default_reference`.
 
-    Finished runs are cached in ``out_dir/cache`` so an interrupted sweep resumes.
+    Finished runs are cached in ``out_dir/cache`` so an interrupted sweep resumes. A file
+    compare would replace that an earlier compare did not write is refused, before anything
+    runs and again before anything is written (:meth:`OutputRecord.refuse_foreign`).
     """
     out = Path(out_dir)
     refs = references_for(experiments, paired_reference)  # a wrong label: before anything runs
     refuse_inputs_among_outputs(out, experiments)
+    planned = planned_outputs(out, experiments, estimates=estimates, figures=figures)
+    record = OutputRecord(out)
+    record.refuse_foreign(planned, [out / "cache"] if use_cache else [])
     make_folder(out)
     with folder_lock(out, "`bomgraph compare`"):
         return _compare(experiments, out, executor, use_cache, figures, progress, estimates,
-                        refs, paired)
+                        refs, paired, (record, planned))
 
 
 def plan_compare(experiments: Sequence[Experiment], out_dir: str | os.PathLike[str], *,
                  use_cache: bool = True, estimates: bool = False,
-                 executor: Executor = Executor()) -> list[dict[str, Any]]:
+                 executor: Executor = Executor(), figures: bool = True) -> list[dict[str, Any]]:
     """What :func:`compare` with ``executor`` (its default too) would run, without running or
     writing anything: one row per task (``experiment``, ``arm``, ``run``, ``cached``: its
     result is in ``out_dir/cache``, so it would not run again), in the order compare runs
-    them."""
+    them. What compare refuses about its folder is refused too."""
     instance(executor, Executor, "plan_compare(): executor", ConfigError)  # as compare's
     refuse_inputs_among_outputs(Path(out_dir), experiments)
+    OutputRecord(Path(out_dir)).refuse_foreign(
+        planned_outputs(Path(out_dir), experiments, estimates=estimates, figures=figures),
+        [Path(out_dir) / "cache"] if use_cache else [])
     source_fingerprint.cache_clear()  # as execute() does: a plugin module reloaded since
     cache = Path(out_dir) / "cache"
     tasks = [replace(t, keep_estimate=estimates) for e in experiments for t in e.tasks()]
@@ -403,25 +392,27 @@ def plan_compare(experiments: Sequence[Experiment], out_dir: str | os.PathLike[s
 def _compare(experiments: Sequence[Experiment], out: Path, executor: Executor,
              use_cache: bool, figures: bool,
              progress: Callable[[int, int], None] | None, estimates: bool,
-             references: Mapping[str, str], paired_config: PairedConfig) -> CompareResult:
+             references: Mapping[str, str], paired_config: PairedConfig,
+             planned: tuple[OutputRecord, list[Path]]) -> CompareResult:
     start = time.perf_counter()
     tasks = [replace(t, keep_estimate=estimates) for e in experiments for t in e.tasks()]
     results, n_cached = execute_counted(tasks, executor, progress=progress,
                                         cache_dir=out / "cache" if use_cache else None)
-    written = write_estimate_files(out, tasks, results) if estimates else []
+    record, paths = planned
+    record.refuse_foreign(paths)  # a file put there while the runs ran (they are cached)
+    record.begin()
+    written = write_estimate_files(out, tasks, results, record.add) if estimates else []
     summary = summarise(results)
     by_run = final_by_run(results)
     paired = paired_comparison(_pairable(by_run, results, experiments), references, paired_config)
     wall = time.perf_counter() - start
-    files = [out / n for n in ("results.json", "results.csv", "summary.csv", "final_by_run.csv",
-                               "paired.csv")]
-    files += written
+    files = [out / n for n in RESULT_FILES] + written
     # compact: without ``indent`` json.dumps takes CPython's C encoder (the main job's file:
     # 0.5 s against 1.6 s indented, docs/measurements.md, "The main job against ...").
     # Strict JSON: a value that is not a number (a run without a map, a robot error of a
     # stream without robot truth) is null, not the bare NaN that jq, JavaScript and R's
     # jsonlite refuse to read.
-    write_text(out / "results.json", json.dumps(jsonable(
+    write_text(files[0], json.dumps(jsonable(
         {"experiments": [{"name": e.name, "title": e.title,
                           "arms": [a.key() for a in e.arms], **_design(e),
                           "runs": e.n_runs()} for e in experiments],
@@ -430,14 +421,16 @@ def _compare(experiments: Sequence[Experiment], out: Path, executor: Executor,
                     "confidence": paired_config.confidence, "seed": paired_config.seed,
                     "rows": [p.as_dict() for p in paired]},
          "results": results, "wall_s": wall}), allow_nan=False))
-    write_csv(out / "results.csv", results_to_csv_rows(results))
-    write_csv(out / "summary.csv", summary)
-    write_csv(out / "final_by_run.csv", by_run)
-    write_csv(out / "paired.csv", [p.as_dict() for p in paired],
-              columns=list(PairedRow.__dataclass_fields__))
+    record.add(files[:1])  # each as soon as written: an interrupted compare leaves them proved
+    for path, rows, cols in ((files[1], results_to_csv_rows(results), None),
+                             (files[2], summary, None), (files[3], by_run, None),
+                             (files[4], [p.as_dict() for p in paired],
+                              list(PairedRow.__dataclass_fields__))):
+        write_csv(path, rows, cols)
+        record.add([path])
     if figures:
-        files += write_compare_figures(out, experiments, results)
-    drop_earlier_outputs(out, files, experiments)
+        files += write_compare_figures(out, experiments, results, record.add)
+    record.finish(files, experiments)
     return CompareResult(tuple(results), tuple(summary), tuple(str(f) for f in files), wall,
                          tuple(paired), n_cached)
 
@@ -453,72 +446,58 @@ def _design(e: Experiment) -> dict[str, Any]:
             "n_steps": steps.pop() if len(steps) == 1 and not e.sources else None}
 
 
-def write_estimate_files(out: Path, tasks: Sequence[Task], results: Sequence[dict[str, Any]]
+def write_estimate_files(out: Path, tasks: Sequence[Task], results: Sequence[dict[str, Any]],
+                         record: Callable[[Sequence[Path]], None] = lambda paths: None
                          ) -> list[Path]:
     """Write each run's final estimate (a result's ``estimate_file`` text, taken out of the
-    result) to ``out/estimates/EXPERIMENT/ARM/RUN.est`` and, unless the run read a stream
-    file the user has, its stream to ``out/streams/EXPERIMENT/RUN.jsonl`` (made again here,
-    the same bytes the worker ran on; a run whose arms saw different streams, e.g. with
-    priors, gets its stream's short hash in the name), so that ``bomgraph evaluate EST
-    STREAM`` pairs them; ``out/estimates/index.csv`` lists each run's estimate and stream
-    (paths relative to ``out``, a user's stream file as given). Names keep letters, digits
-    and ``.-_@``, the rest turned to ``_``; names that coincide so get a short hash each.
-    Returns the paths; a failed run has no estimate and gets none."""
+    result) and, unless the run read a stream file the user has, its stream (made again here,
+    the same bytes the worker ran on) where :func:`bomgraph.out_folder.estimate_paths` says,
+    so that ``bomgraph evaluate EST STREAM`` pairs them; ``out/estimates/index.csv`` lists
+    each run's estimate and stream (paths relative to ``out``, a user's stream file as given).
+    Each file is handed to ``record`` once written. Returns the paths; a failed run has no
+    estimate and gets none."""
     from .stream_file import write_stream
 
     paths: list[Path] = []
     index: list[dict[str, Any]] = []
-    names: dict[tuple[str, str], set[str]] = {}
-    for t in tasks:  # a stream file is not hashed again (it may be gone since its runs)
-        if not isinstance(t.source, FileSource):
-            names.setdefault((t.experiment, t.source.name), set()).add(_source_hash(t))
-    written: set[Path] = set()
     inputs = sorted({t.source.path for t in tasks if isinstance(t.source, FileSource)})
-    exps = unique_slugs([t.experiment for t in tasks])
-    arms = {e: unique_slugs([t.arm.label for t in tasks if t.experiment == e]) for e in exps}
-    runs = {e: unique_slugs([t.source.name for t in tasks if t.experiment == e]) for e in exps}
-    for t, r in zip(tasks, results):
+    streams: set[Path] = set()
+    for t, r, (path, spath) in zip(tasks, results, estimate_paths(out, tasks)):
         text = r.pop("estimate_file", None)
         if text is None:
             continue
-        exp, run = exps[t.experiment], runs[t.experiment][t.source.name]
-        path = out / "estimates" / exp / arms[t.experiment][t.arm.label] / f"{run}.est"
         path.parent.mkdir(parents=True, exist_ok=True)
         write_text(path, text)
+        record([path])
         paths.append(path)
         row = {"experiment": t.experiment, "arm": t.arm.label, "run": t.source.name,
                "estimate": str(path.relative_to(out))}
         index.append(row)
-        if isinstance(t.source, FileSource):
-            row["stream"] = t.source.path
-            continue
-        h = _source_hash(t)
-        stem = run if len(names[(t.experiment, t.source.name)]) == 1 else f"{run}-{h}"
-        spath = out / "streams" / exp / f"{stem}.jsonl"
-        row["stream"] = str(spath.relative_to(out))
-        if spath not in written:
+        row["stream"] = t.source.path if spath is None else str(spath.relative_to(out))
+        if spath is not None and spath not in streams:
+            streams.add(spath)
             spath.parent.mkdir(parents=True, exist_ok=True)
             write_stream(t.stream(), spath, inputs=inputs)
-            written.add(spath)
+            record([spath])
             paths.append(spath)
     if index:
         write_csv(out / "estimates" / "index.csv", index)
         paths.append(out / "estimates" / "index.csv")
+        record(paths[-1:])
     return paths
 
 
-def _source_hash(task: Task) -> str:
-    return hashlib.sha256(json.dumps(task.source.key(), sort_keys=True).encode()).hexdigest()[:8]
-
-
 def write_compare_figures(out_dir: str | os.PathLike[str], experiments: Sequence[Experiment],
-                          results: Sequence[Mapping[str, Any]]) -> list[Path]:
+                          results: Sequence[Mapping[str, Any]],
+                          record: Callable[[Sequence[Path]], None] = lambda paths: None
+                          ) -> list[Path]:
     """The comparison's figures as PNG files in ``out_dir``; returns their paths.
 
     One error-against-time figure per experiment (landmark MPE; robot error too for Exp. 2,
     the paper's figs. 4, 6, 7, 8), one figure of every method's final map per recording, and
     an example map with trajectory of the first simulated experiment (figs. 3 and 5:
     ``stmds-smacof-loc`` at t = 100, run again by :func:`bomgraph.bench.run_example`).
+    Each file is handed to ``record`` once written.
     """
     out = Path(out_dir)
     files = []
@@ -534,10 +513,11 @@ def write_compare_figures(out_dir: str | os.PathLike[str], experiments: Sequence
                                    title=f"{exp.title}: landmarks ({exp.n_runs()} runs)")
         path = out / f"{slug(exp.name)}_error_vs_time.png"
         write_figure(fig, path, dpi=120)
+        record([path])
         files.append(path)
     for exp in experiments:
         if exp.sources:
-            files += _write_source_maps(out, exp, results)
+            files += _write_source_maps(out, exp, results, record)
     sim_exps = [e for e in experiments if e.designed]
     if not sim_exps:
         return files
@@ -558,11 +538,12 @@ def write_compare_figures(out_dir: str | os.PathLike[str], experiments: Sequence
         write_text(out / "example_map.txt", f"example map not drawn: {type(exc).__name__}: "
                                             f"{exc}\n")
         files.append(out / "example_map.txt")
+    record(files[-1:])
     return files
 
 
-def _write_source_maps(out: Path, exp: Experiment,
-                       results: Sequence[Mapping[str, Any]]) -> list[Path]:
+def _write_source_maps(out: Path, exp: Experiment, results: Sequence[Mapping[str, Any]],
+                       record: Callable[[Sequence[Path]], None]) -> list[Path]:
     """One figure per recorded source: every method's final map (aligned) over the truth."""
     files = []
     for src in exp.sources:
@@ -580,6 +561,7 @@ def _write_source_maps(out: Path, exp: Experiment,
                                 title=f"{exp.title}: {src.name}")
         path = out / f"{slug(exp.name)}_{slug(src.name)}_maps.png"
         write_figure(fig, path, dpi=100)
+        record([path])
         files.append(path)
     return files
 

@@ -440,6 +440,8 @@ def folder_lock(folder: str | os.PathLike[str], what: str) -> Iterator[None]:
     ------
     FolderBusyError
         The folder is locked by another process (the message names its pid).
+    OutputPathError
+        ``.bomgraph.lock`` there holds something else than a pid (a user's file).
     """
     try:
         import fcntl
@@ -456,6 +458,9 @@ def folder_lock(folder: str | os.PathLike[str], what: str) -> Iterator[None]:
             raise FolderBusyError(
                 f"{os.fspath(folder)}: another {what} (pid {holder}) is writing into this "
                 f"folder; wait for it to finish or choose another --out") from None
+        if not re.fullmatch(rb"\s*\d*\s*", os.pread(fd, 65, 0)):  # not a pid: not ours to empty
+            raise OutputPathError(f"{lock}: is not a bomgraph lock (a process id); move it or "
+                                  f"choose another --out")
         os.ftruncate(fd, 0)
         os.pwrite(fd, f"{os.getpid()}\n".encode("ascii"), 0)
         yield

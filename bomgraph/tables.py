@@ -11,9 +11,12 @@ import csv
 import io
 import json
 import math
+import os
 import re
 from dataclasses import dataclass
 from typing import Any, Mapping, Sequence
+
+from .stdio import output_file
 
 FORMATS = ("text", "json", "csv", "markdown", "latex")
 
@@ -115,4 +118,22 @@ def format_table(columns: Sequence[Column], rows: Sequence[Mapping[str, Any]], f
     return "\n".join(lines)
 
 
-__all__ = ["FORMATS", "Column", "format_table"]
+def write_csv(path: str | os.PathLike[str], rows: Sequence[Mapping[str, Any]],
+              columns: Sequence[str] | None = None) -> None:
+    """``rows`` as a CSV file: ``columns`` (default: every key, in order of appearance; keys
+    outside ``columns`` are left out); list values joined with ``;``."""
+    cols: list[str] = list(columns or ())
+    if columns is None:
+        for r in rows:
+            for k in r:
+                if k not in cols:
+                    cols.append(k)
+    with output_file(path) as fh:  # atomically: a reader never sees half a table
+        w = csv.DictWriter(fh, fieldnames=cols, extrasaction="ignore", lineterminator="\r\n")
+        w.writeheader()
+        for r in rows:
+            w.writerow({k: (";".join(map(str, v)) if isinstance(v, list) else v)
+                        for k, v in r.items()})
+
+
+__all__ = ["FORMATS", "Column", "format_table", "write_csv"]

@@ -33,6 +33,16 @@ def test_compare_says_how_many_runs_came_from_the_cache(tmp_path: Path,
                    use_cache=False).n_cached == 0
 
 
+def test_compare_counts_one_run_in_the_singular(tmp_path: Path, capsys: pytest.CaptureFixture
+                                                ) -> None:
+    """Its last line said "1 runs in 0.0 s"."""
+    run_file = tmp_path / "s.jsonl"
+    assert main(["simulate", "--steps", "20", "--landmarks", "10", "--out", str(run_file)]) == 0
+    assert main(["compare", "--streams", str(run_file), "--methods", "triangulate", "--jobs",
+                 "1", "--no-figures", "--no-progress", "--out", str(tmp_path / "c")]) == 0
+    assert capsys.readouterr().out.strip().splitlines()[-1].startswith("1 run in ")
+
+
 _HEAD = ('{"format": "bomgraph-stream", "version": %s, "bearing_sigma_rad": 0.05, '
          '"odometry_sigma": [0.03, 0, 0.05]}\n{"t": 0, "bearings": [[1, 0.5]]}\n')
 

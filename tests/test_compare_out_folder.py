@@ -1,0 +1,197 @@
+"""``compare --out DIR`` replaces a file in DIR only if an earlier compare wrote it, unchanged
+since (its manifest, :class:`bomgraph.out_folder.OutputRecord`); any other file at a name it
+writes is refused before anything runs, in one line, exit 2 (h61: a user's ``results.csv``
+was silently replaced)."""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+import pytest
+
+from bomgraph import report
+from bomgraph.bench import Executor
+from bomgraph.cli import main
+from bomgraph.experiments import Arm, Experiment, compare_experiments
+from bomgraph.out_folder import MANIFEST
+from bomgraph.report import compare
+from bomgraph.sim import SimConfig
+from bomgraph.stdio import OutputPathError
+
+SMALL = SimConfig(n_steps=40, n_landmarks=20)
+
+
+def _exp(name: str = "t") -> Experiment:
+    return Experiment(name, "test", (Arm("tri", "triangulate"),), SMALL, seed=3, n_layouts=1,
+                      n_starts=1)
+
+
+@pytest.fixture()
+def stream(tmp_path: Path) -> Path:
+    path = tmp_path / "s.jsonl"
+    assert main(["simulate", "--steps", "30", "--landmarks", "10", "--out", str(path)]) == 0
+    return path
+
+
+def _cmd(stream: Path, out: Path, *more: str) -> list[str]:
+    return ["compare", "--streams", str(stream), "--methods", "triangulate", "--jobs", "1",
+            "--no-progress", "--out", str(out), *more]
+
+
+def test_a_users_file_named_as_compare_names_its_results_is_refused_before_anything_runs(
+        tmp_path: Path, stream: Path, capsys: pytest.CaptureFixture) -> None:
+    """The brief's reproduction: rc 0 and the user's results.csv replaced by compare's."""
+    out = tmp_path / "out"
+    out.mkdir()
+    mine = out / "results.csv"
+    mine.write_text("my,data\n")
+    capsys.readouterr()
+    assert main(_cmd(stream, out)) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and str(mine) in err[0] and "move it or choose another folder" in err[0]
+    assert mine.read_text() == "my,data\n"
+    assert sorted(p.name for p in out.iterdir()) == ["results.csv"]  # nothing ran or was written
+    assert main(_cmd(stream, out, "--dry-run")) == 2          # what compare refuses, so does it
+
+
+@pytest.mark.parametrize("name", ["summary.csv", "paired.csv", "results.json",
+                                  "streams_s_maps.png", "streams_error_vs_time.png"])
+def test_every_name_compare_writes_is_refused_when_it_is_a_users(
+        tmp_path: Path, stream: Path, name: str) -> None:
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / name).write_bytes(b"mine")
+    (out / "notes.png").write_bytes(b"not a name compare writes")
+    chosen, _ = compare_experiments(streams=[str(stream)], methods="triangulate")
+    with pytest.raises(OutputPathError, match=f"{name}, which compare did not write"):
+        compare(chosen, out, executor=Executor("serial"))
+    assert (out / name).read_bytes() == b"mine"
+    (out / name).unlink()
+    compare(chosen, out, executor=Executor("serial"))
+    assert (out / "notes.png").read_bytes() == b"not a name compare writes"
+
+
+def test_a_users_estimates_and_cache_folders(tmp_path: Path, stream: Path) -> None:
+    """A user's own folder named estimates: compare adds its files, refuses to replace one of
+    theirs (index.csv), and never removes the others; a file named cache is refused."""
+    out = tmp_path / "out"
+    (out / "estimates").mkdir(parents=True)
+    (out / "estimates" / "index.csv").write_text("mine\n")
+    (out / "estimates" / "notes.txt").write_text("mine\n")
+    chosen, _ = compare_experiments(streams=[str(stream)], methods="triangulate")
+    with pytest.raises(OutputPathError, match="index.csv, which compare did not write"):
+        compare(chosen, out, executor=Executor("serial"), estimates=True)
+    compare(chosen, out, executor=Executor("serial"))                 # no estimates: no clash
+    (out / "estimates" / "index.csv").rename(out / "estimates" / "my-index.csv")
+    compare(chosen, out, executor=Executor("serial"), estimates=True)
+    compare(chosen, out, executor=Executor("serial"))          # removes compare's estimates only
+    assert sorted(p.name for p in (out / "estimates").iterdir()) == ["my-index.csv", "notes.txt"]
+    cache = tmp_path / "c2" / "cache"
+    cache.parent.mkdir()
+    cache.write_text("mine\n")
+    with pytest.raises(OutputPathError, match="cache, which is a file"):
+        compare(chosen, cache.parent, executor=Executor("serial"))
+    compare(chosen, cache.parent, executor=Executor("serial"), use_cache=False)
+    assert cache.read_text() == "mine\n"
+
+
+def test_compare_twice_and_a_result_edited_in_between(tmp_path: Path, stream: Path) -> None:
+    """The README's `bomgraph compare --out compare-results`, twice: the second replaces the
+    first's files; a file the user changed since is refused, by content (size and SHA-256),
+    even with its old modification time put back."""
+    out = tmp_path / "out"
+    chosen, _ = compare_experiments(streams=[str(stream)], methods="triangulate")
+    compare(chosen, out, executor=Executor("serial"))
+    compare(chosen, out, executor=Executor("serial"))
+    csv = out / "summary.csv"
+    st = csv.stat()
+    text = csv.read_text()
+    csv.write_text(text.replace("triangulate", "triangulatE"))          # same size
+    os.utime(csv, ns=(st.st_atime_ns, st.st_mtime_ns))
+    with pytest.raises(OutputPathError, match="summary.csv, which was changed since"):
+        compare(chosen, out, executor=Executor("serial"))
+    assert "triangulatE" in csv.read_text()
+
+
+def test_an_interrupted_compare_leaves_its_files_proved(tmp_path: Path, stream: Path,
+                                                        monkeypatch: pytest.MonkeyPatch) -> None:
+    """Ctrl-C while the figures are drawn: the results are written, the final manifest is
+    not; the files written so far are in the journal, so a re-run replaces them."""
+    out = tmp_path / "out"
+    chosen, _ = compare_experiments(streams=[str(stream)], methods="triangulate")
+    real = report.write_figure
+
+    def interrupted(fig: object, path: Path, dpi: int) -> str:
+        if "maps" in str(path):
+            raise KeyboardInterrupt
+        return real(fig, path, dpi)
+
+    monkeypatch.setattr(report, "write_figure", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        compare(chosen, out, executor=Executor("serial"))
+    assert (out / "streams_error_vs_time.png").exists()
+    monkeypatch.undo()
+    compare(chosen, out, executor=Executor("serial"))
+    listed = json.loads((out / MANIFEST).read_text())["files"]
+    assert {e["path"] for e in listed} >= {"results.csv", "streams_s_maps.png"}
+
+
+def test_a_folder_of_an_older_bomgraph(tmp_path: Path, stream: Path) -> None:
+    """Without a manifest nothing proves a file compare's: refused, saying so; with the
+    manifest of version 1 (size and modification time) the files it lists are replaced; a
+    file of that name that is no manifest is refused."""
+    out = tmp_path / "out"
+    chosen, _ = compare_experiments(streams=[str(stream)], methods="triangulate")
+    compare(chosen, out, executor=Executor("serial"))
+    listed = json.loads((out / MANIFEST).read_text())["files"]
+    v1 = [{k: e[k] for k in ("path", "size", "mtime_ns")} for e in listed]
+    (out / MANIFEST).write_text(json.dumps({"format": "bomgraph-compare-files", "version": 1,
+                                            "files": v1}, indent=0))
+    compare(chosen, out, executor=Executor("serial"))
+    (out / MANIFEST).unlink()
+    with pytest.raises(OutputPathError, match=f"has no {MANIFEST}: not compare's, or an older"):
+        compare(chosen, out, executor=Executor("serial"))
+    (out / MANIFEST).write_text("my notes\n")
+    with pytest.raises(OutputPathError, match="is not the list of files bomgraph compare"):
+        compare(chosen, out, executor=Executor("serial"))
+    assert (out / MANIFEST).read_text() == "my notes\n"
+
+
+def test_the_designed_experiments_figures_too(tmp_path: Path) -> None:
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "example_map.png").write_bytes(b"mine")
+    with pytest.raises(OutputPathError, match="example_map.png, which compare did not write"):
+        compare([_exp()], out, executor=Executor("serial"))
+    with pytest.raises(OutputPathError, match="example_map.png"):
+        report.plan_compare([_exp()], out)
+    compare([_exp()], out, executor=Executor("serial"), figures=False)
+    assert (out / "example_map.png").read_bytes() == b"mine"
+
+
+def test_a_users_file_named_as_the_folder_lock_is_not_emptied(tmp_path: Path) -> None:
+    """compare truncated OUT/.bomgraph.lock to write its pid, whatever the file held."""
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / ".bomgraph.lock").write_text("my notes\n")
+    with pytest.raises(OutputPathError, match="is not a bomgraph lock"):
+        compare([_exp()], out, executor=Executor("serial"), figures=False)
+    assert (out / ".bomgraph.lock").read_text() == "my notes\n"
+    (out / ".bomgraph.lock").write_text("12345\n")                # a lock of an earlier run
+    compare([_exp()], out, executor=Executor("serial"), figures=False)
+
+
+def test_dry_run_refuses_what_compare_would(tmp_path: Path, stream: Path,
+                                            capsys: pytest.CaptureFixture) -> None:
+    """--dry-run says what compare would refuse; a user's figure is no clash without
+    figures."""
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "streams_s_maps.png").write_bytes(b"mine")
+    assert main(_cmd(stream, out, "--dry-run")) == 2
+    assert "streams_s_maps.png, which compare did not write" in capsys.readouterr().err
+    assert main(_cmd(stream, out, "--dry-run", "--no-figures")) == 0
+    assert main(_cmd(stream, out, "--no-figures")) == 0
+    assert (out / "streams_s_maps.png").read_bytes() == b"mine"
