@@ -10,12 +10,16 @@ without ground truth (each fails before h63's fix):
 * ARM ran twice on each stream (once as the arm, once as the reference), and arm by arm it
   ran again for each other arm once more than 8 streams were compared; now once a stream,
   the same rows bit for bit;
+* ``bomgraph.cli.main(["compare", ..., "--dask-local", "1"])`` in the caller's process left
+  Dask's loggers at CRITICAL for good.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import importlib
 import json
+import logging
 import math
 import sys
 from pathlib import Path
@@ -152,3 +156,21 @@ def test_a_reference_labelled_otherwise_is_still_no_pair(tmp_path: Path) -> None
     assert ratios and all(math.isfinite(x) and x < 1e3 for x in ratios), ratios  # were 1e15
     assert {r["scored_against"] for r in result.results if r["arm"] == "tri"} == {
         "itself (reference triangulate)"}
+
+
+def test_main_gives_back_the_callers_dask_logger_levels(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    importlib.import_module("distributed")  # the caller uses Dask: its loggers configured
+
+    names = ["distributed", "distributed.client", "distributed.scheduler",
+             "distributed.worker"]
+    logging.getLogger("distributed.scheduler").setLevel(logging.DEBUG)  # the caller's own
+    try:
+        before = {n: logging.getLogger(n).level for n in names}
+        assert main(["compare", "--streams", *_streams(tmp_path, 1), "--methods",
+                     "triangulate", "--dask-local", "1", "--no-figures", "--out",
+                     str(tmp_path / "out")]) == 0
+        assert {n: logging.getLogger(n).level for n in names} == before  # were CRITICAL
+    finally:
+        logging.getLogger("distributed.scheduler").setLevel(logging.NOTSET)
+    capsys.readouterr()
