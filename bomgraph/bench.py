@@ -18,13 +18,11 @@ import contextvars
 import hashlib
 import json
 import logging
-import math
 import os
 import socket
 import tempfile
-import time
 import traceback
-from dataclasses import asdict, dataclass, replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Callable, Iterable, Iterator, Mapping, Sequence
 
@@ -34,20 +32,21 @@ from .checks import instance, is_integer
 from .errors import (ConfigError, StreamFormatError, TooFewLandmarksError,
                      UnknownMethodError)
 from .estimate_file import stream_identity, write_estimate
-from .evaluate import CheckpointScore, score_checkpoints, score_estimate
-from .experiments import Arm, Experiment, SimSource, Task
+from .evaluate import score_estimate
+from .experiments import Experiment, SimSource, Task
 from .jsonio import jsonable
-from .mapper import (Checkpoint, MapEstimate, RunResult, checkpoint_times, create_mapper,
+from .mapper import (MapEstimate, RunResult, checkpoint_times, create_mapper,
                      method_failure_note, method_info, run)
 from .method_code import (bomgraph_edited, method_code, refuse_runtime_methods, sourceless,
                           stale_after_run, stale_here, stale_plugin, warn_sourceless,
                           workers_outdated)
 from .plugins import code_fingerprint, source_fingerprint
 from .result_cache import read_cached, strip_timings, write_cached  # re-exported
+from .run_scoring import (CheckpointScorer, keep_reference, reference_map, run_arm,
+                          runs_as_reference)
 from .stream import Step, Stream, Truth
 from .stream_file import StreamReader, count_steps  # re-exported: bench.count_steps
 from .sweep import scheduler_address_problem
-from .trajectory import bearing_residuals
 
 #: Bump to invalidate every cached result (the code fingerprint covers code changes).
 _log = logging.getLogger(__name__)
@@ -81,9 +80,11 @@ def run_task(task: Task) -> dict[str, Any]:
     (docs/measurements.md).
 
     A stream without ground truth is scored against the final map (and poses) of the task's
-    reference method when it has one (``scored_against``: ``"reference LABEL"``), else only
-    by truth-free metrics: landmarks mapped and ``bearing_rms_rad``, the RMS bearing residual
-    of each checkpoint's map and trajectory against the stream's own bearings.
+    reference method when it has one (``scored_against``: ``"reference LABEL"``; the arm
+    that runs as the reference runs once, scored against its own final map: ``"itself
+    (reference LABEL)"``; :mod:`bomgraph.run_scoring`), else only by truth-free metrics:
+    landmarks mapped and ``bearing_rms_rad``, the RMS bearing residual of each checkpoint's
+    map and trajectory against the stream's own bearings.
     """
     from threadpoolctl import threadpool_limits
 
@@ -94,45 +95,6 @@ def run_task(task: Task) -> dict[str, Any]:
 #: True while :func:`_indexed` runs a task: in a worker (local or Dask), not in the process
 #: that made the task (a serial run), for what a failure tells to do.
 _IN_WORKER: contextvars.ContextVar[bool] = contextvars.ContextVar("in_worker", default=False)
-
-
-def _run_method(task: Task, arm: Arm, stream: Stream,
-                on_checkpoint: Callable[[Checkpoint], None]) -> RunResult:
-    """The arm on the stream, each checkpoint handed to ``on_checkpoint`` as it is taken and
-    only the last kept (each map holds the trajectory so far: kept, they grow as T^2)."""
-    truth = stream.truth
-    needs_truth = method_info(arm.method).needs_truth
-    mapper = create_mapper(arm.method, stream.header, truth=truth if needs_truth else None,
-                           **dict(arm.options))
-    return run(mapper, stream.steps, checkpoint_every=arm.checkpoint_every
-               or task.checkpoint_every, method=arm.label, on_checkpoint=on_checkpoint,
-               keep_checkpoints=False)
-
-
-_REFERENCES: dict[str, MapEstimate] = {}
-
-
-def _reference_map(task: Task, stream: Stream) -> MapEstimate:
-    """The final estimate of the task's reference method on its stream (kept for the other
-    tasks of the same stream and reference that run in this process)."""
-    assert task.reference is not None
-    key = json.dumps({"source": task.source.key(), "ref": task.reference.key(),
-                      "every": task.checkpoint_every}, sort_keys=True)
-    if key not in _REFERENCES:
-        if len(_REFERENCES) >= 8:
-            _REFERENCES.pop(next(iter(_REFERENCES)))
-        _REFERENCES[key] = _run_method(task, task.reference, stream, lambda c: None).final
-    return _REFERENCES[key]
-
-
-def _bearing_rms(estimate: MapEstimate, stream: Stream) -> float:
-    """RMS bearing residual [rad] of ``estimate`` against the stream's bearings (NaN without
-    poses or without a bearing on a mapped landmark): a truth-free score."""
-    if estimate.poses is None or not len(estimate):
-        return math.nan
-    r = bearing_residuals(estimate.landmark_ids, estimate.landmarks_xy, estimate.pose_t,
-                          estimate.poses, stream.steps)
-    return float(np.sqrt(np.mean(r ** 2))) if r.size else math.nan
 
 
 def _failure(exc: BaseException) -> str:
@@ -191,10 +153,13 @@ def _run_task(task: Task) -> dict[str, Any]:
         out.update(ok=False, error=f"{type(exc).__name__}: {exc}")
         return out
     truth: Truth | MapEstimate | None = stream.truth
+    own = truth is None and runs_as_reference(task)
     out["scored_against"] = "truth"
-    if truth is None and task.reference is not None:
+    if own:  # this run is the reference's: run once, scored against its own final map
+        out["scored_against"] = f"itself (reference {task.reference.label})"
+    elif truth is None and task.reference is not None:
         try:
-            truth = _reference_map(task, stream)
+            truth = reference_map(task, stream)
         except Exception as exc:  # no reference, no score: a failed run with the reason
             out.update(ok=False, error=f"reference {task.reference.label} failed: "
                                        + _failure(exc), traceback=_traceback(exc))
@@ -202,33 +167,29 @@ def _run_task(task: Task) -> dict[str, Any]:
         out["scored_against"] = f"reference {task.reference.label}"
     elif truth is None:
         out["scored_against"] = "none"
-    rows: list[dict[str, Any]] = []
-    unscorable: list[str] = []
-    scoring_s = [0.0]
-
-    def score(c: Checkpoint) -> None:  # as the run goes, outside the run's own timing
-        if unscorable:  # the run has failed already; its later maps are not scored
-            return
-        t0 = time.perf_counter()
-        try:
-            row = (_unscored(c) if truth is None else
-                   asdict(score_checkpoints([c], truth)[0]))
-            if stream.truth is None:
-                row["bearing_rms_rad"] = _bearing_rms(c.estimate, stream)
-            rows.append(row)
-        except Exception as exc:  # an unscorable estimate is a failed run, with the reason
-            unscorable.append(f"scoring failed: {type(exc).__name__}: {exc}")
-        scoring_s[0] += time.perf_counter() - t0
-
+    score = CheckpointScorer(stream, truth, own=own)  # as the run goes, outside its timing
     try:
-        result = _run_method(task, task.arm, stream, score)
+        result = run_arm(task, task.arm, stream, score)
     except Exception as exc:  # a failing method is a result, reported with its reason
         out.update(ok=False, error=_failure(exc), traceback=_traceback(exc))
         _log.debug("%s on %s failed:\n%s", task.arm.label, task.source.name, out["traceback"])
         return out
+    if own:  # kept for the other arms' runs on this stream in this process
+        truth = keep_reference(task, result.final)
+        if score.overflow:  # too many maps to keep: the run again, against its final map
+            _log.info("%s on %s: its maps are too large to keep: run again, scored against "
+                      "its final map", task.arm.label, task.source.name)
+            score = CheckpointScorer(stream, truth)
+            try:
+                result = run_arm(task, task.arm, stream, score)
+            except Exception as exc:  # as the first time: a result, with its reason
+                out.update(ok=False, error=_failure(exc), traceback=_traceback(exc))
+                return out
+        else:
+            score.against(truth)
     # its package edited during the run (a module it imported since): code of neither key
-    if unscorable or (stale := stale_after_run(task, worker=_IN_WORKER.get())):
-        out.update(ok=False, error=unscorable[0] if unscorable else stale)
+    if score.failure or (stale := stale_after_run(task, worker=_IN_WORKER.get())):
+        out.update(ok=False, error=score.failure or stale)
         return out
     info = jsonable(dict(result.final.info), max_items=64)
     final = result.final
@@ -246,7 +207,7 @@ def _run_task(task: Task) -> dict[str, Any]:
             pass
     if out["scored_against"] == "truth":
         del out["scored_against"]  # the paper's results keep their shape
-    out.update(ok=True, checkpoints=rows, total_s=result.total_s - scoring_s[0],
+    out.update(ok=True, checkpoints=score.rows, total_s=result.total_s - score.seconds,
                step_median_s=float(np.median(result.step_s)),
                converged=info.get("converged"), info=info)
     if task.keep_estimate:
@@ -268,14 +229,6 @@ def _estimate_text(task: Task, stream: Stream, result: RunResult) -> str:
                        checkpoint_every=task.arm.checkpoint_every or task.checkpoint_every)
         with open(path, encoding="utf-8") as fh:
             return fh.read()
-
-
-def _unscored(c: Checkpoint) -> dict[str, Any]:
-    """A checkpoint row without a reference: the counts, NaN errors (as a map sharing fewer
-    than 3 landmarks with the truth)."""
-    nan = math.nan
-    return asdict(CheckpointScore(c.t, len(c.estimate), c.estimate_s, nan, nan, nan, nan, 0,
-                                  nan, nan, nan, nan))
 
 
 @dataclass(frozen=True)
@@ -411,6 +364,8 @@ def execute_counted(tasks: Sequence[Task], executor: Executor = Executor(), *,
         if r is None:
             twins.setdefault(keys[k], []).append(k)
     todo = [ks[0] for ks in twins.values()]
+    if executor.backend == "serial":
+        todo = _streams_in_turn(todo, tasks)
     done = len(tasks) - sum(len(ks) for ks in twins.values())
     if progress:
         progress(done, len(tasks))
@@ -438,6 +393,22 @@ def execute_counted(tasks: Sequence[Task], executor: Executor = Executor(), *,
                      "files there; give them this process's (and restart them)",
                      len(other_key), other_key[0])
     return [r for r in results if r is not None], n_cached
+
+
+def _streams_in_turn(todo: list[int], tasks: Sequence[Task]) -> list[int]:
+    """The serial order of the tasks ``todo`` (indices into ``tasks``) of a sweep with a
+    reference: stream by stream, each stream's run of the arm that runs as its reference
+    first, so that a reference map (of a stream without truth) is made once and is still
+    kept when the stream's other runs need it (arm by arm, the reference ran again for
+    each arm on more than :data:`~bomgraph.run_scoring.MAX_REFERENCES` streams). Without a
+    reference, ``todo`` as it is."""
+    if all(tasks[k].reference is None for k in todo):
+        return todo
+    stream: dict[tuple[str, str], int] = {}
+    for k in todo:
+        stream.setdefault((tasks[k].experiment, tasks[k].source.name), len(stream))
+    return sorted(todo, key=lambda k: (stream[(tasks[k].experiment, tasks[k].source.name)],
+                                       not runs_as_reference(tasks[k])))
 
 
 def _indexed(k: int, task: Task) -> tuple[int, dict[str, Any]]:

@@ -263,8 +263,10 @@ def _compare(args: argparse.Namespace, seen: dict[str, int]) -> int:
               file=sys.stderr)
     if executor.backend == "dask" and not getattr(args, "verbose", 0):
         from .cluster import quiet_dask_logging
+        from .stdio import restore_after
 
-        quiet_dask_logging()    # a cluster's failure is the failed runs' line, Dask's with -v
+        # a cluster's failure is the failed runs' line, Dask's with -v; main(): undone after
+        restore_after(quiet_dask_logging())
     show = sys.stderr.isatty() if args.progress is None else args.progress
     bar = None
 

@@ -99,16 +99,26 @@ def worker_failure(exc: BaseException) -> str:
     return f"on a Dask worker, {reason}"
 
 
-def quiet_dask_logging() -> None:
+def quiet_dask_logging() -> Callable[[], None]:
     """Dask's own log lines (its client reconnecting with a traceback, "Couldn't gather") at
     CRITICAL only, so that a failure is the failed runs' one line: for the command line without
-    ``-v`` (:mod:`bomgraph.cli`), never called by the library itself, since it is not
-    restored (the client's reconnect task logs its traceback when the process ends)."""
+    ``-v`` (:mod:`bomgraph.cli`), never called by the library itself. Returns what gives each
+    of those loggers its level back: the command run in its caller's process calls it at
+    the end (:func:`bomgraph.stdio.restore_after`); the program does not (the client's
+    reconnect task logs its traceback when the process ends)."""
     importlib.import_module("distributed")  # its logging configuration first, ours over it
 
-    for name in ["distributed", *logging.root.manager.loggerDict]:  # some set a level
-        if name.split(".")[0] == "distributed":
-            logging.getLogger(name).setLevel(logging.CRITICAL)
+    loggers = [logging.getLogger(name) for name in ["distributed",
+                                                    *list(logging.root.manager.loggerDict)]
+               if name.split(".")[0] == "distributed"]  # some set a level
+    levels = {lg: lg.level for lg in loggers}
+    for lg in loggers:
+        lg.setLevel(logging.CRITICAL)
+
+    def restore() -> None:
+        for lg, level in levels.items():
+            lg.setLevel(level)
+    return restore
 
 
 def dispatch(func: Callable[[int, Any], tuple[int, dict[str, Any]]], index: Sequence[int],

@@ -181,6 +181,8 @@ def _pair_row(experiment: str, arm: str, reference: str, mine: Mapping[str, Mapp
     runs = sorted(set(mine) | set(ref), key=str)
     both = [r for r in runs if r in mine and r in ref]
     ran = [r for r in both if mine[r]["ok"] and ref[r]["ok"]]
+    own = {name: sum(bool(rs[r].get("own_map")) for r in ran)
+           for name, rs in ((reference, ref), (arm, mine))}
     a = np.array([_mpe(mine[r]) for r in ran], dtype=float)
     b = np.array([_mpe(ref[r]) for r in ran], dtype=float)
     keep = np.isfinite(a) & np.isfinite(b)
@@ -203,6 +205,11 @@ def _pair_row(experiment: str, arm: str, reference: str, mine: Mapping[str, Mapp
             stats["ratio_of_means"] = float(a.mean() / b.mean())
         else:
             notes.append("a mean MPE of 0: no ratio")
+    notes += [f"{name} is the --reference, scored against its own map on {k} of {len(ran)} "
+              f"runs (no truth): no pair there" + (
+                  " (the other arms are scored against its map: pair them with one another, "
+                  "--paired-reference ARM)" if name == reference and k == len(ran) else "")
+              for name, k in own.items() if k]
     if stats["ratio_of_means"] is not None and n < MIN_PAIRS_CI:
         notes.append(f"interval: {n} pairs, needs {MIN_PAIRS_CI}")
     elif stats["ratio_of_means"] is not None:
@@ -240,7 +247,8 @@ def paired_comparison(rows: Sequence[Mapping[str, Any]],
     rows : sequence of mapping
         One per (experiment, arm, run), as :func:`bomgraph.report.final_by_run` makes them:
         ``experiment``, ``arm``, ``run``, ``ok`` and the final ``mpe_m`` [m] (NaN or None:
-        no score). Their order does not matter.
+        no score), and ``own_map`` True for a run scored against its own final map (its
+        ``mpe_m`` is then no score: :func:`pairable`). Their order does not matter.
     references : mapping, optional
         Experiment name -> the label of its reference arm; an experiment not named here is
         compared against its first arm (in the order of the rows).
@@ -277,14 +285,16 @@ def paired_comparison(rows: Sequence[Mapping[str, Any]],
     return out
 
 
-def default_reference(experiment: Experiment) -> str:
+def default_reference(experiment: Experiment, *, skip: Sequence[str] = ()) -> str:
     """The arm an experiment's arms are paired against: its ``reference`` method when that is
     one of its arms too, else its first benchmark bound (a method that reads the truth, like
-    ``oracle``), else its first arm."""
-    labels = [a.label for a in experiment.arms]
+    ``oracle``), else its first arm; of the arms not labelled in ``skip`` (all skipped: the
+    first arm)."""
+    labels = [a.label for a in experiment.arms if a.label not in skip] or [
+        experiment.arms[0].label]
     if experiment.reference is not None and experiment.reference.label in labels:
         return experiment.reference.label
-    for arm in experiment.arms:
+    for arm in (a for a in experiment.arms if a.label in labels):
         try:
             if method_info(arm.method).needs_truth:
                 return arm.label
@@ -309,6 +319,40 @@ def references_for(experiments: Sequence[Experiment], label: str | None = None
                           f"choose one of: {', '.join(arms)}")
     return {e.name: label if label in [a.label for a in e.arms] else default_reference(e)
             for e in experiments}
+
+
+def pairable(by_run: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
+    """``by_run`` (rows of :func:`bomgraph.report.final_by_run`) with each run that was
+    scored against its own final map (a stream without truth, the arm run as the sweep's
+    ``--reference``: ``scored_against`` ``"itself (...)"``) marked ``own_map`` and its MPE
+    NaN: its error there is rounding, and a ratio over it ~1e15 (h58; h59; a reference
+    labelled otherwise than its arm, h63)."""
+    return [{**r, "mpe_m": math.nan, "own_map": True}
+            if str(r.get("scored_against", "")).startswith("itself") else dict(r)
+            for r in by_run]
+
+
+def scored_references(experiments: Sequence[Experiment], references: Mapping[str, str],
+                      rows: Sequence[Mapping[str, Any]], label: str | None = None
+                      ) -> dict[str, str]:
+    """``references`` (from :func:`references_for`), where the reference was chosen by
+    default and every run of it that ran was scored against its own map (streams without
+    truth: it is the sweep's ``--reference``) while at least two other arms ran, turned to
+    the next default (:func:`default_reference` without it): the others are paired with one
+    another on their errors against its map, not with it on none. An arm named by ``label``
+    (``--paired-reference``) stays. ``rows``: as :func:`paired_comparison`'s, after
+    :func:`pairable`."""
+    out = dict(references)
+    for e in experiments:
+        ref = out.get(e.name)
+        if ref is None or ref == label:
+            continue
+        mine = [r for r in rows if r["experiment"] == e.name]
+        ran = [r for r in mine if r["arm"] == ref and r["ok"]]
+        others = {r["arm"] for r in mine if r["arm"] != ref and r["ok"]}
+        if ran and all(r.get("own_map") for r in ran) and len(others) >= 2:
+            out[e.name] = default_reference(e, skip=[ref])
+    return out
 
 
 def _num(v: float | None, fmt: str, scale: float = 1.0) -> str:
@@ -344,5 +388,5 @@ def format_paired(rows: Sequence[PairedRow], confidence: float = 0.95) -> str:
 
 
 __all__ = ["MIN_NONZERO_WILCOXON", "MIN_PAIRS_CI", "PairedConfig", "PairedRow",
-           "default_reference", "format_paired", "paired_comparison",
-           "ratio_of_means_ci", "references_for", "wilcoxon_p"]
+           "default_reference", "format_paired", "paired_comparison", "pairable",
+           "ratio_of_means_ci", "references_for", "scored_references", "wilcoxon_p"]

@@ -26,9 +26,10 @@ from .bench import (Executor, execute_counted, refuse_runtime_methods, run_examp
 from .checks import instance
 from .errors import ConfigError, StreamFormatError
 from .evaluate import score_estimate
-from .experiments import PAPER_REPORTED, Arm, Experiment, FileSource, Task
+from .experiments import PAPER_REPORTED, Experiment, FileSource, Task
 from .jsonio import jsonable
-from .paired import PairedConfig, PairedRow, paired_comparison, references_for
+from .paired import (PairedConfig, PairedRow, pairable, paired_comparison,
+                     references_for, scored_references)
 from .plots import MapPanel, error_vs_time_figure, final_maps_figure, map_figure
 from .out_folder import (RESULT_FILES, OutputRecord, estimate_paths, planned_outputs,
                          refuse_inputs_among_outputs, slug)
@@ -149,22 +150,10 @@ def final_by_run(results: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
             row[key] = math.nan if v is None else float(v)
         row["converged"] = r.get("converged")
         row["total_s"] = r.get("total_s", math.nan)
+        if "scored_against" in r:  # a stream without truth (the paper's rows as they were)
+            row["scored_against"] = r["scored_against"]
         rows.append(row)
     return rows
-
-
-def _pairable(by_run: Sequence[Mapping[str, Any]], results: Sequence[Mapping[str, Any]],
-              experiments: Sequence[Experiment]) -> list[dict[str, Any]]:
-    """``by_run`` without a run scored against its own arm's map (no truth, the arm *is* the
-    reference, options too: h59): its error is rounding, a ratio over it ~1e15 (h58)."""
-    as_run: Callable[[Arm], tuple] = lambda a: (a.label, a.method, dict(a.options),
-                                                 a.prior_fraction)
-    selves = {(e.name, a.label) for e in experiments for a in e.arms
-              if e.reference is not None and as_run(a) == as_run(e.reference)}
-    own = {(r["experiment"], r["arm"], r["run"]) for r in results if (r["experiment"], r[
-        "arm"]) in selves and r.get("scored_against") == f"reference {r['arm']}"}
-    return [{**r, "mpe_m": math.nan} if (r["experiment"], r["arm"], r["run"]) in own
-            else dict(r) for r in by_run]
 
 
 def error_curves(results: Sequence[Mapping[str, Any]], metric: str = "mpe_m"
@@ -300,7 +289,8 @@ def format_by_run(rows: Sequence[dict]) -> str:
                      f"'no map': fewer than 3 landmarks; 'unscored': a map, but nothing to "
                      f"score it by (fewer than 3 landmarks in common with the truth or "
                      f"reference; without either, no poses); FAILED: the run raised; mrad: no "
-                     f"truth or reference, RMS bearing residual")
+                     f"truth or reference, RMS bearing residual; reference: the --reference's "
+                     f"own run, the map the others are scored against")
         aw = max([30] + [len(a) for a in arms])  # names in full: never two alike
         rw = max([14] + [len(r) for r in runs])
         lines.append(f"{'arm':{aw}s} " + " ".join(f"{r:>{rw}s}" for r in runs))
@@ -312,6 +302,8 @@ def format_by_run(rows: Sequence[dict]) -> str:
                     cells.append("")
                 elif not r["ok"]:
                     cells.append("FAILED")
+                elif str(r.get("scored_against", "")).startswith("itself"):
+                    cells.append(f"reference ({r['n_mapped']})")  # its MPE: 0 by definition
                 elif not math.isfinite(r["mpe_m"]) and math.isfinite(r["bearing_rms_rad"]):
                     cells.append(f"{1000 * r['bearing_rms_rad']:.1f}mrad ({r['n_mapped']})")
                 elif not math.isfinite(r["mpe_m"]) and r["n_mapped"] >= 3:
@@ -363,7 +355,7 @@ def compare(experiments: Sequence[Experiment], out_dir: str | os.PathLike[str], 
     make_folder(out)
     with folder_lock(out, "`bomgraph compare`"):
         return _compare(experiments, out, executor, use_cache, figures, progress, estimates,
-                        refs, paired, (record, planned))
+                        refs, paired, paired_reference, (record, planned))
 
 
 def plan_compare(experiments: Sequence[Experiment], out_dir: str | os.PathLike[str], *,
@@ -393,6 +385,7 @@ def _compare(experiments: Sequence[Experiment], out: Path, executor: Executor,
              use_cache: bool, figures: bool,
              progress: Callable[[int, int], None] | None, estimates: bool,
              references: Mapping[str, str], paired_config: PairedConfig,
+             label: str | None,
              planned: tuple[OutputRecord, list[Path]]) -> CompareResult:
     start = time.perf_counter()
     tasks = [replace(t, keep_estimate=estimates) for e in experiments for t in e.tasks()]
@@ -404,7 +397,9 @@ def _compare(experiments: Sequence[Experiment], out: Path, executor: Executor,
     written = write_estimate_files(out, tasks, results, record.add) if estimates else []
     summary = summarise(results)
     by_run = final_by_run(results)
-    paired = paired_comparison(_pairable(by_run, results, experiments), references, paired_config)
+    rows = pairable(by_run)  # no pair with a run scored against its own map, nor with its arm
+    paired = paired_comparison(rows, scored_references(experiments, references, rows, label),
+                               paired_config)
     wall = time.perf_counter() - start
     files = [out / n for n in RESULT_FILES] + written
     # compact: without ``indent`` json.dumps takes CPython's C encoder (the main job's file:

@@ -28,6 +28,7 @@ streams for :mod:`bomgraph.cli` and raise :class:`~bomgraph.errors.BomgraphError
 from __future__ import annotations
 
 import contextlib
+import contextvars
 import errno
 import logging
 import os
@@ -516,14 +517,32 @@ def _first_line(record: logging.LogRecord) -> bool:
     return True
 
 
+#: The undos :func:`restore_after` was given in the :func:`logging_restored` block running.
+_UNDOS: contextvars.ContextVar[list[Callable[[], None]] | None] = contextvars.ContextVar(
+    "bomgraph_logging_undos", default=None)
+
+
+def restore_after(undo: Callable[[], None]) -> None:
+    """Have ``undo`` (what puts back a change to logging, such as Dask's loggers quieted by
+    :func:`bomgraph.cluster.quiet_dask_logging`) called when the :func:`logging_restored`
+    block running ends: the command run in its caller's process. Outside one (the program,
+    whose process ends with the command) the change stays."""
+    undos = _UNDOS.get()
+    if undos is not None:
+        undos.append(undo)
+
+
 @contextlib.contextmanager
 def logging_restored() -> Iterator[None]:
     """The root logger's level and handlers and the warnings' filters and ``showwarning`` as
-    they were before, when the block ends: for the command run in its caller's process
-    (:func:`bomgraph.cli.main`), whose ``-q`` left the caller's root logger at ERROR, its
-    handlers removed, and every warning ignored."""
+    they were before, when the block ends, and the changes given to :func:`restore_after`
+    undone: for the command run in its caller's process (:func:`bomgraph.cli.main`), whose
+    ``-q`` left the caller's root logger at ERROR, its handlers removed, and every warning
+    ignored, and whose Dask cluster left Dask's loggers at CRITICAL (h63)."""
     root = logging.getLogger()
     level, handlers = root.level, root.handlers[:]
+    undos: list[Callable[[], None]] = []
+    token = _UNDOS.set(undos)
     # logging.captureWarnings keeps the showwarning it replaced, and installs its own only
     # when it holds none: catch_warnings puts showwarning back, so that is put back too (else
     # the caller's captureWarnings(True) afterwards, and the next main()'s, did nothing)
@@ -532,6 +551,9 @@ def logging_restored() -> Iterator[None]:
         with warnings.catch_warnings():
             yield
     finally:
+        _UNDOS.reset(token)
+        for undo in reversed(undos):
+            undo()
         if hasattr(logging, "_warnings_showwarning"):
             logging._warnings_showwarning = captured
         for h in root.handlers[:]:  # the block's handlers go, the caller's come back
@@ -549,4 +571,4 @@ __all__ = ["STDIO", "MAX_LINE_BYTES", "MAX_INPUT_BYTES", "OutputPathError",
            "read_bounded", "read_regular_file", "copy_bounded", "display_path", "input_path", "write_output",
            "is_stdout", "check_output_path", "AtomicOutput", "output_file", "write_text",
            "write_figure", "FolderBusyError", "make_folder", "folder_lock", "signals_held",
-           "configure_logging", "logging_restored"]
+           "configure_logging", "logging_restored", "restore_after"]

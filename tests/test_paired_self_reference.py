@@ -26,14 +26,15 @@ def test_an_arm_scored_against_itself_is_no_pair(tmp_path: Path) -> None:
     exps, _ = compare_experiments(streams=[str(path)], methods="triangulate,stmds-cs",
                                   reference="triangulate")
     result = compare(exps, tmp_path / "out", executor=Executor("serial"), figures=False)
-    assert {r["arm"]: r["scored_against"] for r in result.results} == {
-        "triangulate": "reference triangulate", "stmds-cs": "reference triangulate"}
+    assert {r["arm"]: r["scored_against"] for r in result.results} == {  # h63: "itself"
+        "triangulate": "itself (reference triangulate)", "stmds-cs": "reference triangulate"}
     (row,) = result.paired
     assert row.reference == "triangulate" and row.arm == "stmds-cs"
     # the reference arm's only run was scored against itself: nothing to pair with
     assert (row.n_pairs, row.unscored) == (0, 1), row
     assert row.ratio_of_means is None and row.ratio_median is None, row
     assert "no run scored by both" in row.note
+    assert "triangulate is the --reference, scored against its own map on 1 of 1" in row.note
     # its own final map is still reported as it was scored (for the by-run table)
     ref_run = next(r for r in result.results if r["arm"] == "triangulate")
     assert math.isfinite(ref_run["checkpoints"][-1]["mpe_m"])
