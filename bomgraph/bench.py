@@ -43,6 +43,7 @@ from .method_code import (bomgraph_edited, method_code, refuse_runtime_methods, 
                           stale_after_run, stale_here, stale_plugin, warn_sourceless,
                           workers_outdated)
 from .plugins import code_fingerprint, source_fingerprint
+from .processes import daemonic
 from .result_cache import read_cached, strip_timings, write_cached  # re-exported
 from .stream import Step, Stream, Truth
 from .stream_file import StreamReader, count_steps  # re-exported: bench.count_steps
@@ -341,7 +342,8 @@ def which_cached(tasks: Sequence[Task], cache_dir: str | os.PathLike[str],
                  executor: Executor = Executor()) -> list[bool]:
     """:func:`is_cached` of each task, keyed as one :func:`execute` sweep keys them (each
     plugin's package hashed once)."""
-    disk = instance(executor, Executor, "is_cached(): executor", ConfigError).backend != "serial"
+    backend = instance(executor, Executor, "is_cached(): executor", ConfigError).backend
+    disk = backend == "dask" or (backend == "processes" and not daemonic())  # as execute
     if bomgraph_edited():
         return [False] * len(tasks)
     memo: dict[str, str | None] = {}
@@ -374,6 +376,11 @@ def execute_counted(tasks: Sequence[Task], executor: Executor = Executor(), *,
     if bad is not None:
         raise ConfigError(f"execute(): tasks must be Task objects (experiment.tasks()), got "
                           f"{type(bad).__name__}")
+    if executor.backend == "processes" and daemonic():
+        _log.warning("this process is daemonic (a multiprocessing.Pool worker), which cannot "
+                     "start worker processes: running the %d run(s) here, one at a time "
+                     "(as Executor('serial'), --jobs 1)", len(tasks))
+        executor = Executor("serial")
     if executor.backend != "serial":
         refuse_runtime_methods(tasks, executor.backend)
     source_fingerprint.cache_clear()  # a plugin module reloaded since the last sweep: new keys
