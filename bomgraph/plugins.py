@@ -108,9 +108,12 @@ def refresh() -> None:
     _FOLDERS.clear()
     from .import_closure import _PARSED
     from .loaded_code import _FROM
+    from .loaded_values import forget
 
     _PARSED.clear()
     _FROM.clear()
+    _MODULES.clear()
+    forget()
     importlib.invalidate_caches()
 
 
@@ -400,7 +403,20 @@ def _fingerprint(target: str, version: str | None, loaded: bool,
             # it holds a name of a module reloaded since (from .helpers import SCALE): it
             # runs that module's old code, which no file holds now
             h.update(b"holds names of a module reloaded since")
+    if loaded:
+        _MODULES[target] = [m for _, f in files if (m := modules.get(f.resolve())) is not None]
     return h.hexdigest()[:16]
+
+
+#: Per target: the loaded modules of its files, when :func:`source_fingerprint` last hashed it.
+_MODULES: dict[str, list[types.ModuleType]] = {}
+
+
+def loaded_modules(target: str, version: str | None = None) -> list[types.ModuleType]:
+    """The modules of the files of ``target``'s key (:func:`source_fingerprint`) that this
+    process has loaded, in their order."""
+    source_fingerprint(target, version)
+    return list(_MODULES.get(target, []))
 
 
 def _stale_imports(module: types.ModuleType, path: Path, digest: bytes, top: str) -> bool:

@@ -27,13 +27,13 @@ from .bench import (Executor, execute_counted, refuse_runtime_methods, run_examp
                     which_cached)
 from .checks import instance
 from .errors import ConfigError, StreamFormatError
+from .method_code import new_sweep
 from .evaluate import score_estimate
 from .experiments import PAPER_REPORTED, Arm, Experiment, FileSource, Task
 from .jsonio import jsonable
 from .paired import PairedConfig, PairedRow, paired_comparison, references_for
 from .plots import MapPanel, error_vs_time_figure, final_maps_figure, map_figure
 from .out_folder import drop_earlier_outputs, refuse_inputs_among_outputs, slug, unique_slugs
-from .plugins import source_fingerprint
 from .stdio import folder_lock, make_folder, output_file, write_figure, write_text
 from .tables import HUGE
 
@@ -389,7 +389,7 @@ def plan_compare(experiments: Sequence[Experiment], out_dir: str | os.PathLike[s
     them."""
     instance(executor, Executor, "plan_compare(): executor", ConfigError)  # as compare's
     refuse_inputs_among_outputs(Path(out_dir), experiments)
-    source_fingerprint.cache_clear()  # as execute() does: a plugin module reloaded since
+    new_sweep()  # as execute() does: a plugin module reloaded, a value set since
     cache = Path(out_dir) / "cache"
     tasks = [replace(t, keep_estimate=estimates) for e in experiments for t in e.tasks()]
     if executor.backend != "serial":  # as execute() refuses them
