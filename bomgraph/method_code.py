@@ -18,9 +18,10 @@ from typing import Sequence
 
 from .errors import ConfigError, UnknownMethodError
 from .experiments import Task
-from .mapper import method_info
 from .loaded_values import Unhashable, note_run, values_fingerprint
+from .mapper import method_info
 from .plugins import code_changed, disk_fingerprint, loaded_modules, source_fingerprint
+from .processes import daemonic
 
 _log = logging.getLogger(__name__)
 
@@ -244,6 +245,8 @@ def refuse_runtime_methods(tasks: Sequence[Task], backend: str) -> None:
     ConfigError
         Naming the method and how to make it a plugin (or to run serially).
     """
+    if backend == "processes" and daemonic():  # run here, serially (bench.execute)
+        return
     names = dict.fromkeys(m for t in tasks for m in t.methods())
     for name in names:
         try:

@@ -17,6 +17,7 @@ import numpy as np
 from bomgraph import mapper
 from bomgraph.bench import Executor, execute
 from bomgraph.experiments import Arm, Experiment, FileSource
+from bomgraph.report import plan_compare
 from bomgraph.sim import SimConfig, simulate
 from bomgraph.stream_file import write_stream
 
@@ -34,6 +35,8 @@ def _sweep(stream: str) -> tuple[list[tuple[bool, str]], list[str], list[str], i
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         try:
+            plan = plan_compare([exp], stream + ".out", executor=Executor("processes", n_jobs=2))
+            assert len(plan) == 2, plan
             res = [(r["ok"], r.get("error", "")) for r in
                    execute(exp.tasks(), Executor("processes", n_jobs=2))]
         except Exception as exc:  # noqa: BLE001 - reported to the test
