@@ -169,7 +169,7 @@ def _run_task(task: Task) -> dict[str, Any]:
     out: dict[str, Any] = {"experiment": task.experiment, "arm": task.arm.label,
                            "method": task.arm.method, "run": task.source.name, "key": None}
     try:  # in a worker, what the client could key and it cannot: a failed run, not a raise
-        out["key"] = task_key(task)
+        out["key"] = task_key(task, disk=_IN_WORKER.get())  # a worker runs the files'
         stale = stale_plugin(task, worker=_IN_WORKER.get())
     except Exception as exc:
         if not _IN_WORKER.get():  # the process that made the task: its error, as it keyed it

@@ -161,3 +161,36 @@ def test_a_value_set_here_that_workers_do_not_see_is_said(
         warn_sourceless(exp.tasks(), disk=True)
     lines = [r.getMessage() for r in caplog.records]
     assert len(lines) == 1 and "'h64-val'" in lines[0] and "do not see" in lines[0], lines
+
+
+def test_workers_key_a_plugin_holding_a_value_that_cannot_be_hashed_as_the_client(
+        plugin_site: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+        caplog: pytest.LogCaptureFixture) -> None:
+    """A worker keyed its run as a run in its process, values included: a global its code
+    names that cannot be hashed (a generator, ``gtsam.LevenbergMarquardtParams()``) made its
+    key "unhashable" where the client's is the files', and no run was cached ("the workers
+    keyed them otherwise"). A worker now keys with the files it runs. Fails before."""
+    import os
+
+    from _plugin_dist import write_dist_info
+
+    write(plugin_site / "h64gen" / "__init__.py", "")
+    write(plugin_site / "h64gen" / "m.py", depth_mapper("DEPTH_M + 0 * len(str(GEN))", "Mine")
+          + "\nDEPTH_M = 1.0\nGEN = (i for i in range(3))\n")
+    write_dist_info(plugin_site, "h64gen", {"h64-gen": "h64gen.m:Mine"})
+    monkeypatch.setenv("PYTHONPATH", os.pathsep.join([str(plugin_site),
+                                                      os.environ.get("PYTHONPATH", "")]))
+    from bomgraph import plugins
+
+    plugins.refresh()
+    stream = tmp_path / "s.jsonl"
+    write_stream(simulate(SimConfig(n_steps=20), np.random.default_rng(3)), stream)
+    exp = Experiment("e", "e", (Arm("h64-gen", "h64-gen"),), sources=(FileSource(str(stream)),))
+    counts = []
+    with caplog.at_level(logging.WARNING, logger="bomgraph"):
+        for _ in range(2):
+            (res,), n_cached = execute_counted(exp.tasks(), Executor("processes", n_jobs=2),
+                                               cache_dir=tmp_path / "cache")
+            assert res["ok"], res.get("error")
+            counts.append(n_cached)
+    assert counts == [0, 1], [r.getMessage() for r in caplog.records]
