@@ -37,10 +37,11 @@ from .experiments import Experiment, SimSource, Task
 from .jsonio import jsonable
 from .mapper import (MapEstimate, RunResult, checkpoint_times, create_mapper,
                      method_failure_note, method_info, run)
-from .method_code import (bomgraph_edited, method_code, refuse_runtime_methods, sourceless,
-                          stale_after_run, stale_here, stale_plugin, warn_sourceless,
+from .method_code import (bomgraph_edited, method_code, new_sweep, refuse_runtime_methods,
+                          stale_after_run, stale_here, stale_plugin, uncacheable, warn_sourceless,
                           workers_outdated)
-from .plugins import code_fingerprint, source_fingerprint
+from .plugins import code_fingerprint
+from .processes import daemonic
 from .result_cache import read_cached, strip_timings, write_cached  # re-exported
 from .run_scoring import (CheckpointScorer, keep_reference, reference_map, run_arm,
                           runs_as_reference)
@@ -130,7 +131,7 @@ def _run_task(task: Task) -> dict[str, Any]:
     out: dict[str, Any] = {"experiment": task.experiment, "arm": task.arm.label,
                            "method": task.arm.method, "run": task.source.name, "key": None}
     try:  # in a worker, what the client could key and it cannot: a failed run, not a raise
-        out["key"] = task_key(task)
+        out["key"] = task_key(task, disk=_IN_WORKER.get())  # a worker runs the files'
         stale = stale_plugin(task, worker=_IN_WORKER.get())
     except Exception as exc:
         if not _IN_WORKER.get():  # the process that made the task: its error, as it keyed it
@@ -276,12 +277,14 @@ class Executor:
         return cls("processes", n_jobs=jobs)
 
 
-def _cache_path(cache_dir: Path, task: Task, key: str | None = None) -> Path | None:
+def _cache_path(cache_dir: Path, task: Task, key: str | None = None, disk: bool = False
+                ) -> Path | None:
     """One file per (arm, source, code) (``key``: the task's :func:`task_key`, computed when
     not given): experiments that share an arm share its runs. None for a task whose method
-    has no source file to hash (:func:`~bomgraph.method_code.sourceless`): its results are
-    neither read from nor written to the cache."""
-    return None if sourceless(task) else cache_dir / f"{key or task_key(task)}.json"
+    has no source file to hash, or, run here (not ``disk``), a value set that cannot be
+    hashed (:func:`~bomgraph.method_code.uncacheable`): its results are neither read from
+    nor written to the cache."""
+    return None if uncacheable(task, disk) else cache_dir / f"{key or task_key(task)}.json"
 
 
 def is_cached(task: Task, cache_dir: str | os.PathLike[str], executor: Executor = Executor()
@@ -294,13 +297,16 @@ def which_cached(tasks: Sequence[Task], cache_dir: str | os.PathLike[str],
                  executor: Executor = Executor()) -> list[bool]:
     """:func:`is_cached` of each task, keyed as one :func:`execute` sweep keys them (each
     plugin's package hashed once)."""
-    disk = instance(executor, Executor, "is_cached(): executor", ConfigError).backend != "serial"
+    backend = instance(executor, Executor, "is_cached(): executor", ConfigError).backend
+    disk = backend == "dask" or (backend == "processes" and not daemonic())  # as execute
     if bomgraph_edited():
         return [False] * len(tasks)
+    new_sweep()
     memo: dict[str, str | None] = {}
     stale: dict[tuple[str, ...], bool] = {}
     paths = [None if not disk and stale_here(t, stale) else
-             _cache_path(Path(cache_dir), t, task_key(t, disk=disk, memo=memo)) for t in tasks]
+             _cache_path(Path(cache_dir), t, task_key(t, disk=disk, memo=memo), disk)
+             for t in tasks]
     return [p is not None and read_cached(p) is not None for p in paths]
 
 
@@ -327,9 +333,14 @@ def execute_counted(tasks: Sequence[Task], executor: Executor = Executor(), *,
     if bad is not None:
         raise ConfigError(f"execute(): tasks must be Task objects (experiment.tasks()), got "
                           f"{type(bad).__name__}")
+    if executor.backend == "processes" and daemonic():
+        _log.warning("this process is daemonic (a multiprocessing.Pool worker), which cannot "
+                     "start worker processes: running the %d run(s) here, one at a time "
+                     "(as Executor('serial'), --jobs 1)", len(tasks))
+        executor = Executor("serial")
     if executor.backend != "serial":
         refuse_runtime_methods(tasks, executor.backend)
-    source_fingerprint.cache_clear()  # a plugin module reloaded since the last sweep: new keys
+    new_sweep()  # a plugin module reloaded, a value of it set since the last sweep: new keys
     if cache_dir is not None and bomgraph_edited():
         cache_dir = None
     results: list[dict[str, Any] | None] = [None] * len(tasks)
@@ -344,12 +355,12 @@ def execute_counted(tasks: Sequence[Task], executor: Executor = Executor(), *,
     cache = Path(cache_dir) if cache_dir is not None else None
     if cache is not None:
         cache.mkdir(parents=True, exist_ok=True)
-        warn_sourceless(tasks)
+        warn_sourceless(tasks, disk)
         stale: dict[tuple[str, ...], bool] = {}
         for k, t in enumerate(tasks):
             if not disk and stale_here(t, stale):
                 continue
-            path = _cache_path(cache, t, keys[k])
+            path = _cache_path(cache, t, keys[k], disk)
             cached = None if path is None else read_cached(path)
             if cached is not None:
                 cached.update(experiment=t.experiment, arm=t.arm.label, run=t.source.name)
@@ -378,7 +389,7 @@ def execute_counted(tasks: Sequence[Task], executor: Executor = Executor(), *,
                 if res.get("ok"):  # a failure is never cached, and says why itself
                     other_key.append(f"{tasks[k].arm.label} on {tasks[k].source.name}")
             elif (cache is not None and res.get("ok")  # failures are re-run next time
-                  and (path := _cache_path(cache, tasks[k], keys[k])) is not None):
+                  and (path := _cache_path(cache, tasks[k], keys[k], disk)) is not None):
                 write_cached(path, res)
             for j in twins[keys[k]]:
                 t = tasks[j]

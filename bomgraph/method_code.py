@@ -2,7 +2,8 @@
 
 A plugin's or a method registered at run time's code is part of its cache key
 (:func:`method_code`; built-in methods are covered by the runner's hash of the bomgraph and
-baselines sources). The code that runs must be the code keyed: a method without a source file
+baselines sources), and for a run in this process the values of its modules set since they
+were loaded (:func:`method_values`, :mod:`bomgraph.loaded_values`). The code that runs must be the code keyed: a method without a source file
 is never cached (:func:`sourceless`), a worker that imported a plugin before an edit does not
 run it (:func:`stale_plugin`), the local workers that joblib keeps between sweeps are ended
 when a plugin changed since they ran it (:func:`workers_outdated`), and a method registered at
@@ -11,13 +12,16 @@ run time is refused to workers, which cannot see it (:func:`refuse_runtime_metho
 
 from __future__ import annotations
 
+import functools
 import logging
 from typing import Sequence
 
 from .errors import ConfigError, UnknownMethodError
 from .experiments import Task
+from .loaded_values import Unhashable, note_run, values_fingerprint
 from .mapper import method_info
-from .plugins import code_changed, disk_fingerprint, source_fingerprint
+from .plugins import code_changed, disk_fingerprint, loaded_modules, source_fingerprint
+from .processes import daemonic
 
 _log = logging.getLogger(__name__)
 
@@ -60,18 +64,47 @@ def method_code(task: Task, *, disk: bool = False,
     memo = {} if memo is None else memo
     for m in task.methods():
         if m not in memo:
-            memo[m] = _keyed(m, method_fingerprint(m, disk=disk))
+            memo[m] = _keyed(m, method_fingerprint(m, disk=disk), disk)
     return {m: fp for m in task.methods() if (fp := memo[m]) is not None}
 
 
-def _keyed(name: str, fingerprint: str | None) -> str | None:
+def _keyed(name: str, fingerprint: str | None, disk: bool) -> str | None:
     """A method's fingerprint with what its package's sources do not tell: its target (the
-    same name registered again as another factory of the package) and whether it is given
-    the truth (registered with ``needs_truth``, or its factory says so)."""
+    same name registered again as another factory of the package), whether it is given
+    the truth (registered with ``needs_truth``, or its factory says so) and, for a run in
+    this process (not ``disk``), the values of its modules set since they were loaded
+    (:func:`method_values`)."""
     if fingerprint is None:
         return None
     info = method_info(name)
-    return f"{fingerprint} {info.target}" + (" truth" if info.needs_truth else "")
+    values = "" if disk or fingerprint == NO_SOURCE else method_values(info.target,
+                                                                       info.version)
+    return (f"{fingerprint} {info.target}" + (" truth" if info.needs_truth else "")
+            + (f" values={values}" if values else " values unhashable" if values is None
+               else ""))
+
+
+#: Per target: why :func:`method_values` could not hash a value of its modules.
+_UNHASHABLE: dict[str, str] = {}
+
+
+@functools.lru_cache(maxsize=64)
+def method_values(target: str, version: str | None = None) -> str | None:
+    """A hash of the values of ``target``'s loaded modules set since they were loaded
+    (:func:`bomgraph.loaded_values.values_fingerprint`: ``mymethod.set_depth(3.0)``), ""
+    when none is, None when one cannot be hashed (the method's runs in this process are then
+    not cached: :func:`uncacheable`). Taken once a sweep (:func:`new_sweep`)."""
+    try:
+        return values_fingerprint(loaded_modules(target, version))
+    except Unhashable as exc:
+        _UNHASHABLE[target] = str(exc)
+        return None
+
+
+def new_sweep() -> None:
+    """Forget the keys' parts taken for the last sweep: a module reloaded, a value set since."""
+    source_fingerprint.cache_clear()
+    method_values.cache_clear()
 
 
 def stale_plugin(task: Task, *, worker: bool) -> str:
@@ -106,6 +139,10 @@ def stale_after_run(task: Task, *, worker: bool) -> str:
     result is of neither key's code), and why the check itself failed if it did (the
     package removed or broken meanwhile): "" only when the code is still the keyed one."""
     try:
+        if not worker:  # what the run changed in its modules is its own state
+            for m in task.methods():
+                if (info := method_info(m)).origin != "builtin":
+                    note_run(loaded_modules(info.target, info.version))
         return stale_plugin(task, worker=worker)
     except Exception as exc:  # a run that cannot be tied to its code is not cached
         return (f"the method's code could not be checked after the run ({type(exc).__name__}: "
@@ -140,8 +177,25 @@ def sourceless(task: Task) -> list[str]:
     return [m for m in task.methods() if _known(m) and not method_has_source(m)]
 
 
-def warn_sourceless(tasks: Sequence[Task]) -> None:
-    """One log line for the runs left out of the cache by :func:`sourceless`."""
+def unhashable(task: Task, disk: bool) -> list[str]:
+    """The task's methods run in this process (not ``disk``) whose modules hold a value set
+    since they were loaded that cannot be hashed (:func:`method_values`): no key can tell
+    it, so a cached result could be of another value."""
+    return [] if disk else [m for m in task.methods() if _known(m) and (
+        info := method_info(m)).origin != "builtin" and method_has_source(m)
+        and method_values(info.target, info.version) is None]
+
+
+def uncacheable(task: Task, disk: bool) -> bool:
+    """Whether the task's results are neither read from nor written to the cache
+    (:func:`sourceless`, :func:`unhashable`)."""
+    return bool(sourceless(task) or unhashable(task, disk))
+
+
+def warn_sourceless(tasks: Sequence[Task], disk: bool = True) -> None:
+    """One log line for the runs left out of the cache by :func:`sourceless`, one for those
+    by :func:`unhashable`; for workers (``disk``), one for the methods whose modules hold a
+    value set in this process, which the workers do not see."""
     names = dict.fromkeys(m for t in tasks for m in sourceless(t))
     if names:
         n = sum(1 for t in tasks if sourceless(t))
@@ -149,6 +203,23 @@ def warn_sourceless(tasks: Sequence[Task]) -> None:
                      "in a notebook cell or `python -c`), so a cached result could be from "
                      "before an edit; put the class in a .py module to cache its runs",
                      n, ", ".join(repr(m) for m in names))
+    if disk:  # the workers import the files: a value set here is not theirs
+        unseen = dict.fromkeys(m for t in tasks for m in t.methods() if _known(m) and (
+            info := method_info(m)).origin != "builtin" and method_values(info.target,
+                                                                          info.version))
+        if unseen:
+            _log.warning("method(s) %s: a value of their modules was set in this process "
+                         "(a global or class attribute changed since loaded), which the "
+                         "worker processes do not see: they run the files' values; run "
+                         "serially (--jobs 1, Executor('serial')) to run this process's",
+                         ", ".join(repr(m) for m in unseen))
+    odd = dict.fromkeys(method_info(m).target for t in tasks for m in unhashable(t, disk))
+    if odd:
+        n = sum(1 for t in tasks if unhashable(t, disk))
+        _log.warning("%d run(s) not cached: %s, a value the method's code reads that bomgraph "
+                     "cannot hash, so a cached result could be of another value; make it a "
+                     "number, string, array, dataclass or container of them, or make it in "
+                     "the method", n, "; ".join(_UNHASHABLE.get(t, t) for t in odd))
 
 
 def bomgraph_edited() -> bool:
@@ -174,6 +245,8 @@ def refuse_runtime_methods(tasks: Sequence[Task], backend: str) -> None:
     ConfigError
         Naming the method and how to make it a plugin (or to run serially).
     """
+    if backend == "processes" and daemonic():  # run here, serially (bench.execute)
+        return
     names = dict.fromkeys(m for t in tasks for m in t.methods())
     for name in names:
         try:
@@ -217,6 +290,7 @@ def workers_outdated(tasks: Sequence[Task]) -> bool:
     return outdated
 
 
-__all__ = ["NO_SOURCE", "bomgraph_edited", "method_fingerprint", "method_has_source", "method_code", "stale_plugin",
-           "stale_after_run", "stale_here", "sourceless", "warn_sourceless",
+__all__ = ["NO_SOURCE", "bomgraph_edited", "method_fingerprint", "method_has_source",
+           "method_code", "method_values", "new_sweep", "stale_plugin", "stale_after_run",
+           "stale_here", "sourceless", "unhashable", "uncacheable", "warn_sourceless",
            "refuse_runtime_methods", "workers_outdated"]

@@ -105,11 +105,15 @@ def refresh() -> None:
     _RECORDED.clear()
     _DISK.clear()
     _LISTED.clear()
+    _FOLDERS.clear()
     from .import_closure import _PARSED
     from .loaded_code import _FROM
+    from .loaded_values import forget
 
     _PARSED.clear()
     _FROM.clear()
+    _MODULES.clear()
+    forget()
     importlib.invalidate_caches()
 
 
@@ -193,10 +197,11 @@ def _py_files(root: str) -> list[tuple[str, Path]]:
     """The ``.py`` files under ``root`` (links to nothing left out: an editor's lock
     ``.#m.py``), each with its path relative to ``root`` (as ``relative_to(root)
     .as_posix()``); a link to a folder of code is followed (a helper folder linked into
-    the package is imported through it), unless to a folder already listed or above. Listed again only
-    when a folder's status changed (a file added, removed or renamed in it) since the last
+    the package is imported through it), unless to a folder already listed or above. Kept
+    while no folder's status changed (a file added, removed or renamed in it) since the last
     listing, within :data:`RACY_NS` too: a worker lists a plugin's package before and after
-    each run."""
+    each run; then only the folders whose status changed are listed again
+    (:func:`_code_entries`)."""
     seen = _LISTED.get(root)
     if seen is not None and all(_stat_signature(Path(d)) == sig for d, sig in seen[0]):
         return list(seen[1])
@@ -205,47 +210,70 @@ def _py_files(root: str) -> list[tuple[str, Path]]:
     real = {os.path.realpath(root)}
     while folders:
         prefix, folder = folders.pop()
-        signatures.append((folder, _stat_signature(Path(folder))))  # before its listing
-        try:
-            entries = list(os.scandir(folder))
-        except OSError:  # gone or unreadable meanwhile, as rglob skips it
-            continue
-        for e in entries:
-            try:
-                if os.path.normcase(e.name).endswith(".py") and e.is_file():
-                    out.append((prefix + e.name, Path(e.path)))
-                elif e.is_dir():
-                    follow = _new_folder(e, real)
-                    if follow:
-                        folders.append((prefix + e.name + "/", e.path))
-                    elif follow is None:   # watched: code written into it lists it
-                        signatures.append((e.path, _stat_signature(Path(e.path))))
-            except OSError:
+        sig, entries = _code_entries(folder)
+        signatures.append((folder, sig))
+        for name, path, kind in entries:
+            if kind == "py":
+                out.append((prefix + name, Path(path)))
                 continue
+            follow = True if kind == "dir" else _new_folder(path, real)
+            if follow:
+                folders.append((prefix + name + "/", path))
+            elif follow is None:   # watched: code written into it lists it
+                signatures.append((path, _stat_signature(Path(path))))
     if all(sig is not None and _aged(sig) for _, sig in signatures):
         _LISTED[root] = (signatures, list(out))
     return out
 
 
-def _new_folder(entry: os.DirEntry[str], real: set[str]) -> bool | None:
-    """Whether to list the folder ``entry``; a link: to a folder of Python code (a ``.py``
-    file at its top, not a linked data set), not to a folder of ``real`` (those listed) nor
-    to one above them (a loop); its real path is then added to ``real``. None for a link
-    to a folder passed over for holding no code (or unreadable): its status is to be
-    watched, as the first module written into it (or its permissions given) lists it."""
-    if not entry.is_symlink():
-        return True
-    path = os.path.realpath(entry.path)
-    if any(path == r or r.startswith(path.rstrip(os.sep) + os.sep) for r in real):
-        return False
+def _code_entries(folder: str) -> tuple[tuple[int, ...] | None, list[tuple[str, str, str]]]:
+    """The :func:`_stat_signature` of ``folder`` and, as listed after it, its entries that
+    can be code: ``.py`` files (``"py"``), folders (``"dir"``) and links to folders
+    (``"link"``), each as (name, path, kind); none when it cannot be listed (gone, or
+    unreadable, as rglob skips it). Listed again only when its status changed or was within
+    :data:`RACY_NS` of the listing: a data set linked into a package (100,000 files in 100
+    folders, one being written) was listed whole at each check, 98 ms, where now the
+    folder written is (h64)."""
+    sig = _stat_signature(Path(folder))  # before the listing: a change after it moves it
+    seen = _FOLDERS.get(folder)
+    if sig is not None and seen is not None and seen[0] == sig:
+        return sig, seen[1]
+    out: list[tuple[str, str, str]] = []
     try:
-        names = os.listdir(path)
+        entries = list(os.scandir(folder))
     except OSError:
+        return sig, out
+    fold = os.name == "nt"  # .PY is a module there
+    for e in entries:  # a data file costs a name's test and its type, read with the name
+        try:
+            if (e.name.lower() if fold else e.name).endswith(".py") and e.is_file():
+                out.append((e.name, e.path, "py"))
+            elif e.is_dir():
+                out.append((e.name, e.path, "link" if e.is_symlink() else "dir"))
+        except OSError:
+            continue
+    if sig is not None and _aged(sig):
+        _FOLDERS[folder] = (sig, out)
+    return sig, out
+
+
+def _new_folder(path: str, real: set[str]) -> bool | None:
+    """Whether to list the folder that the link ``path`` points to: a folder of Python code
+    (a ``.py`` file at its top, not a linked data set), not one of ``real`` (those listed)
+    nor one above them (a loop); its real path is then added to ``real``. None for a
+    folder passed over for holding no code (or unreadable): its status is to be watched,
+    as the first module written into it (or its permissions given) lists it."""
+    target = os.path.realpath(path)
+    if any(target == r or r.startswith(target.rstrip(os.sep) + os.sep) for r in real):
+        return False
+    if not any(kind == "py" for _, _, kind in _code_entries(path)[1]):
         return None
-    if not any(os.path.normcase(n).endswith(".py") for n in names):
-        return None
-    real.add(path)
+    real.add(target)
     return True
+
+
+#: Per folder: :func:`_code_entries`.
+_FOLDERS: dict[str, tuple[tuple[int, ...], list[tuple[str, str, str]]]] = {}
 
 
 #: Per package folder: the :func:`_stat_signature` of each of its folders and its listing.
@@ -375,7 +403,20 @@ def _fingerprint(target: str, version: str | None, loaded: bool,
             # it holds a name of a module reloaded since (from .helpers import SCALE): it
             # runs that module's old code, which no file holds now
             h.update(b"holds names of a module reloaded since")
+    if loaded:
+        _MODULES[target] = [m for _, f in files if (m := modules.get(f.resolve())) is not None]
     return h.hexdigest()[:16]
+
+
+#: Per target: the loaded modules of its files, when :func:`source_fingerprint` last hashed it.
+_MODULES: dict[str, list[types.ModuleType]] = {}
+
+
+def loaded_modules(target: str, version: str | None = None) -> list[types.ModuleType]:
+    """The modules of the files of ``target``'s key (:func:`source_fingerprint`) that this
+    process has loaded, in their order."""
+    source_fingerprint(target, version)
+    return list(_MODULES.get(target, []))
 
 
 def _stale_imports(module: types.ModuleType, path: Path, digest: bytes, top: str) -> bool:

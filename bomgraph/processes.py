@@ -105,6 +105,16 @@ def dispatch(func: Callable[[int, Any], tuple[int, dict[str, Any]]], index: Sequ
                 yield k, res
 
 
+def daemonic() -> bool:
+    """Whether this process cannot start worker processes: a daemonic one (a
+    ``multiprocessing.Pool`` worker) may have no children, so joblib ran every task in it, one
+    at a time, saying only "Loky-backed parallel loops cannot be called in a
+    multiprocessing, setting n_jobs=1" after bomgraph's line that it started workers."""
+    import multiprocessing
+
+    return bool(multiprocessing.current_process().daemon)
+
+
 def _pool(func: Callable[[int, Any], tuple[int, dict[str, Any]]], pending: dict[int, Any],
           n_jobs: int, marks: str) -> Iterator[tuple[int, dict[str, Any]]]:
     from joblib import Parallel, delayed, effective_n_jobs, parallel_config
@@ -320,4 +330,4 @@ def _start_workers(par: Any) -> None:
             workers.submit(int)  # the first task starts the processes, in this thread
 
 
-__all__ = ["dispatch"]
+__all__ = ["daemonic", "dispatch"]

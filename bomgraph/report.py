@@ -25,6 +25,7 @@ from .bench import (Executor, execute_counted, refuse_runtime_methods, run_examp
                     which_cached)
 from .checks import instance
 from .errors import ConfigError, StreamFormatError
+from .method_code import new_sweep
 from .evaluate import score_estimate
 from .experiments import PAPER_REPORTED, Experiment, FileSource, Task
 from .jsonio import jsonable
@@ -33,7 +34,6 @@ from .paired import (PairedConfig, PairedRow, pairable, paired_comparison,
 from .plots import MapPanel, error_vs_time_figure, final_maps_figure, map_figure
 from .out_folder import (RESULT_FILES, OutputRecord, estimate_paths, planned_outputs,
                          refuse_inputs_among_outputs, slug)
-from .plugins import source_fingerprint
 from .stdio import folder_lock, make_folder, write_figure, write_text
 from .tables import HUGE, write_csv
 
@@ -370,7 +370,7 @@ def plan_compare(experiments: Sequence[Experiment], out_dir: str | os.PathLike[s
     OutputRecord(Path(out_dir)).refuse_foreign(
         planned_outputs(Path(out_dir), experiments, estimates=estimates, figures=figures),
         [Path(out_dir) / "cache"] if use_cache else [])
-    source_fingerprint.cache_clear()  # as execute() does: a plugin module reloaded since
+    new_sweep()  # as execute() does: a plugin module reloaded, a value set since
     cache = Path(out_dir) / "cache"
     tasks = [replace(t, keep_estimate=estimates) for e in experiments for t in e.tasks()]
     if executor.backend != "serial":  # as execute() refuses them

@@ -11,3 +11,11 @@ from threadpoolctl import threadpool_limits
 def _single_threaded_blas():
     with threadpool_limits(limits=1):
         yield
+
+
+@pytest.fixture(name="plugin_site")
+def _plugin_site(tmp_path, monkeypatch):
+    """A folder of plugin packages on ``sys.path`` (``_plugin_site.plugin_site``)."""
+    from _plugin_site import plugin_site
+
+    yield from plugin_site(tmp_path, monkeypatch)

@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from _depth_mapper import depth_mapper
+from _plugin_site import write
 
 from bomgraph import mapper, plugins
 from bomgraph.bench import Executor, execute
@@ -35,56 +36,39 @@ from bomgraph.sim import SimConfig, simulate
 from bomgraph.stream_file import write_stream
 
 
-@pytest.fixture
-def site(tmp_path: Path, monkeypatch: pytest.MonkeyPatch):
-    root = tmp_path / "site"
-    root.mkdir()
-    monkeypatch.syspath_prepend(str(root))
-    monkeypatch.setattr(plugins, "RACY_NS", 0)
-    plugins.refresh()
-    yield root
-    plugins.refresh()
-    for name in [n for n in sys.modules if n.split(".")[0] in ("h56ln", "h56lo")]:
-        del sys.modules[name]
-
-
-def _write(path: Path, text: str) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(text)
-
-
 @pytest.mark.parametrize("target, edited", [("h56ln.m:M", "shared/h.py"),
                                             ("h56ln.inner.m:M", "inner/m.py")])
 def test_an_edit_in_a_linked_folder_of_the_package_moves_the_key(
-        site: Path, tmp_path: Path, target: str, edited: str) -> None:
-    _write(site / "h56ln" / "__init__.py", "")
-    _write(site / "h56ln" / "m.py", "from .shared.h import K\nclass M: pass\n")
-    _write(tmp_path / "shared" / "__init__.py", "")
-    _write(tmp_path / "shared" / "h.py", "K = 1\n")
-    _write(tmp_path / "inner" / "__init__.py", "")
-    _write(tmp_path / "inner" / "m.py", "class M: pass\n")
-    os.symlink(tmp_path / "shared", site / "h56ln" / "shared")
-    os.symlink(tmp_path / "inner", site / "h56ln" / "inner")
-    os.symlink(site, site / "h56ln" / "loop")  # a link up the tree is not followed
-    _write(tmp_path / "data" / "deep" / "x.csv", "1\n")  # nor one to a data folder
-    os.symlink(tmp_path / "data", site / "h56ln" / "data")
+        plugin_site: Path, tmp_path: Path, target: str, edited: str) -> None:
+    write(plugin_site / "h56ln" / "__init__.py", "")
+    write(plugin_site / "h56ln" / "m.py", "from .shared.h import K\nclass M: pass\n")
+    write(tmp_path / "shared" / "__init__.py", "")
+    write(tmp_path / "shared" / "h.py", "K = 1\n")
+    write(tmp_path / "inner" / "__init__.py", "")
+    write(tmp_path / "inner" / "m.py", "class M: pass\n")
+    os.symlink(tmp_path / "shared", plugin_site / "h56ln" / "shared")
+    os.symlink(tmp_path / "inner", plugin_site / "h56ln" / "inner")
+    os.symlink(plugin_site, plugin_site / "h56ln" / "loop")  # a link up is not followed
+    write(tmp_path / "data" / "deep" / "x.csv", "1\n")  # nor one to a data folder
+    os.symlink(tmp_path / "data", plugin_site / "h56ln" / "data")
     before = plugins.disk_fingerprint(target)
     time.sleep(0.05)
     (tmp_path / edited).write_text((tmp_path / edited).read_text() + "K = 2\n")
     assert plugins.disk_fingerprint(target) != before, f"an edit of {edited} re-ran nothing"
-    listed = {Path(d).name for d, _ in plugins._LISTED[str(site / "h56ln")][0]}
+    listed = {Path(d).name for d, _ in plugins._LISTED[str(plugin_site / "h56ln")][0]}
     # the data folder's status is watched (h57: code written into it is listed), but it is
     # not walked: its subfolder is not listed
     assert listed == {"h56ln", "shared", "inner", "data"}, listed
 
 
-def test_a_link_to_nothing_named_py_is_not_read(site: Path) -> None:
-    _write(site / "h56lo" / "__init__.py", "")
+def test_a_link_to_nothing_named_py_is_not_read(plugin_site: Path) -> None:
+    write(plugin_site / "h56lo" / "__init__.py", "")
     # imports by name: its key is the whole package's
-    _write(site / "h56lo" / "m.py", "import importlib\nclass M:\n    X = importlib.import_module\n")
+    write(plugin_site / "h56lo" / "m.py",
+          "import importlib\nclass M:\n    X = importlib.import_module\n")
     before = plugins.disk_fingerprint("h56lo.m:M")
     time.sleep(0.05)  # past the file system's clock tick: the folder's status moves
-    os.symlink("user@host.1234:1700000000", site / "h56lo" / ".#m.py")  # Emacs's lock
+    os.symlink("user@host.1234:1700000000", plugin_site / "h56lo" / ".#m.py")  # Emacs's lock
     assert plugins.disk_fingerprint("h56lo.m:M") == before
 
 
@@ -164,7 +148,7 @@ def test_an_edit_not_reloaded_of_a_module_with_a_lazy_global_is_not_keyed_as_run
     code's result (MPE 0.22 m) was cached under it, served to a fresh process that runs the
     edit (2.13 m). Fails before this commit; a reload still runs the edit."""
     src = tmp_path / "code" / f"h56lazy_{tmp_path.name}.py"
-    _write(src, text)
+    write(src, text)
     monkeypatch.syspath_prepend(str(src.parent))
     monkeypatch.setattr(mapper, "_REGISTRY", dict(mapper._REGISTRY))
     mapper.register_method("mine", f"{src.stem}:Mine")
@@ -223,9 +207,9 @@ def test_a_name_imported_from_a_module_reloaded_alone_is_not_keyed_as_its_new_co
     edit (2.13 m in a fresh process). Now its serial run fails saying to reload it too; a
     reload that changes no imported name runs. Fails before this commit."""
     pkg = tmp_path / "site" / "h56fi"
-    _write(pkg / "__init__.py", "")
-    _write(pkg / "helpers.py", HELPERS)
-    _write(pkg / "a.py", depth_mapper("DEPTH_M * SCALE", "Mine")
+    write(pkg / "__init__.py", "")
+    write(pkg / "helpers.py", HELPERS)
+    write(pkg / "a.py", depth_mapper("DEPTH_M * SCALE", "Mine")
            + "\nfrom .helpers import SCALE, TABLE, ALL, Kind, Cfg, cached, PARTIAL\n"
            "DEPTH_M = 1.0\n")
     monkeypatch.syspath_prepend(str(pkg.parent))
@@ -251,18 +235,18 @@ def test_a_name_imported_from_a_module_reloaded_alone_is_not_keyed_as_its_new_co
 
 
 def test_an_edit_within_the_clocks_tick_of_the_last_read_is_seen(
-        site: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+        plugin_site: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """A file system whose timestamps are coarse (a second: ext3, HFS+; two: FAT) keeps
     size, mtime and ctime through an edit made in the same tick: the status is trusted only
     once older than RACY_NS. No test checked it (h53's set RACY_NS to 0; making ``_aged``
     always true failed none)."""
     monkeypatch.setattr(plugins, "RACY_NS", 2_000_000_000)
-    _write(site / "h56lo" / "__init__.py", "")
-    _write(site / "h56lo" / "m.py", "K = 1\nclass M: pass\n")
+    write(plugin_site / "h56lo" / "__init__.py", "")
+    write(plugin_site / "h56lo" / "m.py", "K = 1\nclass M: pass\n")
     now = time.time_ns()
-    sig = plugins._stat_signature(site / "h56lo" / "m.py")
+    sig = plugins._stat_signature(plugin_site / "h56lo" / "m.py")
     same_tick = (*sig[:3], now, now)  # type: ignore[misc]
     monkeypatch.setattr(plugins, "_stat_signature", lambda path: same_tick)
     before = plugins.disk_fingerprint("h56lo.m:M")
-    (site / "h56lo" / "m.py").write_text("K = 2\nclass M: pass\n")  # same size, same tick
+    (plugin_site / "h56lo" / "m.py").write_text("K = 2\nclass M: pass\n")  # same size, tick
     assert plugins.disk_fingerprint("h56lo.m:M") != before

@@ -6,43 +6,25 @@ code of the package."""
 from __future__ import annotations
 
 import os
-import sys
 import time
 from pathlib import Path
 
-import pytest
+from _plugin_site import write
 
 from bomgraph import plugins
 
 
-@pytest.fixture
-def site(tmp_path: Path, monkeypatch: pytest.MonkeyPatch):
-    root = tmp_path / "site"
-    root.mkdir()
-    monkeypatch.syspath_prepend(str(root))
-    monkeypatch.setattr(plugins, "RACY_NS", 0)
-    plugins.refresh()
-    yield root
-    plugins.refresh()
-    for name in [n for n in sys.modules if n.split(".")[0] == "h57lk"]:
-        del sys.modules[name]
-
-
-def _write(path: Path, text: str) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(text)
-
-
 def test_code_written_into_a_linked_folder_passed_over_moves_the_key(
-        site: Path, tmp_path: Path) -> None:
-    _write(site / "h57lk" / "__init__.py", "")
+        plugin_site: Path, tmp_path: Path) -> None:
+    write(plugin_site / "h57lk" / "__init__.py", "")
     # imports by name: its key is the whole package's
-    _write(site / "h57lk" / "m.py", "import importlib\nclass M:\n    X = importlib.import_module\n")
+    write(plugin_site / "h57lk" / "m.py",
+          "import importlib\nclass M:\n    X = importlib.import_module\n")
     (tmp_path / "helpers").mkdir()
-    _write(tmp_path / "helpers" / "notes.txt", "not code yet\n")
-    os.symlink(tmp_path / "helpers", site / "h57lk" / "helpers")
+    write(tmp_path / "helpers" / "notes.txt", "not code yet\n")
+    os.symlink(tmp_path / "helpers", plugin_site / "h57lk" / "helpers")
     before = plugins.disk_fingerprint("h57lk.m:M")
     assert plugins.disk_fingerprint("h57lk.m:M") == before
     time.sleep(0.05)  # past the file system's clock tick: the folder's status moves
-    _write(tmp_path / "helpers" / "util.py", "SCALE = 2\n")
+    write(tmp_path / "helpers" / "util.py", "SCALE = 2\n")
     assert plugins.disk_fingerprint("h57lk.m:M") != before, "helpers/util.py is in no key"

@@ -1,0 +1,328 @@
+"""The values that a loaded method's code reads from its modules, for a serial run's cache key.
+
+A serial run runs the method's modules as this process holds them: their code, which
+:mod:`bomgraph.plugins` keys by its files, and the values of their globals, which the user
+can change without touching a file: ``mymethod.set_depth(3.0)`` (a function that rebinds
+``global DEPTH_M``), ``mymethod.TABLE["scale"] = 3.0`` (a dict changed in place),
+``mymethod.TABLE = {...}``. The files' key stayed the same, so the result of the old values
+was served from the cache (h64). :func:`values_fingerprint` is a hash of the globals (and of
+the classes' data attributes) of the method's loaded modules that their code names, each by
+its value (:func:`_encode`: numbers, strings, containers of them in order, arrays, enums,
+dataclasses, else its pickle), of those that differ from the value their module had when it
+was loaded: None ("") when none does, so an unchanged method keeps its key, the one worker
+processes use (they import the files). The value a module had when loaded is its file's
+literal (``DEPTH_M = 1.0``, ``TABLE = {"scale": 1.0}``: a value set before the first sweep is
+seen), else the value when bomgraph first saw the module (after a reload, again).
+
+A global that a run of the method changed (a lazy cache: ``global _MODEL``, a memo dict
+filled in place, a counter) is the method's own state: it is left out from then on
+(:func:`note_run`), its value at a run's start taken not to change the result.
+
+Not seen: a global that is not a literal in its file, changed before bomgraph first saw the
+module; a global that a run changed, changed again by the user. A changed value that cannot
+be hashed (an object that neither the encoding nor pickle reads, a container of more than
+:data:`MAX_ITEMS` items, one that holds itself): :func:`values_fingerprint` raises
+:class:`Unhashable`, and the runner caches none of that method's runs (one log line).
+"""
+
+from __future__ import annotations
+
+import ast
+import dataclasses
+import enum
+import functools
+import hashlib
+import logging
+import pathlib
+import pickle
+import re
+import threading
+import types
+import warnings
+from typing import Any, Iterator
+
+import numpy as np
+
+#: Items (container elements, counted recursively) a global's value may hold to be hashed.
+MAX_ITEMS = 1_000_000
+
+_PLAIN = (int, float, complex, str, bytes, bool, type(None))
+_LOCKS = (type(threading.Lock()), type(threading.RLock()), threading.Condition,
+          threading.Event, threading.Semaphore)
+_CODE = (types.ModuleType, type, types.FunctionType, types.BuiltinFunctionType,
+         types.MethodDescriptorType, types.WrapperDescriptorType, types.MethodWrapperType,
+         types.ClassMethodDescriptorType, staticmethod, classmethod, property, np.ufunc)
+
+
+class Unhashable(Exception):
+    """A global's value that :func:`values_fingerprint` cannot hash (the message names it)."""
+
+
+def _code_like(value: object) -> bool:
+    """Whether ``value`` is code, which the files' key covers (a module, class, function,
+    a decorated one), or state no result depends on (a logger, a lock, a typing form)."""
+    kind = type(value)  # not isinstance: an object may raise for its __class__
+    try:
+        if issubclass(kind, _CODE):
+            owner = getattr(value, "__self__", None)
+            return owner is None or issubclass(type(owner), types.ModuleType)
+        if issubclass(kind, (logging.Logger, re.Pattern, *_LOCKS)):
+            return True
+        if kind.__module__ in ("typing", "typing_extensions"):
+            return True
+        return callable(value) and getattr(value, "__wrapped__", None) is not None
+    except Exception:  # an object whose attributes raise
+        return False
+
+
+def _encode(value: object, h: Any, budget: list[int], stack: set[int]) -> None:
+    """Feed ``value``, by value, to the hash ``h`` (raises :class:`Unhashable`)."""
+    budget[0] -= 1
+    if budget[0] < 0:
+        raise Unhashable(f"more than {MAX_ITEMS:,} items")
+    kind = type(value)
+    if kind in _PLAIN:
+        h.update(f"{kind.__name__}:{value!r};".encode())
+        return
+    if id(value) in stack:
+        raise Unhashable("it holds itself")
+    stack.add(id(value))
+    try:
+        _encode_object(value, kind, h, budget, stack)
+    except Unhashable:
+        raise
+    except Exception as exc:  # an object whose attributes raise
+        raise Unhashable(f"a {kind.__qualname__} whose reading raised {type(exc).__name__}"
+                         ) from exc
+    finally:
+        stack.discard(id(value))
+
+
+def _encode_object(value: Any, kind: type, h: Any, budget: list[int], stack: set[int]) -> None:
+    h.update(f"<{kind.__module__}.{kind.__qualname__}".encode())
+    if isinstance(value, enum.Enum):
+        h.update(value.name.encode())
+    elif isinstance(value, (tuple, list)):  # in order: a method iterates it so
+        h.update(f"[{len(value)}".encode())
+        for v in value:
+            _encode(v, h, budget, stack)
+    elif isinstance(value, dict):
+        h.update(f"{{{len(value)}".encode())
+        for k, v in list(value.items()):
+            _encode(k, h, budget, stack)
+            _encode(v, h, budget, stack)
+    elif isinstance(value, (set, frozenset)):  # its order is the strings' hash seed's
+        parts = []
+        for v in list(value):
+            sub = hashlib.sha256()
+            _encode(v, sub, budget, stack)
+            parts.append(sub.digest())
+        h.update(b"".join(sorted(parts)))
+    elif isinstance(value, np.ndarray):
+        h.update(f"{value.dtype.str}{value.shape}".encode())
+        if value.dtype.hasobject:
+            _encode(value.tolist(), h, budget, stack)
+        else:
+            h.update(np.ascontiguousarray(value).tobytes())
+    elif isinstance(value, np.generic):
+        h.update(value.dtype.str.encode() + value.tobytes())
+    elif isinstance(value, np.random.Generator):
+        _encode(value.bit_generator.state, h, budget, stack)
+    elif isinstance(value, pathlib.PurePath):
+        h.update(str(value).encode())
+    elif isinstance(value, functools.partial):
+        _encode((value.func, value.args, value.keywords), h, budget, stack)
+    elif isinstance(value, types.FunctionType):  # in a container: its code, by value
+        from .loaded_code import _shape
+
+        h.update(repr(_shape(value.__code__)).encode())
+        _encode((value.__defaults__, value.__kwdefaults__), h, budget, stack)
+    elif isinstance(value, types.MethodType):
+        _encode((value.__func__, value.__self__), h, budget, stack)
+    elif _code_like(value):
+        h.update(f"{getattr(value, '__module__', '')}.{getattr(value, '__qualname__', '')}"
+                 .encode())
+    elif dataclasses.is_dataclass(value):
+        for f in dataclasses.fields(value):
+            h.update(f.name.encode())
+            _encode(getattr(value, f.name), h, budget, stack)
+    else:
+        try:
+            data = pickle.dumps(value, protocol=4)
+        except Exception as exc:  # noqa: BLE001 - any object's pickling may raise anything
+            raise Unhashable(f"a {kind.__module__}.{kind.__qualname__} that cannot be pickled "
+                             f"({type(exc).__name__})") from exc
+        h.update(hashlib.sha256(data).digest())
+
+
+def _digest(value: object) -> bytes:
+    h = hashlib.sha256()
+    _encode(value, h, [MAX_ITEMS], set())
+    return h.digest()
+
+
+def _code_names(module: types.ModuleType) -> set[str] | None:
+    """The names the module's functions (and its classes' functions) name: the globals and
+    attributes its code can read; None when it names ``globals`` or ``vars`` (all)."""
+    from .loaded_code import _loaded_code, _nested
+
+    names: set[str] = set()
+    filename = getattr(module, "__file__", None)
+    if not isinstance(filename, str):
+        return names
+    for code in _loaded_code(module, filename):
+        for c in (code, *_nested(code)):
+            names.update(c.co_names)
+    return None if {"globals", "vars"} & names else names
+
+
+def _values(module: types.ModuleType) -> Iterator[tuple[str, object]]:
+    """The data the module's code can read: its globals it names and its own classes' data
+    attributes it names (``Cls.NAME``), each by key; code and dunder names left out."""
+    names = _code_names(module)
+    for k, v in list(vars(module).items()):
+        if not isinstance(k, str) or k.startswith(("__", "@")):
+            continue
+        if issubclass(type(v), type) and v.__dict__.get("__module__") == module.__name__:
+            for a, x in list(v.__dict__.items()):
+                if not a.startswith("__") and a != "_abc_impl" and (
+                        names is None or a in names) and not _code_like(x):
+                    yield f"{k}.{a}", x
+        elif (names is None or k in names) and not _code_like(v):
+            yield k, v
+
+
+def _literals(module: types.ModuleType) -> dict[str, object]:
+    """The module's globals bound once at its top level by a literal (``DEPTH_M = 1.0``),
+    named nowhere else at its top level (not changed there: ``ITEMS.append(2)``), by name."""
+    try:
+        with open(module.__file__, "rb") as fh:  # type: ignore[arg-type]
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                tree = ast.parse(fh.read())
+    except (OSError, TypeError, AttributeError, SyntaxError, ValueError, RecursionError,
+            MemoryError):
+        return {}
+    out: dict[str, object] = {}
+    named: dict[str, int] = {}
+    for stmt in tree.body:
+        for node in _run_at_import(stmt):
+            if isinstance(node, ast.Name):
+                named[node.id] = named.get(node.id, 0) + 1
+            elif isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)):
+                named[node.name] = named.get(node.name, 0) + 1
+        target = (stmt.targets[0] if isinstance(stmt, ast.Assign) and len(stmt.targets) == 1
+                  else stmt.target if isinstance(stmt, ast.AnnAssign) else None)
+        if isinstance(target, ast.Name) and getattr(stmt, "value", None) is not None:
+            try:
+                out[target.id] = ast.literal_eval(stmt.value)  # type: ignore[arg-type]
+            except (ValueError, TypeError, SyntaxError, MemoryError, RecursionError):
+                pass
+    return {k: v for k, v in out.items() if named.get(k) == 1}
+
+
+def _run_at_import(node: ast.AST) -> Iterator[ast.AST]:
+    """``node`` and the nodes under it that run when the module is imported: not those of a
+    function's or a lambda's body (a class's body runs)."""
+    yield node
+    if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.Lambda)):
+        return
+    for child in ast.iter_child_nodes(node):
+        yield from _run_at_import(child)
+
+
+#: Per module name: the module, its ``__spec__`` then (a reload gives a new one) and the
+#: digest of each of its values (:func:`_values`) when loaded (None: not known).
+_LOADED: dict[str, tuple[types.ModuleType, object, dict[str, bytes | None]]] = {}
+#: The values (module name, key) that a run of a method changed: its own state.
+_RUN_STATE: set[tuple[str, str]] = set()
+#: The digest of each value as last keyed, by (module name, key) (:func:`note_run`), and
+#: the modules keyed.
+_AT_KEY: dict[tuple[str, str], bytes | None] = {}
+_KEYED: set[str] = set()
+
+
+def _safe_digest(value: object) -> bytes | None:
+    try:
+        return _digest(value)
+    except Unhashable:
+        return None
+
+
+def _loaded(module: types.ModuleType) -> dict[str, bytes | None]:
+    """The digests of the module's values when it was loaded (:data:`_LOADED`)."""
+    name = module.__name__
+    seen = _LOADED.get(name)
+    if seen is not None and seen[0] is module and seen[1] is module.__spec__:
+        return seen[2]
+    literals = _literals(module)
+    base: dict[str, bytes | None] = {}
+    for key, value in _values(module):
+        now = _safe_digest(value)
+        if key in literals:  # set before bomgraph saw it: its value when loaded is unknown
+            base[key] = now if now == _safe_digest(literals[key]) else None
+        else:
+            base[key] = now
+    for key in [k for k in _RUN_STATE if k[0] == name]:
+        _RUN_STATE.discard(key)  # reloaded: its values are the file's again
+    _LOADED[name] = (module, module.__spec__, base)
+    return base
+
+
+def values_fingerprint(modules: list[types.ModuleType]) -> str:
+    """A hash of the values of ``modules`` (a method's loaded modules) that differ from
+    their values when loaded (:mod:`bomgraph.loaded_values`), "" when none does.
+
+    Raises
+    ------
+    Unhashable
+        Such a value cannot be hashed (the message names the module, the global and why).
+    """
+    changed, problem = [], ""
+    for module in modules:
+        base = _loaded(module)
+        _KEYED.add(module.__name__)
+        for key, value in _values(module):
+            where = (module.__name__, key)
+            if where in _RUN_STATE:
+                continue
+            try:
+                now = _digest(value)
+            except Unhashable as exc:
+                _AT_KEY[where] = None
+                problem = problem or f"{module.__name__}.{key} is {exc}"
+                continue
+            _AT_KEY[where] = now
+            if base.get(key) is None or base[key] != now:  # changed, or not known
+                changed.append(f"{module.__name__}.{key}\0".encode() + now)
+    if problem:
+        raise Unhashable(problem)
+    return hashlib.sha256(b"".join(changed)).hexdigest()[:16] if changed else ""
+
+
+def note_run(modules: list[types.ModuleType]) -> None:
+    """After a run in this process: the values of ``modules`` that differ from their keyed
+    ones (:func:`values_fingerprint`), or were made by the run (a class attribute set
+    lazily), are the method's own state, left out of the keys from now on."""
+    for module in modules:
+        if module.__name__ not in _KEYED:  # loaded by the run: nothing to compare with
+            continue
+        for key, value in _values(module):
+            where = (module.__name__, key)
+            if where in _RUN_STATE:
+                continue
+            if where not in _AT_KEY:
+                _RUN_STATE.add(where)
+            elif _AT_KEY[where] is not None and _safe_digest(value) != _AT_KEY[where]:
+                _RUN_STATE.add(where)
+
+
+def forget() -> None:
+    """Forget the values seen (:func:`bomgraph.plugins.refresh`)."""
+    _LOADED.clear()
+    _RUN_STATE.clear()
+    _AT_KEY.clear()
+    _KEYED.clear()
+
+
+__all__ = ["MAX_ITEMS", "Unhashable", "values_fingerprint", "note_run", "forget"]
