@@ -86,3 +86,17 @@ def test_a_sigma_on_the_step_without_odometry_is_not_the_line_named(
     warned = _warned(tmp_path / "s.jsonl", caplog)
     assert len(warned) == 1 and "line 1: 'odometry_sigma'" in warned[0] \
         and "centimetres?" in warned[0], warned
+
+
+def test_translation_and_turn_sigmas_both_off_are_both_warned_of(
+        tmp_path: Path, sim: Stream, caplog: pytest.LogCaptureFixture) -> None:
+    """Every step stating (3, 0, 1.5) (centimetres, and degrees below pi/sqrt(3): not
+    counted) on a robot turning +-0.01 rad: the translations' warning hid the turns'."""
+    steps = tuple(replace(st, odom=np.array([st.odom[0], st.odom[1], 0.01 * (-1) ** st.t]),
+                          odom_sigma=np.array([3.0, 0.0, 1.5])) if st.odom is not None
+                  else st for st in sim.steps)
+    write_stream(Stream(sim.header, steps, None), tmp_path / "s.jsonl")
+    warned = _warned(tmp_path / "s.jsonl", caplog)
+    assert len(warned) == 2, warned
+    assert "centimetres?" in warned[0] and "the 60 steps turn" in warned[1] \
+        and "degrees?" in warned[1], warned
