@@ -160,7 +160,7 @@ _K = math.sqrt(2 / math.pi)
 
 class OdometryScale:
     """Whether a stream's stated odometry sigmas fit its odometry: :meth:`add` each step,
-    then :meth:`problem`.
+    then :meth:`problems`.
 
     Whatever the true motion, odometry with zero-mean symmetric noise moves on average at
     least as far as the noise alone (``E|d + n| >= E|n|``: ``|.|`` is convex and even), and
