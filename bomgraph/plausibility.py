@@ -160,7 +160,7 @@ _K = math.sqrt(2 / math.pi)
 
 class OdometryScale:
     """Whether a stream's stated odometry sigmas fit its odometry: :meth:`add` each step,
-    then :meth:`problem`.
+    then :meth:`problems`.
 
     Whatever the true motion, odometry with zero-mean symmetric noise moves on average at
     least as far as the noise alone (``E|d + n| >= E|n|``: ``|.|`` is convex and even), and
@@ -204,16 +204,23 @@ class OdometryScale:
         self._move_noise = self._turn_noise = 0.0   # sums of sigma
         self._n_unknown = 0                         # steps' own turn sigmas above pi/sqrt(3),
         self._unknown_span = (math.inf, -math.inf)  # and their least and greatest
+        self._own_line: int | None = None           # the lines of the first step stating its
+        self._unknown_line: int | None = None       # own sigma, and one above pi/sqrt(3)
 
-    def add(self, step: Step) -> None:
+    def add(self, step: Step, line: int | None = None) -> None:
+        """Count ``step`` (read from ``line`` of the file, if given: :meth:`problems` names
+        it); a step without odometry (t = 0) is not judged, nor is its ``odom_sigma``."""
         if step.odom is None:
             return
         sigma = self._header if step.odom_sigma is None else step.odom_sigma
-        self.own_sigma |= step.odom_sigma is not None
+        if step.odom_sigma is not None and not self.own_sigma:
+            self.own_sigma, self._own_line = True, line
         self.n += 1
         if step.odom_sigma is not None and \
                 MAX_ODOMETRY_SIGMA[2] < float(sigma[2]) <= MAX_STEP_ODOMETRY_SIGMA[2]:
             lo, hi = self._unknown_span
+            if not self._n_unknown:
+                self._unknown_line = line
             self._n_unknown += 1
             self._unknown_span = (min(lo, float(sigma[2])), max(hi, float(sigma[2])))
         moved = math.hypot(float(step.odom[0]), float(step.odom[1]))
@@ -231,32 +238,44 @@ class OdometryScale:
             self._turn_ratio += min(turned / (_K * turn_noise), 1.0)
 
     def problem(self) -> tuple[str, str] | None:
-        """``(key, message)`` if the odometry contradicts its stated sigmas, or most steps
-        state a turn sigma above pi/sqrt(3), else None; the key is ``odom_sigma`` if a step
-        states its own, else ``odometry_sigma``."""
+        """The first of :meth:`problems` as ``(key, message)``, else None."""
+        out = self.problems()
+        return out[0][:2] if out else None
+
+    def problems(self) -> list[tuple[str, str, int | None]]:
+        """``(key, message, line)`` for each way the odometry contradicts its stated sigmas
+        (the translations', the turns'), and if most steps state a turn sigma above
+        pi/sqrt(3) (then the turns are not judged again: one warning of degrees); empty if
+        none. The key is ``odom_sigma`` if a step states its own, else ``odometry_sigma``;
+        ``line`` is the one given to :meth:`add` with the first step stating a turn sigma
+        above pi/sqrt(3) (for that count), else with the first stating its own sigma (None:
+        not given, or the header's sigmas)."""
         k = _K
         key = "odom_sigma" if self.own_sigma else "odometry_sigma"
-        if 2 * self._n_unknown > self.n:   # no division; False without odometry
+        out: list[tuple[str, str, int | None]] = []
+        unknown = 2 * self._n_unknown > self.n   # no division; False without odometry
+        if unknown:
             lo, hi = self._unknown_span
             span = f"{lo:g}" + (f" to {hi:g}" if hi > lo else "")
-            return (key, f"{self._n_unknown} of the {self.n} steps state a turn sigma above pi/sqrt(3) = "
-                         f"{MAX_ODOMETRY_SIGMA[2]:.3g} rad ({span}), the spread of a heading "
-                         f"uniform on the circle: a step may state its turn unknown, but most "
-                         f"steps doing so leave the odometry no turn; sigmas in degrees?")
+            out.append((key, f"{self._n_unknown} of the {self.n} steps state a turn sigma above "
+                             f"pi/sqrt(3) = {MAX_ODOMETRY_SIGMA[2]:.3g} rad ({span}), the "
+                             f"spread of a heading uniform on the circle: a step may state its "
+                             f"turn unknown, but most steps doing so leave the odometry no "
+                             f"turn; sigmas in degrees?", self._unknown_line))
         for what, n, done, noise, ratio, unit, other in (
                 ("move", self._n_move, self._moved, self._move_noise, self._move_ratio, "m",
                  "centimetres"),
                 ("turn", self._n_turn, self._turned, self._turn_noise, self._turn_ratio,
                  "rad", "degrees")):
-            if n < MIN_SCALE_STEPS:
+            if n < MIN_SCALE_STEPS or (what == "turn" and unknown):
                 continue
             if ratio / n < MIN_MOTION_PER_NOISE:
-                return (key, f"the {n} steps {what} {done / n:.3g} {unit} on average, "
-                             f"{ratio / n:.2g} of what noise of their stated sigmas alone "
-                             f"would {what} them (sqrt(2/pi) sigma, {k * noise / n:.3g} "
-                             f"{unit} on average, or more): sigmas in {other}? (or noise-free "
-                             f"odometry with nominal sigmas)")
-        return None
+                out.append((key, f"the {n} steps {what} {done / n:.3g} {unit} on average, "
+                                 f"{ratio / n:.2g} of what noise of their stated sigmas alone "
+                                 f"would {what} them (sqrt(2/pi) sigma, {k * noise / n:.3g} "
+                                 f"{unit} on average, or more): sigmas in {other}? (or "
+                                 f"noise-free odometry with nominal sigmas)", self._own_line))
+        return out
 
 
 def truth_problem(landmarks_xy: np.ndarray, poses: np.ndarray | None) -> str | None:

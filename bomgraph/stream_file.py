@@ -352,7 +352,6 @@ class StreamReader:
         pending_blank: int | None = None
         warned = not self._warn
         scale = OdometryScale(self.header.odometry_sigma)
-        own_sigma_line: int | None = None     # of the first step stating its own odom_sigma
         for raw in bounded_lines(self._fh, self.path, first_line=2):
             line_no += 1
             ctx = _Ctx(self.path, line_no)
@@ -374,9 +373,7 @@ class StreamReader:
                 _log.warning("%s, line %d: '%s': %s (implausible; later steps are not "
                              "checked)", self.path, line_no, *problem)
             if self._warn:
-                scale.add(step)
-                if own_sigma_line is None and step.odom_sigma is not None:
-                    own_sigma_line = line_no
+                scale.add(step, line_no)
             yield step
             t += 1
         if pending_blank is not None:
@@ -390,8 +387,8 @@ class StreamReader:
             raise StreamFormatError(f"the header has {len(self.truth.poses)} truth poses but "
                                     f"the file has {t} steps; give one pose per step",
                                     path=self.path, line=1, key="truth.poses")
-        if (problem := scale.problem()) is not None:
-            _log.warning("%s, line %d: '%s': %s", self.path, own_sigma_line or 1, *problem)
+        for key, msg, line in scale.problems():
+            _log.warning("%s, line %d: '%s': %s", self.path, line or 1, key, msg)
 
 
 def _decode(raw: bytes, ctx: _Ctx) -> str:
