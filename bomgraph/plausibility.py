@@ -253,7 +253,9 @@ class OdometryScale:
         k = _K
         key = "odom_sigma" if self.own_sigma else "odometry_sigma"
         out: list[tuple[str, str, int | None]] = []
-        unknown = 2 * self._n_unknown > self.n   # no division; False without odometry
+        # no division; False without odometry, and as the scale checks below, not judged on
+        # fewer than MIN_SCALE_STEPS steps (one step may state its turn unknown)
+        unknown = 2 * self._n_unknown > self.n >= MIN_SCALE_STEPS
         if unknown:
             lo, hi = self._unknown_span
             span = f"{lo:g}" + (f" to {hi:g}" if hi > lo else "")
@@ -261,7 +263,9 @@ class OdometryScale:
                              f"pi/sqrt(3) = {MAX_ODOMETRY_SIGMA[2]:.3g} rad ({span}), the "
                              f"spread of a heading uniform on the circle: a step may state its "
                              f"turn unknown, but most steps doing so leave the odometry no "
-                             f"turn; sigmas in degrees?", self._unknown_line))
+                             f"turn; sigmas in degrees? (or, if the turns are truly unknown, "
+                             f"as a g2o file's weak rotation information, nothing to fix)",
+                        self._unknown_line))
         for what, n, done, noise, ratio, unit, other in (
                 ("move", self._n_move, self._moved, self._move_noise, self._move_ratio, "m",
                  "centimetres"),

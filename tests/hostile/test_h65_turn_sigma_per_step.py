@@ -148,3 +148,15 @@ def test_no_odometry_step_is_not_judged() -> None:
     scale = OdometryScale((0.03, 0.0, 5.0))
     scale.add(Step(0, None, np.zeros(0, np.int64), np.zeros(0)))
     assert scale.n == 0 and scale.problem() is None
+
+
+@pytest.mark.parametrize("n_steps", [1, 9])
+def test_too_few_steps_are_not_judged_by_the_count(tmp_path: Path, n_steps: int,
+                                                   caplog: pytest.LogCaptureFixture) -> None:
+    """One step (or nine) stating its turn unknown is valid: like the scale checks, the count
+    judges MIN_SCALE_STEPS (10) steps or more (it warned '1 of the 1 steps'); ten are judged."""
+    from bomgraph.sim import SimConfig, simulate
+    for n, warned in ((n_steps, False), (10, True)):
+        sim = simulate(SimConfig(n_steps=n), np.random.default_rng(0))
+        msgs = _warned(_per_step(sim, tmp_path / f"s{n}.jsonl", (0.03, 0.0, 2.0)), caplog)
+        assert any("turn sigma above pi/sqrt(3)" in m for m in msgs) == warned, (n, msgs)
