@@ -302,8 +302,11 @@ def format_by_run(rows: Sequence[dict]) -> str:
                     cells.append("")
                 elif not r["ok"]:
                     cells.append("FAILED")
+                elif str(r.get("scored_against", "")).startswith("itself") \
+                        and r["n_mapped"] >= 3:  # its MPE: 0 by definition
+                    cells.append(f"reference ({r['n_mapped']})")
                 elif str(r.get("scored_against", "")).startswith("itself"):
-                    cells.append(f"reference ({r['n_mapped']})")  # its MPE: 0 by definition
+                    cells.append(f"no map ({r['n_mapped']})")  # no map to score by (h68)
                 elif not math.isfinite(r["mpe_m"]) and math.isfinite(r["bearing_rms_rad"]):
                     cells.append(f"{1000 * r['bearing_rms_rad']:.1f}mrad ({r['n_mapped']})")
                 elif not math.isfinite(r["mpe_m"]) and r["n_mapped"] >= 3:
