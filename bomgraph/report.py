@@ -400,7 +400,7 @@ def _compare(experiments: Sequence[Experiment], out: Path, executor: Executor,
     written = write_estimate_files(out, tasks, results, record.add) if estimates else []
     summary = summarise(results)
     by_run = final_by_run(results)
-    rows = pairable(by_run)  # no pair with a run scored against its own map, nor with its arm
+    rows = pairable(by_run, experiments)  # no pair with a run scored against its own map
     paired = paired_comparison(rows, scored_references(experiments, references, rows, label),
                                paired_config)
     wall = time.perf_counter() - start
