@@ -24,6 +24,7 @@ from .checks import instance, integer, real
 from .errors import ConfigError, PairingError, UnknownMethodError
 from .experiments import Experiment
 from .mapper import method_info
+from .run_scoring import same_method
 
 #: Fewest pairs for a confidence interval: below it the bootstrap has too few distinct
 #: resamples to mean anything (2 runs have 3).
@@ -321,15 +322,25 @@ def references_for(experiments: Sequence[Experiment], label: str | None = None
             for e in experiments}
 
 
-def pairable(by_run: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
+def pairable(by_run: Sequence[Mapping[str, Any]],
+             experiments: Sequence[Experiment] = ()) -> list[dict[str, Any]]:
     """``by_run`` (rows of :func:`bomgraph.report.final_by_run`) with each run that was
     scored against its own final map (a stream without truth, the arm run as the sweep's
     ``--reference``: ``scored_against`` ``"itself (...)"``) marked ``own_map`` and its MPE
     NaN: its error there is rounding, and a ratio over it ~1e15 (h58; h59; a reference
-    labelled otherwise than its arm, h63)."""
-    return [{**r, "mpe_m": math.nan, "own_map": True}
-            if str(r.get("scored_against", "")).startswith("itself") else dict(r)
-            for r in by_run]
+    labelled otherwise than its arm, h63). So is, with the ``experiments``, a run scored
+    against the reference's map by an arm of the reference's method and options at another
+    checkpoint cadence (a reference with its own ``checkpoint_every``): the same map but
+    for the cadence, whose error is rounding for a method the cadence does not change
+    (ratios of 2e15, h68)."""
+    alike = {(e.name, a.label) for e in experiments for a in e.arms
+             if same_method(a, e.reference)}
+
+    def own(r: Mapping[str, Any]) -> bool:
+        against = str(r.get("scored_against", ""))
+        return against.startswith("itself") or (
+            against.startswith("reference ") and (r.get("experiment"), r.get("arm")) in alike)
+    return [{**r, "mpe_m": math.nan, "own_map": True} if own(r) else dict(r) for r in by_run]
 
 
 def scored_references(experiments: Sequence[Experiment], references: Mapping[str, str],

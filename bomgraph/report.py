@@ -302,8 +302,11 @@ def format_by_run(rows: Sequence[dict]) -> str:
                     cells.append("")
                 elif not r["ok"]:
                     cells.append("FAILED")
+                elif str(r.get("scored_against", "")).startswith("itself") \
+                        and r["n_mapped"] >= 3:  # its MPE: 0 by definition
+                    cells.append(f"reference ({r['n_mapped']})")
                 elif str(r.get("scored_against", "")).startswith("itself"):
-                    cells.append(f"reference ({r['n_mapped']})")  # its MPE: 0 by definition
+                    cells.append(f"no map ({r['n_mapped']})")  # no map to score by (h68)
                 elif not math.isfinite(r["mpe_m"]) and math.isfinite(r["bearing_rms_rad"]):
                     cells.append(f"{1000 * r['bearing_rms_rad']:.1f}mrad ({r['n_mapped']})")
                 elif not math.isfinite(r["mpe_m"]) and r["n_mapped"] >= 3:
@@ -397,7 +400,7 @@ def _compare(experiments: Sequence[Experiment], out: Path, executor: Executor,
     written = write_estimate_files(out, tasks, results, record.add) if estimates else []
     summary = summarise(results)
     by_run = final_by_run(results)
-    rows = pairable(by_run)  # no pair with a run scored against its own map, nor with its arm
+    rows = pairable(by_run, experiments)  # no pair with a run scored against its own map
     paired = paired_comparison(rows, scored_references(experiments, references, rows, label),
                                paired_config)
     wall = time.perf_counter() - start

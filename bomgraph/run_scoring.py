@@ -56,14 +56,20 @@ def _every(task: Task, arm: Arm) -> int:
     return arm.checkpoint_every or task.checkpoint_every
 
 
+def same_method(arm: Arm, reference: Arm | None) -> bool:
+    """Whether ``arm`` runs the method of ``reference`` with the same options, whatever the
+    labels and checkpoint cadences."""
+    return (reference is not None and reference.method == arm.method
+            and json.dumps(dict(reference.options), sort_keys=True)
+            == json.dumps(dict(arm.options), sort_keys=True))
+
+
 def runs_as_reference(task: Task) -> bool:
     """Whether the task's arm runs exactly as its reference does (the same method, options
     and checkpoints, whatever the labels): on a stream without truth its run *is* the
     reference's, scored against its own final map."""
     ref = task.reference
-    return (ref is not None and ref.method == task.arm.method
-            and json.dumps(dict(ref.options), sort_keys=True)
-            == json.dumps(dict(task.arm.options), sort_keys=True)
+    return (ref is not None and same_method(task.arm, ref)
             and _every(task, ref) == _every(task, task.arm))
 
 
@@ -173,4 +179,4 @@ class CheckpointScorer:
 
 
 __all__ = ["CheckpointScorer", "MAX_REFERENCES", "bearing_rms", "keep_reference",
-           "reference_map", "run_arm", "runs_as_reference"]
+           "reference_map", "run_arm", "runs_as_reference", "same_method"]
