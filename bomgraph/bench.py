@@ -47,7 +47,7 @@ from .result_cache import read_cached, strip_timings, write_cached  # re-exporte
 from .stream import Step, Stream, Truth
 from .stream_file import StreamReader, count_steps  # re-exported: bench.count_steps
 from .sweep import scheduler_address_problem
-from .trajectory import bearing_residuals
+from .trajectory import BearingResidualSums
 
 #: Bump to invalidate every cached result (the code fingerprint covers code changes).
 _log = logging.getLogger(__name__)
@@ -130,9 +130,10 @@ def _bearing_rms(estimate: MapEstimate, stream: Stream) -> float:
     poses or without a bearing on a mapped landmark): a truth-free score."""
     if estimate.poses is None or not len(estimate):
         return math.nan
-    r = bearing_residuals(estimate.landmark_ids, estimate.landmarks_xy, estimate.pose_t,
-                          estimate.poses, stream.steps)
-    return float(np.sqrt(np.mean(r ** 2))) if r.size else math.nan
+    sums = BearingResidualSums(estimate.landmark_ids, estimate.landmarks_xy, estimate.pose_t,
+                               estimate.poses)   # summed exactly, as ``evaluate`` sums them
+    sums.add_steps(stream.steps)
+    return sums.rms_rad
 
 
 def _failure(exc: BaseException) -> str:
