@@ -12,7 +12,9 @@
 - :func:`parse_option_value` / :func:`parse_options`: the one parser of ``key=value`` method
   options (from ``--option`` and from scripts). Values are JSON where they parse as JSON;
   ``inf``, ``+inf``, ``-inf``, ``Infinity`` and ``-Infinity`` are infinities; anything else is
-  a string. NaN is refused: no option means "not a number".
+  a string. NaN is refused: no option means "not a number". A record of options
+  (:func:`options_to_json`, :func:`options_from_json`) writes an infinity as the string
+  ``"Infinity"`` or ``"-Infinity"`` (strict JSON has none), so it reads back as given.
 """
 
 from __future__ import annotations
@@ -403,6 +405,41 @@ def _refuse_constant(name: str) -> float:
     return math.inf if name == "Infinity" else -math.inf
 
 
+#: How a record (an estimate file's ``options``, results.json's arms) writes an infinite option
+#: value: strict JSON has no infinity, and these are the texts ``--option`` reads as one.
+OPTION_INFINITIES = {"Infinity": math.inf, "-Infinity": -math.inf}
+
+
+def options_to_json(value: Any) -> Any:
+    """Method options (a mapping, or one value) as they are recorded: each infinity, at any
+    depth, as the string ``"Infinity"`` or ``"-Infinity"`` (:data:`OPTION_INFINITIES`), read
+    back by :func:`options_from_json`; everything else as given (tuples as lists). A string
+    option spelled so would read back as the infinity, so it is refused (ConfigError)."""
+    if isinstance(value, Mapping):
+        return {k: options_to_json(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [options_to_json(v) for v in value]
+    if isinstance(value, str) and value in OPTION_INFINITIES:
+        raise ConfigError(f"option value {value!r}: a record writes an infinity so (it would "
+                          f"read back as {OPTION_INFINITIES[value]}); give the number "
+                          f"(--option KEY=inf) or another string")
+    if isinstance(value, (float, np.floating)) and math.isinf(value):
+        return "Infinity" if value > 0 else "-Infinity"
+    return value
+
+
+def options_from_json(value: Any) -> Any:
+    """Recorded options (:func:`options_to_json`) as given: ``"Infinity"`` and
+    ``"-Infinity"``, at any depth, are the infinities again."""
+    if isinstance(value, dict):
+        return {k: options_from_json(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [options_from_json(v) for v in value]
+    if isinstance(value, str) and value in OPTION_INFINITIES:
+        return OPTION_INFINITIES[value]
+    return value
+
+
 def parse_options(pairs: Sequence[str]) -> dict[str, Any]:
     """``["key=value", ...]`` as a dict, values by :func:`parse_option_value`."""
     out: dict[str, Any] = {}
@@ -421,6 +458,7 @@ def parse_options(pairs: Sequence[str]) -> dict[str, Any]:
     return out
 
 
-__all__ = ["jsonable", "parse_option_value", "parse_options", "MAX_ID", "is_int", "is_id",
+__all__ = ["jsonable", "parse_option_value", "parse_options", "options_to_json",
+           "options_from_json", "OPTION_INFINITIES", "MAX_ID", "is_int", "is_id",
            "is_num", "version_problem", "DuplicateKeyError", "no_duplicate_keys", "loads_strict",
            "find_nonfinite", "path_of", "line_of_key", "unparsable_at"]
