@@ -8,7 +8,9 @@ figure.
   relative motion ``E = (Q_i^-1 Q_j)^-1 (P_i^-1 P_j)`` (evo's RPE with ``--delta``):
   ``|E.xy|`` [m] and ``|E.psi|`` [rad].
 - :func:`bearing_residuals`: measured minus predicted bearing of every measurement the
-  estimate's own map and trajectory cover (no truth needed).
+  estimate's own map and trajectory cover (no truth needed); :class:`BearingResidualSums`
+  their RMS summed batch by batch as a stream is read (exactly: :class:`ExactSum`), without
+  holding the bearings.
 
 Nothing here aligns; :mod:`bomgraph.evaluate` does, then calls these on the aligned poses.
 """
