@@ -192,14 +192,14 @@ def cmd_export(args: argparse.Namespace) -> int:
 
 
 def cmd_methods(args: argparse.Namespace) -> int:
-    from .jsonio import jsonable
+    from .jsonio import jsonable, options_to_json
     from .mapper import available_methods, factory_options, method_config_class, method_info
     from .method_list import format_method_list, method_listing, no_presets_line, preset_summary
 
     if args.name is None:
         rows = [method_listing(i) for i in available_methods()]
         if args.json:
-            print(json.dumps(jsonable(rows)))
+            print(json.dumps(jsonable(options_to_json(rows))))  # presets' infinities kept
             return 0
         print(format_method_list(rows))
         return 0
@@ -209,8 +209,9 @@ def cmd_methods(args: argparse.Namespace) -> int:
     cls = method_config_class(args.name)
     options = describe_options(cls) if cls is not None else factory_options(args.name)
     if args.json:
-        print(json.dumps(jsonable({**r, "config": cls.__name__ if cls else None,
-                                   "options": [o._asdict() for o in options]})))
+        print(json.dumps(jsonable(options_to_json({  # an infinite default as "Infinity"
+            **r, "config": cls.__name__ if cls else None,
+            "options": [o._asdict() for o in options]}))))
         return 0
     print(f"{r['name']}: {r['description']}")
     if r["origin"] == "plugin":

@@ -29,7 +29,8 @@ from .errors import StreamFormatError
 from .estimate_writer import (ESTIMATE_FORMAT, ESTIMATE_VERSION, EstimateWriter,
                               estimate_to_json, write_estimate)
 from .jsonio import (DuplicateKeyError, find_nonfinite, is_id, is_int, is_num, line_of_key,
-                     loads_strict, path_of, unparsable_at, version_problem)
+                     loads_strict, options_from_json, path_of, unparsable_at,
+                     version_problem)
 from .mapper import Checkpoint, MapEstimate
 from .stdio import MAX_LINE_BYTES, bounded_lines, line_too_long
 from .stream_identity import StreamIdentity, stream_file_identity, stream_identity
@@ -300,7 +301,7 @@ def _parse_header_v2(obj: dict, ctx: _Line) -> tuple[str, StreamIdentity | None,
     if "checkpoint_every" in obj and not (is_int(obj["checkpoint_every"])
                                           and obj["checkpoint_every"] >= 1):
         raise ctx.error("checkpoint_every", "must be an integer >= 1")
-    return obj["method"], ident, obj.get("options")
+    return obj["method"], ident, options_from_json(obj.get("options"))  # infinities again
 
 
 def _read_v2(fh: IO[bytes], header: dict, path: str) -> EstimateFile:

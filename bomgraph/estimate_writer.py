@@ -23,7 +23,7 @@ import numpy as np
 
 from .checks import covariance_problem, file_name, finite, integer
 from .errors import ConfigError
-from .jsonio import jsonable
+from .jsonio import jsonable, options_to_json
 from .mapper import Checkpoint, MapEstimate, RunResult
 from .stdio import AtomicOutput, OutputPathError
 from .stream_identity import StreamIdentity
@@ -105,7 +105,7 @@ class EstimateWriter:
         if stream is not None:
             self._header["stream"] = stream.as_dict()
         if options:
-            self._header["options"] = jsonable(dict(options))
+            self._header["options"] = jsonable(options_to_json(dict(options)))
         if checkpoint_every is not None:
             self._header["checkpoint_every"] = integer(
                 checkpoint_every, "estimate file: checkpoint_every", ConfigError, minimum=1)

@@ -20,6 +20,7 @@ from typing import Any, Mapping, Sequence
 
 from .checks import file_name, fraction, instance, integer, items
 from .errors import ConfigError, UnknownMethodError
+from .jsonio import options_to_json
 from .mapper import available_methods, method_config_class, method_info
 from .sim import RunSpec, SimConfig, paper_design
 from .sources import (SIMULATED, DatasetSource, FileSource, SimSource, SimulatedStreams, World,
@@ -62,14 +63,21 @@ class Arm:
         fraction(self.prior_fraction, f"{where}: prior_fraction", ConfigError)
         if self.checkpoint_every is not None:
             integer(self.checkpoint_every, f"{where}: checkpoint_every", ConfigError, minimum=1)
-        try:
-            json.dumps(dict(self.options), allow_nan=False)
+        try:   # infinities as options_to_json records them (a string so spelled refused)
+            json.dumps(options_to_json(dict(self.options)), allow_nan=False)
+        except ConfigError as exc:
+            raise ConfigError(f"arm {self.label!r}: {exc}") from None
         except (TypeError, ValueError):
             raise ConfigError(f"arm {self.label!r}: options must be plain JSON values (numbers, "
-                              f"strings, lists) so results can be cached and compared") from None
+                              f"infinities, strings, lists) so results can be cached and "
+                              f"compared") from None
 
     def key(self) -> dict[str, Any]:
-        return {"label": self.label, "method": self.method, "options": dict(self.options),
+        """The arm as JSON data (the cache key's, results.json's): the options as recorded,
+        an infinity as ``"Infinity"`` (:func:`bomgraph.jsonio.options_to_json`; no string
+        option is spelled so, so two different values never share a key)."""
+        return {"label": self.label, "method": self.method,
+                "options": options_to_json(dict(self.options)),
                 "prior_fraction": self.prior_fraction}
 
 

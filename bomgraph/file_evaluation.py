@@ -9,6 +9,11 @@ stream without ground truth and no ``--reference`` gets the truth-free measures 
 checkpoint, the landmarks mapped and the RMS bearing residual of the map and trajectory
 against the stream's own bearings (:func:`bearing_consistency`), the measure ``compare``
 reports for such streams.
+
+The stream is read once and its steps are not kept: what the scores need from it is its
+header's truth (poses and landmarks), its identity (hashed as it is read) and the bearing
+residuals' sums of squares (:class:`~bomgraph.trajectory.BearingResidualSums`, added up
+exactly batch by batch), so memory grows with the poses and landmarks, not the bearings.
 """
 
 from __future__ import annotations
@@ -28,9 +33,10 @@ from .estimate_file import EstimateFile, read_estimate, stream_identity
 from .jsonio import jsonable
 from .mapper import MapEstimate
 from .stream import Step, Truth
-from .stream_file import read_stream
+from .stream_file import StreamReader
+from .stream_identity import StreamHasher, StreamIdentity
 from .tables import Column, format_table
-from .trajectory import bearing_residuals
+from .trajectory import BearingResidualSums, bearing_arrays
 
 #: The per-checkpoint table of ``bomgraph evaluate`` (SI in JSON/CSV; cm and deg shown).
 EVALUATION_COLUMNS = (
@@ -61,14 +67,23 @@ class BearingConsistency:
 
 
 def bearing_consistency(estimate: MapEstimate, steps: Sequence[Step]) -> BearingConsistency:
-    """:func:`bomgraph.trajectory.bearing_residuals` of ``estimate`` as RMS values."""
-    if estimate.poses is None:
+    """:func:`bomgraph.trajectory.bearing_residuals` of ``estimate`` as RMS values (summed
+    exactly: :class:`~bomgraph.trajectory.BearingResidualSums`, as ``evaluate`` sums them
+    while reading a stream file)."""
+    sums = _residual_sums(estimate)
+    sums.add_steps(steps)
+    return _consistency(sums)
+
+
+def _residual_sums(estimate: MapEstimate, until_t: int | None = None) -> BearingResidualSums:
+    return BearingResidualSums(estimate.landmark_ids, estimate.landmarks_xy, estimate.pose_t,
+                               estimate.poses, until_t)
+
+
+def _consistency(sums: BearingResidualSums) -> BearingConsistency:
+    if sums.n == 0:  # no poses, or no bearing covered: as bearing_residuals' empty array
         return BearingConsistency(0, math.nan, math.nan)
-    args = (estimate.landmark_ids, estimate.landmarks_xy, estimate.pose_t, estimate.poses, steps)
-    r = bearing_residuals(*args)
-    m = bearing_residuals(*args, mirrored=True)
-    rms = (lambda v: float(np.sqrt(np.mean(v ** 2))) if v.size else math.nan)
-    return BearingConsistency(int(r.size), rms(r), rms(m))
+    return BearingConsistency(sums.n, sums.rms_rad, sums.mirrored_rms_rad)
 
 
 def method_label(est: EstimateFile) -> str:
@@ -143,38 +158,45 @@ def evaluate_files(estimate_path: str | os.PathLike[str], stream_path: str | os.
     come from the file's covariances, carried by the alignment (its scale too, with
     ``with_scale``, as in the checkpoint rows), and are NaN without them.
     """
+    est, est_error = _read_estimate_later(estimate_path)
+    ref_est, ref_error = (None, None) if reference_path is None else \
+        _read_estimate_later(reference_path)
     try:
-        stream = read_stream(stream_path)
+        with StreamReader(stream_path) as reader:
+            truth = reader.truth
+            sums = _bearing_sums(est, ref_est, truth)
+            ident = _read_steps(reader, list(sums.values()))
     except StreamFormatError as exc:
         if _is_estimate_file(stream_path):
             raise EvaluationError(f"{stream_path} is an estimate file, not a stream (arguments "
                                   f"swapped? usage: bomgraph evaluate ESTIMATE STREAM)") from None
         raise exc from None
-    est = read_estimate(estimate_path)
-    check_stream_identity(est, stream.steps, estimate_path, stream_path)
-    last = len(stream.steps) - 1
+    if est is None:  # the stream's errors first, as when it was read whole
+        raise est_error  # type: ignore[misc]
+    _check_identity(est, ident, estimate_path, stream_path)
+    last = ident.n_steps - 1
     beyond = [c.t for c in est.checkpoints if c.t > last]
     if beyond:
         raise EvaluationError(f"{estimate_path}: checkpoint t = {beyond[0]} is beyond the last "
                               f"step t = {last} of {stream_path}")
-    ref_est = read_estimate(reference_path) if reference_path is not None else None
+    if ref_error is not None:
+        raise ref_error
     if ref_est is not None:  # scored against its final map: it must be of the same stream
-        check_stream_identity(ref_est, stream.steps, reference_path, stream_path)
-    if ref_est is None and stream.truth is None:
+        _check_identity(ref_est, ident, reference_path, stream_path)
+    if ref_est is None and truth is None:
         if with_scale or align_on != "landmarks" or delta != 1:
             raise EvaluationError(f"{stream_path}: the stream has no ground truth, so there is "
                                   f"nothing to align to (--similarity, --align, --delta); give "
                                   f"--reference EST, or drop them for the truth-free measures")
         free = []
-        for c in (est.checkpoints or (None,)):
+        for k, c in enumerate(est.checkpoints or (None,)):
             e = est.final if c is None else c.estimate
-            b = bearing_consistency(e, stream.steps[: (len(stream.steps) if c is None
-                                                       else c.t + 1)])
+            b = _consistency(sums[k])
             free.append({"t": None if c is None else c.t, "n_mapped": len(e),
                          "n_bearings": b.n, "bearing_rms_rad": b.rms_rad})
-        return FileEvaluation(method_label(est), None, None, bearing=bearing_consistency(
-            est.final, stream.steps), free_rows=tuple(free))
-    target = ref_est.final if ref_est is not None else stream.truth
+        return FileEvaluation(method_label(est), None, None,
+                              bearing=_consistency(sums["final"]), free_rows=tuple(free))
+    target = ref_est.final if ref_est is not None else truth
     kw = dict(with_scale=with_scale, align_on=align_on, delta=delta)
     try:
         score = score_estimate(est.final, target, **kw)
@@ -185,23 +207,79 @@ def evaluate_files(estimate_path: str | os.PathLike[str], stream_path: str | os.
     revised = est.version >= 2 and poses_revised(est)
     if revised:  # the earlier rows' trajectories are first estimates, not the method's then
         rows = tuple(_without_trajectory(r, align_on) for r in rows[:-1]) + rows[-1:]
-    table = (error_table(est.checkpoints, stream.truth)
+    table = (error_table(est.checkpoints, truth)
              if est.checkpoints and ref_est is None and align_on == "landmarks" else None)
     if revised and table is not None:  # as in the rows: no mean over first estimates
         table["robot_mean_m"][:-1] = math.nan
     nl = np_ = math.nan
     undefined = (0, False)
-    if ref_est is None:  # the alignment's scale, if fitted, is carried (landmark_nees)
-        nl = mean_landmark_nees(est.final, stream.truth, score.alignment)
-        undefined = _undefined_covariances(est.final, stream.truth)
-        np_ = pose_nees(est.final, stream.truth, score.alignment)
+    if ref_est is None and truth is not None:  # the alignment's scale, if fitted, is carried
+        nl = mean_landmark_nees(est.final, truth, score.alignment)
+        undefined = _undefined_covariances(est.final, truth)
+        np_ = pose_nees(est.final, truth, score.alignment)
     return FileEvaluation(method_label(est), score, table, rows,
                           None if ref_est is None else (method_label(ref_est)
                                                         or str(reference_path)),
-                          bearing_consistency(est.final, stream.steps),
-                          None if ref_est is None else bearing_consistency(ref_est.final,
-                                                                           stream.steps),
+                          _consistency(sums["final"]),
+                          None if ref_est is None else _consistency(sums["reference"]),
                           nl, np_, undefined, poses_revised=revised)
+
+
+def _read_estimate_later(path: str | os.PathLike[str]) -> tuple[EstimateFile | None,
+                                                                 BomgraphError | None]:
+    """The estimate file at ``path``, or the error reading it, raised once the stream has
+    been read (a broken stream is reported first, as when the stream was read before)."""
+    try:
+        return read_estimate(path), None
+    except BomgraphError as exc:
+        return None, exc
+
+
+def _bearing_sums(est: EstimateFile | None, ref_est: EstimateFile | None,
+                  truth: Truth | None) -> dict[Any, BearingResidualSums]:
+    """The bearing residual sums :func:`evaluate_files` reports, to be fed the stream:
+    ``"final"`` (and ``"reference"``) over every step; without truth or reference, also one
+    per checkpoint ``k`` (0, 1, ...) over the steps up to it."""
+    if est is None:
+        return {}
+    sums: dict[Any, BearingResidualSums] = {"final": _residual_sums(est.final)}
+    if ref_est is not None:
+        sums["reference"] = _residual_sums(ref_est.final)
+    elif truth is None:
+        for k, c in enumerate(est.checkpoints or (None,)):
+            sums[k] = (_residual_sums(est.final) if c is None
+                       else _residual_sums(c.estimate, until_t=c.t))
+    return sums
+
+
+#: Steps and bearings read before the bearing sums are fed (bounds :func:`_read_steps`).
+_BATCH_STEPS, _BATCH_BEARINGS = 4096, 1 << 16
+
+
+def _read_steps(reader: StreamReader, sums: Sequence[BearingResidualSums]) -> StreamIdentity:
+    """Read the steps of ``reader`` once, feeding their bearings to ``sums`` in batches (the
+    steps are not kept: memory bounded by one batch); the stream's identity."""
+    hasher = StreamHasher()
+    batch: list[Step] = []
+    n_bearings = 0
+    for st in reader:
+        hasher.add(st)
+        batch.append(st)
+        n_bearings += len(st.landmark_ids)
+        if len(batch) >= _BATCH_STEPS or n_bearings >= _BATCH_BEARINGS:
+            _feed(batch, sums)
+            batch, n_bearings = [], 0
+    _feed(batch, sums)
+    return hasher.identity
+
+
+def _feed(steps: list[Step], sums: Sequence[BearingResidualSums]) -> None:
+    if not steps:
+        return
+    t, ids, brg = bearing_arrays(steps)
+    for s in sums:
+        if s.until_t is None or s.until_t >= steps[0].t:
+            s.add(t, ids, brg)
 
 
 def _undefined_covariances(final: MapEstimate, truth: Truth) -> tuple[int, bool]:
@@ -254,9 +332,15 @@ def check_stream_identity(est: EstimateFile, steps: Sequence[Step],
     stream_identity`) is not that of ``steps``: it was computed from another stream. An
     estimate without a recorded identity (version 1, or written by a library call) passes.
     Raises ``error`` (``evaluate``: :class:`EvaluationError`; ``export``: ExportError)."""
+    _check_identity(est, stream_identity(steps), estimate_path, stream_path, error)
+
+
+def _check_identity(est: EstimateFile, ident: StreamIdentity,
+                    estimate_path: str | os.PathLike[str], stream_path: str | os.PathLike[str],
+                    error: type[BomgraphError] = EvaluationError) -> None:
+    """:func:`check_stream_identity` against the identity ``ident`` of the stream."""
     if est.stream is None:
         return
-    ident = stream_identity(steps)
     if ident != est.stream:
         what = (f"{est.stream.n_steps} steps recorded, the stream has {ident.n_steps}"
                 if ident.n_steps != est.stream.n_steps else

@@ -12,7 +12,9 @@
 - :func:`parse_option_value` / :func:`parse_options`: the one parser of ``key=value`` method
   options (from ``--option`` and from scripts). Values are JSON where they parse as JSON;
   ``inf``, ``+inf``, ``-inf``, ``Infinity`` and ``-Infinity`` are infinities; anything else is
-  a string. NaN is refused: no option means "not a number".
+  a string. NaN is refused: no option means "not a number". A record of options
+  (:func:`options_to_json`, :func:`options_from_json`) writes an infinity as the string
+  ``"Infinity"`` or ``"-Infinity"`` (strict JSON has none), so it reads back as given.
 """
 
 from __future__ import annotations
@@ -220,9 +222,6 @@ def path_of(root: Any, target: dict | list) -> str | None:
     return None
 
 
-_WS = re.compile(r"[ \t\n\r]*")
-_INDEX = re.compile(r"\[(\d+)\]")
-_SKIP = json.JSONDecoder(parse_constant=float)  # steps over a value (C speed, no key checks)
 
 
 def line_of_key(text: str, key: str | None) -> int:
@@ -230,58 +229,125 @@ def line_of_key(text: str, key: str | None) -> int:
     begins: ``key`` is a path as :func:`find_nonfinite` spells it (``a.b[2]``; a key holding
     ``.`` or ``[`` is matched whole); a path ending in an object's key gives the line of that
     key (of its last occurrence, if it is repeated). Only the path is walked, the values
-    beside it are stepped over; where the path leaves the data (or the text is not JSON) the
-    line is that of the last value reached, so line 1 for a ``key`` of None."""
+    beside it are stepped over; where the path leaves the data the line is that of the last
+    value reached, so line 1 for a ``key`` of None.
+
+    Linear in the text and vectorised (:class:`_Structure`: the brackets, braces and commas
+    outside strings and their depths, found once), so a file of millions of values is walked
+    in a fraction of a second; only the keys of the objects on the path that could be the
+    one named are decoded. ``text`` is expected to be valid JSON (the estimate reader calls
+    this only after parsing it); beyond where it is not, the line is a best guess."""
     end = len(text)
     while end and text[end - 1] in " \t\r\n":
         end -= 1
     if text.find("\n", 0, end) < 0:
         return 1                          # one line (as bomgraph wrote version 1): no walk
-    pos = _WS.match(text).end()
+    data = text.encode("utf-8", "surrogatepass")
+    doc = _Structure(data)
+    pos = _WSB.match(data).end()
     rest = key or ""
     top_empty = key == ""                 # the top-level key "" (the root is never named "")
     at_root = True                        # a root key is not after a "." (".x" is key ".x")
-    try:
-        while rest or top_empty:
-            top_empty = False
-            if text.startswith("[", pos) and (m := _INDEX.match(rest)):
-                at = _WS.match(text, pos + 1).end()
-                for _ in range(int(m[1])):
-                    at = _WS.match(text, _SKIP.raw_decode(text, at)[1]).end()
-                    if not text.startswith(",", at):
-                        break
-                    at = _WS.match(text, at + 1).end()
-                else:
-                    pos, rest, at_root = at, rest[m.end():], False
-                    continue
+    while rest or top_empty:
+        top_empty = False
+        if data.startswith(b"[", pos) and (m := _INDEX.match(rest)):
+            k = int(m[1])
+            commas = doc.separators(pos)
+            if k > len(commas):
                 break
-            if not text.startswith("{", pos):
-                break
-            if not at_root:
-                rest = rest.removeprefix(".")
-            at_root = False
-            best: tuple[str, int, int] | None = None   # (key, where it is, where its value is)
-            at = _WS.match(text, pos + 1).end()
-            while text.startswith('"', at):
-                name, end = scanstring(text, at + 1)
-                value = _WS.match(text, _WS.match(text, end).end() + 1).end()
-                if (rest == name or rest.startswith((name + ".", name + "["))) and (
-                        best is None or len(name) >= len(best[0])):
-                    best = (name, at, value)
-                try:
-                    at = _WS.match(text, _SKIP.raw_decode(text, value)[1]).end()
-                except (ValueError, RecursionError):
-                    break
-                if not text.startswith(",", at):
-                    break
-                at = _WS.match(text, at + 1).end()
-            if best is None:
-                break
-            rest = rest[len(best[0]):]
-            pos = best[2] if rest else best[1]
-    except (ValueError, RecursionError):   # not JSON beyond here: the line reached so far
-        pass
-    return text.count("\n", 0, pos) + 1
+            pos = _WSB.match(data, (pos if k == 0 else int(commas[k - 1])) + 1).end()
+            rest, at_root = rest[m.end():], False
+            continue
+        if not data.startswith(b"{", pos):
+            break
+        if not at_root:
+            rest = rest.removeprefix(".")
+        at_root = False
+        found = doc.last_longest_key(pos, rest)
+        if found is None:
+            break
+        name, at, value = found
+        rest = rest[len(name):]
+        pos = value if rest else at
+    return data.count(b"\n", 0, pos) + 1
+
+
+_WSB = re.compile(rb"[ \t\n\r]*")
+_INDEX = re.compile(r"\[(\d+)\]")
+_OPEN, _CLOSE, _COMMA, _QUOTE, _BACKSLASH = b"[{", b"]}", ord(","), ord('"'), ord("\\")
+
+
+class _Structure:
+    """The skeleton of a JSON text (UTF-8 bytes) for :func:`line_of_key`: the positions of
+    its brackets, braces and commas outside strings with the nesting depth after each, and
+    of its strings' unescaped quotes."""
+
+    def __init__(self, data: bytes) -> None:
+        self.data = data
+        a = np.frombuffer(data, np.uint8)
+        quotes = np.flatnonzero(a == _QUOTE)
+        after_bs = quotes[(quotes > 0) & (a[quotes - 1] == _BACKSLASH)]
+        escaped = [q for q in after_bs.tolist() if _backslashes_before(data, q) % 2]
+        self.quotes = np.setdiff1d(quotes, escaped, assume_unique=True) if escaped else quotes
+        self.backslashes = np.flatnonzero(a == _BACKSLASH)
+        step = np.zeros(256, np.int8)
+        step[list(_OPEN)], step[list(_CLOSE)] = 1, -1
+        mark = step != 0
+        mark[_COMMA] = True
+        where = np.flatnonzero(mark[a])
+        where = where[np.searchsorted(self.quotes, where) % 2 == 0]   # outside strings
+        self.where = where
+        self.is_comma = a[where] == _COMMA
+        self.depth = np.cumsum(step[a[where]], dtype=np.int32)   # inside, after each mark
+
+    def _inside(self, pos: int) -> tuple[int, int, int]:
+        """For the container opened at ``pos``: the index of its opening mark, of its
+        closing one (the end of the marks if it is not closed), and its depth."""
+        i = int(np.searchsorted(self.where, pos))
+        d = int(self.depth[i])
+        below = self.depth[i + 1:] < d
+        j = i + 1 + int(np.argmax(below)) if below.any() else len(self.where)
+        return i, j, d
+
+    def separators(self, pos: int) -> np.ndarray:
+        """The positions of the commas between the values of the container opened at
+        ``pos``."""
+        i, j, d = self._inside(pos)
+        sel = self.is_comma[i + 1:j] & (self.depth[i + 1:j] == d)
+        return self.where[i + 1:j][sel]
+
+    def last_longest_key(self, pos: int, rest: str) -> tuple[str, int, int] | None:
+        """Of the object opened at ``pos``, the key that begins ``rest`` as a path (``rest``
+        itself, or followed by ``.`` or ``[``), the longest, the last if repeated: ``(key,
+        where the key is, where its value is)``, or None. Only keys of a length one of those
+        could have, or written with escapes, are decoded."""
+        i, j, _ = self._inside(pos)
+        close = int(self.where[j]) if j < len(self.where) else len(self.data)
+        # each key is the first string after the '{' or a comma of the object
+        k = np.searchsorted(self.quotes, np.concatenate([[pos], self.separators(pos)]),
+                            side="right")
+        k = k[k + 1 < len(self.quotes)]
+        starts, ends = self.quotes[k], self.quotes[k + 1]
+        starts, ends = starts[starts < close], ends[starts < close]
+        names = {rest} | {rest[:n] for n, ch in enumerate(rest) if ch in ".["}
+        sizes = [len(n.encode("utf-8", "surrogatepass")) for n in names]
+        escaped = (np.searchsorted(self.backslashes, ends)
+                   > np.searchsorted(self.backslashes, starts))
+        best: tuple[str, int, int] | None = None
+        for at, end in zip(*(v[np.isin(ends - starts - 1, sizes) | escaped].tolist()
+                             for v in (starts, ends))):
+            name = scanstring(self.data[at:end + 1].decode("utf-8", "surrogatepass"), 1)[0]
+            if name in names and (best is None or len(name) >= len(best[0])):
+                colon = _WSB.match(self.data, end + 1).end()
+                best = (name, at, _WSB.match(self.data, colon + 1).end())
+        return best
+
+
+def _backslashes_before(data: bytes, pos: int) -> int:
+    n = 0
+    while pos - n - 1 >= 0 and data[pos - n - 1] == 0x5C:
+        n += 1
+    return n
 
 
 #: nesting deeper than this is where a JSON text is said to be too deep (:mod:`json`
@@ -339,6 +405,41 @@ def _refuse_constant(name: str) -> float:
     return math.inf if name == "Infinity" else -math.inf
 
 
+#: How a record (an estimate file's ``options``, results.json's arms) writes an infinite option
+#: value: strict JSON has no infinity, and these are the texts ``--option`` reads as one.
+OPTION_INFINITIES = {"Infinity": math.inf, "-Infinity": -math.inf}
+
+
+def options_to_json(value: Any) -> Any:
+    """Method options (a mapping, or one value) as they are recorded: each infinity, at any
+    depth, as the string ``"Infinity"`` or ``"-Infinity"`` (:data:`OPTION_INFINITIES`), read
+    back by :func:`options_from_json`; everything else as given (tuples as lists). A string
+    option spelled so would read back as the infinity, so it is refused (ConfigError)."""
+    if isinstance(value, Mapping):
+        return {k: options_to_json(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [options_to_json(v) for v in value]
+    if isinstance(value, str) and value in OPTION_INFINITIES:
+        raise ConfigError(f"option value {value!r}: a record writes an infinity so (it would "
+                          f"read back as {OPTION_INFINITIES[value]}); give the number "
+                          f"(--option KEY=inf) or another string")
+    if isinstance(value, (float, np.floating)) and math.isinf(value):
+        return "Infinity" if value > 0 else "-Infinity"
+    return value
+
+
+def options_from_json(value: Any) -> Any:
+    """Recorded options (:func:`options_to_json`) as given: ``"Infinity"`` and
+    ``"-Infinity"``, at any depth, are the infinities again."""
+    if isinstance(value, dict):
+        return {k: options_from_json(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [options_from_json(v) for v in value]
+    if isinstance(value, str) and value in OPTION_INFINITIES:
+        return OPTION_INFINITIES[value]
+    return value
+
+
 def parse_options(pairs: Sequence[str]) -> dict[str, Any]:
     """``["key=value", ...]`` as a dict, values by :func:`parse_option_value`."""
     out: dict[str, Any] = {}
@@ -357,6 +458,7 @@ def parse_options(pairs: Sequence[str]) -> dict[str, Any]:
     return out
 
 
-__all__ = ["jsonable", "parse_option_value", "parse_options", "MAX_ID", "is_int", "is_id",
+__all__ = ["jsonable", "parse_option_value", "parse_options", "options_to_json",
+           "options_from_json", "OPTION_INFINITIES", "MAX_ID", "is_int", "is_id",
            "is_num", "version_problem", "DuplicateKeyError", "no_duplicate_keys", "loads_strict",
            "find_nonfinite", "path_of", "line_of_key", "unparsable_at"]

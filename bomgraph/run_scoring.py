@@ -20,13 +20,11 @@ import time
 from dataclasses import asdict, replace
 from typing import Any, Callable
 
-import numpy as np
-
 from .evaluate import CheckpointScore, score_checkpoints
 from .experiments import Arm, Task
 from .mapper import Checkpoint, MapEstimate, RunResult, create_mapper, method_info, run
 from .stream import Stream, Truth
-from .trajectory import bearing_residuals
+from .trajectory import BearingResidualSums
 
 #: Reference maps kept per process (stream, reference, cadence); the oldest goes first.
 MAX_REFERENCES = 8
@@ -105,9 +103,10 @@ def bearing_rms(estimate: MapEstimate, stream: Stream) -> float:
     poses or without a bearing on a mapped landmark): a truth-free score."""
     if estimate.poses is None or not len(estimate):
         return math.nan
-    r = bearing_residuals(estimate.landmark_ids, estimate.landmarks_xy, estimate.pose_t,
-                          estimate.poses, stream.steps)
-    return float(np.sqrt(np.mean(r ** 2))) if r.size else math.nan
+    sums = BearingResidualSums(estimate.landmark_ids, estimate.landmarks_xy, estimate.pose_t,
+                               estimate.poses)   # summed exactly, as ``evaluate`` sums them
+    sums.add_steps(stream.steps)
+    return sums.rms_rad
 
 
 def _unscored(c: Checkpoint) -> dict[str, Any]:

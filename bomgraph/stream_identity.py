@@ -43,23 +43,38 @@ class StreamIdentity:
 
 def stream_identity(steps: Iterable[Step]) -> StreamIdentity:
     """The :class:`StreamIdentity` of a sequence of steps (a stream's ``steps``, a reader)."""
-    from .stream_file import step_to_json
-
     if isinstance(steps, (str, os.PathLike)) or hasattr(steps, "steps") \
             or not isinstance(steps, Iterable):
         hint = (" (stream_file_identity(path) for a file)" if isinstance(steps, (str, os.PathLike))
                 else " (pass stream.steps)" if hasattr(steps, "steps") else "")
         raise ConfigError(f"stream_identity(): steps must be an iterable of Step, got "
                           f"{type(steps).__name__}{hint}")
-    h = hashlib.sha256()
-    n = 0
+    hasher = StreamHasher()
     for st in steps:
         if not isinstance(st, Step):
-            raise ConfigError(f"stream_identity(): step {n} is a {type(st).__name__}, not a "
-                              f"bomgraph.stream.Step")
-        h.update((json.dumps(step_to_json(st), allow_nan=False) + "\n").encode("utf-8"))
-        n += 1
-    return StreamIdentity(h.hexdigest(), n)
+            raise ConfigError(f"stream_identity(): step {hasher.n} is a {type(st).__name__}, "
+                              f"not a bomgraph.stream.Step")
+        hasher.add(st)
+    return hasher.identity
+
+
+class StreamHasher:
+    """:func:`stream_identity` step by step: :meth:`add` each step in order, then read
+    :attr:`identity` (for a reader that does more with the steps than hash them)."""
+
+    def __init__(self) -> None:
+        self._h = hashlib.sha256()
+        self.n = 0
+
+    def add(self, step: Step) -> None:
+        from .stream_file import step_to_json
+
+        self._h.update((json.dumps(step_to_json(step), allow_nan=False) + "\n").encode("utf-8"))
+        self.n += 1
+
+    @property
+    def identity(self) -> StreamIdentity:
+        return StreamIdentity(self._h.hexdigest(), self.n)
 
 
 def stream_file_identity(path: str | os.PathLike[str]) -> StreamIdentity:
@@ -70,4 +85,4 @@ def stream_file_identity(path: str | os.PathLike[str]) -> StreamIdentity:
         return stream_identity(reader)
 
 
-__all__ = ["StreamIdentity", "stream_identity", "stream_file_identity"]
+__all__ = ["StreamIdentity", "StreamHasher", "stream_identity", "stream_file_identity"]

@@ -8,13 +8,16 @@ figure.
   relative motion ``E = (Q_i^-1 Q_j)^-1 (P_i^-1 P_j)`` (evo's RPE with ``--delta``):
   ``|E.xy|`` [m] and ``|E.psi|`` [rad].
 - :func:`bearing_residuals`: measured minus predicted bearing of every measurement the
-  estimate's own map and trajectory cover (no truth needed).
+  estimate's own map and trajectory cover (no truth needed); :class:`BearingResidualSums`
+  their RMS summed batch by batch as a stream is read (exactly: :class:`ExactSum`), without
+  holding the bearings.
 
 Nothing here aligns; :mod:`bomgraph.evaluate` does, then calls these on the aligned poses.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Sequence
 
@@ -97,23 +100,128 @@ def bearing_residuals(landmark_ids: np.ndarray, landmarks_xy: np.ndarray, pose_t
     """
     if not len(steps) or not len(landmark_ids) or not len(pose_t):
         return np.zeros(0)
-    t = np.concatenate([np.full(len(st.landmark_ids), st.t) for st in steps]).astype(np.int64)
-    ids = np.concatenate([st.landmark_ids for st in steps]).astype(np.int64)
-    brg = np.concatenate([st.bearings_rad for st in steps]).astype(float)
-
-    def rows(keys: np.ndarray, wanted: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        order = np.argsort(keys)
-        pos = np.clip(np.searchsorted(keys, wanted, sorter=order), 0, len(keys) - 1)
-        return order[pos], keys[order[pos]] == wanted
-
-    pr, pok = rows(np.asarray(pose_t, np.int64), t)
-    lr, lok = rows(np.asarray(landmark_ids, np.int64), ids)
-    ok = pok & lok
+    t, ids, brg = bearing_arrays(steps)
+    covered = _Covered(landmark_ids, landmarks_xy, pose_t, poses)
+    ok, pred = covered(t, ids)
     if not ok.any():
         return np.zeros(0)
-    p, q = np.asarray(poses, float)[pr[ok]], np.asarray(landmarks_xy, float)[lr[ok]]
-    pred = angle_residual(np.arctan2(q[:, 1] - p[:, 1], q[:, 0] - p[:, 0]), p[:, 2])
     return angle_residual(brg[ok], -pred if mirrored else pred)
 
 
-__all__ = ["PoseErrors", "absolute_pose_errors", "relative_pose_errors", "bearing_residuals"]
+def bearing_arrays(steps: Sequence[Step]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The bearings of ``steps`` as flat arrays: step ``t``, landmark id, bearing [rad]."""
+    t = np.concatenate([np.full(len(st.landmark_ids), st.t) for st in steps]).astype(np.int64)
+    ids = np.concatenate([st.landmark_ids for st in steps]).astype(np.int64)
+    brg = np.concatenate([st.bearings_rad for st in steps]).astype(float)
+    return t, ids, brg
+
+
+class _Covered:
+    """The bearings a map and trajectory cover and their predictions: called with flat
+    arrays of step ``t`` and landmark ids, gives the mask of those with both a pose at ``t``
+    and the landmark, and their predicted bearings [rad]."""
+
+    def __init__(self, landmark_ids: np.ndarray, landmarks_xy: np.ndarray,
+                 pose_t: np.ndarray, poses: np.ndarray) -> None:
+        self._lm = _Rows(landmark_ids)
+        self._pose = _Rows(pose_t)
+        self._xy = np.asarray(landmarks_xy, float)
+        self._poses = np.asarray(poses, float)
+
+    def __call__(self, t: np.ndarray, ids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        pr, pok = self._pose(t)
+        lr, lok = self._lm(ids)
+        ok = pok & lok
+        p, q = self._poses[pr[ok]], self._xy[lr[ok]]
+        return ok, angle_residual(np.arctan2(q[:, 1] - p[:, 1], q[:, 0] - p[:, 0]), p[:, 2])
+
+
+class _Rows:
+    """Rows of integer ``keys`` (non-empty): for wanted keys, the row and whether it is one."""
+
+    def __init__(self, keys: np.ndarray) -> None:
+        self._keys = np.asarray(keys, np.int64)
+        self._order = np.argsort(self._keys)
+
+    def __call__(self, wanted: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        pos = np.clip(np.searchsorted(self._keys, wanted, sorter=self._order), 0,
+                      len(self._keys) - 1)
+        return self._order[pos], self._keys[self._order[pos]] == wanted
+
+
+class ExactSum:
+    """The exact sum of finite floats given in batches, rounded once when read: it does not
+    depend on how the values are batched or ordered (a running float sum, or numpy's pairwise
+    one, does), in memory bounded by the exponent range.
+
+    Each value is ``M * 2**(e - 53)`` with an integer ``M`` (``np.frexp``); the ``M`` are
+    summed per exponent as integers, exactly, and the total kept as one Python integer.
+    """
+
+    _BIAS = 1073            # frexp's exponent of the smallest subnormal is -1073
+    _ULP = 1 << (1073 + 53)  # the total counts units of 2**-1126
+    _CHUNK = 1 << 25        # 27-bit halves of M: float64 bin sums stay exact below 2**26
+
+    def __init__(self) -> None:
+        self._total = 0
+
+    def add(self, values: np.ndarray) -> None:
+        v = np.asarray(values, float).ravel()
+        for start in range(0, v.size, self._CHUNK):
+            m, e = np.frexp(v[start:start + self._CHUNK])
+            big = (m * 2.0 ** 53).astype(np.int64)
+            bins = e.astype(np.int64) + self._BIAS
+            hi = np.bincount(bins, weights=(big >> 26).astype(float))
+            lo = np.bincount(bins, weights=(big & ((1 << 26) - 1)).astype(float))
+            for k in np.flatnonzero((hi != 0) | (lo != 0)):
+                self._total += ((int(hi[k]) << 26) + int(lo[k])) << int(k)
+
+    @property
+    def value(self) -> float:
+        """The sum, correctly rounded (Python's integer division is)."""
+        return self._total / self._ULP
+
+
+class BearingResidualSums:
+    """:func:`bearing_residuals` of a map and trajectory summed as the bearings are read, for
+    the RMS without holding them: feed the stream's bearings in order with :meth:`add`
+    (those after step ``until_t``, if given, are left out). The RMS values use the exact sum
+    of the squares (:class:`ExactSum`), the same however the bearings were batched."""
+
+    def __init__(self, landmark_ids: np.ndarray, landmarks_xy: np.ndarray, pose_t: np.ndarray,
+                 poses: np.ndarray | None, until_t: int | None = None) -> None:
+        self.until_t = until_t
+        self.n = 0
+        self._sq, self._mirrored_sq = ExactSum(), ExactSum()
+        self._covered = (None if poses is None or not len(landmark_ids) or not len(pose_t)
+                         else _Covered(landmark_ids, landmarks_xy, pose_t, poses))
+
+    def add(self, t: np.ndarray, ids: np.ndarray, bearings_rad: np.ndarray) -> None:
+        """Bearings as flat arrays in stream order: step ``t``, landmark id, bearing [rad]."""
+        if self._covered is None or not len(t):
+            return
+        if self.until_t is not None:
+            k = int(np.searchsorted(t, self.until_t, side="right"))
+            t, ids, bearings_rad = t[:k], ids[:k], bearings_rad[:k]
+        ok, pred = self._covered(t, ids)
+        if ok.any():
+            brg = bearings_rad[ok]
+            self.n += int(ok.sum())
+            self._sq.add(angle_residual(brg, pred) ** 2)
+            self._mirrored_sq.add(angle_residual(brg, -pred) ** 2)
+
+    def add_steps(self, steps: Sequence[Step]) -> None:
+        if len(steps):
+            self.add(*bearing_arrays(steps))
+
+    @property
+    def rms_rad(self) -> float:
+        return math.sqrt(self._sq.value / self.n) if self.n else math.nan
+
+    @property
+    def mirrored_rms_rad(self) -> float:
+        return math.sqrt(self._mirrored_sq.value / self.n) if self.n else math.nan
+
+
+__all__ = ["PoseErrors", "absolute_pose_errors", "relative_pose_errors", "bearing_residuals",
+           "bearing_arrays", "BearingResidualSums", "ExactSum"]
