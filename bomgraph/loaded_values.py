@@ -132,11 +132,13 @@ def _encode_object(value: Any, kind: type, h: Any, budget: list[int], stack: set
         h.update(str(value).encode())
     elif isinstance(value, functools.partial):
         _encode((value.func, value.args, value.keywords), h, budget, stack)
-    elif isinstance(value, types.FunctionType):  # in a container: its code, by value
+    elif isinstance(value, types.FunctionType):  # its code, by value, and what it holds
         from .loaded_code import _shape
 
+        h.update(f"{value.__module__}.{value.__qualname__}".encode())
         h.update(repr(_shape(value.__code__)).encode())
-        _encode((value.__defaults__, value.__kwdefaults__), h, budget, stack)
+        cells = tuple(c.cell_contents if _full(c) else _EMPTY for c in value.__closure__ or ())
+        _encode((value.__defaults__, value.__kwdefaults__, cells), h, budget, stack)
     elif isinstance(value, types.MethodType):
         _encode((value.__func__, value.__self__), h, budget, stack)
     elif _code_like(value):
@@ -150,9 +152,56 @@ def _encode_object(value: Any, kind: type, h: Any, budget: list[int], stack: set
         try:
             data = pickle.dumps(value, protocol=4)
         except Exception as exc:  # noqa: BLE001 - any object's pickling may raise anything
-            raise Unhashable(f"a {kind.__module__}.{kind.__qualname__} that cannot be pickled "
-                             f"({type(exc).__name__})") from exc
+            if type(kind).__name__ != "pybind11_type" or not _encode_extension(
+                    value, kind, h, budget, stack):
+                raise Unhashable(f"a {kind.__module__}.{kind.__qualname__} that cannot be "
+                                 f"pickled ({type(exc).__name__})") from exc
+            return
         h.update(hashlib.sha256(data).digest())
+
+
+#: The form a compiled extension's object prints in when it has no printed form of its own.
+_DEFAULT_REPR = re.compile(r"<[\w.]+ object at 0x[0-9a-fA-F]+>")
+
+
+def _encode_extension(value: Any, kind: type, h: Any, budget: list[int],
+                      stack: set[int]) -> bool:
+    """Feed a compiled extension's object (pybind11) that pickle cannot read by what it
+    tells of its value: its printed form (unless the default ``<... object at 0x...>``), its
+    properties and, for a gtsam object, what its zero-argument ``get*``/``is*`` methods
+    return: ``PARAMS = gtsam.LevenbergMarquardtParams()`` and ``PARAMS.setMaxIterations(300)``
+    (h69). False when it tells nothing (its value cannot be hashed)."""
+    told = False
+    text = str(value)
+    if not _DEFAULT_REPR.fullmatch(text.strip()):
+        h.update(b"str:" + text.encode())
+        told = True
+    props = sorted({n for c in kind.__mro__ for n, a in vars(c).items()
+                    if isinstance(a, property) and not n.startswith("_")})
+    getters = sorted(n for n in dir(value) if n.startswith(("get", "is"))) if (
+        kind.__module__.split(".")[0] == "gtsam") else []
+    for name in props + getters:
+        try:
+            part = getattr(value, name)
+            if name in getters:
+                part = part()
+        except TypeError:  # a getter that takes arguments
+            continue
+        h.update(f";{name}=".encode())
+        _encode(part, h, budget, stack)
+        told = True
+    return told
+
+
+_EMPTY = "<empty cell>"
+
+
+def _full(cell: Any) -> bool:
+    try:
+        cell.cell_contents
+    except ValueError:
+        return False
+    return True
 
 
 def _digest(value: object) -> bytes:
@@ -172,24 +221,44 @@ def _code_names(module: types.ModuleType) -> set[str] | None:
         return names
     for code in _loaded_code(module, filename):
         for c in (code, *_nested(code)):
-            names.update(c.co_names)
+            names.update(c.co_names)  # and names in strings: getattr(self, "GAIN") (h69)
+            names.update(k for k in c.co_consts if isinstance(k, str) and k.isidentifier())
     return None if {"globals", "vars"} & names else names
 
 
-def _values(module: types.ModuleType) -> Iterator[tuple[str, object]]:
-    """The data the module's code can read: its globals it names and its own classes' data
-    attributes it names (``Cls.NAME``), each by key; code and dunder names left out."""
-    names = _code_names(module)
+def _all_names(modules: list[types.ModuleType]) -> set[str] | None:
+    """:func:`_code_names` of all the method's modules: one module's code reads another's
+    globals (``config.PARAMS["depth"]``) and a base class's code reads a subclass's
+    attributes (``self.GAIN`` in ``base.py``, ``Mine.GAIN = [3.0]`` set on ``m.Mine``)."""
+    names: set[str] = set()
+    for module in modules:
+        more = _code_names(module)
+        if more is None:
+            return None
+        names |= more
+    return names
+
+
+def _values(module: types.ModuleType, names: set[str] | None
+            ) -> Iterator[tuple[str, object]]:
+    """The data the method's code can read from the module: its globals in ``names``
+    (:func:`_all_names`; None: all) and its own classes' data attributes in them
+    (``Cls.NAME``), each by key; code and dunder names left out, but for a plain function
+    (a global rebound to another function: ``mymethod.scale = lambda: 3.0``, h69)."""
     for k, v in list(vars(module).items()):
         if not isinstance(k, str) or k.startswith(("__", "@")):
             continue
         if issubclass(type(v), type) and v.__dict__.get("__module__") == module.__name__:
             for a, x in list(v.__dict__.items()):
                 if not a.startswith("__") and a != "_abc_impl" and (
-                        names is None or a in names) and not _code_like(x):
+                        names is None or a in names) and _data(x):
                     yield f"{k}.{a}", x
-        elif (names is None or k in names) and not _code_like(v):
+        elif (names is None or k in names) and _data(v):
             yield k, v
+
+
+def _data(value: object) -> bool:
+    return type(value) is types.FunctionType or not _code_like(value)
 
 
 def _literals(module: types.ModuleType) -> dict[str, object]:
@@ -242,9 +311,36 @@ _AT_KEY: dict[tuple[str, str], bytes | None] = {}
 _KEYED: set[str] = set()
 
 
+#: Per (module name, key): a function it held when loaded that cannot be hashed by value
+#: (a library's, with an odd default), kept so that it is known as the same object.
+_HELD: dict[tuple[str, str], object] = {}
+
+
 def _safe_digest(value: object) -> bytes | None:
     try:
         return _digest(value)
+    except Unhashable:
+        return None
+
+
+def _value_digest(module: types.ModuleType, key: str, value: object) -> bytes:
+    """:func:`_digest` of a module's value (raises :class:`Unhashable`); a function by its
+    name when it is the module's own (the files' key and :mod:`bomgraph.loaded_code` cover
+    its code), else by its code (:func:`_encode`), or as the object held when loaded."""
+    if type(value) is not types.FunctionType:
+        return _digest(value)
+    code = value.__code__
+    if value.__module__ == module.__name__ and code.co_filename == getattr(
+            module, "__file__", None):
+        return f"own function {value.__qualname__}".encode()
+    if _HELD.get((module.__name__, key)) is value:
+        return f"function held {id(value)}".encode()
+    return _digest(value)
+
+
+def _safe_value_digest(module: types.ModuleType, key: str, value: object) -> bytes | None:
+    try:
+        return _value_digest(module, key, value)
     except Unhashable:
         return None
 
@@ -257,8 +353,11 @@ def _loaded(module: types.ModuleType) -> dict[str, bytes | None]:
         return seen[2]
     literals = _literals(module)
     base: dict[str, bytes | None] = {}
-    for key, value in _values(module):
-        now = _safe_digest(value)
+    for key, value in _values(module, None):
+        now = _safe_value_digest(module, key, value)
+        if now is None and type(value) is types.FunctionType:
+            _HELD[(name, key)] = value
+            now = _value_digest(module, key, value)
         if key in literals:  # set before bomgraph saw it: its value when loaded is unknown
             base[key] = now if now == _safe_digest(literals[key]) else None
         else:
@@ -279,15 +378,16 @@ def values_fingerprint(modules: list[types.ModuleType]) -> str:
         Such a value cannot be hashed (the message names the module, the global and why).
     """
     changed, problem = [], ""
+    names = _all_names(modules)
     for module in modules:
         base = _loaded(module)
         _KEYED.add(module.__name__)
-        for key, value in _values(module):
+        for key, value in _values(module, names):
             where = (module.__name__, key)
             if where in _RUN_STATE:
                 continue
             try:
-                now = _digest(value)
+                now = _value_digest(module, key, value)
             except Unhashable as exc:
                 _AT_KEY[where] = None
                 problem = problem or f"{module.__name__}.{key} is {exc}"
@@ -304,22 +404,25 @@ def note_run(modules: list[types.ModuleType]) -> None:
     """After a run in this process: the values of ``modules`` that differ from their keyed
     ones (:func:`values_fingerprint`), or were made by the run (a class attribute set
     lazily), are the method's own state, left out of the keys from now on."""
+    names = _all_names(modules)
     for module in modules:
         if module.__name__ not in _KEYED:  # loaded by the run: nothing to compare with
             continue
-        for key, value in _values(module):
+        for key, value in _values(module, names):
             where = (module.__name__, key)
             if where in _RUN_STATE:
                 continue
             if where not in _AT_KEY:
                 _RUN_STATE.add(where)
-            elif _AT_KEY[where] is not None and _safe_digest(value) != _AT_KEY[where]:
+            elif _AT_KEY[where] is not None and _safe_value_digest(
+                    module, key, value) != _AT_KEY[where]:
                 _RUN_STATE.add(where)
 
 
 def forget() -> None:
     """Forget the values seen (:func:`bomgraph.plugins.refresh`)."""
     _LOADED.clear()
+    _HELD.clear()
     _RUN_STATE.clear()
     _AT_KEY.clear()
     _KEYED.clear()

@@ -1,0 +1,127 @@
+"""Review of h64's values in a serial run's key (h69): what it did not see, and a gtsam
+parameters object that made a method never cached.
+
+- A value read from another module of the method's package (``config.PARAMS["depth"]``), a
+  class attribute set on a subclass and read by its base class's code in another module
+  (``m.Mine.GAIN = [3.0]``, ``self.GAIN`` in ``base.py``), one read by a name in a string
+  (``getattr(self, "GAIN")``), and a module's function rebound to another one
+  (``m.scale = lambda: 3.0``): changed between two sweeps, the old result was served (MPE
+  0.27 m for code that gives 2.14 m).
+- ``PARAMS = gtsam.LevenbergMarquardtParams()`` at module level cannot be pickled: the
+  method's serial runs were never cached though nothing changed; it is now hashed by its
+  printed form and gtsam getters, so it is cached, and a change (``setMaxIterations``) keyed.
+"""
+
+from __future__ import annotations
+
+import importlib
+import sys
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+import pytest
+from _depth_mapper import depth_mapper
+from _plugin_site import write
+
+from bomgraph import mapper
+from bomgraph.bench import Executor, execute_counted, is_cached
+from bomgraph.experiments import Arm, Experiment, FileSource
+from bomgraph.sim import SimConfig, simulate
+from bomgraph.stream_file import write_stream
+
+GTSAM_PARAMS = "import gtsam\nPARAMS = gtsam.LevenbergMarquardtParams()\n"
+
+#: package name -> (its files, the method's target, the change, the change undone)
+CASES: dict[str, tuple[dict[str, str], str, Callable[[], None], Callable[[], None]]] = {}
+
+
+def _case(pkg: str, files: dict[str, str], target: str, change: Callable, undo: Callable):
+    CASES[pkg] = (files, f"{pkg}.{target}", change, undo)
+
+
+_case("h69cfg", {"config.py": "PARAMS = {'depth': 1.0}\n",
+                 "m.py": "from . import config\n" + depth_mapper("config.PARAMS['depth']", "Mine")},
+      "m:Mine", lambda: sys.modules["h69cfg.config"].PARAMS.__setitem__("depth", 3.0),
+      lambda: sys.modules["h69cfg.config"].PARAMS.__setitem__("depth", 1.0))
+_case("h69sub", {"base.py": depth_mapper("self.GAIN[0]", "Base", attrs="GAIN = [1.0]"),
+                 "m.py": "from .base import Base\n\nclass Mine(Base):\n    pass\n"},
+      "m:Mine", lambda: setattr(sys.modules["h69sub.m"].Mine, "GAIN", [3.0]),
+      lambda: delattr(sys.modules["h69sub.m"].Mine, "GAIN"))
+_case("h69str", {"m.py": depth_mapper("getattr(self, 'GAIN')[0]", "Mine", attrs="GAIN = [1.0]")},
+      "m:Mine", lambda: sys.modules["h69str.m"].Mine.GAIN.__setitem__(0, 3.0),
+      lambda: sys.modules["h69str.m"].Mine.GAIN.__setitem__(0, 1.0))
+_ORIGINAL: dict[str, object] = {}
+_case("h69fn", {"m.py": depth_mapper("scale()", "Mine") + "\ndef scale():\n    return 1.0\n"},
+      "m:Mine", lambda: (_ORIGINAL.__setitem__("scale", sys.modules["h69fn.m"].scale),
+                         setattr(sys.modules["h69fn.m"], "scale", lambda: 3.0)),
+      lambda: setattr(sys.modules["h69fn.m"], "scale", _ORIGINAL["scale"]))
+_case("h69gt", {"m.py": GTSAM_PARAMS + depth_mapper("PARAMS.getMaxIterations() / 100.0", "Mine")},
+      "m:Mine", lambda: sys.modules["h69gt.m"].PARAMS.setMaxIterations(300),
+      lambda: sys.modules["h69gt.m"].PARAMS.setMaxIterations(100))
+
+
+def _method(plugin_site: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, pkg: str,
+            files: dict[str, str], target: str) -> tuple[Experiment, Path]:
+    """The package written, imported by the user first (a notebook) and registered at run
+    time; a one-run experiment of it and its cache folder."""
+    write(plugin_site / pkg / "__init__.py", "")
+    for rel, text in files.items():
+        write(plugin_site / pkg / rel, text)
+    monkeypatch.setattr(mapper, "_REGISTRY", dict(mapper._REGISTRY))
+    importlib.import_module(target.split(":")[0])
+    mapper.register_method("h69-val", target)
+    stream = tmp_path / "s.jsonl"
+    write_stream(simulate(SimConfig(n_steps=30), np.random.default_rng(3)), stream)
+    exp = Experiment("e", "e", (Arm("h69-val", "h69-val"),), sources=(FileSource(str(stream)),))
+    return exp, tmp_path / "cache"
+
+
+def _sweep(exp: Experiment, cache: Path | None) -> tuple[float, int]:
+    """The run's final MPE and how many runs came from the cache."""
+    (res,), n_cached = execute_counted(exp.tasks(), Executor("serial"), cache_dir=cache)
+    assert res["ok"], res.get("error")
+    return res["checkpoints"][-1]["mpe_m"], n_cached
+
+
+@pytest.mark.parametrize("pkg", list(CASES))
+def test_a_value_changed_between_two_sweeps_runs_again_and_set_back_is_cached(
+        plugin_site: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, pkg: str) -> None:
+    """Fails before for each case: the old value's result was served (or, for gtsam's
+    parameters, nothing was ever cached: the second sweep ran again)."""
+    files, target, change, undo = CASES[pkg]
+    exp, cache = _method(plugin_site, tmp_path, monkeypatch, pkg, files, target)
+    first, _ = _sweep(exp, cache)
+    assert _sweep(exp, cache) == (first, 1), "unchanged, the run is not served from the cache"
+    change()
+    second, n_cached = _sweep(exp, cache)
+    fresh, _ = _sweep(exp, None)
+    assert (second, n_cached) == (fresh, 0), "the old value's result was served"
+    assert second != first
+    undo()
+    assert _sweep(exp, cache) == (first, 1)
+    assert is_cached(exp.tasks()[0], cache, Executor("processes", n_jobs=2)), \
+        "the workers' key (the files') is not the serial key of the file's values"
+
+
+def test_gtsam_parameters_are_hashed_by_their_fields() -> None:
+    """Two LevenbergMarquardtParams objects: equal settings hash equal, any setter changes
+    the digest; a compiled object that tells nothing of its value is still unhashable."""
+    import gtsam
+
+    from bomgraph.loaded_values import Unhashable, _digest
+
+    a, b = gtsam.LevenbergMarquardtParams(), gtsam.LevenbergMarquardtParams()
+    assert _digest(a) == _digest(b)
+    for setter, value in [("setMaxIterations", 7), ("setlambdaInitial", 1e-3),
+                          ("setUseFixedLambdaFactor", False), ("setVerbosityLM", "SUMMARY"),
+                          ("setRelativeErrorTol", 1e-9)]:
+        c = gtsam.LevenbergMarquardtParams()
+        getattr(c, setter)(value)
+        assert _digest(c) != _digest(a), setter
+    isam = gtsam.ISAM2Params()
+    other = gtsam.ISAM2Params()
+    other.relinearizeSkip = 1
+    assert _digest(isam) == _digest(gtsam.ISAM2Params()) != _digest(other)
+    with pytest.raises(Unhashable):
+        _digest((i for i in range(3)))
