@@ -37,9 +37,9 @@ from .experiments import Experiment, SimSource, Task
 from .jsonio import jsonable
 from .mapper import (MapEstimate, RunResult, checkpoint_times, create_mapper,
                      method_failure_note, method_info, run)
-from .method_code import (bomgraph_edited, method_code, new_sweep, refuse_runtime_methods,
-                          stale_after_run, stale_here, stale_plugin, uncacheable, warn_sourceless,
-                          workers_outdated)
+from .method_code import (bomgraph_edited, method_code, new_sweep, noting_runs,
+                          refuse_runtime_methods, stale_after_run, stale_here, stale_plugin,
+                          uncacheable, warn_sourceless, workers_outdated)
 from .plugins import code_fingerprint
 from .processes import daemonic
 from .result_cache import read_cached, strip_timings, write_cached  # re-exported
@@ -457,8 +457,9 @@ def _dispatch(tasks: list[Task], index: list[int], executor: Executor,
     if not tasks:
         return
     if executor.backend == "serial":
-        for k, t in zip(index, tasks):
-            yield k, run_task(t)
+        with noting_runs():  # what the runs change in their modules: noted once, at the end
+            for k, t in zip(index, tasks):
+                yield k, run_task(t)
         return
     by_k = dict(zip(index, tasks))
     key_of = dict(zip(index, keys)) if keys is not None else {}
