@@ -6,23 +6,28 @@ can change without touching a file: ``mymethod.set_depth(3.0)`` (a function that
 ``global DEPTH_M``), ``mymethod.TABLE["scale"] = 3.0`` (a dict changed in place),
 ``mymethod.TABLE = {...}``. The files' key stayed the same, so the result of the old values
 was served from the cache (h64). :func:`values_fingerprint` is a hash of the globals (and of
-the classes' data attributes) of the method's loaded modules that their code names, each by
+the classes' data attributes) of the method's loaded modules that the code of any of them
+names (``config.PARAMS``, ``self.GAIN``, or in a string: ``getattr(self, "GAIN")``), each by
 its value (:func:`_encode`: numbers, strings, containers of them in order, arrays, enums,
-dataclasses, else its pickle), of those that differ from the value their module had when it
-was loaded: None ("") when none does, so an unchanged method keeps its key, the one worker
+dataclasses, functions by their code, else its pickle, or for a compiled object that has
+none its printed form and properties, and a gtsam one's getters), of those that differ from
+the value their module had when it was loaded: None ("") when none does, so an unchanged method keeps its key, the one worker
 processes use (they import the files). The value a module had when loaded is its file's
 literal (``DEPTH_M = 1.0``, ``TABLE = {"scale": 1.0}``: a value set before the first sweep is
 seen), else the value when bomgraph first saw the module (after a reload, again).
 
 A global that a run of the method changed (a lazy cache: ``global _MODEL``, a memo dict
 filled in place, a counter) is the method's own state: it is left out from then on
-(:func:`note_run`), its value at a run's start taken not to change the result.
+(:func:`note_run`, once at the end of a sweep), its value at a run's start taken not to change
+the result.
 
 Not seen: a global that is not a literal in its file, changed before bomgraph first saw the
-module; a global that a run changed, changed again by the user. A changed value that cannot
-be hashed (an object that neither the encoding nor pickle reads, a container of more than
+module; a global that a run changed, changed again by the user; a gtsam object's setting
+that neither its printed form nor a getter shows (an explicit ``setOrdering``, iterative
+solver parameters). A value that cannot be hashed, changed or not (whether it changed cannot
+be told: an object that neither the encoding nor pickle reads, a container of more than
 :data:`MAX_ITEMS` items, one that holds itself): :func:`values_fingerprint` raises
-:class:`Unhashable`, and the runner caches none of that method's runs (one log line).
+:class:`Unhashable`, and the runner caches none of that method's serial runs (one log line).
 """
 
 from __future__ import annotations
@@ -152,8 +157,7 @@ def _encode_object(value: Any, kind: type, h: Any, budget: list[int], stack: set
         try:
             data = pickle.dumps(value, protocol=4)
         except Exception as exc:  # noqa: BLE001 - any object's pickling may raise anything
-            if type(kind).__name__ != "pybind11_type" or not _encode_extension(
-                    value, kind, h, budget, stack):
+            if not _gtsam_params(kind) or not _encode_params(value, kind, h, budget, stack):
                 raise Unhashable(f"a {kind.__module__}.{kind.__qualname__} that cannot be "
                                  f"pickled ({type(exc).__name__})") from exc
             return
@@ -164,13 +168,19 @@ def _encode_object(value: Any, kind: type, h: Any, budget: list[int], stack: set
 _DEFAULT_REPR = re.compile(r"<[\w.]+ object at 0x[0-9a-fA-F]+>")
 
 
-def _encode_extension(value: Any, kind: type, h: Any, budget: list[int],
-                      stack: set[int]) -> bool:
-    """Feed a compiled extension's object (pybind11) that pickle cannot read by what it
-    tells of its value: its printed form (unless the default ``<... object at 0x...>``), its
-    properties and, for a gtsam object, what its zero-argument ``get*``/``is*`` methods
-    return: ``PARAMS = gtsam.LevenbergMarquardtParams()`` and ``PARAMS.setMaxIterations(300)``
-    (h69). False when it tells nothing (its value cannot be hashed)."""
+def _gtsam_params(kind: type) -> bool:
+    """Whether ``kind`` is a gtsam parameters class (``LevenbergMarquardtParams``,
+    ``ISAM2Params``, ...): only those are read by their printed form and getters; printing
+    another gtsam object can crash the process (a default-made factor's does)."""
+    return kind.__module__.split(".")[0] == "gtsam" and kind.__name__.endswith("Params")
+
+
+def _encode_params(value: Any, kind: type, h: Any, budget: list[int], stack: set[int]) -> bool:
+    """Feed a gtsam parameters object, which pickle cannot read, by what it tells of its
+    value: its printed form (unless the default ``<... object at 0x...>``), its properties
+    and what its zero-argument ``get*``/``is*`` methods return:
+    ``PARAMS = gtsam.LevenbergMarquardtParams()`` and ``PARAMS.setMaxIterations(300)`` (h69).
+    False when it tells nothing (its value cannot be hashed)."""
     told = False
     text = str(value)
     if not _DEFAULT_REPR.fullmatch(text.strip()):
@@ -178,8 +188,7 @@ def _encode_extension(value: Any, kind: type, h: Any, budget: list[int],
         told = True
     props = sorted({n for c in kind.__mro__ for n, a in vars(c).items()
                     if isinstance(a, property) and not n.startswith("_")})
-    getters = sorted(n for n in dir(value) if n.startswith(("get", "is"))) if (
-        kind.__module__.split(".")[0] == "gtsam") else []
+    getters = sorted(n for n in dir(value) if n.startswith(("get", "is")))
     for name in props + getters:
         try:
             part = getattr(value, name)

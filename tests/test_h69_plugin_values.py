@@ -127,6 +127,19 @@ def test_gtsam_parameters_are_hashed_by_their_fields() -> None:
         _digest((i for i in range(3)))
 
 
+def test_a_gtsam_object_other_than_parameters_is_not_printed() -> None:
+    """Printing a default-made gtsam factor ends the process (SIGSEGV): only parameters
+    objects are read by their printed form; this one is unhashable, as before."""
+    import subprocess
+
+    code = ("import gtsam\nfrom bomgraph.loaded_values import Unhashable, _digest\n"
+            "try:\n    _digest(gtsam.ComponentDerivativeFactorChebyshev1Basis())\n"
+            "except Unhashable:\n    print('unhashable')\n")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          timeout=120)
+    assert (done.returncode, done.stdout.strip()) == (0, "unhashable"), done.stderr[-500:]
+
+
 COUNTED = '''
 N = [0]
 
