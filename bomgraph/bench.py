@@ -334,8 +334,8 @@ def execute_counted(tasks: Sequence[Task], executor: Executor = Executor(), *,
         raise ConfigError(f"execute(): tasks must be Task objects (experiment.tasks()), got "
                           f"{type(bad).__name__}")
     if executor.backend == "processes" and daemonic():
-        _log.warning("this process is daemonic (a multiprocessing.Pool worker), which cannot "
-                     "start worker processes: running the %d run(s) here, one at a time "
+        _log.warning("this process is daemonic (a multiprocessing.Pool or Dask worker), which "
+                     "cannot start worker processes: running the %d run(s) here, one at a time "
                      "(as Executor('serial'), --jobs 1)", len(tasks))
         executor = Executor("serial")
     if executor.backend != "serial":
