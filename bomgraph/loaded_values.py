@@ -258,12 +258,23 @@ def _values(module: types.ModuleType, names: set[str] | None
         if not isinstance(k, str) or k.startswith(("__", "@")):
             continue
         if issubclass(type(v), type) and v.__dict__.get("__module__") == module.__name__:
-            for a, x in list(v.__dict__.items()):
-                if not a.startswith("__") and a != "_abc_impl" and (
-                        names is None or a in names) and _data(x):
-                    yield f"{k}.{a}", x
+            yield from _class_values(k, v, names)
         elif (names is None or k in names) and _data(v):
             yield k, v
+
+
+def _class_values(key: str, cls: type, names: set[str] | None, depth: int = 0
+                  ) -> Iterator[tuple[str, object]]:
+    """:func:`_values` of a class: its data attributes in ``names``, and those of the
+    classes defined in its body (``Mine.Defaults.GAIN``, h69), each as ``key.NAME``."""
+    for a, x in list(cls.__dict__.items()):
+        if a.startswith("__") or a == "_abc_impl":
+            continue
+        if (issubclass(type(x), type) and depth < 4 and x.__dict__.get("__module__")
+                == cls.__module__ and x.__qualname__ == f"{cls.__qualname__}.{a}"):
+            yield from _class_values(f"{key}.{a}", x, names, depth + 1)
+        elif (names is None or a in names) and _data(x):
+            yield f"{key}.{a}", x
 
 
 def _data(value: object) -> bool:
@@ -272,7 +283,9 @@ def _data(value: object) -> bool:
 
 def _literals(module: types.ModuleType) -> dict[str, object]:
     """The module's globals bound once at its top level by a literal (``DEPTH_M = 1.0``),
-    named nowhere else at its top level (not changed there: ``ITEMS.append(2)``), by name."""
+    named nowhere else at its top level (not changed there: ``ITEMS.append(2)``), by name;
+    and so its classes' attributes (``class Mine: GAIN = [1.0]``, as ``Mine.GAIN``: one set
+    before the first sweep was taken for the file's, h69)."""
     try:
         with open(module.__file__, "rb") as fh:  # type: ignore[arg-type]
             with warnings.catch_warnings():
@@ -283,20 +296,29 @@ def _literals(module: types.ModuleType) -> dict[str, object]:
         return {}
     out: dict[str, object] = {}
     named: dict[str, int] = {}
+    attrs: set[str] = set()
     for stmt in tree.body:
         for node in _run_at_import(stmt):
             if isinstance(node, ast.Name):
                 named[node.id] = named.get(node.id, 0) + 1
             elif isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)):
                 named[node.name] = named.get(node.name, 0) + 1
-        target = (stmt.targets[0] if isinstance(stmt, ast.Assign) and len(stmt.targets) == 1
-                  else stmt.target if isinstance(stmt, ast.AnnAssign) else None)
-        if isinstance(target, ast.Name) and getattr(stmt, "value", None) is not None:
-            try:
-                out[target.id] = ast.literal_eval(stmt.value)  # type: ignore[arg-type]
-            except (ValueError, TypeError, SyntaxError, MemoryError, RecursionError):
-                pass
-    return {k: v for k, v in out.items() if named.get(k) == 1}
+            elif isinstance(node, ast.Attribute):  # Mine.GAIN.append(2): not the file's
+                attrs.add(node.attr)
+        body = stmt.body if isinstance(stmt, ast.ClassDef) else [stmt]
+        for sub in body:
+            target = (sub.targets[0] if isinstance(sub, ast.Assign) and len(sub.targets) == 1
+                      else sub.target if isinstance(sub, ast.AnnAssign) else None)
+            if isinstance(target, ast.Name) and getattr(sub, "value", None) is not None:
+                try:
+                    value = ast.literal_eval(sub.value)  # type: ignore[arg-type]
+                except (ValueError, TypeError, SyntaxError, MemoryError, RecursionError):
+                    continue
+                if sub is stmt:
+                    out[target.id] = value
+                elif named.get(stmt.name) == 1 and target.id not in attrs:  # type: ignore
+                    out[f"{stmt.name}.{target.id}"] = value  # type: ignore[attr-defined]
+    return {k: v for k, v in out.items() if all(named.get(n) == 1 for n in k.split("."))}
 
 
 def _run_at_import(node: ast.AST) -> Iterator[ast.AST]:

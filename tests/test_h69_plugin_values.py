@@ -5,7 +5,8 @@ parameters object that made a method never cached.
   class attribute set on a subclass and read by its base class's code in another module
   (``m.Mine.GAIN = [3.0]``, ``self.GAIN`` in ``base.py``), one read by a name in a string
   (``getattr(self, "GAIN")``), and a module's function rebound to another one
-  (``m.scale = lambda: 3.0``): changed between two sweeps, the old result was served (MPE
+  (``m.scale = lambda: 3.0``), a class's attribute in a class in its body
+  (``Mine.Defaults.GAIN[0] = 3.0``): changed between two sweeps, the old result was served (MPE
   0.27 m for code that gives 2.14 m).
 - ``PARAMS = gtsam.LevenbergMarquardtParams()`` at module level cannot be pickled: the
   method's serial runs were never cached though nothing changed; it is now hashed by its
@@ -51,6 +52,10 @@ _case("h69sub", {"base.py": depth_mapper("self.GAIN[0]", "Base", attrs="GAIN = [
 _case("h69str", {"m.py": depth_mapper("getattr(self, 'GAIN')[0]", "Mine", attrs="GAIN = [1.0]")},
       "m:Mine", lambda: sys.modules["h69str.m"].Mine.GAIN.__setitem__(0, 3.0),
       lambda: sys.modules["h69str.m"].Mine.GAIN.__setitem__(0, 1.0))
+_case("h69nest", {"m.py": depth_mapper("self.Defaults.GAIN[0]", "Mine",
+                                         attrs="class Defaults:\n        GAIN = [1.0]")},
+      "m:Mine", lambda: sys.modules["h69nest.m"].Mine.Defaults.GAIN.__setitem__(0, 3.0),
+      lambda: sys.modules["h69nest.m"].Mine.Defaults.GAIN.__setitem__(0, 1.0))
 _ORIGINAL: dict[str, object] = {}
 _case("h69fn", {"m.py": depth_mapper("scale()", "Mine") + "\ndef scale():\n    return 1.0\n"},
       "m:Mine", lambda: (_ORIGINAL.__setitem__("scale", sys.modules["h69fn.m"].scale),
@@ -171,3 +176,17 @@ def test_a_sweeps_runs_hash_the_methods_values_once_not_after_each_run(
     assert counter[0] == 3, f"{counter[0]} hashes of BIG for one sweep of 4 runs"
     results, n_cached = execute_counted(exp.tasks(), Executor("serial"), cache_dir=cache)
     assert n_cached == 4
+
+
+def test_a_class_attribute_set_before_the_first_sweep_is_not_keyed_as_the_files(
+        plugin_site: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """``Mine.GAIN[0] = 3.0`` (``GAIN = [1.0]`` in the file) before the first sweep was taken
+    for the value when loaded: the run of 3.0 was cached under the files' key, which worker
+    processes (and this one after a restart) running the file's 1.0 are then served. Fails
+    before (the workers' key was cached)."""
+    files, target, change, _ = CASES["h69str"]
+    exp, cache = _method(plugin_site, tmp_path, monkeypatch, "h69str", files, target)
+    change()
+    mpe, _ = _sweep(exp, cache)
+    assert mpe == _sweep(exp, None)[0]
+    assert not is_cached(exp.tasks()[0], cache, Executor("processes", n_jobs=2))
