@@ -22,7 +22,8 @@ filled in place, a counter) is the method's own state: it is left out from then 
 the result.
 
 Not seen: a global that is not a literal in its file, changed before bomgraph first saw the
-module; a global that a run changed, changed again by the user; a gtsam object's setting
+module; a global that a run changed, changed again by the user; one read by a name the code
+builds at run time (``getattr(self, f"GAIN_{k}")``); a gtsam object's setting
 that neither its printed form nor a getter shows (an explicit ``setOrdering``, iterative
 solver parameters). A value that cannot be hashed, changed or not (whether it changed cannot
 be told: an object that neither the encoding nor pickle reads, a container of more than
