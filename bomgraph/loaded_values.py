@@ -220,9 +220,9 @@ def _digest(value: object) -> bytes:
     return h.digest()
 
 
-def _code_names(module: types.ModuleType) -> set[str] | None:
+def _code_names(module: types.ModuleType) -> set[str]:
     """The names the module's functions (and its classes' functions) name: the globals and
-    attributes its code can read; None when it names ``globals`` or ``vars`` (all)."""
+    attributes its code can read (all its own when among them are ``globals``, ``vars``)."""
     from .loaded_code import _loaded_code, _nested
 
     names: set[str] = set()
@@ -233,20 +233,18 @@ def _code_names(module: types.ModuleType) -> set[str] | None:
         for c in (code, *_nested(code)):
             names.update(c.co_names)  # and names in strings: getattr(self, "GAIN") (h69)
             names.update(k for k in c.co_consts if isinstance(k, str) and k.isidentifier())
-    return None if {"globals", "vars"} & names else names
-
-
-def _all_names(modules: list[types.ModuleType]) -> set[str] | None:
-    """:func:`_code_names` of all the method's modules: one module's code reads another's
-    globals (``config.PARAMS["depth"]``) and a base class's code reads a subclass's
-    attributes (``self.GAIN`` in ``base.py``, ``Mine.GAIN = [3.0]`` set on ``m.Mine``)."""
-    names: set[str] = set()
-    for module in modules:
-        more = _code_names(module)
-        if more is None:
-            return None
-        names |= more
     return names
+
+
+def _all_names(modules: list[types.ModuleType]) -> dict[str, set[str] | None]:
+    """Per module name, the names that the method's code can read of it: those that any of
+    its modules' code names (:func:`_code_names`), as one module's code reads another's
+    globals (``config.PARAMS["depth"]``) and a base class's code a subclass's attributes
+    (``self.GAIN`` in ``base.py``, ``Mine.GAIN = [3.0]`` set on ``m.Mine``); None (all) for a
+    module whose own code names ``globals`` or ``vars``."""
+    own = {m.__name__: _code_names(m) for m in modules}
+    names = set().union(*own.values())
+    return {k: None if {"globals", "vars"} & v else names for k, v in own.items()}
 
 
 def _values(module: types.ModuleType, names: set[str] | None
@@ -414,7 +412,7 @@ def values_fingerprint(modules: list[types.ModuleType]) -> str:
     for module in modules:
         base = _loaded(module)
         _KEYED.add(module.__name__)
-        for key, value in _values(module, names):
+        for key, value in _values(module, names[module.__name__]):
             where = (module.__name__, key)
             if where in _RUN_STATE:
                 continue
@@ -440,7 +438,7 @@ def note_run(modules: list[types.ModuleType]) -> None:
     for module in modules:
         if module.__name__ not in _KEYED:  # loaded by the run: nothing to compare with
             continue
-        for key, value in _values(module, names):
+        for key, value in _values(module, names[module.__name__]):
             where = (module.__name__, key)
             if where in _RUN_STATE:
                 continue

@@ -190,3 +190,16 @@ def test_a_class_attribute_set_before_the_first_sweep_is_not_keyed_as_the_files(
     mpe, _ = _sweep(exp, cache)
     assert mpe == _sweep(exp, None)[0]
     assert not is_cached(exp.tasks()[0], cache, Executor("processes", n_jobs=2))
+
+
+def test_a_helper_naming_vars_reads_only_its_own_module_whole(
+        plugin_site: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A helper module whose code names ``vars`` (``vars(args)``) may read any of its own
+    globals, not the method module's: a generator there that no code names keeps the
+    method cached (the names of all modules are read together since h69)."""
+    exp, cache = _method(plugin_site, tmp_path, monkeypatch, "h69vars", {
+        "util.py": "def as_dict(obj):\n    return dict(vars(obj))\n",
+        "m.py": "from .util import as_dict\n_GEN = (i for i in range(3))\n"
+                + depth_mapper("(1.0 + 0 * len(as_dict(self)))", "Mine")}, "h69vars.m:Mine")
+    first, _ = _sweep(exp, cache)
+    assert _sweep(exp, cache) == (first, 1)
