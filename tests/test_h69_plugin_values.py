@@ -56,6 +56,18 @@ _case("h69nest", {"m.py": depth_mapper("self.Defaults.GAIN[0]", "Mine",
                                          attrs="class Defaults:\n        GAIN = [1.0]")},
       "m:Mine", lambda: sys.modules["h69nest.m"].Mine.Defaults.GAIN.__setitem__(0, 3.0),
       lambda: sys.modules["h69nest.m"].Mine.Defaults.GAIN.__setitem__(0, 1.0))
+# already keyed by the merge (checked in review, kept as cases): an array changed in
+# place, a dict inside a list, a dataclass instance's field
+_case("h69arr", {"m.py": depth_mapper("W[0]", "Mine") + "\nW = np.ones(1)\n"}, "m:Mine",
+      lambda: sys.modules["h69arr.m"].W.__setitem__(0, 3.0),
+      lambda: sys.modules["h69arr.m"].W.__setitem__(0, 1.0))
+_case("h69lst", {"m.py": depth_mapper("T[0]['d']", "Mine") + "\nT = [{'d': 1.0}]\n"}, "m:Mine",
+      lambda: sys.modules["h69lst.m"].T[0].__setitem__("d", 3.0),
+      lambda: sys.modules["h69lst.m"].T[0].__setitem__("d", 1.0))
+_case("h69dc", {"m.py": depth_mapper("CFG.depth", "Mine") + "\nimport dataclasses\n\n\n"
+                "@dataclasses.dataclass\nclass Cfg:\n    depth: float = 1.0\n\n\nCFG = Cfg()\n"},
+      "m:Mine", lambda: setattr(sys.modules["h69dc.m"].CFG, "depth", 3.0),
+      lambda: setattr(sys.modules["h69dc.m"].CFG, "depth", 1.0))
 _ORIGINAL: dict[str, object] = {}
 _case("h69fn", {"m.py": depth_mapper("scale()", "Mine") + "\ndef scale():\n    return 1.0\n"},
       "m:Mine", lambda: (_ORIGINAL.__setitem__("scale", sys.modules["h69fn.m"].scale),
