@@ -37,9 +37,9 @@ from .experiments import Experiment, SimSource, Task
 from .jsonio import jsonable
 from .mapper import (MapEstimate, RunResult, checkpoint_times, create_mapper,
                      method_failure_note, method_info, run)
-from .method_code import (bomgraph_edited, method_code, new_sweep, refuse_runtime_methods,
-                          stale_after_run, stale_here, stale_plugin, uncacheable, warn_sourceless,
-                          workers_outdated)
+from .method_code import (bomgraph_edited, method_code, new_sweep, noting_runs,
+                          refuse_runtime_methods, stale_after_run, stale_here, stale_plugin,
+                          uncacheable, warn_sourceless, workers_outdated)
 from .plugins import code_fingerprint
 from .processes import daemonic
 from .result_cache import read_cached, strip_timings, write_cached  # re-exported
@@ -334,8 +334,8 @@ def execute_counted(tasks: Sequence[Task], executor: Executor = Executor(), *,
         raise ConfigError(f"execute(): tasks must be Task objects (experiment.tasks()), got "
                           f"{type(bad).__name__}")
     if executor.backend == "processes" and daemonic():
-        _log.warning("this process is daemonic (a multiprocessing.Pool worker), which cannot "
-                     "start worker processes: running the %d run(s) here, one at a time "
+        _log.warning("this process is daemonic (a multiprocessing.Pool or Dask worker), which "
+                     "cannot start worker processes: running the %d run(s) here, one at a time "
                      "(as Executor('serial'), --jobs 1)", len(tasks))
         executor = Executor("serial")
     if executor.backend != "serial":
@@ -457,8 +457,9 @@ def _dispatch(tasks: list[Task], index: list[int], executor: Executor,
     if not tasks:
         return
     if executor.backend == "serial":
-        for k, t in zip(index, tasks):
-            yield k, run_task(t)
+        with noting_runs():  # what the runs change in their modules: noted once, at the end
+            for k, t in zip(index, tasks):
+                yield k, run_task(t)
         return
     by_k = dict(zip(index, tasks))
     key_of = dict(zip(index, keys)) if keys is not None else {}

@@ -6,23 +6,29 @@ can change without touching a file: ``mymethod.set_depth(3.0)`` (a function that
 ``global DEPTH_M``), ``mymethod.TABLE["scale"] = 3.0`` (a dict changed in place),
 ``mymethod.TABLE = {...}``. The files' key stayed the same, so the result of the old values
 was served from the cache (h64). :func:`values_fingerprint` is a hash of the globals (and of
-the classes' data attributes) of the method's loaded modules that their code names, each by
+the classes' data attributes) of the method's loaded modules that the code of any of them
+names (``config.PARAMS``, ``self.GAIN``, or in a string: ``getattr(self, "GAIN")``), each by
 its value (:func:`_encode`: numbers, strings, containers of them in order, arrays, enums,
-dataclasses, else its pickle), of those that differ from the value their module had when it
-was loaded: None ("") when none does, so an unchanged method keeps its key, the one worker
+dataclasses, functions by their code, else its pickle, or for a compiled object that has
+none its printed form and properties, and a gtsam one's getters), of those that differ from
+the value their module had when it was loaded: None ("") when none does, so an unchanged method keeps its key, the one worker
 processes use (they import the files). The value a module had when loaded is its file's
 literal (``DEPTH_M = 1.0``, ``TABLE = {"scale": 1.0}``: a value set before the first sweep is
 seen), else the value when bomgraph first saw the module (after a reload, again).
 
 A global that a run of the method changed (a lazy cache: ``global _MODEL``, a memo dict
 filled in place, a counter) is the method's own state: it is left out from then on
-(:func:`note_run`), its value at a run's start taken not to change the result.
+(:func:`note_run`, once at the end of a sweep), its value at a run's start taken not to change
+the result.
 
 Not seen: a global that is not a literal in its file, changed before bomgraph first saw the
-module; a global that a run changed, changed again by the user. A changed value that cannot
-be hashed (an object that neither the encoding nor pickle reads, a container of more than
+module; a global that a run changed, changed again by the user; one read by a name the code
+builds at run time (``getattr(self, f"GAIN_{k}")``); a gtsam object's setting
+that neither its printed form nor a getter shows (an explicit ``setOrdering``, iterative
+solver parameters). A value that cannot be hashed, changed or not (whether it changed cannot
+be told: an object that neither the encoding nor pickle reads, a container of more than
 :data:`MAX_ITEMS` items, one that holds itself): :func:`values_fingerprint` raises
-:class:`Unhashable`, and the runner caches none of that method's runs (one log line).
+:class:`Unhashable`, and the runner caches none of that method's serial runs (one log line).
 """
 
 from __future__ import annotations
@@ -132,11 +138,13 @@ def _encode_object(value: Any, kind: type, h: Any, budget: list[int], stack: set
         h.update(str(value).encode())
     elif isinstance(value, functools.partial):
         _encode((value.func, value.args, value.keywords), h, budget, stack)
-    elif isinstance(value, types.FunctionType):  # in a container: its code, by value
+    elif isinstance(value, types.FunctionType):  # its code, by value, and what it holds
         from .loaded_code import _shape
 
+        h.update(f"{value.__module__}.{value.__qualname__}".encode())
         h.update(repr(_shape(value.__code__)).encode())
-        _encode((value.__defaults__, value.__kwdefaults__), h, budget, stack)
+        cells = tuple(c.cell_contents if _full(c) else _EMPTY for c in value.__closure__ or ())
+        _encode((value.__defaults__, value.__kwdefaults__, cells), h, budget, stack)
     elif isinstance(value, types.MethodType):
         _encode((value.__func__, value.__self__), h, budget, stack)
     elif _code_like(value):
@@ -150,9 +158,60 @@ def _encode_object(value: Any, kind: type, h: Any, budget: list[int], stack: set
         try:
             data = pickle.dumps(value, protocol=4)
         except Exception as exc:  # noqa: BLE001 - any object's pickling may raise anything
-            raise Unhashable(f"a {kind.__module__}.{kind.__qualname__} that cannot be pickled "
-                             f"({type(exc).__name__})") from exc
+            if not _gtsam_params(kind) or not _encode_params(value, kind, h, budget, stack):
+                raise Unhashable(f"a {kind.__module__}.{kind.__qualname__} that cannot be "
+                                 f"pickled ({type(exc).__name__})") from exc
+            return
         h.update(hashlib.sha256(data).digest())
+
+
+#: The form a compiled extension's object prints in when it has no printed form of its own.
+_DEFAULT_REPR = re.compile(r"<[\w.]+ object at 0x[0-9a-fA-F]+>")
+
+
+def _gtsam_params(kind: type) -> bool:
+    """Whether ``kind`` is a gtsam parameters class (``LevenbergMarquardtParams``,
+    ``ISAM2Params``, ...): only those are read by their printed form and getters; printing
+    another gtsam object can crash the process (a default-made factor's does)."""
+    return kind.__module__.split(".")[0] == "gtsam" and kind.__name__.endswith("Params")
+
+
+def _encode_params(value: Any, kind: type, h: Any, budget: list[int], stack: set[int]) -> bool:
+    """Feed a gtsam parameters object, which pickle cannot read, by what it tells of its
+    value: its printed form (unless the default ``<... object at 0x...>``), its properties
+    and what its zero-argument ``get*``/``is*`` methods return:
+    ``PARAMS = gtsam.LevenbergMarquardtParams()`` and ``PARAMS.setMaxIterations(300)`` (h69).
+    False when it tells nothing (its value cannot be hashed)."""
+    told = False
+    text = str(value)
+    if not _DEFAULT_REPR.fullmatch(text.strip()):
+        h.update(b"str:" + text.encode())
+        told = True
+    props = sorted({n for c in kind.__mro__ for n, a in vars(c).items()
+                    if isinstance(a, property) and not n.startswith("_")})
+    getters = sorted(n for n in dir(value) if n.startswith(("get", "is")))
+    for name in props + getters:
+        try:
+            part = getattr(value, name)
+            if name in getters:
+                part = part()
+        except TypeError:  # a getter that takes arguments
+            continue
+        h.update(f";{name}=".encode())
+        _encode(part, h, budget, stack)
+        told = True
+    return told
+
+
+_EMPTY = "<empty cell>"
+
+
+def _full(cell: Any) -> bool:
+    try:
+        cell.cell_contents
+    except ValueError:
+        return False
+    return True
 
 
 def _digest(value: object) -> bytes:
@@ -161,9 +220,9 @@ def _digest(value: object) -> bytes:
     return h.digest()
 
 
-def _code_names(module: types.ModuleType) -> set[str] | None:
+def _code_names(module: types.ModuleType) -> set[str]:
     """The names the module's functions (and its classes' functions) name: the globals and
-    attributes its code can read; None when it names ``globals`` or ``vars`` (all)."""
+    attributes its code can read (all its own when among them are ``globals``, ``vars``)."""
     from .loaded_code import _loaded_code, _nested
 
     names: set[str] = set()
@@ -172,29 +231,60 @@ def _code_names(module: types.ModuleType) -> set[str] | None:
         return names
     for code in _loaded_code(module, filename):
         for c in (code, *_nested(code)):
-            names.update(c.co_names)
-    return None if {"globals", "vars"} & names else names
+            names.update(c.co_names)  # and names in strings: getattr(self, "GAIN") (h69)
+            names.update(k for k in c.co_consts if isinstance(k, str) and k.isidentifier())
+    return names
 
 
-def _values(module: types.ModuleType) -> Iterator[tuple[str, object]]:
-    """The data the module's code can read: its globals it names and its own classes' data
-    attributes it names (``Cls.NAME``), each by key; code and dunder names left out."""
-    names = _code_names(module)
+def _all_names(modules: list[types.ModuleType]) -> dict[str, set[str] | None]:
+    """Per module name, the names that the method's code can read of it: those that any of
+    its modules' code names (:func:`_code_names`), as one module's code reads another's
+    globals (``config.PARAMS["depth"]``) and a base class's code a subclass's attributes
+    (``self.GAIN`` in ``base.py``, ``Mine.GAIN = [3.0]`` set on ``m.Mine``); None (all) for a
+    module whose own code names ``globals`` or ``vars``."""
+    own = {m.__name__: _code_names(m) for m in modules}
+    names = set().union(*own.values())
+    return {k: None if {"globals", "vars"} & v else names for k, v in own.items()}
+
+
+def _values(module: types.ModuleType, names: set[str] | None
+            ) -> Iterator[tuple[str, object]]:
+    """The data the method's code can read from the module: its globals in ``names``
+    (:func:`_all_names`; None: all) and its own classes' data attributes in them
+    (``Cls.NAME``), each by key; code and dunder names left out, but for a plain function
+    (a global rebound to another function: ``mymethod.scale = lambda: 3.0``, h69)."""
     for k, v in list(vars(module).items()):
         if not isinstance(k, str) or k.startswith(("__", "@")):
             continue
         if issubclass(type(v), type) and v.__dict__.get("__module__") == module.__name__:
-            for a, x in list(v.__dict__.items()):
-                if not a.startswith("__") and a != "_abc_impl" and (
-                        names is None or a in names) and not _code_like(x):
-                    yield f"{k}.{a}", x
-        elif (names is None or k in names) and not _code_like(v):
+            yield from _class_values(k, v, names)
+        elif (names is None or k in names) and _data(v):
             yield k, v
+
+
+def _class_values(key: str, cls: type, names: set[str] | None, depth: int = 0
+                  ) -> Iterator[tuple[str, object]]:
+    """:func:`_values` of a class: its data attributes in ``names``, and those of the
+    classes defined in its body (``Mine.Defaults.GAIN``, h69), each as ``key.NAME``."""
+    for a, x in list(cls.__dict__.items()):
+        if a.startswith("__") or a == "_abc_impl":
+            continue
+        if (issubclass(type(x), type) and depth < 4 and x.__dict__.get("__module__")
+                == cls.__module__ and x.__qualname__ == f"{cls.__qualname__}.{a}"):
+            yield from _class_values(f"{key}.{a}", x, names, depth + 1)
+        elif (names is None or a in names) and _data(x):
+            yield f"{key}.{a}", x
+
+
+def _data(value: object) -> bool:
+    return type(value) is types.FunctionType or not _code_like(value)
 
 
 def _literals(module: types.ModuleType) -> dict[str, object]:
     """The module's globals bound once at its top level by a literal (``DEPTH_M = 1.0``),
-    named nowhere else at its top level (not changed there: ``ITEMS.append(2)``), by name."""
+    named nowhere else at its top level (not changed there: ``ITEMS.append(2)``), by name;
+    and so its classes' attributes (``class Mine: GAIN = [1.0]``, as ``Mine.GAIN``: one set
+    before the first sweep was taken for the file's, h69)."""
     try:
         with open(module.__file__, "rb") as fh:  # type: ignore[arg-type]
             with warnings.catch_warnings():
@@ -205,20 +295,29 @@ def _literals(module: types.ModuleType) -> dict[str, object]:
         return {}
     out: dict[str, object] = {}
     named: dict[str, int] = {}
+    attrs: set[str] = set()
     for stmt in tree.body:
         for node in _run_at_import(stmt):
             if isinstance(node, ast.Name):
                 named[node.id] = named.get(node.id, 0) + 1
             elif isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)):
                 named[node.name] = named.get(node.name, 0) + 1
-        target = (stmt.targets[0] if isinstance(stmt, ast.Assign) and len(stmt.targets) == 1
-                  else stmt.target if isinstance(stmt, ast.AnnAssign) else None)
-        if isinstance(target, ast.Name) and getattr(stmt, "value", None) is not None:
-            try:
-                out[target.id] = ast.literal_eval(stmt.value)  # type: ignore[arg-type]
-            except (ValueError, TypeError, SyntaxError, MemoryError, RecursionError):
-                pass
-    return {k: v for k, v in out.items() if named.get(k) == 1}
+            elif isinstance(node, ast.Attribute):  # Mine.GAIN.append(2): not the file's
+                attrs.add(node.attr)
+        body = stmt.body if isinstance(stmt, ast.ClassDef) else [stmt]
+        for sub in body:
+            target = (sub.targets[0] if isinstance(sub, ast.Assign) and len(sub.targets) == 1
+                      else sub.target if isinstance(sub, ast.AnnAssign) else None)
+            if isinstance(target, ast.Name) and getattr(sub, "value", None) is not None:
+                try:
+                    value = ast.literal_eval(sub.value)  # type: ignore[arg-type]
+                except (ValueError, TypeError, SyntaxError, MemoryError, RecursionError):
+                    continue
+                if sub is stmt:
+                    out[target.id] = value
+                elif named.get(stmt.name) == 1 and target.id not in attrs:  # type: ignore
+                    out[f"{stmt.name}.{target.id}"] = value  # type: ignore[attr-defined]
+    return {k: v for k, v in out.items() if all(named.get(n) == 1 for n in k.split("."))}
 
 
 def _run_at_import(node: ast.AST) -> Iterator[ast.AST]:
@@ -242,9 +341,36 @@ _AT_KEY: dict[tuple[str, str], bytes | None] = {}
 _KEYED: set[str] = set()
 
 
+#: Per (module name, key): a function it held when loaded that cannot be hashed by value
+#: (a library's, with an odd default), kept so that it is known as the same object.
+_HELD: dict[tuple[str, str], object] = {}
+
+
 def _safe_digest(value: object) -> bytes | None:
     try:
         return _digest(value)
+    except Unhashable:
+        return None
+
+
+def _value_digest(module: types.ModuleType, key: str, value: object) -> bytes:
+    """:func:`_digest` of a module's value (raises :class:`Unhashable`); a function by its
+    name when it is the module's own (the files' key and :mod:`bomgraph.loaded_code` cover
+    its code), else by its code (:func:`_encode`), or as the object held when loaded."""
+    if type(value) is not types.FunctionType:
+        return _digest(value)
+    code = value.__code__
+    if value.__module__ == module.__name__ and code.co_filename == getattr(
+            module, "__file__", None):
+        return f"own function {value.__qualname__}".encode()
+    if _HELD.get((module.__name__, key)) is value:
+        return f"function held {id(value)}".encode()
+    return _digest(value)
+
+
+def _safe_value_digest(module: types.ModuleType, key: str, value: object) -> bytes | None:
+    try:
+        return _value_digest(module, key, value)
     except Unhashable:
         return None
 
@@ -257,8 +383,11 @@ def _loaded(module: types.ModuleType) -> dict[str, bytes | None]:
         return seen[2]
     literals = _literals(module)
     base: dict[str, bytes | None] = {}
-    for key, value in _values(module):
-        now = _safe_digest(value)
+    for key, value in _values(module, None):
+        now = _safe_value_digest(module, key, value)
+        if now is None and type(value) is types.FunctionType:
+            _HELD[(name, key)] = value
+            now = _value_digest(module, key, value)
         if key in literals:  # set before bomgraph saw it: its value when loaded is unknown
             base[key] = now if now == _safe_digest(literals[key]) else None
         else:
@@ -279,15 +408,16 @@ def values_fingerprint(modules: list[types.ModuleType]) -> str:
         Such a value cannot be hashed (the message names the module, the global and why).
     """
     changed, problem = [], ""
+    names = _all_names(modules)
     for module in modules:
         base = _loaded(module)
         _KEYED.add(module.__name__)
-        for key, value in _values(module):
+        for key, value in _values(module, names[module.__name__]):
             where = (module.__name__, key)
             if where in _RUN_STATE:
                 continue
             try:
-                now = _digest(value)
+                now = _value_digest(module, key, value)
             except Unhashable as exc:
                 _AT_KEY[where] = None
                 problem = problem or f"{module.__name__}.{key} is {exc}"
@@ -304,22 +434,25 @@ def note_run(modules: list[types.ModuleType]) -> None:
     """After a run in this process: the values of ``modules`` that differ from their keyed
     ones (:func:`values_fingerprint`), or were made by the run (a class attribute set
     lazily), are the method's own state, left out of the keys from now on."""
+    names = _all_names(modules)
     for module in modules:
         if module.__name__ not in _KEYED:  # loaded by the run: nothing to compare with
             continue
-        for key, value in _values(module):
+        for key, value in _values(module, names[module.__name__]):
             where = (module.__name__, key)
             if where in _RUN_STATE:
                 continue
             if where not in _AT_KEY:
                 _RUN_STATE.add(where)
-            elif _AT_KEY[where] is not None and _safe_digest(value) != _AT_KEY[where]:
+            elif _AT_KEY[where] is not None and _safe_value_digest(
+                    module, key, value) != _AT_KEY[where]:
                 _RUN_STATE.add(where)
 
 
 def forget() -> None:
     """Forget the values seen (:func:`bomgraph.plugins.refresh`)."""
     _LOADED.clear()
+    _HELD.clear()
     _RUN_STATE.clear()
     _AT_KEY.clear()
     _KEYED.clear()
