@@ -7,6 +7,9 @@ from __future__ import annotations
 
 import json
 import os
+import signal
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -123,10 +126,10 @@ def test_an_interrupted_compare_leaves_its_files_proved(tmp_path: Path, stream: 
     chosen, _ = compare_experiments(streams=[str(stream)], methods="triangulate")
     real = report.write_figure
 
-    def interrupted(fig: object, path: Path, dpi: int) -> str:
+    def interrupted(fig: object, path: Path, dpi: int, ready: object = None) -> str:
         if "maps" in str(path):
             raise KeyboardInterrupt
-        return real(fig, path, dpi)
+        return real(fig, path, dpi, ready=ready)
 
     monkeypatch.setattr(report, "write_figure", interrupted)
     with pytest.raises(KeyboardInterrupt):
@@ -136,6 +139,35 @@ def test_an_interrupted_compare_leaves_its_files_proved(tmp_path: Path, stream: 
     compare(chosen, out, executor=Executor("serial"))
     listed = json.loads((out / MANIFEST).read_text())["files"]
     assert {e["path"] for e in listed} >= {"results.csv", "streams_s_maps.png"}
+
+
+#: a compare killed (SIGKILL) the moment its results.json is in place, before anything more
+_KILLED_AFTER_RESULTS = """
+import os, signal, sys
+real = os.replace
+def replace(src, dst, **kw):
+    real(src, dst, **kw)
+    if os.path.basename(dst) == "results.json":
+        os.kill(os.getpid(), signal.SIGKILL)
+os.replace = replace
+from bomgraph.cli import main
+sys.exit(main(sys.argv[1:]))
+"""
+
+
+def test_a_compare_killed_as_a_file_takes_its_name_leaves_it_proved(tmp_path: Path,
+                                                                     stream: Path) -> None:
+    """kill -9 (or Ctrl-C) between a file's rename into place and its line in the journal
+    left a file that nothing listed: every later compare refused its own folder ("which was
+    changed since an earlier compare wrote it"). A file is now listed before it is renamed
+    (h67; fails before)."""
+    out = tmp_path / "out"
+    assert main(_cmd(stream, out, "--no-figures")) == 0
+    env = {**os.environ, "PYTHONPATH": str(Path(report.__file__).parents[1])}
+    proc = subprocess.run([sys.executable, "-c", _KILLED_AFTER_RESULTS,
+                           *_cmd(stream, out, "--no-figures")], env=env, capture_output=True)
+    assert proc.returncode == -signal.SIGKILL
+    assert main(_cmd(stream, out, "--no-figures")) == 0
 
 
 def test_a_folder_of_an_older_bomgraph(tmp_path: Path, stream: Path) -> None:
