@@ -249,8 +249,10 @@ class OutputRecord:
     def refuse_foreign(self, paths: Sequence[Path], folders: Sequence[Path] = ()) -> None:
         """Refuse, naming the first, a file at one of ``paths`` (the names this compare may
         write) that the manifest does not show compare wrote, unchanged since: a user's own
-        file, or one of a compare without a manifest (an older bomgraph); a folder there, a
-        file where compare makes a folder (one of ``folders``, or on the way to a path).
+        file, or one of a compare without a manifest (an older bomgraph); a link there or on
+        the way (written through, a file outside the folder was replaced: a user's copy of
+        results.csv, moved out and linked back); a folder there, a file where compare makes a
+        folder (one of ``folders``, or on the way to a path).
 
         Raises
         ------
@@ -276,6 +278,10 @@ class OutputRecord:
                 raise OutputPathError(f"--out {out}: compare writes the file {p}, which is a "
                                       f"folder; {todo}")
             rel = os.path.normpath(os.path.relpath(p, out))
+            if os.path.realpath(p) != os.path.join(os.path.realpath(out), rel):
+                raise OutputPathError(f"--out {out}: compare would replace {p}, which is a "
+                                      f"link to {os.path.realpath(p)} (compare writes no links "
+                                      f"and replaces nothing outside its folder); {todo}")
             if any(_unchanged(p, e) for e in by_path.get(rel, ())):
                 continue
             why = ("which was changed since an earlier compare wrote it" if rel in by_path else

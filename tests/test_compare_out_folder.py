@@ -170,6 +170,24 @@ def test_a_compare_killed_as_a_file_takes_its_name_leaves_it_proved(tmp_path: Pa
     assert main(_cmd(stream, out, "--no-figures")) == 0
 
 
+@pytest.mark.parametrize("link", ["summary.csv", "estimates"])
+def test_a_link_at_a_name_compare_writes_is_refused(tmp_path: Path, stream: Path,
+                                                    link: str) -> None:
+    """The user keeps a compare's file (or its estimates) elsewhere, linked back: its content
+    is what compare wrote, so compare wrote through the link and replaced the user's copy,
+    outside the folder (h67; fails before)."""
+    out, keep = tmp_path / "out", tmp_path / "keep"
+    keep.mkdir()
+    chosen, _ = compare_experiments(streams=[str(stream)], methods="triangulate,ekf")
+    compare(chosen, out, executor=Executor("serial"), estimates=True)
+    (out / link).rename(keep / link)
+    (out / link).symlink_to(keep / link)
+    before = {p: p.read_bytes() for p in keep.rglob("*") if p.is_file()}
+    with pytest.raises(OutputPathError, match="which is a link to .*keep"):
+        compare(chosen, out, executor=Executor("serial"), estimates=True)
+    assert {p: p.read_bytes() for p in keep.rglob("*") if p.is_file()} == before
+
+
 def test_a_folder_of_an_older_bomgraph(tmp_path: Path, stream: Path) -> None:
     """Without a manifest nothing proves a file compare's: refused, saying so; with the
     manifest of version 1 (size and modification time) the files it lists are replaced; a
