@@ -458,8 +458,16 @@ def folder_lock(folder: str | os.PathLike[str], what: str) -> Iterator[None]:
         yield
         return
     lock = os.path.join(os.fspath(folder), ".bomgraph.lock")
-    fd = os.open(lock, os.O_RDWR | os.O_CREAT, 0o666 & ~_umask())
+    not_ours = (f"{lock}: is not a bomgraph lock (a process id); move it or choose another "
+                f"--out")
+    try:  # without blocking: a FIFO there is refused, not waited on
+        fd = os.open(lock, os.O_RDWR | os.O_CREAT | getattr(os, "O_NONBLOCK", 0),
+                     0o666 & ~_umask())
+    except IsADirectoryError:
+        raise OutputPathError(not_ours) from None
     try:
+        if not stat.S_ISREG(os.fstat(fd).st_mode):  # a FIFO: "[Errno 29] Illegal seek"
+            raise OutputPathError(not_ours)
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
@@ -467,9 +475,8 @@ def folder_lock(folder: str | os.PathLike[str], what: str) -> Iterator[None]:
             raise FolderBusyError(
                 f"{os.fspath(folder)}: another {what} (pid {holder}) is writing into this "
                 f"folder; wait for it to finish or choose another --out") from None
-        if not re.fullmatch(rb"\s*\d*\s*", os.pread(fd, 65, 0)):  # not a pid: not ours to empty
-            raise OutputPathError(f"{lock}: is not a bomgraph lock (a process id); move it or "
-                                  f"choose another --out")
+        if os.fstat(fd).st_size > 64 or not re.fullmatch(rb"\s*\d*\s*", os.pread(fd, 64, 0)):
+            raise OutputPathError(not_ours)  # not a pid (judged whole): not ours to empty
         os.ftruncate(fd, 0)
         os.pwrite(fd, f"{os.getpid()}\n".encode("ascii"), 0)
         yield

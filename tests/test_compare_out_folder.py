@@ -233,6 +233,25 @@ def test_a_users_file_named_as_the_folder_lock_is_not_emptied(tmp_path: Path) ->
     compare([_exp()], out, executor=Executor("serial"), figures=False)
 
 
+@pytest.mark.parametrize("kind", ["digits first", "fifo", "folder"])
+def test_a_lock_that_is_no_pid_file_is_refused_naming_it(tmp_path: Path, kind: str) -> None:
+    """Only the first 65 bytes were judged: a file of 70 digits and then notes was emptied;
+    a FIFO there was "bomgraph: error: [Errno 29] Illegal seek" (h67; fails before)."""
+    out = tmp_path / "out"
+    out.mkdir()
+    lock = out / ".bomgraph.lock"
+    if kind == "fifo":
+        os.mkfifo(lock)
+    elif kind == "folder":
+        lock.mkdir()
+    else:
+        lock.write_text("1" * 70 + "\nmy notes\n")
+    with pytest.raises(OutputPathError, match="bomgraph.lock: is not a bomgraph lock"):
+        compare([_exp()], out, executor=Executor("serial"), figures=False)
+    if kind == "digits first":
+        assert lock.read_text() == "1" * 70 + "\nmy notes\n"
+
+
 def test_dry_run_refuses_what_compare_would(tmp_path: Path, stream: Path,
                                             capsys: pytest.CaptureFixture) -> None:
     """--dry-run says what compare would refuse; a user's figure is no clash without
