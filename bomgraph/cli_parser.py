@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import re
 from typing import Any, Callable, NoReturn, Sequence
 
 #: a run over this many steps shows a progress bar (when stderr is a terminal).
@@ -26,8 +27,8 @@ class _Parser(argparse.ArgumentParser):
     (argparse makes them of their parent's)."""
 
     def error(self, message: str) -> NoReturn:
-        self.exit(2, f"{self.prog}: error: {' '.join(message.split())}; see {self.prog} "
-                     f"--help\n")
+        line = re.sub(r"\s*[\r\n]+\s*", " ", message).strip()  # the value as given: '1  2'
+        self.exit(2, f"{self.prog}: error: {line}; see {self.prog} --help\n")
 
     def parse_known_args(self, args: Sequence[str] | None = None,  # type: ignore[override]
                          namespace: argparse.Namespace | None = None

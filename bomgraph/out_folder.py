@@ -4,8 +4,9 @@
   made from experiment, arm and run names (:func:`slug`, :func:`unique_slugs`);
 * the inputs it must never overwrite (:func:`refuse_inputs_among_outputs`);
 * the manifest of what it wrote (:data:`MANIFEST`), kept as a journal (:class:`OutputRecord`):
-  a file is listed, with its size and SHA-256, as soon as it is written, so the manifest
-  proves which files of the folder are compare's, after an interrupted compare too;
+  a file is listed, with its size and SHA-256, once written beside its name and before it
+  takes that name, so the manifest proves which files of the folder are compare's, after an
+  interrupted or killed compare too;
 * what it refuses to replace (:meth:`OutputRecord.refuse_foreign`): a file at one of the
   names it would write that the manifest does not show compare wrote, unchanged since (a
   user's ``results.csv``; a folder from a bomgraph older than the manifest);
@@ -22,7 +23,7 @@ import logging
 import os
 import re
 from pathlib import Path
-from typing import Any, Mapping, Sequence
+from typing import Any, Callable, Mapping, Sequence
 
 from .experiments import DatasetSource, Experiment, FileSource, Task
 from .stdio import InputTooLargeError, OutputPathError, read_regular_file, write_text
@@ -166,13 +167,15 @@ def _sha256(path: str | os.PathLike[str]) -> str:
     return h.hexdigest()
 
 
-def _entry(out: Path, path: Path) -> dict[str, Any] | None:
+def _entry(out: Path, path: Path, name: Path | None = None) -> dict[str, Any] | None:
+    """``path``'s entry, listed as ``name`` (default ``path``): the file about to take that
+    name (its size, modification time and contents stay as it is renamed)."""
     try:
         st = os.stat(path)
         digest = _sha256(path)
     except OSError:
         return None
-    return {"path": os.path.relpath(path, out), "size": st.st_size,
+    return {"path": os.path.relpath(path if name is None else name, out), "size": st.st_size,
             "mtime_ns": st.st_mtime_ns, "sha256": digest}
 
 
@@ -235,8 +238,8 @@ def _unchanged(path: str | os.PathLike[str], entry: Mapping[str, Any]) -> bool:
 
 class OutputRecord:
     """This compare's :data:`MANIFEST` in ``out``: :meth:`refuse_foreign` before anything
-    runs and again before anything is written, :meth:`begin` just before writing, :meth:`add`
-    after each file, :meth:`finish` at the end."""
+    runs and again before anything is written, :meth:`begin` just before writing, each file
+    written with :meth:`ready`'s callback, :meth:`finish` at the end."""
 
     def __init__(self, out: Path) -> None:
         self.out = out
@@ -246,8 +249,10 @@ class OutputRecord:
     def refuse_foreign(self, paths: Sequence[Path], folders: Sequence[Path] = ()) -> None:
         """Refuse, naming the first, a file at one of ``paths`` (the names this compare may
         write) that the manifest does not show compare wrote, unchanged since: a user's own
-        file, or one of a compare without a manifest (an older bomgraph); a folder there, a
-        file where compare makes a folder (one of ``folders``, or on the way to a path).
+        file, or one of a compare without a manifest (an older bomgraph); a link there or on
+        the way (written through, a file outside the folder was replaced: a user's copy of
+        results.csv, moved out and linked back); a folder there, a file where compare makes a
+        folder (one of ``folders``, or on the way to a path).
 
         Raises
         ------
@@ -273,6 +278,10 @@ class OutputRecord:
                 raise OutputPathError(f"--out {out}: compare writes the file {p}, which is a "
                                       f"folder; {todo}")
             rel = os.path.normpath(os.path.relpath(p, out))
+            if os.path.realpath(p) != os.path.join(os.path.realpath(out), rel):
+                raise OutputPathError(f"--out {out}: compare would replace {p}, which is a "
+                                      f"link to {os.path.realpath(p)} (compare writes no links "
+                                      f"and replaces nothing outside its folder); {todo}")
             if any(_unchanged(p, e) for e in by_path.get(rel, ())):
                 continue
             why = ("which was changed since an earlier compare wrote it" if rel in by_path else
@@ -289,12 +298,22 @@ class OutputRecord:
         lines += [json.dumps(e) for e in _earlier_entries(self.out)]
         write_text(self.path, "\n".join(lines) + "\n")
 
-    def add(self, paths: Sequence[Path]) -> None:
-        """List ``paths``, just written, in the journal."""
-        new = [e for p in paths if (e := _entry(self.out, p)) is not None]
-        self.entries += new
-        with open(self.path, "a", encoding="utf-8") as fh:
-            fh.write("".join(json.dumps(e) + "\n" for e in new))
+    def ready(self, path: Path) -> Callable[[str], None]:
+        """The ``ready`` of a writer of ``path`` (:func:`bomgraph.stdio.output_file`): it lists
+        the finished file, still beside ``path``, in the journal before it replaces ``path``.
+        A compare interrupted or killed at any point leaves each file proved: either the one
+        listed earlier or the new one (listed after a written file: killed in between, the new
+        one was not, and the next compare refused the folder)."""
+        def journal(tmp: str) -> None:
+            entry = _entry(self.out, Path(tmp), path)
+            if entry is None:
+                raise OSError(f"cannot read {tmp}, just written")
+            with open(self.path, "a", encoding="utf-8") as fh:
+                fh.write(json.dumps(entry) + "\n")
+                fh.flush()
+                os.fsync(fh.fileno())
+            self.entries.append(entry)
+        return journal
 
     def finish(self, written: Sequence[Path], experiments: Sequence[Experiment]) -> None:
         """Remove what an earlier compare wrote and this one did not

@@ -397,7 +397,7 @@ def _compare(experiments: Sequence[Experiment], out: Path, executor: Executor,
     record, paths = planned
     record.refuse_foreign(paths)  # a file put there while the runs ran (they are cached)
     record.begin()
-    written = write_estimate_files(out, tasks, results, record.add) if estimates else []
+    written = write_estimate_files(out, tasks, results, record.ready) if estimates else []
     summary = summarise(results)
     by_run = final_by_run(results)
     rows = pairable(by_run, experiments)  # no pair with a run scored against its own map
@@ -418,16 +418,14 @@ def _compare(experiments: Sequence[Experiment], out: Path, executor: Executor,
          "paired": {"n_bootstrap": paired_config.n_bootstrap,
                     "confidence": paired_config.confidence, "seed": paired_config.seed,
                     "rows": [p.as_dict() for p in paired]},
-         "results": results, "wall_s": wall}), allow_nan=False))
-    record.add(files[:1])  # each as soon as written: an interrupted compare leaves them proved
+         "results": results, "wall_s": wall}), allow_nan=False), ready=record.ready(files[0]))
     for path, rows, cols in ((files[1], results_to_csv_rows(results), None),
                              (files[2], summary, None), (files[3], by_run, None),
                              (files[4], [p.as_dict() for p in paired],
                               list(PairedRow.__dataclass_fields__))):
-        write_csv(path, rows, cols)
-        record.add([path])
+        write_csv(path, rows, cols, ready=record.ready(path))  # listed before it is in place
     if figures:
-        files += write_compare_figures(out, experiments, results, record.add)
+        files += write_compare_figures(out, experiments, results, record.ready)
     record.finish(files, experiments)
     return CompareResult(tuple(results), tuple(summary), tuple(str(f) for f in files), wall,
                          tuple(paired), n_cached)
@@ -445,15 +443,15 @@ def _design(e: Experiment) -> dict[str, Any]:
 
 
 def write_estimate_files(out: Path, tasks: Sequence[Task], results: Sequence[dict[str, Any]],
-                         record: Callable[[Sequence[Path]], None] = lambda paths: None
+                         ready: Callable[[Path], Callable[[str], None] | None] = lambda p: None
                          ) -> list[Path]:
     """Write each run's final estimate (a result's ``estimate_file`` text, taken out of the
     result) and, unless the run read a stream file the user has, its stream (made again here,
     the same bytes the worker ran on) where :func:`bomgraph.out_folder.estimate_paths` says,
     so that ``bomgraph evaluate EST STREAM`` pairs them; ``out/estimates/index.csv`` lists
     each run's estimate and stream (paths relative to ``out``, a user's stream file as given).
-    Each file is handed to ``record`` once written. Returns the paths; a failed run has no
-    estimate and gets none."""
+    Each file is written with ``ready(path)`` as its ``ready``. Returns the paths; a failed
+    run has no estimate and gets none."""
     from .stream_file import write_stream
 
     paths: list[Path] = []
@@ -465,8 +463,7 @@ def write_estimate_files(out: Path, tasks: Sequence[Task], results: Sequence[dic
         if text is None:
             continue
         path.parent.mkdir(parents=True, exist_ok=True)
-        write_text(path, text)
-        record([path])
+        write_text(path, text, ready=ready(path))
         paths.append(path)
         row = {"experiment": t.experiment, "arm": t.arm.label, "run": t.source.name,
                "estimate": str(path.relative_to(out))}
@@ -475,19 +472,17 @@ def write_estimate_files(out: Path, tasks: Sequence[Task], results: Sequence[dic
         if spath is not None and spath not in streams:
             streams.add(spath)
             spath.parent.mkdir(parents=True, exist_ok=True)
-            write_stream(t.stream(), spath, inputs=inputs)
-            record([spath])
+            write_stream(t.stream(), spath, inputs=inputs, ready=ready(spath))
             paths.append(spath)
     if index:
-        write_csv(out / "estimates" / "index.csv", index)
         paths.append(out / "estimates" / "index.csv")
-        record(paths[-1:])
+        write_csv(paths[-1], index, ready=ready(paths[-1]))
     return paths
 
 
 def write_compare_figures(out_dir: str | os.PathLike[str], experiments: Sequence[Experiment],
                           results: Sequence[Mapping[str, Any]],
-                          record: Callable[[Sequence[Path]], None] = lambda paths: None
+                          ready: Callable[[Path], Callable[[str], None] | None] = lambda p: None
                           ) -> list[Path]:
     """The comparison's figures as PNG files in ``out_dir``; returns their paths.
 
@@ -495,7 +490,7 @@ def write_compare_figures(out_dir: str | os.PathLike[str], experiments: Sequence
     the paper's figs. 4, 6, 7, 8), one figure of every method's final map per recording, and
     an example map with trajectory of the first simulated experiment (figs. 3 and 5:
     ``stmds-smacof-loc`` at t = 100, run again by :func:`bomgraph.bench.run_example`).
-    Each file is handed to ``record`` once written.
+    Each file is written with ``ready(path)`` as its ``ready``.
     """
     out = Path(out_dir)
     files = []
@@ -510,12 +505,11 @@ def write_compare_figures(out_dir: str | os.PathLike[str], experiments: Sequence
         fig = error_vs_time_figure(curves, robot_curves=rob,
                                    title=f"{exp.title}: landmarks ({exp.n_runs()} runs)")
         path = out / f"{slug(exp.name)}_error_vs_time.png"
-        write_figure(fig, path, dpi=120)
-        record([path])
+        write_figure(fig, path, dpi=120, ready=ready(path))
         files.append(path)
     for exp in experiments:
         if exp.sources:
-            files += _write_source_maps(out, exp, results, record)
+            files += _write_source_maps(out, exp, results, ready)
     sim_exps = [e for e in experiments if e.designed]
     if not sim_exps:
         return files
@@ -530,18 +524,17 @@ def write_compare_figures(out_dir: str | os.PathLike[str], experiments: Sequence
                          title=f"stmds-smacof-loc, run {exp.runs()[0].name}, "
                                f"t = {t_show or exp.sim.n_steps}")
         path = out / "example_map.png"
-        write_figure(fig, path, dpi=120)
+        write_figure(fig, path, dpi=120, ready=ready(path))
         files.append(path)
     except Exception as exc:  # the map figure is optional; say why it is missing
-        write_text(out / "example_map.txt", f"example map not drawn: {type(exc).__name__}: "
-                                            f"{exc}\n")
         files.append(out / "example_map.txt")
-    record(files[-1:])
+        write_text(files[-1], f"example map not drawn: {type(exc).__name__}: {exc}\n",
+                   ready=ready(files[-1]))
     return files
 
 
 def _write_source_maps(out: Path, exp: Experiment, results: Sequence[Mapping[str, Any]],
-                       record: Callable[[Sequence[Path]], None]) -> list[Path]:
+                       ready: Callable[[Path], Callable[[str], None] | None]) -> list[Path]:
     """One figure per recorded source: every method's final map (aligned) over the truth."""
     files = []
     for src in exp.sources:
@@ -558,8 +551,7 @@ def _write_source_maps(out: Path, exp: Experiment, results: Sequence[Mapping[str
         fig = final_maps_figure(truth, [_map_panel(r) for r in rs],
                                 title=f"{exp.title}: {src.name}")
         path = out / f"{slug(exp.name)}_{slug(src.name)}_maps.png"
-        write_figure(fig, path, dpi=100)
-        record([path])
+        write_figure(fig, path, dpi=100, ready=ready(path))
         files.append(path)
     return files
 

@@ -314,8 +314,10 @@ class AtomicOutput:
     beside it. :func:`output_file` wraps the three for a ``with`` block."""
 
     def __init__(self, path: str | os.PathLike[str], *, binary: bool = False,
-                 inputs: Sequence[str | os.PathLike[str] | None] = ()) -> None:
+                 inputs: Sequence[str | os.PathLike[str] | None] = (),
+                 ready: Callable[[str], None] | None = None) -> None:
         check_output_path(path, inputs)
+        self._ready = ready  # called with the finished temporary file, before it replaces path
         self.given = os.fspath(path)
         st = _stat(self.given)
         self.direct = _direct(self.given, st)
@@ -370,6 +372,8 @@ class AtomicOutput:
             self.fh.close()
             self.fh = None
         if self._tmp is not None:
+            if self._ready is not None:  # e.g. compare's journal lists it before it is in place
+                self._ready(self._tmp)
             os.replace(self._tmp, self.path)
             self._tmp = None
             _fsync_dir(os.path.dirname(self.path))
@@ -388,11 +392,14 @@ class AtomicOutput:
 
 @contextlib.contextmanager
 def output_file(path: str | os.PathLike[str], *, binary: bool = False,
-                inputs: Sequence[str | os.PathLike[str] | None] = ()) -> Iterator[IO]:
+                inputs: Sequence[str | os.PathLike[str] | None] = (),
+                ready: Callable[[str], None] | None = None) -> Iterator[IO]:
     """A handle to write ``path`` the one way (module docstring); the file is in place when
     the block ends normally, and nothing is left beside it when it raises (SIGTERM too, under
-    the CLI, which turns it into ``SystemExit``)."""
-    out = AtomicOutput(path, binary=binary, inputs=inputs)
+    the CLI, which turns it into ``SystemExit``). ``ready`` is called with the finished file
+    beside ``path`` just before it replaces ``path`` (not for a device or FIFO, written
+    directly); if it raises, ``path`` is left as it was."""
+    out = AtomicOutput(path, binary=binary, inputs=inputs, ready=ready)
     try:
         fh = out.open()
         yield fh
@@ -403,17 +410,19 @@ def output_file(path: str | os.PathLike[str], *, binary: bool = False,
 
 
 def write_text(path: str | os.PathLike[str], text: str,
-               inputs: Sequence[str | os.PathLike[str] | None] = ()) -> None:
+               inputs: Sequence[str | os.PathLike[str] | None] = (),
+               ready: Callable[[str], None] | None = None) -> None:
     """``text`` into ``path`` through :func:`output_file`."""
-    with output_file(path, inputs=inputs) as fh:
+    with output_file(path, inputs=inputs, ready=ready) as fh:
         fh.write(text)
 
 
-def write_figure(fig: Any, path: str | os.PathLike[str], dpi: int) -> str:
+def write_figure(fig: Any, path: str | os.PathLike[str], dpi: int,
+                 ready: Callable[[str], None] | None = None) -> str:
     """A matplotlib figure into ``path`` through :func:`output_file` (its format by the
     suffix: .png, .pdf, .svg), so an interrupted save leaves the earlier figure, not half of
     one; returns the path."""
-    with output_file(path, binary=True) as fh:
+    with output_file(path, binary=True, ready=ready) as fh:
         fig.savefig(fh, format=os.fspath(path).rsplit(".", 1)[-1].lower(), dpi=dpi,
                     facecolor="white")
     return os.fspath(path)
@@ -450,8 +459,16 @@ def folder_lock(folder: str | os.PathLike[str], what: str) -> Iterator[None]:
         yield
         return
     lock = os.path.join(os.fspath(folder), ".bomgraph.lock")
-    fd = os.open(lock, os.O_RDWR | os.O_CREAT, 0o666 & ~_umask())
+    not_ours = (f"{lock}: is not a bomgraph lock (a process id); move it or choose another "
+                f"--out")
+    try:  # without blocking: a FIFO there is refused, not waited on
+        fd = os.open(lock, os.O_RDWR | os.O_CREAT | getattr(os, "O_NONBLOCK", 0),
+                     0o666 & ~_umask())
+    except IsADirectoryError:
+        raise OutputPathError(not_ours) from None
     try:
+        if not stat.S_ISREG(os.fstat(fd).st_mode):  # a FIFO: "[Errno 29] Illegal seek"
+            raise OutputPathError(not_ours)
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
@@ -459,9 +476,8 @@ def folder_lock(folder: str | os.PathLike[str], what: str) -> Iterator[None]:
             raise FolderBusyError(
                 f"{os.fspath(folder)}: another {what} (pid {holder}) is writing into this "
                 f"folder; wait for it to finish or choose another --out") from None
-        if not re.fullmatch(rb"\s*\d*\s*", os.pread(fd, 65, 0)):  # not a pid: not ours to empty
-            raise OutputPathError(f"{lock}: is not a bomgraph lock (a process id); move it or "
-                                  f"choose another --out")
+        if os.fstat(fd).st_size > 64 or not re.fullmatch(rb"\s*\d*\s*", os.pread(fd, 64, 0)):
+            raise OutputPathError(not_ours)  # not a pid (judged whole): not ours to empty
         os.ftruncate(fd, 0)
         os.pwrite(fd, f"{os.getpid()}\n".encode("ascii"), 0)
         yield

@@ -12,7 +12,7 @@ from __future__ import annotations
 import json
 import logging
 import os
-from typing import IO, Any, Iterable, Iterator, Sequence
+from typing import IO, Any, Callable, Iterable, Iterator, Sequence
 
 import numpy as np
 
@@ -459,18 +459,21 @@ def step_to_json(step: Step) -> dict:
 
 
 def write_stream(stream: Stream, path: str | os.PathLike[str], *,
-                 inputs: Sequence[str | os.PathLike[str] | None] = ()) -> None:
+                 inputs: Sequence[str | os.PathLike[str] | None] = (),
+                 ready: Callable[[str], None] | None = None) -> None:
     """Write a stream as JSON Lines; ``read_stream`` gives back an equal Stream.
 
     The same Stream always gives the same bytes (see :func:`write_stream_parts`).
     """
     _check_type(stream, Stream, "stream")
-    write_stream_parts(stream.header, stream.steps, path, truth=stream.truth, inputs=inputs)
+    write_stream_parts(stream.header, stream.steps, path, truth=stream.truth, inputs=inputs,
+                       ready=ready)
 
 
 def write_stream_parts(header: StreamHeader, steps: Iterable[Step],
                        path: str | os.PathLike[str], truth: Truth | None = None, *,
-                       inputs: Sequence[str | os.PathLike[str] | None] = ()) -> None:
+                       inputs: Sequence[str | os.PathLike[str] | None] = (),
+                       ready: Callable[[str], None] | None = None) -> None:
     """Write a header and an iterable of steps (which may be a generator) to ``path``.
 
     Written as every bomgraph output is (:func:`bomgraph.stdio.output_file`): a regular file
@@ -486,7 +489,7 @@ def write_stream_parts(header: StreamHeader, steps: Iterable[Step],
         raise StreamFormatError(f"must be an iterable of Step, got {type(steps).__name__}"
                                 + (" (pass stream.steps)" if isinstance(steps, Stream) else ""),
                                 key="steps")
-    with output_file(path, inputs=inputs) as fh:
+    with output_file(path, inputs=inputs, ready=ready) as fh:
         fh.write(json.dumps(header_to_json(header, truth), allow_nan=False) + "\n")
         n = 0
         for step in steps:

@@ -14,7 +14,7 @@ import math
 import os
 import re
 from dataclasses import dataclass
-from typing import Any, Mapping, Sequence
+from typing import Any, Callable, Mapping, Sequence
 
 from .stdio import output_file
 
@@ -119,16 +119,18 @@ def format_table(columns: Sequence[Column], rows: Sequence[Mapping[str, Any]], f
 
 
 def write_csv(path: str | os.PathLike[str], rows: Sequence[Mapping[str, Any]],
-              columns: Sequence[str] | None = None) -> None:
+              columns: Sequence[str] | None = None,
+              ready: Callable[[str], None] | None = None) -> None:
     """``rows`` as a CSV file: ``columns`` (default: every key, in order of appearance; keys
-    outside ``columns`` are left out); list values joined with ``;``."""
+    outside ``columns`` are left out); list values joined with ``;``. ``ready``: as
+    :func:`bomgraph.stdio.output_file`'s."""
     cols: list[str] = list(columns or ())
     if columns is None:
         for r in rows:
             for k in r:
                 if k not in cols:
                     cols.append(k)
-    with output_file(path) as fh:  # atomically: a reader never sees half a table
+    with output_file(path, ready=ready) as fh:  # atomically: a reader never sees half a table
         w = csv.DictWriter(fh, fieldnames=cols, extrasaction="ignore", lineterminator="\r\n")
         w.writeheader()
         for r in rows:

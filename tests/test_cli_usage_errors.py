@@ -72,6 +72,15 @@ def test_a_bad_value_and_an_invalid_choice(capsys: pytest.CaptureFixture) -> Non
               "not allowed with")
 
 
+def test_the_value_is_quoted_as_given_and_a_line_break_is_one_space(
+        capsys: pytest.CaptureFixture) -> None:
+    """Every run of spaces was squeezed to one: ``--jobs '1   2'`` was quoted as '1 2' (h67;
+    fails before)."""
+    _one_line(["compare", "--jobs", "1   2"], "bomgraph compare", capsys, "'1   2'")
+    line = _one_line(["compare", "--jobs", "1\n2"], "bomgraph compare", capsys)
+    assert "'1\\n2'" in line                           # repr(): argparse quotes it so
+
+
 def test_the_installed_command_too() -> None:
     """The brief's reproduction: ``bomgraph run --bogus`` printed 5 lines."""
     proc = subprocess.run([sys.executable, "-m", "bomgraph", "run", "--bogus"],

@@ -7,6 +7,9 @@ from __future__ import annotations
 
 import json
 import os
+import signal
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -123,10 +126,10 @@ def test_an_interrupted_compare_leaves_its_files_proved(tmp_path: Path, stream: 
     chosen, _ = compare_experiments(streams=[str(stream)], methods="triangulate")
     real = report.write_figure
 
-    def interrupted(fig: object, path: Path, dpi: int) -> str:
+    def interrupted(fig: object, path: Path, dpi: int, ready: object = None) -> str:
         if "maps" in str(path):
             raise KeyboardInterrupt
-        return real(fig, path, dpi)
+        return real(fig, path, dpi, ready=ready)
 
     monkeypatch.setattr(report, "write_figure", interrupted)
     with pytest.raises(KeyboardInterrupt):
@@ -136,6 +139,53 @@ def test_an_interrupted_compare_leaves_its_files_proved(tmp_path: Path, stream: 
     compare(chosen, out, executor=Executor("serial"))
     listed = json.loads((out / MANIFEST).read_text())["files"]
     assert {e["path"] for e in listed} >= {"results.csv", "streams_s_maps.png"}
+
+
+#: a compare killed (SIGKILL) the moment its results.json is in place, before anything more
+_KILLED_AFTER_RESULTS = """
+import os, signal, sys
+real = os.replace
+def replace(src, dst, **kw):
+    real(src, dst, **kw)
+    if os.path.basename(dst) == "results.json":
+        os.kill(os.getpid(), signal.SIGKILL)
+os.replace = replace
+from bomgraph.cli import main
+sys.exit(main(sys.argv[1:]))
+"""
+
+
+def test_a_compare_killed_as_a_file_takes_its_name_leaves_it_proved(tmp_path: Path,
+                                                                     stream: Path) -> None:
+    """kill -9 (or Ctrl-C) between a file's rename into place and its line in the journal
+    left a file that nothing listed: every later compare refused its own folder ("which was
+    changed since an earlier compare wrote it"). A file is now listed before it is renamed
+    (h67; fails before)."""
+    out = tmp_path / "out"
+    assert main(_cmd(stream, out, "--no-figures")) == 0
+    env = {**os.environ, "PYTHONPATH": str(Path(report.__file__).parents[1])}
+    proc = subprocess.run([sys.executable, "-c", _KILLED_AFTER_RESULTS,
+                           *_cmd(stream, out, "--no-figures")], env=env, capture_output=True)
+    assert proc.returncode == -signal.SIGKILL
+    assert main(_cmd(stream, out, "--no-figures")) == 0
+
+
+@pytest.mark.parametrize("link", ["summary.csv", "estimates"])
+def test_a_link_at_a_name_compare_writes_is_refused(tmp_path: Path, stream: Path,
+                                                    link: str) -> None:
+    """The user keeps a compare's file (or its estimates) elsewhere, linked back: its content
+    is what compare wrote, so compare wrote through the link and replaced the user's copy,
+    outside the folder (h67; fails before)."""
+    out, keep = tmp_path / "out", tmp_path / "keep"
+    keep.mkdir()
+    chosen, _ = compare_experiments(streams=[str(stream)], methods="triangulate,ekf")
+    compare(chosen, out, executor=Executor("serial"), estimates=True)
+    (out / link).rename(keep / link)
+    (out / link).symlink_to(keep / link)
+    before = {p: p.read_bytes() for p in keep.rglob("*") if p.is_file()}
+    with pytest.raises(OutputPathError, match="which is a link to .*keep"):
+        compare(chosen, out, executor=Executor("serial"), estimates=True)
+    assert {p: p.read_bytes() for p in keep.rglob("*") if p.is_file()} == before
 
 
 def test_a_folder_of_an_older_bomgraph(tmp_path: Path, stream: Path) -> None:
@@ -181,6 +231,25 @@ def test_a_users_file_named_as_the_folder_lock_is_not_emptied(tmp_path: Path) ->
     assert (out / ".bomgraph.lock").read_text() == "my notes\n"
     (out / ".bomgraph.lock").write_text("12345\n")                # a lock of an earlier run
     compare([_exp()], out, executor=Executor("serial"), figures=False)
+
+
+@pytest.mark.parametrize("kind", ["digits first", "fifo", "folder"])
+def test_a_lock_that_is_no_pid_file_is_refused_naming_it(tmp_path: Path, kind: str) -> None:
+    """Only the first 65 bytes were judged: a file of 70 digits and then notes was emptied;
+    a FIFO there was "bomgraph: error: [Errno 29] Illegal seek" (h67; fails before)."""
+    out = tmp_path / "out"
+    out.mkdir()
+    lock = out / ".bomgraph.lock"
+    if kind == "fifo":
+        os.mkfifo(lock)
+    elif kind == "folder":
+        lock.mkdir()
+    else:
+        lock.write_text("1" * 70 + "\nmy notes\n")
+    with pytest.raises(OutputPathError, match="bomgraph.lock: is not a bomgraph lock"):
+        compare([_exp()], out, executor=Executor("serial"), figures=False)
+    if kind == "digits first":
+        assert lock.read_text() == "1" * 70 + "\nmy notes\n"
 
 
 def test_dry_run_refuses_what_compare_would(tmp_path: Path, stream: Path,
