@@ -260,7 +260,8 @@ def paired_comparison(rows: Sequence[Mapping[str, Any]],
         ``experiment``, ``arm``, ``run``, ``ok`` and the final ``mpe_m`` [m] (NaN or None:
         no score), and ``own_map`` for a run scored against its own final map (its
         ``mpe_m`` is then no score: :func:`pairable`): ``"itself"``, the reference's own
-        run, or ``"method"``, an arm of its method and options at another cadence. Their order does not matter.
+        run, or ``"method"``, an arm of its method and options at another cadence (True:
+        ``"itself"``). Their order does not matter.
     references : mapping, optional
         Experiment name -> the label of its reference arm; an experiment not named here is
         compared against its first arm (in the order of the rows).

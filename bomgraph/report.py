@@ -230,8 +230,9 @@ def format_summary(summary: Sequence[dict]) -> str:
         free = any("bearing_rms_mean_rad" in r for r in rows)
         if free:  # streams without truth: landmarks mapped, bearing RMS [mrad], reference
             lines[-1] += ("; mapped: landmarks at the end; brg: RMS bearing residual [mrad] "
-                          "of the map and trajectory against the stream (no truth needed); "
-                          "[0/n], no score: runs scored against their own map")
+                          "of the map and trajectory against the stream (no truth needed)")
+            if any(_own(r) or "no score" in str(r.get("scored_against")) for r in rows):
+                lines[-1] += "; [0/n], no score: runs scored against their own map"
             head = head.replace("  paper", f" {'mapped':>6s} {'brg':>6s}  scored against")
         lines.append(head)
         for r, cells in zip(rows, by_row):
@@ -297,8 +298,9 @@ def format_by_run(rows: Sequence[dict]) -> str:
                      f"score it by (fewer than 3 landmarks in common with the truth or "
                      f"reference; without either, no poses); FAILED: the run raised; mrad: no "
                      f"truth or reference, RMS bearing residual; reference: the --reference's "
-                     f"own run, the map the others are scored against, or a run of its method "
-                     f"and options (another checkpoint cadence): no score")
+                     f"own run, the map the others are scored against" + (
+                         ", or a run of its method and options (another checkpoint cadence): "
+                         "no score" if any(r.get("self_scored") == "method" for r in rs) else ""))
         aw = max([30] + [len(a) for a in arms])  # names in full: never two alike
         rw = max([14] + [len(r) for r in runs])
         lines.append(f"{'arm':{aw}s} " + " ".join(f"{r:>{rw}s}" for r in runs))

@@ -8,9 +8,15 @@ and kept for the other arms' runs there (:func:`reference_map`); the arm that ru
 the reference (:func:`runs_as_reference`) is that run: it runs once, its checkpoints are
 scored against its own final map after it (:class:`CheckpointScorer`), and that map is kept
 for the others; a reference that fails there is remembered as well, so that the other arms'
-runs fail at once with its error (:func:`failed_reference`), not run it again. Without a reference, a run gets the truth-free measures only: landmarks
-mapped and the RMS bearing residual of each map and trajectory against the stream's own
-bearings (also given beside the scores on a stream without truth).
+runs fail at once with its error (:func:`failed_reference`), not run it again. Without a
+reference, a run gets the truth-free measures only: landmarks mapped and the RMS bearing
+residual of each map and trajectory against the stream's own bearings (also given beside
+the scores on a stream without truth).
+
+A run scored against its own map (the reference's, or an arm of its method and options at
+another cadence: :func:`self_scored`) has errors that are no measure of accuracy: compare
+marks it (:func:`mark_self_scored`), and the tables and figures leave them out
+(:func:`scores_left_out`).
 """
 
 from __future__ import annotations
