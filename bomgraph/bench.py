@@ -43,8 +43,8 @@ from .method_code import (bomgraph_edited, method_code, new_sweep, noting_runs,
 from .plugins import code_fingerprint
 from .processes import daemonic
 from .result_cache import read_cached, strip_timings, write_cached  # re-exported
-from .run_scoring import (CheckpointScorer, keep_reference, reference_map, run_arm,
-                          runs_as_reference)
+from .run_scoring import (CheckpointScorer, ReferenceFailure, failed_reference,
+                          keep_reference, reference_map, run_arm, runs_as_reference)
 from .stream import Step, Stream, Truth
 from .stream_file import StreamReader, count_steps  # re-exported: bench.count_steps
 from .sweep import scheduler_address_problem
@@ -162,11 +162,14 @@ def _run_task(task: Task) -> dict[str, Any]:
         out["scored_against"] = f"itself (reference {task.reference.label})"
     elif truth is None and task.reference is not None:
         out["scored_against"] = f"reference {task.reference.label}"
-        try:
-            truth = reference_map(task, stream)
-        except Exception as exc:  # no reference, no score: a failed run with the reason
-            out.update(ok=False, error=f"reference {task.reference.label} failed: "
-                                       + _failure(exc), traceback=_traceback(exc))
+        failed = failed_reference(task)  # it failed here already: not run again (h72)
+        if failed is None:
+            try:
+                truth = reference_map(task, stream)
+            except Exception as exc:  # no reference, no score: a failed run with the reason
+                failed = _reference_failed(task, exc)
+        if failed is not None:
+            out.update(ok=False, error=failed.error, traceback=failed.traceback)
             return out
     elif truth is None:
         out["scored_against"] = "none"
@@ -175,10 +178,13 @@ def _run_task(task: Task) -> dict[str, Any]:
         result = run_arm(task, task.arm, stream, score)
     except Exception as exc:  # a failing method is a result, reported with its reason
         out.update(ok=False, error=_failure(exc), traceback=_traceback(exc))
+        if own:  # the reference failed: the other arms' runs here fail with it at once
+            _reference_failed(task, exc)
         _log.debug("%s on %s failed:\n%s", task.arm.label, task.source.name, out["traceback"])
         return out
     if own:  # kept for the other arms' runs on this stream in this process
-        truth = keep_reference(task, result.final)
+        truth = result.final
+        keep_reference(task, truth)
         if score.overflow:  # too many maps to keep: the run again, against its final map
             _log.info("%s on %s: its maps are too large to keep: run again, scored against "
                       "its final map", task.arm.label, task.source.name)
@@ -214,6 +220,17 @@ def _run_task(task: Task) -> dict[str, Any]:
     if task.keep_estimate:
         out["estimate_file"] = _estimate_text(task, stream, result)
     return out
+
+
+def _reference_failed(task: Task, exc: BaseException) -> ReferenceFailure:
+    """The task's reference raised ``exc`` on its stream: kept for the other arms' runs
+    there in this process (:func:`~bomgraph.run_scoring.failed_reference`), as its map
+    would be."""
+    assert task.reference is not None
+    failed = ReferenceFailure(f"reference {task.reference.label} failed: " + _failure(exc),
+                              _traceback(exc))
+    keep_reference(task, failed)
+    return failed
 
 
 def _estimate_text(task: Task, stream: Stream, result: RunResult) -> str:

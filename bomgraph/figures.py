@@ -20,6 +20,7 @@ from .file_evaluation import check_stream_identity, method_label, poses_revised
 from .evaluate import score_estimate
 from .plots import results_figure, run_figure
 from .report import error_curves
+from .run_scoring import scores_left_out, self_scored
 from .stdio import check_output_path, read_regular_file, write_figure
 from .stream_file import read_stream
 
@@ -115,14 +116,21 @@ def _results_data(obj: Any, src: Path, experiments: Sequence[str]) -> tuple[
     """The final MPE per experiment and arm, the error curves and the titles of a parsed
     ``results.json`` (malformed rows raise ValueError, KeyError, TypeError, ...)."""
     results, meta = obj["results"], obj.get("experiments", [])
+    # a run scored against its own map (marked by compare; a reference's own run of an
+    # older compare by its scored_against): its errors left out, as compare's figures do
+    results = [scores_left_out({**r, "self_scored": self_scored(r, ())}) for r in results]
     names = list(dict.fromkeys(r["experiment"] for r in results))
     unknown = sorted(set(experiments) - set(names))
     if unknown:
         raise ConfigError(f"{src}: no experiment {unknown[0]!r}; it has {', '.join(names)}")
     chosen = [n for n in names if not experiments or n in experiments]
     final: dict[str, dict[str, np.ndarray]] = {}
+    own: dict[str, list[str]] = {}
     for r in results:
         if r["experiment"] not in chosen:
+            continue
+        if r["self_scored"]:  # no final map of its own to show: left out, said so
+            own.setdefault(r["experiment"], []).append(r["arm"])
             continue
         v = math.nan
         if r.get("ok") and r.get("checkpoints"):
@@ -135,6 +143,9 @@ def _results_data(obj: Any, src: Path, experiments: Sequence[str]) -> tuple[
         curves.setdefault(exp, {})[arm] = c
     titles = {m["name"]: f"{m.get('title', m['name'])} ({m.get('runs', '?')} runs)"
               for m in meta if isinstance(m, dict) and "name" in m}
+    for exp, arms in own.items():
+        titles[exp] = (f"{titles.get(exp, exp)}\nnot drawn: {', '.join(dict.fromkeys(arms))} "
+                       f"(scored against its own map)")
     return final, curves, titles
 
 

@@ -24,7 +24,7 @@ from .checks import instance, integer, real
 from .errors import ConfigError, PairingError, UnknownMethodError
 from .experiments import Experiment
 from .mapper import method_info
-from .run_scoring import same_method
+from .run_scoring import self_scored, self_scored_arms
 
 #: Fewest pairs for a confidence interval: below it the bootstrap has too few distinct
 #: resamples to mean anything (2 runs have 3).
@@ -182,8 +182,8 @@ def _pair_row(experiment: str, arm: str, reference: str, mine: Mapping[str, Mapp
     runs = sorted(set(mine) | set(ref), key=str)
     both = [r for r in runs if r in mine and r in ref]
     ran = [r for r in both if mine[r]["ok"] and ref[r]["ok"]]
-    own = {name: sum(bool(rs[r].get("own_map")) for r in ran)
-           for name, rs in ((reference, ref), (arm, mine))}
+    own = {(name, kind): sum(_own_kind(rs[r]) == kind for r in ran)
+           for name, rs in ((reference, ref), (arm, mine)) for kind in ("itself", "method")}
     a = np.array([_mpe(mine[r]) for r in ran], dtype=float)
     b = np.array([_mpe(ref[r]) for r in ran], dtype=float)
     keep = np.isfinite(a) & np.isfinite(b)
@@ -206,11 +206,14 @@ def _pair_row(experiment: str, arm: str, reference: str, mine: Mapping[str, Mapp
             stats["ratio_of_means"] = float(a.mean() / b.mean())
         else:
             notes.append("a mean MPE of 0: no ratio")
-    notes += [f"{name} is the --reference, scored against its own map on {k} of {len(ran)} "
-              f"runs (no truth): no pair there" + (
+    notes += [(f"{name} is the --reference, scored against its own map" if kind == "itself"
+               else f"{name} runs the --reference's method and options at another "
+                    f"checkpoint cadence: scored against that run's map, its own but for the "
+                    f"cadence,")
+              + f" on {k} of {len(ran)} runs (no truth): no pair there" + (
                   " (the other arms are scored against its map: pair them with one another, "
                   "--paired-reference ARM)" if name == reference and k == len(ran) else "")
-              for name, k in own.items() if k]
+              for (name, kind), k in own.items() if k]
     if stats["ratio_of_means"] is not None and n < MIN_PAIRS_CI:
         notes.append(f"interval: {n} pairs, needs {MIN_PAIRS_CI}")
     elif stats["ratio_of_means"] is not None:
@@ -233,6 +236,13 @@ def _pair_row(experiment: str, arm: str, reference: str, mine: Mapping[str, Mapp
                      losses=int(np.sum(d > 0)), wilcoxon_p=p, note="; ".join(notes))
 
 
+def _own_kind(row: Mapping[str, Any]) -> str:
+    """A row's ``own_map``: ``"itself"``, ``"method"`` or ``""`` (True, as a caller's rows
+    may have it: ``"itself"``)."""
+    kind = row.get("own_map") or ""
+    return "itself" if kind is True else str(kind)
+
+
 def _mpe(row: Mapping[str, Any]) -> float:
     v = row.get("mpe_m")
     return math.nan if v is None else float(v)
@@ -248,8 +258,10 @@ def paired_comparison(rows: Sequence[Mapping[str, Any]],
     rows : sequence of mapping
         One per (experiment, arm, run), as :func:`bomgraph.report.final_by_run` makes them:
         ``experiment``, ``arm``, ``run``, ``ok`` and the final ``mpe_m`` [m] (NaN or None:
-        no score), and ``own_map`` True for a run scored against its own final map (its
-        ``mpe_m`` is then no score: :func:`pairable`). Their order does not matter.
+        no score), and ``own_map`` for a run scored against its own final map (its
+        ``mpe_m`` is then no score: :func:`pairable`): ``"itself"``, the reference's own
+        run, or ``"method"``, an arm of its method and options at another cadence (True:
+        ``"itself"``). Their order does not matter.
     references : mapping, optional
         Experiment name -> the label of its reference arm; an experiment not named here is
         compared against its first arm (in the order of the rows).
@@ -326,21 +338,17 @@ def pairable(by_run: Sequence[Mapping[str, Any]],
              experiments: Sequence[Experiment] = ()) -> list[dict[str, Any]]:
     """``by_run`` (rows of :func:`bomgraph.report.final_by_run`) with each run that was
     scored against its own final map (a stream without truth, the arm run as the sweep's
-    ``--reference``: ``scored_against`` ``"itself (...)"``) marked ``own_map`` and its MPE
+    ``--reference``: ``scored_against`` ``"itself (...)"``) marked ``own_map`` (``"itself"``,
+    :func:`bomgraph.run_scoring.self_scored`) and its MPE
     NaN: its error there is rounding, and a ratio over it ~1e15 (h58; h59; a reference
     labelled otherwise than its arm, h63). So is, with the ``experiments``, a run scored
     against the reference's map by an arm of the reference's method and options at another
     checkpoint cadence (a reference with its own ``checkpoint_every``): the same map but
     for the cadence, whose error is rounding for a method the cadence does not change
-    (ratios of 2e15, h68)."""
-    alike = {(e.name, a.label) for e in experiments for a in e.arms
-             if same_method(a, e.reference)}
-
-    def own(r: Mapping[str, Any]) -> bool:
-        against = str(r.get("scored_against", ""))
-        return against.startswith("itself") or (
-            against.startswith("reference ") and (r.get("experiment"), r.get("arm")) in alike)
-    return [{**r, "mpe_m": math.nan, "own_map": True} if own(r) else dict(r) for r in by_run]
+    (ratios of 2e15, h68): ``own_map`` ``"method"``."""
+    alike = self_scored_arms(experiments)
+    return [{**r, "mpe_m": math.nan, "own_map": self_scored(r, alike)}
+            if self_scored(r, alike) else dict(r) for r in by_run]
 
 
 def scored_references(experiments: Sequence[Experiment], references: Mapping[str, str],

@@ -31,6 +31,7 @@ from .experiments import PAPER_REPORTED, Experiment, FileSource, Task
 from .jsonio import jsonable
 from .paired import (PairedConfig, PairedRow, pairable, paired_comparison,
                      references_for, scored_references)
+from .run_scoring import mark_self_scored, scored_against, scores_left_out
 from .plots import MapPanel, error_vs_time_figure, final_maps_figure, map_figure
 from .out_folder import (RESULT_FILES, OutputRecord, estimate_paths, planned_outputs,
                          refuse_inputs_among_outputs, slug)
@@ -70,7 +71,9 @@ def _value_at(res: Mapping[str, Any], t: int, key: str) -> float:
 def summarise(results: Sequence[Mapping[str, Any]],
               times: Sequence[int] = REPORT_TIMES) -> list[dict[str, Any]]:
     """One row per (experiment, arm): MPE at ``times`` (mean, median, std), robot error,
-    convergence, NEES, wall time. Failed runs are counted, not hidden."""
+    convergence, NEES, wall time. Failed runs are counted, not hidden; a run scored against
+    its own map (``self_scored``) only for its truth-free values (``n_scored@t`` 0)."""
+    results = [scores_left_out(r) for r in results]
     groups = _group(results, "experiment", "arm")
     exp_last: dict[str, int] = {}
     for r in results:
@@ -128,7 +131,7 @@ def _truth_free_columns(row: dict[str, Any], ok: Sequence[Mapping[str, Any]],
     free = [r for r in ok if r["checkpoints"] and "bearing_rms_rad" in r["checkpoints"][-1]]
     if not free:
         return
-    row["scored_against"] = "; ".join(sorted({r.get("scored_against", "truth") for r in ok}))
+    row["scored_against"] = "; ".join(sorted({scored_against(r) for r in ok}))
     row["n_mapped_mean"] = float(np.mean([r["checkpoints"][-1]["n_mapped"] for r in free]))
     row["bearing_rms_mean_rad"] = _finite_stat(
         np.nanmean, np.array([_value_at(r, last_t, "bearing_rms_rad") for r in free]))
@@ -139,7 +142,7 @@ def final_by_run(results: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
     or the failure. For experiments whose runs are different recordings (the real data), where
     a mean over runs hides which recording a method fails on."""
     rows = []
-    for r in results:
+    for r in map(scores_left_out, results):  # no MPE of a map against itself
         row: dict[str, Any] = {"experiment": r["experiment"], "arm": r["arm"], "run": r["run"],
                                "ok": bool(r.get("ok")), "error": r.get("error", "")}
         last = r["checkpoints"][-1] if r.get("ok") and r.get("checkpoints") else {}
@@ -152,6 +155,7 @@ def final_by_run(results: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
         row["total_s"] = r.get("total_s", math.nan)
         if "scored_against" in r:  # a stream without truth (the paper's rows as they were)
             row["scored_against"] = r["scored_against"]
+            row["self_scored"] = r.get("self_scored", "")  # "itself", "method" or ""
         rows.append(row)
     return rows
 
@@ -160,7 +164,8 @@ def error_curves(results: Sequence[Mapping[str, Any]], metric: str = "mpe_m"
                  ) -> dict[tuple[str, str], tuple[np.ndarray, np.ndarray]]:
     """Per (experiment, arm): all runs' checkpoint times ``(k,)``, the metric ``(runs, k)``."""
     out: dict[tuple[str, str], tuple[np.ndarray, np.ndarray]] = {}
-    for key, rs in _group([r for r in results if r.get("ok")], "experiment", "arm").items():
+    for key, rs in _group([scores_left_out(r) for r in results if r.get("ok")],
+                          "experiment", "arm").items():
         ts = np.array(sorted({c["t"] for r in rs for c in r["checkpoints"]}))
         vals = np.array([[_value_at(r, t, metric) if t <= r["checkpoints"][-1]["t"]
                           else math.nan for t in ts] for r in rs])  # NaN: the stream ended
@@ -176,9 +181,10 @@ def results_to_csv_rows(results: Sequence[Mapping[str, Any]]) -> list[dict[str, 
             rows.append({"experiment": r["experiment"], "arm": r["arm"], "run": r["run"],
                          "ok": False, "error": r.get("error", "")})
             continue
+        mark = {k: r[k] for k in ("scored_against", "self_scored") if k in r}
         for c in r["checkpoints"]:
             rows.append({"experiment": r["experiment"], "arm": r["arm"], "run": r["run"],
-                         "ok": True, "error": "", **c})
+                         "ok": True, "error": "", **c, **mark})
     return rows
 
 
@@ -225,6 +231,8 @@ def format_summary(summary: Sequence[dict]) -> str:
         if free:  # streams without truth: landmarks mapped, bearing RMS [mrad], reference
             lines[-1] += ("; mapped: landmarks at the end; brg: RMS bearing residual [mrad] "
                           "of the map and trajectory against the stream (no truth needed)")
+            if any(_own(r) or "no score" in str(r.get("scored_against")) for r in rows):
+                lines[-1] += "; [0/n], no score: runs scored against their own map"
             head = head.replace("  paper", f" {'mapped':>6s} {'brg':>6s}  scored against")
         lines.append(head)
         for r, cells in zip(rows, by_row):
@@ -290,7 +298,9 @@ def format_by_run(rows: Sequence[dict]) -> str:
                      f"score it by (fewer than 3 landmarks in common with the truth or "
                      f"reference; without either, no poses); FAILED: the run raised; mrad: no "
                      f"truth or reference, RMS bearing residual; reference: the --reference's "
-                     f"own run, the map the others are scored against")
+                     f"own run, the map the others are scored against" + (
+                         ", or a run of its method and options (another checkpoint cadence): "
+                         "no score" if any(r.get("self_scored") == "method" for r in rs) else ""))
         aw = max([30] + [len(a) for a in arms])  # names in full: never two alike
         rw = max([14] + [len(r) for r in runs])
         lines.append(f"{'arm':{aw}s} " + " ".join(f"{r:>{rw}s}" for r in runs))
@@ -302,10 +312,9 @@ def format_by_run(rows: Sequence[dict]) -> str:
                     cells.append("")
                 elif not r["ok"]:
                     cells.append("FAILED")
-                elif str(r.get("scored_against", "")).startswith("itself") \
-                        and r["n_mapped"] >= 3:  # its MPE: 0 by definition
+                elif _own(r) and r["n_mapped"] >= 3:  # its MPE: 0 by definition
                     cells.append(f"reference ({r['n_mapped']})")
-                elif str(r.get("scored_against", "")).startswith("itself"):
+                elif _own(r):
                     cells.append(f"no map ({r['n_mapped']})")  # no map to score by (h68)
                 elif not math.isfinite(r["mpe_m"]) and math.isfinite(r["bearing_rms_rad"]):
                     cells.append(f"{1000 * r['bearing_rms_rad']:.1f}mrad ({r['n_mapped']})")
@@ -317,6 +326,10 @@ def format_by_run(rows: Sequence[dict]) -> str:
                     cells.append(f"{_cm(r['mpe_m'], '.1f')} ({r['n_mapped']})")
             lines.append(f"{arm:{aw}s} " + " ".join(f"{c:>{rw}s}" for c in cells))
     return "\n".join(lines)
+
+
+def _own(row: Mapping[str, Any]) -> bool:
+    return bool(row.get("self_scored")) or str(row.get("scored_against")).startswith("itself")
 
 
 @dataclass(frozen=True)
@@ -397,6 +410,7 @@ def _compare(experiments: Sequence[Experiment], out: Path, executor: Executor,
     record, paths = planned
     record.refuse_foreign(paths)  # a file put there while the runs ran (they are cached)
     record.begin()
+    results = mark_self_scored(results, experiments)  # scored against their own map
     written = write_estimate_files(out, tasks, results, record.ready) if estimates else []
     summary = summarise(results)
     by_run = final_by_run(results)
@@ -502,8 +516,12 @@ def write_compare_figures(out_dir: str | os.PathLike[str], experiments: Sequence
             continue
         rob = {arm: c for (e, arm), c in robot.items()
                if e == exp.name and np.any(np.isfinite(c[1]))}
-        fig = error_vs_time_figure(curves, robot_curves=rob,
-                                   title=f"{exp.title}: landmarks ({exp.n_runs()} runs)")
+        own = sorted({r["arm"] for r in results if r["experiment"] == exp.name
+                      and r.get("self_scored")})  # their curves: NaN, not drawn
+        fig = error_vs_time_figure(curves, robot_curves=rob, title=f"{exp.title}: landmarks "
+                                   f"({exp.n_runs()} runs)" + (f"\nnot drawn: {', '.join(own)}"
+                                                               f" (scored against its own map)"
+                                                               if own else ""))
         path = out / f"{slug(exp.name)}_error_vs_time.png"
         write_figure(fig, path, dpi=120, ready=ready(path))
         files.append(path)

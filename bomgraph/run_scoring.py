@@ -7,9 +7,16 @@ final map (and trajectory) of the sweep's reference method: run once per stream 
 and kept for the other arms' runs there (:func:`reference_map`); the arm that runs exactly as
 the reference (:func:`runs_as_reference`) is that run: it runs once, its checkpoints are
 scored against its own final map after it (:class:`CheckpointScorer`), and that map is kept
-for the others. Without a reference, a run gets the truth-free measures only: landmarks
-mapped and the RMS bearing residual of each map and trajectory against the stream's own
-bearings (also given beside the scores on a stream without truth).
+for the others; a reference that fails there is remembered as well, so that the other arms'
+runs fail at once with its error (:func:`failed_reference`), not run it again. Without a
+reference, a run gets the truth-free measures only: landmarks mapped and the RMS bearing
+residual of each map and trajectory against the stream's own bearings (also given beside
+the scores on a stream without truth).
+
+A run scored against its own map (the reference's, or an arm of its method and options at
+another cadence: :func:`self_scored`) has errors that are no measure of accuracy: compare
+marks it (:func:`mark_self_scored`), and the tables and figures leave them out
+(:func:`scores_left_out`).
 """
 
 from __future__ import annotations
@@ -17,11 +24,11 @@ from __future__ import annotations
 import json
 import math
 import time
-from dataclasses import asdict, replace
-from typing import Any, Callable
+from dataclasses import asdict, dataclass, replace
+from typing import Any, Callable, Collection, Mapping, Sequence
 
 from .evaluate import CheckpointScore, score_checkpoints
-from .experiments import Arm, Task
+from .experiments import Arm, Experiment, Task
 from .mapper import Checkpoint, MapEstimate, RunResult, create_mapper, method_info, run
 from .stream import Stream, Truth
 from .trajectory import BearingResidualSums
@@ -34,7 +41,23 @@ MAX_REFERENCES = 8
 #: again, scored against the first run's final map as it goes (the same rows).
 MAX_KEPT_BYTES = 256 * 2 ** 20
 
-_REFERENCES: dict[str, MapEstimate] = {}
+#: What a run scored against its own map keeps of each checkpoint row for the tables and
+#: figures (:func:`scores_left_out`): its counts, time and truth-free bearing RMS. Its errors
+#: and NEES are against its own map (rounding at its end) or, an arm of the reference's
+#: method and options at another cadence, against the same map: no measure of accuracy.
+UNSCORED_KEYS = ("t", "n_mapped", "estimate_s", "n_common", "bearing_rms_rad")
+
+
+@dataclass(frozen=True)
+class ReferenceFailure:
+    """A reference that raised on a stream: the error its other arms' runs there fail with
+    (``"reference LABEL failed: ..."``) and its traceback."""
+
+    error: str
+    traceback: str
+
+
+_REFERENCES: dict[str, MapEstimate | ReferenceFailure] = {}
 
 
 def run_arm(task: Task, arm: Arm, stream: Stream,
@@ -77,9 +100,11 @@ def _reference_key(task: Task) -> str:
                        "every": task.checkpoint_every}, sort_keys=True)
 
 
-def keep_reference(task: Task, final: MapEstimate) -> MapEstimate:
-    """Keep ``final``, the reference method's final map on the task's stream, for the other
-    tasks of the same stream and reference that run in this process; returns it."""
+def keep_reference(task: Task, final: MapEstimate | ReferenceFailure
+                   ) -> MapEstimate | ReferenceFailure:
+    """Keep ``final``, the reference method's final map on the task's stream (or how it
+    failed there), for the other tasks of the same stream and reference that run in this
+    process; returns it."""
     key = _reference_key(task)
     _REFERENCES.pop(key, None)
     while len(_REFERENCES) >= MAX_REFERENCES:
@@ -93,9 +118,80 @@ def reference_map(task: Task, stream: Stream) -> MapEstimate:
     task of this process has run it (or was it) already."""
     assert task.reference is not None
     kept = _REFERENCES.get(_reference_key(task))
-    if kept is not None:
+    if isinstance(kept, MapEstimate):
         return kept
-    return keep_reference(task, run_arm(task, task.reference, stream, lambda c: None).final)
+    final = run_arm(task, task.reference, stream, lambda c: None).final
+    keep_reference(task, final)
+    return final
+
+
+def failed_reference(task: Task) -> ReferenceFailure | None:
+    """How the task's reference failed on its stream, if a task of this process saw it fail
+    (:func:`keep_reference`): the task fails with that, not running it again."""
+    kept = _REFERENCES.get(_reference_key(task)) if task.reference is not None else None
+    return kept if isinstance(kept, ReferenceFailure) else None
+
+
+def self_scored_arms(experiments: Sequence[Experiment]) -> set[tuple[str, str]]:
+    """(experiment, label) of each arm of the method and options of its experiment's
+    reference (:func:`same_method`), whatever its checkpoint cadence."""
+    return {(e.name, a.label) for e in experiments for a in e.arms
+            if same_method(a, e.reference)}
+
+
+def self_scored(result: Mapping[str, Any], alike: Collection[tuple[str, str]]) -> str:
+    """How a run (a result of :func:`bomgraph.bench.run_task`, or a row of
+    :func:`bomgraph.report.final_by_run`) was scored against its own map, on a stream
+    without truth: ``"itself"``, the run was the reference's (``scored_against``
+    ``"itself (...)"``); ``"method"``, an arm of ``alike`` (:func:`self_scored_arms`: the
+    reference's method and options at another checkpoint cadence) scored against the
+    reference's map, the same map but for the cadence; ``""``, neither (a score)."""
+    if isinstance(result.get("self_scored"), str) and result["self_scored"]:
+        return result["self_scored"]
+    against = str(result.get("scored_against", ""))
+    if against.startswith("itself"):
+        return "itself"
+    if against.startswith("reference ") and (result.get("experiment"),
+                                             result.get("arm")) in alike:
+        return "method"
+    return ""
+
+
+def scored_against(result: Mapping[str, Any]) -> str:
+    """What a run on a stream without truth was scored against, for the summary: its
+    ``scored_against``, and for an arm of the reference's method and options (``self_scored``
+    ``"method"``) that this is no score."""
+    against = str(result.get("scored_against", "truth"))
+    if result.get("self_scored") == "method":
+        return f"{against} (its method and options: no score)"
+    return against
+
+
+def mark_self_scored(results: Sequence[dict[str, Any]], experiments: Sequence[Experiment]
+                     ) -> list[dict[str, Any]]:
+    """``results``, each run scored against its own map (:func:`self_scored`) given
+    ``self_scored`` (``"itself"`` or ``"method"``), its values kept (results.json); the
+    others as they are (the same objects: a run with truth is never touched)."""
+    alike = self_scored_arms(experiments)
+    out = []
+    for r in results:
+        kind = self_scored(r, alike)
+        if kind:
+            r["self_scored"] = kind
+        out.append(r)
+    return out
+
+
+def scores_left_out(result: Mapping[str, Any]) -> Mapping[str, Any]:
+    """``result`` for a table or figure: a run marked ``self_scored``
+    (:func:`mark_self_scored`) as a copy with only the :data:`UNSCORED_KEYS` of each
+    checkpoint (the rest NaN), so that no score of a map against itself is averaged, drawn
+    or shown as accuracy; any other run as it is."""
+    if not result.get("self_scored"):
+        return result
+    return {**result, "checkpoints": [{k: v if k in UNSCORED_KEYS else math.nan
+                                       for k, v in c.items()}
+                                      for c in result.get("checkpoints", [])]}
 
 
 def bearing_rms(estimate: MapEstimate, stream: Stream) -> float:
@@ -177,5 +273,8 @@ class CheckpointScorer:
         return row
 
 
-__all__ = ["CheckpointScorer", "MAX_REFERENCES", "bearing_rms", "keep_reference",
-           "reference_map", "run_arm", "runs_as_reference", "same_method"]
+__all__ = ["CheckpointScorer", "MAX_REFERENCES", "ReferenceFailure", "UNSCORED_KEYS",
+           "bearing_rms", "failed_reference", "keep_reference", "mark_self_scored",
+           "reference_map", "run_arm", "runs_as_reference", "same_method", "scored_against",
+           "scores_left_out",
+           "self_scored", "self_scored_arms"]
