@@ -30,6 +30,7 @@ from typing import Any, Callable, Collection, Mapping, Sequence
 from .evaluate import CheckpointScore, score_checkpoints
 from .experiments import Arm, Experiment, Task
 from .mapper import Checkpoint, MapEstimate, RunResult, create_mapper, method_info, run
+from .method_code import method_code
 from .stream import Stream, Truth
 from .trajectory import BearingResidualSums
 
@@ -95,9 +96,15 @@ def runs_as_reference(task: Task) -> bool:
 
 
 def _reference_key(task: Task) -> str:
+    """What the kept reference map (or failure) is kept by: the stream, the reference arm,
+    the cadence and the code of the reference's methods as this process runs them
+    (:func:`bomgraph.method_code.method_code`: a plugin or a run-time method edited and
+    reloaded since, or a constant of it set, is another reference; h73: a library user who
+    fixed a failing reference got its old failure again in the next compare)."""
     assert task.reference is not None
+    code = method_code(replace(task, arm=task.reference))
     return json.dumps({"source": task.source.key(), "ref": task.reference.key(),
-                       "every": task.checkpoint_every}, sort_keys=True)
+                       "every": task.checkpoint_every, "code": code}, sort_keys=True)
 
 
 def keep_reference(task: Task, final: MapEstimate | ReferenceFailure

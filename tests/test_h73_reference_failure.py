@@ -1,0 +1,93 @@
+"""h73: a reference that failed on a stream is remembered in the process (h72) so that the
+other arms' runs there fail at once with its error; that memory outlived the sweep. Each test
+fails before h73's fix: a library user who fixed the reference (its module edited and
+reloaded) or what it failed on (a file it reads) and ran compare again in the same Python
+session got the old failure for every other arm, though a failure is never cached."""
+
+from __future__ import annotations
+
+import dataclasses
+import importlib
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from bomgraph import mapper, run_scoring
+from bomgraph.bench import Executor
+from bomgraph.experiments import compare_experiments
+from bomgraph.report import compare
+from bomgraph.sim import SimConfig, simulate
+from bomgraph.stream_file import write_stream
+
+FLAKY = '''\
+import os
+
+from baselines.triangulate import TriangulateMapper
+
+BROKEN = {broken}
+
+
+class Flaky(TriangulateMapper):
+    """triangulate that raises at its first step while BROKEN or while a file is there"""
+
+    def step(self, step):
+        if BROKEN or os.path.exists({blocker!r}):
+            raise RuntimeError("no map today")
+        return super().step(step)
+'''
+
+
+def _streams(tmp_path: Path, n: int) -> list[str]:
+    paths = []
+    for seed in range(n):
+        stream = simulate(SimConfig(n_steps=40), np.random.default_rng(seed))
+        path = tmp_path / f"nt{seed}.jsonl"
+        write_stream(dataclasses.replace(stream, truth=None), path)
+        paths.append(str(path))
+    return paths
+
+
+@pytest.fixture
+def flaky(tmp_path: Path, monkeypatch: pytest.MonkeyPatch):
+    """Writes the run-time method ``flaky`` (``write(broken)``) and registers it; the file
+    whose presence also makes it fail."""
+    code = tmp_path / "code"
+    code.mkdir()
+    blocker = tmp_path / "blocker"
+    module = code / "bomgraph_h73_flaky.py"
+    monkeypatch.syspath_prepend(str(code))
+    monkeypatch.setattr(mapper, "_REGISTRY", dict(mapper._REGISTRY))
+    monkeypatch.setattr(run_scoring, "_REFERENCES", {})
+
+    def write(broken: bool) -> None:
+        module.write_text(FLAKY.format(broken=broken, blocker=str(blocker)))
+
+    write(False)
+    mapper.register_method("flaky", "bomgraph_h73_flaky:Flaky")
+    yield write, blocker
+    sys.modules.pop("bomgraph_h73_flaky", None)
+
+
+def _compare(tmp_path: Path, paths: list[str], name: str) -> list[dict]:
+    exps, _ = compare_experiments(streams=paths, methods="ekf,triangulate",
+                                  reference="flaky")
+    return list(compare(exps, tmp_path / name, executor=Executor("serial"),
+                        figures=False).results)
+
+
+def test_a_reference_fixed_and_reloaded_is_run_again(tmp_path: Path, flaky) -> None:
+    write, _ = flaky
+    paths = _streams(tmp_path, 2)
+    write(True)
+    import bomgraph_h73_flaky
+    importlib.reload(bomgraph_h73_flaky)
+    first = _compare(tmp_path, paths, "out1")
+    assert not any(r["ok"] for r in first) and all("no map today" in r["error"] for r in first)
+    write(False)  # the user fixes the method and reloads it
+    importlib.reload(bomgraph_h73_flaky)
+    second = _compare(tmp_path, paths, "out2")
+    assert all(r["ok"] for r in second), {r.get("error") for r in second}  # the old failure
+    assert {r["scored_against"] for r in second} == {"reference flaky"}
+
