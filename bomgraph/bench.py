@@ -44,7 +44,8 @@ from .plugins import code_fingerprint
 from .processes import daemonic
 from .result_cache import read_cached, strip_timings, write_cached  # re-exported
 from .run_scoring import (CheckpointScorer, ReferenceFailure, failed_reference,
-                          keep_reference, reference_map, run_arm, runs_as_reference)
+                          forget_failures, keep_reference, reference_map, run_arm,
+                          runs_as_reference)
 from .stream import Step, Stream, Truth
 from .stream_file import StreamReader, count_steps  # re-exported: bench.count_steps
 from .sweep import scheduler_address_problem
@@ -358,6 +359,7 @@ def execute_counted(tasks: Sequence[Task], executor: Executor = Executor(), *,
     if executor.backend != "serial":
         refuse_runtime_methods(tasks, executor.backend)
     new_sweep()  # a plugin module reloaded, a value of it set since the last sweep: new keys
+    forget_failures()  # a reference that failed in the last sweep here runs again (h73)
     if cache_dir is not None and bomgraph_edited():
         cache_dir = None
     results: list[dict[str, Any] | None] = [None] * len(tasks)

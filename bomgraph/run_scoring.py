@@ -8,7 +8,9 @@ and kept for the other arms' runs there (:func:`reference_map`); the arm that ru
 the reference (:func:`runs_as_reference`) is that run: it runs once, its checkpoints are
 scored against its own final map after it (:class:`CheckpointScorer`), and that map is kept
 for the others; a reference that fails there is remembered as well, so that the other arms'
-runs fail at once with its error (:func:`failed_reference`), not run it again. Without a
+runs fail at once with its error (:func:`failed_reference`), not run it again (in that
+sweep: :func:`forget_failures`). Kept maps and failures are keyed by the reference's code as
+this process runs it, so an edited and reloaded reference is run anew. Without a
 reference, a run gets the truth-free measures only: landmarks mapped and the RMS bearing
 residual of each map and trajectory against the stream's own bearings (also given beside
 the scores on a stream without truth).
@@ -137,6 +139,14 @@ def failed_reference(task: Task) -> ReferenceFailure | None:
     (:func:`keep_reference`): the task fails with that, not running it again."""
     kept = _REFERENCES.get(_reference_key(task)) if task.reference is not None else None
     return kept if isinstance(kept, ReferenceFailure) else None
+
+
+def forget_failures() -> None:
+    """Forget the references that failed in this process (:func:`failed_reference`): a new
+    sweep runs them again, as a failure is never cached (what it failed on may be fixed);
+    their maps are kept."""
+    for key in [k for k, v in _REFERENCES.items() if isinstance(v, ReferenceFailure)]:
+        del _REFERENCES[key]
 
 
 def self_scored_arms(experiments: Sequence[Experiment]) -> set[tuple[str, str]]:
@@ -281,7 +291,6 @@ class CheckpointScorer:
 
 
 __all__ = ["CheckpointScorer", "MAX_REFERENCES", "ReferenceFailure", "UNSCORED_KEYS",
-           "bearing_rms", "failed_reference", "keep_reference", "mark_self_scored",
-           "reference_map", "run_arm", "runs_as_reference", "same_method", "scored_against",
-           "scores_left_out",
-           "self_scored", "self_scored_arms"]
+           "bearing_rms", "failed_reference", "forget_failures", "keep_reference",
+           "mark_self_scored", "reference_map", "run_arm", "runs_as_reference", "same_method",
+           "scored_against", "scores_left_out", "self_scored", "self_scored_arms"]

@@ -91,3 +91,13 @@ def test_a_reference_fixed_and_reloaded_is_run_again(tmp_path: Path, flaky) -> N
     assert all(r["ok"] for r in second), {r.get("error") for r in second}  # the old failure
     assert {r["scored_against"] for r in second} == {"reference flaky"}
 
+
+def test_a_failed_reference_is_run_again_by_the_next_compare(tmp_path: Path, flaky) -> None:
+    _, blocker = flaky
+    paths = _streams(tmp_path, 2)
+    blocker.write_text("")  # what it fails on: not its code
+    first = _compare(tmp_path, paths, "out1")
+    assert not any(r["ok"] for r in first)
+    blocker.unlink()
+    second = _compare(tmp_path, paths, "out2")  # a failure is never cached: run again
+    assert all(r["ok"] for r in second), {r.get("error") for r in second}
