@@ -162,7 +162,11 @@ def self_scored(result: Mapping[str, Any], alike: Collection[tuple[str, str]]) -
     without truth: ``"itself"``, the run was the reference's (``scored_against``
     ``"itself (...)"``); ``"method"``, an arm of ``alike`` (:func:`self_scored_arms`: the
     reference's method and options at another checkpoint cadence) scored against the
-    reference's map, the same map but for the cadence; ``""``, neither (a score)."""
+    reference's map, the same map but for the cadence; ``""``, neither (a score), or a run
+    that failed (no map, no score: h73; it was marked ``"itself"``, and the figures' titles
+    said its curve was left out as scored against its own map)."""
+    if not result.get("ok", True):
+        return ""
     if isinstance(result.get("self_scored"), str) and result["self_scored"]:
         return result["self_scored"]
     against = str(result.get("scored_against", ""))

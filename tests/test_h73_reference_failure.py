@@ -6,8 +6,10 @@ session got the old failure for every other arm, though a failure is never cache
 
 from __future__ import annotations
 
+import csv
 import dataclasses
 import importlib
+import json
 import sys
 from pathlib import Path
 
@@ -17,6 +19,7 @@ import pytest
 from bomgraph import mapper, run_scoring
 from bomgraph.bench import Executor
 from bomgraph.experiments import compare_experiments
+from bomgraph.figures import _results_data
 from bomgraph.report import compare
 from bomgraph.sim import SimConfig, simulate
 from bomgraph.stream_file import write_stream
@@ -101,3 +104,24 @@ def test_a_failed_reference_is_run_again_by_the_next_compare(tmp_path: Path, fla
     blocker.unlink()
     second = _compare(tmp_path, paths, "out2")  # a failure is never cached: run again
     assert all(r["ok"] for r in second), {r.get("error") for r in second}
+
+
+def test_a_failed_reference_run_is_no_self_score(tmp_path: Path, flaky) -> None:
+    """Its own run failed: no "scored against its own map" in results or figure titles."""
+    _, blocker = flaky
+    blocker.write_text("")
+    exps, _ = compare_experiments(streams=_streams(tmp_path, 2), methods="flaky,ekf",
+                                  reference="flaky")
+    out = tmp_path / "out"
+    result = compare(exps, out, executor=Executor("serial"), figures=False)
+    assert not any(r["ok"] for r in result.results)
+    assert not any(r.get("self_scored") for r in result.results)  # was "itself"
+    with open(out / "final_by_run.csv", newline="") as fh:
+        assert {r["self_scored"] for r in csv.DictReader(fh)} == {""}
+    saved = json.loads((out / "results.json").read_text())
+    _, _, titles = _results_data(saved, out / "results.json", [])
+    assert "not drawn" not in titles["streams"], titles  # `bomgraph plot --results`
+    for r in saved["results"]:  # a results.json of h72, its failed runs marked
+        r["self_scored"] = "itself" if r["arm"] == "flaky" else ""
+    _, _, titles = _results_data(saved, out / "results.json", [])
+    assert "not drawn" not in titles["streams"], titles
