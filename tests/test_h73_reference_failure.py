@@ -125,3 +125,27 @@ def test_a_failed_reference_run_is_no_self_score(tmp_path: Path, flaky) -> None:
         r["self_scored"] = "itself" if r["arm"] == "flaky" else ""
     _, _, titles = _results_data(saved, out / "results.json", [])
     assert "not drawn" not in titles["streams"], titles
+
+
+def test_a_worker_kept_from_an_earlier_sweep_runs_a_failed_reference_again(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """joblib keeps its worker processes between sweeps; one that saw the reference fail in
+    an earlier sweep served that failure in the next. The worker is this process here (the
+    dispatcher runs its function in it), the earlier sweep's failure kept in it."""
+    from bomgraph import processes
+    from bomgraph.bench import execute
+
+    monkeypatch.setattr(run_scoring, "_REFERENCES", {})
+    exps, _ = compare_experiments(streams=_streams(tmp_path, 2), methods="ekf",
+                                  reference="triangulate")
+    tasks = exps[0].tasks()
+
+    def here(func, index, tasks, n_jobs, failed, *, fresh=False):
+        for task in tasks:  # what the worker kept of a sweep where the reference failed
+            run_scoring.keep_reference(task, run_scoring.ReferenceFailure(
+                "reference triangulate failed: RuntimeError: an earlier sweep", ""))
+        for k, t in zip(index, tasks):
+            yield func(k, t)
+    monkeypatch.setattr(processes, "dispatch", here)
+    results = execute(tasks, Executor("processes", n_jobs=2))
+    assert all(r["ok"] for r in results), {r.get("error") for r in results}
