@@ -20,6 +20,7 @@ from bomgraph import mapper, run_scoring
 from bomgraph.bench import Executor
 from bomgraph.experiments import compare_experiments
 from bomgraph.figures import _results_data
+from bomgraph.method_code import new_sweep
 from bomgraph.report import compare
 from bomgraph.sim import SimConfig, simulate
 from bomgraph.stream_file import write_stream
@@ -149,3 +150,24 @@ def test_a_worker_kept_from_an_earlier_sweep_runs_a_failed_reference_again(
     monkeypatch.setattr(processes, "dispatch", here)
     results = execute(tasks, Executor("processes", n_jobs=2))
     assert all(r["ok"] for r in results), {r.get("error") for r in results}
+
+
+def test_a_kept_reference_map_is_not_served_after_its_code_changed(tmp_path: Path,
+                                                                    flaky) -> None:
+    """The same holds of a reference that ran: its map, kept for the other arms, was served
+    after its module was edited and reloaded (kept maps were keyed without the code)."""
+    write, _ = flaky
+    import bomgraph_h73_flaky
+    importlib.reload(bomgraph_h73_flaky)
+    exps, _ = compare_experiments(streams=_streams(tmp_path, 1), methods="ekf",
+                                  reference="flaky")
+    task = exps[0].tasks()[0]
+    stream = task.stream()
+    first = run_scoring.reference_map(task, stream)
+    assert run_scoring.reference_map(task, stream) is first  # kept
+    write(False)
+    (tmp_path / "code" / "bomgraph_h73_flaky.py").write_text(
+        (tmp_path / "code" / "bomgraph_h73_flaky.py").read_text() + "\n# edited\n")
+    importlib.reload(bomgraph_h73_flaky)
+    new_sweep()  # as compare's next sweep does
+    assert run_scoring.reference_map(task, stream) is not first
