@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import contextlib
 import contextvars
+import functools
 import hashlib
 import json
 import logging
@@ -22,6 +23,7 @@ import os
 import socket
 import tempfile
 import traceback
+import uuid
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Callable, Iterable, Iterator, Mapping, Sequence
@@ -43,7 +45,7 @@ from .method_code import (bomgraph_edited, method_code, new_sweep, noting_runs,
 from .plugins import code_fingerprint
 from .processes import daemonic
 from .result_cache import read_cached, strip_timings, write_cached  # re-exported
-from .run_scoring import (CheckpointScorer, ReferenceFailure, failed_reference,
+from .run_scoring import (CheckpointScorer, ReferenceFailure, failed_reference, forget_failures,
                           keep_reference, reference_map, run_arm, runs_as_reference)
 from .stream import Step, Stream, Truth
 from .stream_file import StreamReader, count_steps  # re-exported: bench.count_steps
@@ -358,6 +360,7 @@ def execute_counted(tasks: Sequence[Task], executor: Executor = Executor(), *,
     if executor.backend != "serial":
         refuse_runtime_methods(tasks, executor.backend)
     new_sweep()  # a plugin module reloaded, a value of it set since the last sweep: new keys
+    forget_failures()  # a reference that failed in the last sweep here runs again (h73)
     if cache_dir is not None and bomgraph_edited():
         cache_dir = None
     results: list[dict[str, Any] | None] = [None] * len(tasks)
@@ -439,8 +442,16 @@ def _streams_in_turn(todo: list[int], tasks: Sequence[Task]) -> list[int]:
                                        not runs_as_reference(tasks[k])))
 
 
-def _indexed(k: int, task: Task) -> tuple[int, dict[str, Any]]:
-    """In a worker: ``k`` and the task's result."""
+_SWEEP = ""  # the sweep whose tasks this worker process ran last (_indexed)
+
+
+def _indexed(k: int, task: Task, sweep: str = "") -> tuple[int, dict[str, Any]]:
+    """In a worker: ``k`` and the task's result. ``sweep``: its token; a worker kept from
+    another sweep forgets the references that failed there first (h73: never cached)."""
+    global _SWEEP
+    if sweep != _SWEEP:
+        forget_failures()
+        _SWEEP = sweep
     token = _IN_WORKER.set(True)
     try:
         return k, run_task(task)
@@ -478,6 +489,7 @@ def _dispatch(tasks: list[Task], index: list[int], executor: Executor,
             for k, t in zip(index, tasks):
                 yield k, run_task(t)
         return
+    run = functools.partial(_indexed, sweep=uuid.uuid4().hex)  # for workers kept between sweeps
     by_k = dict(zip(index, tasks))
     key_of = dict(zip(index, keys)) if keys is not None else {}
 
@@ -490,13 +502,13 @@ def _dispatch(tasks: list[Task], index: list[int], executor: Executor,
     if executor.backend == "processes":
         from .processes import dispatch
 
-        yield from dispatch(_indexed, index, tasks,
+        yield from dispatch(run, index, tasks,
                             _local_workers(executor.n_jobs, len(tasks), two_for_one=True),
                             failed, fresh=workers_outdated(tasks))
     else:
         from .cluster import dispatch as dispatch_dask
 
-        yield from dispatch_dask(_indexed, index, tasks, scheduler=executor.scheduler,
+        yield from dispatch_dask(run, index, tasks, scheduler=executor.scheduler,
                                  n_local=_local_workers(executor.dask_local, len(tasks)),
                                  failed=failed)
 

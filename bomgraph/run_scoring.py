@@ -8,7 +8,9 @@ and kept for the other arms' runs there (:func:`reference_map`); the arm that ru
 the reference (:func:`runs_as_reference`) is that run: it runs once, its checkpoints are
 scored against its own final map after it (:class:`CheckpointScorer`), and that map is kept
 for the others; a reference that fails there is remembered as well, so that the other arms'
-runs fail at once with its error (:func:`failed_reference`), not run it again. Without a
+runs fail at once with its error (:func:`failed_reference`), not run it again (in that
+sweep: :func:`forget_failures`). Kept maps and failures are keyed by the reference's code as
+this process runs it, so an edited and reloaded reference is run anew. Without a
 reference, a run gets the truth-free measures only: landmarks mapped and the RMS bearing
 residual of each map and trajectory against the stream's own bearings (also given beside
 the scores on a stream without truth).
@@ -30,6 +32,7 @@ from typing import Any, Callable, Collection, Mapping, Sequence
 from .evaluate import CheckpointScore, score_checkpoints
 from .experiments import Arm, Experiment, Task
 from .mapper import Checkpoint, MapEstimate, RunResult, create_mapper, method_info, run
+from .method_code import method_code
 from .stream import Stream, Truth
 from .trajectory import BearingResidualSums
 
@@ -95,9 +98,15 @@ def runs_as_reference(task: Task) -> bool:
 
 
 def _reference_key(task: Task) -> str:
+    """What the kept reference map (or failure) is kept by: the stream, the reference arm,
+    the cadence and the code of the reference's methods as this process runs them
+    (:func:`bomgraph.method_code.method_code`: a plugin or a run-time method edited and
+    reloaded since, or a constant of it set, is another reference; h73: a library user who
+    fixed a failing reference got its old failure again in the next compare)."""
     assert task.reference is not None
+    code = method_code(replace(task, arm=task.reference))
     return json.dumps({"source": task.source.key(), "ref": task.reference.key(),
-                       "every": task.checkpoint_every}, sort_keys=True)
+                       "every": task.checkpoint_every, "code": code}, sort_keys=True)
 
 
 def keep_reference(task: Task, final: MapEstimate | ReferenceFailure
@@ -132,6 +141,14 @@ def failed_reference(task: Task) -> ReferenceFailure | None:
     return kept if isinstance(kept, ReferenceFailure) else None
 
 
+def forget_failures() -> None:
+    """Forget the references that failed in this process (:func:`failed_reference`): a new
+    sweep runs them again, as a failure is never cached (what it failed on may be fixed);
+    their maps are kept."""
+    for key in [k for k, v in _REFERENCES.items() if isinstance(v, ReferenceFailure)]:
+        del _REFERENCES[key]
+
+
 def self_scored_arms(experiments: Sequence[Experiment]) -> set[tuple[str, str]]:
     """(experiment, label) of each arm of the method and options of its experiment's
     reference (:func:`same_method`), whatever its checkpoint cadence."""
@@ -145,7 +162,11 @@ def self_scored(result: Mapping[str, Any], alike: Collection[tuple[str, str]]) -
     without truth: ``"itself"``, the run was the reference's (``scored_against``
     ``"itself (...)"``); ``"method"``, an arm of ``alike`` (:func:`self_scored_arms`: the
     reference's method and options at another checkpoint cadence) scored against the
-    reference's map, the same map but for the cadence; ``""``, neither (a score)."""
+    reference's map, the same map but for the cadence; ``""``, neither (a score), or a run
+    that failed (no map, no score: h73; it was marked ``"itself"``, and the figures' titles
+    said its curve was left out as scored against its own map)."""
+    if not result.get("ok", True):
+        return ""
     if isinstance(result.get("self_scored"), str) and result["self_scored"]:
         return result["self_scored"]
     against = str(result.get("scored_against", ""))
@@ -274,7 +295,6 @@ class CheckpointScorer:
 
 
 __all__ = ["CheckpointScorer", "MAX_REFERENCES", "ReferenceFailure", "UNSCORED_KEYS",
-           "bearing_rms", "failed_reference", "keep_reference", "mark_self_scored",
-           "reference_map", "run_arm", "runs_as_reference", "same_method", "scored_against",
-           "scores_left_out",
-           "self_scored", "self_scored_arms"]
+           "bearing_rms", "failed_reference", "forget_failures", "keep_reference",
+           "mark_self_scored", "reference_map", "run_arm", "runs_as_reference", "same_method",
+           "scored_against", "scores_left_out", "self_scored", "self_scored_arms"]
