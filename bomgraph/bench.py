@@ -518,19 +518,28 @@ def run_file(stream_path: str | os.PathLike[str], method: str,
             raise ConfigError(f"{os.fspath(stream_path)}: method {method!r} reads the ground "
                               f"truth, and this stream has none (no 'truth' in its header)")
         mapper = create_mapper(method, reader.header, truth=reader.truth, **dict(options or {}))
-        steps: Iterable[Step] = reader if progress is None else _reporting(reader, progress)
         _log.info("running %s on %s", method, stream_path)
         if out is None:
+            steps: Iterable[Step] = reader if progress is None else _reporting(reader, progress)
             result = run(mapper, steps, checkpoint_every=checkpoint_every, method=method)
-        else:
-            from .estimate_file import EstimateWriter, stream_file_identity
+        else:  # the stream read once, its identity (the header's) hashed as it is read
+            from .estimate_file import EstimateWriter
+            from .stream_identity import StreamHasher
 
-            writer = stack.enter_context(EstimateWriter(
-                out, method, stream=stream_file_identity(stream_path), options=options,
-                checkpoint_every=checkpoint_every))
-            result = run(mapper, steps, checkpoint_every=checkpoint_every, method=method,
-                         on_checkpoint=writer.add, keep_checkpoints=False)
-            writer.finish(result)
+            hasher = StreamHasher()
+            steps = hasher.through(reader)
+            try:
+                writer = stack.enter_context(EstimateWriter(
+                    out, method, stream=hasher, options=options,
+                    checkpoint_every=checkpoint_every))
+                result = run(mapper, steps if progress is None else _reporting(steps, progress),
+                             checkpoint_every=checkpoint_every, method=method,
+                             on_checkpoint=writer.add, keep_checkpoints=False)
+                writer.finish(result)
+            except Exception as exc:  # a bad step anywhere in the stream is refused first,
+                if not isinstance(exc, StreamFormatError):  # as when it was read for its
+                    _refuse_a_bad_stream(stream_path)      # identity before the run
+                raise
     _log.info("%s: %d checkpoints, %d landmarks at t = %d, %.3f s", method,
               len(checkpoint_times(result.checkpoints[-1].t + 1, checkpoint_every)),
               len(result.final), result.checkpoints[-1].t, result.total_s)
@@ -545,6 +554,15 @@ def run_file(stream_path: str | os.PathLike[str], method: str,
         _log.warning("%s: the final solve did not converge (%s)", method,
                      result.final.info.get("stop", "see the estimate's info"))
     return result
+
+
+def _refuse_a_bad_stream(stream_path: str | os.PathLike[str]) -> None:
+    from .stream_identity import stream_file_identity
+
+    try:
+        stream_file_identity(stream_path)
+    except StreamFormatError as exc:
+        raise exc from None
 
 
 def _reporting(steps: Iterable[Step], progress: Callable[[int], None]) -> Iterator[Step]:

@@ -9,7 +9,7 @@ import hashlib
 import json
 import os
 from dataclasses import dataclass
-from typing import Any, Iterable
+from typing import Any, Iterable, Iterator
 
 from .checks import is_integer
 from .errors import ConfigError
@@ -71,6 +71,12 @@ class StreamHasher:
 
         self._h.update((json.dumps(step_to_json(step), allow_nan=False) + "\n").encode("utf-8"))
         self.n += 1
+
+    def through(self, steps: Iterable[Step]) -> Iterator[Step]:
+        """The steps, each added as it is passed on (hashed as a run reads them)."""
+        for st in steps:
+            self.add(st)
+            yield st
 
     @property
     def identity(self) -> StreamIdentity:
