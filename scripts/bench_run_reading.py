@@ -41,6 +41,10 @@ _USAGE = ("import resource, subprocess, sys\n"
 _TIMINGS = re.compile(rb'"estimate_s":[^,}]*|"timing_s":\{[^}]*\}')
 
 
+#: the children's working directory: not a tree (``python -c`` imports from it first)
+_CWD = os.path.dirname(os.path.abspath(os.sep))
+
+
 def _env(tree: str) -> dict[str, str]:
     return {**os.environ, "PYTHONPATH": tree, "OMP_NUM_THREADS": "1"}
 
@@ -58,8 +62,8 @@ def without_timings(path: str) -> bytes:
 def measure(tree: str, stream: str, method: str, out: str, every: int) -> dict[str, Any]:
     argv = _bomgraph("run", stream, "--method", method, "--out", out,
                      "--checkpoint-every", str(every))
-    text = subprocess.run([sys.executable, "-c", _USAGE, *argv], env=_env(tree), check=True,
-                          capture_output=True, text=True).stdout
+    text = subprocess.run([sys.executable, "-c", _USAGE, *argv], env=_env(tree), cwd=_CWD,
+                          check=True, capture_output=True, text=True).stdout
     cpu, rss = text.split()[-2:]
     return {"tree": tree, "method": method, "stream": stream, "cpu_s": float(cpu),
             "peak_kb": int(rss)}
@@ -98,7 +102,8 @@ def main(argv: list[str] | None = None) -> int:
     trees = [str(Path(t).resolve()) for t in args.trees]
     for tree in trees:
         got = subprocess.run([sys.executable, "-c", "import bomgraph; print(bomgraph.__file__)"],
-                             env=_env(tree), check=True, capture_output=True, text=True).stdout
+                             env=_env(tree), cwd=_CWD, check=True, capture_output=True,
+                             text=True).stdout
         if not got.startswith(tree + os.sep):
             raise SystemExit(f"PYTHONPATH={tree} imports {got.strip()}: not a bomgraph tree?")
     rows: list[dict[str, Any]] = []
@@ -109,7 +114,7 @@ def main(argv: list[str] | None = None) -> int:
             stream = os.path.join(where, f"s{steps}.jsonl")
             if not os.path.exists(stream):
                 subprocess.run(_bomgraph("simulate", "--out", stream, "--steps", str(steps),
-                                         "--seed", "1"), env=_env(trees[0]), check=True,
+                                         "--seed", "1"), env=_env(trees[0]), cwd=_CWD, check=True,
                                stdout=subprocess.DEVNULL)
             for method in args.methods:
                 for rep in range(args.reps):
