@@ -31,7 +31,7 @@ import numpy as np
 from .checks import instance, is_integer
 from .errors import (ConfigError, StreamFormatError, TooFewLandmarksError,
                      UnknownMethodError)
-from .estimate_file import stream_identity, write_estimate
+from .estimate_file import write_estimate
 from .evaluate import score_estimate
 from .experiments import Experiment, SimSource, Task
 from .jsonio import jsonable
@@ -47,6 +47,7 @@ from .run_scoring import (CheckpointScorer, keep_reference, reference_map, run_a
                           runs_as_reference)
 from .stream import Step, Stream, Truth
 from .stream_file import StreamReader, count_steps  # re-exported: bench.count_steps
+from .stream_identity import identity_of_stream
 from .sweep import scheduler_address_problem
 
 #: Bump to invalidate every cached result (the code fingerprint covers code changes).
@@ -225,7 +226,7 @@ def _estimate_text(task: Task, stream: Stream, result: RunResult) -> str:
     with tempfile.TemporaryDirectory(prefix="bomgraph-est-") as d:
         path = os.path.join(d, "final.est")
         write_estimate(replace(result, method=task.arm.method), path,
-                       stream=stream_identity(stream.steps),
+                       stream=identity_of_stream(stream),
                        options=dict(task.arm.options),
                        checkpoint_every=task.arm.checkpoint_every or task.checkpoint_every)
         with open(path, encoding="utf-8") as fh:

@@ -143,3 +143,51 @@ def test_a_bad_line_after_a_method_failure_is_still_what_is_refused(
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and f"{bad}, line 82" in err[0] and "h71 fails" not in err[0], err
     assert not est.exists() and not [p for p in os.listdir(tmp_path) if "partial" in p]
+
+
+def test_compare_hashes_a_stream_once_for_all_its_estimates_and_its_cache_is_hit(
+        stream: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+        capsys: pytest.CaptureFixture) -> None:
+    """compare reads a stream file once for its arms (kept), but hashed its steps again for
+    each arm's estimate file: fails before h71 (162 steps hashed for 2 arms of 81 steps).
+    The cache keys are not touched: the second compare takes both runs from the cache."""
+    hashed: list[int] = []
+    add = StreamHasher.add
+
+    def counted(self, step):
+        hashed.append(1)
+        return add(self, step)
+
+    monkeypatch.setattr(StreamHasher, "add", counted)
+    out = tmp_path / "cmp"
+    argv = ["compare", "--streams", str(stream), "--methods", "triangulate,stmds-smacof",
+            "--jobs", "1", "--no-figures", "--no-progress", "--estimates", "--out", str(out)]
+    assert main(argv) == 0
+    assert len(hashed) == 81
+    monkeypatch.undo()
+    files = sorted(out.glob("estimates/*/*/*.est"))
+    assert len(files) == 2
+    first = [f.read_bytes() for f in files]
+    assert all(read_estimate(f).stream == stream_file_identity(stream) for f in files)
+    capsys.readouterr()
+    assert main(argv) == 0
+    assert "(2 from the cache)" in capsys.readouterr().out
+    assert [f.read_bytes() for f in files] == first
+
+
+def test_identity_of_stream_is_stream_identity_kept_while_the_stream_lives(stream: Path) -> None:
+    import gc
+
+    from bomgraph import stream_identity as si
+    from bomgraph.errors import ConfigError
+
+    s = read_stream(stream)
+    assert si.identity_of_stream(s) == stream_identity(s.steps) == stream_file_identity(stream)
+    assert si.identity_of_stream(s) is si.identity_of_stream(s)
+    key = id(s)
+    assert key in si._OF_STREAM
+    del s
+    gc.collect()
+    assert key not in si._OF_STREAM
+    with pytest.raises(ConfigError, match="must be a Stream, got tuple"):
+        si.identity_of_stream(())
