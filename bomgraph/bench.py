@@ -33,7 +33,7 @@ import numpy as np
 from .checks import instance, is_integer
 from .errors import (ConfigError, StreamFormatError, TooFewLandmarksError,
                      UnknownMethodError)
-from .estimate_file import stream_identity, write_estimate
+from .estimate_file import write_estimate
 from .evaluate import score_estimate
 from .experiments import Experiment, SimSource, Task
 from .jsonio import jsonable
@@ -49,6 +49,7 @@ from .run_scoring import (CheckpointScorer, ReferenceFailure, failed_reference, 
                           keep_reference, reference_map, run_arm, runs_as_reference)
 from .stream import Step, Stream, Truth
 from .stream_file import StreamReader, count_steps  # re-exported: bench.count_steps
+from .stream_identity import identity_of_stream
 from .sweep import scheduler_address_problem
 
 #: Bump to invalidate every cached result (the code fingerprint covers code changes).
@@ -244,7 +245,7 @@ def _estimate_text(task: Task, stream: Stream, result: RunResult) -> str:
     with tempfile.TemporaryDirectory(prefix="bomgraph-est-") as d:
         path = os.path.join(d, "final.est")
         write_estimate(replace(result, method=task.arm.method), path,
-                       stream=stream_identity(stream.steps),
+                       stream=identity_of_stream(stream),
                        options=dict(task.arm.options),
                        checkpoint_every=task.arm.checkpoint_every or task.checkpoint_every)
         with open(path, encoding="utf-8") as fh:
@@ -548,19 +549,28 @@ def run_file(stream_path: str | os.PathLike[str], method: str,
             raise ConfigError(f"{os.fspath(stream_path)}: method {method!r} reads the ground "
                               f"truth, and this stream has none (no 'truth' in its header)")
         mapper = create_mapper(method, reader.header, truth=reader.truth, **dict(options or {}))
-        steps: Iterable[Step] = reader if progress is None else _reporting(reader, progress)
         _log.info("running %s on %s", method, stream_path)
         if out is None:
+            steps: Iterable[Step] = reader if progress is None else _reporting(reader, progress)
             result = run(mapper, steps, checkpoint_every=checkpoint_every, method=method)
-        else:
-            from .estimate_file import EstimateWriter, stream_file_identity
+        else:  # the stream read once, its identity (the header's) hashed as it is read
+            from .estimate_file import EstimateWriter
+            from .stream_identity import StreamHasher
 
-            writer = stack.enter_context(EstimateWriter(
-                out, method, stream=stream_file_identity(stream_path), options=options,
-                checkpoint_every=checkpoint_every))
-            result = run(mapper, steps, checkpoint_every=checkpoint_every, method=method,
-                         on_checkpoint=writer.add, keep_checkpoints=False)
-            writer.finish(result)
+            hasher = StreamHasher()
+            steps = hasher.through(reader)
+            try:
+                writer = stack.enter_context(EstimateWriter(
+                    out, method, stream=hasher, options=options,
+                    checkpoint_every=checkpoint_every))
+                result = run(mapper, steps if progress is None else _reporting(steps, progress),
+                             checkpoint_every=checkpoint_every, method=method,
+                             on_checkpoint=writer.add, keep_checkpoints=False)
+                writer.finish(result)
+            except Exception as exc:  # a bad step anywhere in the stream is refused first,
+                if not isinstance(exc, StreamFormatError):  # as when it was read for its
+                    _refuse_a_bad_stream(stream_path)      # identity before the run
+                raise
     _log.info("%s: %d checkpoints, %d landmarks at t = %d, %.3f s", method,
               len(checkpoint_times(result.checkpoints[-1].t + 1, checkpoint_every)),
               len(result.final), result.checkpoints[-1].t, result.total_s)
@@ -575,6 +585,15 @@ def run_file(stream_path: str | os.PathLike[str], method: str,
         _log.warning("%s: the final solve did not converge (%s)", method,
                      result.final.info.get("stop", "see the estimate's info"))
     return result
+
+
+def _refuse_a_bad_stream(stream_path: str | os.PathLike[str]) -> None:
+    from .stream_identity import stream_file_identity
+
+    try:
+        stream_file_identity(stream_path)
+    except StreamFormatError as exc:
+        raise exc from None
 
 
 def _reporting(steps: Iterable[Step], progress: Callable[[int], None]) -> Iterator[Step]:

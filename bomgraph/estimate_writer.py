@@ -12,10 +12,13 @@ that are not numbers), naming the argument: a file ``bomgraph run`` writes is on
 
 from __future__ import annotations
 
+import io
 import json
 import math
 import os
+import shutil
 import signal
+import tempfile
 import threading
 from typing import IO, Any, Mapping
 
@@ -26,7 +29,7 @@ from .errors import ConfigError
 from .jsonio import jsonable, options_to_json
 from .mapper import Checkpoint, MapEstimate, RunResult
 from .stdio import AtomicOutput, OutputPathError
-from .stream_identity import StreamIdentity
+from .stream_identity import StreamHasher, StreamIdentity
 
 
 ESTIMATE_FORMAT = "bomgraph-estimate"
@@ -92,25 +95,35 @@ class EstimateWriter:
     (:class:`bomgraph.stdio.AtomicOutput`: links followed, devices and FIFOs written
     directly). Memory: one checkpoint is held back (the last one is written with its whole
     trajectory).
+
+    ``stream`` may be a :class:`~bomgraph.stream_identity.StreamHasher` that the steps are
+    added to as the run reads them (``bomgraph run`` reads the stream once): the header,
+    which names the stream, is then known at :meth:`finish` only, so the checkpoints go to an
+    unnamed temporary file beside the target first and are copied after the header (the same
+    bytes as with the identity given at the start).
     """
 
     def __init__(self, path: str | os.PathLike[str], method: str, *,
-                 stream: StreamIdentity | None = None,
+                 stream: StreamIdentity | StreamHasher | None = None,
                  options: Mapping[str, Any] | None = None,
                  checkpoint_every: int | None = None) -> None:
         self.path = file_name(path, "--out", OutputPathError)
         _check_header(method, stream, options)
         self._header: dict[str, Any] = {"format": ESTIMATE_FORMAT,
                                         "version": ESTIMATE_VERSION, "method": str(method)}
-        if stream is not None:
+        self._hasher = stream if isinstance(stream, StreamHasher) else None
+        if isinstance(stream, StreamIdentity):
             self._header["stream"] = stream.as_dict()
+        elif self._hasher is not None:  # its place in the header, filled in by finish()
+            self._header["stream"] = None
         if options:
             self._header["options"] = jsonable(options_to_json(dict(options)))
         if checkpoint_every is not None:
             self._header["checkpoint_every"] = integer(
                 checkpoint_every, "estimate file: checkpoint_every", ConfigError, minimum=1)
-        self._fh: IO[str] | None = None
+        self._fh: IO[str] | None = None  # where the checkpoints go
         self._out: AtomicOutput | None = None
+        self._body: IO[str] | None = None  # with a hasher: the checkpoints until finish()
         self._held: Checkpoint | None = None
         self._since_t: int | None = -1
         self._last_t = -1
@@ -121,10 +134,13 @@ class EstimateWriter:
         self._out = AtomicOutput(self.path)
         try:  # __exit__ does not run when __enter__ raises
             self._fh = self._out.open()
+            if self._hasher is not None:
+                self._body = self._fh = _body_file(self._out)
             if (threading.current_thread() is threading.main_thread()
                     and signal.getsignal(signal.SIGTERM) == signal.SIG_DFL):
                 self._old_handler = signal.signal(signal.SIGTERM, _raise_exit)
-            self._fh.write(_dumps(self._header))
+            if self._hasher is None:
+                self._fh.write(_dumps(self._header))
         except BaseException:
             self.__exit__()
             raise
@@ -180,11 +196,21 @@ class EstimateWriter:
                               f"seconds (RunResult.total_s and step_s), got {timing}")
         self._fh.write(_dumps({"timing_s": timing}))
         self._fh = None
+        if self._body is not None:  # the header, now that the stream is known, then the rest
+            self._header["stream"] = self._hasher.identity.as_dict()
+            out = self._out.fh
+            out.write(_dumps(self._header))
+            out.flush()
+            self._body.flush()
+            self._body.buffer.seek(0)  # bytes to bytes: the text is UTF-8 either way
+            shutil.copyfileobj(self._body.buffer, out.buffer, 1 << 20)
+            self._close_body()
         self._out.commit()
 
     def __exit__(self, *exc: object) -> None:
         try:
             self._fh = None
+            self._close_body()
             if self._out is not None:
                 self._out.abort()
         finally:
@@ -193,16 +219,33 @@ class EstimateWriter:
                 self._old_handler = None
 
 
+    def _close_body(self) -> None:
+        if self._body is not None:
+            body, self._body = self._body, None
+            body.close()
+
+
+def _body_file(out: AtomicOutput) -> IO[str]:
+    """An unnamed temporary file (gone when closed, or when the process dies) beside the
+    target's temporary file, or in the temporary directory for a device or a FIFO."""
+    where = None if out.direct else os.path.dirname(out.path) or "."
+    try:
+        raw = tempfile.TemporaryFile(dir=where)
+    except OSError:  # a folder that takes the target but no second file: the default one
+        raw = tempfile.TemporaryFile()
+    return io.TextIOWrapper(raw, encoding="utf-8", newline="\n")
+
+
 def _check_header(method: Any, stream: Any, options: Any) -> None:
     """Refuse a header the file cannot hold as given (naming the argument)."""
     if not isinstance(method, str):
         raise ConfigError(f"estimate file: method must be the method's name (a str), got "
                           f"{type(method).__name__} {method!r:.40}")
-    if stream is not None and not isinstance(stream, StreamIdentity):
+    if stream is not None and not isinstance(stream, (StreamIdentity, StreamHasher)):
         hint = (" (stream_file_identity(path))" if isinstance(stream, (str, os.PathLike)) else
                 " (stream_identity(stream.steps))" if hasattr(stream, "steps") else "")
-        raise ConfigError(f"estimate file: stream must be a StreamIdentity or None, got "
-                          f"{type(stream).__name__}{hint}")
+        raise ConfigError(f"estimate file: stream must be a StreamIdentity, a StreamHasher or "
+                          f"None, got {type(stream).__name__}{hint}")
     if options is not None and not isinstance(options, Mapping):
         raise ConfigError(f"estimate file: options must be a mapping of option names to "
                           f"values (or None), got {type(options).__name__}")

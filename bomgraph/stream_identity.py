@@ -8,12 +8,13 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import weakref
 from dataclasses import dataclass
-from typing import Any, Iterable
+from typing import Any, Iterable, Iterator
 
 from .checks import is_integer
 from .errors import ConfigError
-from .stream import Step
+from .stream import Step, Stream
 
 
 @dataclass(frozen=True)
@@ -58,6 +59,28 @@ def stream_identity(steps: Iterable[Step]) -> StreamIdentity:
     return hasher.identity
 
 
+#: the identities :func:`identity_of_stream` worked out, by ``id(stream)``: (a weak reference
+#: to the stream, its identity); an entry goes with its stream
+_OF_STREAM: dict[int, tuple["weakref.ref[Stream]", StreamIdentity]] = {}
+
+
+def identity_of_stream(stream: Stream) -> StreamIdentity:
+    """``stream_identity(stream.steps)``, worked out once per :class:`Stream` object: a
+    compare with ``--estimates`` writes one estimate file per arm on the same (kept) stream,
+    and hashing its steps for each cost a third of reading it. A stream cannot change (frozen,
+    its steps a tuple of steps with read-only arrays)."""
+    if not isinstance(stream, Stream):
+        raise ConfigError(f"identity_of_stream(): stream must be a Stream, got "
+                          f"{type(stream).__name__}")
+    key = id(stream)
+    kept = _OF_STREAM.get(key)
+    if kept is not None and kept[0]() is stream:
+        return kept[1]
+    ident = stream_identity(stream.steps)
+    _OF_STREAM[key] = (weakref.ref(stream, lambda _, k=key: _OF_STREAM.pop(k, None)), ident)
+    return ident
+
+
 class StreamHasher:
     """:func:`stream_identity` step by step: :meth:`add` each step in order, then read
     :attr:`identity` (for a reader that does more with the steps than hash them)."""
@@ -72,6 +95,12 @@ class StreamHasher:
         self._h.update((json.dumps(step_to_json(step), allow_nan=False) + "\n").encode("utf-8"))
         self.n += 1
 
+    def through(self, steps: Iterable[Step]) -> Iterator[Step]:
+        """The steps, each added as it is passed on (hashed as a run reads them)."""
+        for st in steps:
+            self.add(st)
+            yield st
+
     @property
     def identity(self) -> StreamIdentity:
         return StreamIdentity(self._h.hexdigest(), self.n)
@@ -85,4 +114,5 @@ def stream_file_identity(path: str | os.PathLike[str]) -> StreamIdentity:
         return stream_identity(reader)
 
 
-__all__ = ["StreamIdentity", "StreamHasher", "stream_identity", "stream_file_identity"]
+__all__ = ["StreamIdentity", "StreamHasher", "stream_identity", "identity_of_stream",
+           "stream_file_identity"]
