@@ -26,7 +26,7 @@ import traceback
 import uuid
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any, Callable, Iterable, Iterator, Mapping, Sequence
+from typing import Any, Callable, Iterator, Mapping, Sequence
 
 import numpy as np
 
@@ -35,10 +35,9 @@ from .errors import (ConfigError, StreamFormatError, TooFewLandmarksError,
                      UnknownMethodError)
 from .estimate_file import write_estimate
 from .evaluate import score_estimate
-from .experiments import Experiment, SimSource, Task
+from .experiments import Task
 from .jsonio import jsonable
-from .mapper import (MapEstimate, RunResult, checkpoint_times, create_mapper,
-                     method_failure_note, method_info, run)
+from .mapper import MapEstimate, RunResult, method_failure_note
 from .method_code import (bomgraph_edited, method_code, new_sweep, noting_runs,
                           refuse_runtime_methods, stale_after_run, stale_here, stale_plugin,
                           uncacheable, warn_sourceless, workers_outdated)
@@ -47,8 +46,9 @@ from .processes import daemonic
 from .result_cache import read_cached, strip_timings, write_cached  # re-exported
 from .run_scoring import (CheckpointScorer, ReferenceFailure, failed_reference, forget_failures,
                           keep_reference, reference_map, run_arm, runs_as_reference)
-from .stream import Step, Stream, Truth
-from .stream_file import StreamReader, count_steps  # re-exported: bench.count_steps
+from .stream import Stream, Truth
+from .file_run import run_example, run_file  # re-exported: bench.run_file, bench.run_example
+from .stream_file import count_steps  # re-exported: bench.count_steps
 from .stream_identity import identity_of_stream
 from .sweep import scheduler_address_problem
 
@@ -512,106 +512,6 @@ def _dispatch(tasks: list[Task], index: list[int], executor: Executor,
         yield from dispatch_dask(run, index, tasks, scheduler=executor.scheduler,
                                  n_local=_local_workers(executor.dask_local, len(tasks)),
                                  failed=failed)
-
-
-def run_file(stream_path: str | os.PathLike[str], method: str,
-             options: Mapping[str, Any] | None = None, *, checkpoint_every: int = 10,
-             allow_truth: bool = False,
-             progress: Callable[[int], None] | None = None,
-             out: str | os.PathLike[str] | None = None) -> RunResult:
-    """Run ``method`` with ``options`` over a stream file, read step by step (single-threaded
-    BLAS, as :func:`run_task`). ``progress(t)`` is called after each step is read.
-
-    With ``out``, the estimate file is written there checkpoint by checkpoint (atomically,
-    with the stream's identity and the options; :class:`bomgraph.estimate_file.EstimateWriter`)
-    and the result keeps only the final checkpoint, so memory stays bounded by one map.
-
-    Raises
-    ------
-    ConfigError
-        The method reads the ground truth (a benchmark bound) and ``allow_truth`` is False.
-    """
-    from threadpoolctl import threadpool_limits
-
-    if options is not None and not isinstance(options, Mapping):
-        raise ConfigError(f"run_file(): options must be a mapping of option names to values "
-                          f"(or None), got {type(options).__name__}")
-    if method_info(method).needs_truth and not allow_truth:
-        raise ConfigError(f"method {method!r} reads the ground truth; it is a benchmark "
-                          f"bound, not a mapper (pass --allow-truth to run it anyway)")
-    if out is not None and os.path.exists(out) and os.path.samefile(out, stream_path):
-        raise ConfigError(f"--out {os.fspath(out)} is the input stream; choose another "
-                          f"file for the estimate")
-    with contextlib.ExitStack() as stack:
-        reader = stack.enter_context(StreamReader(stream_path))
-        stack.enter_context(threadpool_limits(limits=1))
-        if reader.truth is None and method_info(method).needs_truth:
-            raise ConfigError(f"{os.fspath(stream_path)}: method {method!r} reads the ground "
-                              f"truth, and this stream has none (no 'truth' in its header)")
-        mapper = create_mapper(method, reader.header, truth=reader.truth, **dict(options or {}))
-        _log.info("running %s on %s", method, stream_path)
-        if out is None:
-            steps: Iterable[Step] = reader if progress is None else _reporting(reader, progress)
-            result = run(mapper, steps, checkpoint_every=checkpoint_every, method=method)
-        else:  # the stream read once, its identity (the header's) hashed as it is read
-            from .estimate_file import EstimateWriter
-            from .stream_identity import StreamHasher
-
-            hasher = StreamHasher()
-            steps = hasher.through(reader)
-            try:
-                writer = stack.enter_context(EstimateWriter(
-                    out, method, stream=hasher, options=options,
-                    checkpoint_every=checkpoint_every))
-                result = run(mapper, steps if progress is None else _reporting(steps, progress),
-                             checkpoint_every=checkpoint_every, method=method,
-                             on_checkpoint=writer.add, keep_checkpoints=False)
-                writer.finish(result)
-            except Exception as exc:  # a bad step anywhere in the stream is refused first,
-                if not isinstance(exc, StreamFormatError):  # as when it was read for its
-                    _refuse_a_bad_stream(stream_path)      # identity before the run
-                raise
-    _log.info("%s: %d checkpoints, %d landmarks at t = %d, %.3f s", method,
-              len(checkpoint_times(result.checkpoints[-1].t + 1, checkpoint_every)),
-              len(result.final), result.checkpoints[-1].t, result.total_s)
-    if len(result.final) == 0:
-        _log.warning("%s mapped no landmark by t = %d (too few steps or too little parallax?)",
-                     method, result.checkpoints[-1].t)
-    failures = result.final.info.get("update_failures")
-    if failures:
-        _log.warning("%s: %d solver failure(s) recovered from (last: %s); see the estimate's "
-                     "info", method, failures, result.final.info.get("last_failure", "?"))
-    if result.final.info.get("converged") is False:
-        _log.warning("%s: the final solve did not converge (%s)", method,
-                     result.final.info.get("stop", "see the estimate's info"))
-    return result
-
-
-def _refuse_a_bad_stream(stream_path: str | os.PathLike[str]) -> None:
-    from .stream_identity import stream_file_identity
-
-    try:
-        stream_file_identity(stream_path)
-    except StreamFormatError as exc:
-        raise exc from None
-
-
-def _reporting(steps: Iterable[Step], progress: Callable[[int], None]) -> Iterator[Step]:
-    for st in steps:
-        yield st
-        progress(st.t)
-
-
-def run_example(method: str, experiment: Experiment, *, run_index: int = 0,
-                t: int | None = None) -> tuple[Stream, MapEstimate]:
-    """``method`` (default options) on run ``run_index`` of a simulated experiment, without
-    priors: the stream and the estimate at checkpoint ``t`` (the last one by default). For the
-    example map of the comparison (paper fig. 3 and 5)."""
-    stream = SimSource(experiment.runs()[run_index], experiment.sim).stream()
-    needs_truth = method_info(method).needs_truth
-    mapper = create_mapper(method, stream.header, truth=stream.truth if needs_truth else None)
-    res = run(mapper, stream.steps, checkpoint_every=experiment.checkpoint_every)
-    return stream, (res.final if t is None else res.at(t))
 
 
 __all__ = ["Executor", "run_task", "execute", "execute_counted", "is_cached", "which_cached",
