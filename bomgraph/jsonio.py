@@ -248,27 +248,30 @@ def line_of_key(text: str, key: str | None) -> int:
     rest = key or ""
     top_empty = key == ""                 # the top-level key "" (the root is never named "")
     at_root = True                        # a root key is not after a "." (".x" is key ".x")
-    while rest or top_empty:
-        top_empty = False
-        if data.startswith(b"[", pos) and (m := _INDEX.match(rest)):
-            k = int(m[1])
-            commas = doc.separators(pos)
-            if k > len(commas):
+    try:   # the text is parsed JSON when the estimate reader asks; if not, a best guess
+        while rest or top_empty:
+            top_empty = False
+            if data.startswith(b"[", pos) and (m := _INDEX.match(rest)):
+                k = int(m[1])
+                commas = doc.separators(pos)
+                if k > len(commas):
+                    break
+                pos = _WSB.match(data, (pos if k == 0 else int(commas[k - 1])) + 1).end()
+                rest, at_root = rest[m.end():], False
+                continue
+            if not data.startswith(b"{", pos):
                 break
-            pos = _WSB.match(data, (pos if k == 0 else int(commas[k - 1])) + 1).end()
-            rest, at_root = rest[m.end():], False
-            continue
-        if not data.startswith(b"{", pos):
-            break
-        if not at_root:
-            rest = rest.removeprefix(".")
-        at_root = False
-        found = doc.last_longest_key(pos, rest)
-        if found is None:
-            break
-        name, at, value = found
-        rest = rest[len(name):]
-        pos = value if rest else at
+            if not at_root:
+                rest = rest.removeprefix(".")
+            at_root = False
+            found = doc.last_longest_key(pos, rest)
+            if found is None:
+                break
+            name, at, value = found
+            rest = rest[len(name):]
+            pos = value if rest else at
+    except (ValueError, IndexError):   # not JSON here (a string's quotes unpaired,
+        pass                           # a raw control character): the line reached
     return data.count(b"\n", 0, pos) + 1
 
 

@@ -137,3 +137,14 @@ def test_line_of_key_of_a_path_as_deep_as_json_parses() -> None:
     assert line_of_key(text, "options" + ".a" * 499 + ".b") == 500 + 1
     assert line_of_key(text, "options" + ".a" * 499 + ".c.a") == 500 + 1   # leaves the data
     assert line_of_key(text, "landmarks[1999][1]") == text.count("\n") + 1
+
+
+def test_line_of_key_of_a_text_not_json_gives_a_line() -> None:
+    """As the docstring says (a best guess beyond where the text is not JSON) and as before
+    h62, the line reached so far: h70 found the vectorised walk raising JSONDecodeError on a
+    key holding a raw newline, and IndexError on a bracket its unpaired quotes put
+    "inside" a string (found by fuzzing broken texts against the pre-h62 walk)."""
+    text = '{"a": 1,\n "\n": 2,\n "d": 3}'
+    assert line_of_key(text, "d") == 1
+    text = '{\n "[.[":\n[ ],\n "0.":\n{\n  """ [ ] ],\n  "":\n[],\n  "0.":"x"\n}\n}'
+    assert line_of_key(text, "0..[0]") == 6
