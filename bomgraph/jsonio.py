@@ -248,31 +248,35 @@ def line_of_key(text: str, key: str | None) -> int:
     rest = key or ""
     top_empty = key == ""                 # the top-level key "" (the root is never named "")
     at_root = True                        # a root key is not after a "." (".x" is key ".x")
-    while rest or top_empty:
-        top_empty = False
-        if data.startswith(b"[", pos) and (m := _INDEX.match(rest)):
-            k = int(m[1])
-            commas = doc.separators(pos)
-            if k > len(commas):
+    try:   # the text is parsed JSON when the estimate reader asks; if not, a best guess
+        while rest or top_empty:
+            top_empty = False
+            if data.startswith(b"[", pos) and (m := _INDEX.match(rest)):
+                k = int(m[1])
+                commas = doc.separators(pos)
+                if k > len(commas):
+                    break
+                pos = _WSB.match(data, (pos if k == 0 else int(commas[k - 1])) + 1).end()
+                rest, at_root = rest[m.end():], False
+                continue
+            if not data.startswith(b"{", pos):
                 break
-            pos = _WSB.match(data, (pos if k == 0 else int(commas[k - 1])) + 1).end()
-            rest, at_root = rest[m.end():], False
-            continue
-        if not data.startswith(b"{", pos):
-            break
-        if not at_root:
-            rest = rest.removeprefix(".")
-        at_root = False
-        found = doc.last_longest_key(pos, rest)
-        if found is None:
-            break
-        name, at, value = found
-        rest = rest[len(name):]
-        pos = value if rest else at
+            if not at_root:
+                rest = rest.removeprefix(".")
+            at_root = False
+            found = doc.last_longest_key(pos, rest)
+            if found is None:
+                break
+            name, at, value = found
+            rest = rest[len(name):]
+            pos = value if rest else at
+    except (ValueError, IndexError):   # not JSON here (a string's quotes unpaired,
+        pass                           # a raw control character): the line reached
     return data.count(b"\n", 0, pos) + 1
 
 
 _WSB = re.compile(rb"[ \t\n\r]*")
+_PATH_CUT = re.compile(rb"[.\[]")
 _INDEX = re.compile(r"\[(\d+)\]")
 _OPEN, _CLOSE, _COMMA, _QUOTE, _BACKSLASH = b"[{", b"]}", ord(","), ord('"'), ord("\\")
 
@@ -305,9 +309,14 @@ class _Structure:
         closing one (the end of the marks if it is not closed), and its depth."""
         i = int(np.searchsorted(self.where, pos))
         d = int(self.depth[i])
-        below = self.depth[i + 1:] < d
-        j = i + 1 + int(np.argmax(below)) if below.any() else len(self.where)
-        return i, j, d
+        lo, width, n = i + 1, 64, len(self.where)
+        while lo < n:   # in growing windows: a path's containers are walked in their length
+            hi = min(n, lo + width)               # (not to the end of the text at each level)
+            below = np.flatnonzero(self.depth[lo:hi] < d)
+            if below.size:
+                return i, lo + int(below[0]), d
+            lo, width = hi, width * 4
+        return i, n, d
 
     def separators(self, pos: int) -> np.ndarray:
         """The positions of the commas between the values of the container opened at
@@ -329,15 +338,19 @@ class _Structure:
         k = k[k + 1 < len(self.quotes)]
         starts, ends = self.quotes[k], self.quotes[k + 1]
         starts, ends = starts[starts < close], ends[starts < close]
-        names = {rest} | {rest[:n] for n, ch in enumerate(rest) if ch in ".["}
-        sizes = [len(n.encode("utf-8", "surrogatepass")) for n in names]
+        # the byte lengths of rest and of its prefixes before a "." or "[", up to the longest
+        # key here (not every prefix: a path n keys deep has n of them, each as long)
+        longest = int((ends - starts).max()) - 1 if len(starts) else 0
+        head = rest[:longest + 1].encode("utf-8", "surrogatepass")
+        sizes = [m.start() for m in _PATH_CUT.finditer(head)] + [len(head)]
         escaped = (np.searchsorted(self.backslashes, ends)
                    > np.searchsorted(self.backslashes, starts))
         best: tuple[str, int, int] | None = None
         for at, end in zip(*(v[np.isin(ends - starts - 1, sizes) | escaped].tolist()
                              for v in (starts, ends))):
             name = scanstring(self.data[at:end + 1].decode("utf-8", "surrogatepass"), 1)[0]
-            if name in names and (best is None or len(name) >= len(best[0])):
+            if rest.startswith(name) and rest[len(name):len(name) + 1] in ("", ".", "[") \
+                    and (best is None or len(name) >= len(best[0])):
                 colon = _WSB.match(self.data, end + 1).end()
                 best = (name, at, _WSB.match(self.data, colon + 1).end())
         return best

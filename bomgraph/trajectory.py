@@ -156,6 +156,8 @@ class ExactSum:
 
     Each value is ``M * 2**(e - 53)`` with an integer ``M`` (``np.frexp``); the ``M`` are
     summed per exponent as integers, exactly, and the total kept as one Python integer.
+    A NaN or an infinity given makes the sum that (NaN for both infinities), as a float sum
+    would; a finite sum beyond the float range reads as an infinity of its sign.
     """
 
     _BIAS = 1073            # frexp's exponent of the smallest subnormal is -1073
@@ -164,9 +166,14 @@ class ExactSum:
 
     def __init__(self) -> None:
         self._total = 0
+        self._special = 0.0     # the float sum of the NaNs and infinities given
 
     def add(self, values: np.ndarray) -> None:
         v = np.asarray(values, float).ravel()
+        finite = np.isfinite(v)
+        if not finite.all():    # frexp gives no integer mantissa for these
+            self._special += float(np.sum(v[~finite]))
+            v = v[finite]
         for start in range(0, v.size, self._CHUNK):
             m, e = np.frexp(v[start:start + self._CHUNK])
             big = (m * 2.0 ** 53).astype(np.int64)
@@ -179,7 +186,12 @@ class ExactSum:
     @property
     def value(self) -> float:
         """The sum, correctly rounded (Python's integer division is)."""
-        return self._total / self._ULP
+        if self._special != 0.0 or math.isnan(self._special):
+            return self._special
+        try:
+            return self._total / self._ULP
+        except OverflowError:   # beyond the largest float: as a float sum would round it
+            return math.inf if self._total > 0 else -math.inf
 
 
 class BearingResidualSums:

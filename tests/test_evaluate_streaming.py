@@ -94,3 +94,22 @@ def test_evaluate_keeps_no_more_steps_than_a_batch(files, monkeypatch, bare) -> 
             b = fe.bearing_consistency(c.estimate, steps[: c.t + 1])
             assert got["checkpoints"]["bearing_rms_rad"][k] == b.rms_rad
             assert got["checkpoints"]["n_bearings"][k] == b.n
+
+
+def test_exact_sum_of_nonfinite_or_overflowing_values_is_not_a_finite_number() -> None:
+    """h70: a NaN or infinity went through frexp's NaN mantissa cast to int64 and gave a
+    finite garbage sum (-1023.0 for [nan, 1.0]); a sum past the float range raised
+    OverflowError. They are NaN and infinities, as numpy's sum (the old RMS) gives them."""
+    def total(*batches: list[float]) -> float:
+        s = ExactSum()
+        for b in batches:
+            s.add(np.array(b))
+        return s.value
+    with np.errstate(invalid="raise"):   # no cast of a NaN either
+        assert math.isnan(total([math.nan, 1.0]))
+        assert math.isnan(total([1.0], [math.inf], [-math.inf, 2.0]))
+        assert total([1.0, math.inf], [3.0]) == math.inf
+        assert total([-math.inf], [1e308]) == -math.inf
+    assert total([1.7e308, 1.7e308]) == math.inf
+    assert total([-1.7e308], [-1.7e308, 1.0]) == -math.inf
+    assert total([1.7e308, 1.7e308, -1.7e308]) == 1.7e308   # exact: no intermediate overflow
