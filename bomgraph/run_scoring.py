@@ -221,7 +221,8 @@ def bearing_rms(estimate: MapEstimate, stream: Stream) -> float:
     if estimate.poses is None or not len(estimate):
         return math.nan
     sums = BearingResidualSums(estimate.landmark_ids, estimate.landmarks_xy, estimate.pose_t,
-                               estimate.poses)   # summed exactly, as ``evaluate`` sums them
+                               estimate.poses,   # summed exactly, as ``evaluate`` sums them
+                               mirrored=False)
     sums.add_steps(stream.steps)
     return sums.rms_rad
 

@@ -198,13 +198,16 @@ class BearingResidualSums:
     """:func:`bearing_residuals` of a map and trajectory summed as the bearings are read, for
     the RMS without holding them: feed the stream's bearings in order with :meth:`add`
     (those after step ``until_t``, if given, are left out). The RMS values use the exact sum
-    of the squares (:class:`ExactSum`), the same however the bearings were batched."""
+    of the squares (:class:`ExactSum`), the same however the bearings were batched. With
+    ``mirrored=False`` the mirrored sums are not kept (:attr:`mirrored_rms_rad` is NaN)."""
 
     def __init__(self, landmark_ids: np.ndarray, landmarks_xy: np.ndarray, pose_t: np.ndarray,
-                 poses: np.ndarray | None, until_t: int | None = None) -> None:
+                 poses: np.ndarray | None, until_t: int | None = None, *,
+                 mirrored: bool = True) -> None:
         self.until_t = until_t
         self.n = 0
-        self._sq, self._mirrored_sq = ExactSum(), ExactSum()
+        self._sq = ExactSum()
+        self._mirrored_sq = ExactSum() if mirrored else None
         self._covered = (None if poses is None or not len(landmark_ids) or not len(pose_t)
                          else _Covered(landmark_ids, landmarks_xy, pose_t, poses))
 
@@ -220,7 +223,8 @@ class BearingResidualSums:
             brg = bearings_rad[ok]
             self.n += int(ok.sum())
             self._sq.add(angle_residual(brg, pred) ** 2)
-            self._mirrored_sq.add(angle_residual(brg, -pred) ** 2)
+            if self._mirrored_sq is not None:
+                self._mirrored_sq.add(angle_residual(brg, -pred) ** 2)
 
     def add_steps(self, steps: Sequence[Step]) -> None:
         if len(steps):
@@ -232,7 +236,9 @@ class BearingResidualSums:
 
     @property
     def mirrored_rms_rad(self) -> float:
-        return math.sqrt(self._mirrored_sq.value / self.n) if self.n else math.nan
+        if self._mirrored_sq is None or not self.n:
+            return math.nan
+        return math.sqrt(self._mirrored_sq.value / self.n)
 
 
 __all__ = ["PoseErrors", "absolute_pose_errors", "relative_pose_errors", "bearing_residuals",

@@ -113,3 +113,20 @@ def test_exact_sum_of_nonfinite_or_overflowing_values_is_not_a_finite_number() -
     assert total([1.7e308, 1.7e308]) == math.inf
     assert total([-1.7e308], [-1.7e308, 1.0]) == -math.inf
     assert total([1.7e308, 1.7e308, -1.7e308]) == 1.7e308   # exact: no intermediate overflow
+
+
+def test_sums_without_the_mirror_give_the_same_rms_and_no_mirrored_one() -> None:
+    """compare's per-checkpoint bearing RMS keeps no mirrored sums (h70: half its work); the
+    RMS is the same bit for bit."""
+    from bomgraph.sim import SimConfig, simulate
+    from bomgraph.trajectory import BearingResidualSums
+
+    s = simulate(SimConfig(n_steps=40), np.random.default_rng(3))
+    ids, xy = np.asarray(s.truth.landmark_ids), np.asarray(s.truth.landmarks_xy) + 0.01
+    poses = np.asarray(s.truth.poses)
+    both = BearingResidualSums(ids, xy, np.arange(len(poses)), poses)
+    plain = BearingResidualSums(ids, xy, np.arange(len(poses)), poses, mirrored=False)
+    both.add_steps(s.steps)
+    plain.add_steps(s.steps)
+    assert plain.n == both.n > 0 and plain.rms_rad == both.rms_rad
+    assert math.isnan(plain.mirrored_rms_rad) and not math.isnan(both.mirrored_rms_rad)
