@@ -236,6 +236,41 @@ def _unchanged(path: str | os.PathLike[str], entry: Mapping[str, Any]) -> bool:
     return st.st_mtime_ns == entry["mtime_ns"]
 
 
+#: The name :class:`bomgraph.stdio.AtomicOutput` writes ``NAME`` under until it renames it:
+#: ``tempfile.mkstemp(prefix=".NAME.", suffix=".partial")``, 8 characters of tempfile's.
+_TEMP_NAME = r"\.{name}\.[a-z0-9_]{{8}}\.partial"
+
+
+def _inside(root: str, rel: str) -> str | None:
+    """``root/rel`` when it is plainly inside ``root`` (no ``..``, absolute path or link on
+    the way), else None."""
+    plain = os.path.normpath(os.path.join(root, rel))
+    if (not rel or os.path.isabs(rel) or os.path.realpath(plain) != plain
+            or not plain.startswith(root + os.sep)):
+        return None
+    return plain
+
+
+def _compacted(out: Path, entries: Sequence[Mapping[str, Any]]) -> list[Mapping[str, Any]]:
+    """One entry per file still there: the one that proves it as it is (a compare killed
+    between a file's line and its rename listed contents that never took the name), else
+    the last (the file was changed since: refused as such). Entries of files gone prove
+    nothing and go. Every interrupted compare used to copy them all again (h75)."""
+    by_path: dict[str, list[Mapping[str, Any]]] = {}
+    for e in entries:
+        by_path.setdefault(os.path.normpath(e["path"]), []).append(e)
+    kept = []
+    for rel, listed in by_path.items():
+        path = out / rel
+        if not os.path.lexists(path):
+            continue
+        if len(listed) > 1:
+            proving = [e for e in listed if _unchanged(path, e)]
+            listed = proving or listed
+        kept.append(listed[-1])
+    return kept
+
+
 class OutputRecord:
     """This compare's :data:`MANIFEST` in ``out``: :meth:`refuse_foreign` before anything
     runs and again before anything is written, :meth:`begin` just before writing, each file
@@ -284,18 +319,54 @@ class OutputRecord:
                                       f"and replaces nothing outside its folder); {todo}")
             if any(_unchanged(p, e) for e in by_path.get(rel, ())):
                 continue
+            # not listed: never compare's, or changed since and then left out of the list by
+            # a compare that did not write it again (h75: "which compare did not write")
             why = ("which was changed since an earlier compare wrote it" if rel in by_path else
-                   f"which compare did not write (not in {MANIFEST})" if listed or
+                   f"which is not listed as compare's, unchanged, in {self.path}" if listed or
                    os.path.lexists(self.path) else
-                   f"which compare did not write (the folder has no {MANIFEST}: not "
+                   f"which is not listed as compare's (the folder has no {MANIFEST}: not "
                    f"compare's, or an older bomgraph's)")
             raise OutputPathError(f"--out {out}: compare would replace {p}, {why}; {todo}")
 
+    def remove_leftovers(self, paths: Sequence[Path]) -> int:
+        """Remove the temporary files that compares killed while writing (``kill -9``, a
+        power cut) left beside the names compare writes: ``paths`` (this compare's), the
+        manifest's and those it lists, and nothing else (only names exactly of the writers'
+        pattern, :data:`_TEMP_NAME`). Call it holding the folder's lock: then no other
+        compare is writing them. The sweep cache's are left (``execute`` may share a cache
+        folder without the lock). Returns how many were removed (logged too)."""
+        root = os.path.realpath(self.out)
+        listed = [Path(p) for e in _earlier_entries(self.out)
+                  if (p := _inside(root, e["path"])) is not None]
+        names: dict[str, set[str]] = {}  # where the writers put them: beside the real path
+        for p in [self.path, *paths, *listed]:
+            names.setdefault(os.path.realpath(p.parent), set()).add(p.name)
+        removed = 0
+        for folder, wanted in names.items():
+            pattern = re.compile("|".join(_TEMP_NAME.format(name=re.escape(n)) for n in wanted))
+            try:
+                found = [e for e in os.scandir(folder) if pattern.fullmatch(e.name)
+                         and e.is_file(follow_symlinks=False)]
+            except OSError:  # no such folder (yet): nothing left there
+                continue
+            for e in found:
+                try:
+                    os.unlink(e.path)
+                    removed += 1
+                except OSError as exc:
+                    _log.warning("could not remove %s, left by an interrupted compare: %s",
+                                 e.path, exc)
+        if removed:
+            _log.info("removed %d temporary file(s) that interrupted compares left in %s",
+                      removed, self.out)
+        return removed
+
     def begin(self) -> None:
-        """The manifest as a journal: the earlier entries (so an interrupted compare leaves
-        every file of compare's still proved), then each file as it is written."""
+        """The manifest as a journal: the earlier entries that still prove a file
+        (:func:`_compacted`: so an interrupted compare leaves every file of compare's still
+        proved, and the journal does not grow with each one), then each file as written."""
         lines = [json.dumps({"format": _MANIFEST_FORMAT, "version": _VERSION})]
-        lines += [json.dumps(e) for e in _earlier_entries(self.out)]
+        lines += [json.dumps(e) for e in _compacted(self.out, _earlier_entries(self.out))]
         write_text(self.path, "\n".join(lines) + "\n")
 
     def ready(self, path: Path) -> Callable[[str], None]:
@@ -339,11 +410,8 @@ def drop_earlier_outputs(out: Path, written: Sequence[Path],
     root = os.path.realpath(out)
     keep = {i for p in [*written, *input_paths(experiments)] if (i := _file_id(p)) is not None}
     for entry in _earlier_entries(out):
-        rel = entry["path"]
-        plain = os.path.normpath(os.path.join(root, rel))
-        path = Path(plain)
-        if (not rel or os.path.isabs(rel) or os.path.realpath(plain) != plain
-                or not plain.startswith(root + os.sep) or not path.is_file()):
+        plain = _inside(root, entry["path"])
+        if plain is None or not (path := Path(plain)).is_file():
             continue
         if _file_id(path) in keep or not _unchanged(path, entry):
             continue

@@ -359,8 +359,9 @@ def compare(experiments: Sequence[Experiment], out_dir: str | os.PathLike[str], 
     ``paired_reference`` where there is one, else :func:`bomgraph.paired.default_reference`.
 
     Finished runs are cached in ``out_dir/cache`` so an interrupted sweep resumes. A file
-    compare would replace that an earlier compare did not write is refused, before anything
-    runs and again before anything is written (:meth:`OutputRecord.refuse_foreign`).
+    compare would replace that its manifest does not list as an earlier compare's, unchanged
+    since, is refused before anything runs and again before anything is written
+    (:meth:`OutputRecord.refuse_foreign`).
     """
     out = Path(out_dir)
     refs = references_for(experiments, paired_reference)  # a wrong label: before anything runs
@@ -370,6 +371,7 @@ def compare(experiments: Sequence[Experiment], out_dir: str | os.PathLike[str], 
     record.refuse_foreign(planned, [out / "cache"] if use_cache else [])
     make_folder(out)
     with folder_lock(out, "`bomgraph compare`"):
+        record.remove_leftovers(planned)  # of compares killed while writing: none writes now
         return _compare(experiments, out, executor, use_cache, figures, progress, estimates,
                         refs, paired, paired_reference, (record, planned))
 

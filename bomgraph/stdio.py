@@ -13,7 +13,8 @@ the compare results and cache, figures):
   is refused in one line;
 * a regular file (or a new one) is written beside its target under a unique temporary name
   (``.NAME.XXXX.partial``), flushed to disk and renamed into place, so a reader never sees half
-  a file and an interrupted write leaves the old file and no stray file;
+  a file and an interrupted write leaves the old file and no stray file (but ``kill -9``: then
+  the temporary file too; only ``compare``, holding its folder's lock, removes those later);
 * an output that is one of the command's inputs (the same file, through links or hard links
   too) is refused before anything is computed.
 

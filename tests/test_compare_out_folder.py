@@ -68,7 +68,7 @@ def test_every_name_compare_writes_is_refused_when_it_is_a_users(
     (out / name).write_bytes(b"mine")
     (out / "notes.png").write_bytes(b"not a name compare writes")
     chosen, _ = compare_experiments(streams=[str(stream)], methods="triangulate")
-    with pytest.raises(OutputPathError, match=f"{name}, which compare did not write"):
+    with pytest.raises(OutputPathError, match=f"{name}, which is not listed as compare.s"):
         compare(chosen, out, executor=Executor("serial"))
     assert (out / name).read_bytes() == b"mine"
     (out / name).unlink()
@@ -84,7 +84,7 @@ def test_a_users_estimates_and_cache_folders(tmp_path: Path, stream: Path) -> No
     (out / "estimates" / "index.csv").write_text("mine\n")
     (out / "estimates" / "notes.txt").write_text("mine\n")
     chosen, _ = compare_experiments(streams=[str(stream)], methods="triangulate")
-    with pytest.raises(OutputPathError, match="index.csv, which compare did not write"):
+    with pytest.raises(OutputPathError, match="index.csv, which is not listed as compare.s"):
         compare(chosen, out, executor=Executor("serial"), estimates=True)
     compare(chosen, out, executor=Executor("serial"))                 # no estimates: no clash
     (out / "estimates" / "index.csv").rename(out / "estimates" / "my-index.csv")
@@ -213,7 +213,7 @@ def test_the_designed_experiments_figures_too(tmp_path: Path) -> None:
     out = tmp_path / "out"
     out.mkdir()
     (out / "example_map.png").write_bytes(b"mine")
-    with pytest.raises(OutputPathError, match="example_map.png, which compare did not write"):
+    with pytest.raises(OutputPathError, match="example_map.png, which is not listed as compare.s"):
         compare([_exp()], out, executor=Executor("serial"))
     with pytest.raises(OutputPathError, match="example_map.png"):
         report.plan_compare([_exp()], out)
@@ -260,7 +260,7 @@ def test_dry_run_refuses_what_compare_would(tmp_path: Path, stream: Path,
     out.mkdir()
     (out / "streams_s_maps.png").write_bytes(b"mine")
     assert main(_cmd(stream, out, "--dry-run")) == 2
-    assert "streams_s_maps.png, which compare did not write" in capsys.readouterr().err
+    assert "streams_s_maps.png, which is not listed as compare's" in capsys.readouterr().err
     assert main(_cmd(stream, out, "--dry-run", "--no-figures")) == 0
     assert main(_cmd(stream, out, "--no-figures")) == 0
     assert (out / "streams_s_maps.png").read_bytes() == b"mine"
