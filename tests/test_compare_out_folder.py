@@ -14,6 +14,7 @@ from pathlib import Path
 
 import pytest
 
+import _compare_folder
 from bomgraph import report
 from bomgraph.bench import Executor
 from bomgraph.cli import main
@@ -31,16 +32,8 @@ def _exp(name: str = "t") -> Experiment:
                       n_starts=1)
 
 
-@pytest.fixture()
-def stream(tmp_path: Path) -> Path:
-    path = tmp_path / "s.jsonl"
-    assert main(["simulate", "--steps", "30", "--landmarks", "10", "--out", str(path)]) == 0
-    return path
-
-
-def _cmd(stream: Path, out: Path, *more: str) -> list[str]:
-    return ["compare", "--streams", str(stream), "--methods", "triangulate", "--jobs", "1",
-            "--no-progress", "--out", str(out), *more]
+stream = _compare_folder.stream   # the fixture
+_cmd = _compare_folder.compare_cmd
 
 
 def test_a_users_file_named_as_compare_names_its_results_is_refused_before_anything_runs(

@@ -21,13 +21,12 @@ import importlib
 import json
 import logging
 import math
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from bomgraph import mapper, run_scoring
+from bomgraph import run_scoring
 from bomgraph.bench import Executor
 from bomgraph.cli import main
 from bomgraph.evaluate import score_checkpoints
@@ -36,6 +35,8 @@ from bomgraph.mapper import create_mapper, run
 from bomgraph.report import compare
 from bomgraph.sim import SimConfig, simulate
 from bomgraph.stream_file import read_stream, write_stream
+
+from _runtime_method import runtime_method
 
 COUNTED = '''\
 from baselines.triangulate import TriangulateMapper
@@ -66,17 +67,8 @@ def _streams(tmp_path: Path, n: int, n_steps: int = 30) -> list[str]:
 @pytest.fixture
 def counted(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> list:
     """The run-time method ``counted`` (triangulate); its list of runs."""
-    code = tmp_path / "code"
-    code.mkdir()
-    (code / "bomgraph_h63_counted.py").write_text(COUNTED)
-    monkeypatch.syspath_prepend(str(code))
-    monkeypatch.setattr(mapper, "_REGISTRY", dict(mapper._REGISTRY))
-    monkeypatch.setattr(run_scoring, "_REFERENCES", {})
-    mapper.register_method("counted", "bomgraph_h63_counted:Counted")
-    import bomgraph_h63_counted
-
-    yield bomgraph_h63_counted.MADE
-    sys.modules.pop("bomgraph_h63_counted", None)
+    for module in runtime_method(tmp_path, monkeypatch, "counted", "bomgraph_h63_counted", COUNTED, "Counted"):
+        yield module.MADE
 
 
 def _rows(checkpoints: list) -> list[dict]:

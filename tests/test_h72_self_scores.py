@@ -15,13 +15,12 @@ import csv
 import dataclasses
 import json
 import math
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from bomgraph import mapper, run_scoring
+from bomgraph import run_scoring
 from bomgraph.bench import Executor
 from bomgraph.cli import main
 from bomgraph.experiments import compare_experiments
@@ -29,6 +28,8 @@ from bomgraph.figures import _results_data
 from bomgraph.report import compare, error_curves, final_by_run, format_by_run, summarise
 from bomgraph.sim import SimConfig, simulate
 from bomgraph.stream_file import write_stream
+
+from _runtime_method import runtime_method
 
 FAILING = '''\
 from baselines.triangulate import TriangulateMapper
@@ -112,17 +113,8 @@ def test_an_arm_of_the_references_method_at_another_cadence_is_no_score(
 @pytest.fixture
 def failing(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> list:
     """The run-time method ``failing``; its list of runs."""
-    code = tmp_path / "code"
-    code.mkdir()
-    (code / "bomgraph_h72_failing.py").write_text(FAILING)
-    monkeypatch.syspath_prepend(str(code))
-    monkeypatch.setattr(mapper, "_REGISTRY", dict(mapper._REGISTRY))
-    monkeypatch.setattr(run_scoring, "_REFERENCES", {})
-    mapper.register_method("failing", "bomgraph_h72_failing:Failing")
-    import bomgraph_h72_failing
-
-    yield bomgraph_h72_failing.MADE
-    sys.modules.pop("bomgraph_h72_failing", None)
+    for module in runtime_method(tmp_path, monkeypatch, "failing", "bomgraph_h72_failing", FAILING, "Failing"):
+        yield module.MADE
 
 
 @pytest.mark.parametrize("methods", ["triangulate,ekf,stmds-cs", "triangulate,failing,ekf"])

@@ -15,6 +15,7 @@ from pathlib import Path
 
 import pytest
 
+import _compare_folder
 from bomgraph import out_folder, report
 from bomgraph.bench import Executor
 from bomgraph.cli import main
@@ -24,16 +25,8 @@ from bomgraph.report import compare
 from bomgraph.stdio import AtomicOutput, OutputPathError
 
 
-@pytest.fixture()
-def stream(tmp_path: Path) -> Path:
-    path = tmp_path / "s.jsonl"
-    assert main(["simulate", "--steps", "30", "--landmarks", "10", "--out", str(path)]) == 0
-    return path
-
-
-def _cmd(stream: Path, out: Path, *more: str) -> list[str]:
-    return ["compare", "--streams", str(stream), "--methods", "triangulate", "--jobs", "1",
-            "--no-progress", "--out", str(out), *more]
+stream = _compare_folder.stream   # the fixture
+_cmd = _compare_folder.compare_cmd
 
 
 #: a compare killed (SIGKILL) just after its writer created the temporary file of NAME
