@@ -6,6 +6,9 @@
   failed at the end, a disk full at the copy of the checkpoints), and the file was opened
   again, so a stream removed or replaced since gave its error instead of the method's. Now the
   same reader goes on from where the run stopped.
+- The checkpoints waited in a second temporary file and were copied after the header at the
+  end: the estimate took twice its size on the disk for a moment. Now they wait in the
+  target's own temporary file, after room kept for the header, moved back in place at the end.
 """
 
 from __future__ import annotations
@@ -13,6 +16,7 @@ from __future__ import annotations
 import errno
 import json
 import os
+import re
 import textwrap
 from pathlib import Path
 
@@ -20,6 +24,10 @@ import pytest
 
 from bomgraph import estimate_writer, mapper, stream_file
 from bomgraph.cli import main
+from bomgraph.estimate_file import write_estimate
+from bomgraph.mapper import create_mapper, run
+from bomgraph.stream_file import read_stream
+from bomgraph.stream_identity import stream_identity
 
 
 @pytest.fixture(scope="module")
@@ -101,15 +109,13 @@ def test_the_method_error_stands_when_the_stream_file_is_gone(
     assert not copy.exists() and not est.exists()
 
 
-def test_a_full_disk_at_the_copy_is_one_line_and_the_stream_is_not_read_again(
+def test_a_failure_at_the_end_is_one_line_and_the_stream_is_not_read_again(
         stream: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
         capsys: pytest.CaptureFixture) -> None:
-    """The checkpoints are copied after the header at the end (the file is then twice its
-    size on disk for a moment): no space left there is one line, exit 2, nothing left behind
-    and the previous estimate kept. Fails before h74: the stream, read to its end by the run,
-    was read again (162 parses) before the error was reported."""
-    def full(src, dst, length=0):
-        dst.write(src.read(10))
+    """The disk full when the estimate is flushed to it at the end: one line, exit 2,
+    nothing left behind and the previous estimate kept. Fails before h74: the stream, read
+    to its end by the run, was read again (162 parses) before the error was reported."""
+    def full(fd: int) -> None:
         raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
 
     out = tmp_path / "out"
@@ -117,13 +123,61 @@ def test_a_full_disk_at_the_copy_is_one_line_and_the_stream_is_not_read_again(
     est = out / "e.est"
     est.write_text("the previous estimate\n")
     parses = _parses(monkeypatch)
-    monkeypatch.setattr(estimate_writer.shutil, "copyfileobj", full)
+    monkeypatch.setattr(os, "fsync", full)
     assert main(["run", str(stream), "--method", "triangulate", "--out", str(est)]) == 2
+    monkeypatch.undo()
     assert len(parses) == 81
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and str(est) in err[0] and "No space left" in err[0], err
     assert est.read_text() == "the previous estimate\n"
     assert os.listdir(out) == ["e.est"]
+
+
+def test_the_estimate_takes_no_second_file(stream: Path, tmp_path: Path,
+                                           monkeypatch: pytest.MonkeyPatch) -> None:
+    """Fails before h74: the checkpoints went to a second (unnamed) file beside the target
+    and were copied after the header at the end, so the estimate took twice its size on the
+    disk (a 1.29 MB estimate on a 2 MB tmpfs: 'No space left on device', where it fitted
+    before h71). Now they wait in the target's own temporary file, after room for the header.
+    The bytes are those of the estimate written with the stream's identity known first."""
+    def refused(*args, **kwargs):
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+    est = tmp_path / "e.est"
+    with monkeypatch.context() as m:
+        m.setattr(estimate_writer.tempfile, "TemporaryFile", refused)
+        assert main(["run", str(stream), "--method", "triangulate", "--out", str(est),
+                     "--checkpoint-every", "7"]) == 0
+    s = read_stream(stream)
+    given = tmp_path / "given.est"
+    write_estimate(run(create_mapper("triangulate", s.header), s.steps, checkpoint_every=7,
+                       method="triangulate"), given, stream=stream_identity(s.steps),
+                   checkpoint_every=7)
+
+    def without_timings(path: Path) -> list[str]:
+        lines = path.read_text().splitlines()
+        assert lines[-1].startswith('{"timing_s"')
+        return [re.sub(r',"estimate_s":[^,}]+', "", line) for line in lines[:-1]]
+
+    assert without_timings(est) == without_timings(given)
+    assert sorted(os.listdir(tmp_path)) == ["e.est", "given.est"]
+
+
+@pytest.mark.parametrize("room", [0, 5, 300])
+def test_the_header_is_put_in_its_room_and_the_rest_moved_back(tmp_path: Path,
+                                                               room: int) -> None:
+    header = b'{"format":"x"}\n'
+    body = bytes(range(256)) * (10_000 + 7)  # more than two chunks of 1 MiB
+    path = tmp_path / "f"
+    path.write_bytes(b" " * (len(header) + room) + body)
+    fd = os.open(path, os.O_RDWR)
+    try:
+        estimate_writer._put_header(fd, header, len(header) + room)
+    finally:
+        os.close(fd)
+    assert path.read_bytes() == header + body
+    with pytest.raises(RuntimeError, match="more than the 3 kept"):
+        estimate_writer._put_header(0, header, 3)
 
 
 def test_a_bad_line_after_the_failure_is_still_what_is_refused(
