@@ -191,3 +191,29 @@ def test_a_bad_line_after_the_failure_is_still_what_is_refused(
     assert main(["run", str(bad), "--method", failing, "--out", str(tmp_path / "e.est")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and f"{bad}, line 82" in err[0] and "h74 fails" not in err[0], err
+
+
+def test_an_interrupt_while_the_checkpoints_move_back_leaves_the_previous_file(
+        stream: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Ctrl-C in finish() (the header written, the checkpoints half moved): nothing left
+    beside the target, which is as it was, and the stream is not read again (81 parses: a
+    KeyboardInterrupt is no failure of the method's to check the stream for)."""
+    from bomgraph.file_run import run_file
+
+    write_all, calls = estimate_writer._write_all, []
+
+    def interrupted(fd: int, data: bytes) -> None:
+        calls.append(len(data))
+        if len(calls) == 2:  # the header went, then the first piece of the checkpoints
+            raise KeyboardInterrupt
+        write_all(fd, data)
+
+    est = tmp_path / "e.est"
+    est.write_text("the previous estimate\n")
+    parses = _parses(monkeypatch)
+    monkeypatch.setattr(estimate_writer, "_write_all", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        run_file(stream, "triangulate", out=est)
+    assert len(calls) == 2 and len(parses) == 81
+    assert est.read_text() == "the previous estimate\n"
+    assert os.listdir(tmp_path) == ["e.est"]
