@@ -78,12 +78,13 @@ def cmd_run(args: argparse.Namespace) -> int:
     from .bench import run_file
     from .jsonio import parse_options
     from .mapper import checkpoint_times
-    from .stdio import STDIO, check_output_path, input_path, write_output
+    from .stdio import check_output_path, input_path, is_stdout, write_output
 
     from .sweep import run_method
 
     label, method, options = run_method(args.method, parse_options(args.option))
     check_output_path(args.out, inputs=(args.stream,))
+    to_stderr = is_stdout(args.out)  # `--out -`, `--out /dev/stdout > f`: not over the estimate
     with input_path(args.stream) as stream_path:
         bar = _step_bar(stream_path, label, args.progress)
         progress = None if bar is None else (lambda t: bar.update(t + 1 - bar.n))
@@ -100,7 +101,6 @@ def cmd_run(args: argparse.Namespace) -> int:
             if bar is not None:
                 bar.close()
     result = done[0]
-    to_stderr = args.out == STDIO
     if args.json:  # the result keeps only the last checkpoint; the file has all of them
         written = len(checkpoint_times(result.checkpoints[-1].t + 1, args.checkpoint_every))
         _say(json.dumps({"method": label, "stream": args.stream, "out": args.out,
@@ -148,7 +148,7 @@ def cmd_export(args: argparse.Namespace) -> int:
     from .errors import ExportError
     from .export import export_text, truth_estimate, write_text_atomic
     from .file_evaluation import check_stream_identity
-    from .stdio import STDIO, input_path
+    from .stdio import STDIO, input_path, is_stdout
     from .stream_file import read_stream
 
     if (args.estimate is None) == (args.truth is None):
@@ -173,6 +173,7 @@ def cmd_export(args: argparse.Namespace) -> int:
                                   error=ExportError)
         src = est.final
     text = export_text(src, args.format, stream)
+    to_stderr = is_stdout(args.out)  # `--out /dev/stdout > f`: the line would overwrite f
     if args.out == "-":
         sys.stdout.write(text)
     else:
@@ -187,7 +188,7 @@ def cmd_export(args: argparse.Namespace) -> int:
     held = [f"{0 if src.poses is None else len(src.poses)} poses"]
     if args.format in ("csv", "g2o"):  # TUM and KITTI hold poses only
         held.append(f"{len(src.landmark_ids)} landmarks")
-    print(f"wrote {args.out} ({args.format}): {', '.join(held)}")
+    _say(f"wrote {args.out} ({args.format}): {', '.join(held)}", to_stderr=to_stderr)
     return 0
 
 

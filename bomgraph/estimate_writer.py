@@ -98,9 +98,12 @@ class EstimateWriter:
 
     ``stream`` may be a :class:`~bomgraph.stream_identity.StreamHasher` that the steps are
     added to as the run reads them (``bomgraph run`` reads the stream once): the header,
-    which names the stream, is then known at :meth:`finish` only, so the checkpoints go to an
-    unnamed temporary file beside the target first and are copied after the header (the same
-    bytes as with the identity given at the start).
+    which names the stream, is then known at :meth:`finish` only (the same bytes as with the
+    identity given at the start). The checkpoints then go after room for the longest such
+    header in the temporary file, and :meth:`finish` writes the header and moves them back
+    onto its end in place: the file takes no more room on the disk than the estimate. A
+    device or a FIFO, written in order, gets them from an unnamed temporary file (in the
+    temporary directory) copied after the header.
     """
 
     def __init__(self, path: str | os.PathLike[str], method: str, *,
@@ -134,8 +137,10 @@ class EstimateWriter:
         self._out = AtomicOutput(self.path)
         try:  # __exit__ does not run when __enter__ raises
             self._fh = self._out.open()
-            if self._hasher is not None:
-                self._body = self._fh = _body_file(self._out)
+            if self._hasher is not None and self._out.direct:
+                self._body = self._fh = _body_file()
+            elif self._hasher is not None:  # room for the header, written by finish()
+                self._fh.write(" " * (self._room() - 1) + "\n")
             if (threading.current_thread() is threading.main_thread()
                     and signal.getsignal(signal.SIGTERM) == signal.SIG_DFL):
                 self._old_handler = signal.signal(signal.SIGTERM, _raise_exit)
@@ -196,16 +201,27 @@ class EstimateWriter:
                               f"seconds (RunResult.total_s and step_s), got {timing}")
         self._fh.write(_dumps({"timing_s": timing}))
         self._fh = None
-        if self._body is not None:  # the header, now that the stream is known, then the rest
+        if self._hasher is not None:  # the header, now that the stream is known
             self._header["stream"] = self._hasher.identity.as_dict()
             out = self._out.fh
-            out.write(_dumps(self._header))
-            out.flush()
-            self._body.flush()
-            self._body.buffer.seek(0)  # bytes to bytes: the text is UTF-8 either way
-            shutil.copyfileobj(self._body.buffer, out.buffer, 1 << 20)
-            self._close_body()
+            if self._body is not None:  # then the checkpoints, copied after it
+                out.write(_dumps(self._header))
+                out.flush()
+                self._body.flush()
+                self._body.buffer.seek(0)  # bytes to bytes: the text is UTF-8 either way
+                shutil.copyfileobj(self._body.buffer, out.buffer, 1 << 20)
+                self._close_body()
+            else:
+                out.flush()
+                _put_header(out.fileno(), _dumps(self._header).encode("utf-8"),
+                            self._room())
         self._out.commit()
+
+    def _room(self) -> int:
+        """The bytes of the longest header a hashed stream can give: its count of steps
+        with 19 digits (more steps than a stream file can hold)."""
+        longest = dict(self._header, stream={"steps_sha256": "0" * 64, "n_steps": 10 ** 18})
+        return len(_dumps(longest).encode("utf-8"))
 
     def __exit__(self, *exc: object) -> None:
         try:
@@ -225,15 +241,39 @@ class EstimateWriter:
             body.close()
 
 
-def _body_file(out: AtomicOutput) -> IO[str]:
-    """An unnamed temporary file (gone when closed, or when the process dies) beside the
-    target's temporary file, or in the temporary directory for a device or a FIFO."""
-    where = None if out.direct else os.path.dirname(out.path) or "."
-    try:
-        raw = tempfile.TemporaryFile(dir=where)
-    except OSError:  # a folder that takes the target but no second file: the default one
-        raw = tempfile.TemporaryFile()
-    return io.TextIOWrapper(raw, encoding="utf-8", newline="\n")
+def _body_file() -> IO[str]:
+    """An unnamed temporary file (gone when closed, or when the process dies) in the
+    temporary directory: the checkpoints for a device or a FIFO until the header is known."""
+    return io.TextIOWrapper(tempfile.TemporaryFile(), encoding="utf-8", newline="\n")
+
+
+def _put_header(fd: int, header: bytes, room: int) -> None:
+    """Write ``header`` at the start of the file ``fd``, whose first ``room`` bytes were kept
+    for it, and move what follows them back to its end (front to back, so nothing is
+    overwritten before it is read; the file only shrinks)."""
+    if len(header) > room:
+        raise RuntimeError(f"the estimate's header takes {len(header)} bytes, more than the "
+                           f"{room} kept for it")
+    end = os.lseek(fd, 0, os.SEEK_END)
+    os.lseek(fd, 0, os.SEEK_SET)
+    _write_all(fd, header)
+    src, dst = room, len(header)
+    while src < end and src != dst:
+        os.lseek(fd, src, os.SEEK_SET)
+        chunk = os.read(fd, min(1 << 20, end - src))
+        if not chunk:
+            raise OSError(f"the estimate's temporary file ended at byte {src}, not {end}")
+        os.lseek(fd, dst, os.SEEK_SET)
+        _write_all(fd, chunk)
+        src, dst = src + len(chunk), dst + len(chunk)
+    os.ftruncate(fd, end - (room - len(header)))
+    os.lseek(fd, 0, os.SEEK_END)
+
+
+def _write_all(fd: int, data: bytes) -> None:
+    view = memoryview(data)
+    while view:
+        view = view[os.write(fd, view):]
 
 
 def _check_header(method: Any, stream: Any, options: Any) -> None:

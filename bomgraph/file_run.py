@@ -67,7 +67,8 @@ def run_file(stream_path: str | os.PathLike[str], method: str,
             from .stream_identity import StreamHasher
 
             hasher = StreamHasher()
-            steps = hasher.through(reader)
+            lines = iter(reader)  # kept: the rest of it is checked if the run fails
+            steps = hasher.through(lines)
             try:
                 writer = stack.enter_context(EstimateWriter(
                     out, method, stream=hasher, options=options,
@@ -78,7 +79,7 @@ def run_file(stream_path: str | os.PathLike[str], method: str,
                 writer.finish(result)
             except Exception as exc:  # a bad step anywhere in the stream is refused first,
                 if not isinstance(exc, StreamFormatError):  # as when it was read for its
-                    _refuse_a_bad_stream(stream_path)      # identity before the run
+                    _refuse_a_bad_rest(lines)              # identity before the run
                 raise
     _log.info("%s: %d checkpoints, %d landmarks at t = %d, %.3f s", method,
               len(checkpoint_times(result.checkpoints[-1].t + 1, checkpoint_every)),
@@ -96,11 +97,15 @@ def run_file(stream_path: str | os.PathLike[str], method: str,
     return result
 
 
-def _refuse_a_bad_stream(stream_path: str | os.PathLike[str]) -> None:
-    from .stream_identity import stream_file_identity
-
+def _refuse_a_bad_rest(lines: Iterator[Step]) -> None:
+    """Read the steps the run had not read yet (the same reader, from where it stopped; none
+    once it has read them all): a bad line after the point of a method's (or the output's)
+    failure is the error reported, as when the stream was checked before the run. The file
+    is not opened again: the steps already read were checked, and a file replaced or removed
+    since is not what the run read."""
     try:
-        stream_file_identity(stream_path)
+        for _ in lines:
+            pass
     except StreamFormatError as exc:
         raise exc from None
 

@@ -171,8 +171,8 @@ def display_path(message: str) -> str:
 def input_path(path: str) -> Iterator[str]:
     """``path`` itself, or for ``-`` and a FIFO (``/dev/stdin`` on a pipe, a named pipe) a
     temporary file holding all of it (removed after; bounded as every input is): a command
-    may read its input more than once (``run`` counts its lines for the progress bar, and
-    reads it again to check it when the method fails), and a pipe gives its bytes only once."""
+    may read its input more than once (``run`` counts its lines for the progress bar), and a
+    pipe gives its bytes only once."""
     if path != STDIO:
         try:
             fifo = stat.S_ISFIFO(os.stat(path).st_mode)
