@@ -67,7 +67,8 @@ def run_file(stream_path: str | os.PathLike[str], method: str,
             from .stream_identity import StreamHasher
 
             hasher = StreamHasher()
-            lines = iter(reader)  # kept: the rest of it is checked if the run fails
+            refused: list[StreamFormatError] = []  # the reader's own error, if it gave one
+            lines = _remembering(reader, refused)  # kept: the rest is checked if the run fails
             steps = hasher.through(lines)
             try:
                 writer = stack.enter_context(EstimateWriter(
@@ -79,7 +80,7 @@ def run_file(stream_path: str | os.PathLike[str], method: str,
                 writer.finish(result)
             except Exception as exc:  # a bad step anywhere in the stream is refused first,
                 if not isinstance(exc, StreamFormatError):  # as when it was read for its
-                    _refuse_a_bad_rest(lines)              # identity before the run
+                    _refuse_a_bad_rest(lines, refused)     # identity before the run
                 raise
     _log.info("%s: %d checkpoints, %d landmarks at t = %d, %.3f s", method,
               len(checkpoint_times(result.checkpoints[-1].t + 1, checkpoint_every)),
@@ -97,10 +98,22 @@ def run_file(stream_path: str | os.PathLike[str], method: str,
     return result
 
 
-def _refuse_a_bad_rest(lines: Iterator[Step]) -> None:
+def _remembering(steps: Iterable[Step], refused: list[StreamFormatError]) -> Iterator[Step]:
+    """The steps; a :class:`StreamFormatError` they raise is kept in ``refused`` too: the run
+    takes a due checkpoint when the line after it is bad, and if the method fails there, the
+    exception raised is the method's, with the stream's error only as its context."""
+    try:
+        yield from steps
+    except StreamFormatError as exc:
+        refused.append(exc)
+        raise
+
+
+def _refuse_a_bad_rest(lines: Iterator[Step], refused: list[StreamFormatError]) -> None:
     """Read the steps the run had not read yet (the same reader, from where it stopped; none
     once it has read them all): a bad line after the point of a method's (or the output's)
-    failure is the error reported, as when the stream was checked before the run. The file
+    failure is the error reported, as when the stream was checked before the run; so is a
+    bad line the reader already refused (``refused``) before the method failed. The file
     is not opened again: the steps already read were checked, and a file replaced or removed
     since is not what the run read."""
     try:
@@ -108,6 +121,8 @@ def _refuse_a_bad_rest(lines: Iterator[Step]) -> None:
             pass
     except StreamFormatError as exc:
         raise exc from None
+    if refused:
+        raise refused[0] from None
 
 
 def _reporting(steps: Iterable[Step], progress: Callable[[int], None]) -> Iterator[Step]:
