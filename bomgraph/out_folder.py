@@ -336,11 +336,15 @@ class OutputRecord:
         compare is writing them. The sweep cache's are left (``execute`` may share a cache
         folder without the lock). Returns how many were removed (logged too)."""
         root = os.path.realpath(self.out)
-        listed = [Path(p) for e in _earlier_entries(self.out)
-                  if (p := _inside(root, e["path"])) is not None]
         names: dict[str, set[str]] = {}  # where the writers put them: beside the real path
-        for p in [self.path, *paths, *listed]:
-            names.setdefault(os.path.realpath(p.parent), set()).add(p.name)
+        for rel in [MANIFEST, *(os.path.relpath(p, self.out) for p in paths),
+                    *(e["path"] for e in _earlier_entries(self.out))]:
+            # only plainly inside: a folder linked elsewhere (estimates/ on another disk) may
+            # be another compare's, holding another lock, or hold a user's file (h77)
+            folder, name = os.path.split(os.path.normpath(rel))
+            where = root if not folder else _inside(root, folder)
+            if where is not None and name not in ("", ".", "..") and not os.path.isabs(rel):
+                names.setdefault(where, set()).add(name)
         removed = 0
         for folder, wanted in names.items():
             pattern = re.compile("|".join(_TEMP_NAME.format(name=re.escape(n)) for n in wanted))

@@ -1,0 +1,89 @@
+"""h77, review of h75 (compare removes the temporary files killed compares left): what it must
+never remove. A folder of compare's linked elsewhere (``estimates/`` on another disk) is not
+inside the folder its lock covers: a file there named like a temporary one (another compare's,
+writing now; a user's) was removed. A writer of another process (``bomgraph run --out
+OUT/results.csv``) writing its temporary file right now had it removed under it."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import _compare_folder
+from bomgraph.cli import main
+from bomgraph.out_folder import MANIFEST, OutputRecord
+
+
+stream = _compare_folder.stream   # the fixture
+_cmd = _compare_folder.compare_cmd
+
+_TEMP = ".s.est.abcdefgh.partial"   # exactly the writer's pattern for s.est
+
+
+def test_a_folder_linked_elsewhere_is_left_alone(tmp_path: Path, stream: Path) -> None:
+    """Before h77 the file beside s.est in the linked folder was removed."""
+    elsewhere = tmp_path / "elsewhere"
+    (elsewhere / "streams" / "triangulate").mkdir(parents=True)
+    theirs = elsewhere / "streams" / "triangulate" / _TEMP
+    theirs.write_text("another compare's estimate, being written\n")
+    out = tmp_path / "q"
+    out.mkdir()
+    (out / "estimates").symlink_to(elsewhere)
+    assert main(_cmd(stream, out, "--estimates")) == 0
+    assert theirs.read_text() == "another compare's estimate, being written\n"
+
+
+def test_the_out_folder_itself_may_be_a_link(tmp_path: Path, stream: Path) -> None:
+    real = tmp_path / "real"
+    real.mkdir()
+    out = tmp_path / "q"
+    out.symlink_to(real)
+    assert main(_cmd(stream, out, "--estimates")) == 0
+    left = [real / ".results.csv.abcdefgh.partial",
+            real / "estimates" / "streams" / "triangulate" / _TEMP,
+            real / f".{MANIFEST}.abcdefgh.partial"]
+    for p in left:
+        p.write_text("left by a killed compare\n")
+    assert main(_cmd(stream, out, "--estimates")) == 0
+    assert [p for p in left if os.path.lexists(p)] == []
+
+
+def test_listed_names_outside_the_folder_are_left_alone(tmp_path: Path, stream: Path) -> None:
+    out = tmp_path / "q"
+    assert main(_cmd(stream, out)) == 0
+    outside = tmp_path / ".x.abcdefgh.partial"
+    outside.write_text("mine\n")
+    (tmp_path / "d").mkdir()
+    absolute = tmp_path / "d" / ".y.abcdefgh.partial"
+    absolute.write_text("mine\n")
+    entry = '{{"path": "{}", "size": 1, "mtime_ns": 1, "sha256": "0"}}'
+    lines = [(out / MANIFEST).read_text().rstrip("\n").rstrip("]}").rstrip(",\n"),
+             entry.format("../x"), entry.format(tmp_path / "d" / "y")]
+    (out / MANIFEST).write_text(",\n".join(lines) + "\n]}\n")
+    assert OutputRecord(out).remove_leftovers([]) == 0
+    assert outside.read_text() == absolute.read_text() == "mine\n"
+
+
+def test_links_and_folders_named_so_are_left_alone(tmp_path: Path, stream: Path) -> None:
+    out = tmp_path / "q"
+    assert main(_cmd(stream, out)) == 0
+    target = tmp_path / "target.csv"
+    target.write_text("mine\n")
+    (out / ".results.csv.abcdefgh.partial").symlink_to(target)
+    (out / ".summary.csv.abcdefgh.partial").mkdir()
+    (out / ".summary.csv.abcdefgh.partial" / "f").write_text("mine\n")
+    assert main(_cmd(stream, out)) == 0
+    assert os.path.islink(out / ".results.csv.abcdefgh.partial")
+    assert target.read_text() == "mine\n"
+    assert (out / ".summary.csv.abcdefgh.partial" / "f").read_text() == "mine\n"
+
+
+def test_dry_run_removes_nothing(tmp_path: Path, stream: Path) -> None:
+    out = tmp_path / "q"
+    assert main(_cmd(stream, out)) == 0
+    left = out / ".results.csv.abcdefgh.partial"
+    left.write_text("left by a killed compare\n")
+    assert main(_cmd(stream, out, "--dry-run")) == 0
+    assert left.exists()
+    assert main(_cmd(stream, out)) == 0
+    assert not left.exists()
