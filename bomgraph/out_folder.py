@@ -22,6 +22,7 @@ import json
 import logging
 import os
 import re
+import stat
 from pathlib import Path
 from typing import Any, Callable, Mapping, Sequence
 
@@ -271,6 +272,29 @@ def _compacted(out: Path, entries: Sequence[Mapping[str, Any]]) -> list[Mapping[
     return kept
 
 
+def _remove_unclaimed(path: str) -> bool:
+    """Remove the regular file ``path`` unless a writer still holds it (its lock,
+    :func:`bomgraph.stdio._claimed`: another process's ``bomgraph run --out OUT/results.csv``
+    writing now, which compare's folder lock does not cover; a writer killed holds nothing).
+    Whether it was removed."""
+    fd = os.open(path, os.O_RDONLY | getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_NONBLOCK", 0))
+    try:
+        if not stat.S_ISREG(os.fstat(fd).st_mode):
+            return False
+        try:
+            import fcntl
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except ImportError:  # no flock here: writers hold no lock either
+            pass
+        except BlockingIOError:
+            _log.debug("left %s: a writer is still writing it", path)
+            return False
+        os.unlink(path)  # unless a writer is between its mkstemp and its lock: microseconds
+        return True
+    finally:
+        os.close(fd)
+
+
 class OutputRecord:
     """This compare's :data:`MANIFEST` in ``out``: :meth:`refuse_foreign` before anything
     runs and again before anything is written, :meth:`begin` just before writing, each file
@@ -355,8 +379,7 @@ class OutputRecord:
                 continue
             for e in found:
                 try:
-                    os.unlink(e.path)
-                    removed += 1
+                    removed += _remove_unclaimed(e.path)
                 except OSError as exc:
                     _log.warning("could not remove %s, left by an interrupted compare: %s",
                                  e.path, exc)

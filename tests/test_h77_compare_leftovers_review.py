@@ -7,11 +7,18 @@ OUT/results.csv``) writing its temporary file right now had it removed under it.
 from __future__ import annotations
 
 import os
+import signal
+import subprocess
+import sys
 from pathlib import Path
 
+import pytest
+
 import _compare_folder
+from bomgraph import stdio
 from bomgraph.cli import main
 from bomgraph.out_folder import MANIFEST, OutputRecord
+from bomgraph.stdio import AtomicOutput
 
 
 stream = _compare_folder.stream   # the fixture
@@ -87,3 +94,36 @@ def test_dry_run_removes_nothing(tmp_path: Path, stream: Path) -> None:
     assert left.exists()
     assert main(_cmd(stream, out)) == 0
     assert not left.exists()
+
+
+@pytest.mark.skipif(os.name != "posix", reason="the writers' lock is POSIX flock")
+def test_another_processs_writer_keeps_its_temporary_file(tmp_path: Path,
+                                                           stream: Path) -> None:
+    """A writer still writing (another process's ``bomgraph run --out q/results.csv``; its
+    temporary file open) keeps it: before h77 it was removed and the writer failed at its
+    rename (FileNotFoundError) and its output was lost."""
+    out = tmp_path / "q"
+    out.mkdir()
+    writer = AtomicOutput(out / "results.csv")
+    writer.open().write("another process's output\n")
+    try:
+        assert OutputRecord(out).remove_leftovers([out / "results.csv"]) == 0
+    finally:
+        writer.commit()
+    assert (out / "results.csv").read_text() == "another process's output\n"
+
+
+def test_a_writer_killed_holds_nothing(tmp_path: Path, stream: Path) -> None:
+    """Killed (SIGKILL) with its temporary file open and locked: the lock goes with it, and
+    the next compare removes the file."""
+    out = tmp_path / "q"
+    assert main(_cmd(stream, out)) == 0
+    code = ("import os, signal, sys\nfrom bomgraph.stdio import AtomicOutput\n"
+            "AtomicOutput(sys.argv[1]).open().write('half')\n"
+            "os.kill(os.getpid(), signal.SIGKILL)\n")
+    env = {**os.environ, "PYTHONPATH": str(Path(stdio.__file__).parents[1])}
+    proc = subprocess.run([sys.executable, "-c", code, str(out / "results.csv")], env=env)
+    assert proc.returncode == -signal.SIGKILL
+    assert len(list(out.glob(".results.csv.*.partial"))) == 1
+    assert main(_cmd(stream, out)) == 0
+    assert list(out.glob("*.partial")) == []
