@@ -22,10 +22,10 @@ import json
 import logging
 import os
 import re
-import stat
 from pathlib import Path
 from typing import Any, Callable, Mapping, Sequence
 
+from .claims import remove_unclaimed
 from .experiments import DatasetSource, Experiment, FileSource, Task
 from .stdio import InputTooLargeError, OutputPathError, read_regular_file, write_text
 
@@ -272,29 +272,6 @@ def _compacted(out: Path, entries: Sequence[Mapping[str, Any]]) -> list[Mapping[
     return kept
 
 
-def _remove_unclaimed(path: str) -> bool:
-    """Remove the regular file ``path`` unless a writer still holds it (its lock,
-    :func:`bomgraph.stdio._claimed`: another process's ``bomgraph run --out OUT/results.csv``
-    writing now, which compare's folder lock does not cover; a writer killed holds nothing).
-    Whether it was removed."""
-    fd = os.open(path, os.O_RDONLY | getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_NONBLOCK", 0))
-    try:
-        if not stat.S_ISREG(os.fstat(fd).st_mode):
-            return False
-        try:
-            import fcntl
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except ImportError:  # no flock here: writers hold no lock either
-            pass
-        except BlockingIOError:
-            _log.debug("left %s: a writer is still writing it", path)
-            return False
-        os.unlink(path)  # unless a writer is between its mkstemp and its lock: microseconds
-        return True
-    finally:
-        os.close(fd)
-
-
 class OutputRecord:
     """This compare's :data:`MANIFEST` in ``out``: :meth:`refuse_foreign` before anything
     runs and again before anything is written, :meth:`begin` just before writing, each file
@@ -357,8 +334,11 @@ class OutputRecord:
         power cut) left beside the names compare writes: ``paths`` (this compare's), the
         manifest's and those it lists, and nothing else (only names exactly of the writers'
         pattern, :data:`_TEMP_NAME`). Call it holding the folder's lock: then no other
-        compare is writing them. The sweep cache's are left (``execute`` may share a cache
-        folder without the lock). Returns how many were removed (logged too)."""
+        compare is writing them; nor is any other writer of bomgraph (it holds its temporary
+        file's lock while it writes: :func:`_remove_unclaimed`). Only in folders plainly
+        inside ``out``: one linked elsewhere may be another folder's, under its own lock. The
+        sweep cache's are left (``execute`` may share a cache folder without the lock).
+        Returns how many were removed (logged too)."""
         root = os.path.realpath(self.out)
         names: dict[str, set[str]] = {}  # where the writers put them: beside the real path
         for rel in [MANIFEST, *(os.path.relpath(p, self.out) for p in paths),
@@ -379,7 +359,7 @@ class OutputRecord:
                 continue
             for e in found:
                 try:
-                    removed += _remove_unclaimed(e.path)
+                    removed += remove_unclaimed(e.path)
                 except OSError as exc:
                     _log.warning("could not remove %s, left by an interrupted compare: %s",
                                  e.path, exc)

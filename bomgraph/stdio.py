@@ -44,6 +44,7 @@ from pathlib import Path
 from typing import IO, Any, Callable, Iterator, Sequence
 
 from .checks import file_name, items
+from .claims import claim, release
 from .errors import BomgraphError
 
 STDIO = "-"
@@ -309,24 +310,6 @@ def signals_held() -> Iterator[None]:
         signal.pthread_sigmask(signal.SIG_SETMASK, old)
 
 
-def _claimed(fd: int) -> int | None:
-    """A second descriptor of ``fd``'s file holding an exclusive ``flock`` on it until it is
-    closed (or the process dies, ``kill -9`` too): a temporary file still being written, which
-    ``compare``'s removal of killed writers' temporary files leaves alone (h77). None where
-    there is no flock (the file is written all the same)."""
-    try:
-        import fcntl
-    except ImportError:
-        return None
-    held = os.dup(fd)
-    try:
-        fcntl.flock(held, fcntl.LOCK_EX | fcntl.LOCK_NB)
-    except OSError:
-        os.close(held)
-        return None
-    return held
-
-
 class AtomicOutput:
     """The one way bomgraph writes a file (see the module docstring): :meth:`open` gives the
     handle, :meth:`commit` puts the file in place, :meth:`abort` removes what was written
@@ -344,7 +327,7 @@ class AtomicOutput:
         self._mode = 0o666 & ~_umask() if st is None else stat.S_IMODE(st.st_mode)
         self._binary = binary
         self._tmp: str | None = None
-        self._claim: int | None = None  # holds the temporary file's lock (:func:`_claimed`)
+        self._claim: int | None = None  # its temporary file's lock (bomgraph.claims)
         self.fh: IO | None = None
 
     def open(self) -> IO:
@@ -372,7 +355,7 @@ class AtomicOutput:
         with signals_held():
             fd, self._tmp = tempfile.mkstemp(prefix=f".{name}.", suffix=".partial", dir=d)
             try:
-                self._claim = _claimed(fd)
+                self._claim = claim(fd)
                 os.chmod(fd, self._mode)  # as open() would (or as the file was), not 0600
                 self.fh = os.fdopen(fd, mode, **kw)
             except BaseException:
@@ -397,14 +380,9 @@ class AtomicOutput:
                 self._ready(self._tmp)
             os.replace(self._tmp, self.path)
             self._tmp = None
-            self._release()
-            _fsync_dir(os.path.dirname(self.path))
-
-    def _release(self) -> None:
-        if self._claim is not None:
-            with contextlib.suppress(OSError):
-                os.close(self._claim)
+            release(self._claim)
             self._claim = None
+            _fsync_dir(os.path.dirname(self.path))
 
     def abort(self) -> None:
         with signals_held():  # a second Ctrl-C must not stop the cleanup of the first
@@ -416,7 +394,8 @@ class AtomicOutput:
                 with contextlib.suppress(OSError):
                     os.unlink(self._tmp)
                 self._tmp = None
-            self._release()
+            release(self._claim)
+            self._claim = None
 
 
 @contextlib.contextmanager
