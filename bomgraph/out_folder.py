@@ -272,6 +272,18 @@ def _compacted(out: Path, entries: Sequence[Mapping[str, Any]]) -> list[Mapping[
     return kept
 
 
+def _writing(out: Path) -> list[str]:
+    """The files an interrupted compare was writing: its journal's header's (none when the
+    manifest is a finished one, missing or not one)."""
+    try:
+        head = json.loads(read_regular_file(out / MANIFEST).split(b"\n", 1)[0].decode("utf-8"))
+    except (OSError, InputTooLargeError, UnicodeDecodeError, ValueError, RecursionError):
+        return []
+    names = head.get("writing") if isinstance(head, dict) else None
+    return ([n for n in names if isinstance(n, str)]
+            if isinstance(names, list) and head.get("format") == _MANIFEST_FORMAT else [])
+
+
 class OutputRecord:
     """This compare's :data:`MANIFEST` in ``out``: :meth:`refuse_foreign` before anything
     runs and again before anything is written, :meth:`begin` just before writing, each file
@@ -342,7 +354,7 @@ class OutputRecord:
         root = os.path.realpath(self.out)
         names: dict[str, set[str]] = {}  # where the writers put them: beside the real path
         for rel in [MANIFEST, *(os.path.relpath(p, self.out) for p in paths),
-                    *(e["path"] for e in _earlier_entries(self.out))]:
+                    *(e["path"] for e in _earlier_entries(self.out)), *_writing(self.out)]:
             # only plainly inside: a folder linked elsewhere (estimates/ on another disk) may
             # be another compare's, holding another lock, or hold a user's file (h77)
             folder, name = os.path.split(os.path.normpath(rel))
@@ -368,11 +380,16 @@ class OutputRecord:
                       removed, self.out)
         return removed
 
-    def begin(self) -> None:
-        """The manifest as a journal: the earlier entries that still prove a file
-        (:func:`_compacted`: so an interrupted compare leaves every file of compare's still
-        proved, and the journal does not grow with each one), then each file as written."""
-        lines = [json.dumps({"format": _MANIFEST_FORMAT, "version": _VERSION})]
+    def begin(self, paths: Sequence[Path] = ()) -> None:
+        """The manifest as a journal: a header naming the files this compare may write
+        (``paths``: a compare killed before it listed one left its temporary file beside a
+        name the next one may neither list nor write, h77), the earlier entries that still
+        prove a file (:func:`_compacted`: so an interrupted compare leaves every file of
+        compare's still proved, and the journal does not grow with each one), then each file
+        as written."""
+        writing = sorted(os.path.relpath(p, self.out) for p in paths)
+        lines = [json.dumps({"format": _MANIFEST_FORMAT, "version": _VERSION,
+                             "writing": writing})]
         lines += [json.dumps(e) for e in _compacted(self.out, _earlier_entries(self.out))]
         write_text(self.path, "\n".join(lines) + "\n")
 

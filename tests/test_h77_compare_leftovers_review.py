@@ -19,6 +19,7 @@ from bomgraph import stdio
 from bomgraph.cli import main
 from bomgraph.out_folder import MANIFEST, OutputRecord
 from bomgraph.stdio import AtomicOutput
+from test_h75_compare_leftovers import _killed_writing
 
 
 stream = _compare_folder.stream   # the fixture
@@ -127,3 +128,17 @@ def test_a_writer_killed_holds_nothing(tmp_path: Path, stream: Path) -> None:
     assert len(list(out.glob(".results.csv.*.partial"))) == 1
     assert main(_cmd(stream, out)) == 0
     assert list(out.glob("*.partial")) == []
+
+
+def test_a_leftover_of_a_name_neither_listed_nor_written_now(tmp_path: Path,
+                                                            stream: Path) -> None:
+    """A compare with --estimates killed writing the estimate, before it listed it, in a
+    folder whose list has no estimate (the compare before wrote none), then one without
+    --estimates: the estimate's temporary file was left (found by 36 kill -9 trials: 1 of
+    them). Its journal names what it was writing: the next removes it."""
+    out = tmp_path / "q"
+    assert main(_cmd(stream, out, "--no-figures")) == 0
+    _killed_writing("s.est", _cmd(stream, out, "--no-figures", "--estimates"), out)
+    assert len(list(out.rglob(".s.est.*.partial"))) == 1
+    assert main(_cmd(stream, out, "--no-figures")) == 0
+    assert list(out.rglob("*.partial")) == []
