@@ -344,10 +344,11 @@ class OutputRecord:
     def remove_leftovers(self, paths: Sequence[Path]) -> int:
         """Remove the temporary files that compares killed while writing (``kill -9``, a
         power cut) left beside the names compare writes: ``paths`` (this compare's), the
-        manifest's and those it lists, and nothing else (only names exactly of the writers'
-        pattern, :data:`_TEMP_NAME`). Call it holding the folder's lock: then no other
-        compare is writing them; nor is any other writer of bomgraph (it holds its temporary
-        file's lock while it writes: :func:`_remove_unclaimed`). Only in folders plainly
+        manifest's, those it lists and those an interrupted compare's journal was writing,
+        and nothing else (only names exactly of the writers' pattern, :data:`_TEMP_NAME`).
+        Call it holding the folder's lock: then no other compare is writing them; nor is any
+        other writer of bomgraph (it holds its temporary file's lock while it writes:
+        :func:`bomgraph.claims.remove_unclaimed`). Only in folders plainly
         inside ``out``: one linked elsewhere may be another folder's, under its own lock. The
         sweep cache's are left (``execute`` may share a cache folder without the lock).
         Returns how many were removed (logged too)."""
