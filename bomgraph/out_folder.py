@@ -25,6 +25,7 @@ import re
 from pathlib import Path
 from typing import Any, Callable, Mapping, Sequence
 
+from .claims import remove_unclaimed
 from .experiments import DatasetSource, Experiment, FileSource, Task
 from .stdio import InputTooLargeError, OutputPathError, read_regular_file, write_text
 
@@ -271,6 +272,18 @@ def _compacted(out: Path, entries: Sequence[Mapping[str, Any]]) -> list[Mapping[
     return kept
 
 
+def _writing(out: Path) -> list[str]:
+    """The files an interrupted compare was writing: its journal's header's (none when the
+    manifest is a finished one, missing or not one)."""
+    try:
+        head = json.loads(read_regular_file(out / MANIFEST).split(b"\n", 1)[0].decode("utf-8"))
+    except (OSError, InputTooLargeError, UnicodeDecodeError, ValueError, RecursionError):
+        return []
+    names = head.get("writing") if isinstance(head, dict) else None
+    return ([n for n in names if isinstance(n, str)]
+            if isinstance(names, list) and head.get("format") == _MANIFEST_FORMAT else [])
+
+
 class OutputRecord:
     """This compare's :data:`MANIFEST` in ``out``: :meth:`refuse_foreign` before anything
     runs and again before anything is written, :meth:`begin` just before writing, each file
@@ -331,16 +344,24 @@ class OutputRecord:
     def remove_leftovers(self, paths: Sequence[Path]) -> int:
         """Remove the temporary files that compares killed while writing (``kill -9``, a
         power cut) left beside the names compare writes: ``paths`` (this compare's), the
-        manifest's and those it lists, and nothing else (only names exactly of the writers'
-        pattern, :data:`_TEMP_NAME`). Call it holding the folder's lock: then no other
-        compare is writing them. The sweep cache's are left (``execute`` may share a cache
-        folder without the lock). Returns how many were removed (logged too)."""
+        manifest's, those it lists and those an interrupted compare's journal was writing,
+        and nothing else (only names exactly of the writers' pattern, :data:`_TEMP_NAME`).
+        Call it holding the folder's lock: then no other compare is writing them; nor is any
+        other writer of bomgraph (it holds its temporary file's lock while it writes:
+        :func:`bomgraph.claims.remove_unclaimed`). Only in folders plainly
+        inside ``out``: one linked elsewhere may be another folder's, under its own lock. The
+        sweep cache's are left (``execute`` may share a cache folder without the lock).
+        Returns how many were removed (logged too)."""
         root = os.path.realpath(self.out)
-        listed = [Path(p) for e in _earlier_entries(self.out)
-                  if (p := _inside(root, e["path"])) is not None]
         names: dict[str, set[str]] = {}  # where the writers put them: beside the real path
-        for p in [self.path, *paths, *listed]:
-            names.setdefault(os.path.realpath(p.parent), set()).add(p.name)
+        for rel in [MANIFEST, *(os.path.relpath(p, self.out) for p in paths),
+                    *(e["path"] for e in _earlier_entries(self.out)), *_writing(self.out)]:
+            # only plainly inside: a folder linked elsewhere (estimates/ on another disk) may
+            # be another compare's, holding another lock, or hold a user's file (h77)
+            folder, name = os.path.split(os.path.normpath(rel))
+            where = root if not folder else _inside(root, folder)
+            if where is not None and name not in ("", ".", "..") and not os.path.isabs(rel):
+                names.setdefault(where, set()).add(name)
         removed = 0
         for folder, wanted in names.items():
             pattern = re.compile("|".join(_TEMP_NAME.format(name=re.escape(n)) for n in wanted))
@@ -351,8 +372,7 @@ class OutputRecord:
                 continue
             for e in found:
                 try:
-                    os.unlink(e.path)
-                    removed += 1
+                    removed += remove_unclaimed(e.path)
                 except OSError as exc:
                     _log.warning("could not remove %s, left by an interrupted compare: %s",
                                  e.path, exc)
@@ -361,11 +381,16 @@ class OutputRecord:
                       removed, self.out)
         return removed
 
-    def begin(self) -> None:
-        """The manifest as a journal: the earlier entries that still prove a file
-        (:func:`_compacted`: so an interrupted compare leaves every file of compare's still
-        proved, and the journal does not grow with each one), then each file as written."""
-        lines = [json.dumps({"format": _MANIFEST_FORMAT, "version": _VERSION})]
+    def begin(self, paths: Sequence[Path] = ()) -> None:
+        """The manifest as a journal: a header naming the files this compare may write
+        (``paths``: a compare killed before it listed one left its temporary file beside a
+        name the next one may neither list nor write, h77), the earlier entries that still
+        prove a file (:func:`_compacted`: so an interrupted compare leaves every file of
+        compare's still proved, and the journal does not grow with each one), then each file
+        as written."""
+        writing = sorted(os.path.relpath(p, self.out) for p in paths)
+        lines = [json.dumps({"format": _MANIFEST_FORMAT, "version": _VERSION,
+                             "writing": writing})]
         lines += [json.dumps(e) for e in _compacted(self.out, _earlier_entries(self.out))]
         write_text(self.path, "\n".join(lines) + "\n")
 

@@ -411,7 +411,7 @@ def _compare(experiments: Sequence[Experiment], out: Path, executor: Executor,
                                         cache_dir=out / "cache" if use_cache else None)
     record, paths = planned
     record.refuse_foreign(paths)  # a file put there while the runs ran (they are cached)
-    record.begin()
+    record.begin(paths)  # named first: killed writing one, the next removes its leftover
     results = mark_self_scored(results, experiments)  # scored against their own map
     written = write_estimate_files(out, tasks, results, record.ready) if estimates else []
     summary = summarise(results)

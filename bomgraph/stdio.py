@@ -44,6 +44,7 @@ from pathlib import Path
 from typing import IO, Any, Callable, Iterator, Sequence
 
 from .checks import file_name, items
+from .claims import claim, release
 from .errors import BomgraphError
 
 STDIO = "-"
@@ -326,6 +327,7 @@ class AtomicOutput:
         self._mode = 0o666 & ~_umask() if st is None else stat.S_IMODE(st.st_mode)
         self._binary = binary
         self._tmp: str | None = None
+        self._claim: int | None = None  # its temporary file's lock (bomgraph.claims)
         self.fh: IO | None = None
 
     def open(self) -> IO:
@@ -353,6 +355,7 @@ class AtomicOutput:
         with signals_held():
             fd, self._tmp = tempfile.mkstemp(prefix=f".{name}.", suffix=".partial", dir=d)
             try:
+                self._claim = claim(fd)
                 os.chmod(fd, self._mode)  # as open() would (or as the file was), not 0600
                 self.fh = os.fdopen(fd, mode, **kw)
             except BaseException:
@@ -377,6 +380,8 @@ class AtomicOutput:
                 self._ready(self._tmp)
             os.replace(self._tmp, self.path)
             self._tmp = None
+            release(self._claim)
+            self._claim = None
             _fsync_dir(os.path.dirname(self.path))
 
     def abort(self) -> None:
@@ -389,6 +394,8 @@ class AtomicOutput:
                 with contextlib.suppress(OSError):
                     os.unlink(self._tmp)
                 self._tmp = None
+            release(self._claim)
+            self._claim = None
 
 
 @contextlib.contextmanager
