@@ -48,7 +48,9 @@ def _sweep(stream: str) -> tuple[list[tuple[bool, str]], list[str], list[str], i
 def test_a_sweep_in_a_pool_worker_runs_serially_saying_so_once(tmp_path) -> None:
     stream = tmp_path / "s.jsonl"
     write_stream(simulate(SimConfig(n_steps=20), np.random.default_rng(3)), stream)
-    with multiprocessing.get_context("fork").Pool(1) as pool:
+    # spawn, not fork: the test process runs threads (fork may deadlock the child; Python 3.13
+    # warns of it), and the worker registers its method itself
+    with multiprocessing.get_context("spawn").Pool(1) as pool:
         res, logs, caught, pid = pool.apply(_sweep, (str(stream),))
     assert pid != os.getpid()
     assert res == [(True, ""), (True, "")], res
