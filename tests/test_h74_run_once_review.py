@@ -22,32 +22,22 @@ from pathlib import Path
 
 import pytest
 
-from bomgraph import estimate_writer, mapper, stream_file
+from bomgraph import estimate_writer, mapper
 from bomgraph.cli import main
 from bomgraph.estimate_file import write_estimate
 from bomgraph.mapper import create_mapper, run
 from bomgraph.stream_file import read_stream
 from bomgraph.stream_identity import stream_identity
 
+from _run_once import counted_parses, simulated
+
 
 @pytest.fixture(scope="module")
 def stream(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    path = tmp_path_factory.mktemp("h74") / "s.jsonl"
-    assert main(["simulate", "--seed", "5", "--steps", "80", "--landmarks", "12",
-                 "--out", str(path)]) == 0
-    return path
+    return simulated(tmp_path_factory, 80, 12)
 
 
-def _parses(monkeypatch: pytest.MonkeyPatch) -> list[int]:
-    seen: list[int] = []
-    parse = stream_file._parse_step
-
-    def counted(*args, **kwargs):
-        seen.append(1)
-        return parse(*args, **kwargs)
-
-    monkeypatch.setattr(stream_file, "_parse_step", counted)
-    return seen
+_parses = counted_parses
 
 
 _FAILING = textwrap.dedent('''

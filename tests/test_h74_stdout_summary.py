@@ -12,18 +12,16 @@ from pathlib import Path
 
 import pytest
 
-from bomgraph.cli import main
 from bomgraph.estimate_file import read_estimate, stream_file_identity
+
+from _run_once import simulated
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
 @pytest.fixture(scope="module")
 def stream(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    path = tmp_path_factory.mktemp("h74") / "s.jsonl"
-    assert main(["simulate", "--seed", "5", "--steps", "30", "--landmarks", "12",
-                 "--out", str(path)]) == 0
-    return path
+    return simulated(tmp_path_factory, 30, 12)
 
 
 def _to_file(argv: list[str], stdout: Path) -> subprocess.CompletedProcess:

@@ -22,13 +22,12 @@ import pytest
 from bomgraph import estimate_writer, mapper
 from bomgraph.cli import main
 
+from _run_once import simulated
+
 
 @pytest.fixture(scope="module")
 def stream(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    path = tmp_path_factory.mktemp("h76") / "s.jsonl"
-    assert main(["simulate", "--seed", "5", "--steps", "40", "--landmarks", "8",
-                 "--out", str(path)]) == 0
-    return path
+    return simulated(tmp_path_factory, 40, 8)
 
 
 _FAILING = textwrap.dedent('''
