@@ -10,10 +10,10 @@ import json
 import os
 import textwrap
 from pathlib import Path
+from typing import Iterator
 
 import pytest
 
-from bomgraph import mapper
 from bomgraph.cli import main
 from bomgraph.estimate_file import (EstimateWriter, read_estimate, stream_file_identity,
                                     write_estimate)
@@ -22,6 +22,7 @@ from bomgraph.stream_file import read_stream
 from bomgraph.stream_identity import StreamHasher, stream_identity
 
 from _run_once import counted_parses, simulated
+from _runtime_method import runtime_method
 
 
 @pytest.fixture(scope="module")
@@ -112,12 +113,10 @@ _FAILING = textwrap.dedent('''
 
 
 @pytest.fixture
-def failing(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> str:
-    (tmp_path / "h71failing.py").write_text(_FAILING)
-    monkeypatch.syspath_prepend(str(tmp_path))
-    monkeypatch.setattr(mapper, "_REGISTRY", dict(mapper._REGISTRY))
-    mapper.register_method("h71-failing", "h71failing:Failing", "fails at t = 3")
-    return "h71-failing"
+def failing(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Iterator[str]:
+    for _ in runtime_method(tmp_path, monkeypatch, "h71-failing", "h71failing", _FAILING,
+                            "Failing", "fails at t = 3"):
+        yield "h71-failing"
 
 
 def test_a_bad_line_after_a_method_failure_is_still_what_is_refused(

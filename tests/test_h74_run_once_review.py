@@ -19,10 +19,11 @@ import os
 import re
 import textwrap
 from pathlib import Path
+from typing import Iterator
 
 import pytest
 
-from bomgraph import estimate_writer, mapper
+from bomgraph import estimate_writer
 from bomgraph.cli import main
 from bomgraph.estimate_file import write_estimate
 from bomgraph.mapper import create_mapper, run
@@ -30,6 +31,7 @@ from bomgraph.stream_file import read_stream
 from bomgraph.stream_identity import stream_identity
 
 from _run_once import counted_parses, simulated
+from _runtime_method import runtime_method
 
 
 @pytest.fixture(scope="module")
@@ -63,12 +65,10 @@ _FAILING = textwrap.dedent('''
 
 
 @pytest.fixture
-def failing(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> str:
-    (tmp_path / "h74failing.py").write_text(_FAILING)
-    monkeypatch.syspath_prepend(str(tmp_path))
-    monkeypatch.setattr(mapper, "_REGISTRY", dict(mapper._REGISTRY))
-    mapper.register_method("h74-failing", "h74failing:Failing", "fails at t = 3")
-    return "h74-failing"
+def failing(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Iterator[str]:
+    for _ in runtime_method(tmp_path, monkeypatch, "h74-failing", "h74failing", _FAILING,
+                            "Failing", "fails at t = 3"):
+        yield "h74-failing"
 
 
 def test_a_method_failure_on_a_good_stream_reads_each_line_once(

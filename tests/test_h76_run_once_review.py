@@ -16,13 +16,15 @@ import os
 import random
 import textwrap
 from pathlib import Path
+from typing import Iterator
 
 import pytest
 
-from bomgraph import estimate_writer, mapper
+from bomgraph import estimate_writer
 from bomgraph.cli import main
 
 from _run_once import simulated
+from _runtime_method import runtime_method
 
 
 @pytest.fixture(scope="module")
@@ -49,13 +51,10 @@ _FAILING = textwrap.dedent('''
 
 
 @pytest.fixture
-def failing(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> str:
-    (tmp_path / "h76failing.py").write_text(_FAILING)
-    monkeypatch.syspath_prepend(str(tmp_path))
-    monkeypatch.setattr(mapper, "_REGISTRY", dict(mapper._REGISTRY))
-    mapper.register_method("h76-failing", "h76failing:FailingEstimate",
-                           "fails estimating at t = 10")
-    return "h76-failing"
+def failing(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Iterator[str]:
+    for _ in runtime_method(tmp_path, monkeypatch, "h76-failing", "h76failing", _FAILING,
+                            "FailingEstimate", "fails estimating at t = 10"):
+        yield "h76-failing"
 
 
 def _bad_at(stream: Path, t: int, tmp_path: Path) -> Path:
