@@ -564,7 +564,11 @@ def _write_source_maps(out: Path, exp: Experiment, results: Sequence[Mapping[str
         try:
             truth = src.stream().truth
         except (StreamFormatError, OSError) as exc:  # removed or rewritten since its runs
-            _log.warning("no map figure for %s: %s", src.name, exc)
+            unread = all(str(r.get("error", "")).startswith(("StreamFormatError: ",
+                                                             "DatasetError: ")) for r in rs)
+            # runs that could not read it already say why (the CLI's one error line)
+            _log.log(logging.DEBUG if unread else logging.WARNING, "no map figure for %s: %s",
+                     src.name, exc)
             continue
         if truth is None:
             continue

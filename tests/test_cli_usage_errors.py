@@ -90,3 +90,18 @@ def test_the_installed_command_too() -> None:
         "bomgraph run: error: the following arguments are required: stream, --method, --out; "
         "see bomgraph run --help"]
 
+
+
+def test_compare_on_an_unreadable_stream_is_one_line(tmp_path, capsys: pytest.CaptureFixture
+                                                      ) -> None:
+    """A stream with a bad step: compare's one error line (exit 2), not also a warning that
+    its map figure could not be drawn (it printed both)."""
+    good = tmp_path / "s.jsonl"
+    assert main(["simulate", "--steps", "20", "--landmarks", "10", "--out", str(good)]) == 0
+    bad = tmp_path / "bad.jsonl"
+    bad.write_text(good.read_text().replace('"odom"', '"odum"', 1))
+    capsys.readouterr()
+    assert main(["compare", "--streams", str(bad), "--methods", "triangulate", "--jobs", "1",
+                 "--no-progress", "--out", str(tmp_path / "c")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "'odum'" in err[0] and "error" in err[0], err
