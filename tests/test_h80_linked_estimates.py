@@ -9,13 +9,18 @@ from __future__ import annotations
 
 import json
 import shutil
+from dataclasses import replace
 from pathlib import Path
 
 import pytest
 
 import _compare_folder
+from bomgraph.bench import Executor
 from bomgraph.cli import main
+from bomgraph.experiments import Arm, Experiment
 from bomgraph.out_folder import MANIFEST
+from bomgraph.report import compare
+from bomgraph.sim import SimConfig
 from bomgraph.stdio import folder_lock
 
 
@@ -163,3 +168,27 @@ def test_a_link_to_no_folder_is_refused_saying_so(tmp_path: Path, stream: Path,
     assert main(_cmd(stream, out)) == 2
     assert "which is a link to" in _one_error(capsys)
     assert not (tmp_path / "unmounted").exists()
+
+
+def test_a_linked_streams_folder_and_a_link_further_down(tmp_path: Path) -> None:
+    """``OUT/streams`` (a simulated run's stream) and a folder under ``estimates/`` linked: the
+    same rules; the stale file under the deeper link is removed, the linked folders stay."""
+    out, big = tmp_path / "out", tmp_path / "big"
+    (big / "streams").mkdir(parents=True)
+    (big / "tri").mkdir()
+    (out / "estimates" / "t").mkdir(parents=True)
+    (out / "streams").symlink_to(big / "streams")
+    (out / "estimates" / "t" / "tri").symlink_to(big / "tri")
+    arms = (Arm("tri", "triangulate"), Arm("tri2", "triangulate"))
+    exp = Experiment("t", "test", arms, SimConfig(n_steps=40, n_landmarks=20), seed=3,
+                     n_layouts=1, n_starts=1)
+    for _ in range(2):
+        compare([exp], out, executor=Executor("serial"), estimates=True, figures=False)
+    runs = sorted(p.name for p in (big / "tri").glob("*.est"))
+    assert runs and len(list((big / "streams" / "t").iterdir())) == len(runs)
+    compare([replace(exp, arms=arms[1:])], out, executor=Executor("serial"), estimates=True,
+            figures=False)
+    assert [p.name for p in (big / "tri").iterdir()] == [".bomgraph.lock"]  # its lock
+    assert (out / "estimates" / "t" / "tri").is_symlink()
+    assert len(list((big / "streams" / "t").iterdir())) == len(runs)  # tri2's, still
+    assert sorted(p.name for p in (out / "estimates" / "t" / "tri2").iterdir()) == runs
