@@ -11,7 +11,11 @@
   names it would write that the manifest does not show compare wrote, unchanged since (a
   user's ``results.csv``; a folder from a bomgraph older than the manifest);
 * what the next compare removes: the files the manifest lists that it does not write again,
-  if nobody changed them since, and nothing else (:func:`drop_earlier_outputs`).
+  if nobody changed them since, and nothing else (:func:`drop_earlier_outputs`);
+* a link to a folder on the way (``estimates/`` linked to a folder on a bigger disk): followed,
+  and named in the entries of the files written through it (``via``); they prove a file only
+  while the same links lead to the same folders (:func:`_proves`). A link at a file's name is
+  never written through.
 """
 
 from __future__ import annotations
@@ -147,7 +151,7 @@ def refuse_inputs_among_outputs(out: Path, experiments: Sequence[Experiment]) ->
 #: write them again; nothing else.
 MANIFEST = ".bomgraph-compare-files"
 _MANIFEST_FORMAT = "bomgraph-compare-files"
-_VERSION = 2  # 1: entries without sha256, proved by size and modification time
+_VERSION = 3  # 1: entries without sha256, proved by size and modification time; 2: no via
 
 
 def _file_id(path: str | os.PathLike[str]) -> tuple[int, int] | None:
@@ -168,16 +172,37 @@ def _sha256(path: str | os.PathLike[str]) -> str:
     return h.hexdigest()
 
 
+def _links_on_the_way(out: Path, rel: str) -> dict[str, str]:
+    """The folders between ``out`` and ``out/rel`` that are links (a user's ``estimates/`` on
+    another disk): each one's path relative to ``out`` -> the real folder it leads to now."""
+    parts = Path(rel).parts[:-1]
+    subs = [os.path.join(*parts[:i]) for i in range(1, len(parts) + 1)]
+    return {sub: os.path.realpath(out / sub) for sub in subs if os.path.islink(out / sub)}
+
+
+def _plain(rel: str) -> str | None:
+    """``rel`` normalised when it names a file under the folder (no ``..``, not absolute)."""
+    norm = os.path.normpath(rel)
+    if (not rel or os.path.isabs(norm) or norm in (".", "..")
+            or norm.startswith(os.pardir + os.sep)):
+        return None
+    return norm
+
+
 def _entry(out: Path, path: Path, name: Path | None = None) -> dict[str, Any] | None:
     """``path``'s entry, listed as ``name`` (default ``path``): the file about to take that
-    name (its size, modification time and contents stay as it is renamed)."""
+    name (its size, modification time and contents stay as it is renamed), and the links to
+    folders on the way to it (``via``, when there are)."""
     try:
         st = os.stat(path)
         digest = _sha256(path)
     except OSError:
         return None
-    return {"path": os.path.relpath(path if name is None else name, out), "size": st.st_size,
-            "mtime_ns": st.st_mtime_ns, "sha256": digest}
+    rel = os.path.relpath(path if name is None else name, out)
+    entry = {"path": rel, "size": st.st_size, "mtime_ns": st.st_mtime_ns, "sha256": digest}
+    if links := _links_on_the_way(out, rel):
+        entry["via"] = links
+    return entry
 
 
 def _parse_manifest(data: bytes) -> list[dict[str, Any]] | None:
@@ -204,7 +229,7 @@ def _parse_manifest(data: bytes) -> list[dict[str, Any]] | None:
         return None
     return [e for e in files if isinstance(e, dict) and isinstance(e.get("path"), str)
             and isinstance(e.get("size"), int) and isinstance(e.get("mtime_ns"), int)
-            and isinstance(e.get("sha256", ""), str)]
+            and isinstance(e.get("sha256", ""), str) and isinstance(e.get("via", {}), dict)]
 
 
 def _read_manifest(out: Path) -> list[dict[str, Any]] | None:
@@ -237,6 +262,31 @@ def _unchanged(path: str | os.PathLike[str], entry: Mapping[str, Any]) -> bool:
     return st.st_mtime_ns == entry["mtime_ns"]
 
 
+def _proves(out: Path, entry: Mapping[str, Any]) -> bool:
+    """Whether ``entry`` proves the file at its path compare's, unchanged (:func:`_unchanged`):
+    the path plainly under ``out``, no link at the file's name, and the same links on the way
+    leading to the same folders as when it was written. Files reached through a link changed
+    since (or made, or removed) are not proved: a copy of compare's files, a folder another
+    compare wrote, may hold the same bytes; its stale files are not compare's to remove."""
+    rel = _plain(entry["path"])
+    if rel is None or os.path.islink(out / rel):
+        return False
+    return entry.get("via", {}) == _links_on_the_way(out, rel) and _unchanged(out / rel, entry)
+
+
+def _link_changed(out: Path, rel: str, entry: Mapping[str, Any]) -> str:
+    """Why ``entry`` proves no file at ``out/rel`` now that its links on the way differ, and
+    what to do, for an error."""
+    was, now = entry.get("via", {}), _links_on_the_way(out, rel)
+    sub = min(k for k in {*was, *now} if was.get(k) != now.get(k))
+    back = (f"link {out / sub} back to {was[sub]}, move the files there, or choose another "
+            f"folder" if sub in was else "move the files there or choose another folder")
+    then = f"a link to {was[sub]}" if sub in was else "no link"
+    now_is = f"which is a link to {now[sub]}" if sub in now else "now a folder"
+    return (f"through {out / sub}, {now_is}: the earlier compare wrote it when that was {then} "
+            f"(files reached through another link are not proved compare's); {back}")
+
+
 #: The name :class:`bomgraph.stdio.AtomicOutput` writes ``NAME`` under until it renames it:
 #: ``tempfile.mkstemp(prefix=".NAME.", suffix=".partial")``, 8 characters of tempfile's.
 _TEMP_NAME = r"\.{name}\.[a-z0-9_]{{8}}\.partial"
@@ -266,7 +316,7 @@ def _compacted(out: Path, entries: Sequence[Mapping[str, Any]]) -> list[Mapping[
         if not os.path.lexists(path):
             continue
         if len(listed) > 1:
-            proving = [e for e in listed if _unchanged(path, e)]
+            proving = [e for e in listed if _proves(out, e)]
             listed = proving or listed
         kept.append(listed[-1])
     return kept
@@ -297,10 +347,13 @@ class OutputRecord:
     def refuse_foreign(self, paths: Sequence[Path], folders: Sequence[Path] = ()) -> None:
         """Refuse, naming the first, a file at one of ``paths`` (the names this compare may
         write) that the manifest does not show compare wrote, unchanged since: a user's own
-        file, or one of a compare without a manifest (an older bomgraph); a link there or on
-        the way (written through, a file outside the folder was replaced: a user's copy of
-        results.csv, moved out and linked back); a folder there, a file where compare makes a
-        folder (one of ``folders``, or on the way to a path).
+        file, or one of a compare without a manifest (an older bomgraph); a link there
+        (written through, a file outside the folder was replaced: a user's copy of
+        results.csv, moved out and linked back); a file reached through a link to a folder on
+        the way that led elsewhere (or was no link) when compare wrote it; a folder there, a
+        file or a link to no folder where compare makes a folder (one of ``folders``, or on
+        the way to a path). A link to a folder on the way is no reason (``estimates/`` on
+        another disk).
 
         Raises
         ------
@@ -317,8 +370,10 @@ class OutputRecord:
             by_path.setdefault(os.path.normpath(e["path"]), []).append(e)
         for folder in [*folders, *sorted({q for p in paths for q in p.parents if out in q.parents})]:
             if os.path.lexists(folder) and not folder.is_dir():
+                what = (f"a link to {os.path.realpath(folder)}, which is not a folder"
+                        if os.path.islink(folder) else "a file")
                 raise OutputPathError(f"--out {out}: compare writes a folder {folder}, which "
-                                      f"is a file; {todo}")
+                                      f"is {what}; {todo}")
         for p in paths:
             if not os.path.lexists(p):
                 continue
@@ -326,12 +381,16 @@ class OutputRecord:
                 raise OutputPathError(f"--out {out}: compare writes the file {p}, which is a "
                                       f"folder; {todo}")
             rel = os.path.normpath(os.path.relpath(p, out))
-            if os.path.realpath(p) != os.path.join(os.path.realpath(out), rel):
+            if os.path.islink(p):
                 raise OutputPathError(f"--out {out}: compare would replace {p}, which is a "
-                                      f"link to {os.path.realpath(p)} (compare writes no links "
-                                      f"and replaces nothing outside its folder); {todo}")
-            if any(_unchanged(p, e) for e in by_path.get(rel, ())):
+                                      f"link to {os.path.realpath(p)} (compare writes through "
+                                      f"no link at a file's name); {todo}")
+            if any(_proves(out, e) for e in by_path.get(rel, ())):
                 continue
+            links = _links_on_the_way(out, rel)
+            if by_path.get(rel) and all(e.get("via", {}) != links for e in by_path[rel]):
+                raise OutputPathError(f"--out {out}: compare would replace {p} "
+                                      f"{_link_changed(out, rel, by_path[rel][-1])}")
             # not listed: never compare's, or changed since and then left out of the list by
             # a compare that did not write it again (h75: "which compare did not write")
             why = ("which was changed since an earlier compare wrote it" if rel in by_path else
@@ -417,6 +476,18 @@ class OutputRecord:
         drop_earlier_outputs(self.out, written, experiments, self.entries)
 
 
+def linked_folders(out: Path, paths: Sequence[Path]) -> dict[str, Path]:
+    """The real folders that links on the way to ``paths`` lead to (``out/estimates`` linked
+    to another disk), ``out``'s own left out: each -> the first link to it. ``compare`` locks
+    them as it locks ``out``: another folder's compare may write one through a link too."""
+    root, found = os.path.realpath(out), {}
+    for p in paths:
+        for sub, real in _links_on_the_way(out, os.path.relpath(p, out)).items():
+            if real != root:
+                found.setdefault(real, out / sub)
+    return found
+
+
 def drop_earlier_outputs(out: Path, written: Sequence[Path],
                          experiments: Sequence[Experiment],
                          entries: Sequence[Mapping[str, Any]] | None = None) -> None:
@@ -428,22 +499,22 @@ def drop_earlier_outputs(out: Path, written: Sequence[Path],
     Left alone: a file compare did not write (a user's own figure in the folder); one changed
     since compare wrote it (its size or SHA-256 differ); one this compare wrote or
     reads (compared as files, not names: a case-insensitive disk or a link is no escape); any
-    entry that is not plainly inside ``out`` (``..``, an absolute path, a link on the way).
-    Folders the removals empty go too. A removal that fails is logged, never raised: the
-    results are written by then.
+    entry that is not plainly under ``out`` (``..``, an absolute path) or that the links on
+    its way no longer prove (:func:`_proves`). Folders the removals empty go too, up to
+    ``out`` or a link (a linked folder stays, and so does the link). A removal that fails is
+    logged, never raised: the results are written by then.
     """
-    root = os.path.realpath(out)
     keep = {i for p in [*written, *input_paths(experiments)] if (i := _file_id(p)) is not None}
     for entry in _earlier_entries(out):
-        plain = _inside(root, entry["path"])
-        if plain is None or not (path := Path(plain)).is_file():
+        rel = _plain(entry["path"])
+        if rel is None or not (path := out / rel).is_file():
             continue
-        if _file_id(path) in keep or not _unchanged(path, entry):
+        if _file_id(path) in keep or not _proves(out, entry):
             continue
         try:
             path.unlink()
             parent = path.parent
-            while str(parent) != root and not any(parent.iterdir()):
+            while parent != out and not parent.is_symlink() and not any(parent.iterdir()):
                 parent.rmdir()
                 parent = parent.parent
         except OSError as exc:
@@ -472,5 +543,5 @@ def unique_slugs(names: Sequence[str]) -> dict[str, str]:
 
 __all__ = ["COMPARE_FILES", "COMPARE_FOLDERS", "MANIFEST", "OutputRecord", "RESULT_FILES",
            "drop_earlier_outputs", "estimate_paths", "figure_paths", "input_paths",
-           "planned_outputs", "refuse_inputs_among_outputs", "slug", "source_hash",
-           "unique_slugs"]
+           "linked_folders", "planned_outputs", "refuse_inputs_among_outputs", "slug",
+           "source_hash", "unique_slugs"]

@@ -10,6 +10,7 @@ A result is the dict of :func:`bomgraph.bench.run_task`; its ``checkpoints`` are
 
 from __future__ import annotations
 
+import contextlib
 import json
 import logging
 import math
@@ -33,8 +34,8 @@ from .paired import (PairedConfig, PairedRow, pairable, paired_comparison,
                      references_for, scored_references)
 from .run_scoring import mark_self_scored, scored_against, scores_left_out
 from .plots import MapPanel, error_vs_time_figure, final_maps_figure, map_figure
-from .out_folder import (RESULT_FILES, OutputRecord, estimate_paths, planned_outputs,
-                         refuse_inputs_among_outputs, slug)
+from .out_folder import (RESULT_FILES, OutputRecord, estimate_paths, linked_folders,
+                         planned_outputs, refuse_inputs_among_outputs, slug)
 from .stdio import folder_lock, make_folder, write_figure, write_text
 from .tables import HUGE, write_csv
 
@@ -370,7 +371,10 @@ def compare(experiments: Sequence[Experiment], out_dir: str | os.PathLike[str], 
     record = OutputRecord(out)
     record.refuse_foreign(planned, [out / "cache"] if use_cache else [])
     make_folder(out)
-    with folder_lock(out, "`bomgraph compare`"):
+    with folder_lock(out, "`bomgraph compare`"), contextlib.ExitStack() as linked:
+        for real, link in linked_folders(out, planned).items():  # two folders may link one
+            linked.enter_context(folder_lock(real, f"`bomgraph compare` (into it, or through a "
+                                                   f"link to it as {link} is one)"))
         record.remove_leftovers(planned)  # of compares killed while writing: none writes now
         return _compare(experiments, out, executor, use_cache, figures, progress, estimates,
                         refs, paired, paired_reference, (record, planned))
