@@ -8,7 +8,8 @@ the compare results and cache, figures):
 * a symbolic link is followed: the file it points to is written, the link stays a link;
 * a character device or a FIFO (``/dev/null``, ``/dev/stdout``, a named pipe) and the names of
   open descriptors (``/dev/stdout``, ``/dev/fd/N``, ``/proc/self/fd/N``) are written directly,
-  never replaced by a regular file;
+  never replaced by a regular file; a descriptor of this process through a duplicate of it
+  (``>> f`` appends, ``1<> f`` writes from where it stands: never truncated);
 * anything else that exists and is not a regular file (a directory, a block device, a socket)
   is refused in one line;
 * a regular file (or a new one) is written beside its target under a unique temporary name
@@ -58,7 +59,8 @@ _CHUNK = 2**20
 #: temp paths standing for stdin, so messages can name ``<stdin>`` instead.
 _SPOOLED: dict[str, str] = {}
 #: names that stand for an already open descriptor: written directly, never renamed over.
-_FD_NAME = re.compile(r"^/(dev/(stdout|stderr|stdin|fd/\d+)|proc/(self|\d+)/fd/\d+)$")
+_FD_NAME = re.compile(r"^/(dev/(stdout|stderr|stdin|fd/(\d+))|proc/(self|\d+)/fd/(\d+))$")
+_STANDARD = {"stdin": 0, "stdout": 1, "stderr": 2}
 
 
 class OutputPathError(BomgraphError):
@@ -228,6 +230,35 @@ def _direct(path: str, st: os.stat_result | None) -> bool:
     return stat.S_ISREG(st.st_mode) and bool(_FD_NAME.match(os.path.abspath(path)))
 
 
+def _own_descriptor(path: str) -> int | None:
+    """The descriptor of this process that ``path`` names (``/dev/stdout``: 1, ``/dev/fd/N``,
+    ``/proc/self/fd/N``: N), else None (another process's, or no such name)."""
+    m = _FD_NAME.match(os.path.abspath(path))
+    if m is None or (m[4] not in (None, "self") and int(m[4]) != os.getpid()):
+        return None
+    return _STANDARD[m[2]] if m[2] in _STANDARD else int(m[3] or m[5])
+
+
+def _open_direct(path: str, st: os.stat_result) -> int:
+    """A descriptor to write the device, FIFO or open descriptor ``path`` in place: for a
+    descriptor of this process a duplicate of it, with its flags and its position (opening
+    ``/dev/stdout`` by name reopens its file from the start, truncated: ``>> f`` lost f's
+    content, h79); else ``path`` opened, never truncated (appended to, if a regular file)."""
+    own = _own_descriptor(path)
+    if own is None:
+        return os.open(path, os.O_WRONLY | (os.O_APPEND if stat.S_ISREG(st.st_mode) else 0))
+    fd = os.dup(own)
+    try:
+        import fcntl
+        readonly = fcntl.fcntl(fd, fcntl.F_GETFL) & os.O_ACCMODE == os.O_RDONLY
+    except ImportError:
+        readonly = False
+    if readonly:
+        os.close(fd)
+        raise OSError(errno.EBADF, f"descriptor {own} is open for reading only")
+    return fd
+
+
 def is_stdout(path: str) -> bool:
     """Whether writing ``path`` reaches this process's standard output (``-``,
     ``/dev/stdout``, or the file stdout is redirected to): result lines then go to stderr."""
@@ -264,11 +295,13 @@ def check_output_path(path: str | os.PathLike[str],
     st = _stat(path)
     if st is not None and stat.S_ISDIR(st.st_mode):
         raise OutputPathError(f"--out {path}: is a directory; give a file name")
-    if _direct(path, st):
+    direct = _direct(path, st)
+    if direct:
         if not os.access(path, os.W_OK):
             raise OutputPathError(f"--out {path}: not writable")
-        return
-    if st is not None and not stat.S_ISREG(st.st_mode):
+        if not stat.S_ISREG(st.st_mode):
+            return
+    elif st is not None and not stat.S_ISREG(st.st_mode):
         raise OutputPathError(f"--out {path}: exists and is neither a regular file, a "
                               f"character device nor a FIFO; choose another name")
     target = os.path.realpath(path)
@@ -286,6 +319,8 @@ def check_output_path(path: str | os.PathLike[str],
         if same:
             raise OutputPathError(f"--out {path}: is the input {inp}; refusing to overwrite "
                                   f"an input: choose another name")
+    if direct:  # a file open as a descriptor (``>> f``): written where it is
+        return
     folder = Path(target).parent
     if not folder.is_dir():
         raise OutputPathError(f"--out {path}: the folder {folder} does not exist")
@@ -324,6 +359,7 @@ class AtomicOutput:
         self.given = os.fspath(path)
         st = _stat(self.given)
         self.direct = _direct(self.given, st)
+        self._st = st
         self.path = self.given if self.direct else os.path.realpath(self.given)
         self._mode = 0o666 & ~_umask() if st is None else stat.S_IMODE(st.st_mode)
         self._binary = binary
@@ -347,7 +383,12 @@ class AtomicOutput:
         kw = {} if self._binary else {"encoding": "utf-8", "newline": "\n"}
         mode = "wb" if self._binary else "w"
         if self.direct:
-            self.fh = open(self.given, mode, **kw)
+            fd = _open_direct(self.given, self._st)
+            try:
+                self.fh = open(fd, mode, **kw)
+            except BaseException:
+                os.close(fd)
+                raise
             return self.fh
         d, name = os.path.split(self.path)
         # SIGTERM/SIGINT are held back from the temporary file's creation until the handle
