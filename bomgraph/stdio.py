@@ -13,9 +13,10 @@ the compare results and cache, figures):
 * anything else that exists and is not a regular file (a directory, a block device, a socket)
   is refused in one line;
 * a regular file (or a new one) is written beside its target under a unique temporary name
-  (``.NAME.XXXX.partial``), flushed to disk and renamed into place, so a reader never sees half
-  a file and an interrupted write leaves the old file and no stray file (but ``kill -9``: then
-  the temporary file too; only ``compare``, holding its folder's lock, removes those later);
+  (``.NAME.XXXXXXXX.partial``, :data:`bomgraph.claims.TEMP_NAME`), flushed to disk and renamed
+  into place, so a reader never sees half a file and an interrupted write leaves the old file
+  and no stray file (but ``kill -9``: then the temporary file too, which the next writer of
+  ``NAME`` removes, :func:`bomgraph.claims.remove_leftovers`, as compare does its folder's);
 * an output that is one of the command's inputs (the same file, through links or hard links
   too) is refused before anything is computed.
 
@@ -44,7 +45,7 @@ from pathlib import Path
 from typing import IO, Any, Callable, Iterator, Sequence
 
 from .checks import file_name, items
-from .claims import claim, release
+from .claims import new_temp_file, release, remove_leftovers
 from .errors import BomgraphError
 
 _log = logging.getLogger(__name__)
@@ -395,9 +396,8 @@ class AtomicOutput:
         # owns it: a signal raising mid-way would leave a file nobody removes, or close the
         # descriptor twice (EBADF). Delivered at the unmask, the handle is in place for abort.
         with signals_held():
-            fd, self._tmp = tempfile.mkstemp(prefix=f".{name}.", suffix=".partial", dir=d)
+            fd, self._tmp, self._claim = new_temp_file(d, name)
             try:
-                self._claim = claim(fd)
                 os.chmod(fd, self._mode)  # as open() would (or as the file was), not 0600
                 self.fh = os.fdopen(fd, mode, **kw)
             except BaseException:
@@ -405,6 +405,11 @@ class AtomicOutput:
                     os.close(fd)
                 self.abort()
                 raise
+        if self._claim is not None:  # where writers hold claims, a killed one's is known
+            removed = remove_leftovers(d, [name], keep=self._tmp)
+            if removed:
+                _log.info("removed %d temporary file(s) of %s that killed writers left",
+                          removed, self.path)
         return self.fh
 
     def commit(self) -> None:
