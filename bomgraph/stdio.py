@@ -8,8 +8,9 @@ the compare results and cache, figures):
 * a symbolic link is followed: the file it points to is written, the link stays a link;
 * a character device or a FIFO (``/dev/null``, ``/dev/stdout``, a named pipe) and the names of
   open descriptors (``/dev/stdout``, ``/dev/fd/N``, ``/proc/self/fd/N``) are written directly,
-  never replaced by a regular file; a descriptor of this process through a duplicate of it
-  (``>> f`` appends, ``1<> f`` writes from where it stands: never truncated);
+  never replaced by a regular file; a descriptor of this process (or a link to its name)
+  through a duplicate of it (``>> f`` appends, ``1<> f`` writes from where it stands: never
+  truncated);
 * anything else that exists and is not a regular file (a directory, a block device, a socket)
   is refused in one line;
 * a regular file (or a new one) is written beside its target under a unique temporary name
@@ -228,13 +229,29 @@ def _direct(path: str, st: os.stat_result | None) -> bool:
         return False
     if stat.S_ISCHR(st.st_mode) or stat.S_ISFIFO(st.st_mode):
         return True
-    return stat.S_ISREG(st.st_mode) and bool(_FD_NAME.match(os.path.abspath(path)))
+    return stat.S_ISREG(st.st_mode) and _fd_name(path) is not None
+
+
+def _fd_name(path: str) -> re.Match[str] | None:
+    """The name of an open descriptor that ``path`` is, or that its symbolic links lead to
+    (``out -> /dev/stdout``: the file behind it was replaced, ``>> f`` lost f too), else
+    None."""
+    for _ in range(40):  # the kernel's limit of links followed
+        path = os.path.abspath(path)
+        m = _FD_NAME.match(path)
+        if m is not None or not os.path.islink(path):
+            return m
+        try:
+            path = os.path.join(os.path.dirname(path), os.readlink(path))
+        except OSError:  # gone meanwhile: the write says so
+            return None
+    return None
 
 
 def _own_descriptor(path: str) -> int | None:
     """The descriptor of this process that ``path`` names (``/dev/stdout``: 1, ``/dev/fd/N``,
-    ``/proc/self/fd/N``: N), else None (another process's, or no such name)."""
-    m = _FD_NAME.match(os.path.abspath(path))
+    ``/proc/self/fd/N``: N; through links too), else None (another process's, or none)."""
+    m = _fd_name(path)
     if m is None or (m[4] not in (None, "self") and int(m[4]) != os.getpid()):
         return None
     return _STANDARD[m[2]] if m[2] in _STANDARD else int(m[3] or m[5])
