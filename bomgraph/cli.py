@@ -265,7 +265,7 @@ def _compare(args: argparse.Namespace, seen: dict[str, int]) -> int:
               file=sys.stderr)
     if executor.backend == "dask" and not getattr(args, "verbose", 0):
         from .cluster import quiet_dask_logging
-        from .stdio import restore_after
+        from .log_setup import restore_after
 
         # a cluster's failure is the failed runs' line, Dask's with -v; main(): undone after
         restore_after(quiet_dask_logging())
@@ -499,7 +499,7 @@ def program() -> int:
 
 def _run(argv: Sequence[str] | None, program: bool) -> int:
     hook = sys.unraisablehook
-    from .stdio import logging_restored
+    from .log_setup import logging_restored
 
     kept = contextlib.ExitStack()
     if not program:  # the caller's logging and warnings, which the command replaces
@@ -551,7 +551,7 @@ def _main(argv: Sequence[str] | None) -> int:
         args = parser.parse_args(argv)
     except BrokenPipeError:  # `bomgraph --help | head -1`
         return _stdout_closed()
-    from .stdio import configure_logging
+    from .log_setup import configure_logging
 
     configure_logging(getattr(args, "verbose", 0), getattr(args, "quiet", False))
     func: Callable[[argparse.Namespace], int] = _COMMANDS[args.func]

@@ -104,7 +104,7 @@ def quiet_dask_logging() -> Callable[[], None]:
     CRITICAL only, so that a failure is the failed runs' one line: for the command line without
     ``-v`` (:mod:`bomgraph.cli`), never called by the library itself. Returns what gives each
     of those loggers its level back: the command run in its caller's process calls it at
-    the end (:func:`bomgraph.stdio.restore_after`); the program does not (the client's
+    the end (:func:`bomgraph.log_setup.restore_after`); the program does not (the client's
     reconnect task logs its traceback when the process ends)."""
     importlib.import_module("distributed")  # its logging configuration first, ours over it
 

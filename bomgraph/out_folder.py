@@ -29,7 +29,7 @@ import re
 from pathlib import Path
 from typing import Any, Callable, Mapping, Sequence
 
-from .claims import remove_unclaimed
+from .claims import remove_leftovers
 from .experiments import DatasetSource, Experiment, FileSource, Task
 from .stdio import InputTooLargeError, OutputPathError, read_regular_file, write_text
 
@@ -287,11 +287,6 @@ def _link_changed(out: Path, rel: str, entry: Mapping[str, Any]) -> str:
             f"(files reached through another link are not proved compare's); {back}")
 
 
-#: The name :class:`bomgraph.stdio.AtomicOutput` writes ``NAME`` under until it renames it:
-#: ``tempfile.mkstemp(prefix=".NAME.", suffix=".partial")``, 8 characters of tempfile's.
-_TEMP_NAME = r"\.{name}\.[a-z0-9_]{{8}}\.partial"
-
-
 def _inside(root: str, rel: str) -> str | None:
     """``root/rel`` when it is plainly inside ``root`` (no ``..``, absolute path or link on
     the way), else None."""
@@ -404,13 +399,13 @@ class OutputRecord:
         """Remove the temporary files that compares killed while writing (``kill -9``, a
         power cut) left beside the names compare writes: ``paths`` (this compare's), the
         manifest's, those it lists and those an interrupted compare's journal was writing,
-        and nothing else (only names exactly of the writers' pattern, :data:`_TEMP_NAME`).
-        Call it holding the folder's lock: then no other compare is writing them; nor is any
-        other writer of bomgraph (it holds its temporary file's lock while it writes:
-        :func:`bomgraph.claims.remove_unclaimed`). Only in folders plainly
-        inside ``out``: one linked elsewhere may be another folder's, under its own lock. The
-        sweep cache's are left (``execute`` may share a cache folder without the lock).
-        Returns how many were removed (logged too)."""
+        and nothing else (only names exactly of the writers' pattern,
+        :data:`bomgraph.claims.TEMP_NAME`). Call it holding the folder's lock: then no other
+        compare is writing them; nor is any other writer of bomgraph (it holds its temporary
+        file's lock while it writes: :func:`bomgraph.claims.remove_leftovers`). Only in
+        folders plainly inside ``out``: one linked elsewhere may be another folder's, under
+        its own lock. The sweep cache's are left here (each cache file's writer removes its
+        name's). Returns how many were removed (logged too)."""
         root = os.path.realpath(self.out)
         names: dict[str, set[str]] = {}  # where the writers put them: beside the real path
         for rel in [MANIFEST, *(os.path.relpath(p, self.out) for p in paths),
@@ -421,20 +416,7 @@ class OutputRecord:
             where = root if not folder else _inside(root, folder)
             if where is not None and name not in ("", ".", "..") and not os.path.isabs(rel):
                 names.setdefault(where, set()).add(name)
-        removed = 0
-        for folder, wanted in names.items():
-            pattern = re.compile("|".join(_TEMP_NAME.format(name=re.escape(n)) for n in wanted))
-            try:
-                found = [e for e in os.scandir(folder) if pattern.fullmatch(e.name)
-                         and e.is_file(follow_symlinks=False)]
-            except OSError:  # no such folder (yet): nothing left there
-                continue
-            for e in found:
-                try:
-                    removed += remove_unclaimed(e.path)
-                except OSError as exc:
-                    _log.warning("could not remove %s, left by an interrupted compare: %s",
-                                 e.path, exc)
+        removed = sum(remove_leftovers(folder, wanted) for folder, wanted in names.items())
         if removed:
             _log.info("removed %d temporary file(s) that interrupted compares left in %s",
                       removed, self.out)

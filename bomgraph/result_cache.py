@@ -38,7 +38,9 @@ def read_cached(path: Path) -> dict[str, Any] | None:
 def write_cached(path: Path, result: Mapping[str, Any]) -> None:
     """Write a result as every output is (:func:`bomgraph.stdio.output_file`: under a unique
     temporary name beside ``path``, then renamed): two sweeps sharing a folder never write the
-    same temporary file, and a reader never sees half a file."""
+    same temporary file, and a reader never sees half a file. The temporary files of
+    ``path``'s name that killed sweeps left are removed then, never one another sweep is
+    writing (:func:`bomgraph.claims.remove_leftovers`)."""
     with output_file(path) as fh:
         fh.write(json.dumps(result, allow_nan=True))
 

@@ -8,13 +8,16 @@ the compare results and cache, figures):
 * a symbolic link is followed: the file it points to is written, the link stays a link;
 * a character device or a FIFO (``/dev/null``, ``/dev/stdout``, a named pipe) and the names of
   open descriptors (``/dev/stdout``, ``/dev/fd/N``, ``/proc/self/fd/N``) are written directly,
-  never replaced by a regular file;
+  never replaced by a regular file; a descriptor of this process (or a link to its name)
+  through a duplicate of it (``>> f`` appends, ``1<> f`` writes from where it stands: never
+  truncated);
 * anything else that exists and is not a regular file (a directory, a block device, a socket)
   is refused in one line;
 * a regular file (or a new one) is written beside its target under a unique temporary name
-  (``.NAME.XXXX.partial``), flushed to disk and renamed into place, so a reader never sees half
-  a file and an interrupted write leaves the old file and no stray file (but ``kill -9``: then
-  the temporary file too; only ``compare``, holding its folder's lock, removes those later);
+  (``.NAME.XXXXXXXX.partial``, :data:`bomgraph.claims.TEMP_NAME`), flushed to disk and renamed
+  into place, so a reader never sees half a file and an interrupted write leaves the old file
+  and no stray file (but ``kill -9``: then the temporary file too, which the next writer of
+  ``NAME`` removes, :func:`bomgraph.claims.remove_leftovers`, as compare does its folder's);
 * an output that is one of the command's inputs (the same file, through links or hard links
   too) is refused before anything is computed.
 
@@ -23,13 +26,13 @@ reads (streams, estimates, datasets, stdin), so an input without newlines (``/de
 refused in one line instead of being read until memory runs out.
 
 The core never prints; these helpers move bytes between files and the process's standard
-streams for :mod:`bomgraph.cli` and raise :class:`~bomgraph.errors.BomgraphError` subclasses.
+streams for :mod:`bomgraph.cli` and raise :class:`~bomgraph.errors.BomgraphError` subclasses
+(the CLI's logging is set up in :mod:`bomgraph.log_setup`).
 """
 
 from __future__ import annotations
 
 import contextlib
-import contextvars
 import errno
 import logging
 import os
@@ -39,13 +42,14 @@ import stat
 import sys
 import tempfile
 import threading
-import warnings
 from pathlib import Path
 from typing import IO, Any, Callable, Iterator, Sequence
 
 from .checks import file_name, items
-from .claims import claim, release
+from .claims import new_temp_file, release, remove_leftovers
 from .errors import BomgraphError
+
+_log = logging.getLogger(__name__)
 
 STDIO = "-"
 #: the longest line any bomgraph text input may have (a stream header with the truth of a
@@ -57,7 +61,8 @@ _CHUNK = 2**20
 #: temp paths standing for stdin, so messages can name ``<stdin>`` instead.
 _SPOOLED: dict[str, str] = {}
 #: names that stand for an already open descriptor: written directly, never renamed over.
-_FD_NAME = re.compile(r"^/(dev/(stdout|stderr|stdin|fd/\d+)|proc/(self|\d+)/fd/\d+)$")
+_FD_NAME = re.compile(r"^/(dev/(stdout|stderr|stdin|fd/(\d+))|proc/(self|\d+)/fd/(\d+))$")
+_STANDARD = {"stdin": 0, "stdout": 1, "stderr": 2}
 
 
 class OutputPathError(BomgraphError):
@@ -224,7 +229,52 @@ def _direct(path: str, st: os.stat_result | None) -> bool:
         return False
     if stat.S_ISCHR(st.st_mode) or stat.S_ISFIFO(st.st_mode):
         return True
-    return stat.S_ISREG(st.st_mode) and bool(_FD_NAME.match(os.path.abspath(path)))
+    return stat.S_ISREG(st.st_mode) and _fd_name(path) is not None
+
+
+def _fd_name(path: str) -> re.Match[str] | None:
+    """The name of an open descriptor that ``path`` is, or that its symbolic links lead to
+    (``out -> /dev/stdout``: the file behind it was replaced, ``>> f`` lost f too), else
+    None."""
+    for _ in range(40):  # the kernel's limit of links followed
+        path = os.path.abspath(path)
+        m = _FD_NAME.match(path)
+        if m is not None or not os.path.islink(path):
+            return m
+        try:
+            path = os.path.join(os.path.dirname(path), os.readlink(path))
+        except OSError:  # gone meanwhile: the write says so
+            return None
+    return None
+
+
+def _own_descriptor(path: str) -> int | None:
+    """The descriptor of this process that ``path`` names (``/dev/stdout``: 1, ``/dev/fd/N``,
+    ``/proc/self/fd/N``: N; through links too), else None (another process's, or none)."""
+    m = _fd_name(path)
+    if m is None or (m[4] not in (None, "self") and int(m[4]) != os.getpid()):
+        return None
+    return _STANDARD[m[2]] if m[2] in _STANDARD else int(m[3] or m[5])
+
+
+def _open_direct(path: str, st: os.stat_result) -> int:
+    """A descriptor to write the device, FIFO or open descriptor ``path`` in place: for a
+    descriptor of this process a duplicate of it, with its flags and its position (opening
+    ``/dev/stdout`` by name reopens its file from the start, truncated: ``>> f`` lost f's
+    content, h79); else ``path`` opened, never truncated (appended to, if a regular file)."""
+    own = _own_descriptor(path)
+    if own is None:
+        return os.open(path, os.O_WRONLY | (os.O_APPEND if stat.S_ISREG(st.st_mode) else 0))
+    fd = os.dup(own)
+    try:
+        import fcntl
+        readonly = fcntl.fcntl(fd, fcntl.F_GETFL) & os.O_ACCMODE == os.O_RDONLY
+    except ImportError:
+        readonly = False
+    if readonly:
+        os.close(fd)
+        raise OSError(errno.EBADF, f"descriptor {own} is open for reading only")
+    return fd
 
 
 def is_stdout(path: str) -> bool:
@@ -263,11 +313,13 @@ def check_output_path(path: str | os.PathLike[str],
     st = _stat(path)
     if st is not None and stat.S_ISDIR(st.st_mode):
         raise OutputPathError(f"--out {path}: is a directory; give a file name")
-    if _direct(path, st):
+    direct = _direct(path, st)
+    if direct:
         if not os.access(path, os.W_OK):
             raise OutputPathError(f"--out {path}: not writable")
-        return
-    if st is not None and not stat.S_ISREG(st.st_mode):
+        if not stat.S_ISREG(st.st_mode):
+            return
+    elif st is not None and not stat.S_ISREG(st.st_mode):
         raise OutputPathError(f"--out {path}: exists and is neither a regular file, a "
                               f"character device nor a FIFO; choose another name")
     target = os.path.realpath(path)
@@ -285,6 +337,8 @@ def check_output_path(path: str | os.PathLike[str],
         if same:
             raise OutputPathError(f"--out {path}: is the input {inp}; refusing to overwrite "
                                   f"an input: choose another name")
+    if direct:  # a file open as a descriptor (``>> f``): written where it is
+        return
     folder = Path(target).parent
     if not folder.is_dir():
         raise OutputPathError(f"--out {path}: the folder {folder} does not exist")
@@ -323,6 +377,7 @@ class AtomicOutput:
         self.given = os.fspath(path)
         st = _stat(self.given)
         self.direct = _direct(self.given, st)
+        self._st = st
         self.path = self.given if self.direct else os.path.realpath(self.given)
         self._mode = 0o666 & ~_umask() if st is None else stat.S_IMODE(st.st_mode)
         self._binary = binary
@@ -346,16 +401,20 @@ class AtomicOutput:
         kw = {} if self._binary else {"encoding": "utf-8", "newline": "\n"}
         mode = "wb" if self._binary else "w"
         if self.direct:
-            self.fh = open(self.given, mode, **kw)
+            fd = _open_direct(self.given, self._st)
+            try:
+                self.fh = open(fd, mode, **kw)
+            except BaseException:
+                os.close(fd)
+                raise
             return self.fh
         d, name = os.path.split(self.path)
         # SIGTERM/SIGINT are held back from the temporary file's creation until the handle
         # owns it: a signal raising mid-way would leave a file nobody removes, or close the
         # descriptor twice (EBADF). Delivered at the unmask, the handle is in place for abort.
         with signals_held():
-            fd, self._tmp = tempfile.mkstemp(prefix=f".{name}.", suffix=".partial", dir=d)
+            fd, self._tmp, self._claim = new_temp_file(d, name)
             try:
-                self._claim = claim(fd)
                 os.chmod(fd, self._mode)  # as open() would (or as the file was), not 0600
                 self.fh = os.fdopen(fd, mode, **kw)
             except BaseException:
@@ -363,6 +422,11 @@ class AtomicOutput:
                     os.close(fd)
                 self.abort()
                 raise
+        if self._claim is not None:  # where writers hold claims, a killed one's is known
+            removed = remove_leftovers(d, [name], keep=self._tmp)
+            if removed:
+                _log.info("removed %d temporary file(s) of %s that killed writers left",
+                          removed, self.path)
         return self.fh
 
     def commit(self) -> None:
@@ -512,87 +576,8 @@ def _fsync_dir(d: str) -> None:
         os.close(fd)
 
 
-def configure_logging(verbose: int = 0, quiet: bool = False) -> None:
-    """The root handler on stderr: WARNING by default, INFO with -v, DEBUG with -vv, ERROR
-    with -q."""
-    level = (logging.ERROR if quiet else logging.DEBUG if verbose >= 2
-             else logging.INFO if verbose == 1 else logging.WARNING)
-    root = logging.getLogger()
-    for h in root.handlers[:]:  # set aside, not closed: main() puts them back
-        # (:func:`logging_restored`)
-        root.removeHandler(h)
-    handler = logging.StreamHandler(sys.stderr)
-    handler.setFormatter(logging.Formatter("bomgraph: %(levelname)s: %(message)s"))
-    root.addHandler(handler)
-    root.setLevel(level)
-    logging.captureWarnings(True)
-    captured = logging.getLogger("py.warnings")
-    if _first_line not in captured.filters:
-        captured.addFilter(_first_line)
-    if quiet:
-        warnings.simplefilter("ignore")
-
-
-def _first_line(record: logging.LogRecord) -> bool:
-    """A Python warning as :func:`logging.captureWarnings` logs it, cut to its first line
-    (``FILE:LINE: Category: text``): the source line below it made one warning three lines."""
-    lines = record.getMessage().strip().splitlines()
-    record.msg, record.args = (lines[0] if lines else ""), ()
-    return True
-
-
-#: The undos :func:`restore_after` was given in the :func:`logging_restored` block running.
-_UNDOS: contextvars.ContextVar[list[Callable[[], None]] | None] = contextvars.ContextVar(
-    "bomgraph_logging_undos", default=None)
-
-
-def restore_after(undo: Callable[[], None]) -> None:
-    """Have ``undo`` (what puts back a change to logging, such as Dask's loggers quieted by
-    :func:`bomgraph.cluster.quiet_dask_logging`) called when the :func:`logging_restored`
-    block running ends: the command run in its caller's process. Outside one (the program,
-    whose process ends with the command) the change stays."""
-    undos = _UNDOS.get()
-    if undos is not None:
-        undos.append(undo)
-
-
-@contextlib.contextmanager
-def logging_restored() -> Iterator[None]:
-    """The root logger's level and handlers and the warnings' filters and ``showwarning`` as
-    they were before, when the block ends, and the changes given to :func:`restore_after`
-    undone: for the command run in its caller's process (:func:`bomgraph.cli.main`), whose
-    ``-q`` left the caller's root logger at ERROR, its handlers removed, and every warning
-    ignored, and whose Dask cluster left Dask's loggers at CRITICAL (h63)."""
-    root = logging.getLogger()
-    level, handlers = root.level, root.handlers[:]
-    undos: list[Callable[[], None]] = []
-    token = _UNDOS.set(undos)
-    # logging.captureWarnings keeps the showwarning it replaced, and installs its own only
-    # when it holds none: catch_warnings puts showwarning back, so that is put back too (else
-    # the caller's captureWarnings(True) afterwards, and the next main()'s, did nothing)
-    captured = getattr(logging, "_warnings_showwarning", None)
-    try:
-        with warnings.catch_warnings():
-            yield
-    finally:
-        _UNDOS.reset(token)
-        for undo in reversed(undos):
-            undo()
-        if hasattr(logging, "_warnings_showwarning"):
-            logging._warnings_showwarning = captured
-        for h in root.handlers[:]:  # the block's handlers go, the caller's come back
-            if h not in handlers:
-                root.removeHandler(h)
-                h.close()
-        for h in handlers:
-            if h not in root.handlers:
-                root.addHandler(h)
-        root.setLevel(level)
-
-
 __all__ = ["STDIO", "MAX_LINE_BYTES", "MAX_INPUT_BYTES", "OutputPathError",
            "InputTooLargeError", "line_too_long", "input_too_large", "bounded_lines",
            "read_bounded", "read_regular_file", "copy_bounded", "display_path", "input_path", "write_output",
            "is_stdout", "check_output_path", "AtomicOutput", "output_file", "write_text",
-           "write_figure", "FolderBusyError", "make_folder", "folder_lock", "signals_held",
-           "configure_logging", "logging_restored", "restore_after"]
+           "write_figure", "FolderBusyError", "make_folder", "folder_lock", "signals_held"]

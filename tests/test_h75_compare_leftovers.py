@@ -16,7 +16,7 @@ from pathlib import Path
 import pytest
 
 import _compare_folder
-from bomgraph import out_folder, report
+from bomgraph import claims, out_folder, report
 from bomgraph.bench import Executor
 from bomgraph.cli import main
 from bomgraph.experiments import compare_experiments
@@ -104,7 +104,7 @@ def test_the_pattern_is_the_writers(tmp_path: Path) -> None:
     try:
         import re
         name = os.path.basename(w._tmp or "")
-        assert re.fullmatch(out_folder._TEMP_NAME.format(name=re.escape("results.csv")), name)
+        assert re.fullmatch(claims.TEMP_NAME.format(name=re.escape("results.csv")), name)
     finally:
         w.abort()
 

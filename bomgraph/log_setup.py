@@ -1,0 +1,93 @@
+"""The CLI's logging: one handler on stderr at the level ``-v``/``-q`` ask for, Python
+warnings logged on one line, and everything put back when a command run in its caller's
+process (:func:`bomgraph.cli.main`) ends (moved from :mod:`bomgraph.stdio`, h79)."""
+
+from __future__ import annotations
+
+import contextlib
+import contextvars
+import logging
+import sys
+import warnings
+from typing import Callable, Iterator
+
+
+def configure_logging(verbose: int = 0, quiet: bool = False) -> None:
+    """The root handler on stderr: WARNING by default, INFO with -v, DEBUG with -vv, ERROR
+    with -q."""
+    level = (logging.ERROR if quiet else logging.DEBUG if verbose >= 2
+             else logging.INFO if verbose == 1 else logging.WARNING)
+    root = logging.getLogger()
+    for h in root.handlers[:]:  # set aside, not closed: main() puts them back
+        # (:func:`logging_restored`)
+        root.removeHandler(h)
+    handler = logging.StreamHandler(sys.stderr)
+    handler.setFormatter(logging.Formatter("bomgraph: %(levelname)s: %(message)s"))
+    root.addHandler(handler)
+    root.setLevel(level)
+    logging.captureWarnings(True)
+    captured = logging.getLogger("py.warnings")
+    if _first_line not in captured.filters:
+        captured.addFilter(_first_line)
+    if quiet:
+        warnings.simplefilter("ignore")
+
+
+def _first_line(record: logging.LogRecord) -> bool:
+    """A Python warning as :func:`logging.captureWarnings` logs it, cut to its first line
+    (``FILE:LINE: Category: text``): the source line below it made one warning three lines."""
+    lines = record.getMessage().strip().splitlines()
+    record.msg, record.args = (lines[0] if lines else ""), ()
+    return True
+
+
+#: The undos :func:`restore_after` was given in the :func:`logging_restored` block running.
+_UNDOS: contextvars.ContextVar[list[Callable[[], None]] | None] = contextvars.ContextVar(
+    "bomgraph_logging_undos", default=None)
+
+
+def restore_after(undo: Callable[[], None]) -> None:
+    """Have ``undo`` (what puts back a change to logging, such as Dask's loggers quieted by
+    :func:`bomgraph.cluster.quiet_dask_logging`) called when the :func:`logging_restored`
+    block running ends: the command run in its caller's process. Outside one (the program,
+    whose process ends with the command) the change stays."""
+    undos = _UNDOS.get()
+    if undos is not None:
+        undos.append(undo)
+
+
+@contextlib.contextmanager
+def logging_restored() -> Iterator[None]:
+    """The root logger's level and handlers and the warnings' filters and ``showwarning`` as
+    they were before, when the block ends, and the changes given to :func:`restore_after`
+    undone: for the command run in its caller's process (:func:`bomgraph.cli.main`), whose
+    ``-q`` left the caller's root logger at ERROR, its handlers removed, and every warning
+    ignored, and whose Dask cluster left Dask's loggers at CRITICAL (h63)."""
+    root = logging.getLogger()
+    level, handlers = root.level, root.handlers[:]
+    undos: list[Callable[[], None]] = []
+    token = _UNDOS.set(undos)
+    # logging.captureWarnings keeps the showwarning it replaced, and installs its own only
+    # when it holds none: catch_warnings puts showwarning back, so that is put back too (else
+    # the caller's captureWarnings(True) afterwards, and the next main()'s, did nothing)
+    captured = getattr(logging, "_warnings_showwarning", None)
+    try:
+        with warnings.catch_warnings():
+            yield
+    finally:
+        _UNDOS.reset(token)
+        for undo in reversed(undos):
+            undo()
+        if hasattr(logging, "_warnings_showwarning"):
+            logging._warnings_showwarning = captured
+        for h in root.handlers[:]:  # the block's handlers go, the caller's come back
+            if h not in handlers:
+                root.removeHandler(h)
+                h.close()
+        for h in handlers:
+            if h not in root.handlers:
+                root.addHandler(h)
+        root.setLevel(level)
+
+
+__all__ = ["configure_logging", "logging_restored", "restore_after"]
