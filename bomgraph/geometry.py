@@ -1,5 +1,6 @@
-"""Planar geometry shared by every method: SE(2) algebra, the odometry chain, and the one
-least-squares ray-intersection kernel with its parallax measures.
+"""Planar geometry shared by every method: SE(2) algebra, the odometry chain, the one
+predicted-bearing kernel (:func:`pair_bearings`) and the one least-squares ray-intersection
+kernel with its parallax measures.
 
 A pose is ``[x_m, y_m, psi_rad]``; an odometry increment ``[dx_m, dy_m, dpsi_rad]`` is the
 motion from pose ``t-1`` to pose ``t`` expressed in the frame of pose ``t-1`` (STREAM_FORMAT.md):
