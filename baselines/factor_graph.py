@@ -29,7 +29,7 @@ from scipy.spatial import cKDTree
 from bomgraph.angles import angle_residual
 from bomgraph.config import resolve
 from bomgraph.errors import ConfigError
-from bomgraph.geometry import origin_spread, rotation
+from bomgraph.geometry import origin_spread, pair_bearings, rotation
 from bomgraph.mapper import MapEstimate
 from bomgraph.stream import Step, StreamHeader, Truth
 
@@ -197,8 +197,7 @@ class BatchState:
         pos, sel = _locate(ids, lid[at])
         at, pos = at[sel], pos[sel]
         p = all_poses(values, self.problem.n_steps)[owner[at]]
-        d = xy[pos] - p[:, :2]
-        r = angle_residual(np.arctan2(d[:, 1], d[:, 0]) - p[:, 2], brg[at])
+        r = angle_residual(pair_bearings(p, xy[pos], wrapped=False), brg[at])
         return r / float(self.header.bearing_sigma_rad), at
 
     def max_whitened_residual(self, values: gtsam.Values) -> float:

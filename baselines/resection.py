@@ -20,7 +20,7 @@ import numpy as np
 
 from bomgraph.angles import angle_residual, wrap_angle
 from bomgraph.errors import ConfigError
-from bomgraph.geometry import compose, inverse, ray_normals, rotation
+from bomgraph.geometry import compose, inverse, pair_bearings, ray_normals, rotation
 
 
 def resection_jacobian(pose: np.ndarray, landmarks_xy: np.ndarray) -> np.ndarray:
@@ -131,8 +131,7 @@ def resect_poses(owner: np.ndarray, landmarks_xy: np.ndarray, bearings_rad: np.n
         sel = mask[own]
         o = np.searchsorted(rows, own[sel])
         c = cands[o]
-        d = lm[sel][:, None, :] - c[..., :2]                            # (J', H, 2)
-        r = angle_residual(np.arctan2(d[..., 1], d[..., 0]) - c[..., 2],
+        r = angle_residual(pair_bearings(c, lm[sel][:, None, :], wrapped=False),   # (J', H)
                            b[sel][:, None]) / sig[sel][:, None]
         e = cands - prior0[rows][:, None, :]
         e[..., 2] = angle_residual(cands[..., 2], prior0[rows][:, None, 2])
@@ -186,8 +185,7 @@ def resect_poses(owner: np.ndarray, landmarks_xy: np.ndarray, bearings_rad: np.n
         sel = active[own]
         o, l_, b_, s_ = np.searchsorted(idx, own[sel]), lm[sel], b[sel], sig[sel]
         p = poses[idx]
-        d = l_ - p[o, :2]
-        r = angle_residual(np.arctan2(d[:, 1], d[:, 0]) - p[o, 2], b_) / s_
+        r = angle_residual(pair_bearings(p[o], l_, wrapped=False), b_) / s_
         wr = np.where(np.abs(r) <= huber_k, 1.0, huber_k / np.maximum(np.abs(r), 1e-300))
         jac = resection_jacobian(p[o], l_) / s_[:, None]
         h = _group_sum(o, wr[:, None, None] * jac[:, :, None] * jac[:, None, :], len(idx))

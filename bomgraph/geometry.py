@@ -1,5 +1,6 @@
-"""Planar geometry shared by every method: SE(2) algebra, the odometry chain, and the one
-least-squares ray-intersection kernel with its parallax measures.
+"""Planar geometry shared by every method: SE(2) algebra, the odometry chain, the one
+predicted-bearing kernel (:func:`pair_bearings`) and the one least-squares ray-intersection
+kernel with its parallax measures.
 
 A pose is ``[x_m, y_m, psi_rad]``; an odometry increment ``[dx_m, dy_m, dpsi_rad]`` is the
 motion from pose ``t-1`` to pose ``t`` expressed in the frame of pose ``t-1`` (STREAM_FORMAT.md):
@@ -139,9 +140,35 @@ def to_local(pose: ArrayLike, points_world_xy: ArrayLike) -> np.ndarray:
 
 def bearings_to(pose: ArrayLike, points_world_xy: ArrayLike) -> np.ndarray:
     """Bearings ``(n,)`` from ``pose`` to world points, relative to its heading, wrapped."""
-    p = np.asarray(pose, dtype=float)
-    q = np.asarray(points_world_xy, dtype=float).reshape(-1, 2)
-    return angle_residual(np.arctan2(q[:, 1] - p[1], q[:, 0] - p[0]), p[2])
+    return pair_bearings(pose, np.asarray(points_world_xy, dtype=float).reshape(-1, 2))
+
+
+def pair_bearings(poses: ArrayLike, points_world_xy: ArrayLike, *,
+                  wrapped: bool = True) -> np.ndarray:
+    """The bearing of each point from its own pose: the one predicted-bearing kernel.
+
+    Parameters
+    ----------
+    poses : array of shape (..., 3)
+        ``[x_m, y_m, psi_rad]``; row ``i`` is the pose that sees point ``i``.
+    points_world_xy : array of shape (..., 2)
+        World points; broadcast against ``poses`` (rows ``(m, 3)`` with ``(m, 2)``, or every
+        pose with every point as ``(W, 1, 3)`` with ``(1, m, 2)``).
+    wrapped : bool
+        True (the default): ``atan2(dy, dx) - psi`` wrapped to (-pi, pi] (as
+        :func:`~bomgraph.angles.angle_residual`). False: not wrapped, for a residual that
+        wraps once, ``angle_residual(measured, pair_bearings(..., wrapped=False))``: wrapping
+        the prediction first rounds differently.
+
+    Returns
+    -------
+    bearing_rad : ndarray of the broadcast shape without the last axis
+        Counter-clockwise from the pose's heading to the point, in radians.
+    """
+    p = np.asarray(poses, dtype=float)
+    d = np.asarray(points_world_xy, dtype=float) - p[..., :2]
+    ang = np.arctan2(d[..., 1], d[..., 0])
+    return angle_residual(ang, p[..., 2]) if wrapped else ang - p[..., 2]
 
 
 # --------------------------------------------------------------------------------------------

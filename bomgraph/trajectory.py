@@ -24,7 +24,7 @@ from typing import Sequence
 import numpy as np
 
 from .angles import angle_residual
-from .geometry import between
+from .geometry import between, pair_bearings
 from .stream import Step
 
 
@@ -133,7 +133,7 @@ class _Covered:
         lr, lok = self._lm(ids)
         ok = pok & lok
         p, q = self._poses[pr[ok]], self._xy[lr[ok]]
-        return ok, angle_residual(np.arctan2(q[:, 1] - p[:, 1], q[:, 0] - p[:, 0]), p[:, 2])
+        return ok, pair_bearings(p, q)
 
 
 class _Rows:

@@ -25,7 +25,7 @@ from scipy.optimize import minimize, nnls
 
 from ..angles import angle_residual
 from ..errors import DatasetError
-from ..geometry import between
+from ..geometry import between, pair_bearings
 from ..stream import Stream
 
 GROSS_OUTLIER_RAD = 0.2
@@ -79,8 +79,7 @@ def bearing_residuals(stream: Stream) -> tuple[np.ndarray, np.ndarray, np.ndarra
                            f"position")
     pose = truth.poses[step_t]
     lxy = truth.landmarks_xy[idx]
-    pred = angle_residual(np.arctan2(lxy[:, 1] - pose[:, 1], lxy[:, 0] - pose[:, 0]),
-                          pose[:, 2])
+    pred = pair_bearings(pose, lxy)
     return angle_residual(meas, pred), step_t, ids
 
 

@@ -39,7 +39,7 @@ import numpy as np
 from ..angles import angle_residual, wrap_angle
 from ..config import requirement
 from ..errors import ConfigError, DatasetError
-from ..geometry import between
+from ..geometry import between, pair_bearings
 from ..plausibility import refuse_implausible
 from ..stream import Step, Stream, StreamHeader, Truth
 from .calibration import (bearing_residuals, calibrate_odometry, odometry_length_ratio,
@@ -362,8 +362,8 @@ def _raw_bearing_check(raw: MrclamRobotData, subject: np.ndarray,
                                               sorter=np.argsort(raw.landmark_ids))]
     if det.sum() < 2:
         return None
-    det_r = angle_residual(me["bearing_rad"][det], np.arctan2(
-        det_xy[:, 1] - det_pose[:, 1], det_xy[:, 0] - det_pose[:, 0]) - det_pose[:, 2])
+    det_r = angle_residual(me["bearing_rad"][det],
+                           pair_bearings(det_pose, det_xy, wrapped=False))
     return {**robust_bearing_stats(det_r), "fov_rad": [float(me["bearing_rad"][det].min()),
                                                        float(me["bearing_rad"][det].max())]}
 

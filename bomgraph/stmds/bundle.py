@@ -38,7 +38,7 @@ from numpy.typing import ArrayLike
 
 from ..angles import angle_residual
 from ..errors import ConfigError
-from ..geometry import between, dead_reckon, effective_parallax, to_local
+from ..geometry import between, dead_reckon, effective_parallax, pair_bearings, to_local
 from .bundle_lm import (SIGMA_FLOOR, UNDETERMINED_LEVERAGE,  # noqa: F401 (re-exported)
                         WindowInverse, _bearing_residuals, _levenberg_marquardt, _Problem)
 from .triangulation import PairEstimates, pair_indices
@@ -425,8 +425,8 @@ def _start_without_outlier(poses: np.ndarray, brg: np.ndarray, refused: np.ndarr
         return empty
     # residuals of every ray of the landmark at each point found without one of them
     full = brg[:, owner[col]]                                        # (W, m)
-    d = xy[None, :, :] - poses[:, None, :2]
-    res = np.abs(angle_residual(np.arctan2(d[..., 1], d[..., 0]) - poses[:, None, 2], full))
+    pred = pair_bearings(poses[:, None, :], xy[None, :, :], wrapped=False)   # (W, m)
+    res = np.abs(angle_residual(pred, full))
     left = res[ray_k[col], np.arange(col.size)].copy()
     res[ray_k[col], np.arange(col.size)] = np.nan
     rms = np.sqrt(np.nanmean(res ** 2, axis=0))
