@@ -20,7 +20,7 @@ from .file_evaluation import check_stream_identity, method_label, poses_revised
 from .evaluate import score_estimate
 from .plots import results_figure, run_figure
 from .report import error_curves
-from .run_scoring import scores_left_out, self_scored
+from .run_scoring import not_drawn_line, scores_left_out, self_scored
 from .stdio import check_output_path, read_regular_file, write_figure
 from .stream_file import read_stream
 
@@ -143,9 +143,9 @@ def _results_data(obj: Any, src: Path, experiments: Sequence[str]) -> tuple[
         curves.setdefault(exp, {})[arm] = c
     titles = {m["name"]: f"{m.get('title', m['name'])} ({m.get('runs', '?')} runs)"
               for m in meta if isinstance(m, dict) and "name" in m}
-    for exp, arms in own.items():
-        titles[exp] = (f"{titles.get(exp, exp)}\nnot drawn: {', '.join(dict.fromkeys(arms))} "
-                       f"(scored against its own map)")
+    for exp in own:
+        titles[exp] = titles.get(exp, exp) + not_drawn_line(
+            [r for r in results if r["experiment"] == exp])
     return final, curves, titles
 
 

@@ -32,7 +32,7 @@ from .experiments import PAPER_REPORTED, Experiment, FileSource, Task
 from .jsonio import jsonable
 from .paired import (PairedConfig, PairedRow, pairable, paired_comparison,
                      references_for, scored_references)
-from .run_scoring import mark_self_scored, scored_against, scores_left_out
+from .run_scoring import mark_self_scored, not_drawn_line, scored_against, scores_left_out
 from .plots import MapPanel, error_vs_time_figure, final_maps_figure, map_figure
 from .out_folder import (RESULT_FILES, OutputRecord, estimate_paths, linked_folders,
                          planned_outputs, refuse_inputs_among_outputs, slug)
@@ -522,12 +522,9 @@ def write_compare_figures(out_dir: str | os.PathLike[str], experiments: Sequence
             continue
         rob = {arm: c for (e, arm), c in robot.items()
                if e == exp.name and np.any(np.isfinite(c[1]))}
-        own = sorted({r["arm"] for r in results if r["experiment"] == exp.name
-                      and r.get("self_scored")})  # their curves: NaN, not drawn
+        own = not_drawn_line([r for r in results if r["experiment"] == exp.name])
         fig = error_vs_time_figure(curves, robot_curves=rob, title=f"{exp.title}: landmarks "
-                                   f"({exp.n_runs()} runs)" + (f"\nnot drawn: {', '.join(own)}"
-                                                               f" (scored against its own map)"
-                                                               if own else ""))
+                                   f"({exp.n_runs()} runs)" + own)  # self-scored: NaN
         path = out / f"{slug(exp.name)}_error_vs_time.png"
         write_figure(fig, path, dpi=120, ready=ready(path))
         files.append(path)

@@ -203,6 +203,21 @@ def mark_self_scored(results: Sequence[dict[str, Any]], experiments: Sequence[Ex
     return out
 
 
+def not_drawn_line(results: Sequence[Mapping[str, Any]]) -> str:
+    """A figure title's line naming the arms of ``results`` (one experiment's) whose runs
+    marked ``self_scored`` are left out of it: an arm alone when none of its runs is drawn,
+    ``ARM on k of n runs`` when its other runs are (its runs on streams with truth); ``""``
+    when none is left out."""
+    counts: dict[str, list[int]] = {}
+    for r in results:
+        count = counts.setdefault(r["arm"], [0, 0])
+        count[0] += bool(r.get("self_scored"))
+        count[1] += 1
+    parts = [arm if k == n else f"{arm} on {k} of {n} runs" for arm, (k, n) in counts.items()
+             if k]
+    return f"\nnot drawn: {', '.join(parts)} (scored against its own map)" if parts else ""
+
+
 def scores_left_out(result: Mapping[str, Any]) -> Mapping[str, Any]:
     """``result`` for a table or figure: a run marked ``self_scored``
     (:func:`mark_self_scored`) as a copy with only the :data:`UNSCORED_KEYS` of each

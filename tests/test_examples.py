@@ -72,3 +72,11 @@ def test_custom_hybrid_runs_and_its_solve_converges() -> None:
 
 def test_custom_hybrid_is_under_40_lines() -> None:
     assert len((EXAMPLES / "custom_hybrid.py").read_text().splitlines()) < 40
+
+
+def test_plugin_method_without_its_arguments_says_how_to_call_it() -> None:
+    proc = subprocess.run([sys.executable, str(EXAMPLES / "plugin_method.py")],
+                          capture_output=True, env=ENV, timeout=600, cwd=ROOT)
+    err = proc.stderr.decode()  # was a ValueError traceback (h81)
+    assert proc.returncode == 2 and "Traceback" not in err, err
+    assert err.startswith("usage: ") and "STREAM.jsonl OUT.est" in err, err

@@ -1,6 +1,6 @@
 """A plugin method: a tiny Mapper registered under a name and run like the built-in ones.
 
-    python docs/examples/plugin_method.py STREAM.jsonl OUT.json
+    python docs/examples/plugin_method.py STREAM.jsonl OUT.est
 
 The mapper places each landmark at the dead-reckoned position of the first pose that saw it,
 pushed one metre along the bearing: a (poor) map, but a complete Mapper.
@@ -45,6 +45,9 @@ register_method("first-sight-script", "__main__:FirstSightMapper",
                 "each landmark one metre along its first bearing (an example plugin)")
 
 if __name__ == "__main__":
+    if len(sys.argv) != 3:
+        print("usage: python docs/examples/plugin_method.py STREAM.jsonl OUT.est", file=sys.stderr)
+        sys.exit(2)
     stream_path, out = sys.argv[1:3]
     sys.exit(main(["run", stream_path, "--method", "first-sight-script", "--option", "depth_m=0.5",
                    "--out", out]))
