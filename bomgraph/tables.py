@@ -131,7 +131,7 @@ def write_csv(path: str | os.PathLike[str], rows: Sequence[Mapping[str, Any]],
                 if k not in cols:
                     cols.append(k)
     with output_file(path, ready=ready) as fh:  # atomically: a reader never sees half a table
-        w = csv.DictWriter(fh, fieldnames=cols, extrasaction="ignore", lineterminator="\r\n")
+        w = csv.DictWriter(fh, fieldnames=cols, extrasaction="ignore", lineterminator="\n")
         w.writeheader()
         for r in rows:
             w.writerow({k: (";".join(map(str, v)) if isinstance(v, list) else v)

@@ -77,7 +77,7 @@ def _complete(path: Path) -> str:
             rows = list(csv.reader(data.decode().splitlines()))
             if not rows or any(len(r) != len(rows[0]) for r in rows):
                 return "CSV with rows of other lengths"
-            if not data.endswith(b"\r\n"):
+            if not data.endswith(b"\n"):
                 return "CSV without its last line end"
     except ValueError as exc:
         return f"not parseable: {exc}"

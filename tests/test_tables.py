@@ -96,3 +96,22 @@ def test_a_huge_value_in_a_fixed_point_column_prints_in_exponent_form() -> None:
     assert max(len(line) for line in txt.splitlines()) < 40
     # the machine-readable formats keep the value itself
     assert '"mpe_m": 1e+300' in format_table(cols, [{"mpe_m": 1e300, "n": 3}], "json")
+
+
+def test_written_csv_ends_lines_as_the_printed_csv_does(tmp_path) -> None:
+    """compare's CSV files (results.csv, estimates/index.csv) end lines in ``\\n`` as
+    ``--format csv`` prints them: a shell's ``cut -d, -f5`` of index.csv gives the path
+    without a carriage return (with ``\\r\\n`` it named no file). A value holding a comma or
+    a newline is still quoted, and reads back."""
+    import csv
+
+    from bomgraph.tables import write_csv
+    path = tmp_path / "t.csv"
+    rows = [{"a": 1, "b": "x,y", "c": "two\nlines"}, {"a": 2, "b": "z", "c": "p.est"}]
+    write_csv(path, rows)
+    data = path.read_bytes()
+    assert b"\r" not in data and data.endswith(b"\n")
+    assert data.splitlines()[-1].split(b",")[-1] == b"p.est"
+    with open(path, newline="") as fh:
+        back = list(csv.DictReader(fh))
+    assert [r["c"] for r in back] == ["two\nlines", "p.est"] and back[0]["b"] == "x,y"
