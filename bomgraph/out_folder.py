@@ -68,7 +68,8 @@ def estimate_paths(out: Path, tasks: Sequence[Task]) -> list[tuple[Path, Path | 
     stream file the user has, its stream: ``out/estimates/EXPERIMENT/ARM/RUN.est`` and
     ``out/streams/EXPERIMENT/RUN.jsonl`` (a run whose arms saw different streams, e.g. with
     priors, gets its stream's short hash in the name). Names keep letters, digits and
-    ``.-_@``, the rest turned to ``_``; names that coincide so get a short hash each."""
+    ``.-_@``, the rest turned to ``_`` (and a name ``.`` or ``..``, :func:`slug`); names that
+    coincide so get a short hash each."""
     names: dict[tuple[str, str], set[str]] = {}
     for t in tasks:  # a stream file is not hashed again (it may be gone since its runs)
         if not isinstance(t.source, FileSource):
@@ -527,8 +528,10 @@ def drop_earlier_outputs(out: Path, written: Sequence[Path],
 
 def slug(name: str) -> str:
     """``name`` as a file or folder name: letters, digits, ``.``, ``-``, ``_``, ``@``, the
-    rest ``_``."""
-    return re.sub(r"[^A-Za-z0-9._@-]+", "_", name).strip("_") or "_"
+    rest ``_``; never ``.`` or ``..`` (a folder ``estimates/EXP/..`` is ``estimates``, and
+    through a link on the way the folder above the one it leads to: h82)."""
+    name = re.sub(r"[^A-Za-z0-9._@-]+", "_", name).strip("_")
+    return name if name not in ("", ".", "..") else "_"
 
 
 def unique_slugs(names: Sequence[str]) -> dict[str, str]:
