@@ -480,11 +480,15 @@ class OutputRecord:
 def linked_folders(out: Path, paths: Sequence[Path]) -> dict[str, Path]:
     """The real folders that links on the way to ``paths`` lead to (``out/estimates`` linked
     to another disk), ``out``'s own left out: each -> the first link to it. ``compare`` locks
-    them as it locks ``out``: another folder's compare may write one through a link too."""
-    root, found = os.path.realpath(out), {}
+    them as it locks ``out``: another folder's compare may write one through a link too. One
+    folder reached by two real paths (a bind mount; names differing in case on a
+    case-insensitive disk) is named once, and not at all when it is ``out``: compare locked it
+    twice and refused itself (h82)."""
+    seen, found = {_file_id(out)}, {}
     for p in paths:
         for sub, real in _links_on_the_way(out, os.path.relpath(p, out)).items():
-            if real != root:
+            if (folder := _file_id(real)) not in seen or folder is None:
+                seen.add(folder)
                 found.setdefault(real, out / sub)
     return found
 
