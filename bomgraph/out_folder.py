@@ -280,12 +280,16 @@ def _link_changed(out: Path, rel: str, entry: Mapping[str, Any]) -> str:
     what to do, for an error."""
     was, now = entry.get("via", {}), _links_on_the_way(out, rel)
     sub = min(k for k in {*was, *now} if was.get(k) != now.get(k))
-    back = (f"link {out / sub} back to {was[sub]}, move the files there, or choose another "
-            f"folder" if sub in was else "move the files there or choose another folder")
-    then = f"a link to {was[sub]}" if sub in was else "no link"
+    back = (f"link {out / sub} back to {was[sub]}, move away the files there, or choose "
+            f"another folder" if sub in was else
+            "move away the files there or choose another folder")
+    # no via: no link then, or a list of a bomgraph before h80, which named no links (h82)
+    then = (f"the earlier compare wrote it when that was a link to {was[sub]}" if sub in was
+            else f"the earlier compare's list names no link there (it was none, or that "
+                 f"bomgraph named none)")
     now_is = f"which is a link to {now[sub]}" if sub in now else "now a folder"
-    return (f"through {out / sub}, {now_is}: the earlier compare wrote it when that was {then} "
-            f"(files reached through another link are not proved compare's); {back}")
+    return (f"through {out / sub}, {now_is}: {then}; files reached "
+            f"through another link are not proved compare's: {back}")
 
 
 #: The name :class:`bomgraph.stdio.AtomicOutput` writes ``NAME`` under until it renames it:
