@@ -487,10 +487,16 @@ def linked_folders(out: Path, paths: Sequence[Path]) -> dict[str, Path]:
     them as it locks ``out``: another folder's compare may write one through a link too. One
     folder reached by two real paths (a bind mount; names differing in case on a
     case-insensitive disk) is named once, and not at all when it is ``out``: compare locked it
-    twice and refused itself (h82)."""
+    twice and refused itself (h82). The links on the way to the files of the manifest that
+    still lead where they did (:func:`drop_earlier_outputs` may remove them) are counted too:
+    a compare without ``--estimates`` removes the earlier estimates through the link."""
     seen, found = {_file_id(out)}, {}
-    for p in paths:
-        for sub, real in _links_on_the_way(out, os.path.relpath(p, out)).items():
+    rels = [os.path.relpath(p, out) for p in paths]
+    for e in _earlier_entries(out):
+        if (rel := _plain(e["path"])) is not None and e.get("via"):
+            rels += [rel] if e["via"] == _links_on_the_way(out, rel) else []
+    for rel in rels:
+        for sub, real in _links_on_the_way(out, rel).items():
             if (folder := _file_id(real)) not in seen or folder is None:
                 seen.add(folder)
                 found.setdefault(real, out / sub)

@@ -20,6 +20,7 @@ from bomgraph.cli import main
 from bomgraph.experiments import Arm, Experiment, FileSource
 from bomgraph.out_folder import MANIFEST, slug, unique_slugs
 from bomgraph.report import compare
+from bomgraph.stdio import folder_lock
 
 
 stream = _compare_folder.stream   # the fixture
@@ -103,3 +104,23 @@ def test_a_list_from_before_links_were_noted_is_not_said_to_show_no_link(
     assert "which is a link to" in err and "when that was no link" not in err
     assert "names no link" in err
     assert sorted(p.name for p in big.rglob("*")) == before
+
+
+def test_a_linked_folder_compare_removes_files_from_is_locked_too(
+        tmp_path: Path, stream: Path, capsys: pytest.CaptureFixture) -> None:
+    """A compare without ``--estimates`` removes the earlier estimates, through the link: it
+    did so without the linked folder's lock, while another folder's compare (holding it) may
+    be writing the same bytes there. Refused now, nothing removed. Fails before."""
+    out, big = tmp_path / "out", tmp_path / "big"
+    out.mkdir()
+    big.mkdir()
+    (out / "estimates").symlink_to(big)
+    assert main(_cmd(stream, out)) == 0
+    before = sorted(p.name for p in big.rglob("*"))
+    no_estimates = [a for a in _cmd(stream, out) if a != "--estimates"]
+    with folder_lock(big, "`bomgraph compare`"):           # another folder's, writing there
+        assert main(no_estimates) == 2
+        assert "is writing into this folder" in _one_error(capsys)
+    assert sorted(p.name for p in big.rglob("*")) == before
+    assert main(no_estimates) == 0
+    assert [p.name for p in big.iterdir()] == [".bomgraph.lock"]   # then removed, as before
