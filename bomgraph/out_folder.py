@@ -487,9 +487,11 @@ def linked_folders(out: Path, paths: Sequence[Path]) -> dict[str, Path]:
     them as it locks ``out``: another folder's compare may write one through a link too. One
     folder reached by two real paths (a bind mount; names differing in case on a
     case-insensitive disk) is named once, and not at all when it is ``out``: compare locked it
-    twice and refused itself (h82). The links on the way to the files of the manifest that
-    still lead where they did (:func:`drop_earlier_outputs` may remove them) are counted too:
-    a compare without ``--estimates`` removes the earlier estimates through the link."""
+    twice and refused itself (h82). So is each folder above one of them that holds another
+    compare's :data:`MANIFEST`, first (that compare locks only its own folder). The links on
+    the way to the files of the manifest that still lead where they did
+    (:func:`drop_earlier_outputs` may remove them) are counted too: a compare without
+    ``--estimates`` removes the earlier estimates through the link."""
     seen, found = {_file_id(out)}, {}
     rels = [os.path.relpath(p, out) for p in paths]
     for e in _earlier_entries(out):
@@ -497,9 +499,13 @@ def linked_folders(out: Path, paths: Sequence[Path]) -> dict[str, Path]:
             rels += [rel] if e["via"] == _links_on_the_way(out, rel) else []
     for rel in rels:
         for sub, real in _links_on_the_way(out, rel).items():
-            if (folder := _file_id(real)) not in seen or folder is None:
-                seen.add(folder)
-                found.setdefault(real, out / sub)
+            # and another compare's folder it leads into (``b/estimates/streams``): that
+            # compare locks ``b`` only, and writes and removes there too (h82)
+            for folder in [*(str(q) for q in reversed(Path(real).parents)
+                             if os.path.lexists(q / MANIFEST)), real]:  # refused: no lock file
+                if (i := _file_id(folder)) not in seen or i is None:
+                    seen.add(i)
+                    found.setdefault(folder, out / sub)
     return found
 
 

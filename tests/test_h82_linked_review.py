@@ -124,3 +124,24 @@ def test_a_linked_folder_compare_removes_files_from_is_locked_too(
     assert sorted(p.name for p in big.rglob("*")) == before
     assert main(no_estimates) == 0
     assert [p.name for p in big.iterdir()] == [".bomgraph.lock"]   # then removed, as before
+
+
+def test_a_link_into_another_compares_folder_locks_that_folder(
+        tmp_path: Path, stream: Path, capsys: pytest.CaptureFixture) -> None:
+    """``a/estimates/streams`` linked to ``b/estimates/streams``, a folder of another
+    compare's ``b``: a compare into ``a`` locked that folder only, never ``b``, so it wrote
+    there while a compare into ``b`` ran (and one into ``b`` could start while it wrote). Now
+    it locks ``b`` too. Fails before."""
+    a, b = tmp_path / "a", tmp_path / "b"
+    assert main(_cmd(stream, b)) == 0
+    (a / "estimates").mkdir(parents=True)
+    (a / "estimates" / "streams").symlink_to(b / "estimates" / "streams")
+    other = tmp_path / "other.jsonl"                 # other names: nothing of b's replaced
+    shutil.copy(stream, other)
+    before = sorted(str(p) for p in b.rglob("*"))
+    with folder_lock(b, "`bomgraph compare`"):       # a compare into b, running
+        assert main(_cmd(other, a)) == 2
+        assert "is writing into this folder" in _one_error(capsys)
+    assert sorted(str(p) for p in b.rglob("*")) == before
+    assert main(_cmd(other, a)) == 0, capsys.readouterr().err
+    assert (b / "estimates" / "streams" / "triangulate" / "other.est").is_file()
