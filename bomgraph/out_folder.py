@@ -285,8 +285,8 @@ def _link_changed(out: Path, rel: str, entry: Mapping[str, Any]) -> str:
             "move away the files there or choose another folder")
     # no via: no link then, or a list of a bomgraph before h80, which named no links (h82)
     then = (f"the earlier compare wrote it when that was a link to {was[sub]}" if sub in was
-            else f"the earlier compare's list names no link there (it was none, or that "
-                 f"bomgraph named none)")
+            else "the earlier compare's list names no link there (it was none, or that "
+                 "bomgraph named none)")
     now_is = f"which is a link to {now[sub]}" if sub in now else "now a folder"
     return (f"through {out / sub}, {now_is}: {then}; files reached "
             f"through another link are not proved compare's: {back}")
