@@ -7,6 +7,7 @@ to show that the folder was no link."""
 from __future__ import annotations
 
 import json
+import shlex
 import shutil
 import subprocess
 import sys
@@ -72,12 +73,13 @@ def test_a_folder_reached_by_two_real_paths_is_locked_once(tmp_path: Path,
         d.mkdir(parents=True)
     (out / "estimates" / "streams" / "triangulate").symlink_to(big)
     (out / "estimates" / "streams" / "stmds-smacof").symlink_to(alias)
+    mount = f"mount --bind {shlex.quote(str(big))} {shlex.quote(str(alias))}"
     if shutil.which("unshare") is None or subprocess.run(
-            ["unshare", "-m", "true"], capture_output=True).returncode != 0:
-        pytest.skip("needs unshare -m (a mount namespace) to bind-mount a folder")
-    code = ("import sys; from bomgraph.cli import main; sys.exit(main(sys.argv[1:]))")
-    script = (f"mount --bind {big} {alias} && exec {sys.executable} -c '{code}' "
-              + " ".join(_cmd(stream, out)))
+            ["unshare", "-m", "sh", "-c", mount], capture_output=True).returncode != 0:
+        pytest.skip("needs unshare -m and mount --bind (root) to bind-mount a folder")
+    code = "import sys; from bomgraph.cli import main; sys.exit(main(sys.argv[1:]))"
+    script = f"{mount} && exec " + shlex.join([sys.executable, "-c", code,
+                                               *_cmd(stream, out)])
     proc = subprocess.run(["unshare", "-m", "sh", "-c", script], capture_output=True,
                           text=True)
     assert proc.returncode == 0, proc.stderr
