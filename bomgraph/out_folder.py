@@ -495,8 +495,8 @@ def linked_folders(out: Path, paths: Sequence[Path]) -> dict[str, Path]:
     seen, found = {_file_id(out)}, {}
     rels = [os.path.relpath(p, out) for p in paths]
     for e in _earlier_entries(out):
-        if (rel := _plain(e["path"])) is not None and e.get("via"):
-            rels += [rel] if e["via"] == _links_on_the_way(out, rel) else []
+        if (rel := _plain(e["path"])) is not None and e.get("via") and (out / rel).is_file():
+            rels += [rel] if e["via"] == _links_on_the_way(out, rel) else []  # not: unmounted
     for rel in rels:
         for sub, real in _links_on_the_way(out, rel).items():
             # and another compare's folder it leads into (``b/estimates/streams``): that

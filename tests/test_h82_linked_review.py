@@ -126,6 +126,9 @@ def test_a_linked_folder_compare_removes_files_from_is_locked_too(
     assert sorted(p.name for p in big.rglob("*")) == before
     assert main(no_estimates) == 0
     assert [p.name for p in big.iterdir()] == [".bomgraph.lock"]   # then removed, as before
+    assert main(_cmd(stream, out)) == 0
+    big.rename(tmp_path / "unmounted")     # the disk away: nothing to remove there, no lock
+    assert main(no_estimates) == 0, capsys.readouterr().err
 
 
 def test_a_link_into_another_compares_folder_locks_that_folder(
