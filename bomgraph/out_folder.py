@@ -68,7 +68,8 @@ def estimate_paths(out: Path, tasks: Sequence[Task]) -> list[tuple[Path, Path | 
     stream file the user has, its stream: ``out/estimates/EXPERIMENT/ARM/RUN.est`` and
     ``out/streams/EXPERIMENT/RUN.jsonl`` (a run whose arms saw different streams, e.g. with
     priors, gets its stream's short hash in the name). Names keep letters, digits and
-    ``.-_@``, the rest turned to ``_``; names that coincide so get a short hash each."""
+    ``.-_@``, the rest turned to ``_`` (and a name ``.`` or ``..``, :func:`slug`); names that
+    coincide so get a short hash each."""
     names: dict[tuple[str, str], set[str]] = {}
     for t in tasks:  # a stream file is not hashed again (it may be gone since its runs)
         if not isinstance(t.source, FileSource):
@@ -279,12 +280,16 @@ def _link_changed(out: Path, rel: str, entry: Mapping[str, Any]) -> str:
     what to do, for an error."""
     was, now = entry.get("via", {}), _links_on_the_way(out, rel)
     sub = min(k for k in {*was, *now} if was.get(k) != now.get(k))
-    back = (f"link {out / sub} back to {was[sub]}, move the files there, or choose another "
-            f"folder" if sub in was else "move the files there or choose another folder")
-    then = f"a link to {was[sub]}" if sub in was else "no link"
+    back = (f"link {out / sub} back to {was[sub]}, move away the files there, or choose "
+            f"another folder" if sub in was else
+            "move away the files there or choose another folder")
+    # no via: no link then, or a list of a bomgraph before h80, which named no links (h82)
+    then = (f"the earlier compare wrote it when that was a link to {was[sub]}" if sub in was
+            else "the earlier compare's list names no link there (it was none, or that "
+                 "bomgraph named none)")
     now_is = f"which is a link to {now[sub]}" if sub in now else "now a folder"
-    return (f"through {out / sub}, {now_is}: the earlier compare wrote it when that was {then} "
-            f"(files reached through another link are not proved compare's); {back}")
+    return (f"through {out / sub}, {now_is}: {then}; files reached "
+            f"through another link are not proved compare's: {back}")
 
 
 def _inside(root: str, rel: str) -> str | None:
@@ -461,12 +466,28 @@ class OutputRecord:
 def linked_folders(out: Path, paths: Sequence[Path]) -> dict[str, Path]:
     """The real folders that links on the way to ``paths`` lead to (``out/estimates`` linked
     to another disk), ``out``'s own left out: each -> the first link to it. ``compare`` locks
-    them as it locks ``out``: another folder's compare may write one through a link too."""
-    root, found = os.path.realpath(out), {}
-    for p in paths:
-        for sub, real in _links_on_the_way(out, os.path.relpath(p, out)).items():
-            if real != root:
-                found.setdefault(real, out / sub)
+    them as it locks ``out``: another folder's compare may write one through a link too. One
+    folder reached by two real paths (a bind mount; names differing in case on a
+    case-insensitive disk) is named once, and not at all when it is ``out``: compare locked it
+    twice and refused itself (h82). So is each folder above one of them that holds another
+    compare's :data:`MANIFEST`, first (that compare locks only its own folder). The links on
+    the way to the files of the manifest that still lead where they did
+    (:func:`drop_earlier_outputs` may remove them) are counted too: a compare without
+    ``--estimates`` removes the earlier estimates through the link."""
+    seen, found = {_file_id(out)}, {}
+    rels = [os.path.relpath(p, out) for p in paths]
+    for e in _earlier_entries(out):
+        if (rel := _plain(e["path"])) is not None and e.get("via") and (out / rel).is_file():
+            rels += [rel] if e["via"] == _links_on_the_way(out, rel) else []  # not: unmounted
+    for rel in rels:
+        for sub, real in _links_on_the_way(out, rel).items():
+            # and another compare's folder it leads into (``b/estimates/streams``): that
+            # compare locks ``b`` only, and writes and removes there too (h82)
+            for folder in [*(str(q) for q in reversed(Path(real).parents)
+                             if os.path.lexists(q / MANIFEST)), real]:  # refused: no lock file
+                if (i := _file_id(folder)) not in seen or i is None:
+                    seen.add(i)
+                    found.setdefault(folder, out / sub)
     return found
 
 
@@ -509,8 +530,10 @@ def drop_earlier_outputs(out: Path, written: Sequence[Path],
 
 def slug(name: str) -> str:
     """``name`` as a file or folder name: letters, digits, ``.``, ``-``, ``_``, ``@``, the
-    rest ``_``."""
-    return re.sub(r"[^A-Za-z0-9._@-]+", "_", name).strip("_") or "_"
+    rest ``_``; never ``.`` or ``..`` (a folder ``estimates/EXP/..`` is ``estimates``, and
+    through a link on the way the folder above the one it leads to: h82)."""
+    name = re.sub(r"[^A-Za-z0-9._@-]+", "_", name).strip("_")
+    return name if name not in ("", ".", "..") else "_"
 
 
 def unique_slugs(names: Sequence[str]) -> dict[str, str]:

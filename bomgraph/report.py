@@ -374,7 +374,7 @@ def compare(experiments: Sequence[Experiment], out_dir: str | os.PathLike[str], 
     with folder_lock(out, "`bomgraph compare`"), contextlib.ExitStack() as linked:
         for real, link in linked_folders(out, planned).items():  # two folders may link one
             linked.enter_context(folder_lock(real, f"`bomgraph compare` (into it, or through a "
-                                                   f"link to it as {link} is one)"))
+                                                   f"link into it as {link} is one)"))
         record.remove_leftovers(planned)  # of compares killed while writing: none writes now
         return _compare(experiments, out, executor, use_cache, figures, progress, estimates,
                         refs, paired, paired_reference, (record, planned))
