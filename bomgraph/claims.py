@@ -4,7 +4,9 @@ ones killed writers left (``kill -9``, a power cut) leaves the one another proce
 (a ``bomgraph run --out OUT/results.csv`` while compare cleans ``OUT``; a second ``run`` of
 the same ``--out``; two sweeps sharing a cache folder). ``flock`` is released when the writer
 dies, ``kill -9`` too. The removers: every writer, of the name it writes
-(:func:`remove_leftovers`), and compare, of the names its folder holds
+(:func:`remove_leftovers`), but the sweep cache's, whose folder each sweep cleans once
+(:func:`remove_leftovers_like`, :func:`bomgraph.result_cache.remove_cache_leftovers`), and
+compare, of the names its folder holds
 (:meth:`bomgraph.out_folder.OutputRecord.remove_leftovers`)."""
 
 from __future__ import annotations
@@ -145,11 +147,26 @@ def remove_leftovers(folder: str, names: Iterable[str], keep: str | None = None)
     writer's file cannot be told from a dead one's, and removing it lost that writer's output,
     h83). Returns how many were removed; one that cannot be removed is logged and left."""
     wanted = sorted(set(names))
-    if not wanted or not _have_flock():  # without flock no leftover is told from a live file
+    if not wanted:
         return 0
-    pattern = re.compile("|".join(TEMP_NAME.format(name=re.escape(n)) for n in wanted))
-    prefixes = tuple(f".{n}." for n in wanted)  # cheap first: a cache folder holds thousands
-    try:
+    return _remove_matching(folder, "|".join(re.escape(n) for n in wanted),
+                            tuple(f".{n}." for n in wanted), keep)
+
+
+def remove_leftovers_like(folder: str, name_pattern: str) -> int:
+    """:func:`remove_leftovers` of every name in ``folder`` that the regular expression
+    ``name_pattern`` matches whole, in one listing: for a folder of thousands of files one
+    writer (the sweep cache) writes many names of, where a listing per file written cost as
+    much as the write (10,000 files: 7.7 ms a listing, h83)."""
+    return _remove_matching(folder, name_pattern, (".",), None)
+
+
+def _remove_matching(folder: str, name_pattern: str, prefixes: tuple[str, ...],
+                     keep: str | None) -> int:
+    if not _have_flock():  # without flock no leftover is told from a live writer's file
+        return 0
+    pattern = re.compile(TEMP_NAME.format(name=f"(?:{name_pattern})"))
+    try:  # the prefixes first: cheap, and a cache folder holds thousands
         with os.scandir(folder) as entries:
             found = [e.path for e in entries if e.name.startswith(prefixes)
                      and pattern.fullmatch(e.name) and e.is_file(follow_symlinks=False)]
@@ -166,4 +183,5 @@ def remove_leftovers(folder: str, names: Iterable[str], keep: str | None = None)
     return removed
 
 
-__all__ = ["TEMP_NAME", "new_temp_file", "release", "remove_unclaimed", "remove_leftovers"]
+__all__ = ["TEMP_NAME", "new_temp_file", "release", "remove_unclaimed", "remove_leftovers",
+           "remove_leftovers_like"]

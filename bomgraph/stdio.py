@@ -371,8 +371,9 @@ class AtomicOutput:
 
     def __init__(self, path: str | os.PathLike[str], *, binary: bool = False,
                  inputs: Sequence[str | os.PathLike[str] | None] = (),
-                 ready: Callable[[str], None] | None = None) -> None:
+                 ready: Callable[[str], None] | None = None, leftovers: bool = True) -> None:
         check_output_path(path, inputs)
+        self._leftovers = leftovers  # remove the name's leftovers (not: its caller does, h83)
         self._ready = ready  # called with the finished temporary file, before it replaces path
         self.given = os.fspath(path)
         st = _stat(self.given)
@@ -422,7 +423,7 @@ class AtomicOutput:
                     os.close(fd)
                 self.abort()
                 raise
-        if self._claim is not None:  # where writers hold claims, a killed one's is known
+        if self._claim is not None and self._leftovers:  # a killed claimer's is known
             removed = remove_leftovers(d, [name], keep=self._tmp)
             if removed:
                 _log.info("removed %d temporary file(s) of %s that killed writers left",
@@ -465,13 +466,16 @@ class AtomicOutput:
 @contextlib.contextmanager
 def output_file(path: str | os.PathLike[str], *, binary: bool = False,
                 inputs: Sequence[str | os.PathLike[str] | None] = (),
-                ready: Callable[[str], None] | None = None) -> Iterator[IO]:
+                ready: Callable[[str], None] | None = None,
+                leftovers: bool = True) -> Iterator[IO]:
     """A handle to write ``path`` the one way (module docstring); the file is in place when
     the block ends normally, and nothing is left beside it when it raises (SIGTERM too, under
     the CLI, which turns it into ``SystemExit``). ``ready`` is called with the finished file
     beside ``path`` just before it replaces ``path`` (not for a device or FIFO, written
-    directly); if it raises, ``path`` is left as it was."""
-    out = AtomicOutput(path, binary=binary, inputs=inputs, ready=ready)
+    directly); if it raises, ``path`` is left as it was. ``leftovers=False``: the killed
+    writers' temporary files of ``path``'s name are left to the caller (the sweep cache's
+    folder is cleaned once a sweep, not listed again for each of its thousands of files)."""
+    out = AtomicOutput(path, binary=binary, inputs=inputs, ready=ready, leftovers=leftovers)
     try:
         fh = out.open()
         yield fh
