@@ -61,7 +61,8 @@ _CHUNK = 2**20
 #: temp paths standing for stdin, so messages can name ``<stdin>`` instead.
 _SPOOLED: dict[str, str] = {}
 #: names that stand for an already open descriptor: written directly, never renamed over.
-_FD_NAME = re.compile(r"^/(dev/(stdout|stderr|stdin|fd/(\d+))|proc/(self|\d+)/fd/(\d+))$")
+_FD_NAME = re.compile(r"^/(dev/(stdout|stderr|stdin|fd/(\d+))"
+                      r"|proc/(self|thread-self|\d+)(?:/task/\d+)?/fd/(\d+))$")
 _STANDARD = {"stdin": 0, "stdout": 1, "stderr": 2}
 
 
@@ -205,13 +206,21 @@ def write_output(path: str, write: Callable[[str], None]) -> None:
     if path != STDIO:
         write(path)
         return
+    stdout = standard_output().buffer
     with tempfile.TemporaryDirectory(prefix="bomgraph-stdout-") as tmp:
         out = os.path.join(tmp, "out")
         write(out)
         with open(out, "rb") as fh:
             while chunk := fh.read(_CHUNK):
-                sys.stdout.buffer.write(chunk)
-        sys.stdout.buffer.flush()
+                stdout.write(chunk)
+        stdout.flush()
+
+
+def standard_output() -> IO[str]:
+    """``sys.stdout`` for ``--out -``, refused when closed (``>&-``: a traceback before, h83)."""
+    if sys.stdout is None:
+        raise OutputPathError("--out -: the standard output is closed; give a file name")
+    return sys.stdout
 
 
 def _stat(path: str) -> os.stat_result | None:
@@ -252,7 +261,7 @@ def _own_descriptor(path: str) -> int | None:
     """The descriptor of this process that ``path`` names (``/dev/stdout``: 1, ``/dev/fd/N``,
     ``/proc/self/fd/N``: N; through links too), else None (another process's, or none)."""
     m = _fd_name(path)
-    if m is None or (m[4] not in (None, "self") and int(m[4]) != os.getpid()):
+    if m is None or (m[4] not in (None, "self", "thread-self") and int(m[4]) != os.getpid()):
         return None
     return _STANDARD[m[2]] if m[2] in _STANDARD else int(m[3] or m[5])
 
@@ -307,10 +316,13 @@ def check_output_path(path: str | os.PathLike[str],
     inputs = items(inputs, (str, os.PathLike, type(None)), "inputs (the files read)",
                    OutputPathError, want="file names")
     if path == STDIO:
+        standard_output()  # closed: refused before anything is computed
         return
     if not path:  # os.path.realpath("") is the working folder: the rename would aim at it
         raise OutputPathError("--out is empty; give a file name")
     st = _stat(path)
+    if st is None and _fd_name(path) is not None:  # /dev/stdout under >&-: not a folder's file
+        raise OutputPathError(f"--out {path}: that descriptor is not open; give a file name")
     if st is not None and stat.S_ISDIR(st.st_mode):
         raise OutputPathError(f"--out {path}: is a directory; give a file name")
     direct = _direct(path, st)
@@ -582,6 +594,7 @@ def _fsync_dir(d: str) -> None:
 
 __all__ = ["STDIO", "MAX_LINE_BYTES", "MAX_INPUT_BYTES", "OutputPathError",
            "InputTooLargeError", "line_too_long", "input_too_large", "bounded_lines",
-           "read_bounded", "read_regular_file", "copy_bounded", "display_path", "input_path", "write_output",
+           "read_bounded", "read_regular_file", "copy_bounded", "display_path", "input_path",
+           "write_output", "standard_output",
            "is_stdout", "check_output_path", "AtomicOutput", "output_file", "write_text",
            "write_figure", "FolderBusyError", "make_folder", "folder_lock", "signals_held"]
