@@ -233,18 +233,19 @@ def _stat(path: str) -> os.stat_result | None:
 
 
 def _direct(path: str, st: os.stat_result | None) -> bool:
-    """Whether ``path`` is written in place: a character device, a FIFO, an open descriptor."""
+    """Whether ``path`` is written in place: a character device, a FIFO, an open descriptor
+    (a socket too, of this process: a service's stdout, h83)."""
     if st is None:
         return False
     if stat.S_ISCHR(st.st_mode) or stat.S_ISFIFO(st.st_mode):
         return True
-    return stat.S_ISREG(st.st_mode) and _fd_name(path) is not None
+    sock = stat.S_ISSOCK(st.st_mode) and _own_descriptor(path) is not None
+    return sock or stat.S_ISREG(st.st_mode) and _fd_name(path) is not None
 
 
 def _fd_name(path: str) -> re.Match[str] | None:
-    """The name of an open descriptor that ``path`` is, or that its symbolic links lead to
-    (``out -> /dev/stdout``: the file behind it was replaced, ``>> f`` lost f too), else
-    None."""
+    """The name of a descriptor that ``path`` is, or that its symbolic links lead to (``out
+    -> /dev/stdout``: the file behind it was replaced, ``>> f`` lost f too), else None."""
     for _ in range(40):  # the kernel's limit of links followed
         path = os.path.abspath(path)
         m = _FD_NAME.match(path)
@@ -306,7 +307,7 @@ def check_output_path(path: str | os.PathLike[str],
     ``inputs`` (the same file, through symbolic or hard links too; an input that is a folder
     refuses every file in it), a file whose folder does not exist or is not writable, an
     existing file that is not writable.
-    ``-`` (stdout), character devices and FIFOs pass.
+    ``-`` (stdout), character devices, FIFOs and this process's descriptors (a socket too) pass.
 
     Raises
     ------
@@ -592,9 +593,8 @@ def _fsync_dir(d: str) -> None:
         os.close(fd)
 
 
-__all__ = ["STDIO", "MAX_LINE_BYTES", "MAX_INPUT_BYTES", "OutputPathError",
-           "InputTooLargeError", "line_too_long", "input_too_large", "bounded_lines",
-           "read_bounded", "read_regular_file", "copy_bounded", "display_path", "input_path",
-           "write_output", "standard_output",
+__all__ = ["STDIO", "MAX_LINE_BYTES", "MAX_INPUT_BYTES", "OutputPathError", "InputTooLargeError",
+           "line_too_long", "input_too_large", "bounded_lines", "read_bounded", "read_regular_file",
+           "copy_bounded", "display_path", "input_path", "write_output", "standard_output",
            "is_stdout", "check_output_path", "AtomicOutput", "output_file", "write_text",
            "write_figure", "FolderBusyError", "make_folder", "folder_lock", "signals_held"]

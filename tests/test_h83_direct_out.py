@@ -77,3 +77,27 @@ def test_a_closed_stdout_is_one_line_never_a_traceback(tmp_path: Path, command: 
     assert done.returncode == 0 and done.stderr == b"", done.stderr
     assert (tmp_path / "written").stat().st_size > 0
     assert not (tmp_path / "-").exists()
+
+
+def test_out_dev_stdout_on_a_socket_is_written(tmp_path: Path) -> None:
+    """A service's stdout is often a socket (systemd's journal): this process's descriptor is
+    written through a duplicate of it as a file's or a pipe's is. Fails before h83: refused,
+    'exists and is neither a regular file, a character device nor a FIFO'; another process's
+    socket stays refused (it cannot be opened by name)."""
+    import socket
+
+    expected = None
+    for out in ("-", "/dev/stdout", "/dev/fd/1"):
+        ours, theirs = socket.socketpair()
+        with ours, theirs:
+            writer = subprocess.Popen(["bash", "-c", f"{SIMULATE} --out {out}"], cwd=tmp_path,
+                                      env=ENV, stdout=theirs, stderr=subprocess.PIPE)
+            theirs.close()
+            got = b""
+            while chunk := ours.recv(1 << 16):
+                got += chunk
+            err = writer.stderr.read()
+            writer.stderr.close()
+            assert writer.wait() == 0, err
+        expected = expected or got
+        assert got == expected and got.startswith(b'{"format"'), got[:100]
