@@ -6,18 +6,16 @@ Writing (:func:`output_file`, used by every writer of bomgraph: streams, estimat
 the compare results and cache, figures):
 
 * a symbolic link is followed: the file it points to is written, the link stays a link;
-* a character device or a FIFO (``/dev/null``, ``/dev/stdout``, a named pipe) and the names of
-  open descriptors (``/dev/stdout``, ``/dev/fd/N``, ``/proc/self/fd/N``) are written directly,
-  never replaced by a regular file; a descriptor of this process (or a link to its name)
-  through a duplicate of it (``>> f`` appends, ``1<> f`` writes from where it stands: never
-  truncated);
-* anything else that exists and is not a regular file (a directory, a block device, a socket)
-  is refused in one line;
+* a character device or a FIFO (``/dev/null``, a named pipe) is written directly, the name of
+  a descriptor (``/dev/stdout``, ``/dev/fd/N``, ``/proc/self/fd/N``, a link to one) too: of
+  this process through a duplicate of it (a socket too; ``>> f`` appends, ``1<> f`` writes
+  from where it stands: never truncated), of another opened to append;
+* anything else that exists and is not a regular file (a directory, a block device) is refused;
 * a regular file (or a new one) is written beside its target under a unique temporary name
   (``.NAME.XXXXXXXX.partial``, :data:`bomgraph.claims.TEMP_NAME`), flushed to disk and renamed
   into place, so a reader never sees half a file and an interrupted write leaves the old file
   and no stray file (but ``kill -9``: then the temporary file too, which the next writer of
-  ``NAME`` removes, :func:`bomgraph.claims.remove_leftovers`, as compare does its folder's);
+  ``NAME`` removes, :func:`bomgraph.claims.remove_leftovers`; the sweep cache's, the next sweep);
 * an output that is one of the command's inputs (the same file, through links or hard links
   too) is refused before anything is computed.
 
@@ -37,6 +35,7 @@ import errno
 import logging
 import os
 import re
+import shutil
 import signal
 import stat
 import sys
@@ -202,17 +201,18 @@ def input_path(path: str) -> Iterator[str]:
 
 
 def write_output(path: str, write: Callable[[str], None]) -> None:
-    """``write(path)``, or for ``-`` write to a temporary file and copy it to stdout."""
+    """``write(path)``, or for ``-`` write to a temporary file and copy it to stdout (or to the
+    text stream a caller in this process set as ``sys.stdout``: ``io.StringIO``, a notebook's)."""
     if path != STDIO:
         write(path)
         return
-    stdout = standard_output().buffer
+    stdout = standard_output()
+    binary = hasattr(stdout, "buffer")
     with tempfile.TemporaryDirectory(prefix="bomgraph-stdout-") as tmp:
         out = os.path.join(tmp, "out")
         write(out)
-        with open(out, "rb") as fh:
-            while chunk := fh.read(_CHUNK):
-                stdout.write(chunk)
+        with open(out, "rb") if binary else open(out, encoding="utf-8", newline="") as fh:
+            shutil.copyfileobj(fh, stdout.buffer if binary else stdout, _CHUNK)
         stdout.flush()
 
 

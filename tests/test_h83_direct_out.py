@@ -101,3 +101,26 @@ def test_out_dev_stdout_on_a_socket_is_written(tmp_path: Path) -> None:
             assert writer.wait() == 0, err
         expected = expected or got
         assert got == expected and got.startswith(b'{"format"'), got[:100]
+
+
+def test_out_dash_in_process_reaches_a_text_only_stdout(tmp_path: Path,
+                                                        monkeypatch: pytest.MonkeyPatch) -> None:
+    """``main([... "--out", "-"])`` from a caller whose ``sys.stdout`` is a text stream
+    without ``.buffer`` (``io.StringIO``, a notebook's): the output is written there. Fails
+    before h83: ``run`` raised AttributeError ('_io.StringIO' object has no attribute
+    'buffer'), ``simulate`` wrote a file named ``-``."""
+    import io
+
+    from bomgraph.cli import main
+
+    monkeypatch.chdir(tmp_path)
+    assert main(["simulate", "--steps", "8", "--landmarks", "4", "--out", "s.jsonl"]) == 0
+    for argv in (["simulate", "--steps", "8", "--landmarks", "4"],
+                 ["run", "s.jsonl", "--method", "triangulate"]):
+        text = io.StringIO()
+        monkeypatch.setattr(sys, "stdout", text)
+        assert main([*argv, "--out", "-"]) == 0
+        monkeypatch.setattr(sys, "stdout", sys.__stdout__)
+        assert text.getvalue().startswith('{"format"'), text.getvalue()[:100]
+    assert not (tmp_path / "-").exists()
+    assert text.getvalue().startswith('{"format":"bomgraph-estimate"')
