@@ -124,3 +124,17 @@ def test_out_dash_in_process_reaches_a_text_only_stdout(tmp_path: Path,
         assert text.getvalue().startswith('{"format"'), text.getvalue()[:100]
     assert not (tmp_path / "-").exists()
     assert text.getvalue().startswith('{"format":"bomgraph-estimate"')
+
+
+def test_a_closed_stderr_never_puts_lines_into_stdout_nor_fails(tmp_path: Path) -> None:
+    """``2>&-``: Python has no ``sys.stderr``; a line printed to it went to stdout, into the
+    data of ``--out -`` (``simulate --out - > f 2>&-``: f ended with ``wrote -: ...``), and
+    ``run``'s progress bar raised AttributeError (exit 1, the traceback shown nowhere). Fails
+    before h83; now those lines go nowhere, as asked."""
+    done = _sh(f"{SIMULATE} --out plain && {SIMULATE} --out - > got 2>&- && "
+               f"{BOMGRAPH} run plain --method triangulate --out - > est 2>&-", tmp_path)
+    assert done.returncode == 0, done.stderr
+    assert (tmp_path / "got").read_bytes() == (tmp_path / "plain").read_bytes()
+    assert (tmp_path / "est").read_bytes().endswith(b"}}\n")
+    done = _sh(f"{SIMULATE} --out /no/such/folder/x 2>&-", tmp_path)
+    assert done.returncode == 2 and done.stdout == b"", done.stdout
