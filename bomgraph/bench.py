@@ -44,6 +44,7 @@ from .method_code import (bomgraph_edited, method_code, new_sweep, noting_runs,
 from .plugins import code_fingerprint
 from .processes import daemonic
 from .result_cache import read_cached, strip_timings, write_cached  # re-exported
+from .result_cache import remove_cache_leftovers
 from .run_scoring import (CheckpointScorer, ReferenceFailure, failed_reference, forget_failures,
                           keep_reference, reference_map, run_arm, runs_as_reference)
 from .stream import Stream, Truth
@@ -376,6 +377,7 @@ def execute_counted(tasks: Sequence[Task], executor: Executor = Executor(), *,
     cache = Path(cache_dir) if cache_dir is not None else None
     if cache is not None:
         cache.mkdir(parents=True, exist_ok=True)
+        remove_cache_leftovers(cache)  # once a sweep, not once a file written (h83)
         warn_sourceless(tasks, disk)
         stale: dict[tuple[str, ...], bool] = {}
         for k, t in enumerate(tasks):

@@ -23,7 +23,6 @@ from .cli_parser import PROGRESS_MIN_STEPS, build_parser
 from .errors import BomgraphError, ConfigError
 
 
-
 def _say(text: str, *, to_stderr: bool = False) -> None:
     """Print a result line (to stderr when stdout carries data, e.g. ``--out -``)."""
     print(text, file=sys.stderr if to_stderr else sys.stdout)
@@ -37,7 +36,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     import numpy as np
 
     from .sim import SimConfig, make_priors, simulate, with_priors
-    from .stdio import check_output_path, is_stdout
+    from .stdio import check_output_path, is_stdout, write_output
     from .stream_file import write_stream
 
     check_output_path(args.out)
@@ -53,7 +52,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     if args.prior_fraction > 0:
         stream = with_priors(stream, make_priors(stream.truth, args.prior_fraction,
                                                  args.prior_sigma, rng))
-    write_stream(stream, args.out)
+    write_output(args.out, lambda p: write_stream(stream, p))  # `-`: stdout, not a file
     _say(f"wrote {args.out}: {len(stream.steps)} steps, {config.n_landmarks} landmarks, "
          f"{len(stream.header.priors)} priors", to_stderr=is_stdout(args.out))
     return 0
@@ -148,7 +147,7 @@ def cmd_export(args: argparse.Namespace) -> int:
     from .errors import ExportError
     from .export import export_text, truth_estimate, write_text_atomic
     from .file_evaluation import check_stream_identity
-    from .stdio import STDIO, input_path, is_stdout
+    from .stdio import STDIO, input_path, is_stdout, standard_output
     from .stream_file import read_stream
 
     if (args.estimate is None) == (args.truth is None):
@@ -175,7 +174,7 @@ def cmd_export(args: argparse.Namespace) -> int:
     text = export_text(src, args.format, stream)
     to_stderr = is_stdout(args.out)  # `--out /dev/stdout > f`: the line would overwrite f
     if args.out == "-":
-        sys.stdout.write(text)
+        standard_output().write(text)
     else:
         write_text_atomic(text, args.out,
                           [p for p in (args.estimate, stream_path) if p and p != STDIO])
@@ -342,12 +341,12 @@ def _print_plan(rows: list[dict[str, Any]], out: str) -> int:
 
 def _import(args: argparse.Namespace, make: Callable[[], Any], *inputs: str | None) -> int:
     """Check ``--out`` (not one of the ``inputs``) before ``make()`` imports, then write."""
-    from .stdio import check_output_path, is_stdout
+    from .stdio import check_output_path, is_stdout, write_output
     from .stream_file import write_stream
 
     check_output_path(args.out, inputs)
     stream = make()
-    write_stream(stream, args.out, inputs=inputs)
+    write_output(args.out, lambda p: write_stream(stream, p, inputs=inputs))
     n_brg = sum(len(st.landmark_ids) for st in stream.steps)
     truth = "no truth" if stream.truth is None else (
         "truth: landmarks only" if stream.truth.poses is None else "truth: poses + landmarks")
@@ -557,7 +556,8 @@ def _main(argv: Sequence[str] | None) -> int:
     func: Callable[[argparse.Namespace], int] = _COMMANDS[args.func]
     try:
         status = func(args)
-        sys.stdout.flush()
+        if sys.stdout is not None:  # None: closed by the shell (>&-)
+            sys.stdout.flush()
         return status
     except BrokenPipeError:
         return _stdout_closed()

@@ -7,6 +7,7 @@ from __future__ import annotations
 import contextlib
 import contextvars
 import logging
+import os
 import sys
 import warnings
 from typing import Callable, Iterator
@@ -14,7 +15,8 @@ from typing import Callable, Iterator
 
 def configure_logging(verbose: int = 0, quiet: bool = False) -> None:
     """The root handler on stderr: WARNING by default, INFO with -v, DEBUG with -vv, ERROR
-    with -q."""
+    with -q (stderr closed by the shell: on /dev/null, :func:`_stderr_reopened`)."""
+    _stderr_reopened()
     level = (logging.ERROR if quiet else logging.DEBUG if verbose >= 2
              else logging.INFO if verbose == 1 else logging.WARNING)
     root = logging.getLogger()
@@ -31,6 +33,30 @@ def configure_logging(verbose: int = 0, quiet: bool = False) -> None:
         captured.addFilter(_first_line)
     if quiet:
         warnings.simplefilter("ignore")
+
+
+def _stderr_reopened() -> None:
+    """Descriptor 2 on /dev/null and ``sys.stderr`` writing there when the shell closed it
+    (``2>&-``: Python has no ``sys.stderr``). Before (h83), ``run``'s progress bar raised
+    AttributeError (exit 1, the traceback shown nowhere), and a line printed to
+    ``sys.stderr`` = None went to stdout: ``simulate --out - > f 2>&-`` ended f with
+    ``wrote -: ...``. Nothing is done when descriptor 2 is open (a caller in this process
+    that set ``sys.stderr`` to None keeps it)."""
+    if sys.stderr is not None:
+        return
+    try:
+        os.fstat(2)
+        return
+    except OSError:
+        pass
+    try:
+        fd = os.open(os.devnull, os.O_WRONLY)
+        if fd != 2:  # 0 or 1 closed too: the lowest number was free
+            os.dup2(fd, 2)
+            os.close(fd)
+        sys.stderr = open(2, "w", encoding="utf-8", errors="backslashreplace", closefd=False)
+    except OSError:
+        pass
 
 
 def _first_line(record: logging.LogRecord) -> bool:

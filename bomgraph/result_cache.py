@@ -5,9 +5,11 @@ from __future__ import annotations
 
 import json
 import logging
+import os
 from pathlib import Path
 from typing import Any, Iterable, Mapping
 
+from .claims import remove_leftovers_like
 from .estimate_file import untimed_estimate_text
 from .stdio import InputTooLargeError, output_file, read_regular_file
 
@@ -38,11 +40,24 @@ def read_cached(path: Path) -> dict[str, Any] | None:
 def write_cached(path: Path, result: Mapping[str, Any]) -> None:
     """Write a result as every output is (:func:`bomgraph.stdio.output_file`: under a unique
     temporary name beside ``path``, then renamed): two sweeps sharing a folder never write the
-    same temporary file, and a reader never sees half a file. The temporary files of
-    ``path``'s name that killed sweeps left are removed then, never one another sweep is
-    writing (:func:`bomgraph.claims.remove_leftovers`)."""
-    with output_file(path) as fh:
+    same temporary file, and a reader never sees half a file. The temporary files killed
+    sweeps left are not looked for here: :func:`remove_cache_leftovers` removes them once a
+    sweep (a listing of a folder of 10,000 files for each file written cost as much as the
+    write itself, and a sweep's listings grew as the square of its runs, h83)."""
+    with output_file(path, leftovers=False) as fh:
         fh.write(json.dumps(result, allow_nan=True))
+
+
+def remove_cache_leftovers(cache: Path) -> int:
+    """Remove the temporary files of cache files (``.KEY.json.XXXXXXXX.partial``) in the
+    cache folder ``cache`` that sweeps killed while writing left, never one a sweep running
+    (sharing the folder) is writing (:func:`bomgraph.claims.remove_leftovers_like`); how
+    many, logged."""
+    removed = remove_leftovers_like(os.fspath(cache), r"[0-9a-f]+\.json")
+    if removed:
+        _log.info("removed %d temporary file(s) that killed sweeps left in the cache %s",
+                  removed, cache)
+    return removed
 
 
 def strip_timings(results: Iterable[Mapping[str, Any]]) -> list[dict[str, Any]]:
@@ -61,4 +76,4 @@ def strip_timings(results: Iterable[Mapping[str, Any]]) -> list[dict[str, Any]]:
     return out
 
 
-__all__ = ["read_cached", "write_cached", "strip_timings"]
+__all__ = ["read_cached", "write_cached", "remove_cache_leftovers", "strip_timings"]

@@ -6,18 +6,16 @@ Writing (:func:`output_file`, used by every writer of bomgraph: streams, estimat
 the compare results and cache, figures):
 
 * a symbolic link is followed: the file it points to is written, the link stays a link;
-* a character device or a FIFO (``/dev/null``, ``/dev/stdout``, a named pipe) and the names of
-  open descriptors (``/dev/stdout``, ``/dev/fd/N``, ``/proc/self/fd/N``) are written directly,
-  never replaced by a regular file; a descriptor of this process (or a link to its name)
-  through a duplicate of it (``>> f`` appends, ``1<> f`` writes from where it stands: never
-  truncated);
-* anything else that exists and is not a regular file (a directory, a block device, a socket)
-  is refused in one line;
+* a character device or a FIFO (``/dev/null``, a named pipe) is written directly, the name of
+  a descriptor (``/dev/stdout``, ``/dev/fd/N``, ``/proc/self/fd/N``, a link to one) too: of
+  this process through a duplicate of it (a socket too; ``>> f`` appends, ``1<> f`` writes
+  from where it stands: never truncated), of another opened to append;
+* anything else that exists and is not a regular file (a directory, a block device) is refused;
 * a regular file (or a new one) is written beside its target under a unique temporary name
   (``.NAME.XXXXXXXX.partial``, :data:`bomgraph.claims.TEMP_NAME`), flushed to disk and renamed
   into place, so a reader never sees half a file and an interrupted write leaves the old file
   and no stray file (but ``kill -9``: then the temporary file too, which the next writer of
-  ``NAME`` removes, :func:`bomgraph.claims.remove_leftovers`, as compare does its folder's);
+  ``NAME`` removes, :func:`bomgraph.claims.remove_leftovers`; the sweep cache's, the next sweep);
 * an output that is one of the command's inputs (the same file, through links or hard links
   too) is refused before anything is computed.
 
@@ -37,6 +35,7 @@ import errno
 import logging
 import os
 import re
+import shutil
 import signal
 import stat
 import sys
@@ -61,7 +60,8 @@ _CHUNK = 2**20
 #: temp paths standing for stdin, so messages can name ``<stdin>`` instead.
 _SPOOLED: dict[str, str] = {}
 #: names that stand for an already open descriptor: written directly, never renamed over.
-_FD_NAME = re.compile(r"^/(dev/(stdout|stderr|stdin|fd/(\d+))|proc/(self|\d+)/fd/(\d+))$")
+_FD_NAME = re.compile(r"^/(dev/(stdout|stderr|stdin|fd/(\d+))"
+                      r"|proc/(self|thread-self|\d+)(?:/task/\d+)?/fd/(\d+))$")
 _STANDARD = {"stdin": 0, "stdout": 1, "stderr": 2}
 
 
@@ -201,17 +201,26 @@ def input_path(path: str) -> Iterator[str]:
 
 
 def write_output(path: str, write: Callable[[str], None]) -> None:
-    """``write(path)``, or for ``-`` write to a temporary file and copy it to stdout."""
+    """``write(path)``, or for ``-`` write to a temporary file and copy it to stdout (or to the
+    text stream a caller in this process set as ``sys.stdout``: ``io.StringIO``, a notebook's)."""
     if path != STDIO:
         write(path)
         return
+    stdout = standard_output()
+    binary = hasattr(stdout, "buffer")
     with tempfile.TemporaryDirectory(prefix="bomgraph-stdout-") as tmp:
         out = os.path.join(tmp, "out")
         write(out)
-        with open(out, "rb") as fh:
-            while chunk := fh.read(_CHUNK):
-                sys.stdout.buffer.write(chunk)
-        sys.stdout.buffer.flush()
+        with open(out, "rb") if binary else open(out, encoding="utf-8", newline="") as fh:
+            shutil.copyfileobj(fh, stdout.buffer if binary else stdout, _CHUNK)
+        stdout.flush()
+
+
+def standard_output() -> IO[str]:
+    """``sys.stdout`` for ``--out -``, refused when closed (``>&-``: a traceback before, h83)."""
+    if sys.stdout is None:
+        raise OutputPathError("--out -: the standard output is closed; give a file name")
+    return sys.stdout
 
 
 def _stat(path: str) -> os.stat_result | None:
@@ -224,18 +233,19 @@ def _stat(path: str) -> os.stat_result | None:
 
 
 def _direct(path: str, st: os.stat_result | None) -> bool:
-    """Whether ``path`` is written in place: a character device, a FIFO, an open descriptor."""
+    """Whether ``path`` is written in place: a character device, a FIFO, an open descriptor
+    (a socket too, of this process: a service's stdout, h83)."""
     if st is None:
         return False
     if stat.S_ISCHR(st.st_mode) or stat.S_ISFIFO(st.st_mode):
         return True
-    return stat.S_ISREG(st.st_mode) and _fd_name(path) is not None
+    sock = stat.S_ISSOCK(st.st_mode) and _own_descriptor(path) is not None
+    return sock or stat.S_ISREG(st.st_mode) and _fd_name(path) is not None
 
 
 def _fd_name(path: str) -> re.Match[str] | None:
-    """The name of an open descriptor that ``path`` is, or that its symbolic links lead to
-    (``out -> /dev/stdout``: the file behind it was replaced, ``>> f`` lost f too), else
-    None."""
+    """The name of a descriptor that ``path`` is, or that its symbolic links lead to (``out
+    -> /dev/stdout``: the file behind it was replaced, ``>> f`` lost f too), else None."""
     for _ in range(40):  # the kernel's limit of links followed
         path = os.path.abspath(path)
         m = _FD_NAME.match(path)
@@ -252,7 +262,7 @@ def _own_descriptor(path: str) -> int | None:
     """The descriptor of this process that ``path`` names (``/dev/stdout``: 1, ``/dev/fd/N``,
     ``/proc/self/fd/N``: N; through links too), else None (another process's, or none)."""
     m = _fd_name(path)
-    if m is None or (m[4] not in (None, "self") and int(m[4]) != os.getpid()):
+    if m is None or (m[4] not in (None, "self", "thread-self") and int(m[4]) != os.getpid()):
         return None
     return _STANDARD[m[2]] if m[2] in _STANDARD else int(m[3] or m[5])
 
@@ -297,7 +307,7 @@ def check_output_path(path: str | os.PathLike[str],
     ``inputs`` (the same file, through symbolic or hard links too; an input that is a folder
     refuses every file in it), a file whose folder does not exist or is not writable, an
     existing file that is not writable.
-    ``-`` (stdout), character devices and FIFOs pass.
+    ``-`` (stdout), character devices, FIFOs and this process's descriptors (a socket too) pass.
 
     Raises
     ------
@@ -307,10 +317,13 @@ def check_output_path(path: str | os.PathLike[str],
     inputs = items(inputs, (str, os.PathLike, type(None)), "inputs (the files read)",
                    OutputPathError, want="file names")
     if path == STDIO:
+        standard_output()  # closed: refused before anything is computed
         return
     if not path:  # os.path.realpath("") is the working folder: the rename would aim at it
         raise OutputPathError("--out is empty; give a file name")
     st = _stat(path)
+    if st is None and _fd_name(path) is not None:  # /dev/stdout under >&-: not a folder's file
+        raise OutputPathError(f"--out {path}: that descriptor is not open; give a file name")
     if st is not None and stat.S_ISDIR(st.st_mode):
         raise OutputPathError(f"--out {path}: is a directory; give a file name")
     direct = _direct(path, st)
@@ -371,8 +384,9 @@ class AtomicOutput:
 
     def __init__(self, path: str | os.PathLike[str], *, binary: bool = False,
                  inputs: Sequence[str | os.PathLike[str] | None] = (),
-                 ready: Callable[[str], None] | None = None) -> None:
+                 ready: Callable[[str], None] | None = None, leftovers: bool = True) -> None:
         check_output_path(path, inputs)
+        self._leftovers = leftovers  # remove the name's leftovers (not: its caller does, h83)
         self._ready = ready  # called with the finished temporary file, before it replaces path
         self.given = os.fspath(path)
         st = _stat(self.given)
@@ -422,7 +436,7 @@ class AtomicOutput:
                     os.close(fd)
                 self.abort()
                 raise
-        if self._claim is not None:  # where writers hold claims, a killed one's is known
+        if self._claim is not None and self._leftovers:  # a killed claimer's is known
             removed = remove_leftovers(d, [name], keep=self._tmp)
             if removed:
                 _log.info("removed %d temporary file(s) of %s that killed writers left",
@@ -465,13 +479,16 @@ class AtomicOutput:
 @contextlib.contextmanager
 def output_file(path: str | os.PathLike[str], *, binary: bool = False,
                 inputs: Sequence[str | os.PathLike[str] | None] = (),
-                ready: Callable[[str], None] | None = None) -> Iterator[IO]:
+                ready: Callable[[str], None] | None = None,
+                leftovers: bool = True) -> Iterator[IO]:
     """A handle to write ``path`` the one way (module docstring); the file is in place when
     the block ends normally, and nothing is left beside it when it raises (SIGTERM too, under
     the CLI, which turns it into ``SystemExit``). ``ready`` is called with the finished file
     beside ``path`` just before it replaces ``path`` (not for a device or FIFO, written
-    directly); if it raises, ``path`` is left as it was."""
-    out = AtomicOutput(path, binary=binary, inputs=inputs, ready=ready)
+    directly); if it raises, ``path`` is left as it was. ``leftovers=False``: the killed
+    writers' temporary files of ``path``'s name are left to the caller (the sweep cache's
+    folder is cleaned once a sweep, not listed again for each of its thousands of files)."""
+    out = AtomicOutput(path, binary=binary, inputs=inputs, ready=ready, leftovers=leftovers)
     try:
         fh = out.open()
         yield fh
@@ -576,8 +593,8 @@ def _fsync_dir(d: str) -> None:
         os.close(fd)
 
 
-__all__ = ["STDIO", "MAX_LINE_BYTES", "MAX_INPUT_BYTES", "OutputPathError",
-           "InputTooLargeError", "line_too_long", "input_too_large", "bounded_lines",
-           "read_bounded", "read_regular_file", "copy_bounded", "display_path", "input_path", "write_output",
+__all__ = ["STDIO", "MAX_LINE_BYTES", "MAX_INPUT_BYTES", "OutputPathError", "InputTooLargeError",
+           "line_too_long", "input_too_large", "bounded_lines", "read_bounded", "read_regular_file",
+           "copy_bounded", "display_path", "input_path", "write_output", "standard_output",
            "is_stdout", "check_output_path", "AtomicOutput", "output_file", "write_text",
            "write_figure", "FolderBusyError", "make_folder", "folder_lock", "signals_held"]
