@@ -72,10 +72,12 @@ class StmdsConfig(Presets):
         SMACOF weights: 1 for every known pair (the paper) or 1 / variance of the fused
         distance (normalised to mean 1).
     smacof_init : {"best", "previous", "classical"}
-        Warm start of SMACOF: the previous map (landmarks new to it placed by the
-        classical-scaling map aligned onto it), the DMC-SPL classical-scaling map (the paper),
-        or both, keeping the lower stress ("best"; the classical start is tried at the first
-        SMACOF estimate and every ``reconstruct.RESTART_EVERY`` estimates after it).
+        Warm start of SMACOF: the previous scheduled map (the method's own, made every
+        ``mapper.WARM_EVERY`` steps whether or not ``estimate()`` was called; landmarks new to
+        it placed by the classical-scaling map aligned onto it), the DMC-SPL classical-scaling
+        map (the paper), or both, keeping the lower stress ("best"; the classical start is
+        tried at the first scheduled SMACOF map and every ``reconstruct.RESTART_EVERY`` after
+        it).
     landmark_mds_above : int
         Method 2 maps with more landmarks than this start SMACOF from landmark MDS (shortest
         paths from ``n_pivots`` pivots only) instead of the full DMC-SPL + classical scaling.

@@ -8,7 +8,9 @@ and fuse every pair's instantaneous squared distance into the distance store (II
 ``estimate()`` call: take the known pairs (a prior, or ``min_count`` estimates), add the held
 robot positions when localising (III-E, :mod:`.localisation`), and reconstruct coordinates
 (III-D, :func:`.reconstruct.reconstruct`); landmarks left out are named in
-``info["left_out"]``.
+``info["left_out"]``. Method 2's SMACOF starts from the map of the last step on the method's
+own schedule (every :data:`WARM_EVERY` steps, made there whether or not estimate() was
+called), so the map at a step does not depend on the caller's estimate() cadence.
 
 ``estimate().info`` reports: method, t, fusion, the numbers of stored / known / mapped pairs,
 of triangulated and gated landmarks, the landmarks left out, the number of components, the
@@ -47,6 +49,11 @@ from .window import (WindowSchedule, triangulate_window, triangulate_window_lsq,
 #: Largest std. dev. (metres or radians) STMDS accepts in a header or a step: beyond it no
 #: measurement carries information and the variances (fourth powers) leave double precision.
 MAX_SIGMA = 1e6
+
+#: SMACOF's warm start is the map of the last step ``t`` with ``t % WARM_EVERY == 0`` (made
+#: there whether or not the caller asked for an estimate: the paper's checkpoint cadence), so
+#: the map at a step does not depend on how often estimate() was called before it.
+WARM_EVERY = 10
 
 #: Keyframe windows (``tri_method="lsq"``) held before they are triangulated together.
 BATCH_WINDOWS = 64
@@ -129,9 +136,13 @@ class StmdsMapper:
         self._n_outliers = 0                      # rays dropped by the window bundle
         self._triangulated = _GrowingFlags()      # by dense index: ever passed the gates
         self._relative_gate = math.isfinite(cfg.max_relative_range_sigma)
-        self._n_smacof = 0                        # SMACOF estimates made so far
+        self._n_smacof = 0                        # SMACOF maps kept so far
         self._n_triangulated = 0
-        self._prev_xy = np.zeros((0, 2))   # previous map by dense landmark index (NaN: absent)
+        # the last scheduled map (_warm_scheduled) by dense landmark index (NaN: absent),
+        # SMACOF's warm start, and the step and reconstruction it was kept at
+        self._prev_xy = np.zeros((0, 2))
+        self._kept_t = -1
+        self._kept: tuple | None = None
         self._robots = RobotPoses(cfg.n_robot_poses, cfg.fusion) if cfg.localise else None
         # the paper's rule (consecutive steps, no localisation, no relative gate) runs in
         # batches of steps (.batch); the other variants step by step
@@ -158,6 +169,7 @@ class StmdsMapper:
     def step(self, step: Step) -> None:
         """Triangulate the landmarks seen ``k`` steps ago and now (``k`` in
         ``baseline_steps``; the paper: ``t-1`` and ``t``) and fuse their pair distances."""
+        self._catch_up()
         ids = step.landmark_ids
         brg = step.bearings_rad
         if step.odom_sigma is not None:
@@ -441,14 +453,32 @@ class StmdsMapper:
                 "n_outlier_rays": self._n_outliers,
                 "n_degenerate_estimates": self._store.n_degenerate}
 
-    def estimate(self) -> MapEstimate:
-        """The map now (and the held poses when localising); never raises for lack of data.
-
-        Raises :class:`~bomgraph.errors.DegenerateGeometryError` when the stream gave pair
-        estimates but every one was degenerate (zero length: parallel rays through every
-        landmark, e.g. a stuck sensor; or no finite variance), naming that cause.
-        """
+    def _warm_scheduled(self, t: int) -> bool:
+        """Step ``t`` is on the method's own warm-start schedule: SMACOF warm-started from
+        the previous map keeps the map at every :data:`WARM_EVERY`-th step (from the last
+        one before ``smacof_from_t``), whatever the caller's estimate() cadence."""
         cfg = self.config
+        return (cfg.method == "smacof" and cfg.smacof_init != "classical" and t > 0
+                and t % WARM_EVERY == 0 and t + WARM_EVERY >= cfg.smacof_from_t)
+
+    def _catch_up(self) -> None:
+        """Make the scheduled map of the last step if no estimate() made it (before the next
+        step changes the distances); a step whose pairs are all degenerate keeps no map."""
+        if self._warm_scheduled(self._t) and self._kept_t != self._t:
+            try:
+                self._reconstruction()
+            except DegenerateGeometryError:
+                self._prev_xy = np.zeros((0, 2))
+                self._kept_t, self._kept = self._t, None
+
+    def _reconstruction(self) -> tuple[dict[str, Any], Any, int, bool]:
+        """``(info, Reconstruction, n_landmarks, joint)`` of the map now, warm-started from
+        the last scheduled map; a scheduled step's map is kept (:meth:`_warm_scheduled`) and
+        given again to a second estimate() at that step."""
+        cfg = self.config
+        if self._kept is not None and self._kept_t == self._t:
+            info, rec, n_lm, joint = self._kept
+            return dict(info), rec, n_lm, joint
         self.flush()
         info = self._base_info()
         store, triangulated = self._with_open_window()
@@ -465,33 +495,44 @@ class StmdsMapper:
         dist, var = known.distance_m, known.variance_m2
         measured = known.count >= cfg.min_count          # not a prior alone
         n_nodes = n_lm
-        robot_nodes = np.zeros(0, np.int64)
         # Method 2 reconstructs the robot positions with the landmarks (eq. 7); Method 1 maps
         # the landmarks alone, then trilaterates the positions (DMC-SPL over the sparse robot
         # rows distorts the map)
         joint = self._robots is not None and cfg.method == "smacof"
         if joint and len(self._robots.t) >= 1:
-            first, second, dist, var, robot_nodes = extend_with_robots(
+            first, second, dist, var, _ = extend_with_robots(
                 self._robots, first, second, dist, var, n_lm, cfg.robot_ranges,
                 self._window_sigma, cfg.min_parallax_rad)
             measured = np.concatenate([measured, np.ones(len(first) - len(measured), bool)])
-            n_nodes = n_lm + len(robot_nodes)
+            n_nodes = n_lm + len(self._robots.t)
         rec = reconstruct(cfg, n_nodes, n_lm, first, second, dist, var, measured,
                           triangulated, t=self._t, n_smacof=self._n_smacof,
                           previous_xy=self._prev_xy)
+        if self._warm_scheduled(self._t):
+            self._kept_t, self._kept = self._t, (dict(info), rec, n_lm, joint)
+            self._n_smacof += int(rec.used_smacof)
+            self._prev_xy = np.full((n_lm, 2), np.nan)
+            is_lm = rec.nodes < n_lm
+            self._prev_xy[rec.nodes[is_lm]] = rec.points_xy[is_lm]
+        return info, rec, n_lm, joint
+
+    def estimate(self) -> MapEstimate:
+        """The map now (and the held poses when localising); never raises for lack of data.
+
+        Raises :class:`~bomgraph.errors.DegenerateGeometryError` when the stream gave pair
+        estimates but every one was degenerate (zero length: parallel rays through every
+        landmark, e.g. a stuck sensor; or no finite variance), naming that cause.
+        """
+        info, rec, n_lm, joint = self._reconstruction()
         if len(rec.nodes) == 0:
-            self._prev_xy = np.zeros((0, 2))
             info.update(reason=rec.info["reason"], left_out=[])
             return MapEstimate.empty(**info)
         kept_nodes, xy = rec.nodes, rec.points_xy
         left = rec.left_out
         info["left_out"] = sorted(int(i) for i in self._ids.ids[left[left < n_lm]])
         info.update(rec.info)
-        self._n_smacof += int(rec.used_smacof)
         is_lm = kept_nodes < n_lm
-        self._prev_xy = np.full((n_lm, 2), np.nan)
-        self._prev_xy[kept_nodes[is_lm]] = xy[is_lm]
-
+        robot_nodes = n_lm + np.arange(len(self._robots.t) if joint else 0)
         lm_idx = kept_nodes[is_lm]
         lm_ids = self._ids.ids[lm_idx]
         lm_xy = xy[is_lm]

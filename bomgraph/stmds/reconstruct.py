@@ -7,9 +7,10 @@ eq. 7) :func:`reconstruct` keeps the nodes with ``min_degree`` triangulated dist
 * Method 1 (``method="cs"``): DMC-SPL (shortest paths on distances, III-D.1) + classical
   scaling.
 * Method 2 (``method="smacof"``): Method 1 while ``t < smacof_from_t``, weighted SMACOF
-  (III-D.2, eq. 6) on the known pairs from then on, warm-started from the previous map
-  (nodes new to it placed by the classical-scaling map aligned onto it) and, every
-  :data:`RESTART_EVERY` SMACOF estimates, also from the classical-scaling map, keeping the
+  (III-D.2, eq. 6) on the known pairs from then on, warm-started from the previous map the
+  caller kept (:class:`.mapper.StmdsMapper` keeps one every ``WARM_EVERY`` steps; nodes new
+  to it placed by the classical-scaling map aligned onto it) and, every
+  :data:`RESTART_EVERY` kept SMACOF maps, also from the classical-scaling map, keeping the
   lower stress. Large maps start from landmark MDS (pivot shortest paths) instead.
 
 No state is kept here: the previous map and the number of SMACOF estimates made so far come in
