@@ -31,6 +31,7 @@ import gtsam
 import numpy as np
 
 from bomgraph.angles import angle_residual
+from bomgraph.geometry import bearing_offsets
 from bomgraph.stream import StreamHeader
 
 from .bearing_graph import (BearingGraph, FactorGraphConfig, bearing_noise, landmark_key,
@@ -54,9 +55,9 @@ def old_bearing_priors(poses: np.ndarray, points: np.ndarray, bearings_rad: np.n
     the Gauss-Newton step; the current point where the information is singular).
     """
     n = len(points)
-    d = points[which] - poses[:, :2]
-    r2 = np.maximum((d * d).sum(axis=1), 1e-18)
-    res = angle_residual(bearings_rad, np.arctan2(d[:, 1], d[:, 0]) - poses[:, 2]) / sigma_rad
+    pred, d, r2 = bearing_offsets(poses, points[which])
+    r2 = np.maximum(r2, 1e-18)
+    res = angle_residual(bearings_rad, pred) / sigma_rad
     jac = np.column_stack([-d[:, 1], d[:, 0]]) / r2[:, None] / sigma_rad       # (J, 2)
     w = np.ones_like(res) if cauchy_k is None else 1.0 / (1.0 + (res / cauchy_k) ** 2)
     info = np.zeros((n, 2, 2))

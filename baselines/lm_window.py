@@ -47,6 +47,7 @@ import gtsam
 import numpy as np
 
 from bomgraph.angles import angle_residual
+from bomgraph.geometry import bearing_offsets
 from bomgraph.stream import StreamHeader
 
 from .lm_report import GTSAM_ERRORS, _first_line, lm_params
@@ -433,9 +434,9 @@ def fold_bearings(poses: np.ndarray, points: np.ndarray, bearings_rad: np.ndarra
     info : (n, 2, 2) ``H = sum w J^T J``; eta : (n, 2) ``H l0 + sum w J^T r``.
     """
     n = len(points)
-    d = points[which] - poses[:, :2]
-    r2 = np.maximum((d * d).sum(axis=1), 1e-18)
-    res = angle_residual(bearings_rad, np.arctan2(d[:, 1], d[:, 0]) - poses[:, 2]) / sigma_rad
+    pred, d, r2 = bearing_offsets(poses, points[which])
+    r2 = np.maximum(r2, 1e-18)
+    res = angle_residual(bearings_rad, pred) / sigma_rad
     jx, jy = -d[:, 1] / r2 / sigma_rad, d[:, 0] / r2 / sigma_rad
     w = np.ones_like(res) if cauchy_k is None else 1.0 / (1.0 + (res / cauchy_k) ** 2)
     info = np.empty((n, 2, 2))

@@ -20,15 +20,23 @@ import numpy as np
 
 from bomgraph.angles import angle_residual, wrap_angle
 from bomgraph.errors import ConfigError
-from bomgraph.geometry import compose, inverse, pair_bearings, ray_normals, rotation
+from bomgraph.geometry import (bearing_offsets, compose, inverse, pair_bearings, ray_normals,
+                               rotation)
 
 
 def resection_jacobian(pose: np.ndarray, landmarks_xy: np.ndarray) -> np.ndarray:
     """Jacobian ``(k, 3)`` of the predicted bearings ``atan2(l - p) - psi`` w.r.t. the pose
     ``[x, y, psi]`` (``pose`` of shape (3,) or one pose per landmark, (k, 3))."""
-    d = np.asarray(landmarks_xy, dtype=float) - np.asarray(pose, dtype=float)[..., :2]
-    r2 = np.maximum((d * d).sum(-1), 1e-18)
-    return np.column_stack([d[:, 1] / r2, -d[:, 0] / r2, -np.ones(len(d))])
+    _, d, r2 = bearing_offsets(pose, landmarks_xy)
+    return _pose_jacobian(d, r2)
+
+
+def _pose_jacobian(offset_xy: np.ndarray, range2_m2: np.ndarray) -> np.ndarray:
+    """:func:`resection_jacobian` from :func:`~bomgraph.geometry.bearing_offsets`'s offset
+    ``(k, 2)`` and squared range ``(k,)`` (floored at 1e-18 m^2)."""
+    r2 = np.maximum(range2_m2, 1e-18)
+    return np.column_stack([offset_xy[:, 1] / r2, -offset_xy[:, 0] / r2,
+                            -np.ones(len(offset_xy))])
 
 
 def _group_sum(owner: np.ndarray, values: np.ndarray, n: int) -> np.ndarray:
@@ -185,9 +193,10 @@ def resect_poses(owner: np.ndarray, landmarks_xy: np.ndarray, bearings_rad: np.n
         sel = active[own]
         o, l_, b_, s_ = np.searchsorted(idx, own[sel]), lm[sel], b[sel], sig[sel]
         p = poses[idx]
-        r = angle_residual(pair_bearings(p[o], l_, wrapped=False), b_) / s_
+        pred, d, r2 = bearing_offsets(p[o], l_)
+        r = angle_residual(pred, b_) / s_
         wr = np.where(np.abs(r) <= huber_k, 1.0, huber_k / np.maximum(np.abs(r), 1e-300))
-        jac = resection_jacobian(p[o], l_) / s_[:, None]
+        jac = _pose_jacobian(d, r2) / s_[:, None]
         h = _group_sum(o, wr[:, None, None] * jac[:, :, None] * jac[:, None, :], len(idx))
         g = _group_sum(o, (wr * r)[:, None] * jac, len(idx))
         e = np.column_stack([p[:, :2] - prior0[idx, :2],

@@ -1,6 +1,6 @@
 """Planar geometry shared by every method: SE(2) algebra, the odometry chain, the one
-predicted-bearing kernel (:func:`pair_bearings`) and the one least-squares ray-intersection
-kernel with its parallax measures.
+predicted-bearing kernel (:func:`pair_bearings`; :func:`bearing_offsets` where the bearing is
+linearised) and the one least-squares ray-intersection kernel with its parallax measures.
 
 A pose is ``[x_m, y_m, psi_rad]``; an odometry increment ``[dx_m, dy_m, dpsi_rad]`` is the
 motion from pose ``t-1`` to pose ``t`` expressed in the frame of pose ``t-1`` (STREAM_FORMAT.md):
@@ -169,6 +169,38 @@ def pair_bearings(poses: ArrayLike, points_world_xy: ArrayLike, *,
     d = np.asarray(points_world_xy, dtype=float) - p[..., :2]
     ang = np.arctan2(d[..., 1], d[..., 0])
     return angle_residual(ang, p[..., 2]) if wrapped else ang - p[..., 2]
+
+
+def bearing_offsets(poses: ArrayLike, points_world_xy: ArrayLike
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`pair_bearings` not wrapped, with the offset and squared range its Jacobian is
+    built from: the one kernel for a bearing that is linearised.
+
+    With ``[dx, dy]`` the offset and ``r2 = dx^2 + dy^2``, the bearing's derivatives are
+    ``[-dy, dx] / r2`` (rad/m) with respect to the point ``[lx, ly]`` and
+    ``[dy / r2, -dx / r2, -1]`` with respect to the pose ``[x, y, psi]``.
+
+    Parameters
+    ----------
+    poses : array of shape (..., 3)
+        ``[x_m, y_m, psi_rad]``; row ``i`` is the pose that sees point ``i``.
+    points_world_xy : array of shape (..., 2)
+        World points, broadcast against ``poses`` as in :func:`pair_bearings`.
+
+    Returns
+    -------
+    bearing_rad : ndarray of the broadcast shape without the last axis
+        ``atan2(dy, dx) - psi``, not wrapped (the bits of ``pair_bearings(..., wrapped=False)``;
+        wrap it, or the residual it enters, once).
+    offset_xy_m : ndarray of the broadcast shape
+        ``[dx, dy]``: the point less the pose's position.
+    range2_m2 : ndarray of the broadcast shape without the last axis
+        ``dx * dx + dy * dy`` (zero where a point is at its pose: divide with care).
+    """
+    p = np.asarray(poses, dtype=float)
+    d = np.subtract(points_world_xy, p[..., :2])
+    dx, dy = d[..., 0], d[..., 1]
+    return np.arctan2(dy, dx) - p[..., 2], d, dx * dx + dy * dy
 
 
 # --------------------------------------------------------------------------------------------

@@ -27,6 +27,7 @@ import math
 import numpy as np
 
 from bomgraph.angles import wrap_angle
+from bomgraph.geometry import bearing_offsets
 
 
 def motion_jacobians(pose: np.ndarray, odom: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -108,9 +109,8 @@ def bearing_and_jacobian(poses: np.ndarray, points_xy: np.ndarray) -> tuple[np.n
     jac : ndarray of shape (k, 5)
         Derivatives with respect to ``[x, y, psi, lx, ly]``.
     """
-    d = points_xy - poses[:, :2]
-    q = np.einsum("ki,ki->k", d, d)
-    b = wrap_angle(np.arctan2(d[:, 1], d[:, 0]) - poses[:, 2])
+    pred, d, q = bearing_offsets(poses, points_xy)
+    b = wrap_angle(pred)
     jac = np.empty((len(q), 5))
     gx = np.divide(-d[:, 1], q, out=jac[:, 3])
     gy = np.divide(d[:, 0], q, out=jac[:, 4])

@@ -20,6 +20,8 @@ from typing import Callable
 
 import numpy as np
 
+from bomgraph.geometry import bearing_offsets
+
 from .filter import JacobianRows
 
 #: ``(jac (m, 5), cols (m, 5)) -> jac (m, 5)``: the general observability constraint (the
@@ -64,11 +66,8 @@ def landmark_rows(x: np.ndarray, P: np.ndarray, nullspace: np.ndarray,  # noqa: 
     m = len(cols)
     v = x[cols]                                                  # (m, 5)
     block = P[cols[:, :, None], cols[:, None, :]]                # (m, 5, 5)
-    d = v[:, 3:5] - v[:, 0:2]
-    dx, dy = d[:, 0], d[:, 1]
-    q = dx * dx + dy * dy                                        # |r|^2
+    h, d, q = bearing_offsets(v[:, 0:3], v[:, 3:5])              # q: |r|^2
     dist = np.sqrt(q)
-    h = np.arctan2(dy, dx) - v[:, 2]
     u = d / dist[:, None]                                        # the ray's unit vector
     a = nullspace[cols, 2]                                       # anchors: [-a_y, a_x]
     length = u[:, 0] * (a[:, 4] - a[:, 1]) + u[:, 1] * (a[:, 0] - a[:, 3])

@@ -326,7 +326,7 @@ def _fit(u: np.ndarray, sig: np.ndarray, bearing_sigma_rad: float, brg: np.ndarr
             prob = _Problem(u, sig, bearing_sigma_rad, k, lm, theta, n_lm)
             poses, points, blocks, converged = _levenberg_marquardt(prob, poses, points,
                                                                      max_iter, tol)
-            res_rad = _bearing_residuals(poses, points, k, lm, theta)[0]
+            res_rad = _bearing_residuals(poses, points, k, lm, theta, False)[0]
             res = np.abs(res_rad) / bearing_sigma_rad
             determined = np.ones(len(k), bool)
             if (outlier_sigma is not None or estimate_sigma) and res.size:

@@ -11,6 +11,7 @@ import numpy as np
 from scipy.linalg import lapack, solve_triangular
 
 from ..angles import angle_residual
+from ..geometry import bearing_offsets, pair_bearings
 
 #: Odometry std. devs. below this (m or rad) are raised to it: a zero std. dev. (the paper's
 #: simulator has no lateral slip, ``sigma_dy = 0``) would be an infinite weight, and a tiny one
@@ -53,17 +54,13 @@ def _bearing_residuals(poses: np.ndarray, points: np.ndarray, k: np.ndarray, lm:
                        ) -> tuple[np.ndarray, np.ndarray | None]:
     """Bearing residuals and ``d res / d (p_l)`` (``d / d z_k`` is its negative,
     ``d / d psi_k = -1``; None without ``jacobians``)."""
-    pk = poses[k]
-    d = points[lm] - pk[:, :2]
-    dx, dy = d[:, 0], d[:, 1]
-    res = angle_residual(np.arctan2(dy, dx) - pk[:, 2], theta)
     if not jacobians:
-        return res, None
-    r2 = dx * dx + dy * dy
+        return angle_residual(pair_bearings(poses[k], points[lm], wrapped=False), theta), None
+    pred, d, r2 = bearing_offsets(poses[k], points[lm])
     dp = np.empty_like(d)
-    dp[:, 0] = -dy / r2
-    dp[:, 1] = dx / r2
-    return res, dp
+    dp[:, 0] = -d[:, 1] / r2
+    dp[:, 1] = d[:, 0] / r2
+    return angle_residual(pred, theta), dp
 
 
 class _Problem:
