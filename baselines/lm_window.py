@@ -26,8 +26,8 @@ Two uses (issue 14 items 1-2):
   ``lag_marginal_landmarks`` landmarks (large maps, where a dense marginal would cost
   ``O(L^3)`` per iteration), or when an elimination fails (``marginal_failure``), the
   marginal is given up for *conditional folds*: each landmark's
-  bearings from the older (held) poses folded into one Gaussian prior (as in
-  :mod:`baselines.fixed_lag`), grown as steps leave the window, redone from all its old
+  bearings from the older (held) poses folded into one Gaussian prior (:func:`fold_bearings`),
+  grown as steps leave the window, redone from all its old
   bearings when its point has moved more than ``refold_m`` from where it was folded, and all
   reset after a whole-graph solve; the held boundary pose is then fixed by a prior.
 
