@@ -1,0 +1,72 @@
+"""Review of h83's closed stderr (h86): the command run in its caller's process
+(:func:`bomgraph.cli.main`) whose ``sys.stderr`` is None while descriptor 2 is open (the
+caller set it so, as ``pythonw`` does; or its stderr was closed and a file it opened then
+took descriptor 2). h83 left ``sys.stderr`` None there, so
+
+* a line printed to it went to stdout: ``simulate --out -`` into an ``io.StringIO`` ended the
+  stream with ``wrote -: ...``;
+* ``run``'s progress bar raised AttributeError (``None.isatty``): a traceback, exit 1;
+
+and the command run with descriptor 2 closed left ``sys.stderr`` replaced in its caller.
+"""
+
+from __future__ import annotations
+
+import io
+import os
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import pytest
+
+from bomgraph.cli import main
+
+ROOT = Path(__file__).resolve().parents[1]
+ENV = {**os.environ, "PYTHONPATH": str(ROOT), "OMP_NUM_THREADS": "1"}
+SIMULATE = ["simulate", "--steps", "8", "--landmarks", "4"]
+
+
+def test_no_line_goes_into_the_data_when_sys_stderr_is_none(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Fails before h86: the text ended with ``wrote -: 9 steps, ...``."""
+    assert main([*SIMULATE, "--out", str(tmp_path / "plain")]) == 0
+    text = io.StringIO()
+    monkeypatch.setattr(sys, "stderr", None)
+    monkeypatch.setattr(sys, "stdout", text)
+    assert main([*SIMULATE, "--out", "-"]) == 0
+    assert sys.stderr is None  # the caller's, as it was
+    monkeypatch.undo()
+    assert text.getvalue() == (tmp_path / "plain").read_text()
+
+
+def test_run_with_sys_stderr_none_runs(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Fails before h86: AttributeError: 'NoneType' object has no attribute 'isatty'."""
+    stream = tmp_path / "plain"
+    assert main([*SIMULATE, "--out", str(stream)]) == 0
+    text = io.StringIO()
+    monkeypatch.setattr(sys, "stderr", None)
+    monkeypatch.setattr(sys, "stdout", text)
+    assert main(["run", str(stream), "--method", "triangulate", "--out", "-"]) == 0
+    monkeypatch.undo()
+    assert text.getvalue().startswith('{"format"') and "landmarks mapped" not in text.getvalue()
+
+
+def test_main_with_stderr_closed_leaves_its_caller_as_it_was(tmp_path: Path) -> None:
+    """``2>&-`` in a program that calls main(): before h86 ``sys.stderr`` was a stream of
+    bomgraph's after it, and descriptor 2 on /dev/null."""
+    script = textwrap.dedent(f"""
+        import os, sys
+        from bomgraph.cli import main
+        status = main({[*SIMULATE, "--out", str(tmp_path / "x")]!r})
+        try:
+            os.fstat(2)
+            open2 = True
+        except OSError:
+            open2 = False
+        print(status, sys.stderr is None, open2)
+        """)
+    done = subprocess.run(["bash", "-c", f'"{sys.executable}" -c "$0" 2>&-', script],
+                          env=ENV, capture_output=True, text=True, check=False)
+    assert done.stdout.splitlines()[-1] == "0 True False", done.stdout + done.stderr
