@@ -464,7 +464,7 @@ def _stdout_closed() -> int:
     try:  # stop the interpreter's final flush from failing again on the closed pipe
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())
-    except (OSError, ValueError):
+    except (OSError, ValueError, AttributeError):  # AttributeError: closed (>&-, h86)
         pass
     return 128 + signal.SIGPIPE if hasattr(signal, "SIGPIPE") else 1
 

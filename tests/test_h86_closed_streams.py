@@ -1,4 +1,4 @@
-"""Review of h83's closed stderr (h86): the command run in its caller's process
+"""Review of h83's closed stdout and stderr (h86). The command run in its caller's process
 (:func:`bomgraph.cli.main`) whose ``sys.stderr`` is None while descriptor 2 is open (the
 caller set it so, as ``pythonw`` does; or its stderr was closed and a file it opened then
 took descriptor 2). h83 left ``sys.stderr`` None there, so
@@ -70,3 +70,15 @@ def test_main_with_stderr_closed_leaves_its_caller_as_it_was(tmp_path: Path) -> 
     done = subprocess.run(["bash", "-c", f'"{sys.executable}" -c "$0" 2>&-', script],
                           env=ENV, capture_output=True, text=True, check=False)
     assert done.stdout.splitlines()[-1] == "0 True False", done.stdout + done.stderr
+
+
+def test_a_broken_pipe_with_stdout_closed_is_no_traceback(tmp_path: Path) -> None:
+    """``--out FIFO >&-`` whose reader stops early: a BrokenPipeError, then AttributeError
+    (``None.fileno``) in the quiet exit; a traceback, exit 1. Fails before h86."""
+    os.mkfifo(tmp_path / "fifo")
+    script = (f'(head -c 1 fifo > /dev/null) & "{sys.executable}" -m bomgraph simulate '
+              f'--steps 3000 --out fifo >&-; status=$?; wait; exit $status')
+    done = subprocess.run(["bash", "-c", script], cwd=tmp_path, env=ENV, capture_output=True,
+                          text=True, check=False)
+    assert "Traceback" not in done.stderr, done.stderr
+    assert done.returncode == 141, done.stderr
