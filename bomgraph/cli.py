@@ -462,8 +462,8 @@ def _forget_unhandled_interrupt() -> None:
 def _stdout_closed() -> int:
     """A closed pipe on stdout (``bomgraph methods | head -1``): exit quietly."""
     try:  # stop the interpreter's final flush from failing again on the closed pipe
-        devnull = os.open(os.devnull, os.O_WRONLY)
-        os.dup2(devnull, sys.stdout.fileno())
+        with open(os.devnull, "wb") as null:  # closed after: none left open (h86)
+            os.dup2(null.fileno(), sys.stdout.fileno())
     except (OSError, ValueError, AttributeError):  # AttributeError: closed (>&-, h86)
         pass
     return 128 + signal.SIGPIPE if hasattr(signal, "SIGPIPE") else 1

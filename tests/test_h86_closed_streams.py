@@ -82,3 +82,17 @@ def test_a_broken_pipe_with_stdout_closed_is_no_traceback(tmp_path: Path) -> Non
                           text=True, check=False)
     assert "Traceback" not in done.stderr, done.stderr
     assert done.returncode == 141, done.stderr
+
+
+def test_main_on_a_broken_stdout_pipe_leaves_no_descriptor(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """The quiet exit of a closed pipe put /dev/null on stdout's descriptor and left the
+    descriptor it opened for it open: one more a call of main(). Fails before h86."""
+    read, write = os.pipe()
+    os.close(read)
+    with open(write, "w") as broken:
+        monkeypatch.setattr(sys, "stdout", broken)
+        before = len(os.listdir("/proc/self/fd"))
+        assert main(["methods"]) == 141
+        assert len(os.listdir("/proc/self/fd")) == before
+        monkeypatch.undo()
