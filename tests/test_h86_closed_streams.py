@@ -22,6 +22,7 @@ from pathlib import Path
 import pytest
 
 from bomgraph.cli import main
+from bomgraph.estimate_file import untimed_estimate_text
 
 ROOT = Path(__file__).resolve().parents[1]
 ENV = {**os.environ, "PYTHONPATH": str(ROOT), "OMP_NUM_THREADS": "1"}
@@ -96,3 +97,31 @@ def test_main_on_a_broken_stdout_pipe_leaves_no_descriptor(
         assert main(["methods"]) == 141
         assert len(os.listdir("/proc/self/fd")) == before
         monkeypatch.undo()
+
+
+@pytest.mark.parametrize("argv", [["run", "-", "--method", "triangulate", "--out", "x"],
+                                  ["evaluate", "est", "-"]])
+def test_a_closed_stdin_is_one_line(tmp_path: Path, argv: list[str]) -> None:
+    """``-`` read with stdin closed (``<&-``, Python has no ``sys.stdin``): AttributeError
+    (``None.buffer``), a traceback, exit 1, as a closed stdout was before h83. Fails
+    before h86."""
+    command = " ".join([f'"{sys.executable}" -m bomgraph', *argv])
+    done = subprocess.run(["bash", "-c", f"{command} <&-"], cwd=tmp_path, env=ENV,
+                          capture_output=True, text=True, check=False)
+    assert done.returncode == 2, done.stderr
+    assert done.stderr.count("\n") == 1 and "standard input is closed" in done.stderr, \
+        done.stderr
+
+
+def test_dash_read_from_a_text_only_sys_stdin(tmp_path: Path,
+                                              monkeypatch: pytest.MonkeyPatch) -> None:
+    """A caller in this process whose ``sys.stdin`` is a text stream (``io.StringIO``), as
+    h83 made ``--out -`` write a text-only ``sys.stdout``: AttributeError before h86."""
+    stream = tmp_path / "plain"
+    assert main([*SIMULATE, "--out", str(stream)]) == 0
+    assert main(["run", str(stream), "--method", "triangulate", "--out",
+                 str(tmp_path / "a.json")]) == 0
+    monkeypatch.setattr(sys, "stdin", io.StringIO(stream.read_text()))
+    assert main(["run", "-", "--method", "triangulate", "--out", str(tmp_path / "b.json")]) == 0
+    a, b = (untimed_estimate_text((tmp_path / n).read_text()) for n in ("a.json", "b.json"))
+    assert a == b
