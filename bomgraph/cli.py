@@ -147,7 +147,7 @@ def cmd_export(args: argparse.Namespace) -> int:
     from .errors import ExportError
     from .export import export_text, truth_estimate, write_text_atomic
     from .file_evaluation import check_stream_identity
-    from .std_streams import STDIO, input_path, is_stdout, standard_output
+    from .std_streams import STDIO, check_output_path, input_path, is_stdout, standard_output
     from .stream_file import read_stream
 
     if (args.estimate is None) == (args.truth is None):
@@ -173,11 +173,12 @@ def cmd_export(args: argparse.Namespace) -> int:
         src = est.final
     text = export_text(src, args.format, stream)
     to_stderr = is_stdout(args.out)  # `--out /dev/stdout > f`: the line would overwrite f
+    inputs = [p for p in (args.estimate, stream_path) if p and p != STDIO]
     if args.out == "-":
+        check_output_path(STDIO, inputs)  # `--out - >> EST`: refused as /dev/stdout is (h86)
         standard_output().write(text)
     else:
-        write_text_atomic(text, args.out,
-                          [p for p in (args.estimate, stream_path) if p and p != STDIO])
+        write_text_atomic(text, args.out, inputs)
     if args.format == "tum" and stream is None and not getattr(args, "quiet", False):
         print("bomgraph: note: the TUM time stamps are step indices; give --stream FILE to "
               "use the stream's time_s (as export --truth does), so that evo can pair them",

@@ -171,6 +171,25 @@ def standard_output() -> IO[str]:
     return sys.stdout
 
 
+def _stdout_not_input(stdout: IO[str], inputs: Sequence[str | os.PathLike[str] | None]) -> None:
+    """Refuse ``--out -`` whose stdout is one of ``inputs`` (``>> INPUT``: read, then the output
+    appended to it), as ``--out /dev/stdout`` is (h86)."""
+    try:
+        out = os.fstat(stdout.fileno())
+    except (OSError, ValueError, AttributeError):  # a text stream of a caller in this process
+        return
+    for inp in inputs if stat.S_ISREG(out.st_mode) else ():
+        if inp is None or os.fspath(inp) == STDIO:
+            continue
+        try:
+            same = os.path.samestat(out, os.stat(inp))
+        except OSError:  # missing, unreadable: its reader says so
+            same = False
+        if same:
+            raise OutputPathError(f"--out -: the standard output is the input {os.fspath(inp)}; "
+                                  f"refusing to overwrite an input: choose another name")
+
+
 def _stat(path: str) -> os.stat_result | None:
     try:
         return os.stat(path)  # follows links: what a write would reach
@@ -254,7 +273,7 @@ def check_output_path(path: str | os.PathLike[str],
     inputs = items(inputs, (str, os.PathLike, type(None)), "inputs (the files read)",
                    OutputPathError, want="file names")
     if path == STDIO:
-        standard_output()  # closed: refused before anything is computed
+        _stdout_not_input(standard_output(), inputs)  # closed: refused before computing
         return
     if not path:  # os.path.realpath("") is the working folder: the rename would aim at it
         raise OutputPathError("--out is empty; give a file name")

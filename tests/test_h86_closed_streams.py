@@ -125,3 +125,32 @@ def test_dash_read_from_a_text_only_sys_stdin(tmp_path: Path,
     assert main(["run", "-", "--method", "triangulate", "--out", str(tmp_path / "b.json")]) == 0
     a, b = (untimed_estimate_text((tmp_path / n).read_text()) for n in ("a.json", "b.json"))
     assert a == b
+
+
+G2O = ("EDGE_SE2 0 1 1.0 0.0 0.1 100 0 0 100 0 400\n"
+       "EDGE_SE2 1 2 1.0 0.0 0.1 100 0 0 100 0 400\n"
+       "EDGE_BEARING_SE2_XY 0 10 0.5 1000\nEDGE_BEARING_SE2_XY 1 10 0.3 1000\n"
+       "EDGE_BEARING_SE2_XY 2 10 0.2 1000\n")
+
+
+@pytest.mark.parametrize("command", ["run plain --method triangulate", "import g2o plain",
+                                     "export est --stream plain --format tum"])
+def test_out_dash_appended_to_an_input_is_refused(tmp_path: Path, command: str) -> None:
+    """``--out - >> INPUT``: refused as ``--out /dev/stdout >> INPUT`` is, before anything is
+    computed (export: before it writes). Fails before h86: the input read, then the output
+    appended to it (run: the estimate after the stream's lines; import, which h83 made write
+    stdout: a stream after the g2o edges; export: its text after the stream's lines)."""
+    if not command.startswith("import"):
+        assert main([*SIMULATE, "--out", str(tmp_path / "plain")]) == 0
+        assert main(["run", str(tmp_path / "plain"), "--method", "triangulate", "--out",
+                     str(tmp_path / "est")]) == 0
+    else:
+        (tmp_path / "plain").write_text(G2O)
+    before = (tmp_path / "plain").read_bytes()
+    for out in ("/dev/stdout", "-"):
+        done = subprocess.run(["bash", "-c", f'"{sys.executable}" -m bomgraph {command} '
+                               f"--out {out} >> plain"], cwd=tmp_path, env=ENV,
+                              capture_output=True, text=True, check=False)
+        assert done.returncode == 2, (out, done.stderr)
+        assert "is the input plain" in done.stderr and done.stderr.count("\n") == 1, done.stderr
+        assert (tmp_path / "plain").read_bytes() == before
