@@ -172,8 +172,8 @@ def standard_output() -> IO[str]:
 
 
 def _stdout_not_input(stdout: IO[str], inputs: Sequence[str | os.PathLike[str] | None]) -> None:
-    """Refuse ``--out -`` whose stdout is one of ``inputs`` (``>> INPUT``: read, then the output
-    appended to it), as ``--out /dev/stdout`` is (h86)."""
+    """Refuse ``--out -`` whose stdout is one of ``inputs`` or a file in an input folder (``>>
+    INPUT``: read, then the output appended to it), as ``--out /dev/stdout`` is (h86)."""
     try:
         out = os.fstat(stdout.fileno())
     except (OSError, ValueError, AttributeError):  # a text stream of a caller in this process
@@ -181,8 +181,10 @@ def _stdout_not_input(stdout: IO[str], inputs: Sequence[str | os.PathLike[str] |
     for inp in inputs if stat.S_ISREG(out.st_mode) else ():
         if inp is None or os.fspath(inp) == STDIO:
             continue
-        try:
-            same = os.path.samestat(out, os.stat(inp))
+        try:  # an input folder (mrclam's): any file in it, as for a file name
+            st = os.stat(inp)
+            same = os.path.samestat(out, st) or stat.S_ISDIR(st.st_mode) and any(
+                os.path.samestat(out, os.stat(e.path)) for e in os.scandir(inp))
         except OSError:  # missing, unreadable: its reader says so
             same = False
         if same:
