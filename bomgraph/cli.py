@@ -36,7 +36,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     import numpy as np
 
     from .sim import SimConfig, make_priors, simulate, with_priors
-    from .stdio import check_output_path, is_stdout, write_output
+    from .std_streams import check_output_path, is_stdout, write_output
     from .stream_file import write_stream
 
     check_output_path(args.out)
@@ -77,7 +77,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     from .bench import run_file
     from .jsonio import parse_options
     from .mapper import checkpoint_times
-    from .stdio import check_output_path, input_path, is_stdout, write_output
+    from .std_streams import check_output_path, input_path, is_stdout, write_output
 
     from .sweep import run_method
 
@@ -115,7 +115,7 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 def cmd_evaluate(args: argparse.Namespace) -> int:
     from .file_evaluation import evaluate_files, format_evaluation
-    from .stdio import STDIO, input_path
+    from .std_streams import STDIO, input_path
 
     if args.estimate == STDIO and args.stream == STDIO:
         raise BomgraphError("only one of ESTIMATE and STREAM can be '-' (stdin)")
@@ -147,7 +147,7 @@ def cmd_export(args: argparse.Namespace) -> int:
     from .errors import ExportError
     from .export import export_text, truth_estimate, write_text_atomic
     from .file_evaluation import check_stream_identity
-    from .stdio import STDIO, input_path, is_stdout, standard_output
+    from .std_streams import STDIO, check_output_path, input_path, is_stdout, standard_output
     from .stream_file import read_stream
 
     if (args.estimate is None) == (args.truth is None):
@@ -173,11 +173,12 @@ def cmd_export(args: argparse.Namespace) -> int:
         src = est.final
     text = export_text(src, args.format, stream)
     to_stderr = is_stdout(args.out)  # `--out /dev/stdout > f`: the line would overwrite f
+    inputs = [p for p in (args.estimate, stream_path) if p and p != STDIO]
     if args.out == "-":
+        check_output_path(STDIO, inputs)  # `--out - >> EST`: refused as /dev/stdout is (h86)
         standard_output().write(text)
     else:
-        write_text_atomic(text, args.out,
-                          [p for p in (args.estimate, stream_path) if p and p != STDIO])
+        write_text_atomic(text, args.out, inputs)
     if args.format == "tum" and stream is None and not getattr(args, "quiet", False):
         print("bomgraph: note: the TUM time stamps are step indices; give --stream FILE to "
               "use the stream's time_s (as export --truth does), so that evo can pair them",
@@ -341,7 +342,7 @@ def _print_plan(rows: list[dict[str, Any]], out: str) -> int:
 
 def _import(args: argparse.Namespace, make: Callable[[], Any], *inputs: str | None) -> int:
     """Check ``--out`` (not one of the ``inputs``) before ``make()`` imports, then write."""
-    from .stdio import check_output_path, is_stdout, write_output
+    from .std_streams import check_output_path, is_stdout, write_output
     from .stream_file import write_stream
 
     check_output_path(args.out, inputs)
@@ -462,9 +463,9 @@ def _forget_unhandled_interrupt() -> None:
 def _stdout_closed() -> int:
     """A closed pipe on stdout (``bomgraph methods | head -1``): exit quietly."""
     try:  # stop the interpreter's final flush from failing again on the closed pipe
-        devnull = os.open(os.devnull, os.O_WRONLY)
-        os.dup2(devnull, sys.stdout.fileno())
-    except (OSError, ValueError):
+        with open(os.devnull, "wb") as null:  # closed after: none left open (h86)
+            os.dup2(null.fileno(), sys.stdout.fileno())
+    except (OSError, ValueError, AttributeError):  # AttributeError: closed (>&-, h86)
         pass
     return 128 + signal.SIGPIPE if hasattr(signal, "SIGPIPE") else 1
 
@@ -567,7 +568,7 @@ def _main(argv: Sequence[str] | None) -> int:
         note = method_failure_note(exc)
         if isinstance(exc, BomgraphError) or (isinstance(exc, OSError) and note is None):
             # a refusal, with what to fix (also one a method made, then with where): exit 2
-            from .stdio import display_path
+            from .std_streams import display_path
 
             message = str(exc)
             if isinstance(exc, OSError) and exc.filename is None \

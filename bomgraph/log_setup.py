@@ -36,27 +36,45 @@ def configure_logging(verbose: int = 0, quiet: bool = False) -> None:
 
 
 def _stderr_reopened() -> None:
-    """Descriptor 2 on /dev/null and ``sys.stderr`` writing there when the shell closed it
-    (``2>&-``: Python has no ``sys.stderr``). Before (h83), ``run``'s progress bar raised
-    AttributeError (exit 1, the traceback shown nowhere), and a line printed to
-    ``sys.stderr`` = None went to stdout: ``simulate --out - > f 2>&-`` ended f with
-    ``wrote -: ...``. Nothing is done when descriptor 2 is open (a caller in this process
-    that set ``sys.stderr`` to None keeps it)."""
+    """``sys.stderr`` writing to /dev/null when it is None, so that no line printed to it goes
+    to stdout (into the data of ``--out -``) and no progress bar fails; put back when the
+    command run in its caller's process ends (:func:`restore_after`). Descriptor 2 closed
+    (``2>&-``) is put on /dev/null too; one open (the caller set ``sys.stderr`` to None, as
+    ``pythonw`` does, or a file it opened took descriptor 2) is never written. Before (h83),
+    ``run``'s progress bar raised AttributeError (exit 1, the traceback shown nowhere), and a
+    line printed to ``sys.stderr`` = None went to stdout: ``simulate --out - > f 2>&-`` ended
+    f with ``wrote -: ...``; in the caller's process (h86) too, and its ``sys.stderr`` and
+    descriptor 2 were left changed."""
     if sys.stderr is not None:
         return
     try:
         os.fstat(2)
-        return
+        closed = False
     except OSError:
-        pass
+        closed = True
     try:
-        fd = os.open(os.devnull, os.O_WRONLY)
-        if fd != 2:  # 0 or 1 closed too: the lowest number was free
-            os.dup2(fd, 2)
-            os.close(fd)
-        sys.stderr = open(2, "w", encoding="utf-8", errors="backslashreplace", closefd=False)
+        if not closed:
+            stream = open(os.devnull, "w", encoding="utf-8")
+        else:
+            fd = os.open(os.devnull, os.O_WRONLY)
+            if fd != 2:  # 0 or 1 closed too: the lowest number was free
+                os.dup2(fd, 2)
+                os.close(fd)
+            stream = open(2, "w", encoding="utf-8", errors="backslashreplace", closefd=False)
     except OSError:
-        pass
+        return
+    ours = os.fstat(stream.fileno())
+    sys.stderr = stream
+
+    def undo() -> None:
+        if sys.stderr is stream:
+            sys.stderr = None
+        with contextlib.suppress(OSError, ValueError):
+            stream.close()
+            if closed and os.path.samestat(os.fstat(2), ours):
+                os.close(2)  # closed as it was
+
+    restore_after(undo)
 
 
 def _first_line(record: logging.LogRecord) -> bool:

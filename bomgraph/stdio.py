@@ -19,6 +19,8 @@ the compare results and cache, figures):
 * an output that is one of the command's inputs (the same file, through links or hard links
   too) is refused before anything is computed.
 
+``-`` and the process's standard streams: :mod:`bomgraph.std_streams`.
+
 Reading: :data:`MAX_LINE_BYTES` and :data:`MAX_INPUT_BYTES` bound every text file bomgraph
 reads (streams, estimates, datasets, stdin), so an input without newlines (``/dev/zero``) is
 refused in one line instead of being read until memory runs out.
@@ -35,11 +37,9 @@ import errno
 import logging
 import os
 import re
-import shutil
 import signal
 import stat
 import sys
-import tempfile
 import threading
 from pathlib import Path
 from typing import IO, Any, Callable, Iterator, Sequence
@@ -57,8 +57,6 @@ MAX_LINE_BYTES = 64 * 2**20
 #: the largest text input bomgraph reads (a stream, an estimate, a dataset file, stdin).
 MAX_INPUT_BYTES = 4 * 2**30
 _CHUNK = 2**20
-#: temp paths standing for stdin, so messages can name ``<stdin>`` instead.
-_SPOOLED: dict[str, str] = {}
 #: names that stand for an already open descriptor: written directly, never renamed over.
 _FD_NAME = re.compile(r"^/(dev/(stdout|stderr|stdin|fd/(\d+))"
                       r"|proc/(self|thread-self|\d+)(?:/task/\d+)?/fd/(\d+))$")
@@ -166,61 +164,32 @@ def copy_bounded(src: IO[bytes], dst: IO[bytes], path: str) -> None:
         dst.write(chunk)
 
 
-def display_path(message: str) -> str:
-    """``message`` with every spooled temp path replaced by ``<stdin>``."""
-    for tmp, name in _SPOOLED.items():
-        message = message.replace(tmp, name)
-    return message
-
-
-@contextlib.contextmanager
-def input_path(path: str) -> Iterator[str]:
-    """``path`` itself, or for ``-`` and a FIFO (``/dev/stdin`` on a pipe, a named pipe) a
-    temporary file holding all of it (removed after; bounded as every input is): a command
-    may read its input more than once (``run`` counts its lines for the progress bar), and a
-    pipe gives its bytes only once."""
-    if path != STDIO:
-        try:
-            fifo = stat.S_ISFIFO(os.stat(path).st_mode)
-        except (OSError, ValueError):  # missing, unreadable, ...: the reader says so
-            fifo = False
-        if not fifo:
-            yield path
-            return
-    with tempfile.TemporaryDirectory(prefix="bomgraph-stdin-") as tmp:
-        spooled = os.path.join(tmp, "stdin")
-        # kept: the message may be printed after the cleanup
-        _SPOOLED[spooled] = "<stdin>" if path == STDIO else path
-        with open(spooled, "wb") as fh:
-            if path == STDIO:
-                copy_bounded(sys.stdin.buffer, fh, spooled)
-            else:
-                with open(path, "rb") as src:
-                    copy_bounded(src, fh, spooled)
-        yield spooled
-
-
-def write_output(path: str, write: Callable[[str], None]) -> None:
-    """``write(path)``, or for ``-`` write to a temporary file and copy it to stdout (or to the
-    text stream a caller in this process set as ``sys.stdout``: ``io.StringIO``, a notebook's)."""
-    if path != STDIO:
-        write(path)
-        return
-    stdout = standard_output()
-    binary = hasattr(stdout, "buffer")
-    with tempfile.TemporaryDirectory(prefix="bomgraph-stdout-") as tmp:
-        out = os.path.join(tmp, "out")
-        write(out)
-        with open(out, "rb") if binary else open(out, encoding="utf-8", newline="") as fh:
-            shutil.copyfileobj(fh, stdout.buffer if binary else stdout, _CHUNK)
-        stdout.flush()
-
-
 def standard_output() -> IO[str]:
     """``sys.stdout`` for ``--out -``, refused when closed (``>&-``: a traceback before, h83)."""
     if sys.stdout is None:
         raise OutputPathError("--out -: the standard output is closed; give a file name")
     return sys.stdout
+
+
+def _stdout_not_input(stdout: IO[str], inputs: Sequence[str | os.PathLike[str] | None]) -> None:
+    """Refuse ``--out -`` whose stdout is one of ``inputs`` or a file in an input folder (``>>
+    INPUT``: read, then the output appended to it), as ``--out /dev/stdout`` is (h86)."""
+    try:
+        out = os.fstat(stdout.fileno())
+    except (OSError, ValueError, AttributeError):  # a text stream of a caller in this process
+        return
+    for inp in inputs if stat.S_ISREG(out.st_mode) else ():
+        if inp is None or os.fspath(inp) == STDIO:
+            continue
+        try:  # an input folder (mrclam's): any file in it, as for a file name
+            st = os.stat(inp)
+            same = os.path.samestat(out, st) or stat.S_ISDIR(st.st_mode) and any(
+                os.path.samestat(out, os.stat(e.path)) for e in os.scandir(inp))
+        except OSError:  # missing, unreadable: its reader says so
+            same = False
+        if same:
+            raise OutputPathError(f"--out -: the standard output is the input {os.fspath(inp)}; "
+                                  f"refusing to overwrite an input: choose another name")
 
 
 def _stat(path: str) -> os.stat_result | None:
@@ -287,17 +256,6 @@ def _open_direct(path: str, st: os.stat_result) -> int:
     return fd
 
 
-def is_stdout(path: str) -> bool:
-    """Whether writing ``path`` reaches this process's standard output (``-``,
-    ``/dev/stdout``, or the file stdout is redirected to): result lines then go to stderr."""
-    if path == STDIO:
-        return True
-    try:
-        return os.path.samestat(os.stat(path), os.fstat(sys.stdout.fileno()))
-    except (OSError, ValueError, AttributeError):
-        return False
-
-
 def check_output_path(path: str | os.PathLike[str],
                       inputs: Sequence[str | os.PathLike[str] | None] = ()) -> None:
     """Refuse an output path before anything is computed.
@@ -317,7 +275,7 @@ def check_output_path(path: str | os.PathLike[str],
     inputs = items(inputs, (str, os.PathLike, type(None)), "inputs (the files read)",
                    OutputPathError, want="file names")
     if path == STDIO:
-        standard_output()  # closed: refused before anything is computed
+        _stdout_not_input(standard_output(), inputs)  # closed: refused before computing
         return
     if not path:  # os.path.realpath("") is the working folder: the rename would aim at it
         raise OutputPathError("--out is empty; give a file name")
@@ -595,6 +553,6 @@ def _fsync_dir(d: str) -> None:
 
 __all__ = ["STDIO", "MAX_LINE_BYTES", "MAX_INPUT_BYTES", "OutputPathError", "InputTooLargeError",
            "line_too_long", "input_too_large", "bounded_lines", "read_bounded", "read_regular_file",
-           "copy_bounded", "display_path", "input_path", "write_output", "standard_output",
-           "is_stdout", "check_output_path", "AtomicOutput", "output_file", "write_text",
-           "write_figure", "FolderBusyError", "make_folder", "folder_lock", "signals_held"]
+           "copy_bounded", "standard_output", "check_output_path", "AtomicOutput", "output_file",
+           "write_text", "write_figure", "FolderBusyError", "make_folder", "folder_lock",
+           "signals_held"]

@@ -270,7 +270,7 @@ def test_sigterm_as_the_temporary_file_is_created_leaves_nothing(
     def raise_exit(signum, frame):
         raise SystemExit(143)
 
-    monkeypatch.setattr({"mkstemp": stdio.tempfile, "chmod": stdio.os,
+    monkeypatch.setattr({"mkstemp": tempfile, "chmod": stdio.os,
                          "fdopen": stdio.os}[where], where, arrives)
     # (a process-wide signal may go to any thread that does not block it, which then has the
     # main thread run the handler at once: the mask is a guarantee for one-thread processes)
