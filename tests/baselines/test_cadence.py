@@ -6,34 +6,28 @@ and on MRCLAM6 robot 3 as ``bomgraph import mrclam`` makes it (skipped without t
 
 from __future__ import annotations
 
-import os
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 from bomgraph.evaluate import score_estimate
 from bomgraph.mapper import create_mapper, run
-from bomgraph.sim import SimConfig, paper_design, simulate_run
 from bomgraph.stream import Stream
 
-DATA = Path(os.environ.get("BOMGRAPH_DATA",
-                           Path(__file__).resolve().parents[3] / "shared" / "data"))
+from _cadence_streams import mrclam6_robot3, simulated_run  # tests/_cadence_streams.py
+
 METHODS = ("gtsam-batch", "oracle", "hybrid")
 CADENCES = (1, 10, 10 ** 6)      # every step, the paper's, only at the end
 
 
 @pytest.fixture(scope="module")
 def simulated() -> Stream:
-    return simulate_run(paper_design(0)[1], SimConfig(n_steps=60))
+    return simulated_run()
 
 
 @pytest.fixture(scope="module")
 def mrclam6() -> Stream:
-    if not (DATA / "mrclam6").is_dir():
-        pytest.skip(f"no MRCLAM6 at {DATA / 'mrclam6'}")
-    from bomgraph.datasets.mrclam import import_mrclam
-    return import_mrclam(DATA / "mrclam6", 3)
+    return mrclam6_robot3()
 
 
 def final_maps(name: str, stream: Stream) -> dict[int, tuple[np.ndarray, float, dict]]:
