@@ -20,14 +20,8 @@ METHODS = ("gtsam-batch", "oracle", "hybrid")
 CADENCES = (1, 10, 10 ** 6)      # every step, the paper's, only at the end
 
 
-@pytest.fixture(scope="module")
-def simulated() -> Stream:
-    return simulated_run()
-
-
-@pytest.fixture(scope="module")
-def mrclam6() -> Stream:
-    return mrclam6_robot3()
+simulated = pytest.fixture(simulated_run, scope="module", name="simulated")
+mrclam6 = pytest.fixture(mrclam6_robot3, scope="module", name="mrclam6")
 
 
 def final_maps(name: str, stream: Stream) -> dict[int, tuple[np.ndarray, float, dict]]:

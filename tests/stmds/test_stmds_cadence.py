@@ -20,14 +20,8 @@ from _cadence_streams import mrclam6_robot3, simulated_run  # tests/_cadence_str
 METHODS = ("stmds-cs", "stmds-smacof", "stmds-cs-loc", "stmds-smacof-loc")
 
 
-@pytest.fixture(scope="module")
-def simulated() -> Stream:
-    return simulated_run()
-
-
-@pytest.fixture(scope="module")
-def mrclam6() -> Stream:
-    return mrclam6_robot3()
+simulated = pytest.fixture(simulated_run, scope="module", name="simulated")
+mrclam6 = pytest.fixture(mrclam6_robot3, scope="module", name="mrclam6")
 
 
 @pytest.mark.parametrize("name", METHODS)
