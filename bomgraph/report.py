@@ -242,6 +242,8 @@ def format_summary(summary: Sequence[dict]) -> str:
             nees = r.get("nees_pose_mean")
             nees_s = "   -  " if nees is None or not math.isfinite(nees) else f"{nees:6.2f}"
             robot_s = _cm(r.get("robot_last_mean_m"))
+            wall = r.get("wall_s_mean")  # NaN: no run of the arm ran to the end
+            wall_s = "   -   " if wall is None or not math.isfinite(wall) else f"{wall:7.3f}"
             ran = r["runs"] - r["failed"]
             robot_s, conv_s, nees_s = (  # averaged over fewer runs than ran: say so
                 v + (f"[{r[k]}/{ran}]" if 0 < r.get(k, ran) < ran else "")
@@ -251,7 +253,7 @@ def format_summary(summary: Sequence[dict]) -> str:
             lines.append(f"{r['arm']:{aw}s} {r['runs']:4d} "
                          + " ".join(f"{c:>{w}s}" for c in cells)
                          + f" {robot_s:>7s} {conv_s:>5s} {nees_s:>6s}"
-                         f" {r.get('wall_s_mean', float('nan')):7.3f}"
+                         f" {wall_s:>7s}"
                          + (_free_cells(r) if free else f"  {r.get('paper', '')}") + fail)
         lines += _nees_landmark_note(rows)
     return "\n".join(lines)

@@ -339,3 +339,25 @@ def test_a_stream_file_removed_during_compare_fails_its_runs_not_the_compare(
     assert (out / "e_s0_maps.png").exists() and (out / "e_s1_maps.png").exists()
     assert not (out / "e_s2_maps.png").exists()
     assert len(list((out / "estimates").rglob("*.est"))) == 2
+
+
+def test_an_arm_whose_every_run_failed_shows_no_nan_wall_time() -> None:
+    """An arm every run of which raised showed ``nan`` in the table's ``wall s`` cell where
+    its robot, conv and NEES cells show ``-``; it shows ``-`` now. summary.csv keeps ``nan``
+    there, as in its other columns without a value."""
+    ok = {"experiment": "e", "arm": "tri", "method": "triangulate", "run": "a", "ok": True,
+          "converged": None, "total_s": 0.25,
+          "checkpoints": [{"t": 50, "n_mapped": 15, "mpe_m": 0.05, "robot_last_m": 0.1,
+                           "nees_pose": float("nan"), "nees_landmark": float("nan")}]}
+    bad = {"experiment": "e", "arm": "crasher", "method": "crasher", "run": "a", "ok": False,
+           "error": "ValueError: boom at 5"}
+    rows = summarise([bad, ok])
+    text = format_summary(rows).splitlines()
+    head = next(s for s in text if s.startswith("arm "))
+    failed = next(s for s in text if s.startswith("crasher "))
+    assert "nan" not in failed.lower()
+    wall_end = head.index("wall s") + len("wall s")
+    assert failed[wall_end - 7:wall_end].strip() == "-"
+    good = next(s for s in text if s.startswith("tri "))
+    assert good[wall_end - 7:wall_end].strip() == "0.250"
+    assert np.isnan(rows[0]["wall_s_mean"]) and rows[1]["wall_s_mean"] == 0.25
