@@ -478,9 +478,11 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 def program() -> int:
     """The ``bomgraph`` command as a program (the console script and ``python -m
-    bomgraph``): :func:`main` on ``sys.argv[1:]``, except that SIGINT and SIGTERM are left
-    ignored at the end: the command is over, and a signal during the interpreter's exit
-    would turn into a traceback or a death by signal."""
+    bomgraph``): :func:`main` on ``sys.argv[1:]``, closed descriptors 0-2 held first
+    (:func:`~bomgraph.stdio.hold_standard_descriptors`), SIGINT and SIGTERM left ignored at
+    the end: a signal during the interpreter's exit would be a traceback or a death by it."""
+    from .stdio import hold_standard_descriptors
+    hold_standard_descriptors()
     return _run(None, program=True)
 
 

@@ -1,0 +1,103 @@
+"""The command started with a standard descriptor closed (``<&-``, ``>&-``, ``2>&-``), run as
+a user runs it: ``bomgraph`` in a subprocess under a real shell redirect (h92).
+
+The first file the command opened took the free number, so whatever wrote to descriptor 1
+or 2 after (a method's C library, as GTSAM's ``std::cout`` does; here a plugin that writes
+to the descriptors directly) wrote into that file: ``compare --out D >&-`` put it into
+``D/.bomgraph.lock``. Now /dev/null is put on each closed one before anything is opened.
+"""
+
+from __future__ import annotations
+
+import os
+import shlex
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import pytest
+
+from _plugin_dist import write_dist_info
+
+ROOT = Path(__file__).resolve().parents[1]
+BOMGRAPH = f"{shlex.quote(sys.executable)} -m bomgraph"
+
+SHOUTER = textwrap.dedent('''
+    import os
+
+    from bomgraph.mapper import MapEstimate
+
+
+    def _shout(what):
+        for fd in (1, 2):
+            try:
+                os.write(fd, b"STRAY %s fd%d\\n" % (what, fd))
+            except OSError:
+                pass
+
+
+    class Shouter:
+        """writes to descriptors 1 and 2 directly, as a C library's printf does"""
+
+        def __init__(self, header) -> None:
+            pass
+
+        def step(self, step) -> None:
+            if step.t == 3:
+                _shout(b"step")
+
+        def estimate(self):
+            _shout(b"estimate")
+            return MapEstimate.empty()
+''')
+
+
+@pytest.fixture()
+def shouter_env(tmp_path: Path) -> dict[str, str]:
+    """An environment whose PYTHONPATH holds the plugin ``shouter`` (entry point included)."""
+    site = tmp_path / "site"
+    site.mkdir()
+    (site / "shout_plugin.py").write_text(SHOUTER)
+    write_dist_info(site, "shout-plugin", {"shouter": "shout_plugin:Shouter"})
+    return {**os.environ, "PYTHONPATH": f"{ROOT}{os.pathsep}{site}", "OMP_NUM_THREADS": "1"}
+
+
+def _files_with(folder: Path, text: bytes) -> list[str]:
+    return sorted(str(p.relative_to(folder)) for p in folder.rglob("*")
+                  if p.is_file() and text in p.read_bytes())
+
+
+@pytest.mark.parametrize("closed", [">&-", "<&- >&-", "2>&-", ">&- 2>&-", "<&-"])
+def test_nothing_written_to_a_closed_descriptor_lands_in_an_output(
+        tmp_path: Path, shouter_env: dict[str, str], closed: str) -> None:
+    """Fails before h92 with ``>&-``: ``cc/.bomgraph.lock`` held ``STRAY estimate fd1``."""
+    work = tmp_path / "work"
+    work.mkdir()
+    assert subprocess.run(["bash", "-c", f"{BOMGRAPH} simulate --steps 30 --landmarks 8 "
+                           f"--out s.jsonl"], cwd=work, env=shouter_env, capture_output=True,
+                          check=False).returncode == 0
+    script = (f"{BOMGRAPH} simulate --steps 10 --out sim.jsonl {closed} || exit 10; "
+              f"{BOMGRAPH} run s.jsonl --method shouter --out r.est {closed} || exit 11; "
+              f"{BOMGRAPH} compare --streams s.jsonl --methods shouter,triangulate --out cc "
+              f"--jobs 1 --estimates --no-figures {closed} || exit 12")
+    done = subprocess.run(["bash", "-c", script], cwd=work, env=shouter_env,
+                          capture_output=True, check=False)
+    assert done.returncode == 0, done.stderr
+    assert b"Traceback" not in done.stderr, done.stderr
+    assert _files_with(work, b"STRAY") == []
+    assert (work / "r.est").read_bytes().startswith(b'{"format"')
+    assert (work / "cc" / "results.json").is_file()
+
+
+def test_a_closed_stdout_is_still_refused_as_out(tmp_path: Path) -> None:
+    """/dev/null on descriptor 1 is no output: ``--out /dev/stdout >&-`` is still refused in
+    one line, as ``--out -``; ``--out /dev/stderr 2>&-`` too (before h92 it wrote /dev/null,
+    which the logging had put on descriptor 2, and exited 0)."""
+    env = {**os.environ, "PYTHONPATH": str(ROOT), "OMP_NUM_THREADS": "1"}
+    for out, closed in (("/dev/stdout", ">&-"), ("/dev/fd/1", ">&-"), ("-", ">&-"),
+                        ("/dev/stderr", "2>&-")):
+        done = subprocess.run(["bash", "-c", f"{BOMGRAPH} simulate --steps 5 --out {out} "
+                               f"{closed}"], cwd=tmp_path, env=env, capture_output=True,
+                              check=False)
+        assert done.returncode == 2, (out, done.stderr)
