@@ -101,3 +101,40 @@ def test_a_closed_stdout_is_still_refused_as_out(tmp_path: Path) -> None:
                                f"{closed}"], cwd=tmp_path, env=env, capture_output=True,
                               check=False)
         assert done.returncode == 2, (out, done.stderr)
+
+
+def test_compare_in_worker_processes_with_stdout_closed(tmp_path: Path,
+                                                        shouter_env: dict[str, str]) -> None:
+    """loky flushes ``sys.stdout`` and ``sys.stderr`` before it starts each worker: with the
+    shell's ``>&-`` (``sys.stdout`` None) ``compare --jobs 2`` ended in a traceback
+    (AttributeError: 'NoneType' object has no attribute 'flush'), and the library's
+    ``compare`` with ``Executor("processes")`` in a process that had closed its
+    ``sys.stdout`` raised ValueError: I/O operation on closed file. Fails before h92."""
+    assert subprocess.run(["bash", "-c", f"{BOMGRAPH} simulate --steps 30 --landmarks 8 "
+                           f"--out s.jsonl"], cwd=tmp_path, env=shouter_env,
+                          capture_output=True, check=False).returncode == 0
+    done = subprocess.run(["bash", "-c", f"{BOMGRAPH} compare --streams s.jsonl --methods "
+                           f"shouter,triangulate --out cli --jobs 2 --no-figures >&-"],
+                          cwd=tmp_path, env=shouter_env, capture_output=True, check=False)
+    assert done.returncode == 0 and b"Traceback" not in done.stderr, done.stderr
+    assert _files_with(tmp_path / "cli", b"STRAY") == []
+    script = textwrap.dedent("""
+        import sys
+        from bomgraph.bench import Executor
+        from bomgraph.experiments import compare_experiments
+        from bomgraph.report import compare
+
+        if __name__ == "__main__":
+            experiments, _ = compare_experiments(streams=["s.jsonl"],
+                                                 methods="shouter,triangulate")
+            sys.stdout.close()
+            result = compare(experiments, "lib", executor=Executor("processes", n_jobs=2),
+                             figures=False)
+            assert sys.stdout.closed  # the caller's, as it was
+            print(len(result.results), sum(r["ok"] for r in result.results), file=sys.stderr)
+        """)
+    (tmp_path / "lib.py").write_text(script)
+    done = subprocess.run([sys.executable, "lib.py"], cwd=tmp_path, env=shouter_env,
+                          capture_output=True, text=True, check=False)
+    assert done.returncode == 0, done.stderr
+    assert done.stderr.splitlines()[-1] == "2 2", done.stderr
