@@ -489,8 +489,10 @@ def program() -> int:
 def _run(argv: Sequence[str] | None, program: bool) -> int:
     hook = sys.unraisablehook
     from .log_setup import logging_restored
+    from .std_streams import closed_streams_as_none
 
     kept = contextlib.ExitStack()
+    kept.enter_context(closed_streams_as_none())  # put back after logging_restored's undos
     if not program:  # the caller's logging and warnings, which the command replaces
         kept.enter_context(logging_restored())
     owned = _own_signals(hook)
