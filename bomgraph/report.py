@@ -217,7 +217,7 @@ def format_summary(summary: Sequence[dict]) -> str:
     for (exp,), rows in _group(summary, "experiment").items():
         times = sorted({int(k.split("@")[1]) for r in rows for k in r
                         if k.startswith("mpe_mean_m@")})
-        if all(r.get("scored_against") == "none" for r in rows):
+        if all(r.get("scored_against") == "none" for r in rows if r["runs"] > r["failed"]):
             times = []  # no truth, no reference: no MPE to show
         lines.append(f"\n== {exp} ==  landmark MPE [cm] mean/median±std at t; robot: error "
                      f"[cm] of the latest pose at the end; conv: converged runs; NEES: robot "
@@ -286,7 +286,7 @@ def _free_cells(r: Mapping[str, Any]) -> str:
     mapped = r.get("n_mapped_mean", math.nan)
     return (f" {'-' if not math.isfinite(mapped) else f'{mapped:.1f}':>6s}"
             f" {'-' if not math.isfinite(brg) else f'{1000 * brg:.2f}':>6s}"
-            f"  {r.get('scored_against', 'truth')}")
+            f"  {r.get('scored_against', 'truth' if r['runs'] > r['failed'] else '-')}")
 
 
 def format_by_run(rows: Sequence[dict]) -> str:
