@@ -342,27 +342,14 @@ def _print_plan(rows: list[dict[str, Any]], out: str) -> int:
 
 def _import(args: argparse.Namespace, make: Callable[[], Any], *inputs: str | None) -> int:
     """Check ``--out`` (not one of the ``inputs``) before ``make()`` imports, then write."""
+    from .datasets.summary import import_summary
     from .std_streams import check_output_path, is_stdout, write_output
     from .stream_file import write_stream
 
     check_output_path(args.out, inputs)
     stream = make()
     write_output(args.out, lambda p: write_stream(stream, p, inputs=inputs))
-    n_brg = sum(len(st.landmark_ids) for st in stream.steps)
-    truth = "no truth" if stream.truth is None else (
-        "truth: landmarks only" if stream.truth.poses is None else "truth: poses + landmarks")
-    odo, per_step = stream.header.odometry_sigma, ""
-    if any(st.odom_sigma is not None for st in stream.steps):  # each step has its own
-        import numpy as np
-
-        odo = np.median([st.odometry_sigma(stream.header) for st in stream.steps
-                         if st.odom is not None], axis=0)
-        per_step = "per step, median "
-    _say(f"wrote {args.out}: {len(stream.steps)} steps, {n_brg} bearings, "
-         f"{len(stream.landmark_ids())} landmarks; bearing sigma "
-         f"{stream.header.bearing_sigma_rad:.4f} rad, odometry sigma {per_step}"
-         f"{odo[0]:.4f} m, {odo[1]:.4f} m, {odo[2]:.4f} rad; {truth}",
-         to_stderr=is_stdout(args.out))
+    _say(f"wrote {args.out}: {import_summary(stream)}", to_stderr=is_stdout(args.out))
     return 0
 
 
@@ -491,17 +478,21 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 def program() -> int:
     """The ``bomgraph`` command as a program (the console script and ``python -m
-    bomgraph``): :func:`main` on ``sys.argv[1:]``, except that SIGINT and SIGTERM are left
-    ignored at the end: the command is over, and a signal during the interpreter's exit
-    would turn into a traceback or a death by signal."""
+    bomgraph``): :func:`main` on ``sys.argv[1:]``, closed descriptors 0-2 held first
+    (:func:`~bomgraph.stdio.hold_standard_descriptors`), SIGINT and SIGTERM left ignored at
+    the end: a signal during the interpreter's exit would be a traceback or a death by it."""
+    from .stdio import hold_standard_descriptors
+    hold_standard_descriptors()
     return _run(None, program=True)
 
 
 def _run(argv: Sequence[str] | None, program: bool) -> int:
     hook = sys.unraisablehook
     from .log_setup import logging_restored
+    from .std_streams import closed_streams_as_none
 
     kept = contextlib.ExitStack()
+    kept.enter_context(closed_streams_as_none())  # put back after logging_restored's undos
     if not program:  # the caller's logging and warnings, which the command replaces
         kept.enter_context(logging_restored())
     owned = _own_signals(hook)

@@ -107,7 +107,9 @@ def plot_results(results_dir: str | os.PathLike[str], out: str | os.PathLike[str
         raise
     except (ValueError, KeyError, TypeError, AttributeError, IndexError,
             RecursionError) as exc:  # a row of the wrong shape anywhere in the file
-        raise ConfigError(f"{src}: not a compare results file ({type(exc).__name__})") from None
+        key = f" {str(exc.args[0])[:40]!r}" if isinstance(exc, KeyError) and exc.args else ""
+        raise ConfigError(f"{src}: not a compare results file ({type(exc).__name__}{key}); "
+                          f"give a folder that `bomgraph compare --out DIR` wrote") from None
     return write_figure(results_figure(final, curves, kind=kind, titles=titles), path, dpi)
 
 

@@ -21,6 +21,7 @@ import re
 import shutil
 import socket
 import stat
+import sys
 import tempfile
 import threading
 import time
@@ -69,7 +70,7 @@ def dispatch(func: Callable[[int, Any], tuple[int, dict[str, Any]]], index: Sequ
     _remove_stale_marks()
     pending = dict(zip(index, tasks))
     stalled = False
-    with tempfile.TemporaryDirectory(prefix=MARKS_PREFIX) as marks:
+    with _flushable_std_streams(), tempfile.TemporaryDirectory(prefix=MARKS_PREFIX) as marks:
         with open(os.path.join(marks, OWNER), "w", encoding="utf-8") as fh:
             json.dump(_owner(), fh)
         while pending:
@@ -103,6 +104,29 @@ def dispatch(func: Callable[[int, Any], tuple[int, dict[str, Any]]], index: Sequ
                     _clear(marks)
                 del pending[k]
                 yield k, res
+
+
+@contextlib.contextmanager
+def _flushable_std_streams() -> Iterator[None]:
+    """``sys.stdout`` and ``sys.stderr`` writing to /dev/null while the workers may start, each
+    only where it is None (the shell closed it: ``>&-``) or closed (a caller's
+    ``sys.stdout.close()``), and put back after (unless set meanwhile). loky flushes both as
+    it starts each worker, from any of its threads: ``compare --jobs 2 >&-`` ended in a
+    traceback (AttributeError), and ``compare`` with ``Executor("processes")`` in a process
+    whose ``sys.stdout`` was closed raised ValueError (h92)."""
+    swapped: dict[str, tuple[Any, Any]] = {}
+    for name in ("stdout", "stderr"):
+        stream = getattr(sys, name)
+        if stream is None or getattr(stream, "closed", False):
+            swapped[name] = (stream, open(os.devnull, "w", encoding="utf-8"))
+            setattr(sys, name, swapped[name][1])
+    try:
+        yield
+    finally:
+        for name, (stream, null) in swapped.items():
+            if getattr(sys, name) is null:
+                setattr(sys, name, stream)
+            null.close()
 
 
 def daemonic() -> bool:

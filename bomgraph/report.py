@@ -217,7 +217,7 @@ def format_summary(summary: Sequence[dict]) -> str:
     for (exp,), rows in _group(summary, "experiment").items():
         times = sorted({int(k.split("@")[1]) for r in rows for k in r
                         if k.startswith("mpe_mean_m@")})
-        if all(r.get("scored_against") == "none" for r in rows):
+        if all(r.get("scored_against") == "none" for r in rows if r["runs"] > r["failed"]):
             times = []  # no truth, no reference: no MPE to show
         lines.append(f"\n== {exp} ==  landmark MPE [cm] mean/median±std at t; robot: error "
                      f"[cm] of the latest pose at the end; conv: converged runs; NEES: robot "
@@ -242,6 +242,8 @@ def format_summary(summary: Sequence[dict]) -> str:
             nees = r.get("nees_pose_mean")
             nees_s = "   -  " if nees is None or not math.isfinite(nees) else f"{nees:6.2f}"
             robot_s = _cm(r.get("robot_last_mean_m"))
+            wall = r.get("wall_s_mean")  # NaN: no run of the arm ran to the end
+            wall_s = "   -   " if wall is None or not math.isfinite(wall) else f"{wall:7.3f}"
             ran = r["runs"] - r["failed"]
             robot_s, conv_s, nees_s = (  # averaged over fewer runs than ran: say so
                 v + (f"[{r[k]}/{ran}]" if 0 < r.get(k, ran) < ran else "")
@@ -251,7 +253,7 @@ def format_summary(summary: Sequence[dict]) -> str:
             lines.append(f"{r['arm']:{aw}s} {r['runs']:4d} "
                          + " ".join(f"{c:>{w}s}" for c in cells)
                          + f" {robot_s:>7s} {conv_s:>5s} {nees_s:>6s}"
-                         f" {r.get('wall_s_mean', float('nan')):7.3f}"
+                         f" {wall_s:>7s}"
                          + (_free_cells(r) if free else f"  {r.get('paper', '')}") + fail)
         lines += _nees_landmark_note(rows)
     return "\n".join(lines)
@@ -284,7 +286,7 @@ def _free_cells(r: Mapping[str, Any]) -> str:
     mapped = r.get("n_mapped_mean", math.nan)
     return (f" {'-' if not math.isfinite(mapped) else f'{mapped:.1f}':>6s}"
             f" {'-' if not math.isfinite(brg) else f'{1000 * brg:.2f}':>6s}"
-            f"  {r.get('scored_against', 'truth')}")
+            f"  {r.get('scored_against', 'truth' if r['runs'] > r['failed'] else '-')}")
 
 
 def format_by_run(rows: Sequence[dict]) -> str:

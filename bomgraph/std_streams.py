@@ -106,7 +106,26 @@ def is_stdout(path: str) -> bool:
         return False
 
 
+@contextlib.contextmanager
+def closed_streams_as_none() -> Iterator[None]:
+    """A ``sys.stdout`` or ``sys.stderr`` that a caller in this process closed
+    (``sys.stdout.close()``) taken for None while a command runs, as the shell's ``>&-``
+    leaves it: its lines dropped, ``--out -`` refused as closed; put back after. Before (h92)
+    :func:`bomgraph.cli.main` wrote its output, then raised ValueError (I/O operation on
+    closed file) at the first line it printed."""
+    closed = {name: stream for name in ("stdout", "stderr")
+              if getattr(stream := getattr(sys, name), "closed", False) is True}
+    for name in closed:
+        setattr(sys, name, None)
+    try:
+        yield
+    finally:
+        for name, stream in closed.items():
+            if getattr(sys, name) is None:
+                setattr(sys, name, stream)
+
+
 #: with :mod:`bomgraph.stdio`'s ``STDIO``, ``standard_output`` and ``check_output_path``: what
 #: a command needs of its standard streams and ``--out``, from one module
 __all__ = ["STDIO", "display_path", "input_path", "standard_input", "standard_output",
-           "write_output", "is_stdout", "check_output_path"]
+           "write_output", "is_stdout", "check_output_path", "closed_streams_as_none"]

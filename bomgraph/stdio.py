@@ -164,6 +164,33 @@ def copy_bounded(src: IO[bytes], dst: IO[bytes], path: str) -> None:
         dst.write(chunk)
 
 
+#: the standard descriptors that :func:`hold_standard_descriptors` found closed
+_CLOSED_AT_START: set[int] = set()
+
+
+def hold_standard_descriptors() -> None:
+    """/dev/null on each of descriptors 0, 1 and 2 that is closed (``<&-``, ``>&-``,
+    ``2>&-``), for the program (:func:`bomgraph.cli.program`) before it opens anything: else
+    the first file it opened took that number, and whatever wrote to the descriptor after (a
+    method's C library, a worker process, which inherits it) wrote into that file (h92: text
+    a method wrote to descriptor 1 landed in ``compare``'s ``.bomgraph.lock``). Python's
+    ``sys.stdin``/``sys.stdout``/``sys.stderr`` stay None: ``-`` is still refused as closed,
+    and so is ``--out /dev/stdout`` (:func:`check_output_path`)."""
+    for fd in (0, 1, 2):
+        try:
+            os.fstat(fd)
+            continue
+        except OSError:
+            pass
+        with contextlib.suppress(OSError):  # no /dev/null to open: left closed, as before
+            null = os.open(os.devnull, os.O_RDWR)  # the lowest free number: fd itself
+            if null != fd:
+                os.dup2(null, fd)
+                os.close(null)
+            os.set_inheritable(fd, True)  # as the shell's would be: worker processes get it
+            _CLOSED_AT_START.add(fd)
+
+
 def standard_output() -> IO[str]:
     """``sys.stdout`` for ``--out -``, refused when closed (``>&-``: a traceback before, h83)."""
     if sys.stdout is None:
@@ -280,7 +307,8 @@ def check_output_path(path: str | os.PathLike[str],
     if not path:  # os.path.realpath("") is the working folder: the rename would aim at it
         raise OutputPathError("--out is empty; give a file name")
     st = _stat(path)
-    if st is None and _fd_name(path) is not None:  # /dev/stdout under >&-: not a folder's file
+    if _fd_name(path) is not None and (st is None or _own_descriptor(path) in _CLOSED_AT_START):
+        # /dev/stdout under >&-: not a folder's file; /dev/null on it is no output either
         raise OutputPathError(f"--out {path}: that descriptor is not open; give a file name")
     if st is not None and stat.S_ISDIR(st.st_mode):
         raise OutputPathError(f"--out {path}: is a directory; give a file name")
@@ -553,6 +581,6 @@ def _fsync_dir(d: str) -> None:
 
 __all__ = ["STDIO", "MAX_LINE_BYTES", "MAX_INPUT_BYTES", "OutputPathError", "InputTooLargeError",
            "line_too_long", "input_too_large", "bounded_lines", "read_bounded", "read_regular_file",
-           "copy_bounded", "standard_output", "check_output_path", "AtomicOutput", "output_file",
-           "write_text", "write_figure", "FolderBusyError", "make_folder", "folder_lock",
-           "signals_held"]
+           "copy_bounded", "hold_standard_descriptors", "standard_output", "check_output_path",
+           "AtomicOutput", "output_file", "write_text", "write_figure", "FolderBusyError",
+           "make_folder", "folder_lock", "signals_held"]

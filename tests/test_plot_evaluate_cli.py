@@ -116,6 +116,23 @@ def test_plot_results_of_the_wrong_shape_is_one_line(tmp_path, capsys, content: 
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "not a compare results file" in err[0], err
 
+def test_plot_results_of_another_format_says_what_is_missing_and_what_to_do(
+        tmp_path, capsys) -> None:
+    """A results.json whose results have no ``arm`` (not one bomgraph's ``compare`` ever wrote:
+    every format since the first has it; h92 drew those of 7efaa1f and of before the
+    ``self_scored`` marks correctly) was refused as ``not a compare results file
+    (KeyError)``, naming neither the key nor what to do. Fails before h92."""
+    rows = [{"experiment": "e", "method": "triangulate", "run": "r", "ok": True,
+             "checkpoints": [{"t": 10, "mpe_m": 0.1}]}]
+    (tmp_path / "results.json").write_text(json.dumps({"method": "triangulate",
+                                                       "results": rows}))
+    assert main(["plot", "--results", str(tmp_path), "--out", str(tmp_path / "r.png")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "not a compare results file (KeyError 'arm')" in err[0], err
+    assert "bomgraph compare --out" in err[0], err
+    assert not (tmp_path / "r.png").exists()
+
+
 def test_palette_is_per_method_and_ellipses_are_drawn() -> None:
     assert method_colour("ekf") == method_colour("ekf")
     assert method_colour("stmds-smacof (improved)") != method_colour("stmds-smacof")

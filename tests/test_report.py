@@ -339,3 +339,45 @@ def test_a_stream_file_removed_during_compare_fails_its_runs_not_the_compare(
     assert (out / "e_s0_maps.png").exists() and (out / "e_s1_maps.png").exists()
     assert not (out / "e_s2_maps.png").exists()
     assert len(list((out / "estimates").rglob("*.est"))) == 2
+
+
+def test_an_arm_whose_every_run_failed_shows_no_nan_wall_time() -> None:
+    """An arm every run of which raised showed ``nan`` in the table's ``wall s`` cell where
+    its robot, conv and NEES cells show ``-``; it shows ``-`` now. summary.csv keeps ``nan``
+    there, as in its other columns without a value."""
+    ok = {"experiment": "e", "arm": "tri", "method": "triangulate", "run": "a", "ok": True,
+          "converged": None, "total_s": 0.25,
+          "checkpoints": [{"t": 50, "n_mapped": 15, "mpe_m": 0.05, "robot_last_m": 0.1,
+                           "nees_pose": float("nan"), "nees_landmark": float("nan")}]}
+    bad = {"experiment": "e", "arm": "crasher", "method": "crasher", "run": "a", "ok": False,
+           "error": "ValueError: boom at 5"}
+    rows = summarise([bad, ok])
+    text = format_summary(rows).splitlines()
+    head = next(s for s in text if s.startswith("arm "))
+    failed = next(s for s in text if s.startswith("crasher "))
+    assert "nan" not in failed.lower()
+    wall_end = head.index("wall s") + len("wall s")
+    assert failed[wall_end - 7:wall_end].strip() == "-"
+    good = next(s for s in text if s.startswith("tri "))
+    assert good[wall_end - 7:wall_end].strip() == "0.250"
+    assert np.isnan(rows[0]["wall_s_mean"]) and rows[1]["wall_s_mean"] == 0.25
+
+
+def test_an_arm_whose_every_run_failed_is_scored_against_nothing() -> None:
+    """On streams without truth the table's last column said ``truth`` for an arm whose
+    every run failed (no run was scored against anything), and its row brought back the MPE
+    columns that a table of truth-free runs without a reference leaves out (every cell
+    ``-``); it shows ``-`` now, as the other cells of that row do, and counts for neither."""
+    free = {"experiment": "e", "arm": "tri", "method": "triangulate", "run": "a", "ok": True,
+            "converged": None, "total_s": 0.25, "scored_against": "none",
+            "checkpoints": [{"t": 50, "n_mapped": 15, "mpe_m": float("nan"),
+                             "robot_last_m": float("nan"), "bearing_rms_rad": 0.01,
+                             "nees_pose": float("nan"), "nees_landmark": float("nan")}]}
+    bad = {"experiment": "e", "arm": "crasher", "method": "crasher", "run": "a", "ok": False,
+           "error": "ValueError: boom at 5"}
+    text = format_summary(summarise([bad, free])).splitlines()
+    failed = next(s for s in text if s.startswith("crasher "))
+    cells = failed.split("FAILED")[0].split()[2:]
+    assert "truth" not in failed and cells == ["-"] * len(cells), failed
+    head = next(s for s in text if s.startswith("arm "))
+    assert "t=50" not in head  # no truth, no reference: no MPE column, as without the failure

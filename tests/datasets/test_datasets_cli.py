@@ -76,3 +76,42 @@ def test_import_summary_line_gives_units_and_says_when_each_step_has_its_own_sig
     sig = g.header.odometry_sigma
     assert (f"odometry sigma {sig[0]:.4f} m, {sig[1]:.4f} m, {sig[2]:.4f} rad;"
             in capsys.readouterr().out)
+
+
+def test_import_g2o_summary_names_the_priors_and_the_fix_it_carried(tmp_path, capsys):
+    """A g2o file written by ``bomgraph export --format g2o`` carries the stream's priors
+    (landmark distances) in its ``# bomgraph header`` comment, and the import puts them back
+    into the stream; its summary line did not say so (h92: 38 priors imported, none named).
+    A FIX record (the gauge; the Sapienza file fixes pose 1498) is recorded in meta and used
+    by no method: the line says that too. Fails before h92."""
+    import numpy as np
+
+    from bomgraph.cli import main
+    from bomgraph.sim import SimConfig, make_priors, simulate, with_priors
+    from bomgraph.stream_file import write_stream
+
+    s = simulate(SimConfig(n_steps=25, n_landmarks=20), np.random.default_rng(4))
+    s = with_priors(s, make_priors(s.truth, 0.2, 0.03, np.random.default_rng(5)))
+    n = len(s.header.priors)
+    assert n > 0
+    write_stream(s, tmp_path / "p.jsonl")
+    assert main(["export", "--truth", str(tmp_path / "p.jsonl"), "--format", "g2o",
+                 "--out", str(tmp_path / "p.g2o")]) == 0
+    text = (tmp_path / "p.g2o").read_text()
+    assert "\nFIX 20\n" in text  # its first pose: the gauge
+    capsys.readouterr()
+    assert main(["import", "g2o", str(tmp_path / "p.g2o"), "--out",
+                 str(tmp_path / "back.jsonl")]) == 0
+    assert len(read_stream(tmp_path / "back.jsonl").header.priors) == n
+    out = capsys.readouterr().out
+    assert f"; {n} priors (landmark distances);" in out, out
+    assert "; FIX of vertex 20 (step 0) not used: a gauge;" in out, out
+    (tmp_path / "nofix.g2o").write_text(text.replace("\nFIX 20\n", "\n"))
+    assert main(["import", "g2o", str(tmp_path / "nofix.g2o"), "--out",
+                 str(tmp_path / "plain.jsonl")]) == 0
+    out = capsys.readouterr().out
+    assert "FIX" not in out and f"{n} priors" in out
+    make_mrclam(tmp_path / "m")
+    assert main(["import", "mrclam", str(tmp_path / "m"), "--robot", "1", "--out",
+                 str(tmp_path / "m.jsonl")]) == 0
+    assert "prior" not in capsys.readouterr().out  # none: not a word about them

@@ -1,0 +1,47 @@
+"""What an imported stream holds, in the one line ``bomgraph import`` prints after ``wrote
+OUT:`` (moved out of :mod:`bomgraph.cli`, h92): steps, bearings, landmarks, the sigmas with
+their units, the priors a g2o file carried (its ``# bomgraph header``), a g2o ``FIX`` (a
+gauge, recorded in meta and used by no method) and what truth there is."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..stream import Stream
+
+
+def _plural(n: int, word: str) -> str:
+    return f"{n} {word}{'' if n == 1 else 's'}"
+
+
+def import_summary(stream: Stream) -> str:
+    """The summary of an imported ``stream``: ``N steps, N bearings, N landmarks; bearing
+    sigma S rad, odometry sigma [per step, median] X m, Y m, T rad[; N priors (landmark
+    distances)][; FIX of vertex V (step t) not used: a gauge]; truth: ...`` (the bracketed
+    parts only when there are some)."""
+    header = stream.header
+    n_brg = sum(len(st.landmark_ids) for st in stream.steps)
+    odo, per_step = header.odometry_sigma, ""
+    if any(st.odom_sigma is not None for st in stream.steps):  # each step has its own
+        odo = tuple(np.median([st.odometry_sigma(header) for st in stream.steps
+                               if st.odom is not None], axis=0))
+        per_step = "per step, median "
+    parts = [f"{len(stream.steps)} steps, {n_brg} bearings, "
+             f"{len(stream.landmark_ids())} landmarks",
+             f"bearing sigma {header.bearing_sigma_rad:.4f} rad, odometry sigma {per_step}"
+             f"{odo[0]:.4f} m, {odo[1]:.4f} m, {odo[2]:.4f} rad"]
+    if header.priors:
+        parts.append(f"{_plural(len(header.priors), 'prior')} (landmark distances)")
+    fixed = (header.meta or {}).get("fixed_vertex_ids") or []
+    if fixed:
+        steps = (header.meta or {}).get("fixed_steps") or []
+        where = "" if len(fixed) != 1 or len(steps) != 1 else f" (step {steps[0]})"
+        ids = ", ".join(str(v) for v in fixed[:5]) + (", ..." if len(fixed) > 5 else "")
+        parts.append(f"FIX of {'vertex' if len(fixed) == 1 else 'vertices'} {ids}{where} "
+                     f"not used: a gauge")
+    parts.append("no truth" if stream.truth is None else (
+        "truth: landmarks only" if stream.truth.poses is None else "truth: poses + landmarks"))
+    return "; ".join(parts)
+
+
+__all__ = ["import_summary"]
