@@ -188,8 +188,9 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--paired-reference", metavar="ARM", default=None,
                    help="the arm every other arm is paired against, run by run, in paired.csv "
                         "(an arm's label as the tables show it; default: each experiment's "
-                        "--reference arm if it is one of its arms, else its oracle-like bound, "
-                        "else its first arm)")
+                        "--reference arm if it is one of its arms, unless every run of it is "
+                        "scored against its own map (no truth) and two other arms ran; else "
+                        "its oracle-like bound, else its first arm)")
     c.add_argument("--checkpoint-every", type=_positive_int, metavar="N",
                    help="with --streams: map every N steps (default 10)")
     c.add_argument("--quick", action="store_true",
