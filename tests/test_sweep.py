@@ -252,3 +252,16 @@ def test_methods_lists_every_preset_on_a_line_of_its_own(capsys: pytest.CaptureF
             break
         block.append(ln.split()[0])
     assert block[0] == "@paper" and "@real" in block and "@improved" in block
+
+
+def test_jobs_on_the_command_line_overrides_the_files_dask_executor(
+        tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    """README: the command line's `--jobs` overrides `[executor]`. Before h89 a file's
+    `dask_local` won: `--jobs 1` started a Dask cluster and said "--jobs 1 is not used"."""
+    assert main(["simulate", "--seed", "1", "--steps", "20", "--out",
+                 str(tmp_path / "s.jsonl"), "-q"]) == 0
+    (tmp_path / "sweep.toml").write_text('streams = ["s.jsonl"]\nmethods = ["triangulate"]\n'
+                                         '[executor]\ndask_local = 1\n')
+    assert main(["compare", "--config", str(tmp_path / "sweep.toml"), "--jobs", "1",
+                 "--no-figures", "--no-progress", "--out", str(tmp_path / "o")]) == 0
+    assert "is not used" not in capsys.readouterr().err
