@@ -211,10 +211,12 @@ def build_parser() -> argparse.ArgumentParser:
                         "choose another folder")
     c.add_argument("--seed", type=_nonneg_int, help="the paper design's seed (default 0)")
     c.add_argument("--jobs", type=_jobs, help="local processes (-1, the default: one per core)")
-    c.add_argument("--scheduler", default=None, metavar="ADDRESS",
-                   help="run on an existing Dask distributed scheduler, e.g. tcp://host:8786")
-    c.add_argument("--dask-local", type=_nonneg_int, metavar="N",
-                   help="start a local Dask cluster of N worker processes")
+    cluster = c.add_mutually_exclusive_group()
+    cluster.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                         help="run on an existing Dask distributed scheduler, e.g. "
+                              "tcp://host:8786")
+    cluster.add_argument("--dask-local", type=_nonneg_int, metavar="N",
+                         help="start a local Dask cluster of N worker processes")
     c.add_argument("--no-cache", action="store_true", help="ignore and do not write the cache")
     c.add_argument("--dry-run", action="store_true",
                    help="list what would run (per experiment and arm: runs, and how many are "
