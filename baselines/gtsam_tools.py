@@ -94,7 +94,11 @@ def build_graph(header: StreamHeader, steps: Iterable[Step], *,
                 config: FactorGraphConfig | None = None,
                 start_pose: Sequence[float] = (0.0, 0.0, 0.0), admit: bool = True
                 ) -> BatchState:
-    """The factor graph and initial values of a whole stream (what ``gtsam-batch`` solves).
+    """The factor graph and initial values of a whole stream, on the dead-reckoned poses.
+
+    Unlike ``gtsam-batch``, which lets landmarks in as it goes (on its solved poses), this
+    lets them in once, at the end: those whose rays on the dead-reckoned poses of the whole
+    stream intersect (on a drifting recording few or none); the others stay pending.
 
     Parameters
     ----------
@@ -230,22 +234,28 @@ def seed_landmarks(state: BatchState, estimate: MapEstimate, *, trim: float = 3.
     value of every graph landmark the map has is replaced by its map position.
 
     Returns the :class:`AlignedMap`; raises :class:`TooFewLandmarksError` if fewer than 3
-    graph landmarks are in the map (build the graph with ``admit=True``; on a drifting
-    recording the dead-reckoned rays of a whole run may admit none: the hybrid aligns on the
-    early trajectory and resects every pose, ``HybridMapper(header, seed_mapper=...)``).
+    graph landmarks are in the map, saying whether pending landmarks would enter now
+    (``state.absorb()``; a graph built with ``admit=False``) or not: on a drifting recording
+    the dead-reckoned rays of a whole run may admit none, and the hybrid aligns on the early
+    trajectory and resects every pose, ``HybridMapper(header, seed_mapper=...)``.
     """
     problem = state.problem
     ids = np.array(sorted(problem.landmark_ids), np.int64)
     ref_xy = landmarks_from_values(state.values, ids)
     n_common = np.intersect1d(ids, estimate.landmark_ids).size
     if n_common < 3:
+        pending = problem.pending()
+        cand = sorted(lid for lid, n_rays in pending.items() if n_rays >= 2)
+        n_ok = int(problem.initial_points(*problem.rays_of(cand, state.poses))[1].sum())
+        why = (f"{n_ok} of them intersect on the graph's poses: let them in first "
+               f"(state.absorb(), or build_graph(admit=True)), or" if n_ok else
+               "their rays on the graph's poses do not intersect (as on a drifting "
+               "recording's dead-reckoned poses):")
         raise TooFewLandmarksError(
             f"seed_landmarks: the graph holds {ids.size} landmarks, {n_common} of them in the "
             f"map ({len(estimate)}), and 3 are needed to align the map onto them; "
-            f"{len(problem.pending())} landmarks are pending (their rays on the dead-reckoned "
-            f"poses do not intersect yet, as on a drifting recording): build the graph with "
-            f"admit=True, or let the hybrid align the map on the "
-            f"early trajectory and resect every pose: "
+            f"{len(pending)} landmarks are pending, and {why} let the hybrid align the "
+            f"map on the early trajectory and resect every pose: "
             f"baselines.hybrid.HybridMapper(header, seed_mapper=YOUR_MAPPER)")
     aligned = align_map(estimate, ids, ref_xy, trim=trim)
     where = aligned.as_dict()

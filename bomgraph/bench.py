@@ -280,14 +280,16 @@ class Executor:
                 raise ConfigError(f"--scheduler {self.scheduler!r}: {problem}")
 
     @classmethod
-    def choose(cls, jobs: int | None = -1, scheduler: str | None = None,
-               dask_local: int | None = 0, *,
+    def choose(cls, jobs: int | None = None, scheduler: str | None = None,
+               dask_local: int | None = None, *,
                defaults: Mapping[str, Any] | None = None) -> "Executor":
         """Dask when a ``scheduler`` or ``dask_local`` workers are given, else serial for
-        ``jobs == 1``, else ``jobs`` local processes (-1: one per core). A value left None
-        is taken from ``defaults`` (a sweep file's ``[executor]``: ``jobs``, ``scheduler``,
-        ``dask_local``), else the default."""
-        d = dict(defaults or {})
+        ``jobs == 1``, else ``jobs`` local processes (-1, the default: one per core). When
+        all three are None they are taken from ``defaults`` (a sweep file's ``[executor]``:
+        ``jobs``, ``scheduler``, ``dask_local``); any one given (the command line) sets the
+        whole of ``defaults`` aside, as ``--jobs 1`` overrides a file's ``dask_local``."""
+        given = jobs is not None or scheduler is not None or dask_local is not None
+        d = {} if given else dict(defaults or {})
         jobs = d.get("jobs", -1) if jobs is None else jobs
         scheduler = scheduler or d.get("scheduler")
         dask_local = d.get("dask_local", 0) if dask_local is None else dask_local

@@ -188,8 +188,9 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--paired-reference", metavar="ARM", default=None,
                    help="the arm every other arm is paired against, run by run, in paired.csv "
                         "(an arm's label as the tables show it; default: each experiment's "
-                        "--reference arm if it is one of its arms, else its oracle-like bound, "
-                        "else its first arm)")
+                        "--reference arm if it is one of its arms, unless every run of it is "
+                        "scored against its own map (no truth) and two other arms ran; else "
+                        "its oracle-like bound, else its first arm)")
     c.add_argument("--checkpoint-every", type=_positive_int, metavar="N",
                    help="with --streams: map every N steps (default 10)")
     c.add_argument("--quick", action="store_true",
@@ -210,10 +211,12 @@ def build_parser() -> argparse.ArgumentParser:
                         "choose another folder")
     c.add_argument("--seed", type=_nonneg_int, help="the paper design's seed (default 0)")
     c.add_argument("--jobs", type=_jobs, help="local processes (-1, the default: one per core)")
-    c.add_argument("--scheduler", default=None, metavar="ADDRESS",
-                   help="run on an existing Dask distributed scheduler, e.g. tcp://host:8786")
-    c.add_argument("--dask-local", type=_nonneg_int, metavar="N",
-                   help="start a local Dask cluster of N worker processes")
+    cluster = c.add_mutually_exclusive_group()
+    cluster.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                         help="run on an existing Dask distributed scheduler, e.g. "
+                              "tcp://host:8786")
+    cluster.add_argument("--dask-local", type=_nonneg_int, metavar="N",
+                         help="start a local Dask cluster of N worker processes")
     c.add_argument("--no-cache", action="store_true", help="ignore and do not write the cache")
     c.add_argument("--dry-run", action="store_true",
                    help="list what would run (per experiment and arm: runs, and how many are "

@@ -36,7 +36,7 @@ from .run_scoring import mark_self_scored, not_drawn_line, scored_against, score
 from .plots import MapPanel, error_vs_time_figure, final_maps_figure, map_figure
 from .out_folder import (RESULT_FILES, OutputRecord, estimate_paths, linked_folders,
                          planned_outputs, refuse_inputs_among_outputs, slug)
-from .stdio import folder_lock, make_folder, write_figure, write_text
+from .stdio import check_folder, folder_lock, make_folder, write_figure, write_text
 from .tables import HUGE, write_csv
 
 _log = logging.getLogger(__name__)
@@ -390,6 +390,7 @@ def plan_compare(experiments: Sequence[Experiment], out_dir: str | os.PathLike[s
     result is in ``out_dir/cache``, so it would not run again), in the order compare runs
     them. What compare refuses about its folder is refused too."""
     instance(executor, Executor, "plan_compare(): executor", ConfigError)  # as compare's
+    check_folder(out_dir)
     refuse_inputs_among_outputs(Path(out_dir), experiments)
     OutputRecord(Path(out_dir)).refuse_foreign(
         planned_outputs(Path(out_dir), experiments, estimates=estimates, figures=figures),

@@ -507,12 +507,23 @@ class FolderBusyError(BomgraphError):
     """Another process holds the lock of an output folder."""
 
 
+def check_folder(folder: str | os.PathLike[str]) -> None:
+    """Refuse an output folder that is a file, or lies under one (:class:`OutputPathError`,
+    naming it, instead of the bare ``[Errno 17] File exists`` or ``[Errno 20] Not a
+    directory``); nothing is created."""
+    path = Path(folder)
+    for at in (path, *path.parents):   # the nearest one that exists must be a folder
+        if os.path.exists(at):
+            if not os.path.isdir(at):
+                what = "is a file" if at == path else f"{os.fspath(at)} is a file"
+                raise OutputPathError(f"--out {os.fspath(folder)}: {what}; give a folder (it "
+                                      f"is created if missing)")
+            return
+
+
 def make_folder(folder: str | os.PathLike[str]) -> None:
-    """Create the output folder ``folder`` and its parents; a path that is a file is refused
-    (:class:`OutputPathError`, naming it) instead of the bare ``[Errno 17] File exists``."""
-    if os.path.exists(folder) and not os.path.isdir(folder):
-        raise OutputPathError(f"--out {os.fspath(folder)}: is a file; give a folder (it is "
-                              f"created if missing)")
+    """Create the output folder ``folder`` and its parents (:func:`check_folder` first)."""
+    check_folder(folder)
     Path(folder).mkdir(parents=True, exist_ok=True)
 
 
@@ -583,4 +594,4 @@ __all__ = ["STDIO", "MAX_LINE_BYTES", "MAX_INPUT_BYTES", "OutputPathError", "Inp
            "line_too_long", "input_too_large", "bounded_lines", "read_bounded", "read_regular_file",
            "copy_bounded", "hold_standard_descriptors", "standard_output", "check_output_path",
            "AtomicOutput", "output_file", "write_text", "write_figure", "FolderBusyError",
-           "make_folder", "folder_lock", "signals_held"]
+           "check_folder", "make_folder", "folder_lock", "signals_held"]

@@ -401,6 +401,9 @@ class _Reader:
             problem = scheduler_address_problem(out["scheduler"])
             if problem:
                 raise self.fail("executor.scheduler", problem)
+        if out.get("dask_local") and "scheduler" in out:
+            raise self.fail("executor", "give one of dask_local and scheduler, not both (a "
+                                        "local cluster or an existing one)")
         return out
 
     def experiment(self, t: Mapping[str, Any], at: str) -> ExperimentSpec:

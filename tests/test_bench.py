@@ -91,6 +91,24 @@ def test_executor_choose_follows_the_command_line() -> None:
     assert Executor.choose(1, scheduler="tcp://x:1").scheduler == "tcp://x:1"
 
 
+def test_the_command_lines_executor_overrides_the_sweep_files_whole() -> None:
+    """README: "The command line's `--jobs`, `--dask-local` and `--scheduler` override
+    `[executor]`". Before h89 a file's `dask_local = 2` (or `scheduler`) still won over
+    `--jobs 1`: the sweep started a Dask cluster and printed "--jobs 1 is not used"."""
+    file_dask = {"dask_local": 2}
+    assert Executor.choose(1, defaults=file_dask) == Executor("serial")
+    assert Executor.choose(3, defaults={"scheduler": "tcp://x:1"}) == Executor(
+        "processes", n_jobs=3)
+    assert Executor.choose(None, "tcp://y:2", None, defaults=file_dask) == Executor(
+        "dask", scheduler="tcp://y:2")
+    # nothing on the command line: the file's [executor], then the default
+    assert Executor.choose(None, None, None, defaults=file_dask) == Executor("dask",
+                                                                            dask_local=2)
+    assert Executor.choose(None, None, None, defaults={"jobs": 1}) == Executor("serial")
+    assert Executor.choose(defaults={"jobs": 1}) == Executor("serial")
+    assert Executor.choose() == Executor("processes", n_jobs=-1)
+
+
 
 def test_local_processes_are_bounded_by_the_tasks_and_the_cores(
         monkeypatch: pytest.MonkeyPatch) -> None:

@@ -257,3 +257,23 @@ def test_dry_run_refuses_what_compare_would(tmp_path: Path, stream: Path,
     assert main(_cmd(stream, out, "--dry-run", "--no-figures")) == 0
     assert main(_cmd(stream, out, "--no-figures")) == 0
     assert (out / "streams_s_maps.png").read_bytes() == b"mine"
+
+
+@pytest.mark.parametrize("dry_run", [False, True])
+@pytest.mark.parametrize("under", ["", "/sub"])
+def test_an_out_that_is_or_lies_under_a_file_is_one_line_also_in_a_dry_run(
+        tmp_path: Path, stream: Path, capsys: pytest.CaptureFixture, dry_run: bool,
+        under: str) -> None:
+    """h89: `--dry-run` ("what the same command would run") listed the runs for an `--out`
+    that is a file, which compare refuses; and `--out FILE/sub` was `[Errno 20] Not a
+    directory: 'FILE/sub'`, naming neither --out nor the file."""
+    (tmp_path / "afile").write_text("mine\n")
+    out = f"{tmp_path / 'afile'}{under}"
+    args = ["compare", "--streams", str(stream), "--methods", "triangulate", "--jobs", "1",
+            "--no-figures", "--out", out] + (["--dry-run"] if dry_run else [])
+    assert main(args) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    named = "is a file" if not under else f"{tmp_path / 'afile'} is a file"
+    assert len(err) == 1 and err[0].startswith(f"bomgraph: error: --out {out}: {named}; give "
+                                               f"a folder"), err
+    assert (tmp_path / "afile").read_text() == "mine\n"

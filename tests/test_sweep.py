@@ -175,6 +175,10 @@ def test_a_stream_without_truth_gets_truth_free_scores_or_a_reference(
     ("streams = [\"runs/*.jsonl\"]\n", "methods: give at least one method"),
     ("streams = [\"runs/*.jsonl\"]\nmethods = [\"triangulate\"]\n[executor]\njobs = 0\n",
      "executor.jobs"),
+    # h89: both ran on the scheduler, dask_local dropped without a word
+    ("streams = [\"runs/*.jsonl\"]\nmethods = [\"triangulate\"]\n[executor]\n"
+     "dask_local = 2\nscheduler = \"tcp://127.0.0.1:8786\"\n",
+     "executor: give one of dask_local and scheduler"),
     ("streams = [\"runs/*.jsonl\"\n", "not valid TOML"),
     # session 12's hostile audit: each of these ran (or allocated) before it was refused
     ("streams = [\"runs/*.jsonl\"]\n[[methods]]\nname = \"stmds-smacof\"\n"
@@ -252,3 +256,29 @@ def test_methods_lists_every_preset_on_a_line_of_its_own(capsys: pytest.CaptureF
             break
         block.append(ln.split()[0])
     assert block[0] == "@paper" and "@real" in block and "@improved" in block
+
+
+def test_jobs_on_the_command_line_overrides_the_files_dask_executor(
+        tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    """README: the command line's `--jobs` overrides `[executor]`. Before h89 a file's
+    `dask_local` won: `--jobs 1` started a Dask cluster and said "--jobs 1 is not used"."""
+    assert main(["simulate", "--seed", "1", "--steps", "20", "--out",
+                 str(tmp_path / "s.jsonl"), "-q"]) == 0
+    (tmp_path / "sweep.toml").write_text('streams = ["s.jsonl"]\nmethods = ["triangulate"]\n'
+                                         '[executor]\ndask_local = 1\n')
+    assert main(["compare", "--config", str(tmp_path / "sweep.toml"), "--jobs", "1",
+                 "--no-figures", "--no-progress", "--out", str(tmp_path / "o")]) == 0
+    assert "is not used" not in capsys.readouterr().err
+
+
+def test_scheduler_and_dask_local_together_are_refused(
+        runs: Path, capsys: pytest.CaptureFixture) -> None:
+    """h89: `--scheduler ADDR --dask-local N` (the README: `[--scheduler ADDR | --dask-local
+    N]`) ran on the scheduler and dropped --dask-local without a word."""
+    with pytest.raises(SystemExit) as stop:  # argparse's exit: main() does not catch it
+        main(["compare", "--streams", str(runs / "runs" / "r1.jsonl"), "--methods",
+              "triangulate", "--scheduler", "tcp://127.0.0.1:8786", "--dask-local", "2",
+              "--dry-run", "--out", str(runs / "x")])
+    assert stop.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--dask-local: not allowed with argument --scheduler" in err[0]

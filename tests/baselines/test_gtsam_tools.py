@@ -93,6 +93,27 @@ def test_seeding_a_graph_without_landmarks_says_what_to_do(noise_free: Stream) -
     assert "HybridMapper(header, seed_mapper=YOUR_MAPPER)" in text
 
 
+def test_seeding_says_whether_letting_landmarks_in_would_help(noise_free: Stream) -> None:
+    """h89: the message told to "build the graph with admit=True" also to a graph built so
+    (build_graph's default), whose rays on the dead-reckoned poses intersect nowhere, as on
+    MRCLAM6 robot 3 with the README's recipe. It now says which of the two it is."""
+    drifting = simulate(SimConfig(n_steps=60, n_landmarks=20, noise_scale=10.0),
+                        np.random.default_rng(3))
+    state = gt.build_graph(drifting.header, drifting.steps)
+    assert state.problem.landmark_ids == [] and state.problem.pending()
+    with pytest.raises(TooFewLandmarksError) as err:
+        gt.seed_landmarks(state, _mirrored(drifting))
+    text = str(err.value)
+    assert "admit=True" not in text and "absorb" not in text
+    assert "their rays on the graph's poses do not intersect" in text
+    assert "HybridMapper(header, seed_mapper=YOUR_MAPPER)" in text
+    held = gt.build_graph(noise_free.header, noise_free.steps, admit=False)
+    n_in = len(gt.build_graph(noise_free.header, noise_free.steps).problem.landmark_ids)
+    with pytest.raises(TooFewLandmarksError) as err:
+        gt.seed_landmarks(held, _mirrored(noise_free))
+    assert f"{n_in} of them intersect on the graph's poses: let them in first" in str(err.value)
+
+
 def test_diagnose_a_good_graph(noisy: Stream) -> None:
     state = gt.build_graph(noisy.header, noisy.steps[:30])
     d = gt.diagnose(state.graph, state.values)
