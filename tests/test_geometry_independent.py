@@ -182,3 +182,24 @@ def test_many_rays_from_two_places_do_not_make_parallax() -> None:
         assert ok == want
         if want:
             np.testing.assert_allclose(x, target, rtol=0, atol=1e-9)
+
+
+def test_a_zero_parallax_gate_refuses_one_ray_and_parallel_rays_without_raising() -> None:
+    """``min_parallax_rad=0`` (the gate off, as the tests above use it): a point with one ray,
+    or with two parallel rays, has a singular normal matrix. It is refused (NaN, False) like
+    any undetermined point; before, ``np.linalg.solve`` raised ``LinAlgError('Singular
+    matrix')`` for the whole group, so one such point lost every other point's answer."""
+    from bomgraph.geometry import intersect_ray_groups
+
+    target = np.array([2.0, 1.0])
+    good = np.array([[0.0, 0.0], [4.0, 0.0]])
+    origins = np.vstack([good, [[5.0, 5.0]], [[0.0, 3.0], [1.0, 3.0]]])
+    dirs = np.concatenate([_rays_to(target, good), [0.3], [0.0, 0.0]])
+    owner = np.array([0, 0, 1, 2, 2])
+    for gate in (0.0, 1e-12):
+        xy, ok = intersect_ray_groups(origins, dirs, owner, 3, min_parallax_rad=gate)
+        assert ok.tolist() == [True, False, False]
+        np.testing.assert_allclose(xy[0], target, rtol=0, atol=1e-12)
+        assert np.all(np.isnan(xy[1:]))
+        x, ok1 = intersect_rays(origins[3:], dirs[3:], min_parallax_rad=gate)
+        assert not ok1 and np.all(np.isnan(x))
