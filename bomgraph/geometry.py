@@ -336,9 +336,11 @@ def solve_ray_normal_equations(a: np.ndarray, b: np.ndarray, origins: np.ndarray
         NaN where a gate refused the point.
     ok : bool ndarray of shape (m,)
     """
-    # A necessary condition first (the normal matrix must be invertible) ...
+    # A necessary condition first (the normal matrix must be invertible: with the gate at 0,
+    # one ray or parallel rays give an eigenvalue of 0 to rounding, which must not reach the
+    # solve, whose LinAlgError would lose every point of the group) ...
     lam = parallax_eigenvalue(a)
-    ok = lam >= 1.0 - math.cos(min_parallax_rad)
+    ok = (lam >= 1.0 - math.cos(min_parallax_rad)) & (lam > 1e-12 * (a[..., 0, 0] + a[..., 1, 1]))
     x = np.full((len(a), 2), np.nan)
     if np.any(ok):
         x[ok] = np.linalg.solve(a[ok], b[ok][..., None])[..., 0]

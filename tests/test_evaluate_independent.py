@@ -128,3 +128,88 @@ def test_nees_under_a_similarity_alignment_is_that_of_the_estimates_own_frame() 
         ep[2] = (ep[2] + np.pi) % (2 * np.pi) - np.pi
         assert pose_nees(est, truth, al) == pytest.approx(float(ep @ np.linalg.solve(pcov, ep)),
                                                           rel=1e-9)
+
+
+def test_similarity_without_reflection_fits_the_best_scale_for_its_rotation() -> None:
+    """A mirrored map aligned with ``with_scale`` and reflection forbidden: the rotation is the
+    best proper one, and for it the least-squares scale is ``sum b . (R a) / sum |a|^2``
+    (centred points), written out here. The Umeyama scale is ``trace(S D) / var``: dropping
+    the ``D = diag(1, -1)`` sign (``sum(sv)``) overstates it."""
+    rng = np.random.default_rng(62)
+    truth = rng.uniform(0, 3, (12, 2))
+    est = ((truth + rng.normal(0, 0.05, truth.shape)) @ _rot(0.8).T * [1.0, -1.0]) / 2.5
+    al = align(est, truth, with_scale=True, allow_reflection=False)
+    assert not al.reflected
+    a, b = est - est.mean(0), truth - truth.mean(0)
+    ra = a @ al.rotation.T
+    best = float((b * ra).sum() / (a * a).sum())
+    assert al.scale == pytest.approx(best, rel=1e-9)
+    np.testing.assert_allclose(al.translation, truth.mean(0) - best * al.rotation @ est.mean(0),
+                               atol=1e-12)
+    # and the fit is the brute-force optimum over proper rotations at their own best scale
+    sse = float(((al.apply(est) - truth) ** 2).sum())
+    grid = np.linspace(-np.pi, np.pi, 20001)
+    costs = []
+    for t in grid:
+        rt = a @ _rot(t).T
+        s = (b * rt).sum() / (a * a).sum()
+        costs.append(float(((s * rt - b) ** 2).sum()))
+    assert sse <= min(costs) + 1e-9
+
+
+def test_latest_pose_is_the_latest_step_whatever_the_row_order() -> None:
+    """``pose_t`` need not be sorted (MapEstimate refuses repeats only): ``robot_last_m`` and
+    :func:`pose_nees` are about the pose with the largest step, not the last row."""
+    rng = np.random.default_rng(63)
+    lm = rng.uniform(0, 3, (6, 2))
+    poses = np.column_stack([rng.uniform(0, 3, (5, 2)), rng.uniform(-3, 3, 5)])
+    truth = Truth(np.arange(6), lm, poses)
+    err = np.array([[0.3, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.1, 0.0], [0.0, 0.0, 0.0],
+                    [0.0, 0.0, 0.2]])            # per step 0..4
+    cov = np.tile(np.diag([0.01, 0.01, 0.01]), (5, 1, 1))
+    order = np.array([4, 0, 3, 1, 2])           # step 4 first, step 2 last
+    est = MapEstimate(np.arange(6), lm, pose_t=order, poses=(poses + err)[order],
+                      pose_cov=cov)
+    s = score_estimate(est, truth)
+    assert s.robot_last_m == pytest.approx(0.0, abs=1e-12)      # step 4: heading error only
+    assert s.robot_mean_m == pytest.approx(0.4 / 5, rel=1e-9)
+    assert pose_nees(est, truth, s.alignment) == pytest.approx(0.2 ** 2 / 0.01, rel=1e-9)
+
+
+def test_pose_nees_heading_error_is_wrapped_across_pi() -> None:
+    """A heading of pi - 0.05 against a true -pi + 0.05 is an error of -0.1 rad, not
+    2 pi - 0.1: the pose NEES under ``diag(.., 0.01)`` is 1, not ~3.8e3."""
+    lm = np.array([[0.0, 0.0], [2.0, 0.0], [0.0, 3.0], [1.0, 1.0]])
+    truth = Truth(np.arange(4), lm, np.array([[0.0, 0.0, 0.0], [1.0, 1.0, -np.pi + 0.05]]))
+    est = MapEstimate(np.arange(4), lm, pose_t=np.array([1]),
+                      poses=np.array([[1.0, 1.0, np.pi - 0.05]]),
+                      pose_cov=np.diag([0.01, 0.01, 0.01])[None])
+    s = score_estimate(est, truth)
+    assert pose_nees(est, truth, s.alignment) == pytest.approx(1.0, rel=1e-9)
+    assert s.ape_heading_rmse_rad == pytest.approx(0.1, rel=1e-9)
+
+
+def test_collinear_tie_the_positions_leave_is_broken_by_the_headings() -> None:
+    """Landmarks and robot positions all on one line: the mirror across it fits both equally,
+    but it turns a heading of +1 rad off the line into -1 rad. The headings pick the proper
+    fit; the score is not ambiguous and the pose errors are zero."""
+    lm = np.column_stack([np.linspace(0, 2, 6), np.zeros(6)])
+    poses = np.column_stack([np.linspace(0, 2, 5), np.zeros(5), np.full(5, 1.0)])
+    truth = Truth(np.arange(6), lm, poses)
+    r = _rot(0.6)
+    est = MapEstimate(np.arange(6), lm @ r.T, pose_t=np.arange(5),
+                      poses=np.column_stack([poses[:, :2] @ r.T, poses[:, 2] + 0.6]))
+    s = score_estimate(est, truth)
+    assert not s.ambiguous and not s.alignment.reflected
+    assert s.ape_heading_rmse_rad == pytest.approx(0.0, abs=1e-9)
+    assert s.robot_mean_m == pytest.approx(0.0, abs=1e-9)
+
+
+def test_squared_error_sum_of_a_hand_computed_case() -> None:
+    """``_sse`` (the tie-break cost) is the plain sum of squares, scaled only to avoid
+    overflow: |(3, 4)|^2 + |(1, 0)|^2 = 26, and the same at 1e200 without overflowing."""
+    from bomgraph.evaluate import _sse
+    x = np.array([[3.0, 4.0], [1.0, 0.0]])
+    assert _sse(x, 0.0) == pytest.approx(26.0, rel=1e-15)
+    assert _sse(x * 1e150, 0.0) == pytest.approx(26.0e300, rel=1e-12)
+    assert _sse(x, x) == 0.0

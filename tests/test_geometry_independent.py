@@ -139,3 +139,67 @@ def test_effective_parallax_is_the_smallest_eigenvalue_of_the_mean_ray_normal() 
     for i in range(30):
         lam = np.linalg.eigvalsh(ray_normals(d[owner == i]).mean(0))[0]
         assert got[i] == pytest.approx(math.acos(1 - 2 * lam), abs=1e-7)
+
+
+def test_two_rays_are_accepted_just_above_the_parallax_gate_and_refused_just_below() -> None:
+    """``min_parallax_rad`` is the angle between two rays that counts as determined: the
+    normal matrix's smallest eigenvalue for two rays at ``alpha`` is ``1 - cos(alpha)``, so
+    the gate is ``1 - cos(min_parallax)`` (not ``sin^2``, which asks for ~1.4 times the
+    angle). Checked at 0.95 and 1.05 times the gate for several gates, ray lengths and
+    orientations."""
+    rng = np.random.default_rng(37)
+    for gate in (math.radians(1.0), math.radians(2.0), 0.2, 0.5):
+        for _ in range(5):
+            target = rng.uniform(-3, 3, 2)
+            base = rng.uniform(-math.pi, math.pi)
+            reach = rng.uniform(1, 10, 2)
+            for factor, want in ((1.05, True), (0.95, False)):
+                back = np.array([base, base + factor * gate])   # directions from the point
+                origins = target + reach[:, None] * np.column_stack([np.cos(back),
+                                                                     np.sin(back)])
+                x, ok = intersect_rays(origins, _rays_to(target, origins),
+                                       min_parallax_rad=gate)
+                assert ok == want, (gate, factor)
+                if want:
+                    np.testing.assert_allclose(x, target, rtol=0, atol=1e-6)
+                else:
+                    assert np.all(np.isnan(x))
+
+
+def test_many_rays_from_two_places_do_not_make_parallax() -> None:
+    """Twenty-five rays from each of two places 1.5 degrees apart (seen from the point) sum
+    to a normal matrix whose smallest eigenvalue ``25 (1 - cos 1.5 deg)`` passes the 2-degree
+    eigenvalue test; the angle the origins span seen from the point (1.5 degrees) refuses it.
+    Two degrees apart, it is accepted."""
+    target = np.array([1.0, 2.0])
+    for span_deg, want in ((1.5, False), (2.5, True)):
+        back = np.repeat([0.3, 0.3 + math.radians(span_deg)], 25)
+        origins = target + 4.0 * np.column_stack([np.cos(back), np.sin(back)])
+        dirs = _rays_to(target, origins)
+        lam = parallax_eigenvalue(ray_normals(dirs).sum(0))
+        assert lam > 1 - math.cos(math.radians(2.0))     # the eigenvalue alone would pass
+        x, ok = intersect_rays(origins, dirs, min_parallax_rad=math.radians(2.0))
+        assert ok == want
+        if want:
+            np.testing.assert_allclose(x, target, rtol=0, atol=1e-9)
+
+
+def test_a_zero_parallax_gate_refuses_one_ray_and_parallel_rays_without_raising() -> None:
+    """``min_parallax_rad=0`` (the gate off, as the tests above use it): a point with one ray,
+    or with two parallel rays, has a singular normal matrix. It is refused (NaN, False) like
+    any undetermined point; before, ``np.linalg.solve`` raised ``LinAlgError('Singular
+    matrix')`` for the whole group, so one such point lost every other point's answer."""
+    from bomgraph.geometry import intersect_ray_groups
+
+    target = np.array([2.0, 1.0])
+    good = np.array([[0.0, 0.0], [4.0, 0.0]])
+    origins = np.vstack([good, [[5.0, 5.0]], [[0.0, 3.0], [1.0, 3.0]]])
+    dirs = np.concatenate([_rays_to(target, good), [0.3], [0.0, 0.0]])
+    owner = np.array([0, 0, 1, 2, 2])
+    for gate in (0.0, 1e-12):
+        xy, ok = intersect_ray_groups(origins, dirs, owner, 3, min_parallax_rad=gate)
+        assert ok.tolist() == [True, False, False]
+        np.testing.assert_allclose(xy[0], target, rtol=0, atol=1e-12)
+        assert np.all(np.isnan(xy[1:]))
+        x, ok1 = intersect_rays(origins[3:], dirs[3:], min_parallax_rad=gate)
+        assert not ok1 and np.all(np.isnan(x))

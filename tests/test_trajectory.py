@@ -11,7 +11,8 @@ import pytest
 from bomgraph.evaluate import align, align_candidates, score_estimate
 from bomgraph.mapper import MapEstimate
 from bomgraph.stream import Step, Truth
-from bomgraph.trajectory import bearing_residuals, relative_pose_errors
+from bomgraph.trajectory import (absolute_pose_errors, bearing_residuals,
+                                 relative_pose_errors)
 
 
 def _umeyama(src: np.ndarray, dst: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -169,3 +170,53 @@ def test_bearing_residuals_vanish_at_the_truth_and_flip_for_a_mirror() -> None:
     mir = bearing_residuals(np.arange(2), lm * [1, -1], np.arange(2), pose * [1, -1, -1], steps,
                             mirrored=True)
     assert np.max(np.abs(mir)) < 1e-12
+
+
+def test_rpe_heading_error_wraps_across_pi_and_a_delta_of_the_whole_span_is_one_pair() -> None:
+    """Reference turn pi - 0.01 between steps 0 and 1, estimated turn -pi + 0.01 (the same
+    motion 0.02 rad further): the heading error is 0.02, not 2 pi - 0.02. And a delta equal
+    to the span of the steps (0 .. 4, delta 4) is one pair, (0, 4)."""
+    ref = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, np.pi - 0.01]])
+    est = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, -np.pi + 0.01]])
+    r = relative_pose_errors(np.array([0, 1]), est, ref, delta=1)
+    np.testing.assert_allclose(r.heading_rad, [0.02], rtol=1e-9)
+    np.testing.assert_allclose(r.translation_m, [0.0], atol=1e-12)
+    ape = absolute_pose_errors(np.array([0, 1]), est, ref)     # the same wrap, per pose
+    np.testing.assert_allclose(ape.heading_rad, [0.0, 0.02], rtol=1e-9, atol=1e-15)
+    poses = np.column_stack([np.arange(5.0), np.zeros(5), np.zeros(5)])
+    moved = poses.copy()
+    moved[4, 1] = 0.3
+    whole = relative_pose_errors(np.arange(5), moved, poses, delta=4)
+    np.testing.assert_array_equal(whole.t, [0])
+    np.testing.assert_allclose(whole.translation_m, [0.3], rtol=1e-12)
+
+
+def test_rpe_and_bearing_residuals_do_not_depend_on_the_row_order() -> None:
+    """Poses given out of step order (MapEstimate allows it) and a map whose ids are not
+    sorted give the same RPE and bearing residuals as sorted rows; a bearing of a landmark the
+    map lacks, or from a step without a pose, is left out; the residual is measured minus
+    predicted (signed), checked on a bearing 0.1 rad off."""
+    rng, truth = _world(4)
+    est = truth.poses + np.column_stack([rng.normal(0, 0.05, (30, 2)), rng.normal(0, 0.05, 30)])
+    t = np.arange(30)
+    want = relative_pose_errors(t, est, truth.poses, delta=3)
+    perm = rng.permutation(30)
+    got = relative_pose_errors(t[perm], est[perm], truth.poses[perm], delta=3)
+    np.testing.assert_array_equal(got.t, want.t)
+    np.testing.assert_allclose(got.translation_m, want.translation_m, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(got.heading_rad, want.heading_rad, rtol=0, atol=1e-15)
+    # bearing residuals: steps 0..5 see landmarks 0..11 plus 99 (not mapped); step 5 has
+    # no pose in the estimate
+    lm, poses = truth.landmarks_xy, truth.poses[:5]
+    steps = []
+    for k in range(6):
+        p = truth.poses[k]
+        b = np.arctan2(lm[:, 1] - p[1], lm[:, 0] - p[0]) - p[2] + (0.1 if k == 2 else 0.0)
+        steps.append(Step(k, np.zeros(3), np.r_[np.arange(12), 99],
+                          np.angle(np.exp(1j * np.r_[b, 0.5]))))
+    ids_perm = rng.permutation(12)
+    pose_perm = np.array([3, 0, 4, 2, 1])
+    r = bearing_residuals(np.arange(12)[ids_perm], lm[ids_perm], np.arange(5)[pose_perm],
+                          poses[pose_perm], steps)
+    assert r.shape == (5 * 12,)
+    np.testing.assert_allclose(r, np.repeat([0.0, 0.0, 0.1, 0.0, 0.0], 12), atol=1e-12)

@@ -131,3 +131,23 @@ def test_presets_and_validation() -> None:
     for bad in ({"odometry_cauchy_k": 0.0}, {"bearing_cauchy_k": -1.0}, {"range_gate": 0.5}):
         with pytest.raises(ConfigError):
             FactorGraphConfig(**bad)
+
+
+def test_prior_and_bearing_factor_errors_are_the_residual_over_sigma_by_hand() -> None:
+    """A distance prior (2 m, sigma 0.05 m) between landmarks 2.1 m apart has GTSAM error
+    ``0.5 (0.1 / 0.05)^2 = 2``; a bearing factor (sigma 0.02 rad) 0.03 rad off has error
+    ``0.5 (0.03 / 0.02)^2 = 1.125``: the sigmas are std. devs., not variances."""
+    from baselines.bearing_graph import bearing_noise, prior_factor
+    from bomgraph.stream import Prior, StreamHeader
+
+    v = gtsam.Values()
+    v.insert(landmark_key(3), gtsam.Point2(1.0, 1.0))
+    v.insert(landmark_key(8), gtsam.Point2(1.0, 3.1))
+    v.insert(pose_key(0), gtsam.Pose2(0.0, 0.0, 0.4))
+    f = prior_factor(Prior(3, 8, 2.0, 0.05))
+    assert f.error(v) == pytest.approx(0.5 * (0.1 / 0.05) ** 2, rel=1e-9)
+    header = StreamHeader(bearing_sigma_rad=0.02, odometry_sigma=np.array([0.01, 0.0, 0.01]))
+    true_bearing = math.atan2(1.0, 1.0) - 0.4
+    b = gtsam.BearingFactor2D(pose_key(0), landmark_key(3), gtsam.Rot2(true_bearing + 0.03),
+                              bearing_noise(header))
+    assert b.error(v) == pytest.approx(0.5 * (0.03 / 0.02) ** 2, rel=1e-9)

@@ -303,3 +303,60 @@ def test_one_pass_gated_update_is_the_model_path_to_rounding(method: str) -> Non
     np.testing.assert_allclose(a.poses, b.poses, rtol=0, atol=1e-9)
     np.testing.assert_allclose(pa, pb, rtol=0, atol=1e-9)
     assert (ga, ua) == (gb, ub)
+
+
+def _heading_model(x: np.ndarray):
+    """A bearing that measures the robot's heading itself: ``h = psi``, ``H = [0, 0, 1, 0..]``
+    (linear, so the iterated update must equal the plain one)."""
+    h_row = np.zeros((1, len(x)))
+    h_row[0, 2] = 1.0
+    return np.array([x[2]]), rows_from_dense(h_row)
+
+
+@pytest.mark.parametrize("iterations", [1, 3])
+def test_update_wraps_the_innovation_and_the_iterates_across_pi(iterations: int) -> None:
+    """Heading pi - 0.01 (variance 0.01), measured at -pi + 0.03 (0.04 rad further on, across
+    the cut) with sigma 0.1: the innovation is +0.04, the gain 0.5, so the heading moves to
+    pi + 0.01, i.e. -pi + 0.01 (a plain ``z - h`` gives an innovation of 0.04 - 2 pi). filterpy's own
+    ``update`` with ``residual=angle_residual`` is the reference. The model is linear, so the
+    iterated update (whose iterates cross pi and whose ``x_0 - x_i`` must be wrapped too)
+    gives the same state and covariance."""
+    psi0 = np.pi - 0.01
+    f = BearingEkf(np.array([0.5, -0.2, psi0]), np.diag([0.04, 0.04, 0.01]), 0.1)
+    f.augment(np.array([2.0, 1.0]), np.arange(3), np.array([[1.0, 0, 0.3], [0, 1.0, -0.2]]),
+              np.array([0.2, 0.3]), np.array([False, False]))
+    ref = ExtendedKalmanFilter(dim_x=5, dim_z=1)
+    ref.x, ref.P, ref.R = f.x.copy(), f.P.copy(), np.eye(1) * 0.01
+    z = np.array([-np.pi + 0.03])
+    ref.update(z, lambda x: np.eye(5)[2:3], lambda x: np.array([x[2]]), R=ref.R,
+               residual=angle_residual)
+    f.update(z, _heading_model, iterations=iterations)
+    assert abs(float(f.x[2] - (-np.pi + 0.01))) < 1e-12
+    np.testing.assert_allclose(angle_residual(f.x, ref.x), 0.0, atol=1e-12)
+    np.testing.assert_allclose(f.P, ref.P, atol=1e-12)
+
+
+def test_iterated_update_across_pi_is_the_map_estimate() -> None:
+    """The MAP test above with the heading at pi - 0.01 and a bearing that turns it ~0.05 rad
+    further, past pi: the iterates wrap, so ``x_0 - x_i`` must be differenced with the wrap
+    (unwrapped, the second iterate jumps by ~2 pi K and the last linearisation is made there).
+    """
+    psi0 = np.pi - 0.01
+    f = BearingEkf(np.array([0.0, 0.0, psi0]), np.diag([0.1, 0.1, 0.1]) ** 2, 0.02)
+    f.augment(np.array([-2.0, -1.0]), np.arange(3), np.zeros((2, 3)),
+              np.diag([0.3, 0.3]) ** 2, np.array([False, False]))
+    x0, p0 = f.x.copy(), f.P.copy()
+    info = np.linalg.inv(p0)
+    z, var = _bearing(x0) - 0.06, np.array([0.02 ** 2])
+
+    def cost(x: np.ndarray) -> float:
+        d = x - x0
+        d[2] = float(angle_residual(x[2], x0[2]))
+        r = float(angle_residual(z[0], _bearing(x)[0]))
+        return 0.5 * d @ info @ d + 0.5 * r * r / var[0]
+
+    best = minimize(cost, x0, method="BFGS", options={"gtol": 1e-12}).x
+    assert best[2] > np.pi                               # the MAP heading is past the cut
+    f.update(z, _model, var, iterations=30)
+    assert f.x[2] < 0                                    # held wrapped
+    np.testing.assert_allclose(angle_residual(f.x, best), 0.0, atol=1e-6)

@@ -69,3 +69,22 @@ def test_a_prior_is_one_more_estimate_with_the_variance_of_a_squared_gaussian() 
     store.add(np.array([0]), np.array([1]), np.array([d * d]), np.array([v]))
     fused_var_d2 = 1.0 / (1.0 / vp + 1.0 / v)
     assert store.known().variance_m2[0] == pytest.approx(fused_var_d2 / (4 * d * d), rel=1e-12)
+
+
+@pytest.mark.parametrize("rule, distance_m, variance_m2", [
+    # w = d2^m / v over (d2, v) = (1, 0.1) and (4, 0.4): paper m=0 averages d2 with w = 10,
+    # 2.5; relative m=2 averages d with w = 10, 40; scale-free m=3 averages 1/d with w = 10, 160
+    ("paper", np.sqrt(20.0 / 12.5), 1.0 / (1.6 * 4.0 * 12.5)),
+    ("relative", 90.0 / 50.0, 1.8 ** 2 / (4.0 * 50.0)),
+    ("scale-free", 170.0 / 90.0, (170.0 / 90.0) ** 4 / (4.0 * 170.0)),
+])
+def test_two_disagreeing_estimates_fuse_as_written_out_by_hand(rule: str, distance_m: float,
+                                                               variance_m2: float) -> None:
+    """Estimates ``d2 = 1`` (variance 0.1) and ``d2 = 4`` (variance 0.4) of one pair: the fused
+    distance and its variance ``d2^(m-1) / (4 sum w)`` computed by hand for each rule (the
+    tests above have agreeing estimates, for which every exponent ``m`` gives one answer)."""
+    store = DistanceStore(rule)
+    store.add(np.array([0, 0]), np.array([1, 1]), np.array([1.0, 4.0]), np.array([0.1, 0.4]))
+    known = store.known()
+    assert known.distance_m[0] == pytest.approx(distance_m, rel=1e-12)
+    assert known.variance_m2[0] == pytest.approx(variance_m2, rel=1e-12)

@@ -111,3 +111,61 @@ def test_all_pose_range_variance_matches_a_monte_carlo_of_the_bearings() -> None
     var = out.var(axis=0, ddof=1)
     se = v0 * math.sqrt(2.0 / (n - 1))            # 2.6 % of each variance
     assert np.all(np.abs(var - v0) <= 4 * se + 0.02 * v0), np.c_[var, v0]
+
+
+def _two_views(parallax_rad: float, reversed_rays: bool = False) -> RobotPoses:
+    """Two poses 1 m apart along x (no turn) seeing landmark 7 about 5 m away with rays at
+    ``parallax_rad`` (the landmark on the perpendicular bisector of the baseline); reversed:
+    both bearings turned by pi (the same lines, the point behind both rays)."""
+    depth = 0.5 / math.tan(parallax_rad / 2)
+    lm = np.array([0.5, depth])
+    flip = math.pi if reversed_rays else 0.0
+    brg = [np.array([math.atan2(lm[1], lm[0] - x) + flip]) for x in (0.0, 1.0)]
+    idx = [np.array([7]), np.array([7])]
+    return _held(np.array([[1.0, 0.0, 0.0]]), np.zeros((1, 3)), brg, idx)
+
+
+def test_all_pose_ranges_parallax_gate_and_rays_in_front_at_range() -> None:
+    """The gate compares the ``1 / r^2``-weighted normal matrix's smallest eigenvalue with
+    ``1 - cos(min_parallax)`` times the mean weight: with rays 1.2 times the gate apart the
+    landmark (~5 m away: weights ~1/25) is kept, at 0.8 times refused; with both rays reversed
+    (the point behind them) it is refused."""
+    gate = math.radians(11.0)
+    k, lm, d, _ = _two_views(1.2 * gate).all_pose_ranges(0.01, gate)
+    assert lm.tolist() == [7, 7]
+    depth = 0.5 / math.tan(0.6 * gate)
+    np.testing.assert_allclose(d, [math.hypot(0.5, depth)] * 2, rtol=1e-9)
+    assert _two_views(0.8 * gate).all_pose_ranges(0.01, gate)[0].size == 0
+    assert _two_views(1.2 * gate, reversed_rays=True).all_pose_ranges(0.01, gate)[0].size == 0
+
+
+def test_one_range_estimate_comes_back_with_its_own_variance() -> None:
+    """``add_ranges`` folds ``(r, var r)`` as a squared distance of variance ``4 r^2 var r``:
+    one estimate fused alone is itself, distance and variance, under every rule."""
+    for rule in ("paper", "relative", "scale-free"):
+        win = RobotPoses(3, rule)
+        win.push(0, None, None, np.zeros(0, np.int64), np.zeros(0))
+        win.add_ranges(0, np.array([4, 9]), np.array([2.5, 0.7]), np.array([0.01, 0.0004]))
+        lm, d, v = win.ranges(0)
+        assert lm.tolist() == [4, 9]
+        np.testing.assert_allclose(d, [2.5, 0.7], rtol=1e-12)
+        np.testing.assert_allclose(v, [0.01, 0.0004], rtol=1e-12)
+
+
+def test_headings_of_poses_without_a_mapped_landmark_follow_the_odometry() -> None:
+    """``_fill_headings``: a pose's missing heading is its neighbour's plus (or, from the
+    next pose, minus) the turn between them, ``odom[k]`` leading from pose ``k-1`` to ``k``:
+    turns 0.1, 0.2, 0.3 from a heading 0.5 give 0.6, 0.8, 1.1, forwards and backwards."""
+    from bomgraph.stmds.localisation import _fill_headings
+
+    odoms = np.array([[0.1, 0.0, 0.1], [0.1, 0.0, 0.2], [0.1, 0.0, 0.3]])
+    win = _held(odoms, np.zeros((3, 3)))
+    ks = np.arange(4)
+    want = [0.5, 0.6, 0.8, 1.1]
+    nan = math.nan
+    np.testing.assert_allclose(_fill_headings(win, ks, np.array([0.5, nan, nan, nan])), want,
+                               rtol=1e-12)
+    np.testing.assert_allclose(_fill_headings(win, ks, np.array([nan, nan, nan, 1.1])), want,
+                               rtol=1e-12)
+    np.testing.assert_allclose(_fill_headings(win, ks, np.array([nan, 0.6, nan, nan])), want,
+                               rtol=1e-12)

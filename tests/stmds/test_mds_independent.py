@@ -10,6 +10,7 @@ relabelling, and trilateration against a generic least-squares solver.
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from scipy.optimize import least_squares
 
 from bomgraph.stmds.mds import classical_scaling, double_centre, raw_stress, smacof, trilaterate
@@ -156,3 +157,61 @@ def test_prune_low_degree_is_the_k_core_by_peeling_one_vertex_at_a_time() -> Non
         np.testing.assert_array_equal(prune_low_degree(n, f, s, 3), alive)
         sizes.append(int(alive.sum()))
     assert min(sizes) == 0 and 10 < np.median(sizes) < 30
+
+
+def test_trilaterate_start_is_the_weighted_linear_solve_and_refinement_never_raises_cost() -> None:
+    """With ``n_refine=0`` the answer is the linear solve of the squared-range equations
+    ``2 a_i . x - |x|^2 = |a_i|^2 - r_i^2`` weighted by ``1 / var(r_i^2) = 1 / (4 r_i^2 v_i)``,
+    written here as normal equations; the Gauss-Newton refinement keeps a step only if the
+    range cost falls, so with coarse ranges (where a full step can overshoot) the refined
+    cost is never above the start's."""
+    rng = np.random.default_rng(45)
+    for _ in range(200):
+        anchors = rng.uniform(0, 2.5, (5, 2))
+        x = rng.uniform(0.3, 2.2, 2)
+        var = rng.uniform(1e-3, 0.09, 5)
+        r = np.abs(np.linalg.norm(anchors - x, axis=1) + rng.normal(0, 1, 5) * np.sqrt(var))
+        start = trilaterate(anchors, r, var, n_refine=0)
+        a = np.column_stack([2.0 * anchors, -np.ones(5)])
+        y = (anchors ** 2).sum(1) - r ** 2
+        w = 1.0 / (4.0 * r ** 2 * var)
+        sol = np.linalg.solve(a.T @ (w[:, None] * a), a.T @ (w * y))
+        np.testing.assert_allclose(start, sol[:2], rtol=1e-7, atol=1e-9)
+
+        def cost(p: np.ndarray) -> float:
+            return float((((r - np.linalg.norm(anchors - p, axis=1)) ** 2) / var).sum())
+
+        assert cost(trilaterate(anchors, r, var)) <= cost(start) * (1 + 1e-12)
+
+
+def test_smacof_is_scale_equivariant_including_when_it_stops() -> None:
+    """Distances and start scaled by 1000: the same iterations (``tol`` is relative to the
+    stress), the points scaled by 1000, Stress-1 unchanged."""
+    rng, x, f, s, d = _graph(30, 46)
+    d_noisy = d * (1 + 0.05 * rng.standard_normal(len(d)))
+    init = x + rng.normal(0, 0.3, x.shape)
+    a = smacof(30, f, s, d_noisy, init=init, tol=1e-5)
+    b = smacof(30, f, s, 1000.0 * d_noisy, init=1000.0 * init, tol=1e-5)
+    assert a.converged and b.converged and a.n_iter == b.n_iter > 3
+    np.testing.assert_allclose(b.points, 1000.0 * a.points, rtol=1e-9, atol=1e-9)
+    assert b.stress1 == pytest.approx(a.stress1, rel=1e-9)
+
+
+def test_sparse_laplacian_solver_is_the_centred_pseudo_inverse() -> None:
+    """The sparse-LU path (grounded vertex, then centred) is ``V^+ b`` like the dense one:
+    forced with ``dense_max=0``, real and complex ``b``."""
+    from bomgraph.stmds.mds import LaplacianSolver
+
+    rng, x, f, s, _ = _graph(40, 47)
+    w = rng.uniform(0.5, 2.0, len(f))
+    lap = np.zeros((40, 40))
+    np.add.at(lap, (f, s), -w)
+    np.add.at(lap, (s, f), -w)
+    lap[np.diag_indices(40)] = -lap.sum(1)
+    b = rng.normal(size=(40, 2))
+    b -= b.mean(0)
+    want = np.linalg.pinv(lap) @ b
+    solver = LaplacianSolver(40, f, s, w, dense_max=0)
+    np.testing.assert_allclose(solver.solve(b), want, atol=1e-10)
+    got = solver.solve(b[:, 0] + 1j * b[:, 1])
+    np.testing.assert_allclose(np.column_stack([got.real, got.imag]), want, atol=1e-10)

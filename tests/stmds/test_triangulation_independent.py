@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from bomgraph.geometry import between, bearings_to, compose
-from bomgraph.stmds.triangulation import (compose_odometry, pair_squared_distances,
+from bomgraph.stmds.triangulation import (compose_odometry, gate_points, pair_squared_distances,
                                           point_covariance, range_variances, triangulate_rays)
 
 
@@ -171,3 +171,22 @@ def test_pair_distances_do_not_depend_on_a_mirrored_world_the_order_or_the_wrap(
     for f, s, d, v in zip(base.first, base.second, base.squared_distance_m2, base.variance_m4):
         dd, vv = key[(f, s)]
         assert abs(dd - d) <= 1e-12 * d and abs(vv - v) <= 1e-10 * v
+
+
+def test_gates_refuse_a_point_behind_the_second_ray_and_compare_sigma_not_variance() -> None:
+    """Hand-made rays: pose t-1 at the origin, moved 1 m ahead without turning, a landmark at
+    (0.5, 1). With the second bearing reversed the rays still meet there, in front of ray 1
+    (``r1 > 0``) but behind ray 2 (``r2 < 0``): refused. The relative gate compares the
+    depth's std. dev. with ``max_relative_range_sigma * r1``: a std. dev. of 0.3 r1 passes at
+    0.31 and is refused at 0.29."""
+    odom = np.array([1.0, 0.0, 0.0])
+    a = np.array([np.arctan2(1.0, 0.5)] * 2)
+    b = np.array([np.arctan2(1.0, -0.5), np.arctan2(1.0, -0.5) - np.pi])
+    tri = triangulate_rays(odom, a, b)
+    np.testing.assert_allclose(tri.points_xy, [[0.5, 1.0], [0.5, 1.0]], atol=1e-12)
+    assert tri.range_prev_m[1] > 0 > tri.range_now_m[1]
+    assert gate_points(tri).tolist() == [True, False]
+    front = tri.subset(np.array([0]))
+    var = (0.3 * front.range_prev_m) ** 2
+    assert gate_points(front, var, max_relative_range_sigma=0.31).tolist() == [True]
+    assert gate_points(front, var, max_relative_range_sigma=0.29).tolist() == [False]
