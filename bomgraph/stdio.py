@@ -191,6 +191,15 @@ def hold_standard_descriptors() -> None:
             _CLOSED_AT_START.add(fd)
 
 
+def open_input(path: str | os.PathLike[str]) -> IO[bytes]:
+    """``open(path, "rb")``, but the name of a descriptor that :func:`hold_standard_descriptors`
+    found closed (``/dev/stdin`` under ``<&-``) raises OSError: reading it read the /dev/null
+    held on it, an empty input refused for what it lacked (h93)."""
+    if _CLOSED_AT_START and (fd := _own_descriptor(os.fspath(path))) in _CLOSED_AT_START:
+        raise OSError(errno.EBADF, f"descriptor {fd} was closed when bomgraph started")
+    return open(path, "rb")
+
+
 def standard_output() -> IO[str]:
     """``sys.stdout`` for ``--out -``, refused when closed (``>&-``: a traceback before, h83)."""
     if sys.stdout is None:
@@ -581,6 +590,6 @@ def _fsync_dir(d: str) -> None:
 
 __all__ = ["STDIO", "MAX_LINE_BYTES", "MAX_INPUT_BYTES", "OutputPathError", "InputTooLargeError",
            "line_too_long", "input_too_large", "bounded_lines", "read_bounded", "read_regular_file",
-           "copy_bounded", "hold_standard_descriptors", "standard_output", "check_output_path",
-           "AtomicOutput", "output_file", "write_text", "write_figure", "FolderBusyError",
-           "make_folder", "folder_lock", "signals_held"]
+           "copy_bounded", "hold_standard_descriptors", "open_input", "standard_output",
+           "check_output_path", "AtomicOutput", "output_file", "write_text", "write_figure",
+           "FolderBusyError", "make_folder", "folder_lock", "signals_held"]
