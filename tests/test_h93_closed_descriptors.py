@@ -80,3 +80,32 @@ def test_a_stdout_appended_to_spelled_with_two_leading_slashes_is_appended_to(
     assert done.returncode == 0, done.stderr
     text = (work / "f.txt").read_text()
     assert text.startswith("kept\n{\"format\": \"bomgraph-stream\""), text[:80]
+
+
+def test_main_in_a_process_that_closed_its_sys_stdin(tmp_path: Path,
+                                                     monkeypatch: pytest.MonkeyPatch,
+                                                     capsys: pytest.CaptureFixture[str]) -> None:
+    """``sys.stdin.close()`` in the caller, then :func:`bomgraph.cli.main` with ``-`` as the
+    input: ValueError (I/O operation on closed file) came out of main(), a traceback, where
+    h92 took a closed ``sys.stdout`` or ``sys.stderr`` for the shell's ``>&-``. A closed
+    ``sys.stdin`` is the shell's ``<&-`` now: ``-`` refused in one line, exit 2, and the
+    caller's ``sys.stdin`` left as it was. Fails before h93."""
+    import io
+
+    from bomgraph.cli import main
+
+    assert main(["simulate", "--steps", "5", "--out", str(tmp_path / "s.jsonl")]) == 0
+    text = io.StringIO("")
+    text.close()
+    with open(tmp_path / "s.jsonl", encoding="utf-8") as binary:  # with a buffer, as stdin
+        pass
+    for closed in (text, binary):
+        monkeypatch.setattr(sys, "stdin", closed)
+        capsys.readouterr()
+        assert main(["run", "-", "--method", "triangulate", "--out",
+                     str(tmp_path / "r.est")]) == 2
+        assert sys.stdin is closed
+        assert "-: the standard input is closed" in capsys.readouterr().err
+        assert main(["evaluate", "-", str(tmp_path / "s.jsonl")]) == 2
+        assert "-: the standard input is closed" in capsys.readouterr().err
+        assert not (tmp_path / "r.est").exists()
