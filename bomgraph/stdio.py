@@ -252,7 +252,8 @@ def _fd_name(path: str) -> re.Match[str] | None:
     """The name of a descriptor that ``path`` is, or that its symbolic links lead to (``out
     -> /dev/stdout``: the file behind it was replaced, ``>> f`` lost f too), else None."""
     for _ in range(40):  # the kernel's limit of links followed
-        path = "/" + os.path.abspath(path).lstrip("/")  # //dev/fd/1 too, which abspath keeps
+        path = os.path.abspath(path)
+        path = path[1:] if path.startswith("//") else path  # //dev/fd/1: abspath keeps it
         m = _FD_NAME.match(path)
         if m is not None or not os.path.islink(path):
             return m
