@@ -109,3 +109,40 @@ def test_main_in_a_process_that_closed_its_sys_stdin(tmp_path: Path,
         assert main(["evaluate", "-", str(tmp_path / "s.jsonl")]) == 2
         assert "-: the standard input is closed" in capsys.readouterr().err
         assert not (tmp_path / "r.est").exists()
+
+
+def _ok(k: int, _: object) -> tuple[int, dict]:
+    return k, {"ok": True}
+
+
+def _one_dies(k: int, _: object) -> tuple[int, dict]:
+    if k == 1:
+        import time
+
+        time.sleep(0.3)  # after task 0's result is out: the worker starts after that
+        os._exit(3)
+    return k, {"ok": True}
+
+
+def test_two_dispatches_under_way_with_stdout_closed(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Two dispatches under way at once (two ``compare`` calls in two threads of a process
+    whose ``sys.stdout`` is None or closed): the one that had put /dev/null on
+    ``sys.stdout`` put None back when it ended, while the other one's workers still started
+    (one of its workers died: a pool of its own), and loky's flush raised AttributeError out
+    of it, h92's fault again (seen with two threads: ``AttributeError("'NoneType' object
+    has no attribute 'flush'")``). Here the two are interleaved in one thread. Fails before
+    h93."""
+    from bomgraph.processes import dispatch
+
+    monkeypatch.setattr(sys, "stdout", None)
+    failed = lambda k, why: {"ok": False, "error": why}  # noqa: E731
+    first = dispatch(_ok, [0, 1], [None, None], 1, failed)
+    out_a = [next(first)]
+    second = dispatch(_one_dies, [0, 1], [None, None], 1, failed)
+    out_b = [next(second)]
+    out_a += list(first)  # ended: the second is still under way
+    assert sys.stdout is not None
+    out_b += list(second)
+    assert sys.stdout is None
+    assert sorted((k, r["ok"]) for k, r in out_a) == [(0, True), (1, True)]
+    assert sorted((k, r["ok"]) for k, r in out_b) == [(0, True), (1, False)], out_b
