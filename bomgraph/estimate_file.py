@@ -32,7 +32,7 @@ from .jsonio import (DuplicateKeyError, find_nonfinite, is_id, is_int, is_num, l
                      loads_strict, options_from_json, path_of, unparsable_at,
                      version_problem)
 from .mapper import Checkpoint, MapEstimate
-from .stdio import MAX_LINE_BYTES, bounded_lines, line_too_long
+from .stdio import MAX_LINE_BYTES, bounded_lines, line_too_long, open_input
 from .stream_identity import StreamIdentity, stream_file_identity, stream_identity
 
 
@@ -358,7 +358,7 @@ def read_estimate(path: str | os.PathLike[str]) -> EstimateFile:
     lines, the line the key is on)."""
     path = file_name(path, "estimate path", StreamFormatError)
     try:
-        fh = open(path, "rb")
+        fh = open_input(path)
     except OSError as exc:
         raise StreamFormatError(f"cannot open: {exc.strerror}", path=path) from None
     with fh:

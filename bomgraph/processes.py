@@ -106,6 +106,12 @@ def dispatch(func: Callable[[int, Any], tuple[int, dict[str, Any]]], index: Sequ
                 yield k, res
 
 
+#: :func:`_flushable_std_streams`'s: the dispatches under way, the streams put aside for them
+_STD_LOCK = threading.Lock()
+_STD_HELD: dict[str, tuple[Any, Any]] = {}
+_STD_USERS = [0]
+
+
 @contextlib.contextmanager
 def _flushable_std_streams() -> Iterator[None]:
     """``sys.stdout`` and ``sys.stderr`` writing to /dev/null while the workers may start, each
@@ -113,20 +119,27 @@ def _flushable_std_streams() -> Iterator[None]:
     ``sys.stdout.close()``), and put back after (unless set meanwhile). loky flushes both as
     it starts each worker, from any of its threads: ``compare --jobs 2 >&-`` ended in a
     traceback (AttributeError), and ``compare`` with ``Executor("processes")`` in a process
-    whose ``sys.stdout`` was closed raised ValueError (h92)."""
-    swapped: dict[str, tuple[Any, Any]] = {}
-    for name in ("stdout", "stderr"):
-        stream = getattr(sys, name)
-        if stream is None or getattr(stream, "closed", False):
-            swapped[name] = (stream, open(os.devnull, "w", encoding="utf-8"))
-            setattr(sys, name, swapped[name][1])
+    whose ``sys.stdout`` was closed raised ValueError (h92). Put back when the last of the
+    dispatches under way ends: one in another thread that ended first put back None while
+    this one's workers were still starting, AttributeError again (h93)."""
+    with _STD_LOCK:
+        for name in ("stdout", "stderr"):
+            stream = getattr(sys, name)
+            if name not in _STD_HELD and (stream is None or getattr(stream, "closed", False)):
+                _STD_HELD[name] = (stream, open(os.devnull, "w", encoding="utf-8"))
+                setattr(sys, name, _STD_HELD[name][1])
+        _STD_USERS[0] += 1
     try:
         yield
     finally:
-        for name, (stream, null) in swapped.items():
-            if getattr(sys, name) is null:
-                setattr(sys, name, stream)
-            null.close()
+        with _STD_LOCK:
+            _STD_USERS[0] -= 1
+            if not _STD_USERS[0]:
+                for name, (stream, null) in _STD_HELD.items():
+                    if getattr(sys, name) is null:
+                        setattr(sys, name, stream)
+                    null.close()
+                _STD_HELD.clear()
 
 
 def daemonic() -> bool:

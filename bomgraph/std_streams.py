@@ -112,8 +112,9 @@ def closed_streams_as_none() -> Iterator[None]:
     (``sys.stdout.close()``) taken for None while a command runs, as the shell's ``>&-``
     leaves it: its lines dropped, ``--out -`` refused as closed; put back after. Before (h92)
     :func:`bomgraph.cli.main` wrote its output, then raised ValueError (I/O operation on
-    closed file) at the first line it printed."""
-    closed = {name: stream for name in ("stdout", "stderr")
+    closed file) at the first line it printed. A closed ``sys.stdin`` is the shell's ``<&-``:
+    ``-`` refused as closed, where ValueError came out of main() (h93)."""
+    closed = {name: stream for name in ("stdin", "stdout", "stderr")
               if getattr(stream := getattr(sys, name), "closed", False) is True}
     for name in closed:
         setattr(sys, name, None)

@@ -46,6 +46,8 @@ from typing import IO, Any, Callable, Iterator, Sequence
 
 from .checks import file_name, items
 from .claims import new_temp_file, release, remove_leftovers
+from .descriptors import (_CLOSED_AT_START, _fd_name, _own_descriptor,  # noqa: F401
+                          hold_standard_descriptors, open_input)
 from .errors import BomgraphError
 
 _log = logging.getLogger(__name__)
@@ -57,10 +59,6 @@ MAX_LINE_BYTES = 64 * 2**20
 #: the largest text input bomgraph reads (a stream, an estimate, a dataset file, stdin).
 MAX_INPUT_BYTES = 4 * 2**30
 _CHUNK = 2**20
-#: names that stand for an already open descriptor: written directly, never renamed over.
-_FD_NAME = re.compile(r"^/(dev/(stdout|stderr|stdin|fd/(\d+))"
-                      r"|proc/(self|thread-self|\d+)(?:/task/\d+)?/fd/(\d+))$")
-_STANDARD = {"stdin": 0, "stdout": 1, "stderr": 2}
 
 
 class OutputPathError(BomgraphError):
@@ -164,33 +162,6 @@ def copy_bounded(src: IO[bytes], dst: IO[bytes], path: str) -> None:
         dst.write(chunk)
 
 
-#: the standard descriptors that :func:`hold_standard_descriptors` found closed
-_CLOSED_AT_START: set[int] = set()
-
-
-def hold_standard_descriptors() -> None:
-    """/dev/null on each of descriptors 0, 1 and 2 that is closed (``<&-``, ``>&-``,
-    ``2>&-``), for the program (:func:`bomgraph.cli.program`) before it opens anything: else
-    the first file it opened took that number, and whatever wrote to the descriptor after (a
-    method's C library, a worker process, which inherits it) wrote into that file (h92: text
-    a method wrote to descriptor 1 landed in ``compare``'s ``.bomgraph.lock``). Python's
-    ``sys.stdin``/``sys.stdout``/``sys.stderr`` stay None: ``-`` is still refused as closed,
-    and so is ``--out /dev/stdout`` (:func:`check_output_path`)."""
-    for fd in (0, 1, 2):
-        try:
-            os.fstat(fd)
-            continue
-        except OSError:
-            pass
-        with contextlib.suppress(OSError):  # no /dev/null to open: left closed, as before
-            null = os.open(os.devnull, os.O_RDWR)  # the lowest free number: fd itself
-            if null != fd:
-                os.dup2(null, fd)
-                os.close(null)
-            os.set_inheritable(fd, True)  # as the shell's would be: worker processes get it
-            _CLOSED_AT_START.add(fd)
-
-
 def standard_output() -> IO[str]:
     """``sys.stdout`` for ``--out -``, refused when closed (``>&-``: a traceback before, h83)."""
     if sys.stdout is None:
@@ -237,30 +208,6 @@ def _direct(path: str, st: os.stat_result | None) -> bool:
         return True
     sock = stat.S_ISSOCK(st.st_mode) and _own_descriptor(path) is not None
     return sock or stat.S_ISREG(st.st_mode) and _fd_name(path) is not None
-
-
-def _fd_name(path: str) -> re.Match[str] | None:
-    """The name of a descriptor that ``path`` is, or that its symbolic links lead to (``out
-    -> /dev/stdout``: the file behind it was replaced, ``>> f`` lost f too), else None."""
-    for _ in range(40):  # the kernel's limit of links followed
-        path = os.path.abspath(path)
-        m = _FD_NAME.match(path)
-        if m is not None or not os.path.islink(path):
-            return m
-        try:
-            path = os.path.join(os.path.dirname(path), os.readlink(path))
-        except OSError:  # gone meanwhile: the write says so
-            return None
-    return None
-
-
-def _own_descriptor(path: str) -> int | None:
-    """The descriptor of this process that ``path`` names (``/dev/stdout``: 1, ``/dev/fd/N``,
-    ``/proc/self/fd/N``: N; through links too), else None (another process's, or none)."""
-    m = _fd_name(path)
-    if m is None or (m[4] not in (None, "self", "thread-self") and int(m[4]) != os.getpid()):
-        return None
-    return _STANDARD[m[2]] if m[2] in _STANDARD else int(m[3] or m[5])
 
 
 def _open_direct(path: str, st: os.stat_result) -> int:
@@ -592,6 +539,6 @@ def _fsync_dir(d: str) -> None:
 
 __all__ = ["STDIO", "MAX_LINE_BYTES", "MAX_INPUT_BYTES", "OutputPathError", "InputTooLargeError",
            "line_too_long", "input_too_large", "bounded_lines", "read_bounded", "read_regular_file",
-           "copy_bounded", "hold_standard_descriptors", "standard_output", "check_output_path",
-           "AtomicOutput", "output_file", "write_text", "write_figure", "FolderBusyError",
-           "check_folder", "make_folder", "folder_lock", "signals_held"]
+           "copy_bounded", "hold_standard_descriptors", "open_input", "standard_output",
+           "check_output_path", "AtomicOutput", "output_file", "write_text", "write_figure",
+           "FolderBusyError", "check_folder", "make_folder", "folder_lock", "signals_held"]

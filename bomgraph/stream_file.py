@@ -22,7 +22,7 @@ from .jsonio import (MAX_ID, DuplicateKeyError, decode_utf8, find_nonfinite, is_
                      is_num, loads_strict, unparsable_at, version_problem)
 from .plausibility import (OdometryScale, bearings_problem, header_problems, step_problem,
                            truth_problem)
-from .stdio import MAX_LINE_BYTES, bounded_lines, line_too_long, output_file
+from .stdio import MAX_LINE_BYTES, bounded_lines, line_too_long, open_input, output_file
 from .stream import Prior, Step, Stream, StreamHeader, Truth
 
 _log = logging.getLogger(__name__)
@@ -309,7 +309,7 @@ class StreamReader:
         self.path = file_name(path, "stream path", StreamFormatError)
         self._warn = warn
         try:
-            self._fh: IO[bytes] = open(self.path, "rb")
+            self._fh: IO[bytes] = open_input(self.path)
         except OSError as exc:
             raise StreamFormatError(f"cannot open: {exc.strerror}", path=self.path) from None
         try:
@@ -522,7 +522,7 @@ def _check_type(value: Any, kind: type, key: str) -> None:
 def count_steps(stream_path: str | os.PathLike[str]) -> int:
     """The number of step lines of a stream file (its lines after the header), without
     parsing them: for a progress bar's total."""
-    with open(stream_path, "rb") as fh:  # bounded: /dev/zero is refused, not counted forever
+    with open_input(stream_path) as fh:  # bounded: /dev/zero is refused, not counted forever
         n = sum(1 for _ in bounded_lines(fh, stream_path))
     return max(n - 1, 0)
 

@@ -25,7 +25,7 @@ import numpy as np
 from ..errors import DatasetError
 from ..jsonio import MAX_ID
 from ..plausibility import MAX_BEARING_SIGMA_RAD, MIN_BEARING_SIGMA_RAD
-from ..stdio import MAX_LINE_BYTES, line_too_long
+from ..stdio import MAX_LINE_BYTES, line_too_long, open_input
 
 FieldKind = Literal["int", "float"]
 _CHUNK = 2**20
@@ -119,7 +119,7 @@ def read_lines(path: str | os.PathLike[str], *, comment: str | None = "#") -> It
     """
     p = Path(path)
     try:
-        fh = open(p, "rb")
+        fh = open_input(p)
     except FileNotFoundError:
         raise DatasetError(f"{p}: file not found; check the path") from None
     except OSError as exc:

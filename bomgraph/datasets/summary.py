@@ -18,18 +18,20 @@ def import_summary(stream: Stream) -> str:
     """The summary of an imported ``stream``: ``N steps, N bearings, N landmarks; bearing
     sigma S rad, odometry sigma [per step, median] X m, Y m, T rad[; N priors (landmark
     distances)][; FIX of vertex V (step t) not used: a gauge]; truth: ...`` (the bracketed
-    parts only when there are some)."""
+    parts only when there are some; ``no odometry`` for the sigmas of a single pose)."""
     header = stream.header
     n_brg = sum(len(st.landmark_ids) for st in stream.steps)
+    moved = [st for st in stream.steps if st.odom is not None]
     odo, per_step = header.odometry_sigma, ""
-    if any(st.odom_sigma is not None for st in stream.steps):  # each step has its own
-        odo = tuple(np.median([st.odometry_sigma(header) for st in stream.steps
-                               if st.odom is not None], axis=0))
+    if any(st.odom_sigma is not None for st in moved):  # each step has its own
+        odo = tuple(np.median([st.odometry_sigma(header) for st in moved], axis=0))
         per_step = "per step, median "
-    parts = [f"{len(stream.steps)} steps, {n_brg} bearings, "
-             f"{len(stream.landmark_ids())} landmarks",
-             f"bearing sigma {header.bearing_sigma_rad:.4f} rad, odometry sigma {per_step}"
-             f"{odo[0]:.4f} m, {odo[1]:.4f} m, {odo[2]:.4f} rad"]
+    # one pose, no odometry (h93): not "odometry sigma 0.0000 m, ...", as if it were exact
+    odo_s = (f"odometry sigma {per_step}{odo[0]:.4f} m, {odo[1]:.4f} m, {odo[2]:.4f} rad"
+             if moved else "no odometry")
+    parts = [f"{_plural(len(stream.steps), 'step')}, {_plural(n_brg, 'bearing')}, "
+             f"{_plural(len(stream.landmark_ids()), 'landmark')}",
+             f"bearing sigma {header.bearing_sigma_rad:.4f} rad, {odo_s}"]
     if header.priors:
         parts.append(f"{_plural(len(header.priors), 'prior')} (landmark distances)")
     fixed = (header.meta or {}).get("fixed_vertex_ids") or []

@@ -115,3 +115,23 @@ def test_import_g2o_summary_names_the_priors_and_the_fix_it_carried(tmp_path, ca
     assert main(["import", "mrclam", str(tmp_path / "m"), "--robot", "1", "--out",
                  str(tmp_path / "m.jsonl")]) == 0
     assert "prior" not in capsys.readouterr().out  # none: not a word about them
+
+
+def test_import_summary_of_one_pose_says_no_odometry_and_counts_in_the_singular(tmp_path,
+                                                                                capsys):
+    """A g2o file of one pose (bearings, no EDGE_SE2) imports as a stream of one step and no
+    odometry; its summary line said ``1 steps, 1 bearings, 1 landmarks; ... odometry sigma
+    0.0000 m, 0.0000 m, 0.0000 rad``, as if the odometry were exact; it says ``no
+    odometry`` now, and counts one step, bearing, landmark and prior in the singular (h93's
+    review of h92, who wrote ``1 prior`` but left ``1 steps``). Fails before h93."""
+    from bomgraph.cli import main
+
+    (tmp_path / "one.g2o").write_text(
+        '# bomgraph header: {"priors": [{"i": 100, "j": 101, "distance_m": 5.0, '
+        '"sigma_m": 0.1}]}\nVERTEX_SE2 1 0 0 0\nVERTEX_XY 100 5 0\nVERTEX_XY 101 0 5\n'
+        "EDGE_BEARING_SE2_XY 1 100 0.0 400\nFIX 1\n")
+    assert main(["import", "g2o", str(tmp_path / "one.g2o"), "--out",
+                 str(tmp_path / "one.jsonl")]) == 0
+    out = capsys.readouterr().out
+    assert "1 step, 1 bearing, 1 landmark; " in out, out
+    assert "odometry sigma" not in out and ", no odometry; 1 prior (landmark distances); " in out
