@@ -508,17 +508,20 @@ class FolderBusyError(BomgraphError):
 
 
 def check_folder(folder: str | os.PathLike[str]) -> None:
-    """Refuse an output folder that is a file, or lies under one (:class:`OutputPathError`,
-    naming it, instead of the bare ``[Errno 17] File exists`` or ``[Errno 20] Not a
-    directory``); nothing is created."""
+    """Refuse an output folder that is or lies under a file or a link to a missing folder
+    (:class:`OutputPathError`, naming it, not ``[Errno 17]`` or ``[Errno 20]``); no mkdir."""
     path = Path(folder)
     for at in (path, *path.parents):   # the nearest one that exists must be a folder
+        name = "" if at == path else f"{os.fspath(at)} "
+        if os.path.exists(at) and not os.path.isdir(at):
+            raise OutputPathError(f"--out {os.fspath(folder)}: {name}is a file; give a folder "
+                                  f"(it is created if missing)")
         if os.path.exists(at):
-            if not os.path.isdir(at):
-                what = "is a file" if at == path else f"{os.fspath(at)} is a file"
-                raise OutputPathError(f"--out {os.fspath(folder)}: {what}; give a folder (it "
-                                      f"is created if missing)")
             return
+        if os.path.islink(at):   # mkdir does not follow it: [Errno 17] File exists
+            raise OutputPathError(f"--out {os.fspath(folder)}: {name}is a link to "
+                                  f"{os.readlink(at)}, which does not exist; create that "
+                                  f"folder, or give another")
 
 
 def make_folder(folder: str | os.PathLike[str]) -> None:

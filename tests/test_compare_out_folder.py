@@ -277,3 +277,25 @@ def test_an_out_that_is_or_lies_under_a_file_is_one_line_also_in_a_dry_run(
     assert len(err) == 1 and err[0].startswith(f"bomgraph: error: --out {out}: {named}; give "
                                                f"a folder"), err
     assert (tmp_path / "afile").read_text() == "mine\n"
+
+
+@pytest.mark.parametrize("dry_run", [False, True])
+@pytest.mark.parametrize("under", ["", "/sub"])
+def test_an_out_through_a_broken_link_is_one_line_also_in_a_dry_run(
+        tmp_path: Path, stream: Path, capsys: pytest.CaptureFixture, dry_run: bool,
+        under: str) -> None:
+    """h94: `--out LINK` (or LINK/sub) where LINK is a symbolic link to a missing folder:
+    `--dry-run` listed the runs (exit 0) and compare said `[Errno 17] File exists: 'LINK'`
+    (mkdir does not follow a link), naming neither --out nor the link."""
+    link = tmp_path / "results"
+    link.symlink_to(tmp_path / "gone")
+    out = f"{link}{under}"
+    args = ["compare", "--streams", str(stream), "--methods", "triangulate", "--jobs", "1",
+            "--no-figures", "--out", out] + (["--dry-run"] if dry_run else [])
+    assert main(args) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    named = "is" if not under else f"{link} is"
+    assert len(err) == 1 and err[0].startswith(
+        f"bomgraph: error: --out {out}: {named} a link to {tmp_path / 'gone'}, which does not "
+        f"exist; create that folder, or give another"), err
+    assert link.is_symlink() and not (tmp_path / "gone").exists()
