@@ -508,20 +508,20 @@ class FolderBusyError(BomgraphError):
 
 
 def check_folder(folder: str | os.PathLike[str]) -> None:
-    """Refuse an output folder that is or lies under a file or a link to a missing folder
-    (:class:`OutputPathError`, naming it, not ``[Errno 17]`` or ``[Errno 20]``); no mkdir."""
+    """Refuse an output folder that is empty or is or lies under a file or a link to a missing
+    folder (:class:`OutputPathError`, naming it, not ``[Errno 17]``/``[Errno 20]``); no mkdir."""
+    if not os.fspath(folder):   # Path('') is '.'
+        raise OutputPathError("--out is empty; give a folder ('.' for this one)")
     path = Path(folder)
     for at in (path, *path.parents):   # the nearest one that exists must be a folder
-        name = "" if at == path else f"{os.fspath(at)} "
-        if os.path.exists(at) and not os.path.isdir(at):
-            raise OutputPathError(f"--out {os.fspath(folder)}: {name}is a file; give a folder "
-                                  f"(it is created if missing)")
-        if os.path.exists(at):
+        if os.path.isdir(at):
             return
-        if os.path.islink(at):   # mkdir does not follow it: [Errno 17] File exists
-            raise OutputPathError(f"--out {os.fspath(folder)}: {name}is a link to "
-                                  f"{os.readlink(at)}, which does not exist; create that "
-                                  f"folder, or give another")
+        if os.path.lexists(at):   # mkdir does not follow a link: [Errno 17] File exists
+            what = (f"a link to {os.readlink(at)}, which does not exist; create that folder, "
+                    f"or give another" if not os.path.exists(at) else
+                    "a file; give a folder (it is created if missing)")
+            name = "" if at == path else f"{os.fspath(at)} "
+            raise OutputPathError(f"--out {os.fspath(folder)}: {name}is {what}")
 
 
 def make_folder(folder: str | os.PathLike[str]) -> None:

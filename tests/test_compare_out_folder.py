@@ -299,3 +299,17 @@ def test_an_out_through_a_broken_link_is_one_line_also_in_a_dry_run(
         f"bomgraph: error: --out {out}: {named} a link to {tmp_path / 'gone'}, which does not "
         f"exist; create that folder, or give another"), err
     assert link.is_symlink() and not (tmp_path / "gone").exists()
+
+
+@pytest.mark.parametrize("dry_run", [False, True])
+def test_an_empty_out_is_refused(tmp_path: Path, stream: Path, capsys: pytest.CaptureFixture,
+                                 monkeypatch: pytest.MonkeyPatch, dry_run: bool) -> None:
+    """h94: `--out ""` (an unset variable) wrote the results into the current folder (Path('')
+    is '.'); the files' --out say "--out is empty" (tests/hostile/test_io_hostile.py)."""
+    monkeypatch.chdir(tmp_path)
+    args = ["compare", "--streams", str(stream), "--methods", "triangulate", "--jobs", "1",
+            "--no-figures", "--out", ""] + (["--dry-run"] if dry_run else [])
+    assert main(args) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == ["bomgraph: error: --out is empty; give a folder ('.' for this one)"], err
+    assert not (tmp_path / "results.json").exists() and not (tmp_path / "cache").exists()
