@@ -299,6 +299,8 @@ def test_an_out_through_a_broken_link_is_one_line_also_in_a_dry_run(
         f"bomgraph: error: --out {out}: {named} a link to {tmp_path / 'gone'}, which does not "
         f"exist; create that folder, or give another"), err
     assert link.is_symlink() and not (tmp_path / "gone").exists()
+    (tmp_path / "gone").mkdir()   # a link to a folder is a folder
+    assert main(args) == 0
 
 
 @pytest.mark.parametrize("dry_run", [False, True])
