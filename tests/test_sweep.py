@@ -282,3 +282,19 @@ def test_scheduler_and_dask_local_together_are_refused(
     assert stop.value.code == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "--dask-local: not allowed with argument --scheduler" in err[0]
+
+
+@pytest.mark.parametrize("config", [False, True])
+def test_an_empty_scheduler_is_refused(runs: Path, tmp_path: Path,
+                                       capsys: pytest.CaptureFixture, config: bool) -> None:
+    """h94: `--scheduler ""` (an unset variable) ran on local processes without a word, and
+    with a sweep file set its `[executor]` aside too; a file's `scheduler = ""` is refused."""
+    (tmp_path / "sweep.toml").write_text(f'streams = ["{runs / "runs" / "r1.jsonl"}"]\n'
+                                         'methods = ["triangulate"]\n[executor]\njobs = 1\n')
+    what = (["--config", str(tmp_path / "sweep.toml")] if config else
+            ["--streams", str(runs / "runs" / "r1.jsonl"), "--methods", "triangulate"])
+    assert main(["compare", *what, "--scheduler", "", "--dry-run", "--out",
+                 str(tmp_path / "x")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == ["bomgraph: error: --scheduler is empty; give the address `dask scheduler` "
+                   "printed, e.g. tcp://HOST:8786"], err
