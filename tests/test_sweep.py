@@ -179,6 +179,11 @@ def test_a_stream_without_truth_gets_truth_free_scores_or_a_reference(
     ("streams = [\"runs/*.jsonl\"]\nmethods = [\"triangulate\"]\n[executor]\n"
      "dask_local = 2\nscheduler = \"tcp://127.0.0.1:8786\"\n",
      "executor: give one of dask_local and scheduler"),
+    # h94: dask_local = 0 with a scheduler passed (the README: "together are refused", and
+    # --dask-local 0 --scheduler ADDR is)
+    ("streams = [\"runs/*.jsonl\"]\nmethods = [\"triangulate\"]\n[executor]\n"
+     "dask_local = 0\nscheduler = \"tcp://127.0.0.1:8786\"\n",
+     "executor: give one of dask_local and scheduler"),
     ("streams = [\"runs/*.jsonl\"\n", "not valid TOML"),
     # session 12's hostile audit: each of these ran (or allocated) before it was refused
     ("streams = [\"runs/*.jsonl\"]\n[[methods]]\nname = \"stmds-smacof\"\n"
