@@ -234,7 +234,8 @@ def seed_landmarks(state: BatchState, estimate: MapEstimate, *, trim: float = 3.
     value of every graph landmark the map has is replaced by its map position.
 
     Returns the :class:`AlignedMap`; raises :class:`TooFewLandmarksError` if fewer than 3
-    graph landmarks are in the map, saying whether pending landmarks would enter now
+    graph landmarks are in the map, saying whether the map holds too few of the stream's
+    landmarks (ids not the stream's), or whether pending landmarks would enter now
     (``state.absorb()``; a graph built with ``admit=False``) or not: on a drifting recording
     the dead-reckoned rays of a whole run may admit none, and the hybrid aligns on the early
     trajectory and resects every pose, ``HybridMapper(header, seed_mapper=...)``.
@@ -243,8 +244,17 @@ def seed_landmarks(state: BatchState, estimate: MapEstimate, *, trim: float = 3.
     ids = np.array(sorted(problem.landmark_ids), np.int64)
     ref_xy = landmarks_from_values(state.values, ids)
     n_common = np.intersect1d(ids, estimate.landmark_ids).size
+    pending = problem.pending()
+    seen = np.intersect1d(np.union1d(ids, np.array(list(pending), np.int64)),
+                          estimate.landmark_ids).size   # of the stream's, graph or pending
+    if n_common < 3 and ids.size >= 3 and seen < 3:   # the graph has enough: the map has not
+        raise TooFewLandmarksError(
+            f"seed_landmarks: the graph holds {ids.size} landmarks, {n_common} of them in the "
+            f"map ({len(estimate)}), and 3 are needed to align the map onto them; " +
+            ("the map's landmark ids are not the stream's (it holds none the stream sees): "
+             "give a map of this stream" if not seen else
+             f"the map holds {seen} of the landmarks the stream sees: give a map of more"))
     if n_common < 3:
-        pending = problem.pending()
         cand = sorted(lid for lid, n_rays in pending.items() if n_rays >= 2)
         n_ok = int(problem.initial_points(*problem.rays_of(cand, state.poses))[1].sum())
         why = (f"{n_ok} of them intersect on the graph's poses: let them in first "

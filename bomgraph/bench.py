@@ -288,6 +288,9 @@ class Executor:
         all three are None they are taken from ``defaults`` (a sweep file's ``[executor]``:
         ``jobs``, ``scheduler``, ``dask_local``); any one given (the command line) sets the
         whole of ``defaults`` aside, as ``--jobs 1`` overrides a file's ``dask_local``."""
+        if scheduler == "":   # an unset variable: not "no scheduler", nor the file's
+            raise ConfigError("--scheduler is empty; give the address `dask scheduler` "
+                              "printed, e.g. tcp://HOST:8786")
         given = jobs is not None or scheduler is not None or dask_local is not None
         d = {} if given else dict(defaults or {})
         jobs = d.get("jobs", -1) if jobs is None else jobs

@@ -36,7 +36,7 @@ from .run_scoring import mark_self_scored, not_drawn_line, scored_against, score
 from .plots import MapPanel, error_vs_time_figure, final_maps_figure, map_figure
 from .out_folder import (RESULT_FILES, OutputRecord, estimate_paths, linked_folders,
                          planned_outputs, refuse_inputs_among_outputs, slug)
-from .stdio import check_folder, folder_lock, make_folder, write_figure, write_text
+from .stdio import check_folder, folder_lock, write_figure, write_text
 from .tables import HUGE, write_csv
 
 _log = logging.getLogger(__name__)
@@ -368,11 +368,11 @@ def compare(experiments: Sequence[Experiment], out_dir: str | os.PathLike[str], 
     """
     out = Path(out_dir)
     refs = references_for(experiments, paired_reference)  # a wrong label: before anything runs
+    check_folder(out_dir)   # first, as plan_compare: Path('') is '.'
     refuse_inputs_among_outputs(out, experiments)
     planned = planned_outputs(out, experiments, estimates=estimates, figures=figures)
-    record = OutputRecord(out)
-    record.refuse_foreign(planned, [out / "cache"] if use_cache else [])
-    make_folder(out)
+    (record := OutputRecord(out)).refuse_foreign(planned, [out / "cache"] if use_cache else [])
+    out.mkdir(parents=True, exist_ok=True)   # check_folder above
     with folder_lock(out, "`bomgraph compare`"), contextlib.ExitStack() as linked:
         for real, link in linked_folders(out, planned).items():  # two folders may link one
             linked.enter_context(folder_lock(real, f"`bomgraph compare` (into it, or through a "

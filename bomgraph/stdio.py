@@ -455,17 +455,20 @@ class FolderBusyError(BomgraphError):
 
 
 def check_folder(folder: str | os.PathLike[str]) -> None:
-    """Refuse an output folder that is a file, or lies under one (:class:`OutputPathError`,
-    naming it, instead of the bare ``[Errno 17] File exists`` or ``[Errno 20] Not a
-    directory``); nothing is created."""
+    """Refuse an output folder that is empty or is or lies under a file or a link to a missing
+    folder (:class:`OutputPathError`, naming it, not ``[Errno 17]``/``[Errno 20]``); no mkdir."""
+    if not os.fspath(folder):   # Path('') is '.'
+        raise OutputPathError("--out is empty; give a folder ('.' for this one)")
     path = Path(folder)
     for at in (path, *path.parents):   # the nearest one that exists must be a folder
-        if os.path.exists(at):
-            if not os.path.isdir(at):
-                what = "is a file" if at == path else f"{os.fspath(at)} is a file"
-                raise OutputPathError(f"--out {os.fspath(folder)}: {what}; give a folder (it "
-                                      f"is created if missing)")
+        if os.path.isdir(at):
             return
+        if os.path.lexists(at):   # mkdir does not follow a link: [Errno 17] File exists
+            what = (f"a link to {os.readlink(at)}, which does not exist; create that folder, "
+                    f"or give another" if not os.path.exists(at) else
+                    "a file; give a folder (it is created if missing)")
+            name = "" if at == path else f"{os.fspath(at)} "
+            raise OutputPathError(f"--out {os.fspath(folder)}: {name}is {what}")
 
 
 def make_folder(folder: str | os.PathLike[str]) -> None:

@@ -401,7 +401,7 @@ class _Reader:
             problem = scheduler_address_problem(out["scheduler"])
             if problem:
                 raise self.fail("executor.scheduler", problem)
-        if out.get("dask_local") and "scheduler" in out:
+        if "dask_local" in out and "scheduler" in out:   # as --dask-local 0 --scheduler A
             raise self.fail("executor", "give one of dask_local and scheduler, not both (a "
                                         "local cluster or an existing one)")
         return out

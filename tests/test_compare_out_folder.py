@@ -277,3 +277,41 @@ def test_an_out_that_is_or_lies_under_a_file_is_one_line_also_in_a_dry_run(
     assert len(err) == 1 and err[0].startswith(f"bomgraph: error: --out {out}: {named}; give "
                                                f"a folder"), err
     assert (tmp_path / "afile").read_text() == "mine\n"
+
+
+@pytest.mark.parametrize("dry_run", [False, True])
+@pytest.mark.parametrize("under", ["", "/sub"])
+def test_an_out_through_a_broken_link_is_one_line_also_in_a_dry_run(
+        tmp_path: Path, stream: Path, capsys: pytest.CaptureFixture, dry_run: bool,
+        under: str) -> None:
+    """h94: `--out LINK` (or LINK/sub) where LINK is a symbolic link to a missing folder:
+    `--dry-run` listed the runs (exit 0) and compare said `[Errno 17] File exists: 'LINK'`
+    (mkdir does not follow a link), naming neither --out nor the link."""
+    link = tmp_path / "results"
+    link.symlink_to(tmp_path / "gone")
+    out = f"{link}{under}"
+    args = ["compare", "--streams", str(stream), "--methods", "triangulate", "--jobs", "1",
+            "--no-figures", "--out", out] + (["--dry-run"] if dry_run else [])
+    assert main(args) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    named = "is" if not under else f"{link} is"
+    assert len(err) == 1 and err[0].startswith(
+        f"bomgraph: error: --out {out}: {named} a link to {tmp_path / 'gone'}, which does not "
+        f"exist; create that folder, or give another"), err
+    assert link.is_symlink() and not (tmp_path / "gone").exists()
+    (tmp_path / "gone").mkdir()   # a link to a folder is a folder
+    assert main(args) == 0
+
+
+@pytest.mark.parametrize("dry_run", [False, True])
+def test_an_empty_out_is_refused(tmp_path: Path, stream: Path, capsys: pytest.CaptureFixture,
+                                 monkeypatch: pytest.MonkeyPatch, dry_run: bool) -> None:
+    """h94: `--out ""` (an unset variable) wrote the results into the current folder (Path('')
+    is '.'); the files' --out say "--out is empty" (tests/hostile/test_io_hostile.py)."""
+    monkeypatch.chdir(tmp_path)
+    args = ["compare", "--streams", str(stream), "--methods", "triangulate", "--jobs", "1",
+            "--no-figures", "--out", ""] + (["--dry-run"] if dry_run else [])
+    assert main(args) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == ["bomgraph: error: --out is empty; give a folder ('.' for this one)"], err
+    assert not (tmp_path / "results.json").exists() and not (tmp_path / "cache").exists()

@@ -179,6 +179,11 @@ def test_a_stream_without_truth_gets_truth_free_scores_or_a_reference(
     ("streams = [\"runs/*.jsonl\"]\nmethods = [\"triangulate\"]\n[executor]\n"
      "dask_local = 2\nscheduler = \"tcp://127.0.0.1:8786\"\n",
      "executor: give one of dask_local and scheduler"),
+    # h94: dask_local = 0 with a scheduler passed (the README: "together are refused", and
+    # --dask-local 0 --scheduler ADDR is)
+    ("streams = [\"runs/*.jsonl\"]\nmethods = [\"triangulate\"]\n[executor]\n"
+     "dask_local = 0\nscheduler = \"tcp://127.0.0.1:8786\"\n",
+     "executor: give one of dask_local and scheduler"),
     ("streams = [\"runs/*.jsonl\"\n", "not valid TOML"),
     # session 12's hostile audit: each of these ran (or allocated) before it was refused
     ("streams = [\"runs/*.jsonl\"]\n[[methods]]\nname = \"stmds-smacof\"\n"
@@ -282,3 +287,19 @@ def test_scheduler_and_dask_local_together_are_refused(
     assert stop.value.code == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "--dask-local: not allowed with argument --scheduler" in err[0]
+
+
+@pytest.mark.parametrize("config", [False, True])
+def test_an_empty_scheduler_is_refused(runs: Path, tmp_path: Path,
+                                       capsys: pytest.CaptureFixture, config: bool) -> None:
+    """h94: `--scheduler ""` (an unset variable) ran on local processes without a word, and
+    with a sweep file set its `[executor]` aside too; a file's `scheduler = ""` is refused."""
+    (tmp_path / "sweep.toml").write_text(f'streams = ["{runs / "runs" / "r1.jsonl"}"]\n'
+                                         'methods = ["triangulate"]\n[executor]\njobs = 1\n')
+    what = (["--config", str(tmp_path / "sweep.toml")] if config else
+            ["--streams", str(runs / "runs" / "r1.jsonl"), "--methods", "triangulate"])
+    assert main(["compare", *what, "--scheduler", "", "--dry-run", "--out",
+                 str(tmp_path / "x")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == ["bomgraph: error: --scheduler is empty; give the address `dask scheduler` "
+                   "printed, e.g. tcp://HOST:8786"], err

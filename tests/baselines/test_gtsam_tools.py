@@ -114,6 +114,23 @@ def test_seeding_says_whether_letting_landmarks_in_would_help(noise_free: Stream
     assert f"{n_in} of them intersect on the graph's poses: let them in first" in str(err.value)
 
 
+def test_seeding_with_a_map_of_other_landmarks_says_so(noise_free: Stream) -> None:
+    """h94: a graph holding the stream's landmarks and a map of other ones (its ids not the
+    stream's) was told its pending rays "do not intersect (as on a drifting recording's
+    dead-reckoned poses)" and sent to the hybrid, on a noise-free stream; it is the map."""
+    state = gt.build_graph(noise_free.header, noise_free.steps)
+    n_in = len(state.problem.landmark_ids)
+    assert n_in >= 3
+    other = _mirrored(noise_free)
+    other = MapEstimate(np.asarray(other.landmark_ids) + 1000, other.landmarks_xy)
+    with pytest.raises(TooFewLandmarksError) as err:
+        gt.seed_landmarks(state, other)
+    text = str(err.value)
+    assert f"the graph holds {n_in} landmarks, 0 of them in the map ({len(other)})" in text
+    assert "the map's landmark ids are not the stream's" in text
+    assert "drifting" not in text and "HybridMapper" not in text
+
+
 def test_diagnose_a_good_graph(noisy: Stream) -> None:
     state = gt.build_graph(noisy.header, noisy.steps[:30])
     d = gt.diagnose(state.graph, state.values)
