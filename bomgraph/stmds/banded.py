@@ -6,7 +6,8 @@ one pose, so the pose block ``A`` of ``J^T J`` is block tridiagonal (3 x 3 block
 never the dense ``3 M x 3 M`` matrix unless the dense fallback asks), and the banded triangular
 solve :func:`.bundle_lm.arrow_inverse` needs for ``A``'s diagonal blocks of ``A^-1``
 (:func:`solve_lower_unit`). Every function gives the numbers of the dense construction it
-replaces, bit for bit.
+replaces (bit for bit with the OpenBLAS numpy and scipy bundle here, `scripts/check_identical.py`;
+a BLAS may group a short sum otherwise, so the tests ask for equality to rounding).
 """
 
 from __future__ import annotations

@@ -18,6 +18,18 @@ def _bits(x: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(x, dtype=float).view(np.int64)
 
 
+def _assert_close(x, y) -> None:
+    """Equal to rounding: two summation orders of the same products (a banded solve on the
+    trailing block against one on the whole; five nonzeros against a dense row) give the
+    same bits with the OpenBLAS that numpy and scipy bundle here (``scripts/check_identical.py``
+    and the map hashes in ``docs/measurements.md``), but a BLAS is free to group a short
+    sum otherwise, so the test asks for equality to rounding only."""
+    x, y = np.asarray(x), np.asarray(y)
+    assert x.shape == y.shape
+    np.testing.assert_array_equal(x == 0, y == 0)                  # the same structure
+    np.testing.assert_allclose(x, y, rtol=1e-12, atol=1e-14 * max(np.abs(y).max(), 1.0))
+
+
 def _assert_same_bits(x, y) -> None:
     if isinstance(x, tuple):
         assert isinstance(y, tuple) and len(x) == len(y)
@@ -67,8 +79,8 @@ def test_band_and_dense_pose_blocks_give_the_same_bits(seed: int) -> None:
 @pytest.mark.parametrize("n_p", [1, 5, 6, UNIT_COLUMNS - 1, UNIT_COLUMNS, 2 * UNIT_COLUMNS + 7,
                                  301])
 def test_unit_solve_is_one_dtbtrs_call_bit_for_bit(n_p: int) -> None:
-    """``U^-T [B, I]`` by trailing blocks equals LAPACK's ``dtbtrs`` on the whole ``[B, I]``,
-    bit for bit, zeros above the diagonal included."""
+    """``U^-T [B, I]`` by trailing blocks equals LAPACK's ``dtbtrs`` on the whole ``[B, I]``
+    (to rounding: :func:`_assert_close`), zeros above the diagonal included."""
     rng = np.random.default_rng(n_p)
     factor = rng.normal(size=(6, n_p))
     factor[5] = np.abs(factor[5]) + 0.5
@@ -78,8 +90,8 @@ def test_unit_solve_is_one_dtbtrs_call_bit_for_bit(n_p: int) -> None:
     whole, fail = lapack.dtbtrs(factor, np.column_stack([rhs, np.eye(n_p)]), uplo="U",
                                 trans="T")
     assert fail == 0
-    _assert_same_bits(solve_lower_unit(factor, rhs), whole)
-    _assert_same_bits(solve_lower_unit(factor, rhs[:, :0]), whole[:, 7:])
+    _assert_close(solve_lower_unit(factor, rhs), whole)
+    _assert_close(solve_lower_unit(factor, rhs[:, :0]), whole[:, 7:])
     singular = factor.copy()
     singular[5, n_p // 2] = 0.0
     assert solve_lower_unit(singular, rhs) is None
@@ -89,10 +101,10 @@ def test_unit_solve_is_one_dtbtrs_call_bit_for_bit(n_p: int) -> None:
 @pytest.mark.parametrize("make", [_long_window, _near_pose_window])
 def test_leverages_from_the_nonzeros_are_those_of_the_dense_rows(make) -> None:
     """``WindowInverse.leverages_at`` (each bearing row's five nonzeros) gives the bits of
-    ``leverages`` on the dense rows, on the arrow path and on the dense fallback."""
+    ``leverages`` on the dense rows (to rounding: :func:`_assert_close`), on the arrow path
+    and on the dense fallback."""
     prob, p0, q0 = make(21)
     _, blocks = prob.normal_equations(p0, q0)
     inverse = bundle_lm.WindowInverse(prob, blocks)
     assert (inverse._arrow is None) == (make is _near_pose_window)
-    _assert_same_bits(inverse.leverages_at(p0, q0),
-                      inverse.leverages(prob.bearing_rows(p0, q0)))
+    _assert_close(inverse.leverages_at(p0, q0), inverse.leverages(prob.bearing_rows(p0, q0)))
