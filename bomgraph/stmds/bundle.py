@@ -337,7 +337,7 @@ def _fit(u: np.ndarray, sig: np.ndarray, bearing_sigma_rad: float, brg: np.ndarr
                 # up to rounding whatever its noise, so r / sqrt(1 - h) would be rounding):
                 # it is neither tested nor counted in the sigma estimate
                 inverse = WindowInverse(prob, blocks)
-                h = inverse.leverages(prob.bearing_rows(poses, points))
+                h = inverse.leverages_at(poses, points)
                 determined = h < UNDETERMINED_LEVERAGE
                 res = np.where(determined, res / np.sqrt(np.clip(1.0 - h, 1e-6, 1.0)), 0.0)
             if not estimate_sigma or rnd == SIGMA_ROUNDS - 1:

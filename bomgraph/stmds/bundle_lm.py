@@ -12,6 +12,7 @@ from scipy.linalg import lapack, solve_triangular
 
 from ..angles import angle_residual
 from ..geometry import bearing_offsets, pair_bearings
+from .banded import PoseBlock, solve_lower_unit, upper_band
 
 #: Odometry std. devs. below this (m or rad) are raised to it: a zero std. dev. (the paper's
 #: simulator has no lateral slip, ``sigma_dy = 0``) would be an infinite weight, and a tiny one
@@ -130,7 +131,9 @@ class _Problem:
                          ) -> tuple[float, tuple[np.ndarray, ...]]:
         """The cost and the blocks of ``J^T J`` and ``J^T r`` (whitened), without the dense
         Jacobian: ``(cost, (A (P, P) poses, B (P, 2 L) poses x landmarks, C (L, 2, 2)
-        landmark blocks, g_poses (P,), g_landmarks (2 L,)))``, ``P = 3 (W - 1)``."""
+        landmark blocks, g_poses (P,), g_landmarks (2 L,)))``, ``P = 3 (W - 1)``; ``A`` is
+        a :class:`.banded.PoseBlock` where :func:`uses_arrow` (long windows), dense
+        otherwise."""
         cost, lin = self.evaluate(poses, points)
         return cost, self.blocks(lin)
 
@@ -155,7 +158,7 @@ class _Problem:
         m, n_lm = len(self.odoms), (self.n - self.n_pose_vars) // 2
         if self._onehot is None:
             self._setup_onehot(m, n_lm)
-        sel, b_flat, pose_of, lm_of, diag, upper, lower = self._onehot
+        sel, b_flat, pose_of, lm_of = self._onehot
         jbt, jat = jb.transpose(0, 2, 1), ja[1:].transpose(0, 2, 1)
         jp = np.empty((len(sel), 3))                        # d res / d pose k >= 1
         jp[:, :2] = -jl[sel]
@@ -163,12 +166,10 @@ class _Problem:
         d = jbt @ jb                                        # the 3 x 3 blocks on the diagonal
         d[:-1] += jat @ ja[1:]
         d += (pose_of @ (jp[:, :, None] * jp[:, None, :]).reshape(-1, 9)).reshape(m, 3, 3)
-        a = np.zeros((3 * m, 3 * m))
-        a4 = a.reshape(m, 3, m, 3)
-        a4[diag, :, diag, :] = d
         off = jat @ jb[1:]
-        a4[upper, :, lower, :] = off
-        a4[lower, :, upper, :] = off.transpose(0, 2, 1)
+        a = PoseBlock(d, off)
+        if not uses_arrow(3 * m, 2 * n_lm):       # short windows: the dense Schur complement
+            a = a.dense()
         gp = (jbt @ ro[:, :, None])[:, :, 0]
         gp[:-1] += (jat @ ro[1:, :, None])[:, :, 0]
         gp += pose_of @ (jp * rb[sel, None])
@@ -181,19 +182,17 @@ class _Problem:
     def _setup_onehot(self, m: int, n_lm: int) -> None:
         """Rays seen from a pose variable, the one-hot matrices summing per pose and per
         landmark (a matrix product is one call; the problem's rays do not change), where each
-        ray's pose x landmark products land in ``B``, and the pose blocks on and beside the
-        diagonal."""
+        ray's pose x landmark products land in ``B``."""
         sel = np.flatnonzero(self.k >= 1)
         k_sel = self.k[sel] - 1
         pose_of = np.zeros((m, len(sel)))
         pose_of[k_sel, np.arange(len(sel))] = 1.0
         lm_of = np.zeros((n_lm, len(self.k)))
         lm_of[self.lm, np.arange(len(self.k))] = 1.0
-        i = np.arange(m)
         # flat index in B (3 M, 2 L) of (pose variable 3 k + a, landmark variable 2 l + b)
         b_flat = ((3 * k_sel[:, None, None] + np.arange(3)[None, :, None]) * (2 * n_lm)
                   + 2 * self.lm[sel][:, None, None] + np.arange(2)[None, None, :])
-        self._onehot = (sel, b_flat, pose_of, lm_of, i, i[:-1], i[1:])
+        self._onehot = (sel, b_flat, pose_of, lm_of)
 
     def unpack(self, poses: np.ndarray, points: np.ndarray, delta: np.ndarray
                ) -> tuple[np.ndarray, np.ndarray]:
@@ -331,16 +330,50 @@ class WindowInverse:
         """Each bearing row's leverage (:meth:`_Problem.bearing_rows`, ``(R, n)``), in [0, 1]."""
         if self._arrow is None:
             return ray_leverages(self._info(), rows)
-        s, ainv_kk, ainv_b, schur = self._arrow
-        n_p = self.prob.n_pose_vars
-        js = rows * s                                  # the rows in the scaled variables
-        pc = self.prob.pose_col[self.prob.k]           # -1: seen from the fixed pose 0
-        var = pc >= 0
-        kk = np.where(var, pc // 3, 0)
+        js = rows * self._arrow[0]                     # the rows in the scaled variables
+        pc, var, kk = self._ray_poses()
         jp = np.take_along_axis(js, np.where(var, pc, 0)[:, None] + np.arange(3), axis=1)
         jp[~var] = 0.0
+        return self._arrow_leverages(jp, kk, self._pose_part(jp, kk)
+                                     - js[:, self.prob.n_pose_vars:])
+
+    def leverages_at(self, poses: np.ndarray, points: np.ndarray) -> np.ndarray:
+        """:meth:`leverages` of the bearing rows at ``poses``, ``points``
+        (:meth:`_Problem.bearing_rows`), the same numbers; on the arrow path from each row's
+        five nonzeros (three pose, two landmark entries), without the dense ``(R, n)`` rows."""
+        prob = self.prob
+        if self._arrow is None:
+            return self.leverages(prob.bearing_rows(poses, points))
+        s = self._arrow[0]
+        dp = _bearing_residuals(poses, points, prob.k, prob.lm, prob.theta)[1]
+        pc, var, kk = self._ray_poses()
+        c = pc[var]
+        jp = np.zeros((len(prob.k), 3))
+        jp[var, 0] = -dp[var, 0] * prob.w_b * s[c]
+        jp[var, 1] = -dp[var, 1] * prob.w_b * s[c + 1]
+        jp[var, 2] = -prob.w_b * s[c + 2]
+        v = self._pose_part(jp, kk)                    # minus the landmark entries
+        ray, lc = np.arange(len(prob.k)), 2 * prob.lm
+        v[ray, lc] -= dp[:, 0] * prob.w_b * s[prob.n_pose_vars + lc]
+        v[ray, lc + 1] -= dp[:, 1] * prob.w_b * s[prob.n_pose_vars + lc + 1]
+        return self._arrow_leverages(jp, kk, v)
+
+    def _ray_poses(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Each ray's pose column (-1: the fixed pose 0), whether it is a variable, and
+        its pose (0 for the fixed one)."""
+        pc = self.prob.pose_col[self.prob.k]
+        var = pc >= 0
+        return pc, var, np.where(var, pc // 3, 0)
+
+    def _pose_part(self, jp: np.ndarray, kk: np.ndarray) -> np.ndarray:
+        """``(A^-1 B)_k^T j_p`` per ray (``jp``: its scaled pose entries), ``(R, 2 L)``."""
+        ainv_b = self._arrow[2]
         w3 = ainv_b.reshape(-1, 3, ainv_b.shape[1])[kk]             # (R, 3, 2 L)
-        v = (jp[:, :, None] * w3).sum(1) - js[:, n_p:]
+        return (jp[:, :, None] * w3).sum(1)
+
+    def _arrow_leverages(self, jp: np.ndarray, kk: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """``j_p^T (A^-1)_kk j_p + v^T T^-1 v`` per ray (:func:`arrow_inverse`), in [0, 1]."""
+        _, ainv_kk, _, schur = self._arrow
         h = np.einsum("ri,rij,rj->r", jp, ainv_kk[kk], jp) + psd_quadratic_forms(
             schur, v, jacobi=False)
         return np.clip(h, 0.0, 1.0)
@@ -385,8 +418,6 @@ def _schur_step(blocks: tuple[np.ndarray, ...], lam: float) -> np.ndarray | None
     None when the damped system is singular or the step is not finite."""
     a, b, c, gp, gl = blocks
     n_p = len(gp)
-    a_d = a.copy()
-    a_d.flat[::n_p + 1] += lam * np.maximum(a.diagonal(), 1e-12)
     c_d = c.reshape(-1, 4).copy()                     # (c00, c01, c10, c11) per landmark
     c_d[:, ::3] += lam * np.maximum(c_d[:, ::3], 1e-12)
     det = c_d[:, 0] * c_d[:, 3] - c_d[:, 1] * c_d[:, 2]
@@ -396,8 +427,13 @@ def _schur_step(blocks: tuple[np.ndarray, ...], lam: float) -> np.ndarray | None
     g_l = gl.reshape(-1, 2)
     if n_p == 0:
         return -(c_inv * g_l[:, None, :]).sum(2).ravel()
-    if uses_arrow(n_p, len(gl)):
-        return _arrow_step(a_d, b, c_d, gp, gl)
+    if uses_arrow(n_p, len(gl)):             # the damped upper band alone
+        band_d = upper_band(a).copy()
+        band_d[5] += lam * np.maximum(band_d[5], 1e-12)
+        return _arrow_step(band_d, b, c_d, gp, gl)
+    a = np.asarray(a)
+    a_d = a.copy()
+    a_d.flat[::n_p + 1] += lam * np.maximum(a.diagonal(), 1e-12)
     b3 = b.reshape(n_p, -1, 2)
     bw = (b3[:, :, 0, None] * c_inv[None, :, 0] + b3[:, :, 1, None] * c_inv[None, :, 1]
           ).reshape(n_p, -1)
@@ -423,7 +459,7 @@ ARROW_MAX_COND = 1e9
 ARROW_MIN_POSE_VARS = 60
 
 
-def _arrow_step(a_d: np.ndarray, b: np.ndarray, c_d: np.ndarray, gp: np.ndarray,
+def _arrow_step(band_d: np.ndarray, b: np.ndarray, c_d: np.ndarray, gp: np.ndarray,
                 gl: np.ndarray) -> np.ndarray | None:
     """The damped step with the *poses* eliminated first, for long windows.
 
@@ -431,17 +467,18 @@ def _arrow_step(a_d: np.ndarray, b: np.ndarray, c_d: np.ndarray, gp: np.ndarray,
     touches one pose), so it is factorised banded (Cholesky, half-bandwidth 5) in ``O(P)``,
     and only the landmarks' ``2 L x 2 L`` Schur complement ``C - B^T A^-1 B`` is dense: ``O(P
     L^2)`` in all against ``O(P^3)`` for the dense Schur complement on the poses, the same
-    step to rounding. ``c_d``: the damped 2 x 2 landmark blocks flattened ``(L, 4)``. None if
-    a factorisation fails (not positive definite) or the step is not finite."""
+    step to rounding. ``band_d``: the damped pose block's upper band (:func:`.banded.upper_band`);
+    ``c_d``: the damped 2 x 2 landmark blocks flattened ``(L, 4)``. None if a factorisation
+    fails (not positive definite) or the step is not finite."""
     from scipy.linalg import LinAlgError, cho_solve_banded, cholesky_banded
 
     n_p, n_l = len(gp), len(gl)
-    band = np.zeros((6, n_p))
-    for k in range(6):
-        band[5 - k, k:] = a_d.diagonal(k)
+    rhs = np.empty((n_p, n_l + 1), order="F")     # LAPACK's layout: solved in place
+    rhs[:, :n_l] = b
+    rhs[:, n_l] = gp
     try:
-        factor = cholesky_banded(band, lower=False, check_finite=False)
-        y = cho_solve_banded((factor, False), np.column_stack([b, gp]), check_finite=False)
+        factor = cholesky_banded(band_d, lower=False, check_finite=False)
+        y = cho_solve_banded((factor, False), rhs, overwrite_b=True, check_finite=False)
     except (LinAlgError, ValueError):
         return None
     ainv_b, ainv_g = y[:, :n_l], y[:, n_l]
@@ -500,8 +537,8 @@ def arrow_inverse(blocks: tuple[np.ndarray, ...]
         factor = cholesky_banded(band, lower=False, check_finite=False)
     except (LinAlgError, ValueError):
         return None
-    y, fail = lapack.dtbtrs(factor, np.column_stack([b_s, np.eye(n_p)]), uplo="U", trans="T")
-    if fail:
+    y = solve_lower_unit(factor, b_s)
+    if y is None:
         return None
     x, y_b = y[:, n_l:], y[:, :n_l]                            # U^-T, U^-T B
     ainv_b, fail = lapack.dtbtrs(factor, y_b, uplo="U", trans="N")   # A^-1 B
@@ -529,7 +566,7 @@ def _dense_information(blocks: tuple[np.ndarray, ...]) -> np.ndarray:
     a, b, c, gp, gl = blocks
     n_p, n_l = len(gp), len(gl)
     info = np.zeros((n_p + n_l, n_p + n_l))
-    info[:n_p, :n_p] = a
+    info[:n_p, :n_p] = np.asarray(a)
     info[:n_p, n_p:] = b
     info[n_p:, :n_p] = b.T
     lm = np.arange(0, n_l, 2)
