@@ -54,6 +54,9 @@ class PoseBlock:
         return a
 
     def __array__(self, dtype: Any = None, copy: Any = None) -> np.ndarray:
+        if copy is False:       # numpy 2's protocol: the dense matrix is always a new array
+            raise ValueError("a PoseBlock has no dense array to share: copy=False is not "
+                             "possible, use np.asarray(a) or a.dense()")
         return self.dense() if dtype is None else self.dense().astype(dtype)
 
 
@@ -79,7 +82,9 @@ def solve_lower_unit(factor: np.ndarray, rhs: np.ndarray) -> np.ndarray | None:
     columns ``j0 ...`` are solved on the trailing block ``U[j0:, j0:]`` alone, the zeros
     above left as they are: the same numbers as one ``dtbtrs`` call on ``[rhs, I]`` (a
     column's leading zeros add only zeros to each later row's sum), in half the work and
-    without the ``P x P`` identity."""
+    without the ``P x P`` identity. That holds for a finite factor (``arrow_inverse`` checks
+    its band; the Cholesky factor of a finite band is finite): a NaN on the diagonal makes the
+    whole call's later columns NaN (``0 / NaN``), the trailing blocks' not."""
     n_p, n_r = rhs.shape
     y = np.zeros((n_p, n_r + n_p), order="F")
     if n_r:

@@ -146,3 +146,14 @@ def test_arrow_inverse_of_a_window_without_landmarks_leaves_the_heap_alone() -> 
     assert done.returncode == 0, done.stderr[-2000:]
     assert done.stdout.strip() == "ok"
 
+
+def test_pose_block_refuses_an_array_without_a_copy() -> None:
+    """numpy 2's ``__array__(copy=False)`` asks for no copy; the dense matrix is always a new
+    array, so it raises as numpy's protocol asks instead of copying quietly."""
+    prob, p0, q0 = _long_window(21)
+    a = prob.normal_equations(p0, q0)[1][0]
+    assert isinstance(a, PoseBlock)
+    with pytest.raises(ValueError, match="copy"):
+        np.asarray(a, copy=False)
+    np.testing.assert_array_equal(np.asarray(a, copy=True), a.dense())
+    assert np.asarray(a, dtype=np.float32).dtype == np.float32
