@@ -40,7 +40,13 @@ class PoseBlock:
         self.band = band
 
     def diagonal(self, k: int = 0) -> np.ndarray:
-        """``A``'s ``k``-th upper diagonal, ``0 <= k <= 5`` (as ``ndarray.diagonal``)."""
+        """``A``'s ``k``-th diagonal (as ``ndarray.diagonal``): the band's for ``0 <= k <= 5``,
+        zeros beyond it; below the main one from the dense matrix (the 3 x 3 blocks on the
+        diagonal need not be symmetric to the last bit)."""
+        if k < 0:
+            return self.dense().diagonal(k)
+        if k > 5:
+            return np.zeros(max(self.shape[0] - k, 0))
         return self.band[5 - k, k:]
 
     def dense(self) -> np.ndarray:

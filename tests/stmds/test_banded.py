@@ -157,3 +157,14 @@ def test_pose_block_refuses_an_array_without_a_copy() -> None:
         np.asarray(a, copy=False)
     np.testing.assert_array_equal(np.asarray(a, copy=True), a.dense())
     assert np.asarray(a, dtype=np.float32).dtype == np.float32
+
+
+def test_pose_block_diagonals_outside_the_band_are_those_of_the_matrix() -> None:
+    """``PoseBlock.diagonal(k)`` stands in for ``ndarray.diagonal``: beyond the band (``k >=
+    6``) it is zeros, below it (``k < 0``) the upper one by symmetry; ``k = 6`` gave the main
+    diagonal (``band[-1]``) before, ``k = -1`` an IndexError."""
+    prob, p0, q0 = _long_window(22)
+    a = prob.normal_equations(p0, q0)[1][0]
+    dense = a.dense()
+    for k in (-7, -5, -1, 0, 3, 5, 6, 7, 11, a.shape[0] - 1, a.shape[0], a.shape[0] + 4):
+        np.testing.assert_array_equal(a.diagonal(k), dense.diagonal(k))
