@@ -4,13 +4,16 @@ bit, as the dense construction it replaces on the arrow path of long windows (th
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
 from scipy.linalg import lapack
 
+import bomgraph
 import bomgraph.stmds.bundle_lm as bundle_lm
 from bomgraph.stmds.banded import UNIT_COLUMNS, PoseBlock, solve_lower_unit, upper_band
 
@@ -141,8 +144,9 @@ def test_arrow_inverse_of_a_window_without_landmarks_leaves_the_heap_alone() -> 
     right-hand side of zero columns writes outside its buffers (the heap corrupted, the
     process aborted by glibc a few allocations later), so it is not called. In a subprocess,
     which such a fault kills."""
+    env = {**os.environ, "PYTHONPATH": str(Path(bomgraph.__file__).resolve().parents[1])}
     done = subprocess.run([sys.executable, "-c", _NO_LANDMARKS], capture_output=True,
-                          text=True, timeout=600)
+                          text=True, timeout=600, env=env)   # this test's bomgraph
     assert done.returncode == 0, done.stderr[-2000:]
     assert done.stdout.strip() == "ok"
 
