@@ -40,7 +40,13 @@ class PoseBlock:
         self.band = band
 
     def diagonal(self, k: int = 0) -> np.ndarray:
-        """``A``'s ``k``-th upper diagonal, ``0 <= k <= 5`` (as ``ndarray.diagonal``)."""
+        """``A``'s ``k``-th diagonal (as ``ndarray.diagonal``): the band's for ``0 <= k <= 5``,
+        zeros beyond it; below the main one from the dense matrix (the 3 x 3 blocks on the
+        diagonal need not be symmetric to the last bit)."""
+        if k < 0:
+            return self.dense().diagonal(k)
+        if k > 5:
+            return np.zeros(max(self.shape[0] - k, 0))
         return self.band[5 - k, k:]
 
     def dense(self) -> np.ndarray:
@@ -54,6 +60,9 @@ class PoseBlock:
         return a
 
     def __array__(self, dtype: Any = None, copy: Any = None) -> np.ndarray:
+        if copy is False:       # numpy 2's protocol: the dense matrix is always a new array
+            raise ValueError("a PoseBlock has no dense array to share: copy=False is not "
+                             "possible, use np.asarray(a) or a.dense()")
         return self.dense() if dtype is None else self.dense().astype(dtype)
 
 
@@ -79,7 +88,9 @@ def solve_lower_unit(factor: np.ndarray, rhs: np.ndarray) -> np.ndarray | None:
     columns ``j0 ...`` are solved on the trailing block ``U[j0:, j0:]`` alone, the zeros
     above left as they are: the same numbers as one ``dtbtrs`` call on ``[rhs, I]`` (a
     column's leading zeros add only zeros to each later row's sum), in half the work and
-    without the ``P x P`` identity."""
+    without the ``P x P`` identity. That holds for a finite factor (``arrow_inverse`` checks
+    its band; the Cholesky factor of a finite band is finite): a NaN on the diagonal makes the
+    whole call's later columns NaN (``0 / NaN``), the trailing blocks' not."""
     n_p, n_r = rhs.shape
     y = np.zeros((n_p, n_r + n_p), order="F")
     if n_r:

@@ -541,9 +541,12 @@ def arrow_inverse(blocks: tuple[np.ndarray, ...]
     if y is None:
         return None
     x, y_b = y[:, n_l:], y[:, :n_l]                            # U^-T, U^-T B
-    ainv_b, fail = lapack.dtbtrs(factor, y_b, uplo="U", trans="N")   # A^-1 B
-    if fail or not np.all(np.isfinite(ainv_b)):
-        return None
+    if n_l:      # scipy's dtbtrs on zero columns corrupts the heap (a window without landmarks)
+        ainv_b, fail = lapack.dtbtrs(factor, y_b, uplo="U", trans="N")   # A^-1 B
+        if fail or not np.all(np.isfinite(ainv_b)):
+            return None
+    else:
+        ainv_b = np.zeros((n_p, 0))
     x3 = x.reshape(n_p, n_p // 3, 3)
     ainv_kk = np.einsum("rki,rkj->kij", x3, x3)
     # cond(A) <= |A|_1 trace(A^-1) <= sqrt(11) n cond(A): an ill-conditioned pose block (a

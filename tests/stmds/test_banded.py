@@ -4,10 +4,16 @@ bit, as the dense construction it replaces on the arrow path of long windows (th
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
+from pathlib import Path
+
 import numpy as np
 import pytest
 from scipy.linalg import lapack
 
+import bomgraph
 import bomgraph.stmds.bundle_lm as bundle_lm
 from bomgraph.stmds.banded import UNIT_COLUMNS, PoseBlock, solve_lower_unit, upper_band
 
@@ -108,3 +114,61 @@ def test_leverages_from_the_nonzeros_are_those_of_the_dense_rows(make) -> None:
     inverse = bundle_lm.WindowInverse(prob, blocks)
     assert (inverse._arrow is None) == (make is _near_pose_window)
     _assert_close(inverse.leverages_at(p0, q0), inverse.leverages(prob.bearing_rows(p0, q0)))
+
+
+_NO_LANDMARKS = """
+import numpy as np
+import bomgraph.stmds.bundle_lm as bundle_lm
+from bomgraph.stmds.bundle import _Problem
+rng = np.random.default_rng(3)
+m = 25                                                  # 75 pose variables: the arrow path
+odoms = np.tile([0.5, 0.0, 0.05], (m, 1)) + rng.normal(0.0, 0.01, (m, 3))
+none = np.zeros(0, np.int64)
+prob = _Problem(odoms, np.full((m, 3), 0.02), 0.02, none, none, np.zeros(0), 0)
+poses = np.vstack([np.zeros(3), np.cumsum(odoms, 0)])
+_, blocks = prob.normal_equations(poses, np.zeros((0, 2)))
+assert bundle_lm.uses_arrow(prob.n_pose_vars, 0)
+for _ in range(50):
+    s, ainv_kk, ainv_b, schur = bundle_lm.arrow_inverse(blocks)
+    junk = [np.empty(i % 17 + 1) for i in range(200)]
+a = np.asarray(blocks[0]) * s[:, None] * s[None, :]
+inv = np.linalg.inv(a).reshape(m, 3, m, 3)[np.arange(m), :, np.arange(m), :]
+assert ainv_b.shape == (3 * m, 0) and schur.shape == (0, 0)
+assert np.abs(ainv_kk - inv).max() < 1e-9 * np.abs(inv).max()
+print("ok")
+"""
+
+
+def test_arrow_inverse_of_a_window_without_landmarks_leaves_the_heap_alone() -> None:
+    """A long window without landmarks has no ``A^-1 B`` to solve: scipy's ``dtbtrs`` on a
+    right-hand side of zero columns writes outside its buffers (the heap corrupted, the
+    process aborted by glibc a few allocations later), so it is not called. In a subprocess,
+    which such a fault kills."""
+    env = {**os.environ, "PYTHONPATH": str(Path(bomgraph.__file__).resolve().parents[1])}
+    done = subprocess.run([sys.executable, "-c", _NO_LANDMARKS], capture_output=True,
+                          text=True, timeout=600, env=env)   # this test's bomgraph
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert done.stdout.strip() == "ok"
+
+
+def test_pose_block_refuses_an_array_without_a_copy() -> None:
+    """numpy 2's ``__array__(copy=False)`` asks for no copy; the dense matrix is always a new
+    array, so it raises as numpy's protocol asks instead of copying quietly."""
+    prob, p0, q0 = _long_window(21)
+    a = prob.normal_equations(p0, q0)[1][0]
+    assert isinstance(a, PoseBlock)
+    with pytest.raises(ValueError, match="copy"):
+        np.asarray(a, copy=False)
+    np.testing.assert_array_equal(np.asarray(a, copy=True), a.dense())
+    assert np.asarray(a, dtype=np.float32).dtype == np.float32
+
+
+def test_pose_block_diagonals_outside_the_band_are_those_of_the_matrix() -> None:
+    """``PoseBlock.diagonal(k)`` stands in for ``ndarray.diagonal``: beyond the band (``k >=
+    6``) it is zeros, below it (``k < 0``) the upper one by symmetry; ``k = 6`` gave the main
+    diagonal (``band[-1]``) before, ``k = -1`` an IndexError."""
+    prob, p0, q0 = _long_window(22)
+    a = prob.normal_equations(p0, q0)[1][0]
+    dense = a.dense()
+    for k in (-7, -5, -1, 0, 3, 5, 6, 7, 11, a.shape[0] - 1, a.shape[0], a.shape[0] + 4):
+        np.testing.assert_array_equal(a.diagonal(k), dense.diagonal(k))
