@@ -64,8 +64,8 @@ from ..errors import DatasetError, StreamFormatError
 from ..plausibility import MAX_ABS_ANGLE_RAD, MAX_ODOMETRY_SIGMA, refuse_implausible
 from ..stream import Step, Stream, StreamHeader, Truth
 from ..stream_file import parse_priors
-from ._text import (chain_order, checked_bearing_sigma, dataset_error, file_label, parse_float,
-                    parse_int, read_lines)
+from ._text import (MAX_RECORD_FILE_BYTES, chain_order, checked_bearing_sigma, dataset_error,
+                    file_label, parse_float, parse_int, read_lines)
 from .calibration import bearing_residuals, odometry_errors, robust_bearing_stats
 
 #: A comment line of the file that carries what g2o has no record for (written by ``bomgraph
@@ -92,7 +92,7 @@ def _bomgraph_header(path: Path) -> tuple[dict[str, Any], int | None]:
     None without one) and its line number; each field checked."""
     from ..jsonio import DuplicateKeyError, find_nonfinite, loads_strict
 
-    for line in read_lines(path, comment=None):
+    for line in read_lines(path, comment=None, max_bytes=MAX_RECORD_FILE_BYTES):
         text = " ".join(line.tokens)
         if not text.startswith("#"):
             return {}, None
@@ -138,7 +138,7 @@ class _G2oFile:
         self.odometry: list[tuple[int, int, int, np.ndarray, np.ndarray]] = []
         self.bearings: list[tuple[int, int, int, float, float]] = []
         self.fixed: list[int] = []
-        for line in read_lines(self.path):
+        for line in read_lines(self.path, max_bytes=MAX_RECORD_FILE_BYTES):
             tag = line.tokens[0]
             if tag == "FIX":
                 if len(line.tokens) < 2:

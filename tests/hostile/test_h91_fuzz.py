@@ -38,3 +38,69 @@ def test_a_sweep_of_many_methods_is_bounded_as_a_whole(tmp_path: Path) -> None:
     with pytest.raises(SweepError, match=r"arms.toml: methods: the sweep's runs x methods would "
                                          r"exceed 1,000,000"):
         read_sweep(path)
+
+
+def test_a_dataset_table_is_held_in_8_bytes_a_value(tmp_path: Path) -> None:
+    """A dataset file may be 256 MiB (``MAX_DATASET_BYTES``): about 8 million MRCLAM rows.
+    ``read_table`` held them as lists of Python numbers, about 140 bytes a row of three
+    columns, so a 6 MB gzip of odometry rows (1 GB decompressed, refused only at 256 MiB)
+    ended ``import mrclam`` in a MemoryError traceback under 1.5 GiB of address space. The
+    columns are now typed buffers: 8 bytes a value, and the line number 8 more (32 bytes a
+    row here, measured as the growth of the peak from 40,000 rows to 80,000)."""
+    import tracemalloc
+
+    from bomgraph.datasets._text import read_table
+
+    def peak(rows: int) -> int:
+        path = tmp_path / f"Robot1_Odometry_{rows}.dat"
+        path.write_text("# header\n" + "1248444187.156 \t 0.086 \t -0.398\n" * rows)
+        tracemalloc.start()
+        try:
+            table, numbers = read_table(path, [("time", "float"), ("v", "float"),
+                                               ("w", "float")])
+            assert len(numbers) == rows and numbers[-1] == rows + 1
+            assert float(table["w"][-1]) == -0.398
+            return tracemalloc.get_traced_memory()[1]
+        finally:
+            tracemalloc.stop()
+
+    per_row = (peak(80_000) - peak(40_000)) / 40_000
+    assert per_row < 64, per_row
+
+
+_RECORD_FILES = {
+    "victoria": lambda i: (f"ODOMETRY {i} {i + 1} 0.01 0.0 0.001 0.0001 0 0 4e-06 0 4e-06\n"
+                           f"LANDMARK {i + 1} {10**8 + i % 50} 3.5 1.2 0.4 0 0.4\n"),
+    "g2o": lambda i: (f"VERTEX_SE2 {i} {0.1 * i} 0 0\n"
+                      f"EDGE_SE2 {i} {i + 1} 0.1 0 0.01 500 0 0 500 0 5000\n"
+                      f"EDGE_BEARING_SE2_XY {i} {10**7 + i % 40} 0.5 10000\n"),
+}
+
+
+@pytest.mark.parametrize("kind", sorted(_RECORD_FILES))
+def test_a_g2o_or_victoria_file_is_bounded_by_the_memory_its_records_take(
+        tmp_path: Path, kind: str) -> None:
+    """The g2o and Victoria Park importers hold every record as Python objects, then a Step a
+    pose: 20-25 bytes of memory a byte of text, so a file at the dataset cap (256 MiB) asked
+    for 5-6 GiB and ended in a MemoryError traceback under 1.5 GiB of address space (h91's
+    fuzz; 262 MB of Victoria Park records ran 257 s, then died). Their files are now capped
+    at 16 MiB, a regular file refused before it is read (before the fix this one, just
+    over, was read and imported: 17 MiB of records)."""
+    from bomgraph.datasets import import_g2o, import_victoria
+    from bomgraph.datasets._text import MAX_RECORD_FILE_BYTES
+    from bomgraph.errors import DatasetError
+
+    path = tmp_path / f"big.{kind}"
+    record = _RECORD_FILES[kind]
+    with open(path, "w") as fh:
+        i = 0
+        while fh.tell() <= MAX_RECORD_FILE_BYTES + 2**20:
+            fh.write("".join(record(k) for k in range(i, i + 1000)))
+            i += 1000
+        if kind == "g2o":
+            fh.write(f"VERTEX_SE2 {i} {0.1 * i} 0 0\n")
+    read = import_victoria if kind == "victoria" else import_g2o
+    with pytest.raises(DatasetError, match=r"big\.\w+: larger than 16 MiB, the limit for a g2o "
+                                           r"or Victoria Park file"):
+        read(path)
+
