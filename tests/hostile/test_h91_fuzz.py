@@ -8,6 +8,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
+from hostile_helpers import bomgraph, one_error
 
 from bomgraph.sweep import SweepError, read_sweep
 
@@ -104,3 +105,19 @@ def test_a_g2o_or_victoria_file_is_bounded_by_the_memory_its_records_take(
                                            r"or Victoria Park file"):
         read(path)
 
+
+def test_an_export_refusal_names_the_estimate_file(work: Path) -> None:
+    """An estimate cut short (its last checkpoint line deleted) and exported as g2o was
+    refused without naming the file: ``bomgraph: error: g2o needs a pose vertex at every
+    step; the estimate has none at ...``."""
+    assert bomgraph("run", "s.jsonl", "--method", "triangulate", "--out", "e.est",
+                    cwd=work).returncode == 0
+    lines = (work / "e.est").read_text().splitlines(keepends=True)
+    (work / "cut.est").write_text("".join(lines[:-2] + lines[-1:]))
+    err = one_error(bomgraph("export", "cut.est", "--stream", "s.jsonl", "--format", "g2o",
+                             "--out", "cut.g2o", cwd=work), "needs a pose vertex")
+    assert err.startswith("bomgraph: error: cut.est: "), err
+    assert not (work / "cut.g2o").exists()
+    err = one_error(bomgraph("export", "-", "--stream", "s.jsonl", "--format", "g2o", "--out",
+                             "cut.g2o", stdin=(work / "cut.est").read_bytes(), cwd=work))
+    assert err.startswith("bomgraph: error: <stdin>: g2o needs a pose vertex"), err
