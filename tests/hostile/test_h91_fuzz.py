@@ -121,3 +121,25 @@ def test_an_export_refusal_names_the_estimate_file(work: Path) -> None:
     err = one_error(bomgraph("export", "-", "--stream", "s.jsonl", "--format", "g2o", "--out",
                              "cut.g2o", stdin=(work / "cut.est").read_bytes(), cwd=work))
     assert err.startswith("bomgraph: error: <stdin>: g2o needs a pose vertex"), err
+
+
+def test_a_cache_entry_of_the_wrong_shape_is_a_miss(work: Path) -> None:
+    """A cache entry with its key and ``ok`` intact but a landmark row cut to two numbers
+    ended the next ``compare`` in a traceback while it drew the map figures, after it had
+    rewritten results.json (``ValueError: setting an array element with a sequence``). It
+    is now a cache miss, as an unreadable entry is: the run runs again."""
+    import json
+
+    args = ("compare", "--streams", "s.jsonl", "--methods", "triangulate", "--out", "cmp",
+            "--jobs", "1", "--no-progress")
+    assert bomgraph(*args, cwd=work).returncode == 0
+    (entry,) = (work / "cmp" / "cache").glob("*.json")
+    cached = json.loads(entry.read_text())
+    del cached["final_map"]["landmarks"][0][2]
+    entry.write_text(json.dumps(cached))
+    proc = bomgraph(*args, cwd=work)
+    err = proc.stderr.decode()
+    assert proc.returncode == 0 and "Traceback" not in err, err
+    assert f"ignoring the cache file {entry}" in err.replace("cmp/cache", str(work / "cmp/cache")) \
+        or entry.name in err, err
+    assert len(json.loads(entry.read_text())["final_map"]["landmarks"][0]) == 3  # run again
