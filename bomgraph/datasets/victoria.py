@@ -45,7 +45,7 @@ import numpy as np
 from ..errors import DatasetError
 from ..plausibility import refuse_implausible
 from ..stream import Step, Stream, StreamHeader
-from .g2o import header_odometry_sigma, odometry_sigma_from_information
+from .g2o import checked_sigma, header_odometry_sigma, odometry_sigma_from_information
 from ._text import (MAX_RECORD_FILE_BYTES, chain_order, checked_bearing_sigma, dataset_error,
                     file_label, parse_float, parse_int, read_lines)
 
@@ -139,7 +139,9 @@ def import_victoria(path: str | os.PathLike[str], *,
     for t, pid in enumerate(order[1:]):
         meas, cov = by_target[pid]
         odoms[t] = meas
-        sig[t], corr = odometry_sigma_from_information(float(meas[2]), np.linalg.inv(cov))
+        with np.errstate(all="ignore"):
+            sigma, corr = odometry_sigma_from_information(float(meas[2]), np.linalg.inv(cov))
+        sig[t] = checked_sigma(sigma, p, line_of[pid], "covariance")
         max_corr = max(max_corr, corr)
     header_odo, uniform = header_odometry_sigma(sig)
 
