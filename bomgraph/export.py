@@ -256,10 +256,21 @@ def to_g2o(src: MapEstimate, stream: Stream) -> str:
     return "\n".join(lines) + "\n"
 
 
-def export_text(src: MapEstimate, fmt: str, stream: Stream | None = None) -> str:
-    """The text of ``src`` in format ``fmt`` (one of :data:`FORMATS`)."""
+def export_text(src: MapEstimate, fmt: str, stream: Stream | None = None, *,
+                name: str | None = None) -> str:
+    """The text of ``src`` in format ``fmt`` (one of :data:`FORMATS`); ``name``, the file
+    ``src`` was read from (``-``: stdin), starts the message of what it lacks for ``fmt``."""
     _check_estimate(src, "export_text")
     _check_stream(stream, "export_text")
+    if name is None:
+        return _export_text(src, fmt, stream)
+    try:
+        return _export_text(src, fmt, stream)
+    except ExportError as exc:  # h91: a refusal named neither the estimate nor its line
+        raise ExportError(f"{'<stdin>' if name == '-' else name}: {exc}") from None
+
+
+def _export_text(src: MapEstimate, fmt: str, stream: Stream | None) -> str:
     if fmt == "tum":
         return to_tum(src, stream)
     if fmt == "kitti":

@@ -34,7 +34,47 @@ def read_cached(path: Path) -> dict[str, Any] | None:
         _log.warning("ignoring the cache file %s: not a result of this task; the task runs "
                      "again", path)
         return None
+    problem = _shape_problem(cached)
+    if problem:  # h91: a hand-edited entry ended compare in a traceback drawing its figures
+        _log.warning("ignoring the cache file %s: %s; the task runs again", path, problem)
+        return None
     return cached
+
+
+def _number(v: Any) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+
+def _points(v: Any) -> bool:
+    """A list of ``[id, x, y]`` (or ``[t, x, y]``) rows, as ``run_task`` writes them."""
+    return isinstance(v, list) and all(
+        isinstance(r, list) and len(r) == 3 and isinstance(r[0], int)
+        and not isinstance(r[0], bool) and _number(r[1]) and _number(r[2]) for r in v)
+
+
+def _shape_problem(cached: Mapping[str, Any]) -> str:
+    """What in a cached result is not of the shape ``bench.run_task`` writes ("" if nothing):
+    the report reads it as such."""
+    for k in ("experiment", "arm", "method", "run"):
+        if not isinstance(cached.get(k), str):
+            return f"'{k}' is not a string"
+    fm = cached.get("final_map")
+    if fm is not None and not (isinstance(fm, dict) and _points(fm.get("landmarks"))
+                               and _points(fm.get("poses", []))):
+        return "'final_map' is not {landmarks: [[id, x, y], ...], poses: [[t, x, y], ...]}"
+    rows = cached.get("checkpoints")
+    if not (isinstance(rows, list) and all(
+            isinstance(r, dict) and isinstance(r.get("t"), int)
+            and all(v is None or _number(v) for v in r.values()) for r in rows)):
+        return "'checkpoints' is not a list of rows of numbers with an integer 't'"
+    if not all(_number(cached.get(k)) for k in ("total_s", "step_median_s")):
+        return "'total_s' or 'step_median_s' is not a number"
+    if not isinstance(cached.get("info"), dict) or cached.get("converged") not in (None, True,
+                                                                                  False):
+        return "'info' is not a table or 'converged' not true, false or null"
+    if not isinstance(cached.get("estimate_file", ""), str):
+        return "'estimate_file' is not a string"
+    return ""
 
 
 def write_cached(path: Path, result: Mapping[str, Any]) -> None:

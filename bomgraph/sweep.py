@@ -67,6 +67,11 @@ MAX_SWEEP_BYTES = 16 * 2**20
 #: the most simulated runs of one world (its seeds, or a design's layouts x starts): a bound
 #: on a typo (``seeds = 1000000000``), far beyond any sweep one machine finishes.
 MAX_WORLD_RUNS = 100_000
+#: the most tasks of one sweep (its runs, simulated or streams, times its methods, the
+#: reference counted as one): the same bound on the whole file, whose worlds and methods are
+#: otherwise not counted (2,000 worlds of 100,000 seeds each ran out of memory while the
+#: file was read, before h91's fix).
+MAX_SWEEP_TASKS = 1_000_000
 
 
 class SweepError(ConfigError):
@@ -343,6 +348,16 @@ class _Reader:
 
     def __init__(self, path: Path) -> None:
         self.path = path
+        self.runs = 0  # simulated runs of the worlds read so far
+        self.tasks = 0  # runs x methods of the experiments read so far
+
+    def count(self, attr: str, n: int, key: str) -> None:
+        """Add ``n`` runs (or tasks) to the sweep's count, before they are made."""
+        setattr(self, attr, getattr(self, attr) + n)
+        if getattr(self, attr) > MAX_SWEEP_TASKS:
+            what = "simulated runs" if attr == "runs" else "runs x methods"
+            raise self.fail(key, f"the sweep's {what} would exceed {MAX_SWEEP_TASKS:,}; "
+                                 f"split it into several sweep files")
 
     def fail(self, key: str, message: str) -> SweepError:
         return SweepError(f"{self.path}: {key}: {message}")
@@ -434,6 +449,11 @@ class _Reader:
         if not isinstance(methods, list) or not methods:
             raise self.fail(f"{at}methods", "give at least one method ([[methods]] with a "
                                             "name, or methods = [\"NAME@PRESET\", ...])")
+        n_runs = len(streams) + sum(
+            len(w.seeds) if w.design is None else w.design["layouts"] * w.design["starts"]
+            for w in worlds)
+        self.count("tasks", n_runs * (len(methods) + (t.get("reference") is not None)),
+                   f"{at}methods")
         arms = tuple(self.method(m, f"{at}methods[{k}]") for k, m in enumerate(methods))
         _unique_or(self, [a.label for a in arms], f"{at}methods[].label")
         ref = t.get("reference")
@@ -498,6 +518,7 @@ class _Reader:
                 raise self.fail(f"{key}.design", f"layouts x starts must be at most "
                                                  f"{MAX_WORLD_RUNS:,} runs, got "
                                                  f"{design['layouts'] * design['starts']:,}")
+            self.count("runs", design["layouts"] * design["starts"], f"{key}.design")
             return WorldSpec(name, sim, (), design, float(sigma))
         seeds = t.get("seeds")
         if isinstance(seeds, int) and not isinstance(seeds, bool):
@@ -505,12 +526,15 @@ class _Reader:
             if seeds > MAX_WORLD_RUNS:
                 raise self.fail(f"{key}.seeds", f"at most {MAX_WORLD_RUNS:,} runs of one "
                                                 f"world, got {seeds:,}")
+            self.count("runs", seeds, f"{key}.seeds")
             seeds = list(range(seeds))
         if not isinstance(seeds, list) or not seeds:
             raise self.fail(f"{key}.seeds", "give the seeds: a list of integers, or a count")
         if len(seeds) > MAX_WORLD_RUNS:
             raise self.fail(f"{key}.seeds", f"at most {MAX_WORLD_RUNS:,} runs of one world, "
                                             f"got {len(seeds):,}")
+        if not isinstance(t.get("seeds"), int):
+            self.count("runs", len(seeds), f"{key}.seeds")
         seeds = [self.int_(s, f"{key}.seeds[{k}]", 0) for k, s in enumerate(seeds)]
         if len(set(seeds)) != len(seeds):
             raise self.fail(f"{key}.seeds", "a seed appears twice")

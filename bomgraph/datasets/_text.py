@@ -12,6 +12,7 @@ blanks are accepted (a public MRCLAM copy uses them).
 
 from __future__ import annotations
 
+import array
 import gzip
 import math
 import os
@@ -96,6 +97,13 @@ GZIP_MAGIC = b"\x1f\x8b"
 #: 75x that. The text is read a block at a time, but the rows parsed from it are held, so the
 #: cap bounds them too (the general input cap, 4 GiB, would let a 4 MiB .gz ask for it all).
 MAX_DATASET_BYTES = 256 * 2**20
+#: the largest g2o or Victoria Park file read, decompressed. Their importers hold every
+#: record as Python objects and then a Step per pose: about 20-25 bytes of memory a byte of
+#: text (h91: 5 MB more text took 96 MB more for g2o, 125 MB for Victoria Park), so a file
+#: at MAX_DATASET_BYTES asked for 5-6 GiB (h91's fuzz: a MemoryError traceback under
+#: 1.5 GiB of address space). 16 MiB, about 400 MB at the peak, is 23x the Victoria Park
+#: file (0.7 MB) and 120x the g2o sample (0.13 MB).
+MAX_RECORD_FILE_BYTES = 16 * 2**20
 
 
 @dataclass(frozen=True)
@@ -106,7 +114,8 @@ class Line:
     tokens: list[str]
 
 
-def read_lines(path: str | os.PathLike[str], *, comment: str | None = "#") -> Iterator[Line]:
+def read_lines(path: str | os.PathLike[str], *, comment: str | None = "#",
+               max_bytes: int | None = None) -> Iterator[Line]:
     """The non-comment, non-blank lines of a dataset file with their 1-based line numbers,
     read a block of lines at a time (gzip-decompressed if the name ends in ``.gz``): memory
     is one block (about 1 MiB) and one line, whatever the file's size.
@@ -115,9 +124,11 @@ def read_lines(path: str | os.PathLike[str], *, comment: str | None = "#") -> It
     ------
     DatasetError
         When the file is missing, unreadable, not gzip despite its name, corrupt gzip, larger
-        than :data:`MAX_DATASET_BYTES` decompressed, or not ASCII/UTF-8.
+        than ``max_bytes`` decompressed (default :data:`MAX_DATASET_BYTES`; a file larger
+        than that on disk is refused before it is read), or not ASCII/UTF-8.
     """
     p = Path(path)
+    max_bytes = MAX_DATASET_BYTES if max_bytes is None else max_bytes
     try:
         fh = open_input(p)
     except FileNotFoundError:
@@ -131,10 +142,12 @@ def read_lines(path: str | os.PathLike[str], *, comment: str | None = "#") -> It
             raise DatasetError(f"{p}: cannot read ({exc.strerror or exc})") from None
         if p.suffix == ".gz" and not is_gzip:
             raise DatasetError(f"{p}: named .gz but not gzip data; drop the .gz suffix")
+        if not is_gzip and os.fstat(fh.fileno()).st_size > max_bytes:
+            raise _too_large(p, max_bytes)
         src: IO[bytes] = gzip.GzipFile(fileobj=fh) if p.suffix == ".gz" else fh
         number, offset = 0, 0
         try:
-            for block in _line_blocks(src, p):
+            for block in _line_blocks(src, p, max_bytes):
                 try:
                     text = block.decode("utf-8")
                 except UnicodeDecodeError as exc:
@@ -155,19 +168,26 @@ def read_lines(path: str | os.PathLike[str], *, comment: str | None = "#") -> It
             raise DatasetError(f"{p}: cannot read ({exc.strerror or exc})") from None
 
 
-def _line_blocks(src: IO[bytes], p: Path) -> Iterator[bytes]:
+def _too_large(p: Path, max_bytes: int) -> DatasetError:
+    what = ("a dataset file (the largest real recording file is 3.4 MB)"
+            if max_bytes == MAX_DATASET_BYTES else
+            "a g2o or Victoria Park file, whose records are all held (the Victoria Park file "
+            "is 0.7 MB)")
+    return DatasetError(f"{p}: larger than {max_bytes >> 20} MiB"
+                        f"{' decompressed' if p.suffix == '.gz' else ''}, the limit for {what}; "
+                        f"split it")
+
+
+def _line_blocks(src: IO[bytes], p: Path, max_bytes: int) -> Iterator[bytes]:
     """``src`` in blocks of whole lines (about 1 MiB each; the last may lack its newline),
     refusing a line over :data:`bomgraph.stdio.MAX_LINE_BYTES` and a file over
-    :data:`MAX_DATASET_BYTES`. Memory: one block and one line."""
+    ``max_bytes``. Memory: one block and one line."""
     pending: list[bytes] = []   # the start of a line longer than the chunk
     pending_n = total = newlines = 0
     while chunk := src.read(_CHUNK):
         total += len(chunk)
-        if total > MAX_DATASET_BYTES:
-            raise DatasetError(
-                f"{p}: larger than {MAX_DATASET_BYTES >> 20} MiB"
-                f"{' decompressed' if p.suffix == '.gz' else ''}, the limit for a dataset file "
-                f"(the largest real recording file is 3.4 MB); split it")
+        if total > max_bytes:
+            raise _too_large(p, max_bytes)
         cut = chunk.rfind(b"\n")
         if cut < 0:
             pending.append(chunk)
@@ -237,8 +257,11 @@ def read_table(path: str | os.PathLike[str], fields: Sequence[tuple[str, FieldKi
         the line number and the field.
     """
     names = [f for f, _ in fields]
-    columns: list[list[float | int]] = [[] for _ in fields]
-    numbers: list[int] = []
+    # typed buffers, 8 bytes a value: a file at MAX_DATASET_BYTES of MRCLAM rows is about 8
+    # million rows, which as lists of Python numbers took over 1 GiB (h91's fuzz: a 6 MB
+    # gzip of odometry rows ended in a MemoryError traceback under 1.5 GiB of address space)
+    columns = [array.array("q" if kind == "int" else "d") for _, kind in fields]
+    numbers = array.array("q")
     for line in read_lines(path, comment=comment):
         numbers.append(line.number)
         if len(line.tokens) != len(fields):
@@ -250,9 +273,9 @@ def read_table(path: str | os.PathLike[str], fields: Sequence[tuple[str, FieldKi
                 columns[k].append(parse_int(token, path, line.number, name))
             else:
                 columns[k].append(parse_float(token, path, line.number, name))
-    table = {name: np.array(col, dtype=np.int64 if kind == "int" else float)
+    table = {name: np.frombuffer(col, dtype=np.int64 if kind == "int" else float)
              for (name, kind), col in zip(fields, columns)}
-    return table, np.array(numbers, dtype=np.int64)
+    return table, np.frombuffer(numbers, dtype=np.int64)
 
 
 def chain_order(edges: Sequence[tuple[int, int, int]],
@@ -325,4 +348,5 @@ def file_label(path: str | os.PathLike[str]) -> str:
 
 
 __all__ = ["dataset_error", "find_file", "has_file", "read_lines", "Line", "MAX_DATASET_BYTES",
+           "MAX_RECORD_FILE_BYTES",
            "parse_float", "parse_int", "read_table", "chain_order", "file_label"]

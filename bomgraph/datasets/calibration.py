@@ -156,7 +156,8 @@ def fit_odometry_sigma(odoms: np.ndarray, errors: np.ndarray) -> tuple[np.ndarra
     e = np.asarray(errors, dtype=float).reshape(-1, 3)
     if len(u) < 6:
         raise DatasetError(f"need at least 6 steps to calibrate the odometry sigma, got "
-                           f"{len(u)}; use smaller keyframe thresholds or calibrate=False")
+                           f"{len(u)}; use smaller keyframe thresholds, or the default sigmas "
+                           f"(--no-calibrate, calibrate=False)")
     reg2 = np.column_stack([np.ones(len(u)), np.hypot(u[:, 0], u[:, 1]) ** 2, u[:, 2] ** 2])
     model = np.zeros((3, 3))
     keep = np.ones(len(u), dtype=bool)

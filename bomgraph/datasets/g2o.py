@@ -64,8 +64,8 @@ from ..errors import DatasetError, StreamFormatError
 from ..plausibility import MAX_ABS_ANGLE_RAD, MAX_ODOMETRY_SIGMA, refuse_implausible
 from ..stream import Step, Stream, StreamHeader, Truth
 from ..stream_file import parse_priors
-from ._text import (chain_order, checked_bearing_sigma, dataset_error, file_label, parse_float,
-                    parse_int, read_lines)
+from ._text import (MAX_RECORD_FILE_BYTES, chain_order, checked_bearing_sigma, dataset_error,
+                    file_label, parse_float, parse_int, read_lines)
 from .calibration import bearing_residuals, odometry_errors, robust_bearing_stats
 
 #: A comment line of the file that carries what g2o has no record for (written by ``bomgraph
@@ -92,7 +92,7 @@ def _bomgraph_header(path: Path) -> tuple[dict[str, Any], int | None]:
     None without one) and its line number; each field checked."""
     from ..jsonio import DuplicateKeyError, find_nonfinite, loads_strict
 
-    for line in read_lines(path, comment=None):
+    for line in read_lines(path, comment=None, max_bytes=MAX_RECORD_FILE_BYTES):
         text = " ".join(line.tokens)
         if not text.startswith("#"):
             return {}, None
@@ -138,7 +138,7 @@ class _G2oFile:
         self.odometry: list[tuple[int, int, int, np.ndarray, np.ndarray]] = []
         self.bearings: list[tuple[int, int, int, float, float]] = []
         self.fixed: list[int] = []
-        for line in read_lines(self.path):
+        for line in read_lines(self.path, max_bytes=MAX_RECORD_FILE_BYTES):
             tag = line.tokens[0]
             if tag == "FIX":
                 if len(line.tokens) < 2:
@@ -232,10 +232,23 @@ def odometry_sigma_from_information(dth_rad: float, information: np.ndarray
     """
     c, s = math.cos(dth_rad), math.sin(dth_rad)
     jac = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-    cov = jac @ np.linalg.inv(information) @ jac.T
-    sigma = np.sqrt(np.diag(cov))
-    corr = cov / np.outer(sigma, sigma)
+    with np.errstate(all="ignore"):  # a denormal or huge entry: the caller names its line
+        cov = jac @ np.linalg.inv(information) @ jac.T
+        sigma = np.sqrt(np.diag(cov))
+        corr = cov / np.outer(sigma, sigma)
     return sigma, float(np.max(np.abs(corr[np.triu_indices(3, 1)])))
+
+
+def checked_sigma(sigma: np.ndarray, path: Path, line: int, field: str) -> np.ndarray:
+    """``sigma`` from a line's odometry information or covariance, refused (naming the file,
+    the line and the field) unless finite: a positive definite matrix with a denormal or
+    near-overflow entry (``4.9e-324``, ``1.8e308``) has no finite inverse (h91's fuzz: the
+    stream's own check refused it naming neither the file nor the line)."""
+    if not np.all(np.isfinite(sigma)):
+        raise dataset_error(path, line, field, "this matrix has no finite inverse in floating "
+                                               "point (an entry too small or too large); fix "
+                                               "this line")
+    return sigma
 
 
 def import_g2o(path: str | os.PathLike[str], *, truth_path: str | os.PathLike[str] | None = None,
@@ -299,7 +312,8 @@ def import_g2o(path: str | os.PathLike[str], *, truth_path: str | os.PathLike[st
     for t, pid in enumerate(order[1:], start=0):
         meas, info = by_target[pid]
         odoms[t] = meas
-        sig[t], corr = odometry_sigma_from_information(meas[2], info)
+        sigma, corr = odometry_sigma_from_information(meas[2], info)
+        sig[t] = checked_sigma(sigma, g.path, line_of[pid], "information")
         max_corr = max(max_corr, corr)
     header_odo, uniform = header_odometry_sigma(sig)
 

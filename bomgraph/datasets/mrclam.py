@@ -477,8 +477,11 @@ def import_mrclam(data_dir: str | os.PathLike[str], robot: int, *,
 
     # 6. calibration ------------------------------------------------------------------------
     if calibrate and truth_poses is not None:  # calibrate without truth was refused above
-        model, odo_info = calibrate_odometry(odoms, regress, truth_poses,
-                                             keyframe.min_distance_m, keyframe.min_turn_rad)
+        try:
+            model, odo_info = calibrate_odometry(odoms, regress, truth_poses,
+                                                 keyframe.min_distance_m, keyframe.min_turn_rad)
+        except DatasetError as exc:  # h91: the message named neither the folder nor the robot
+            raise DatasetError(f"{Path(data_dir)}: robot {robot}: {exc}") from None
     else:
         model = np.asarray(DEFAULT_ODOMETRY_MODEL, dtype=float)
         odo_info = {"source": "DEFAULT_ODOMETRY_MODEL (mrclam6 robots 1-5, default keyframes)"}

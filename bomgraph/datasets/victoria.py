@@ -45,9 +45,9 @@ import numpy as np
 from ..errors import DatasetError
 from ..plausibility import refuse_implausible
 from ..stream import Step, Stream, StreamHeader
-from .g2o import header_odometry_sigma, odometry_sigma_from_information
-from ._text import (chain_order, checked_bearing_sigma, dataset_error, file_label, parse_float,
-                    parse_int, read_lines)
+from .g2o import checked_sigma, header_odometry_sigma, odometry_sigma_from_information
+from ._text import (MAX_RECORD_FILE_BYTES, chain_order, checked_bearing_sigma, dataset_error,
+                    file_label, parse_float, parse_int, read_lines)
 
 _RECORDS = {
     "ODOMETRY": ["i", "j", "dx", "dy", "dtheta", "c_xx", "c_xy", "c_xth", "c_yy", "c_yth",
@@ -81,7 +81,7 @@ def import_victoria(path: str | os.PathLike[str], *,
     p = Path(path)
     odo: list[tuple[int, int, int, np.ndarray, np.ndarray]] = []
     obs: list[tuple[int, int, int, float, float, float]] = []
-    for line in read_lines(p):
+    for line in read_lines(p, max_bytes=MAX_RECORD_FILE_BYTES):
         tag = line.tokens[0]
         if tag not in _RECORDS:
             raise dataset_error(p, line.number, "tag",
@@ -139,7 +139,9 @@ def import_victoria(path: str | os.PathLike[str], *,
     for t, pid in enumerate(order[1:]):
         meas, cov = by_target[pid]
         odoms[t] = meas
-        sig[t], corr = odometry_sigma_from_information(float(meas[2]), np.linalg.inv(cov))
+        with np.errstate(all="ignore"):
+            sigma, corr = odometry_sigma_from_information(float(meas[2]), np.linalg.inv(cov))
+        sig[t] = checked_sigma(sigma, p, line_of[pid], "covariance")
         max_corr = max(max_corr, corr)
     header_odo, uniform = header_odometry_sigma(sig)
 

@@ -339,3 +339,12 @@ def test_real_mrclam1_gzip_without_robot_truth(tmp_path):
     assert s.truth.poses is None and len(s.truth.landmark_ids) == 15
     write_stream(s, tmp_path / "m1.jsonl")
     assert read_stream(tmp_path / "m1.jsonl") == s
+
+
+def test_too_few_steps_to_calibrate_names_the_folder_and_the_flag(tmp_path):
+    """h91's fuzz: a ground-truth file cut short left 5 keyframes with truth, and the refusal
+    named neither the folder nor the robot, and only the library's ``calibrate=False``."""
+    make_mrclam(tmp_path, seconds=2.0)
+    with pytest.raises(DatasetError, match=rf"^{tmp_path}: robot 1: need at least 6 steps to "
+                                           rf"calibrate .*--no-calibrate"):
+        import_mrclam(tmp_path, 1)
