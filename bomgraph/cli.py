@@ -568,6 +568,10 @@ def _main(argv: Sequence[str] | None) -> int:
             print(f"bomgraph: error: {display_path(message)}" + (f" ({note})" if note else ""),
                   file=sys.stderr)
             return 2
+        if note is None and isinstance(exc, MemoryError):  # no traceback helps here (h91)
+            print(f"bomgraph: error: out of memory{f' ({exc})' if str(exc) else ''}; give a "
+                  f"smaller input or fewer --jobs, or run it with more memory", file=sys.stderr)
+            return 1
         if note is None:   # not a method's own code: bomgraph's bug, whose traceback helps
             raise
         return _method_failed(args, exc, note)

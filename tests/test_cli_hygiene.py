@@ -365,3 +365,20 @@ def test_compare_out_that_is_a_file_is_named_and_kept(tmp_path: Path) -> None:
     one_error_line(bomgraph("compare", "--quick", "--no-progress", "--no-figures", "--out",
                             str(target)), "--out", "is a file; give a folder")
     assert target.read_text() == "keep me"
+
+
+def test_bomgraphs_own_memory_error_is_one_line_exit_1(monkeypatch: pytest.MonkeyPatch,
+                                                       capsys: pytest.CaptureFixture) -> None:
+    """Running out of memory in bomgraph's own code (h91: an importer at its size cap under a
+    memory limit) is one line saying so and what to try, exit 1: before, a traceback."""
+    import bomgraph.cli as cli
+
+    def exhausted(args: object) -> int:
+        raise MemoryError("Unable to allocate 1.2 GiB for an array")
+
+    monkeypatch.setitem(cli._COMMANDS, "cmd_methods", exhausted)
+    assert cli.main(["methods"]) == 1
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "Traceback" not in err, err
+    assert err.startswith("bomgraph: error: out of memory (Unable to allocate 1.2 GiB"), err
+    assert "smaller input or fewer --jobs" in err
