@@ -48,7 +48,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
-from .checks import file_name
+from .checks import echo, file_name
 from .errors import BomgraphError, ConfigError
 from .sim import SimConfig
 
@@ -316,7 +316,7 @@ def _checked_method(m: MethodSpec, where: str) -> MethodSpec:
     try:  # every run would fail alike: refuse the sweep before it starts
         check_method_options(m.method, m.options)
     except ConfigError as exc:
-        raise SweepError(f"{where}: options {dict(m.options)}: {exc}") from None
+        raise SweepError(f"{where}: options {echo(dict(m.options))}: {exc}") from None
     return m
 
 
