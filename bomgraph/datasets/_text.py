@@ -187,9 +187,11 @@ def _line_blocks(src: IO[bytes], p: Path, max_bytes: int) -> Iterator[bytes]:
     pending_n = total = newlines = 0
     while chunk := src.read(_CHUNK):
         total += len(chunk)
-        if total > max_bytes:
-            raise _too_large(p, max_bytes)
         cut = chunk.rfind(b"\n")
+        if total > max_bytes:
+            if cut < 0 and pending_n + len(chunk) > max_bytes:  # one line over the file's cap
+                raise line_too_long(p, newlines + 1, max_bytes)  # (/dev/zero; h96)
+            raise _too_large(p, max_bytes)
         if cut < 0:
             pending.append(chunk)
             pending_n += len(chunk)
