@@ -24,6 +24,22 @@ Raise = Callable[[str], Exception]
 _INT64_MAX = float(np.iinfo(np.int64).max)
 
 
+#: the most characters of a value a message repeats (h96: a 100,000-character --option
+#: value was echoed whole, twice, in one error line)
+MAX_ECHO_CHARS = 80
+
+
+def clip(text: str) -> str:
+    """``text`` for a message: its first :data:`MAX_ECHO_CHARS` characters, then ``...`` if
+    there were more."""
+    return text if len(text) <= MAX_ECHO_CHARS else text[:MAX_ECHO_CHARS] + "..."
+
+
+def echo(value: Any) -> str:
+    """``repr(value)`` for a message, clipped (:func:`clip`)."""
+    return clip(repr(value))
+
+
 def is_integer(v: Any) -> bool:
     """A Python or numpy integer (``True``/``False`` are not)."""
     return isinstance(v, (numbers.Integral, np.integer)) and not isinstance(v, (bool, np.bool_))
@@ -199,5 +215,5 @@ def covariance_problem(cov: np.ndarray) -> tuple[int, str] | None:
     return None
 
 
-__all__ = ["is_integer", "id_array", "row_array", "real", "finite", "finite_or_none", "integer",
+__all__ = ["MAX_ECHO_CHARS", "clip", "echo", "is_integer", "id_array", "row_array", "real", "finite", "finite_or_none", "integer",
            "file_name", "instance", "fraction", "items", "COV_RTOL", "covariance_problem"]

@@ -19,6 +19,7 @@ from typing import Any, Callable, ClassVar, Mapping, NamedTuple, TypeVar
 
 import numpy as np
 
+from .checks import clip, echo
 from .errors import ConfigError
 
 C = TypeVar("C", bound="Presets")
@@ -43,13 +44,14 @@ class Presets:
         fields = {f.name for f in dataclasses.fields(cls)}  # type: ignore[arg-type]
         unknown = sorted(set(overrides) - fields)
         if unknown:
-            raise ConfigError(f"{cls.__name__}: unknown option(s) {', '.join(unknown)}; "
+            raise ConfigError(f"{cls.__name__}: unknown option(s) "
+                              f"{', '.join(map(clip, unknown))}; "
                               f"valid options: {', '.join(sorted(fields))}")
         hints = typing.get_type_hints(cls)
         for key, value in overrides.items():
             problem = type_problem(hints.get(key), value)
             if problem:
-                raise ConfigError(f"{cls.__name__}: bad option value {key}={value!r}: {problem}")
+                raise ConfigError(f"{cls.__name__}: bad option value {key}={echo(value)}: {problem}")
         values = {**cls.PRESETS[name], **overrides}
         try:
             return cls(**values)

@@ -22,7 +22,8 @@ rotation about ``z`` only:
     ``J = diag(R(dth), 1)`` (the inverse of the importer's mapping,
     :func:`bomgraph.datasets.g2o.odometry_sigma_from_information`), and
     ``EDGE_BEARING_SE2_XY`` per bearing with information ``1 / sigma_b^2``. Landmark vertex ids
-    are the landmark ids; pose vertex ids are ``max landmark id + 1 + t``. The importer
+    are the landmark ids; pose vertex ids are ``max landmark id + 1 + t`` (a stream whose
+    last pose id would pass 2^63 - 1, which the importer refuses, is refused). The importer
     (:func:`bomgraph.datasets.import_g2o`) reads the file back to the same steps. A landmark that
     is observed but not in the estimate gets no vertex (its edges stay; a comment line lists
     it). The stream's sensor range, time stamps and known landmark distances (priors, for
@@ -204,6 +205,10 @@ def g2o_header_comment(stream: Stream) -> str:
     return G2O_HEADER_PREFIX + json.dumps(extra, allow_nan=False, separators=(",", ":"))
 
 
+#: the largest vertex id ``import g2o`` reads (an int64)
+_MAX_G2O_ID = 2**63 - 1
+
+
 def to_g2o(src: MapEstimate, stream: Stream) -> str:
     """The stream's problem with ``src`` as the vertex values (module docstring)."""
     _check_estimate(src, "to_g2o")
@@ -219,6 +224,10 @@ def to_g2o(src: MapEstimate, stream: Stream) -> str:
     observed = stream.landmark_ids()
     all_ids = np.concatenate([observed, src.landmark_ids]).astype(np.int64)
     base = int(all_ids.max()) + 1 if all_ids.size else 0
+    if base + n - 1 > _MAX_G2O_ID:  # h96: written, then refused by `import g2o`
+        raise ExportError(f"g2o: pose vertex ids are the largest landmark id + 1 + t, and "
+                          f"landmark id {base - 1} leaves no room for {n} poses below 2^63 "
+                          f"(the ids g2o and bomgraph read); renumber the landmarks")
     lm = {int(i): xy for i, xy in zip(src.landmark_ids, src.landmarks_xy)}
     lines = ["# bomgraph export: bearing-only 2-D SLAM problem with the estimate as vertex "
              f"values; pose vertex id = {base} + t", g2o_header_comment(stream)]

@@ -73,10 +73,12 @@ def _mib(n: int) -> str:
     return f"{n / 2**20:g} MiB"
 
 
-def line_too_long(path: str | os.PathLike[str], line: int) -> InputTooLargeError:
-    """The refusal of a line longer than :data:`MAX_LINE_BYTES` (no newline in sight)."""
+def line_too_long(path: str | os.PathLike[str], line: int,
+                  limit: int = MAX_LINE_BYTES) -> InputTooLargeError:
+    """The refusal of a line longer than ``limit`` (:data:`MAX_LINE_BYTES`, or a smaller cap
+    on the whole file) with no newline in sight."""
     return InputTooLargeError(
-        f"{os.fspath(path)}, line {line}: longer than {_mib(MAX_LINE_BYTES)} without a "
+        f"{os.fspath(path)}, line {line}: longer than {_mib(limit)} without a "
         f"newline; not a bomgraph text file (is it binary data or a device like /dev/zero?)")
 
 

@@ -97,12 +97,13 @@ GZIP_MAGIC = b"\x1f\x8b"
 #: 75x that. The text is read a block at a time, but the rows parsed from it are held, so the
 #: cap bounds them too (the general input cap, 4 GiB, would let a 4 MiB .gz ask for it all).
 MAX_DATASET_BYTES = 256 * 2**20
-#: the largest g2o or Victoria Park file read, decompressed. Their importers hold every
-#: record as Python objects and then a Step per pose: about 20-25 bytes of memory a byte of
-#: text (h91: 5 MB more text took 96 MB more for g2o, 125 MB for Victoria Park), so a file
-#: at MAX_DATASET_BYTES asked for 5-6 GiB (h91's fuzz: a MemoryError traceback under
-#: 1.5 GiB of address space). 16 MiB, about 400 MB at the peak, is 23x the Victoria Park
-#: file (0.7 MB) and 120x the g2o sample (0.13 MB).
+#: the largest Victoria Park file read, decompressed. Its importer holds every record as
+#: Python objects and then a Step per pose: about 25 bytes of memory a byte of text (h91: 5 MB
+#: more text took 125 MB more), so a file at MAX_DATASET_BYTES asked for 6 GiB (h91's fuzz: a
+#: MemoryError traceback under 1.5 GiB of address space). 16 MiB, about 400 MB at the peak, is
+#: 23x the Victoria Park file (0.7 MB). A g2o file is bounded by the text of the records it
+#: holds as objects instead (:data:`bomgraph.datasets.g2o.MAX_G2O_HELD_BYTES`, h96): its
+#: bearings are held 8 bytes a value, and a simulated run's export is 1.5 KB a step.
 MAX_RECORD_FILE_BYTES = 16 * 2**20
 
 
@@ -171,8 +172,8 @@ def read_lines(path: str | os.PathLike[str], *, comment: str | None = "#",
 def _too_large(p: Path, max_bytes: int) -> DatasetError:
     what = ("a dataset file (the largest real recording file is 3.4 MB)"
             if max_bytes == MAX_DATASET_BYTES else
-            "a g2o or Victoria Park file, whose records are all held (the Victoria Park file "
-            "is 0.7 MB)")
+            "a Victoria Park file, whose records are all held (the Victoria Park file is "
+            "0.7 MB)")
     return DatasetError(f"{p}: larger than {max_bytes >> 20} MiB"
                         f"{' decompressed' if p.suffix == '.gz' else ''}, the limit for {what}; "
                         f"split it")
@@ -186,9 +187,11 @@ def _line_blocks(src: IO[bytes], p: Path, max_bytes: int) -> Iterator[bytes]:
     pending_n = total = newlines = 0
     while chunk := src.read(_CHUNK):
         total += len(chunk)
-        if total > max_bytes:
-            raise _too_large(p, max_bytes)
         cut = chunk.rfind(b"\n")
+        if total > max_bytes:
+            if cut < 0 and pending_n + len(chunk) > max_bytes:  # one line over the file's cap
+                raise line_too_long(p, newlines + 1, max_bytes)  # (/dev/zero; h96)
+            raise _too_large(p, max_bytes)
         if cut < 0:
             pending.append(chunk)
             pending_n += len(chunk)

@@ -51,6 +51,7 @@ used.
 
 from __future__ import annotations
 
+import array
 import logging
 import math
 import os
@@ -64,7 +65,7 @@ from ..errors import DatasetError, StreamFormatError
 from ..plausibility import MAX_ABS_ANGLE_RAD, MAX_ODOMETRY_SIGMA, refuse_implausible
 from ..stream import Step, Stream, StreamHeader, Truth
 from ..stream_file import parse_priors
-from ._text import (MAX_RECORD_FILE_BYTES, chain_order, checked_bearing_sigma, dataset_error,
+from ._text import (chain_order, checked_bearing_sigma, dataset_error,
                     file_label, parse_float, parse_int, read_lines)
 from .calibration import bearing_residuals, odometry_errors, robust_bearing_stats
 
@@ -92,7 +93,7 @@ def _bomgraph_header(path: Path) -> tuple[dict[str, Any], int | None]:
     None without one) and its line number; each field checked."""
     from ..jsonio import DuplicateKeyError, find_nonfinite, loads_strict
 
-    for line in read_lines(path, comment=None, max_bytes=MAX_RECORD_FILE_BYTES):
+    for line in read_lines(path, comment=None):
         text = " ".join(line.tokens)
         if not text.startswith("#"):
             return {}, None
@@ -128,6 +129,43 @@ def _bomgraph_header(path: Path) -> tuple[dict[str, Any], int | None]:
     return {}, None
 
 
+#: the most text of a g2o file's vertex, EDGE_SE2 and FIX records (the file as a whole is at
+#: most :data:`~bomgraph.datasets._text.MAX_DATASET_BYTES`). They are held as Python objects,
+#: 20-27 bytes of memory a byte of text (h96: 32 MiB of VERTEX_SE2 lines peaked at 629 MB, of
+#: EDGE_SE2 lines at 886 MB), so 16 MiB is about 450 MB; a simulated run's file has 270 bytes
+#: of them a step, so 16 MiB is 60,000 steps. The bearings, most of a file, are held 8 bytes a
+#: value (:class:`_Bearings`): a 250 MB file of 18,000 steps and 3.7 million bearings peaked
+#: at 404 MB. h91's cap of 16 MiB on the whole file refused a 20,000-step simulated run's own
+#: export (29 MB).
+MAX_G2O_HELD_BYTES = 16 * 2**20
+_TOO_MANY_RECORDS = (f"more than {MAX_G2O_HELD_BYTES >> 20} MiB of VERTEX_SE2, VERTEX_XY, "
+                     f"EDGE_SE2 and FIX records (about 60,000 poses), the limit for a g2o file; "
+                     f"split it")
+
+
+class _Bearings:
+    """The ``EDGE_BEARING_SE2_XY`` records of a file, in file order: columns ``i``, ``l``,
+    ``line`` (int64) and ``bearing``, ``w`` (float64), as arrays by :meth:`columns`."""
+
+    def __init__(self) -> None:
+        self._int = [array.array("q") for _ in range(3)]
+        self._float = [array.array("d") for _ in range(2)]
+
+    def append(self, i: int, lid: int, line: int, brg: float, w: float) -> None:
+        for col, v in zip(self._int, (i, lid, line)):
+            col.append(v)
+        for colf, x in zip(self._float, (brg, w)):
+            colf.append(x)
+
+    def __len__(self) -> int:
+        return len(self._int[0])
+
+    def columns(self) -> tuple[np.ndarray, ...]:
+        """``i, l, line, bearing, w``: read-only views of the buffers."""
+        return (tuple(np.frombuffer(c, dtype=np.int64) for c in self._int)
+                + tuple(np.frombuffer(c, dtype=float) for c in self._float))
+
+
 class _G2oFile:
     """The records of one g2o file, validated line by line."""
 
@@ -136,10 +174,17 @@ class _G2oFile:
         self.poses: dict[int, tuple[np.ndarray, int]] = {}
         self.landmarks: dict[int, tuple[np.ndarray, int]] = {}
         self.odometry: list[tuple[int, int, int, np.ndarray, np.ndarray]] = []
-        self.bearings: list[tuple[int, int, int, float, float]] = []
+        # the bearings, most of a file's lines, in typed buffers (8 bytes a value): as
+        # tuples of Python numbers they took about 10 bytes of memory a byte of text
+        self.bearings = _Bearings()
         self.fixed: list[int] = []
-        for line in read_lines(self.path, max_bytes=MAX_RECORD_FILE_BYTES):
+        held = 0   # bytes of text of the records held as Python objects
+        for line in read_lines(self.path):
             tag = line.tokens[0]
+            if tag != "EDGE_BEARING_SE2_XY":
+                held += sum(map(len, line.tokens)) + len(line.tokens)
+                if held > MAX_G2O_HELD_BYTES:
+                    raise dataset_error(self.path, line.number, None, _TOO_MANY_RECORDS)
             if tag == "FIX":
                 if len(line.tokens) < 2:
                     raise dataset_error(self.path, line.number, "id",
@@ -193,7 +238,7 @@ class _G2oFile:
             if not v["w"] > 0:
                 raise dataset_error(self.path, line, "w", f"bearing information must be > 0, "
                                                           f"got {v['w']}")
-            self.bearings.append((v["i"], v["l"], line, v["bearing"], v["w"]))
+            self.bearings.append(v["i"], v["l"], line, v["bearing"], v["w"])
 
 
 def header_odometry_sigma(sig: np.ndarray) -> tuple[tuple[float, float, float], bool]:
@@ -279,10 +324,11 @@ def import_g2o(path: str | os.PathLike[str], *, truth_path: str | os.PathLike[st
         misses a pose.
     """
     g = _G2oFile(path)
+    b_i, b_l, b_line, b_brg, b_w = g.bearings.columns()
     edges = [(i, j, line) for i, j, line, _, _ in g.odometry]
     order = chain_order(edges, g.path)
     if not order:
-        observers = sorted({i for i, _, _, _, _ in g.bearings})
+        observers = np.unique(b_i).tolist()
         if len(observers) > 1:
             raise dataset_error(g.path, None, None,
                                 f"bearings from {len(observers)} poses but no EDGE_SE2 "
@@ -318,33 +364,16 @@ def import_g2o(path: str | os.PathLike[str], *, truth_path: str | os.PathLike[st
     header_odo, uniform = header_odometry_sigma(sig)
 
     # bearings ------------------------------------------------------------------------------
-    per_step: list[dict[int, float]] = [{} for _ in order]
-    first_line: dict[tuple[int, int], int] = {}
-    weights = []
-    beyond: list[tuple[int, float]] = []    # (line, bearing) written beyond a full turn
-    for i, lid, line, brg, w in g.bearings:
-        if i not in step_of:
-            kind = "a landmark" if i in g.landmarks else "not on the odometry chain"
-            raise dataset_error(g.path, line, "i", f"bearing from vertex {i}, which is {kind}; "
-                                                   f"the first id must be a pose of the chain")
-        if lid in pose_ids:
-            raise dataset_error(g.path, line, "l", f"bearing to vertex {lid}, which is a pose; "
-                                                   f"the second id must be a landmark")
-        if (i, lid) in first_line:
-            raise dataset_error(g.path, line, None,
-                                f"a second bearing from pose {i} to landmark {lid} (first on "
-                                f"line {first_line[(i, lid)]}); one landmark appears at most "
-                                f"once per step: merge or delete one")
-        first_line[(i, lid)] = line
-        per_step[step_of[i]][lid] = brg
-        weights.append(w)
-        if abs(brg) > MAX_ABS_ANGLE_RAD:
-            beyond.append((line, brg))
-    if beyond:   # valid (g2o wraps angles, and so does a Step), but most likely degrees
+    steps_of_b, first_bad = _bearing_steps(g, order, b_i, b_l, b_line)
+    if first_bad is not None:
+        raise first_bad
+    beyond = np.flatnonzero(np.abs(b_brg) > MAX_ABS_ANGLE_RAD)  # beyond a full turn
+    if beyond.size:   # valid (g2o wraps angles, and so does a Step), but most likely degrees
         _log.warning("%s, line %d: field 'bearing': %g is more than a full turn (%d such "
                      "bearing(s) in the file); bearings are radians (degrees?); wrapped to "
-                     "(-pi, pi]", g.path, beyond[0][0], beyond[0][1], len(beyond))
-    w_arr = np.array(weights, dtype=float)
+                     "(-pi, pi]", g.path, int(b_line[beyond[0]]), float(b_brg[beyond[0]]),
+                     beyond.size)
+    w_arr = b_w
     if bearing_sigma_rad is not None:
         sigma_b = checked_bearing_sigma(bearing_sigma_rad)
         sigma_source = "given by the caller"
@@ -360,11 +389,13 @@ def import_g2o(path: str | os.PathLike[str], *, truth_path: str | os.PathLike[st
     if times is not None and len(times) != len(order):
         raise dataset_error(g.path, extra_line, "bomgraph header",
                             f"time_s has {len(times)} stamps for {len(order)} poses")
+    by_step = np.lexsort((b_l, steps_of_b))   # by step, then by landmark id
+    cuts = np.searchsorted(steps_of_b[by_step], np.arange(len(order) + 1))
     steps = []
-    for t, lms in enumerate(per_step):
-        ids = np.array(sorted(lms), dtype=np.int64)
+    for t in range(len(order)):
+        rows = by_step[cuts[t]:cuts[t + 1]]
         steps.append(Step(t=t, odom=None if t == 0 else odoms[t - 1],
-                          landmark_ids=ids, bearings_rad=np.array([lms[k] for k in ids.tolist()]),
+                          landmark_ids=b_l[rows].copy(), bearings_rad=b_brg[rows].copy(),
                           odom_sigma=None if (t == 0 or uniform) else sig[t - 1],
                           time_s=None if times is None else float(times[t])))
 
@@ -396,7 +427,7 @@ def import_g2o(path: str | os.PathLike[str], *, truth_path: str | os.PathLike[st
                                 f"no VERTEX_SE2 for pose {missing[0]} ({len(missing)} of "
                                 f"{len(order)} poses missing); the truth needs every pose")
         lm_ids = np.array(sorted(tg.landmarks), dtype=np.int64)
-        observed = {lid for _, lid, _, _, _ in g.bearings}
+        observed = set(np.unique(b_l).tolist())
         unknown = sorted(observed - set(lm_ids.tolist()))
         if unknown:
             raise dataset_error(tg.path, None, None,
@@ -428,6 +459,41 @@ def import_g2o(path: str | os.PathLike[str], *, truth_path: str | os.PathLike[st
                        poses=None if truth is None else truth.poses, odom_lines=odom_lines,
                        priors_line=extra_line)
     return Stream(header, tuple(steps), truth)
+
+
+def _bearing_steps(g: _G2oFile, order: list[int], b_i: np.ndarray, b_l: np.ndarray,
+                   b_line: np.ndarray) -> tuple[np.ndarray, DatasetError | None]:
+    """The step of each bearing of ``g`` (``order``: the chain's pose ids), and the refusal
+    of the file's first bearing (in file order) that is not from a pose of the chain, not to a
+    landmark, or a second one of its pose and landmark (None if none is)."""
+    chain = np.array(order, dtype=np.int64)   # never empty (import_g2o)
+    perm = np.argsort(chain, kind="stable")
+    ids = chain[perm]
+    pos = np.minimum(np.searchsorted(ids, b_i), len(ids) - 1)
+    on_chain = ids[pos] == b_i
+    steps = np.where(on_chain, perm[pos], -1).astype(np.int64)
+    to_pose = ids[np.minimum(np.searchsorted(ids, b_l), len(ids) - 1)] == b_l
+    pair = np.lexsort((b_l, b_i))     # stable: a pair's rows in file order
+    again = np.zeros(len(b_i), dtype=bool)
+    again[pair[1:]] = (b_i[pair[1:]] == b_i[pair[:-1]]) & (b_l[pair[1:]] == b_l[pair[:-1]])
+    bad = np.flatnonzero(~on_chain | to_pose | again)
+    if not bad.size:
+        return steps, None
+    k = int(bad[0])
+    i, lid, line = int(b_i[k]), int(b_l[k]), int(b_line[k])
+    if not on_chain[k]:
+        kind = "a landmark" if i in g.landmarks else "not on the odometry chain"
+        return steps, dataset_error(g.path, line, "i", f"bearing from vertex {i}, which is "
+                                                       f"{kind}; the first id must be a pose "
+                                                       f"of the chain")
+    if to_pose[k]:
+        return steps, dataset_error(g.path, line, "l", f"bearing to vertex {lid}, which is a "
+                                                       f"pose; the second id must be a landmark")
+    first = int(b_line[np.flatnonzero((b_i == i) & (b_l == lid))[0]])
+    return steps, dataset_error(g.path, line, None,
+                                f"a second bearing from pose {i} to landmark {lid} (first on "
+                                f"line {first}); one landmark appears at most once per step: "
+                                f"merge or delete one")
 
 
 #: the truth check refuses odometry whose RMS translation error against the truth exceeds
