@@ -30,7 +30,7 @@ from typing import Any, Callable, Iterator, Mapping, Sequence
 
 import numpy as np
 
-from .checks import instance, is_integer
+from .checks import echo, instance, is_integer
 from .errors import (ConfigError, StreamFormatError, TooFewLandmarksError,
                      UnknownMethodError)
 from .estimate_file import write_estimate
@@ -204,7 +204,10 @@ def _run_task(task: Task) -> dict[str, Any]:
     if score.failure or (stale := stale_after_run(task, worker=_IN_WORKER.get())):
         out.update(ok=False, error=score.failure or stale)
         return out
-    info = jsonable(dict(result.final.info), max_items=64)
+    info = jsonable(dict(result.final.info), max_items=64)   # a numpy bool_: a bool
+    converged = info.get("converged")
+    if not (converged is None or isinstance(converged, bool)):   # h98: see _odd_converged
+        converged = None
     final = result.final
     out["final_map"] = None
     if truth is not None:
@@ -220,7 +223,7 @@ def _run_task(task: Task) -> dict[str, Any]:
             pass
     out.update(ok=True, checkpoints=score.rows, total_s=result.total_s - score.seconds,
                step_median_s=float(np.median(result.step_s)),
-               converged=info.get("converged"), info=info)
+               converged=converged, info=info)
     if task.keep_estimate:
         out["estimate_file"] = _estimate_text(task, stream, result)
     return out
@@ -446,7 +449,26 @@ def execute_counted(tasks: Sequence[Task], executor: Executor = Executor(), *,
                      "this process: other bomgraph or plugin code, library versions or data "
                      "files there; give them this process's (and restart them)",
                      len(other_key), other_key[0])
+    _odd_converged(results)
     return [r for r in results if r is not None], n_cached
+
+
+def _odd_converged(results: Sequence[Mapping[str, Any] | None]) -> None:
+    """One warning per method whose ``info["converged"]`` is not True, False or None (a
+    string, a number): :func:`run_task` recorded its runs' ``converged`` as unknown (None),
+    which the report leaves out of the converged rate, as for a method that says nothing.
+    Not a failed run: the map is scored as any other. Recorded as said, the cache's check
+    (true, false or null) refused the entry, so the run ran again in every sweep, and the
+    report's mean of it raised."""
+    said: dict[str, Any] = {}
+    for r in results:
+        info = r.get("info") if r is not None and r.get("ok") else None
+        v = info.get("converged") if isinstance(info, dict) else None
+        if not (v is None or isinstance(v, bool)):
+            said.setdefault(str(r.get("method")), v)   # type: ignore[union-attr]
+    for method, v in said.items():
+        _log.warning("method %s: info['converged'] is %s, not True, False or None: its runs "
+                     "are recorded as convergence unknown; return a bool", method, echo(v))
 
 
 def _streams_in_turn(todo: list[int], tasks: Sequence[Task]) -> list[int]:
