@@ -24,13 +24,13 @@ import socket
 import tempfile
 import traceback
 import uuid
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Callable, Iterator, Mapping, Sequence
 
 import numpy as np
 
-from .checks import instance, is_integer
+from .checks import echo, instance, is_integer
 from .errors import (ConfigError, StreamFormatError, TooFewLandmarksError,
                      UnknownMethodError)
 from .estimate_file import write_estimate
@@ -204,7 +204,10 @@ def _run_task(task: Task) -> dict[str, Any]:
     if score.failure or (stale := stale_after_run(task, worker=_IN_WORKER.get())):
         out.update(ok=False, error=score.failure or stale)
         return out
-    info = jsonable(dict(result.final.info), max_items=64)
+    info = jsonable(dict(result.final.info), max_items=64)   # a numpy bool_: a bool
+    converged = info.get("converged")
+    if not (converged is None or isinstance(converged, bool)):   # h98: see _odd_converged
+        converged = None
     final = result.final
     out["final_map"] = None
     if truth is not None:
@@ -220,7 +223,7 @@ def _run_task(task: Task) -> dict[str, Any]:
             pass
     out.update(ok=True, checkpoints=score.rows, total_s=result.total_s - score.seconds,
                step_median_s=float(np.median(result.step_s)),
-               converged=info.get("converged"), info=info)
+               converged=converged, info=info)
     if task.keep_estimate:
         out["estimate_file"] = _estimate_text(task, stream, result)
     return out
@@ -257,12 +260,21 @@ def _estimate_text(task: Task, stream: Stream, result: RunResult) -> str:
 class Executor:
     """Where tasks run: ``"serial"``, ``"processes"`` (joblib, one per core by default) or
     ``"dask"`` (an existing scheduler at ``scheduler`` or a local cluster of
-    ``dask_local`` workers)."""
+    ``dask_local`` workers). ``scheduler_from``: the words naming where ``scheduler`` came
+    from in errors (:meth:`choose`: a sweep file's key; default the ``--scheduler`` flag)."""
 
     backend: str = "processes"
     n_jobs: int = -1
     scheduler: str | None = None
     dask_local: int = 0
+    scheduler_from: str | None = field(default=None, compare=False)
+
+    def scheduler_named(self) -> str:
+        """The scheduler address as errors name it: ``--scheduler ADDRESS``, or the sweep
+        file's key and value when it came from there."""
+        if self.scheduler_from is None:
+            return f"--scheduler {self.scheduler}"
+        return f'{self.scheduler_from} = "{self.scheduler}"'
 
     def __post_init__(self) -> None:
         if self.backend not in ("serial", "processes", "dask"):
@@ -277,7 +289,7 @@ class Executor:
         if self.scheduler is not None:
             problem = scheduler_address_problem(self.scheduler)
             if problem:
-                raise ConfigError(f"--scheduler {self.scheduler!r}: {problem}")
+                raise ConfigError(f"{self.scheduler_named()}: {problem}")
 
     @classmethod
     def choose(cls, jobs: int | None = None, scheduler: str | None = None,
@@ -286,18 +298,24 @@ class Executor:
         """Dask when a ``scheduler`` or ``dask_local`` workers are given, else serial for
         ``jobs == 1``, else ``jobs`` local processes (-1, the default: one per core). When
         all three are None they are taken from ``defaults`` (a sweep file's ``[executor]``:
-        ``jobs``, ``scheduler``, ``dask_local``); any one given (the command line) sets the
-        whole of ``defaults`` aside, as ``--jobs 1`` overrides a file's ``dask_local``."""
+        ``jobs``, ``scheduler``, ``dask_local``, and ``file``, its name, for the errors about
+        its scheduler); any one given (the command line) sets the whole of ``defaults``
+        aside, as ``--jobs 1`` overrides a file's ``dask_local``."""
         if scheduler == "":   # an unset variable: not "no scheduler", nor the file's
             raise ConfigError("--scheduler is empty; give the address `dask scheduler` "
                               "printed, e.g. tcp://HOST:8786")
         given = jobs is not None or scheduler is not None or dask_local is not None
         d = {} if given else dict(defaults or {})
         jobs = d.get("jobs", -1) if jobs is None else jobs
-        scheduler = scheduler or d.get("scheduler")
+        named = None
+        if not scheduler and d.get("scheduler"):
+            scheduler = d["scheduler"]
+            named = f"{d['file']}: executor.scheduler" if d.get("file") else \
+                "[executor] scheduler"
         dask_local = d.get("dask_local", 0) if dask_local is None else dask_local
         if scheduler or dask_local:
-            return cls("dask", scheduler=scheduler, dask_local=dask_local or 0)
+            return cls("dask", scheduler=scheduler, dask_local=dask_local or 0,
+                       scheduler_from=named)
         if jobs == 1:
             return cls("serial")
         return cls("processes", n_jobs=jobs)
@@ -431,7 +449,26 @@ def execute_counted(tasks: Sequence[Task], executor: Executor = Executor(), *,
                      "this process: other bomgraph or plugin code, library versions or data "
                      "files there; give them this process's (and restart them)",
                      len(other_key), other_key[0])
+    _odd_converged(results)
     return [r for r in results if r is not None], n_cached
+
+
+def _odd_converged(results: Sequence[Mapping[str, Any] | None]) -> None:
+    """One warning per method whose ``info["converged"]`` is not True, False or None (a
+    string, a number): :func:`run_task` recorded its runs' ``converged`` as unknown (None),
+    which the report leaves out of the converged rate, as for a method that says nothing.
+    Not a failed run: the map is scored as any other. Recorded as said, the cache's check
+    (true, false or null) refused the entry, so the run ran again in every sweep, and the
+    report's mean of it raised."""
+    said: dict[str, Any] = {}
+    for r in results:
+        info = r.get("info") if r is not None and r.get("ok") else None
+        v = info.get("converged") if isinstance(info, dict) else None
+        if not (v is None or isinstance(v, bool)):
+            said.setdefault(str(r.get("method")), v)   # type: ignore[union-attr]
+    for method, v in said.items():
+        _log.warning("method %s: info['converged'] is %s, not True, False or None: its runs "
+                     "are recorded as convergence unknown; return a bool", method, echo(v))
 
 
 def _streams_in_turn(todo: list[int], tasks: Sequence[Task]) -> list[int]:
@@ -517,6 +554,7 @@ def _dispatch(tasks: list[Task], index: list[int], executor: Executor,
         from .cluster import dispatch as dispatch_dask
 
         yield from dispatch_dask(run, index, tasks, scheduler=executor.scheduler,
+                                 scheduler_named=executor.scheduler_named(),
                                  n_local=_local_workers(executor.dask_local, len(tasks)),
                                  failed=failed)
 

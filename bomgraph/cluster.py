@@ -46,9 +46,11 @@ async def _identity(address: str, timeout: float) -> Any:
         comm.abort()
 
 
-def check_scheduler(address: str, timeout: float | None = None) -> int:
+def check_scheduler(address: str, timeout: float | None = None, *,
+                    named: str | None = None) -> int:
     """The number of workers of the Dask scheduler at ``address``, asked within ``timeout``
-    seconds (default :func:`connect_timeout`).
+    seconds (default :func:`connect_timeout`). ``named``: how the errors name the address
+    (default ``--scheduler ADDRESS``; a sweep file's key when it came from there).
 
     Raises
     ------
@@ -57,22 +59,23 @@ def check_scheduler(address: str, timeout: float | None = None) -> int:
         dashboard, another service): one line saying which, and what to check.
     """
     timeout = connect_timeout() if timeout is None else timeout
+    named = f"--scheduler {address}" if named is None else named
     hint = ("is `dask scheduler` running, and is this the address it printed (not its "
             "dashboard's or a worker's)?")
     with concurrent.futures.ThreadPoolExecutor(1) as pool:  # also under a running event loop
         try:
             reply = pool.submit(asyncio.run, _identity(address, timeout)).result()
         except (asyncio.TimeoutError, TimeoutError):
-            raise ConfigError(f"--scheduler {address}: no Dask scheduler answered within "
+            raise ConfigError(f"{named}: no Dask scheduler answered within "
                               f"{timeout:g} s; {hint}") from None
         except Exception as exc:  # refused, unresolvable, or a reply Dask cannot read
             reason = ((str(exc).splitlines() or [type(exc).__name__])[0]
                       if isinstance(exc, OSError) else "what answers speaks no Dask")
-            raise ConfigError(f"--scheduler {address}: no Dask scheduler there ({reason}); "
+            raise ConfigError(f"{named}: no Dask scheduler there ({reason}); "
                               f"{hint}") from None
     kind = reply.get("type") if isinstance(reply, dict) else None
     if kind != "Scheduler":
-        raise ConfigError(f"--scheduler {address}: that is a Dask {kind or 'service'}, not a "
+        raise ConfigError(f"{named}: that is a Dask {kind or 'service'}, not a "
                           f"scheduler; give the address `dask scheduler` printed")
     return int(reply.get("n_workers", len(reply.get("workers", {}))))
 
@@ -123,24 +126,25 @@ def quiet_dask_logging() -> Callable[[], None]:
 
 def dispatch(func: Callable[[int, Any], tuple[int, dict[str, Any]]], index: Sequence[int],
              tasks: Sequence[Any], *, scheduler: str | None, n_local: int,
-             failed: Callable[[int, str], dict[str, Any]]
+             failed: Callable[[int, str], dict[str, Any]], scheduler_named: str | None = None
              ) -> Iterator[tuple[int, dict[str, Any]]]:
     """``func(k, task)`` for each pair on the cluster, yielded as they finish; a task the
-    cluster could not run is ``(k, failed(k, reason))``."""
+    cluster could not run is ``(k, failed(k, reason))``. ``scheduler_named``: how errors
+    name the address (:func:`check_scheduler`)."""
     yield from _dispatch(func, index, tasks, scheduler=scheduler, n_local=n_local,
-                         failed=failed)
+                         failed=failed, scheduler_named=scheduler_named)
 
 
 def _dispatch(func: Callable[[int, Any], tuple[int, dict[str, Any]]], index: Sequence[int],
               tasks: Sequence[Any], *, scheduler: str | None, n_local: int,
-              failed: Callable[[int, str], dict[str, Any]]
+              failed: Callable[[int, str], dict[str, Any]], scheduler_named: str | None = None
               ) -> Iterator[tuple[int, dict[str, Any]]]:
     from distributed import Client, LocalCluster, wait
 
     cluster = None
     alone = False  # warned that no worker is there
     if scheduler:
-        alone = check_scheduler(scheduler) == 0
+        alone = check_scheduler(scheduler, named=scheduler_named) == 0
         if alone:
             _log.warning("the Dask scheduler at %s has no workers: the runs wait for one "
                          "(start `dask worker %s`)", scheduler, scheduler)

@@ -283,7 +283,7 @@ def compare_experiments(*, config: str | None = None, streams: Sequence[str] | N
     the shipped ``paper``, whose design ``quick`` and ``seed`` change), stream files with
     ``methods`` (``"NAME[@PRESET],..."``), ``options`` (``"NAME:KEY=VALUE"``) and a
     ``reference``, or the recordings under ``real``; then the experiments called ``names``.
-    Returns them and the sweep file's executor settings.
+    Returns them and the sweep file's executor settings (with ``file``, its path, if any).
 
     Raises
     ------
@@ -325,6 +325,8 @@ def compare_experiments(*, config: str | None = None, streams: Sequence[str] | N
     else:
         sweep = load_experiments(config or "paper")
         settings = dict(sweep.executor)
+        if settings:       # named in the errors about its scheduler (Executor.choose)
+            settings["file"] = sweep.path
         exps = {e.name: e for e in designed_variant(sweep.experiments, quick=quick, seed=seed)}
     return select(exps, names), settings
 

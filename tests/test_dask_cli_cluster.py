@@ -231,6 +231,25 @@ def test_an_address_where_no_scheduler_answers_is_one_line_exit_2(
     assert line.startswith(f"bomgraph: error: --scheduler {address}: {expected}")
 
 
+def test_a_sweep_files_scheduler_is_named_by_the_file_and_key(setup: dict) -> None:
+    """The address came from ``[executor] scheduler`` of the sweep file, not from a flag:
+    the refusal names the file and the key (it said ``--scheduler ADDRESS``, a flag the
+    user did not give). Nothing listens at the port (Dask's connect timeout, 3 s here)."""
+    address = f"tcp://127.0.0.1:{_free_port()}"
+    sweep = setup["root"] / "remote.toml"
+    sweep.write_text(f"name = \"remote\"\nstreams = {json.dumps(setup['streams'])}\n"
+                     f"methods = [\"triangulate\"]\n\n[executor]\n"
+                     f"scheduler = \"{address}\"\n")
+    proc = subprocess.run([sys.executable, "-m", "bomgraph", "compare", "--config", str(sweep),
+                           "--no-figures", "--out", str(setup["root"] / "remote")],
+                          env=setup["env"], capture_output=True, text=True, timeout=120)
+    line = _one_line(proc)
+    assert proc.returncode == 2, proc.stderr
+    assert line.startswith(f"bomgraph: error: {sweep}: executor.scheduler = \"{address}\": "
+                           f"no Dask scheduler "), line     # "there (...)" or "answered ..."
+    assert "--scheduler" not in line
+
+
 def test_an_http_address_is_refused_before_connecting(setup: dict) -> None:
     proc = _compare(setup, "http://127.0.0.1:8787", "triangulate", setup["root"] / "http")
     line = _one_line(proc)

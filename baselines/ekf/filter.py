@@ -3,10 +3,12 @@
 bearing-only SLAM (paper section IV, Exp. 2).
 
 :class:`BearingEkf` keeps the state ``x`` (shape ``(n,)``) and covariance ``P`` (``(n, n)``) in a
-``filterpy.kalman.ExtendedKalmanFilter`` (``kf.x``, ``kf.P``; after an update also ``kf.y``,
-``kf.S``, ``kf.K``, ``kf.R`` of that batch). The state is ``[x_m, y_m, psi_rad]`` of the robot
-followed by blocks the mappers lay out (landmarks ``[x_m, y_m]``, pose clones ``[x_m, y_m,
-psi_rad]``, inverse-depth features ``[x0_m, y0_m, theta_rad, rho_per_m]``).
+``filterpy.kalman.ExtendedKalmanFilter`` (``kf.x``, ``kf.P``; after an update also ``kf.y``
+and ``kf.S`` of that batch; the gain ``K`` is never formed, so ``kf.K`` is filterpy's
+initial zeros (3, 1), and ``kf.R`` stays the single-bearing ``bearing_sigma_rad**2`` set at
+construction, not the batch's ``diag(var)``). The state is ``[x_m, y_m, psi_rad]`` of the robot followed by
+blocks the mappers lay out (landmarks ``[x_m, y_m]``, pose clones ``[x_m, y_m, psi_rad]``,
+inverse-depth features ``[x0_m, y0_m, theta_rad, rho_per_m]``).
 
 Which part of filterpy is used, and why: the ``ExtendedKalmanFilter`` object holds the state,
 and its ``update`` (``K = P H^T S^-1``, ``x + K y`` with a ``residual``, Joseph form) is the

@@ -8,7 +8,8 @@ import gtsam
 import numpy as np
 import pytest
 
-from baselines.bearing_graph import landmarks_from_values, pose_key, poses_from_values
+from baselines.bearing_graph import (landmark_key, landmarks_from_values, pose_key,
+                                     poses_from_values)
 from bomgraph.mapper import create_mapper, run
 from bomgraph.sim import SimConfig, paper_design, simulate_run
 from bomgraph.stream import Stream
@@ -129,3 +130,41 @@ def test_the_poses_before_a_window_move_with_its_solution(stream: Stream) -> Non
     gap = np.abs(np.angle(np.exp(1j * (est.poses[:, 2]
                                       - poses_from_values(best, est.pose_t)[:, 2]))))
     assert gap[:b].max() < 3 * gap[b:].max() + 1e-4, (gap[:b].max(), gap[b:].max())
+
+
+def test_after_a_window_solve_the_residual_check_covers_the_window_bearings_only(
+        stream: Stream) -> None:
+    """``whitened_residuals`` after a window solve with held pose ``b``: the window's graph
+    has the chunks from step ``b + 1`` on (pose ``b``'s own bearings are in its marginal, or
+    folded by ``_fold_upto(b + 1)``, steps < ``b + 1``), so the bearings checked are exactly
+    the window graph's bearing factors, owners ``> b`` (here b = 110). A boundary pose turned
+    0.3 rad leaves the largest residual, the robust trigger's input, as it was (3.04 sigma);
+    with ``owner >= b`` it becomes 7.57, above ``robust_trigger`` 5, for bearings the
+    window's solve does not hold."""
+    mapper = create_mapper("gtsam-batch", stream.header, lag_after_steps=60, lag_steps=30,
+                           full_growth=1.5, huber_k=None)
+    for s in stream.steps[:150]:
+        mapper.step(s)
+    mapper.estimate()
+    state = mapper.state
+    b = state._window_b
+    assert b > 60
+    owner, lid, _ = state.bearings()
+    _, at = state.whitened_residuals(state.values)
+    got = {(int(owner[i]), int(lid[i])) for i in at}
+    pose_of = {pose_key(t): t for t in range(state.problem.n_steps)}
+    lm_of = {landmark_key(int(i)): int(i) for i in np.unique(lid)}
+    graph = state.chunks._factors(b)
+    want = set()
+    for i in range(graph.size()):          # a bearing factor: keys (pose, landmark)
+        keys = [int(k) for k in graph.at(i).keys()]
+        if len(keys) == 2 and keys[0] in pose_of and keys[1] in lm_of:
+            want.add((pose_of[keys[0]], lm_of[keys[1]]))
+    assert want and min(t for t, _ in want) == b + 1
+    assert got == want
+    before = state.max_whitened_residual(state.values)
+    turned = gtsam.Values(state.values)
+    p = turned.atPose2(pose_key(b))
+    turned.update(pose_key(b), gtsam.Pose2(p.x(), p.y(), p.theta() + 0.3))
+    assert np.any(owner == b)
+    assert state.max_whitened_residual(turned) == before

@@ -169,3 +169,61 @@ def test_headings_of_poses_without_a_mapped_landmark_follow_the_odometry() -> No
                                rtol=1e-12)
     np.testing.assert_allclose(_fill_headings(win, ks, np.array([nan, 0.6, nan, nan])), want,
                                rtol=1e-12)
+
+
+def _rot(theta: float) -> np.ndarray:
+    c, s = math.cos(theta), math.sin(theta)
+    return np.array([[c, -s], [s, c]])
+
+
+def _resection_scene():
+    """Four poses (robot nodes 9..12 after 9 landmark slots) in a world of five landmarks
+    with ids 2, 3, 5, 6, 8 (slot 8 not mapped); the bearings by ``math.atan2`` per pair, CCW
+    from the heading and wrapped by ``math.remainder``: independent of the geometry kernel."""
+    poses = np.array([[0.0, 0.0, 0.3], [0.4, 0.1, 0.9], [0.9, 0.5, -2.6], [1.3, 0.2, 3.0]])
+    lm_idx = np.array([2, 3, 5, 6], np.int64)
+    lms = np.array([[2.0, 1.0], [-1.0, 2.5], [0.5, -2.0], [3.0, -0.5]])
+    seen = [np.array([2, 3, 5, 8]), np.array([3, 6]), np.array([2, 5, 6]), np.array([6, 3, 2])]
+    where = {2: 0, 3: 1, 5: 2, 6: 3}
+    win = RobotPoses(4, "scale-free")
+    for k, (x, y, psi) in enumerate(poses):
+        b = []
+        for i in seen[k]:
+            lx, ly = lms[where[int(i)]] if int(i) in where else (7.0, 7.0)
+            b.append(math.remainder(math.atan2(ly - y, lx - x) - psi, math.tau))
+        win.push(k, None if k == 0 else np.zeros(3), None, seen[k], np.array(b))
+    kept = np.concatenate([lm_idx, 9 + np.arange(4)])
+    return win, poses, lms, lm_idx, kept
+
+
+def test_resect_headings_recovers_headings_and_undoes_a_mirror_exactly() -> None:
+    """Noise-free: with the map and positions rotated by ``theta`` the headings come back as
+    ``psi + theta`` and the frame is kept; with them mirrored (``y -> -y``) and then rotated,
+    the mirror image fits better, so the output is reflected back (``lm_xy`` is the truth
+    rotated by ``-theta``, the poses likewise with headings ``psi - theta``) and
+    ``reflected`` is True (the docstring: reflect the frame when the mirror image fits
+    better)."""
+    from bomgraph.stmds.localisation import resect_headings
+
+    win, poses, lms, lm_idx, kept = _resection_scene()
+    theta = 0.7
+    r = _rot(theta)
+    pts = np.concatenate([lms, poses[:, :2]])
+    xy = pts @ r.T
+    lm_xy, pose_t, out, reflected = resect_headings(win, kept, xy, 9, lm_idx, xy[:4])
+    assert reflected is False and pose_t.tolist() == [0, 1, 2, 3]
+    np.testing.assert_allclose(lm_xy, lms @ r.T, atol=1e-12)
+    np.testing.assert_allclose(out[:, :2], poses[:, :2] @ r.T, atol=1e-12)
+    np.testing.assert_allclose(np.remainder(out[:, 2] - poses[:, 2] - theta + 1, math.tau),
+                               1.0, atol=1e-12)
+
+    mirrored = (pts * [1.0, -1.0]) @ r.T
+    lm_xy, pose_t, out, reflected = resect_headings(win, kept, mirrored, 9, lm_idx,
+                                                    mirrored[:4])
+    back = _rot(-theta)
+    assert reflected is True and pose_t.tolist() == [0, 1, 2, 3]
+    np.testing.assert_allclose(lm_xy, lms @ back.T, atol=1e-12)
+    np.testing.assert_allclose(out[:, :2], poses[:, :2] @ back.T, atol=1e-12)
+    np.testing.assert_allclose(np.remainder(out[:, 2] - poses[:, 2] + theta + 1, math.tau),
+                               1.0, atol=1e-12)
+    assert np.all(np.abs(out[:, 2]) <= math.pi)

@@ -1,0 +1,81 @@
+"""A method's ``info["converged"]`` that is not True, False or None (h98).
+
+A plugin returning ``"yes"`` was cached as a result whose ``converged`` the cache's own check
+(``result_cache.read_cached``: true, false or null) then refused on every later sweep, so the
+run ran again each time, and the summary's ``np.mean`` of it ended ``compare`` in a
+traceback. Now such a value is recorded as unknown (``converged`` None, as the report treats
+a method that says nothing), with one warning naming the method and the key; the method's
+own ``info`` keeps what it said. A numpy ``bool_`` (what ``np.all(...)`` returns) is a bool:
+recorded as one, and cached.
+"""
+
+from __future__ import annotations
+
+import importlib
+import logging
+from pathlib import Path
+
+import numpy as np
+import pytest
+from _depth_mapper import depth_mapper
+from _plugin_site import write
+
+from bomgraph import mapper
+from bomgraph.bench import Executor, execute_counted
+from bomgraph.experiments import Arm, Experiment, FileSource
+from bomgraph.report import summarise
+from bomgraph.sim import SimConfig, simulate
+from bomgraph.stream_file import write_stream
+
+ESTIMATE = ("return MapEstimate(ids, np.array([self.seen[i] for i in ids.tolist()])"
+            ".reshape(-1, 2))")
+
+
+def _experiment(plugin_site: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                pkg: str, converged: str) -> Experiment:
+    """A method (registered at run time as ``h98-conv``) whose info says ``converged =
+    <converged>`` (an expression), and a one-run experiment of it."""
+    code = depth_mapper("1.0").replace(
+        ESTIMATE, ESTIMATE[:-1] + f", info={{'converged': {converged}}})")
+    assert "info=" in code
+    write(plugin_site / pkg / "__init__.py", "")
+    write(plugin_site / pkg / "m.py", code)
+    monkeypatch.setattr(mapper, "_REGISTRY", dict(mapper._REGISTRY))
+    importlib.import_module(f"{pkg}.m")
+    mapper.register_method("h98-conv", f"{pkg}.m:DepthMapper")
+    stream = tmp_path / "s.jsonl"
+    write_stream(simulate(SimConfig(n_steps=20), np.random.default_rng(5)), stream)
+    return Experiment("e", "e", (Arm("h98-conv", "h98-conv"),), sources=(FileSource(str(stream)),))
+
+
+def test_a_numpy_bool_is_recorded_as_a_bool_and_cached(
+        plugin_site: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    exp = _experiment(plugin_site, tmp_path, monkeypatch, "h98np", "np.bool_(True)")
+    (res,), n_cached = execute_counted(exp.tasks(), Executor("serial"),
+                                       cache_dir=tmp_path / "cache")
+    assert res["ok"] and res["converged"] is True and n_cached == 0
+    (again,), n_cached = execute_counted(exp.tasks(), Executor("serial"),
+                                         cache_dir=tmp_path / "cache")
+    assert n_cached == 1 and again["converged"] is True
+    assert summarise([again])[0]["converged_rate"] == 1.0
+
+
+def test_a_string_is_recorded_as_unknown_with_one_warning_and_cached(
+        plugin_site: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+        caplog: pytest.LogCaptureFixture) -> None:
+    """Fails before: ``converged`` was "yes", the second sweep ran it again (the cache entry
+    refused), and ``summarise`` raised TypeError."""
+    exp = _experiment(plugin_site, tmp_path, monkeypatch, "h98str", "'yes'")
+    with caplog.at_level(logging.WARNING):
+        (res,), n_cached = execute_counted(exp.tasks(), Executor("serial"),
+                                           cache_dir=tmp_path / "cache")
+    assert res["ok"] and res["converged"] is None and n_cached == 0
+    assert res["info"]["converged"] == "yes"              # the method's own words, kept
+    said = [r.getMessage() for r in caplog.records if r.levelno >= logging.WARNING]
+    assert len(said) == 1, said
+    assert "h98-conv" in said[0] and "info['converged']" in said[0] and "'yes'" in said[0]
+    (again,), n_cached = execute_counted(exp.tasks(), Executor("serial"),
+                                         cache_dir=tmp_path / "cache")
+    assert n_cached == 1 and again["converged"] is None
+    row = summarise([again])[0]
+    assert np.isnan(row["converged_rate"]) and row["n_converged_known"] == 0
