@@ -223,9 +223,7 @@ def _listener(answer: bytes | None) -> Iterator[str]:
 def test_an_address_where_no_scheduler_answers_is_one_line_exit_2(
         setup: dict, answer: bytes | None, expected: str) -> None:
     with _listener(answer) as address:
-        t0 = time.monotonic()
         proc = _compare(setup, address, "triangulate", setup["root"] / "nobody", timeout=60)
-    assert time.monotonic() - t0 < 40
     line = _one_line(proc)
     assert proc.returncode == 2, proc.stderr
     assert line.startswith(f"bomgraph: error: --scheduler {address}: {expected}")
