@@ -13,6 +13,8 @@ import logging
 import os
 from typing import Any, Callable, Iterable, Iterator, Mapping
 
+import numpy as np
+
 from .errors import ConfigError, StreamFormatError
 from .experiments import Experiment, SimSource
 from .mapper import (MapEstimate, RunResult, checkpoint_times, create_mapper, method_info,
@@ -92,7 +94,8 @@ def run_file(stream_path: str | os.PathLike[str], method: str,
     if failures:
         _log.warning("%s: %d solver failure(s) recovered from (last: %s); see the estimate's "
                      "info", method, failures, result.final.info.get("last_failure", "?"))
-    if result.final.info.get("converged") is False:
+    converged = result.final.info.get("converged")  # a numpy bool_ too (np.all(...))
+    if isinstance(converged, (bool, np.bool_)) and not converged:
         _log.warning("%s: the final solve did not converge (%s)", method,
                      result.final.info.get("stop", "see the estimate's info"))
     return result

@@ -79,3 +79,21 @@ def test_a_string_is_recorded_as_unknown_with_one_warning_and_cached(
     assert n_cached == 1 and again["converged"] is None
     row = summarise([again])[0]
     assert np.isnan(row["converged_rate"]) and row["n_converged_known"] == 0
+
+
+@pytest.mark.parametrize("converged, warned", [("np.bool_(False)", True), ("False", True),
+                                               ("np.bool_(True)", False), ("None", False)])
+def test_bomgraph_run_warns_of_a_final_solve_that_did_not_converge(
+        plugin_site: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+        caplog: pytest.LogCaptureFixture, converged: str, warned: bool) -> None:
+    """``run_file`` (``bomgraph run``) warns when the final map says it did not converge,
+    also when it says so with a numpy ``bool_`` (before: only ``is False``, so a method
+    returning ``np.bool_(False)`` got no warning)."""
+    from bomgraph.file_run import run_file
+
+    pkg = "h98run_" + "".join(c for c in converged if c.isalnum())
+    exp = _experiment(plugin_site, tmp_path, monkeypatch, pkg, converged)
+    with caplog.at_level(logging.WARNING, logger="bomgraph"):
+        run_file(exp.sources[0].path, "h98-conv")
+    said = [r.getMessage() for r in caplog.records if "did not converge" in r.getMessage()]
+    assert len(said) == int(warned), said
