@@ -44,7 +44,7 @@ def echo(value: Any) -> str:
         return clip(repr(value))
     if len(value) <= MAX_ECHO_CHARS:
         return repr(value)
-    return repr(value[:MAX_ECHO_CHARS])[:-1] + "..."   # no closing quote: it goes on
+    return repr(str(value[:MAX_ECHO_CHARS]))[:-1] + "..."   # no closing quote: it goes on
 
 
 def echo_name(name: str) -> str:
