@@ -36,8 +36,22 @@ def clip(text: str) -> str:
 
 
 def echo(value: Any) -> str:
-    """``repr(value)`` for a message, clipped (:func:`clip`)."""
-    return clip(repr(value))
+    """``repr(value)`` for a message, clipped (:func:`clip`). A string is cut, not its
+    ``repr``: one of up to :data:`MAX_ECHO_CHARS` characters is echoed whole with both quotes
+    (h97: an 80-character value lost its last character, a 79-character one its closing
+    quote to a ``...`` that said it was cut), and an escape (``\\x00``) is never cut in half."""
+    if not isinstance(value, str):
+        return clip(repr(value))
+    if len(value) <= MAX_ECHO_CHARS:
+        return repr(value)
+    return repr(str(value[:MAX_ECHO_CHARS]))[:-1] + "..."   # no closing quote: it goes on
+
+
+def echo_name(name: str) -> str:
+    """A name the user wrote (an option key) for a message: as written, clipped, or its
+    :func:`echo` when it holds a newline or another unprintable character (h97: an unknown
+    option ``a<newline>b`` split the one-line error in two)."""
+    return clip(name) if name.isprintable() else echo(name)
 
 
 def is_integer(v: Any) -> bool:
@@ -215,5 +229,6 @@ def covariance_problem(cov: np.ndarray) -> tuple[int, str] | None:
     return None
 
 
-__all__ = ["MAX_ECHO_CHARS", "clip", "echo", "is_integer", "id_array", "row_array", "real", "finite", "finite_or_none", "integer",
+__all__ = ["MAX_ECHO_CHARS", "clip", "echo", "echo_name",
+           "is_integer", "id_array", "row_array", "real", "finite", "finite_or_none", "integer",
            "file_name", "instance", "fraction", "items", "COV_RTOL", "covariance_problem"]

@@ -19,7 +19,7 @@ from typing import Any, Callable, ClassVar, Mapping, NamedTuple, TypeVar
 
 import numpy as np
 
-from .checks import clip, echo
+from .checks import echo, echo_name
 from .errors import ConfigError
 
 C = TypeVar("C", bound="Presets")
@@ -45,7 +45,7 @@ class Presets:
         unknown = sorted(set(overrides) - fields)
         if unknown:
             raise ConfigError(f"{cls.__name__}: unknown option(s) "
-                              f"{', '.join(map(clip, unknown))}; "
+                              f"{', '.join(map(echo_name, unknown))}; "
                               f"valid options: {', '.join(sorted(fields))}")
         hints = typing.get_type_hints(cls)
         for key, value in overrides.items():

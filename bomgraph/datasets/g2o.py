@@ -179,7 +179,9 @@ class _G2oFile:
         self.bearings = _Bearings()
         self.fixed: list[int] = []
         held = 0   # bytes of text of the records held as Python objects
-        for line in read_lines(self.path):
+        # a line is split into Python strings before it is checked: bounded as the held
+        # records are (h97: one 60 MB line, in a file h91 capped at 16 MiB, took 1.7 GB)
+        for line in read_lines(self.path, max_line_chars=MAX_G2O_HELD_BYTES):
             tag = line.tokens[0]
             if tag != "EDGE_BEARING_SE2_XY":
                 held += sum(map(len, line.tokens)) + len(line.tokens)
