@@ -8,6 +8,7 @@ never a link or anything but a regular file, never another name's or another fol
 from __future__ import annotations
 
 import fcntl
+import json
 import os
 import signal
 import subprocess
@@ -98,9 +99,12 @@ def test_two_writers_of_one_name_never_remove_each_others_file(tmp_path: Path) -
     sweeps sharing a cache folder write one key: the first's file stays and is put in place
     after the second's."""
     path = tmp_path / "key.json"
+    entry = {"ok": True, "key": "key", "experiment": "e", "arm": "a", "method": "m",
+             "run": "r", "checkpoints": [], "total_s": 0.0, "step_median_s": 0.0, "info": {},
+             "converged": None}   # of the shape read_cached accepts (h91)
     first = AtomicOutput(path)
-    first.open().write('{"ok": true, "key": "key", "who": "first"}')
-    write_cached(path, {"ok": True, "key": "key", "who": "second"})
+    first.open().write(json.dumps({**entry, "who": "first"}))
+    write_cached(path, {**entry, "who": "second"})
     assert read_cached(path)["who"] == "second"
     assert len(_partials(tmp_path)) == 1
     first.commit()
