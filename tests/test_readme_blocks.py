@@ -18,7 +18,7 @@ import pytest
 from _plugin_dist import write_dist_info
 
 ROOT = Path(__file__).resolve().parents[1]
-DOCS = ("README.md", "docs/FORMATS.md", "docs/measurements.md")
+DOCS = ("README.md", "docs/FORMATS.md", "docs/measurements.md", "docs/measurements-early.md")
 DATA = Path(os.environ.get("BOMGRAPH_DATA", ROOT.parent / "shared" / "data"))
 BOMGRAPH = f'"{sys.executable}" -m bomgraph'
 
@@ -38,7 +38,7 @@ RUN = {
     ("docs/FORMATS.md", '{"format": "bomgraph-stream"'): "test_formats_stream_blocks",
     ("docs/FORMATS.md", "import numpy as np\nfrom bomgraph.stream import"):
         "test_formats_stream_blocks",
-    ("docs/measurements.md", 'checkpoint_every = 10\n[[experiments]]\nname = "lw1"'):
+    ("docs/measurements-early.md", 'checkpoint_every = 10\n[[experiments]]\nname = "lw1"'):
         "test_measurement_sweep_block_plans",
 }
 LEFT_OUT = {
@@ -247,9 +247,11 @@ def test_formats_stream_blocks(tmp_path: Path) -> None:
 
 
 def test_measurement_sweep_block_plans(tmp_path: Path) -> None:
-    """docs/measurements.md's one sweep file (window-ba-long's min_count) is still one that
-    compare reads: 5 runs each of its two arms (its numbers are history, of the code then)."""
-    (tmp_path / "lw.toml").write_text(block("docs/measurements.md", "checkpoint_every = 10\n"))
+    """The measurements' one sweep file (window-ba-long's min_count, in
+    docs/measurements-early.md) is still one that compare reads: 5 runs each of its two arms
+    (its numbers are history, of the code then)."""
+    (tmp_path / "lw.toml").write_text(block("docs/measurements-early.md",
+                                            "checkpoint_every = 10\n"))
     out = shell(f"{BOMGRAPH} compare --config lw.toml --dry-run --out lw", tmp_path).stdout
     assert re.search(r"lw1 +long-mc3 +5 runs", out) and re.search(r"lw1 +oracle +5 runs", out)
 
@@ -268,7 +270,7 @@ def test_a_block_added_to_the_docs_fails_saying_what_to_do(
     for doc in DOCS:
         (tmp_path / doc).parent.mkdir(parents=True, exist_ok=True)
         shutil.copy(ROOT / doc, tmp_path / doc)
-    with open(tmp_path / "docs" / "measurements.md", "a") as fh:
+    with open(tmp_path / "docs" / "measurements-early.md", "a") as fh:
         fh.write(f"\nMore text.\n\n{added}\nThe end.\n")
     monkeypatch.setattr(sys.modules[__name__], "ROOT", tmp_path)
     with pytest.raises(AssertionError) as caught:
