@@ -246,6 +246,13 @@ def parse_int(token: str, path: str | os.PathLike[str], line: int, field: str) -
     return value
 
 
+#: the longest data line of a table (:func:`read_table`; a MRCLAM row is about 50 characters):
+#: a longer one is refused before it is split into tokens, about 20 bytes of memory a
+#: character (h97: one 60 MB line of a g2o file peaked at 1.7 GB; the tables' 64 MiB line cap
+#: let the same through)
+MAX_TABLE_LINE_CHARS = 2**20
+
+
 def read_table(path: str | os.PathLike[str], fields: Sequence[tuple[str, FieldKind]], *,
                comment: str | None = "#") -> tuple[dict[str, np.ndarray], np.ndarray]:
     """Read a whitespace-separated numeric table with exactly ``len(fields)`` columns.
@@ -278,7 +285,7 @@ def read_table(path: str | os.PathLike[str], fields: Sequence[tuple[str, FieldKi
     # gzip of odometry rows ended in a MemoryError traceback under 1.5 GiB of address space)
     columns = [array.array("q" if kind == "int" else "d") for _, kind in fields]
     numbers = array.array("q")
-    for line in read_lines(path, comment=comment):
+    for line in read_lines(path, comment=comment, max_line_chars=MAX_TABLE_LINE_CHARS):
         numbers.append(line.number)
         if len(line.tokens) != len(fields):
             raise dataset_error(path, line.number, None,
@@ -364,5 +371,5 @@ def file_label(path: str | os.PathLike[str]) -> str:
 
 
 __all__ = ["dataset_error", "find_file", "has_file", "read_lines", "Line", "MAX_DATASET_BYTES",
-           "MAX_RECORD_FILE_BYTES",
+           "MAX_RECORD_FILE_BYTES", "MAX_TABLE_LINE_CHARS",
            "parse_float", "parse_int", "read_table", "chain_order", "file_label"]

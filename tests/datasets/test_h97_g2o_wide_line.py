@@ -37,3 +37,25 @@ def test_a_long_comment_is_still_skipped_and_short_lines_keep_their_messages(
     with pytest.raises(DatasetError, match=r"c\.g2o, line 3: EDGE_BEARING_SE2_XY needs 4 "
                                            r"fields \(i l bearing w\), got 1004"):
         import_g2o(path)
+
+
+def test_a_table_line_longer_than_its_cap_is_refused_before_it_is_split(tmp_path: Path) -> None:
+    """The same for MRCLAM's tables (``read_table``): a data line over
+    ``MAX_TABLE_LINE_CHARS`` is refused naming its line, before it is split into tokens
+    (before: split, about 20 bytes of memory a character up to the 64 MiB line cap, then
+    refused for its field count); a short line keeps its message."""
+    from bomgraph.datasets._text import MAX_TABLE_LINE_CHARS, read_table
+
+    fields = [("time", "float"), ("v", "float"), ("w", "float")]
+    wide = tmp_path / "Robot1_Odometry.dat"
+    wide.write_text("# Time [s] v [m/s] w [rad/s]\n1248272272.841 0.0 0.0\n"
+                    + "1 " * (MAX_TABLE_LINE_CHARS // 2 + 1) + "\n")
+    with pytest.raises(DatasetError, match=r"Robot1_Odometry\.dat, line 3: [0-9,]+ characters, "
+                                           r"more than the 1,048,576 one line of this file "
+                                           r"may have; fix or delete this line$"):
+        read_table(wide, fields)
+    short = tmp_path / "short.dat"
+    short.write_text("1248272272.841 0.0 0.0\n" + "1 " * 1000 + "\n")
+    with pytest.raises(DatasetError, match=r"short\.dat, line 2: expected 3 fields \(time, v, "
+                                           r"w\), got 1000"):
+        read_table(short, fields)
