@@ -259,6 +259,18 @@ def test_dry_run_refuses_what_compare_would(tmp_path: Path, stream: Path,
     assert (out / "streams_s_maps.png").read_bytes() == b"mine"
 
 
+def _args(stream: Path, out: str, dry_run: bool) -> list[str]:
+    """A one-arm compare (or its dry run) writing to ``--out out``."""
+    return ["compare", "--streams", str(stream), "--methods", "triangulate", "--jobs", "1",
+            "--no-figures", "--out", out] + (["--dry-run"] if dry_run else [])
+
+
+def _refused(stream: Path, out: str, dry_run: bool, capsys: pytest.CaptureFixture) -> list[str]:
+    """:func:`_args` run: exit 2 asserted; its stderr lines."""
+    assert main(_args(stream, out, dry_run)) == 2
+    return capsys.readouterr().err.strip().splitlines()
+
+
 @pytest.mark.parametrize("dry_run", [False, True])
 @pytest.mark.parametrize("under", ["", "/sub"])
 def test_an_out_that_is_or_lies_under_a_file_is_one_line_also_in_a_dry_run(
@@ -269,10 +281,7 @@ def test_an_out_that_is_or_lies_under_a_file_is_one_line_also_in_a_dry_run(
     directory: 'FILE/sub'`, naming neither --out nor the file."""
     (tmp_path / "afile").write_text("mine\n")
     out = f"{tmp_path / 'afile'}{under}"
-    args = ["compare", "--streams", str(stream), "--methods", "triangulate", "--jobs", "1",
-            "--no-figures", "--out", out] + (["--dry-run"] if dry_run else [])
-    assert main(args) == 2
-    err = capsys.readouterr().err.strip().splitlines()
+    err = _refused(stream, out, dry_run, capsys)
     named = "is a file" if not under else f"{tmp_path / 'afile'} is a file"
     assert len(err) == 1 and err[0].startswith(f"bomgraph: error: --out {out}: {named}; give "
                                                f"a folder"), err
@@ -290,17 +299,14 @@ def test_an_out_through_a_broken_link_is_one_line_also_in_a_dry_run(
     link = tmp_path / "results"
     link.symlink_to(tmp_path / "gone")
     out = f"{link}{under}"
-    args = ["compare", "--streams", str(stream), "--methods", "triangulate", "--jobs", "1",
-            "--no-figures", "--out", out] + (["--dry-run"] if dry_run else [])
-    assert main(args) == 2
-    err = capsys.readouterr().err.strip().splitlines()
+    err = _refused(stream, out, dry_run, capsys)
     named = "is" if not under else f"{link} is"
     assert len(err) == 1 and err[0].startswith(
         f"bomgraph: error: --out {out}: {named} a link to {tmp_path / 'gone'}, which does not "
         f"exist; create that folder, or give another"), err
     assert link.is_symlink() and not (tmp_path / "gone").exists()
     (tmp_path / "gone").mkdir()   # a link to a folder is a folder
-    assert main(args) == 0
+    assert main(_args(stream, out, dry_run)) == 0
 
 
 @pytest.mark.parametrize("dry_run", [False, True])
@@ -309,9 +315,6 @@ def test_an_empty_out_is_refused(tmp_path: Path, stream: Path, capsys: pytest.Ca
     """h94: `--out ""` (an unset variable) wrote the results into the current folder (Path('')
     is '.'); the files' --out say "--out is empty" (tests/hostile/test_io_hostile.py)."""
     monkeypatch.chdir(tmp_path)
-    args = ["compare", "--streams", str(stream), "--methods", "triangulate", "--jobs", "1",
-            "--no-figures", "--out", ""] + (["--dry-run"] if dry_run else [])
-    assert main(args) == 2
-    err = capsys.readouterr().err.strip().splitlines()
+    err = _refused(stream, "", dry_run, capsys)
     assert err == ["bomgraph: error: --out is empty; give a folder ('.' for this one)"], err
     assert not (tmp_path / "results.json").exists() and not (tmp_path / "cache").exists()
