@@ -463,14 +463,18 @@ class OutputRecord:
         drop_earlier_outputs(self.out, written, experiments, self.entries)
 
 
-def linked_folders(out: Path, paths: Sequence[Path]) -> dict[str, Path]:
+def linked_folders(out: Path, paths: Sequence[Path]) -> dict[str, tuple[Path, bool]]:
     """The real folders that links on the way to ``paths`` lead to (``out/estimates`` linked
-    to another disk), ``out``'s own left out: each -> the first link to it. ``compare`` locks
-    them as it locks ``out``: another folder's compare may write one through a link too. One
+    to another disk), ``out``'s own left out: each -> (the first link to it, ``shared``).
+    ``compare`` locks them as it locks ``out``: another folder's compare may write one through
+    a link too. One
     folder reached by two real paths (a bind mount; names differing in case on a
     case-insensitive disk) is named once, and not at all when it is ``out``: compare locked it
     twice and refused itself (h82). So is each folder above one of them that holds another
-    compare's :data:`MANIFEST`, first (that compare locks only its own folder). The links on
+    compare's :data:`MANIFEST`, first (that compare locks only its own folder), with
+    ``shared`` true: a shared lock there keeps that compare out while two compares writing
+    into two of its subfolders run side by side (each refused the other through ``/`` when a
+    compare had once written there: stop 43's CI). The links on
     the way to the files of the manifest that still lead where they did
     (:func:`drop_earlier_outputs` may remove them) are counted too: a compare without
     ``--estimates`` removes the earlier estimates through the link."""
@@ -483,11 +487,12 @@ def linked_folders(out: Path, paths: Sequence[Path]) -> dict[str, Path]:
         for sub, real in _links_on_the_way(out, rel).items():
             # and another compare's folder it leads into (``b/estimates/streams``): that
             # compare locks ``b`` only, and writes and removes there too (h82)
-            for folder in [*(str(q) for q in reversed(Path(real).parents)
-                             if os.path.lexists(q / MANIFEST)), real]:  # refused: no lock file
+            above = [str(q) for q in reversed(Path(real).parents)
+                     if os.path.lexists(q / MANIFEST)]
+            for folder in [*above, real]:  # refused: no lock file
                 if (i := _file_id(folder)) not in seen or i is None:
                     seen.add(i)
-                    found.setdefault(folder, out / sub)
+                    found.setdefault(folder, (out / sub, folder != real))
     return found
 
 

@@ -374,9 +374,9 @@ def compare(experiments: Sequence[Experiment], out_dir: str | os.PathLike[str], 
     (record := OutputRecord(out)).refuse_foreign(planned, [out / "cache"] if use_cache else [])
     out.mkdir(parents=True, exist_ok=True)   # check_folder above
     with folder_lock(out, "`bomgraph compare`"), contextlib.ExitStack() as linked:
-        for real, link in linked_folders(out, planned).items():  # two folders may link one
+        for real, (link, above) in linked_folders(out, planned).items():  # two may link one
             linked.enter_context(folder_lock(real, f"`bomgraph compare` (into it, or through a "
-                                                   f"link into it as {link} is one)"))
+                                                   f"link into it as {link} is one)", above))
         record.remove_leftovers(planned)  # of compares killed while writing: none writes now
         return _compare(experiments, out, executor, use_cache, figures, progress, estimates,
                         refs, paired, paired_reference, (record, planned))

@@ -480,9 +480,12 @@ def make_folder(folder: str | os.PathLike[str]) -> None:
 
 
 @contextlib.contextmanager
-def folder_lock(folder: str | os.PathLike[str], what: str) -> Iterator[None]:
+def folder_lock(folder: str | os.PathLike[str], what: str,
+                shared: bool = False) -> Iterator[None]:
     """Hold an exclusive lock on ``folder`` (``fcntl.flock`` on ``folder/.bomgraph.lock``) for
     the block, so two sweeps never write one folder; a second one is refused at once.
+    ``shared``: a shared lock (a compare writing below ``folder`` through a link, not into it),
+    refused while an exclusive one is held and refusing one, not refusing another shared one.
 
     Raises
     ------
@@ -508,19 +511,33 @@ def folder_lock(folder: str | os.PathLike[str], what: str) -> Iterator[None]:
         if not stat.S_ISREG(os.fstat(fd).st_mode):  # a FIFO: "[Errno 29] Illegal seek"
             raise OutputPathError(not_ours)
         try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            fcntl.flock(fd, (fcntl.LOCK_SH if shared else fcntl.LOCK_EX) | fcntl.LOCK_NB)
         except BlockingIOError:
             holder = os.pread(fd, 64, 0).decode("ascii", "replace").strip() or "?"
+            who, where = f" (pid {holder})", "into this folder"
+            if not shared and _lock_is_shared(fd):  # held by compares writing below it only
+                who, where = "", "below this folder, through a link"
             raise FolderBusyError(
-                f"{os.fspath(folder)}: another {what} (pid {holder}) is writing into this "
-                f"folder; wait for it to finish or choose another --out") from None
+                f"{os.fspath(folder)}: another {what}{who} is writing {where}; wait for it to "
+                f"finish or choose another --out") from None
         if os.fstat(fd).st_size > 64 or not re.fullmatch(rb"\s*\d*\s*", os.pread(fd, 64, 0)):
             raise OutputPathError(not_ours)  # not a pid (judged whole): not ours to empty
-        os.ftruncate(fd, 0)
-        os.pwrite(fd, f"{os.getpid()}\n".encode("ascii"), 0)
+        if not shared:  # shared holders would overwrite each other's: the last writer's stays
+            os.ftruncate(fd, 0)
+            os.pwrite(fd, f"{os.getpid()}\n".encode("ascii"), 0)
         yield
     finally:
         os.close(fd)  # releases the lock; the file stays (removing it would race)
+
+
+def _lock_is_shared(fd: int) -> bool:
+    """Whether the lock on ``fd`` that refused an exclusive one is held shared only."""
+    import fcntl
+    try:
+        fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
+    except BlockingIOError:
+        return False
+    return True  # released with fd, closed by the caller
 
 
 def _umask() -> int:

@@ -6,6 +6,7 @@ to show that the folder was no link."""
 
 from __future__ import annotations
 
+import fcntl
 import json
 import shlex
 import shutil
@@ -150,3 +151,28 @@ def test_a_link_into_another_compares_folder_locks_that_folder(
     assert sorted(str(p) for p in b.rglob("*")) == before
     assert main(_cmd(other, a)) == 0, capsys.readouterr().err
     assert (b / "estimates" / "streams" / "triangulate" / "other.est").is_file()
+
+
+def test_two_compares_through_links_below_another_compares_folder_run_side_by_side(
+        tmp_path: Path, stream: Path, capsys: pytest.CaptureFixture) -> None:
+    """Stop 43's CI: a compare had once written into ``/``, so every compare through a link
+    locked ``/`` (a folder above its linked one that holds a manifest) exclusively, and the
+    two Python versions' suites, run side by side, refused each other's. The folder above is
+    now locked shared: a compare through a link below it runs while another such holds it,
+    a compare into it is still refused (and refuses them), each saying which. Fails before."""
+    top = tmp_path / "top"
+    assert main(_cmd(stream, top)) == 0                          # top holds a manifest
+    (big := top / "mine" / "big").mkdir(parents=True)
+    a = tmp_path / "a"
+    a.mkdir()
+    (a / "estimates").symlink_to(big)
+    with open(top / ".bomgraph.lock", "rb") as held:             # another one through a link
+        fcntl.flock(held, fcntl.LOCK_SH)                         # (raw: as the old code's too)
+        assert main(_cmd(stream, a)) == 0, capsys.readouterr().err
+        assert main(_cmd(stream, top)) == 2                      # one into top: refused
+        err = _one_error(capsys)
+        assert "is writing below this folder, through a link" in err and "pid" not in err
+    with folder_lock(top, "`bomgraph compare`"):                 # one into top, running
+        assert main(_cmd(stream, a)) == 2
+        assert "is writing into this folder" in _one_error(capsys)
+    assert (top / ".bomgraph.lock").read_text().strip().isdigit()  # no holder's pid lost
