@@ -27,11 +27,12 @@ import logging
 import os
 import re
 from pathlib import Path
-from typing import Any, Callable, Mapping, Sequence
+from typing import Any, Callable, Iterator, Mapping, Sequence
 
 from .claims import remove_leftovers
 from .experiments import DatasetSource, Experiment, FileSource, Task
-from .stdio import InputTooLargeError, OutputPathError, read_regular_file, write_text
+from .stdio import (InputTooLargeError, OutputPathError, folder_lock, read_regular_file,
+                    write_text)
 
 _log = logging.getLogger(__name__)
 
@@ -463,37 +464,77 @@ class OutputRecord:
         drop_earlier_outputs(self.out, written, experiments, self.entries)
 
 
-def linked_folders(out: Path, paths: Sequence[Path]) -> dict[str, tuple[Path, bool]]:
-    """The real folders that links on the way to ``paths`` lead to (``out/estimates`` linked
-    to another disk), ``out``'s own left out: each -> (the first link to it, ``shared``).
-    ``compare`` locks them as it locks ``out``: another folder's compare may write one through
-    a link too. One
-    folder reached by two real paths (a bind mount; names differing in case on a
-    case-insensitive disk) is named once, and not at all when it is ``out``: compare locked it
-    twice and refused itself (h82). So is each folder above one of them that holds another
-    compare's :data:`MANIFEST`, first (that compare locks only its own folder), with
-    ``shared`` true: a shared lock there keeps that compare out while two compares writing
-    into two of its subfolders run side by side (each refused the other through ``/`` when a
-    compare had once written there: stop 43's CI). The links on
-    the way to the files of the manifest that still lead where they did
-    (:func:`drop_earlier_outputs` may remove them) are counted too: a compare without
-    ``--estimates`` removes the earlier estimates through the link."""
-    seen, found = {_file_id(out)}, {}
+def _touched(out: Path, paths: Sequence[Path]) -> list[str]:
+    """``paths`` relative to ``out``, and the files of the manifest reached through links that
+    still lead where they did (:func:`drop_earlier_outputs` may remove them: a compare without
+    ``--estimates`` removes the earlier estimates through the link)."""
     rels = [os.path.relpath(p, out) for p in paths]
     for e in _earlier_entries(out):
         if (rel := _plain(e["path"])) is not None and e.get("via") and (out / rel).is_file():
             rels += [rel] if e["via"] == _links_on_the_way(out, rel) else []  # not: unmounted
-    for rel in rels:
+    return rels
+
+
+def linked_folders(out: Path, paths: Sequence[Path]) -> dict[str, Path]:
+    """The real folders that links on the way to ``paths`` (:func:`_touched`) lead to
+    (``out/estimates`` linked to another disk), ``out``'s own left out: each -> the first link
+    to it. ``compare`` locks them as it locks ``out``: another folder's compare may write one
+    through a link too. One folder reached by two real paths (a bind mount; names differing in
+    case on a case-insensitive disk) is named once, and not at all when it is ``out``: compare
+    locked it twice and refused itself (h82)."""
+    seen, found = {_file_id(out)}, {}
+    for rel in _touched(out, paths):
         for sub, real in _links_on_the_way(out, rel).items():
-            # and another compare's folder it leads into (``b/estimates/streams``): that
-            # compare locks ``b`` only, and writes and removes there too (h82)
-            above = [str(q) for q in reversed(Path(real).parents)
-                     if os.path.lexists(q / MANIFEST)]
-            for folder in [*above, real]:  # refused: no lock file
-                if (i := _file_id(folder)) not in seen or i is None:
-                    seen.add(i)
-                    found.setdefault(folder, (out / sub, folder != real))
+            if (i := _file_id(real)) not in seen or i is None:  # refused: no lock file
+                seen.add(i)
+                found.setdefault(real, out / sub)
     return found
+
+
+def folders_below_locked(out: Path, rels: Sequence[str], held: set[Any]) -> dict[str, str]:
+    """The folders ``compare`` writes below that hold a lock file (another compare writes into
+    one, or through a link into one), but those of ``held`` (``(device, inode)``, added to it):
+    on the real way to the files ``rels`` (:func:`_touched`), from ``/`` if a link leads there, else
+    from ``out`` down (compares into folders above ``out`` never write its files). Each -> the
+    folder compare writes into below it; outermost first. Before h100 only a folder above a
+    linked one holding a manifest: not one in its first compare yet, or written via a link."""
+    found: dict[str, str] = {}
+    top = Path(os.path.realpath(out))
+    for sub in dict.fromkeys(os.path.dirname(rel) for rel in rels):
+        real = Path(os.path.realpath(out / sub))
+        linked = bool(_links_on_the_way(out, os.path.join(sub, "_")))
+        for q in [real, *real.parents]:
+            if ((linked or top in q.parents) and os.path.lexists(q / ".bomgraph.lock")
+                    and (i := _file_id(q)) not in held):
+                held.add(i)
+                found[str(q)] = str(real)
+    return dict(sorted(found.items(), key=lambda kv: len(Path(kv[0]).parts)))
+
+
+@contextlib.contextmanager
+def compare_locks(out: Path, paths: Sequence[Path]) -> Iterator[None]:
+    """Hold what ``compare`` writing ``paths`` into ``out`` locks (:func:`folder_lock`):
+    ``out`` and its :func:`linked_folders` exclusive, :func:`folders_below_locked` shared (a
+    compare into a folder above is kept out, two writing into two of its subfolders run side
+    by side: stop 43's CI). Those are looked for again once the exclusive ones are held: of
+    two compares that may write one file, the second to start finds the other's lock (h100).
+    First too: one refused there leaves no lock file in a folder it links to."""
+    who = "`bomgraph compare`"
+    with folder_lock(out, who), contextlib.ExitStack() as stack:
+        linked, rels = linked_folders(out, paths), _touched(out, paths)
+        held = {_file_id(out), *(_file_id(real) for real in linked)}
+
+        def below() -> None:
+            for folder, into in folders_below_locked(out, rels, held).items():
+                stack.enter_context(folder_lock(folder, f"{who} (into it, or through a link "
+                                                        f"into it; this one writes into "
+                                                        f"{into})", shared=True))
+        below()
+        for real, link in linked.items():  # two folders may link one
+            stack.enter_context(folder_lock(real, f"{who} (into it, or through a link into "
+                                                  f"it as {link} is one)"))
+        below()
+        yield
 
 
 def drop_earlier_outputs(out: Path, written: Sequence[Path],
@@ -552,6 +593,6 @@ def unique_slugs(names: Sequence[str]) -> dict[str, str]:
 
 
 __all__ = ["COMPARE_FILES", "COMPARE_FOLDERS", "MANIFEST", "OutputRecord", "RESULT_FILES",
-           "drop_earlier_outputs", "estimate_paths", "figure_paths", "input_paths",
-           "linked_folders", "planned_outputs", "refuse_inputs_among_outputs", "slug",
-           "source_hash", "unique_slugs"]
+           "compare_locks", "drop_earlier_outputs", "estimate_paths", "figure_paths",
+           "folders_below_locked", "input_paths", "linked_folders", "planned_outputs",
+           "refuse_inputs_among_outputs", "slug", "source_hash", "unique_slugs"]

@@ -10,7 +10,6 @@ A result is the dict of :func:`bomgraph.bench.run_task`; its ``checkpoints`` are
 
 from __future__ import annotations
 
-import contextlib
 import json
 import logging
 import math
@@ -34,9 +33,9 @@ from .paired import (PairedConfig, PairedRow, pairable, paired_comparison,
                      references_for, scored_references)
 from .run_scoring import mark_self_scored, not_drawn_line, scored_against, scores_left_out
 from .plots import MapPanel, error_vs_time_figure, final_maps_figure, map_figure
-from .out_folder import (RESULT_FILES, OutputRecord, estimate_paths, linked_folders,
+from .out_folder import (RESULT_FILES, OutputRecord, compare_locks, estimate_paths,
                          planned_outputs, refuse_inputs_among_outputs, slug)
-from .stdio import check_folder, folder_lock, write_figure, write_text
+from .stdio import check_folder, write_figure, write_text
 from .tables import HUGE, write_csv
 
 _log = logging.getLogger(__name__)
@@ -373,10 +372,7 @@ def compare(experiments: Sequence[Experiment], out_dir: str | os.PathLike[str], 
     planned = planned_outputs(out, experiments, estimates=estimates, figures=figures)
     (record := OutputRecord(out)).refuse_foreign(planned, [out / "cache"] if use_cache else [])
     out.mkdir(parents=True, exist_ok=True)   # check_folder above
-    with folder_lock(out, "`bomgraph compare`"), contextlib.ExitStack() as linked:
-        for real, (link, above) in linked_folders(out, planned).items():  # two may link one
-            linked.enter_context(folder_lock(real, f"`bomgraph compare` (into it, or through a "
-                                                   f"link into it as {link} is one)", above))
+    with compare_locks(out, planned):  # out, folders linked from it, folders it writes below
         record.remove_leftovers(planned)  # of compares killed while writing: none writes now
         return _compare(experiments, out, executor, use_cache, figures, progress, estimates,
                         refs, paired, paired_reference, (record, planned))

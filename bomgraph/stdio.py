@@ -484,8 +484,9 @@ def folder_lock(folder: str | os.PathLike[str], what: str,
                 shared: bool = False) -> Iterator[None]:
     """Hold an exclusive lock on ``folder`` (``fcntl.flock`` on ``folder/.bomgraph.lock``) for
     the block, so two sweeps never write one folder; a second one is refused at once.
-    ``shared``: a shared lock (a compare writing below ``folder`` through a link, not into it),
-    refused while an exclusive one is held and refusing one, not refusing another shared one.
+    ``shared``: a shared lock (a compare writing below ``folder``, not into it), refused while
+    an exclusive one is held and refusing one, not refusing another shared one; on a lock file
+    that is there (none is made, nothing written: the folder may be another user's, or ``/``).
 
     Raises
     ------
@@ -502,11 +503,19 @@ def folder_lock(folder: str | os.PathLike[str], what: str,
     lock = os.path.join(os.fspath(folder), ".bomgraph.lock")
     not_ours = (f"{lock}: is not a bomgraph lock (a process id); move it or choose another "
                 f"--out")
-    try:  # without blocking: a FIFO there is refused, not waited on
-        fd = os.open(lock, os.O_RDWR | os.O_CREAT | getattr(os, "O_NONBLOCK", 0),
+    try:  # without blocking: a FIFO there is refused, not waited on; a link too (h100)
+        fd = os.open(lock, (os.O_RDONLY if shared else os.O_RDWR | os.O_CREAT)
+                     | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_NOFOLLOW", 0),
                      0o666 & ~_umask())
-    except IsADirectoryError:
-        raise OutputPathError(not_ours) from None
+    except OSError as exc:  # a link: ELOOP (its target was emptied, or made, h100)
+        if isinstance(exc, IsADirectoryError) or exc.errno == errno.ELOOP:
+            raise OutputPathError(not_ours) from None
+        if not (shared and isinstance(exc, FileNotFoundError)):
+            raise
+        fd = -1  # shared, and no lock file: none is made in a folder above; nothing holds it
+    if fd < 0:
+        yield
+        return
     try:
         if not stat.S_ISREG(os.fstat(fd).st_mode):  # a FIFO: "[Errno 29] Illegal seek"
             raise OutputPathError(not_ours)
@@ -516,7 +525,7 @@ def folder_lock(folder: str | os.PathLike[str], what: str,
             holder = os.pread(fd, 64, 0).decode("ascii", "replace").strip() or "?"
             who, where = f" (pid {holder})", "into this folder"
             if not shared and _lock_is_shared(fd):  # held by compares writing below it only
-                who, where = "", "below this folder, through a link"
+                who, where = "", "below this folder, through a link or from a folder above"
             raise FolderBusyError(
                 f"{os.fspath(folder)}: another {what}{who} is writing {where}; wait for it to "
                 f"finish or choose another --out") from None
