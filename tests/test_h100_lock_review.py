@@ -11,12 +11,17 @@ from __future__ import annotations
 import contextlib
 import fcntl
 import os
+import shutil
+import subprocess
+import sys
+import tempfile
 from pathlib import Path
 from typing import Iterator
 
 import pytest
 
 import _compare_folder
+import bomgraph
 from bomgraph import out_folder
 from bomgraph.cli import main
 from bomgraph.out_folder import MANIFEST
@@ -147,3 +152,37 @@ def test_a_lock_file_that_is_a_link_is_refused_not_written_through(
     assert "is not a bomgraph lock" in _one_error(capsys)
     assert (notes.read_text() == "7\n") if target == "notes" else not notes.exists()
     assert not (out / "results.csv").exists()
+
+
+def test_a_folder_above_of_another_user_is_locked_shared_without_writing_to_it(
+        stream: Path) -> None:
+    """Another user's compare through a link below a folder root's compare wrote (its lock
+    file root's, -rw-r--r--) failed, "[Errno 13] Permission denied: TOP/.bomgraph.lock": the
+    shared lock opened it to write. So did every compare of a user through a link once root
+    had compared into ``/`` (stop 43's CI). Read only now. Fails before."""
+    if os.geteuid() != 0 or shutil.which("setpriv") is None:
+        pytest.skip("needs root and setpriv to run a compare as another user")
+    d = Path(tempfile.mkdtemp(prefix="h100-"))   # tmp_path's folders: root's only (0700)
+    try:
+        d.chmod(0o755)
+        shutil.copy(stream, d / "s.jsonl")
+        assert main(_cmd(d / "s.jsonl", d / "top")) == 0        # root's compare
+        (d / "top" / "sub").mkdir()
+        (d / "u" / "out").mkdir(parents=True)
+        for folder in (d / "top" / "sub", d / "u", d / "u" / "out"):
+            os.chown(folder, 65534, 65534)
+        (d / "u" / "out" / "estimates").symlink_to(d / "top" / "sub")
+        env = {**os.environ, "HOME": str(d / "u"), "MPLCONFIGDIR": str(d / "u"),
+               "PYTHONPATH": str(Path(bomgraph.__file__).parent.parent)}
+        nobody = ["setpriv", "--reuid=65534", "--regid=65534", "--clear-groups",
+                  sys.executable, "-c"]
+        if subprocess.run([*nobody, "import bomgraph.cli"], env=env, cwd=d,
+                          capture_output=True).returncode != 0:
+            pytest.skip("the code is not readable by another user here")
+        code = "import sys; from bomgraph.cli import main; sys.exit(main(sys.argv[1:]))"
+        proc = subprocess.run([*nobody, code, *_cmd(d / "s.jsonl", d / "u" / "out")],
+                              env=env, cwd=d, capture_output=True, text=True)
+        assert proc.returncode == 0, proc.stderr
+        assert (d / "top" / "sub" / "streams" / "triangulate" / "s.est").is_file()
+    finally:
+        shutil.rmtree(d)
