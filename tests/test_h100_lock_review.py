@@ -14,7 +14,6 @@ import os
 import shutil
 import subprocess
 import sys
-import tempfile
 from pathlib import Path
 from typing import Iterator
 
@@ -155,34 +154,31 @@ def test_a_lock_file_that_is_a_link_is_refused_not_written_through(
 
 
 def test_a_folder_above_of_another_user_is_locked_shared_without_writing_to_it(
-        stream: Path) -> None:
-    """Another user's compare through a link below a folder root's compare wrote (its lock
-    file root's, -rw-r--r--) failed, "[Errno 13] Permission denied: TOP/.bomgraph.lock": the
-    shared lock opened it to write. So did every compare of a user through a link once root
-    had compared into ``/`` (stop 43's CI). Read only now. Fails before."""
+        tmp_path: Path, stream: Path) -> None:
+    """Another user's compare through a link below a folder whose compare lock is not theirs
+    (-rw-r--r--) failed, "[Errno 13] Permission denied: TOP/.bomgraph.lock": the shared lock
+    opened it to write. So did every compare of a user through a link once root had compared
+    into ``/`` (stop 43's CI). Read only now. Fails before. Here the lock belongs to uid 65534
+    and the compare runs as root without the capabilities that override file permissions
+    (``setpriv --bounding-set``), so the interpreter and the code stay readable to it."""
     if os.geteuid() != 0 or shutil.which("setpriv") is None:
-        pytest.skip("needs root and setpriv to run a compare as another user")
-    d = Path(tempfile.mkdtemp(prefix="h100-"))   # tmp_path's folders: root's only (0700)
-    try:
-        d.chmod(0o755)
-        shutil.copy(stream, d / "s.jsonl")
-        assert main(_cmd(d / "s.jsonl", d / "top")) == 0        # root's compare
-        (d / "top" / "sub").mkdir()
-        (d / "u" / "out").mkdir(parents=True)
-        for folder in (d / "top" / "sub", d / "u", d / "u" / "out"):
-            os.chown(folder, 65534, 65534)
-        (d / "u" / "out" / "estimates").symlink_to(d / "top" / "sub")
-        env = {**os.environ, "HOME": str(d / "u"), "MPLCONFIGDIR": str(d / "u"),
-               "PYTHONPATH": str(Path(bomgraph.__file__).parent.parent)}
-        nobody = ["setpriv", "--reuid=65534", "--regid=65534", "--clear-groups",
-                  sys.executable, "-c"]
-        if subprocess.run([*nobody, "import bomgraph.cli"], env=env, cwd=d,
-                          capture_output=True).returncode != 0:
-            pytest.skip("the code is not readable by another user here")
-        code = "import sys; from bomgraph.cli import main; sys.exit(main(sys.argv[1:]))"
-        proc = subprocess.run([*nobody, code, *_cmd(d / "s.jsonl", d / "u" / "out")],
-                              env=env, cwd=d, capture_output=True, text=True)
-        assert proc.returncode == 0, proc.stderr
-        assert (d / "top" / "sub" / "streams" / "triangulate" / "s.est").is_file()
-    finally:
-        shutil.rmtree(d)
+        pytest.skip("needs root and setpriv to run a compare without override capabilities")
+    assert main(_cmd(stream, tmp_path / "top")) == 0
+    lock = tmp_path / "top" / ".bomgraph.lock"
+    os.chown(lock, 65534, 65534)                                 # another user's compare's
+    lock.chmod(0o644)
+    (tmp_path / "top" / "sub").mkdir()
+    (tmp_path / "u" / "out").mkdir(parents=True)
+    (tmp_path / "u" / "out" / "estimates").symlink_to(tmp_path / "top" / "sub")
+    no_override = ["setpriv", "--bounding-set=-dac_override,-dac_read_search,-fowner",
+                   "--inh-caps=-dac_override,-dac_read_search,-fowner", sys.executable, "-c"]
+    env = {**os.environ, "PYTHONPATH": str(Path(bomgraph.__file__).parent.parent)}
+    probe = subprocess.run([*no_override, f"open({str(lock)!r}, 'r+')"], env=env,
+                           capture_output=True, text=True)
+    assert "Permission denied" in probe.stderr, probe.stderr   # the capabilities are gone
+    code = "import sys; from bomgraph.cli import main; sys.exit(main(sys.argv[1:]))"
+    proc = subprocess.run([*no_override, code, *_cmd(stream, tmp_path / "u" / "out")],
+                          env=env, capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr
+    assert (tmp_path / "top" / "sub" / "streams" / "triangulate" / "s.est").is_file()
+    assert lock.stat().st_uid == 65534 and lock.stat().st_mode & 0o777 == 0o644
