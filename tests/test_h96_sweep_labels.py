@@ -4,6 +4,8 @@ The comparisons are counted here (no timing): before the fix, n labels took n^2.
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import pytest
 
 from bomgraph.sweep import SweepError, _named_streams, _unique
@@ -34,3 +36,17 @@ def test_stream_labels_keep_their_names() -> None:
     named = dict(_named_streams(paths))
     assert named["/d0/run5.jsonl"] == "d0-run5" and named["/x/solo.jsonl"] == "solo"
     assert len(set(named.values())) == len(paths)
+
+
+@pytest.mark.parametrize("paths, kept", [
+    (["/x/a.jsonl", "/y/a.jsonl", "/z/x-a.jsonl", "/w/x-a-0.jsonl"], "/w/x-a-0.jsonl"),
+    (["/x/a.jsonl", "/y/a.jsonl", "/w/x-a-0.jsonl", "/v/x-a-0-0.jsonl"], "/v/x-a-0-0.jsonl"),
+    (["/d/a.jsonl", "/d/a.json", "/e/d-a-1.jsonl", "/f/d-a-0.jsonl", "/g/d-a.jsonl"],
+     "/f/d-a-0.jsonl")])
+def test_a_numbered_label_is_not_another_files_stem(paths: list[str], kept: str) -> None:
+    """Fails before (h101): ``x-a-0.jsonl`` beside ``x/a.jsonl`` and ``y/a.jsonl`` named two
+    streams ``x-a-0``, and ``compare --streams`` refused its own labels ("two runs are named
+    'x-a-0' ... rename the world or the source"). A stem no other file shares keeps its name."""
+    named = dict(_named_streams(paths))
+    assert len(set(named.values())) == len(paths), named
+    assert named[kept] == Path(kept).stem
