@@ -542,12 +542,14 @@ def _main(argv: Sequence[str] | None) -> int:
         args = parser.parse_args(argv)
     except BrokenPipeError:  # `bomgraph --help | head -1`
         return _stdout_closed()
+    from .checks import command_line
     from .log_setup import configure_logging
 
     configure_logging(getattr(args, "verbose", 0), getattr(args, "quiet", False))
     func: Callable[[argparse.Namespace], int] = _COMMANDS[args.func]
     try:
-        status = func(args)
+        with command_line():   # refusals name the options (--out), not the library's names
+            status = func(args)
         if sys.stdout is not None:  # None: closed by the shell (>&-)
             sys.stdout.flush()
         return status

@@ -48,7 +48,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from .checks import real
+from .checks import option_named, real
 from .datasets.g2o import G2O_HEADER_PREFIX
 from .errors import ConfigError, ExportError
 from .mapper import MapEstimate, RunResult
@@ -58,6 +58,7 @@ from .stream_file import header_to_json
 
 FORMATS = ("tum", "kitti", "csv", "g2o")
 ZERO_SIGMA_FLOOR = 1e-4
+_CSV = "fmt='csv'"
 
 
 def truth_estimate(stream: Stream) -> MapEstimate:
@@ -118,8 +119,8 @@ def _need_poses(src: MapEstimate, fmt: str) -> tuple[np.ndarray, np.ndarray]:
         whose = ("the stream's truth has none (landmark truth only)"
                  if src.info.get("source") == "truth" else
                  "this estimate has none (the method maps landmarks only)")
-        raise ExportError(f"{fmt} holds robot poses and {whose}; use --format csv for its "
-                          f"landmarks")
+        raise ExportError(f"{fmt} holds robot poses and {whose}; use "
+                          f"{option_named('--format csv', _CSV)} for its landmarks")
     order = np.argsort(src.pose_t, kind="stable")
     return src.pose_t[order], src.poses[order]
 
@@ -288,7 +289,8 @@ def _export_text(src: MapEstimate, fmt: str, stream: Stream | None) -> str:
         return to_csv(src, stream)
     if fmt == "g2o":
         if stream is None:
-            raise ExportError("g2o holds the measurements too: give the stream (--stream)")
+            raise ExportError(f"g2o holds the measurements too: give the stream "
+                              f"({option_named('--stream', 'stream')})")
         return to_g2o(src, stream)
     raise ConfigError(f"unknown export format {fmt!r}; choose one of {', '.join(FORMATS)}")
 
