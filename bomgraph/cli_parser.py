@@ -69,6 +69,18 @@ def _jobs(text: str) -> int:
     return v
 
 
+@_named("number of workers")
+def _dask_workers(text: str) -> int:
+    """``--dask-local N``: a cluster of no workers is none (h101: 0 set a sweep file's
+    ``[executor]`` aside and ran local processes, one per core, without a word)."""
+    v = int(text)
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"must be >= 1 (a local Dask cluster's workers), got "
+                                         f"{v}; leave it out for local processes (--jobs) or "
+                                         f"a sweep file's [executor]")
+    return v
+
+
 @_named("positive integer")
 def _positive_int(text: str) -> int:
     v = int(text)
@@ -215,7 +227,7 @@ def build_parser() -> argparse.ArgumentParser:
     cluster.add_argument("--scheduler", default=None, metavar="ADDRESS",
                          help="run on an existing Dask distributed scheduler, e.g. "
                               "tcp://host:8786")
-    cluster.add_argument("--dask-local", type=_nonneg_int, metavar="N",
+    cluster.add_argument("--dask-local", type=_dask_workers, metavar="N",
                          help="start a local Dask cluster of N worker processes")
     c.add_argument("--no-cache", action="store_true", help="ignore and do not write the cache")
     c.add_argument("--dry-run", action="store_true",
