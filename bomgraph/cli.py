@@ -171,7 +171,8 @@ def cmd_export(args: argparse.Namespace) -> int:
             check_stream_identity(est, stream.steps, args.estimate, stream_path,
                                   error=ExportError)
         src = est.final
-    text = export_text(src, args.format, stream, name=args.truth or args.estimate)
+    text = export_text(src, args.format, stream, name=args.truth or args.estimate,
+                       stream_name=stream_path)
     to_stderr = is_stdout(args.out)  # `--out /dev/stdout > f`: the line would overwrite f
     inputs = [p for p in (args.estimate, stream_path) if p and p != STDIO]
     if args.out == "-":

@@ -226,9 +226,11 @@ def to_g2o(src: MapEstimate, stream: Stream) -> str:
     all_ids = np.concatenate([observed, src.landmark_ids]).astype(np.int64)
     base = int(all_ids.max()) + 1 if all_ids.size else 0
     if base + n - 1 > _MAX_G2O_ID:  # h96: written, then refused by `import g2o`
-        raise ExportError(f"g2o: pose vertex ids are the largest landmark id + 1 + t, and "
-                          f"landmark id {base - 1} leaves no room for {n} poses below 2^63 "
-                          f"(the ids g2o and bomgraph read); renumber the landmarks")
+        # the stream's id, unless the estimate's alone (h101: named the estimate file)
+        error = StreamExportError if base - 1 in observed else ExportError
+        raise error(f"g2o: pose vertex ids are the largest landmark id + 1 + t, and "
+                    f"landmark id {base - 1} leaves no room for {n} poses below 2^63 "
+                    f"(the ids g2o and bomgraph read); renumber the landmarks")
     lm = {int(i): xy for i, xy in zip(src.landmark_ids, src.landmarks_xy)}
     lines = ["# bomgraph export: bearing-only 2-D SLAM problem with the estimate as vertex "
              f"values; pose vertex id = {base} + t", g2o_header_comment(stream)]
@@ -266,18 +268,25 @@ def to_g2o(src: MapEstimate, stream: Stream) -> str:
     return "\n".join(lines) + "\n"
 
 
+class StreamExportError(ExportError):
+    """An export refused for what the stream holds (not the estimate)."""
+
+
 def export_text(src: MapEstimate, fmt: str, stream: Stream | None = None, *,
-                name: str | None = None) -> str:
+                name: str | None = None, stream_name: str | None = None) -> str:
     """The text of ``src`` in format ``fmt`` (one of :data:`FORMATS`); ``name``, the file
-    ``src`` was read from (``-``: stdin), starts the message of what it lacks for ``fmt``."""
+    ``src`` was read from (``-``: stdin), starts the message of what it lacks for ``fmt``;
+    ``stream_name``, the stream's, the message of what the stream holds that ``fmt`` cannot
+    (a :class:`StreamExportError`; ``name`` when not given)."""
     _check_estimate(src, "export_text")
     _check_stream(stream, "export_text")
-    if name is None:
-        return _export_text(src, fmt, stream)
     try:
         return _export_text(src, fmt, stream)
     except ExportError as exc:  # h91: a refusal named neither the estimate nor its line
-        raise ExportError(f"{'<stdin>' if name == '-' else name}: {exc}") from None
+        whose = stream_name if isinstance(exc, StreamExportError) and stream_name else name
+        if whose is None:
+            raise
+        raise type(exc)(f"{'<stdin>' if whose == '-' else whose}: {exc}") from None
 
 
 def _export_text(src: MapEstimate, fmt: str, stream: Stream | None) -> str:
@@ -310,4 +319,4 @@ def write_text_atomic(text: str, path: str | os.PathLike[str],
 
 __all__ = ["FORMATS", "ZERO_SIGMA_FLOOR", "CSV_HEADER", "g2o_header_comment", "ExportError",
            "MapEstimate", "export_text", "to_tum", "to_kitti", "to_csv", "to_g2o",
-           "odometry_information", "write_text_atomic"]
+           "odometry_information", "write_text_atomic", "StreamExportError"]
