@@ -10,7 +10,7 @@ from __future__ import annotations
 import argparse
 import math
 import re
-from typing import Any, Callable, NoReturn, Sequence
+from typing import IO, Any, Callable, NoReturn, Sequence
 
 #: a run over this many steps shows a progress bar (when stderr is a terminal).
 PROGRESS_MIN_STEPS = 1000
@@ -25,6 +25,13 @@ class _Parser(argparse.ArgumentParser):
     line): ``bomgraph run: error: the following arguments are required: stream; see bomgraph
     run --help``, not the usage block first. Its subcommands' parsers are of this class too
     (argparse makes them of their parent's)."""
+
+    def _print_message(self, message: str, file: IO[str] | None = None) -> None:
+        # help and --version go to stdout (file: sys.stdout); closed (``>&-``: None) argparse
+        # wrote them to stderr, where every command's own lines are dropped (h101). Errors
+        # name sys.stderr.
+        if file is not None:
+            super()._print_message(message, file)
 
     def error(self, message: str) -> NoReturn:
         line = re.sub(r"\s*[\r\n]+\s*", " ", message).strip()  # the value as given: '1  2'
