@@ -9,12 +9,14 @@ being reshaped into a wrong answer. Each check is O(size) numpy (a step's is on 
 
 from __future__ import annotations
 
+import contextlib
+import contextvars
 import json
 import math
 import numbers
 import os
 from collections.abc import Iterable, Mapping
-from typing import Any, Callable
+from typing import Any, Callable, Iterator
 
 import numpy as np
 
@@ -22,6 +24,37 @@ import numpy as np
 Raise = Callable[[str], Exception]
 
 _INT64_MAX = float(np.iinfo(np.int64).max)
+
+
+#: whether refusals name the command line's options (while a command runs,
+#: :func:`command_line`) or the library's parameters (h101: ``report.compare(...,
+#: out_dir="x")`` from Python said "--out x: is a file", an option it was never given)
+_ON_COMMAND_LINE: contextvars.ContextVar[bool] = contextvars.ContextVar(
+    "bomgraph_on_command_line", default=False)
+
+
+@contextlib.contextmanager
+def command_line() -> Iterator[None]:
+    """Refusals name the command line's options in the block (:func:`bomgraph.cli.main`'s)."""
+    token = _ON_COMMAND_LINE.set(True)
+    try:
+        yield
+    finally:
+        _ON_COMMAND_LINE.reset(token)
+
+
+def option_named(option: str, param: str, value: Any = None) -> str:
+    """An input as a refusal names it: the command line's ``option`` (``--out PATH``) while a
+    command runs, else the library's parameter ``param`` (``out_dir='PATH'``); without
+    ``value``, the name alone."""
+    if _ON_COMMAND_LINE.get():
+        return option if value is None else f"{option} {os.fspath(value)}"
+    return param if value is None else f"{param}={os.fspath(value)!r}"
+
+
+def out_named(param: str, path: str | os.PathLike[str] | None = None) -> str:
+    """The output ``path`` as a refusal names it: ``--out PATH``, or ``param='PATH'``."""
+    return option_named("--out", param, path)
 
 
 #: the most characters of a value a message repeats (h96: a 100,000-character --option
@@ -229,6 +262,7 @@ def covariance_problem(cov: np.ndarray) -> tuple[int, str] | None:
     return None
 
 
-__all__ = ["MAX_ECHO_CHARS", "clip", "echo", "echo_name",
+__all__ = ["MAX_ECHO_CHARS", "clip", "command_line", "echo", "echo_name", "option_named",
+           "out_named",
            "is_integer", "id_array", "row_array", "real", "finite", "finite_or_none", "integer",
            "file_name", "instance", "fraction", "items", "COV_RTOL", "covariance_problem"]

@@ -171,7 +171,8 @@ def cmd_export(args: argparse.Namespace) -> int:
             check_stream_identity(est, stream.steps, args.estimate, stream_path,
                                   error=ExportError)
         src = est.final
-    text = export_text(src, args.format, stream, name=args.truth or args.estimate)
+    text = export_text(src, args.format, stream, name=args.truth or args.estimate,
+                       stream_name=stream_path)
     to_stderr = is_stdout(args.out)  # `--out /dev/stdout > f`: the line would overwrite f
     inputs = [p for p in (args.estimate, stream_path) if p and p != STDIO]
     if args.out == "-":
@@ -542,12 +543,14 @@ def _main(argv: Sequence[str] | None) -> int:
         args = parser.parse_args(argv)
     except BrokenPipeError:  # `bomgraph --help | head -1`
         return _stdout_closed()
+    from .checks import command_line
     from .log_setup import configure_logging
 
     configure_logging(getattr(args, "verbose", 0), getattr(args, "quiet", False))
     func: Callable[[argparse.Namespace], int] = _COMMANDS[args.func]
     try:
-        status = func(args)
+        with command_line():   # refusals name the options (--out), not the library's names
+            status = func(args)
         if sys.stdout is not None:  # None: closed by the shell (>&-)
             sys.stdout.flush()
         return status

@@ -10,7 +10,7 @@ from __future__ import annotations
 import argparse
 import math
 import re
-from typing import Any, Callable, NoReturn, Sequence
+from typing import IO, Any, Callable, NoReturn, Sequence
 
 #: a run over this many steps shows a progress bar (when stderr is a terminal).
 PROGRESS_MIN_STEPS = 1000
@@ -25,6 +25,13 @@ class _Parser(argparse.ArgumentParser):
     line): ``bomgraph run: error: the following arguments are required: stream; see bomgraph
     run --help``, not the usage block first. Its subcommands' parsers are of this class too
     (argparse makes them of their parent's)."""
+
+    def _print_message(self, message: str, file: IO[str] | None = None) -> None:
+        # help and --version go to stdout (file: sys.stdout); closed (``>&-``: None) argparse
+        # wrote them to stderr, where every command's own lines are dropped (h101). Errors
+        # name sys.stderr.
+        if file is not None:
+            super()._print_message(message, file)
 
     def error(self, message: str) -> NoReturn:
         line = re.sub(r"\s*[\r\n]+\s*", " ", message).strip()  # the value as given: '1  2'
@@ -66,6 +73,18 @@ def _jobs(text: str) -> int:
     if v == 0 or v < -1:
         raise argparse.ArgumentTypeError("must be a number of processes >= 1, or -1 for one "
                                          "per core")
+    return v
+
+
+@_named("number of workers")
+def _dask_workers(text: str) -> int:
+    """``--dask-local N``: a cluster of no workers is none (h101: 0 set a sweep file's
+    ``[executor]`` aside and ran local processes, one per core, without a word)."""
+    v = int(text)
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"must be >= 1 (a local Dask cluster's workers), got "
+                                         f"{v}; leave it out for local processes (--jobs) or "
+                                         f"a sweep file's [executor]")
     return v
 
 
@@ -215,7 +234,7 @@ def build_parser() -> argparse.ArgumentParser:
     cluster.add_argument("--scheduler", default=None, metavar="ADDRESS",
                          help="run on an existing Dask distributed scheduler, e.g. "
                               "tcp://host:8786")
-    cluster.add_argument("--dask-local", type=_nonneg_int, metavar="N",
+    cluster.add_argument("--dask-local", type=_dask_workers, metavar="N",
                          help="start a local Dask cluster of N worker processes")
     c.add_argument("--no-cache", action="store_true", help="ignore and do not write the cache")
     c.add_argument("--dry-run", action="store_true",

@@ -24,7 +24,7 @@ from typing import IO, Any, Mapping
 
 import numpy as np
 
-from .checks import covariance_problem, file_name, finite, integer
+from .checks import covariance_problem, file_name, finite, integer, out_named
 from .errors import ConfigError
 from .jsonio import jsonable, options_to_json
 from .mapper import Checkpoint, MapEstimate, RunResult
@@ -110,7 +110,7 @@ class EstimateWriter:
                  stream: StreamIdentity | StreamHasher | None = None,
                  options: Mapping[str, Any] | None = None,
                  checkpoint_every: int | None = None) -> None:
-        self.path = file_name(path, "--out", OutputPathError)
+        self.path = file_name(path, out_named("path"), OutputPathError)
         _check_header(method, stream, options)
         self._header: dict[str, Any] = {"format": ESTIMATE_FORMAT,
                                         "version": ESTIMATE_VERSION, "method": str(method)}

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import json
 import os
+from collections import Counter
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Mapping, Sequence
@@ -112,7 +113,8 @@ class Experiment:
             integer(getattr(self, key), f"{where}: {key}", ConfigError, minimum=low)
         runs = [s.name for s in self.sources] + [s.name for w in self.worlds
                                                  for s in w.sources(0.0)]
-        twice = sorted({r for r in runs if runs.count(r) > 1})
+        # not list.count: quadratic, 3.8 s for a glob of 20,000 streams (h101, as h96's)
+        twice = sorted(r for r, n in Counter(runs).items() if n > 1)
         if twice:  # a run's name keys its estimate file, its table column and its figure
             raise ConfigError(f"{where}: two runs are named {twice[0]!r} (a source's label and "
                               f"a world's run WORLD-seedN, or two sources): their estimates and "

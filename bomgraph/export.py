@@ -48,7 +48,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from .checks import real
+from .checks import option_named, real
 from .datasets.g2o import G2O_HEADER_PREFIX
 from .errors import ConfigError, ExportError
 from .mapper import MapEstimate, RunResult
@@ -58,6 +58,7 @@ from .stream_file import header_to_json
 
 FORMATS = ("tum", "kitti", "csv", "g2o")
 ZERO_SIGMA_FLOOR = 1e-4
+_CSV = "fmt='csv'"
 
 
 def truth_estimate(stream: Stream) -> MapEstimate:
@@ -118,8 +119,8 @@ def _need_poses(src: MapEstimate, fmt: str) -> tuple[np.ndarray, np.ndarray]:
         whose = ("the stream's truth has none (landmark truth only)"
                  if src.info.get("source") == "truth" else
                  "this estimate has none (the method maps landmarks only)")
-        raise ExportError(f"{fmt} holds robot poses and {whose}; use --format csv for its "
-                          f"landmarks")
+        raise ExportError(f"{fmt} holds robot poses and {whose}; use "
+                          f"{option_named('--format csv', _CSV)} for its landmarks")
     order = np.argsort(src.pose_t, kind="stable")
     return src.pose_t[order], src.poses[order]
 
@@ -225,9 +226,11 @@ def to_g2o(src: MapEstimate, stream: Stream) -> str:
     all_ids = np.concatenate([observed, src.landmark_ids]).astype(np.int64)
     base = int(all_ids.max()) + 1 if all_ids.size else 0
     if base + n - 1 > _MAX_G2O_ID:  # h96: written, then refused by `import g2o`
-        raise ExportError(f"g2o: pose vertex ids are the largest landmark id + 1 + t, and "
-                          f"landmark id {base - 1} leaves no room for {n} poses below 2^63 "
-                          f"(the ids g2o and bomgraph read); renumber the landmarks")
+        # the stream's id, unless the estimate's alone (h101: named the estimate file)
+        error = StreamExportError if base - 1 in observed else ExportError
+        raise error(f"g2o: pose vertex ids are the largest landmark id + 1 + t, and "
+                    f"landmark id {base - 1} leaves no room for {n} poses below 2^63 "
+                    f"(the ids g2o and bomgraph read); renumber the landmarks")
     lm = {int(i): xy for i, xy in zip(src.landmark_ids, src.landmarks_xy)}
     lines = ["# bomgraph export: bearing-only 2-D SLAM problem with the estimate as vertex "
              f"values; pose vertex id = {base} + t", g2o_header_comment(stream)]
@@ -265,18 +268,25 @@ def to_g2o(src: MapEstimate, stream: Stream) -> str:
     return "\n".join(lines) + "\n"
 
 
+class StreamExportError(ExportError):
+    """An export refused for what the stream holds (not the estimate)."""
+
+
 def export_text(src: MapEstimate, fmt: str, stream: Stream | None = None, *,
-                name: str | None = None) -> str:
+                name: str | None = None, stream_name: str | None = None) -> str:
     """The text of ``src`` in format ``fmt`` (one of :data:`FORMATS`); ``name``, the file
-    ``src`` was read from (``-``: stdin), starts the message of what it lacks for ``fmt``."""
+    ``src`` was read from (``-``: stdin), starts the message of what it lacks for ``fmt``;
+    ``stream_name``, the stream's, the message of what the stream holds that ``fmt`` cannot
+    (a :class:`StreamExportError`; ``name`` when not given)."""
     _check_estimate(src, "export_text")
     _check_stream(stream, "export_text")
-    if name is None:
-        return _export_text(src, fmt, stream)
     try:
         return _export_text(src, fmt, stream)
     except ExportError as exc:  # h91: a refusal named neither the estimate nor its line
-        raise ExportError(f"{'<stdin>' if name == '-' else name}: {exc}") from None
+        whose = stream_name if isinstance(exc, StreamExportError) and stream_name else name
+        if whose is None:
+            raise
+        raise type(exc)(f"{'<stdin>' if whose == '-' else whose}: {exc}") from None
 
 
 def _export_text(src: MapEstimate, fmt: str, stream: Stream | None) -> str:
@@ -288,7 +298,8 @@ def _export_text(src: MapEstimate, fmt: str, stream: Stream | None) -> str:
         return to_csv(src, stream)
     if fmt == "g2o":
         if stream is None:
-            raise ExportError("g2o holds the measurements too: give the stream (--stream)")
+            raise ExportError(f"g2o holds the measurements too: give the stream "
+                              f"({option_named('--stream', 'stream')})")
         return to_g2o(src, stream)
     raise ConfigError(f"unknown export format {fmt!r}; choose one of {', '.join(FORMATS)}")
 
@@ -308,4 +319,4 @@ def write_text_atomic(text: str, path: str | os.PathLike[str],
 
 __all__ = ["FORMATS", "ZERO_SIGMA_FLOOR", "CSV_HEADER", "g2o_header_comment", "ExportError",
            "MapEstimate", "export_text", "to_tum", "to_kitti", "to_csv", "to_g2o",
-           "odometry_information", "write_text_atomic"]
+           "odometry_information", "write_text_atomic", "StreamExportError"]

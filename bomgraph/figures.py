@@ -14,6 +14,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
+from .checks import option_named
 from .errors import BomgraphError, ConfigError, EvaluationError
 from .estimate_file import read_estimate
 from .file_evaluation import check_stream_identity, method_label, poses_revised
@@ -25,6 +26,7 @@ from .stdio import check_output_path, read_regular_file, write_figure
 from .stream_file import read_stream
 
 FIGURE_SUFFIXES = (".png", ".pdf", ".svg")
+_LANDMARKS = "align_on='landmarks'"
 
 
 def _check_out(out: str | os.PathLike[str], *inputs: str | os.PathLike[str]) -> Path:
@@ -70,7 +72,8 @@ def plot_run(estimate_path: str | os.PathLike[str], stream_path: str | os.PathLi
     if first and align_on != "landmarks":
         raise EvaluationError(f"{estimate_path}: the poses at t = {t} are as first estimated "
                               f"(the method revised them later), so they cannot place the "
-                              f"map: use --align landmarks, or plot the final map")
+                              f"map: use {option_named('--align landmarks', _LANDMARKS)}, or "
+                              f"plot the final map")
     try:
         s = score_estimate(est, truth, align_on=align_on)
     except EvaluationError as exc:  # say which file and map, as evaluate does

@@ -26,6 +26,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
+from .checks import option_named
 from .errors import BomgraphError, EvaluationError, StreamFormatError
 from .evaluate import (CheckpointScore, MapScore, error_table, mean_landmark_nees, pose_nees,
                        score_checkpoints, score_estimate)
@@ -185,9 +186,12 @@ def evaluate_files(estimate_path: str | os.PathLike[str], stream_path: str | os.
         _check_identity(ref_est, ident, reference_path, stream_path)
     if ref_est is None and truth is None:
         if with_scale or align_on != "landmarks" or delta != 1:
+            given = ", ".join(option_named(o, p) for o, p in (
+                ("--similarity", "with_scale"), ("--align", "align_on"), ("--delta", "delta")))
             raise EvaluationError(f"{stream_path}: the stream has no ground truth, so there is "
-                                  f"nothing to align to (--similarity, --align, --delta); give "
-                                  f"--reference EST, or drop them for the truth-free measures")
+                                  f"nothing to align to ({given}); give "
+                                  f"{option_named('--reference EST', 'reference_path')}, or "
+                                  f"drop them for the truth-free measures")
         free = []
         for k, c in enumerate(est.checkpoints or (None,)):
             e = est.final if c is None else c.estimate

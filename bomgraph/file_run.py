@@ -15,6 +15,7 @@ from typing import Any, Callable, Iterable, Iterator, Mapping
 
 import numpy as np
 
+from .checks import option_named, out_named
 from .errors import ConfigError, StreamFormatError
 from .experiments import Experiment, SimSource
 from .mapper import (MapEstimate, RunResult, checkpoint_times, create_mapper, method_info,
@@ -49,9 +50,11 @@ def run_file(stream_path: str | os.PathLike[str], method: str,
                           f"(or None), got {type(options).__name__}")
     if method_info(method).needs_truth and not allow_truth:
         raise ConfigError(f"method {method!r} reads the ground truth; it is a benchmark "
-                          f"bound, not a mapper (pass --allow-truth to run it anyway)")
+                          f"bound, not a mapper (pass "
+                          f"{option_named('--allow-truth', 'allow_truth=True')} to run it "
+                          f"anyway)")
     if out is not None and os.path.exists(out) and os.path.samefile(out, stream_path):
-        raise ConfigError(f"--out {os.fspath(out)} is the input stream; choose another "
+        raise ConfigError(f"{out_named('out', out)} is the input stream; choose another "
                           f"file for the estimate")
     with contextlib.ExitStack() as stack:
         reader = stack.enter_context(StreamReader(stream_path))

@@ -31,6 +31,7 @@ from typing import Any, Callable, Iterator, Mapping, Sequence
 
 from .claims import remove_leftovers
 from .experiments import DatasetSource, Experiment, FileSource, Task
+from .checks import out_named
 from .stdio import (InputTooLargeError, OutputPathError, folder_lock, read_regular_file,
                     write_text)
 
@@ -132,7 +133,7 @@ def refuse_inputs_among_outputs(out: Path, experiments: Sequence[Experiment]) ->
         return
     folder = os.path.realpath(out)
     if folder in inputs:
-        raise OutputPathError(f"--out {out}: is the input {inputs[folder]}; compare writes its "
+        raise OutputPathError(f"{out_named('out_dir', out)}: is the input {inputs[folder]}; compare writes its "
                               f"results there: choose another folder")
     written = [out / n for n in COMPARE_FILES] + list(out.glob("*.png"))
     for sub in COMPARE_FOLDERS:
@@ -140,7 +141,7 @@ def refuse_inputs_among_outputs(out: Path, experiments: Sequence[Experiment]) ->
     for path in written:
         real = os.path.realpath(path)
         if real in inputs:
-            raise OutputPathError(f"--out {out}: compare writes {path}, which is the input "
+            raise OutputPathError(f"{out_named('out_dir', out)}: compare writes {path}, which is the input "
                                   f"{inputs[real]}; refusing to overwrite an input: move it "
                                   f"or choose another folder")
 
@@ -364,7 +365,7 @@ class OutputRecord:
         out, todo = self.out, "move it or choose another folder"
         listed = _read_manifest(out)
         if listed is None:
-            raise OutputPathError(f"--out {out}: {self.path} is not the list of files bomgraph "
+            raise OutputPathError(f"{out_named('out_dir', out)}: {self.path} is not the list of files bomgraph "
                                   f"compare keeps there; {todo}")
         by_path: dict[str, list[dict[str, Any]]] = {}
         for e in listed:
@@ -373,24 +374,24 @@ class OutputRecord:
             if os.path.lexists(folder) and not folder.is_dir():
                 what = (f"a link to {os.path.realpath(folder)}, which is not a folder"
                         if os.path.islink(folder) else "a file")
-                raise OutputPathError(f"--out {out}: compare writes a folder {folder}, which "
+                raise OutputPathError(f"{out_named('out_dir', out)}: compare writes a folder {folder}, which "
                                       f"is {what}; {todo}")
         for p in paths:
             if not os.path.lexists(p):
                 continue
             if p.is_dir():
-                raise OutputPathError(f"--out {out}: compare writes the file {p}, which is a "
+                raise OutputPathError(f"{out_named('out_dir', out)}: compare writes the file {p}, which is a "
                                       f"folder; {todo}")
             rel = os.path.normpath(os.path.relpath(p, out))
             if os.path.islink(p):
-                raise OutputPathError(f"--out {out}: compare would replace {p}, which is a "
+                raise OutputPathError(f"{out_named('out_dir', out)}: compare would replace {p}, which is a "
                                       f"link to {os.path.realpath(p)} (compare writes through "
                                       f"no link at a file's name); {todo}")
             if any(_proves(out, e) for e in by_path.get(rel, ())):
                 continue
             links = _links_on_the_way(out, rel)
             if by_path.get(rel) and all(e.get("via", {}) != links for e in by_path[rel]):
-                raise OutputPathError(f"--out {out}: compare would replace {p} "
+                raise OutputPathError(f"{out_named('out_dir', out)}: compare would replace {p} "
                                       f"{_link_changed(out, rel, by_path[rel][-1])}")
             # not listed: never compare's, or changed since and then left out of the list by
             # a compare that did not write it again (h75: "which compare did not write")
@@ -399,7 +400,7 @@ class OutputRecord:
                    os.path.lexists(self.path) else
                    f"which is not listed as compare's (the folder has no {MANIFEST}: not "
                    f"compare's, or an older bomgraph's)")
-            raise OutputPathError(f"--out {out}: compare would replace {p}, {why}; {todo}")
+            raise OutputPathError(f"{out_named('out_dir', out)}: compare would replace {p}, {why}; {todo}")
 
     def remove_leftovers(self, paths: Sequence[Path]) -> int:
         """Remove the temporary files that compares killed while writing (``kill -9``, a

@@ -27,7 +27,7 @@ from typing import Iterable, Sequence
 import numpy as np
 
 from .errors import BomgraphError
-from .stream import Step, StreamHeader
+from .stream import Prior, Step, StreamHeader
 
 #: pi/sqrt(3) (1.81 rad), the standard deviation of an angle uniform on the circle. An angle
 #: error wrapped to (-pi, pi] (every method wraps bearing and heading residuals) that is
@@ -282,6 +282,37 @@ class OdometryScale:
         return out
 
 
+class PriorLandmarks:
+    """The landmarks a stream's priors name that no step observes. Valid (the simulator
+    draws Exp. 3's priors over every landmark, seen in a short run or not), but only a method
+    mapping landmarks from priors alone uses such a prior; priors numbered apart from the
+    bearings (an offset, a dataset's other ids) were all of them, and every method ran as
+    without priors, silently. Judged by the reader after the last step, as
+    :class:`OdometryScale`: a warning."""
+
+    def __init__(self, priors: Sequence[Prior]) -> None:
+        self._priors = tuple(priors)
+        self._unseen = {p.i for p in priors} | {p.j for p in priors}
+
+    def add(self, step: Step) -> None:
+        if self._unseen and step.landmark_ids.size:
+            self._unseen.difference_update(step.landmark_ids.tolist())
+
+    def problem(self) -> tuple[str, str] | None:
+        """``("priors", message)`` naming the unobserved landmarks (the first 5) and how many
+        priors name one, else None."""
+        if not self._unseen:
+            return None
+        ids = sorted(self._unseen)
+        n = sum(p.i in self._unseen or p.j in self._unseen for p in self._priors)
+        more = f", ... ({len(ids)} landmarks)" if len(ids) > 5 else ""
+        return ("priors", f"{n} of the {len(self._priors)} priors name a landmark no step "
+                          f"observes (id{'s' * (len(ids) > 1)} {', '.join(map(str, ids[:5]))}{more}): only a "
+                          f"method mapping landmarks from priors alone (stmds-*, option "
+                          f"map_unobserved) uses those, the others ignore them (landmark "
+                          f"ids numbered other than the bearings'?)")
+
+
 def truth_problem(landmarks_xy: np.ndarray, poses: np.ndarray | None) -> str | None:
     """A message if a truth coordinate is beyond :data:`MAX_COORDINATE_M`, else None."""
     for what, xy in (("landmark", landmarks_xy), ("pose", poses)):
@@ -324,5 +355,6 @@ __all__ = ["MAX_ANGLE_SIGMA_RAD", "MAX_BEARING_SIGMA_RAD", "MAX_ODOMETRY_SIGMA",
            "MAX_STEP_ODOMETRY_SIGMA",
            "MIN_MOTION_PER_NOISE", "MIN_SCALE_STEPS", "TURN_SIGMAS", "SENSOR_RANGE_LIMITS_M",
            "PRIOR_SIGMA_LIMITS_M",
-           "MAX_STEP_M", "MAX_COORDINATE_M", "MAX_ABS_ANGLE_RAD", "OdometryScale", "header_problems",
+           "MAX_STEP_M", "MAX_COORDINATE_M", "MAX_ABS_ANGLE_RAD", "OdometryScale",
+           "PriorLandmarks", "header_problems",
            "bearings_problem", "step_problem", "truth_problem", "refuse_implausible"]

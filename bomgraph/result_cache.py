@@ -69,8 +69,8 @@ def _shape_problem(cached: Mapping[str, Any]) -> str:
         return "'checkpoints' is not a list of rows of numbers with an integer 't'"
     if not all(_number(cached.get(k)) for k in ("total_s", "step_median_s")):
         return "'total_s' or 'step_median_s' is not a number"
-    if not isinstance(cached.get("info"), dict) or cached.get("converged") not in (None, True,
-                                                                                  False):
+    conv = cached.get("converged")   # not `in (None, True, False)`: 1 == True, 0.0 == False
+    if not isinstance(cached.get("info"), dict) or not (conv is None or isinstance(conv, bool)):
         return "'info' is not a table or 'converged' not true, false or null"
     if not isinstance(cached.get("estimate_file", ""), str):
         return "'estimate_file' is not a string"

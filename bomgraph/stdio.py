@@ -44,7 +44,7 @@ import threading
 from pathlib import Path
 from typing import IO, Any, Callable, Iterator, Sequence
 
-from .checks import file_name, items
+from .checks import file_name, items, out_named
 from .claims import new_temp_file, release, remove_leftovers
 from .descriptors import (_CLOSED_AT_START, _fd_name, _own_descriptor,  # noqa: F401
                           hold_standard_descriptors, open_input)
@@ -167,7 +167,8 @@ def copy_bounded(src: IO[bytes], dst: IO[bytes], path: str) -> None:
 def standard_output() -> IO[str]:
     """``sys.stdout`` for ``--out -``, refused when closed (``>&-``: a traceback before, h83)."""
     if sys.stdout is None:
-        raise OutputPathError("--out -: the standard output is closed; give a file name")
+        raise OutputPathError(f"{out_named('path', STDIO)}: the standard output is closed; give "
+                              f"a file name")
     return sys.stdout
 
 
@@ -188,7 +189,8 @@ def _stdout_not_input(stdout: IO[str], inputs: Sequence[str | os.PathLike[str] |
         except OSError:  # missing, unreadable: its reader says so
             same = False
         if same:
-            raise OutputPathError(f"--out -: the standard output is the input {os.fspath(inp)}; "
+            raise OutputPathError(f"{out_named('path', STDIO)}: the standard output is the input "
+                                  f"{os.fspath(inp)}; "
                                   f"refusing to overwrite an input: choose another name")
 
 
@@ -198,7 +200,7 @@ def _stat(path: str) -> os.stat_result | None:
     except FileNotFoundError:
         return None
     except OSError as exc:
-        raise OutputPathError(f"--out {path}: {exc.strerror}") from None
+        raise OutputPathError(f"{out_named('path', path)}: {exc.strerror}") from None
 
 
 def _direct(path: str, st: os.stat_result | None) -> bool:
@@ -247,28 +249,29 @@ def check_output_path(path: str | os.PathLike[str],
     ------
     OutputPathError
     """
-    path = file_name(path, "--out", OutputPathError)
+    path = file_name(path, out_named("path"), OutputPathError)
     inputs = items(inputs, (str, os.PathLike, type(None)), "inputs (the files read)",
                    OutputPathError, want="file names")
     if path == STDIO:
         _stdout_not_input(standard_output(), inputs)  # closed: refused before computing
         return
     if not path:  # os.path.realpath("") is the working folder: the rename would aim at it
-        raise OutputPathError("--out is empty; give a file name")
+        raise OutputPathError(f"{out_named('path')} is empty; give a file name")
     st = _stat(path)
     if _fd_name(path) is not None and (st is None or _own_descriptor(path) in _CLOSED_AT_START):
         # /dev/stdout under >&-: not a folder's file; /dev/null on it is no output either
-        raise OutputPathError(f"--out {path}: that descriptor is not open; give a file name")
+        raise OutputPathError(f"{out_named('path', path)}: that descriptor is not open; give a "
+                              f"file name")
     if st is not None and stat.S_ISDIR(st.st_mode):
-        raise OutputPathError(f"--out {path}: is a directory; give a file name")
+        raise OutputPathError(f"{out_named('path', path)}: is a directory; give a file name")
     direct = _direct(path, st)
     if direct:
         if not os.access(path, os.W_OK):
-            raise OutputPathError(f"--out {path}: not writable")
+            raise OutputPathError(f"{out_named('path', path)}: not writable")
         if not stat.S_ISREG(st.st_mode):
             return
     elif st is not None and not stat.S_ISREG(st.st_mode):
-        raise OutputPathError(f"--out {path}: exists and is neither a regular file, a "
+        raise OutputPathError(f"{out_named('path', path)}: exists and is neither a regular file, a "
                               f"character device nor a FIFO; choose another name")
     target = os.path.realpath(path)
     for inp in inputs:
@@ -283,17 +286,18 @@ def check_output_path(path: str | os.PathLike[str],
             same = os.path.dirname(target) == os.path.realpath(inp) and target in {
                 os.path.realpath(os.path.join(inp, f)) for f in os.listdir(inp)}
         if same:
-            raise OutputPathError(f"--out {path}: is the input {inp}; refusing to overwrite "
+            raise OutputPathError(f"{out_named('path', path)}: is the input {inp}; refusing to "
+                                  f"overwrite "
                                   f"an input: choose another name")
     if direct:  # a file open as a descriptor (``>> f``): written where it is
         return
     folder = Path(target).parent
     if not folder.is_dir():
-        raise OutputPathError(f"--out {path}: the folder {folder} does not exist")
+        raise OutputPathError(f"{out_named('path', path)}: the folder {folder} does not exist")
     if st is not None and not os.access(target, os.W_OK):
-        raise OutputPathError(f"--out {path}: the file is not writable")
+        raise OutputPathError(f"{out_named('path', path)}: the file is not writable")
     if st is None and not os.access(folder, os.W_OK | os.X_OK):
-        raise OutputPathError(f"--out {path}: the folder {folder} is not writable")
+        raise OutputPathError(f"{out_named('path', path)}: the folder {folder} is not writable")
 
 
 @contextlib.contextmanager
@@ -344,7 +348,7 @@ class AtomicOutput:
             what = ("cannot open it for writing" if self.direct
                     else f"cannot create a file in {where}")
             raise OutputPathError(f"{self.given}: {what} ({exc.strerror or exc}); choose "
-                                  f"another --out") from None
+                                  f"another {out_named('path')}") from None
 
     def _open(self) -> IO:
         kw = {} if self._binary else {"encoding": "utf-8", "newline": "\n"}
@@ -460,7 +464,8 @@ def check_folder(folder: str | os.PathLike[str]) -> None:
     """Refuse an output folder that is empty or is or lies under a file or a link to a missing
     folder (:class:`OutputPathError`, naming it, not ``[Errno 17]``/``[Errno 20]``); no mkdir."""
     if not os.fspath(folder):   # Path('') is '.'
-        raise OutputPathError("--out is empty; give a folder ('.' for this one)")
+        raise OutputPathError(f"{out_named('out_dir')} is empty; give a folder ('.' for this "
+                              f"one)")
     path = Path(folder)
     for at in (path, *path.parents):   # the nearest one that exists must be a folder
         if os.path.isdir(at):
@@ -470,7 +475,7 @@ def check_folder(folder: str | os.PathLike[str]) -> None:
                     f"or give another" if not os.path.exists(at) else
                     "a file; give a folder (it is created if missing)")
             name = "" if at == path else f"{os.fspath(at)} "
-            raise OutputPathError(f"--out {os.fspath(folder)}: {name}is {what}")
+            raise OutputPathError(f"{out_named('out_dir', folder)}: {name}is {what}")
 
 
 def make_folder(folder: str | os.PathLike[str]) -> None:
@@ -502,7 +507,7 @@ def folder_lock(folder: str | os.PathLike[str], what: str,
         return
     lock = os.path.join(os.fspath(folder), ".bomgraph.lock")
     not_ours = (f"{lock}: is not a bomgraph lock (a process id); move it or choose another "
-                f"--out")
+                f"{out_named('out_dir')}")
     try:  # without blocking: a FIFO there is refused, not waited on; a link too (h100)
         fd = os.open(lock, (os.O_RDONLY if shared else os.O_RDWR | os.O_CREAT)
                      | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_NOFOLLOW", 0),
@@ -528,7 +533,7 @@ def folder_lock(folder: str | os.PathLike[str], what: str,
                 who, where = "", "below this folder, through a link or from a folder above"
             raise FolderBusyError(
                 f"{os.fspath(folder)}: another {what}{who} is writing {where}; wait for it to "
-                f"finish or choose another --out") from None
+                f"finish or choose another {out_named('out_dir')}") from None
         if os.fstat(fd).st_size > 64 or not re.fullmatch(rb"\s*\d*\s*", os.pread(fd, 64, 0)):
             raise OutputPathError(not_ours)  # not a pid (judged whole): not ours to empty
         if not shared:  # shared holders would overwrite each other's: the last writer's stays

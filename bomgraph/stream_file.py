@@ -20,8 +20,8 @@ from .checks import file_name
 from .errors import StreamFormatError
 from .jsonio import (MAX_ID, DuplicateKeyError, decode_utf8, find_nonfinite, is_id, is_int,
                      is_num, loads_strict, unparsable_at, version_problem)
-from .plausibility import (OdometryScale, bearings_problem, header_problems, step_problem,
-                           truth_problem)
+from .plausibility import (OdometryScale, PriorLandmarks, bearings_problem, header_problems,
+                           step_problem, truth_problem)
 from .stdio import MAX_LINE_BYTES, bounded_lines, line_too_long, open_input, output_file
 from .stream import Prior, Step, Stream, StreamHeader, Truth
 
@@ -352,6 +352,7 @@ class StreamReader:
         pending_blank: int | None = None
         warned = not self._warn
         scale = OdometryScale(self.header.odometry_sigma)
+        priors = PriorLandmarks(self.header.priors)
         for raw in bounded_lines(self._fh, self.path, first_line=2):
             line_no += 1
             ctx = _Ctx(self.path, line_no)
@@ -374,6 +375,7 @@ class StreamReader:
                              "checked)", self.path, line_no, *problem)
             if self._warn:
                 scale.add(step, line_no)
+                priors.add(step)
             yield step
             t += 1
         if pending_blank is not None:
@@ -389,6 +391,8 @@ class StreamReader:
                                     path=self.path, line=1, key="truth.poses")
         for key, msg, line in scale.problems():
             _log.warning("%s, line %d: '%s': %s", self.path, line or 1, key, msg)
+        if self._warn and (unseen := priors.problem()):
+            _log.warning("%s, line 1: '%s': %s", self.path, *unseen)
 
 
 def _decode(raw: bytes, ctx: _Ctx) -> str:

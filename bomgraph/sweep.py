@@ -278,14 +278,25 @@ def stream_header_problem(paths: Sequence[str]) -> str:
 
 
 def _named_streams(paths: list[str]) -> tuple[tuple[str, str], ...]:
-    """Each path with its run label: the file stem, or ``folder-stem`` when two files share a
-    stem (``folder-stem-K`` when that is not enough)."""
+    """Each path with its run label, unique: the file stem, or ``folder-stem`` when two files
+    share a stem (``folder-stem-K``, K the path's place in ``paths``, when that is not
+    enough; ``-K`` once more while another file's stem is that already: ``x-a-0.jsonl`` beside
+    two ``a.jsonl`` in folders ``x`` and ``y`` made a second ``x-a-0``, and the experiment
+    refused its two runs of one name)."""
     stems = [Path(p).stem for p in paths]
     times = Counter(stems)  # not list.count: quadratic in a glob of 100,000 files (h96)
     labels = [s if times[s] == 1 else f"{Path(p).parent.name}-{s}"
               for p, s in zip(paths, stems)]
     times = Counter(labels)
-    labels = [lb if times[lb] == 1 else f"{lb}-{k}" for k, lb in enumerate(labels)]
+    kept = {lb for lb, n in times.items() if n == 1}
+
+    def numbered(lb: str, k: int) -> str:
+        # two numbered labels never match: what follows their last '-' is their own K
+        while (lb := f"{lb}-{k}") in kept:
+            pass
+        return lb
+
+    labels = [lb if times[lb] == 1 else numbered(lb, k) for k, lb in enumerate(labels)]
     return tuple(zip(paths, labels))
 
 

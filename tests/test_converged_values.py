@@ -12,6 +12,7 @@ recorded as one, and cached.
 from __future__ import annotations
 
 import importlib
+import json
 import logging
 from pathlib import Path
 
@@ -24,6 +25,7 @@ from bomgraph import mapper
 from bomgraph.bench import Executor, execute_counted
 from bomgraph.experiments import Arm, Experiment, FileSource
 from bomgraph.report import summarise
+from bomgraph.result_cache import read_cached
 from bomgraph.sim import SimConfig, simulate
 from bomgraph.stream_file import write_stream
 
@@ -97,3 +99,20 @@ def test_bomgraph_run_warns_of_a_final_solve_that_did_not_converge(
         run_file(exp.sources[0].path, "h98-conv")
     said = [r.getMessage() for r in caplog.records if "did not converge" in r.getMessage()]
     assert len(said) == int(warned), said
+
+
+@pytest.mark.parametrize("converged", [1, 0, 1.0, 0.0, 2, "yes"])
+def test_a_cached_converged_that_is_a_number_is_a_cache_miss(
+        tmp_path: Path, converged: object, caplog: pytest.LogCaptureFixture) -> None:
+    """A hand-edited cache entry whose ``converged`` is a number is of the wrong shape, as
+    ``2`` or ``"yes"`` is. Fails before for 1, 0, 1.0 and 0.0: the check was a membership
+    test, ``in (None, True, False)``, and 1 == True, 0.0 == False, so the entry was read and
+    its ``converged`` reached the per-run table as a number."""
+    path = tmp_path / "key.json"
+    path.write_text(json.dumps(
+        {"ok": True, "key": "key", "experiment": "e", "arm": "a", "method": "m", "run": "r",
+         "checkpoints": [], "total_s": 0.0, "step_median_s": 0.0, "info": {},
+         "converged": converged}))
+    with caplog.at_level(logging.WARNING):
+        assert read_cached(path) is None
+    assert "'converged' not true, false or null" in caplog.text and str(path) in caplog.text

@@ -166,3 +166,24 @@ def test_main_in_a_process_that_closed_its_sys_stdout_or_stderr(
     assert sys.stderr is closed
     monkeypatch.undo()
     assert (tmp_path / "a").read_text() == (tmp_path / "plain").read_text() == data.getvalue()
+
+
+
+@pytest.mark.parametrize("args, status", [("--help", 0), ("--version", 0), ("compare --help", 0),
+                                          ("methods", 0), ("compare --bogus", 2)])
+def test_help_and_version_with_stdout_closed_are_dropped_as_a_commands_lines(
+        tmp_path: Path, args: str, status: int) -> None:
+    """h101: ``bomgraph --help >&-`` printed the help to stderr (argparse's fallback when
+    sys.stdout is None), where every command drops its own lines (``methods >&-``: nothing,
+    exit 0). Now the help and the version are dropped too; a usage error still goes to
+    stderr. Fails before for --help, --version and compare --help."""
+    env = {**os.environ, "PYTHONPATH": str(ROOT), "OMP_NUM_THREADS": "1"}
+    done = subprocess.run(["bash", "-c", f"{BOMGRAPH} {args} >&-"], cwd=tmp_path, env=env,
+                          capture_output=True, check=False)
+    assert done.returncode == status, done.stderr[:200]
+    if status == 0:
+        assert done.stderr == b"", done.stderr[:200]
+    else:
+        assert done.stderr.decode().splitlines() == [
+            "bomgraph compare: error: unrecognized arguments: --bogus; see bomgraph compare "
+            "--help"], done.stderr

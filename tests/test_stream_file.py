@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import logging
 from pathlib import Path
 
 import numpy as np
@@ -507,3 +508,31 @@ def test_a_step_with_too_many_bearings_is_refused_before_parsing(tmp_path: Path,
                                                     rf"than 50 bearings in one step"):
             read_stream(stream(n))
         assert parsed == ([1, 2] if n == 51 else [1])
+
+
+@pytest.mark.parametrize("pairs, warned", [
+    ([(0, 1)], ""),
+    ([(0, 1), (1, 7)], "1 of the 2 priors name a landmark no step observes (id 7)"),
+    ([(100, 101), (101, 102), (103, 104), (104, 105), (105, 106), (100, 106)],
+     "6 of the 6 priors name a landmark no step observes (ids 100, 101, 102, 103, 104, ... "
+     "(7 landmarks))")])
+def test_priors_on_landmarks_no_step_observes_are_warned_of(
+        tmp_path: Path, caplog: pytest.LogCaptureFixture, pairs: list, warned: str) -> None:
+    """h101: priors numbered apart from the bearings (here ids 100-106; the steps see 0 and
+    1) were read silently, and every method but one option of BOM-STMDS ran as without
+    them. Valid (the simulator draws priors over landmarks a short run never sees): a
+    warning naming the file, line 1 and the ids, after the last step; none without ``warn``.
+    Fails before: no warning."""
+    header = {**HEADER, "priors": [{"i": i, "j": j, "distance_m": 1.0, "sigma_m": 0.03}
+                                   for i, j in pairs]}
+    path = write_lines(tmp_path / "p.jsonl", [header, *STEPS])
+    with caplog.at_level(logging.WARNING, logger="bomgraph"):
+        assert len(read_stream(path).header.priors) == len(pairs)
+        with StreamReader(path, warn=False) as reader:
+            list(reader)
+    said = [r.getMessage() for r in caplog.records if "'priors'" in r.getMessage()]
+    if not warned:
+        assert said == []
+        return
+    assert len(said) == 1, said
+    assert said[0].startswith(f"{path}, line 1: 'priors': {warned}:"), said[0]

@@ -289,6 +289,23 @@ def test_scheduler_and_dask_local_together_are_refused(
     assert len(err) == 1 and "--dask-local: not allowed with argument --scheduler" in err[0]
 
 
+@pytest.mark.parametrize("extra", [[], ["--jobs", "1"]])
+def test_dask_local_0_is_refused(runs: Path, tmp_path: Path, capsys: pytest.CaptureFixture,
+                                 extra: list[str]) -> None:
+    """h101: `--dask-local 0` (a cluster of no workers; `--dask-local $N` with N unset to 0)
+    set the sweep file's `[executor]` aside (its `jobs = 1` here) and ran local processes,
+    one per core, without a word. Refused now, as `--jobs 0` is. Fails before: exit 0."""
+    sweep = tmp_path / "s.toml"
+    sweep.write_text(f'streams = ["{runs / "runs" / "r1.jsonl"}"]\nmethods = ["triangulate"]\n'
+                     f'[executor]\njobs = 1\n')
+    with pytest.raises(SystemExit) as stop:  # argparse's exit: main() does not catch it
+        main(["compare", "--config", str(sweep), "--dask-local", "0", *extra, "--dry-run",
+              "--out", str(tmp_path / "x")])
+    assert stop.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "argument --dask-local: must be >= 1" in err[0], err
+
+
 @pytest.mark.parametrize("config", [False, True])
 def test_an_empty_scheduler_is_refused(runs: Path, tmp_path: Path,
                                        capsys: pytest.CaptureFixture, config: bool) -> None:

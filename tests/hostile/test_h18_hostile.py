@@ -111,8 +111,8 @@ def test_h18_13_an_uncreatable_out_names_the_path_given(work: Path, monkeypatch)
     monkeypatch.setattr("tempfile.mkstemp", lambda **kw: (_ for _ in ()).throw(
         PermissionError(13, "Permission denied")))
     with pytest.raises(OutputPathError, match=rf"^{out}: cannot create a file in {ro} "
-                                              rf"\(Permission denied\); choose another --out$"):
-        AtomicOutput(out).open()
+                                              rf"\(Permission denied\); choose another path$"):
+        AtomicOutput(out).open()   # Python, its parameter; the command line's --out (h101)
     assert not list(ro.iterdir())
     if Path("/proc/self").is_dir():  # a folder that passes access() but takes no file (root)
         for args in (["run", "--method", "triangulate", "--out", "/proc/x.json",
