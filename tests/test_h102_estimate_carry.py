@@ -40,3 +40,12 @@ def test_a_final_map_without_poses_reads_back_without_poses(tmp_path: Path) -> N
     assert got[-1].poses is None and got[-1].pose_t is None and got[-1].pose_cov is None
     np.testing.assert_array_equal(got[-1].landmarks_xy, LMS[1])
     assert read_estimate(tmp_path / "e.jsonl").final.poses is None
+
+
+def test_the_timing_line_by_hand(tmp_path: Path) -> None:
+    """steps: the sum of the step times; step_median and estimate_median: medians."""
+    cps = tuple(Checkpoint(5 * (k + 1), WITHOUT, s) for k, s in enumerate((0.001, 0.002, 0.009)))
+    write_estimate(RunResult("m", cps, np.array([0.01, 0.02, 0.06]), 0.5), tmp_path / "e.jsonl")
+    timing = read_estimate(tmp_path / "e.jsonl").timing_s
+    assert timing == {"total": 0.5, "steps": 0.09, "step_median": 0.02, "estimates": 0.012,
+                      "estimate_median": 0.002}
