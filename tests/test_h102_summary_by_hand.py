@@ -84,3 +84,18 @@ def test_csv_and_json_tables_carry_raw_values_under_their_names() -> None:
     obj = json.loads(format_table(COLUMNS, ROWS, "json", meta={"title": "x"}))
     assert obj == {"title": "x", "rows": [{"arm": "a", "mpe_m": 0.0123, "n": 3},
                                           {"arm": "b", "mpe_m": None, "n": 0}]}
+
+
+def test_write_csv_keeps_every_key_in_order_of_appearance(tmp_path) -> None:
+    """summary.csv's columns: every key of every row, first seen first; lists joined by ';'
+    (a key only a later row has, a failed run's errors, is a column too)."""
+    from bomgraph.tables import write_csv
+
+    rows = [{"arm": "a", "mpe_m": 0.01, "errors": []},
+            {"arm": "b", "mpe_m": 0.02, "errors": ["E1: x", "E2: y"], "note": "late"}]
+    write_csv(tmp_path / "s.csv", rows)
+    text = (tmp_path / "s.csv").read_text()
+    assert text.splitlines()[0] == "arm,mpe_m,errors,note"
+    assert list(csv.DictReader(io.StringIO(text))) == [
+        {"arm": "a", "mpe_m": "0.01", "errors": "", "note": ""},
+        {"arm": "b", "mpe_m": "0.02", "errors": "E1: x;E2: y", "note": "late"}]
