@@ -81,3 +81,30 @@ def test_the_written_cache_file_is_the_result_as_json(tmp_path: Path) -> None:
     path = tmp_path / f"{KEY}.json"
     write_cached(path, _result())
     assert json.loads(path.read_text()) == _result()
+
+
+def test_a_name_registered_again_to_another_factory_of_the_package_changes_the_key(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The package's sources are the same; the factory the name runs is not."""
+    from bomgraph import mapper
+    from bomgraph.bench import task_key
+    from bomgraph.experiments import Arm, Task
+    from bomgraph.sim import SimConfig, paper_design
+    from bomgraph.sources import SimSource
+
+    pkg = tmp_path / "h102_two_factories"
+    pkg.mkdir()
+    (pkg / "__init__.py").write_text("")
+    (pkg / "m.py").write_text("def make_a(header):\n    return None\n\n\n"
+                              "def make_b(header):\n    return None\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    try:
+        mapper.register_method("h102-two", "h102_two_factories.m:make_a", replace=True)
+        task = Task("e", Arm("x", "h102-two"), SimSource(paper_design(0)[0], SimConfig()))
+        first = task_key(task)
+        mapper.register_method("h102-two", "h102_two_factories.m:make_b", replace=True)
+        assert task_key(task) != first
+    finally:
+        mapper._REGISTRY.pop("h102-two", None)
+        for name in [n for n in sys.modules if n.startswith("h102_two_factories")]:
+            del sys.modules[name]
