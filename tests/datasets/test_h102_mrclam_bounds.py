@@ -165,3 +165,22 @@ def test_the_turn_ratio_is_truth_over_odometry(tmp_path):
     s = import_mrclam(tmp_path, 1, keyframe=KeyframeConfig(**EXACT))
     ratio = s.header.meta["odometry_model"]["turn_ratio_truth_over_odometry"]
     assert ratio == pytest.approx(1 / 1.05, rel=1e-6)
+
+
+def test_detections_in_a_truth_gap_longer_than_the_limit_are_dropped(tmp_path):
+    """Ground truth missing for 0.8 s (> max_truth_gap_s = 0.5, < twice it): every detection
+    from the gap's start up to its end is dropped and counted, as many as the measurement
+    file has there (counted here from the file)."""
+    world = make_mrclam(tmp_path, extras=False)
+    t = world["t"]
+    gt = tmp_path / "Robot1_Groundtruth.dat"
+    lines = gt.read_text().split("\n")
+    head = [ln for ln in lines if ln.startswith("#")]
+    rows = [ln for ln in lines if ln.strip() and not ln.startswith("#")]
+    gt.write_text("\n".join(head + rows[:1001] + rows[1080:]) + "\n")   # t[1000] .. t[1080]
+    me = (tmp_path / "Robot1_Measurement.dat").read_text().split("\n")
+    times = np.array([float(ln.split()[0]) for ln in me if ln.strip() and not ln.startswith("#")])
+    in_gap = int(np.sum((times >= t[1000]) & (times < t[1080])))
+    assert in_gap > 0
+    s = import_mrclam(tmp_path, 1, keyframe=KeyframeConfig(**EXACT))
+    assert s.header.meta["rows"]["in_truth_gap"] == in_gap
