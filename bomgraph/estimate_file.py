@@ -16,6 +16,7 @@ naming the file, the line and the key (in version 1, the line on which the key i
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import os
@@ -310,6 +311,7 @@ def _read_v2(fh: IO[bytes], header: dict, path: str) -> EstimateFile:
     prev: MapEstimate | None = None
     timing: dict[str, float] | None = None
     line_no = 1
+    last_has_poses = False
     for raw in bounded_lines(fh, path, first_line=2):
         line_no += 1
         ctx = _Line(path, line_no)
@@ -331,12 +333,18 @@ def _read_v2(fh: IO[bytes], header: dict, path: str) -> EstimateFile:
             raise ctx.error("t", f"checkpoints must be in increasing t ({t} after {cps[-1].t})")
         cps.append(Checkpoint(t, est, est_s))
         prev = est
+        last_has_poses = "poses" in obj or "new_poses" in obj
     if timing is None:
         raise StreamFormatError("ends before the timing_s line (truncated?)", path=path,
                                 line=line_no + 1, key="timing_s")
     if not cps:
         raise StreamFormatError("no checkpoint line; the final map is the last checkpoint",
                                 path=path, line=2, key="t")
+    if not last_has_poses and cps[-1].estimate.pose_t is not None:
+        # the final map is exact: without poses of its own it has none (an earlier line
+        # without poses keeps the trajectory so far; h102: the final map kept it too)
+        final = dataclasses.replace(cps[-1].estimate, pose_t=None, poses=None, pose_cov=None)
+        cps[-1] = Checkpoint(cps[-1].t, final, cps[-1].estimate_s)
     return EstimateFile(method, cps[-1].estimate, tuple(cps), timing, 2, ident, options)
 
 
