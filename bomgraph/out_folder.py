@@ -26,6 +26,7 @@ import json
 import logging
 import os
 import re
+from collections import Counter
 from pathlib import Path
 from typing import Any, Callable, Iterator, Mapping, Sequence
 
@@ -588,9 +589,9 @@ def unique_slugs(names: Sequence[str]) -> dict[str, str]:
     (x)`` and ``tri_x``, ``EKF`` and ``ekf``), get their own short hash appended, so no two
     share a file."""
     slugs = {n: slug(n) for n in dict.fromkeys(names)}
-    folded = [v.casefold() for v in slugs.values()]    # one file on a case-insensitive disk
+    folded = Counter(v.casefold() for v in slugs.values())  # h103: not list.count (n^2)
     return {n: (f"{v}-{hashlib.sha256(n.encode()).hexdigest()[:8]}"
-                if folded.count(v.casefold()) > 1 else v) for n, v in slugs.items()}
+                if folded[v.casefold()] > 1 else v) for n, v in slugs.items()}
 
 
 __all__ = ["COMPARE_FILES", "COMPARE_FOLDERS", "MANIFEST", "OutputRecord", "RESULT_FILES",
