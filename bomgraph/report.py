@@ -37,6 +37,7 @@ from .out_folder import (RESULT_FILES, OutputRecord, compare_locks, estimate_pat
                          planned_outputs, refuse_inputs_among_outputs, slug)
 from .stdio import check_folder, write_figure, write_text
 from .tables import HUGE, write_csv
+from .worker_log import said_once
 
 _log = logging.getLogger(__name__)
 
@@ -372,7 +373,7 @@ def compare(experiments: Sequence[Experiment], out_dir: str | os.PathLike[str], 
     planned = planned_outputs(out, experiments, estimates=estimates, figures=figures)
     (record := OutputRecord(out)).refuse_foreign(planned, [out / "cache"] if use_cache else [])
     out.mkdir(parents=True, exist_ok=True)   # check_folder above
-    with compare_locks(out, planned):  # out, folders linked from it, folders it writes below
+    with compare_locks(out, planned), said_once():  # out, its linked and written folders
         record.remove_leftovers(planned)  # of compares killed while writing: none writes now
         return _compare(experiments, out, executor, use_cache, figures, progress, estimates,
                         refs, paired, paired_reference, (record, planned))

@@ -13,18 +13,23 @@
 from __future__ import annotations
 
 import logging
+import os
+import subprocess
 import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from bomgraph.bench import Executor
+from bomgraph.experiments import Arm, Experiment, FileSource
 from bomgraph.figures import plot_results, plot_run
 from bomgraph.file_run import run_file
 from bomgraph.out_folder import unique_slugs
-from bomgraph.sim import SimConfig, simulate
+from bomgraph.report import compare
+from bomgraph.sim import SimConfig, make_priors, simulate, with_priors
 from bomgraph.stdio import OutputPathError
-from bomgraph.stream_file import write_stream
+from bomgraph.stream_file import StreamReader, read_stream, write_stream
 
 
 @pytest.fixture()
@@ -75,3 +80,74 @@ def test_unique_slugs_counts_each_name_once() -> None:
     assert calls == 0, calls   # before: 2,002 scans of the whole list
     assert slugs["d3-run3"] == "d3-run3"
     assert slugs["EKF"] != slugs["ekf"] and slugs["EKF"].startswith("EKF-")
+
+
+def _short_runs_with_priors(folder: Path, n: int) -> list[Path]:
+    """``n`` simulated runs of 50 steps with Exp. 3's priors (drawn over every landmark, as
+    ``bomgraph simulate --steps 50 --prior-fraction 0.1`` does), so that a few name landmarks
+    the short runs never see: the stream reader warns of those (h101)."""
+    paths = []
+    for seed in range(n):
+        rng = np.random.default_rng(seed)
+        s = simulate(SimConfig(n_steps=50), rng)
+        path = folder / f"s{seed}.jsonl"
+        write_stream(with_priors(s, make_priors(s.truth, 0.1, 0.03, rng)), path)
+        paths.append(path)
+    return paths
+
+
+def _warned(text: str) -> list[str]:
+    return [ln for ln in text.splitlines() if "'priors'" in ln]
+
+
+def test_compare_in_worker_processes_warns_once_per_stream(tmp_path: Path) -> None:
+    """Fails before: each worker process that read a stream warned of it on its own stderr,
+    unprefixed and under ``-q`` too, and the figures' reading warned again (6 lines for 2
+    streams and 2 methods, 4 of them under -q)."""
+    paths = _short_runs_with_priors(tmp_path, 2)
+    expected = set()
+    for p in paths:
+        with StreamReader(p) as reader:
+            list(reader)
+    for quiet in ([], ["-q"]):
+        out = tmp_path / f"cmp{len(quiet)}"
+        done = subprocess.run(
+            [sys.executable, "-m", "bomgraph", "compare", *quiet, "--streams", *map(str, paths),
+             "--methods", "triangulate,stmds-smacof", "--jobs", "2", "--no-cache",
+             "--estimates", "--out", str(out)], capture_output=True, text=True,
+            env={**os.environ, "PYTHONPATH": str(Path(__file__).parents[1])})
+        assert done.returncode == 0, done.stderr
+        said = _warned(done.stderr)
+        if quiet:
+            assert said == [], said
+            continue
+        assert len(said) == len(set(said)) and all(
+            ln.startswith("bomgraph: WARNING: ") for ln in said), said
+        expected = {ln for ln in said}
+        assert "_worker_warnings" not in (out / "results.json").read_text()
+    assert len(expected) == sum(bool(_unobserved(p)) for p in paths) > 0
+
+
+def _unobserved(path: Path) -> set[int]:
+    s = read_stream(path)
+    seen = {int(i) for st in s.steps for i in st.landmark_ids}
+    return {i for p in s.header.priors for i in (p.i, p.j)} - seen
+
+
+def test_a_serial_compare_of_many_streams_warns_once_per_stream(
+        tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    """Fails before: the map figures read each stream again (8 are kept read), and warned
+    again: 14 lines for 7 streams of 10."""
+    paths = _short_runs_with_priors(tmp_path, 10)
+    exp = Experiment("e", "e", (Arm("triangulate", "triangulate"),),
+                     sources=tuple(FileSource(str(p)) for p in paths))
+    with caplog.at_level(logging.WARNING, logger="bomgraph"):
+        compare([exp], tmp_path / "cmp", executor=Executor("serial"), use_cache=False)
+    said = [r.getMessage() for r in caplog.records if "'priors'" in r.getMessage()]
+    assert len(said) == len(set(said)) == sum(bool(_unobserved(p)) for p in paths) > 0, said
+    warned = next(p for p in paths if _unobserved(p))
+    caplog.clear()
+    with caplog.at_level(logging.WARNING, logger="bomgraph"):   # outside a sweep: each read
+        read_stream(warned)
+        read_stream(warned)
+    assert len([r for r in caplog.records if "'priors'" in r.getMessage()]) == 2
