@@ -151,3 +151,20 @@ def test_a_serial_compare_of_many_streams_warns_once_per_stream(
         read_stream(warned)
         read_stream(warned)
     assert len([r for r in caplog.records if "'priors'" in r.getMessage()]) == 2
+
+
+def test_map_figures_of_runs_whose_names_slug_alike_are_two_files(tmp_path: Path) -> None:
+    """Fails before: streams ``run 1`` and ``run_1`` (labels unique, h101) drew their map
+    figures into one file, ``e_run_1_maps.png``, the first overwritten (compare listed it
+    twice); ``RUN_1`` beside them is one file with it on a case-insensitive disk."""
+    paths = []
+    for k, name in enumerate(("run 1", "run_1", "RUN_1")):
+        paths.append(tmp_path / f"{name}.jsonl")
+        write_stream(simulate(SimConfig(n_steps=20), np.random.default_rng(k)), paths[-1])
+    exp = Experiment("e", "e", (Arm("triangulate", "triangulate"),),
+                     sources=tuple(FileSource(str(p)) for p in paths))
+    result = compare([exp], tmp_path / "cmp", executor=Executor("serial"), use_cache=False)
+    maps = sorted(p.name for p in (tmp_path / "cmp").glob("*_maps.png"))
+    assert len(maps) == 3 and len({m.casefold() for m in maps}) == 3, maps
+    written = [Path(p).name for p in result.files if str(p).endswith("_maps.png")]
+    assert sorted(written) == maps
