@@ -12,6 +12,7 @@
 
 from __future__ import annotations
 
+import json
 import logging
 import os
 import subprocess
@@ -27,6 +28,7 @@ from bomgraph.figures import plot_results, plot_run
 from bomgraph.file_run import run_file
 from bomgraph.out_folder import unique_slugs
 from bomgraph.report import compare
+from bomgraph.result_cache import read_cached
 from bomgraph.sim import SimConfig, make_priors, simulate, with_priors
 from bomgraph.stdio import OutputPathError
 from bomgraph.stream_file import StreamReader, read_stream, write_stream
@@ -168,3 +170,17 @@ def test_map_figures_of_runs_whose_names_slug_alike_are_two_files(tmp_path: Path
     assert len(maps) == 3 and len({m.casefold() for m in maps}) == 3, maps
     written = [Path(p).name for p in result.files if str(p).endswith("_maps.png")]
     assert sorted(written) == maps
+
+
+@pytest.mark.parametrize("converged", [True, False, None, "absent"])
+def test_a_cached_converged_of_true_false_null_or_none_still_loads(
+        tmp_path: Path, converged: object) -> None:
+    """h101's check (a real bool or null) keeps every entry earlier versions wrote: run_task
+    has written ``converged`` as true, false or null (or not at all) since the cache began."""
+    entry = {"ok": True, "key": "key", "experiment": "e", "arm": "a", "method": "m", "run": "r",
+             "checkpoints": [], "total_s": 0.0, "step_median_s": 0.0, "info": {}}
+    if converged != "absent":
+        entry["converged"] = converged
+    path = tmp_path / "key.json"
+    path.write_text(json.dumps(entry))
+    assert read_cached(path) == entry
