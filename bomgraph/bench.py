@@ -52,6 +52,7 @@ from .file_run import run_example, run_file  # re-exported: bench.run_file, benc
 from .stream_file import count_steps  # re-exported: bench.count_steps
 from .stream_identity import identity_of_stream
 from .sweep import scheduler_address_problem
+from .worker_log import SAID, kept_warnings, said_once, say_kept
 
 #: Bump to invalidate every cached result (the code fingerprint covers code changes).
 _log = logging.getLogger(__name__)
@@ -369,7 +370,17 @@ def execute_counted(tasks: Sequence[Task], executor: Executor = Executor(), *,
                     cache_dir: str | os.PathLike[str] | None = None,
                     progress: Callable[[int, int], None] | None = None
                     ) -> tuple[list[dict[str, Any]], int]:
-    """:func:`execute`'s results, and how many of them were read from ``cache_dir``."""
+    """:func:`execute`'s results, and how many of them were read from ``cache_dir``. A
+    warning is said once (:func:`bomgraph.worker_log.said_once`), however many workers give
+    it."""
+    with said_once():
+        return _execute_counted(tasks, executor, cache_dir, progress)
+
+
+def _execute_counted(tasks: Sequence[Task], executor: Executor,
+                     cache_dir: str | os.PathLike[str] | None,
+                     progress: Callable[[int, int], None] | None
+                     ) -> tuple[list[dict[str, Any]], int]:
     if not isinstance(executor, Executor):
         raise ConfigError(f"execute(): executor must be an Executor (Executor('serial'), "
                           f"Executor.choose(jobs)), got {type(executor).__name__}")
@@ -431,6 +442,7 @@ def execute_counted(tasks: Sequence[Task], executor: Executor = Executor(), *,
             _dispatch([tasks[k] for k in todo], todo, executor,
                       [keys[k] for k in todo])) as dispatched:
         for k, res in dispatched:
+            say_kept(res.pop(SAID, ()))  # a worker's warnings, each said once a sweep
             if res.get("key") != keys[k]:  # kept, but a later read would refuse it
                 if res.get("ok"):  # a failure is never cached, and says why itself
                     other_key.append(f"{tasks[k].arm.label} on {tasks[k].source.name}")
@@ -498,8 +510,10 @@ def _indexed(k: int, task: Task, sweep: str = "") -> tuple[int, dict[str, Any]]:
         forget_failures()
         _SWEEP = sweep
     token = _IN_WORKER.set(True)
-    try:
-        return k, run_task(task)
+    try:  # its warnings said by the sweep's process, once (h103), not on this one's stderr
+        with kept_warnings() as said:
+            result = run_task(task)
+        return k, ({**result, SAID: said} if said else result)
     finally:
         _IN_WORKER.reset(token)
 

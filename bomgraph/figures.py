@@ -30,13 +30,13 @@ _LANDMARKS = "align_on='landmarks'"
 
 
 def _check_out(out: str | os.PathLike[str], *inputs: str | os.PathLike[str]) -> Path:
-    if not os.fspath(out):
-        check_output_path(out, inputs)   # refuses it: "--out is empty" (Path('') is '.')
+    if not os.fspath(out):  # refuses it: "--out is empty" (Path('') is '.')
+        check_output_path(out, inputs, name="out")
     path = Path(out)
     if path.suffix.lower() not in FIGURE_SUFFIXES:
         raise ConfigError(f"{out}: the figure's file name must end in "
                           f"{', '.join(FIGURE_SUFFIXES)}")
-    check_output_path(path, inputs)
+    check_output_path(path, inputs, name="out")  # the parameter's name (h103), not 'path'
     return path
 
 

@@ -21,6 +21,7 @@ from .experiments import Experiment, SimSource
 from .mapper import (MapEstimate, RunResult, checkpoint_times, create_mapper, method_info,
                      run)
 from .stream import Step, Stream
+from .stdio import check_output_path
 from .stream_file import StreamReader
 
 _log = logging.getLogger(__name__)
@@ -56,6 +57,8 @@ def run_file(stream_path: str | os.PathLike[str], method: str,
     if out is not None and os.path.exists(out) and os.path.samefile(out, stream_path):
         raise ConfigError(f"{out_named('out', out)} is the input stream; choose another "
                           f"file for the estimate")
+    if out is not None:  # before the stream is read, and naming the parameter ``out`` (h103:
+        check_output_path(out, name="out")  # EstimateWriter's refusal said path='x')
     with contextlib.ExitStack() as stack:
         reader = stack.enter_context(StreamReader(stream_path))
         stack.enter_context(threadpool_limits(limits=1))

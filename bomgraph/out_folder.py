@@ -25,11 +25,11 @@ import hashlib
 import json
 import logging
 import os
-import re
 from pathlib import Path
 from typing import Any, Callable, Iterator, Mapping, Sequence
 
 from .claims import remove_leftovers
+from .slugs import figure_names, slug, unique_slugs  # re-exported: out_folder.slug
 from .experiments import DatasetSource, Experiment, FileSource, Task
 from .checks import out_named
 from .stdio import (InputTooLargeError, OutputPathError, folder_lock, read_regular_file,
@@ -52,9 +52,7 @@ COMPARE_FOLDERS = ("cache", "estimates")
 def figure_paths(out: Path, experiments: Sequence[Experiment]) -> list[Path]:
     """The figures :func:`write_compare_figures` may write (and ``example_map.txt``, which
     stands for the example map when it cannot be drawn)."""
-    paths = [out / f"{slug(e.name)}_error_vs_time.png" for e in experiments]
-    paths += [out / f"{slug(e.name)}_{slug(src.name)}_maps.png"
-              for e in experiments for src in e.sources]
+    paths = [out / name for name in figure_names(experiments).values()]
     if any(e.designed for e in experiments):
         paths += [out / "example_map.png", out / "example_map.txt"]
     return paths
@@ -573,24 +571,6 @@ def drop_earlier_outputs(out: Path, written: Sequence[Path],
         entries = [e for p in written if (e := _entry(out, p)) is not None]
     write_text(out / MANIFEST, json.dumps({"format": _MANIFEST_FORMAT, "version": _VERSION,
                                            "files": list(entries)}, indent=0) + "\n")
-
-
-def slug(name: str) -> str:
-    """``name`` as a file or folder name: letters, digits, ``.``, ``-``, ``_``, ``@``, the
-    rest ``_``; never ``.`` or ``..`` (a folder ``estimates/EXP/..`` is ``estimates``, and
-    through a link on the way the folder above the one it leads to: h82)."""
-    name = re.sub(r"[^A-Za-z0-9._@-]+", "_", name).strip("_")
-    return name if name not in ("", ".", "..") else "_"
-
-
-def unique_slugs(names: Sequence[str]) -> dict[str, str]:
-    """Each name's :func:`slug`; names whose slugs coincide, or differ in case only (``tri
-    (x)`` and ``tri_x``, ``EKF`` and ``ekf``), get their own short hash appended, so no two
-    share a file."""
-    slugs = {n: slug(n) for n in dict.fromkeys(names)}
-    folded = [v.casefold() for v in slugs.values()]    # one file on a case-insensitive disk
-    return {n: (f"{v}-{hashlib.sha256(n.encode()).hexdigest()[:8]}"
-                if folded.count(v.casefold()) > 1 else v) for n, v in slugs.items()}
 
 
 __all__ = ["COMPARE_FILES", "COMPARE_FOLDERS", "MANIFEST", "OutputRecord", "RESULT_FILES",

@@ -34,9 +34,11 @@ from .paired import (PairedConfig, PairedRow, pairable, paired_comparison,
 from .run_scoring import mark_self_scored, not_drawn_line, scored_against, scores_left_out
 from .plots import MapPanel, error_vs_time_figure, final_maps_figure, map_figure
 from .out_folder import (RESULT_FILES, OutputRecord, compare_locks, estimate_paths,
-                         planned_outputs, refuse_inputs_among_outputs, slug)
+                         planned_outputs, refuse_inputs_among_outputs)
+from .slugs import figure_names
 from .stdio import check_folder, write_figure, write_text
 from .tables import HUGE, write_csv
+from .worker_log import said_once
 
 _log = logging.getLogger(__name__)
 
@@ -372,7 +374,7 @@ def compare(experiments: Sequence[Experiment], out_dir: str | os.PathLike[str], 
     planned = planned_outputs(out, experiments, estimates=estimates, figures=figures)
     (record := OutputRecord(out)).refuse_foreign(planned, [out / "cache"] if use_cache else [])
     out.mkdir(parents=True, exist_ok=True)   # check_folder above
-    with compare_locks(out, planned):  # out, folders linked from it, folders it writes below
+    with compare_locks(out, planned), said_once():  # out, its linked and written folders
         record.remove_leftovers(planned)  # of compares killed while writing: none writes now
         return _compare(experiments, out, executor, use_cache, figures, progress, estimates,
                         refs, paired, paired_reference, (record, planned))
@@ -513,6 +515,7 @@ def write_compare_figures(out_dir: str | os.PathLike[str], experiments: Sequence
     """
     out = Path(out_dir)
     files = []
+    names = figure_names(experiments)  # unique (h103: runs 'a b' and 'a_b' drew one file)
     mpe = error_curves(results, "mpe_m")
     robot = error_curves(results, "robot_last_m")
     for exp in experiments:
@@ -524,12 +527,12 @@ def write_compare_figures(out_dir: str | os.PathLike[str], experiments: Sequence
         own = not_drawn_line([r for r in results if r["experiment"] == exp.name])
         fig = error_vs_time_figure(curves, robot_curves=rob, title=f"{exp.title}: landmarks "
                                    f"({exp.n_runs()} runs)" + own)  # self-scored: NaN
-        path = out / f"{slug(exp.name)}_error_vs_time.png"
+        path = out / names[exp.name]
         write_figure(fig, path, dpi=120, ready=ready(path))
         files.append(path)
     for exp in experiments:
         if exp.sources:
-            files += _write_source_maps(out, exp, results, ready)
+            files += _write_source_maps(out, exp, results, ready, names)
     sim_exps = [e for e in experiments if e.designed]
     if not sim_exps:
         return files
@@ -554,7 +557,8 @@ def write_compare_figures(out_dir: str | os.PathLike[str], experiments: Sequence
 
 
 def _write_source_maps(out: Path, exp: Experiment, results: Sequence[Mapping[str, Any]],
-                       ready: Callable[[Path], Callable[[str], None] | None]) -> list[Path]:
+                       ready: Callable[[Path], Callable[[str], None] | None],
+                       names: Mapping[Any, str]) -> list[Path]:
     """One figure per recorded source: every method's final map (aligned) over the truth."""
     files = []
     for src in exp.sources:
@@ -574,7 +578,7 @@ def _write_source_maps(out: Path, exp: Experiment, results: Sequence[Mapping[str
             continue
         fig = final_maps_figure(truth, [_map_panel(r) for r in rs],
                                 title=f"{exp.title}: {src.name}")
-        path = out / f"{slug(exp.name)}_{slug(src.name)}_maps.png"
+        path = out / names[(exp.name, src.name)]
         write_figure(fig, path, dpi=100, ready=ready(path))
         files.append(path)
     return files

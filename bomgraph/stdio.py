@@ -164,15 +164,16 @@ def copy_bounded(src: IO[bytes], dst: IO[bytes], path: str) -> None:
         dst.write(chunk)
 
 
-def standard_output() -> IO[str]:
+def standard_output(name: str = "path") -> IO[str]:
     """``sys.stdout`` for ``--out -``, refused when closed (``>&-``: a traceback before, h83)."""
     if sys.stdout is None:
-        raise OutputPathError(f"{out_named('path', STDIO)}: the standard output is closed; give "
+        raise OutputPathError(f"{out_named(name, STDIO)}: the standard output is closed; give "
                               f"a file name")
     return sys.stdout
 
 
-def _stdout_not_input(stdout: IO[str], inputs: Sequence[str | os.PathLike[str] | None]) -> None:
+def _stdout_not_input(stdout: IO[str], inputs: Sequence[str | os.PathLike[str] | None],
+                      name: str = "path") -> None:
     """Refuse ``--out -`` whose stdout is one of ``inputs`` or a file in an input folder (``>>
     INPUT``: read, then the output appended to it), as ``--out /dev/stdout`` is (h86)."""
     try:
@@ -189,18 +190,18 @@ def _stdout_not_input(stdout: IO[str], inputs: Sequence[str | os.PathLike[str] |
         except OSError:  # missing, unreadable: its reader says so
             same = False
         if same:
-            raise OutputPathError(f"{out_named('path', STDIO)}: the standard output is the input "
+            raise OutputPathError(f"{out_named(name, STDIO)}: the standard output is the input "
                                   f"{os.fspath(inp)}; "
                                   f"refusing to overwrite an input: choose another name")
 
 
-def _stat(path: str) -> os.stat_result | None:
+def _stat(path: str, name: str = "path") -> os.stat_result | None:
     try:
         return os.stat(path)  # follows links: what a write would reach
     except FileNotFoundError:
         return None
     except OSError as exc:
-        raise OutputPathError(f"{out_named('path', path)}: {exc.strerror}") from None
+        raise OutputPathError(f"{out_named(name, path)}: {exc.strerror}") from None
 
 
 def _direct(path: str, st: os.stat_result | None) -> bool:
@@ -235,7 +236,8 @@ def _open_direct(path: str, st: os.stat_result) -> int:
 
 
 def check_output_path(path: str | os.PathLike[str],
-                      inputs: Sequence[str | os.PathLike[str] | None] = ()) -> None:
+                      inputs: Sequence[str | os.PathLike[str] | None] = (), *,
+                      name: str = "path") -> None:
     """Refuse an output path before anything is computed.
 
     Refused: a path that is no file name (None, a number), ``inputs`` given as one path
@@ -249,29 +251,29 @@ def check_output_path(path: str | os.PathLike[str],
     ------
     OutputPathError
     """
-    path = file_name(path, out_named("path"), OutputPathError)
+    path = file_name(path, out_named(name), OutputPathError)
     inputs = items(inputs, (str, os.PathLike, type(None)), "inputs (the files read)",
                    OutputPathError, want="file names")
     if path == STDIO:
-        _stdout_not_input(standard_output(), inputs)  # closed: refused before computing
+        _stdout_not_input(standard_output(name), inputs, name)  # closed: refused before
         return
     if not path:  # os.path.realpath("") is the working folder: the rename would aim at it
-        raise OutputPathError(f"{out_named('path')} is empty; give a file name")
-    st = _stat(path)
+        raise OutputPathError(f"{out_named(name)} is empty; give a file name")
+    st = _stat(path, name)
     if _fd_name(path) is not None and (st is None or _own_descriptor(path) in _CLOSED_AT_START):
         # /dev/stdout under >&-: not a folder's file; /dev/null on it is no output either
-        raise OutputPathError(f"{out_named('path', path)}: that descriptor is not open; give a "
+        raise OutputPathError(f"{out_named(name, path)}: that descriptor is not open; give a "
                               f"file name")
     if st is not None and stat.S_ISDIR(st.st_mode):
-        raise OutputPathError(f"{out_named('path', path)}: is a directory; give a file name")
+        raise OutputPathError(f"{out_named(name, path)}: is a directory; give a file name")
     direct = _direct(path, st)
     if direct:
         if not os.access(path, os.W_OK):
-            raise OutputPathError(f"{out_named('path', path)}: not writable")
+            raise OutputPathError(f"{out_named(name, path)}: not writable")
         if not stat.S_ISREG(st.st_mode):
             return
     elif st is not None and not stat.S_ISREG(st.st_mode):
-        raise OutputPathError(f"{out_named('path', path)}: exists and is neither a regular file, a "
+        raise OutputPathError(f"{out_named(name, path)}: exists and is neither a regular file, a "
                               f"character device nor a FIFO; choose another name")
     target = os.path.realpath(path)
     for inp in inputs:
@@ -286,18 +288,18 @@ def check_output_path(path: str | os.PathLike[str],
             same = os.path.dirname(target) == os.path.realpath(inp) and target in {
                 os.path.realpath(os.path.join(inp, f)) for f in os.listdir(inp)}
         if same:
-            raise OutputPathError(f"{out_named('path', path)}: is the input {inp}; refusing to "
+            raise OutputPathError(f"{out_named(name, path)}: is the input {inp}; refusing to "
                                   f"overwrite "
                                   f"an input: choose another name")
     if direct:  # a file open as a descriptor (``>> f``): written where it is
         return
     folder = Path(target).parent
     if not folder.is_dir():
-        raise OutputPathError(f"{out_named('path', path)}: the folder {folder} does not exist")
+        raise OutputPathError(f"{out_named(name, path)}: the folder {folder} does not exist")
     if st is not None and not os.access(target, os.W_OK):
-        raise OutputPathError(f"{out_named('path', path)}: the file is not writable")
+        raise OutputPathError(f"{out_named(name, path)}: the file is not writable")
     if st is None and not os.access(folder, os.W_OK | os.X_OK):
-        raise OutputPathError(f"{out_named('path', path)}: the folder {folder} is not writable")
+        raise OutputPathError(f"{out_named(name, path)}: the folder {folder} is not writable")
 
 
 @contextlib.contextmanager

@@ -24,8 +24,10 @@ from .plausibility import (OdometryScale, PriorLandmarks, bearings_problem, head
                            step_problem, truth_problem)
 from .stdio import MAX_LINE_BYTES, bounded_lines, line_too_long, open_input, output_file
 from .stream import Prior, Step, Stream, StreamHeader, Truth
+from .worker_log import OnceInASweep
 
 _log = logging.getLogger(__name__)
+_log.addFilter(OnceInASweep())  # a warning read again in a sweep is said once (h103)
 
 FORMAT_NAME = "bomgraph-stream"
 FORMAT_VERSION = 1

@@ -425,13 +425,14 @@ class _Reader:
                                                  f"{jobs!r}")
             out["jobs"] = jobs
         if "dask_local" in t:
-            out["dask_local"] = self.int_(t["dask_local"], "executor.dask_local", 0)
+            # >= 1, as --dask-local (h103: 0 ran local processes, one per core, silently)
+            out["dask_local"] = self.int_(t["dask_local"], "executor.dask_local", 1)
         if "scheduler" in t:
             out["scheduler"] = self.str_(t["scheduler"], "executor.scheduler")
             problem = scheduler_address_problem(out["scheduler"])
             if problem:
                 raise self.fail("executor.scheduler", problem)
-        if "dask_local" in out and "scheduler" in out:   # as --dask-local 0 --scheduler A
+        if "dask_local" in out and "scheduler" in out:   # as --dask-local N --scheduler A
             raise self.fail("executor", "give one of dask_local and scheduler, not both (a "
                                         "local cluster or an existing one)")
         return out

@@ -180,10 +180,13 @@ def test_a_stream_without_truth_gets_truth_free_scores_or_a_reference(
      "dask_local = 2\nscheduler = \"tcp://127.0.0.1:8786\"\n",
      "executor: give one of dask_local and scheduler"),
     # h94: dask_local = 0 with a scheduler passed (the README: "together are refused", and
-    # --dask-local 0 --scheduler ADDR is)
+    # --dask-local 0 --scheduler ADDR is); h103: refused for its 0, as --dask-local 0 (h101)
     ("streams = [\"runs/*.jsonl\"]\nmethods = [\"triangulate\"]\n[executor]\n"
      "dask_local = 0\nscheduler = \"tcp://127.0.0.1:8786\"\n",
-     "executor: give one of dask_local and scheduler"),
+     "executor.dask_local: must be an integer >= 1"),
+    # h103: a cluster of no workers; it ran local processes, one per core, without a word
+    ("streams = [\"runs/*.jsonl\"]\nmethods = [\"triangulate\"]\n[executor]\n"
+     "dask_local = 0\n", "executor.dask_local: must be an integer >= 1"),
     ("streams = [\"runs/*.jsonl\"\n", "not valid TOML"),
     # session 12's hostile audit: each of these ran (or allocated) before it was refused
     ("streams = [\"runs/*.jsonl\"]\n[[methods]]\nname = \"stmds-smacof\"\n"
