@@ -8,8 +8,6 @@ Each source's ``key()`` is what the runner hashes into the cache key.
 from __future__ import annotations
 
 import functools
-import hashlib
-import os
 from collections import OrderedDict
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -19,6 +17,7 @@ import numpy as np
 
 from .checks import file_name, fraction, instance, integer, items
 from .errors import ConfigError, StreamFormatError
+from .file_digest import file_sha256, files_sha256
 from .sim import RunSpec, SimConfig, make_priors, simulate, simulate_run, with_priors
 from .stream import Stream
 
@@ -116,29 +115,16 @@ class DatasetSource:
 
     def stream(self) -> Stream:
         return _load_dataset(self.kind, self.path, self.robot, self.truth_path,
-                             _files_stamp(self.path, self.truth_path))
+                             files_sha256(self.path, self.truth_path))
 
     def key(self) -> dict[str, Any]:
+        """The recording's kind, paths and robot, and the SHA-256 of the bytes of every file
+        under ``path`` and ``truth_path`` (:func:`bomgraph.file_digest.files_sha256`): a file
+        replaced by other bytes of the same size and modification time changes it (h104: a
+        key of sizes and times reused the results of the old data)."""
         truth = None if self.truth_path is None else str(Path(self.truth_path).resolve())
         return {"kind": self.kind, "path": str(Path(self.path).resolve()), "robot": self.robot,
-                "truth": truth, "files": _files_stamp(self.path, self.truth_path)}
-
-
-def _files_stamp(*paths: str | None) -> str:
-    """Size and modification time of every file under ``paths`` (a change invalidates the
-    cache), each file named by its resolved path: the same files however they are spelled
-    (relative or absolute) have the same stamp."""
-    h = hashlib.sha256()
-    for p in paths:
-        if p is None:
-            continue
-        root = Path(p).resolve()
-        files = sorted(root.rglob("*")) if root.is_dir() else [root]
-        for f in files:
-            if f.is_file():
-                st = f.stat()
-                h.update(f"{f}:{st.st_size}:{st.st_mtime_ns};".encode())
-    return h.hexdigest()[:16]
+                "truth": truth, "sha256": files_sha256(self.path, self.truth_path)}
 
 
 @dataclass(frozen=True)
@@ -160,33 +146,25 @@ class FileSource:
         file_name(self.path, "FileSource: path", ConfigError)
 
     def stream(self) -> Stream:
-        st = _stat(self.path)
-        return _read_stream_file(str(Path(self.path).resolve()), st.st_size, st.st_mtime_ns)
+        return _read_stream_file(str(Path(self.path).resolve()), _sha256(self.path))
 
     def key(self) -> dict[str, Any]:
-        st = _stat(self.path)
-        return {"kind": "file", "sha256": _file_sha256(str(Path(self.path).resolve()),
-                                                       st.st_size, st.st_mtime_ns)}
+        return {"kind": "file", "sha256": _sha256(self.path)}
 
 
-def _stat(path: str) -> os.stat_result:
+def _sha256(path: str) -> str:
+    """:func:`~bomgraph.file_digest.file_sha256` of a stream file, a StreamFormatError naming
+    it when it cannot be read."""
     try:
-        return os.stat(path)
+        return file_sha256(path)
     except OSError as exc:
         raise StreamFormatError(f"cannot open: {exc.strerror}", path=str(path)) from None
 
 
-@functools.lru_cache(maxsize=64)
-def _file_sha256(path: str, size: int, mtime_ns: int) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for block in iter(lambda: fh.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
-
-
 @functools.lru_cache(maxsize=8)
-def _read_stream_file(path: str, size: int, mtime_ns: int) -> Stream:
+def _read_stream_file(path: str, sha256: str) -> Stream:
+    """The stream file, kept per process by its bytes' ``sha256`` too (as in the cache key):
+    a changed file is read again."""
     from .stream_file import read_stream
 
     return read_stream(path)
@@ -255,9 +233,9 @@ class World:
 
 @functools.lru_cache(maxsize=16)
 def _load_dataset(kind: str, path: str, robot: int | None, truth_path: str | None,
-                  stamp: str) -> Stream:
-    """The recording, kept per process by its files' ``stamp`` too (:func:`_files_stamp`, as
-    in the cache key): a changed file is read again."""
+                  sha256: str) -> Stream:
+    """The recording, kept per process by its files' ``sha256`` too (as in the cache key): a
+    changed file is read again."""
     from . import datasets
 
     if kind == "mrclam":
