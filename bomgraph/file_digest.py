@@ -35,11 +35,14 @@ def _status(st: os.stat_result) -> tuple[int, ...]:
     return (st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns, st.st_ctime_ns)
 
 
-def _aged(status: tuple[int, ...]) -> bool:
-    """Whether ``status`` was last changed over :data:`RACY_NS` ago (mtime and ctime), so that
-    it can stand for the bytes read after it: never on Windows, where ``st_ctime`` is the
-    creation time, which a write does not change."""
-    return os.name != "nt" and time.time_ns() - max(status[3], status[4]) > RACY_NS
+def _aged(status: tuple[int, ...], now_ns: int) -> bool:
+    """Whether ``status`` had last changed over :data:`RACY_NS` before ``now_ns`` (mtime and
+    ctime), the time it was taken at, so that it can stand for the bytes read after it: never
+    on Windows, where ``st_ctime`` is the creation time, which a write does not change. The
+    time before the status, not after the read (h105): a read that took seconds (a large file
+    on a network disk) made a status taken within a tick of a write look aged, and a write in
+    that tick during the read kept its status and a digest of neither content."""
+    return os.name != "nt" and now_ns - max(status[3], status[4]) > RACY_NS
 
 
 def file_sha256(path: str | os.PathLike[str]) -> str:
@@ -51,13 +54,14 @@ def file_sha256(path: str | os.PathLike[str]) -> str:
         The file cannot be opened or read.
     """
     name = os.path.abspath(path)  # a link's target is in the status (its device and inode)
+    now_ns = time.time_ns()  # before the status (_aged)
     status = _status(os.stat(name))  # before the read: a write after it changes it
     kept = _KEPT.get(name)
     if kept is not None and kept[0] == status:
         return kept[1]
     with open(name, "rb") as fh:
         digest = hashlib.file_digest(fh, "sha256").hexdigest()
-    if _aged(status):
+    if _aged(status, now_ns):
         if len(_KEPT) >= MAX_KEPT:
             _KEPT.clear()
         _KEPT[name] = (status, digest)
