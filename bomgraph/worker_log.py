@@ -20,8 +20,6 @@ SAID = "_worker_warnings"
 
 _SAID: contextvars.ContextVar[set[str] | None] = contextvars.ContextVar(
     "bomgraph_said_once", default=None)
-_KEPT: contextvars.ContextVar[_Kept | None] = contextvars.ContextVar(
-    "bomgraph_kept_warnings", default=None)
 
 #: A run's distinct warnings kept at most (h105: a method warning once a step kept every one,
 #: 101,000 of them 4.8 MB sent back and 17 MB held); the rest are counted, and said as one.
@@ -44,6 +42,10 @@ class _Kept(list):  # type: ignore[type-arg]
             return
         self.seen.add(item)
         self.append(item)
+
+
+_KEPT: contextvars.ContextVar[_Kept | None] = contextvars.ContextVar(
+    "bomgraph_kept_warnings", default=None)
 
 
 @contextlib.contextmanager
