@@ -1,15 +1,37 @@
 """Test-session setup: single-threaded BLAS (the toolkit's matrices are small; multithreaded
-BLAS on small matrices stalls on a loaded 2-core machine, see bomgraph.bench.run_task)."""
+BLAS on small matrices stalls on a loaded 2-core machine, see bomgraph.bench.run_task), and
+nothing written outside pytest's temporary folders: no Hypothesis example database in the
+working folder (a checkout's ``.hypothesis/``, which both CI suites shared and which replayed
+one run's examples in the next), Dask's worker scratch in the session's folder (not
+``$TMPDIR/dask-scratch-space``, shared with every other Dask user of the machine)."""
 
 from __future__ import annotations
 
 import pytest
+from hypothesis import settings
 from threadpoolctl import threadpool_limits
+
+# the default of every @settings below it; tests/hostile/test_hypothesis_methods.py's own
+# profiles say database=None themselves
+settings.register_profile("bomgraph", database=None)
+settings.load_profile("bomgraph")
 
 
 @pytest.fixture(autouse=True, scope="session")
 def _single_threaded_blas():
     with threadpool_limits(limits=1):
+        yield
+
+
+@pytest.fixture(autouse=True, scope="session")
+def _dask_scratch_in_the_session_folder(tmp_path_factory: pytest.TempPathFactory):
+    """Dask's ``temporary-directory`` (its workers' scratch) in this session's folder, for the
+    clusters made here and, through the environment, for the processes the tests start."""
+    import dask.config
+
+    scratch = str(tmp_path_factory.mktemp("dask-scratch"))
+    with pytest.MonkeyPatch.context() as mp, dask.config.set({"temporary-directory": scratch}):
+        mp.setenv("DASK_TEMPORARY_DIRECTORY", scratch)
         yield
 
 
