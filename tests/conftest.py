@@ -3,9 +3,17 @@ BLAS on small matrices stalls on a loaded 2-core machine, see bomgraph.bench.run
 nothing written outside pytest's temporary folders: no Hypothesis example database in the
 working folder (a checkout's ``.hypothesis/``, which both CI suites shared and which replayed
 one run's examples in the next), Dask's worker scratch in the session's folder (not
-``$TMPDIR/dask-scratch-space``, shared with every other Dask user of the machine)."""
+``$TMPDIR/dask-scratch-space``, shared with every other Dask user of the machine), and no
+bytecode (``__pycache__``) written by this process or the ones it starts: the tests edit
+modules and reload or re-import them within a second, with the size unchanged (``1.0`` ->
+``3.0``), where Python takes the old ``.pyc`` for fresh (it compares the source's mtime in
+whole seconds and its size) and runs the old code: test_h56_plugin_keys failed so wherever
+``PYTHONDONTWRITEBYTECODE`` was not set already."""
 
 from __future__ import annotations
+
+import os
+import sys
 
 import pytest
 from hypothesis import settings
@@ -15,6 +23,10 @@ from threadpoolctl import threadpool_limits
 # profiles say database=None themselves
 settings.register_profile("bomgraph", database=None)
 settings.load_profile("bomgraph")
+
+# here, before any test module is imported or makes its environment from os.environ
+sys.dont_write_bytecode = True
+os.environ["PYTHONDONTWRITEBYTECODE"] = "1"
 
 
 @pytest.fixture(autouse=True, scope="session")
