@@ -134,7 +134,7 @@ def test_a_g2o_edge_of_weak_rotation_imports_and_reads_without_a_warning(tmp_pat
 
     g2o = DATA / "bearing_only_sim_g2o" / "slam2D_bearing_only_initial_guess.g2o"
     if not g2o.exists():
-        pytest.fail(missing("bearing_only_sim_g2o", g2o.name))
+        pytest.skip(missing("bearing_only_sim_g2o", g2o.name))  # .ci/run fails on a skip
     for every in (False, True):   # one weak edge; every edge weak (the header's sigma then)
         lines = g2o.read_text().splitlines()
         for k in [i for i, ln in enumerate(lines) if ln.startswith("EDGE_SE2 ")][
