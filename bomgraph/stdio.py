@@ -502,11 +502,10 @@ def folder_lock(folder: str | os.PathLike[str], what: str,
     lock = os.path.join(os.fspath(folder), ".bomgraph.lock")
     not_ours = (f"{lock}: is not a bomgraph lock (a process id); move it or choose another "
                 f"--out")
-    try:  # without blocking: a FIFO there is refused, not waited on
-        fd = os.open(lock, os.O_RDWR | os.O_CREAT | getattr(os, "O_NONBLOCK", 0),
-                     0o666 & ~_umask())
-    except IsADirectoryError:
-        raise OutputPathError(not_ours) from None
+    fd = _open_lock(lock, shared, not_ours)
+    if fd is None:
+        yield
+        return
     try:
         if not stat.S_ISREG(os.fstat(fd).st_mode):  # a FIFO: "[Errno 29] Illegal seek"
             raise OutputPathError(not_ours)
@@ -528,6 +527,28 @@ def folder_lock(folder: str | os.PathLike[str], what: str,
         yield
     finally:
         os.close(fd)  # releases the lock; the file stays (removing it would race)
+
+
+def _open_lock(lock: str, shared: bool, not_ours: str) -> int | None:
+    """``lock`` opened to be flocked, created if missing. For a shared lock (a folder above
+    the one written) that this user cannot write (another user's, read-only: ``/`` after a
+    compare was once written there, which refused every compare through a link below it),
+    the file is opened for reading, which flock needs no more than; None when it is not
+    there either: none of this user's compares can have locked that folder."""
+    flags = getattr(os, "O_NONBLOCK", 0)  # without blocking: a FIFO is refused, not waited on
+    try:
+        return os.open(lock, os.O_RDWR | os.O_CREAT | flags, 0o666 & ~_umask())
+    except IsADirectoryError:
+        raise OutputPathError(not_ours) from None
+    except OSError as exc:
+        if not shared or exc.errno not in (errno.EACCES, errno.EPERM, errno.EROFS):
+            raise
+    try:
+        return os.open(lock, os.O_RDONLY | flags)  # a folder there: refused as not a file
+    except FileNotFoundError:
+        _log.debug("%s: not there and cannot be made: %s is not locked", lock,
+                   os.path.dirname(lock))
+        return None
 
 
 def _lock_is_shared(fd: int) -> bool:

@@ -10,6 +10,9 @@ beside this one (``.ci/run`` runs the 3.11 and 3.13 suites side by side on one m
   shared by both suites, replaying one run's examples in the next); it is off
   (``tests/conftest.py``). Fails before.
 * Dask's scratch (``dask-scratch-space``) went to ``$TMPDIR``; it is in the session's folder.
+* A compare written once into a folder this user cannot write (``/``, as on this machine in
+  stop 43) refused every later compare through a link below it: the shared lock above could
+  not create its file. Fails before.
 """
 
 from __future__ import annotations
@@ -17,6 +20,7 @@ from __future__ import annotations
 import contextlib
 import os
 import socket
+import subprocess
 import warnings
 from pathlib import Path
 from typing import Iterator
@@ -25,8 +29,11 @@ import numpy as np
 import pytest
 
 from bomgraph.bench import Executor, execute
+from bomgraph.cli import main
 from bomgraph.experiments import Arm, Experiment, FileSource
+from bomgraph.out_folder import MANIFEST
 from bomgraph.sim import SimConfig, simulate
+from bomgraph.stdio import folder_lock
 from bomgraph.stream_file import write_stream
 
 
@@ -71,3 +78,74 @@ def test_dask_scratch_is_in_the_session_folder(tmp_path_factory: pytest.TempPath
     scratch = Path(dask.config.get("temporary-directory"))
     assert scratch.is_dir() and tmp_path_factory.getbasetemp() in scratch.parents, scratch
     assert os.environ["DASK_TEMPORARY_DIRECTORY"] == str(scratch)  # for the processes started
+
+
+@contextlib.contextmanager
+def _not_writable(*paths: Path) -> Iterator[None]:
+    """``paths`` made unwritable for this process for the block: mode 0o555 / 0o444, and for
+    root (whom modes do not stop) the immutable attribute (``chattr +i``)."""
+    if os.geteuid() != 0:
+        for p in paths:
+            p.chmod(0o555 if p.is_dir() else 0o444)
+        try:
+            yield
+        finally:
+            for p in paths:
+                p.chmod(0o755 if p.is_dir() else 0o644)
+        return
+    made = [p for p in paths
+            if subprocess.run(["chattr", "+i", str(p)], capture_output=True).returncode == 0]
+    try:
+        if len(made) < len(paths):
+            pytest.skip("root needs chattr +i (e2fsprogs, a file system that has it) to make "
+                        "a folder unwritable")
+        yield
+    finally:
+        for p in made:
+            subprocess.run(["chattr", "-i", str(p)], check=True)
+
+
+def _compare_through_a_link(top: Path) -> list[str]:
+    """``compare`` into ``top/sub/out``, its estimates a link to ``top/sub/big``, ``top``
+    holding another compare's manifest."""
+    sub = top / "sub"
+    (sub / "out").mkdir(parents=True)
+    (sub / "big").mkdir()
+    (sub / "out" / "estimates").symlink_to(sub / "big")
+    stream = sub / "s.jsonl"
+    write_stream(simulate(SimConfig(n_steps=20, n_landmarks=8), np.random.default_rng(2)), stream)
+    return ["compare", "--streams", str(stream), "--methods", "triangulate", "--jobs", "1",
+            "--no-progress", "--no-figures", "--estimates", "-q", "--out", str(sub / "out")]
+
+
+def test_a_compare_below_an_unwritable_folder_holding_a_manifest_runs(
+        tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    """A compare once written into ``/`` (or any folder another user owns, or a read-only
+    disk) made every later compare through a link below it exit 2 with "[Errno 1] Operation
+    not permitted: '.../.bomgraph.lock'" (root, an immutable folder, as here; a user who cannot
+    write there gets errno 13, EACCES, from the same open): the shared lock above could not
+    create its file. Fails before."""
+    top = tmp_path / "top"
+    args = _compare_through_a_link(top)
+    (top / MANIFEST).write_text('{"format": "bomgraph-compare-files", "version": 3, '
+                                '"files": []}\n')
+    with _not_writable(top):
+        assert main(args) == 0, capsys.readouterr().err
+    assert (top / "sub" / "big" / "index.csv").is_file()
+    assert not (top / ".bomgraph.lock").exists()
+
+
+def test_an_unwritable_folders_lock_still_keeps_its_compare_out(
+        tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    """The lock file there (this user cannot write it) is locked shared all the same: while
+    a compare writes into that folder, one below it through a link is refused."""
+    top = tmp_path / "top"
+    args = _compare_through_a_link(top)
+    (top / MANIFEST).write_text('{"format": "bomgraph-compare-files", "version": 3, '
+                                '"files": []}\n')
+    with folder_lock(top, "`bomgraph compare`"), _not_writable(top / ".bomgraph.lock", top):
+        assert main(args) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and f"{top}: another `bomgraph compare`" in err[0], err
+    with _not_writable(top / ".bomgraph.lock", top):  # and once it is done, it runs
+        assert main(args) == 0, capsys.readouterr().err
