@@ -2,7 +2,8 @@
 BLAS on small matrices stalls on a loaded 2-core machine, see bomgraph.bench.run_task), and
 nothing written outside pytest's temporary folders: no Hypothesis example database in the
 working folder (a checkout's ``.hypothesis/``, which both CI suites shared and which replayed
-one run's examples in the next), Dask's worker scratch in the session's folder (not
+one run's examples in the next) and Hypothesis's other files (its ``constants`` and
+``unicode_data`` caches, written there too) in a temporary folder of the session, Dask's worker scratch in the session's folder (not
 ``$TMPDIR/dask-scratch-space``, shared with every other Dask user of the machine), and no
 bytecode (``__pycache__``) written by this process or the ones it starts: the tests edit
 modules and reload or re-import them within a second, with the size unchanged (``1.0`` ->
@@ -13,7 +14,9 @@ whole seconds and its size) and runs the old code: test_h56_plugin_keys failed s
 from __future__ import annotations
 
 import os
+import shutil
 import sys
+import tempfile
 
 import pytest
 from hypothesis import settings
@@ -27,6 +30,18 @@ settings.load_profile("bomgraph")
 # here, before any test module is imported or makes its environment from os.environ
 sys.dont_write_bytecode = True
 os.environ["PYTHONDONTWRITEBYTECODE"] = "1"
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    """Hypothesis's storage folder (by default ``.hypothesis`` in the working folder, where it
+    writes its caches while the test modules are collected) in a temporary folder of this
+    session, removed at its end; the processes the tests start get it too."""
+    from hypothesis.configuration import set_hypothesis_home_dir
+
+    home = tempfile.mkdtemp(prefix="bomgraph-tests-hypothesis-")
+    config.add_cleanup(lambda: shutil.rmtree(home, ignore_errors=True))
+    os.environ["HYPOTHESIS_STORAGE_DIRECTORY"] = home
+    set_hypothesis_home_dir(home)
 
 
 @pytest.fixture(autouse=True, scope="session")

@@ -71,6 +71,17 @@ def test_no_hypothesis_example_database_in_the_working_folder() -> None:
     assert settings(max_examples=3, deadline=None).database is None  # as the tests say it
 
 
+def test_hypothesis_writes_nothing_in_the_working_folder() -> None:
+    """Its ``constants`` and ``unicode_data`` caches went to the working folder's
+    ``.hypothesis/`` (the checkout's) whatever the database setting, from the collection on."""
+    from hypothesis.configuration import storage_directory
+
+    where = storage_directory("constants", intent_to_write=False).path
+    assert where.parent == Path(os.environ["HYPOTHESIS_STORAGE_DIRECTORY"]), where
+    assert Path.cwd() not in where.parents, where
+    assert where.parent.name.startswith("bomgraph-tests-hypothesis-"), where
+
+
 def test_dask_scratch_is_in_the_session_folder(tmp_path_factory: pytest.TempPathFactory
                                                 ) -> None:
     import dask.config
