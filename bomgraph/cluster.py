@@ -25,6 +25,12 @@ _log = logging.getLogger(__name__)
 #: seconds between looks at the cluster while no run finishes (for the no-worker warning)
 POLL_S = 5.0
 
+#: The local cluster's scheduler without a dashboard still serves HTTP (Dask's health and
+#: metrics routes), on port 8787 unless told otherwise: while anything else held 8787 (a
+#: notebook's cluster, another compare) every ``--dask-local`` run warned "UserWarning: Port
+#: 8787 is already in use" (an error under ``-W error``). A free port of this host instead.
+LOCAL_SCHEDULER_HTTP = {"dashboard_address": "127.0.0.1:0"}
+
 
 def connect_timeout() -> float:
     """Dask's connect timeout (``distributed.comm.timeouts.connect``, 30 s by default) [s]."""
@@ -151,7 +157,8 @@ def _dispatch(func: Callable[[int, Any], tuple[int, dict[str, Any]]], index: Seq
         client = Client(scheduler, timeout=connect_timeout())
     else:
         cluster = LocalCluster(n_workers=n_local, threads_per_worker=1, processes=True,
-                               host="127.0.0.1", dashboard_address=None)
+                               host="127.0.0.1", dashboard_address=None,
+                               scheduler_kwargs=LOCAL_SCHEDULER_HTTP)
         client = Client(cluster)
     try:
         futures = client.map(func, list(index), list(tasks), pure=False)

@@ -5,16 +5,11 @@ without the data)."""
 
 from __future__ import annotations
 
-import os
-from pathlib import Path
-
 import pytest
 
 from bomgraph.sim import SimConfig, paper_design, simulate_run
 from bomgraph.stream import Stream
-
-DATA = Path(os.environ.get("BOMGRAPH_DATA",
-                           Path(__file__).resolve().parents[2] / "shared" / "data"))
+from _shared_data import DATA, missing  # tests/_shared_data.py
 
 
 def simulated_run() -> Stream:
@@ -23,6 +18,6 @@ def simulated_run() -> Stream:
 
 def mrclam6_robot3() -> Stream:
     if not (DATA / "mrclam6").is_dir():
-        pytest.skip(f"no MRCLAM6 at {DATA / 'mrclam6'}")
+        pytest.skip(missing("mrclam6"))
     from bomgraph.datasets.mrclam import import_mrclam
     return import_mrclam(DATA / "mrclam6", 3)

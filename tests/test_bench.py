@@ -214,10 +214,13 @@ def test_task_key_is_stable_and_tells_tasks_apart() -> None:
 def test_existing_dask_scheduler_by_address() -> None:
     from distributed import LocalCluster
 
+    from bomgraph.cluster import LOCAL_SCHEDULER_HTTP
+
     tasks = _exp((Arm("tri", "triangulate"),)).tasks()[:2]
     serial = strip_timings(execute(tasks, Executor("serial")))
     with LocalCluster(n_workers=1, threads_per_worker=1, processes=True, host="127.0.0.1",
-                      dashboard_address=None) as cluster:
+                      dashboard_address=None,
+                      scheduler_kwargs=LOCAL_SCHEDULER_HTTP) as cluster:  # not port 8787
         remote = strip_timings(execute(tasks, Executor("dask",
                                                        scheduler=cluster.scheduler_address)))
     assert json.dumps(serial) == json.dumps(remote)

@@ -118,7 +118,7 @@ def _cluster(setup: dict, worker_env: dict, workers: int = 1) -> Iterator[str]:
     try:
         procs.append(subprocess.Popen(
             [sys.executable, "-m", "distributed.cli.dask_scheduler", "--host", "127.0.0.1",
-             "--port", address.rsplit(":", 1)[1], "--dashboard-address", ":0", "--no-show"],
+             "--port", address.rsplit(":", 1)[1], "--dashboard-address", "127.0.0.1:0", "--no-show"],
             env=setup["env"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
         for _ in range(workers):
             procs.append(subprocess.Popen(

@@ -121,9 +121,13 @@ METHOD = textwrap.dedent('''
 def test_a_method_in_a_module_pytest_rewrote_runs_and_is_cached(tmp_path: Path) -> None:
     (tmp_path / "test_h56_rewritten.py").write_text(METHOD)
     repo = Path(__file__).resolve().parents[1]
+    # its temporary folders in this test's (not a new pytest-N beside this session's), and
+    # none of this session's PYTEST_ADDOPTS
+    env = {k: v for k, v in os.environ.items() if k != "PYTEST_ADDOPTS"}
     out = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider",
-                          "test_h56_rewritten.py"], cwd=tmp_path, capture_output=True,
-                         text=True, env={**os.environ, "PYTHONPATH": str(repo)})
+                          "--basetemp", str(tmp_path / "basetemp"), "test_h56_rewritten.py"],
+                         cwd=tmp_path, capture_output=True, text=True,
+                         env={**env, "PYTHONPATH": str(repo)})
     assert out.returncode == 0, out.stdout[-600:]
 
 

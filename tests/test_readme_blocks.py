@@ -16,10 +16,10 @@ from pathlib import Path
 import pytest
 
 from _plugin_dist import write_dist_info
+from _shared_data import DATA, missing  # tests/_shared_data.py
 
 ROOT = Path(__file__).resolve().parents[1]
 DOCS = ("README.md", "docs/FORMATS.md", "docs/measurements.md", "docs/measurements-early.md")
-DATA = Path(os.environ.get("BOMGRAPH_DATA", ROOT.parent / "shared" / "data"))
 BOMGRAPH = f'"{sys.executable}" -m bomgraph'
 
 # (document, how the block starts): the test that runs it, or why it is left out
@@ -179,7 +179,7 @@ def _toy_plugin_env(tmp_path: Path) -> dict:
             "PYTHONPATH": os.pathsep.join(map(str, (ROOT, site, plugin)))}
 
 
-@pytest.mark.skipif(not (DATA / "mrclam6").is_dir(), reason=f"no MRCLAM6 at {DATA}")
+@pytest.mark.skipif(not (DATA / "mrclam6").is_dir(), reason=missing("mrclam6"))
 def test_benchmark_your_own_method_blocks(tmp_path: Path) -> None:
     """README, "Benchmark your own method on your own data": the four commands (the plugin
     installed as pip would; one worker, not two) print the final-map table the README

@@ -8,10 +8,11 @@ from __future__ import annotations
 import importlib
 import sys
 from pathlib import Path
+from typing import Iterator
 
 import pytest
 
-from bomgraph import mapper
+from bomgraph import mapper, plugins
 from bomgraph.bench import Executor, execute, task_key
 from bomgraph.errors import ConfigError
 from bomgraph.experiments import Arm, Experiment, FileSource, Task
@@ -47,7 +48,10 @@ def _task(method: str, options: dict, tmp_path: Path) -> Task:
 
 
 @pytest.fixture
-def seed_plugin(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
+def seed_plugin(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Iterator[Path]:
+    """The seed package in this test's folder; forgotten after it (the package a test before
+    imported from its own folder was the one keyed, and its edit test failed run after the
+    other test: h99)."""
     pkg = tmp_path / "h20seedpkg"
     pkg.mkdir()
     (pkg / "__init__.py").write_text("")
@@ -55,7 +59,12 @@ def seed_plugin(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
     monkeypatch.syspath_prepend(str(tmp_path))
     monkeypatch.setattr(mapper, "_REGISTRY", dict(mapper._REGISTRY))
     mapper.register_method("h20-seed", "h20seedpkg.seed:Seed", "a seed")
-    return pkg / "seed.py"
+    try:
+        yield pkg / "seed.py"
+    finally:
+        for name in [m for m in sys.modules if m.split(".")[0] == "h20seedpkg"]:
+            del sys.modules[name]
+        plugins.refresh()
 
 
 def test_a_seed_plugin_is_in_the_cache_key_and_an_edit_changes_it(

@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import csv
 import json
-import os
 from pathlib import Path
 
 import numpy as np
@@ -20,12 +19,12 @@ from bomgraph.datasets.victoria import import_victoria
 from bomgraph.stream import Stream
 
 from _scripts import load_script  # noqa: E402  (tests/_scripts.py)
+from _shared_data import DATA, missing  # tests/_shared_data.py
 
 ROOT = Path(__file__).resolve().parents[1]
-DATA = Path(os.environ.get("BOMGRAPH_DATA", ROOT.parent / "shared" / "data"))
 VICTORIA = DATA / "victoria_park" / "victoria_park.txt"
 
-pytestmark = pytest.mark.skipif(not DATA.is_dir(), reason="no data folder (../shared/data or $BOMGRAPH_DATA)")
+pytestmark = pytest.mark.skipif(not DATA.is_dir(), reason=missing())
 
 
 def _script():

@@ -15,8 +15,6 @@ from __future__ import annotations
 
 import copy
 import math
-import os
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -30,11 +28,10 @@ from bomgraph.geometry import bearings_to, compose, rotation
 from bomgraph.mapper import Mapper, create_mapper, run
 from bomgraph.sim import SimConfig, simulate
 from bomgraph.stream import Step, StreamHeader
+from _shared_data import DATA, missing  # tests/_shared_data.py
 
 SMALL = SimConfig(n_landmarks=20, n_steps=80)
-DATA = Path(os.environ.get("BOMGRAPH_DATA",
-                           Path(__file__).resolve().parents[3] / "shared" / "data"))
-needs_data = pytest.mark.skipif(not DATA.is_dir(), reason=f"no shared data at {DATA}")
+needs_data = pytest.mark.skipif(not DATA.is_dir(), reason=missing())
 
 
 def test_registry_builds_mappers_and_estimate_never_raises() -> None:

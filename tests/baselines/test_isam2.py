@@ -4,9 +4,7 @@ GTSAM method (issue 13 item 7)."""
 
 from __future__ import annotations
 
-import os
 from dataclasses import replace
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -18,9 +16,8 @@ from bomgraph.evaluate import score_estimate
 from bomgraph.mapper import create_mapper, run
 from bomgraph.sim import SimConfig, simulate
 from bomgraph.stream import Prior, Step, Stream, Truth
+from _shared_data import DATA, missing  # tests/_shared_data.py
 
-DATA = Path(os.environ.get("BOMGRAPH_DATA",
-                          Path(__file__).resolve().parents[3] / "shared" / "data"))
 
 
 @pytest.fixture(scope="module")
@@ -124,7 +121,7 @@ def test_long_mode_checks_the_whole_graph_each_time_it_doubles(small: Stream) ->
     assert dense.info["checked_at_step"] == 111
 
 
-@pytest.mark.skipif(not (DATA / "mrclam6").is_dir(), reason=f"no shared data at {DATA}")
+@pytest.mark.skipif(not (DATA / "mrclam6").is_dir(), reason=missing("mrclam6"))
 def test_cadence_independence_on_a_recording() -> None:
     from bomgraph.datasets.mrclam import import_mrclam
     stream = import_mrclam(DATA / "mrclam6", 4)
@@ -365,7 +362,7 @@ def test_real_preset_final_map_converges_on_mrclam1_robot3() -> None:
     final map 14.5 units of predicted decrease above the minimum, reported unconverged. The
     ``real`` preset's 10-step cap reaches it (predicted decrease 0.03, ninth session)."""
     if not (DATA / "mrclam1").is_dir():
-        pytest.skip(f"no MRCLAM1 at {DATA / 'mrclam1'}")
+        pytest.skip(missing("mrclam1"))
     from bomgraph.datasets.mrclam import import_mrclam
 
     stream = import_mrclam(DATA / "mrclam1", 3, calibrate=False)

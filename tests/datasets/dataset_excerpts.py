@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import gzip
 import math
-import os
 from pathlib import Path
 
 import numpy as np
@@ -16,10 +15,9 @@ import pytest
 
 from bomgraph.angles import wrap_angle
 from bomgraph.geometry import bearings_to
+from _shared_data import DATA, missing  # tests/_shared_data.py
 
-DATA = Path(os.environ.get("BOMGRAPH_DATA",
-                          Path(__file__).resolve().parents[3] / "shared" / "data"))
-needs_data = pytest.mark.skipif(not DATA.is_dir(), reason=f"no shared data at {DATA}")
+needs_data = pytest.mark.skipif(not DATA.is_dir(), reason=missing())
 
 EXACT = dict(command_delay_s=0.0, attach_window_s=0.0)
 

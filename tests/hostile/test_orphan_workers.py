@@ -80,8 +80,11 @@ def test_workers_end_when_the_process_that_started_them_is_killed(tmp_path: Path
                                                                    state: str) -> None:
     # output to a file: the workers inherit it, and a pipe would stay open while they live
     with open(tmp_path / "output", "wb") as out:
+        # TMPDIR: the folder of the dispatch's marks that the kill leaves (bomgraph-running-*,
+        # removed by a later dispatch) is this test's, not the session's $TMPDIR
         proc = subprocess.Popen([sys.executable, "-c", SCRIPT, str(tmp_path), state],
-                                env=ENV, stdout=out, stderr=subprocess.STDOUT)
+                                env={**ENV, "TMPDIR": str(tmp_path)}, stdout=out,
+                                stderr=subprocess.STDOUT)
     workers: dict[int, str | None] = {}
     try:
         for k in (0, 1):

@@ -7,7 +7,6 @@ are not decided by rounding."""
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import numpy as np
@@ -18,9 +17,7 @@ import bomgraph.stmds.bundle_lm as bundle_lm
 from bomgraph.stmds.bundle_lm import LEVERAGE_RCOND, UNDETERMINED_LEVERAGE, ray_leverages
 
 from test_stmds_bundle import _perturbed_problem  # the window problem helper
-
-DATA = Path(os.environ.get("BOMGRAPH_DATA",
-                           Path(__file__).resolve().parents[2].parent / "shared" / "data"))
+from _shared_data import DATA, missing  # tests/_shared_data.py
 
 
 def _qr_leverages(jac: np.ndarray) -> np.ndarray:
@@ -124,7 +121,7 @@ def test_real_preset_on_a_recording_is_not_decided_by_rounding(tmp_path: Path) -
     while an ill-conditioned pose block could take the arrow path; 1.3e-10 now;
     ``scripts/check_rounding.py``)."""
     if not (DATA / "mrclam6").is_dir():
-        pytest.skip(f"no MRCLAM6 at {DATA / 'mrclam6'}")
+        pytest.skip(missing("mrclam6"))
     from bomgraph.cli import main as bomgraph_main
 
     from _scripts import load_script  # tests/_scripts.py
