@@ -30,8 +30,7 @@ _EST = Path("streams")            # estimates/EXPERIMENT (the experiment of --st
 
 
 def _cmd(stream: Path, out: Path, methods: str = "triangulate,stmds-smacof") -> list[str]:
-    return ["compare", "--streams", str(stream), "--methods", methods, "--jobs", "1",
-            "--no-progress", "--no-figures", "--estimates", "--out", str(out)]
+    return _compare_folder.linked_cmd(stream, out, methods)
 
 
 def _linked(tmp_path: Path, name: str = "out", target: str = "big") -> tuple[Path, Path]:
@@ -48,10 +47,7 @@ def _files(folder: Path) -> dict[str, bytes]:
             if p.is_file() and p.name != ".bomgraph.lock"}
 
 
-def _one_error(capsys: pytest.CaptureFixture) -> str:
-    err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1, err
-    return err[0]
+_one_error = _compare_folder.one_error
 
 
 def test_a_linked_estimates_folder_works_on_every_compare(tmp_path: Path, stream: Path,

@@ -29,14 +29,10 @@ stream = _compare_folder.stream   # the fixture
 
 
 def _cmd(stream: Path, out: Path, methods: str = "triangulate,stmds-smacof") -> list[str]:
-    return ["compare", "--streams", str(stream), "--methods", methods, "--jobs", "1",
-            "--no-progress", "--no-figures", "--estimates", "--out", str(out)]
+    return _compare_folder.linked_cmd(stream, out, methods)
 
 
-def _one_error(capsys: pytest.CaptureFixture) -> str:
-    err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1, err
-    return err[0]
+_one_error = _compare_folder.one_error
 
 
 def test_a_dot_or_dot_dot_is_never_a_folder_name() -> None:

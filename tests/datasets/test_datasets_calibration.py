@@ -12,13 +12,17 @@ from bomgraph.datasets.calibration import (fit_odometry_sigma, odometry_errors,
 from bomgraph.geometry import between
 
 
-def test_fit_odometry_sigma_recovers_a_known_model():
-    rng = np.random.default_rng(7)
-    n = 4000
+def _odometry_sample(seed: int, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``n`` steps ``u`` (dx, dy, dpsi), a known sigma ``model`` and errors ``e`` drawn from it."""
+    rng = np.random.default_rng(seed)
     u = np.column_stack([rng.uniform(0.05, 0.6, n), rng.uniform(-0.02, 0.02, n),
                          rng.uniform(-0.6, 0.6, n)])
     model = np.array([[0.005, 0.08, 0.02], [0.004, 0.03, 0.05], [0.01, 0.1, 0.12]])
-    e = rng.standard_normal((n, 3)) * odometry_sigma_model(model, u)
+    return u, model, rng.standard_normal((n, 3)) * odometry_sigma_model(model, u)
+
+
+def test_fit_odometry_sigma_recovers_a_known_model():
+    u, model, e = _odometry_sample(7, 4000)
     e[:5] += 5.0  # gross errors are excluded, not fitted
     fit, info = fit_odometry_sigma(u, e)
     assert info["n_excluded"] >= 5
@@ -27,6 +31,15 @@ def test_fit_odometry_sigma_recovers_a_known_model():
     np.testing.assert_allclose(np.median(sig_fit / sig_true, axis=0), 1.0, atol=0.05)
     np.testing.assert_allclose(fit[:, 1:], model[:, 1:], rtol=0.2)
 
+
+
+def test_a_step_gross_in_one_component_is_left_out_of_the_refit():
+    """(h102) The refit keeps the steps within 5 sigmas in *every* component."""
+    u, model, e = _odometry_sample(3, 2000)
+    e[:20, 0] += 2.0   # dx only: dy and the turn are fine on these steps
+    fit, info = fit_odometry_sigma(u, e)
+    assert info["n_excluded"] >= 20
+    np.testing.assert_allclose(fit[0, 1:], model[0, 1:], rtol=0.25)
 
 def test_robust_bearing_stats_on_known_residuals():
     rng = np.random.default_rng(1)
