@@ -2,6 +2,10 @@
 
 - ``bomgraph --help > /dev/full`` exited 0 and said nothing (argparse ignores an error writing
   its help), where ``bomgraph methods > /dev/full`` says the error in one line and exits 2.
+- ``plugins._disk_digest`` and ``_code_entries`` judged a status racy against the clock after
+  the read (or the listing), as ``file_digest`` did before c675047: a read taking seconds kept
+  a digest (a listing) whose status a write in the same tick, during it, leaves unchanged. A
+  fake clock here (no timing), as tests/test_h105_review.py's: the read "takes" 3 s.
 """
 
 from __future__ import annotations
@@ -10,9 +14,12 @@ import os
 import shlex
 import subprocess
 import sys
+import types
 from pathlib import Path
 
 import pytest
+
+from bomgraph import plugins
 
 ROOT = Path(__file__).resolve().parents[1]
 BOMGRAPH = f"{shlex.quote(sys.executable)} -m bomgraph"
@@ -42,3 +49,55 @@ def test_help_into_a_closed_pipe_or_closed_stdout_stays_quiet(tmp_path: Path) ->
     done = _bash(tmp_path, f"{BOMGRAPH} compare --help | true; echo ${{PIPESTATUS[0]}}")
     assert done.stderr == b"", done.stderr[:300]
     assert done.stdout.decode().strip() in ("0", "141"), done.stdout
+
+
+def _fake_clock(monkeypatch: pytest.MonkeyPatch, path: Path) -> list[int]:
+    """A clock 0.5 s after ``path``'s last change, for ``plugins``."""
+    st = path.stat()
+    clock = [max(st.st_mtime_ns, st.st_ctime_ns) + 500_000_000]
+    monkeypatch.setattr(plugins, "time", types.SimpleNamespace(time_ns=lambda: clock[0]))
+    monkeypatch.setattr(plugins, "RACY_NS", 2_000_000_000)
+    return clock
+
+
+def test_a_source_digest_is_not_kept_when_its_status_was_racy_when_taken(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Fails before: the status, taken 0.5 s after the file's change, was judged after the
+    3 s read (3.5 s: aged) and kept."""
+    path = tmp_path / "m.py"
+    path.write_bytes(b"x = 1\n")
+    clock = _fake_clock(monkeypatch, path)
+    read = plugins._read
+
+    def slow_read(p: Path) -> bytes:
+        clock[0] += 3_000_000_000
+        return read(p)
+
+    monkeypatch.setattr(plugins, "_read", slow_read)
+    monkeypatch.setattr(plugins, "_DISK", {})
+    assert plugins._disk_digest(path) == plugins._digest(b"x = 1\n")
+    assert path not in plugins._DISK
+    plugins._disk_digest(path)  # now 3.5 s after its change: aged, kept
+    assert path in plugins._DISK
+
+
+def test_a_folder_listing_is_not_kept_when_its_status_was_racy_when_taken(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Fails before, as the digest: the folder's status judged after a 3 s listing."""
+    (tmp_path / "pkg").mkdir()
+    (tmp_path / "pkg" / "m.py").write_text("x = 1\n")
+    folder = str(tmp_path / "pkg")
+    clock = _fake_clock(monkeypatch, tmp_path / "pkg")
+    scandir = os.scandir
+
+    def slow_scandir(p: str):  # noqa: ANN202
+        clock[0] += 3_000_000_000
+        return scandir(p)
+
+    monkeypatch.setattr(plugins.os, "scandir", slow_scandir)
+    monkeypatch.setattr(plugins, "_FOLDERS", {})
+    monkeypatch.setattr(plugins, "_LISTED", {})
+    assert [rel for rel, _ in plugins._py_files(folder)] == ["m.py"]
+    assert folder not in plugins._FOLDERS and folder not in plugins._LISTED
+    assert [rel for rel, _ in plugins._py_files(folder)] == ["m.py"]  # 3.5 s after: aged
+    assert folder in plugins._FOLDERS and folder in plugins._LISTED
