@@ -6,6 +6,9 @@
   the read (or the listing), as ``file_digest`` did before c675047: a read taking seconds kept
   a digest (a listing) whose status a write in the same tick, during it, leaves unchanged. A
   fake clock here (no timing), as tests/test_h105_review.py's: the read "takes" 3 s.
+- Library refusals that named command-line options (``Executor.choose(scheduler="")``:
+  "--scheduler is empty") name the parameters from Python, the options while a command runs
+  (``checks.option_named``, as 053e51f).
 """
 
 from __future__ import annotations
@@ -16,10 +19,13 @@ import subprocess
 import sys
 import types
 from pathlib import Path
+from typing import Callable
 
 import pytest
 
-from bomgraph import plugins
+from bomgraph import bench, cluster, experiments, plugins
+from bomgraph.checks import command_line
+from bomgraph.errors import ConfigError
 
 ROOT = Path(__file__).resolve().parents[1]
 BOMGRAPH = f"{shlex.quote(sys.executable)} -m bomgraph"
@@ -101,3 +107,52 @@ def test_a_folder_listing_is_not_kept_when_its_status_was_racy_when_taken(
     assert folder not in plugins._FOLDERS and folder not in plugins._LISTED
     assert [rel for rel, _ in plugins._py_files(folder)] == ["m.py"]  # 3.5 s after: aged
     assert folder in plugins._FOLDERS and folder in plugins._LISTED
+
+
+LIBRARY_REFUSALS = [
+    (lambda: bench.Executor.choose(scheduler=""),
+     "scheduler is empty; give the address",
+     "--scheduler is empty; give the address"),
+    (lambda: bench.Executor("dask", scheduler="http://x:1"),
+     "scheduler='http://x:1': not a Dask scheduler address",
+     "--scheduler http://x:1: not a Dask scheduler address"),
+    (lambda: experiments.compare_experiments(config="paper", streams=["a"]),
+     "compare_experiments(): give one of config, streams, real, not config and streams",
+     "compare: give one of --config, --streams, --real, not --config and --streams"),
+    (lambda: experiments.compare_experiments(methods="ekf"),
+     "compare_experiments(): methods goes with streams or real (in a sweep file: [[methods]]",
+     "compare: --methods goes with --streams FILE... or --real DIR (in a sweep file: "),
+    (lambda: experiments.compare_experiments(checkpoint_every=3),
+     "compare_experiments(): checkpoint_every goes with streams (in a sweep file: ",
+     "compare: --checkpoint-every goes with --streams FILE... (in a sweep file: "),
+    (lambda: experiments.compare_experiments(options=["a:b=1"]),
+     "compare_experiments(): options goes with streams (in",
+     "compare: --option goes with --streams FILE... (in"),
+]
+
+
+@pytest.mark.parametrize("call, library, command", LIBRARY_REFUSALS, ids=[
+    "empty-scheduler", "bad-scheduler", "two-sources", "methods", "checkpoint-every", "options"])
+def test_library_refusals_name_the_parameters_and_the_options_on_the_command_line(
+        call: Callable[[], object], library: str, command: str) -> None:
+    """Fails before for the library wording: ``Executor.choose(scheduler="")`` said
+    "--scheduler is empty", ``compare_experiments(methods=...)`` "compare: --methods goes
+    with --streams FILE...". While a command runs (``checks.command_line``), the options."""
+    with pytest.raises(ConfigError) as exc:
+        call()
+    assert str(exc.value).startswith(library), str(exc.value)
+    with command_line(), pytest.raises(ConfigError) as exc:
+        call()
+    assert str(exc.value).startswith(command), str(exc.value)
+
+
+def test_check_scheduler_names_its_address_parameter(tmp_path: Path) -> None:
+    """Fails before: ``check_scheduler(address)`` from Python said "--scheduler ADDRESS"
+    (port 1: nothing listens there, refused at once)."""
+    address = "tcp://127.0.0.1:1"
+    with pytest.raises(ConfigError) as exc:
+        cluster.check_scheduler(address, 5)
+    assert str(exc.value).startswith(f"address={address!r}: no Dask scheduler"), exc.value
+    with command_line(), pytest.raises(ConfigError) as exc:
+        cluster.check_scheduler(address, 5)
+    assert str(exc.value).startswith(f"--scheduler {address}: no Dask scheduler"), exc.value
