@@ -9,10 +9,13 @@
 - Library refusals that named command-line options (``Executor.choose(scheduler="")``:
   "--scheduler is empty") name the parameters from Python, the options while a command runs
   (``checks.option_named``, as 053e51f).
+- Without ``fcntl`` (Windows) ``stdio.folder_lock`` took no lock and said nothing; now a
+  warning says so, once a process.
 """
 
 from __future__ import annotations
 
+import logging
 import os
 import shlex
 import subprocess
@@ -23,7 +26,7 @@ from typing import Callable
 
 import pytest
 
-from bomgraph import bench, cluster, experiments, plugins
+from bomgraph import bench, cluster, experiments, plugins, stdio
 from bomgraph.checks import command_line
 from bomgraph.errors import ConfigError
 
@@ -156,3 +159,22 @@ def test_check_scheduler_names_its_address_parameter(tmp_path: Path) -> None:
     with command_line(), pytest.raises(ConfigError) as exc:
         cluster.check_scheduler(address, 5)
     assert str(exc.value).startswith(f"--scheduler {address}: no Dask scheduler"), exc.value
+
+
+def test_without_flock_a_compare_folder_is_not_locked_and_a_warning_says_so_once(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+        caplog: pytest.LogCaptureFixture) -> None:
+    """No ``fcntl`` (Windows, simulated as tests/test_h83_leftovers_review.py does): no lock
+    is taken (two holders at once), and one warning per process says so. Fails before:
+    nothing was said."""
+    monkeypatch.setitem(sys.modules, "fcntl", None)
+    monkeypatch.setattr(stdio, "_NO_LOCK_SAID", [], raising=False)
+    caplog.set_level(logging.WARNING, logger="bomgraph")
+    with stdio.folder_lock(tmp_path, "compare"), stdio.folder_lock(tmp_path, "compare"):
+        pass
+    with stdio.folder_lock(tmp_path / "other", "compare", shared=True):
+        pass
+    said = [r.getMessage() for r in caplog.records if r.levelno >= logging.WARNING]
+    assert said == [f"{tmp_path} is not locked: this platform has no flock, so two compares "
+                    f"into one folder at once are not kept apart; run one at a time"]
+    assert not (tmp_path / ".bomgraph.lock").exists()
