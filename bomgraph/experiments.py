@@ -343,17 +343,18 @@ def _real_method_names(methods: str) -> list[str]:
     defaults and its recording variants, :func:`real_variants`), each known (plugins
     included), none twice."""
     names = [m.strip() for m in methods.split(",") if m.strip()]
+    lead = option_named("compare --real --methods", "compare_experiments(): methods with real")
     for name in names:
         if "@" in name:
-            raise ConfigError(f"compare --real --methods: give names without a preset "
+            raise ConfigError(f"{lead}: give names without a preset "
                               f"({name!r}): each method runs with its defaults and its "
                               f"recording variants")
         method_info(name)
     twice = sorted({n for n in names if names.count(n) > 1})
     if twice:
-        raise ConfigError(f"compare --real --methods: {', '.join(twice)} appears twice")
+        raise ConfigError(f"{lead}: {', '.join(twice)} appears twice")
     if not names:
-        raise ConfigError("compare --real --methods: give at least one method")
+        raise ConfigError(f"{lead}: give at least one method")
     return names
 
 

@@ -26,7 +26,7 @@ from typing import Callable
 
 import pytest
 
-from bomgraph import bench, cluster, experiments, plugins, stdio
+from bomgraph import bench, cluster, experiments, jsonio, plugins, stdio
 from bomgraph.checks import command_line
 from bomgraph.errors import ConfigError
 
@@ -131,11 +131,23 @@ LIBRARY_REFUSALS = [
     (lambda: experiments.compare_experiments(options=["a:b=1"]),
      "compare_experiments(): options goes with streams (in",
      "compare: --option goes with --streams FILE... (in"),
+    (lambda: experiments.compare_experiments(real="x", methods="ekf@fast"),
+     "compare_experiments(): methods with real: give names without a preset ('ekf@fast')",
+     "compare --real --methods: give names without a preset ('ekf@fast')"),
+    (lambda: experiments.compare_experiments(real="x", methods=" , "),
+     "compare_experiments(): methods with real: give at least one method",
+     "compare --real --methods: give at least one method"),
+    (lambda: jsonio.options_to_json({"a": "Infinity"}),
+     "option value 'Infinity': a record writes an infinity so (it would read back as inf); "
+     "give the number (float('inf')) or another string",
+     "option value 'Infinity': a record writes an infinity so (it would read back as inf); "
+     "give the number (--option KEY=inf) or another string"),
 ]
 
 
 @pytest.mark.parametrize("call, library, command", LIBRARY_REFUSALS, ids=[
-    "empty-scheduler", "bad-scheduler", "two-sources", "methods", "checkpoint-every", "options"])
+    "empty-scheduler", "bad-scheduler", "two-sources", "methods", "checkpoint-every", "options",
+    "real-preset", "real-none", "infinity-string"])
 def test_library_refusals_name_the_parameters_and_the_options_on_the_command_line(
         call: Callable[[], object], library: str, command: str) -> None:
     """Fails before for the library wording: ``Executor.choose(scheduler="")`` said
