@@ -137,6 +137,17 @@ LIBRARY_REFUSALS = [
     (lambda: experiments.compare_experiments(real="x", methods=" , "),
      "compare_experiments(): methods with real: give at least one method",
      "compare --real --methods: give at least one method"),
+    (lambda: experiments.compare_experiments(streams=["nofile"], methods="ekf"),
+     "streams: no such file nofile", "--streams: no such file nofile"),
+    (lambda: experiments.compare_experiments(streams=["nofile"], methods=""),
+     "methods: give at least one method", "--methods: give at least one method"),
+    (lambda: experiments.compare_experiments(streams=["nofile"], methods="ekf,x@",
+                                             options=["bad"]),
+     "methods='x@': 'x@' is not NAME or NAME@PRESET", "--methods x@: 'x@' is not NAME or"),
+    (lambda: experiments.compare_experiments(streams=["nofile"], methods="ekf",
+                                             options=["ukf:a=1"]),
+     "options ukf:a=1: 'ukf' is not one of methods ekf",
+     "--option ukf:a=1: 'ukf' is not one of --methods ekf"),
     (lambda: jsonio.options_to_json({"a": "Infinity"}),
      "option value 'Infinity': a record writes an infinity so (it would read back as inf); "
      "give the number (float('inf')) or another string",
@@ -147,7 +158,8 @@ LIBRARY_REFUSALS = [
 
 @pytest.mark.parametrize("call, library, command", LIBRARY_REFUSALS, ids=[
     "empty-scheduler", "bad-scheduler", "two-sources", "methods", "checkpoint-every", "options",
-    "real-preset", "real-none", "infinity-string"])
+    "real-preset", "real-none", "streams-missing", "methods-none", "method-token",
+    "option-target", "infinity-string"])
 def test_library_refusals_name_the_parameters_and_the_options_on_the_command_line(
         call: Callable[[], object], library: str, command: str) -> None:
     """Fails before for the library wording: ``Executor.choose(scheduler="")`` said
