@@ -30,7 +30,7 @@ from typing import Any, Callable, Iterator, Mapping, Sequence
 
 import numpy as np
 
-from .checks import echo, instance, is_integer
+from .checks import echo, instance, is_integer, option_named
 from .errors import (ConfigError, StreamFormatError, TooFewLandmarksError,
                      UnknownMethodError)
 from .estimate_file import write_estimate
@@ -271,10 +271,10 @@ class Executor:
     scheduler_from: str | None = field(default=None, compare=False)
 
     def scheduler_named(self) -> str:
-        """The scheduler address as errors name it: ``--scheduler ADDRESS``, or the sweep
-        file's key and value when it came from there."""
+        """The scheduler address as errors name it: ``--scheduler ADDRESS`` (from Python:
+        ``scheduler='ADDRESS'``), or the sweep file's key and value when it came from there."""
         if self.scheduler_from is None:
-            return f"--scheduler {self.scheduler}"
+            return option_named("--scheduler", "scheduler", self.scheduler)
         return f'{self.scheduler_from} = "{self.scheduler}"'
 
     def __post_init__(self) -> None:
@@ -303,8 +303,8 @@ class Executor:
         its scheduler); any one given (the command line) sets the whole of ``defaults``
         aside, as ``--jobs 1`` overrides a file's ``dask_local``."""
         if scheduler == "":   # an unset variable: not "no scheduler", nor the file's
-            raise ConfigError("--scheduler is empty; give the address `dask scheduler` "
-                              "printed, e.g. tcp://HOST:8786")
+            raise ConfigError(f"{option_named('--scheduler', 'scheduler')} is empty; give the "
+                              f"address `dask scheduler` printed, e.g. tcp://HOST:8786")
         given = jobs is not None or scheduler is not None or dask_local is not None
         d = {} if given else dict(defaults or {})
         jobs = d.get("jobs", -1) if jobs is None else jobs

@@ -538,11 +538,13 @@ def _own_signals(hook: Callable[[Any], None]) -> dict[int, Any]:
 
 
 def _main(argv: Sequence[str] | None) -> int:
-    parser = build_parser()
     try:
-        args = parser.parse_args(argv)
+        args = build_parser().parse_args(argv)
     except BrokenPipeError:  # `bomgraph --help | head -1`
         return _stdout_closed()
+    except OSError as exc:  # `bomgraph --help > /dev/full`: as a command's output error
+        print(f"bomgraph: error: {exc}", file=sys.stderr)
+        return 2
     from .checks import command_line
     from .log_setup import configure_logging
 

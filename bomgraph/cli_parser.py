@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 import math
 import re
+import sys
 from typing import IO, Any, Callable, NoReturn, Sequence
 
 #: a run over this many steps shows a progress bar (when stderr is a terminal).
@@ -30,8 +31,16 @@ class _Parser(argparse.ArgumentParser):
         # help and --version go to stdout (file: sys.stdout); closed (``>&-``: None) argparse
         # wrote them to stderr, where every command's own lines are dropped (h101). Errors
         # name sys.stderr.
-        if file is not None:
+        # An error writing them (``--help > /dev/full``) is the command's output error, as any
+        # command's (one line, exit 2; a closed pipe: quiet), where argparse ignored it (exit
+        # 0, nothing said; h107): written and flushed here, the error raised.
+        if file is None or not message:
+            return
+        if file is sys.stderr:
             super()._print_message(message, file)
+            return
+        file.write(message)
+        file.flush()
 
     def error(self, message: str) -> NoReturn:
         line = re.sub(r"\s*[\r\n]+\s*", " ", message).strip()  # the value as given: '1  2'

@@ -18,6 +18,7 @@ import logging
 from concurrent.futures import CancelledError
 from typing import Any, Callable, Iterator, Sequence
 
+from .checks import option_named
 from .errors import ConfigError, UnknownMethodError
 
 _log = logging.getLogger(__name__)
@@ -56,7 +57,8 @@ def check_scheduler(address: str, timeout: float | None = None, *,
                     named: str | None = None) -> int:
     """The number of workers of the Dask scheduler at ``address``, asked within ``timeout``
     seconds (default :func:`connect_timeout`). ``named``: how the errors name the address
-    (default ``--scheduler ADDRESS``; a sweep file's key when it came from there).
+    (default ``--scheduler ADDRESS``, from Python ``address='ADDRESS'``; a sweep file's key
+    when it came from there).
 
     Raises
     ------
@@ -65,7 +67,7 @@ def check_scheduler(address: str, timeout: float | None = None, *,
         dashboard, another service): one line saying which, and what to check.
     """
     timeout = connect_timeout() if timeout is None else timeout
-    named = f"--scheduler {address}" if named is None else named
+    named = option_named("--scheduler", "address", address) if named is None else named
     hint = ("is `dask scheduler` running, and is this the address it printed (not its "
             "dashboard's or a worker's)?")
     with concurrent.futures.ThreadPoolExecutor(1) as pool:  # also under a running event loop

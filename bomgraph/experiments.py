@@ -19,7 +19,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
-from .checks import file_name, fraction, instance, integer, items
+from .checks import file_name, fraction, instance, integer, items, option_named
 from .errors import ConfigError, UnknownMethodError
 from .jsonio import options_to_json
 from .mapper import available_methods, method_config_class, method_info
@@ -304,18 +304,23 @@ def compare_experiments(*, config: str | None = None, streams: Sequence[str] | N
     items(options, str, f"{where}: options", ConfigError, want="'NAME:KEY=VALUE' strings")
     if checkpoint_every is not None:   # 0 used to mean the default, 10
         integer(checkpoint_every, f"{where}: checkpoint_every", ConfigError, minimum=1)
-    given = [n for n, v in (("--config", config), ("--streams", streams), ("--real", real)) if v]
+    # named as the command line's options while a command runs, else as the parameters (h107)
+    lead, opt = option_named("compare", where), option_named  # compare_experiments():
+    sources = [opt(o, p) for o, p in (("--config", "config"), ("--streams", "streams"),
+                                      ("--real", "real"))]
+    given = [n for n, v in zip(sources, (config, streams, real)) if v]
     if len(given) > 1:
-        raise ConfigError(f"compare: give one of --config, --streams, --real, not "
-                          f"{' and '.join(given)}")
+        raise ConfigError(f"{lead}: give one of {', '.join(sources)}, not {' and '.join(given)}")
     for flag, value, where in (("--methods", methods, "[[methods]] tables"),
                                ("--option", options, "options = {...}"),
                                ("--reference", reference, 'reference = "NAME"'),
                                ("--checkpoint-every", checkpoint_every, "checkpoint_every = N")):
         if value and not streams and not (real and flag == "--methods"):
-            raise ConfigError(f"compare: {flag} goes with --streams FILE..."
-                              f"{' or --real DIR' if flag == '--methods' else ''} (in a sweep "
-                              f"file: {where})")
+            param = flag[2:].replace("-", "_") + ("s" if flag == "--option" else "")
+            raise ConfigError(f"{lead}: {opt(flag, param)} goes with "
+                              f"{opt('--streams FILE...', 'streams')}"
+                              f"{' or ' + opt('--real DIR', 'real') if flag == '--methods' else ''}"
+                              f" (in a sweep file: {where})")
     settings: dict[str, Any] = {}
     if real:
         exps = real_experiments(real, _real_method_names(methods) if methods else None)
@@ -338,17 +343,18 @@ def _real_method_names(methods: str) -> list[str]:
     defaults and its recording variants, :func:`real_variants`), each known (plugins
     included), none twice."""
     names = [m.strip() for m in methods.split(",") if m.strip()]
+    lead = option_named("compare --real --methods", "compare_experiments(): methods with real")
     for name in names:
         if "@" in name:
-            raise ConfigError(f"compare --real --methods: give names without a preset "
+            raise ConfigError(f"{lead}: give names without a preset "
                               f"({name!r}): each method runs with its defaults and its "
                               f"recording variants")
         method_info(name)
     twice = sorted({n for n in names if names.count(n) > 1})
     if twice:
-        raise ConfigError(f"compare --real --methods: {', '.join(twice)} appears twice")
+        raise ConfigError(f"{lead}: {', '.join(twice)} appears twice")
     if not names:
-        raise ConfigError("compare --real --methods: give at least one method")
+        raise ConfigError(f"{lead}: give at least one method")
     return names
 
 

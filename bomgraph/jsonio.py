@@ -29,6 +29,7 @@ from typing import Any, Iterator, Mapping, Sequence
 
 import numpy as np
 
+from .checks import option_named
 from .errors import ConfigError
 
 _INFINITIES = {"inf": math.inf, "+inf": math.inf, "infinity": math.inf, "+infinity": math.inf,
@@ -433,9 +434,10 @@ def options_to_json(value: Any) -> Any:
     if isinstance(value, (list, tuple)):
         return [options_to_json(v) for v in value]
     if isinstance(value, str) and value in OPTION_INFINITIES:
+        number = option_named("--option KEY=inf", "float('inf')")
         raise ConfigError(f"option value {value!r}: a record writes an infinity so (it would "
                           f"read back as {OPTION_INFINITIES[value]}); give the number "
-                          f"(--option KEY=inf) or another string")
+                          f"({number}) or another string")
     if isinstance(value, (float, np.floating)) and math.isinf(value):
         return "Infinity" if value > 0 else "-Infinity"
     return value

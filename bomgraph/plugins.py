@@ -206,7 +206,7 @@ def _py_files(root: str) -> list[tuple[str, Path]]:
     if seen is not None and all(_stat_signature(Path(d)) == sig for d, sig in seen[0]):
         return list(seen[1])
     out: list[tuple[str, Path]] = []
-    folders, signatures = [("", root)], []
+    folders, signatures, now_ns = [("", root)], [], time.time_ns()  # before any status
     real = {os.path.realpath(root)}
     while folders:
         prefix, folder = folders.pop()
@@ -221,7 +221,7 @@ def _py_files(root: str) -> list[tuple[str, Path]]:
                 folders.append((prefix + name + "/", path))
             elif follow is None:   # watched: code written into it lists it
                 signatures.append((path, _stat_signature(Path(path))))
-    if all(sig is not None and _aged(sig) for _, sig in signatures):
+    if all(sig is not None and _aged(sig, now_ns) for _, sig in signatures):
         _LISTED[root] = (signatures, list(out))
     return out
 
@@ -234,6 +234,7 @@ def _code_entries(folder: str) -> tuple[tuple[int, ...] | None, list[tuple[str, 
     :data:`RACY_NS` of the listing: a data set linked into a package (100,000 files in 100
     folders, one being written) was listed whole at each check, 98 ms, where now the
     folder written is (h64)."""
+    now_ns = time.time_ns()  # before the status (_aged)
     sig = _stat_signature(Path(folder))  # before the listing: a change after it moves it
     seen = _FOLDERS.get(folder)
     if sig is not None and seen is not None and seen[0] == sig:
@@ -252,7 +253,7 @@ def _code_entries(folder: str) -> tuple[tuple[int, ...] | None, list[tuple[str, 
                 out.append((e.name, e.path, "link" if e.is_symlink() else "dir"))
         except OSError:
             continue
-    if sig is not None and _aged(sig):
+    if sig is not None and _aged(sig, now_ns):
         _FOLDERS[folder] = (sig, out)
     return sig, out
 
@@ -484,11 +485,12 @@ def _stat_signature(path: Path) -> tuple[int, ...] | None:
     return (st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns, st.st_ctime_ns)
 
 
-def _aged(sig: tuple[int, ...]) -> bool:
-    """Whether a :func:`_stat_signature` is older than :data:`RACY_NS` (mtime and ctime), so
-    that it can stand for the contents read after it: never on Windows, where ``st_ctime``
-    is the creation time, which a write does not change."""
-    return os.name != "nt" and time.time_ns() - max(sig[3], sig[4]) > RACY_NS
+def _aged(sig: tuple[int, ...], now_ns: int) -> bool:
+    """Whether a :func:`_stat_signature` was older than :data:`RACY_NS` (mtime and ctime) at
+    ``now_ns``, a time read before it was taken (not after the read: a slow read made a racy
+    one look aged, h107), so that it can stand for the contents read after it: never on
+    Windows, where ``st_ctime`` is the creation time, which a write does not change."""
+    return os.name != "nt" and now_ns - max(sig[3], sig[4]) > RACY_NS
 
 
 def _disk_digest(path: Path) -> bytes:
@@ -498,12 +500,13 @@ def _disk_digest(path: Path) -> bytes:
     ctime, which no tool sets (an edit that keeps the size and puts the mtime back, an
     archive's fixed mtimes), and a file changed within :data:`RACY_NS` of its read is read
     again (as git's "racy" index entries), so an edit is seen at the next check."""
+    now_ns = time.time_ns()  # before the status (_aged)
     sig = _stat_signature(path)  # before the read: an edit after it changes it
     seen = _DISK.get(path)
     if sig is not None and seen is not None and seen[0] == sig:
         return seen[1]
     digest = _digest(_read(path))
-    if sig is not None and _aged(sig):
+    if sig is not None and _aged(sig, now_ns):
         _DISK[path] = (sig, digest)
     return digest
 

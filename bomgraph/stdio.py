@@ -486,6 +486,10 @@ def make_folder(folder: str | os.PathLike[str]) -> None:
     Path(folder).mkdir(parents=True, exist_ok=True)
 
 
+#: the folder :func:`folder_lock` first said it could not lock (no flock), once a process
+_NO_LOCK_SAID: list[str | os.PathLike[str]] = []
+
+
 @contextlib.contextmanager
 def folder_lock(folder: str | os.PathLike[str], what: str,
                 shared: bool = False) -> Iterator[None]:
@@ -494,6 +498,7 @@ def folder_lock(folder: str | os.PathLike[str], what: str,
     ``shared``: a shared lock (a compare writing below ``folder``, not into it), refused while
     an exclusive one is held and refusing one, not refusing another shared one; on a lock file
     that is there (none is made, nothing written: the folder may be another user's, or ``/``).
+    Where there is no ``fcntl`` (Windows) no lock is taken, and a warning says so once.
 
     Raises
     ------
@@ -504,7 +509,11 @@ def folder_lock(folder: str | os.PathLike[str], what: str,
     """
     try:
         import fcntl
-    except ImportError:  # no flock on this platform: no lock
+    except ImportError:  # no flock on this platform (Windows): no lock, said once (h107)
+        if not _NO_LOCK_SAID:
+            _NO_LOCK_SAID.append(folder)
+            _log.warning("%s is not locked: this platform has no flock, so two compares into "
+                         "one folder at once are not kept apart; run one at a time", folder)
         yield
         return
     lock = os.path.join(os.fspath(folder), ".bomgraph.lock")

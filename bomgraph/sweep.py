@@ -48,7 +48,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
-from .checks import echo, file_name
+from .checks import echo, file_name, option_named
 from .errors import BomgraphError, ConfigError
 from .sim import SimConfig
 
@@ -199,29 +199,33 @@ def command_line_spec(streams: Sequence[str], methods: Sequence[str],
     [--reference NAME[@PRESET]]`` as the sweep it stands for (one experiment)."""
     from .jsonio import parse_options
 
+    # options while a command runs, the parameters from Python (compare_experiments; h107)
+    st, ms, op = (option_named(f"--{o}", p) for o, p in (
+        ("streams", "streams"), ("methods", "methods"), ("option", "options")))
+
     if not streams:
-        raise SweepError("--streams: give at least one stream file")
+        raise SweepError(f"{st}: give at least one stream file")
     if not methods:
-        raise SweepError("--methods: give at least one method (NAME or NAME@PRESET, "
+        raise SweepError(f"{ms}: give at least one method (NAME or NAME@PRESET, "
                          "comma-separated); `bomgraph methods` lists them")
-    arms = [parse_method(tok, f"--methods {tok}") for tok in methods]
-    ref = parse_method(reference, "--reference") if reference else None
+    arms = [parse_method(tok, option_named("--methods", "methods", tok)) for tok in methods]
+    ref = parse_method(reference, option_named("--reference", "reference")) if reference else None
     extra: dict[str, dict[str, Any]] = {}
     for text in options:
         target, sep, pair = text.partition(":")
         if not sep or "=" not in pair:
-            raise SweepError(f"--option {text}: an option is NAME:KEY=VALUE (NAME: a method "
-                             f"of --methods)")
+            raise SweepError(f"{op} {text}: an option is NAME:KEY=VALUE (NAME: a method "
+                             f"of {ms})")
         if not any(target in (a.label, a.method) for a in [*arms, *([ref] if ref else [])]):
-            raise SweepError(f"--option {text}: {target!r} is not one of --methods "
+            raise SweepError(f"{op} {text}: {target!r} is not one of {ms} "
                              f"{','.join(methods)}")
         try:
             given = parse_options([pair])
         except ConfigError as exc:
-            raise SweepError(f"--option {text}: {exc}") from None
+            raise SweepError(f"{op} {text}: {exc}") from None
         key = next(iter(given))
         if key in extra.get(target, {}):
-            raise SweepError(f"--option {text}: {target}:{key} is given twice (one compare "
+            raise SweepError(f"{op} {text}: {target}:{key} is given twice (one compare "
                              f"runs one value per method; to compare values, give the "
                              f"method once per value with a label of its own in a sweep "
                              f"file)")
@@ -238,21 +242,21 @@ def command_line_spec(streams: Sequence[str], methods: Sequence[str],
         label = m.label
         if "preset" in added:  # labelled as NAME@PRESET is, never by another preset
             if "preset" in m.options:
-                raise SweepError(f"--option {by}:preset=...: --methods {m.label} names "
+                raise SweepError(f"{op} {by}:preset=...: {ms} {m.label} names "
                                  f"its preset already; give the preset once")
             if isinstance(added["preset"], str):
                 label = f"{m.label}@{added['preset']}"
         return _checked_method(dataclasses.replace(m, label=label, options={
-            **m.options, **added}), f"--option {m.label}")
+            **m.options, **added}), f"{op} {m.label}")
 
     missing = [s for s in streams if not Path(s).is_file()]
     if missing:
-        raise SweepError(f"--streams: no such file {missing[0]}")
+        raise SweepError(f"{st}: no such file {missing[0]}")
     problem = stream_header_problem(streams)
     if problem:
-        raise SweepError(f"--streams: {problem}")
+        raise SweepError(f"{st}: {problem}")
     arms = [with_options(a) for a in arms]
-    _unique([a.label for a in arms], "--methods")
+    _unique([a.label for a in arms], ms)
     exp = ExperimentSpec(name, f"{len(streams)} stream(s), {len(arms)} method(s)",
                          tuple(arms),
                          streams=_named_streams([str(Path(s).resolve()) for s in streams]),
