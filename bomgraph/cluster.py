@@ -32,6 +32,12 @@ POLL_S = 5.0
 LOCAL_SCHEDULER_HTTP = {"dashboard_address": "127.0.0.1:0"}
 
 
+#: How to see the warnings of a run whose worker died: a worker keeps them for its result
+#: (:mod:`bomgraph.worker_log`), so they end with it; run serially, they reach stderr at once.
+ALONE_HINT = ("run it alone with --jobs 1 (without --dask-local or --scheduler) to see its "
+              "warnings")
+
+
 def connect_timeout() -> float:
     """Dask's connect timeout (``distributed.comm.timeouts.connect``, 30 s by default) [s]."""
     import dask.config
@@ -97,8 +103,9 @@ def worker_failure(exc: BaseException) -> str:
                 f"and run again")
     if isinstance(exc, KilledWorker):
         return ("KilledWorker: every Dask worker that ran it died (a crash in native code, "
-                "the out-of-memory killer, or a worker stopped); see the workers' logs, then "
-                "run again (finished runs are cached)")
+                "the out-of-memory killer, or a worker stopped); see the workers' logs, and "
+                f"{ALONE_HINT} (a worker sends them back with the result: they died with "
+                "it); finished runs are cached")
     first = (str(exc).splitlines() or [""])[0].split("; known methods")[0]
     reason = f"{type(exc).__name__}: {first}" if first else type(exc).__name__
     if isinstance(exc, (UnknownMethodError, ImportError)):
