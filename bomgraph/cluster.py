@@ -33,6 +33,12 @@ POLL_S = 5.0
 LOCAL_SCHEDULER_HTTP = {"dashboard_address": "127.0.0.1:0"}
 
 
+#: How to see the warnings of a run whose worker died: a worker keeps them for its result
+#: (:mod:`bomgraph.worker_log`), so they end with it; run serially, they reach stderr at once.
+ALONE_HINT = ("run it alone with --jobs 1 (without --dask-local or --scheduler) to see its "
+              "warnings")
+
+
 def connect_timeout() -> float:
     """Dask's connect timeout (``distributed.comm.timeouts.connect``, 30 s by default) [s]."""
     import dask.config
@@ -99,8 +105,9 @@ def worker_failure(exc: BaseException) -> str:
                 f"and run again")
     if isinstance(exc, KilledWorker):
         return ("KilledWorker: every Dask worker that ran it died (a crash in native code, "
-                "the out-of-memory killer, or a worker stopped); see the workers' logs, then "
-                "run again (finished runs are cached)")
+                "the out-of-memory killer, or a worker stopped); see the workers' logs, and "
+                f"{ALONE_HINT} (a worker sends them back with the result: they died with "
+                "it); finished runs are cached")
     first = (str(exc).splitlines() or [""])[0].split("; known methods")[0]
     reason = f"{type(exc).__name__}: {first}" if first else type(exc).__name__
     if isinstance(exc, (UnknownMethodError, ImportError)):
@@ -113,7 +120,8 @@ def worker_failure(exc: BaseException) -> str:
 def quiet_dask_logging() -> Callable[[], None]:
     """Dask's own log lines (its client reconnecting with a traceback, "Couldn't gather") at
     CRITICAL only, so that a failure is the failed runs' one line: for the command line without
-    ``-v`` (:mod:`bomgraph.cli`), never called by the library itself. Returns what gives each
+    ``-v`` (:mod:`bomgraph.cli`), never called by the library in its caller's process (only
+    on a local cluster's workers as they end: :func:`_quiet_worker`). Returns what gives each
     of those loggers its level back: the command run in its caller's process calls it at
     the end (:func:`bomgraph.log_setup.restore_after`); the program does not (the client's
     reconnect task logs its traceback when the process ends)."""
@@ -130,6 +138,15 @@ def quiet_dask_logging() -> Callable[[], None]:
         for lg, level in levels.items():
             lg.setLevel(level)
     return restore
+
+
+def _quiet_worker() -> None:
+    """On a worker of the local cluster, just before it is closed: Dask's log lines from then
+    on at CRITICAL only. A heartbeat that met the scheduler closing printed "Failed to
+    communicate with scheduler during heartbeat" and a ``StreamClosedError`` traceback on the
+    worker's stderr, the user's (h106: once in 9 compares). Never on a ``--scheduler``'s
+    workers (the user's), nor in the caller's process."""
+    quiet_dask_logging()
 
 
 def dispatch(func: Callable[[int, Any], tuple[int, dict[str, Any]]], index: Sequence[int],
@@ -190,6 +207,11 @@ def _dispatch(func: Callable[[int, Any], tuple[int, dict[str, Any]]], index: Seq
                     out = (which[fut.key], failed(which[fut.key], worker_failure(exc)))
                 yield out
     finally:
+        if cluster is not None:  # its workers are ours, and end now: quiet first (h106)
+            try:
+                client.run(_quiet_worker, on_error="ignore")
+            except Exception:  # the scheduler is gone: nothing more to say to them
+                _log.debug("could not quiet the local workers", exc_info=True)
         client.close()
         if cluster is not None:
             cluster.close()

@@ -348,8 +348,10 @@ def _died(exc: BaseException, began: bool = True) -> str:
                 f"killer); fix that, or run serially (--jobs 1, Executor('serial')); finished "
                 f"runs are cached")
     return (f"WorkerDied: the worker process that ran it died{codes_text}: a crash in native "
-            f"code, the out-of-memory killer, or os._exit in the method; run it alone with "
-            f"`bomgraph run STREAM --method NAME` to see (finished runs are cached)")
+            f"code, the out-of-memory killer, or os._exit in the method; its warnings died "
+            f"with it (a worker sends them back with the result): run it alone with "
+            f"--jobs 1 or `bomgraph run STREAM --method NAME` to see them (finished runs "
+            f"are cached)")
 
 
 def _start_workers(par: Any) -> None:

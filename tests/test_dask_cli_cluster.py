@@ -164,6 +164,9 @@ def test_a_run_that_kills_its_workers_fails_alone_and_the_rest_is_cached(setup: 
         line = _one_line(proc)
         assert proc.returncode == 1, proc.stderr
         assert "KilledWorker: every Dask worker that ran it died" in line
+        # its warnings were kept for its result, and died with it: how to see them (h106)
+        assert "run it alone with --jobs 1 (without --dask-local or --scheduler) to see its " \
+               "warnings" in line, line
         assert _ok_runs(out) == {("triangulate", "s1"): True, ("triangulate", "s2"): True,
                                  ("crashy", "s1"): False, ("crashy", "s2"): False}
         assert len(list((out / "cache").glob("*.json"))) == 2  # the finished runs

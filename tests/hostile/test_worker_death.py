@@ -80,6 +80,9 @@ def test_a_dying_worker_fails_its_run_and_the_sweep_goes_on(tmp_path: Path) -> N
     dying = [r for r in results if r["arm"] == "dying"]
     assert len(dying) == 3 and not any(r["ok"] for r in dying)
     assert all(r["error"].startswith("WorkerDied:") and "EXIT(7)" in r["error"] for r in dying)
+    # its warnings were kept for its result, and died with it: how to see them (h106)
+    assert all("its warnings died with it" in r["error"] and "run it alone with --jobs 1 or "
+               "`bomgraph run STREAM --method NAME` to see them" in r["error"] for r in dying)
     # every other run has the result it has on its own, in this process, one at a time
     _, serial = _compare(tmp_path, "ser", "triangulate,ekf", "1", streams)
     mine = {(r["arm"], r["run"]): r for r in strip_timings(results) if r["arm"] != "dying"}
