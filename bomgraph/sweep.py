@@ -489,6 +489,7 @@ class _Reader:
         if not isinstance(patterns, list):
             raise self.fail(key, "must be a list of file names or globs")
         paths: list[str] = []
+        seen: set[str] = set()   # of paths: a membership test a file, not a scan of the list
         for k, pat in enumerate(patterns):
             pat = self.str_(pat, f"{key}[{k}]")
             full = pat if os.path.isabs(pat) else str(self.path.parent / pat)
@@ -497,7 +498,9 @@ class _Reader:
             if not found:
                 raise self.fail(f"{key}[{k}]", f"{pat!r} matches no file (relative to "
                                                f"{self.path.parent.resolve()})")
-            paths += [f for f in found if f not in paths]
+            new = [f for f in found if f not in seen]
+            paths += new
+            seen.update(new)
         problem = stream_header_problem(paths)
         if problem:
             raise self.fail(key, problem)

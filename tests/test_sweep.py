@@ -323,3 +323,15 @@ def test_an_empty_scheduler_is_refused(runs: Path, tmp_path: Path,
     err = capsys.readouterr().err.strip().splitlines()
     assert err == ["bomgraph: error: --scheduler is empty; give the address `dask scheduler` "
                    "printed, e.g. tcp://HOST:8786"], err
+
+
+def test_overlapping_stream_patterns_name_each_file_once_in_first_match_order(
+        runs: Path, tmp_path: Path) -> None:
+    """Each file once, where its first pattern put it, whatever later patterns match again
+    (the repeats are now found in a set, not by scanning the list: h103's note, 3.8 s for two
+    patterns of 20,000 files)."""
+    toml = tmp_path / "sweep.toml"
+    toml.write_text(f'streams = ["{runs}/runs/r2.jsonl", "{runs}/runs/*.jsonl", '
+                    f'"{runs}/runs/r*.jsonl"]\nmethods = ["triangulate"]\n')
+    (exp,) = read_sweep(toml).experiments
+    assert [Path(p).name for p, _ in exp.streams] == ["r2.jsonl", "r1.jsonl"]
