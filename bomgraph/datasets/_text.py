@@ -381,6 +381,6 @@ def file_label(path: str | os.PathLike[str]) -> str:
     return Path(path).name
 
 
-__all__ = ["dataset_error", "find_file", "file_read", "has_file", "read_lines", "Line", "MAX_DATASET_BYTES",
-           "MAX_RECORD_FILE_BYTES", "MAX_TABLE_LINE_CHARS",
+__all__ = ["dataset_error", "find_file", "file_read", "has_file", "read_lines", "Line",
+           "MAX_DATASET_BYTES", "MAX_RECORD_FILE_BYTES", "MAX_TABLE_LINE_CHARS",
            "parse_float", "parse_int", "read_table", "chain_order", "file_label"]

@@ -196,5 +196,6 @@ def read_mrclam_robot(data_dir: str | os.PathLike[str], robot: int) -> MrclamRob
         groundtruth=gt, files=files)
 
 
-__all__ = ["MrclamRobotData", "read_mrclam_robot", "mrclam_file_names", "mrclam_inputs", "ROBOT_SUBJECTS", "MAX_SPEED_MPS",
-           "MAX_TURN_RATE_RADPS", "MAX_RANGE_M", "MAX_COORDINATE_M"]
+__all__ = ["MrclamRobotData", "read_mrclam_robot", "mrclam_file_names", "mrclam_inputs",
+           "ROBOT_SUBJECTS", "MAX_SPEED_MPS", "MAX_TURN_RATE_RADPS", "MAX_RANGE_M",
+           "MAX_COORDINATE_M"]
