@@ -1,8 +1,9 @@
-"""The SHA-256 of an input file's bytes (a stream file, a recording's files), what the runner's
-cache key (:func:`bomgraph.bench.task_key`) holds of a source read from disk, so that a cached
-result belongs to the data as it is now: a file replaced by other bytes of the same size with
-its modification time kept (``cp -p``, ``rsync -a``, ``touch -r``, an archive's fixed times)
-runs again.
+"""The SHA-256 of an input file's bytes (a stream file, the files a recording's importer reads:
+:func:`inputs_sha256`), what the runner's cache key (:func:`bomgraph.bench.task_key`) holds of
+a source read from disk, so that a cached result belongs to the data as it is now, wherever it
+is: a file replaced by other bytes of the same size with its modification time kept (``cp
+-p``, ``rsync -a``, ``touch -r``, an archive's fixed times) runs again; a copy elsewhere does
+not.
 
 Each file is hashed once a process while its status stays the same: a sweep keys each of its
 tasks (and a worker each task it runs), and MRCLAM6's 17 files (26 MB) took 18 ms to hash
@@ -17,8 +18,10 @@ from __future__ import annotations
 
 import hashlib
 import os
+import stat
 import time
 from pathlib import Path
+from typing import Mapping
 
 #: A file whose status changed less than this long [ns] before it was hashed is hashed again
 #: the next time (2 s: FAT's timestamps; ext3 and HFS+ keep a second).
@@ -68,31 +71,34 @@ def file_sha256(path: str | os.PathLike[str]) -> str:
     return digest
 
 
-def files_sha256(*paths: str | os.PathLike[str] | None) -> str:
-    """One hex SHA-256 of every file under ``paths`` (a file, or a folder and every file under
-    it), each named by its resolved path and hashed by :func:`file_sha256`: the same files
-    however they are spelled (relative or absolute) have the same digest, and one byte changed
-    in any of them changes it. A file that cannot be read counts by its name, size and
-    modification time (the importer that needs it says why it cannot)."""
+def inputs_sha256(inputs: Mapping[str, str | os.PathLike[str] | None]) -> str:
+    """One hex SHA-256 of the files an importer reads (role -> file, None where there is
+    none), each named by its role and by whether its name ends in ``.gz`` (read decompressed),
+    never by its folder or path, and hashed by :func:`file_sha256`: the same bytes anywhere
+    have the same digest, and one byte changed in any of them changes it. A file that cannot
+    be read counts by its size and modification time, one that is not a regular file (a FIFO,
+    which hashing would block on) by what it is, one absent as absent: the importer that needs
+    it says why it cannot."""
     h = hashlib.sha256()
-    for p in paths:
-        if p is None:
-            continue
-        root = Path(p).resolve()
-        files = sorted(root.rglob("*")) if root.is_dir() else [root]
-        for f in files:
-            if not f.is_file():
-                continue
-            try:
-                digest = file_sha256(f)
-            except OSError as exc:
-                try:
-                    st = f.stat()
-                    digest = f"unreadable ({exc.errno}) {st.st_size} {st.st_mtime_ns}"
-                except OSError:  # removed since it was listed
-                    continue
-            h.update(f"{f}\0{digest}\0".encode())
+    for role in sorted(inputs):
+        path = inputs[role]
+        gz = path is not None and Path(path).suffix == ".gz"
+        digest = "absent" if path is None else _input_digest(path)
+        h.update(f"{role}\0{'gz' if gz else ''}\0{digest}\0".encode())
     return h.hexdigest()
+
+
+def _input_digest(path: str | os.PathLike[str]) -> str:
+    try:
+        st = os.stat(path)
+    except OSError as exc:  # removed since it was found, a link broken since
+        return f"absent ({exc.errno})"
+    if not stat.S_ISREG(st.st_mode):
+        return f"not a regular file ({stat.S_IFMT(st.st_mode):o})"
+    try:
+        return file_sha256(path)
+    except OSError as exc:
+        return f"unreadable ({exc.errno}) {st.st_size} {st.st_mtime_ns}"
 
 
 def forget() -> None:
@@ -100,4 +106,4 @@ def forget() -> None:
     _KEPT.clear()
 
 
-__all__ = ["RACY_NS", "file_sha256", "files_sha256", "forget"]
+__all__ = ["RACY_NS", "file_sha256", "inputs_sha256", "forget"]

@@ -17,7 +17,7 @@ import numpy as np
 
 from .checks import file_name, fraction, instance, integer, items
 from .errors import ConfigError, StreamFormatError
-from .file_digest import file_sha256, files_sha256
+from .file_digest import file_sha256, inputs_sha256
 from .sim import RunSpec, SimConfig, make_priors, simulate, simulate_run, with_priors
 from .stream import Stream
 
@@ -91,9 +91,19 @@ class SimSource:
                 "prior_fraction": self.prior_fraction, "prior_sigma": self.prior_sigma_xy_m}
 
 
+#: The kinds of recording a :class:`DatasetSource` imports.
+DATASET_KINDS = ("mrclam", "g2o", "victoria")
+
+
 @dataclass(frozen=True)
 class DatasetSource:
-    """A real recording, imported on use: ``kind`` is ``mrclam``, ``g2o`` or ``victoria``."""
+    """A real recording, imported on use: ``kind`` is ``mrclam`` (``path`` the folder, with a
+    ``robot``), ``g2o`` (``path`` the file, ``truth_path`` optional) or ``victoria``.
+
+    Its cache key is the SHA-256 of the files the importer reads (:meth:`key`), so, as a
+    stream file, a moved, renamed or copied recording reuses the cache and an edited one runs
+    again; other files in its folder are not in it.
+    """
 
     kind: str
     path: str
@@ -102,6 +112,12 @@ class DatasetSource:
     label: str = ""
 
     def __post_init__(self) -> None:
+        if self.kind not in DATASET_KINDS:
+            raise ConfigError(f"DatasetSource: unknown dataset kind {self.kind!r}; use "
+                              f"{', '.join(DATASET_KINDS)}")
+        if self.kind == "mrclam" and self.robot is None:
+            raise ConfigError("DatasetSource('mrclam'): robot: an MRCLAM source needs a robot "
+                              "number (1-5)")
         file_name(self.path, f"DatasetSource({self.kind!r}): path", ConfigError)
         if self.truth_path is not None:
             file_name(self.truth_path, f"DatasetSource({self.kind!r}): truth_path", ConfigError)
@@ -113,18 +129,32 @@ class DatasetSource:
         base = Path(self.path).name
         return f"{base}-r{self.robot}" if self.robot is not None else base
 
+    def inputs(self) -> dict[str, Path | None]:
+        """Role -> each file the importer reads (MRCLAM: the robot's ``odometry``,
+        ``measurements`` and ``groundtruth``, ``landmarks`` and ``barcodes``; g2o: ``edges``
+        and ``truth``; Victoria: ``data``), None where there is none (the importer says why,
+        or does without), as the importer declares them."""
+        from . import datasets
+
+        if self.kind == "mrclam":
+            return datasets.mrclam_inputs(self.path, self.robot)
+        if self.kind == "g2o":
+            return datasets.g2o_inputs(self.path, self.truth_path)
+        return datasets.victoria_inputs(self.path)
+
     def stream(self) -> Stream:
         return _load_dataset(self.kind, self.path, self.robot, self.truth_path,
-                             files_sha256(self.path, self.truth_path))
+                             inputs_sha256(self.inputs()))
 
     def key(self) -> dict[str, Any]:
-        """The recording's kind, paths and robot, and the SHA-256 of the bytes of every file
-        under ``path`` and ``truth_path`` (:func:`bomgraph.file_digest.files_sha256`): a file
-        replaced by other bytes of the same size and modification time changes it (h104: a
-        key of sizes and times reused the results of the old data)."""
-        truth = None if self.truth_path is None else str(Path(self.truth_path).resolve())
-        return {"kind": self.kind, "path": str(Path(self.path).resolve()), "robot": self.robot,
-                "truth": truth, "sha256": files_sha256(self.path, self.truth_path)}
+        """The recording's kind and robot and the SHA-256 of the bytes of the files its
+        importer reads (:meth:`inputs`, :func:`bomgraph.file_digest.inputs_sha256`), each
+        named by its role, not its path: the same recording anywhere (copied, moved, renamed)
+        has the same key; a file beside them (notes, a compare's ``--out`` folder) is not in
+        it (h109: each changed the key); a file replaced by other bytes of the same size and
+        modification time changes it (h104: a key of sizes and times reused the results of
+        the old data)."""
+        return {"kind": self.kind, "robot": self.robot, "sha256": inputs_sha256(self.inputs())}
 
 
 @dataclass(frozen=True)
@@ -234,20 +264,16 @@ class World:
 @functools.lru_cache(maxsize=16)
 def _load_dataset(kind: str, path: str, robot: int | None, truth_path: str | None,
                   sha256: str) -> Stream:
-    """The recording, kept per process by its files' ``sha256`` too (as in the cache key): a
-    changed file is read again."""
+    """The recording (``kind`` one of :data:`DATASET_KINDS`), kept per process by its input
+    files' ``sha256`` too (as in the cache key): a changed file is read again."""
     from . import datasets
 
     if kind == "mrclam":
-        if robot is None:
-            raise ConfigError("an MRCLAM source needs a robot number (1-5)")
         return datasets.import_mrclam(path, robot)
     if kind == "g2o":
         return datasets.import_g2o(path, truth_path=truth_path)
-    if kind == "victoria":
-        return datasets.import_victoria(path)
-    raise ConfigError(f"unknown dataset kind {kind!r}; use mrclam, g2o or victoria")
+    return datasets.import_victoria(path)
 
 
-__all__ = ["SimulatedStreams", "SIMULATED", "SimSource", "DatasetSource", "FileSource",
-           "WorldSource", "World"]
+__all__ = ["SimulatedStreams", "SIMULATED", "SimSource", "DATASET_KINDS", "DatasetSource",
+           "FileSource", "WorldSource", "World"]

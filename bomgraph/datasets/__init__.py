@@ -6,12 +6,18 @@
   ``EDGE_BEARING_SE2_XY``), optional ground-truth file.
 - :func:`~bomgraph.datasets.victoria.import_victoria`: GTSAM's Victoria Park text file.
 
+Each importer declares the files it reads, role -> file (:func:`mrclam_inputs`,
+:func:`g2o_inputs`, :func:`victoria_inputs`): what a recording's cache key hashes
+(:class:`bomgraph.sources.DatasetSource`).
+
 A malformed input line raises :class:`~bomgraph.errors.DatasetError` naming the file, the line
 and the field.
 """
 
-from .g2o import import_g2o
+from .g2o import g2o_inputs, import_g2o
 from .mrclam import KeyframeConfig, import_mrclam
-from .victoria import import_victoria
+from .mrclam_files import mrclam_inputs
+from .victoria import import_victoria, victoria_inputs
 
-__all__ = ["import_g2o", "import_mrclam", "import_victoria", "KeyframeConfig"]
+__all__ = ["import_g2o", "import_mrclam", "import_victoria", "KeyframeConfig", "g2o_inputs",
+           "mrclam_inputs", "victoria_inputs"]

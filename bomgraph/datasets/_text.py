@@ -64,12 +64,11 @@ def find_file(directory: str | os.PathLike[str], name: str) -> Path:
         When neither exists (the message lists what was tried), or the one there is a
         directory or a broken or looping link (the message says which).
     """
+    found = file_read(directory, name)
+    if found is not None:
+        return found
     d = Path(directory)
-    candidates = (d / name, d / (name + ".gz"))
-    for candidate in candidates:
-        if candidate.exists() and not candidate.is_dir():  # a device or FIFO is read, bounded
-            return candidate
-    for candidate in candidates:  # there, but not a file: say what it is
+    for candidate in (d / name, d / (name + ".gz")):  # there, but not a file: say what it is
         if candidate.is_dir():
             raise DatasetError(f"{candidate}: is a directory, not a data file; put the "
                                f"dataset's {name} there")
@@ -79,6 +78,18 @@ def find_file(directory: str | os.PathLike[str], name: str) -> Path:
     raise DatasetError(f"{d}: neither {name} nor {name}.gz exists; check the dataset "
                        f"directory (each MRCLAM folder holds Barcodes.dat, "
                        f"Landmark_Groundtruth.dat and RobotN_*.dat)")
+
+
+def file_read(directory: str | os.PathLike[str], name: str) -> Path | None:
+    """The file :func:`find_file` reads for ``name``: ``directory/name`` or, failing that,
+    ``directory/name.gz``, whichever first exists and is not a directory (a device or FIFO is
+    read, bounded); None when neither is, or it cannot be told (no search permission on the
+    folder): :func:`find_file` then says why. It never raises (a cache key lists it)."""
+    d = Path(directory)
+    for candidate in (d / name, d / (name + ".gz")):
+        if os.path.exists(candidate) and not os.path.isdir(candidate):  # never raise
+            return candidate
+    return None
 
 
 def has_file(directory: str | os.PathLike[str], name: str) -> bool:
@@ -370,6 +381,6 @@ def file_label(path: str | os.PathLike[str]) -> str:
     return Path(path).name
 
 
-__all__ = ["dataset_error", "find_file", "has_file", "read_lines", "Line", "MAX_DATASET_BYTES",
-           "MAX_RECORD_FILE_BYTES", "MAX_TABLE_LINE_CHARS",
+__all__ = ["dataset_error", "find_file", "file_read", "has_file", "read_lines", "Line",
+           "MAX_DATASET_BYTES", "MAX_RECORD_FILE_BYTES", "MAX_TABLE_LINE_CHARS",
            "parse_float", "parse_int", "read_table", "chain_order", "file_label"]

@@ -298,6 +298,15 @@ def checked_sigma(sigma: np.ndarray, path: Path, line: int, field: str) -> np.nd
     return sigma
 
 
+def g2o_inputs(path: str | os.PathLike[str], truth_path: str | os.PathLike[str] | None = None
+               ) -> dict[str, Path]:
+    """Role -> each file :func:`import_g2o` reads: what a recording's cache key hashes."""
+    files = {"edges": Path(path)}
+    if truth_path is not None:
+        files["truth"] = Path(truth_path)
+    return files
+
+
 def import_g2o(path: str | os.PathLike[str], *, truth_path: str | os.PathLike[str] | None = None,
                bearing_sigma_rad: float | None = None) -> Stream:
     """Import a bearing-only g2o file (see the module docstring).

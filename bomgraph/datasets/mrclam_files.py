@@ -17,7 +17,7 @@ from typing import Mapping
 import numpy as np
 
 from ..errors import DatasetError
-from ._text import dataset_error, file_label, find_file, has_file, read_table
+from ._text import dataset_error, file_label, file_read, find_file, has_file, read_table
 
 ROBOT_SUBJECTS = (1, 2, 3, 4, 5)
 """Subject numbers of the five robots (dataset rule, SOURCE.md quirk 1)."""
@@ -46,6 +46,22 @@ class MrclamRobotData:
     measurements: Mapping[str, np.ndarray]
     groundtruth: Mapping[str, np.ndarray] | None
     files: Mapping[str, str]
+
+
+def mrclam_file_names(robot: int) -> dict[str, str]:
+    """Role -> name of each file :func:`read_mrclam_robot` reads for ``robot`` (each as it is
+    or gzip-compressed, ``NAME.gz``); ``groundtruth`` only if it is there."""
+    return {"barcodes": "Barcodes.dat", "landmarks": "Landmark_Groundtruth.dat",
+            "odometry": f"Robot{robot}_Odometry.dat",
+            "measurements": f"Robot{robot}_Measurement.dat",
+            "groundtruth": f"Robot{robot}_Groundtruth.dat"}
+
+
+def mrclam_inputs(data_dir: str | os.PathLike[str], robot: int) -> dict[str, Path | None]:
+    """Role -> the file :func:`read_mrclam_robot` reads for ``robot`` (of
+    :func:`mrclam_file_names`), None where there is none (the importer says why, or, for
+    ``groundtruth``, does without): what a recording's cache key hashes."""
+    return {role: file_read(data_dir, name) for role, name in mrclam_file_names(robot).items()}
 
 
 def _check_sorted(path: Path, time_s: np.ndarray, lines: np.ndarray) -> None:
@@ -106,8 +122,9 @@ def read_mrclam_robot(data_dir: str | os.PathLike[str], robot: int) -> MrclamRob
     if not d.is_dir():
         raise DatasetError(f"{d}: not a directory; pass the MRCLAM dataset folder")
     files: dict[str, str] = {}
+    names = mrclam_file_names(robot)
 
-    p = find_file(d, "Barcodes.dat")
+    p = find_file(d, names["barcodes"])
     files["barcodes"] = file_label(p)
     bc, bc_lines = read_table(p, [("subject", "int"), ("barcode", "int")])
     seen: dict[int, int] = {}
@@ -118,7 +135,7 @@ def read_mrclam_robot(data_dir: str | os.PathLike[str], robot: int) -> MrclamRob
                                 f"each barcode must name one subject")
         seen[b] = s
 
-    p = find_file(d, "Landmark_Groundtruth.dat")
+    p = find_file(d, names["landmarks"])
     files["landmarks"] = file_label(p)
     lm, lm_lines = read_table(p, [("subject", "int"), ("x", "float"), ("y", "float"),
                                   ("x_std", "float"), ("y_std", "float")])
@@ -136,7 +153,7 @@ def read_mrclam_robot(data_dir: str | os.PathLike[str], robot: int) -> MrclamRob
         raise dataset_error(p, int(lm_lines[k]), "subject",
                             f"subject {int(ids[k])} is a robot (1-5), not a landmark")
 
-    p = find_file(d, f"Robot{robot}_Odometry.dat")
+    p = find_file(d, names["odometry"])
     files["odometry"] = file_label(p)
     od, od_lines = read_table(p, [("time", "float"), ("v", "float"), ("w", "float")])
     if od["time"].size < 2:
@@ -145,7 +162,7 @@ def read_mrclam_robot(data_dir: str | os.PathLike[str], robot: int) -> MrclamRob
     _check_sorted(p, od["time"], od_lines)
     _check_within(p, od_lines, od, {"v": MAX_SPEED_MPS, "w": MAX_TURN_RATE_RADPS})
 
-    p = find_file(d, f"Robot{robot}_Measurement.dat")
+    p = find_file(d, names["measurements"])
     files["measurements"] = file_label(p)
     me, me_lines = read_table(p, [("time", "float"), ("barcode", "int"), ("range", "float"),
                                   ("bearing", "float")])
@@ -159,8 +176,8 @@ def read_mrclam_robot(data_dir: str | os.PathLike[str], robot: int) -> MrclamRob
     _check_within(p, me_lines, me, {"range": MAX_RANGE_M})
 
     gt = None
-    if has_file(d, f"Robot{robot}_Groundtruth.dat"):
-        p = find_file(d, f"Robot{robot}_Groundtruth.dat")
+    if has_file(d, names["groundtruth"]):
+        p = find_file(d, names["groundtruth"])
         files["groundtruth"] = file_label(p)
         g, g_lines = read_table(p, [("time", "float"), ("x", "float"), ("y", "float"),
                                     ("heading", "float")])
@@ -179,5 +196,6 @@ def read_mrclam_robot(data_dir: str | os.PathLike[str], robot: int) -> MrclamRob
         groundtruth=gt, files=files)
 
 
-__all__ = ["MrclamRobotData", "read_mrclam_robot", "ROBOT_SUBJECTS", "MAX_SPEED_MPS",
-           "MAX_TURN_RATE_RADPS", "MAX_RANGE_M", "MAX_COORDINATE_M"]
+__all__ = ["MrclamRobotData", "read_mrclam_robot", "mrclam_file_names", "mrclam_inputs",
+           "ROBOT_SUBJECTS", "MAX_SPEED_MPS", "MAX_TURN_RATE_RADPS", "MAX_RANGE_M",
+           "MAX_COORDINATE_M"]

@@ -56,6 +56,11 @@ _RECORDS = {
 }
 
 
+def victoria_inputs(path: str | os.PathLike[str]) -> dict[str, Path]:
+    """Role -> the file :func:`import_victoria` reads: what a recording's cache key hashes."""
+    return {"data": Path(path)}
+
+
 def import_victoria(path: str | os.PathLike[str], *,
                     bearing_sigma_rad: float | None = None) -> Stream:
     """Import GTSAM's ``victoria_park.txt`` (see the module docstring).
@@ -206,4 +211,4 @@ def import_victoria(path: str | os.PathLike[str], *,
     return Stream(header, tuple(steps), None)
 
 
-__all__ = ["import_victoria"]
+__all__ = ["import_victoria", "victoria_inputs"]

@@ -8,7 +8,9 @@ from __future__ import annotations
 
 import gzip
 import math
+import os
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 import pytest
@@ -25,6 +27,17 @@ EXACT = dict(command_delay_s=0.0, attach_window_s=0.0)
 def exact_repr(x: float) -> str:
     """A float written so that reading it back gives the same float."""
     return repr(float(x))
+
+
+def rewrite_keeping_size_and_times(path: Path, edit: Callable[[bytes], bytes]) -> None:
+    """``path``'s bytes edited, its size and modification time as they were (``touch -r``)."""
+    st = path.stat()
+    data = path.read_bytes()
+    new = edit(data)
+    assert new != data and len(new) == len(data)
+    path.write_bytes(new)
+    os.utime(path, ns=(st.st_atime_ns, st.st_mtime_ns))
+    assert (path.stat().st_size, path.stat().st_mtime_ns) == (st.st_size, st.st_mtime_ns)
 
 
 # --------------------------------------------------------------------------------------------

@@ -11,11 +11,10 @@ import json
 import os
 import time
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 import pytest
-from dataset_excerpts import LANDMARKS, make_mrclam
+from dataset_excerpts import LANDMARKS, make_mrclam, rewrite_keeping_size_and_times
 
 from bomgraph import file_digest
 from bomgraph.bench import Executor, execute_counted, strip_timings, task_key
@@ -23,17 +22,6 @@ from bomgraph.experiments import Arm, Task
 from bomgraph.sim import SimConfig, simulate
 from bomgraph.sources import DatasetSource, FileSource
 from bomgraph.stream_file import write_stream
-
-
-def rewrite_keeping_size_and_times(path: Path, edit: Callable[[bytes], bytes]) -> None:
-    """``path``'s bytes edited, its size and modification time as they were (``touch -r``)."""
-    st = path.stat()
-    data = path.read_bytes()
-    new = edit(data)
-    assert new != data and len(new) == len(data)
-    path.write_bytes(new)
-    os.utime(path, ns=(st.st_atime_ns, st.st_mtime_ns))
-    assert (path.stat().st_size, path.stat().st_mtime_ns) == (st.st_size, st.st_mtime_ns)
 
 
 def untimed(result: dict) -> str:
