@@ -79,7 +79,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     from .mapper import checkpoint_times
     from .std_streams import check_output_path, input_path, is_stdout, write_output
 
-    from .sweep import run_method
+    from .command_line_sweep import run_method
 
     label, method, options = run_method(args.method, parse_options(args.option))
     check_output_path(args.out, inputs=(args.stream,))
