@@ -28,15 +28,19 @@ def run_method(token: str, options: Mapping[str, Any]) -> tuple[str, str, dict[s
     Raises
     ------
     ConfigError
-        The preset is given twice, or ``TOKEN`` is not ``NAME`` or ``NAME@PRESET``.
+        The preset is given twice, or ``TOKEN`` is not ``NAME`` or ``NAME@PRESET`` (or names
+        an unknown method or preset). The message names ``--method`` and ``--option`` while a
+        command runs, else the parameters ``token`` and ``options`` (h111).
     """
     options = dict(options)
     if "@" not in token:
         preset = options.get("preset")
         return (f"{token}@{preset}" if isinstance(preset, str) else token), token, options
-    spec = parse_method(token, "--method")
+    spec = parse_method(token, option_named("--method", "token"))
     if "preset" in options:
-        raise ConfigError(f"--method {token} and --option preset=...: give the preset once")
+        given = option_named("--option preset=...", "options['preset']")
+        raise ConfigError(f"{option_named('--method', 'token', token)} and {given}: give the "
+                          f"preset once")
     return token, spec.method, {**spec.options, **options}
 
 
