@@ -245,7 +245,7 @@ class Sweep:
 def load_experiments(path_or_name: Any) -> Sweep:
     """The experiments of a sweep file (:mod:`bomgraph.sweep` reads and checks it), of a
     shipped one by name (``"paper"``: :func:`bomgraph.sweep.shipped`), or of a ready
-    :class:`bomgraph.sweep.SweepSpec` (e.g. :func:`bomgraph.sweep.command_line_spec`).
+    :class:`bomgraph.sweep.SweepSpec` (e.g. :func:`bomgraph.command_line_sweep.command_line_spec`).
 
     Raises
     ------
@@ -293,7 +293,7 @@ def compare_experiments(*, config: str | None = None, streams: Sequence[str] | N
         Options that do not go together (the message says which); a SweepError for a bad
         sweep file or stream list.
     """
-    from .sweep import command_line_spec
+    from .command_line_sweep import command_line_spec
 
     where = "compare_experiments()"
     if streams is not None:

@@ -20,10 +20,10 @@ from .estimate_file import read_estimate
 from .file_evaluation import check_stream_identity, method_label, poses_revised
 from .evaluate import score_estimate
 from .plots import results_figure, run_figure
-from .report import error_curves
 from .run_scoring import not_drawn_line, scores_left_out, self_scored
 from .stdio import check_output_path, read_regular_file, write_figure
 from .stream_file import read_stream
+from .summaries import error_curves
 
 FIGURE_SUFFIXES = (".png", ".pdf", ".svg")
 _LANDMARKS = "align_on='landmarks'"

@@ -6,7 +6,7 @@ MPE, the ratio of their mean MPEs with a bootstrap confidence interval that resa
 jointly, the median of the per-run ratios and differences, wins / ties / losses and the
 Wilcoxon signed-rank p-value of the differences.
 
-Input rows are those of :func:`bomgraph.report.final_by_run` (``experiment``, ``arm``,
+Input rows are those of :func:`bomgraph.summaries.final_by_run` (``experiment``, ``arm``,
 ``run``, ``ok``, ``mpe_m``); :func:`paired_comparison` is pure (no files, no printing) and
 :func:`format_paired` renders its rows for the command line.
 """
@@ -256,7 +256,7 @@ def paired_comparison(rows: Sequence[Mapping[str, Any]],
     Parameters
     ----------
     rows : sequence of mapping
-        One per (experiment, arm, run), as :func:`bomgraph.report.final_by_run` makes them:
+        One per (experiment, arm, run), as :func:`bomgraph.summaries.final_by_run` makes them:
         ``experiment``, ``arm``, ``run``, ``ok`` and the final ``mpe_m`` [m] (NaN or None:
         no score), and ``own_map`` for a run scored against its own final map (its
         ``mpe_m`` is then no score: :func:`pairable`): ``"itself"``, the reference's own
@@ -336,7 +336,7 @@ def references_for(experiments: Sequence[Experiment], label: str | None = None
 
 def pairable(by_run: Sequence[Mapping[str, Any]],
              experiments: Sequence[Experiment] = ()) -> list[dict[str, Any]]:
-    """``by_run`` (rows of :func:`bomgraph.report.final_by_run`) with each run that was
+    """``by_run`` (rows of :func:`bomgraph.summaries.final_by_run`) with each run that was
     scored against its own final map (a stream without truth, the arm run as the sweep's
     ``--reference``: ``scored_against`` ``"itself (...)"``) marked ``own_map`` (``"itself"``,
     :func:`bomgraph.run_scoring.self_scored`) and its MPE

@@ -158,7 +158,7 @@ def self_scored_arms(experiments: Sequence[Experiment]) -> set[tuple[str, str]]:
 
 def self_scored(result: Mapping[str, Any], alike: Collection[tuple[str, str]]) -> str:
     """How a run (a result of :func:`bomgraph.bench.run_task`, or a row of
-    :func:`bomgraph.report.final_by_run`) was scored against its own map, on a stream
+    :func:`bomgraph.summaries.final_by_run`) was scored against its own map, on a stream
     without truth: ``"itself"``, the run was the reference's (``scored_against``
     ``"itself (...)"``); ``"method"``, an arm of ``alike`` (:func:`self_scored_arms`: the
     reference's method and options at another checkpoint cadence) scored against the

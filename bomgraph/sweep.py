@@ -30,9 +30,10 @@ strings ``"NAME"`` / ``"NAME@PRESET"``. The paper's experiments are such a file,
 the package (``bomgraph/sweeps/paper.toml``, ``--config paper``).
 
 :func:`read_sweep` returns plain, checked data (:class:`SweepSpec`); a mistake raises
-:class:`SweepError` with one line naming the file and the key. :func:`command_line_spec`
-turns ``compare --streams ... --methods ...`` into the same data, so a sweep file and the
-equivalent command line run the same tasks with the same cache keys.
+:class:`SweepError` with one line naming the file and the key.
+:func:`bomgraph.command_line_sweep.command_line_spec` turns ``compare --streams ...
+--methods ...`` into the same data, so a sweep file and the equivalent command line run the
+same tasks with the same cache keys.
 """
 
 from __future__ import annotations
@@ -48,7 +49,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
-from .checks import echo, file_name, option_named
+from .checks import echo, file_name
 from .errors import BomgraphError, ConfigError
 from .sim import SimConfig
 
@@ -169,100 +170,6 @@ def parse_method(token: str, where: str = "methods") -> MethodSpec:
     if not name or (("@" in token) and not preset):
         raise SweepError(f"{where}: {token!r} is not NAME or NAME@PRESET")
     return _checked_method(MethodSpec(token, name, {"preset": preset} if preset else {}), where)
-
-
-def run_method(token: str, options: Mapping[str, Any]) -> tuple[str, str, dict[str, Any]]:
-    """``bomgraph run --method TOKEN --option KEY=VALUE...`` as (label, method, options):
-    ``NAME@PRESET`` (as ``compare --methods`` takes it) is ``NAME`` with ``preset=PRESET``,
-    and ``NAME`` with a ``preset`` option is labelled ``NAME@PRESET`` too, as ``evaluate``
-    names either estimate.
-
-    Raises
-    ------
-    ConfigError
-        The preset is given twice, or ``TOKEN`` is not ``NAME`` or ``NAME@PRESET``.
-    """
-    options = dict(options)
-    if "@" not in token:
-        preset = options.get("preset")
-        return (f"{token}@{preset}" if isinstance(preset, str) else token), token, options
-    spec = parse_method(token, "--method")
-    if "preset" in options:
-        raise ConfigError(f"--method {token} and --option preset=...: give the preset once")
-    return token, spec.method, {**spec.options, **options}
-
-
-def command_line_spec(streams: Sequence[str], methods: Sequence[str],
-                      options: Sequence[str] = (), *, reference: str | None = None,
-                      checkpoint_every: int = 10, name: str = "streams") -> SweepSpec:
-    """``compare --streams FILE... --methods NAME[@PRESET],... [--option NAME:KEY=VALUE]
-    [--reference NAME[@PRESET]]`` as the sweep it stands for (one experiment)."""
-    from .jsonio import parse_options
-
-    # options while a command runs, the parameters from Python (compare_experiments; h107)
-    st, ms, op = (option_named(f"--{o}", p) for o, p in (
-        ("streams", "streams"), ("methods", "methods"), ("option", "options")))
-
-    if not streams:
-        raise SweepError(f"{st}: give at least one stream file")
-    if not methods:
-        raise SweepError(f"{ms}: give at least one method (NAME or NAME@PRESET, "
-                         "comma-separated); `bomgraph methods` lists them")
-    arms = [parse_method(tok, option_named("--methods", "methods", tok)) for tok in methods]
-    ref = parse_method(reference, option_named("--reference", "reference")) if reference else None
-    extra: dict[str, dict[str, Any]] = {}
-    for text in options:
-        target, sep, pair = text.partition(":")
-        if not sep or "=" not in pair:
-            raise SweepError(f"{op} {text}: an option is NAME:KEY=VALUE (NAME: a method "
-                             f"of {ms})")
-        if not any(target in (a.label, a.method) for a in [*arms, *([ref] if ref else [])]):
-            raise SweepError(f"{op} {text}: {target!r} is not one of {ms} "
-                             f"{','.join(methods)}")
-        try:
-            given = parse_options([pair])
-        except ConfigError as exc:
-            raise SweepError(f"{op} {text}: {exc}") from None
-        key = next(iter(given))
-        if key in extra.get(target, {}):
-            raise SweepError(f"{op} {text}: {target}:{key} is given twice (one compare "
-                             f"runs one value per method; to compare values, give the "
-                             f"method once per value with a label of its own in a sweep "
-                             f"file)")
-        extra.setdefault(target, {}).update(given)
-
-    def with_options(m: MethodSpec) -> MethodSpec:
-        added: dict[str, Any] = {}
-        by = m.method  # the --option target that gives the preset (the user's spelling)
-        for target in (m.method, m.label):
-            added.update(extra.get(target, {}))
-            by = target if "preset" in extra.get(target, {}) else by
-        if not added:
-            return m
-        label = m.label
-        if "preset" in added:  # labelled as NAME@PRESET is, never by another preset
-            if "preset" in m.options:
-                raise SweepError(f"{op} {by}:preset=...: {ms} {m.label} names "
-                                 f"its preset already; give the preset once")
-            if isinstance(added["preset"], str):
-                label = f"{m.label}@{added['preset']}"
-        return _checked_method(dataclasses.replace(m, label=label, options={
-            **m.options, **added}), f"{op} {m.label}")
-
-    missing = [s for s in streams if not Path(s).is_file()]
-    if missing:
-        raise SweepError(f"{st}: no such file {missing[0]}")
-    problem = stream_header_problem(streams)
-    if problem:
-        raise SweepError(f"{st}: {problem}")
-    arms = [with_options(a) for a in arms]
-    _unique([a.label for a in arms], ms)
-    exp = ExperimentSpec(name, f"{len(streams)} stream(s), {len(arms)} method(s)",
-                         tuple(arms),
-                         streams=_named_streams([str(Path(s).resolve()) for s in streams]),
-                         reference=None if ref is None else with_options(ref),
-                         checkpoint_every=checkpoint_every)
-    return SweepSpec("<command line>", (exp,))
 
 
 def stream_header_problem(paths: Sequence[str]) -> str:
@@ -596,5 +503,5 @@ def _unique_or(reader: _Reader, labels: Sequence[str], key: str) -> None:
 
 
 __all__ = ["SweepError", "SweepSpec", "ExperimentSpec", "MethodSpec", "WorldSpec",
-           "read_sweep", "command_line_spec", "parse_method", "shipped", "resolve_path",
+           "read_sweep", "parse_method", "shipped", "resolve_path",
            "SHIPPED_DIR"]

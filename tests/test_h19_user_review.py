@@ -139,7 +139,7 @@ def test_an_option_given_twice_is_refused_not_the_last_kept(tmp_path: Path, caps
                  "tri_window=4", "--option", "tri_window=6", "--out", str(tmp_path / "e.est")]) == 2
     assert "option tri_window is given twice" in capsys.readouterr().err
     # one arm by its label, over the method-wide value: allowed, and each arm gets its own
-    from bomgraph.sweep import command_line_spec
+    from bomgraph.command_line_sweep import command_line_spec
 
     spec = command_line_spec([str(tmp_path / "s.jsonl")], ["stmds-cs", "stmds-cs@real"],
                              ["stmds-cs:min_degree=4", "stmds-cs@real:min_degree=5"])

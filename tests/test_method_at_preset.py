@@ -158,7 +158,8 @@ def test_compare_labels_a_preset_option_as_name_at_preset(stream: Path, tmp_path
     ``real`` under their ``@paper`` and ``@improved`` labels (two identical rows named as
     two settings); ``--option X:preset=P`` on ``--methods X`` and a sweep file's
     ``options = { preset = "P" }`` labelled the arm ``X`` (h53). Fails before."""
-    from bomgraph.sweep import SweepError, command_line_spec, read_sweep
+    from bomgraph.command_line_sweep import command_line_spec
+    from bomgraph.sweep import SweepError, read_sweep
 
     with pytest.raises(SweepError, match="give the preset once"):
         command_line_spec([str(stream)], ["stmds-smacof@paper", "stmds-smacof@improved"],
