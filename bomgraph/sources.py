@@ -118,6 +118,9 @@ class DatasetSource:
         if self.kind == "mrclam" and self.robot is None:
             raise ConfigError("DatasetSource('mrclam'): robot: an MRCLAM source needs a robot "
                               "number (1-5)")
+        if self.robot is not None:  # an int in the key (JSON): np.int64(1) is robot 1
+            object.__setattr__(self, "robot", integer(
+                self.robot, f"DatasetSource({self.kind!r}): robot", ConfigError, minimum=1))
         file_name(self.path, f"DatasetSource({self.kind!r}): path", ConfigError)
         if self.truth_path is not None:
             file_name(self.truth_path, f"DatasetSource({self.kind!r}): truth_path", ConfigError)

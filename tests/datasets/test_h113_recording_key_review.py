@@ -11,11 +11,12 @@ import sys
 import threading
 from pathlib import Path
 
+import numpy as np
 import pytest
 from dataset_excerpts import write_g2o
 
-from bomgraph.bench import Executor, execute_counted
-from bomgraph.errors import DatasetError
+from bomgraph.bench import Executor, execute_counted, task_key
+from bomgraph.errors import ConfigError, DatasetError
 from bomgraph.experiments import Arm, Task
 from bomgraph.sources import DatasetSource
 
@@ -81,3 +82,17 @@ def test_computing_a_recordings_key_does_not_import_scipy_optimize(tmp_path: Pat
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True)
     assert out.stdout.strip() == "False"
+
+
+def test_a_numpy_robot_number_is_keyed_as_an_int_and_a_bad_one_refused() -> None:
+    """``robot=np.int64(1)`` (``for r in np.arange(1, 6)``) is robot 1, which the importer
+    takes. Fails before: ``task_key`` raised ``TypeError: Object of type int64 is not JSON
+    serializable``, a traceback; ``robot=1.5`` was taken until the run failed."""
+    source = DatasetSource("mrclam", "m", robot=np.int64(1))
+    assert type(source.robot) is int and source == DatasetSource("mrclam", "m", robot=1)
+    assert task_key(Task("e", ARM, source)) == task_key(
+        Task("e", ARM, DatasetSource("mrclam", "m", robot=1)))
+    for bad in (1.5, "1", True, 0):
+        with pytest.raises(ConfigError, match=r"DatasetSource\('mrclam'\): robot must be an "
+                                              r"integer >= 1"):
+            DatasetSource("mrclam", "m", robot=bad)
