@@ -93,7 +93,7 @@ def _input_digest(path: str | os.PathLike[str]) -> str:
         st = os.stat(path)
     except OSError as exc:  # removed since it was found, a link broken since
         return f"absent ({exc.errno})"
-    if not stat.S_ISREG(st.st_mode):
+    if not stat.S_ISREG(st.st_mode):  # its bytes cannot be told: DatasetSource refuses it
         return f"not a regular file ({stat.S_IFMT(st.st_mode):o})"
     try:
         return file_sha256(path)
@@ -101,9 +101,25 @@ def _input_digest(path: str | os.PathLike[str]) -> str:
         return f"unreadable ({exc.errno}) {st.st_size} {st.st_mtime_ns}"
 
 
+#: What :func:`special_file` calls each kind of file that is neither regular nor a folder.
+_SPECIAL = ((stat.S_ISFIFO, "FIFO"), (stat.S_ISCHR, "character device"),
+            (stat.S_ISBLK, "block device"), (stat.S_ISSOCK, "socket"))
+
+
+def special_file(path: str | os.PathLike[str]) -> str | None:
+    """What ``path`` (links followed) is when it is a FIFO, device or socket, whose bytes
+    cannot be hashed without being consumed (or never end), so a key holds what it is, not
+    its bytes; None for a regular file, a folder, or nothing there."""
+    try:
+        mode = os.stat(path).st_mode
+    except (OSError, ValueError):
+        return None
+    return next((name for test, name in _SPECIAL if test(mode)), None)
+
+
 def forget() -> None:
     """Forget every kept digest (each file is hashed again)."""
     _KEPT.clear()
 
 
-__all__ = ["RACY_NS", "file_sha256", "inputs_sha256", "forget"]
+__all__ = ["RACY_NS", "file_sha256", "inputs_sha256", "special_file", "forget"]

@@ -16,8 +16,8 @@ from typing import Any, Callable
 import numpy as np
 
 from .checks import file_name, fraction, instance, integer, items
-from .errors import ConfigError, StreamFormatError
-from .file_digest import file_sha256, inputs_sha256
+from .errors import ConfigError, DatasetError, StreamFormatError
+from .file_digest import file_sha256, inputs_sha256, special_file
 from .sim import RunSpec, SimConfig, make_priors, simulate, simulate_run, with_priors
 from .stream import Stream
 
@@ -118,6 +118,9 @@ class DatasetSource:
         if self.kind == "mrclam" and self.robot is None:
             raise ConfigError("DatasetSource('mrclam'): robot: an MRCLAM source needs a robot "
                               "number (1-5)")
+        if self.robot is not None:  # an int in the key (JSON): np.int64(1) is robot 1
+            object.__setattr__(self, "robot", integer(
+                self.robot, f"DatasetSource({self.kind!r}): robot", ConfigError, minimum=1))
         file_name(self.path, f"DatasetSource({self.kind!r}): path", ConfigError)
         if self.truth_path is not None:
             file_name(self.truth_path, f"DatasetSource({self.kind!r}): truth_path", ConfigError)
@@ -143,8 +146,23 @@ class DatasetSource:
         return datasets.victoria_inputs(self.path)
 
     def stream(self) -> Stream:
+        """The imported recording (kept per process while its input files stay the same).
+
+        Raises
+        ------
+        DatasetError
+            As the importer does, and for an input that is a FIFO or a device (h113): its
+            key holds what it is, not the bytes it gives, so a result read through it would
+            be the cached result of other data later (and each run reads it again)."""
+        inputs = self.inputs()
+        for path in inputs.values():
+            what = None if path is None else special_file(path)
+            if what is not None:
+                raise DatasetError(f"{path}: a {what}, not a regular file; a recording's files "
+                                   f"are hashed for the cache key and read by each run: copy "
+                                   f"the data into a regular file")
         return _load_dataset(self.kind, self.path, self.robot, self.truth_path,
-                             inputs_sha256(self.inputs()))
+                             inputs_sha256(inputs))
 
     def key(self) -> dict[str, Any]:
         """The recording's kind and robot and the SHA-256 of the bytes of the files its

@@ -21,7 +21,6 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-from scipy.optimize import minimize, nnls
 
 from ..angles import angle_residual
 from ..errors import DatasetError
@@ -172,6 +171,10 @@ def fit_odometry_sigma(odoms: np.ndarray, errors: np.ndarray) -> tuple[np.ndarra
 
 def _fit_variance(reg2: np.ndarray, e2: np.ndarray) -> np.ndarray:
     """``(a, b, c) >= 0`` maximising the Gaussian likelihood with var = reg2 @ (a,b,c)^2."""
+    # here: scipy.optimize takes 0.3 s to import, and a recording's cache key imports this
+    # module (through the importers' declared inputs) without calibrating anything
+    from scipy.optimize import minimize, nnls
+
     floor2 = _MIN_SIGMA_FLOOR ** 2
     start, _ = nnls(reg2, e2)
     start = np.maximum(start, [floor2, 0.0, 0.0])
