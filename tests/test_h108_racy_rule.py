@@ -1,0 +1,83 @@
+"""h108: one rule for trusting a file's status, used by every reader that keeps what it read.
+
+``file_digest.file_sha256`` (a recording's or a stream's bytes) and ``plugins``' source
+digests and folder listings each had their own ``RACY_NS``, status and ``_aged``: the tests
+set each module's knob apart, and one could change without the other. The rule is now
+``file_digest.settled_status`` and ``cached_read``, and its one knob ``file_digest.RACY_NS``;
+the source files' readers moved to ``bomgraph.source_files``. A fake clock here (no timing),
+as tests/test_h105_review.py's: the status is the file's own.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import types
+from pathlib import Path
+from typing import Callable
+
+import pytest
+
+from bomgraph import file_digest, source_files
+
+USERS = ["file_sha256", "source digest", "source listing"]
+
+
+def _user(name: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+          ) -> tuple[Path, Callable[[], object], list[str]]:
+    """A file (or folder) read by the user ``name``, the call that reads it through the rule,
+    and the list of its reads so far (each read appends its path), with nothing kept yet."""
+    reads: list[str] = []
+    if name == "file_sha256":
+        path = tmp_path / "a.dat"
+        path.write_bytes(b"1 2 3\n")
+        digest = hashlib.file_digest
+        monkeypatch.setattr(file_digest.hashlib, "file_digest",
+                            lambda fh, alg: reads.append(fh.name) or digest(fh, alg))
+        monkeypatch.setattr(file_digest, "_KEPT", {})
+        return path, lambda: file_digest.file_sha256(path), reads
+    if name == "source digest":
+        path = tmp_path / "m.py"
+        path.write_bytes(b"x = 1\n")
+        read = source_files.read
+        monkeypatch.setattr(source_files, "read", lambda p: reads.append(str(p)) or read(p))
+        monkeypatch.setattr(source_files, "_DISK", {})
+        return path, lambda: source_files.disk_digest(path), reads
+    path = tmp_path / "pkg"
+    path.mkdir()
+    (path / "m.py").write_text("x = 1\n")
+    list_code = source_files._list_code
+    monkeypatch.setattr(source_files, "_list_code",
+                        lambda folder: reads.append(folder) or list_code(folder))
+    monkeypatch.setattr(source_files, "_FOLDERS", {})
+    monkeypatch.setattr(source_files, "_LISTED", {})
+    return path, lambda: source_files.py_files(str(path)), reads
+
+
+def _clock(monkeypatch: pytest.MonkeyPatch, at_ns: int) -> list[int]:
+    """The rule's clock, stopped at ``at_ns`` (set ``[0]`` to move it)."""
+    clock = [at_ns]
+    monkeypatch.setattr(file_digest, "time", types.SimpleNamespace(time_ns=lambda: clock[0]))
+    return clock
+
+
+def _changed_ns(path: Path) -> int:
+    st = path.stat()
+    return max(st.st_mtime_ns, st.st_ctime_ns)
+
+
+@pytest.mark.parametrize("user", USERS)
+@pytest.mark.parametrize(("racy_ns", "reads_of_two"), [(2_000_000_000, 2), (100_000_000, 1)],
+                         ids=["racy", "settled"])
+def test_one_knob_governs_every_reader_of_a_status(
+        user: str, racy_ns: int, reads_of_two: int, tmp_path: Path,
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """Half a second after the file's change, read twice: with ``file_digest.RACY_NS`` 2 s
+    its status is racy and it is read twice; with 0.1 s it is settled and read once. Fails
+    if a reader stops following the rule (keeps a racy status, or reads its own knob or
+    clock: its own 2 s on the real clock, a few ms after the write, reads twice)."""
+    path, call, reads = _user(user, tmp_path, monkeypatch)
+    _clock(monkeypatch, _changed_ns(path) + 500_000_000)
+    monkeypatch.setattr(file_digest, "RACY_NS", racy_ns)
+    first = call()
+    assert call() == first
+    assert len(reads) == reads_of_two, reads
