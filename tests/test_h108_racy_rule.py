@@ -6,11 +6,18 @@ set each module's knob apart, and one could change without the other. The rule i
 ``file_digest.settled_status`` and ``cached_read``, and its one knob ``file_digest.RACY_NS``;
 the source files' readers moved to ``bomgraph.source_files``. A fake clock here (no timing),
 as tests/test_h105_review.py's: the status is the file's own.
+
+A file whose mtime is ahead of the clock (``touch -d tomorrow``, an archive's or a machine's
+whose clock is ahead) was never settled, so it was read at every call: 50 digests of a 20 MB
+file took 26 ms with its mtime an hour back and 792 ms with it a day ahead (kept: True /
+False). A time far ahead of the clock is settled while it stays ahead.
 """
 
 from __future__ import annotations
 
 import hashlib
+import os
+import time
 import types
 from pathlib import Path
 from typing import Callable
@@ -81,3 +88,48 @@ def test_one_knob_governs_every_reader_of_a_status(
     first = call()
     assert call() == first
     assert len(reads) == reads_of_two, reads
+
+
+DAY_NS = 86_400 * 10**9
+
+
+@pytest.mark.parametrize("user", USERS)
+def test_a_time_far_ahead_of_the_clock_is_settled_while_it_stays_ahead(
+        user: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Fails before (read at every call). An mtime a day ahead: once the ctime is settled,
+    read once; within RACY_NS of the clock, racy (read at each call, nothing kept); past
+    it, what was kept while it was ahead does not count (a write in its tick can leave the
+    status as it was: the next test), and the status settled now is kept anew."""
+    path, call, reads = _user(user, tmp_path, monkeypatch)
+    ahead_ns = time.time_ns() + DAY_NS
+    os.utime(path, ns=(ahead_ns, ahead_ns))
+    clock = _clock(monkeypatch, path.stat().st_ctime_ns + 3_000_000_000)
+    first = call()
+    assert (call(), len(reads)) == (first, 1)
+    clock[0] = ahead_ns - 1_000_000_000
+    assert (call(), call(), len(reads)) == (first, first, 3)
+    clock[0] = ahead_ns + 3_000_000_000
+    assert (call(), call(), len(reads)) == (first, first, 4)
+
+
+@pytest.mark.parametrize("user", USERS[:2])
+def test_a_write_in_the_tick_of_a_time_set_ahead_is_seen_where_the_ctime_stays(
+        user: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A file system whose ctime does not follow writes (Linux's vfat driver long read it
+    from the file's creation time) tells a write by its mtime alone. A digest kept while the
+    mtime was a day ahead, then a same-size write when the clock is in that mtime's tick (the
+    file keeps its status): an hour later the new bytes are read. Fails with the rule judging
+    the ctime alone, or a time ahead settled without the status saying it was ahead."""
+    path, call, reads = _user(user, tmp_path, monkeypatch)
+    status = file_digest._status
+    monkeypatch.setattr(file_digest, "_status", lambda st: (*status(st)[:4], 0))
+    ahead_ns = time.time_ns() + DAY_NS
+    os.utime(path, ns=(ahead_ns, ahead_ns))
+    clock = _clock(monkeypatch, time.time_ns())
+    first = call()
+    assert (call(), len(reads)) == (first, 1)
+    data = path.read_bytes()
+    path.write_bytes(data.replace(b"1", b"7"))  # written in the tick of ahead_ns:
+    os.utime(path, ns=(ahead_ns, ahead_ns))     # its mtime is ahead_ns
+    clock[0] = ahead_ns + 3_600 * 10**9
+    assert call() != first
