@@ -66,11 +66,11 @@ def py_files(root: str) -> list[tuple[str, Path]]:
             if kind == "py":
                 out.append((prefix + name, Path(path)))
                 continue
-            follow = True if kind == "dir" else _new_folder(path, real)
+            follow, watched = (True, None) if kind == "dir" else _new_folder(path, real)
             if follow:
                 folders.append((prefix + name + "/", path))
             elif follow is None:   # watched: code written into it lists it
-                signatures.append((path, settled_status(path)))
+                signatures.append((path, watched))
     if all(sig is not None for _, sig in signatures):
         _LISTED[root] = (signatures, list(out))
     return out
@@ -104,19 +104,22 @@ def _list_code(folder: str) -> list[tuple[str, str, str]]:
     return out
 
 
-def _new_folder(path: str, real: set[str]) -> bool | None:
+def _new_folder(path: str, real: set[str]) -> tuple[bool | None, Status | None]:
     """Whether to list the folder that the link ``path`` points to: a folder of Python code
     (a ``.py`` file at its top, not a linked data set), not one of ``real`` (those listed)
     nor one above them (a loop); its real path is then added to ``real``. None for a
-    folder passed over for holding no code (or unreadable): its status is to be watched,
-    as the first module written into it (or its permissions given) lists it."""
+    folder passed over for holding no code (or unreadable), with the status to watch, as
+    the first module written into it (or its permissions given) lists it: the one taken
+    before the listing that found no code (one taken after it could hold a module written
+    in between, and be kept with a listing without it)."""
     target = os.path.realpath(path)
     if any(target == r or r.startswith(target.rstrip(os.sep) + os.sep) for r in real):
-        return False
-    if not any(kind == "py" for _, _, kind in _code_entries(path)[1]):
-        return None
+        return False, None
+    sig, entries = _code_entries(path)
+    if not any(kind == "py" for _, _, kind in entries):
+        return None, sig
     real.add(target)
-    return True
+    return True, None
 
 
 def read(path: Path) -> bytes:

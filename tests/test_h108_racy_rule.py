@@ -133,3 +133,34 @@ def test_a_write_in_the_tick_of_a_time_set_ahead_is_seen_where_the_ctime_stays(
     os.utime(path, ns=(ahead_ns, ahead_ns))     # its mtime is ahead_ns
     clock[0] = ahead_ns + 3_600 * 10**9
     assert call() != first
+
+
+def test_code_written_into_a_linked_folder_during_its_listing_is_listed_next_time(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Fails before. A link to a folder without code is passed over and its status watched
+    (h57: the first module written into it lists it). That status was taken after the
+    listing: a module written in between, and the status then settled (the listing "takes"
+    3 s here, a fake clock), was kept with a listing without it, so it was never listed."""
+    root = tmp_path / "pkg"
+    root.mkdir()
+    (root / "m.py").write_text("x = 1\n")
+    (tmp_path / "data").mkdir()
+    (tmp_path / "data" / "x.csv").write_text("1\n")
+    os.symlink(tmp_path / "data", root / "data")
+    monkeypatch.setattr(source_files, "_FOLDERS", {})
+    monkeypatch.setattr(source_files, "_LISTED", {})
+    clock = _clock(monkeypatch, max(_changed_ns(root), _changed_ns(tmp_path / "data"))
+                   + 3_000_000_000)
+    scandir = os.scandir
+
+    def slow_scandir(folder: str):  # noqa: ANN202
+        entries = list(scandir(folder))
+        if folder == str(root / "data"):
+            (tmp_path / "data" / "new.py").write_text("y = 2\n")
+            clock[0] = _changed_ns(tmp_path / "data") + 3_000_000_000
+        return iter(entries)
+
+    monkeypatch.setattr(source_files.os, "scandir", slow_scandir)
+    assert [rel for rel, _ in source_files.py_files(str(root))] == ["m.py"]
+    monkeypatch.setattr(source_files.os, "scandir", scandir)
+    assert sorted(rel for rel, _ in source_files.py_files(str(root))) == ["data/new.py", "m.py"]
