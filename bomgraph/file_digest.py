@@ -8,10 +8,11 @@ not.
 Each file is hashed once a process while its status stays the same: a sweep keys each of its
 tasks (and a worker each task it runs), and MRCLAM6's 17 files (26 MB) took 18 ms to hash
 against 0.4 ms to stat. The status is the device, inode, size, modification time and change
-time (``ctime``, which any write sets and no tool puts back); a file whose status changed less
-than :data:`RACY_NS` before it was hashed is hashed again the next time, as git's "racy" index
-entries and :func:`bomgraph.plugins._disk_digest` (a file system with coarse timestamps keeps
-the status through a same-size write within one tick of its clock).
+time (``ctime``, which any write sets and no tool puts back). Which status can stand for the
+bytes read after it (:func:`settled_status`, the "racy" rule of git's index) is decided here
+once, for every reader that keeps what it read while the status stays (:func:`cached_read`):
+this module's digests, and the listings and digests of a plugin's source files
+(:mod:`bomgraph.source_files`).
 """
 
 from __future__ import annotations
@@ -21,31 +22,83 @@ import os
 import stat
 import time
 from pathlib import Path
-from typing import Mapping
+from typing import Callable, Mapping, TypeVar
 
-#: A file whose status changed less than this long [ns] before it was hashed is hashed again
-#: the next time (2 s: FAT's timestamps; ext3 and HFS+ keep a second).
+#: A status whose modification or change time is within this long [ns] of the clock, behind
+#: it or ahead, is not trusted: the file is read again the next time (2 s: FAT's timestamps;
+#: ext3 and HFS+ keep a second). The one knob of the rule (:func:`settled_status`).
 RACY_NS = 2_000_000_000
 
 #: At most this many files' digests are kept (a recording of a few hundred files included).
 MAX_KEPT = 4096
 
-#: Per file (its absolute path): its :func:`_status` and the SHA-256 of the bytes read after it.
-_KEPT: dict[str, tuple[tuple[int, ...], str]] = {}
+#: A file's device, inode, size, modification and change time, and whether each time is
+#: ahead of the clock (:func:`settled_status`).
+Status = tuple[int, ...]
+
+#: Per file (its absolute path): its :func:`settled_status` and the SHA-256 of the bytes read
+#: after it.
+_KEPT: dict[str, tuple[Status, str]] = {}
+
+K = TypeVar("K", bound="str | os.PathLike[str]")
+V = TypeVar("V")
 
 
-def _status(st: os.stat_result) -> tuple[int, ...]:
+def settled_status(path: str | os.PathLike[str]) -> Status | None:
+    """The status of the file or folder at ``path`` (links followed: device, inode, size,
+    modification and change time, and whether each time is ahead of the clock) if it can
+    stand for the bytes or entries read after it; None when it cannot be taken, and on
+    Windows (``st_ctime`` is the creation time there, which a write does not change).
+
+    A write gives the file its clock's time, and a file system with coarse timestamps keeps
+    the status through a same-size write within one tick. So each time must be over
+    :data:`RACY_NS` behind the clock read before the status (a write since has a later time),
+    or over :data:`RACY_NS` ahead of the clock read after it (a write before it has an
+    earlier time): an mtime set ahead (``touch -d tomorrow``, an archive's, or a machine's
+    whose clock is ahead) was read again at every call. A time ahead counts only while it
+    stays ahead: the status says which times are, so once the clock has passed one, what was
+    kept under it no longer matches (a write in its tick may have kept the rest). The ctime
+    alone would do where every write sets it; the mtime is checked too for a file system
+    whose ctime does not follow writes (Linux's vfat driver long read it from the creation
+    time). The clock is read before the status, not after the read: a read that took
+    seconds (a large file on a network disk) made a status taken within a tick of a write
+    look settled (h105, h107)."""
+    if os.name == "nt":
+        return None
+    before_ns = time.time_ns()
+    try:
+        status = _status(os.stat(path))
+    except OSError:
+        return None
+    after_ns = time.time_ns()
+    times = status[3:5]
+    ahead = tuple(int(t - after_ns > RACY_NS) for t in times)
+    if all(up or before_ns - t > RACY_NS for t, up in zip(times, ahead)):
+        return status + ahead
+    return None
+
+
+def _status(st: os.stat_result) -> Status:
     return (st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns, st.st_ctime_ns)
 
 
-def _aged(status: tuple[int, ...], now_ns: int) -> bool:
-    """Whether ``status`` had last changed over :data:`RACY_NS` before ``now_ns`` (mtime and
-    ctime), the time it was taken at, so that it can stand for the bytes read after it: never
-    on Windows, where ``st_ctime`` is the creation time, which a write does not change. The
-    time before the status, not after the read (h105): a read that took seconds (a large file
-    on a network disk) made a status taken within a tick of a write look aged, and a write in
-    that tick during the read kept its status and a digest of neither content."""
-    return os.name != "nt" and now_ns - max(status[3], status[4]) > RACY_NS
+def cached_read(kept: dict[K, tuple[Status, V]], path: K, read: Callable[[], V],
+                most: int | None = None) -> tuple[Status | None, V]:
+    """What ``read()`` returns for the file or folder at ``path`` (its bytes' digest, its
+    entries), given again from ``kept`` while its :func:`settled_status` stays the same, and
+    that status (None: not settled; nothing is then kept). The status is taken before the
+    read, so a write during the read changes it. ``most``: ``kept`` is emptied before it
+    would hold more."""
+    status = settled_status(path)
+    seen = kept.get(path)
+    if status is not None and seen is not None and seen[0] == status:
+        return status, seen[1]
+    value = read()
+    if status is not None:
+        if most is not None and len(kept) >= most:
+            kept.clear()
+        kept[path] = (status, value)
+    return status, value
 
 
 def file_sha256(path: str | os.PathLike[str]) -> str:
@@ -57,18 +110,12 @@ def file_sha256(path: str | os.PathLike[str]) -> str:
         The file cannot be opened or read.
     """
     name = os.path.abspath(path)  # a link's target is in the status (its device and inode)
-    now_ns = time.time_ns()  # before the status (_aged)
-    status = _status(os.stat(name))  # before the read: a write after it changes it
-    kept = _KEPT.get(name)
-    if kept is not None and kept[0] == status:
-        return kept[1]
-    with open(name, "rb") as fh:
-        digest = hashlib.file_digest(fh, "sha256").hexdigest()
-    if _aged(status, now_ns):
-        if len(_KEPT) >= MAX_KEPT:
-            _KEPT.clear()
-        _KEPT[name] = (status, digest)
-    return digest
+
+    def read() -> str:
+        with open(name, "rb") as fh:
+            return hashlib.file_digest(fh, "sha256").hexdigest()
+
+    return cached_read(_KEPT, name, read, most=MAX_KEPT)[1]
 
 
 def inputs_sha256(inputs: Mapping[str, str | os.PathLike[str] | None]) -> str:
@@ -122,4 +169,5 @@ def forget() -> None:
     _KEPT.clear()
 
 
-__all__ = ["RACY_NS", "file_sha256", "inputs_sha256", "special_file", "forget"]
+__all__ = ["RACY_NS", "settled_status", "cached_read", "file_sha256", "inputs_sha256",
+           "special_file", "forget"]

@@ -16,9 +16,11 @@ entry points (not the memory of the process that started the sweep). The factory
 libraries that compute their numbers; :func:`source_fingerprint` hashes a method's code (the
 ``.py`` files of the top-level package of its module that the module imports, or the whole
 package when one of them imports by name: :mod:`bomgraph.import_closure`; or the module's one
-file) with the distribution's version. The runner puts both in the cache key, so editing a plugin (or
-upgrading numpy, scipy, gtsam or filterpy) re-runs it. This module imports nothing from
-bomgraph but the errors (the registry in :mod:`bomgraph.mapper` builds on it).
+file) with the distribution's version. The runner puts both in the cache key, so editing a
+plugin (or upgrading numpy, scipy, gtsam or filterpy) re-runs it. The files are listed and
+read by :mod:`bomgraph.source_files`; this module adds what a loaded module runs. It imports
+nothing else from bomgraph but the errors (the registry in :mod:`bomgraph.mapper` builds on
+it).
 """
 
 from __future__ import annotations
@@ -28,9 +30,7 @@ import hashlib
 import importlib
 import importlib.util
 import logging
-import os
 import sys
-import time
 import traceback
 import types
 from dataclasses import dataclass
@@ -38,6 +38,7 @@ from importlib import metadata
 from pathlib import Path
 from typing import Any
 
+from . import source_files
 from .errors import UnknownMethodError
 
 #: The entry-point group a plugin package registers its methods in.
@@ -103,9 +104,7 @@ def refresh() -> None:
     source_fingerprint.cache_clear()
     _LOADED.clear()
     _RECORDED.clear()
-    _DISK.clear()
-    _LISTED.clear()
-    _FOLDERS.clear()
+    source_files.forget()
     from .import_closure import _PARSED
     from .loaded_code import _FROM
     from .loaded_values import forget
@@ -178,110 +177,6 @@ def _reraise_interrupt(exc: BaseException) -> None:
         seen = seen.__cause__ or seen.__context__
 
 
-def _source_files(module_name: str) -> tuple[list[tuple[str, Path]], bool]:
-    """The ``.py`` files of the top-level package of ``module_name`` (or its one file), each
-    with its name relative to the package folder, in a fixed order; and whether the package
-    is spread over several folders."""
-    top = module_name.split(".")[0]
-    mod = sys.modules.get(top) or importlib.import_module(top)
-    out: list[tuple[str, Path]] = []
-    roots = sorted(getattr(mod, "__path__", []) or [])
-    for root in roots:
-        out += _py_files(root)
-    if not out and getattr(mod, "__file__", None):
-        return [(Path(mod.__file__).name, Path(mod.__file__))], False
-    return sorted(out), len(roots) > 1
-
-
-def _py_files(root: str) -> list[tuple[str, Path]]:
-    """The ``.py`` files under ``root`` (links to nothing left out: an editor's lock
-    ``.#m.py``), each with its path relative to ``root`` (as ``relative_to(root)
-    .as_posix()``); a link to a folder of code is followed (a helper folder linked into
-    the package is imported through it), unless to a folder already listed or above. Kept
-    while no folder's status changed (a file added, removed or renamed in it) since the last
-    listing, within :data:`RACY_NS` too: a worker lists a plugin's package before and after
-    each run; then only the folders whose status changed are listed again
-    (:func:`_code_entries`)."""
-    seen = _LISTED.get(root)
-    if seen is not None and all(_stat_signature(Path(d)) == sig for d, sig in seen[0]):
-        return list(seen[1])
-    out: list[tuple[str, Path]] = []
-    folders, signatures, now_ns = [("", root)], [], time.time_ns()  # before any status
-    real = {os.path.realpath(root)}
-    while folders:
-        prefix, folder = folders.pop()
-        sig, entries = _code_entries(folder)
-        signatures.append((folder, sig))
-        for name, path, kind in entries:
-            if kind == "py":
-                out.append((prefix + name, Path(path)))
-                continue
-            follow = True if kind == "dir" else _new_folder(path, real)
-            if follow:
-                folders.append((prefix + name + "/", path))
-            elif follow is None:   # watched: code written into it lists it
-                signatures.append((path, _stat_signature(Path(path))))
-    if all(sig is not None and _aged(sig, now_ns) for _, sig in signatures):
-        _LISTED[root] = (signatures, list(out))
-    return out
-
-
-def _code_entries(folder: str) -> tuple[tuple[int, ...] | None, list[tuple[str, str, str]]]:
-    """The :func:`_stat_signature` of ``folder`` and, as listed after it, its entries that
-    can be code: ``.py`` files (``"py"``), folders (``"dir"``) and links to folders
-    (``"link"``), each as (name, path, kind); none when it cannot be listed (gone, or
-    unreadable, as rglob skips it). Listed again only when its status changed or was within
-    :data:`RACY_NS` of the listing: a data set linked into a package (100,000 files in 100
-    folders, one being written) was listed whole at each check, 98 ms, where now the
-    folder written is (h64)."""
-    now_ns = time.time_ns()  # before the status (_aged)
-    sig = _stat_signature(Path(folder))  # before the listing: a change after it moves it
-    seen = _FOLDERS.get(folder)
-    if sig is not None and seen is not None and seen[0] == sig:
-        return sig, seen[1]
-    out: list[tuple[str, str, str]] = []
-    try:
-        entries = list(os.scandir(folder))
-    except OSError:
-        return sig, out
-    fold = os.name == "nt"  # .PY is a module there
-    for e in entries:  # a data file costs a name's test and its type, read with the name
-        try:
-            if (e.name.lower() if fold else e.name).endswith(".py") and e.is_file():
-                out.append((e.name, e.path, "py"))
-            elif e.is_dir():
-                out.append((e.name, e.path, "link" if e.is_symlink() else "dir"))
-        except OSError:
-            continue
-    if sig is not None and _aged(sig, now_ns):
-        _FOLDERS[folder] = (sig, out)
-    return sig, out
-
-
-def _new_folder(path: str, real: set[str]) -> bool | None:
-    """Whether to list the folder that the link ``path`` points to: a folder of Python code
-    (a ``.py`` file at its top, not a linked data set), not one of ``real`` (those listed)
-    nor one above them (a loop); its real path is then added to ``real``. None for a
-    folder passed over for holding no code (or unreadable): its status is to be watched,
-    as the first module written into it (or its permissions given) lists it."""
-    target = os.path.realpath(path)
-    if any(target == r or r.startswith(target.rstrip(os.sep) + os.sep) for r in real):
-        return False
-    if not any(kind == "py" for _, _, kind in _code_entries(path)[1]):
-        return None
-    real.add(target)
-    return True
-
-
-#: Per folder: :func:`_code_entries`.
-_FOLDERS: dict[str, tuple[tuple[int, ...], list[tuple[str, str, str]]]] = {}
-
-
-#: Per package folder: the :func:`_stat_signature` of each of its folders and its listing.
-_LISTED: dict[str, tuple[list[tuple[str, tuple[int, ...] | None]],
-                         list[tuple[str, Path]]]] = {}
-
-
 #: The libraries whose versions :func:`code_fingerprint` holds: they compute the numbers, and
 #: another version of one can give other bits for the same bomgraph code.
 NUMERIC_LIBRARIES = ("numpy", "scipy", "gtsam", "filterpy")
@@ -298,9 +193,9 @@ def code_fingerprint() -> str:
     h = hashlib.sha256()
     for root in _code_roots():
         # as rglob's order (the paper's keys kept), no editor's lock (a link to nothing)
-        for rel, f in sorted(_py_files(str(root)), key=lambda rf: rf[1]):
+        for rel, f in sorted(source_files.py_files(str(root)), key=lambda rf: rf[1]):
             h.update(rel.encode())
-            h.update(_read(f))
+            h.update(source_files.read(f))
     for lib in NUMERIC_LIBRARIES:
         try:
             h.update(f"{lib}=={metadata.version(lib)};".encode())
@@ -319,8 +214,8 @@ def _code_roots() -> list[Path]:
 
 
 def _code_state() -> list[tuple[str, bytes]]:
-    return [(f"{root}/{rel}", _disk_digest(f)) for root in _code_roots()
-            for rel, f in sorted(_py_files(str(root)))]
+    return [(f"{root}/{rel}", source_files.disk_digest(f)) for root in _code_roots()
+            for rel, f in sorted(source_files.py_files(str(root)))]
 
 
 #: :func:`_code_state` when :func:`code_fingerprint` hashed the sources.
@@ -377,7 +272,7 @@ def _fingerprint(target: str, version: str | None, loaded: bool,
 
     module = target.partition(":")[0]
     try:
-        files, several_roots = _source_files(module)
+        files, several_roots = source_files.package_files(module)
     except ImportError as exc:
         _reraise_interrupt(exc)
         raise UnknownMethodError(f"cannot read the source of {target!r}: {exc}") from exc
@@ -387,7 +282,7 @@ def _fingerprint(target: str, version: str | None, loaded: bool,
                                  f"{type(exc).__name__}: {exc}") from exc
     if not files:
         return None
-    disk = {f: _disk_digest(f) for _, f in files}
+    disk = {f: source_files.disk_digest(f) for _, f in files}
     # the files importing the module can run (not another method's module of the package)
     files = closure(module, files, disk, several_roots=several_roots)
     top = module.split(".")[0]
@@ -424,7 +319,7 @@ def _stale_imports(module: types.ModuleType, path: Path, digest: bytes, top: str
     from .loaded_code import stale_imports
 
     try:
-        return bool(stale_imports(module, lambda: _read(path), digest, top))
+        return bool(stale_imports(module, lambda: source_files.read(path), digest, top))
     except Exception:  # a loaded object whose comparison raises: taken as the file's
         return False
 
@@ -439,11 +334,11 @@ def _file_digest(path: Path, module: object | None, check: bool = True) -> bytes
     if state is not None and seen is not None and _same_state(seen[1], state):
         return seen[0]
     if state is None:
-        return _disk_digest(path)
+        return source_files.disk_digest(path)
     from .loaded_code import runs_file
 
-    data = _read(path)
-    digest = _digest(data)
+    data = source_files.read(path)
+    digest = source_files.digest(data)
     if seen is not None and digest != seen[0] and not _reloaded(seen[1], state, data):
         # only globals its own code rebinds changed (a lazy cache: ``global _MODEL``), not a
         # reload: it runs the code first hashed, not the file edited since (whose changes to
@@ -455,59 +350,6 @@ def _file_digest(path: Path, module: object | None, check: bool = True) -> bytes
     if check and data and not runs_file(module, data):  # type: ignore[arg-type]
         digest = hashlib.sha256(b"loaded code is not the file's\0" + digest).digest()
     _LOADED[path] = (digest, state)
-    return digest
-
-
-def _read(path: Path) -> bytes:
-    try:
-        return path.read_bytes()
-    except OSError:  # a file removed while we read: hash its name only
-        return b""
-
-
-def _digest(data: bytes) -> bytes:
-    return hashlib.sha256(f"{len(data)}\0".encode() + data).digest()
-
-
-#: Per source file: its :func:`_stat_signature` and the digest of the contents read after it.
-_DISK: dict[Path, tuple[tuple[int, ...], bytes]] = {}
-
-#: A file whose status changed less than this long [ns] before it was read is read again the
-#: next time: a write within the same tick of the file system's clock keeps the signature.
-RACY_NS = 2_000_000_000
-
-
-def _stat_signature(path: Path) -> tuple[int, ...] | None:
-    try:
-        st = path.stat()
-    except OSError:
-        return None
-    return (st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns, st.st_ctime_ns)
-
-
-def _aged(sig: tuple[int, ...], now_ns: int) -> bool:
-    """Whether a :func:`_stat_signature` was older than :data:`RACY_NS` (mtime and ctime) at
-    ``now_ns``, a time read before it was taken (not after the read: a slow read made a racy
-    one look aged, h107), so that it can stand for the contents read after it: never on
-    Windows, where ``st_ctime`` is the creation time, which a write does not change."""
-    return os.name != "nt" and now_ns - max(sig[3], sig[4]) > RACY_NS
-
-
-def _disk_digest(path: Path) -> bytes:
-    """The digest of a source file's contents as they are now. Read again only when its
-    status changed since it was last read (a worker checks a plugin's package before and
-    after each run: a package of 300 files took 7 ms a check): any write changes the
-    ctime, which no tool sets (an edit that keeps the size and puts the mtime back, an
-    archive's fixed mtimes), and a file changed within :data:`RACY_NS` of its read is read
-    again (as git's "racy" index entries), so an edit is seen at the next check."""
-    now_ns = time.time_ns()  # before the status (_aged)
-    sig = _stat_signature(path)  # before the read: an edit after it changes it
-    seen = _DISK.get(path)
-    if sig is not None and seen is not None and seen[0] == sig:
-        return seen[1]
-    digest = _digest(_read(path))
-    if sig is not None and _aged(sig, now_ns):
-        _DISK[path] = (sig, digest)
     return digest
 
 

@@ -9,7 +9,7 @@ from typing import Iterator
 
 import pytest
 
-from bomgraph import plugins
+from bomgraph import file_digest, plugins
 
 
 def write(path: Path, text: str) -> None:
@@ -20,12 +20,13 @@ def write(path: Path, text: str) -> None:
 
 def plugin_site(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Iterator[Path]:
     """``tmp_path/site``, put first on ``sys.path``, with the plugins' caches forgotten before
-    and after and their files' status trusted at once (``RACY_NS`` 0: the tests sleep past
-    the file system's clock tick); the modules imported from it are forgotten after."""
+    and after and their files' status trusted at once (``file_digest.RACY_NS`` 0: the tests
+    sleep past the file system's clock tick); the modules imported from it are forgotten
+    after."""
     root = tmp_path / "site"
     root.mkdir()
     monkeypatch.syspath_prepend(str(root))
-    monkeypatch.setattr(plugins, "RACY_NS", 0)
+    monkeypatch.setattr(file_digest, "RACY_NS", 0)
     plugins.refresh()
     yield root
     plugins.refresh()

@@ -2,10 +2,11 @@
 
 - ``bomgraph --help > /dev/full`` exited 0 and said nothing (argparse ignores an error writing
   its help), where ``bomgraph methods > /dev/full`` says the error in one line and exits 2.
-- ``plugins._disk_digest`` and ``_code_entries`` judged a status racy against the clock after
-  the read (or the listing), as ``file_digest`` did before c675047: a read taking seconds kept
-  a digest (a listing) whose status a write in the same tick, during it, leaves unchanged. A
-  fake clock here (no timing), as tests/test_h105_review.py's: the read "takes" 3 s.
+- ``plugins._disk_digest`` and ``_code_entries`` (now ``source_files``'s, with the rule in
+  ``file_digest``) judged a status racy against the clock after the read (or the listing), as
+  ``file_digest`` did before c675047: a read taking seconds kept a digest (a listing) whose
+  status a write in the same tick, during it, leaves unchanged. A fake clock here (no
+  timing), as tests/test_h105_review.py's: the read "takes" 3 s.
 - Library refusals that named command-line options (``Executor.choose(scheduler="")``:
   "--scheduler is empty") name the parameters from Python, the options while a command runs
   (``checks.option_named``, as 053e51f).
@@ -26,7 +27,8 @@ from typing import Callable
 
 import pytest
 
-from bomgraph import bench, cluster, experiments, jsonio, plugins, stdio
+from bomgraph import (bench, cluster, experiments, file_digest, jsonio, source_files,
+                      stdio)
 from bomgraph.checks import command_line
 from bomgraph.errors import ConfigError
 
@@ -61,11 +63,11 @@ def test_help_into_a_closed_pipe_or_closed_stdout_stays_quiet(tmp_path: Path) ->
 
 
 def _fake_clock(monkeypatch: pytest.MonkeyPatch, path: Path) -> list[int]:
-    """A clock 0.5 s after ``path``'s last change, for ``plugins``."""
+    """A clock 0.5 s after ``path``'s last change, for ``file_digest`` (the rule)."""
     st = path.stat()
     clock = [max(st.st_mtime_ns, st.st_ctime_ns) + 500_000_000]
-    monkeypatch.setattr(plugins, "time", types.SimpleNamespace(time_ns=lambda: clock[0]))
-    monkeypatch.setattr(plugins, "RACY_NS", 2_000_000_000)
+    monkeypatch.setattr(file_digest, "time", types.SimpleNamespace(time_ns=lambda: clock[0]))
+    monkeypatch.setattr(file_digest, "RACY_NS", 2_000_000_000)
     return clock
 
 
@@ -76,18 +78,18 @@ def test_a_source_digest_is_not_kept_when_its_status_was_racy_when_taken(
     path = tmp_path / "m.py"
     path.write_bytes(b"x = 1\n")
     clock = _fake_clock(monkeypatch, path)
-    read = plugins._read
+    read = source_files.read
 
     def slow_read(p: Path) -> bytes:
         clock[0] += 3_000_000_000
         return read(p)
 
-    monkeypatch.setattr(plugins, "_read", slow_read)
-    monkeypatch.setattr(plugins, "_DISK", {})
-    assert plugins._disk_digest(path) == plugins._digest(b"x = 1\n")
-    assert path not in plugins._DISK
-    plugins._disk_digest(path)  # now 3.5 s after its change: aged, kept
-    assert path in plugins._DISK
+    monkeypatch.setattr(source_files, "read", slow_read)
+    monkeypatch.setattr(source_files, "_DISK", {})
+    assert source_files.disk_digest(path) == source_files.digest(b"x = 1\n")
+    assert path not in source_files._DISK
+    source_files.disk_digest(path)  # now 3.5 s after its change: aged, kept
+    assert path in source_files._DISK
 
 
 def test_a_folder_listing_is_not_kept_when_its_status_was_racy_when_taken(
@@ -103,13 +105,13 @@ def test_a_folder_listing_is_not_kept_when_its_status_was_racy_when_taken(
         clock[0] += 3_000_000_000
         return scandir(p)
 
-    monkeypatch.setattr(plugins.os, "scandir", slow_scandir)
-    monkeypatch.setattr(plugins, "_FOLDERS", {})
-    monkeypatch.setattr(plugins, "_LISTED", {})
-    assert [rel for rel, _ in plugins._py_files(folder)] == ["m.py"]
-    assert folder not in plugins._FOLDERS and folder not in plugins._LISTED
-    assert [rel for rel, _ in plugins._py_files(folder)] == ["m.py"]  # 3.5 s after: aged
-    assert folder in plugins._FOLDERS and folder in plugins._LISTED
+    monkeypatch.setattr(source_files.os, "scandir", slow_scandir)
+    monkeypatch.setattr(source_files, "_FOLDERS", {})
+    monkeypatch.setattr(source_files, "_LISTED", {})
+    assert [rel for rel, _ in source_files.py_files(folder)] == ["m.py"]
+    assert folder not in source_files._FOLDERS and folder not in source_files._LISTED
+    assert [rel for rel, _ in source_files.py_files(folder)] == ["m.py"]  # 3.5 s after: aged
+    assert folder in source_files._FOLDERS and folder in source_files._LISTED
 
 
 LIBRARY_REFUSALS = [

@@ -26,7 +26,7 @@ import numpy as np
 import pytest
 from _depth_mapper import depth_mapper
 
-from bomgraph import mapper, plugins
+from bomgraph import file_digest, mapper, plugins
 from bomgraph.bench import Executor, execute
 from bomgraph.experiments import Arm, Experiment, FileSource
 from bomgraph.sim import SimConfig, simulate
@@ -36,7 +36,8 @@ from bomgraph.stream_file import write_stream
 @pytest.fixture
 def package(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
     """A plugin package of a few modules in two folders, importable, its files' status
-    trusted at once (``RACY_NS`` 0: the tests sleep past the file system's clock tick)."""
+    trusted at once (``file_digest.RACY_NS`` 0: the tests sleep past the file system's clock
+    tick)."""
     pkg = tmp_path / "site" / "h53pkg"
     (pkg / "sub").mkdir(parents=True)
     (pkg / "__init__.py").write_text("")
@@ -48,7 +49,7 @@ def package(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
     (pkg / "m0.py").write_text("from .sub import s0, s1, s2, s3, s4, s9, new\n"
                                "from .sub.deeper import d\nX = 0\n")
     monkeypatch.syspath_prepend(str(pkg.parent))
-    monkeypatch.setattr(plugins, "RACY_NS", 0, raising=False)
+    monkeypatch.setattr(file_digest, "RACY_NS", 0)
     plugins.refresh()
     yield pkg
     plugins.refresh()

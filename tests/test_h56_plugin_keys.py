@@ -29,7 +29,7 @@ import pytest
 from _depth_mapper import depth_mapper
 from _plugin_site import write
 
-from bomgraph import mapper, plugins
+from bomgraph import file_digest, mapper, plugins, source_files
 from bomgraph.bench import Executor, execute
 from bomgraph.experiments import Arm, Experiment, FileSource
 from bomgraph.sim import SimConfig, simulate
@@ -55,7 +55,7 @@ def test_an_edit_in_a_linked_folder_of_the_package_moves_the_key(
     time.sleep(0.05)
     (tmp_path / edited).write_text((tmp_path / edited).read_text() + "K = 2\n")
     assert plugins.disk_fingerprint(target) != before, f"an edit of {edited} re-ran nothing"
-    listed = {Path(d).name for d, _ in plugins._LISTED[str(plugin_site / "h56ln")][0]}
+    listed = {Path(d).name for d, _ in source_files._LISTED[str(plugin_site / "h56ln")][0]}
     # the data folder's status is watched (h57: code written into it is listed), but it is
     # not walked: its subfolder is not listed
     assert listed == {"h56ln", "shared", "inner", "data"}, listed
@@ -244,13 +244,13 @@ def test_an_edit_within_the_clocks_tick_of_the_last_read_is_seen(
     size, mtime and ctime through an edit made in the same tick: the status is trusted only
     once older than RACY_NS. No test checked it (h53's set RACY_NS to 0; making ``_aged``
     always true failed none)."""
-    monkeypatch.setattr(plugins, "RACY_NS", 2_000_000_000)
+    monkeypatch.setattr(file_digest, "RACY_NS", 2_000_000_000)
     write(plugin_site / "h56lo" / "__init__.py", "")
     write(plugin_site / "h56lo" / "m.py", "K = 1\nclass M: pass\n")
     now = time.time_ns()
-    sig = plugins._stat_signature(plugin_site / "h56lo" / "m.py")
-    same_tick = (*sig[:3], now, now)  # type: ignore[misc]
-    monkeypatch.setattr(plugins, "_stat_signature", lambda path: same_tick)
+    sig = file_digest._status((plugin_site / "h56lo" / "m.py").stat())
+    same_tick = (*sig[:3], now, now)
+    monkeypatch.setattr(file_digest, "_status", lambda st: same_tick)
     before = plugins.disk_fingerprint("h56lo.m:M")
     (plugin_site / "h56lo" / "m.py").write_text("K = 2\nclass M: pass\n")  # same size, tick
     assert plugins.disk_fingerprint("h56lo.m:M") != before
