@@ -165,8 +165,9 @@ def read_sweep(path_or_name: str | os.PathLike[str]) -> SweepSpec:
     return _Reader(path).sweep(data)
 
 
-def parse_method(token: str, where: str = "methods") -> MethodSpec:
-    """``"NAME"`` or ``"NAME@PRESET"`` as an arm labelled ``token``."""
+def parse_method(token: str, where: str = "token") -> MethodSpec:
+    """``"NAME"`` or ``"NAME@PRESET"`` as an arm labelled ``token``; a refusal names it as
+    ``where`` (a sweep file's key, a command line's option; by default the parameter)."""
     name, _, preset = token.partition("@")
     if not name or (("@" in token) and not preset):
         raise SweepError(f"{where}: {token!r} is not NAME or NAME@PRESET")
