@@ -1,4 +1,5 @@
-"""The ``bomgraph`` command: argument parsing and printing only.
+"""The ``bomgraph`` command: its commands, printing and exit statuses only (the argument
+parser is :mod:`bomgraph.cli_parser`; the signal handlers :mod:`bomgraph.cli_signals`).
 
 Every command is one library call plus printing. A user error (a BomgraphError) prints one
 line to stderr and exits with status 2, without a traceback. ``-v``/``-q`` set the level of
@@ -20,8 +21,8 @@ import sys
 from typing import Any, Callable, Sequence
 
 from .cli_parser import PROGRESS_MIN_STEPS, build_parser
-from .cli_signals import (Terminated, _forget_unhandled_interrupt, _own_signals, _status,
-                          _stdout_closed, _stopped)
+from .cli_signals import (Terminated, forget_unhandled_interrupt, own_signals, stdout_closed,
+                          stop_status, stopped)
 from .errors import BomgraphError, ConfigError
 
 
@@ -241,8 +242,8 @@ def cmd_compare(args: argparse.Namespace) -> int:
         return _compare(args, seen)
     except (KeyboardInterrupt, Terminated) as exc:  # anywhere: imports, runs, writes, printing
         cached = "" if args.no_cache else f"; {seen['done']} runs cached, rerun to resume"
-        print(f"bomgraph: {_stopped(exc)}{cached}", file=sys.stderr)
-        return _status(exc)
+        print(f"bomgraph: {stopped(exc)}{cached}", file=sys.stderr)
+        return stop_status(exc)
 
 
 def _compare(args: argparse.Namespace, seen: dict[str, int]) -> int:
@@ -427,21 +428,21 @@ def _run(argv: Sequence[str] | None, program: bool) -> int:
     kept.enter_context(closed_streams_as_none())  # put back after logging_restored's undos
     if not program:  # the caller's logging and warnings, which the command replaces
         kept.enter_context(logging_restored())
-    owned = _own_signals(hook)
+    owned = own_signals(hook)
     try:
         try:
             status = _main(argv)
         except (KeyboardInterrupt, Terminated) as exc:  # before a command ran, or after
             command = next((a for a in (sys.argv[1:] if argv is None else argv)
                             if not a.startswith("-")), "")
-            print(f"bomgraph: {_stopped(exc)}" + ("; rerun to resume" if command == "compare"
-                                                  else ""), file=sys.stderr)
-            status = _status(exc)
+            print(f"bomgraph: {stopped(exc)}" + ("; rerun to resume" if command == "compare"
+                                                 else ""), file=sys.stderr)
+            status = stop_status(exc)
         finally:
             for s in owned:
                 signal.signal(s, signal.SIG_IGN)
         if status in (130, 143):
-            _forget_unhandled_interrupt()
+            forget_unhandled_interrupt()
         return status
     finally:
         if not program:
@@ -455,7 +456,7 @@ def _main(argv: Sequence[str] | None) -> int:
     try:
         args = build_parser().parse_args(argv)
     except BrokenPipeError:  # `bomgraph --help | head -1`
-        return _stdout_closed()
+        return stdout_closed()
     except OSError as exc:  # `bomgraph --help > /dev/full`: as a command's output error
         print(f"bomgraph: error: {exc}", file=sys.stderr)
         return 2
@@ -471,7 +472,7 @@ def _main(argv: Sequence[str] | None) -> int:
             sys.stdout.flush()
         return status
     except BrokenPipeError:
-        return _stdout_closed()
+        return stdout_closed()
     except Exception as exc:
         from .mapper import method_failure_note
 

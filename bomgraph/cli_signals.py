@@ -1,7 +1,8 @@
 """How a ``bomgraph`` command is stopped from outside: SIGINT and SIGTERM (their handlers,
 :class:`Terminated`, the exit statuses 130 and 143, a signal whose exception Python dropped in
 a finaliser delivered again) and a closed pipe on stdout (status 141). :func:`bomgraph.cli.main`
-installs the handlers around each command and restores the caller's after it.
+installs the handlers around each command (:func:`own_signals`) and restores the caller's
+after it.
 """
 
 from __future__ import annotations
@@ -55,15 +56,15 @@ def _on_unraisable(unraisable: Any, previous: Callable[[Any], None],
         pass
 
 
-def _stopped(exc: BaseException) -> str:
+def stopped(exc: BaseException) -> str:
     return "terminated" if isinstance(exc, Terminated) else "interrupted"
 
 
-def _status(exc: BaseException) -> int:
+def stop_status(exc: BaseException) -> int:
     return 128 + (signal.SIGTERM if isinstance(exc, Terminated) else signal.SIGINT)
 
 
-def _forget_unhandled_interrupt() -> None:
+def forget_unhandled_interrupt() -> None:
     """Under ``python -m bomgraph``, a KeyboardInterrupt that came out of code run from a
     string (the functions ``dataclasses`` and ``namedtuple`` make, in an import) leaves a
     flag in CPython that makes the process kill itself with SIGINT at exit, once the
@@ -72,7 +73,7 @@ def _forget_unhandled_interrupt() -> None:
     exec("None")
 
 
-def _stdout_closed() -> int:
+def stdout_closed() -> int:
     """A closed pipe on stdout (``bomgraph methods | head -1``): exit quietly."""
     try:  # stop the interpreter's final flush from failing again on the closed pipe
         with open(os.devnull, "wb") as null:  # closed after: none left open (h86)
@@ -82,7 +83,7 @@ def _stdout_closed() -> int:
     return 128 + signal.SIGPIPE if hasattr(signal, "SIGPIPE") else 1
 
 
-def _own_signals(hook: Callable[[Any], None]) -> dict[int, Any]:
+def own_signals(hook: Callable[[Any], None]) -> dict[int, Any]:
     """Install :func:`_on_signal` for SIGINT and SIGTERM and :func:`_on_unraisable` before
     ``hook`` (main thread only); the signal handlers it replaced."""
     import functools
@@ -99,4 +100,5 @@ def _own_signals(hook: Callable[[Any], None]) -> dict[int, Any]:
     return previous
 
 
-__all__ = ["Terminated"]
+__all__ = ["Terminated", "own_signals", "stopped", "stop_status", "forget_unhandled_interrupt",
+           "stdout_closed"]

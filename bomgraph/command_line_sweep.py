@@ -15,8 +15,8 @@ from typing import Any, Mapping, Sequence
 
 from .checks import option_named
 from .errors import ConfigError
-from .sweep import (ExperimentSpec, MethodSpec, SweepError, SweepSpec, _checked_method,
-                    _named_streams, _unique, parse_method, stream_header_problem)
+from .sweep import (ExperimentSpec, MethodSpec, SweepError, SweepSpec, check_unique,
+                    checked_method, named_streams, parse_method, stream_header_problem)
 
 
 def run_method(token: str, options: Mapping[str, Any]) -> tuple[str, str, dict[str, Any]]:
@@ -98,7 +98,7 @@ def command_line_spec(streams: Sequence[str], methods: Sequence[str],
                                  f"its preset already; give the preset once")
             if isinstance(added["preset"], str):
                 label = f"{m.label}@{added['preset']}"
-        return _checked_method(dataclasses.replace(m, label=label, options={
+        return checked_method(dataclasses.replace(m, label=label, options={
             **m.options, **added}), f"{op} {m.label}")
 
     missing = [s for s in streams if not Path(s).is_file()]
@@ -108,10 +108,10 @@ def command_line_spec(streams: Sequence[str], methods: Sequence[str],
     if problem:
         raise SweepError(f"{st}: {problem}")
     arms = [with_options(a) for a in arms]
-    _unique([a.label for a in arms], ms)
+    check_unique([a.label for a in arms], ms)
     exp = ExperimentSpec(name, f"{len(streams)} stream(s), {len(arms)} method(s)",
                          tuple(arms),
-                         streams=_named_streams([str(Path(s).resolve()) for s in streams]),
+                         streams=named_streams([str(Path(s).resolve()) for s in streams]),
                          reference=None if ref is None else with_options(ref),
                          checkpoint_every=checkpoint_every)
     return SweepSpec("<command line>", (exp,))

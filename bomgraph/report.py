@@ -39,7 +39,7 @@ from .out_folder import (RESULT_FILES, OutputRecord, compare_locks, estimate_pat
                          planned_outputs, refuse_inputs_among_outputs)
 from .slugs import figure_names
 from .stdio import check_folder, write_figure, write_text
-from .summaries import (REPORT_TIMES, _group, error_curves, final_by_run,
+from .summaries import (REPORT_TIMES, error_curves, final_by_run, group_rows,
                         results_to_csv_rows, summarise)
 from .tables import HUGE, write_csv
 from .worker_log import said_once
@@ -72,7 +72,7 @@ def _mpe_cells(r: dict, times: Sequence[int]) -> list[str]:
 def format_summary(summary: Sequence[dict]) -> str:
     """The comparison table as text: one block per experiment, one row per arm."""
     lines = []
-    for (exp,), rows in _group(summary, "experiment").items():
+    for (exp,), rows in group_rows(summary, "experiment").items():
         times = sorted({int(k.split("@")[1]) for r in rows for k in r
                         if k.startswith("mpe_mean_m@")})
         if all(r.get("scored_against") == "none" for r in rows if r["runs"] > r["failed"]):
@@ -150,7 +150,7 @@ def _free_cells(r: Mapping[str, Any]) -> str:
 def format_by_run(rows: Sequence[dict]) -> str:
     """Final landmark MPE [cm] (landmarks mapped) per arm and run, one block per experiment."""
     lines = []
-    for (exp,), rs in _group(rows, "experiment").items():
+    for (exp,), rs in group_rows(rows, "experiment").items():
         runs = list(dict.fromkeys(r["run"] for r in rs))
         arms = list(dict.fromkeys(r["arm"] for r in rs))
         cell = {(r["arm"], r["run"]): r for r in rs}

@@ -1,8 +1,9 @@
 """The runner's results as rows (paper section IV's numbers): one row per experiment and
 arm (:func:`summarise`), one per run (:func:`final_by_run`), each arm's error curves over
 time (:func:`error_curves`) and the long format of every checkpoint
-(:func:`results_to_csv_rows`). Plain data, no files and no text: :mod:`bomgraph.report`
-formats these rows as tables and writes them with the figures.
+(:func:`results_to_csv_rows`); :func:`group_rows` groups rows by their keys' values (the
+report's tables too). Plain data, no files and no text: :mod:`bomgraph.report` formats these
+rows as tables and writes them with the figures.
 
 A result is the dict of :func:`bomgraph.bench.run_task`; its ``checkpoints`` are the rows of
 :func:`bomgraph.evaluate.score_checkpoints` as dicts.
@@ -22,8 +23,8 @@ from .run_scoring import scored_against, scores_left_out
 REPORT_TIMES = (50, 100, 200, 300)
 
 
-def _group(rows: Sequence[Mapping[str, Any]], *keys: str
-           ) -> dict[tuple[Any, ...], list[Mapping[str, Any]]]:
+def group_rows(rows: Sequence[Mapping[str, Any]], *keys: str
+               ) -> dict[tuple[Any, ...], list[Mapping[str, Any]]]:
     """``rows`` by the values of ``keys``, groups and rows in order of appearance."""
     out: dict[tuple[Any, ...], list[Mapping[str, Any]]] = {}
     for r in rows:
@@ -52,7 +53,7 @@ def summarise(results: Sequence[Mapping[str, Any]],
     convergence, NEES, wall time. Failed runs are counted, not hidden; a run scored against
     its own map (``self_scored``) only for its truth-free values (``n_scored@t`` 0)."""
     results = [scores_left_out(r) for r in results]
-    groups = _group(results, "experiment", "arm")
+    groups = group_rows(results, "experiment", "arm")
     exp_last: dict[str, int] = {}
     for r in results:
         if r.get("ok") and r["checkpoints"]:
@@ -142,8 +143,8 @@ def error_curves(results: Sequence[Mapping[str, Any]], metric: str = "mpe_m"
                  ) -> dict[tuple[str, str], tuple[np.ndarray, np.ndarray]]:
     """Per (experiment, arm): all runs' checkpoint times ``(k,)``, the metric ``(runs, k)``."""
     out: dict[tuple[str, str], tuple[np.ndarray, np.ndarray]] = {}
-    for key, rs in _group([scores_left_out(r) for r in results if r.get("ok")],
-                          "experiment", "arm").items():
+    for key, rs in group_rows([scores_left_out(r) for r in results if r.get("ok")],
+                              "experiment", "arm").items():
         ts = np.array(sorted({c["t"] for r in rs for c in r["checkpoints"]}))
         vals = np.array([[_value_at(r, t, metric) if t <= r["checkpoints"][-1]["t"]
                           else math.nan for t in ts] for r in rs])  # NaN: the stream ended
@@ -166,4 +167,5 @@ def results_to_csv_rows(results: Sequence[Mapping[str, Any]]) -> list[dict[str, 
     return rows
 
 
-__all__ = ["REPORT_TIMES", "summarise", "final_by_run", "error_curves", "results_to_csv_rows"]
+__all__ = ["REPORT_TIMES", "summarise", "final_by_run", "error_curves", "results_to_csv_rows",
+           "group_rows"]

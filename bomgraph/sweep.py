@@ -32,8 +32,9 @@ the package (``bomgraph/sweeps/paper.toml``, ``--config paper``).
 :func:`read_sweep` returns plain, checked data (:class:`SweepSpec`); a mistake raises
 :class:`SweepError` with one line naming the file and the key.
 :func:`bomgraph.command_line_sweep.command_line_spec` turns ``compare --streams ...
---methods ...`` into the same data, so a sweep file and the equivalent command line run the
-same tasks with the same cache keys.
+--methods ...`` into the same data with this module's checks (:func:`parse_method`,
+:func:`checked_method`, :func:`check_unique`, :func:`named_streams`), so a sweep file and the
+equivalent command line run the same tasks with the same cache keys.
 """
 
 from __future__ import annotations
@@ -164,12 +165,13 @@ def read_sweep(path_or_name: str | os.PathLike[str]) -> SweepSpec:
     return _Reader(path).sweep(data)
 
 
-def parse_method(token: str, where: str = "methods") -> MethodSpec:
-    """``"NAME"`` or ``"NAME@PRESET"`` as an arm labelled ``token``."""
+def parse_method(token: str, where: str = "token") -> MethodSpec:
+    """``"NAME"`` or ``"NAME@PRESET"`` as an arm labelled ``token``; a refusal names it as
+    ``where`` (a sweep file's key, a command line's option; by default the parameter)."""
     name, _, preset = token.partition("@")
     if not name or (("@" in token) and not preset):
         raise SweepError(f"{where}: {token!r} is not NAME or NAME@PRESET")
-    return _checked_method(MethodSpec(token, name, {"preset": preset} if preset else {}), where)
+    return checked_method(MethodSpec(token, name, {"preset": preset} if preset else {}), where)
 
 
 def stream_header_problem(paths: Sequence[str]) -> str:
@@ -188,7 +190,7 @@ def stream_header_problem(paths: Sequence[str]) -> str:
     return ""
 
 
-def _named_streams(paths: list[str]) -> tuple[tuple[str, str], ...]:
+def named_streams(paths: list[str]) -> tuple[tuple[str, str], ...]:
     """Each path with its run label, unique: the file stem, or ``folder-stem`` when two files
     share a stem (``folder-stem-K``, K the path's place in ``paths``, when that is not
     enough; ``-K`` once more while another file's stem is that already: ``x-a-0.jsonl`` beside
@@ -211,14 +213,14 @@ def _named_streams(paths: list[str]) -> tuple[tuple[str, str], ...]:
     return tuple(zip(paths, labels))
 
 
-def _unique(labels: Sequence[str], where: str) -> None:
+def check_unique(labels: Sequence[str], where: str) -> None:
     # not list.count: 460,000 worlds fit a sweep file's 16 MiB, hours of comparisons (h96)
     dup = sorted(x for x, n in Counter(labels).items() if n > 1)
     if dup:
         raise SweepError(f"{where}: {dup[0]!r} appears twice (give one a label)")
 
 
-def _checked_method(m: MethodSpec, where: str) -> MethodSpec:
+def checked_method(m: MethodSpec, where: str) -> MethodSpec:
     """Refuse an unknown method or preset (the preset against the method's config class)
     and options the method's configuration refuses."""
     from .mapper import check_method_options, method_config_class, method_info
@@ -411,7 +413,7 @@ class _Reader:
         problem = stream_header_problem(paths)
         if problem:
             raise self.fail(key, problem)
-        return _named_streams(paths)
+        return named_streams(paths)
 
     def world(self, t: Any, key: str, index: int) -> WorldSpec:
         t = self.keys(t, set(_SIM_FIELDS) | _WORLD_EXTRA, key)
@@ -492,16 +494,16 @@ class _Reader:
         if every is not None:
             every = self.int_(every, f"{key}.checkpoint_every", 1)
         m = MethodSpec(self.str_(label, f"{key}.label"), name, options, float(frac), every)
-        return _checked_method(m, f"{self.path}: {key}")
+        return checked_method(m, f"{self.path}: {key}")
 
 
 def _unique_or(reader: _Reader, labels: Sequence[str], key: str) -> None:
     try:
-        _unique(labels, key)
+        check_unique(labels, key)
     except SweepError as exc:
         raise SweepError(f"{reader.path}: {exc}") from None
 
 
 __all__ = ["SweepError", "SweepSpec", "ExperimentSpec", "MethodSpec", "WorldSpec",
-           "read_sweep", "parse_method", "shipped", "resolve_path",
-           "SHIPPED_DIR"]
+           "read_sweep", "parse_method", "checked_method", "named_streams", "check_unique",
+           "shipped", "resolve_path", "SHIPPED_DIR"]

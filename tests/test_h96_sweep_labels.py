@@ -10,7 +10,7 @@ import pytest
 
 from bomgraph.errors import ConfigError
 from bomgraph.experiments import Arm, Experiment, FileSource
-from bomgraph.sweep import SweepError, _named_streams, _unique
+from bomgraph.sweep import SweepError, check_unique, named_streams
 
 
 class _Label(str):
@@ -26,16 +26,16 @@ class _Label(str):
 def test_repeated_names_are_found_in_linear_time() -> None:
     labels = [_Label(f"w{i}") for i in range(2_000)]
     _Label.compared = 0
-    _unique(labels, "worlds[].name")
+    check_unique(labels, "worlds[].name")
     assert _Label.compared < 20_000
     with pytest.raises(SweepError, match=r"worlds\[\]\.name: 'w7' appears twice"):
-        _unique(labels + [_Label("w9"), _Label("w7")], "worlds[].name")
+        check_unique(labels + [_Label("w9"), _Label("w7")], "worlds[].name")
 
 
 def test_stream_labels_keep_their_names() -> None:
-    """_named_streams, also counted by list.count before, made the same labels."""
+    """named_streams, also counted by list.count before, made the same labels."""
     paths = [f"/d{i % 3}/run{i // 3}.jsonl" for i in range(3_000)] + ["/x/solo.jsonl"]
-    named = dict(_named_streams(paths))
+    named = dict(named_streams(paths))
     assert named["/d0/run5.jsonl"] == "d0-run5" and named["/x/solo.jsonl"] == "solo"
     assert len(set(named.values())) == len(paths)
 
@@ -49,7 +49,7 @@ def test_a_numbered_label_is_not_another_files_stem(paths: list[str], kept: str)
     """Fails before (h101): ``x-a-0.jsonl`` beside ``x/a.jsonl`` and ``y/a.jsonl`` named two
     streams ``x-a-0``, and ``compare --streams`` refused its own labels ("two runs are named
     'x-a-0' ... rename the world or the source"). A stem no other file shares keeps its name."""
-    named = dict(_named_streams(paths))
+    named = dict(named_streams(paths))
     assert len(set(named.values())) == len(paths), named
     assert named[kept] == Path(kept).stem
 
