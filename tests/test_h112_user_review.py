@@ -1,0 +1,79 @@
+"""h112: a new user's walk through the README (fresh venv, own plugin, own streams, hostile
+input). Each test failed before its fix.
+
+* ``compare --out`` a folder this user cannot write printed Python's
+  ``[Errno 13] Permission denied: 'ro/.bomgraph.lock'`` (``--out ro/new``:
+  ``[Errno 13] Permission denied: 'ro/new'``): no ``--out``, nothing on what to do.
+* ``run --out`` (and every other writer) over an existing file in such a folder passed the
+  check and failed when it made its temporary file beside it.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from _not_writable import not_writable  # tests/_not_writable.py
+
+ROOT = Path(__file__).resolve().parents[1]
+ENV = {**os.environ, "PYTHONPATH": str(ROOT), "OMP_NUM_THREADS": "1"}
+
+
+def bomgraph(*args: object, cwd: Path) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "bomgraph", *map(str, args)], cwd=cwd,
+                          env=ENV, capture_output=True, text=True, timeout=300)
+
+
+def one_error(proc: subprocess.CompletedProcess, *needles: str) -> str:
+    """Exit 2 and one line ``bomgraph: error: ...`` holding every needle, no traceback."""
+    assert proc.returncode == 2, proc.stderr
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("bomgraph: error: "), proc.stderr
+    assert "Traceback" not in proc.stderr and "[Errno" not in proc.stderr, proc.stderr
+    for needle in needles:
+        assert needle in lines[0], lines[0]
+    return lines[0]
+
+
+@pytest.fixture(scope="module")
+def work(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    work = tmp_path_factory.mktemp("h112")
+    assert bomgraph("simulate", "--seed", "1", "--steps", "40", "--out", "s.jsonl",
+                    cwd=work).returncode == 0
+    assert bomgraph("run", "s.jsonl", "--method", "triangulate", "--out", "e.est",
+                    cwd=work).returncode == 0
+    return work
+
+
+def test_compare_out_a_folder_it_cannot_write(work: Path) -> None:
+    locked = work / "locked"
+    locked.mkdir()
+    compare = ("compare", "--streams", "s.jsonl", "--methods", "triangulate", "--jobs", "1")
+    with not_writable(locked):
+        one_error(bomgraph(*compare, "--out", "locked", cwd=work),
+                  "--out locked: is not writable; choose another folder")
+        one_error(bomgraph(*compare, "--out", "locked/new", cwd=work),
+                  "--out locked/new: locked, where it would be made, is not writable")
+        one_error(bomgraph(*compare, "--dry-run", "--out", "locked", cwd=work),
+                  "is not writable")  # what compare refuses, its plan refuses
+    assert list(locked.iterdir()) == []
+
+
+@pytest.mark.parametrize("command", [
+    ("run", "s.jsonl", "--method", "triangulate"),
+    ("export", "e.est", "--stream", "s.jsonl", "--format", "tum"),
+    ("simulate", "--seed", "2", "--steps", "10")])
+def test_a_file_in_a_folder_it_cannot_write_is_refused_before_anything(
+        work: Path, command: tuple[str, ...]) -> None:
+    locked = work / f"locked-{command[0]}"
+    locked.mkdir()
+    old = locked / "old.out"
+    old.write_text("keep\n")
+    with not_writable(locked):
+        one_error(bomgraph(*command, "--out", old, cwd=work),
+                  f"--out {old}: the folder {locked} is not writable")
+    assert old.read_text() == "keep\n" and [p.name for p in locked.iterdir()] == ["old.out"]
