@@ -135,8 +135,8 @@ def resolve_path(path_or_name: str | os.PathLike[str]) -> Path:
         return p
     if (SHIPPED_DIR / f"{p}.toml").is_file() and p.suffix != ".toml":
         return SHIPPED_DIR / f"{p}.toml"
-    raise SweepError(f"{path_or_name}: no such sweep file (a path, or a shipped one: "
-                     f"{', '.join(shipped())})")
+    raise SweepError(f"{path_or_name}: {'is a folder, not a' if p.is_dir() else 'no such'} "
+                     f"sweep file (a path, or a shipped one: {', '.join(shipped())})")
 
 
 def read_sweep(path_or_name: str | os.PathLike[str]) -> SweepSpec:

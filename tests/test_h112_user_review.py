@@ -6,6 +6,7 @@ input). Each test failed before its fix.
   ``[Errno 13] Permission denied: 'ro/new'``): no ``--out``, nothing on what to do.
 * ``run --out`` (and every other writer) over an existing file in such a folder passed the
   check and failed when it made its temporary file beside it.
+* ``compare --streams DIR`` said "no such file DIR", ``--config DIR`` "no such sweep file".
 """
 
 from __future__ import annotations
@@ -77,3 +78,20 @@ def test_a_file_in_a_folder_it_cannot_write_is_refused_before_anything(
         one_error(bomgraph(*command, "--out", old, cwd=work),
                   f"--out {old}: the folder {locked} is not writable")
     assert old.read_text() == "keep\n" and [p.name for p in locked.iterdir()] == ["old.out"]
+
+
+def test_a_folder_given_as_a_stream_or_sweep_file_is_called_a_folder(work: Path) -> None:
+    """``compare --streams DIR`` said "no such file DIR" and ``--config DIR`` "no such sweep
+    file", of a folder that is there."""
+    (work / "runs").mkdir(exist_ok=True)
+    one_error(bomgraph("compare", "--streams", "runs", "--methods", "triangulate", "--out", "o",
+                       cwd=work),
+              "--streams: runs is a folder, not a file; give the files in it (runs/*.jsonl")
+    one_error(bomgraph("compare", "--streams", "nothing.jsonl", "--methods", "triangulate",
+                       "--out", "o", cwd=work), "--streams: no such file nothing.jsonl")
+    one_error(bomgraph("compare", "--config", "runs", "--out", "o", cwd=work),
+              "runs: is a folder, not a sweep file (a path, or a shipped one: ")
+    one_error(bomgraph("compare", "--config", "none.toml", "--out", "o", cwd=work),
+              "none.toml: no such sweep file (a path, or a shipped one: ")
+    assert not (work / "o").exists()
+
