@@ -7,6 +7,8 @@ input). Each test failed before its fix.
 * ``run --out`` (and every other writer) over an existing file in such a folder passed the
   check and failed when it made its temporary file beside it.
 * ``compare --streams DIR`` said "no such file DIR", ``--config DIR`` "no such sweep file".
+* A stream or estimate cut short in its last line: ``not valid JSON (Unterminated string
+  starting at)``, no column, nothing on the cause.
 """
 
 from __future__ import annotations
@@ -95,3 +97,26 @@ def test_a_folder_given_as_a_stream_or_sweep_file_is_called_a_folder(work: Path)
               "none.toml: no such sweep file (a path, or a shipped one: ")
     assert not (work / "o").exists()
 
+
+def test_a_file_cut_short_in_its_last_line_is_called_so(work: Path) -> None:
+    """A stream or estimate whose last line was cut (a recording or a copy interrupted) said
+    ``line 42: not valid JSON (Expecting ',' delimiter)`` or ``(Unterminated string starting
+    at)``: no column, nothing on the cause."""
+    stream = (work / "s.jsonl").read_bytes()
+    (work / "cut.jsonl").write_bytes(stream[:-40])
+    n = stream.count(b"\n")
+    one_error(bomgraph("run", "cut.jsonl", "--method", "triangulate", "--out", "x.est",
+                       cwd=work),
+              f"cut.jsonl, line {n}: not valid JSON (", " at column ",
+              "the file ends in this line, without a newline: cut short? complete the line "
+              "or remove it")
+    est = (work / "e.est").read_bytes()
+    (work / "cut.est").write_bytes(est[:-30])
+    n = est.count(b"\n")
+    one_error(bomgraph("evaluate", "cut.est", "s.jsonl", cwd=work),
+              f"cut.est, line {n}: not valid JSON (", " at column ", "cut short?")
+    (work / "typo.jsonl").write_bytes(stream.replace(b'{"t": 3,', b'{"t": 3', 1))
+    line = one_error(bomgraph("run", "typo.jsonl", "--method", "triangulate", "--out", "x.est",
+                              cwd=work), "typo.jsonl, line 5: not valid JSON (", " at column ")
+    assert "cut short" not in line  # a line with its newline was not cut
+    assert not (work / "x.est").exists()
