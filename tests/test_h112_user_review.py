@@ -9,6 +9,7 @@ input). Each test failed before its fix.
 * ``compare --streams DIR`` said "no such file DIR", ``--config DIR`` "no such sweep file".
 * A stream or estimate cut short in its last line: ``not valid JSON (Unterminated string
   starting at)``, no column, nothing on the cause.
+* ``landmark_nees`` of an estimate without covariances did not say which methods give them.
 """
 
 from __future__ import annotations
@@ -120,3 +121,20 @@ def test_a_file_cut_short_in_its_last_line_is_called_so(work: Path) -> None:
                               cwd=work), "typo.jsonl, line 5: not valid JSON (", " at column ")
     assert "cut short" not in line  # a line with its newline was not cut
     assert not (work / "x.est").exists()
+
+
+def test_landmark_nees_without_covariances_says_which_methods_give_them() -> None:
+    """It said only "the estimate has no landmark covariances"."""
+    import numpy as np
+
+    from bomgraph import create_mapper, run
+    from bomgraph.errors import EvaluationError
+    from bomgraph.evaluate import landmark_nees, score_estimate
+    from bomgraph.sim import SimConfig, simulate
+
+    stream = simulate(SimConfig(n_steps=60), np.random.default_rng(0))
+    final = run(create_mapper("triangulate", stream.header), stream.steps).final
+    with pytest.raises(EvaluationError, match=r"no landmark covariances \(landmark_cov\): use "
+                                              r"a method that gives them, ekf, ekf-invdepth, "
+                                              r"or a GTSAM method with covariances=True"):
+        landmark_nees(final, stream.truth, score_estimate(final, stream.truth).alignment)
