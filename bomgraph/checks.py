@@ -194,10 +194,14 @@ def file_name(value: Any, name: str, error: Raise) -> str:
 
 def no_file(path: str, what: str = "file") -> str:
     """Why ``path`` names no file, for an error line: it is a folder (the reason the command
-    line's ``--streams DIR`` gave as "no such file DIR", h112), or there is nothing there."""
+    line's ``--streams DIR`` gave as "no such file DIR", h112), or there is nothing there (a
+    pattern the shell did not expand: said so)."""
     if os.path.isdir(path):
         return (f"{path} is a folder, not a {what}; give the {what}s in it "
                 f"({os.path.join(path, '*.jsonl')} in the shell)")
+    if any(c in path for c in "*?["):  # '--streams "runs/*.jsonl"': the shell did not expand it
+        return (f"no such {what} {path} (a pattern? the command line takes files: leave the "
+                f"pattern unquoted for the shell to expand, or put it in a sweep file's streams)")
     return f"no such {what} {path}"
 
 

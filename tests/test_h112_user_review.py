@@ -6,7 +6,8 @@ input). Each test failed before its fix.
   ``[Errno 13] Permission denied: 'ro/new'``): no ``--out``, nothing on what to do.
 * ``run --out`` (and every other writer) over an existing file in such a folder passed the
   check and failed when it made its temporary file beside it.
-* ``compare --streams DIR`` said "no such file DIR", ``--config DIR`` "no such sweep file".
+* ``compare --streams DIR`` said "no such file DIR", ``--config DIR`` "no such sweep file";
+  a quoted pattern (``--streams "runs/*.jsonl"``) "no such file runs/*.jsonl".
 * A stream or estimate cut short in its last line: ``not valid JSON (Unterminated string
   starting at)``, no column, nothing on the cause.
 * ``landmark_nees`` of an estimate without covariances did not say which methods give them.
@@ -92,6 +93,11 @@ def test_a_folder_given_as_a_stream_or_sweep_file_is_called_a_folder(work: Path)
               "--streams: runs is a folder, not a file; give the files in it (runs/*.jsonl")
     one_error(bomgraph("compare", "--streams", "nothing.jsonl", "--methods", "triangulate",
                        "--out", "o", cwd=work), "--streams: no such file nothing.jsonl")
+    one_error(bomgraph("compare", "--streams", "runs/*.jsonl", "--methods", "triangulate",
+                       "--out", "o", cwd=work),
+              "--streams: no such file runs/*.jsonl (a pattern? the command line takes files: "
+              "leave the pattern unquoted for the shell to expand, or put it in a sweep file's "
+              "streams)")
     one_error(bomgraph("compare", "--config", "runs", "--out", "o", cwd=work),
               "runs: is a folder, not a sweep file (a path, or a shipped one: ")
     one_error(bomgraph("compare", "--config", "none.toml", "--out", "o", cwd=work),
