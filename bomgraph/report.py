@@ -230,6 +230,8 @@ def compare(experiments: Sequence[Experiment], out_dir: str | os.PathLike[str], 
     refuse_inputs_among_outputs(out, experiments)
     planned = planned_outputs(out, experiments, estimates=estimates, figures=figures)
     (record := OutputRecord(out)).refuse_foreign(planned, [out / "cache"] if use_cache else [])
+    if executor.backend != "serial":  # as execute() would, before OUT and its lock are made
+        refuse_runtime_methods([t for e in experiments for t in e.tasks()], executor.backend)
     out.mkdir(parents=True, exist_ok=True)   # check_folder above
     with compare_locks(out, planned), said_once():  # out, its linked and written folders
         record.remove_leftovers(planned)  # of compares killed while writing: none writes now
@@ -283,11 +285,9 @@ def _compare(experiments: Sequence[Experiment], out: Path, executor: Executor,
                                paired_config)
     wall = time.perf_counter() - start
     files = [out / n for n in RESULT_FILES] + written
-    # compact: without ``indent`` json.dumps takes CPython's C encoder (the main job's file:
-    # 0.5 s against 1.6 s indented, docs/measurements.md, "The main job against ...").
-    # Strict JSON: a value that is not a number (a run without a map, a robot error of a
-    # stream without robot truth) is null, not the bare NaN that jq, JavaScript and R's
-    # jsonlite refuse to read.
+    # compact: CPython's C encoder (0.5 s against 1.6 s indented, docs/measurements.md, "The
+    # main job against ..."); strict JSON: a non-number (a run without a map, a stream without
+    # robot truth) is null, not the bare NaN that jq, JavaScript and R's jsonlite refuse.
     write_text(files[0], json.dumps(jsonable(
         {"experiments": [{"name": e.name, "title": e.title,
                           "arms": [a.key() for a in e.arms], **_design(e),

@@ -11,6 +11,8 @@ input). Each test failed before its fix.
 * A stream or estimate cut short in its last line: ``not valid JSON (Unterminated string
   starting at)``, no column, nothing on the cause.
 * ``landmark_nees`` of an estimate without covariances did not say which methods give them.
+* ``compare(..., executor=Executor("processes", ...))`` refusing a method registered in this
+  process left the output folder behind, with its lock file.
 """
 
 from __future__ import annotations
@@ -144,3 +146,29 @@ def test_landmark_nees_without_covariances_says_which_methods_give_them() -> Non
                                               r"a method that gives them, ekf, ekf-invdepth, "
                                               r"or a GTSAM method with covariances=True"):
         landmark_nees(final, stream.truth, score_estimate(final, stream.truth).alignment)
+
+
+def test_a_runtime_method_refused_for_worker_processes_leaves_no_folder(
+        work: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """README, "A sweep from Python", with ``Executor("processes", n_jobs=2)``: the refusal
+    (workers cannot see a method registered in this process) came after compare had made the
+    output folder and its lock file, which stayed behind, empty but for ``.bomgraph.lock``."""
+    from bomgraph.bench import Executor
+    from bomgraph.errors import ConfigError
+    from bomgraph.experiments import compare_experiments
+    from bomgraph.report import compare
+
+    from _runtime_method import runtime_method  # tests/_runtime_method.py
+
+    source = ("from bomgraph.mapper import MapEstimate\nimport numpy as np\n"
+              "class Nothing:\n    def __init__(self, header):\n        pass\n"
+              "    def step(self, step):\n        pass\n    def estimate(self):\n"
+              "        return MapEstimate(np.zeros(0, dtype=np.int64), np.zeros((0, 2)))\n")
+    for _ in runtime_method(tmp_path, monkeypatch, "h112-nothing", "h112_nothing", source,
+                            "Nothing"):
+        experiments, _ = compare_experiments(streams=[str(work / "s.jsonl")],
+                                             methods="h112-nothing,triangulate")
+        with pytest.raises(ConfigError, match="registered at run time"):
+            compare(experiments, tmp_path / "out", executor=Executor("processes", n_jobs=2),
+                    figures=False)
+        assert not (tmp_path / "out").exists()
