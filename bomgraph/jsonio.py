@@ -394,7 +394,10 @@ def unparsable_at(text: str) -> tuple[int | None, str | None]:
 
 
 def decoder_problem(exc: json.JSONDecodeError) -> str:
-    """The decoder's message and column: ``Expecting ',' delimiter at column 61``."""
+    """The decoder's message and column: ``Expecting ',' delimiter at column 61``; of a
+    byte-order mark, what to do (it said "decode using utf-8-sig", advice to a programmer)."""
+    if exc.msg.startswith("Unexpected UTF-8 BOM"):
+        return "the file starts with a UTF-8 byte-order mark (BOM): save it as UTF-8 without one"
     return f"{exc.msg.removesuffix(' at')} at column {exc.colno}"
 
 

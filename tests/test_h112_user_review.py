@@ -9,7 +9,8 @@ input). Each test failed before its fix.
 * ``compare --streams DIR`` said "no such file DIR", ``--config DIR`` "no such sweep file";
   a quoted pattern (``--streams "runs/*.jsonl"``) "no such file runs/*.jsonl".
 * A stream or estimate cut short in its last line: ``not valid JSON (Unterminated string
-  starting at)``, no column, nothing on the cause.
+  starting at)``, no column, nothing on the cause; one saved with a byte-order mark (Windows
+  Notepad's UTF-8) ``(Unexpected UTF-8 BOM (decode using utf-8-sig) at column 1)``.
 * ``landmark_nees`` of an estimate without covariances did not say which methods give them.
 * ``compare(..., executor=Executor("processes", ...))`` refusing a method registered in this
   process left the output folder behind, with its lock file.
@@ -172,3 +173,14 @@ def test_a_runtime_method_refused_for_worker_processes_leaves_no_folder(
             compare(experiments, tmp_path / "out", executor=Executor("processes", n_jobs=2),
                     figures=False)
         assert not (tmp_path / "out").exists()
+
+
+def test_a_file_with_a_byte_order_mark_says_how_to_save_it(work: Path) -> None:
+    bom = b"\xef\xbb\xbf"
+    (work / "bom.jsonl").write_bytes(bom + (work / "s.jsonl").read_bytes())
+    (work / "bom.est").write_bytes(bom + (work / "e.est").read_bytes())
+    says = ("line 1: not valid JSON (the file starts with a UTF-8 byte-order mark (BOM): save it "
+            "as UTF-8 without one)")
+    one_error(bomgraph("run", "bom.jsonl", "--method", "triangulate", "--out", "x.est",
+                       cwd=work), f"bom.jsonl, {says}")
+    one_error(bomgraph("evaluate", "bom.est", "s.jsonl", cwd=work), f"bom.est, {says}")
