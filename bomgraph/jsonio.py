@@ -393,12 +393,15 @@ def unparsable_at(text: str) -> tuple[int | None, str | None]:
     return None, None
 
 
+#: what a file that starts with a UTF-8 byte-order mark (Windows Notepad's "UTF-8") is told
+BOM_ADVICE = "the file starts with a UTF-8 byte-order mark (BOM): save it as UTF-8 without one"
+
+
 def decoder_problem(exc: json.JSONDecodeError) -> str:
     """The decoder's message and column: ``Expecting ',' delimiter at column 61``; of a
     byte-order mark, what to do (it said "decode using utf-8-sig", advice to a programmer)."""
-    if exc.msg.startswith("Unexpected UTF-8 BOM"):
-        return "the file starts with a UTF-8 byte-order mark (BOM): save it as UTF-8 without one"
-    return f"{exc.msg.removesuffix(' at')} at column {exc.colno}"
+    return BOM_ADVICE if exc.msg.startswith("Unexpected UTF-8 BOM") else (
+        f"{exc.msg.removesuffix(' at')} at column {exc.colno}")
 
 
 def line_not_json(exc: BaseException, text: str) -> str:
@@ -501,4 +504,4 @@ __all__ = ["jsonable", "parse_option_value", "parse_options", "options_to_json",
            "options_from_json", "OPTION_INFINITIES", "MAX_ID", "is_int", "is_id",
            "is_num", "version_problem", "DuplicateKeyError", "no_duplicate_keys", "loads_strict",
            "find_nonfinite", "path_of", "line_of_key", "unparsable_at", "decoder_problem",
-           "line_not_json"]
+           "BOM_ADVICE", "line_not_json"]

@@ -10,7 +10,8 @@ input). Each test failed before its fix.
   a quoted pattern (``--streams "runs/*.jsonl"``) "no such file runs/*.jsonl".
 * A stream or estimate cut short in its last line: ``not valid JSON (Unterminated string
   starting at)``, no column, nothing on the cause; one saved with a byte-order mark (Windows
-  Notepad's UTF-8) ``(Unexpected UTF-8 BOM (decode using utf-8-sig) at column 1)``.
+  Notepad's UTF-8) ``(Unexpected UTF-8 BOM (decode using utf-8-sig) at column 1)``, and a
+  dataset text file (g2o, Victoria Park) ``unsupported record '\\ufeff#'``.
 * ``landmark_nees`` of an estimate without covariances did not say which methods give them.
 * ``compare(..., executor=Executor("processes", ...))`` refusing a method registered in this
   process left the output folder behind, with its lock file.
@@ -184,3 +185,18 @@ def test_a_file_with_a_byte_order_mark_says_how_to_save_it(work: Path) -> None:
     one_error(bomgraph("run", "bom.jsonl", "--method", "triangulate", "--out", "x.est",
                        cwd=work), f"bom.jsonl, {says}")
     one_error(bomgraph("evaluate", "bom.est", "s.jsonl", cwd=work), f"bom.est, {says}")
+
+
+def test_a_dataset_file_with_a_byte_order_mark_says_how_to_save_it(work: Path) -> None:
+    """g2o and Victoria Park text saved with a byte-order mark said "unsupported record
+    '\\ufeff#'" / "unknown record '\\ufeffODOMETRY'"."""
+    assert bomgraph("export", "e.est", "--stream", "s.jsonl", "--format", "g2o", "--out",
+                    "e.g2o", cwd=work).returncode == 0
+    (work / "bom.g2o").write_bytes(b"\xef\xbb\xbf" + (work / "e.g2o").read_bytes())
+    (work / "bom.txt").write_bytes(b"\xef\xbb\xbfODOMETRY 0.0 0.1 0.2 0.0\n")
+    says = ("line 1: the file starts with a UTF-8 byte-order mark (BOM): save it as UTF-8 "
+            "without one")
+    one_error(bomgraph("import", "g2o", "bom.g2o", "--out", "x.jsonl", cwd=work),
+              f"bom.g2o, {says}")
+    one_error(bomgraph("import", "victoria", "bom.txt", "--out", "x.jsonl", cwd=work),
+              f"bom.txt, {says}")
