@@ -11,7 +11,8 @@ input). Each test failed before its fix.
 * A stream or estimate cut short in its last line: ``not valid JSON (Unterminated string
   starting at)``, no column, nothing on the cause; one saved with a byte-order mark (Windows
   Notepad's UTF-8) ``(Unexpected UTF-8 BOM (decode using utf-8-sig) at column 1)``, and a
-  dataset text file (g2o, Victoria Park) ``unsupported record '\\ufeff#'``.
+  dataset text file (g2o, Victoria Park) ``unsupported record '\\ufeff#'``, a sweep file
+  ``not valid TOML: Invalid statement (at line 1, column 1)``.
 * ``landmark_nees`` of an estimate without covariances did not say which methods give them.
 * ``compare(..., executor=Executor("processes", ...))`` refusing a method registered in this
   process left the output folder behind, with its lock file.
@@ -200,3 +201,11 @@ def test_a_dataset_file_with_a_byte_order_mark_says_how_to_save_it(work: Path) -
               f"bom.g2o, {says}")
     one_error(bomgraph("import", "victoria", "bom.txt", "--out", "x.jsonl", cwd=work),
               f"bom.txt, {says}")
+
+
+def test_a_sweep_file_with_a_byte_order_mark_says_how_to_save_it(work: Path) -> None:
+    """It said "not valid TOML: Invalid statement (at line 1, column 1)"."""
+    (work / "bom.toml").write_bytes(b'\xef\xbb\xbfstreams = ["s.jsonl"]\nmethods = ["ekf"]\n')
+    one_error(bomgraph("compare", "--config", "bom.toml", "--dry-run", "--out", "o", cwd=work),
+              "bom.toml: the file starts with a UTF-8 byte-order mark (BOM): save it as UTF-8 "
+              "without one")
