@@ -285,9 +285,11 @@ def _compare(experiments: Sequence[Experiment], out: Path, executor: Executor,
                                paired_config)
     wall = time.perf_counter() - start
     files = [out / n for n in RESULT_FILES] + written
-    # compact: CPython's C encoder (0.5 s against 1.6 s indented, docs/measurements.md, "The
-    # main job against ..."); strict JSON: a non-number (a run without a map, a stream without
-    # robot truth) is null, not the bare NaN that jq, JavaScript and R's jsonlite refuse.
+    # compact: without ``indent`` json.dumps takes CPython's C encoder (the main job's file:
+    # 0.5 s against 1.6 s indented, docs/measurements.md, "The main job against ...").
+    # Strict JSON: a value that is not a number (a run without a map, a robot error of a
+    # stream without robot truth) is null, not the bare NaN that jq, JavaScript and R's
+    # jsonlite refuse to read.
     write_text(files[0], json.dumps(jsonable(
         {"experiments": [{"name": e.name, "title": e.title,
                           "arms": [a.key() for a in e.arms], **_design(e),
