@@ -192,6 +192,19 @@ def file_name(value: Any, name: str, error: Raise) -> str:
     return path
 
 
+def no_file(path: str, what: str = "file") -> str:
+    """Why ``path`` names no file, for an error line: it is a folder (the reason the command
+    line's ``--streams DIR`` gave as "no such file DIR", h112), or there is nothing there (a
+    pattern the shell did not expand: said so)."""
+    if os.path.isdir(path):
+        return (f"{path} is a folder, not a {what}; give the {what}s in it "
+                f"({os.path.join(path, '*.jsonl')} in the shell)")
+    if any(c in path for c in "*?["):  # '--streams "runs/*.jsonl"': the shell did not expand it
+        return (f"no such {what} {path} (a pattern? the command line takes files: leave the "
+                f"pattern unquoted for the shell to expand, or put it in a sweep file's streams)")
+    return f"no such {what} {path}"
+
+
 def _kind_names(kinds: type | tuple[type, ...]) -> str:
     return " or ".join(k.__name__ for k in (kinds if isinstance(kinds, tuple) else (kinds,)))
 
@@ -265,4 +278,5 @@ def covariance_problem(cov: np.ndarray) -> tuple[int, str] | None:
 __all__ = ["MAX_ECHO_CHARS", "clip", "command_line", "echo", "echo_name", "option_named",
            "out_named",
            "is_integer", "id_array", "row_array", "real", "finite", "finite_or_none", "integer",
-           "file_name", "instance", "fraction", "items", "COV_RTOL", "covariance_problem"]
+           "file_name", "no_file", "instance", "fraction", "items", "COV_RTOL",
+           "covariance_problem"]

@@ -13,7 +13,7 @@ import dataclasses
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
-from .checks import option_named
+from .checks import no_file, option_named
 from .errors import ConfigError
 from .sweep import (ExperimentSpec, MethodSpec, SweepError, SweepSpec, check_unique,
                     checked_method, named_streams, parse_method, stream_header_problem)
@@ -103,7 +103,7 @@ def command_line_spec(streams: Sequence[str], methods: Sequence[str],
 
     missing = [s for s in streams if not Path(s).is_file()]
     if missing:
-        raise SweepError(f"{st}: no such file {missing[0]}")
+        raise SweepError(f"{st}: {no_file(missing[0])}")
     problem = stream_header_problem(streams)
     if problem:
         raise SweepError(f"{st}: {problem}")

@@ -29,9 +29,9 @@ from .checks import COV_RTOL, covariance_problem, file_name
 from .errors import StreamFormatError
 from .estimate_writer import (ESTIMATE_FORMAT, ESTIMATE_VERSION, EstimateWriter,
                               estimate_to_json, write_estimate)
-from .jsonio import (DuplicateKeyError, find_nonfinite, is_id, is_int, is_num, line_of_key,
-                     loads_strict, options_from_json, path_of, unparsable_at,
-                     version_problem)
+from .jsonio import (DuplicateKeyError, decoder_problem, find_nonfinite, is_id, is_int, is_num,
+                     line_not_json, line_of_key, loads_strict, options_from_json, path_of,
+                     unparsable_at, version_problem)
 from .mapper import Checkpoint, MapEstimate
 from .stdio import MAX_LINE_BYTES, bounded_lines, line_too_long, open_input
 from .stream_identity import StreamIdentity, stream_file_identity, stream_identity
@@ -173,8 +173,7 @@ def _parse_line(text: str, ctx: _Line) -> dict:
     except DuplicateKeyError as exc:
         raise ctx.error(str(exc), "appears twice in one object") from None
     except (json.JSONDecodeError, RecursionError, ValueError) as exc:
-        why = getattr(exc, "msg", None) or unparsable_at(text)[1]
-        raise ctx.error(None, f"not valid JSON ({why or type(exc).__name__})") from None
+        raise ctx.error(None, line_not_json(exc, text)) from None
     if not isinstance(obj, dict):
         raise ctx.error(None, f"expected a JSON object, got {type(obj).__name__}")
     bad = find_nonfinite(obj)
@@ -354,11 +353,6 @@ def _read_v2(fh: IO[bytes], header: dict, path: str) -> EstimateFile:
 MAX_V1_BYTES = 128 * 2**20
 
 
-def _where(exc: json.JSONDecodeError) -> str:
-    """The decoder's message and column: ``Expecting ',' delimiter at column 61``."""
-    return f"{exc.msg.removesuffix(' at')} at column {exc.colno}"
-
-
 def read_estimate(path: str | os.PathLike[str]) -> EstimateFile:
     """Read an estimate file written by ``bomgraph run`` (version 2, or version 1), strictly:
     unknown and duplicate keys, non-finite numbers and malformed entries are refused, naming
@@ -427,10 +421,10 @@ def read_estimate(path: str | os.PathLike[str]) -> EstimateFile:
             second = text.split("\n", 2)[1:2]
             if (exc.lineno > 1 and isinstance(head_error, json.JSONDecodeError) and second
                     and second[0].lstrip().startswith('{"t"')):  # a broken version-2 header
-                raise StreamFormatError(f"not valid JSON ({_where(head_error)}); a version-2 "
+                raise StreamFormatError(f"not valid JSON ({decoder_problem(head_error)}); a version-2 "
                                         f"header is one JSON object on line 1",
                                         path=path, line=1) from None
-            raise StreamFormatError(f"not valid JSON ({_where(exc)})", path=path,
+            raise StreamFormatError(f"not valid JSON ({decoder_problem(exc)})", path=path,
                                     line=exc.lineno) from None
         except (RecursionError, ValueError) as exc:
             line, why = unparsable_at(text)

@@ -440,7 +440,9 @@ def landmark_nees(estimate: MapEstimate, truth: Truth, alignment: Alignment) -> 
     method reports none for it: not defined).
     """
     if estimate.landmark_cov is None:
-        raise EvaluationError("the estimate has no landmark covariances")
+        raise EvaluationError("the estimate has no landmark covariances (landmark_cov): use a "
+                              "method that gives them, ekf, ekf-invdepth, or a GTSAM method "
+                              "with covariances=True")
     common, ie, it = np.intersect1d(estimate.landmark_ids, truth.landmark_ids,
                                     return_indices=True)
     e = alignment.apply(estimate.landmarks_xy[ie]) - truth.landmarks_xy[it]

@@ -393,6 +393,33 @@ def unparsable_at(text: str) -> tuple[int | None, str | None]:
     return None, None
 
 
+#: what a file that starts with a UTF-8 byte-order mark (Windows Notepad's "UTF-8") is told
+BOM_ADVICE = "the file starts with a UTF-8 byte-order mark (BOM): save it as UTF-8 without one"
+
+
+def decoder_problem(exc: json.JSONDecodeError) -> str:
+    """The decoder's message and column: ``Expecting ',' delimiter at column 61``; of a
+    byte-order mark, what to do (it said "decode using utf-8-sig", advice to a programmer)."""
+    return BOM_ADVICE if exc.msg.startswith("Unexpected UTF-8 BOM") else (
+        f"{exc.msg.removesuffix(' at')} at column {exc.colno}")
+
+
+def line_not_json(exc: BaseException, text: str) -> str:
+    """Why one line of a JSON Lines file (``text``, with its newline) does not parse:
+    ``not valid JSON (Expecting ',' delimiter at column 61)``, and where the line has no
+    newline (the file ends in it), that the file looks cut short (h112: a truncated last line
+    said only ``(Unterminated string starting at)``)."""
+    if isinstance(exc, json.JSONDecodeError):
+        why = decoder_problem(exc)
+    elif isinstance(exc, RecursionError):
+        why = "too deeply nested"
+    else:
+        why = unparsable_at(text)[1] or str(exc) or type(exc).__name__
+    cut = ("" if text.endswith("\n") else "; the file ends in this line, without a newline: "
+           "cut short? complete the line or remove it")
+    return f"not valid JSON ({why}){cut}"
+
+
 def decode_utf8(raw: bytes) -> str:
     """One raw line as text; ``UnicodeDecodeError`` says at which byte it is not UTF-8."""
     return raw.decode("utf-8")
@@ -476,4 +503,5 @@ def parse_options(pairs: Sequence[str]) -> dict[str, Any]:
 __all__ = ["jsonable", "parse_option_value", "parse_options", "options_to_json",
            "options_from_json", "OPTION_INFINITIES", "MAX_ID", "is_int", "is_id",
            "is_num", "version_problem", "DuplicateKeyError", "no_duplicate_keys", "loads_strict",
-           "find_nonfinite", "path_of", "line_of_key", "unparsable_at"]
+           "find_nonfinite", "path_of", "line_of_key", "unparsable_at", "decoder_problem",
+           "BOM_ADVICE", "line_not_json"]

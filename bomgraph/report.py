@@ -230,6 +230,8 @@ def compare(experiments: Sequence[Experiment], out_dir: str | os.PathLike[str], 
     refuse_inputs_among_outputs(out, experiments)
     planned = planned_outputs(out, experiments, estimates=estimates, figures=figures)
     (record := OutputRecord(out)).refuse_foreign(planned, [out / "cache"] if use_cache else [])
+    if executor.backend != "serial":  # as execute() would, before OUT and its lock are made
+        refuse_runtime_methods([t for e in experiments for t in e.tasks()], executor.backend)
     out.mkdir(parents=True, exist_ok=True)   # check_folder above
     with compare_locks(out, planned), said_once():  # out, its linked and written folders
         record.remove_leftovers(planned)  # of compares killed while writing: none writes now

@@ -298,7 +298,7 @@ def check_output_path(path: str | os.PathLike[str],
         raise OutputPathError(f"{out_named(name, path)}: the folder {folder} does not exist")
     if st is not None and not os.access(target, os.W_OK):
         raise OutputPathError(f"{out_named(name, path)}: the file is not writable")
-    if st is None and not os.access(folder, os.W_OK | os.X_OK):
+    if not os.access(folder, os.W_OK | os.X_OK):  # a file too: replaced from one made beside it
         raise OutputPathError(f"{out_named(name, path)}: the folder {folder} is not writable")
 
 
@@ -464,13 +464,19 @@ class FolderBusyError(BomgraphError):
 
 def check_folder(folder: str | os.PathLike[str]) -> None:
     """Refuse an output folder that is empty or is or lies under a file or a link to a missing
-    folder (:class:`OutputPathError`, naming it, not ``[Errno 17]``/``[Errno 20]``); no mkdir."""
+    folder, or that is (or would be made in) a folder this process cannot write
+    (:class:`OutputPathError`, naming it, not ``[Errno 13]``/``[Errno 17]``/``[Errno 20]``);
+    no mkdir."""
     if not os.fspath(folder):   # Path('') is '.'
         raise OutputPathError(f"{out_named('out_dir')} is empty; give a folder ('.' for this "
                               f"one)")
     path = Path(folder)
     for at in (path, *path.parents):   # the nearest one that exists must be a folder
         if os.path.isdir(at):
+            if not os.access(at, os.W_OK | os.X_OK):  # not '[Errno 13] ...: OUT/.bomgraph.lock'
+                name = "" if at == path else f"{os.fspath(at)}, where it would be made, "
+                raise OutputPathError(f"{out_named('out_dir', folder)}: {name}is not "
+                                      f"writable; choose another folder")
             return
         if os.path.lexists(at):   # mkdir does not follow a link: [Errno 17] File exists
             what = (f"a link to {os.readlink(at)}, which does not exist; create that folder, "

@@ -19,7 +19,7 @@ import numpy as np
 from .checks import file_name
 from .errors import StreamFormatError
 from .jsonio import (MAX_ID, DuplicateKeyError, decode_utf8, find_nonfinite, is_id, is_int,
-                     is_num, loads_strict, unparsable_at, version_problem)
+                     is_num, line_not_json, loads_strict, version_problem)
 from .plausibility import (OdometryScale, PriorLandmarks, bearings_problem, header_problems,
                            step_problem, truth_problem)
 from .stdio import MAX_LINE_BYTES, bounded_lines, line_too_long, open_input, output_file
@@ -84,9 +84,7 @@ def _parse_json_line(text: str, ctx: _Ctx) -> dict:
     except DuplicateKeyError as exc:
         raise ctx.error(str(exc), "appears twice in one object; a reader never drops data")
     except (json.JSONDecodeError, RecursionError, ValueError) as exc:
-        msg = getattr(exc, "msg", None) or ("too deeply nested" if isinstance(exc, RecursionError)
-                                            else unparsable_at(text)[1] or str(exc))
-        raise ctx.error(None, f"not valid JSON ({msg})") from None
+        raise ctx.error(None, line_not_json(exc, text)) from None
     if not isinstance(obj, dict):
         raise ctx.error(None, f"expected a JSON object, got {type(obj).__name__}")
     bad = find_nonfinite(obj)

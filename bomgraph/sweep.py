@@ -52,6 +52,7 @@ from typing import Any, Mapping, Sequence
 
 from .checks import echo, file_name
 from .errors import BomgraphError, ConfigError
+from .jsonio import BOM_ADVICE
 from .sim import SimConfig
 
 #: The folder of the sweep files shipped in the package (``--config NAME``).
@@ -136,8 +137,8 @@ def resolve_path(path_or_name: str | os.PathLike[str]) -> Path:
         return p
     if (SHIPPED_DIR / f"{p}.toml").is_file() and p.suffix != ".toml":
         return SHIPPED_DIR / f"{p}.toml"
-    raise SweepError(f"{path_or_name}: no such sweep file (a path, or a shipped one: "
-                     f"{', '.join(shipped())})")
+    raise SweepError(f"{path_or_name}: {'is a folder, not a' if p.is_dir() else 'no such'} "
+                     f"sweep file (a path, or a shipped one: {', '.join(shipped())})")
 
 
 def read_sweep(path_or_name: str | os.PathLike[str]) -> SweepSpec:
@@ -156,8 +157,9 @@ def read_sweep(path_or_name: str | os.PathLike[str]) -> SweepSpec:
             raise SweepError(f"{path}: larger than {MAX_SWEEP_BYTES // 2**20} MiB; not a sweep "
                              f"file")
         data = tomllib.loads(raw.decode("utf-8"))
-    except tomllib.TOMLDecodeError as exc:
-        raise SweepError(f"{path}: not valid TOML: {exc}") from None
+    except tomllib.TOMLDecodeError as exc:  # of a byte-order mark: "Invalid statement"
+        why = BOM_ADVICE if raw.startswith(b"\xef\xbb\xbf") else f"not valid TOML: {exc}"
+        raise SweepError(f"{path}: {why}") from None
     except RecursionError:
         raise SweepError(f"{path}: not valid TOML: arrays or tables nested too deeply") from None
     except (OSError, UnicodeDecodeError) as exc:

@@ -20,7 +20,6 @@ from __future__ import annotations
 import contextlib
 import os
 import socket
-import subprocess
 import warnings
 from pathlib import Path
 from typing import Iterator
@@ -35,6 +34,8 @@ from bomgraph.out_folder import MANIFEST
 from bomgraph.sim import SimConfig, simulate
 from bomgraph.stdio import folder_lock
 from bomgraph.stream_file import write_stream
+
+from _not_writable import not_writable  # tests/_not_writable.py
 
 
 @contextlib.contextmanager
@@ -91,31 +92,6 @@ def test_dask_scratch_is_in_the_session_folder(tmp_path_factory: pytest.TempPath
     assert os.environ["DASK_TEMPORARY_DIRECTORY"] == str(scratch)  # for the processes started
 
 
-@contextlib.contextmanager
-def _not_writable(*paths: Path) -> Iterator[None]:
-    """``paths`` made unwritable for this process for the block: mode 0o555 / 0o444, and for
-    root (whom modes do not stop) the immutable attribute (``chattr +i``)."""
-    if os.geteuid() != 0:
-        for p in paths:
-            p.chmod(0o555 if p.is_dir() else 0o444)
-        try:
-            yield
-        finally:
-            for p in paths:
-                p.chmod(0o755 if p.is_dir() else 0o644)
-        return
-    made = [p for p in paths
-            if subprocess.run(["chattr", "+i", str(p)], capture_output=True).returncode == 0]
-    try:
-        if len(made) < len(paths):
-            pytest.skip("root needs chattr +i (e2fsprogs, a file system that has it) to make "
-                        "a folder unwritable")
-        yield
-    finally:
-        for p in made:
-            subprocess.run(["chattr", "-i", str(p)], check=True)
-
-
 def _compare_through_a_link(top: Path) -> list[str]:
     """``compare`` into ``top/sub/out``, its estimates a link to ``top/sub/big``, ``top``
     holding another compare's manifest."""
@@ -140,7 +116,7 @@ def test_a_compare_below_an_unwritable_folder_holding_a_manifest_runs(
     args = _compare_through_a_link(top)
     (top / MANIFEST).write_text('{"format": "bomgraph-compare-files", "version": 3, '
                                 '"files": []}\n')
-    with _not_writable(top):
+    with not_writable(top):
         assert main(args) == 0, capsys.readouterr().err
     assert (top / "sub" / "big" / "index.csv").is_file()
     assert not (top / ".bomgraph.lock").exists()
@@ -154,9 +130,9 @@ def test_an_unwritable_folders_lock_still_keeps_its_compare_out(
     args = _compare_through_a_link(top)
     (top / MANIFEST).write_text('{"format": "bomgraph-compare-files", "version": 3, '
                                 '"files": []}\n')
-    with folder_lock(top, "`bomgraph compare`"), _not_writable(top / ".bomgraph.lock", top):
+    with folder_lock(top, "`bomgraph compare`"), not_writable(top / ".bomgraph.lock", top):
         assert main(args) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and f"{top}: another `bomgraph compare`" in err[0], err
-    with _not_writable(top / ".bomgraph.lock", top):  # and once it is done, it runs
+    with not_writable(top / ".bomgraph.lock", top):  # and once it is done, it runs
         assert main(args) == 0, capsys.readouterr().err

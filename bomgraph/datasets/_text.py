@@ -24,7 +24,7 @@ from typing import IO, Iterator, Literal, Sequence
 import numpy as np
 
 from ..errors import DatasetError
-from ..jsonio import MAX_ID
+from ..jsonio import BOM_ADVICE, MAX_ID
 from ..plausibility import MAX_BEARING_SIGMA_RAD, MIN_BEARING_SIGMA_RAD
 from ..stdio import MAX_LINE_BYTES, line_too_long, open_input
 
@@ -165,6 +165,8 @@ def read_lines(path: str | os.PathLike[str], *, comment: str | None = "#",
         number, offset = 0, 0
         try:
             for block in _line_blocks(src, p, max_bytes):
+                if offset == 0 and block.startswith(b"\xef\xbb\xbf"):  # was: record '\ufeff#'
+                    raise dataset_error(p, 1, None, BOM_ADVICE)
                 try:
                     text = block.decode("utf-8")
                 except UnicodeDecodeError as exc:
