@@ -22,6 +22,7 @@ import os
 import stat
 import time
 from pathlib import Path
+from time import monotonic_ns
 from typing import Callable, Mapping, TypeVar
 
 #: A status whose modification or change time is within this long [ns] of the clock, behind
@@ -33,13 +34,18 @@ RACY_NS = 2_000_000_000
 #: At most this many files' digests are kept (a recording of a few hundred files included).
 MAX_KEPT = 4096
 
-#: A file's device, inode, size, modification and change time, and whether the modification
-#: time is ahead of the clock (:func:`settled_status`).
+#: A file's device, inode, size, modification and change time, whether the modification time
+#: is ahead of the clock, and the clock's steps back seen so far (:func:`settled_status`).
 Status = tuple[int, ...]
 
 #: Per file (its absolute path): its :func:`settled_status` and the SHA-256 of the bytes read
 #: after it.
 _KEPT: dict[str, tuple[Status, str]] = {}
+
+#: The clock's steps back seen (:func:`_read_clock`), and its reading less the monotonic
+#: clock's at the last status taken.
+_STEPS = 0
+_OFFSET: int | None = None
 
 K = TypeVar("K", bound="str | os.PathLike[str]")
 V = TypeVar("V")
@@ -65,10 +71,12 @@ def settled_status(path: str | os.PathLike[str]) -> Status | None:
     checked too for a file system whose ctime does not follow writes (Linux's vfat driver
     long read it from the creation time). The clock is read before the status, not after
     the read: a read that took seconds (a large file on a network disk) made a status taken
-    within a tick of a write look settled (h105, h107)."""
+    within a tick of a write look settled (h105, h107). The status holds how many times the
+    clock was seen to step back (:func:`_read_clock`): a write after a step back can have
+    the times of a status kept before it."""
     if os.name == "nt":
         return None
-    before_ns = time.time_ns()
+    before_ns, steps = _read_clock()
     try:
         status = _status(os.stat(path))
     except OSError:
@@ -77,8 +85,26 @@ def settled_status(path: str | os.PathLike[str]) -> Status | None:
     mtime_ns, ctime_ns = status[3:5]
     ahead = int(mtime_ns - after_ns > RACY_NS)
     if before_ns - ctime_ns > RACY_NS and (ahead or before_ns - mtime_ns > RACY_NS):
-        return status + (ahead,)
+        return status + (ahead, steps)
     return None
+
+
+def _read_clock() -> tuple[int, int]:
+    """The clock's reading now and how many times it was seen to step back (set back by NTP
+    or by hand): its reading less the monotonic clock's, which no step moves, fell since the
+    last status (the monotonic clock read on either side, so that a pause between the two
+    clocks' readings is not taken for a step; by over a millisecond, as a clock slewed apart
+    from the other drifts). A step back and a same-size write in the tick of a status kept
+    before it (taken well after that tick), the clock then on again, kept its status: the
+    old bytes' digest was served (h115)."""
+    global _STEPS, _OFFSET
+    start_ns = monotonic_ns()
+    now_ns = time.time_ns()
+    end_ns = monotonic_ns()
+    if _OFFSET is not None and now_ns - start_ns < _OFFSET - 1_000_000:
+        _STEPS += 1
+    _OFFSET = now_ns - end_ns
+    return now_ns, _STEPS
 
 
 def _status(st: os.stat_result) -> Status:

@@ -61,9 +61,11 @@ def _user(name: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 
 
 def _clock(monkeypatch: pytest.MonkeyPatch, at_ns: int) -> list[int]:
-    """The rule's clock, stopped at ``at_ns`` (set ``[0]`` to move it)."""
+    """The rule's clock, stopped at ``at_ns`` (set ``[0]`` to move it), and the monotonic
+    clock stopped too (the clock stopped alone looks stepped back: ``_read_clock``)."""
     clock = [at_ns]
     monkeypatch.setattr(file_digest, "time", types.SimpleNamespace(time_ns=lambda: clock[0]))
+    monkeypatch.setattr(file_digest, "monotonic_ns", lambda: 0)
     return clock
 
 
