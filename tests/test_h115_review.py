@@ -11,6 +11,8 @@
   now holds how many times the clock was seen to step back.
 - No test failed with the rule judging the ctime alone (h108's vfat test is caught by its
   "ahead" flag), nor with the Windows guard removed.
+- h108 fixed, unclaimed: a settled folder that could not be listed (out of file handles) had
+  its empty listing kept until it changed; now nothing is kept (a test holds it).
 
 Fake clocks as tests/test_h108_racy_rule.py's; a file system whose timestamps are coarse is
 one whose status keeps one time for every write (``_status`` patched: ``_tick``).
@@ -18,6 +20,7 @@ one whose status keeps one time for every write (``_status`` patched: ``_tick``)
 
 from __future__ import annotations
 
+import errno
 import os
 import types
 from pathlib import Path
@@ -25,7 +28,7 @@ from typing import Callable
 
 import pytest
 
-from bomgraph import file_digest
+from bomgraph import file_digest, source_files
 from test_h108_racy_rule import USERS, _clock, _user
 
 SECOND_NS = 1_000_000_000
@@ -138,3 +141,24 @@ def test_a_pause_between_the_two_clocks_readings_is_no_step_back(
     first = call()
     pause[0] = 5_000_000
     assert (call(), call(), len(reads)) == (first, first, 1)
+
+
+def test_a_folder_that_could_not_be_listed_is_listed_the_next_time(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Kept as h108 left it (before h108 the empty listing of a settled folder that could not
+    be listed, out of file handles, was kept until the folder changed: its modules left out
+    of the key)."""
+    (tmp_path / "pkg").mkdir()
+    (tmp_path / "pkg" / "m.py").write_text("x = 1\n")
+    monkeypatch.setattr(file_digest, "RACY_NS", -10**18)  # every status settled
+    monkeypatch.setattr(source_files, "_FOLDERS", {})
+    monkeypatch.setattr(source_files, "_LISTED", {})
+    scandir = os.scandir
+
+    def out_of_handles(folder: str):  # noqa: ANN202
+        raise OSError(errno.EMFILE, "Too many open files")
+
+    monkeypatch.setattr(source_files.os, "scandir", out_of_handles)
+    assert source_files.py_files(str(tmp_path / "pkg")) == []
+    monkeypatch.setattr(source_files.os, "scandir", scandir)
+    assert [rel for rel, _ in source_files.py_files(str(tmp_path / "pkg"))] == ["m.py"]
