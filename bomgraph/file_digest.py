@@ -22,23 +22,30 @@ import os
 import stat
 import time
 from pathlib import Path
+from time import monotonic_ns
 from typing import Callable, Mapping, TypeVar
 
 #: A status whose modification or change time is within this long [ns] of the clock, behind
-#: it or ahead, is not trusted: the file is read again the next time (2 s: FAT's timestamps;
-#: ext3 and HFS+ keep a second). The one knob of the rule (:func:`settled_status`).
+#: it or ahead (its change time ahead at all), is not trusted: the file is read again the
+#: next time (2 s: FAT's timestamps; ext3 and HFS+ keep a second). The one knob of the rule
+#: (:func:`settled_status`).
 RACY_NS = 2_000_000_000
 
 #: At most this many files' digests are kept (a recording of a few hundred files included).
 MAX_KEPT = 4096
 
-#: A file's device, inode, size, modification and change time, and whether each time is
-#: ahead of the clock (:func:`settled_status`).
+#: A file's device, inode, size, modification and change time, whether the modification time
+#: is ahead of the clock, and the clock's steps back seen so far (:func:`settled_status`).
 Status = tuple[int, ...]
 
 #: Per file (its absolute path): its :func:`settled_status` and the SHA-256 of the bytes read
 #: after it.
 _KEPT: dict[str, tuple[Status, str]] = {}
+
+#: The clock's steps back seen (:func:`_read_clock`), and its reading less the monotonic
+#: clock's at the last status taken.
+_STEPS = 0
+_OFFSET: int | None = None
 
 K = TypeVar("K", bound="str | os.PathLike[str]")
 V = TypeVar("V")
@@ -46,36 +53,58 @@ V = TypeVar("V")
 
 def settled_status(path: str | os.PathLike[str]) -> Status | None:
     """The status of the file or folder at ``path`` (links followed: device, inode, size,
-    modification and change time, and whether each time is ahead of the clock) if it can
-    stand for the bytes or entries read after it; None when it cannot be taken, and on
-    Windows (``st_ctime`` is the creation time there, which a write does not change).
+    modification and change time, and whether the modification time is ahead of the clock)
+    if it can stand for the bytes or entries read after it; None when it cannot be taken,
+    and on Windows (``st_ctime`` is the creation time there, which a write does not change).
 
     A write gives the file its clock's time, and a file system with coarse timestamps keeps
-    the status through a same-size write within one tick. So each time must be over
-    :data:`RACY_NS` behind the clock read before the status (a write since has a later time),
-    or over :data:`RACY_NS` ahead of the clock read after it (a write before it has an
-    earlier time): an mtime set ahead (``touch -d tomorrow``, an archive's, or a machine's
-    whose clock is ahead) was read again at every call. A time ahead counts only while it
-    stays ahead: the status says which times are, so once the clock has passed one, what was
-    kept under it no longer matches (a write in its tick may have kept the rest). The ctime
-    alone would do where every write sets it; the mtime is checked too for a file system
-    whose ctime does not follow writes (Linux's vfat driver long read it from the creation
-    time). The clock is read before the status, not after the read: a read that took
-    seconds (a large file on a network disk) made a status taken within a tick of a write
-    look settled (h105, h107)."""
+    the status through a same-size write within one tick. So the change time must be over
+    :data:`RACY_NS` behind the clock read before the status (a write since has a later
+    time), and so must the modification time, or be over :data:`RACY_NS` ahead of the clock
+    read after it (a write before it has an earlier time): an mtime set ahead (``touch -d
+    tomorrow``, an archive's) was read again at every call. A ctime ahead is never settled:
+    no tool sets it, so the clock that wrote it is not this one (a file server's ahead of
+    ours, or ours stepped back), and a same-size write in its tick keeps it (h115). An mtime
+    ahead counts only while it stays ahead: the status says whether it is, so once the clock
+    has passed it, what was kept under it no longer matches (a write in its tick may have
+    kept the rest). The ctime alone would do where every write sets it; the mtime is
+    checked too for a file system whose ctime does not follow writes (Linux's vfat driver
+    long read it from the creation time). The clock is read before the status, not after
+    the read: a read that took seconds (a large file on a network disk) made a status taken
+    within a tick of a write look settled (h105, h107). The status holds how many times the
+    clock was seen to step back (:func:`_read_clock`): a write after a step back can have
+    the times of a status kept before it."""
     if os.name == "nt":
         return None
-    before_ns = time.time_ns()
+    before_ns, steps = _read_clock()
     try:
         status = _status(os.stat(path))
     except OSError:
         return None
     after_ns = time.time_ns()
-    times = status[3:5]
-    ahead = tuple(int(t - after_ns > RACY_NS) for t in times)
-    if all(up or before_ns - t > RACY_NS for t, up in zip(times, ahead)):
-        return status + ahead
+    mtime_ns, ctime_ns = status[3:5]
+    ahead = int(mtime_ns - after_ns > RACY_NS)
+    if before_ns - ctime_ns > RACY_NS and (ahead or before_ns - mtime_ns > RACY_NS):
+        return status + (ahead, steps)
     return None
+
+
+def _read_clock() -> tuple[int, int]:
+    """The clock's reading now and how many times it was seen to step back (set back by NTP
+    or by hand): its reading less the monotonic clock's, which no step moves, fell since the
+    last status (the monotonic clock read on either side, so that a pause between the two
+    clocks' readings is not taken for a step; by over a millisecond, as a clock slewed apart
+    from the other drifts). A step back and a same-size write in the tick of a status kept
+    before it (taken well after that tick), the clock then on again, kept its status: the
+    old bytes' digest was served (h115)."""
+    global _STEPS, _OFFSET
+    start_ns = monotonic_ns()
+    now_ns = time.time_ns()
+    end_ns = monotonic_ns()
+    if _OFFSET is not None and now_ns - start_ns < _OFFSET - 1_000_000:
+        _STEPS += 1
+    _OFFSET = now_ns - end_ns
+    return now_ns, _STEPS
 
 
 def _status(st: os.stat_result) -> Status:
