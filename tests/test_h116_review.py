@@ -1,0 +1,43 @@
+"""h116's review of h112 (the new-user audit) and the leads it left: what the checks it added
+said wrongly, and the command line's duplicate streams, the estimates index and the
+read-only-folder tests that never ran as root."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from bomgraph.jsonio import line_not_json, loads_strict
+
+LINE = ('{"t": 3, "odom": [0.1, 0.0, -0.02], "bearings": [[4, 1.25e-1, 0.05]], "ok": true, '
+        '"none": null, "no": false, "s": "a\\"b"}')
+
+
+def _why(text: str, line: int = 22) -> str:
+    with pytest.raises((json.JSONDecodeError, ValueError)) as caught:
+        loads_strict(text)
+    return line_not_json(caught.value, text, line)
+
+
+def test_every_cut_of_a_last_line_is_called_cut_short() -> None:
+    for k in range(1, len(LINE)):
+        assert "cut short?" in _why(LINE[:k]), LINE[:k]
+
+
+@pytest.mark.parametrize("text", [LINE + "x", LINE[:-1] + ",}", LINE + "}", LINE[:-1] + "]"])
+def test_a_complete_last_line_wrong_otherwise_is_not_called_cut_short(text: str) -> None:
+    """h112 said "cut short? complete the line or remove it" of any last line without a
+    newline: of one with a stray character or a trailing comma too, where nothing is
+    missing."""
+    why = _why(text)
+    assert why.startswith("not valid JSON (") and "cut short" not in why, why
+
+
+def test_a_byte_order_mark_after_line_1_is_the_lines() -> None:
+    """Files joined (``cat a.jsonl b.jsonl``), b saved with a BOM: line 57 said "the file
+    starts with a UTF-8 byte-order mark"."""
+    assert "the file starts with a UTF-8 byte-order mark" in _why("\ufeff" + LINE + "\n", 1)
+    why = _why("\ufeff" + LINE + "\n", 57)
+    assert "the line starts with a UTF-8 byte-order mark (BOM): remove it" in why, why
+    assert loads_strict('{"s": "\ufeffx"}') == {"s": "\ufeffx"}  # inside a string: valid
