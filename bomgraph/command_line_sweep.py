@@ -120,7 +120,7 @@ def command_line_spec(streams: Sequence[str], methods: Sequence[str],
     check_unique([a.label for a in arms], ms)
     exp = ExperimentSpec(name, f"{len(streams)} stream(s), {len(arms)} method(s)",
                          tuple(arms),
-                         streams=named_streams(streams),
+                         streams=named_streams([str(Path(s).resolve()) for s in streams]),
                          reference=None if ref is None else with_options(ref),
                          checkpoint_every=checkpoint_every)
     return SweepSpec("<command line>", (exp,))

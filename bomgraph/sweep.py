@@ -217,16 +217,16 @@ def named_streams(paths: list[str]) -> tuple[tuple[str, str], ...]:
 
 def unique_paths(paths: Sequence[str], seen: set[str] | None = None
                  ) -> tuple[list[str], list[str]]:
-    """``paths`` resolved (links and ``..`` followed), each file once: those not in ``seen``
-    (updated) nor before them, and those dropped as the same file again (a sweep file's
-    globs and ``compare --streams`` alike, h116). Only the same file through another
-    spelling or link is dropped: a copy, or a hard link, is another run (its own label, the
-    same bytes and cache key)."""
+    """``paths`` each file once, as given: those whose resolved path (links and ``..``
+    followed) is not in ``seen`` (updated) nor before them, and those dropped as the same
+    file again (a sweep file's globs and ``compare --streams`` alike, h116). Only the same
+    file through another spelling or link is dropped: a copy, or a hard link, is another run
+    (its own label, the same bytes and cache key)."""
     seen = set() if seen is None else seen   # a membership test a file, not a scan (h96)
     kept, dropped = [], []
     for p in paths:
         full = str(Path(p).resolve())
-        (dropped if full in seen else kept).append(p if full in seen else full)
+        (dropped if full in seen else kept).append(p)
         seen.add(full)
     return kept, dropped
 
@@ -421,7 +421,7 @@ class _Reader:
             pat = self.str_(pat, f"{key}[{k}]")
             full = pat if os.path.isabs(pat) else str(self.path.parent / pat)
             found = sorted(glob.glob(full, recursive=True))
-            found = [f for f in found if os.path.isfile(f)]
+            found = [str(Path(f).resolve()) for f in found if os.path.isfile(f)]
             if not found:
                 raise self.fail(f"{key}[{k}]", f"{pat!r} matches no file (relative to "
                                                f"{self.path.parent.resolve()})")

@@ -16,7 +16,7 @@ from bomgraph.command_line_sweep import command_line_spec
 from bomgraph.jsonio import line_not_json, loads_strict
 from bomgraph.sim import SimConfig, simulate
 from bomgraph.stream_file import write_stream
-from bomgraph.sweep import read_sweep
+from bomgraph.sweep import SweepError, read_sweep
 
 LINE = ('{"t": 3, "odom": [0.1, 0.0, -0.02], "bearings": [[4, 1.25e-1, 0.05]], "ok": true, '
         '"none": null, "no": false, "s": "a\\"b"}')
@@ -71,3 +71,13 @@ def test_compare_streams_runs_a_file_given_twice_once_as_a_sweep_file_does(
         'streams = ["a.jsonl", "./a.jsonl", "link.jsonl", "copy.jsonl"]\n'
         'methods = ["triangulate"]\n')
     assert read_sweep(tmp_path / "sweep.toml").experiments[0].streams == runs  # one mechanism
+
+
+def test_compare_streams_names_a_bad_stream_as_given(tmp_path: Path,
+                                                     monkeypatch: pytest.MonkeyPatch) -> None:
+    """The duplicates dropped, the header check still names the file as the user spelled it
+    (a first version of h116's change named it by its resolved path)."""
+    (tmp_path / "bad.jsonl").write_text('{"format": "nope"}\n')
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(SweepError, match=r"^streams: bad\.jsonl, line 1: 'format'"):
+        command_line_spec(["bad.jsonl", "./bad.jsonl"], ["triangulate"], [])
