@@ -10,13 +10,17 @@ while a command runs, else the Python parameter (:func:`bomgraph.checks.option_n
 from __future__ import annotations
 
 import dataclasses
+import logging
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
 from .checks import no_file, option_named
 from .errors import ConfigError
 from .sweep import (ExperimentSpec, MethodSpec, SweepError, SweepSpec, check_unique,
-                    checked_method, named_streams, parse_method, stream_header_problem)
+                    checked_method, named_streams, parse_method, stream_header_problem,
+                    unique_paths)
+
+_log = logging.getLogger(__name__)
 
 
 def run_method(token: str, options: Mapping[str, Any]) -> tuple[str, str, dict[str, Any]]:
@@ -104,6 +108,11 @@ def command_line_spec(streams: Sequence[str], methods: Sequence[str],
     missing = [s for s in streams if not Path(s).is_file()]
     if missing:
         raise SweepError(f"{st}: {no_file(missing[0])}")
+    streams, again = unique_paths(streams)  # as a sweep file's globs: one run a file
+    if again:
+        _log.warning("%s: %s %s the same file as one before; each file runs once (a copy "
+                     "under another name runs as a stream of its own)", st,
+                     ", ".join(again), "is" if len(again) == 1 else "are")
     problem = stream_header_problem(streams)
     if problem:
         raise SweepError(f"{st}: {problem}")

@@ -173,7 +173,7 @@ def _parse_line(text: str, ctx: _Line) -> dict:
     except DuplicateKeyError as exc:
         raise ctx.error(str(exc), "appears twice in one object") from None
     except (json.JSONDecodeError, RecursionError, ValueError) as exc:
-        raise ctx.error(None, line_not_json(exc, text)) from None
+        raise ctx.error(None, line_not_json(exc, text, ctx.line)) from None
     if not isinstance(obj, dict):
         raise ctx.error(None, f"expected a JSON object, got {type(obj).__name__}")
     bad = find_nonfinite(obj)

@@ -404,19 +404,33 @@ def decoder_problem(exc: json.JSONDecodeError) -> str:
         f"{exc.msg.removesuffix(' at')} at column {exc.colno}")
 
 
-def line_not_json(exc: BaseException, text: str) -> str:
-    """Why one line of a JSON Lines file (``text``, with its newline) does not parse:
+#: what is left of a line the decoder ran out of: nothing, or a token that stops short
+#: (``"abc``, ``tru``, ``1.``, ``-``); a line cut short ends so, a complete one does not
+_PARTIAL_TOKEN = re.compile(r'\s*(?:"(?:[^"\\]|\\.)*\\?|-?[0-9.eE+-]*|t(?:ru?)?|f(?:a(?:ls?)?)?'
+                            r'|n(?:ul?)?)')
+
+
+def line_not_json(exc: BaseException, text: str, line: int = 1) -> str:
+    """Why line ``line`` of a JSON Lines file (``text``, with its newline) does not parse:
     ``not valid JSON (Expecting ',' delimiter at column 61)``, and where the line has no
-    newline (the file ends in it), that the file looks cut short (h112: a truncated last line
-    said only ``(Unterminated string starting at)``)."""
+    newline (the file ends in it) and the decoder ran out of it mid-value, that the file looks
+    cut short (h112: a truncated last line said only ``(Unterminated string starting at)``;
+    h116: not of a complete line with a stray character or a trailing comma). A byte-order
+    mark after line 1 (files joined, one saved with a BOM) is called the line's, not the
+    file's."""
     if isinstance(exc, json.JSONDecodeError):
         why = decoder_problem(exc)
-    elif isinstance(exc, RecursionError):
-        why = "too deeply nested"
+        if line > 1 and exc.msg.startswith("Unexpected UTF-8 BOM"):
+            why = ("the line starts with a UTF-8 byte-order mark (BOM): remove it (a file "
+                   "saved with one, joined to this one?)")
+        ran_out = (exc.msg.startswith("Unterminated string")
+                   or _PARTIAL_TOKEN.fullmatch(text, exc.pos) is not None)
     else:
-        why = unparsable_at(text)[1] or str(exc) or type(exc).__name__
-    cut = ("" if text.endswith("\n") else "; the file ends in this line, without a newline: "
-           "cut short? complete the line or remove it")
+        why = ("too deeply nested" if isinstance(exc, RecursionError)
+               else unparsable_at(text)[1] or str(exc) or type(exc).__name__)
+        ran_out = False
+    cut = ("; the file ends in this line, without a newline: cut short? complete the line or "
+           "remove it" if ran_out and not text.endswith("\n") else "")
     return f"not valid JSON ({why}){cut}"
 
 

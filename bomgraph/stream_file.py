@@ -84,7 +84,7 @@ def _parse_json_line(text: str, ctx: _Ctx) -> dict:
     except DuplicateKeyError as exc:
         raise ctx.error(str(exc), "appears twice in one object; a reader never drops data")
     except (json.JSONDecodeError, RecursionError, ValueError) as exc:
-        raise ctx.error(None, line_not_json(exc, text)) from None
+        raise ctx.error(None, line_not_json(exc, text, ctx.line)) from None
     if not isinstance(obj, dict):
         raise ctx.error(None, f"expected a JSON object, got {type(obj).__name__}")
     bad = find_nonfinite(obj)

@@ -215,6 +215,22 @@ def named_streams(paths: list[str]) -> tuple[tuple[str, str], ...]:
     return tuple(zip(paths, labels))
 
 
+def unique_paths(paths: Sequence[str], seen: set[str] | None = None
+                 ) -> tuple[list[str], list[str]]:
+    """``paths`` each file once, as given: those whose resolved path (links and ``..``
+    followed) is not in ``seen`` (updated) nor before them, and those dropped as the same
+    file again (a sweep file's globs and ``compare --streams`` alike, h116). Only the same
+    file through another spelling or link is dropped: a copy, or a hard link, is another run
+    (its own label, the same bytes and cache key)."""
+    seen = set() if seen is None else seen   # a membership test a file, not a scan (h96)
+    kept, dropped = [], []
+    for p in paths:
+        full = str(Path(p).resolve())
+        (dropped if full in seen else kept).append(p)
+        seen.add(full)
+    return kept, dropped
+
+
 def check_unique(labels: Sequence[str], where: str) -> None:
     # not list.count: 460,000 worlds fit a sweep file's 16 MiB, hours of comparisons (h96)
     dup = sorted(x for x, n in Counter(labels).items() if n > 1)
@@ -400,7 +416,7 @@ class _Reader:
         if not isinstance(patterns, list):
             raise self.fail(key, "must be a list of file names or globs")
         paths: list[str] = []
-        seen: set[str] = set()   # of paths: a membership test a file, not a scan of the list
+        seen: set[str] = set()   # of resolved paths (unique_paths)
         for k, pat in enumerate(patterns):
             pat = self.str_(pat, f"{key}[{k}]")
             full = pat if os.path.isabs(pat) else str(self.path.parent / pat)
@@ -409,9 +425,7 @@ class _Reader:
             if not found:
                 raise self.fail(f"{key}[{k}]", f"{pat!r} matches no file (relative to "
                                                f"{self.path.parent.resolve()})")
-            new = [f for f in found if f not in seen]
-            paths += new
-            seen.update(new)
+            paths += unique_paths(found, seen)[0]  # globs may overlap: dropped silently
         problem = stream_header_problem(paths)
         if problem:
             raise self.fail(key, problem)
@@ -508,4 +522,5 @@ def _unique_or(reader: _Reader, labels: Sequence[str], key: str) -> None:
 
 __all__ = ["SweepError", "SweepSpec", "ExperimentSpec", "MethodSpec", "WorldSpec",
            "read_sweep", "parse_method", "checked_method", "named_streams", "check_unique",
+           "unique_paths",
            "shipped", "resolve_path", "SHIPPED_DIR"]

@@ -19,6 +19,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from _not_writable import not_writable  # tests/_not_writable.py
+
 from bomgraph.estimate_file import read_estimate
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -302,13 +304,10 @@ def test_run_checks_out_before_computing(tmp_path: Path, stream: Path) -> None:
                             str(tmp_path / "nowhere" / "e.json")), "does not exist")
     locked = tmp_path / "locked"
     locked.mkdir()
-    locked.chmod(0o500)
-    try:
-        if not os.access(locked, os.W_OK):  # root writes anywhere
-            one_error_line(bomgraph("run", str(stream), "--method", "gtsam-batch", "--out",
-                                    str(locked / "e.json")), "not writable")
-    finally:
-        locked.chmod(0o700)
+    with not_writable(locked):  # root too (it ran only where os.access said so: never in CI)
+        one_error_line(bomgraph("run", str(stream), "--method", "gtsam-batch", "--out",
+                                str(locked / "e.json")), "not writable")
+    assert list(locked.iterdir()) == []
 
 
 def test_gz_hint_only_where_the_bytes_say_gzip(tmp_path: Path) -> None:
