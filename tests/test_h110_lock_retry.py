@@ -10,7 +10,7 @@ from __future__ import annotations
 import contextlib
 import os
 from pathlib import Path
-from typing import Iterator
+from typing import Callable, Iterator
 
 import pytest
 
@@ -33,6 +33,25 @@ def _crossed(tmp_path: Path) -> tuple[Path, Path]:
     return x, w
 
 
+def _count_tries(monkeypatch: pytest.MonkeyPatch, x: Path,
+                 on_try: Callable[[int], None] = lambda n: None) -> list[str]:
+    """The folders compare locks, as it locks them (``on_try(n)`` first, at its ``n``-th try
+    of ``x``); no pause between tries."""
+    lock, tries = out_folder.folder_lock, []
+
+    @contextlib.contextmanager
+    def counted(folder: str, what: str, shared: bool = False) -> Iterator[None]:
+        tries.append(folder)
+        if Path(folder) == x:
+            on_try(sum(Path(f) == x for f in tries))
+        with lock(folder, what, shared):
+            yield
+
+    monkeypatch.setattr(out_folder, "folder_lock", counted)
+    monkeypatch.setattr(out_folder, "RETRY_S", 0.0, raising=False)
+    return tries
+
+
 def test_refused_after_its_own_folder_it_lets_go_and_tries_again(
         tmp_path: Path, stream: Path, monkeypatch: pytest.MonkeyPatch,
         capsys: pytest.CaptureFixture) -> None:
@@ -41,26 +60,19 @@ def test_refused_after_its_own_folder_it_lets_go_and_tries_again(
     held, is refused and lets go of ``w``. This one was refused too: neither ran. Now it lets
     go of ``x`` and tries again, and runs. Fails before (status 2)."""
     x, w = _crossed(tmp_path)
-    lock, tries = out_folder.folder_lock, []
 
-    @contextlib.contextmanager
-    def other_refused(folder: str, what: str, shared: bool = False) -> Iterator[None]:
-        if Path(folder) == x:
-            tries.append(folder)
-            if len(tries) == 2:   # x let go (else the other one could not see it free) ...
-                with lock(x, _WHO):
-                    pass
-                other.close()     # ... and the other one, refused, lets go of w
-        with lock(folder, what, shared):
-            yield
+    def other_refused(n: int) -> None:
+        if n == 2:   # x let go (else the other one could not have seen it free) ...
+            with folder_lock(x, _WHO):
+                pass
+            other.close()     # ... and the other one, refused, let go of w
 
-    monkeypatch.setattr(out_folder, "folder_lock", other_refused)
-    monkeypatch.setattr(out_folder, "RETRY_S", 0.0, raising=False)
+    tries = _count_tries(monkeypatch, x, other_refused)
     with contextlib.ExitStack() as other:
-        other.enter_context(lock(w, _WHO))          # the other compare, into w, has it
+        other.enter_context(folder_lock(w, _WHO))   # the other compare, into w, has it
         assert main(_compare_folder.linked_cmd(stream, x, "triangulate")) == 0, \
             capsys.readouterr().err
-    assert len(tries) == 2
+    assert tries.count(x) == 2
     assert (w / "e" / "streams" / "triangulate" / "s.est").is_file()
 
 
@@ -71,23 +83,13 @@ def test_a_compare_that_keeps_the_lock_still_refuses_it_with_the_same_line(
     line is the error, and nothing is written through the link. Each try took ``x`` again
     (let go in between: the other one, taking its locks, could look at it)."""
     x, w = _crossed(tmp_path)
-    lock, tries = out_folder.folder_lock, []
-
-    @contextlib.contextmanager
-    def counted(folder: str, what: str, shared: bool = False) -> Iterator[None]:
-        if Path(folder) == x:
-            tries.append(folder)
-        with lock(folder, what, shared):
-            yield
-
-    monkeypatch.setattr(out_folder, "folder_lock", counted)
-    monkeypatch.setattr(out_folder, "RETRY_S", 0.0, raising=False)
+    tries = _count_tries(monkeypatch, x)
     with folder_lock(w, _WHO):
         assert main(_compare_folder.linked_cmd(stream, x, "triangulate")) == 2
     err = _compare_folder.one_error(capsys)
     assert f"{w}: another {_WHO}" in err and "is writing into this folder" in err, err
     assert f"(pid {os.getpid()})" in err
-    assert len(tries) == out_folder.LOCK_RETRIES + 1
+    assert tries.count(x) == out_folder.LOCK_RETRIES + 1
     assert not list((w / "e").rglob("*.est")) and not (x / "results.csv").exists()
 
 
@@ -96,15 +98,7 @@ def test_refused_at_its_own_folder_it_is_refused_at_once(tmp_path: Path,
                                                           ) -> None:
     """Refused at ``out`` it holds nothing, so nothing of it can refuse the other: no retry."""
     x, _ = _crossed(tmp_path)
-    lock, tries = out_folder.folder_lock, []
-
-    @contextlib.contextmanager
-    def counted(folder: str, what: str, shared: bool = False) -> Iterator[None]:
-        tries.append(folder)
-        with lock(folder, what, shared):
-            yield
-
-    monkeypatch.setattr(out_folder, "folder_lock", counted)
+    tries = _count_tries(monkeypatch, x)
     with folder_lock(x, _WHO):
         with pytest.raises(FolderBusyError, match="is writing into this folder"):
             with out_folder.compare_locks(x, [x / "results.csv"]):

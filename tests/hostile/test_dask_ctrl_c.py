@@ -23,7 +23,7 @@ from pathlib import Path
 
 import pytest
 
-from hostile_helpers import ENV
+from hostile_helpers import ENV, ctrl_c, group_killed_at_the_end, holds_sigint_and_sigterm
 
 pytestmark = pytest.mark.skipif(not os.path.isdir("/proc/self"), reason="reads /proc")
 
@@ -125,19 +125,10 @@ def test_ctrl_c_to_the_process_group_of_a_dask_local_compare(tmp_path: Path, wor
          "--no-progress", "--out", str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
         env=env, start_new_session=True,
         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
-    try:
+    with group_killed_at_the_end(proc):
         workers = [int(p.read_text()) for p in _wait_for(marks, "running*", 2)]
-        for pid in workers:
-            blocked = int(Path(f"/proc/{pid}/status").read_text().split("SigBlk:")[1].split()[0],
-                          16)
-            assert blocked & (1 << (signal.SIGINT - 1)), f"{blocked:x}"
-            assert blocked & (1 << (signal.SIGTERM - 1)), f"{blocked:x}"
-        os.killpg(proc.pid, signal.SIGINT)
-        _, err = proc.communicate(timeout=120)
-    finally:
-        if proc.poll() is None:
-            os.killpg(proc.pid, signal.SIGKILL)
-            proc.communicate()
+        assert all(holds_sigint_and_sigterm(pid) for pid in workers)
+        _, err = ctrl_c(proc)
     lines = err.decode(errors="replace").strip().splitlines()
     assert proc.returncode == 130, lines
     assert lines == ["bomgraph: interrupted; 0 runs cached, rerun to resume"], lines
