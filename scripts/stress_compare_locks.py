@@ -7,7 +7,8 @@ one compare of each, so every lock file is there from the start), starts both co
 import everything and then wait on one pipe (with ``--at-lock``: as each is about to take its
 folder locks, its checks of the folder done), and closes the pipe: both go within a moment of
 each other. Each run sleeps ``--run-s`` first, so the first to lock holds its locks while the
-other starts (two compares one after the other both run, rightly). A compare's outcome is its status: 0 ran, 2 refused ("another ... is writing").
+other starts; two that both ran are told apart by when each held its locks: at once (never
+right), or one after the other (right: the second took its locks once the first was done). A compare's outcome is its status: 0 ran, 2 refused ("another ... is writing").
 
 Scenarios (A and B):
   same      A --out X, B --out X
@@ -43,16 +44,21 @@ def run_task(task):  # long enough that the two overlap: the first holds its loc
     return _run_task(task)
 bomgraph.bench.run_task = run_task
 go, ready = int(sys.argv[1]), int(sys.argv[2])
-if os.environ["BOMGRAPH_LOCKS_AT_LOCK"]:  # the start: as it takes its locks
-    _locks = bomgraph.report.compare_locks
-    @contextlib.contextmanager
-    def compare_locks(*args, **kwargs):
+at_lock = bool(os.environ["BOMGRAPH_LOCKS_AT_LOCK"])
+_locks = bomgraph.report.compare_locks
+@contextlib.contextmanager
+def compare_locks(*args, **kwargs):
+    if at_lock:  # the start: as it takes its locks
         os.write(ready, b"r")
         os.read(go, 1)
-        with _locks(*args, **kwargs):
+    with _locks(*args, **kwargs):
+        start = time.monotonic()  # the system's clock: the other process's too
+        try:
             yield
-    bomgraph.report.compare_locks = compare_locks
-else:  # the start: as the command starts
+        finally:
+            print(f"held {start} {time.monotonic()}", file=sys.stderr)
+bomgraph.report.compare_locks = compare_locks
+if not at_lock:  # the start: as the command starts
     os.write(ready, b"r")
     os.read(go, 1)
 sys.exit(main(sys.argv[3:]))
@@ -129,6 +135,12 @@ def trial(scenario: str, stream: Path, base: Path, warm: bool, run_s: float,
     errs = [p.communicate(timeout=300)[1].decode(errors="replace").strip() for p in procs]
     codes = [p.returncode for p in procs]
     shutil.rmtree(folder, ignore_errors=True)
+    held = [[float(t) for t in line.split()[1:]] for e in errs for line in e.splitlines()
+            if line.startswith("held ")]
+    if codes == [0, 0] and len(held) == 2:
+        (a0, a1), (b0, b1) = held
+        return ("BOTH RAN, AT ONCE" if a0 < b1 and b0 < a1 else
+                "both ran, one after the other"), errs
     if sorted(codes) == [0, 2]:
         return "one ran, one refused", errs
     if codes == [2, 2]:
