@@ -25,6 +25,8 @@ import hashlib
 import json
 import logging
 import os
+import random
+import time
 from pathlib import Path
 from typing import Any, Callable, Iterator, Mapping, Sequence
 
@@ -32,8 +34,8 @@ from .claims import remove_leftovers
 from .slugs import figure_names, slug, unique_slugs  # re-exported: out_folder.slug
 from .experiments import DatasetSource, Experiment, FileSource, Task
 from .checks import out_named
-from .stdio import (InputTooLargeError, OutputPathError, folder_lock, read_regular_file,
-                    write_text)
+from .stdio import (FolderBusyError, InputTooLargeError, OutputPathError, folder_lock,
+                    read_regular_file, write_text)
 
 _log = logging.getLogger(__name__)
 
@@ -510,6 +512,9 @@ def folders_below_locked(out: Path, rels: Sequence[str], held: set[Any]) -> dict
     return dict(sorted(found.items(), key=lambda kv: len(Path(kv[0]).parts)))
 
 
+LOCK_RETRIES, RETRY_S = 3, 0.1  # compare_locks' tries after the first; pauses: RETRY_S * 2**k
+
+
 @contextlib.contextmanager
 def compare_locks(out: Path, paths: Sequence[Path]) -> Iterator[None]:
     """Hold what ``compare`` writing ``paths`` into ``out`` locks (:func:`folder_lock`):
@@ -517,23 +522,39 @@ def compare_locks(out: Path, paths: Sequence[Path]) -> Iterator[None]:
     compare into a folder above is kept out, two writing into two of its subfolders run side
     by side: stop 43's CI). Those are looked for again once the exclusive ones are held: of
     two compares that may write one file, the second to start finds the other's lock (h100).
-    First too: one refused there leaves no lock file in a folder it links to."""
+    First too: one refused there leaves no lock file in a folder it links to. Refused at
+    ``out``: at once; after (maybe by one that holds it only while refused by ours): all let
+    go, and taken again. Two compares that each held what the other wanted (each linked into
+    the other's folder, starting at once) were both refused, neither ran (h110)."""
     who = "`bomgraph compare`"
-    with folder_lock(out, who), contextlib.ExitStack() as stack:
-        linked, rels = linked_folders(out, paths), _touched(out, paths)
-        held = {_file_id(out), *(_file_id(real) for real in linked)}
+    for attempt in range(LOCK_RETRIES + 1):
+        with folder_lock(out, who), contextlib.ExitStack() as stack:
+            try:
+                _lock_the_rest(out, paths, stack, who)
+            except FolderBusyError:
+                if attempt == LOCK_RETRIES:
+                    raise
+            else:
+                yield
+                return
+        time.sleep(random.uniform(0, RETRY_S * 2**attempt))  # let go: the other one's turn
 
-        def below() -> None:
-            for folder, into in folders_below_locked(out, rels, held).items():
-                stack.enter_context(folder_lock(folder, f"{who} (into it, or through a link "
-                                                        f"into it; this one writes into "
-                                                        f"{into})", shared=True))
-        below()
-        for real, link in linked.items():  # two folders may link one
-            stack.enter_context(folder_lock(real, f"{who} (into it, or through a link into "
-                                                  f"it as {link} is one)"))
-        below()
-        yield
+
+def _lock_the_rest(out: Path, paths: Sequence[Path], stack: contextlib.ExitStack,
+                   who: str) -> None:  # compare_locks' but out's, into stack
+    linked, rels = linked_folders(out, paths), _touched(out, paths)
+    held = {_file_id(out), *(_file_id(real) for real in linked)}
+
+    def below() -> None:
+        for folder, into in folders_below_locked(out, rels, held).items():
+            stack.enter_context(folder_lock(folder, f"{who} (into it, or through a link into "
+                                                    f"it; this one writes into {into})",
+                                            shared=True))
+    below()
+    for real, link in linked.items():  # two folders may link one
+        stack.enter_context(folder_lock(real, f"{who} (into it, or through a link into it "
+                                              f"as {link} is one)"))
+    below()
 
 
 def drop_earlier_outputs(out: Path, written: Sequence[Path],

@@ -4,6 +4,7 @@ one line ``bomgraph: error: ...`` naming the cause, never a traceback."""
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import os
@@ -12,7 +13,7 @@ import resource
 import subprocess
 import sys
 from pathlib import Path
-from typing import Iterable
+from typing import Iterable, Iterator
 
 ROOT = Path(__file__).resolve().parents[2]
 ENV = {**os.environ, "PYTHONPATH": str(ROOT), "PYTHONUNBUFFERED": "1", "OMP_NUM_THREADS": "1",
@@ -95,3 +96,34 @@ def write_jsonl(path: Path, header: dict, steps: Iterable[dict]) -> Path:
 
 HEADER = {"format": "bomgraph-stream", "version": 1, "bearing_sigma_rad": 0.05,
           "odometry_sigma": [0.03, 0.0, 0.05]}
+
+
+def holds_sigint_and_sigterm(pid: int) -> bool:
+    """Whether the process ``pid`` has SIGINT and SIGTERM blocked (Linux ``/proc``)."""
+    import signal
+
+    blocked = int(Path(f"/proc/{pid}/status").read_text().split("SigBlk:")[1].split()[0], 16)
+    return all(blocked & (1 << (s - 1)) for s in (signal.SIGINT, signal.SIGTERM))
+
+
+def ctrl_c(proc: subprocess.Popen, timeout: float = 120) -> tuple[bytes, bytes]:
+    """SIGINT to ``proc``'s process group (a terminal's Ctrl-C; ``proc`` started in a session
+    of its own), and its output once it has ended."""
+    import signal
+
+    os.killpg(proc.pid, signal.SIGINT)
+    return proc.communicate(timeout=timeout)
+
+
+@contextlib.contextmanager
+def group_killed_at_the_end(proc: subprocess.Popen) -> Iterator[subprocess.Popen]:
+    """``proc`` (started in a session of its own) and its group killed after the block if it
+    is still running then (a failed test)."""
+    import signal
+
+    try:
+        yield proc
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.communicate()

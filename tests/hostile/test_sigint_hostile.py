@@ -21,7 +21,7 @@ from pathlib import Path
 
 import pytest
 
-from hostile_helpers import ENV
+from hostile_helpers import ENV, ctrl_c, group_killed_at_the_end, holds_sigint_and_sigterm
 
 from bomgraph.bench import strip_timings
 
@@ -341,7 +341,7 @@ def test_ctrl_c_to_the_process_group_with_worker_processes_is_one_line(
          "--methods", "triangulate,stmds-cs", "--jobs", "2", "--no-figures", "--no-progress",
          "--out", str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env,
         start_new_session=True, preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
-    try:
+    with group_killed_at_the_end(proc):
         workers: list[int] = []
         for _ in range(1200):
             workers = [k for k in _children(proc.pid)
@@ -350,16 +350,8 @@ def test_ctrl_c_to_the_process_group_with_worker_processes_is_one_line(
                 break
             threading.Event().wait(0.05)
         assert len(workers) == 2, proc.communicate()
-        for k in workers:
-            blocked = int(Path(f"/proc/{k}/status").read_text().split("SigBlk:")[1].split()[0],
-                          16)
-            assert blocked & (1 << (signal.SIGINT - 1)) and blocked & (1 << (signal.SIGTERM - 1))
-        os.killpg(proc.pid, signal.SIGINT)
-        stdout, stderr = proc.communicate(timeout=120)
-    finally:
-        if proc.poll() is None:
-            os.killpg(proc.pid, signal.SIGKILL)
-            proc.communicate()
+        assert all(holds_sigint_and_sigterm(k) for k in workers)
+        stdout, stderr = ctrl_c(proc)
     _one_line(subprocess.CompletedProcess(proc.args, proc.returncode, stdout, stderr))
     _no_temporary_files(out)
 
