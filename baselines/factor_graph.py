@@ -294,7 +294,7 @@ class BatchState:
         converged its solution becomes the current values and no bearing is left out any
         more; otherwise nothing changes. Returns its solution and report."""
         values, report = solve_lm(self.graph, self.values, self._lm_config,
-                                  looks_off=_never_off)
+                                  looks_off=never_off)
         if report.converged:
             self._near = np.zeros(0, np.int64)
             self.solved_graph = self.graph
@@ -325,7 +325,7 @@ class BatchState:
                                           self.bearings(), ids, self._fresh, overlay)
         # the window's own LM report tells convergence; a check only if it did not stop
         # on its tolerance
-        window, report = solve_lm(graph, start, self._lm_config, looks_off=_never_off)
+        window, report = solve_lm(graph, start, self._lm_config, looks_off=never_off)
         values = self.values if adopt else gtsam.Values(self.values)
         values.update(window)
         values.update(self.chunks.back_substitute(values))
@@ -365,7 +365,9 @@ def _locate(ids: np.ndarray, lid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return pos, ids[pos] == lid
 
 
-def _never_off(values: gtsam.Values) -> bool:
+def never_off(values: gtsam.Values) -> bool:
+    """A ``looks_off`` for :func:`solve_lm` that never says a solution looks off: the plain
+    pass only (no Huber pass), a Gauss-Newton check only if LM did not stop on its tolerance."""
     return False
 
 
@@ -558,4 +560,4 @@ class OracleMapper(ScheduledSolver):
 __all__ = ["FactorGraphConfig", "SolveReport", "BatchState", "ScheduledSolver", "BatchMapper",
            "OracleMapper", "all_poses",
            "solve_lm", "lm_params", "gauss_newton_check", "marginal_covariances",
-           "estimate_from_values", "GTSAM_ERRORS"]
+           "estimate_from_values", "GTSAM_ERRORS", "never_off"]

@@ -73,7 +73,7 @@ from .bearing_graph import (BearingGraph, FactorGraphConfig, NewFactors, bearing
                             odometry_factors, pose_key, poses_from_values, prior_factor)
 from .factor_graph import (GTSAM_ERRORS, BatchState, SolveReport, estimate_from_values,
                            gauss_newton_check, lm_params, marginal_covariances, solve_lm)
-from .hybrid import _triangulate, trimmed_align
+from .hybrid import triangulate_arrays, trimmed_align
 from .resection import resect_pose, resect_trajectory
 
 
@@ -161,9 +161,9 @@ def triangulate_landmarks(poses: np.ndarray, owner: np.ndarray, ids: np.ndarray,
     ids : ndarray (n,), int64; xy : ndarray (n, 2), metres
         The landmarks with at least two bearings whose rays intersect, sorted by id.
     """
-    return _triangulate(np.asarray(poses, float), np.asarray(owner, np.int64),
-                        np.asarray(ids, np.int64), np.asarray(bearings_rad, float),
-                        np.asarray(only, np.int64), float(min_parallax_rad))
+    return triangulate_arrays(np.asarray(poses, float), np.asarray(owner, np.int64),
+                              np.asarray(ids, np.int64), np.asarray(bearings_rad, float),
+                              np.asarray(only, np.int64), float(min_parallax_rad))
 
 
 @dataclass(frozen=True)

@@ -210,8 +210,9 @@ def _rigid_to(pose_from: np.ndarray, pose_to: np.ndarray
     return r, pose_to[:2] - r @ pose_from[:2], ang
 
 
-def _triangulate(poses: np.ndarray, owner: np.ndarray, ids: np.ndarray, bearings_rad: np.ndarray,
-                 only: np.ndarray, min_parallax_rad: float) -> tuple[np.ndarray, np.ndarray]:
+def triangulate_arrays(poses: np.ndarray, owner: np.ndarray, ids: np.ndarray,
+                       bearings_rad: np.ndarray, only: np.ndarray, min_parallax_rad: float
+                       ) -> tuple[np.ndarray, np.ndarray]:
     """Landmarks of ``only`` intersected from the bearings (owner step ``owner``, landmark
     ``ids``, all (J,)) on ``poses`` (T, 3): ids (n,) and points (n, 2)."""
     out_ids, out_xy = [], []
@@ -298,8 +299,8 @@ class HybridMapper(ScheduledSolver):
             owner, ids, brg = self.state.bearings()
             n_j = int(np.searchsorted(owner, upto))
             owner, ids, brg = owner[:n_j], ids[:n_j], brg[:n_j]
-            ids_out, xy_out = _triangulate(poses[:upto], owner, ids, brg, seed_ids,
-                                           self.config.min_parallax_rad)
+            ids_out, xy_out = triangulate_arrays(poses[:upto], owner, ids, brg, seed_ids,
+                                                 self.config.min_parallax_rad)
             if ids_out.size >= 3:
                 return ids_out, xy_out, False
         return np.zeros(0, np.int64), np.zeros((0, 2)), False
@@ -464,4 +465,5 @@ class HybridMapper(ScheduledSolver):
         return float(np.max(np.hypot(*(seed_xy - xy[have]).T)))
 
 
-__all__ = ["HybridConfig", "HybridMapper", "SeedStart", "check_seed", "trimmed_align"]
+__all__ = ["HybridConfig", "HybridMapper", "SeedStart", "check_seed", "trimmed_align",
+           "triangulate_arrays"]

@@ -20,7 +20,7 @@ from bomgraph.stream import Step, StreamHeader
 
 from .bearing_graph import (BearingGraph, BearingLog, FactorGraphConfig, insert_pose, landmark_key,
                             mid_key, pose_key)
-from .lm_report import GTSAM_ERRORS, _first_line, estimate_from_values, solve_lm
+from .lm_report import GTSAM_ERRORS, estimate_from_values, gtsam_error_line, solve_lm
 from .isam2_window import WindowLongMode
 from .lm_report import plain_gaussian, polish
 from .lm_window import StepChunks
@@ -363,7 +363,7 @@ class Isam2Mapper(WindowLongMode):
                 self._go_long()
             return
         except GTSAM_ERRORS as exc:
-            self.failures.append(_first_line(exc))
+            self.failures.append(gtsam_error_line(exc))
         self.dropped_external += int(external.size())
         start = gtsam.Values(self.estimate_values)
         start.insert_or_assign(values)   # (a window update may have inserted them)
@@ -404,7 +404,7 @@ class Isam2Mapper(WindowLongMode):
                 self._check_window()
                 return
             except GTSAM_ERRORS as exc:
-                self.failures.append(_first_line(exc))
+                self.failures.append(gtsam_error_line(exc))
                 self.estimate_values = values
                 self._leave_window()
         self._isam = self._new_isam()
@@ -412,7 +412,7 @@ class Isam2Mapper(WindowLongMode):
             self._isam.update(self.accepted, self.estimate_values)
             self.estimate_values = self._isam.calculateEstimate()
         except GTSAM_ERRORS as exc:
-            self.failures.append(_first_line(exc))
+            self.failures.append(gtsam_error_line(exc))
             self._long = False
             self._recover(gtsam.NonlinearFactorGraph(), gtsam.Values(self.estimate_values))
             return
@@ -445,7 +445,7 @@ class Isam2Mapper(WindowLongMode):
                                                      gaussian=self._gaussian)
                     converged = decrease <= self.config.decrease_tol and math.isfinite(step)
                 except GTSAM_ERRORS as exc:   # the old solver is still usable
-                    self.failures.append(_first_line(exc))
+                    self.failures.append(gtsam_error_line(exc))
         self._long_check = {"converged": bool(converged), "cost": cost, "gn_step": step,
                             "predicted_decrease": decrease,
                             "checked_at_step": self.problem.n_steps}
@@ -480,7 +480,7 @@ class Isam2Mapper(WindowLongMode):
                 self.estimate_values = self._isam.calculateEstimate()
                 return
             except GTSAM_ERRORS as exc:
-                self.failures.append(_first_line(exc))
+                self.failures.append(gtsam_error_line(exc))
             if attempt == 0:
                 start, _ = solve_lm(self.accepted, start, self.config)
         self._batch = True
@@ -505,7 +505,7 @@ class Isam2Mapper(WindowLongMode):
             try:
                 self._check_window()
             except GTSAM_ERRORS as exc:   # as in _update_window: the whole graph from here on
-                self.failures.append(_first_line(exc))
+                self.failures.append(gtsam_error_line(exc))
                 self._leave_window()
                 self._recover(gtsam.NonlinearFactorGraph(), gtsam.Values(self.estimate_values))
                 if not self._batch:   # the recovered whole graph, checked as promised

@@ -20,7 +20,7 @@ import numpy as np
 from bomgraph.stream import Step
 
 from .bearing_graph import BearingLog, poses_from_values
-from .lm_report import GTSAM_ERRORS, _first_line, solve_lm
+from .lm_report import GTSAM_ERRORS, gtsam_error_line, solve_lm
 from .lm_report import polish
 from .lm_window import StepChunks
 
@@ -75,7 +75,7 @@ class WindowLongMode:
             try:
                 self._check_window()
             except GTSAM_ERRORS as exc:   # the whole graph from here on
-                self.failures.append(_first_line(exc))
+                self.failures.append(gtsam_error_line(exc))
                 self._leave_window()
                 self._recover(gtsam.NonlinearFactorGraph(), gtsam.Values(self.estimate_values))
 

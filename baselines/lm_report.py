@@ -105,7 +105,7 @@ def gauss_newton_check(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values,
     return step, float(linear.error(zero) - linear.error(delta))
 
 
-def _first_line(exc: BaseException) -> str:
+def gtsam_error_line(exc: BaseException) -> str:
     """The gist of a GTSAM exception: one line, without the generic help text."""
     text = " ".join(str(exc).split())
     text = text.split(" Thrown when")[0]
@@ -250,7 +250,7 @@ def solve_lm(graph: gtsam.NonlinearFactorGraph, initial: gtsam.Values,
                 errors.setdefault(id(start), (start, float(opt.error())))
             result = opt.optimize()
         except GTSAM_ERRORS as exc:
-            messages.append(f"{name} pass failed: {_first_line(exc)}")
+            messages.append(f"{name} pass failed: {gtsam_error_line(exc)}")
             return None
         if g is graph:
             errors[id(result)] = (result, float(opt.error()))
@@ -500,4 +500,4 @@ def estimate_from_values(graph: BearingGraph, values: gtsam.Values,
 __all__ = ["GTSAM_ERRORS", "ABSURD_STEP", "DENSE_MARGINALS_MAX", "MarginalCovariances",
            "SolveReport", "lm_params", "solve_lm",
            "gauss_newton_check", "plain_gaussian", "polish", "all_poses",
-           "marginal_covariances", "estimate_from_values"]
+           "marginal_covariances", "estimate_from_values", "gtsam_error_line"]

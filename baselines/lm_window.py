@@ -50,7 +50,7 @@ from bomgraph.angles import angle_residual
 from bomgraph.geometry import bearing_offsets
 from bomgraph.stream import StreamHeader
 
-from .lm_report import GTSAM_ERRORS, _first_line, lm_params
+from .lm_report import GTSAM_ERRORS, gtsam_error_line, lm_params
 from .bearing_graph import (FactorGraphConfig, bearing_noise, landmark_key, pose_key,
                             prior_factor)
 from .graph_values import key_landmark_ids, landmark_keys, points_at
@@ -284,7 +284,7 @@ class StepChunks:
             # landmark (its bearing's Jacobian ~1e6 times the others'; the whole system
             # positive definite at condition ~1e12). The conditional folds need no
             # elimination.
-            self.marginal_failure = _first_line(exc)
+            self.marginal_failure = gtsam_error_line(exc)
             self._give_up_marginal()
             return
         if self._keep:

@@ -20,7 +20,7 @@ _STANDARD = {"stdin": 0, "stdout": 1, "stderr": 2}
 
 
 #: the standard descriptors that :func:`hold_standard_descriptors` found closed
-_CLOSED_AT_START: set[int] = set()
+CLOSED_AT_START: set[int] = set()
 
 
 def hold_standard_descriptors() -> None:
@@ -43,19 +43,19 @@ def hold_standard_descriptors() -> None:
                 os.dup2(null, fd)
                 os.close(null)
             os.set_inheritable(fd, True)  # as the shell's would be: worker processes get it
-            _CLOSED_AT_START.add(fd)
+            CLOSED_AT_START.add(fd)
 
 
 def open_input(path: str | os.PathLike[str]) -> IO[bytes]:
     """``open(path, "rb")``, but the name of a descriptor that :func:`hold_standard_descriptors`
     found closed (``/dev/stdin`` under ``<&-``) raises OSError: reading it read the /dev/null
     held on it, an empty input refused for what it lacked (h93)."""
-    if _CLOSED_AT_START and (fd := _own_descriptor(os.fspath(path))) in _CLOSED_AT_START:
+    if CLOSED_AT_START and (fd := own_descriptor(os.fspath(path))) in CLOSED_AT_START:
         raise OSError(errno.EBADF, f"descriptor {fd} was closed when bomgraph started")
     return open(path, "rb")
 
 
-def _fd_name(path: str) -> re.Match[str] | None:
+def fd_name(path: str) -> re.Match[str] | None:
     """The name of a descriptor that ``path`` is, or that its symbolic links lead to (``out
     -> /dev/stdout``: the file behind it was replaced, ``>> f`` lost f too), else None."""
     for _ in range(40):  # the kernel's limit of links followed
@@ -71,13 +71,14 @@ def _fd_name(path: str) -> re.Match[str] | None:
     return None
 
 
-def _own_descriptor(path: str) -> int | None:
+def own_descriptor(path: str) -> int | None:
     """The descriptor of this process that ``path`` names (``/dev/stdout``: 1, ``/dev/fd/N``,
     ``/proc/self/fd/N``: N; through links too), else None (another process's, or none)."""
-    m = _fd_name(path)
+    m = fd_name(path)
     if m is None or (m[4] not in (None, "self", "thread-self") and int(m[4]) != os.getpid()):
         return None
     return _STANDARD[m[2]] if m[2] in _STANDARD else int(m[3] or m[5])
 
 
-__all__ = ["hold_standard_descriptors", "open_input"]
+__all__ = ["hold_standard_descriptors", "open_input", "fd_name", "own_descriptor",
+           "CLOSED_AT_START"]

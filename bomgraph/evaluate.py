@@ -25,7 +25,7 @@ from .checks import is_integer, row_array
 from .errors import EvaluationError, TooFewLandmarksError, UndeterminedAlignmentError
 from .mapper import Checkpoint, MapEstimate, RunResult
 from .stream import Truth
-from .trajectory import PoseErrors, _rms, absolute_pose_errors, relative_pose_errors
+from .trajectory import PoseErrors, absolute_pose_errors, relative_pose_errors, rms
 
 
 @dataclass(frozen=True)
@@ -328,7 +328,7 @@ def score_estimate(estimate: MapEstimate, truth: Reference, *, allow_reflection:
     if ambiguous and align_on != "landmarks":
         err = np.full(len(err), nan)
     stat = (lambda f: float(f(err))) if err.size else (lambda f: nan)
-    return MapScore(mpe_m=stat(np.mean), rmse_m=_rms(err),
+    return MapScore(mpe_m=stat(np.mean), rmse_m=rms(err),
                     median_m=stat(np.median), max_m=stat(np.max),
                     n_mapped=int(len(estimate.landmark_ids)),
                     n_truth=int(len(truth.landmark_ids)), n_common=int(common.size),

@@ -48,7 +48,7 @@ def _dynamic(node: ast.AST) -> bool:
 
 
 #: Per source file: the digest of its contents and what it imports (None: by name too).
-_PARSED: dict[Path, tuple[bytes, tuple[str, ...] | None]] = {}
+PARSED_IMPORTS: dict[Path, tuple[bytes, tuple[str, ...] | None]] = {}
 
 
 def closure(module: str, files: Sequence[tuple[str, Path]], digests: Mapping[Path, bytes],
@@ -102,7 +102,7 @@ def _imports(path: Path, name: str, is_package: bool,
     """The absolute names of the modules (and of names that may be submodules) that the
     module ``name`` at ``path`` (whose contents have ``digest``) imports; None when it can
     import by name or cannot be read or parsed (it is then keyed with the whole package)."""
-    seen = _PARSED.get(path)
+    seen = PARSED_IMPORTS.get(path)
     if digest is not None and seen is not None and seen[0] == digest:
         return seen[1]
     try:
@@ -137,8 +137,8 @@ def _imports(path: Path, name: str, is_package: bool,
         out = None
     found = None if out is None else tuple(dict.fromkeys(out))
     if digest is not None:  # read after the digest: a later edit changes the digest
-        _PARSED[path] = (digest, found)
+        PARSED_IMPORTS[path] = (digest, found)
     return found
 
 
-__all__ = ["closure", "DYNAMIC"]
+__all__ = ["closure", "DYNAMIC", "PARSED_IMPORTS"]

@@ -51,10 +51,11 @@ def runs_file(module: types.ModuleType, source: bytes) -> bool:
     except (SyntaxError, ValueError):  # the file does not compile now: not the loaded code
         return False
     compiled: dict[str, set[Any]] = {}
-    for code in _nested(fresh) if rewritten is None else (*_nested(fresh), *_nested(rewritten)):
-        compiled.setdefault(code.co_qualname, set()).add(_shape(code))
-    for code in _loaded_code(module, filename):
-        if _shape(code) not in compiled.get(code.co_qualname, ()):
+    for code in (nested_code(fresh) if rewritten is None
+                 else (*nested_code(fresh), *nested_code(rewritten))):
+        compiled.setdefault(code.co_qualname, set()).add(code_shape(code))
+    for code in module_code(module, filename):
+        if code_shape(code) not in compiled.get(code.co_qualname, ()):
             return False
     return _same_literals(module, tree)
 
@@ -76,16 +77,17 @@ def _pytest_rewritten(module: types.ModuleType, source: bytes,
         return None
 
 
-def _nested(code: types.CodeType) -> Iterator[types.CodeType]:
+def nested_code(code: types.CodeType) -> Iterator[types.CodeType]:
+    """The code objects inside ``code`` (its functions, classes, comprehensions), depth first."""
     for c in code.co_consts:
         if isinstance(c, types.CodeType):
             yield c
-            yield from _nested(c)
+            yield from nested_code(c)
 
 
-def _shape(code: types.CodeType) -> tuple[Any, ...]:
+def code_shape(code: types.CodeType) -> tuple[Any, ...]:
     """What a code object computes: all but its line numbers."""
-    consts = tuple(_shape(c) if isinstance(c, types.CodeType) else _const(c)
+    consts = tuple(code_shape(c) if isinstance(c, types.CodeType) else _const(c)
                    for c in code.co_consts)
     return (code.co_qualname, code.co_code, code.co_names, code.co_varnames,
             code.co_freevars, code.co_cellvars, code.co_argcount, code.co_posonlyargcount,
@@ -99,7 +101,7 @@ def _const(value: object) -> tuple[str, str]:
     return (type(value).__qualname__, repr(value))
 
 
-def _loaded_code(module: types.ModuleType, filename: str) -> Iterator[types.CodeType]:
+def module_code(module: types.ModuleType, filename: str) -> Iterator[types.CodeType]:
     """The code objects of the functions ``module`` defines (its own file's), at module
     level and in its classes, through decorators that keep ``__wrapped__``."""
     seen: set[int] = set()
@@ -158,7 +160,7 @@ def rebound_at_run_time(source: bytes) -> tuple[frozenset[str], frozenset[str]]:
 
 #: Per source digest: its module-level ``from M import NAME`` bindings (M absolute, NAME,
 #: the name bound), those of names the file binds nowhere else.
-_FROM: dict[bytes, tuple[tuple[str, str, str], ...]] = {}
+FROM_IMPORTS: dict[bytes, tuple[tuple[str, str, str], ...]] = {}
 
 
 def stale_imports(module: types.ModuleType, source: Callable[[], bytes], digest: bytes,
@@ -168,11 +170,11 @@ def stale_imports(module: types.ModuleType, source: Callable[[], bytes], digest:
     longer hold what ``M`` holds: ``M`` was reloaded (``importlib.reload``, IPython's
     autoreload of an edited ``M``) and ``module`` was not, so it still runs ``M``'s old
     ``NAME`` (a constant, a function, a class). Each as ``"module.NAME (M)"``."""
-    if digest not in _FROM:
-        _FROM[digest] = _from_imports(source(), getattr(module, "__name__", ""),
-                                      hasattr(module, "__path__"))
+    if digest not in FROM_IMPORTS:
+        FROM_IMPORTS[digest] = _from_imports(source(), getattr(module, "__name__", ""),
+                                             hasattr(module, "__path__"))
     out, names = [], vars(module)
-    for src, name, bound in _FROM[digest]:
+    for src, name, bound in FROM_IMPORTS[digest]:
         origin = sys.modules.get(src)
         if (origin is None or src.split(".")[0] != top or bound not in names
                 or name not in vars(origin)):
@@ -258,7 +260,7 @@ def _same_object(old: object, new: object, depth: int = 0) -> bool:
     if type(old) in _IMMUTABLE:
         return _const(old) == _const(new)
     if isinstance(old, types.FunctionType):
-        return (_shape(old.__code__) == _shape(new.__code__)  # type: ignore[attr-defined]
+        return (code_shape(old.__code__) == code_shape(new.__code__)  # type: ignore[attr-defined]
                 and _same_object(old.__defaults__, new.__defaults__, depth)  # type: ignore
                 and _same_object(old.__kwdefaults__, new.__kwdefaults__, depth)  # type: ignore
                 and _same_object(getattr(old, "__wrapped__", None),  # functools.wraps
@@ -341,4 +343,5 @@ def _same_literals(module: types.ModuleType, tree: ast.Module) -> bool:
     return True
 
 
-__all__ = ["runs_file", "rebound_at_run_time", "stale_imports"]
+__all__ = ["runs_file", "rebound_at_run_time", "stale_imports", "nested_code", "code_shape",
+           "module_code", "FROM_IMPORTS"]

@@ -139,10 +139,10 @@ def _encode_object(value: Any, kind: type, h: Any, budget: list[int], stack: set
     elif isinstance(value, functools.partial):
         _encode((value.func, value.args, value.keywords), h, budget, stack)
     elif isinstance(value, types.FunctionType):  # its code, by value, and what it holds
-        from .loaded_code import _shape
+        from .loaded_code import code_shape
 
         h.update(f"{value.__module__}.{value.__qualname__}".encode())
-        h.update(repr(_shape(value.__code__)).encode())
+        h.update(repr(code_shape(value.__code__)).encode())
         cells = tuple(c.cell_contents if _full(c) else _EMPTY for c in value.__closure__ or ())
         _encode((value.__defaults__, value.__kwdefaults__, cells), h, budget, stack)
     elif isinstance(value, types.MethodType):
@@ -223,14 +223,14 @@ def _digest(value: object) -> bytes:
 def _code_names(module: types.ModuleType) -> set[str]:
     """The names the module's functions (and its classes' functions) name: the globals and
     attributes its code can read (all its own when among them are ``globals``, ``vars``)."""
-    from .loaded_code import _loaded_code, _nested
+    from .loaded_code import module_code, nested_code
 
     names: set[str] = set()
     filename = getattr(module, "__file__", None)
     if not isinstance(filename, str):
         return names
-    for code in _loaded_code(module, filename):
-        for c in (code, *_nested(code)):
+    for code in module_code(module, filename):
+        for c in (code, *nested_code(code)):
             names.update(c.co_names)  # and names in strings: getattr(self, "GAIN") (h69)
             names.update(k for k in c.co_consts if isinstance(k, str) and k.isidentifier())
     return names

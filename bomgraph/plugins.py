@@ -105,12 +105,12 @@ def refresh() -> None:
     _LOADED.clear()
     _RECORDED.clear()
     source_files.forget()
-    from .import_closure import _PARSED
-    from .loaded_code import _FROM
+    from .import_closure import PARSED_IMPORTS
+    from .loaded_code import FROM_IMPORTS
     from .loaded_values import forget
 
-    _PARSED.clear()
-    _FROM.clear()
+    PARSED_IMPORTS.clear()
+    FROM_IMPORTS.clear()
     _MODULES.clear()
     forget()
     importlib.invalidate_caches()

@@ -17,7 +17,7 @@ import tempfile
 from typing import IO, Callable, Iterator
 
 from .errors import ConfigError
-from .stdio import _CHUNK, STDIO, check_output_path, copy_bounded, standard_output
+from .stdio import CHUNK_BYTES, STDIO, check_output_path, copy_bounded, standard_output
 
 #: temp paths standing for stdin, so messages can name ``<stdin>`` instead.
 _SPOOLED: dict[str, str] = {}
@@ -91,7 +91,7 @@ def write_output(path: str, write: Callable[[str], None]) -> None:
         out = os.path.join(tmp, "out")
         write(out)
         with open(out, "rb") if binary else open(out, encoding="utf-8", newline="") as fh:
-            shutil.copyfileobj(fh, stdout.buffer if binary else stdout, _CHUNK)
+            shutil.copyfileobj(fh, stdout.buffer if binary else stdout, CHUNK_BYTES)
         stdout.flush()
 
 

@@ -46,8 +46,8 @@ from typing import IO, Any, Callable, Iterator, Sequence
 
 from .checks import file_name, items, out_named
 from .claims import new_temp_file, release, remove_leftovers
-from .descriptors import (_CLOSED_AT_START, _fd_name, _own_descriptor,  # noqa: F401
-                          hold_standard_descriptors, open_input)
+from .descriptors import (CLOSED_AT_START, fd_name,  # noqa: F401
+                          hold_standard_descriptors, open_input, own_descriptor)
 from .errors import BomgraphError
 
 _log = logging.getLogger(__name__)
@@ -58,7 +58,8 @@ STDIO = "-"
 MAX_LINE_BYTES = 64 * 2**20
 #: the largest text input bomgraph reads (a stream, an estimate, a dataset file, stdin).
 MAX_INPUT_BYTES = 4 * 2**30
-_CHUNK = 2**20
+#: how much one read takes when a file or stream is copied or measured (1 MiB).
+CHUNK_BYTES = 2**20
 
 
 class OutputPathError(BomgraphError):
@@ -147,7 +148,7 @@ def copy_bounded(src: IO[bytes], dst: IO[bytes], path: str) -> None:
     since_newline = 0
     line = 1
     while True:
-        chunk = src.read(_CHUNK)
+        chunk = src.read(CHUNK_BYTES)
         if not chunk:
             return
         total += len(chunk)
@@ -211,8 +212,8 @@ def _direct(path: str, st: os.stat_result | None) -> bool:
         return False
     if stat.S_ISCHR(st.st_mode) or stat.S_ISFIFO(st.st_mode):
         return True
-    sock = stat.S_ISSOCK(st.st_mode) and _own_descriptor(path) is not None
-    return sock or stat.S_ISREG(st.st_mode) and _fd_name(path) is not None
+    sock = stat.S_ISSOCK(st.st_mode) and own_descriptor(path) is not None
+    return sock or stat.S_ISREG(st.st_mode) and fd_name(path) is not None
 
 
 def _open_direct(path: str, st: os.stat_result) -> int:
@@ -220,7 +221,7 @@ def _open_direct(path: str, st: os.stat_result) -> int:
     descriptor of this process a duplicate of it, with its flags and its position (opening
     ``/dev/stdout`` by name reopens its file from the start, truncated: ``>> f`` lost f's
     content, h79); else ``path`` opened, never truncated (appended to, if a regular file)."""
-    own = _own_descriptor(path)
+    own = own_descriptor(path)
     if own is None:
         return os.open(path, os.O_WRONLY | (os.O_APPEND if stat.S_ISREG(st.st_mode) else 0))
     fd = os.dup(own)
@@ -260,7 +261,7 @@ def check_output_path(path: str | os.PathLike[str],
     if not path:  # os.path.realpath("") is the working folder: the rename would aim at it
         raise OutputPathError(f"{out_named(name)} is empty; give a file name")
     st = _stat(path, name)
-    if _fd_name(path) is not None and (st is None or _own_descriptor(path) in _CLOSED_AT_START):
+    if fd_name(path) is not None and (st is None or own_descriptor(path) in CLOSED_AT_START):
         # /dev/stdout under >&-: not a folder's file; /dev/null on it is no output either
         raise OutputPathError(f"{out_named(name, path)}: that descriptor is not open; give a "
                               f"file name")
@@ -594,4 +595,5 @@ __all__ = ["STDIO", "MAX_LINE_BYTES", "MAX_INPUT_BYTES", "OutputPathError", "Inp
            "line_too_long", "input_too_large", "bounded_lines", "read_bounded", "read_regular_file",
            "copy_bounded", "hold_standard_descriptors", "open_input", "standard_output",
            "check_output_path", "AtomicOutput", "output_file", "write_text", "write_figure",
-           "FolderBusyError", "check_folder", "make_folder", "folder_lock", "signals_held"]
+           "FolderBusyError", "check_folder", "make_folder", "folder_lock", "signals_held",
+           "CHUNK_BYTES"]

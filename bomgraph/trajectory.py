@@ -28,7 +28,7 @@ from .geometry import between, pair_bearings
 from .stream import Step
 
 
-def _rms(v: np.ndarray) -> float:
+def rms(v: np.ndarray) -> float:
     """RMS without overflow (scaled by the largest magnitude); NaN when empty."""
     if not v.size:
         return float("nan")
@@ -50,11 +50,11 @@ class PoseErrors:
 
     @property
     def translation_rmse_m(self) -> float:
-        return _rms(self.translation_m)
+        return rms(self.translation_m)
 
     @property
     def heading_rmse_rad(self) -> float:
-        return _rms(self.heading_rad)
+        return rms(self.heading_rad)
 
 
 def absolute_pose_errors(t: np.ndarray, est_poses: np.ndarray,
@@ -242,4 +242,4 @@ class BearingResidualSums:
 
 
 __all__ = ["PoseErrors", "absolute_pose_errors", "relative_pose_errors", "bearing_residuals",
-           "bearing_arrays", "BearingResidualSums", "ExactSum"]
+           "bearing_arrays", "BearingResidualSums", "ExactSum", "rms"]

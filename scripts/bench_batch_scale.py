@@ -57,7 +57,7 @@ def main() -> None:
         c = time.process_time()
         out = solve_lm(graph, *a, **k)
         d = time.process_time() - c
-        if k.get("looks_off") is fg._never_off:
+        if k.get("looks_off") is fg.never_off:
             window[0] += d
             window[1] += 1
             window[2] += out[1].iterations

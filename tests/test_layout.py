@@ -2,7 +2,8 @@
 
 Read from the source with ``ast``, counting imports inside functions too: no import cycle
 among the modules of ``bomgraph`` and ``baselines``, ``bomgraph`` never imports ``baselines``,
-``plots`` imports no other bomgraph module, and no file is over 600 lines.
+``plots`` imports no other bomgraph module, no file is over 600 lines, and no module (nor a
+script) imports another module's private (underscore) name.
 """
 
 from __future__ import annotations
@@ -94,6 +95,63 @@ def test_no_import_cycle() -> None:
         if m not in state:
             cycle = visit(m)
             assert cycle is None, " -> ".join(cycle)
+
+
+def _private(name: str) -> bool:
+    return name.startswith("_") and not (name.startswith("__") and name.endswith("__"))
+
+
+def _private_imports(name: str, path: Path, known: set[str]) -> list[str]:
+    """The underscore names of other project modules that ``path`` imports (``from M import
+    _x``) or reads off an imported module (``M._x``), and the private modules (``_text``) it
+    imports from outside their own package: each as ``"file:line: M._x"``."""
+    is_pkg = path.name == "__init__.py"
+    base = name.split(".") if is_pkg else name.split(".")[:-1]
+    tree = ast.parse(path.read_text(), str(path))
+    where = f"{path.relative_to(ROOT)}"
+    found: list[str] = []
+    bound: dict[str, str] = {}  # local name -> the project module it is
+
+    def outside(mod: str) -> bool:  # a private module seen from outside its package
+        parts = mod.split(".")
+        return any(_private(p) and name.split(".")[:i] != parts[:i]
+                   for i, p in enumerate(parts))
+
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            bound.update({a.asname or a.name: a.name for a in node.names if a.name in known})
+        elif isinstance(node, ast.ImportFrom):
+            mod = node.module or ""
+            if node.level:
+                anchor = base[:len(base) - node.level + 1]
+                mod = ".".join(anchor + ([mod] if mod else []))
+            for a in node.names:
+                full = f"{mod}.{a.name}"
+                if full in known:
+                    bound[a.asname or a.name] = full
+                if (full in known and outside(full)) or (mod in known and mod != name and (
+                        _private(a.name) and full not in known or outside(mod))):
+                    found.append(f"{where}:{node.lineno}: {full}")
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Attribute) and _private(node.attr):
+            chain, head = [node.attr], node.value
+            while isinstance(head, ast.Attribute):
+                chain.append(head.attr)
+                head = head.value
+            if isinstance(head, ast.Name) and head.id in bound:
+                mod = ".".join([bound[head.id], *chain[:0:-1]])
+                if mod in known and mod != name:
+                    found.append(f"{where}:{node.lineno}: {mod}.{node.attr}")
+    return found
+
+
+def test_no_module_imports_another_modules_private_name() -> None:
+    """A name used across modules is public in its home module (in its ``__all__``); tests
+    may reach into privates, scripts and the packages may not."""
+    mods = _modules()
+    files = {**mods, **{f"scripts.{f.stem}": f for f in sorted((ROOT / "scripts").glob("*.py"))}}
+    bad = [hit for m, p in files.items() for hit in _private_imports(m, p, set(mods))]
+    assert not bad, "\n".join(bad)
 
 
 def test_no_recorded_data_is_committed() -> None:

@@ -80,7 +80,7 @@ from bomgraph.stream import Step, StreamHeader
 from .config import EkfConfig, InverseDepthConfig
 from .models import invdepth_conversion_kl, invdepth_to_xy, triangulation_kl
 from .range_prior import RhoPriorMixin
-from .slam import _CLONE, _IDP, _LM, EkfSlam
+from .slam import BLOCK_CLONE, BLOCK_IDP, BLOCK_LM, EkfSlam
 
 _R3 = np.arange(3)
 
@@ -158,14 +158,14 @@ class EkfMapper(RhoPriorMixin, EkfSlam):
         noise = np.zeros((2 * m, 2 * m))
         noise[rows[:, :, None], rows[:, None, :]] = test["noise_cov"][sel]
         new_ids = ids[sel].tolist()
-        self._add_blocks([(_LM, i) for i in new_ids], test["points"][sel].ravel(), idx, g,
+        self._add_blocks([(BLOCK_LM, i) for i in new_ids], test["points"][sel].ravel(), idx, g,
                          noise)
         later = [(i, ts, zs) for i in new_ids for ts, zs in self._candidates.pop(i)[1:]]
         if later:
-            self._gated_update(np.array([self._offset[(_CLONE, ts)] for _, ts, _ in later],
+            self._gated_update(np.array([self._offset[(BLOCK_CLONE, ts)] for _, ts, _ in later],
                                         np.int64),
                                np.full(len(later), 2, np.int64),
-                               np.array([self._offset[(_LM, i)] for i, _, _ in later],
+                               np.array([self._offset[(BLOCK_LM, i)] for i, _, _ in later],
                                         np.int64),
                                np.array([zs for _, _, zs in later]))
 
@@ -186,7 +186,7 @@ class EkfMapper(RhoPriorMixin, EkfSlam):
         if seen:
             first = [cands[ids_l[n]][0] for n in seen]
             anchor_t = np.array([f[0] for f in first], np.int64)
-            clone_off = np.array([self._offset[(_CLONE, f[0])] for f in first], np.int64)
+            clone_off = np.array([self._offset[(BLOCK_CLONE, f[0])] for f in first], np.int64)
             test = self._triangulation_test(clone_off, np.array([f[1] for f in first]),
                                             z[seen])
             front = test["front"]
@@ -210,17 +210,17 @@ class EkfMapper(RhoPriorMixin, EkfSlam):
             cands[ids_l[n]] = [(t, z_l[n])]
         for n in extend:
             cands[ids_l[n]].append((t, z_l[n]))
-        if (restart or extend) and (_CLONE, t) not in self._sizes:
+        if (restart or extend) and (BLOCK_CLONE, t) not in self._sizes:
             self.filter.check_room(3, "a pose clone")
             self.filter.clone(_R3)
-            self._sizes[(_CLONE, t)] = 3
+            self._sizes[(BLOCK_CLONE, t)] = 3
             self._rebuild()
         used = {ts for sightings in self._candidates.values() for ts, _ in sightings}
-        self._remove_blocks([k for k in self._sizes if k[0] == _CLONE and k[1] not in used])
+        self._remove_blocks([k for k in self._sizes if k[0] == BLOCK_CLONE and k[1] not in used])
 
     def _landmarks(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
         ids, xy, cov, _ = super()._landmarks()
-        pending = sorted(self._candidates) + sorted(k[1] for k in self._sizes if k[0] == _IDP)
+        pending = sorted(self._candidates) + sorted(k[1] for k in self._sizes if k[0] == BLOCK_IDP)
         return ids, xy, cov, {"pending": pending, "reanchored": self.n_reanchored,
                               "converted": self.n_converted, **self._rho_prior_info(),
                               **{f"init_rejected_{k}": v for k, v in self.n_rejected.items()}}

@@ -29,8 +29,10 @@ from .robust import BearingVariances
 from .rows import feature_rows, landmark_rows, take_rows
 from .variance_scale import InnovationVarianceScale
 
-_LM, _CLONE, _IDP, _BIAS = "lm", "clone", "idp", "bias"
-_SIZE = {_LM: 2, _CLONE: 3, _IDP: 4, _BIAS: 1}
+#: the kinds of state block, first in each block's key ``(kind, id)``: a landmark's xy, a pose
+#: clone, an inverse-depth feature (and a bias, of this module only).
+BLOCK_LM, BLOCK_CLONE, BLOCK_IDP, _BIAS = "lm", "clone", "idp", "bias"
+_SIZE = {BLOCK_LM: 2, BLOCK_CLONE: 3, BLOCK_IDP: 4, _BIAS: 1}
 _RANGE = np.arange(4)
 
 
@@ -112,7 +114,7 @@ class EkfSlam:
         self._mapped = {}         # landmark id -> (kind, offset) of its landmark or feature
         for key, size in self._sizes.items():
             self._offset[key] = off
-            if key[0] == _LM or key[0] == _IDP:
+            if key[0] == BLOCK_LM or key[0] == BLOCK_IDP:
                 self._mapped[key[1]] = (key[0], off)
             off += size
         if off != self.filter.dim:
@@ -124,7 +126,7 @@ class EkfSlam:
         pos = 0
         for key in keys:
             size = _SIZE[key[0]]
-            if key[0] in (_CLONE, _IDP):
+            if key[0] in (BLOCK_CLONE, BLOCK_IDP):
                 is_angle[pos + 2] = True
             pos += size
         self.filter.check_room(len(value), f"{len(keys)} new landmark or pose blocks")
@@ -437,13 +439,13 @@ class EkfSlam:
                 g = np.concatenate([g, np.zeros((4 * m, m))], 1)
                 g[4 * np.arange(m) + 2, 3 + np.arange(m)] = -1.0
                 col.remember(ids.tolist(), value.reshape(m, 4)[:, 2], float(x[2]))
-            self._add_blocks([(_IDP, int(i)) for i in ids], value, idx, g, noise)
+            self._add_blocks([(BLOCK_IDP, int(i)) for i in ids], value, idx, g, noise)
 
     def _idp_blocks(self) -> tuple[list[tuple[str, int]], np.ndarray]:
         """The inverse-depth features' keys and state indices ``(k, 4)`` (kept until the
         layout changes)."""
         if self._idp is None:
-            keys = [k for k in self._sizes if k[0] == _IDP]
+            keys = [k for k in self._sizes if k[0] == BLOCK_IDP]
             bi = self._block_index(np.array([self._offset[k] for k in keys], np.int64), 4)
             self._idp = keys, bi
         return self._idp
@@ -467,7 +469,7 @@ class EkfSlam:
         cols = 4 * np.arange(m)[:, None] + np.arange(4)
         g[rows[:, :, None], cols[:, None, :]] = jac
         old = [keys[s] for s in sel]
-        self._add_blocks([(_LM, k[1]) for k in old], pts.ravel(), idx, g,
+        self._add_blocks([(BLOCK_LM, k[1]) for k in old], pts.ravel(), idx, g,
                          np.zeros((2 * m, 2 * m)))
         self._remove_blocks(old)
         for k in old:
@@ -494,14 +496,14 @@ class EkfSlam:
             restart = []
             corroborated = not bool(gated.all())
             for i, kind, g in (zip(ids[in_state].tolist(), kind_names, gated.tolist())
-                               if _IDP in kind_names else ()):
-                if kind == _IDP and (corroborated or not g):
+                               if BLOCK_IDP in kind_names else ()):
+                if kind == BLOCK_IDP and (corroborated or not g):
                     run_length = self._gated_run.get(i, 0) + 1 if g else 0
                     self._gated_run[i] = run_length
                     if run_length >= self._restart_after:
                         restart.append(i)
             if restart:
-                self._remove_blocks([(kind, i) for i in restart for kind in (_IDP, _BIAS)
+                self._remove_blocks([(kind, i) for i in restart for kind in (BLOCK_IDP, _BIAS)
                                      if (kind, i) in self._sizes])
                 self._coloured.forget(restart)
                 for i in restart:
@@ -567,7 +569,7 @@ class EkfSlam:
 
     def _landmarks(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
         """Ids, positions ``(n, 2)`` and covariances ``(n, 2, 2)`` of the reportable landmarks."""
-        keys = [k for k in self._sizes if k[0] == _LM]
+        keys = [k for k in self._sizes if k[0] == BLOCK_LM]
         ids = np.array([k[1] for k in keys], np.int64)
         bi = self._block_index(np.array([self._offset[k] for k in keys], np.int64), 2)
         x, P = self.filter.x, self.filter.P
@@ -594,4 +596,4 @@ class EkfSlam:
                            pose_cov=self._pose_covs[:n], info=info)
 
 
-__all__ = ["EkfSlam"]
+__all__ = ["EkfSlam", "BLOCK_LM", "BLOCK_CLONE", "BLOCK_IDP"]

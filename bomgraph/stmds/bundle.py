@@ -40,7 +40,8 @@ from ..angles import angle_residual
 from ..errors import ConfigError
 from ..geometry import between, dead_reckon, effective_parallax, pair_bearings, to_local
 from .bundle_lm import (SIGMA_FLOOR, UNDETERMINED_LEVERAGE,  # noqa: F401 (re-exported)
-                        WindowInverse, _bearing_residuals, _levenberg_marquardt, _Problem)
+                        BundleProblem, WindowInverse, levenberg_marquardt,
+                        window_bearing_residuals)
 from .triangulation import PairEstimates, pair_indices
 from .window import window_lsq_points
 
@@ -323,10 +324,10 @@ def _fit(u: np.ndarray, sig: np.ndarray, bearing_sigma_rad: float, brg: np.ndarr
                                             np.array(drop_c, np.int64)), None, False,
                     bearing_sigma_rad)
         for rnd in range(SIGMA_ROUNDS if estimate_sigma else 1):
-            prob = _Problem(u, sig, bearing_sigma_rad, k, lm, theta, n_lm)
-            poses, points, blocks, converged = _levenberg_marquardt(prob, poses, points,
-                                                                     max_iter, tol)
-            res_rad = _bearing_residuals(poses, points, k, lm, theta, False)[0]
+            prob = BundleProblem(u, sig, bearing_sigma_rad, k, lm, theta, n_lm)
+            poses, points, blocks, converged = levenberg_marquardt(prob, poses, points,
+                                                                   max_iter, tol)
+            res_rad = window_bearing_residuals(poses, points, k, lm, theta, False)[0]
             res = np.abs(res_rad) / bearing_sigma_rad
             determined = np.ones(len(k), bool)
             if (outlier_sigma is not None or estimate_sigma) and res.size:

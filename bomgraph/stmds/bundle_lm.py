@@ -50,9 +50,9 @@ def _between_residuals(poses: np.ndarray, odoms: np.ndarray, jacobians: bool = T
     return res, ja, jb
 
 
-def _bearing_residuals(poses: np.ndarray, points: np.ndarray, k: np.ndarray, lm: np.ndarray,
-                       theta: np.ndarray, jacobians: bool = True
-                       ) -> tuple[np.ndarray, np.ndarray | None]:
+def window_bearing_residuals(poses: np.ndarray, points: np.ndarray, k: np.ndarray,
+                             lm: np.ndarray, theta: np.ndarray, jacobians: bool = True
+                             ) -> tuple[np.ndarray, np.ndarray | None]:
     """Bearing residuals and ``d res / d (p_l)`` (``d / d z_k`` is its negative,
     ``d / d psi_k = -1``; None without ``jacobians``)."""
     if not jacobians:
@@ -64,7 +64,7 @@ def _bearing_residuals(poses: np.ndarray, points: np.ndarray, k: np.ndarray, lm:
     return angle_residual(pred, theta), dp
 
 
-class _Problem:
+class BundleProblem:
     """One window's least-squares problem over poses 1..W-1 and the landmarks."""
 
     def __init__(self, odoms: np.ndarray, sigmas: np.ndarray, bearing_sigma_rad: float,
@@ -83,7 +83,8 @@ class _Problem:
 
     def cost(self, poses: np.ndarray, points: np.ndarray) -> float:
         ro = _between_residuals(poses, self.odoms, False)[0] * self.w_odo
-        rb = _bearing_residuals(poses, points, self.k, self.lm, self.theta, False)[0] * self.w_b
+        rb = window_bearing_residuals(poses, points, self.k, self.lm, self.theta,
+                                      False)[0] * self.w_b
         return float(np.sum(ro * ro) + np.sum(rb * rb))
 
     def linearise(self, poses: np.ndarray, points: np.ndarray
@@ -91,7 +92,7 @@ class _Problem:
         """Whitened residual vector and dense Jacobian, shape ``(rows,)`` and ``(rows, n)``."""
         m = len(self.odoms)
         ro, ja, jb = _between_residuals(poses, self.odoms)
-        rb, dp = _bearing_residuals(poses, points, self.k, self.lm, self.theta)
+        rb, dp = window_bearing_residuals(poses, points, self.k, self.lm, self.theta)
         jac = np.zeros((self.rows, self.n))
         odo_rows = np.arange(3 * m).reshape(m, 3)
         wo = self.w_odo[:, :, None]
@@ -121,7 +122,7 @@ class _Problem:
     def bearing_rows(self, poses: np.ndarray, points: np.ndarray) -> np.ndarray:
         """The bearing rows of :meth:`linearise`'s Jacobian alone, shape ``(R, n)`` (the same
         numbers, without the odometry rows)."""
-        dp = _bearing_residuals(poses, points, self.k, self.lm, self.theta)[1]
+        dp = window_bearing_residuals(poses, points, self.k, self.lm, self.theta)[1]
         jac = np.zeros((len(self.k), self.n))
         rows = np.arange(len(self.k))
         self._fill_bearing_rows(jac, rows, dp)
@@ -143,7 +144,7 @@ class _Problem:
         :meth:`blocks`): ``(cost, (odometry residuals (M, 3), d / d x_{m-1} (M, 3, 3),
         d / d x_m (M, 3, 3), bearing residuals (R,), d res / d landmark (R, 2)))``."""
         ro, ja, jb = _between_residuals(poses, self.odoms)
-        rb, dp = _bearing_residuals(poses, points, self.k, self.lm, self.theta)
+        rb, dp = window_bearing_residuals(poses, points, self.k, self.lm, self.theta)
         wo = self.w_odo[:, :, None]
         ja, jb, ro = ja * wo, jb * wo, ro * self.w_odo
         rb = rb * self.w_b
@@ -201,15 +202,15 @@ class _Problem:
         return new_poses, points + delta[self.n_pose_vars:].reshape(-1, 2)
 
 
-def _levenberg_marquardt(prob: _Problem, poses: np.ndarray, points: np.ndarray,
-                         max_iter: int, tol: float
-                         ) -> tuple[np.ndarray, np.ndarray, tuple[np.ndarray, ...], bool]:
+def levenberg_marquardt(prob: BundleProblem, poses: np.ndarray, points: np.ndarray,
+                        max_iter: int, tol: float
+                        ) -> tuple[np.ndarray, np.ndarray, tuple[np.ndarray, ...], bool]:
     """Minimise the window's cost; returns poses, points, the blocks of ``J^T J`` at the end
-    (:meth:`_Problem.blocks`; :class:`WindowInverse` takes what the fit needs from them),
+    (:meth:`BundleProblem.blocks`; :class:`WindowInverse` takes what the fit needs from them),
     converged.
 
     Each step solves the damped normal equations by the Schur complement on the poses
-    (:meth:`_Problem.normal_equations`, :func:`_schur_step`): the landmark block is 2 x 2
+    (:meth:`BundleProblem.normal_equations`, :func:`_schur_step`): the landmark block is 2 x 2
     block-diagonal, so only a ``3 (W - 1)`` system is factorised (and in long windows only a
     banded one and the landmarks' ``2 L`` one, :func:`_arrow_step`)."""
     lam = 1e-6
@@ -300,7 +301,7 @@ def psd_quadratic_forms(m: np.ndarray, rows: np.ndarray, jacobi: bool = True) ->
 
 class WindowInverse:
     """What a window's fit needs of ``(J^T J)^-1`` at its solution (``blocks``:
-    :meth:`_Problem.blocks`): each ray's leverage and the landmarks' covariance.
+    :meth:`BundleProblem.blocks`): each ray's leverage and the landmarks' covariance.
 
     Long windows (:func:`uses_arrow`) take them from the arrow structure
     (:func:`arrow_inverse`: the banded pose block, then only the landmarks' ``2 L x 2 L`` Schur
@@ -315,7 +316,7 @@ class WindowInverse:
     inverses: they agree on rows in the range of ``J``, not on rows with a component along a
     direction near the cut-off (``tests/stmds/test_leverage.py``)."""
 
-    def __init__(self, prob: "_Problem", blocks: tuple[np.ndarray, ...]) -> None:
+    def __init__(self, prob: "BundleProblem", blocks: tuple[np.ndarray, ...]) -> None:
         self.prob, self.blocks = prob, blocks
         n_p = prob.n_pose_vars
         self._arrow = arrow_inverse(blocks) if uses_arrow(n_p, prob.n - n_p) else None
@@ -327,7 +328,8 @@ class WindowInverse:
         return self._dense
 
     def leverages(self, rows: np.ndarray) -> np.ndarray:
-        """Each bearing row's leverage (:meth:`_Problem.bearing_rows`, ``(R, n)``), in [0, 1]."""
+        """Each bearing row's leverage (:meth:`BundleProblem.bearing_rows`, ``(R, n)``), in
+        [0, 1]."""
         if self._arrow is None:
             return ray_leverages(self._info(), rows)
         js = rows * self._arrow[0]                     # the rows in the scaled variables
@@ -339,13 +341,13 @@ class WindowInverse:
 
     def leverages_at(self, poses: np.ndarray, points: np.ndarray) -> np.ndarray:
         """:meth:`leverages` of the bearing rows at ``poses``, ``points``
-        (:meth:`_Problem.bearing_rows`), the same numbers; on the arrow path from each row's
+        (:meth:`BundleProblem.bearing_rows`), the same numbers; on the arrow path from each row's
         five nonzeros (three pose, two landmark entries), without the dense ``(R, n)`` rows."""
         prob = self.prob
         if self._arrow is None:
             return self.leverages(prob.bearing_rows(poses, points))
         s = self._arrow[0]
-        dp = _bearing_residuals(poses, points, prob.k, prob.lm, prob.theta)[1]
+        dp = window_bearing_residuals(poses, points, prob.k, prob.lm, prob.theta)[1]
         pc, var, kk = self._ray_poses()
         c = pc[var]
         jp = np.zeros((len(prob.k), 3))
@@ -579,4 +581,4 @@ def _dense_information(blocks: tuple[np.ndarray, ...]) -> np.ndarray:
     return info
 
 
-__all__ = ["SIGMA_FLOOR"]
+__all__ = ["SIGMA_FLOOR", "BundleProblem", "window_bearing_residuals", "levenberg_marquardt"]

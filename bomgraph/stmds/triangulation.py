@@ -69,7 +69,7 @@ def select_pairs(k: int, select: np.ndarray | None = None) -> tuple[np.ndarray, 
     return select[f], select[g]
 
 
-class _TwoRayResult:
+class TwoRayResult:
     """What the two-ray triangulation results share: length and parallax."""
 
     points_xy: np.ndarray
@@ -86,7 +86,7 @@ class _TwoRayResult:
 
 
 @dataclass(frozen=True, eq=False)
-class RayTriangulation(_TwoRayResult):
+class RayTriangulation(TwoRayResult):
     """Landmarks triangulated from two poses, in the frame of the first (pose ``t-1``).
 
     Attributes
@@ -444,4 +444,4 @@ def pair_squared_distances(tri: RayTriangulation, odometry: ArrayLike,
 __all__ = ["POINT_MEASUREMENTS", "PAIR_MEASUREMENTS", "RayTriangulation", "PairEstimates",
            "pair_indices", "select_pairs", "triangulate_rays", "odometry_covariance", "compose_odometry",
            "point_covariance", "range_jacobians", "range_variances", "gate_points",
-           "pair_squared_distances"]
+           "pair_squared_distances", "TwoRayResult"]

@@ -25,12 +25,12 @@ from numpy.typing import ArrayLike
 from ..angles import angle_residual
 from ..errors import ConfigError
 from ..geometry import effective_parallax
-from .triangulation import PairEstimates, _TwoRayResult, select_pairs
+from .triangulation import PairEstimates, TwoRayResult, select_pairs
 from .window_schedule import WindowSchedule  # noqa: F401 (re-exported: the mapper's)
 
 
 @dataclass(frozen=True, eq=False)
-class WindowTriangulation(_TwoRayResult):
+class WindowTriangulation(TwoRayResult):
     """Landmarks triangulated inside a window of ``W`` poses, in the frame of its first pose.
 
     Attributes

@@ -119,12 +119,12 @@ def test_leverages_from_the_nonzeros_are_those_of_the_dense_rows(make) -> None:
 _NO_LANDMARKS = """
 import numpy as np
 import bomgraph.stmds.bundle_lm as bundle_lm
-from bomgraph.stmds.bundle import _Problem
+from bomgraph.stmds.bundle import BundleProblem
 rng = np.random.default_rng(3)
 m = 25                                                  # 75 pose variables: the arrow path
 odoms = np.tile([0.5, 0.0, 0.05], (m, 1)) + rng.normal(0.0, 0.01, (m, 3))
 none = np.zeros(0, np.int64)
-prob = _Problem(odoms, np.full((m, 3), 0.02), 0.02, none, none, np.zeros(0), 0)
+prob = BundleProblem(odoms, np.full((m, 3), 0.02), 0.02, none, none, np.zeros(0), 0)
 poses = np.vstack([np.zeros(3), np.cumsum(odoms, 0)])
 _, blocks = prob.normal_equations(poses, np.zeros((0, 2)))
 assert bundle_lm.uses_arrow(prob.n_pose_vars, 0)

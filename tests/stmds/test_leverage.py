@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bomgraph.stmds.bundle import _Problem
+from bomgraph.stmds.bundle import BundleProblem
 import bomgraph.stmds.bundle_lm as bundle_lm
 from bomgraph.stmds.bundle_lm import LEVERAGE_RCOND, UNDETERMINED_LEVERAGE, ray_leverages
 
@@ -101,7 +101,7 @@ def test_the_rays_of_a_two_ray_landmark_have_leverage_one() -> None:
     lm = np.append(prob.lm, [n_lm, n_lm])
     q = np.vstack([q0, p0[2, :2] + [2.0, 1.0]])
     theta = np.append(prob.theta, [0.3, 0.9])
-    wide = _Problem(prob.odoms, np.full((len(p0) - 1, 3), 0.02), 0.02, k, lm, theta, n_lm + 1)
+    wide = BundleProblem(prob.odoms, np.full((len(p0) - 1, 3), 0.02), 0.02, k, lm, theta, n_lm + 1)
     jac = wide.linearise(p0, q)[1]
     h = ray_leverages(jac.T @ jac, wide.bearing_rows(p0, q))
     assert np.all(h[-2:] >= UNDETERMINED_LEVERAGE)
@@ -149,7 +149,7 @@ def _long_window(seed: int, far_m: float | None = None):
     far = p0[10, :2] + far_m * np.array([np.cos(0.4), np.sin(0.4)])
     d = far - p0[[3, 10, 20], :2]
     theta = np.append(prob.theta, np.arctan2(d[:, 1], d[:, 0]) - p0[[3, 10, 20], 2] + 1e-3)
-    wide = _Problem(prob.odoms, 1.0 / prob.w_odo, 1.0 / prob.w_b, k, lm, theta, n + 1)
+    wide = BundleProblem(prob.odoms, 1.0 / prob.w_odo, 1.0 / prob.w_b, k, lm, theta, n + 1)
     return wide, p0, np.vstack([q0, far])
 
 
@@ -246,7 +246,7 @@ def _near_pose_window(seed: int, gap_m: float = 2e-6):
     k = np.append(prob.k, [9, 10, 11])
     lm = np.append(prob.lm, [n, n, n])
     theta = np.append(prob.theta, np.arctan2(d[:, 1], d[:, 0]) - p0[[9, 10, 11], 2])
-    near = _Problem(prob.odoms, 1.0 / prob.w_odo, 1.0 / prob.w_b, k, lm, theta, n + 1)
+    near = BundleProblem(prob.odoms, 1.0 / prob.w_odo, 1.0 / prob.w_b, k, lm, theta, n + 1)
     return near, p0, np.vstack([q0, point])
 
 

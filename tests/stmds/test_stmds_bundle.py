@@ -16,7 +16,7 @@ from bomgraph.evaluate import score_estimate
 from bomgraph.geometry import between, bearings_to, dead_reckon, to_local, to_world
 from bomgraph.mapper import create_mapper, run
 from bomgraph.sim import SimConfig, simulate
-from bomgraph.stmds.bundle import (WindowBundle, _Problem, bundle_adjust_window,
+from bomgraph.stmds.bundle import (BundleProblem, WindowBundle, bundle_adjust_window,
                                    bundle_pair_squared_distances)
 from bomgraph.stmds.mapper import StmdsConfig
 from bomgraph.geometry import effective_parallax
@@ -65,7 +65,7 @@ def _perturbed_problem(seed: int, w: int = 7, n: int = 6):
     k, lm = np.nonzero(np.isfinite(brg))
     theta = brg[k, lm] + rng.normal(0.0, 0.05, k.size)
     sig = rng.uniform(0.005, 0.05, (w - 1, 3))
-    prob = _Problem(odoms + rng.normal(0.0, 0.03, odoms.shape), sig, 0.02, k, lm, theta, n)
+    prob = BundleProblem(odoms + rng.normal(0.0, 0.03, odoms.shape), sig, 0.02, k, lm, theta, n)
     p0 = between(poses[0], poses) + rng.normal(0.0, 0.05, (w, 3))
     p0[0] = 0.0
     q0 = to_local(poses[0], pts[:n]) + rng.normal(0.0, 0.1, (n, 2))
