@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import pytest
 
@@ -33,3 +34,17 @@ def test_a_stray_character_after_a_complete_value_is_not_called_cut_short(text: 
     the decoder's stop looked like a number, wherever it began)."""
     why = _why(text)
     assert why.startswith("not valid JSON (") and "cut short" not in why, why
+
+
+def test_a_bad_stream_given_twice_is_one_error_line(tmp_path: Path,
+                                                    capsys: pytest.CaptureFixture[str]) -> None:
+    """h116's warning of the second spelling came before the refusal of the file: two
+    lines for one bad input."""
+    from bomgraph.cli import main
+
+    (tmp_path / "bad.jsonl").write_text("x\n")
+    assert main(["compare", "--streams", str(tmp_path / "bad.jsonl"),
+                 f"{tmp_path}/./bad.jsonl", "--methods", "triangulate",
+                 "--out", str(tmp_path / "out"), "--dry-run"]) == 2
+    [line] = capsys.readouterr().err.strip().splitlines()
+    assert line.startswith("bomgraph: error: --streams: ") and "line 1" in line, line
