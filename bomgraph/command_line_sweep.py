@@ -109,13 +109,13 @@ def command_line_spec(streams: Sequence[str], methods: Sequence[str],
     if missing:
         raise SweepError(f"{st}: {no_file(missing[0])}")
     streams, again = unique_paths(streams)  # as a sweep file's globs: one run a file
+    problem = stream_header_problem(streams)
+    if problem:   # its one line, no warning before it (h119)
+        raise SweepError(f"{st}: {problem}")
     if again:
         _log.warning("%s: %s %s the same file as one before; each file runs once (a copy "
                      "under another name runs as a stream of its own)", st,
                      ", ".join(again), "is" if len(again) == 1 else "are")
-    problem = stream_header_problem(streams)
-    if problem:
-        raise SweepError(f"{st}: {problem}")
     arms = [with_options(a) for a in arms]
     check_unique([a.label for a in arms], ms)
     exp = ExperimentSpec(name, f"{len(streams)} stream(s), {len(arms)} method(s)",

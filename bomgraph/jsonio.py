@@ -404,10 +404,28 @@ def decoder_problem(exc: json.JSONDecodeError) -> str:
         f"{exc.msg.removesuffix(' at')} at column {exc.colno}")
 
 
-#: what is left of a line the decoder ran out of: nothing, or a token that stops short
-#: (``"abc``, ``tru``, ``1.``, ``-``); a line cut short ends so, a complete one does not
-_PARTIAL_TOKEN = re.compile(r'\s*(?:"(?:[^"\\]|\\.)*\\?|-?[0-9.eE+-]*|t(?:ru?)?|f(?:a(?:ls?)?)?'
-                            r'|n(?:ul?)?)')
+#: a number the decoder may have stopped inside (``-``, ``1.``, ``1e``, ``-2.5e+``), and the
+#: start of a literal (``tru``)
+_NUMBER_START = re.compile(r'-?(?:(?:0|[1-9][0-9]*)(?:\.[0-9]*)?(?:[eE][+-]?[0-9]*)?)?')
+_VALUE_START = re.compile(rf'\s*(?:{_NUMBER_START.pattern}|t(?:ru?)?|f(?:a(?:ls?)?)?|n(?:ul?)?)')
+
+
+def _stops_mid_value(exc: json.JSONDecodeError, text: str) -> bool:
+    """The decoder ran out of ``text`` (no newline) inside a value: a prefix of a valid line,
+    as a file cut short ends. Not where a stray character follows a complete value (``1 2``,
+    ``1.2.3``, ``"x"1``, h119: those were called cut short), but inside a ``\\u`` escape too
+    (h119: ``"ab\\u00`` was not)."""
+    rest = text[exc.pos:]
+    if exc.msg.startswith("Unterminated string") or not rest.strip():
+        return True
+    if exc.msg.startswith("Invalid \\uXXXX escape"):
+        return re.fullmatch(r"u[0-9a-fA-F]{0,4}", rest) is not None  # 4: at the end
+    if exc.msg.startswith("Expecting value"):
+        return _VALUE_START.fullmatch(rest) is not None
+    start = exc.pos   # a delimiter expected: the number before it, with what follows it
+    while start > 0 and text[start - 1] in "0123456789.eE+-":
+        start -= 1
+    return start < exc.pos and _NUMBER_START.fullmatch(text, start) is not None
 
 
 def line_not_json(exc: BaseException, text: str, line: int = 1) -> str:
@@ -423,8 +441,7 @@ def line_not_json(exc: BaseException, text: str, line: int = 1) -> str:
         if line > 1 and exc.msg.startswith("Unexpected UTF-8 BOM"):
             why = ("the line starts with a UTF-8 byte-order mark (BOM): remove it (a file "
                    "saved with one, joined to this one?)")
-        ran_out = (exc.msg.startswith("Unterminated string")
-                   or _PARTIAL_TOKEN.fullmatch(text, exc.pos) is not None)
+        ran_out = _stops_mid_value(exc, text)
     else:
         why = ("too deeply nested" if isinstance(exc, RecursionError)
                else unparsable_at(text)[1] or str(exc) or type(exc).__name__)

@@ -25,7 +25,7 @@ import numpy as np
 
 from .bench import (Executor, execute_counted, refuse_runtime_methods, run_example,
                     which_cached)
-from .checks import instance
+from .checks import instance, out_named
 from .errors import ConfigError, StreamFormatError
 from .method_code import new_sweep
 from .evaluate import score_estimate
@@ -38,7 +38,7 @@ from .plots import MapPanel, error_vs_time_figure, final_maps_figure, map_figure
 from .out_folder import (RESULT_FILES, OutputRecord, compare_locks, estimate_paths,
                          planned_outputs, refuse_inputs_among_outputs)
 from .slugs import figure_names
-from .stdio import check_folder, write_figure, write_text
+from .stdio import OutputPathError, check_folder, write_figure, write_text
 from .summaries import (REPORT_TIMES, error_curves, final_by_run, group_rows,
                         results_to_csv_rows, summarise)
 from .tables import HUGE, write_csv
@@ -226,10 +226,8 @@ def compare(experiments: Sequence[Experiment], out_dir: str | os.PathLike[str], 
     """
     out = Path(out_dir)
     refs = references_for(experiments, paired_reference)  # a wrong label: before anything runs
-    check_folder(out_dir)   # first, as plan_compare: Path('') is '.'
-    refuse_inputs_among_outputs(out, experiments)
-    planned = planned_outputs(out, experiments, estimates=estimates, figures=figures)
-    (record := OutputRecord(out)).refuse_foreign(planned, [out / "cache"] if use_cache else [])
+    record, planned = _refuse_before_running(out_dir, experiments, use_cache, estimates, figures,
+                                             executor)
     if executor.backend != "serial":  # as execute() would, before OUT and its lock are made
         refuse_runtime_methods([t for e in experiments for t in e.tasks()], executor.backend)
     out.mkdir(parents=True, exist_ok=True)   # check_folder above
@@ -247,20 +245,47 @@ def plan_compare(experiments: Sequence[Experiment], out_dir: str | os.PathLike[s
     result is in ``out_dir/cache``, so it would not run again), in the order compare runs
     them. What compare refuses about its folder is refused too."""
     instance(executor, Executor, "plan_compare(): executor", ConfigError)  # as compare's
-    check_folder(out_dir)
-    refuse_inputs_among_outputs(Path(out_dir), experiments)
-    OutputRecord(Path(out_dir)).refuse_foreign(
-        planned_outputs(Path(out_dir), experiments, estimates=estimates, figures=figures),
-        [Path(out_dir) / "cache"] if use_cache else [])
+    _refuse_before_running(out_dir, experiments, use_cache, estimates, figures, executor)
     new_sweep()  # as execute() does: a plugin module reloaded, a value set since
     cache = Path(out_dir) / "cache"
-    tasks = [replace(t, keep_estimate=estimates) for e in experiments for t in e.tasks()]
+    tasks = _tasks(experiments, estimates)
     if executor.backend != "serial":  # as execute() refuses them
         refuse_runtime_methods(tasks, executor.backend)
     cached = (which_cached(tasks, cache, executor) if use_cache and cache.is_dir()
               else [False] * len(tasks))
     return [{"experiment": t.experiment, "arm": t.arm.label, "run": t.source.name,
              "cached": c} for t, c in zip(tasks, cached)]
+
+
+def _tasks(experiments: Sequence[Experiment], estimates: bool) -> list[Task]:
+    """The tasks compare runs, in its order, each keeping its estimate with ``estimates``."""
+    return [replace(t, keep_estimate=estimates) for e in experiments for t in e.tasks()]
+
+
+def _refuse_before_running(out_dir: str | os.PathLike[str], experiments: Sequence[Experiment],
+                           use_cache: bool, estimates: bool, figures: bool, executor: Executor
+                           ) -> tuple[OutputRecord, list[Path]]:
+    """What :func:`compare` and :func:`plan_compare` refuse about ``out`` before anything
+    runs: the folder (``check_folder`` first: Path('') is '.'), inputs among the outputs,
+    files not compare's, and a folder it writes into (the cache, ``estimates/``, a figure's)
+    that cannot be written, or where it would be made (h119: ``chattr +i OUT/cache`` ran
+    every task, then stopped on the first cache file); a cache holding every run is only
+    read. Returns the record and the files."""
+    check_folder(out_dir)
+    refuse_inputs_among_outputs(out := Path(out_dir), experiments)
+    planned = planned_outputs(out, experiments, estimates=estimates, figures=figures)
+    cache = [out / "cache"] if use_cache else []
+    (record := OutputRecord(out)).refuse_foreign(planned, cache)
+    for folder in dict.fromkeys([*cache, *(p.parent for p in planned)]):
+        at = folder
+        while at != out and not at.is_dir() and not os.path.lexists(at):
+            at = at.parent   # made there
+        if (at.is_dir() and not os.access(at, os.W_OK | os.X_OK)
+                and not (at in cache and all(which_cached(_tasks(experiments, estimates), at,
+                                                        executor)))):
+            raise OutputPathError(f"{out_named('out_dir', out)}: the folder {at} is not "
+                                  f"writable; make it writable or choose another folder")
+    return record, planned
 
 
 def _compare(experiments: Sequence[Experiment], out: Path, executor: Executor,
@@ -270,7 +295,7 @@ def _compare(experiments: Sequence[Experiment], out: Path, executor: Executor,
              label: str | None,
              planned: tuple[OutputRecord, list[Path]]) -> CompareResult:
     start = time.perf_counter()
-    tasks = [replace(t, keep_estimate=estimates) for e in experiments for t in e.tasks()]
+    tasks = _tasks(experiments, estimates)
     results, n_cached = execute_counted(tasks, executor, progress=progress,
                                         cache_dir=out / "cache" if use_cache else None)
     record, paths = planned
