@@ -354,8 +354,7 @@ def write_estimate_files(out: Path, tasks: Sequence[Task], results: Sequence[dic
     result) and, unless the run read a stream file the user has, its stream (made again here,
     the same bytes the worker ran on) where :func:`bomgraph.out_folder.estimate_paths` says,
     so that ``bomgraph evaluate EST STREAM`` pairs them; ``out/estimates/index.csv`` lists
-    each run's estimate and stream, every path relative to ``out`` (a user's stream file too,
-    :func:`_from_out`), so ``out`` moved or copied with the streams beside it still pairs.
+    each run's estimate and stream (paths relative to ``out``, a user's stream file as given).
     Each file is written with ``ready(path)`` as its ``ready``. Returns the paths; a failed
     run has no estimate and gets none."""
     from .stream_file import write_stream
@@ -374,8 +373,7 @@ def write_estimate_files(out: Path, tasks: Sequence[Task], results: Sequence[dic
         row = {"experiment": t.experiment, "arm": t.arm.label, "run": t.source.name,
                "estimate": str(path.relative_to(out))}
         index.append(row)
-        row["stream"] = (_from_out(t.source.path, out) if spath is None
-                         else str(spath.relative_to(out)))
+        row["stream"] = t.source.path if spath is None else str(spath.relative_to(out))
         if spath is not None and spath not in streams:
             streams.add(spath)
             spath.parent.mkdir(parents=True, exist_ok=True)
@@ -385,17 +383,6 @@ def write_estimate_files(out: Path, tasks: Sequence[Task], results: Sequence[dic
         paths.append(out / "estimates" / "index.csv")
         write_csv(paths[-1], index, ready=ready(paths[-1]))
     return paths
-
-
-def _from_out(path: str, out: Path) -> str:
-    """``path`` relative to the folder ``out`` leads to (``..`` from a link is taken there),
-    as index.csv's other paths are (h116: a user's stream was absolute, so an ``out`` copied
-    with its streams to another machine named files there are not); absolute where there is
-    no relative path (another drive)."""
-    try:
-        return os.path.relpath(path, os.path.realpath(out))
-    except ValueError:
-        return os.path.abspath(path)
 
 
 def write_compare_figures(out_dir: str | os.PathLike[str], experiments: Sequence[Experiment],
