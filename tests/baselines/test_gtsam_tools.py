@@ -108,6 +108,8 @@ def test_seeding_says_whether_letting_landmarks_in_would_help(noise_free: Stream
     assert "admit=True" not in text and "absorb" not in text
     assert "their rays on the graph's poses do not intersect" in text
     assert "HybridMapper(header, seed_mapper=YOUR_MAPPER)" in text
+    # h118: a hybrid of one's own needs the public route too (11 of the 25 paper runs)
+    assert "start the poses from the map (resect_trajectory against it or its mirror" in text
     held = gt.build_graph(noise_free.header, noise_free.steps, admit=False)
     n_in = len(gt.build_graph(noise_free.header, noise_free.steps).problem.landmark_ids)
     with pytest.raises(TooFewLandmarksError) as err:
