@@ -62,7 +62,8 @@ import gtsam
 import numpy as np
 
 from bomgraph.angles import angle_residual
-from bomgraph.errors import BomgraphError, TooFewLandmarksError
+from bomgraph.checks import row_array
+from bomgraph.errors import BomgraphError, ConfigError, TooFewLandmarksError
 from bomgraph.evaluate import Alignment, align
 from bomgraph.geometry import intersect_rays
 from bomgraph.mapper import MapEstimate
@@ -161,9 +162,16 @@ def triangulate_landmarks(poses: np.ndarray, owner: np.ndarray, ids: np.ndarray,
     ids : ndarray (n,), int64; xy : ndarray (n, 2), metres
         The landmarks with at least two bearings whose rays intersect, sorted by id.
     """
-    return _triangulate(np.asarray(poses, float), np.asarray(owner, np.int64),
-                        np.asarray(ids, np.int64), np.asarray(bearings_rad, float),
-                        np.asarray(only, np.int64), float(min_parallax_rad))
+    poses = row_array(poses, 3, "triangulate_landmarks: poses", ConfigError, copy=False)
+    owner = np.asarray(owner, np.int64)
+    if owner.size and not 0 <= owner.min() <= owner.max() < len(poses):
+        raise ConfigError(f"triangulate_landmarks: bearings of steps {int(owner.min())} .. "
+                          f"{int(owner.max())} but poses has {len(poses)} rows (steps 0 .. "
+                          f"{len(poses) - 1}): give only the bearings of those poses "
+                          f"(owner < len(poses)) or a pose per step")
+    return _triangulate(poses, owner, np.asarray(ids, np.int64),
+                        np.asarray(bearings_rad, float), np.asarray(only, np.int64),
+                        float(min_parallax_rad))
 
 
 @dataclass(frozen=True)

@@ -12,7 +12,8 @@ import numpy as np
 import pytest
 
 from baselines import bearing_graph, factor_graph, gtsam_tools as gt, hybrid, resection
-from bomgraph.errors import TooFewLandmarksError
+from bomgraph.errors import ConfigError, TooFewLandmarksError
+from bomgraph.geometry import dead_reckon
 from bomgraph.evaluate import score_estimate
 from bomgraph.mapper import MapEstimate
 from bomgraph.sim import SimConfig, simulate
@@ -209,3 +210,35 @@ def test_diagnose_a_wide_jacobian_names_its_free_variables() -> None:
     d = gt.diagnose(graph, values)
     assert (d.rank, d.n_columns) == (3, 6)
     assert d.null_variables == ["x0", "x1"] and d.unanchored == ["x0", "x1"] and not d.ok
+
+
+def test_the_array_helpers_say_which_convention_they_want(noisy: Stream) -> None:
+    """h118: dead_reckon takes the T-1 increments, resect_trajectory one odometry row per step
+    (row 0 unused); given the former it said "resect_poses: owner indices must lie in 0 ..
+    n_poses-1", a function the caller never called. A map as columns (2, n) and bearings of
+    steps beyond the poses given to triangulate_landmarks were IndexErrors."""
+    state = gt.build_graph(noisy.header, noisy.steps)
+    owner, lid, brg = state.bearings()
+    odoms = np.array([np.zeros(3) if s.odom is None else s.odom for s in noisy.steps])
+    sig = np.array([s.odometry_sigma(noisy.header) for s in noisy.steps])
+    truth = noisy.truth
+    args = (owner, lid, brg, noisy.header.bearing_sigma_rad, truth.landmark_ids)
+    n = len(noisy.steps)
+    with pytest.raises(ConfigError, match=f"step {n - 1} but odoms has {n - 1} rows: give one "
+                                          f"row per step 0 .. T-1, row 0 unused .*prepend"):
+        gt.resect_trajectory(*args, truth.landmarks_xy, odoms[1:], sig[1:])
+    with pytest.raises(ConfigError, match=r"map_xy must have shape \(n, 2\), got \(2, 25\); "
+                                          r"transpose it"):
+        gt.resect_trajectory(*args, truth.landmarks_xy.T, odoms, sig)
+    with pytest.raises(ConfigError, match="odometry_sigma must have the shape of odoms"):
+        gt.resect_trajectory(*args, truth.landmarks_xy, odoms, sig[1:])
+    poses = gt.resect_trajectory(*args, truth.landmarks_xy, odoms, sig)
+    assert poses.shape == (n, 3)
+    dr = dead_reckon(odoms[1:])
+    with pytest.raises(ConfigError, match=rf"bearings of steps 0 .. {n - 1} but poses has 30 "
+                                          r"rows \(steps 0 .. 29\)"):
+        gt.triangulate_landmarks(dr[:30], owner, lid, brg, truth.landmark_ids, 0.3)
+    j = owner < 30
+    ids, xy = gt.triangulate_landmarks(dr[:30], owner[j], lid[j], brg[j], truth.landmark_ids,
+                                       0.3)
+    assert ids.size and xy.shape == (ids.size, 2)
