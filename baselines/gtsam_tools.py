@@ -62,7 +62,8 @@ import gtsam
 import numpy as np
 
 from bomgraph.angles import angle_residual
-from bomgraph.errors import BomgraphError, TooFewLandmarksError
+from bomgraph.checks import row_array
+from bomgraph.errors import BomgraphError, ConfigError, TooFewLandmarksError
 from bomgraph.evaluate import Alignment, align
 from bomgraph.geometry import intersect_rays
 from bomgraph.mapper import MapEstimate
@@ -161,9 +162,16 @@ def triangulate_landmarks(poses: np.ndarray, owner: np.ndarray, ids: np.ndarray,
     ids : ndarray (n,), int64; xy : ndarray (n, 2), metres
         The landmarks with at least two bearings whose rays intersect, sorted by id.
     """
-    return triangulate_arrays(np.asarray(poses, float), np.asarray(owner, np.int64),
-                              np.asarray(ids, np.int64), np.asarray(bearings_rad, float),
-                              np.asarray(only, np.int64), float(min_parallax_rad))
+    poses = row_array(poses, 3, "triangulate_landmarks: poses", ConfigError, copy=False)
+    owner = np.asarray(owner, np.int64)
+    if owner.size and not 0 <= owner.min() <= owner.max() < len(poses):
+        raise ConfigError(f"triangulate_landmarks: bearings of steps {int(owner.min())} .. "
+                          f"{int(owner.max())} but poses has {len(poses)} rows (steps 0 .. "
+                          f"{len(poses) - 1}): give only the bearings of those poses "
+                          f"(owner < len(poses)) or a pose per step")
+    return triangulate_arrays(poses, owner, np.asarray(ids, np.int64),
+                              np.asarray(bearings_rad, float), np.asarray(only, np.int64),
+                              float(min_parallax_rad))
 
 
 @dataclass(frozen=True)
@@ -236,9 +244,12 @@ def seed_landmarks(state: BatchState, estimate: MapEstimate, *, trim: float = 3.
     Returns the :class:`AlignedMap`; raises :class:`TooFewLandmarksError` if fewer than 3
     graph landmarks are in the map, saying whether the map holds too few of the stream's
     landmarks (ids not the stream's), or whether pending landmarks would enter now
-    (``state.absorb()``; a graph built with ``admit=False``) or not: on a drifting recording
-    the dead-reckoned rays of a whole run may admit none, and the hybrid aligns on the early
-    trajectory and resects every pose, ``HybridMapper(header, seed_mapper=...)``.
+    (``state.absorb()``; a graph built with ``admit=False``) or not: the dead-reckoned rays of
+    a whole run may admit none (a drifting recording; 11 of the 25 300-step runs of
+    ``paper_design(0)`` admit fewer than 3). Then start the poses first: :func:`resect_trajectory`
+    against the map (or its mirror), :func:`insert_pose`, ``state.absorb()``, and seed again
+    (README, "GTSAM helpers"); or let the hybrid align on the early trajectory and resect every
+    pose, ``HybridMapper(header, seed_mapper=...)``.
     """
     problem = state.problem
     ids = np.array(sorted(problem.landmark_ids), np.int64)
@@ -264,7 +275,9 @@ def seed_landmarks(state: BatchState, estimate: MapEstimate, *, trim: float = 3.
         raise TooFewLandmarksError(
             f"seed_landmarks: the graph holds {ids.size} landmarks, {n_common} of them in the "
             f"map ({len(estimate)}), and 3 are needed to align the map onto them; "
-            f"{len(pending)} landmarks are pending, and {why} let the hybrid align the "
+            f"{len(pending)} landmarks are pending, and {why} start the poses from the map "
+            f"(resect_trajectory against it or its mirror, then insert_pose: the rays on "
+            f"those poses intersect; README, GTSAM helpers), or let the hybrid align the "
             f"map on the early trajectory and resect every pose: "
             f"baselines.hybrid.HybridMapper(header, seed_mapper=YOUR_MAPPER)")
     aligned = align_map(estimate, ids, ref_xy, trim=trim)
@@ -400,7 +413,12 @@ def diagnose(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, *,
     min_parallax_rad : float
         A landmark whose rays span less is reported weak (the graph builder's entry rule).
     dense_limit : int
-        Widest Jacobian (columns = sum of variable dimensions) checked densely.
+        Widest Jacobian (columns = sum of variable dimensions) checked densely. The dense
+        check is an SVD of the whole whitened Jacobian (a row per bearing), O(rows x
+        columns^2): on a paper run (50 landmarks) 0.5 s CPU at 100 steps (697 columns) and
+        2.8 s at 200 (1,297), several times the LM solve itself; beyond the limit the rank is
+        not checked (``rank`` None) and the diagnosis costs about 0.1 s. Called at every
+        estimate of a growing graph (as :func:`checked_solve` is), lower it or diagnose once.
     rank_tol : float
         Singular values below ``rank_tol`` times the largest count as zero.
 
@@ -485,7 +503,9 @@ def diagnose(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, *,
                 ordering.push_back(k)
             a, _ = linear.jacobian(ordering)
             n_cols = a.shape[1]
-            _, sv, vt = np.linalg.svd(a, full_matrices=True)
+            # V only: with at least as many rows as columns the thin SVD holds all of it,
+            # and a full one would also make U, rows x rows (a row per bearing)
+            _, sv, vt = np.linalg.svd(a, full_matrices=a.shape[0] < a.shape[1])
             tol = rank_tol * (sv[0] if sv.size else 0.0)
             rank = int(np.sum(sv > tol))
             if rank < n_cols:
@@ -516,6 +536,9 @@ def checked_solve(graph: gtsam.NonlinearFactorGraph, initial: gtsam.Values,
                   min_parallax_rad: float | None = None
                   ) -> tuple[gtsam.Values, SolveReport]:
     """:func:`diagnose`, then :func:`solve_lm` (Levenberg-Marquardt with an honest report).
+
+    The diagnosis's dense rank check can cost more than the solve (:func:`diagnose`,
+    ``dense_limit``); in a loop, diagnose once and call :func:`solve_lm`.
 
     Raises
     ------

@@ -19,6 +19,7 @@ from typing import Sequence
 import numpy as np
 
 from bomgraph.angles import angle_residual, wrap_angle
+from bomgraph.checks import id_array, row_array
 from bomgraph.errors import ConfigError
 from bomgraph.geometry import (bearing_offsets, compose, inverse, pair_bearings, ray_normals,
                                rotation)
@@ -279,6 +280,9 @@ def resect_trajectory(owner: np.ndarray, landmark_ids: np.ndarray, bearings_rad:
     map_sigma_m : float
     prior_sigma : (m, m, rad)
     """
+    (owner, landmark_ids, bearings_rad, map_ids, map_xy, odoms,
+     odometry_sigma) = _trajectory_inputs(owner, landmark_ids, bearings_rad, map_ids, map_xy,
+                                          odoms, odometry_sigma)
     n_t = len(odoms)
     ids = np.asarray(landmark_ids)
     order = np.argsort(map_ids)
@@ -326,6 +330,37 @@ def resect_trajectory(owner: np.ndarray, landmark_ids: np.ndarray, bearings_rad:
         if not ok[t]:
             poses[t] = compose(poses[t - 1], odoms[t])
     return poses
+
+
+def _trajectory_inputs(owner: np.ndarray, landmark_ids: np.ndarray, bearings_rad: np.ndarray,
+                       map_ids: np.ndarray, map_xy: np.ndarray, odoms: np.ndarray,
+                       odometry_sigma: np.ndarray) -> tuple[np.ndarray, ...]:
+    """:func:`resect_trajectory`'s arrays, refused in one line naming the argument and what
+    to give when their shapes disagree (values unchanged)."""
+    def bad(message: str) -> ConfigError:
+        return ConfigError(f"resect_trajectory: {message}")
+
+    own = id_array(owner, "owner", bad)
+    lid = id_array(landmark_ids, "landmark_ids", bad)
+    brg = np.asarray(bearings_rad, dtype=float)
+    if not (own.ndim == lid.ndim == brg.ndim == 1 and own.size == lid.size == brg.size):
+        raise bad(f"owner, landmark_ids and bearings_rad must be 1-D, one entry per bearing, "
+                  f"got shapes {own.shape}, {lid.shape}, {brg.shape}")
+    m_ids = id_array(map_ids, "map_ids", bad)
+    m_xy = row_array(map_xy, 2, "map_xy", bad, copy=False)
+    if m_ids.shape[0] != m_xy.shape[0]:
+        raise bad(f"map_ids has {m_ids.shape[0]} ids but map_xy {m_xy.shape[0]} rows")
+    odo = row_array(odoms, 3, "odoms", bad, copy=False)
+    sig = row_array(odometry_sigma, 3, "odometry_sigma", bad, copy=False)
+    if sig.shape != odo.shape:
+        raise bad(f"odometry_sigma must have the shape of odoms {odo.shape}, got {sig.shape}")
+    if own.size and own.max() >= len(odo):
+        raise bad(f"a bearing was taken at step {int(own.max())} but odoms has {len(odo)} rows: "
+                  f"give one row per step 0 .. T-1, row 0 unused (not dead_reckon's T-1 "
+                  f"increments: prepend a row of zeros)")
+    if own.size and own.min() < 0:
+        raise bad(f"owner must be steps >= 0, got {int(own.min())}")
+    return own, lid, brg, m_ids, m_xy, odo, sig
 
 
 __all__ = ["resect_poses", "resect_pose", "resect_trajectory", "resection_jacobian"]

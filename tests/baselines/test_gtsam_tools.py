@@ -5,13 +5,15 @@ is unconstrained, and the checked solve."""
 from __future__ import annotations
 
 import math
+import tracemalloc
 
 import gtsam
 import numpy as np
 import pytest
 
 from baselines import bearing_graph, factor_graph, gtsam_tools as gt, hybrid, resection
-from bomgraph.errors import TooFewLandmarksError
+from bomgraph.errors import ConfigError, TooFewLandmarksError
+from bomgraph.geometry import dead_reckon
 from bomgraph.evaluate import score_estimate
 from bomgraph.mapper import MapEstimate
 from bomgraph.sim import SimConfig, simulate
@@ -107,6 +109,8 @@ def test_seeding_says_whether_letting_landmarks_in_would_help(noise_free: Stream
     assert "admit=True" not in text and "absorb" not in text
     assert "their rays on the graph's poses do not intersect" in text
     assert "HybridMapper(header, seed_mapper=YOUR_MAPPER)" in text
+    # h118: a hybrid of one's own needs the public route too (11 of the 25 paper runs)
+    assert "start the poses from the map (resect_trajectory against it or its mirror" in text
     held = gt.build_graph(noise_free.header, noise_free.steps, admit=False)
     n_in = len(gt.build_graph(noise_free.header, noise_free.steps).problem.landmark_ids)
     with pytest.raises(TooFewLandmarksError) as err:
@@ -173,3 +177,68 @@ def test_diagnose_names_parallel_rays_poses_without_prior_and_missing_values(
                                           gtsam.Rot2(0.0), noise))
     d3 = gt.diagnose(state.graph, state.values)
     assert d3.missing_values == ["l997"] and "no initial value for l997" in d3.summary()
+
+
+def test_diagnose_holds_no_rows_by_rows_matrix() -> None:
+    """The rank check needs the right singular vectors only: a full SVD of a tall Jacobian
+    (a row per bearing) also made the rows x rows U, 250 MB and 10 s CPU at 200 steps of a
+    paper run seeded with its EKF map (5583 x 1297; h118), 30 times the LM solve."""
+    stream = simulate(SimConfig(n_steps=20, n_landmarks=200, noise_scale=0.0),
+                      np.random.default_rng(0))
+    state = gt.build_graph(stream.header, stream.steps)
+    rows, cols = state.graph.linearize(state.values).jacobian()[0].shape
+    assert rows > 4 * cols
+    tracemalloc.start()
+    try:
+        d = gt.diagnose(state.graph, state.values)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert d.ok and d.rank == d.n_columns == cols
+    assert peak < 0.75 * 8 * rows * rows
+
+
+def test_diagnose_a_wide_jacobian_names_its_free_variables() -> None:
+    """Fewer rows than columns (one odometry factor, no prior): the null space is the
+    complement of the row space, which only the full V holds."""
+    graph = gtsam.NonlinearFactorGraph()
+    graph.add(gtsam.BetweenFactorPose2(gt.pose_key(0), gt.pose_key(1), gtsam.Pose2(1, 0, 0),
+                                       gtsam.noiseModel.Isotropic.Sigma(3, 0.1)))
+    values = gtsam.Values()
+    gt.insert_pose(values, 0, np.zeros(3), None)
+    values.insert(gt.pose_key(1), gtsam.Pose2(1.0, 0.0, 0.0))
+    d = gt.diagnose(graph, values)
+    assert (d.rank, d.n_columns) == (3, 6)
+    assert d.null_variables == ["x0", "x1"] and d.unanchored == ["x0", "x1"] and not d.ok
+
+
+def test_the_array_helpers_say_which_convention_they_want(noisy: Stream) -> None:
+    """h118: dead_reckon takes the T-1 increments, resect_trajectory one odometry row per step
+    (row 0 unused); given the former it said "resect_poses: owner indices must lie in 0 ..
+    n_poses-1", a function the caller never called. A map as columns (2, n) and bearings of
+    steps beyond the poses given to triangulate_landmarks were IndexErrors."""
+    state = gt.build_graph(noisy.header, noisy.steps)
+    owner, lid, brg = state.bearings()
+    odoms = np.array([np.zeros(3) if s.odom is None else s.odom for s in noisy.steps])
+    sig = np.array([s.odometry_sigma(noisy.header) for s in noisy.steps])
+    truth = noisy.truth
+    args = (owner, lid, brg, noisy.header.bearing_sigma_rad, truth.landmark_ids)
+    n = len(noisy.steps)
+    with pytest.raises(ConfigError, match=f"step {n - 1} but odoms has {n - 1} rows: give one "
+                                          f"row per step 0 .. T-1, row 0 unused .*prepend"):
+        gt.resect_trajectory(*args, truth.landmarks_xy, odoms[1:], sig[1:])
+    with pytest.raises(ConfigError, match=r"map_xy must have shape \(n, 2\), got \(2, 25\); "
+                                          r"transpose it"):
+        gt.resect_trajectory(*args, truth.landmarks_xy.T, odoms, sig)
+    with pytest.raises(ConfigError, match="odometry_sigma must have the shape of odoms"):
+        gt.resect_trajectory(*args, truth.landmarks_xy, odoms, sig[1:])
+    poses = gt.resect_trajectory(*args, truth.landmarks_xy, odoms, sig)
+    assert poses.shape == (n, 3)
+    dr = dead_reckon(odoms[1:])
+    with pytest.raises(ConfigError, match=rf"bearings of steps 0 .. {n - 1} but poses has 30 "
+                                          r"rows \(steps 0 .. 29\)"):
+        gt.triangulate_landmarks(dr[:30], owner, lid, brg, truth.landmark_ids, 0.3)
+    j = owner < 30
+    ids, xy = gt.triangulate_landmarks(dr[:30], owner[j], lid[j], brg[j], truth.landmark_ids,
+                                       0.3)
+    assert ids.size and xy.shape == (ids.size, 2)
