@@ -25,7 +25,7 @@ import numpy as np
 
 from .bench import (Executor, adds_to_cache, execute_counted, refuse_runtime_methods,
                     run_example, which_cached)
-from .checks import instance, out_named
+from .checks import instance, option_named, out_named
 from .errors import ConfigError, StreamFormatError
 from .method_code import new_sweep
 from .evaluate import score_estimate
@@ -284,8 +284,10 @@ def _refuse_before_running(out_dir: str | os.PathLike[str], experiments: Sequenc
         only_read = (at in cache and os.access(at, os.R_OK | os.X_OK)  # listed, then read
                      and not adds_to_cache(_tasks(experiments, estimates), at, executor))
         if at.is_dir() and not os.access(at, os.W_OK | os.X_OK) and not only_read:
+            no_cache = option_named("--no-cache", "use_cache=False")
+            other = f", or run without the cache ({no_cache})" if at in cache else ""
             raise OutputPathError(f"{out_named('out_dir', out)}: the folder {at} is not "
-                                  f"writable; make it writable or choose another folder")
+                                  f"writable; make it writable or choose another folder{other}")
     return record, planned
 
 

@@ -5,7 +5,8 @@
   unwritable cache refused it: only a cache that would receive a run is refused now.
 - A cache that cannot even be listed (another user's, mode 0700) said ``[Errno 13]
   Permission denied: 'OUT/cache/KEY.json'``, by ``--dry-run`` too: now the one line naming
-  the folder."""
+  the folder.
+- The refusal of an unwritable cache offers ``--no-cache``, which reads and writes none."""
 
 from __future__ import annotations
 
@@ -83,3 +84,26 @@ def test_a_cache_that_cannot_be_listed_is_one_line_naming_it(tmp_path: Path,
             assert f"the folder {out / 'cache'} is not writable" in line, line
     finally:
         (out / "cache").chmod(0o755)
+
+
+def test_an_unwritable_cache_says_no_cache_runs(tmp_path: Path, stream: Path,
+                                                capsys: pytest.CaptureFixture[str]) -> None:
+    """The refusal of an unwritable cache offers ``--no-cache`` (which reads and writes no
+    cache, so runs); another folder's does not. Fails before (no ``--no-cache`` said)."""
+    from bomgraph.cli import main
+
+    out = tmp_path / "out"
+    (out / "cache").mkdir(parents=True)
+    cmd = ["compare", "--streams", str(stream), "--methods", "triangulate", "--jobs", "1",
+           "--no-figures", "--out", str(out)]
+    with not_writable(out / "cache"):
+        for dry in ((), ("--dry-run",)):
+            assert main([*cmd, *dry]) == 2
+            [line] = capsys.readouterr().err.strip().splitlines()
+            assert line.endswith("or run without the cache (--no-cache)"), line
+        assert main([*cmd, "--no-cache"]) == 0
+    (out / "estimates").mkdir()
+    with not_writable(out / "estimates"):
+        assert main([*cmd, "--no-cache", "--estimates"]) == 2
+        [line] = capsys.readouterr().err.strip().splitlines()
+        assert f"{out / 'estimates'} is not writable" in line and "--no-cache" not in line
