@@ -342,17 +342,34 @@ def which_cached(tasks: Sequence[Task], cache_dir: str | os.PathLike[str],
                  executor: Executor = Executor()) -> list[bool]:
     """:func:`is_cached` of each task, keyed as one :func:`execute` sweep keys them (each
     plugin's package hashed once)."""
+    return [p is not None and read_cached(p) is not None
+            for p in _cache_paths(tasks, cache_dir, executor)]
+
+
+def adds_to_cache(tasks: Sequence[Task], cache_dir: str | os.PathLike[str],
+                  executor: Executor = Executor()) -> bool:
+    """Whether :func:`execute` with ``executor`` may write a result into ``cache_dir``: a task
+    it would cache that is not cached yet. Not a task never cached (a method without a source
+    file, a value that cannot be hashed, :func:`~bomgraph.method_code.uncacheable`; h121: an
+    unwritable cache was refused for those), nor any while bomgraph's sources changed."""
+    return any(p is not None and read_cached(p) is None
+               for p in _cache_paths(tasks, cache_dir, executor))
+
+
+def _cache_paths(tasks: Sequence[Task], cache_dir: str | os.PathLike[str],
+                 executor: Executor) -> list[Path | None]:
+    """Each task's cache file as one :func:`execute` sweep keys them (each plugin's package
+    hashed once); None where the cache is neither read nor written for it."""
     backend = instance(executor, Executor, "is_cached(): executor", ConfigError).backend
     disk = backend == "dask" or (backend == "processes" and not daemonic())  # as execute
     if bomgraph_edited():
-        return [False] * len(tasks)
+        return [None] * len(tasks)
     new_sweep()
     memo: dict[str, str | None] = {}
     stale: dict[tuple[str, ...], bool] = {}
-    paths = [None if not disk and stale_here(t, stale) else
-             _cache_path(Path(cache_dir), t, task_key(t, disk=disk, memo=memo), disk)
-             for t in tasks]
-    return [p is not None and read_cached(p) is not None for p in paths]
+    return [None if not disk and stale_here(t, stale) else
+            _cache_path(Path(cache_dir), t, task_key(t, disk=disk, memo=memo), disk)
+            for t in tasks]
 
 
 def execute(tasks: Sequence[Task], executor: Executor = Executor(), *,
@@ -574,5 +591,5 @@ def _dispatch(tasks: list[Task], index: list[int], executor: Executor,
 
 
 __all__ = ["Executor", "run_task", "execute", "execute_counted", "is_cached", "which_cached",
-           "refuse_runtime_methods", "task_key", "code_fingerprint", "strip_timings", "run_file",
-           "count_steps", "run_example", "CACHE_VERSION"]
+           "adds_to_cache", "refuse_runtime_methods", "task_key", "code_fingerprint",
+           "strip_timings", "run_file", "count_steps", "run_example", "CACHE_VERSION"]

@@ -23,9 +23,9 @@ from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 
-from .bench import (Executor, execute_counted, refuse_runtime_methods, run_example,
-                    which_cached)
-from .checks import instance, out_named
+from .bench import (Executor, adds_to_cache, execute_counted, refuse_runtime_methods,
+                    run_example, which_cached)
+from .checks import instance, option_named, out_named
 from .errors import ConfigError, StreamFormatError
 from .method_code import new_sweep
 from .evaluate import score_estimate
@@ -269,8 +269,9 @@ def _refuse_before_running(out_dir: str | os.PathLike[str], experiments: Sequenc
     runs: the folder (``check_folder`` first: Path('') is '.'), inputs among the outputs,
     files not compare's, and a folder it writes into (the cache, ``estimates/``, a figure's)
     that cannot be written, or where it would be made (h119: ``chattr +i OUT/cache`` ran
-    every task, then stopped on the first cache file); a cache holding every run is only
-    read. Returns the record and the files."""
+    every task, then stopped on the first cache file); a cache compare adds no run to (each
+    cached or never cached, :func:`~bomgraph.bench.adds_to_cache`) is only read. Returns the
+    record and the files."""
     check_folder(out_dir)
     refuse_inputs_among_outputs(out := Path(out_dir), experiments)
     planned = planned_outputs(out, experiments, estimates=estimates, figures=figures)
@@ -280,11 +281,13 @@ def _refuse_before_running(out_dir: str | os.PathLike[str], experiments: Sequenc
         at = folder
         while at != out and not at.is_dir() and not os.path.lexists(at):
             at = at.parent   # made there
-        if (at.is_dir() and not os.access(at, os.W_OK | os.X_OK)
-                and not (at in cache and all(which_cached(_tasks(experiments, estimates), at,
-                                                        executor)))):
+        only_read = (at in cache and os.access(at, os.R_OK | os.X_OK)  # listed, then read
+                     and not adds_to_cache(_tasks(experiments, estimates), at, executor))
+        if at.is_dir() and not os.access(at, os.W_OK | os.X_OK) and not only_read:
+            no_cache = option_named("--no-cache", "use_cache=False")
+            other = f", or run without the cache ({no_cache})" if at in cache else ""
             raise OutputPathError(f"{out_named('out_dir', out)}: the folder {at} is not "
-                                  f"writable; make it writable or choose another folder")
+                                  f"writable; make it writable or choose another folder{other}")
     return record, planned
 
 
