@@ -510,6 +510,7 @@ def folders_below_locked(out: Path, rels: Sequence[str], held: set[Any]) -> dict
 
 
 LOCK_RETRIES, RETRY_S = 3, 0.1  # compare_locks' tries after the first; pauses: RETRY_S * 2**k
+_JITTER = random.Random()  # its pauses' own: a user's random.seed sequence is left alone
 
 
 @contextlib.contextmanager
@@ -534,7 +535,7 @@ def compare_locks(out: Path, paths: Sequence[Path]) -> Iterator[None]:
             else:
                 yield
                 return
-        time.sleep(random.uniform(0, RETRY_S * 2**attempt))  # let go: the other one's turn
+        time.sleep(_JITTER.uniform(0, RETRY_S * 2**attempt))  # let go: the other one's turn
 
 
 def _lock_the_rest(out: Path, paths: Sequence[Path], stack: contextlib.ExitStack,

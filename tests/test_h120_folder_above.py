@@ -5,17 +5,22 @@ folder above its own that holds a lock file too. The other compare is a lock the
 
 from __future__ import annotations
 
+import random
 from pathlib import Path
 
+import pytest
+
 import _compare_folder
+from bomgraph import out_folder
 from bomgraph.cli import main
-from bomgraph.stdio import folder_lock
+from bomgraph.stdio import FolderBusyError, folder_lock
 
 stream = _compare_folder.stream   # the fixture
 _WHO = "`bomgraph compare`"
 
 
-def test_a_compare_into_a_folder_below_one_being_written_is_refused(tmp_path, stream, capsys):
+def test_a_compare_into_a_folder_below_one_being_written_is_refused(tmp_path, stream,
+                                                                    capsys) -> None:
     """Fails before (status 0, results written into ``x/estimates``)."""
     x = tmp_path / "x"
     (x / "estimates").mkdir(parents=True)
@@ -39,3 +44,18 @@ def test_two_compares_into_two_folders_below_one_still_run_side_by_side(tmp_path
         assert main(_compare_folder.compare_cmd(stream, x / "b", "--no-figures")) == 0, \
             capsys.readouterr().err
     assert (x / "b" / "results.csv").is_file()
+
+
+def test_a_retry_leaves_the_global_random_state_alone(tmp_path):
+    """The pause before a retry is drawn from a generator of its own: a library user's
+    ``random.seed`` sequence is not moved by a compare that was refused and retried. Fails
+    before (the pauses came from ``random``'s global generator)."""
+    x = tmp_path / "x"
+    (x / "sub").mkdir(parents=True)
+    random.seed(7)
+    state = random.getstate()
+    with folder_lock(x / "sub", _WHO):   # refused below its folder: retried, then refused
+        with pytest.raises(FolderBusyError):
+            with out_folder.compare_locks(x, [x / "sub" / "a.est"]):
+                pass
+    assert random.getstate() == state
