@@ -6,7 +6,6 @@ folder above its own that holds a lock file too. The other compare is a lock the
 from __future__ import annotations
 
 import random
-from pathlib import Path
 
 import pytest
 
