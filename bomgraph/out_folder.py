@@ -495,24 +495,22 @@ def linked_folders(out: Path, paths: Sequence[Path]) -> dict[str, Path]:
 def folders_below_locked(out: Path, rels: Sequence[str], held: set[Any]) -> dict[str, str]:
     """The folders ``compare`` writes below that hold a lock file (another compare writes into
     one, or through a link into one), but those of ``held`` (``(device, inode)``, added to it):
-    on the real way to the files ``rels`` (:func:`_touched`), from ``/`` if a link leads there, else
-    from ``out`` down (compares into folders above ``out`` never write its files). Each -> the
-    folder compare writes into below it; outermost first. Before h100 only a folder above a
-    linked one holding a manifest: not one in its first compare yet, or written via a link."""
+    on the real way to the files ``rels`` (:func:`_touched`) from ``/``. Each -> the folder
+    compare writes into below it; outermost first. Before h100 only a folder above a linked one
+    holding a manifest; before h120 none above ``out`` unless through a link: one into ``x/e``
+    ran beside one into ``x --estimates`` that held ``x`` (refused the other way round)."""
     found: dict[str, str] = {}
-    top = Path(os.path.realpath(out))
     for sub in dict.fromkeys(os.path.dirname(rel) for rel in rels):
         real = Path(os.path.realpath(out / sub))
-        linked = bool(_links_on_the_way(out, os.path.join(sub, "_")))
         for q in [real, *real.parents]:
-            if ((linked or top in q.parents) and os.path.lexists(q / ".bomgraph.lock")
-                    and (i := _file_id(q)) not in held):
+            if os.path.lexists(q / ".bomgraph.lock") and (i := _file_id(q)) not in held:
                 held.add(i)
                 found[str(q)] = str(real)
     return dict(sorted(found.items(), key=lambda kv: len(Path(kv[0]).parts)))
 
 
 LOCK_RETRIES, RETRY_S = 3, 0.1  # compare_locks' tries after the first; pauses: RETRY_S * 2**k
+_JITTER = random.Random()  # its pauses' own: a user's random.seed sequence is left alone
 
 
 @contextlib.contextmanager
@@ -537,7 +535,7 @@ def compare_locks(out: Path, paths: Sequence[Path]) -> Iterator[None]:
             else:
                 yield
                 return
-        time.sleep(random.uniform(0, RETRY_S * 2**attempt))  # let go: the other one's turn
+        time.sleep(_JITTER.uniform(0, RETRY_S * 2**attempt))  # let go: the other one's turn
 
 
 def _lock_the_rest(out: Path, paths: Sequence[Path], stack: contextlib.ExitStack,
