@@ -121,6 +121,10 @@ class BatchState:
             p = values.atPose2(pose_key(n - 1))
             self._last = np.array([p.x(), p.y(), p.theta()])
 
+    def odometry_sigmas(self) -> np.ndarray:
+        """The odometry std. devs. of every step so far, (T, 3) (``Step.odometry_sigma``)."""
+        return np.array(self._odom_sigma)
+
     def bearings(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Every bearing so far: owner step, landmark id, bearing (rad), each (J,)."""
         return self._log.arrays()

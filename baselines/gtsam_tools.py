@@ -36,8 +36,9 @@ What is here, each the same object the baselines run (re-exported, never copied)
   fit with reflection, trimmed: :func:`trimmed_align`) and :func:`seed_landmarks` (the
   aligned map as the start of the graph's landmarks, and landmarks the rays do not yet
   determine entered at their map position); :func:`resect_pose` and
-  :func:`resect_trajectory` (poses from their bearings to a map, :mod:`baselines.resection`:
-  how the hybrid starts the graph's poses);
+  :func:`resect_trajectory` (poses from their bearings to a map, :mod:`baselines.resection`),
+  and :func:`seed_start` (every pose started from a map in any frame: aligned, resected,
+  moved onto the start pose; :mod:`baselines.seeding`, the hybrid's own seeding);
 * **diagnosis**: :func:`diagnose` names, before any solve, the landmarks with fewer than two
   bearings or too little parallax, the poses with no path to a prior, the variables without
   values, and checks the rank of the linearised system (:class:`Diagnosis`);
@@ -74,8 +75,9 @@ from .bearing_graph import (BearingGraph, FactorGraphConfig, NewFactors, bearing
                             odometry_factors, pose_key, poses_from_values, prior_factor)
 from .factor_graph import (GTSAM_ERRORS, BatchState, SolveReport, estimate_from_values,
                            gauss_newton_check, lm_params, marginal_covariances, solve_lm)
-from .hybrid import triangulate_arrays, trimmed_align
 from .resection import resect_pose, resect_trajectory
+from .seeding import (SeedAlignment, SeedStart, align_seed, seed_start, triangulate_arrays,
+                      trimmed_align)
 
 
 class UnconstrainedGraphError(BomgraphError, ValueError):
@@ -246,10 +248,9 @@ def seed_landmarks(state: BatchState, estimate: MapEstimate, *, trim: float = 3.
     landmarks (ids not the stream's), or whether pending landmarks would enter now
     (``state.absorb()``; a graph built with ``admit=False``) or not: the dead-reckoned rays of
     a whole run may admit none (a drifting recording; 11 of the 25 300-step runs of
-    ``paper_design(0)`` admit fewer than 3). Then start the poses first: :func:`resect_trajectory`
-    against the map (or its mirror), :func:`insert_pose`, ``state.absorb()``, and seed again
-    (README, "GTSAM helpers"); or let the hybrid align on the early trajectory and resect every
-    pose, ``HybridMapper(header, seed_mapper=...)``.
+    ``paper_design(0)`` admit fewer than 3). Then start the poses from the map first:
+    ``state.values.update(seed_start(state, estimate).values())`` (:func:`seed_start`, as
+    the hybrid does), ``state.absorb()``, and seed again (README, "GTSAM helpers").
     """
     problem = state.problem
     ids = np.array(sorted(problem.landmark_ids), np.int64)
@@ -276,10 +277,9 @@ def seed_landmarks(state: BatchState, estimate: MapEstimate, *, trim: float = 3.
             f"seed_landmarks: the graph holds {ids.size} landmarks, {n_common} of them in the "
             f"map ({len(estimate)}), and 3 are needed to align the map onto them; "
             f"{len(pending)} landmarks are pending, and {why} start the poses from the map "
-            f"(resect_trajectory against it or its mirror, then insert_pose: the rays on "
-            f"those poses intersect; README, GTSAM helpers), or let the hybrid align the "
-            f"map on the early trajectory and resect every pose: "
-            f"baselines.hybrid.HybridMapper(header, seed_mapper=YOUR_MAPPER)")
+            f"first (as the hybrid does): state.values.update(seed_start(state, "
+            f"map).values()); state.absorb() (the rays on those poses intersect); then "
+            f"seed_landmarks again (README, GTSAM helpers)")
     aligned = align_map(estimate, ids, ref_xy, trim=trim)
     where = aligned.as_dict()
     for lid, n_rays in sorted(problem.pending().items()):
@@ -562,7 +562,8 @@ __all__ = [
     "landmark_key", "insert_pose", "poses_from_values", "landmarks_from_values",
     # initialisation
     "triangulate_landmarks", "align_map", "AlignedMap", "seed_landmarks", "trimmed_align",
-    "resect_pose", "resect_trajectory",
+    "resect_pose", "resect_trajectory", "seed_start", "SeedStart", "align_seed",
+    "SeedAlignment",
     # diagnosis
     "diagnose", "Diagnosis", "key_name", "UnconstrainedGraphError",
     # solving

@@ -11,7 +11,8 @@ settles in a wrong basin (starting from dead reckoning it often does). At each `
    triangulated from the dead-reckoned early trajectory;
 3. initialise every pose by resection against that map
    (:func:`baselines.resection.resect_trajectory`), then move the whole start rigidly so that
-   the first pose is ``start_pose``;
+   the first pose is ``start_pose`` (steps 2-3: :func:`baselines.seeding.seed_start`, public
+   in :mod:`baselines.gtsam_tools`);
 4. run LM on the same graph as ``gtsam-batch`` (:class:`baselines.factor_graph.BatchState`)
    from that start, and from the warm start of the previous solution; keep the lower cost.
 
@@ -31,18 +32,16 @@ from typing import Any, ClassVar, Mapping, Sequence
 import gtsam
 import numpy as np
 
-from bomgraph.angles import angle_residual, wrap_angle
 from bomgraph.config import requirement, resolve
-from bomgraph.errors import BomgraphError, ConfigError
-from bomgraph.evaluate import Alignment, align
-from bomgraph.geometry import dead_reckon, intersect_rays, rotation
+from bomgraph.errors import BomgraphError, ConfigError, TooFewLandmarksError
 from bomgraph.mapper import (MapEstimate, Mapper, check_method_options, create_mapper,
                              method_info)
 from bomgraph.stream import Step, StreamHeader
 
-from .bearing_graph import FactorGraphConfig, insert_pose, landmark_key, landmarks_from_values
-from .factor_graph import BatchState, ScheduledSolver, SolveReport, all_poses
-from .resection import resect_trajectory
+from .bearing_graph import FactorGraphConfig, landmark_key
+from .factor_graph import BatchState, ScheduledSolver, SolveReport
+from .seeding import (SeedAlignment, SeedStart, align_seed, seed_start,  # noqa: F401
+                      triangulate_arrays, trimmed_align)               # (re-exported)
 
 _ROBUST = FactorGraphConfig.PRESETS["robust"]
 _REAL_SEED = {"seed_options": {"preset": "real"}}
@@ -185,61 +184,6 @@ def _canonical(value: Any) -> str:
 
 
 # --------------------------------------------------------------------------------------------
-# Alignment
-# --------------------------------------------------------------------------------------------
-
-def trimmed_align(source_xy: np.ndarray, target_xy: np.ndarray, trim: float = 3.0,
-                  floor_m: float = 0.01) -> Alignment:
-    """Rigid alignment with reflection of ``source`` onto ``target`` ((n, 2) each, n >= 3),
-    refitted once without the points whose residual exceeds ``trim`` times the median (and
-    ``floor_m``)."""
-    al = align(source_xy, target_xy, allow_reflection=True)
-    res = np.linalg.norm(al.apply(source_xy) - target_xy, axis=1)
-    keep = res <= max(trim * float(np.median(res)), floor_m)
-    if 3 <= keep.sum() < len(keep):
-        al = align(source_xy[keep], target_xy[keep], allow_reflection=True)
-    return al
-
-
-
-def _rigid_to(pose_from: np.ndarray, pose_to: np.ndarray
-              ) -> tuple[np.ndarray, np.ndarray, float]:
-    """Rotation ``R``, translation ``c`` and angle with ``R pose_from.xy + c = pose_to.xy``."""
-    ang = float(angle_residual(pose_to[2], pose_from[2]))
-    r = rotation(ang)
-    return r, pose_to[:2] - r @ pose_from[:2], ang
-
-
-def triangulate_arrays(poses: np.ndarray, owner: np.ndarray, ids: np.ndarray,
-                       bearings_rad: np.ndarray, only: np.ndarray, min_parallax_rad: float
-                       ) -> tuple[np.ndarray, np.ndarray]:
-    """Landmarks of ``only`` intersected from the bearings (owner step ``owner``, landmark
-    ``ids``, all (J,)) on ``poses`` (T, 3): ids (n,) and points (n, 2)."""
-    out_ids, out_xy = [], []
-    for lid in np.intersect1d(np.unique(ids), only):
-        sel = ids == lid
-        if sel.sum() < 2:
-            continue
-        p = poses[owner[sel]]
-        xy, ok = intersect_rays(p[:, :2], p[:, 2] + bearings_rad[sel],
-                                min_parallax_rad=min_parallax_rad)
-        if ok:
-            out_ids.append(int(lid))
-            out_xy.append(xy)
-    return np.array(out_ids, dtype=np.int64), np.array(out_xy).reshape(-1, 2)
-
-
-@dataclass
-class SeedStart:
-    """The start the seed map gives, in the map frame: ``values`` (every pose), the resected
-    ``poses`` (T, 3) and the seed map's ``landmarks`` (id -> (2,))."""
-
-    values: gtsam.Values
-    poses: np.ndarray
-    landmarks: dict[int, np.ndarray]
-
-
-# --------------------------------------------------------------------------------------------
 # The mapper
 # --------------------------------------------------------------------------------------------
 
@@ -275,79 +219,42 @@ class HybridMapper(ScheduledSolver):
                               "constructor instead")
         self.seed = seed_mapper if seed_mapper is not None else create_mapper(
             self.config.seed_method, header, **dict(self.config.seed_options or {}))
-        self._odom_sigma: list[np.ndarray] = []
         self._have_solution = False
 
     def _feed(self, step: Step) -> None:
         self.state.add_step(step)
         self.seed.step(step)
-        self._odom_sigma.append(step.odometry_sigma(self.header))
 
     # -- seeding --------------------------------------------------------------------------
-    def _reference(self, seed_ids: np.ndarray) -> tuple[np.ndarray, np.ndarray, bool]:
-        """Landmarks in the odometry frame to align the seed onto: the previous solution's
-        (then True), else triangulated on the dead-reckoned early trajectory."""
-        problem = self.state.problem
-        if self._have_solution and problem.landmark_ids:
-            ids = np.array(sorted(problem.landmark_ids), dtype=np.int64)
-            common = np.intersect1d(ids, seed_ids)
-            if common.size >= 3:
-                return common, landmarks_from_values(self.state.values, common), True
-        odoms = np.array([o for o in problem.odoms[1:]]).reshape(-1, 3)
-        poses = dead_reckon(odoms, problem.start_pose)
-        for upto in (min(self.config.align_steps, len(poses)), len(poses)):
-            owner, ids, brg = self.state.bearings()
-            n_j = int(np.searchsorted(owner, upto))
-            owner, ids, brg = owner[:n_j], ids[:n_j], brg[:n_j]
-            ids_out, xy_out = triangulate_arrays(poses[:upto], owner, ids, brg, seed_ids,
-                                                 self.config.min_parallax_rad)
-            if ids_out.size >= 3:
-                return ids_out, xy_out, False
-        return np.zeros(0, np.int64), np.zeros((0, 2)), False
-
-    def _seed_map(self) -> tuple[tuple[np.ndarray, np.ndarray, bool] | None, dict[str, Any]]:
-        """The seed map aligned into the odometry frame: ``(ids (n,), xy (n, 2), in the
-        previous solution's frame)``, or None (and why)."""
+    def _seed_map(self) -> tuple[SeedAlignment | None, dict[str, Any]]:
+        """The seed map aligned into the odometry frame (:func:`~baselines.seeding.align_seed`:
+        on the previous solution's landmarks if there is one), or None (and why)."""
         try:
             seed = self.seed.estimate()
         except BomgraphError as exc:
             return None, {"seed": f"seed mapper failed: {exc}"}
         if len(seed) < 3:
             return None, {"seed": f"seed map has {len(seed)} landmarks (< 3)"}
-        ref_ids, ref_xy, in_solution_frame = self._reference(seed.landmark_ids)
-        if ref_ids.size < 3:
+        try:
+            aligned = align_seed(self.state, seed, use_solution=self._have_solution,
+                                 align_steps=self.config.align_steps,
+                                 trim=self.config.align_trim)
+        except TooFewLandmarksError:
             return None, {"seed": "fewer than 3 landmarks to align the seed map on"}
-        _, i_seed, i_ref = np.intersect1d(seed.landmark_ids, ref_ids, return_indices=True)
-        al = trimmed_align(seed.landmarks_xy[i_seed], ref_xy[i_ref], self.config.align_trim)
-        return ((seed.landmark_ids, al.apply(seed.landmarks_xy), in_solution_frame),
-                {"seed": "ok", "seed_reflected": al.reflected, "seed_landmarks": len(seed)})
+        return aligned, {"seed": "ok", "seed_reflected": aligned.alignment.reflected,
+                         "seed_landmarks": len(seed)}
 
-    def _seed_start(self, map_ids: np.ndarray, map_xy: np.ndarray, in_solution_frame: bool
-                    ) -> SeedStart | None:
+    def _seed_start(self, aligned: SeedAlignment) -> SeedStart | None:
         """Every pose resected against the aligned seed map, the whole start moved rigidly so
-        that the first pose is ``start_pose``; None if no pose sees 3 seed landmarks."""
-        problem = self.state.problem
-        # in the previous solution's frame its poses (and the odometry predictions of the
-        # new ones) start the resection; otherwise a grid over the heading does
-        start = (all_poses(self.state.values, problem.n_steps) if in_solution_frame else None)
-        owner, ids, brg = self.state.bearings()
-        odoms = np.array([np.zeros(3) if o is None else o for o in problem.odoms])
+        that the first pose is ``start_pose`` (:func:`~baselines.seeding.seed_start`); None if
+        no pose sees 3 seed landmarks."""
         cfg = self.config
-        poses = resect_trajectory(owner, ids, brg, float(self.header.bearing_sigma_rad),
-                                  map_ids, map_xy, odoms, np.array(self._odom_sigma),
-                                  start=start, n_headings=cfg.n_headings,
-                                  huber_k=cfg.resection_huber_k, map_sigma_m=cfg.map_sigma_m,
-                                  prior_sigma=cfg.prior_sigma)
-        if poses is None:
+        try:
+            return seed_start(self.state, aligned, n_headings=cfg.n_headings,
+                              huber_k=cfg.resection_huber_k, map_sigma_m=cfg.map_sigma_m,
+                              prior_sigma=cfg.prior_sigma)
+        except TooFewLandmarksError:
             return None
-        # the first pose defines the frame: move the whole start rigidly onto it
-        r, c, ang = _rigid_to(poses[0], problem.start_pose)
-        poses = np.column_stack([poses[:, :2] @ r.T + c, wrap_angle(poses[:, 2] + ang)])
-        map_xy = map_xy @ r.T + c
-        values = gtsam.Values()
-        for t in range(problem.n_steps):
-            insert_pose(values, t, poses[t], poses[t - 1] if t else None)
-        return SeedStart(values, poses, dict(zip(map_ids.tolist(), map_xy)))
 
     def _with_landmarks(self, values: gtsam.Values, where: dict[int, np.ndarray]
                         ) -> gtsam.Values:
@@ -390,7 +297,7 @@ class HybridMapper(ScheduledSolver):
         starts: list[str] = []
         incremental = found is not None and self.config.warm_start and self._have_solution
         if found is not None and not incremental:
-            seed = self._seed_start(*found)
+            seed = self._seed_start(found)
             if seed is None:
                 info = {"seed": "no pose sees 3 landmarks of the seed map"}
         if seed is not None:
@@ -401,7 +308,7 @@ class HybridMapper(ScheduledSolver):
         else:
             if incremental:
                 assert found is not None
-                seed_map = dict(zip(found[0].tolist(), found[1]))
+                seed_map = dict(zip(found.landmark_ids.tolist(), found.landmarks_xy))
                 self._enter_at_seed(seed_map)
             state.absorb()
         if seed is None or (self.config.warm_start and self._have_solution):
@@ -416,7 +323,7 @@ class HybridMapper(ScheduledSolver):
             gap = self._start_gap_m(seed_map, solved[0][1])
             info["start_gap_m"] = gap
             if gap > self.config.start_tol_m or state.looks_off(solved[0][1]):
-                seed = self._seed_start(*found)
+                seed = self._seed_start(found)
         if seed is not None:
             starts.append("seed")
             # the two starts must solve the same problem for their costs to compare: a warm
@@ -426,7 +333,7 @@ class HybridMapper(ScheduledSolver):
             whole = bool(solved) and solved[0][2].passes[:1] != ("window",)
             previous, state.whole_only = state.whole_only, state.whole_only or whole
             try:
-                solved.append(("seed", *state.solve(self._with_landmarks(seed.values,
+                solved.append(("seed", *state.solve(self._with_landmarks(seed.values(),
                                                                          seed.landmarks))))
             finally:
                 state.whole_only = previous

@@ -11,12 +11,13 @@ import gtsam
 import numpy as np
 import pytest
 
-from baselines import bearing_graph, factor_graph, gtsam_tools as gt, hybrid, resection
+from baselines import (bearing_graph, factor_graph, gtsam_tools as gt, hybrid, resection,
+                       seeding)
 from bomgraph.errors import ConfigError, TooFewLandmarksError
 from bomgraph.geometry import dead_reckon
 from bomgraph.evaluate import score_estimate
-from bomgraph.mapper import MapEstimate
-from bomgraph.sim import SimConfig, simulate
+from bomgraph.mapper import MapEstimate, create_mapper, run
+from bomgraph.sim import SimConfig, paper_design, simulate, simulate_run
 from bomgraph.stream import Stream
 
 
@@ -46,6 +47,7 @@ def test_the_helpers_are_the_baselines_own_objects() -> None:
     assert gt.resect_pose is resection.resect_pose
     assert gt.odometry_factors is bearing_graph.odometry_factors
     assert gt.trimmed_align is hybrid.trimmed_align
+    assert gt.seed_start is hybrid.seed_start is seeding.seed_start   # the hybrid's own
     assert set(gt.__all__) <= set(dir(gt))
 
 
@@ -92,7 +94,7 @@ def test_seeding_a_graph_without_landmarks_says_what_to_do(noise_free: Stream) -
     text = str(err.value)
     assert text.startswith("seed_landmarks: the graph holds 0 landmarks, 0 of them in the map")
     assert f"{len(state.problem.pending())} landmarks are pending" in text
-    assert "HybridMapper(header, seed_mapper=YOUR_MAPPER)" in text
+    assert "state.values.update(seed_start(state, map).values()); state.absorb()" in text
 
 
 def test_seeding_says_whether_letting_landmarks_in_would_help(noise_free: Stream) -> None:
@@ -106,11 +108,10 @@ def test_seeding_says_whether_letting_landmarks_in_would_help(noise_free: Stream
     with pytest.raises(TooFewLandmarksError) as err:
         gt.seed_landmarks(state, _mirrored(drifting))
     text = str(err.value)
-    assert "admit=True" not in text and "absorb" not in text
+    assert "admit=True" not in text and "let them in first" not in text
     assert "their rays on the graph's poses do not intersect" in text
-    assert "HybridMapper(header, seed_mapper=YOUR_MAPPER)" in text
-    # h118: a hybrid of one's own needs the public route too (11 of the 25 paper runs)
-    assert "start the poses from the map (resect_trajectory against it or its mirror" in text
+    # h118, h122: a hybrid of one's own needs the public route too (11 of the 25 paper runs)
+    assert "state.values.update(seed_start(state, map).values()); state.absorb()" in text
     held = gt.build_graph(noise_free.header, noise_free.steps, admit=False)
     n_in = len(gt.build_graph(noise_free.header, noise_free.steps).problem.landmark_ids)
     with pytest.raises(TooFewLandmarksError) as err:
@@ -242,3 +243,36 @@ def test_the_array_helpers_say_which_convention_they_want(noisy: Stream) -> None
     ids, xy = gt.triangulate_landmarks(dr[:30], owner[j], lid[j], brg[j], truth.landmark_ids,
                                        0.3)
     assert ids.size and xy.shape == (ids.size, 2)
+
+
+def test_seed_start_recovers_the_true_poses_from_a_mirrored_map(noise_free: Stream) -> None:
+    """h122: on a noise-free stream, a map mirrored, turned and shifted gives the true poses
+    (the graph's frame is the truth's when its start pose is the true first pose)."""
+    truth = noise_free.truth
+    state = gt.build_graph(noise_free.header, noise_free.steps, start_pose=truth.poses[0])
+    start = gt.seed_start(state, _mirrored(noise_free))
+    assert start.reflected and start.poses.shape == (len(noise_free.steps), 3)
+    np.testing.assert_allclose(start.poses[:, :2], truth.poses[:, :2], atol=1e-6)
+    np.testing.assert_allclose(np.angle(np.exp(1j * (start.poses[:, 2] - truth.poses[:, 2]))),
+                               0.0, atol=1e-6)
+    _, i_s, i_t = np.intersect1d(start.landmark_ids, truth.landmark_ids, return_indices=True)
+    np.testing.assert_allclose(start.landmarks_xy[i_s], truth.landmarks_xy[i_t], atol=1e-6)
+    assert start.values().size() == 2 * len(noise_free.steps) - 1
+
+
+def test_the_recipe_with_seed_start_maps_a_paper_run_seed_landmarks_alone_cannot() -> None:
+    """h122: on run 0 of paper_design(0) (300 steps) the dead-reckoned rays admit fewer than 3
+    landmarks and seed_landmarks raises; the README's one call, seed_start (the hybrid's
+    seeding), starts the poses so that the recipe maps the run."""
+    stream = simulate_run(paper_design(0)[0])
+    stmds_map = run(create_mapper("stmds-smacof", stream.header), stream.steps).final
+    state = gt.build_graph(stream.header, stream.steps)
+    with pytest.raises(TooFewLandmarksError):
+        gt.seed_landmarks(state, stmds_map)
+    state.values.update(gt.seed_start(state, stmds_map).values())
+    state.absorb()
+    gt.seed_landmarks(state, stmds_map)
+    values, report = gt.checked_solve(state.graph, state.values, state.config)
+    estimate = state.to_estimate(values, report.as_info())
+    assert report.converged and len(estimate) >= 3
+    assert score_estimate(estimate, stream.truth).mpe_m < 0.1
