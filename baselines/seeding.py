@@ -152,10 +152,13 @@ def align_seed(state: BatchState, estimate: MapEstimate, *, use_solution: bool =
                 ref = ids_out, xy_out, False
                 break
     if ref is None:
+        # h123: a map whose ids are not the stream's was told to "give more steps"
+        n_seen = np.intersect1d(seed_ids, state.bearings()[1]).size
         raise TooFewLandmarksError(
-            f"align_seed: fewer than 3 of the map's {len(estimate)} landmarks intersect on "
-            f"the dead-reckoned poses of the {problem.n_steps} steps, so the map cannot be "
-            f"aligned: give more steps or a map holding more of the landmarks the stream sees")
+            f"align_seed: fewer than 3 of the map's {len(estimate)} landmarks ({n_seen} of "
+            f"them seen in the stream) intersect on the dead-reckoned poses of the "
+            f"{problem.n_steps} steps, so the map cannot be aligned: give more steps or a map "
+            f"holding more of the landmarks the stream sees (by the stream's landmark ids)")
     ref_ids, ref_xy, in_solution_frame = ref
     _, i_seed, i_ref = np.intersect1d(seed_ids, ref_ids, return_indices=True)
     al = trimmed_align(estimate.landmarks_xy[i_seed], ref_xy[i_ref], trim)

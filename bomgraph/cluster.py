@@ -21,7 +21,7 @@ import logging
 from concurrent.futures import CancelledError
 from typing import Any, Callable, Iterator, Sequence
 
-from .checks import option_named
+from .checks import integer, option_named
 from .errors import ConfigError, UnknownMethodError
 from .stdio import signals_held
 
@@ -205,9 +205,19 @@ def dispatch(func: Callable[[int, Any], tuple[int, dict[str, Any]]], index: Sequ
              ) -> Iterator[tuple[int, dict[str, Any]]]:
     """``func(k, task)`` for each pair on the cluster, yielded as they finish; a task the
     cluster could not run is ``(k, failed(k, reason))``. ``scheduler_named``: how errors
-    name the address (:func:`check_scheduler`)."""
-    yield from _dispatch(func, index, tasks, scheduler=scheduler, n_local=n_local,
-                         failed=failed, scheduler_named=scheduler_named)
+    name the address (:func:`check_scheduler`). Without ``scheduler``, ``n_local`` (the
+    local cluster's workers) must be an integer >= 1: else :class:`ConfigError` at the call,
+    before any cluster starts (h123: ``n_local=-3`` waited forever for a worker).
+
+    Raises
+    ------
+    ConfigError
+        ``n_local`` is not an integer >= 1 and no ``scheduler`` is given.
+    """
+    if not scheduler:
+        integer(n_local, option_named("--dask-local", "n_local"), ConfigError, minimum=1)
+    return _dispatch(func, index, tasks, scheduler=scheduler, n_local=n_local,
+                     failed=failed, scheduler_named=scheduler_named)
 
 
 def _dispatch(func: Callable[[int, Any], tuple[int, dict[str, Any]]], index: Sequence[int],

@@ -280,3 +280,26 @@ def test_a_block_added_to_the_docs_fails_saying_what_to_do(
     with pytest.raises(AssertionError) as caught:
         test_every_block_is_run_or_left_out_with_a_reason()
     assert says in str(caught.value), str(caught.value)
+
+
+def test_gtsam_helpers_seed_start_recipe_runs_as_written(tmp_path: Path) -> None:
+    """README, "GTSAM helpers": the prose recipe after ``seed_landmarks`` raises (three calls
+    in backticks, not a block) runs as written on run 0 of ``paper_design(0)``, where the text
+    says all 50 landmarks then enter and LM converges (h123)."""
+    text = " ".join((ROOT / "README.md").read_text().split())
+    m = re.search(r"with the hybrid's own seeding, and seed again: `([^`]+)`, `([^`]+)` \(the "
+                  r"rays on those poses intersect\), `([^`]+)` \(on run 0 of "
+                  r"`paper_design\(0\)` all 50 landmarks then enter and LM converges", text)
+    assert m, "README's seed_start recipe changed: update this test"
+    script = "\n".join([
+        "from baselines import gtsam_tools as gt",
+        "from bomgraph.mapper import create_mapper, run",
+        "from bomgraph.sim import paper_design, simulate_run",
+        "stream = simulate_run(paper_design(0)[0])",
+        'stmds_map = run(create_mapper("stmds-smacof", stream.header), stream.steps).final',
+        "state = gt.build_graph(stream.header, stream.steps)",
+        *m.groups(),
+        "values, report = gt.checked_solve(state.graph, state.values, state.config)",
+        "print(len(state.to_estimate(values, report.as_info())), report.converged)", ""])
+    (tmp_path / "recipe.py").write_text(script)
+    assert shell(f'"{sys.executable}" recipe.py', tmp_path).stdout.split() == ["50", "True"]

@@ -1,0 +1,83 @@
+"""``baselines.seeding`` (h123, review of h122): what ``align_seed`` and ``seed_start`` raise
+when a map cannot start the poses, and that a ``SeedStart`` hands out new values, never the
+graph's."""
+
+from __future__ import annotations
+
+import gtsam
+import numpy as np
+import pytest
+
+from baselines import gtsam_tools as gt
+from baselines.bearing_graph import poses_from_values
+from baselines.seeding import SeedAlignment
+from bomgraph.errors import TooFewLandmarksError
+from bomgraph.mapper import MapEstimate
+from bomgraph.sim import SimConfig, simulate
+from bomgraph.stream import Stream
+
+
+@pytest.fixture(scope="module")
+def noise_free() -> Stream:
+    return simulate(SimConfig(n_steps=60, n_landmarks=20, noise_scale=0.0),
+                    np.random.default_rng(3))
+
+
+def _true_map(stream: Stream, ids_offset: int = 0, n: int | None = None) -> MapEstimate:
+    truth = stream.truth
+    return MapEstimate(truth.landmark_ids[:n] + ids_offset, truth.landmarks_xy[:n])
+
+
+def test_a_map_of_two_landmarks_cannot_be_aligned(noise_free: Stream) -> None:
+    state = gt.build_graph(noise_free.header, noise_free.steps)
+    for call in (gt.align_seed, gt.seed_start):
+        with pytest.raises(TooFewLandmarksError) as err:
+            call(state, _true_map(noise_free, n=2))
+        assert str(err.value) == (
+            "align_seed: fewer than 3 of the map's 2 landmarks (2 of them seen in the stream) "
+            "intersect on the dead-reckoned poses of the 61 steps, so the map cannot be "
+            "aligned: give more steps or a map holding more of the landmarks the stream sees "
+            "(by the stream's landmark ids)")
+
+
+def test_a_map_of_other_ids_is_told_so(noise_free: Stream) -> None:
+    """The whole true map under other ids: not "more steps", none of them is the stream's."""
+    state = gt.build_graph(noise_free.header, noise_free.steps)
+    with pytest.raises(TooFewLandmarksError, match=r"^align_seed: fewer than 3 of the map's 20 "
+                       r"landmarks \(0 of them seen in the stream\)") as err:
+        gt.seed_start(state, _true_map(noise_free, ids_offset=1000))
+    assert "\n" not in str(err.value)
+
+
+def test_no_pose_seeing_three_landmarks_is_refused(noise_free: Stream) -> None:
+    state = gt.build_graph(noise_free.header, noise_free.steps)
+    al = gt.align_seed(state, _true_map(noise_free))
+    assert al.n_reference == 20 and not al.in_solution_frame
+    two = SeedAlignment(al.landmark_ids[:2], al.landmarks_xy[:2], al.alignment, False, 20)
+    with pytest.raises(TooFewLandmarksError) as err:
+        gt.seed_start(state, two)
+    assert str(err.value) == (
+        "seed_start: no pose sees 3 of the map's 2 landmarks, so none can be resected: give "
+        "a map holding more of the landmarks the stream sees")
+
+
+def test_seed_start_changes_nothing_in_the_graph_and_its_values_are_new(
+        noise_free: Stream) -> None:
+    state = gt.build_graph(noise_free.header, noise_free.steps)
+    n_steps = len(noise_free.steps)
+    ts = np.arange(n_steps)
+    before_size, before = state.values.size(), poses_from_values(state.values, ts)
+    start = gt.seed_start(state, _true_map(noise_free))
+    assert state.values.size() == before_size
+    np.testing.assert_array_equal(poses_from_values(state.values, ts), before)
+    assert start.poses.shape == (n_steps, 3)
+    assert start.landmarks_xy.shape == (start.landmark_ids.size, 2)
+    np.testing.assert_allclose(start.poses[0], state.problem.start_pose, atol=1e-9)
+    values = start.values()
+    assert values is not start.values() and values is not state.values
+    assert values.size() == 2 * n_steps - 1          # x_0..x_T-1 and m_1..m_T-1, no landmark
+    np.testing.assert_allclose(poses_from_values(values, ts), start.poses, atol=1e-12)
+    state.values.update(values)                      # the README's recipe
+    moved = values.atPose2(gt.pose_key(5)).compose(gtsam.Pose2(1.0, 0.0, 0.0))
+    values.update(gt.pose_key(5), moved)             # changing the copy leaves the graph
+    np.testing.assert_allclose(poses_from_values(state.values, ts), start.poses, atol=1e-12)
