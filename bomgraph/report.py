@@ -281,13 +281,15 @@ def _refuse_before_running(out_dir: str | os.PathLike[str], experiments: Sequenc
         at = folder
         while at != out and not at.is_dir() and not os.path.lexists(at):
             at = at.parent   # made there
-        only_read = (at in cache and os.access(at, os.R_OK | os.X_OK)  # listed, then read
-                     and not adds_to_cache(_tasks(experiments, estimates), at, executor))
-        if at.is_dir() and not os.access(at, os.W_OK | os.X_OK) and not only_read:
-            no_cache = option_named("--no-cache", "use_cache=False")
-            other = f", or run without the cache ({no_cache})" if at in cache else ""
-            raise OutputPathError(f"{out_named('out_dir', out)}: the folder {at} is not "
-                                  f"writable; make it writable or choose another folder{other}")
+        if not at.is_dir() or os.access(at, os.W_OK | os.X_OK):
+            continue  # writable: no key computed here (a plugin's package hashed once a sweep)
+        if (at in cache and os.access(at, os.R_OK | os.X_OK)  # listed, then read
+                and not adds_to_cache(_tasks(experiments, estimates), at, executor)):
+            continue  # only read
+        no_cache = option_named("--no-cache", "use_cache=False")
+        other = f", or run without the cache ({no_cache})" if at in cache else ""
+        raise OutputPathError(f"{out_named('out_dir', out)}: the folder {at} is not "
+                              f"writable; make it writable or choose another folder{other}")
     return record, planned
 
 
