@@ -30,11 +30,28 @@ from bomgraph.angles import angle_residual, wrap_angle
 from bomgraph.errors import ConfigError, TooFewLandmarksError
 from bomgraph.evaluate import Alignment, align
 from bomgraph.geometry import dead_reckon, intersect_rays, rotation
-from bomgraph.mapper import MapEstimate
+from bomgraph.mapper import MapEstimate, RunResult
 
 from .bearing_graph import insert_pose, landmarks_from_values
 from .factor_graph import BatchState, all_poses
 from .resection import resect_trajectory
+
+
+def check_map(where: str, estimate: object) -> None:
+    """Refuse a map argument without ``landmark_ids`` and ``landmarks_xy`` (a
+    :class:`~bomgraph.mapper.MapEstimate`, or a ``Truth``) where it enters ``where()``: a
+    ``RunResult`` is told to give ``.final`` (the README's ``run(...).final``).
+
+    Raises
+    ------
+    ConfigError
+        Naming ``where`` and the type given.
+    """
+    if hasattr(estimate, "landmark_ids") and hasattr(estimate, "landmarks_xy"):
+        return
+    hint = (" (result.final or result.at(t))" if isinstance(estimate, RunResult) else "")
+    raise ConfigError(f"{where}(): the map must be a MapEstimate, got "
+                      f"{type(estimate).__name__}{hint}")
 
 
 def trimmed_align(source_xy: np.ndarray, target_xy: np.ndarray, trim: float = 3.0,
@@ -131,6 +148,7 @@ def align_seed(state: BatchState, estimate: MapEstimate, *, use_solution: bool =
     TooFewLandmarksError
         Fewer than 3 reference landmarks in the map.
     """
+    check_map("align_seed", estimate)
     problem = state.problem
     seed_ids = estimate.landmark_ids
     ref = None
@@ -219,6 +237,7 @@ def seed_start(state: BatchState, estimate: MapEstimate | SeedAlignment, *,
                 f"them to the align_seed call that made it, or pass the MapEstimate instead")
         aligned = estimate
     else:
+        check_map("seed_start", estimate)
         aligned = align_seed(state, estimate, **given)
     problem = state.problem
     map_ids, map_xy = aligned.landmark_ids, aligned.landmarks_xy
@@ -244,5 +263,5 @@ def seed_start(state: BatchState, estimate: MapEstimate | SeedAlignment, *,
                      aligned)
 
 
-__all__ = ["SeedAlignment", "SeedStart", "align_seed", "seed_start", "triangulate_arrays",
-           "trimmed_align"]
+__all__ = ["SeedAlignment", "SeedStart", "align_seed", "check_map", "seed_start",
+           "triangulate_arrays", "trimmed_align"]

@@ -12,7 +12,8 @@ from baselines import gtsam_tools as gt
 from baselines.bearing_graph import poses_from_values
 from baselines.seeding import SeedAlignment
 from bomgraph.errors import ConfigError, TooFewLandmarksError
-from bomgraph.mapper import MapEstimate
+from baselines.triangulate import TriangulateMapper
+from bomgraph.mapper import MapEstimate, run
 from bomgraph.sim import SimConfig, simulate
 from bomgraph.stream import Stream
 
@@ -108,3 +109,21 @@ def test_alignment_options_with_a_map_reach_align_seed(noise_free: Stream) -> No
     asked = gt.align_seed(state, est, align_steps=5, trim=1.0)
     np.testing.assert_array_equal(start.aligned.landmarks_xy, asked.landmarks_xy)
     assert start.aligned.n_reference == asked.n_reference < gt.align_seed(state, est).n_reference
+
+
+def test_a_run_result_for_the_map_is_told_to_give_final(noise_free: Stream) -> None:
+    """h125: the README's map is ``run(...).final``; the ``RunResult`` itself, given to any
+    helper that takes a map, raised ``AttributeError: 'RunResult' object has no attribute
+    'landmark_ids'`` deep inside. Each now refuses it where it enters."""
+    result = run(TriangulateMapper(noise_free.header), noise_free.steps)
+    state = gt.build_graph(noise_free.header, noise_free.steps)
+    calls = {"seed_start": lambda m: gt.seed_start(state, m),
+             "align_seed": lambda m: gt.align_seed(state, m),
+             "seed_landmarks": lambda m: gt.seed_landmarks(state, m),
+             "align_map": lambda m: gt.align_map(m, np.arange(3), np.zeros((3, 2)))}
+    for name, call in calls.items():
+        with pytest.raises(ConfigError) as err:
+            call(result)
+        assert str(err.value) == (f"{name}(): the map must be a MapEstimate, got RunResult "
+                                  f"(result.final or result.at(t))")
+    gt.seed_start(state, result.final)                 # what it should have been
