@@ -76,8 +76,8 @@ from .bearing_graph import (BearingGraph, FactorGraphConfig, NewFactors, bearing
 from .factor_graph import (GTSAM_ERRORS, BatchState, SolveReport, estimate_from_values,
                            gauss_newton_check, lm_params, marginal_covariances, solve_lm)
 from .resection import resect_pose, resect_trajectory
-from .seeding import (SeedAlignment, SeedStart, align_seed, seed_start, triangulate_arrays,
-                      trimmed_align)
+from .seeding import (SeedAlignment, SeedStart, align_seed, check_map, seed_start,
+                      triangulate_arrays, trimmed_align)
 
 
 class UnconstrainedGraphError(BomgraphError, ValueError):
@@ -217,6 +217,7 @@ def align_map(estimate: MapEstimate, reference_ids: np.ndarray, reference_xy: np
     TooFewLandmarksError
         Fewer than 3 landmarks common to the map and the reference.
     """
+    check_map("align_map", estimate)
     ref_ids = np.asarray(reference_ids, np.int64)
     ref_xy = np.asarray(reference_xy, float).reshape(-1, 2)
     _, i_map, i_ref = np.intersect1d(estimate.landmark_ids, ref_ids, return_indices=True)
@@ -252,6 +253,7 @@ def seed_landmarks(state: BatchState, estimate: MapEstimate, *, trim: float = 3.
     ``state.values.update(seed_start(state, estimate).values())`` (:func:`seed_start`, as
     the hybrid does), ``state.absorb()``, and seed again (README, "GTSAM helpers").
     """
+    check_map("seed_landmarks", estimate)
     problem = state.problem
     ids = np.array(sorted(problem.landmark_ids), np.int64)
     ref_xy = landmarks_from_values(state.values, ids)

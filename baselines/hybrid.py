@@ -166,6 +166,31 @@ def check_seed(owner: str, seed_method: str, seed_options: Mapping[str, Any] | N
     _SEEDS_CHECKED.add(key)
 
 
+def check_seed_mapper(owner: str, seed_mapper: Mapper | None,
+                      seed_options: Mapping[str, Any] | None, preset: str | None,
+                      options: Mapping[str, Any]) -> None:
+    """Refuse ``seed_options`` beside a ``seed_mapper`` instance (they configure the
+    ``seed_method`` the hybrid would build), saying where they came from: the options, the
+    ``preset`` (``real`` sets them; ``seed_options=None`` drops them) or a ``config=``.
+
+    Raises
+    ------
+    ConfigError
+        ``seed_mapper`` given and ``seed_options`` set.
+    """
+    if seed_mapper is None or not seed_options:
+        return
+    if "seed_options" in options:
+        fix = "pass them to seed_mapper's constructor instead"
+    elif preset is not None:
+        fix = (f"preset {preset!r} sets them: give seed_options=None beside seed_mapper (and "
+               f"pass any options to seed_mapper's constructor)")
+    else:
+        fix = "give a config= with seed_options=None (pass them to seed_mapper's constructor)"
+    raise ConfigError(f"{owner}: seed_options={dict(seed_options)} apply to seed_method, not to "
+                      f"a seed_mapper; {fix}")
+
+
 #: Seeds (name, registered target) and options :func:`check_seed` accepted: a
 #: ``dataclasses.replace`` of the configuration (the warm solve makes one at every checkpoint)
 #: does not check them again.
@@ -214,9 +239,8 @@ class HybridMapper(ScheduledSolver):
         self.config = resolve(HybridConfig, config, preset, options)
         self.header = header
         self.state = BatchState(header, self.config, start_pose)
-        if seed_mapper is not None and self.config.seed_options:
-            raise ConfigError("seed_options apply to seed_method; pass them to seed_mapper's "
-                              "constructor instead")
+        check_seed_mapper("HybridConfig", seed_mapper, self.config.seed_options, preset,
+                          options)
         self.seed = seed_mapper if seed_mapper is not None else create_mapper(
             self.config.seed_method, header, **dict(self.config.seed_options or {}))
         self._have_solution = False

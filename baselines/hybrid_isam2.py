@@ -45,14 +45,14 @@ import numpy as np
 
 from bomgraph.angles import angle_residual
 from bomgraph.config import requirement, resolve
-from bomgraph.errors import BomgraphError, ConfigError
+from bomgraph.errors import BomgraphError
 from bomgraph.geometry import intersect_ray_groups
 from bomgraph.mapper import MapEstimate, Mapper, create_mapper
 from bomgraph.stream import Step, StreamHeader
 
 from .bearing_graph import BearingGraph, landmark_key, landmarks_from_values
 from .gtsam_tools import align_map
-from .hybrid import check_seed
+from .hybrid import check_seed, check_seed_mapper
 from .isam2 import Isam2Config, Isam2Mapper
 
 _REAL_SEED = {"seed_options": {"preset": "real"}}
@@ -169,9 +169,7 @@ class HybridIsam2Mapper(Isam2Mapper):
         cfg = resolve(HybridIsam2Config, config, preset, options)
         super().__init__(header, start_pose=start_pose, config=cfg)
         self.config: HybridIsam2Config = cfg
-        if seed_mapper is not None and cfg.seed_options:
-            raise ConfigError("seed_options apply to seed_method; pass them to seed_mapper's "
-                              "constructor instead")
+        check_seed_mapper("HybridIsam2Config", seed_mapper, cfg.seed_options, preset, options)
         self.seed = seed_mapper if seed_mapper is not None else create_mapper(
             cfg.seed_method, header, **dict(cfg.seed_options or {}))
         # nothing has been fed yet: the plain graph is swapped for the seeded one

@@ -27,14 +27,31 @@ import gtsam
 import numpy as np
 
 from bomgraph.angles import angle_residual, wrap_angle
-from bomgraph.errors import TooFewLandmarksError
+from bomgraph.errors import ConfigError, TooFewLandmarksError
 from bomgraph.evaluate import Alignment, align
 from bomgraph.geometry import dead_reckon, intersect_rays, rotation
-from bomgraph.mapper import MapEstimate
+from bomgraph.mapper import MapEstimate, RunResult
 
 from .bearing_graph import insert_pose, landmarks_from_values
 from .factor_graph import BatchState, all_poses
 from .resection import resect_trajectory
+
+
+def check_map(where: str, estimate: object) -> None:
+    """Refuse a map argument without ``landmark_ids`` and ``landmarks_xy`` (a
+    :class:`~bomgraph.mapper.MapEstimate`, or a ``Truth``) where it enters ``where()``: a
+    ``RunResult`` is told to give ``.final`` (the README's ``run(...).final``).
+
+    Raises
+    ------
+    ConfigError
+        Naming ``where`` and the type given.
+    """
+    if hasattr(estimate, "landmark_ids") and hasattr(estimate, "landmarks_xy"):
+        return
+    hint = (" (result.final or result.at(t))" if isinstance(estimate, RunResult) else "")
+    raise ConfigError(f"{where}(): the map must be a MapEstimate, got "
+                      f"{type(estimate).__name__}{hint}")
 
 
 def trimmed_align(source_xy: np.ndarray, target_xy: np.ndarray, trim: float = 3.0,
@@ -131,6 +148,7 @@ def align_seed(state: BatchState, estimate: MapEstimate, *, use_solution: bool =
     TooFewLandmarksError
         Fewer than 3 reference landmarks in the map.
     """
+    check_map("align_seed", estimate)
     problem = state.problem
     seed_ids = estimate.landmark_ids
     ref = None
@@ -167,8 +185,8 @@ def align_seed(state: BatchState, estimate: MapEstimate, *, use_solution: bool =
 
 
 def seed_start(state: BatchState, estimate: MapEstimate | SeedAlignment, *,
-               use_solution: bool = False, align_steps: int = 50, trim: float = 3.0,
-               n_headings: int = 36, huber_k: float = 2.0, map_sigma_m: float = 0.03,
+               use_solution: bool | None = None, align_steps: int | None = None,
+               trim: float | None = None, n_headings: int = 36, huber_k: float = 2.0, map_sigma_m: float = 0.03,
                prior_sigma: tuple[float, float, float] = (0.02, 0.02, math.radians(2.0))
                ) -> SeedStart:
     """A start for every pose of ``state`` from a map in any frame (the hybrid's seeding).
@@ -186,7 +204,9 @@ def seed_start(state: BatchState, estimate: MapEstimate | SeedAlignment, *,
     estimate : MapEstimate or SeedAlignment
         E.g. the final map of ``stmds-smacof``: ids (n,), xy (n, 2) in metres, any frame.
     use_solution, align_steps, trim
-        Of :func:`align_seed`.
+        Of :func:`align_seed` (its defaults when not given), for a ``MapEstimate`` only: a
+        ``SeedAlignment`` is aligned already, and giving them with one raises ``ConfigError``
+        (pass them to the :func:`align_seed` call that made it).
     n_headings, huber_k, map_sigma_m, prior_sigma
         Of :func:`~baselines.resection.resect_trajectory` (heading grid, Huber threshold,
         map position error in metres, odometry-prior std. devs. (m, m, rad)).
@@ -203,10 +223,22 @@ def seed_start(state: BatchState, estimate: MapEstimate | SeedAlignment, *,
     ------
     TooFewLandmarksError
         The map cannot be aligned (:func:`align_seed`), or no pose sees 3 of its landmarks.
+    ConfigError
+        ``use_solution``, ``align_steps`` or ``trim`` given with a ``SeedAlignment``.
     """
-    aligned = (estimate if isinstance(estimate, SeedAlignment) else
-               align_seed(state, estimate, use_solution=use_solution,
-                          align_steps=align_steps, trim=trim))
+    given = {name: value for name, value in (("use_solution", use_solution),
+                                             ("align_steps", align_steps), ("trim", trim))
+             if value is not None}
+    if isinstance(estimate, SeedAlignment):
+        if given:
+            raise ConfigError(
+                f"seed_start: {', '.join(given)} given with a SeedAlignment, which is aligned "
+                f"already (they apply only when seed_start aligns a MapEstimate itself): pass "
+                f"them to the align_seed call that made it, or pass the MapEstimate instead")
+        aligned = estimate
+    else:
+        check_map("seed_start", estimate)
+        aligned = align_seed(state, estimate, **given)
     problem = state.problem
     map_ids, map_xy = aligned.landmark_ids, aligned.landmarks_xy
     # in the previous solution's frame its poses (and the odometry predictions of the new
@@ -231,5 +263,5 @@ def seed_start(state: BatchState, estimate: MapEstimate | SeedAlignment, *,
                      aligned)
 
 
-__all__ = ["SeedAlignment", "SeedStart", "align_seed", "seed_start", "triangulate_arrays",
-           "trimmed_align"]
+__all__ = ["SeedAlignment", "SeedStart", "align_seed", "check_map", "seed_start",
+           "triangulate_arrays", "trimmed_align"]

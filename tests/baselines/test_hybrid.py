@@ -217,3 +217,25 @@ def test_a_landmark_slid_out_along_its_rays_is_neither_mapped_nor_called_converg
     assert entered
     # the landmarks the rays place are mapped exactly
     assert set(res.final.landmark_ids.tolist()) == set(range(7))
+
+
+@pytest.mark.parametrize("method", ["hybrid", "hybrid-isam2"])
+def test_a_seed_mapper_beside_a_preset_that_sets_seed_options_is_told_the_fix(
+        noise_free: Stream, method: str) -> None:
+    """h125: ``preset="real"`` sets ``seed_options``; with a ``seed_mapper`` the refusal said
+    "pass them to seed_mapper's constructor", of options the caller never gave. It now names
+    the preset and the README's fix (``seed_options=None``), which is then accepted."""
+    seed = TriangulateMapper(noise_free.header)
+    owner = "HybridConfig" if method == "hybrid" else "HybridIsam2Config"
+    with pytest.raises(ConfigError) as err:
+        create_mapper(method, noise_free.header, seed_mapper=seed, preset="real")
+    assert str(err.value) == (
+        f"{owner}: seed_options={{'preset': 'real'}} apply to seed_method, not to a "
+        f"seed_mapper; preset 'real' sets them: give seed_options=None beside seed_mapper "
+        f"(and pass any options to seed_mapper's constructor)")
+    with pytest.raises(ConfigError, match="pass them to seed_mapper's constructor instead$"):
+        create_mapper(method, noise_free.header, seed_mapper=seed,
+                      seed_options={"preset": "real"})
+    mapper = create_mapper(method, noise_free.header, seed_mapper=seed, preset="real",
+                           seed_options=None)
+    assert mapper.seed is seed

@@ -11,8 +11,9 @@ import pytest
 from baselines import gtsam_tools as gt
 from baselines.bearing_graph import poses_from_values
 from baselines.seeding import SeedAlignment
-from bomgraph.errors import TooFewLandmarksError
-from bomgraph.mapper import MapEstimate
+from bomgraph.errors import ConfigError, TooFewLandmarksError
+from baselines.triangulate import TriangulateMapper
+from bomgraph.mapper import MapEstimate, run
 from bomgraph.sim import SimConfig, simulate
 from bomgraph.stream import Stream
 
@@ -81,3 +82,48 @@ def test_seed_start_changes_nothing_in_the_graph_and_its_values_are_new(
     moved = values.atPose2(gt.pose_key(5)).compose(gtsam.Pose2(1.0, 0.0, 0.0))
     values.update(gt.pose_key(5), moved)             # changing the copy leaves the graph
     np.testing.assert_allclose(poses_from_values(state.values, ts), start.poses, atol=1e-12)
+
+
+def test_alignment_options_with_an_aligned_map_are_refused(noise_free: Stream) -> None:
+    """h125: ``use_solution``, ``align_steps`` and ``trim`` only steer ``align_seed``; given
+    with a ``SeedAlignment`` they were silently ignored, now they are refused."""
+    state = gt.build_graph(noise_free.header, noise_free.steps)
+    al = gt.align_seed(state, _true_map(noise_free))
+    for given in ({"trim": 1.5}, {"use_solution": False}, {"align_steps": 10, "trim": 3.0}):
+        with pytest.raises(ConfigError) as err:
+            gt.seed_start(state, al, **given)
+        assert str(err.value) == (
+            f"seed_start: {', '.join(given)} given with a SeedAlignment, which is aligned "
+            f"already (they apply only when seed_start aligns a MapEstimate itself): pass "
+            f"them to the align_seed call that made it, or pass the MapEstimate instead")
+    np.testing.assert_array_equal(gt.seed_start(state, al).poses,
+                                  gt.seed_start(state, _true_map(noise_free)).poses)
+
+
+def test_alignment_options_with_a_map_reach_align_seed(noise_free: Stream) -> None:
+    """With a ``MapEstimate`` they are ``align_seed``'s: the start is the one from the
+    alignment made with them."""
+    state = gt.build_graph(noise_free.header, noise_free.steps)
+    est = _true_map(noise_free)
+    start = gt.seed_start(state, est, align_steps=5, trim=1.0)
+    asked = gt.align_seed(state, est, align_steps=5, trim=1.0)
+    np.testing.assert_array_equal(start.aligned.landmarks_xy, asked.landmarks_xy)
+    assert start.aligned.n_reference == asked.n_reference < gt.align_seed(state, est).n_reference
+
+
+def test_a_run_result_for_the_map_is_told_to_give_final(noise_free: Stream) -> None:
+    """h125: the README's map is ``run(...).final``; the ``RunResult`` itself, given to any
+    helper that takes a map, raised ``AttributeError: 'RunResult' object has no attribute
+    'landmark_ids'`` deep inside. Each now refuses it where it enters."""
+    result = run(TriangulateMapper(noise_free.header), noise_free.steps)
+    state = gt.build_graph(noise_free.header, noise_free.steps)
+    calls = {"seed_start": lambda m: gt.seed_start(state, m),
+             "align_seed": lambda m: gt.align_seed(state, m),
+             "seed_landmarks": lambda m: gt.seed_landmarks(state, m),
+             "align_map": lambda m: gt.align_map(m, np.arange(3), np.zeros((3, 2)))}
+    for name, call in calls.items():
+        with pytest.raises(ConfigError) as err:
+            call(result)
+        assert str(err.value) == (f"{name}(): the map must be a MapEstimate, got RunResult "
+                                  f"(result.final or result.at(t))")
+    gt.seed_start(state, result.final)                 # what it should have been
