@@ -8,7 +8,8 @@ something else. A task that fails on the cluster itself (every worker that ran i
 worker could not import it) becomes a failed run with the reason, so the other runs finish and
 are cached. Ctrl-C kills a local cluster's workers at once (:func:`_end_local_workers`); they
 never take it themselves (:func:`_workers_hold_signals`). Imports from bomgraph only the
-errors, an option's name and :func:`bomgraph.stdio.signals_held`.
+errors, an option's name, :func:`bomgraph.stdio.signals_held` and
+:func:`bomgraph.owned_folders.owned_folder`.
 """
 
 from __future__ import annotations
@@ -23,6 +24,7 @@ from typing import Any, Callable, Iterator, Sequence
 
 from .checks import integer, option_named
 from .errors import ConfigError, UnknownMethodError
+from .owned_folders import owned_folder
 from .stdio import signals_held
 
 _log = logging.getLogger(__name__)
@@ -35,6 +37,13 @@ POLL_S = 5.0
 #: notebook's cluster, another compare) every ``--dask-local`` run warned "UserWarning: Port
 #: 8787 is already in use" (an error under ``-W error``). A free port of this host instead.
 LOCAL_SCHEDULER_HTTP = {"dashboard_address": "127.0.0.1:0"}
+
+#: The local cluster's scratch space (its scheduler's and workers' folders and locks), a
+#: folder of its own in the temporary folder, removed as the cluster ends: Dask's default,
+#: ``dask-scratch-space`` there, was left behind by every ``--dask-local`` compare (its lock
+#: files; SIGTERM: the workers' too; SIGKILL: their folders); one left by a compare ended by
+#: SIGKILL is removed by the next (:func:`bomgraph.owned_folders.remove_stale`).
+SCRATCH_PREFIX = "bomgraph-dask-"
 
 
 #: How to see the warnings of a run whose worker died: a worker keeps them for its result
@@ -228,6 +237,7 @@ def _dispatch(func: Callable[[int, Any], tuple[int, dict[str, Any]]], index: Seq
 
     cluster = client = None
     finished = False  # every result yielded; else the runs were left (Ctrl-C, SIGTERM)
+    scratch = contextlib.ExitStack()  # a local cluster's folder, removed last
     try:
         alone = False  # warned that no worker is there
         if scheduler:
@@ -237,10 +247,13 @@ def _dispatch(func: Callable[[int, Any], tuple[int, dict[str, Any]]], index: Seq
                              "(start `dask worker %s`)", scheduler, scheduler)
             client = Client(scheduler, timeout=connect_timeout())
         else:
+            folder = scratch.enter_context(owned_folder(SCRATCH_PREFIX))
             with _workers_hold_signals():
                 cluster = LocalCluster(n_workers=n_local, threads_per_worker=1, processes=True,
                                        host="127.0.0.1", dashboard_address=None,
-                                       scheduler_kwargs=LOCAL_SCHEDULER_HTTP)
+                                       local_directory=folder,
+                                       scheduler_kwargs={**LOCAL_SCHEDULER_HTTP,
+                                                         "local_directory": folder})
             client = Client(cluster)
         futures = client.map(func, list(index), list(tasks), pure=False)
         which = {f.key: k for f, k in zip(futures, index)}
@@ -281,6 +294,7 @@ def _dispatch(func: Callable[[int, Any], tuple[int, dict[str, Any]]], index: Seq
             client.close()
         if cluster is not None:
             cluster.close()
+        scratch.close()
 
 
 __all__ = ["check_scheduler", "connect_timeout", "dispatch", "worker_failure"]
