@@ -7,8 +7,8 @@ command's one line. They start with SIGINT and SIGTERM blocked, which they keep,
 workers they start later (a worker replaced after a memory leak); the command stops on the
 signal and ends them. A worker whose command is gone (``kill -9``: nothing could end its
 workers) ends within a second, in a task or idle (:func:`_watch_parent`), where before it
-finished its task and waited out joblib's idle timeout, about five minutes. Imports nothing
-from bomgraph but :mod:`bomgraph.stdio` and :mod:`bomgraph.owned_folders`.
+finished its task and waited out joblib's idle timeout, about five minutes. Imports from
+bomgraph only :mod:`bomgraph.stdio`, :mod:`bomgraph.owned_folders`, an error and a check.
 """
 
 from __future__ import annotations
@@ -23,6 +23,8 @@ import time
 import warnings
 from typing import Any, Callable, Iterator, Sequence
 
+from .checks import is_integer
+from .errors import ConfigError
 from .owned_folders import OWNER, alive as _alive, owned_folder
 from .stdio import signals_held
 
@@ -34,6 +36,9 @@ PARENT_POLL_S = 0.25
 #: The folder of a dispatch's marks (:func:`_marked`), in the temporary folder; a killed
 #: dispatch's is removed by the next (:func:`bomgraph.owned_folders.remove_stale`).
 MARKS_PREFIX = "bomgraph-running-"
+
+#: local worker processes per core at most: a typo (``--jobs 100000``) started that many.
+MAX_WORKERS_PER_CORE = 4
 
 
 def dispatch(func: Callable[[int, Any], tuple[int, dict[str, Any]]], index: Sequence[int],
@@ -56,8 +61,42 @@ def dispatch(func: Callable[[int, Any], tuple[int, dict[str, Any]]], index: Sequ
 
     No task runs in this process, where one that ends its process would end the caller: one
     worker asked for (``n_jobs`` 1, or -1 on one core), which joblib would run here, is two
-    given one task at a time (:func:`_pool`).
+    given one task at a time (:func:`_pool`). More workers than tasks, or than
+    :data:`MAX_WORKERS_PER_CORE` per core, are not started (``n_jobs=10**6`` started a
+    thousand).
+
+    Raises
+    ------
+    ConfigError
+        ``n_jobs`` is not an integer >= 1 nor -1 (0, -3, 1.5, True, "2"): at the call, before
+        any worker starts (h124: 0 was joblib's ValueError, 1.5 and True were taken).
     """
+    n_jobs = workers_asked(n_jobs)
+    if n_jobs >= 1:
+        n_jobs = max(1, min(n_jobs, len(tasks), MAX_WORKERS_PER_CORE * (os.cpu_count() or 1)))
+    return _dispatch(func, index, tasks, n_jobs, failed, fresh=fresh)
+
+
+def workers_asked(n_jobs: Any, name: str = "n_jobs") -> int:
+    """``n_jobs``, local worker processes: an integer >= 1, or -1 for one per core (joblib's
+    other negative counts, all cores but some, are not taken: the command line and a sweep
+    file's ``jobs`` refuse them).
+
+    Raises
+    ------
+    ConfigError
+        Anything else, in one line naming ``name``.
+    """
+    if not (is_integer(n_jobs) and (n_jobs >= 1 or n_jobs == -1)):
+        raise ConfigError(f"{name} must be an integer >= 1, or -1 for one process per core, "
+                          f"got {n_jobs!r:.40}")
+    return int(n_jobs)
+
+
+def _dispatch(func: Callable[[int, Any], tuple[int, dict[str, Any]]], index: Sequence[int],
+             tasks: Sequence[Any], n_jobs: int,
+             failed: Callable[[int, str], dict[str, Any]], *, fresh: bool = False
+             ) -> Iterator[tuple[int, dict[str, Any]]]:
     from joblib.externals.loky.process_executor import BrokenProcessPool
 
     if fresh:
@@ -301,4 +340,4 @@ def _start_workers(par: Any) -> None:
             workers.submit(int)  # the first task starts the processes, in this thread
 
 
-__all__ = ["daemonic", "dispatch"]
+__all__ = ["MAX_WORKERS_PER_CORE", "daemonic", "dispatch", "workers_asked"]
