@@ -130,6 +130,21 @@ def worker_failure(exc: BaseException) -> str:
     return f"on a Dask worker, {reason}"
 
 
+def start_failure(exc: BaseException) -> str:
+    """A failed run's error when the local cluster could not start: one of its workers died
+    as it started (h124: a worker killed then, or ended by a sitecustomize, was Dask's
+    ``RuntimeError: Nanny failed to start.`` traceback out of ``compare``, exit 1)."""
+    causes = []
+    while exc is not None and len(causes) < 3:
+        first = (str(exc).splitlines() or [""])[0].strip()
+        causes.append(f"{type(exc).__name__}: {first}" if first else type(exc).__name__)
+        exc = exc.__cause__ or exc.__context__
+    return (f"WorkerDied: the local Dask cluster's workers could not start ({'; '.join(causes)}"
+            f"): something at their start kills them (a sitecustomize or .pth file, a memory "
+            f"limit, the out-of-memory killer, a kill); fix that, or run in local processes "
+            f"(--jobs N, without --dask-local); finished runs are cached")
+
+
 def quiet_dask_logging() -> Callable[[], None]:
     """Dask's own log lines (its client reconnecting with a traceback, "Couldn't gather") at
     CRITICAL only, so that a failure is the failed runs' one line: for the command line without
@@ -248,12 +263,23 @@ def _dispatch(func: Callable[[int, Any], tuple[int, dict[str, Any]]], index: Seq
             client = Client(scheduler, timeout=connect_timeout())
         else:
             folder = scratch.enter_context(owned_folder(SCRATCH_PREFIX))
+            not_started: Exception | None = None
             with _workers_hold_signals():
-                cluster = LocalCluster(n_workers=n_local, threads_per_worker=1, processes=True,
-                                       host="127.0.0.1", dashboard_address=None,
-                                       local_directory=folder,
-                                       scheduler_kwargs={**LOCAL_SCHEDULER_HTTP,
-                                                         "local_directory": folder})
+                try:
+                    cluster = LocalCluster(n_workers=n_local, threads_per_worker=1,
+                                           processes=True, host="127.0.0.1",
+                                           dashboard_address=None, local_directory=folder,
+                                           scheduler_kwargs={**LOCAL_SCHEDULER_HTTP,
+                                                             "local_directory": folder})
+                except Exception as exc:  # a worker died as it started; Dask closed the rest
+                    not_started = exc
+            if not_started is not None:
+                _log.debug("the local Dask cluster did not start", exc_info=not_started)
+                why = start_failure(not_started)
+                for k in index:
+                    yield k, failed(k, why)
+                finished = True
+                return
             client = Client(cluster)
         futures = client.map(func, list(index), list(tasks), pure=False)
         which = {f.key: k for f, k in zip(futures, index)}
