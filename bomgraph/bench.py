@@ -42,7 +42,7 @@ from .method_code import (bomgraph_edited, method_code, new_sweep, noting_runs,
                           refuse_runtime_methods, stale_after_run, stale_here, stale_plugin,
                           uncacheable, warn_sourceless, workers_outdated)
 from .plugins import code_fingerprint
-from .processes import daemonic
+from .processes import MAX_WORKERS_PER_CORE, daemonic, workers_asked
 from .result_cache import read_cached, strip_timings, write_cached  # re-exported
 from .result_cache import remove_cache_leftovers
 from .run_scoring import (CheckpointScorer, ReferenceFailure, failed_reference, forget_failures,
@@ -280,9 +280,7 @@ class Executor:
     def __post_init__(self) -> None:
         if self.backend not in ("serial", "processes", "dask"):
             raise ConfigError(f"backend must be serial, processes or dask, got {self.backend!r}")
-        if not (is_integer(self.n_jobs) and self.n_jobs != 0):
-            raise ConfigError(f"n_jobs must be a non-zero integer (-1: one process per core), "
-                              f"got {self.n_jobs!r}")
+        workers_asked(self.n_jobs)
         if not (is_integer(self.dask_local) and self.dask_local >= 0):
             raise ConfigError(f"dask_local must be an integer >= 0, got {self.dask_local!r}")
         if self.backend == "dask" and not (self.scheduler or self.dask_local > 0):
@@ -533,10 +531,6 @@ def _indexed(k: int, task: Task, sweep: str = "") -> tuple[int, dict[str, Any]]:
         return k, ({**result, SAID: said} if said else result)
     finally:
         _IN_WORKER.reset(token)
-
-
-#: local worker processes per core at most: a typo (``--jobs 100000``) started that many.
-MAX_WORKERS_PER_CORE = 4
 
 
 def _local_workers(requested: int, n_tasks: int, *, two_for_one: bool = False) -> int:

@@ -8,7 +8,8 @@ something else. A task that fails on the cluster itself (every worker that ran i
 worker could not import it) becomes a failed run with the reason, so the other runs finish and
 are cached. Ctrl-C kills a local cluster's workers at once (:func:`_end_local_workers`); they
 never take it themselves (:func:`_workers_hold_signals`). Imports from bomgraph only the
-errors, an option's name and :func:`bomgraph.stdio.signals_held`.
+errors, an option's name, :func:`bomgraph.stdio.signals_held` and
+:func:`bomgraph.owned_folders.owned_folder`.
 """
 
 from __future__ import annotations
@@ -23,6 +24,7 @@ from typing import Any, Callable, Iterator, Sequence
 
 from .checks import integer, option_named
 from .errors import ConfigError, UnknownMethodError
+from .owned_folders import owned_folder
 from .stdio import signals_held
 
 _log = logging.getLogger(__name__)
@@ -35,6 +37,13 @@ POLL_S = 5.0
 #: notebook's cluster, another compare) every ``--dask-local`` run warned "UserWarning: Port
 #: 8787 is already in use" (an error under ``-W error``). A free port of this host instead.
 LOCAL_SCHEDULER_HTTP = {"dashboard_address": "127.0.0.1:0"}
+
+#: The local cluster's scratch space (its scheduler's and workers' folders and locks), a
+#: folder of its own in the temporary folder, removed as the cluster ends: Dask's default,
+#: ``dask-scratch-space`` there, was left behind by every ``--dask-local`` compare (its lock
+#: files; SIGTERM: the workers' too; SIGKILL: their folders); one left by a compare ended by
+#: SIGKILL is removed by the next (:func:`bomgraph.owned_folders.remove_stale`).
+SCRATCH_PREFIX = "bomgraph-dask-"
 
 
 #: How to see the warnings of a run whose worker died: a worker keeps them for its result
@@ -119,6 +128,21 @@ def worker_failure(exc: BaseException) -> str:
                 f"importable (installed there, or on the PYTHONPATH `dask worker` starts "
                 f"with): fix that and restart the workers")
     return f"on a Dask worker, {reason}"
+
+
+def start_failure(exc: BaseException) -> str:
+    """A failed run's error when the local cluster could not start: one of its workers died
+    as it started (h124: a worker killed then, or ended by a sitecustomize, was Dask's
+    ``RuntimeError: Nanny failed to start.`` traceback out of ``compare``, exit 1)."""
+    causes = []
+    while exc is not None and len(causes) < 3:
+        first = (str(exc).splitlines() or [""])[0].strip()
+        causes.append(f"{type(exc).__name__}: {first}" if first else type(exc).__name__)
+        exc = exc.__cause__ or exc.__context__
+    return (f"WorkerDied: the local Dask cluster's workers could not start ({'; '.join(causes)}"
+            f"): something at their start kills them (a sitecustomize or .pth file, a memory "
+            f"limit, the out-of-memory killer, a kill); fix that, or run in local processes "
+            f"(--jobs N, without --dask-local); finished runs are cached")
 
 
 def quiet_dask_logging() -> Callable[[], None]:
@@ -228,6 +252,7 @@ def _dispatch(func: Callable[[int, Any], tuple[int, dict[str, Any]]], index: Seq
 
     cluster = client = None
     finished = False  # every result yielded; else the runs were left (Ctrl-C, SIGTERM)
+    scratch = contextlib.ExitStack()  # a local cluster's folder, removed last
     try:
         alone = False  # warned that no worker is there
         if scheduler:
@@ -237,10 +262,24 @@ def _dispatch(func: Callable[[int, Any], tuple[int, dict[str, Any]]], index: Seq
                              "(start `dask worker %s`)", scheduler, scheduler)
             client = Client(scheduler, timeout=connect_timeout())
         else:
+            folder = scratch.enter_context(owned_folder(SCRATCH_PREFIX))
+            not_started: Exception | None = None
             with _workers_hold_signals():
-                cluster = LocalCluster(n_workers=n_local, threads_per_worker=1, processes=True,
-                                       host="127.0.0.1", dashboard_address=None,
-                                       scheduler_kwargs=LOCAL_SCHEDULER_HTTP)
+                try:
+                    cluster = LocalCluster(n_workers=n_local, threads_per_worker=1,
+                                           processes=True, host="127.0.0.1",
+                                           dashboard_address=None, local_directory=folder,
+                                           scheduler_kwargs={**LOCAL_SCHEDULER_HTTP,
+                                                             "local_directory": folder})
+                except Exception as exc:  # a worker died as it started; Dask closed the rest
+                    not_started = exc
+            if not_started is not None:
+                _log.debug("the local Dask cluster did not start", exc_info=not_started)
+                why = start_failure(not_started)
+                for k in index:
+                    yield k, failed(k, why)
+                finished = True
+                return
             client = Client(cluster)
         futures = client.map(func, list(index), list(tasks), pure=False)
         which = {f.key: k for f, k in zip(futures, index)}
@@ -281,6 +320,7 @@ def _dispatch(func: Callable[[int, Any], tuple[int, dict[str, Any]]], index: Seq
             client.close()
         if cluster is not None:
             cluster.close()
+        scratch.close()
 
 
 __all__ = ["check_scheduler", "connect_timeout", "dispatch", "worker_failure"]

@@ -7,27 +7,25 @@ command's one line. They start with SIGINT and SIGTERM blocked, which they keep,
 workers they start later (a worker replaced after a memory leak); the command stops on the
 signal and ends them. A worker whose command is gone (``kill -9``: nothing could end its
 workers) ends within a second, in a task or idle (:func:`_watch_parent`), where before it
-finished its task and waited out joblib's idle timeout, about five minutes. Imports nothing
-from bomgraph but :mod:`bomgraph.stdio`.
+finished its task and waited out joblib's idle timeout, about five minutes. Imports from
+bomgraph only :mod:`bomgraph.stdio`, :mod:`bomgraph.owned_folders`, an error and a check.
 """
 
 from __future__ import annotations
 
 import contextlib
-import json
 import logging
 import os
 import re
-import shutil
-import socket
-import stat
 import sys
-import tempfile
 import threading
 import time
 import warnings
 from typing import Any, Callable, Iterator, Sequence
 
+from .checks import is_integer
+from .errors import ConfigError
+from .owned_folders import OWNER, alive as _alive, owned_folder
 from .stdio import signals_held
 
 _log = logging.getLogger(__name__)
@@ -35,10 +33,12 @@ _log = logging.getLogger(__name__)
 #: How often, in seconds, a worker checks that the process that started it is there.
 PARENT_POLL_S = 0.25
 
-#: The folder of a dispatch's marks (:func:`_marked`), in the temporary folder, and the file
-#: in it naming the process that made it (:func:`_remove_stale_marks`).
+#: The folder of a dispatch's marks (:func:`_marked`), in the temporary folder; a killed
+#: dispatch's is removed by the next (:func:`bomgraph.owned_folders.remove_stale`).
 MARKS_PREFIX = "bomgraph-running-"
-OWNER = "owner.json"
+
+#: local worker processes per core at most: a typo (``--jobs 100000``) started that many.
+MAX_WORKERS_PER_CORE = 4
 
 
 def dispatch(func: Callable[[int, Any], tuple[int, dict[str, Any]]], index: Sequence[int],
@@ -61,18 +61,49 @@ def dispatch(func: Callable[[int, Any], tuple[int, dict[str, Any]]], index: Sequ
 
     No task runs in this process, where one that ends its process would end the caller: one
     worker asked for (``n_jobs`` 1, or -1 on one core), which joblib would run here, is two
-    given one task at a time (:func:`_pool`).
+    given one task at a time (:func:`_pool`). More workers than tasks, or than
+    :data:`MAX_WORKERS_PER_CORE` per core, are not started (``n_jobs=10**6`` started a
+    thousand).
+
+    Raises
+    ------
+    ConfigError
+        ``n_jobs`` is not an integer >= 1 nor -1 (0, -3, 1.5, True, "2"): at the call, before
+        any worker starts (h124: 0 was joblib's ValueError, 1.5 and True were taken).
     """
+    n_jobs = workers_asked(n_jobs)
+    if n_jobs >= 1:
+        n_jobs = max(1, min(n_jobs, len(tasks), MAX_WORKERS_PER_CORE * (os.cpu_count() or 1)))
+    return _dispatch(func, index, tasks, n_jobs, failed, fresh=fresh)
+
+
+def workers_asked(n_jobs: Any, name: str = "n_jobs") -> int:
+    """``n_jobs``, local worker processes: an integer >= 1, or -1 for one per core (joblib's
+    other negative counts, all cores but some, are not taken: the command line and a sweep
+    file's ``jobs`` refuse them).
+
+    Raises
+    ------
+    ConfigError
+        Anything else, in one line naming ``name``.
+    """
+    if not (is_integer(n_jobs) and (n_jobs >= 1 or n_jobs == -1)):
+        raise ConfigError(f"{name} must be an integer >= 1, or -1 for one process per core, "
+                          f"got {n_jobs!r:.40}")
+    return int(n_jobs)
+
+
+def _dispatch(func: Callable[[int, Any], tuple[int, dict[str, Any]]], index: Sequence[int],
+             tasks: Sequence[Any], n_jobs: int,
+             failed: Callable[[int, str], dict[str, Any]], *, fresh: bool = False
+             ) -> Iterator[tuple[int, dict[str, Any]]]:
     from joblib.externals.loky.process_executor import BrokenProcessPool
 
     if fresh:
         _end_kept_workers()
-    _remove_stale_marks()
     pending = dict(zip(index, tasks))
     stalled = False
-    with _flushable_std_streams(), tempfile.TemporaryDirectory(prefix=MARKS_PREFIX) as marks:
-        with open(os.path.join(marks, OWNER), "w", encoding="utf-8") as fh:
-            json.dump(_owner(), fh)
+    with _flushable_std_streams(), owned_folder(MARKS_PREFIX) as marks:
         while pending:
             before = len(pending)
             try:
@@ -274,66 +305,6 @@ def _clear(marks: str) -> None:
             os.unlink(os.path.join(marks, name))
 
 
-def _owner() -> dict[str, Any]:
-    """This process, as a marks folder's :data:`OWNER` file names it: its pid, and the host,
-    kernel boot and pid namespace in which that pid means this process (the namespace's link
-    alone is the same on every machine for its first processes, ``pid:[4026531836]``: the
-    boot id tells two machines of one name apart)."""
-    try:
-        namespace: str | None = os.readlink("/proc/self/ns/pid")
-        with open("/proc/sys/kernel/random/boot_id", encoding="ascii") as fh:
-            boot: str | None = fh.read().strip() or None
-    except OSError:  # not Linux: no namespace to compare, no folder is ever removed
-        namespace = boot = None
-    return {"pid": os.getpid(), "host": socket.gethostname(), "pid_ns": namespace,
-            "boot_id": boot}
-
-
-def _remove_stale_marks() -> None:
-    """Remove the marks folders that a dispatch ended by SIGKILL (or a power cut) left in the
-    temporary folder: only those of this user whose :data:`OWNER` file names a process of
-    this host, kernel boot and pid namespace that is no longer there. A folder without that
-    file (being made, or made by an older bomgraph), of another user, host, machine of the
-    same name or container, or of a live process (or of a pid taken again since) is left
-    alone."""
-    me = _owner()
-    uid = getattr(os, "getuid", lambda: None)()
-    root = tempfile.gettempdir()
-    if me["pid_ns"] is None or me["boot_id"] is None or uid is None:
-        return
-    try:
-        names = [n for n in os.listdir(root) if n.startswith(MARKS_PREFIX)]
-    except OSError:
-        return
-    for name in names:
-        path = os.path.join(root, name)
-        try:
-            st = os.stat(path, follow_symlinks=False)
-            if st.st_uid != uid or not stat.S_ISDIR(st.st_mode):
-                continue
-            with open(os.path.join(path, OWNER), encoding="utf-8") as fh:
-                owner = json.load(fh)
-        except (OSError, ValueError):
-            continue
-        pid = owner.get("pid") if isinstance(owner, dict) else None
-        if (type(pid) is int and pid > 0 and owner.get("host") == me["host"]
-                and owner.get("pid_ns") == me["pid_ns"]
-                and owner.get("boot_id") == me["boot_id"] and not _alive(pid)):
-            shutil.rmtree(path, ignore_errors=True)
-            _log.debug("removed %s, left by process %d, which is gone", path, pid)
-
-
-def _alive(pid: int) -> bool:
-    """Whether a process ``pid`` exists (another user's too; a zombie too)."""
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except OSError:  # PermissionError: it exists, another user's
-        return True
-    return True
-
-
 def _died(exc: BaseException, began: bool = True) -> str:
     """A failed run's error for a task whose worker process died, with the exit codes that
     joblib gives (``SIGSEGV(-11)``: a crash in native code; ``SIGKILL(-9)``: often the
@@ -369,4 +340,4 @@ def _start_workers(par: Any) -> None:
             workers.submit(int)  # the first task starts the processes, in this thread
 
 
-__all__ = ["daemonic", "dispatch"]
+__all__ = ["MAX_WORKERS_PER_CORE", "daemonic", "dispatch", "workers_asked"]

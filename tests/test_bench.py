@@ -297,9 +297,9 @@ def test_run_task_scores_each_checkpoint_as_it_comes_and_keeps_one_map(
 
 
 @pytest.mark.parametrize("kwargs,match", [
-    ({"n_jobs": 0}, "n_jobs must be a non-zero integer"),
-    ({"n_jobs": "2"}, "n_jobs must be a non-zero integer"),
-    ({"n_jobs": 2.5}, "n_jobs must be a non-zero integer"),
+    ({"n_jobs": 0}, "n_jobs must be an integer >= 1, or -1"),
+    ({"n_jobs": "2"}, "n_jobs must be an integer >= 1, or -1"),
+    ({"n_jobs": 2.5}, "n_jobs must be an integer >= 1, or -1"),
     ({"backend": "dask", "dask_local": 1.5}, "dask_local must be an integer >= 0"),
 ])
 def test_executor_refuses_worker_counts_that_are_not_integers(kwargs: dict, match: str) -> None:

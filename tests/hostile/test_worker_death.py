@@ -201,10 +201,10 @@ def test_marks_folders_of_a_killed_dispatch_are_removed_by_the_next_only(
     process of this host and pid namespace that is gone, and no other."""
     import tempfile
 
-    from bomgraph import processes
+    from bomgraph import owned_folders, processes
 
     monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
-    me = processes._owner()
+    me = owned_folders.owner()
     gone = subprocess.Popen([sys.executable, "-c", "pass"])
     gone.wait()
     folders = {"dead": {**me, "pid": gone.pid}, "live": me, "other-host": {
@@ -215,7 +215,7 @@ def test_marks_folders_of_a_killed_dispatch_are_removed_by_the_next_only(
         folder.mkdir()
         (folder / "3").write_text("")  # a run's mark
         if owner is not None:
-            (folder / processes.OWNER).write_text(json.dumps(owner))
+            (folder / owned_folders.OWNER).write_text(json.dumps(owner))
     out = dict(dispatch(_pid_of, [0, 1], [None, None], 2, lambda k, why: {"failed": why}))
     assert sorted(out) == [0, 1] and "failed" not in out[0], out
     left = sorted(p.name for p in tmp_path.iterdir() if p.name.startswith("bomgraph-running"))
@@ -232,10 +232,10 @@ def test_a_marks_folder_of_another_kernel_is_left_alone(tmp_path: Path,
     names the kernel's boot id too, and a folder of another boot is left alone."""
     import tempfile
 
-    from bomgraph import processes
+    from bomgraph import owned_folders, processes
 
     monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
-    me = processes._owner()
+    me = owned_folders.owner()
     gone = subprocess.Popen([sys.executable, "-c", "pass"])
     gone.wait()
     folders = {"dead": {**me, "pid": gone.pid},
@@ -243,7 +243,7 @@ def test_a_marks_folder_of_another_kernel_is_left_alone(tmp_path: Path,
     for name, owner in folders.items():
         folder = tmp_path / f"{processes.MARKS_PREFIX}{name}"
         folder.mkdir()
-        (folder / processes.OWNER).write_text(json.dumps(owner))
+        (folder / owned_folders.OWNER).write_text(json.dumps(owner))
     out = dict(dispatch(_pid_of, [0], [None], 2, lambda k, why: {"failed": why}))
     assert "failed" not in out[0], out
     left = sorted(p.name for p in tmp_path.iterdir() if p.name.startswith("bomgraph-running"))
