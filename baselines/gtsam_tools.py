@@ -216,6 +216,8 @@ def align_map(estimate: MapEstimate, reference_ids: np.ndarray, reference_xy: np
     ------
     TooFewLandmarksError
         Fewer than 3 landmarks common to the map and the reference.
+    ConfigError
+        ``estimate`` is no map (:func:`~baselines.seeding.check_map`: e.g. a ``RunResult``).
     """
     check_map("align_map", estimate)
     ref_ids = np.asarray(reference_ids, np.int64)
@@ -223,9 +225,10 @@ def align_map(estimate: MapEstimate, reference_ids: np.ndarray, reference_xy: np
     _, i_map, i_ref = np.intersect1d(estimate.landmark_ids, ref_ids, return_indices=True)
     if i_map.size < 3:
         raise TooFewLandmarksError(
-            f"align_map: {i_map.size} landmarks common to the map ({len(estimate)}) and the "
-            f"reference ({ref_ids.size}); 3 are needed: admit more landmarks to the graph "
-            f"first or give a reference with more of the map's landmarks")
+            f"align_map: {i_map.size} landmarks common to the map "
+            f"({len(estimate.landmark_ids)}) and the reference ({ref_ids.size}); 3 are "
+            f"needed: admit more landmarks to the graph first or give a reference with more "
+            f"of the map's landmarks")
     src, dst = estimate.landmarks_xy[i_map], ref_xy[i_ref]
     al = (align(src, dst, allow_reflection=True, with_scale=True) if with_scale
           else trimmed_align(src, dst, trim))
@@ -258,13 +261,14 @@ def seed_landmarks(state: BatchState, estimate: MapEstimate, *, trim: float = 3.
     ids = np.array(sorted(problem.landmark_ids), np.int64)
     ref_xy = landmarks_from_values(state.values, ids)
     n_common = np.intersect1d(ids, estimate.landmark_ids).size
+    n_map = len(estimate.landmark_ids)                  # a Truth has no len()
     pending = problem.pending()
     seen = np.intersect1d(np.union1d(ids, np.array(list(pending), np.int64)),
                           estimate.landmark_ids).size   # of the stream's, graph or pending
     if n_common < 3 and ids.size >= 3 and seen < 3:   # the graph has enough: the map has not
         raise TooFewLandmarksError(
             f"seed_landmarks: the graph holds {ids.size} landmarks, {n_common} of them in the "
-            f"map ({len(estimate)}), and 3 are needed to align the map onto them; " +
+            f"map ({n_map}), and 3 are needed to align the map onto them; " +
             ("the map's landmark ids are not the stream's (it holds none the stream sees): "
              "give a map of this stream" if not seen else
              f"the map holds {seen} of the landmarks the stream sees: give a map of more"))
@@ -277,7 +281,7 @@ def seed_landmarks(state: BatchState, estimate: MapEstimate, *, trim: float = 3.
                "recording's dead-reckoned poses):")
         raise TooFewLandmarksError(
             f"seed_landmarks: the graph holds {ids.size} landmarks, {n_common} of them in the "
-            f"map ({len(estimate)}), and 3 are needed to align the map onto them; "
+            f"map ({n_map}), and 3 are needed to align the map onto them; "
             f"{len(pending)} landmarks are pending, and {why} start the poses from the map "
             f"first (as the hybrid does): state.values.update(seed_start(state, "
             f"map).values()); state.absorb() (the rays on those poses intersect); then "

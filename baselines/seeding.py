@@ -147,10 +147,12 @@ def align_seed(state: BatchState, estimate: MapEstimate, *, use_solution: bool =
     ------
     TooFewLandmarksError
         Fewer than 3 reference landmarks in the map.
+    ConfigError
+        ``estimate`` is no map (:func:`check_map`: e.g. a ``RunResult``).
     """
     check_map("align_seed", estimate)
     problem = state.problem
-    seed_ids = estimate.landmark_ids
+    seed_ids = np.asarray(estimate.landmark_ids)
     ref = None
     if use_solution and problem.landmark_ids:
         ids = np.array(sorted(problem.landmark_ids), dtype=np.int64)
@@ -173,7 +175,7 @@ def align_seed(state: BatchState, estimate: MapEstimate, *, use_solution: bool =
         # h123: a map whose ids are not the stream's was told to "give more steps"
         n_seen = np.intersect1d(seed_ids, state.bearings()[1]).size
         raise TooFewLandmarksError(
-            f"align_seed: fewer than 3 of the map's {len(estimate)} landmarks ({n_seen} of "
+            f"align_seed: fewer than 3 of the map's {seed_ids.size} landmarks ({n_seen} of "
             f"them seen in the stream) intersect on the dead-reckoned poses of the "
             f"{problem.n_steps} steps, so the map cannot be aligned: give more steps or a map "
             f"holding more of the landmarks the stream sees (by the stream's landmark ids)")
@@ -186,7 +188,8 @@ def align_seed(state: BatchState, estimate: MapEstimate, *, use_solution: bool =
 
 def seed_start(state: BatchState, estimate: MapEstimate | SeedAlignment, *,
                use_solution: bool | None = None, align_steps: int | None = None,
-               trim: float | None = None, n_headings: int = 36, huber_k: float = 2.0, map_sigma_m: float = 0.03,
+               trim: float | None = None, n_headings: int = 36, huber_k: float = 2.0,
+               map_sigma_m: float = 0.03,
                prior_sigma: tuple[float, float, float] = (0.02, 0.02, math.radians(2.0))
                ) -> SeedStart:
     """A start for every pose of ``state`` from a map in any frame (the hybrid's seeding).
@@ -224,7 +227,8 @@ def seed_start(state: BatchState, estimate: MapEstimate | SeedAlignment, *,
     TooFewLandmarksError
         The map cannot be aligned (:func:`align_seed`), or no pose sees 3 of its landmarks.
     ConfigError
-        ``use_solution``, ``align_steps`` or ``trim`` given with a ``SeedAlignment``.
+        ``use_solution``, ``align_steps`` or ``trim`` given with a ``SeedAlignment``, or
+        ``estimate`` is no map (:func:`check_map`).
     """
     given = {name: value for name, value in (("use_solution", use_solution),
                                              ("align_steps", align_steps), ("trim", trim))

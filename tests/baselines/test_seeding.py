@@ -4,6 +4,8 @@ graph's."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import gtsam
 import numpy as np
 import pytest
@@ -11,11 +13,11 @@ import pytest
 from baselines import gtsam_tools as gt
 from baselines.bearing_graph import poses_from_values
 from baselines.seeding import SeedAlignment
-from bomgraph.errors import ConfigError, TooFewLandmarksError
 from baselines.triangulate import TriangulateMapper
+from bomgraph.errors import ConfigError, TooFewLandmarksError
 from bomgraph.mapper import MapEstimate, run
 from bomgraph.sim import SimConfig, simulate
-from bomgraph.stream import Stream
+from bomgraph.stream import Stream, Truth
 
 
 @pytest.fixture(scope="module")
@@ -111,19 +113,38 @@ def test_alignment_options_with_a_map_reach_align_seed(noise_free: Stream) -> No
     assert start.aligned.n_reference == asked.n_reference < gt.align_seed(state, est).n_reference
 
 
+def _map_calls(state: gt.BatchState) -> dict[str, Callable[[object], object]]:
+    """Each helper that takes a map, called with ``state`` (align_map on 3 made-up
+    reference landmarks)."""
+    return {"seed_start": lambda m: gt.seed_start(state, m),
+            "align_seed": lambda m: gt.align_seed(state, m),
+            "seed_landmarks": lambda m: gt.seed_landmarks(state, m),
+            "align_map": lambda m: gt.align_map(m, np.arange(3), np.zeros((3, 2)))}
+
+
 def test_a_run_result_for_the_map_is_told_to_give_final(noise_free: Stream) -> None:
     """h125: the README's map is ``run(...).final``; the ``RunResult`` itself, given to any
     helper that takes a map, raised ``AttributeError: 'RunResult' object has no attribute
     'landmark_ids'`` deep inside. Each now refuses it where it enters."""
     result = run(TriangulateMapper(noise_free.header), noise_free.steps)
     state = gt.build_graph(noise_free.header, noise_free.steps)
-    calls = {"seed_start": lambda m: gt.seed_start(state, m),
-             "align_seed": lambda m: gt.align_seed(state, m),
-             "seed_landmarks": lambda m: gt.seed_landmarks(state, m),
-             "align_map": lambda m: gt.align_map(m, np.arange(3), np.zeros((3, 2)))}
-    for name, call in calls.items():
+    for name, call in _map_calls(state).items():
         with pytest.raises(ConfigError) as err:
             call(result)
         assert str(err.value) == (f"{name}(): the map must be a MapEstimate, got RunResult "
                                   f"(result.final or result.at(t))")
     gt.seed_start(state, result.final)                 # what it should have been
+
+
+def test_a_truth_for_the_map_too_far_off_is_told_so_not_a_type_error(noise_free: Stream) -> None:
+    """h129: ``check_map`` admits any map with ``landmark_ids`` and ``landmarks_xy`` (a
+    ``Truth`` too), but the refusals counted the map with ``len(map)``: a ``Truth`` of other
+    ids raised ``TypeError: object of type 'Truth' has no len()`` instead of saying why."""
+    state = gt.build_graph(noise_free.header, noise_free.steps)
+    far = Truth(noise_free.truth.landmark_ids + 1000, noise_free.truth.landmarks_xy)
+    for name, call in _map_calls(state).items():
+        with pytest.raises(TooFewLandmarksError) as err:
+            call(far)
+        said = "align_seed" if name == "seed_start" else name     # seed_start aligns first
+        assert str(err.value).startswith(f"{said}: ") and "20" in str(err.value)
+    assert gt.seed_start(state, noise_free.truth).poses.shape == (61, 3)   # a Truth serves
