@@ -92,7 +92,9 @@ class Outcome:
     """What one method did: its final map (None if it failed), timings, and why it failed.
 
     ``step_wall_s[k]`` is the wall time from step ``k`` being handed to the method to step
-    ``k + 1`` being asked for (the step and any checkpoint estimate after it).
+    ``k + 1`` being asked for (the step and any checkpoint estimate after it). ``cpu_s`` is
+    the process's CPU time (user + system) over the run: on a shared machine the wall time
+    grows with the load, the CPU time much less.
     """
 
     spec: Arm
@@ -102,6 +104,7 @@ class Outcome:
     step_wall_s: np.ndarray
     error: str | None = None
     result: RunResult | None = None
+    cpu_s: float = math.nan
 
 
 def _timed(steps: Sequence[Step], times: list[float], deadline: float | None) -> Iterator[Step]:
@@ -120,7 +123,7 @@ def run_method(spec: Arm, stream: Stream, *, checkpoint_every: int,
                max_seconds: float | None = None) -> Outcome:
     """Run one method on ``stream``; failures (exceptions, the time budget) become reasons."""
     times: list[float] = []
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     deadline = None if max_seconds is None else t0 + max_seconds
     est = res = None
     error = None
@@ -133,9 +136,9 @@ def run_method(spec: Arm, stream: Stream, *, checkpoint_every: int,
             error = f"empty map: {est.info.get('reason', 'no reason given')}"
     except Exception as exc:  # every failure is reported with its reason, never hidden
         error = f"{type(exc).__name__}: {' '.join(str(exc).split())[:300]}"
-    wall = time.perf_counter() - t0
+    wall, cpu = time.perf_counter() - t0, time.process_time() - c0
     step_wall = np.diff(np.array(times)) if len(times) > 1 else np.zeros(0)
-    return Outcome(spec, est, wall, max(len(times) - 1, 0), step_wall, error, res)
+    return Outcome(spec, est, wall, max(len(times) - 1, 0), step_wall, error, res, cpu)
 
 
 def sightings(stream: Stream) -> dict[int, int]:
@@ -189,7 +192,7 @@ def summarise(outcomes: Sequence[Outcome], stream: Stream
             "method": o.spec.label, "registered": o.spec.method, "options": o.spec.options,
             "ok": o.error is None, "error": o.error,
             "landmarks": len(o.estimate) if o.estimate is not None else 0,
-            "wall_s": o.wall_s, "steps_done": o.steps_done, "steps": n_steps,
+            "wall_s": o.wall_s, "cpu_s": o.cpu_s, "steps_done": o.steps_done, "steps": n_steps,
             "ms_per_step_first_10pct": 1e3 * float(np.mean(o.step_wall_s[:tenth]))
             if len(o.step_wall_s) else None,
             "ms_per_step_last_10pct": 1e3 * float(np.mean(o.step_wall_s[-tenth:]))
@@ -240,7 +243,7 @@ def victoria_maps(stream: Stream, specs: Iterable[Arm], out_dir: str | Path, *,
                                    max_seconds=max_seconds))
         if progress is not None:
             o = outcomes[-1]
-            progress(f"{s.label}: {o.wall_s:.1f} s, "
+            progress(f"{s.label}: {o.wall_s:.1f} s ({o.cpu_s:.1f} s CPU), "
                      f"{len(o.estimate) if o.estimate is not None else 0} landmarks"
                      f"{', ' + o.error if o.error else ''}")
     rows, alignments = summarise(outcomes, stream)
@@ -288,7 +291,7 @@ def victoria_maps(stream: Stream, specs: Iterable[Arm], out_dir: str | Path, *,
     csv_path = out / "victoria_park.csv"
     cols = ["method", "ok", "landmarks", "n_common", "rms_m", "mean_m", "median_m", "max_m",
             "traj_mean_m", "reflected", "bearing_rms_rad", "bearing_median_abs_rad",
-            "n_bearings_explained", "wall_s", "steps_done", "ms_per_step_first_10pct",
+            "n_bearings_explained", "wall_s", "cpu_s", "steps_done", "ms_per_step_first_10pct",
             "ms_per_step_last_10pct", "error", "agreement_note"]
     write_csv(csv_path, [{c: r.get(c) for c in cols} for r in rows], cols)
     return {"rows": rows, "meta": meta, "figure": fig_path, "json": json_path,
@@ -305,7 +308,7 @@ def format_table(rows: Sequence[dict[str, Any]]) -> str:
              "reflection allowed); brg rms: RMS bearing residual [rad] of the method's own "
              "map and trajectory over the bearings they cover",
              f"{'method':<18} {'lm':>4} {'common':>6} {'RMS m':>7} {'mean m':>7} {'max m':>7} "
-             f"{'traj m':>7} {'brg rms':>7} {'wall s':>8} {'ms/step first/last 10%':>23}  "
+             f"{'traj m':>7} {'brg rms':>7} {'wall s':>8} {'cpu s':>8} {'ms/step first/last 10%':>23}  "
              f"failure / note"]
     for r in rows:
         ms = (f"{f(r['ms_per_step_first_10pct'], '.2f')}/"
@@ -318,7 +321,7 @@ def format_table(rows: Sequence[dict[str, Any]]) -> str:
                      f"{f(r.get('rms_m'), '.3f'):>7} {f(r.get('mean_m'), '.3f'):>7} "
                      f"{f(r.get('max_m'), '.3f'):>7} {f(r.get('traj_mean_m'), '.3f'):>7} "
                      f"{f(r.get('bearing_rms_rad'), '.4f'):>7} "
-                     f"{r['wall_s']:>8.1f} {ms:>23}  {note}")
+                     f"{r['wall_s']:>8.1f} {f(r.get('cpu_s'), '.1f'):>8} {ms:>23}  {note}")
     return "\n".join(lines)
 
 

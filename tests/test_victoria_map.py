@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import csv
 import json
+import math
 from pathlib import Path
 
 import numpy as np
@@ -100,6 +101,17 @@ def test_files_are_written(result):
     assert [r["method"] for r in got] == ["gtsam-batch", "gtsam-isam2", "triangulate",
                                           "stmds-smacof"]
     assert got[3]["ok"] == "False" and "no known pair" in got[3]["error"]
+
+
+def test_each_row_has_its_cpu_time_beside_its_wall_time(result):
+    # the wall time alone says little on a shared machine; the rows, CSV and table carry both
+    vm, _, res = result
+    rows = {r["method"]: r for r in res["rows"]}
+    assert all(math.isfinite(r["cpu_s"]) and r["cpu_s"] >= 0 for r in res["rows"])
+    assert rows["gtsam-batch"]["cpu_s"] > 0
+    with open(res["csv"], newline="") as fh:
+        assert all(float(r["cpu_s"]) >= 0 for r in csv.DictReader(fh))
+    assert "cpu s" in vm.format_table(res["rows"]).splitlines()[1]
 
 
 def test_time_budget_stops_a_method_and_says_where(result):
