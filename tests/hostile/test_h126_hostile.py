@@ -8,6 +8,7 @@ import json
 import os
 from pathlib import Path
 
+import numpy as np
 import pytest
 from hostile_helpers import HEADER, bomgraph, one_error, write_jsonl
 
@@ -92,3 +93,33 @@ def test_plot_refuses_a_map_too_far_out_to_draw(tmp_path: Path, truth: bool) -> 
     proc = bomgraph("plot", est, stream, "--out", tmp_path / "o.png")
     one_error(proc, "e.json: the final map: a point", "beyond the 1e+100 m a plot can draw")
     assert not (tmp_path / "o.png").exists()
+
+
+def test_checkpoints_read_back_share_one_trajectory(tmp_path: Path) -> None:
+    """A version-2 file of n checkpoints each adding one pose (``run --checkpoint-every 1``)
+    was read into n copies of the trajectory so far: n^2/2 poses, 8,000 checkpoints (a 700 kB
+    file) 1.5 GB. Now each checkpoint's trajectory is a read-only view of one buffer."""
+    from bomgraph.estimate_file import read_estimate
+
+    n = 3000
+    path = tmp_path / "e.json"
+    lines = [json.dumps({"format": "bomgraph-estimate", "version": 2, "method": "x",
+                         "checkpoint_every": 1})]
+    lines += [json.dumps({"t": t, "landmarks": [[0, 1.0, 2.0]],
+                          "new_poses": [[t, 0.1 * t, 0.0, 0.0]]}) for t in range(n)]
+    lines.append(json.dumps({"timing_s": {"total": 1.0}}))
+    path.write_text("\n".join(lines) + "\n")
+    est = read_estimate(path)
+    cps = est.checkpoints
+    assert [len(c.estimate.pose_t) for c in cps[:3]] == [1, 2, 3]
+    assert np.array_equal(cps[-1].estimate.pose_t, np.arange(n))
+    assert cps[10].estimate.poses[10, 0] == pytest.approx(1.0)
+    owners = {id(_base(c.estimate.poses)) for c in cps}
+    assert len(owners) < 20, len(owners)   # a few doubling buffers, not one per checkpoint
+    assert not cps[5].estimate.poses.flags.writeable
+
+
+def _base(a: np.ndarray) -> np.ndarray:
+    while a.base is not None and isinstance(a.base, np.ndarray):
+        a = a.base
+    return a
