@@ -18,7 +18,7 @@ import math
 import os
 import signal
 import sys
-from typing import Any, Callable, Sequence
+from typing import Any, Callable, Iterator, Sequence
 
 from .cli_parser import PROGRESS_MIN_STEPS, build_parser
 from .cli_signals import (Terminated, forget_unhandled_interrupt, own_signals, stdout_closed,
@@ -27,8 +27,27 @@ from .errors import BomgraphError, ConfigError
 
 
 def _say(text: str, *, to_stderr: bool = False) -> None:
-    """Print a result line (to stderr when stdout carries data, e.g. ``--out -``)."""
-    print(text, file=sys.stderr if to_stderr else sys.stdout)
+    """Print a result line (to stderr when stdout carries data, e.g. ``--out -``). An error
+    writing stdout (a full disk, ``> /dev/full``) names the standard output: it was
+    reported as "--out FILE: No space left on device", of a FILE written whole (h126)."""
+    if to_stderr:
+        print(text, file=sys.stderr)
+        return
+    with _naming_stdout():
+        print(text)
+
+
+@contextlib.contextmanager
+def _naming_stdout() -> Iterator[None]:
+    """Errors writing ``sys.stdout`` (other than a closed pipe) as one naming it."""
+    try:
+        yield
+    except BrokenPipeError:
+        raise
+    except OSError as exc:
+        from .stdio import OutputPathError  # not at import: it loads numpy
+
+        raise OutputPathError(f"the standard output: {exc.strerror or exc}") from None
 
 
 # --------------------------------------------------------------------------------------------
@@ -125,7 +144,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     with input_path(args.estimate) as estimate, input_path(args.stream) as stream:
         ev = evaluate_files(estimate, stream, with_scale=args.similarity, align_on=args.align,
                             delta=args.delta, reference_path=args.reference)
-    print(format_evaluation(ev, "json" if args.json else args.format))
+    _say(format_evaluation(ev, "json" if args.json else args.format))
     return 0
 
 
@@ -141,7 +160,7 @@ def cmd_plot(args: argparse.Namespace) -> int:
         if not (args.estimate and args.stream):
             raise ConfigError("plot needs EST STREAM, or --results DIR")
         path = plot_run(args.estimate, args.stream, args.out, t=args.t, align_on=args.align)
-    print(f"wrote {path}")
+    _say(f"wrote {path}")
     return 0
 
 
@@ -204,9 +223,9 @@ def cmd_methods(args: argparse.Namespace) -> int:
     if args.name is None:
         rows = [method_listing(i) for i in available_methods()]
         if args.json:
-            print(json.dumps(jsonable(options_to_json(rows))))  # presets' infinities kept
+            _say(json.dumps(jsonable(options_to_json(rows))))  # presets' infinities kept
             return 0
-        print(format_method_list(rows))
+        _say(format_method_list(rows))
         return 0
     from .config import describe_options
 
@@ -214,25 +233,25 @@ def cmd_methods(args: argparse.Namespace) -> int:
     cls = method_config_class(args.name)
     options = describe_options(cls) if cls is not None else factory_options(args.name)
     if args.json:
-        print(json.dumps(jsonable(options_to_json({  # an infinite default as "Infinity"
+        _say(json.dumps(jsonable(options_to_json({  # an infinite default as "Infinity"
             **r, "config": cls.__name__ if cls else None,
             "options": [o._asdict() for o in options]}))))
         return 0
-    print(f"{r['name']}: {r['description']}")
+    _say(f"{r['name']}: {r['description']}")
     if r["origin"] == "plugin":
-        print(f"  plugin {method_info(args.name).target} from {r['distribution']} {r['version']}")
+        _say(f"  plugin {method_info(args.name).target} from {r['distribution']} {r['version']}")
     where = cls.__name__ if cls is not None else "the factory's keyword parameters"
-    print(f"\noptions ({where}; --option KEY=VALUE):" if options else "\noptions: none")
+    _say(f"\noptions ({where}; --option KEY=VALUE):" if options else "\noptions: none")
     width = max(len(o.name) for o in options) if options else 0
     for o in options:
-        print(f"  {o.name:{width}s}  {o.type}, default {o.default!r}"
+        _say(f"  {o.name:{width}s}  {o.type}, default {o.default!r}"
               + (f": {o.doc}" if o.doc else ""))
     if not r["presets"]:
-        print(f"\n{no_presets_line(args.name)}")
+        _say(f"\n{no_presets_line(args.name)}")
         return 0
-    print("\npresets (NAME@PRESET, or --option preset=PRESET):")
+    _say("\npresets (NAME@PRESET, or --option preset=PRESET):")
     for name, overrides in r["presets"].items():
-        print(f"  {name}: {preset_summary(overrides, 1000)}")
+        _say(f"  {name}: {preset_summary(overrides, 1000)}")
     return 0
 
 
@@ -295,12 +314,12 @@ def _compare(args: argparse.Namespace, seen: dict[str, int]) -> int:
     finally:
         if bar is not None:
             bar.close()
-    print(format_summary(result.summary))
+    _say(format_summary(result.summary))
     if result.paired and not getattr(args, "quiet", False):
-        print(format_paired(result.paired))
+        _say(format_paired(result.paired))
     recorded = {e.name for e in chosen if not e.designed}
     if recorded:
-        print(format_by_run(final_by_run([r for r in result.results
+        _say(format_by_run(final_by_run([r for r in result.results
                                           if r["experiment"] in recorded])))
     est = [f for f in result.files if f.endswith(".est")]
     streams = [f for f in result.files if f.endswith(".jsonl")]
@@ -311,7 +330,7 @@ def _compare(args: argparse.Namespace, seen: dict[str, int]) -> int:
         wrote.append(f"{len(streams)} stream files under {os.path.join(args.out, 'streams')}")
     cache = f" ({result.n_cached} from the cache)" if result.n_cached else ""
     n = len(result.results)
-    print(f"\n{n} run{'' if n == 1 else 's'} in {result.wall_s:.1f} s{cache}; wrote "
+    _say(f"\n{n} run{'' if n == 1 else 's'} in {result.wall_s:.1f} s{cache}; wrote "
           f"{', '.join(wrote)}")
     bad = [r["error"] for r in result.results if not r.get("ok") and str(
         r.get("error", "")).startswith(("StreamFormatError: ", "DatasetError: "))]
@@ -337,9 +356,9 @@ def _print_plan(rows: list[dict[str, Any]], out: str) -> int:
         groups.setdefault((r["experiment"], r["arm"]), []).append(r["cached"])
     width = max([len(a) for _, a in groups] + [3])
     for (exp, arm), cached in groups.items():
-        print(f"{exp:12s} {arm:{width}s} {len(cached):6d} runs, {sum(cached):6d} cached")
+        _say(f"{exp:12s} {arm:{width}s} {len(cached):6d} runs, {sum(cached):6d} cached")
     done = sum(r["cached"] for r in rows)
-    print(f"\n{len(rows)} runs: {len(rows) - done} to run, {done} in "
+    _say(f"\n{len(rows)} runs: {len(rows) - done} to run, {done} in "
           f"{os.path.join(out, 'cache')}; nothing was run or written (--dry-run)")
     return 0
 
@@ -458,7 +477,7 @@ def _main(argv: Sequence[str] | None) -> int:
     except BrokenPipeError:  # `bomgraph --help | head -1`
         return stdout_closed()
     except OSError as exc:  # `bomgraph --help > /dev/full`: as a command's output error
-        print(f"bomgraph: error: {exc}", file=sys.stderr)
+        print(f"bomgraph: error: the standard output: {exc.strerror or exc}", file=sys.stderr)
         return 2
     from .checks import command_line
     from .log_setup import configure_logging
@@ -469,7 +488,8 @@ def _main(argv: Sequence[str] | None) -> int:
         with command_line():   # refusals name the options (--out), not the library's names
             status = func(args)
         if sys.stdout is not None:  # None: closed by the shell (>&-)
-            sys.stdout.flush()
+            with _naming_stdout():
+                sys.stdout.flush()
         return status
     except BrokenPipeError:
         return stdout_closed()

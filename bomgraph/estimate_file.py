@@ -216,7 +216,59 @@ def _check_cov(cov: np.ndarray, key: str, ctx: _Line) -> None:
         raise ctx.error(f"{key}[{bad[0]}]", bad[1])
 
 
-def _parse_checkpoint_v2(obj: dict, ctx: _Line, prev: MapEstimate | None
+class _Trajectory:
+    """The poses a version-2 file has given so far, in buffers grown by doubling: each
+    checkpoint's trajectory is a read-only prefix view of them, not a copy. Each checkpoint
+    held a copy of the whole trajectory before (h126): a file of n checkpoints adding one
+    pose each (``run --checkpoint-every 1``) held n^2/2 poses, 8,000 checkpoints (a 700 kB
+    file) 1.5 GB."""
+
+    def __init__(self) -> None:
+        self.started = False   # a checkpoint gave poses (perhaps none): not None from then on
+        self._restart()
+
+    def _restart(self) -> None:  # new buffers: earlier checkpoints' views keep the old ones
+        self.n = 0
+        self.t = np.zeros(0, np.int64)
+        self.poses = np.zeros((0, 3))
+        self.cov: np.ndarray | None = np.zeros((0, 3, 3))  # None once a segment has none
+
+    def last_t(self) -> int | None:
+        return int(self.t[self.n - 1]) if self.n else None
+
+    def extend(self, t: np.ndarray, poses: np.ndarray, cov: np.ndarray | None,
+               restart: bool) -> None:
+        if restart:
+            self._restart()
+        self.started = True
+        k = self.n + len(t)
+        if k > len(self.t):   # new buffers; the old stay alive only as earlier views
+            size = max(k, 2 * len(self.t), 16)
+            self.t = _grown(self.t, self.n, size)
+            self.poses = _grown(self.poses, self.n, size)
+            self.cov = None if self.cov is None else _grown(self.cov, self.n, size)
+        self.t[self.n:k], self.poses[self.n:k] = t, poses
+        if cov is None:
+            self.cov = None
+        elif self.cov is not None:
+            self.cov[self.n:k] = cov
+        self.n = k
+
+    def views(self) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+        out = [None if a is None else a[:self.n] for a in (self.t, self.poses, self.cov)]
+        for a in out:
+            if a is not None:
+                a.setflags(write=False)
+        return out[0], out[1], out[2]  # type: ignore[return-value]
+
+
+def _grown(a: np.ndarray, n: int, size: int) -> np.ndarray:
+    out = np.empty((size,) + a.shape[1:], a.dtype)
+    out[:n] = a[:n]
+    return out
+
+
+def _parse_checkpoint_v2(obj: dict, ctx: _Line, traj: _Trajectory
                          ) -> tuple[int, MapEstimate, float]:
     unknown = sorted(set(obj) - _LINE_KEYS_V2)
     if unknown:
@@ -242,10 +294,10 @@ def _parse_checkpoint_v2(obj: dict, ctx: _Line, prev: MapEstimate | None
     for cov_key, pose_key in (("pose_cov", "poses"), ("new_pose_cov", "new_poses")):
         if cov_key in obj and pose_key not in obj:
             raise ctx.error(cov_key, f"given without {pose_key}")
-    pose_t = poses = pcov = None
     key = "poses" if "poses" in obj else "new_poses" if "new_poses" in obj else None
     if key is not None:
         pose_t, poses = _rows(obj[key], 4, key, ctx, "[t, x_m, y_m, psi_rad]", int_first=True)
+        pcov = None
         ck = key.replace("poses", "pose_cov")
         if ck in obj:
             _, pc = _rows(obj[ck], 9, ck, ctx, "9 numbers (row-major 3x3) or null",
@@ -254,26 +306,27 @@ def _parse_checkpoint_v2(obj: dict, ctx: _Line, prev: MapEstimate | None
                 raise ctx.error(ck, f"{len(pc)} covariances for {len(pose_t)} poses")
             pcov = pc.reshape(-1, 3, 3)
             _check_cov(pcov, ck, ctx)
-        if key == "new_poses" and prev is not None and prev.pose_t is not None:
-            if len(pose_t) and len(prev.pose_t) and pose_t.min() <= prev.pose_t.max():
-                raise ctx.error(key, f"new poses must come after the previous checkpoint's "
-                                     f"last pose t = {int(prev.pose_t.max())}")
-            pcov = (np.concatenate([prev.pose_cov, pcov])
-                    if pcov is not None and prev.pose_cov is not None else None)
-            pose_t = np.concatenate([prev.pose_t, pose_t])
-            poses = np.concatenate([prev.poses, poses])
-        if len(set(pose_t.tolist())) != len(pose_t):
+        last = traj.last_t() if key == "new_poses" else None
+        if last is not None and len(pose_t) and pose_t.min() <= last:
+            raise ctx.error(key, f"new poses must come after the previous checkpoint's "
+                                 f"last pose t = {last}")
+        if len(set(pose_t.tolist())) != len(pose_t):  # with the above: none in the whole
             raise ctx.error(key, "a step t appears twice")
-    elif prev is not None and prev.pose_t is not None:   # no new poses: the trajectory so far
-        pose_t, poses, pcov = prev.pose_t, prev.poses, prev.pose_cov
+        if len(poses):
+            MapEstimate(np.zeros(0, np.int64), np.zeros((0, 2)), pose_t=pose_t,  # its checks
+                        poses=poses[:, :3], pose_cov=pcov)
+        traj.extend(pose_t, poses, pcov, restart=key == "poses")
     info = obj.get("info", {})
     if not isinstance(info, dict):
         raise ctx.error("info", "must be an object")
     est_s = obj.get("estimate_s", 0.0)
     if not is_num(est_s):
         raise ctx.error("estimate_s", "must be a number (seconds)")
-    return obj["t"], MapEstimate(ids, xy, pose_t=pose_t, poses=poses, landmark_cov=lcov,
-                                 pose_cov=pcov, info=info), float(est_s)
+    est = MapEstimate(ids, xy, landmark_cov=lcov, info=info)
+    if traj.started:  # the trajectory so far, as views (no copy, no re-check)
+        for name, view in zip(("pose_t", "poses", "pose_cov"), traj.views()):
+            object.__setattr__(est, name, view)
+    return obj["t"], est, float(est_s)
 
 
 def _parse_header_v2(obj: dict, ctx: _Line) -> tuple[str, StreamIdentity | None, Any]:
@@ -307,7 +360,7 @@ def _parse_header_v2(obj: dict, ctx: _Line) -> tuple[str, StreamIdentity | None,
 def _read_v2(fh: IO[bytes], header: dict, path: str) -> EstimateFile:
     method, ident, options = _parse_header_v2(header, _Line(path, 1))
     cps: list[Checkpoint] = []
-    prev: MapEstimate | None = None
+    traj = _Trajectory()
     timing: dict[str, float] | None = None
     line_no = 1
     last_has_poses = False
@@ -327,11 +380,10 @@ def _read_v2(fh: IO[bytes], header: dict, path: str) -> EstimateFile:
                 raise ctx.error("timing_s", "the last line is {\"timing_s\": {name: seconds}}")
             timing = {k: float(v) for k, v in obj["timing_s"].items()}
             continue
-        t, est, est_s = _parse_checkpoint_v2(obj, ctx, prev)
+        t, est, est_s = _parse_checkpoint_v2(obj, ctx, traj)
         if cps and t <= cps[-1].t:
             raise ctx.error("t", f"checkpoints must be in increasing t ({t} after {cps[-1].t})")
         cps.append(Checkpoint(t, est, est_s))
-        prev = est
         last_has_poses = "poses" in obj or "new_poses" in obj
     if timing is None:
         raise StreamFormatError("ends before the timing_s line (truncated?)", path=path,

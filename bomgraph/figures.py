@@ -59,6 +59,7 @@ def plot_run(estimate_path: str | os.PathLike[str], stream_path: str | os.PathLi
             raise EvaluationError(f"{estimate_path}: no checkpoint at t = {t}; it has "
                                   f"{', '.join(map(str, sorted(cps))) or 'none'}")
         est, at = cps[t].estimate, f"t = {t}"
+    which = "the final map" if t is None else f"the map at {at}"
     # an earlier checkpoint of a method that revised its poses: its trajectory read back is
     # each pose as first estimated, not the method's at t (file_evaluation.poses_revised)
     first = (t is not None and t != est_file.checkpoints[-1].t and est_file.version >= 2
@@ -66,6 +67,7 @@ def plot_run(estimate_path: str | os.PathLike[str], stream_path: str | os.PathLi
     truth = stream.truth
     label = method_label(est_file) or "estimate"
     if truth is None:
+        _refuse_overflow(est, None, None, f"{estimate_path}: {which}", "")
         fig = run_figure(None, est, None, label=label, landmark_cov=est.landmark_cov,
                          title=f"{label}, {at} (no truth: the estimate's own frame)")
         return write_figure(fig, path, dpi)
@@ -77,8 +79,9 @@ def plot_run(estimate_path: str | os.PathLike[str], stream_path: str | os.PathLi
     try:
         s = score_estimate(est, truth, align_on=align_on)
     except EvaluationError as exc:  # say which file and map, as evaluate does
-        which = "the final map" if t is None else f"the map at {at}"
         raise type(exc)(f"{estimate_path}: {which}: {exc}") from None
+    _refuse_overflow(est, s.alignment, truth, f"{estimate_path}: {which}",
+                     f"{stream_path}, line 1: 'truth'")
     if truth.poses is not None and t is not None:
         truth = type(truth)(truth.landmark_ids, truth.landmarks_xy, truth.poses[:t + 1])
     pe = None if s.ape is None or first else (s.ape.t, s.ape.translation_m, s.ape.heading_rad)
@@ -92,6 +95,34 @@ def plot_run(estimate_path: str | os.PathLike[str], stream_path: str | os.PathLi
     fig = run_figure(truth, est, s.alignment, label=label, errors_m=errors, pose_errors=pe,
                      landmark_cov=est.landmark_cov, title=title)
     return write_figure(fig, path, dpi)
+
+
+#: the largest coordinate (metres) ``plot`` draws: matplotlib's limit arithmetic (spans,
+#: aspect ratios) overflows near the float limit, far beyond any map's metres.
+MAX_DRAWN_M = 1e100
+
+
+def _refuse_overflow(est: Any, alignment: Any, truth: Any, est_where: str,
+                     truth_where: str) -> None:
+    """Refuse to draw a map with a point beyond :data:`MAX_DRAWN_M` (the estimate's as
+    aligned onto the truth, or the truth's): an estimate with a coordinate near the float
+    limit (1e308, a diverged method's) made matplotlib raise "Axis limits cannot be NaN or
+    Inf" (a traceback, exit 1; h126)."""
+    drawn = [] if truth is None else [(truth_where, [truth.landmarks_xy[:, :2]] + (
+        [] if truth.poses is None else [truth.poses[:, :2]]), None)]   # first: it places the map
+    drawn.append((est_where, [est.landmarks_xy] + (
+        [] if est.poses is None else [est.poses[:, :2]]), alignment))
+    for where, xy, moved_by in drawn:
+        with np.errstate(over="ignore", invalid="ignore"):
+            pts = np.vstack(xy)
+            far = float(np.max(np.abs(pts if moved_by is None else moved_by.apply(pts)),
+                               initial=0.0))
+        if not far <= MAX_DRAWN_M:  # NaN too
+            aligned = "" if moved_by is None else ", aligned onto the truth,"
+            hint = (" (a diverged estimate? `bomgraph evaluate` scores it)"
+                    if where == est_where else "")
+            raise EvaluationError(f"{where}: a point{aligned} is {far:g} m from the origin, "
+                                  f"beyond the {MAX_DRAWN_M:g} m a plot can draw{hint}")
 
 
 def plot_results(results_dir: str | os.PathLike[str], out: str | os.PathLike[str], *,

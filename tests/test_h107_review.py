@@ -49,7 +49,7 @@ def test_help_and_version_on_a_full_device_fail_as_a_commands_output(
     done = _bash(tmp_path, f"{BOMGRAPH} {args} > /dev/full")
     assert done.returncode == 2, done.stderr[:300]
     assert done.stderr.decode().splitlines() == [
-        "bomgraph: error: [Errno 28] No space left on device"]
+        "bomgraph: error: the standard output: No space left on device"]
 
 
 def test_help_into_a_closed_pipe_or_closed_stdout_stays_quiet(tmp_path: Path) -> None:
