@@ -229,12 +229,15 @@ class _Trajectory:
 
     def _restart(self) -> None:  # new buffers: earlier checkpoints' views keep the old ones
         self.n = 0
+        self.top: int | None = None  # the largest t so far (a trajectory need not be sorted)
         self.t = np.zeros(0, np.int64)
         self.poses = np.zeros((0, 3))
         self.cov: np.ndarray | None = np.zeros((0, 3, 3))  # None once a segment has none
 
     def last_t(self) -> int | None:
-        return int(self.t[self.n - 1]) if self.n else None
+        """The trajectory's largest t, as the writer's ``since_t``: new poses come after it
+        (its last row's t let ``new_poses`` repeat an earlier t of an unsorted one; h133)."""
+        return self.top
 
     def extend(self, t: np.ndarray, poses: np.ndarray, cov: np.ndarray | None,
                restart: bool) -> None:
@@ -248,6 +251,8 @@ class _Trajectory:
             self.poses = _grown(self.poses, self.n, size)
             self.cov = None if self.cov is None else _grown(self.cov, self.n, size)
         self.t[self.n:k], self.poses[self.n:k] = t, poses
+        if len(t):
+            self.top = int(t.max()) if self.top is None else max(self.top, int(t.max()))
         if cov is None:
             self.cov = None
         elif self.cov is not None:
