@@ -97,8 +97,9 @@ def plot_run(estimate_path: str | os.PathLike[str], stream_path: str | os.PathLi
     return write_figure(fig, path, dpi)
 
 
-#: the largest coordinate (metres) ``plot`` draws: matplotlib's limit arithmetic (spans,
-#: aspect ratios) overflows near the float limit, far beyond any map's metres.
+#: the largest coordinate (metres) ``plot`` accepts: a round bound, not a measured limit
+#: (matplotlib drew 1e307 and failed at 1e308, where its span arithmetic overflows; h133),
+#: far beyond any map's metres.
 MAX_DRAWN_M = 1e100
 
 
@@ -122,7 +123,7 @@ def _refuse_overflow(est: Any, alignment: Any, truth: Any, est_where: str,
             hint = (" (a diverged estimate? `bomgraph evaluate` scores it)"
                     if where == est_where else "")
             raise EvaluationError(f"{where}: a point{aligned} is {far:g} m from the origin, "
-                                  f"beyond the {MAX_DRAWN_M:g} m a plot can draw{hint}")
+                                  f"beyond the {MAX_DRAWN_M:g} m plot accepts{hint}")
 
 
 def plot_results(results_dir: str | os.PathLike[str], out: str | os.PathLike[str], *,
