@@ -45,6 +45,12 @@ LOCAL_SCHEDULER_HTTP = {"dashboard_address": "127.0.0.1:0"}
 #: SIGKILL is removed by the next (:func:`bomgraph.owned_folders.remove_stale`).
 SCRATCH_PREFIX = "bomgraph-dask-"
 
+#: Starts of the local cluster before its runs fail (:func:`start_failure`): Dask closes the
+#: whole cluster when one worker dies as it starts, and one killed once (the out-of-memory
+#: killer, a kill) failed every run where ``--jobs N`` tries a pool whose workers died
+#: before any task once more (h130).
+START_TRIES = 2
+
 
 #: How to see the warnings of a run whose worker died: a worker keeps them for its result
 #: (:mod:`bomgraph.worker_log`), so they end with it; run serially, they reach stderr at once.
@@ -131,16 +137,17 @@ def worker_failure(exc: BaseException) -> str:
 
 
 def start_failure(exc: BaseException) -> str:
-    """A failed run's error when the local cluster could not start: one of its workers died
-    as it started (h124: a worker killed then, or ended by a sitecustomize, was Dask's
-    ``RuntimeError: Nanny failed to start.`` traceback out of ``compare``, exit 1)."""
+    """A failed run's error when the local cluster could not start, :data:`START_TRIES` times
+    in a row: one of its workers died as it started (h124: a worker killed then, or ended by
+    a sitecustomize, was Dask's ``RuntimeError: Nanny failed to start.`` traceback out of
+    ``compare``, exit 1). ``exc``: the last start's error."""
     causes = []
     while exc is not None and len(causes) < 3:
         first = (str(exc).splitlines() or [""])[0].strip()
         causes.append(f"{type(exc).__name__}: {first}" if first else type(exc).__name__)
         exc = exc.__cause__ or exc.__context__
-    return (f"WorkerDied: the local Dask cluster's workers could not start ({'; '.join(causes)}"
-            f"): something at their start kills them (a sitecustomize or .pth file, a memory "
+    return (f"WorkerDied: the local Dask cluster's workers could not start, {START_TRIES} "
+            f"times in a row ({'; '.join(causes)}): something at their start kills them (a sitecustomize or .pth file, a memory "
             f"limit, the out-of-memory killer, a kill); fix that, or run in local processes "
             f"(--jobs N, without --dask-local); finished runs are cached")
 
@@ -264,17 +271,20 @@ def _dispatch(func: Callable[[int, Any], tuple[int, dict[str, Any]]], index: Seq
         else:
             folder = scratch.enter_context(owned_folder(SCRATCH_PREFIX))
             not_started: Exception | None = None
-            with _workers_hold_signals():
-                try:
-                    cluster = LocalCluster(n_workers=n_local, threads_per_worker=1,
-                                           processes=True, host="127.0.0.1",
-                                           dashboard_address=None, local_directory=folder,
-                                           scheduler_kwargs={**LOCAL_SCHEDULER_HTTP,
-                                                             "local_directory": folder})
-                except Exception as exc:  # a worker died as it started; Dask closed the rest
-                    not_started = exc
-            if not_started is not None:
+            for _ in range(START_TRIES):
+                with _workers_hold_signals():
+                    try:
+                        cluster = LocalCluster(n_workers=n_local, threads_per_worker=1,
+                                               processes=True, host="127.0.0.1",
+                                               dashboard_address=None, local_directory=folder,
+                                               scheduler_kwargs={**LOCAL_SCHEDULER_HTTP,
+                                                                 "local_directory": folder})
+                    except Exception as exc:  # a worker died as it started; Dask closed all
+                        not_started = exc
+                if cluster is not None:
+                    break
                 _log.debug("the local Dask cluster did not start", exc_info=not_started)
+            if cluster is None:
                 why = start_failure(not_started)
                 for k in index:
                     yield k, failed(k, why)
