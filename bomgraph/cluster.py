@@ -39,11 +39,44 @@ POLL_S = 5.0
 LOCAL_SCHEDULER_HTTP = {"dashboard_address": "127.0.0.1:0"}
 
 #: The local cluster's scratch space (its scheduler's and workers' folders and locks), a
-#: folder of its own in the temporary folder, removed as the cluster ends: Dask's default,
-#: ``dask-scratch-space`` there, was left behind by every ``--dask-local`` compare (its lock
+#: folder of its own in the temporary folder (Dask's ``temporary-directory`` when set:
+#: :func:`_dask_temp`), removed as the cluster ends: Dask's default, ``dask-scratch-space``
+#: there, was left behind by every ``--dask-local`` compare (its lock
 #: files; SIGTERM: the workers' too; SIGKILL: their folders); one left by a compare ended by
 #: SIGKILL is removed by the next (:func:`bomgraph.owned_folders.remove_stale`).
 SCRATCH_PREFIX = "bomgraph-dask-"
+
+
+def _dask_temp() -> str | None:
+    """Dask's ``temporary-directory`` (``DASK_TEMPORARY_DIRECTORY``: a disk with room where
+    the temporary folder is a small tmpfs), where Dask puts its scratch space, or None: the
+    temporary folder. h130: the local cluster's folder went to the temporary folder always."""
+    import dask.config
+
+    return dask.config.get("temporary-directory", None) or None
+
+
+@contextlib.contextmanager
+def _scratch_folder() -> Iterator[str]:
+    """The local cluster's own folder (:data:`SCRATCH_PREFIX`) for the block.
+
+    Raises
+    ------
+    ConfigError
+        Dask's ``temporary-directory`` is set to where no folder can be made (a file)."""
+    root = _dask_temp()
+    with contextlib.ExitStack() as stack:
+        try:
+            folder = stack.enter_context(owned_folder(SCRATCH_PREFIX, root))
+        except OSError as exc:
+            if root is None:
+                raise
+            raise ConfigError(f"Dask's temporary-directory {root!r} (DASK_TEMPORARY_DIRECTORY, "
+                              f"or temporary-directory in Dask's configuration): no folder "
+                              f"can be made there ({exc.strerror or exc}); give a folder you "
+                              f"can write to") from None
+        yield folder
+
 
 #: Starts of the local cluster before its runs fail (:func:`start_failure`): Dask closes the
 #: whole cluster when one worker dies as it starts, and one killed once (the out-of-memory
@@ -269,7 +302,7 @@ def _dispatch(func: Callable[[int, Any], tuple[int, dict[str, Any]]], index: Seq
                              "(start `dask worker %s`)", scheduler, scheduler)
             client = Client(scheduler, timeout=connect_timeout())
         else:
-            folder = scratch.enter_context(owned_folder(SCRATCH_PREFIX))
+            folder = scratch.enter_context(_scratch_folder())
             not_started: Exception | None = None
             for _ in range(START_TRIES):
                 with _workers_hold_signals():
