@@ -39,11 +39,50 @@ POLL_S = 5.0
 LOCAL_SCHEDULER_HTTP = {"dashboard_address": "127.0.0.1:0"}
 
 #: The local cluster's scratch space (its scheduler's and workers' folders and locks), a
-#: folder of its own in the temporary folder, removed as the cluster ends: Dask's default,
-#: ``dask-scratch-space`` there, was left behind by every ``--dask-local`` compare (its lock
+#: folder of its own in the temporary folder (Dask's ``temporary-directory`` when set:
+#: :func:`_dask_temp`), removed as the cluster ends: Dask's default, ``dask-scratch-space``
+#: there, was left behind by every ``--dask-local`` compare (its lock
 #: files; SIGTERM: the workers' too; SIGKILL: their folders); one left by a compare ended by
 #: SIGKILL is removed by the next (:func:`bomgraph.owned_folders.remove_stale`).
 SCRATCH_PREFIX = "bomgraph-dask-"
+
+
+def _dask_temp() -> str | None:
+    """Dask's ``temporary-directory`` (``DASK_TEMPORARY_DIRECTORY``: a disk with room where
+    the temporary folder is a small tmpfs), where Dask puts its scratch space, or None: the
+    temporary folder. h130: the local cluster's folder went to the temporary folder always."""
+    import dask.config
+
+    return dask.config.get("temporary-directory", None) or None
+
+
+@contextlib.contextmanager
+def _scratch_folder() -> Iterator[str]:
+    """The local cluster's own folder (:data:`SCRATCH_PREFIX`) for the block.
+
+    Raises
+    ------
+    ConfigError
+        Dask's ``temporary-directory`` is set to where no folder can be made (a file)."""
+    root = _dask_temp()
+    with contextlib.ExitStack() as stack:
+        try:
+            folder = stack.enter_context(owned_folder(SCRATCH_PREFIX, root))
+        except OSError as exc:
+            if root is None:
+                raise
+            raise ConfigError(f"Dask's temporary-directory {root!r} (DASK_TEMPORARY_DIRECTORY, "
+                              f"or temporary-directory in Dask's configuration): no folder "
+                              f"can be made there ({exc.strerror or exc}); give a folder you "
+                              f"can write to") from None
+        yield folder
+
+
+#: Starts of the local cluster before its runs fail (:func:`start_failure`): Dask closes the
+#: whole cluster when one worker dies as it starts, and one killed once (the out-of-memory
+#: killer, a kill) failed every run where ``--jobs N`` tries a pool whose workers died
+#: before any task once more (h130).
+START_TRIES = 2
 
 
 #: How to see the warnings of a run whose worker died: a worker keeps them for its result
@@ -131,16 +170,17 @@ def worker_failure(exc: BaseException) -> str:
 
 
 def start_failure(exc: BaseException) -> str:
-    """A failed run's error when the local cluster could not start: one of its workers died
-    as it started (h124: a worker killed then, or ended by a sitecustomize, was Dask's
-    ``RuntimeError: Nanny failed to start.`` traceback out of ``compare``, exit 1)."""
+    """A failed run's error when the local cluster could not start, :data:`START_TRIES` times
+    in a row: one of its workers died as it started (h124: a worker killed then, or ended by
+    a sitecustomize, was Dask's ``RuntimeError: Nanny failed to start.`` traceback out of
+    ``compare``, exit 1). ``exc``: the last start's error."""
     causes = []
     while exc is not None and len(causes) < 3:
         first = (str(exc).splitlines() or [""])[0].strip()
         causes.append(f"{type(exc).__name__}: {first}" if first else type(exc).__name__)
         exc = exc.__cause__ or exc.__context__
-    return (f"WorkerDied: the local Dask cluster's workers could not start ({'; '.join(causes)}"
-            f"): something at their start kills them (a sitecustomize or .pth file, a memory "
+    return (f"WorkerDied: the local Dask cluster's workers could not start, {START_TRIES} "
+            f"times in a row ({'; '.join(causes)}): something at their start kills them (a sitecustomize or .pth file, a memory "
             f"limit, the out-of-memory killer, a kill); fix that, or run in local processes "
             f"(--jobs N, without --dask-local); finished runs are cached")
 
@@ -262,19 +302,22 @@ def _dispatch(func: Callable[[int, Any], tuple[int, dict[str, Any]]], index: Seq
                              "(start `dask worker %s`)", scheduler, scheduler)
             client = Client(scheduler, timeout=connect_timeout())
         else:
-            folder = scratch.enter_context(owned_folder(SCRATCH_PREFIX))
+            folder = scratch.enter_context(_scratch_folder())
             not_started: Exception | None = None
-            with _workers_hold_signals():
-                try:
-                    cluster = LocalCluster(n_workers=n_local, threads_per_worker=1,
-                                           processes=True, host="127.0.0.1",
-                                           dashboard_address=None, local_directory=folder,
-                                           scheduler_kwargs={**LOCAL_SCHEDULER_HTTP,
-                                                             "local_directory": folder})
-                except Exception as exc:  # a worker died as it started; Dask closed the rest
-                    not_started = exc
-            if not_started is not None:
+            for _ in range(START_TRIES):
+                with _workers_hold_signals():
+                    try:
+                        cluster = LocalCluster(n_workers=n_local, threads_per_worker=1,
+                                               processes=True, host="127.0.0.1",
+                                               dashboard_address=None, local_directory=folder,
+                                               scheduler_kwargs={**LOCAL_SCHEDULER_HTTP,
+                                                                 "local_directory": folder})
+                    except Exception as exc:  # a worker died as it started; Dask closed all
+                        not_started = exc
+                if cluster is not None:
+                    break
                 _log.debug("the local Dask cluster did not start", exc_info=not_started)
+            if cluster is None:
                 why = start_failure(not_started)
                 for k in index:
                     yield k, failed(k, why)

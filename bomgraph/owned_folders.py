@@ -23,12 +23,17 @@ OWNER = "owner.json"
 
 
 @contextlib.contextmanager
-def owned_folder(prefix: str) -> Iterator[str]:
-    """A new folder ``PREFIX*`` in the temporary folder for the block, with its :data:`OWNER`
-    file; removed with all in it when the block ends (also on an exception: Ctrl-C, SIGTERM
-    made one). The stale folders of this ``prefix`` are removed first (:func:`remove_stale`)."""
-    remove_stale(prefix)
-    with tempfile.TemporaryDirectory(prefix=prefix, ignore_cleanup_errors=True) as path:
+def owned_folder(prefix: str, root: str | None = None) -> Iterator[str]:
+    """A new folder ``PREFIX*`` in ``root`` (made if missing; default: the temporary folder)
+    for the block, with its :data:`OWNER` file; removed with all in it when the block ends
+    (also on an exception: Ctrl-C, SIGTERM made one). The stale folders of this ``prefix``
+    there are removed first (:func:`remove_stale`)."""
+    if root is not None:
+        root = os.path.abspath(root)
+        os.makedirs(root, exist_ok=True)
+    remove_stale(prefix, root)
+    with tempfile.TemporaryDirectory(prefix=prefix, dir=root,
+                                     ignore_cleanup_errors=True) as path:
         with open(os.path.join(path, OWNER), "w", encoding="utf-8") as fh:
             json.dump(owner(), fh)
         yield path
@@ -49,8 +54,9 @@ def owner() -> dict[str, Any]:
             "boot_id": boot}
 
 
-def remove_stale(prefix: str) -> None:
-    """Remove the folders ``PREFIX*`` in the temporary folder that a process ended by SIGKILL
+def remove_stale(prefix: str, root: str | None = None) -> None:
+    """Remove the folders ``PREFIX*`` in ``root`` (default: the temporary folder) that a
+    process ended by SIGKILL
     (or a power cut) left: only those of this user whose :data:`OWNER` file names a process
     of this host, kernel boot and pid namespace that is no longer there. A folder without
     that file (being made, or made by an older bomgraph), of another user, host, machine of
@@ -58,7 +64,7 @@ def remove_stale(prefix: str) -> None:
     alone."""
     me = owner()
     uid = getattr(os, "getuid", lambda: None)()
-    root = tempfile.gettempdir()
+    root = tempfile.gettempdir() if root is None else root
     if me["pid_ns"] is None or me["boot_id"] is None or uid is None:
         return
     try:

@@ -73,3 +73,50 @@ def test_the_folder_of_a_killed_sweep_is_removed_by_the_next_only(temp_root: Pat
     assert out == [(0, {"ok": True, "t": "a"})]
     assert sorted(p.name for p in temp_root.iterdir()) == [
         "bomgraph-dask-live", "bomgraph-dask-no-owner", "dask-scratch-space"]
+
+
+def _where(k: int, t: str) -> tuple[int, dict]:
+    from distributed import get_worker
+
+    return k, {"dir": get_worker().local_directory}
+
+
+def test_the_folder_is_in_dasks_temporary_directory_when_one_is_set(temp_root: Path,
+                                                                     tmp_path: Path) -> None:
+    """Dask's ``temporary-directory`` (``DASK_TEMPORARY_DIRECTORY``: a disk with room, where
+    the temporary folder is a small tmpfs) was set aside: the workers' scratch went to the
+    temporary folder (h130). It is where the folder goes, and a killed sweep's is removed
+    from there."""
+    import dask.config
+
+    chosen = tmp_path / "dask-tmp"
+    chosen.mkdir()
+    gone = subprocess.Popen([sys.executable, "-c", "pass"])
+    gone.wait()
+    dead = chosen / f"{SCRATCH_PREFIX}dead"
+    dead.mkdir()
+    (dead / owned_folders.OWNER).write_text(json.dumps({**owned_folders.owner(),
+                                                        "pid": gone.pid}))
+    with dask.config.set({"temporary-directory": str(chosen)}):
+        out = list(dispatch(_where, [0], ["a"], scheduler=None, n_local=1, failed=_failed))
+    ((_, res),) = out
+    assert Path(res["dir"]).relative_to(chosen).parts[0].startswith(SCRATCH_PREFIX), res
+    assert sorted(p.name for p in chosen.iterdir()) == []
+    assert sorted(p.name for p in temp_root.iterdir()) == []
+
+
+def test_a_dask_temporary_directory_that_is_a_file_is_one_line_naming_it(
+        temp_root: Path, tmp_path: Path) -> None:
+    """Before h124 Dask's "Cluster failed to start: Not a directory" traceback; h124's folder,
+    made there, was "[Errno 17] File exists" naming no setting."""
+    import dask.config
+
+    from bomgraph.errors import ConfigError
+
+    afile = tmp_path / "afile"
+    afile.write_text("")
+    with dask.config.set({"temporary-directory": str(afile)}):
+        with pytest.raises(ConfigError, match=r"^Dask's temporary-directory '.*afile' "
+                                              r"\(DASK_TEMPORARY_DIRECTORY"):
+            list(dispatch(_task, [0], ["a"], scheduler=None, n_local=1, failed=_failed))
+    assert sorted(p.name for p in temp_root.iterdir()) == []
