@@ -180,6 +180,9 @@ class Isam2Mapper(WindowLongMode):
     on the whole graph, each kept only if it lowers the error, so the map at step ``T``
     does not depend on how often it was asked for. ``info["converged"]`` says whether the
     last Gauss-Newton step predicted a decrease of at most ``decrease_tol`` and was finite.
+    After each scheduled update the whole graph is checked the same way, and where the check
+    fails it is solved by Levenberg-Marquardt and iSAM2 rebuilt there
+    (:meth:`_restart_if_stuck`, ``info["lm_restarts"]``).
     Past ``long_after_steps`` the mapper runs in long mode (:class:`Isam2Config`; bounded
     work per update, no whole-graph polish per estimate, ``info["mode"] = "isam2-long"``
     and ``info["checked_at_step"]``, the step of the whole-graph check it reports; with the
