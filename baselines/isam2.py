@@ -180,7 +180,7 @@ class Isam2Mapper(WindowLongMode):
     on the whole graph, each kept only if it lowers the error, so the map at step ``T``
     does not depend on how often it was asked for. ``info["converged"]`` says whether the
     last Gauss-Newton step predicted a decrease of at most ``decrease_tol`` and was finite.
-    After each scheduled update the whole graph is checked the same way, and where the check
+    After each update the whole graph is checked the same way, and where the check
     fails it is solved by Levenberg-Marquardt and iSAM2 rebuilt there
     (:meth:`_restart_if_stuck`, ``info["lm_restarts"]``).
     Past ``long_after_steps`` the mapper runs in long mode (:class:`Isam2Config`; bounded
@@ -364,7 +364,7 @@ class Isam2Mapper(WindowLongMode):
             elif (extra and not self._long and self.config.long_after_steps is not None
                   and self.problem.n_steps >= self.config.long_after_steps):
                 self._go_long()
-            elif extra and not self._long:
+            elif not self._long:
                 self._restart_if_stuck()
             return
         except GTSAM_ERRORS as exc:
@@ -438,7 +438,7 @@ class Isam2Mapper(WindowLongMode):
 
     def _restart_if_stuck(self) -> dict[str, Any]:
         """The whole-graph Gauss-Newton check (no step taken) of :meth:`_check_long`, also run
-        at each scheduled update in the normal mode: where it fails, Levenberg-Marquardt from
+        after every update in the normal mode: where it fails, Levenberg-Marquardt from
         the estimate and iSAM2 rebuilt there if LM lowered the error (``info["lm_restarts"]``).
         Without it a short recording's iSAM2 that left the minimum's basin never came back
         (MRCLAM6 robot 3 keyframed at 0.5 m / 0.5 rad: the error grew from 14 to 2,742 over
@@ -507,10 +507,15 @@ class Isam2Mapper(WindowLongMode):
         In long mode the buffered steps go to the solver and the whole graph is polished and
         checked once more, Levenberg-Marquardt if the check fails (:meth:`_check_window`,
         :meth:`_check_long`), unless that was just done at this step: the final map is then
-        the checked one (``info["converged"]`` True or False, never None). Otherwise nothing:
-        :meth:`estimate` polishes the whole graph with the buffered steps itself."""
+        the checked one (``info["converged"]`` True or False, never None). In the normal mode
+        the buffered steps go to the solver too, which checks the whole graph after every
+        update (:meth:`_restart_if_stuck`); :meth:`estimate` then polishes the result."""
         n = self.problem.n_steps
-        if not self._long or self._batch or n == 0:
+        if self._batch or n == 0:
+            return
+        if not self._long:   # the buffered steps in, and the whole graph checked (_flush)
+            if self._buffer.size() or self._buffer_values.size() or self._external.size():
+                self._flush(extra=True)
             return
         if self._buffer.size() or self._buffer_values.size() or self._external.size():
             self._flush(extra=True)
