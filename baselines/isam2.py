@@ -180,9 +180,8 @@ class Isam2Mapper(WindowLongMode):
     on the whole graph, each kept only if it lowers the error, so the map at step ``T``
     does not depend on how often it was asked for. ``info["converged"]`` says whether the
     last Gauss-Newton step predicted a decrease of at most ``decrease_tol`` and was finite.
-    After each update the whole graph is checked the same way, and where the check
-    fails it is solved by Levenberg-Marquardt and iSAM2 rebuilt there
-    (:meth:`_restart_if_stuck`, ``info["lm_restarts"]``).
+    At each scheduled update that polish is made and, where it fails, the whole graph solved
+    by Levenberg-Marquardt and iSAM2 rebuilt there (:meth:`_restart_if_stuck`).
     Past ``long_after_steps`` the mapper runs in long mode (:class:`Isam2Config`; bounded
     work per update, no whole-graph polish per estimate, ``info["mode"] = "isam2-long"``
     and ``info["checked_at_step"]``, the step of the whole-graph check it reports; with the
@@ -258,6 +257,8 @@ class Isam2Mapper(WindowLongMode):
         self._window_fresh: list[int] = []
         self.window_rebuilds = 0
         self._at_check = False   # the estimate is the one the last whole-graph check checked
+        # the normal mode's polished map (_polish) and what it was computed from
+        self._polished: tuple[tuple[Any, ...], Any, Any, dict[str, Any]] | None = None
 
     def _new_isam(self) -> gtsam.ISAM2:
         """A fresh iSAM2: Cholesky, Powell's dogleg (a trust region) or Gauss-Newton."""
@@ -364,8 +365,8 @@ class Isam2Mapper(WindowLongMode):
             elif (extra and not self._long and self.config.long_after_steps is not None
                   and self.problem.n_steps >= self.config.long_after_steps):
                 self._go_long()
-            elif not self._long:
-                self._restart_if_stuck()
+            elif extra and not self._long:
+                self._restart_if_stuck(self.config.isam2_polish)
             return
         except GTSAM_ERRORS as exc:
             self.failures.append(gtsam_error_line(exc))
@@ -424,31 +425,29 @@ class Isam2Mapper(WindowLongMode):
         self._check_long()
 
     def _check_long(self) -> None:
-        """The whole-graph Gauss-Newton check of long mode (no step taken): what
-        ``estimate()`` reports until the graph changes. If it predicts more than
-        ``decrease_tol`` of decrease, iSAM2's own Gauss-Newton iteration is not reaching the
-        minimum (it can cycle between two points where a bearing is strongly nonlinear, e.g.
-        a pose passing close to a landmark): the whole graph is then solved by
-        Levenberg-Marquardt from the estimate (:func:`baselines.factor_graph.solve_lm`, which
-        checks its own result) and iSAM2 rebuilt there if LM lowered the error
-        (``info["lm_restarts"]``)."""
+        """The whole-graph Gauss-Newton check of long mode (no step taken, what ``estimate()``
+        reports until the graph changes), and the restart where it fails
+        (:meth:`_restart_if_stuck`: iSAM2's Gauss-Newton can cycle between two points where a
+        bearing is strongly nonlinear, e.g. a pose passing close to a landmark)."""
         self._long_full = self.problem.n_steps
-        self._long_check = {**self._restart_if_stuck(),
+        self._long_check = {**self._restart_if_stuck(0),
                             "checked_at_step": self.problem.n_steps}
 
-    def _restart_if_stuck(self) -> dict[str, Any]:
-        """The whole-graph Gauss-Newton check (no step taken) of :meth:`_check_long`, also run
-        after every update in the normal mode: where it fails, Levenberg-Marquardt from
-        the estimate and iSAM2 rebuilt there if LM lowered the error (``info["lm_restarts"]``).
-        Without it a short recording's iSAM2 that left the minimum's basin never came back
-        (MRCLAM6 robot 3 keyframed at 0.5 m / 0.5 rad: the error grew from 14 to 2,742 over
-        75 steps, 10 of 15 landmarks mapped, 59 cm against `gtsam-batch`'s 8.9). Returns the
-        check: ``converged``, ``cost``, ``gn_step``, ``predicted_decrease``."""
-        _, step, decrease, cost = polish(self.accepted, self.estimate_values, 0,
-                                         self.config.decrease_tol, gaussian=self._gaussian)
+    def _restart_if_stuck(self, iterations: int) -> dict[str, Any]:
+        """Up to ``iterations`` GN steps on the whole graph and the check (0: long mode; the
+        normal mode's scheduled updates: :meth:`_polish`); where it fails, LM and iSAM2 rebuilt
+        there if LM lowered the error (``info["lm_restarts"]``; MRCLAM6 r3 at 0.5 m / 0.5 rad:
+        59 cm, 10 of 15 landmarks without). Returns the check's dict."""
+        if iterations:
+            _, values, c = self._polish()
+            step, decrease, cost = c["gn_step"], c["predicted_decrease"], c["cost"]
+        else:
+            values, step, decrease, cost = polish(self.accepted, self.estimate_values, 0,
+                                                  self.config.decrease_tol,
+                                                  gaussian=self._gaussian)
         converged = decrease <= self.config.decrease_tol and math.isfinite(step)
         if not converged:
-            values, report = solve_lm(self.accepted, self.estimate_values, self.config)
+            values, report = solve_lm(self.accepted, values, self.config)
             if report.final_error < cost:
                 isam = self._new_isam()
                 try:
@@ -456,6 +455,8 @@ class Isam2Mapper(WindowLongMode):
                     self._isam = isam
                     self.estimate_values = self._isam.calculateEstimate()
                     self.lm_restarts += 1
+                    if iterations:
+                        return self._polish()[2]
                     _, step, decrease, cost = polish(self.accepted, self.estimate_values, 0,
                                                      self.config.decrease_tol,
                                                      gaussian=self._gaussian)
@@ -503,19 +504,18 @@ class Isam2Mapper(WindowLongMode):
 
     # -- the map --------------------------------------------------------------------------
     def finish(self) -> None:
-        """The stream has ended (:func:`bomgraph.mapper.run` calls this after the last step).
-        In long mode the buffered steps go to the solver and the whole graph is polished and
-        checked once more, Levenberg-Marquardt if the check fails (:meth:`_check_window`,
-        :meth:`_check_long`), unless that was just done at this step: the final map is then
-        the checked one (``info["converged"]`` True or False, never None). In the normal mode
-        the buffered steps go to the solver too, which checks the whole graph after every
-        update (:meth:`_restart_if_stuck`); :meth:`estimate` then polishes the result."""
+        """After the last step (:func:`bomgraph.mapper.run`). Long mode: the buffered steps in
+        and the whole graph polished and checked once more, LM if it fails (:meth:`_check_window`,
+        :meth:`_check_long`), unless just done (``info["converged"]`` never None). Normal mode:
+        if the map :meth:`estimate` gives is unconverged (:meth:`_polish`), the buffered steps
+        in as at a scheduled update, with its check and restart."""
         n = self.problem.n_steps
         if self._batch or n == 0:
             return
-        if not self._long:   # the buffered steps in, and the whole graph checked (_flush)
-            if self._buffer.size() or self._buffer_values.size() or self._external.size():
-                self._flush(extra=True)
+        if not self._long:   # nothing buffered: the last step was an update
+            if self._external.size() or not self._polish()[2]["converged"]:
+                (self._flush(extra=True) if self._buffer_values.size() or self._external.size()
+                 else self._restart_if_stuck(self.config.isam2_polish))
             return
         if self._buffer.size() or self._buffer_values.size() or self._external.size():
             self._flush(extra=True)
@@ -533,9 +533,8 @@ class Isam2Mapper(WindowLongMode):
         else:
             self._check_long()
 
-    def estimate(self) -> MapEstimate:
-        if self.problem.n_steps == 0:
-            return MapEstimate.empty(reason="no steps yet")
+    def _with_buffer(self) -> tuple[gtsam.NonlinearFactorGraph, gtsam.Values]:
+        """The accepted graph and the solver's estimate, with the buffered steps if any."""
         graph = self.accepted
         values = self.current_values()
         if self._buffer.size() or self._buffer_values.size():
@@ -543,18 +542,43 @@ class Isam2Mapper(WindowLongMode):
             graph.push_back(self._buffer)
             values = gtsam.Values(values)
             values.insert(self._buffer_values)
+        return graph, values
+
+    def _polish_check(self, graph: gtsam.NonlinearFactorGraph, values: gtsam.Values
+                      ) -> tuple[gtsam.Values, dict[str, Any]]:
+        """Up to ``isam2_polish`` Gauss-Newton steps and the check (:func:`polish`)."""
+        values, step, decrease, cost = polish(graph, values, self.config.isam2_polish,
+                                              self.config.decrease_tol, gaussian=self._gaussian)
+        return values, {"converged": bool(decrease <= self.config.decrease_tol
+                                          and math.isfinite(step)),
+                        "cost": cost, "gn_step": step, "predicted_decrease": decrease}
+
+    def _polish(self) -> tuple[gtsam.NonlinearFactorGraph, gtsam.Values, dict[str, Any]]:
+        """The normal mode's map and its check (:meth:`_polish_check` on :meth:`_with_buffer`),
+        computed once per state: a scheduled update's check and the ``estimate()`` after it
+        (the paper's cadence) share it."""
+        key = (self.estimate_values, self.accepted.size(), self._buffer.size(),
+               self._buffer_values.size(), self._gaussian)
+        c = self._polished
+        if c is None or c[0][0] is not key[0] or c[0][1:] != key[1:]:
+            graph, values = self._with_buffer()
+            values, check = self._polish_check(graph, values)
+            c = self._polished = (key, graph, values, check)
+        return c[1], c[2], dict(c[3])
+
+    def estimate(self) -> MapEstimate:
+        if self.problem.n_steps == 0:
+            return MapEstimate.empty(reason="no steps yet")
         report = None
         if self._batch:
+            graph, values = self._with_buffer()
             values, report = solve_lm(graph, values, self.config)
-        if self._long and not self._batch:
+            values, check = self._polish_check(graph, values)
+        elif self._long:
+            graph, values = self._with_buffer()
             check = self._long_report(graph is self.accepted)
         else:
-            values, step, decrease, cost = polish(graph, values, self.config.isam2_polish,
-                                                  self.config.decrease_tol,
-                                                  gaussian=self._gaussian)
-            check = {"converged": bool(decrease <= self.config.decrease_tol
-                                       and math.isfinite(step)),
-                     "cost": cost, "gn_step": step, "predicted_decrease": decrease}
+            graph, values, check = self._polish()
         if report is not None:
             check["converged"] = check["converged"] and report.converged
         mode = "batch" if self._batch else ("isam2-long" if self._long else "isam2")

@@ -2,8 +2,9 @@
 robot 3 keyframed at 0.5 m / 0.5 rad, a keyframing nobody tuned on. Before the whole-graph check
 at each scheduled update of the normal mode (``Isam2Mapper._restart_if_stuck``), the error grew
 from 14 to 2,742 over 75 steps and the final map held 10 of 15 landmarks at 59 cm MPE, against
-`gtsam-batch`'s 8.9 cm on the same stream (skipped without the data). The check follows every
-update, and :meth:`Isam2Mapper.finish` puts the buffered steps in, so the final map is checked."""
+`gtsam-batch`'s 8.9 cm on the same stream (skipped without the data). The check is the polish
+``estimate()`` makes, at each scheduled update and in :meth:`Isam2Mapper.finish` (which puts the
+buffered steps in when it fails)."""
 
 from __future__ import annotations
 
