@@ -21,6 +21,7 @@ from bomgraph.stream import Step, StreamHeader
 from .bearing_graph import (BearingGraph, BearingLog, FactorGraphConfig, insert_pose, landmark_key,
                             mid_key, pose_key)
 from .lm_report import GTSAM_ERRORS, estimate_from_values, gtsam_error_line, solve_lm
+from .isam2_normal import RESTART_COST_RATIO, NormalModeCheck
 from .isam2_window import WindowLongMode
 from .lm_report import plain_gaussian, polish
 from .lm_window import StepChunks
@@ -166,7 +167,7 @@ class Isam2Config(FactorGraphConfig):
         need(self.long_shift_steps >= 1, "long_shift_steps must be >= 1")
 
 
-class Isam2Mapper(WindowLongMode):
+class Isam2Mapper(WindowLongMode, NormalModeCheck):
     """``gtsam-isam2``: iSAM2 updates with only the new factors and values, on an internal
     schedule (every ``isam2_update_every`` steps, and at a step where landmarks entered).
 
@@ -180,8 +181,9 @@ class Isam2Mapper(WindowLongMode):
     on the whole graph, each kept only if it lowers the error, so the map at step ``T``
     does not depend on how often it was asked for. ``info["converged"]`` says whether the
     last Gauss-Newton step predicted a decrease of at most ``decrease_tol`` and was finite.
-    At each scheduled update that polish is made and, where it fails, the whole graph solved
-    by Levenberg-Marquardt and iSAM2 rebuilt there (:meth:`_restart_if_stuck`).
+    At each scheduled update that polish is made and, where it fails far above the expected
+    cost (``isam2_normal.RESTART_COST_RATIO``), the whole graph solved by Levenberg-Marquardt
+    and iSAM2 rebuilt there (:meth:`_restart_if_stuck`).
     Past ``long_after_steps`` the mapper runs in long mode (:class:`Isam2Config`; bounded
     work per update, no whole-graph polish per estimate, ``info["mode"] = "isam2-long"``
     and ``info["checked_at_step"]``, the step of the whole-graph check it reports; with the
@@ -259,6 +261,7 @@ class Isam2Mapper(WindowLongMode):
         self._at_check = False   # the estimate is the one the last whole-graph check checked
         # the normal mode's polished map (_polish) and what it was computed from
         self._polished: tuple[tuple[Any, ...], Any, Any, dict[str, Any]] | None = None
+        self._dims = (0, 0)   # factors of ``accepted`` counted, their residual dimensions
 
     def _new_isam(self) -> gtsam.ISAM2:
         """A fresh iSAM2: Cholesky, Powell's dogleg (a trust region) or Gauss-Newton."""
@@ -435,7 +438,8 @@ class Isam2Mapper(WindowLongMode):
 
     def _restart_if_stuck(self, iterations: int) -> dict[str, Any]:
         """Up to ``iterations`` GN steps on the whole graph and the check (0: long mode; the
-        normal mode's scheduled updates: :meth:`_polish`); where it fails, LM and iSAM2 rebuilt
+        normal mode's scheduled updates: :meth:`_polish`, and only where the cost is also above
+        ``RESTART_COST_RATIO`` x :meth:`_expected_cost`); where it fails, LM and iSAM2 rebuilt
         there if LM lowered the error (``info["lm_restarts"]``; MRCLAM6 r3 at 0.5 m / 0.5 rad:
         59 cm, 10 of 15 landmarks without). Returns the check's dict."""
         if iterations:
@@ -446,7 +450,7 @@ class Isam2Mapper(WindowLongMode):
                                                   self.config.decrease_tol,
                                                   gaussian=self._gaussian)
         converged = decrease <= self.config.decrease_tol and math.isfinite(step)
-        if not converged:
+        if not converged and (not iterations or cost > RESTART_COST_RATIO * self._expected_cost()):
             values, report = solve_lm(self.accepted, values, self.config)
             if report.final_error < cost:
                 isam = self._new_isam()
@@ -532,39 +536,6 @@ class Isam2Mapper(WindowLongMode):
                     self._check_long()
         else:
             self._check_long()
-
-    def _with_buffer(self) -> tuple[gtsam.NonlinearFactorGraph, gtsam.Values]:
-        """The accepted graph and the solver's estimate, with the buffered steps if any."""
-        graph = self.accepted
-        values = self.current_values()
-        if self._buffer.size() or self._buffer_values.size():
-            graph = gtsam.NonlinearFactorGraph(self.accepted)
-            graph.push_back(self._buffer)
-            values = gtsam.Values(values)
-            values.insert(self._buffer_values)
-        return graph, values
-
-    def _polish_check(self, graph: gtsam.NonlinearFactorGraph, values: gtsam.Values
-                      ) -> tuple[gtsam.Values, dict[str, Any]]:
-        """Up to ``isam2_polish`` Gauss-Newton steps and the check (:func:`polish`)."""
-        values, step, decrease, cost = polish(graph, values, self.config.isam2_polish,
-                                              self.config.decrease_tol, gaussian=self._gaussian)
-        return values, {"converged": bool(decrease <= self.config.decrease_tol
-                                          and math.isfinite(step)),
-                        "cost": cost, "gn_step": step, "predicted_decrease": decrease}
-
-    def _polish(self) -> tuple[gtsam.NonlinearFactorGraph, gtsam.Values, dict[str, Any]]:
-        """The normal mode's map and its check (:meth:`_polish_check` on :meth:`_with_buffer`),
-        computed once per state: a scheduled update's check and the ``estimate()`` after it
-        (the paper's cadence) share it."""
-        key = (self.estimate_values, self.accepted.size(), self._buffer.size(),
-               self._buffer_values.size(), self._gaussian)
-        c = self._polished
-        if c is None or c[0][0] is not key[0] or c[0][1:] != key[1:]:
-            graph, values = self._with_buffer()
-            values, check = self._polish_check(graph, values)
-            c = self._polished = (key, graph, values, check)
-        return c[1], c[2], dict(c[3])
 
     def estimate(self) -> MapEstimate:
         if self.problem.n_steps == 0:
