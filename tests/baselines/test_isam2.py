@@ -361,8 +361,8 @@ def test_real_preset_final_map_converges_on_mrclam1_robot3() -> None:
     ends 6-9 dead-reckoned keyframes after the last iSAM2 update; 3 polish steps left the
     final map 14.5 units of predicted decrease above the minimum, reported unconverged. The
     ``real`` preset's 10-step cap reaches it (predicted decrease 0.03, ninth session). Since
-    h128 :meth:`Isam2Mapper.finish` puts the buffered keyframes into iSAM2 and checks the whole
-    graph (LM where the check fails), so 3 polish steps reach it too."""
+    h128/h131 :meth:`Isam2Mapper.finish` puts the buffered keyframes into iSAM2 where the final
+    map is unconverged (and checks it as at a scheduled update), so 3 polish steps reach it too."""
     if not (DATA / "mrclam1").is_dir():
         pytest.skip(missing("mrclam1"))
     from bomgraph.datasets.mrclam import import_mrclam
