@@ -360,7 +360,9 @@ def test_real_preset_final_map_converges_on_mrclam1_robot3() -> None:
     """MRCLAM1 robot 3 (imported ``--no-calibrate``, as ``scripts/bench_generality.py`` does)
     ends 6-9 dead-reckoned keyframes after the last iSAM2 update; 3 polish steps left the
     final map 14.5 units of predicted decrease above the minimum, reported unconverged. The
-    ``real`` preset's 10-step cap reaches it (predicted decrease 0.03, ninth session)."""
+    ``real`` preset's 10-step cap reaches it (predicted decrease 0.03, ninth session). Since
+    h128/h131 :meth:`Isam2Mapper.finish` puts the buffered keyframes into iSAM2 where the final
+    map is unconverged (and checks it as at a scheduled update), so 3 polish steps reach it too."""
     if not (DATA / "mrclam1").is_dir():
         pytest.skip(missing("mrclam1"))
     from bomgraph.datasets.mrclam import import_mrclam
@@ -373,4 +375,4 @@ def test_real_preset_final_map_converges_on_mrclam1_robot3() -> None:
     assert len(final) == 15
     lowered = run(create_mapper("gtsam-isam2", stream.header, preset="real", isam2_polish=3),
                   stream.steps, checkpoint_every=10).final
-    assert not lowered.info["converged"]  # the cap is what changed: 3 steps do not reach it
+    assert lowered.info["converged"], lowered.info  # no longer decided by the polish cap
