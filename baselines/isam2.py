@@ -122,15 +122,15 @@ class Isam2Config(FactorGraphConfig):
         How far the window's end moves before iSAM2 is rebuilt on a new window (each rebuild
         eliminates these steps into the marginal and factorises the window once).
     restart_cost_ratio : float or None
-        The normal mode restarts (Levenberg-Marquardt on the whole graph, iSAM2 rebuilt
-        there) a map whose polish at a scheduled update or at the end of the run is
-        unconverged and costs more than this times the cost expected at the minimum (the
-        chi-square mean: half the residual dimensions less the variables', a ratio without
-        units; :meth:`Isam2Mapper._restart_if_stuck`). Measured: a map out of the basin
-        8.5-38x (MRCLAM6 r3 at 0.5 m / 0.5 rad: 59 cm, 10 of 15 landmarks without the
-        restart); the paper setup's unconverged maps (seeds 3-4, 22-24 of 30 checkpoints) at
-        most 1.21x, whose restarts cost up to 8x the run. 0: every unconverged check
-        restarts; None: none does (nor is the check made at the scheduled updates).
+        Normal mode: a map whose polish at a scheduled update (or at the end of the run) is
+        unconverged and costs more than this times the cost expected at the minimum is
+        solved by Levenberg-Marquardt on the whole graph and iSAM2 rebuilt there. The
+        expected cost is the chi-square mean, half the residual dimensions less the
+        variables' (a ratio, no units; :meth:`Isam2Mapper._restart_if_stuck`). Measured: a
+        map out of the basin 8.5-38x (MRCLAM6 r3 at 0.5 m / 0.5 rad: 59 cm, 10 of 15
+        landmarks without the restart); the paper setup's unconverged maps (seeds 3-4, 22-24
+        of 30 checkpoints) at most 1.21x, whose restarts cost up to 8x the run. 0: every
+        unconverged check restarts; None: none does (nor is the check made at the updates).
     """
 
     PRESETS: ClassVar[Mapping[str, Mapping[str, Any]]] = {

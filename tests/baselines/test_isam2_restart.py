@@ -66,7 +66,7 @@ def test_restart_cost_ratio_is_a_documented_validated_option() -> None:
     from bomgraph.mapper import method_config_class
     for name in ("gtsam-isam2", "hybrid-isam2"):
         docs = {o.name: o.doc for o in describe_options(method_config_class(name))}
-        assert docs["restart_cost_ratio"].startswith("The normal mode restarts"), docs
+        assert docs["restart_cost_ratio"].startswith("Normal mode: a map whose polish"), docs
     from baselines.isam2 import Isam2Config
     assert Isam2Config(restart_cost_ratio=None).restart_cost_ratio is None
     with pytest.raises(BomgraphError, match="restart_cost_ratio must be >= 0 or None"):
