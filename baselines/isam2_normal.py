@@ -16,12 +16,6 @@ import gtsam
 
 from .lm_report import polish
 
-#: The normal mode restarts only a polished map both unconverged and of more than this times
-#: the cost expected at the minimum (:meth:`NormalModeCheck._expected_cost`). Measured: a map out
-#: of the basin 8.5-38x (MRCLAM6 r3 at 0.5 m / 0.5 rad); the paper setup's unconverged maps
-#: (seeds 3-4, 22-24 of 30 checkpoints) at most 1.21x, whose restarts cost up to 8x the run.
-RESTART_COST_RATIO = 2.0
-
 
 class NormalModeCheck:
     """The normal mode's polish and its check (module docstring)."""
@@ -51,7 +45,8 @@ class NormalModeCheck:
 
     def _expected_cost(self) -> float:
         """The cost at the minimum with exact noise models: the chi-square mean, half the
-        residual dimensions less the variables'. The residuals are counted once each."""
+        residual dimensions less the variables' (what ``Isam2Config.restart_cost_ratio``
+        multiplies). The residuals are counted once each."""
         n0, dims = self._dims
         for i in range(n0, self.accepted.size()):
             f = self.accepted.at(i)

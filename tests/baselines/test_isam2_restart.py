@@ -44,3 +44,30 @@ def test_isam2_comes_back_to_the_batch_minimum(coarse: tuple[int, Stream], name:
     assert est.info["lm_restarts"] >= (robot == 3)   # robot 1 never leaves the basin
     assert score.n_mapped >= batch_score.n_mapped
     assert score.mpe_m <= 1.1 * batch_score.mpe_m, (score.mpe_m, batch_score.mpe_m)
+
+
+def test_the_cost_gate_holds_without_polish_steps(coarse: tuple[int, Stream]) -> None:
+    """``isam2_polish`` 0 sent the normal mode's check down long mode's path (the step count
+    was the mode flag), which restarts every unconverged map, past ``restart_cost_ratio``:
+    on robot 3, 3 restarts against 2 with the gate (h134). A ratio no map reaches restarts none."""
+    robot, stream = coarse
+    if robot != 3:
+        pytest.skip("robot 3's iSAM2 leaves the basin; robot 1's never does")
+    mapper = create_mapper("gtsam-isam2", stream.header, preset="real", isam2_polish=0,
+                           restart_cost_ratio=1e6)
+    est = run(mapper, stream.steps, checkpoint_every=10, keep_checkpoints=False).final
+    assert est.info["lm_restarts"] == 0, est.info
+    assert est.info["converged"] is False   # what the gate left: the map out of the basin
+
+
+def test_restart_cost_ratio_is_a_documented_validated_option() -> None:
+    from bomgraph.config import describe_options
+    from bomgraph.errors import BomgraphError
+    from bomgraph.mapper import method_config_class
+    for name in ("gtsam-isam2", "hybrid-isam2"):
+        docs = {o.name: o.doc for o in describe_options(method_config_class(name))}
+        assert docs["restart_cost_ratio"].startswith("Normal mode: a map whose polish"), docs
+    from baselines.isam2 import Isam2Config
+    assert Isam2Config(restart_cost_ratio=None).restart_cost_ratio is None
+    with pytest.raises(BomgraphError, match="restart_cost_ratio must be >= 0 or None"):
+        Isam2Config(restart_cost_ratio=-1.0)
