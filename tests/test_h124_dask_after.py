@@ -50,6 +50,9 @@ def state():
 
 
 if __name__ == "__main__":
+    # Python keeps SIGINT ignored when it started so (a job run in the background by a shell
+    # without job control, as .ci/run runs pytest): Ctrl-C's handler, as in a terminal
+    signal.signal(signal.SIGINT, signal.default_int_handler)
     seen = [state()]
     for _ in range(2):
         out = list(dispatch(task, [0, 1], ["a", "b"], scheduler=None, n_local=1,
