@@ -3,9 +3,10 @@
 The cluster is started with SIGINT and SIGTERM held (``cluster._workers_hold_signals``), so
 the threads it starts keep them blocked. After the sweep the process keeps Dask's one
 offload thread (``Dask-Offload_0``, process-wide, created on its first use, signals blocked:
-the signal goes to the main thread, as it should) and multiprocessing's resource tracker; a
-second sweep adds neither threads, processes nor descriptors, and Ctrl-C (SIGINT) still
-raises KeyboardInterrupt in the main thread, in a blocking call. Just as a sweep returns,
+the signal goes to the main thread, as it should), on Python 3.13 also Dask's profiler thread
+(``Profile``, process-wide, sometimes started only by the second sweep), and multiprocessing's
+resource tracker; a second sweep adds no other thread, process or descriptor, and Ctrl-C
+(SIGINT) still raises KeyboardInterrupt in the main thread, in a blocking call. Just as a sweep returns,
 Dask's thread that joins a worker process may still be there: it ends a moment later (in 1
 of 4 sweeps: 3 threads and 9 descriptors just after, 2 and 7 a second later)."""
 
@@ -78,6 +79,12 @@ def test_a_second_sweep_leaks_nothing_and_ctrl_c_still_works(tmp_path: Path) -> 
     before, first, second, ctrl_c = json.loads(proc.stdout.strip().splitlines()[-1])
     assert ctrl_c == "KeyboardInterrupt"
     assert not before["main_held"] and not first["main_held"] and not second["main_held"]
-    assert second == first, (before, first, second)
-    assert first["threads"] <= before["threads"] + 1, (before, first)  # Dask's offload thread
-    assert first["children"] <= before["children"] + 1, (before, first)  # resource tracker
+    # Dask's process-wide threads, each started once per process: the offload thread, and
+    # (seen with Python 3.13 in CI) its profiler's, which may start after either sweep
+    once = {"Dask-Offload_0", "Profile"}
+    for after in (first, second):
+        assert set(after["names"]) - once == {"MainThread"}, (before, after)
+        assert after["threads"] <= before["threads"] + len(once), (before, after)
+        assert after["children"] <= before["children"] + 1, (before, after)  # resource tracker
+    assert second["children"] == first["children"], (first, second)
+    assert second["fds"] <= first["fds"], (first, second)
