@@ -6,9 +6,9 @@ offload thread (``Dask-Offload_0``, process-wide, created on its first use, sign
 the signal goes to the main thread, as it should), on Python 3.13 also Dask's profiler thread
 (``Profile``, process-wide, sometimes started only by the second sweep), and multiprocessing's
 resource tracker; a second sweep adds no other thread, process or descriptor, and Ctrl-C
-(SIGINT) still raises KeyboardInterrupt in the main thread, in a blocking call. Just as a sweep returns,
-Dask's thread that joins a worker process may still be there: it ends a moment later (in 1
-of 4 sweeps: 3 threads and 9 descriptors just after, 2 and 7 a second later)."""
+(SIGINT) still raises KeyboardInterrupt in the main thread, in a blocking call. Just as a
+sweep returns, Dask's thread that joins a worker process may still be there: it ends a moment
+later (in 1 of 4 sweeps: 3 threads and 9 descriptors just after, 2 and 7 a second later)."""
 
 from __future__ import annotations
 
