@@ -180,7 +180,8 @@ def start_failure(exc: BaseException) -> str:
         causes.append(f"{type(exc).__name__}: {first}" if first else type(exc).__name__)
         exc = exc.__cause__ or exc.__context__
     return (f"WorkerDied: the local Dask cluster's workers could not start, {START_TRIES} "
-            f"times in a row ({'; '.join(causes)}): something at their start kills them (a sitecustomize or .pth file, a memory "
+            f"times in a row ({'; '.join(causes)}): something at their start kills them "
+            f"(a sitecustomize or .pth file, a memory "
             f"limit, the out-of-memory killer, a kill); fix that, or run in local processes "
             f"(--jobs N, without --dask-local); finished runs are cached")
 
