@@ -245,7 +245,7 @@ def cmd_methods(args: argparse.Namespace) -> int:
     width = max(len(o.name) for o in options) if options else 0
     for o in options:
         _say(f"  {o.name:{width}s}  {o.type}, default {o.default!r}"
-              + (f": {o.doc}" if o.doc else ""))
+             + (f": {o.doc}" if o.doc else ""))
     if not r["presets"]:
         _say(f"\n{no_presets_line(args.name)}")
         return 0
@@ -320,7 +320,7 @@ def _compare(args: argparse.Namespace, seen: dict[str, int]) -> int:
     recorded = {e.name for e in chosen if not e.designed}
     if recorded:
         _say(format_by_run(final_by_run([r for r in result.results
-                                          if r["experiment"] in recorded])))
+                                         if r["experiment"] in recorded])))
     est = [f for f in result.files if f.endswith(".est")]
     streams = [f for f in result.files if f.endswith(".jsonl")]
     wrote = [f for f in result.files if not f.endswith((".est", ".jsonl"))]
