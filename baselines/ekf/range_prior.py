@@ -133,13 +133,14 @@ class RhoPriorMixin:
                 "rho_prior_from_features": len(st["converted"]),
                 "rho_prior_moved_features": int(st["tightened"])}
 
-    def _rho_prior_sd(self, keys: list[tuple[str, int]]) -> Any:
-        """The prior std. dev. of ``rho`` of the features ``keys`` (a scalar with
+    def _rho_prior(self, keys: list[tuple[str, int]]) -> tuple[Any, Any]:
+        """The prior mean and std. dev. of ``rho`` of the features ``keys`` (scalars with
         ``"range"``)."""
         st = self._empirical()
         if st is None:
-            return self.rho_sigma
-        return np.array([st["feature"].get(k[1], st["prior"])[1] for k in keys])
+            return self.rho_init, self.rho_sigma
+        prior = np.array([st["feature"].get(k[1], st["prior"]) for k in keys], float)
+        return prior[:, 0], prior[:, 1]
 
 
 __all__ = ["EMPIRICAL_MIN", "RHO_PRIORS", "RhoPriorMixin"]
