@@ -12,6 +12,7 @@ scripts/check_identical.py).
 
 from __future__ import annotations
 
+import logging
 import math
 
 import numpy as np
@@ -92,3 +93,15 @@ def test_early_maps_of_a_paper_run_improve() -> None:
         maps[flag] = (len(cp.estimate), score_estimate(cp.estimate, stream.truth).mpe_m)
     assert maps[True][0] < maps[False][0]
     assert maps[True][1] < 0.9 * maps[False][1]
+
+
+@pytest.mark.parametrize("method", ["ekf", "ekf-invdepth"])
+def test_conversions_are_logged_at_debug_and_change_nothing(method, caplog) -> None:
+    stream = simulate_run(RunSpec(0, 0, 0), SimConfig())
+    quiet = run(create_mapper(method, stream.header, preset="real"), stream.steps).final
+    with caplog.at_level(logging.DEBUG, logger="baselines.ekf.range_prior"):
+        logged = run(create_mapper(method, stream.header, preset="real"), stream.steps).final
+    lines = [r.getMessage() for r in caplog.records if "made Euclidean" in r.getMessage()]
+    assert lines and "sigma_rho/rho" in lines[0]
+    assert np.array_equal(quiet.landmark_ids, logged.landmark_ids)
+    assert np.array_equal(quiet.landmarks_xy, logged.landmarks_xy)
