@@ -6,8 +6,9 @@ add their own. Each names its presets in one ``PRESETS`` dict (:class:`bomgraph.
 ``"paper"``, the defaults, reproduce the paper's setup; ``"real"`` is for recordings (MRCLAM6,
 the g2o set): every bearing used whatever its nonlinearity index (after a blind turn the
 bearings to mapped landmarks are the ones that bring the heading back), two iterations of the
-update, restarts after three gated bearings in a row, and for ``ekf`` inverse-depth
-candidates. The measurements behind them are in docs/measurements.md.
+update, restarts after three gated bearings in a row, for ``ekf`` inverse-depth
+candidates, and for ``ekf-invdepth`` the depth's relative std. dev. in the test that puts a
+feature on the map. The measurements behind them are in docs/measurements.md.
 """
 
 from __future__ import annotations
@@ -273,16 +274,29 @@ class InverseDepthConfig(BearingEkfConfig):
 
     linearity_max : Civera's linearity index ``4 sigma_d / d |cos alpha|`` below which a
         feature becomes Euclidean.
+    relative_depth_check : a feature still in inverse depth is on the map once the bearings
+        have halved its prior std. dev. of ``rho`` (with a baseline across its ray); with
+        True (preset ``"real"``) also its relative std. dev. ``sigma_rho / rho``, the
+        depth's. An update that pulls ``rho`` towards 0 shrinks ``sigma_rho`` (taken at the
+        new ``rho``) with it, the depth as unknown as before: such features passed the first
+        test alone. False (``"paper"``): the first test only, as the paper's runs were made.
     """
 
-    PRESETS: ClassVar[Mapping[str, Mapping[str, Any]]] = {"paper": {}, "real": dict(_REAL)}
+    PRESETS: ClassVar[Mapping[str, Mapping[str, Any]]] = {
+        "paper": {},
+        "real": {**_REAL, "relative_depth_check": True},
+    }
 
     linearity_max: float = 0.1
+    relative_depth_check: bool = False
 
     def __post_init__(self) -> None:
         super().__post_init__()
         if not self.linearity_max > 0:
             raise ConfigError("linearity_max must be > 0")
+        if not isinstance(self.relative_depth_check, (bool, np.bool_)):
+            raise ConfigError(f"relative_depth_check must be true or false, got "
+                              f"{self.relative_depth_check!r}")
 
 
 __all__ = ["BEARING_VARIANCE_SCALES", "BearingEkfConfig", "EkfConfig", "InverseDepthConfig", "JACOBIANS"]

@@ -55,7 +55,9 @@ Inverse depth, ``ekf-invdepth``
     falls below ``linearity_max``. Features still in inverse depth are reported through the
     same conversion by ``estimate()``; left out are those with ``rho <= 0`` and those whose
     depth the bearings have not determined (the std. dev. of ``rho`` still above half its
-    prior's: no parallax yet, e.g. from a robot that has not moved). The prior on
+    prior's: no parallax yet, e.g. from a robot that has not moved; with
+    ``relative_depth_check``, preset ``"real"``, also its ratio to ``rho``: an update that
+    pulled ``rho`` towards 0 shrank its std. dev. with it, the depth as unknown as before). The prior on
     ``rho`` makes it inexact on noise-free data and it is less consistent than ``ekf``.
 
 Iterated update (``iterations > 1``)
@@ -292,9 +294,14 @@ class InverseDepthEkfMapper(RhoPriorMixin, EkfSlam):
             f = x[bi]
             # a feature's depth must come from the bearings (parallax), not from its prior:
             # the bearings must have at least halved the prior std. dev. of rho (from a
-            # robot that never moves, or only turns, they carry no depth at all)
+            # robot that never moves, or only turns, they carry no depth at all); with
+            # relative_depth_check also sigma_rho / rho, the depth's relative std. dev.
             rho_sd = np.sqrt(np.clip(P[bi[:, 3], bi[:, 3]], 0, None))
-            no_depth = rho_sd > 0.5 * self._rho_prior_sd(keys)
+            rho0, rho0_sd = self._rho_prior(keys)
+            no_depth = rho_sd > 0.5 * rho0_sd
+            if self.config.relative_depth_check:
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    no_depth |= ~(rho_sd / np.abs(f[:, 3]) <= 0.5 * rho0_sd / rho0)
             # ... and the odometry must have moved the robot across the feature's ray by more
             # than the bearing noise subtends at the feature's depth (turning on the spot
             # gives the iterated update a spurious depth, never a baseline)

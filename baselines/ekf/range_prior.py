@@ -22,9 +22,12 @@ it.
 
 from __future__ import annotations
 
+import logging
 from typing import Any
 
 import numpy as np
+
+_log = logging.getLogger(__name__)
 
 #: The choices of :attr:`~baselines.ekf.config.BearingEkfConfig.rho_prior`.
 RHO_PRIORS = ("range", "empirical")
@@ -68,6 +71,8 @@ class RhoPriorMixin:
         super()._add_inverse_depth(ids, z)             # type: ignore[misc]
 
     def _convert(self, ready: Any) -> None:
+        if _log.isEnabledFor(logging.DEBUG):     # to trace a feature from its first sighting
+            ready = self._logged(ready)
         st = self._empirical()
         if st is None:
             super()._convert(ready)                    # type: ignore[misc]
@@ -133,13 +138,28 @@ class RhoPriorMixin:
                 "rho_prior_from_features": len(st["converted"]),
                 "rho_prior_moved_features": int(st["tightened"])}
 
-    def _rho_prior_sd(self, keys: list[tuple[str, int]]) -> Any:
-        """The prior std. dev. of ``rho`` of the features ``keys`` (a scalar with
+    def _logged(self, ready: Any) -> Any:
+        """``ready`` that also logs (DEBUG) the features it makes Euclidean, with their
+        ``sigma_rho / rho``."""
+        def logged(features: np.ndarray, covs: np.ndarray) -> np.ndarray:
+            sel = np.asarray(ready(features, covs), bool) & (features[:, 3] > 0)
+            if sel.any():
+                keys = self._idp_blocks()[0]           # type: ignore[attr-defined]
+                t = self._t                            # type: ignore[attr-defined]
+                rel = np.sqrt(covs[sel, 3, 3]) / features[sel, 3]
+                _log.debug("step %d: features %s made Euclidean at sigma_rho/rho %s", t,
+                           [keys[i][1] for i in np.flatnonzero(sel)], np.round(rel, 3).tolist())
+            return sel
+        return logged
+
+    def _rho_prior(self, keys: list[tuple[str, int]]) -> tuple[Any, Any]:
+        """The prior mean and std. dev. of ``rho`` of the features ``keys`` (scalars with
         ``"range"``)."""
         st = self._empirical()
         if st is None:
-            return self.rho_sigma
-        return np.array([st["feature"].get(k[1], st["prior"])[1] for k in keys])
+            return self.rho_init, self.rho_sigma
+        prior = np.array([st["feature"].get(k[1], st["prior"]) for k in keys], float)
+        return prior[:, 0], prior[:, 1]
 
 
 __all__ = ["EMPIRICAL_MIN", "RHO_PRIORS", "RhoPriorMixin"]
