@@ -277,9 +277,13 @@ class InverseDepthConfig(BearingEkfConfig):
     relative_depth_check : a feature still in inverse depth is on the map once the bearings
         have halved its prior std. dev. of ``rho`` (with a baseline across its ray); with
         True (preset ``"real"``) also its relative std. dev. ``sigma_rho / rho``, the
-        depth's. An update that pulls ``rho`` towards 0 shrinks ``sigma_rho`` (taken at the
-        new ``rho``) with it, the depth as unknown as before: such features passed the first
-        test alone. False (``"paper"``): the first test only, as the paper's runs were made.
+        depth's, against the prior's. ``sigma_rho`` is set by the parallax and hardly by
+        ``rho``, so a feature whose ``rho`` is small (a far landmark, or one an update pulled
+        towards 0) passed the first test alone with its depth as uncertain, relatively, as
+        the prior's. The prior's ratio is 1/2 with ``"range"`` from a stated sensor range
+        (so ``sigma_rho / rho <= 0.25``) and 5 with Civera's range-free ``0.1 +- 0.5`` per m,
+        where the test admits nearly every feature. False (``"paper"``): the first test
+        only, as the paper's runs were made.
     """
 
     PRESETS: ClassVar[Mapping[str, Mapping[str, Any]]] = {

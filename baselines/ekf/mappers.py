@@ -56,8 +56,9 @@ Inverse depth, ``ekf-invdepth``
     same conversion by ``estimate()``; left out are those with ``rho <= 0`` and those whose
     depth the bearings have not determined (the std. dev. of ``rho`` still above half its
     prior's: no parallax yet, e.g. from a robot that has not moved; with
-    ``relative_depth_check``, preset ``"real"``, also its ratio to ``rho``: an update that
-    pulled ``rho`` towards 0 shrank its std. dev. with it, the depth as unknown as before). The prior on
+    ``relative_depth_check``, preset ``"real"``, also its ratio to ``rho``: the std. dev. is
+    set by the parallax, hardly by ``rho``, so a small ``rho``, a far landmark or one an update
+    pulled towards 0, passed with the depth as unknown as before). The prior on
     ``rho`` makes it inexact on noise-free data and it is less consistent than ``ekf``.
 
 Iterated update (``iterations > 1``)
