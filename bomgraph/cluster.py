@@ -9,7 +9,8 @@ worker could not import it) becomes a failed run with the reason, so the other r
 are cached. Ctrl-C kills a local cluster's workers at once (:func:`_end_local_workers`); they
 never take it themselves (:func:`_workers_hold_signals`). Imports from bomgraph only the
 errors, an option's name, :func:`bomgraph.stdio.signals_held` and
-:func:`bomgraph.owned_folders.owned_folder`.
+:func:`bomgraph.owned_folders.owned_folder` and
+:func:`bomgraph.processes.worker_count`.
 """
 
 from __future__ import annotations
@@ -25,6 +26,7 @@ from typing import Any, Callable, Iterator, Sequence
 from .checks import integer, option_named
 from .errors import ConfigError, UnknownMethodError
 from .owned_folders import owned_folder
+from .processes import worker_count
 from .stdio import signals_held
 
 _log = logging.getLogger(__name__)
@@ -272,7 +274,9 @@ def dispatch(func: Callable[[int, Any], tuple[int, dict[str, Any]]], index: Sequ
     cluster could not run is ``(k, failed(k, reason))``. ``scheduler_named``: how errors
     name the address (:func:`check_scheduler`). Without ``scheduler``, ``n_local`` (the
     local cluster's workers) must be an integer >= 1: else :class:`ConfigError` at the call,
-    before any cluster starts (h123: ``n_local=-3`` waited forever for a worker).
+    before any cluster starts (h123: ``n_local=-3`` waited forever for a worker). No more
+    workers are started than tasks, nor than :data:`~bomgraph.processes.MAX_WORKERS_PER_CORE`
+    per core (:func:`~bomgraph.processes.worker_count`, as for local processes).
 
     Raises
     ------
@@ -281,6 +285,7 @@ def dispatch(func: Callable[[int, Any], tuple[int, dict[str, Any]]], index: Sequ
     """
     if not scheduler:
         integer(n_local, option_named("--dask-local", "n_local"), ConfigError, minimum=1)
+        n_local = worker_count(n_local, len(tasks))
     return _dispatch(func, index, tasks, scheduler=scheduler, n_local=n_local,
                      failed=failed, scheduler_named=scheduler_named)
 
