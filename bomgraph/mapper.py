@@ -462,24 +462,30 @@ def check_method_options(name: str, options: Mapping[str, Any]) -> None:
     Raises
     ------
     ConfigError
+        Also for a ``seed_method`` (a plugin's too) that :func:`bomgraph.seed_check.check_seed`
+        refuses.
     """
     import inspect
 
     from .config import Presets
 
+    from .seed_check import check_method_seed
+
     cls = method_config_class(name)
     opts = dict(options)
     if "config" in opts:
-        return
+        return check_method_seed(name, opts, opts.pop("config"))
     factory = method_factory(name)
     target = factory.__init__ if inspect.isclass(factory) else factory
     params = inspect.signature(target).parameters
     own = {k for k, p in params.items() if p.kind is not inspect.Parameter.VAR_KEYWORD}
+    config = None
     if cls is not None and issubclass(cls, Presets):
         preset = opts.pop("preset", None)
-        cls.preset(preset or "paper", **{k: v for k, v in opts.items() if k not in own})
-        return
-    _check_plain_options(name, target, params, cls, opts)
+        config = cls.preset(preset or "paper", **{k: v for k, v in opts.items() if k not in own})
+    else:
+        _check_plain_options(name, target, params, cls, opts)
+    check_method_seed(name, opts, config)  # a seed_method, a plugin's too (h137)
 
 
 def _check_plain_options(name: str, target: Callable[..., Any],
