@@ -34,8 +34,7 @@ import numpy as np
 
 from bomgraph.config import requirement, resolve
 from bomgraph.errors import BomgraphError, ConfigError, TooFewLandmarksError
-from bomgraph.mapper import MapEstimate, Mapper, create_mapper
-from bomgraph.seed_check import check_seed
+from bomgraph.mapper import MapEstimate, Mapper, check_seed, create_mapper
 from bomgraph.stream import Step, StreamHeader
 
 from .bearing_graph import FactorGraphConfig, landmark_key

@@ -47,8 +47,7 @@ from bomgraph.angles import angle_residual
 from bomgraph.config import requirement, resolve
 from bomgraph.errors import BomgraphError
 from bomgraph.geometry import intersect_ray_groups
-from bomgraph.mapper import MapEstimate, Mapper, create_mapper
-from bomgraph.seed_check import check_seed
+from bomgraph.mapper import MapEstimate, Mapper, check_seed, create_mapper
 from bomgraph.stream import Step, StreamHeader
 
 from .bearing_graph import BearingGraph, landmark_key, landmarks_from_values

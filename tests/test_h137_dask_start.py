@@ -78,8 +78,11 @@ def _task(k: int, t: str) -> tuple[int, dict]:
 
 def test_a_worker_whose_start_hangs_times_out(tmp_path: Path, monkeypatch) -> None:
     """Before: ``LocalCluster`` waited for it as long as it slept (for ever)."""
+    import importlib
+
     import dask.config
-    import distributed  # noqa: F401 - its configuration first: set() would remove it after
+
+    importlib.import_module("distributed")  # its configuration first: set() removes it after
 
     from bomgraph.cluster import dispatch
 

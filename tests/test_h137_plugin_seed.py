@@ -5,7 +5,7 @@ A researcher's hybrid (a plugin whose factory takes ``seed_method`` and ``seed_o
 builds that method as its seed) could not have its seed checked: ``compare --option
 seeded:seed_method=nope`` (or a bound, or seed options the seed refuses) ran, and every run
 of the method failed, one at a time, mid-sweep, exit 1. The built-in hybrids' check
-(``check_seed``) now lives in ``bomgraph.seed_check`` and
+(``check_seed``) now lives in ``bomgraph.mapper`` and
 :func:`bomgraph.mapper.check_method_options` makes it for any method with a
 ``seed_method``: the command refuses in one line, exit 2, before any run; the default seed
 of the plugin (or of its preset) is checked too, and seeds that go round in a circle are
@@ -20,9 +20,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from _plugin_dist import write_dist_info
+from _plugin_dist import installed
 
-from bomgraph import plugins
 from bomgraph.errors import ConfigError
 from bomgraph.mapper import check_method_options
 from bomgraph.sim import SimConfig, simulate
@@ -84,14 +83,7 @@ METHODS = {"h137-seeded": "h137seeded:Seeded", "h137-circle": "h137seeded:Circle
 def site(tmp_path: Path, monkeypatch: pytest.MonkeyPatch):
     folder = tmp_path / "site"
     folder.mkdir()
-    (folder / "h137seeded.py").write_text(MODULE)
-    write_dist_info(folder, "h137seeded", METHODS)
-    monkeypatch.syspath_prepend(str(folder))
-    plugins.refresh()
-    yield folder
-    monkeypatch.undo()
-    sys.modules.pop("h137seeded", None)
-    plugins.refresh()
+    yield from installed(folder, monkeypatch, "h137seeded", MODULE, METHODS)
 
 
 BAD = [
