@@ -227,6 +227,8 @@ def start_failure(exc: BaseException, tries: int = START_TRIES) -> str:
                "cached")
     kind = _start_kind(exc)
     if kind == "network":
+        said = next(f"{type(e).__name__}: {e}" for e in _causes(exc)
+                    if isinstance(e, OSError) and e.errno in _NETWORK_ERRNOS)
         return (f"ClusterNetwork: the local Dask cluster could not listen or connect on "
                 f"127.0.0.1 ({said}): no free port on this machine (every port of "
                 f"net.ipv4.ip_local_port_range in use), no loopback interface or address (a "
@@ -234,7 +236,7 @@ def start_failure(exc: BaseException, tries: int = START_TRIES) -> str:
                 f"or bring the loopback interface up (ip link set lo up), {instead}")
     if kind == "timeout":
         return (f"WorkerStartTimeout: a worker of the local Dask cluster did not start within "
-                f"{start_timeout():g} s, {times} ({said}): the machine is overloaded or "
+                f"{start_timeout():g} s, {times}: the machine is overloaded or "
                 f"something at the workers' start waits (a sitecustomize or .pth file, a slow "
                 f"network file system); fix that, give them longer (twice Dask's "
                 f"distributed.comm.timeouts.connect: DASK_DISTRIBUTED__COMM__TIMEOUTS__CONNECT="
