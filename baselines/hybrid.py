@@ -34,8 +34,7 @@ import numpy as np
 
 from bomgraph.config import requirement, resolve
 from bomgraph.errors import BomgraphError, ConfigError, TooFewLandmarksError
-from bomgraph.mapper import (MapEstimate, Mapper, check_method_options, create_mapper,
-                             method_info)
+from bomgraph.mapper import MapEstimate, Mapper, check_seed, create_mapper
 from bomgraph.stream import Step, StreamHeader
 
 from .bearing_graph import FactorGraphConfig, landmark_key
@@ -135,37 +134,6 @@ class HybridConfig(FactorGraphConfig):
         need(self.start_tol_m >= 0, "start_tol_m must be >= 0")
 
 
-def check_seed(owner: str, seed_method: str, seed_options: Mapping[str, Any] | None) -> None:
-    """Refuse a ``seed_method`` that is not a registered method or is a bound (it needs the
-    truth), or ``seed_options`` its configuration refuses, where the hybrid's configuration is made: before any run of
-    ``compare`` (:func:`bomgraph.mapper.check_method_options`), not at every run.
-
-    Raises
-    ------
-    ConfigError
-        Naming ``owner``'s option and what the seed method refused.
-    """
-    options = dict(seed_options or {})
-    try:
-        info = method_info(seed_method)
-    except BomgraphError:
-        info = None                         # refused by check_method_options below
-    if info is not None and info.needs_truth:   # the seed runs beside the hybrid, truthless
-        raise ConfigError(f"{owner}: seed_method={seed_method!r} is a bound (it needs the "
-                          f"truth, as oracle does), and a seed maps from the stream alone: "
-                          f"choose a method that does (e.g. stmds-smacof)")
-    target = None if info is None else info.target
-    key = (seed_method, target, _canonical(options))
-    if key in _SEEDS_CHECKED:
-        return
-    try:
-        check_method_options(seed_method, options)
-    except BomgraphError as exc:
-        raise ConfigError(f"{owner}: seed_method={seed_method!r}, seed_options={options}: "
-                          f"{exc}") from None
-    _SEEDS_CHECKED.add(key)
-
-
 def check_seed_mapper(owner: str, seed_mapper: Mapper | None,
                       seed_options: Mapping[str, Any] | None, preset: str | None,
                       options: Mapping[str, Any]) -> None:
@@ -189,23 +157,6 @@ def check_seed_mapper(owner: str, seed_mapper: Mapper | None,
         fix = "give a config= with seed_options=None (pass them to seed_mapper's constructor)"
     raise ConfigError(f"{owner}: seed_options={dict(seed_options)} apply to seed_method, not to "
                       f"a seed_mapper; {fix}")
-
-
-#: Seeds (name, registered target) and options :func:`check_seed` accepted: a
-#: ``dataclasses.replace`` of the configuration (the warm solve makes one at every checkpoint)
-#: does not check them again.
-_SEEDS_CHECKED: set[tuple[str, str | None, str]] = set()
-
-
-def _canonical(value: Any) -> str:
-    """``value`` as a string that tells apart what the option checks tell apart (types, nan,
-    tuples from lists), mappings in key order."""
-    if isinstance(value, Mapping):
-        return "{" + ", ".join(f"{k!r}: {_canonical(v)}" for k, v in sorted(
-            value.items(), key=lambda kv: repr(kv[0]))) + "}"
-    if isinstance(value, (list, tuple)):
-        return type(value).__name__ + "(" + ", ".join(_canonical(v) for v in value) + ")"
-    return f"{type(value).__name__}:{value!r}"
 
 
 # --------------------------------------------------------------------------------------------

@@ -47,12 +47,12 @@ from bomgraph.angles import angle_residual
 from bomgraph.config import requirement, resolve
 from bomgraph.errors import BomgraphError
 from bomgraph.geometry import intersect_ray_groups
-from bomgraph.mapper import MapEstimate, Mapper, create_mapper
+from bomgraph.mapper import MapEstimate, Mapper, check_seed, create_mapper
 from bomgraph.stream import Step, StreamHeader
 
 from .bearing_graph import BearingGraph, landmark_key, landmarks_from_values
 from .gtsam_tools import align_map
-from .hybrid import check_seed, check_seed_mapper
+from .hybrid import check_seed_mapper
 from .isam2 import Isam2Config, Isam2Mapper
 
 _REAL_SEED = {"seed_options": {"preset": "real"}}

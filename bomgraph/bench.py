@@ -42,7 +42,7 @@ from .method_code import (bomgraph_edited, method_code, new_sweep, noting_runs,
                           refuse_runtime_methods, stale_after_run, stale_here, stale_plugin,
                           uncacheable, warn_sourceless, workers_outdated)
 from .plugins import code_fingerprint
-from .processes import MAX_WORKERS_PER_CORE, daemonic, workers_asked
+from .processes import daemonic, workers_asked
 from .result_cache import read_cached, strip_timings, write_cached  # re-exported
 from .result_cache import remove_cache_leftovers
 from .run_scoring import (CheckpointScorer, ReferenceFailure, failed_reference, forget_failures,
@@ -533,23 +533,6 @@ def _indexed(k: int, task: Task, sweep: str = "") -> tuple[int, dict[str, Any]]:
         _IN_WORKER.reset(token)
 
 
-def _local_workers(requested: int, n_tasks: int, *, two_for_one: bool = False) -> int:
-    """Local worker processes for ``n_tasks`` tasks: ``requested`` (-1, joblib's one per
-    core, is passed on), but never more than the tasks nor :data:`MAX_WORKERS_PER_CORE` per
-    core. ``two_for_one``: a pool of one is started as two processes that take one task at
-    a time (:func:`bomgraph.processes.dispatch`), as the log line says."""
-    if requested < 1:
-        return requested
-    cap = min(n_tasks, MAX_WORKERS_PER_CORE * (os.cpu_count() or 1))
-    n = max(min(requested, cap), 1)
-    if requested > cap:
-        started = ("2, one task at a time (a pool of one would run it in this process)"
-                   if two_for_one and n == 1 else str(n))
-        _log.info("%d worker processes asked for %d task(s) on %d core(s): starting %s",
-                  requested, n_tasks, os.cpu_count() or 1, started)
-    return n
-
-
 def _dispatch(tasks: list[Task], index: list[int], executor: Executor,
               keys: Sequence[str] | None = None) -> Iterator[tuple[int, dict[str, Any]]]:
     if not tasks:
@@ -573,14 +556,14 @@ def _dispatch(tasks: list[Task], index: list[int], executor: Executor,
         from .processes import dispatch
 
         yield from dispatch(run, index, tasks,
-                            _local_workers(executor.n_jobs, len(tasks), two_for_one=True),
+                            executor.n_jobs,
                             failed, fresh=workers_outdated(tasks))
     else:
         from .cluster import dispatch as dispatch_dask
 
         yield from dispatch_dask(run, index, tasks, scheduler=executor.scheduler,
                                  scheduler_named=executor.scheduler_named(),
-                                 n_local=_local_workers(executor.dask_local, len(tasks)),
+                                 n_local=executor.dask_local,
                                  failed=failed)
 
 

@@ -80,8 +80,8 @@ def _nonneg_int(text: str) -> int:
 def _jobs(text: str) -> int:
     v = int(text)
     if v == 0 or v < -1:
-        raise argparse.ArgumentTypeError("must be a number of processes >= 1, or -1 for one "
-                                         "per core")
+        raise argparse.ArgumentTypeError(f"must be a number of processes >= 1, or -1 for "
+                                         f"one per core, got {v}")
     return v
 
 

@@ -9,7 +9,8 @@ worker could not import it) becomes a failed run with the reason, so the other r
 are cached. Ctrl-C kills a local cluster's workers at once (:func:`_end_local_workers`); they
 never take it themselves (:func:`_workers_hold_signals`). Imports from bomgraph only the
 errors, an option's name, :func:`bomgraph.stdio.signals_held` and
-:func:`bomgraph.owned_folders.owned_folder`.
+:func:`bomgraph.owned_folders.owned_folder` and
+:func:`bomgraph.processes.worker_count`.
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ from __future__ import annotations
 import asyncio
 import concurrent.futures
 import contextlib
+import errno
 import importlib
 import logging
 from concurrent.futures import CancelledError
@@ -25,6 +27,7 @@ from typing import Any, Callable, Iterator, Sequence
 from .checks import integer, option_named
 from .errors import ConfigError, UnknownMethodError
 from .owned_folders import owned_folder
+from .processes import worker_count
 from .stdio import signals_held
 
 _log = logging.getLogger(__name__)
@@ -81,7 +84,8 @@ def _scratch_folder() -> Iterator[str]:
 #: Starts of the local cluster before its runs fail (:func:`start_failure`): Dask closes the
 #: whole cluster when one worker dies as it starts, and one killed once (the out-of-memory
 #: killer, a kill) failed every run where ``--jobs N`` tries a pool whose workers died
-#: before any task once more (h130).
+#: before any task once more (h130). Not tried again: a cluster that could not listen or
+#: connect on 127.0.0.1 (no port, no loopback: the same the next time).
 START_TRIES = 2
 
 
@@ -169,21 +173,82 @@ def worker_failure(exc: BaseException) -> str:
     return f"on a Dask worker, {reason}"
 
 
-def start_failure(exc: BaseException) -> str:
-    """A failed run's error when the local cluster could not start, :data:`START_TRIES` times
-    in a row: one of its workers died as it started (h124: a worker killed then, or ended by
-    a sitecustomize, was Dask's ``RuntimeError: Nanny failed to start.`` traceback out of
-    ``compare``, exit 1). ``exc``: the last start's error."""
-    causes = []
-    while exc is not None and len(causes) < 3:
-        first = (str(exc).splitlines() or [""])[0].strip()
-        causes.append(f"{type(exc).__name__}: {first}" if first else type(exc).__name__)
+#: What keeps a local cluster from listening or connecting on 127.0.0.1 (:func:`start_failure`)
+_NETWORK_ERRNOS = frozenset({errno.EADDRINUSE, errno.EADDRNOTAVAIL, errno.EACCES, errno.EPERM,
+                             errno.ENETUNREACH, errno.ECONNREFUSED})
+
+
+def start_timeout() -> float:
+    """How long a local cluster's worker may take to start, in seconds: twice Dask's connect
+    timeout (:func:`connect_timeout`; 60 s by default). h137: nothing bounded it, so a worker
+    whose start hung (a sitecustomize, a network file system) hung ``--dask-local``."""
+    return 2 * connect_timeout()
+
+
+def _causes(exc: BaseException | None) -> list[BaseException]:
+    """``exc`` and what it came from (``__cause__``, else ``__context__``), outermost first."""
+    out: list[BaseException] = []
+    while exc is not None and len(out) < 12 and exc not in out:
+        out.append(exc)
         exc = exc.__cause__ or exc.__context__
-    return (f"WorkerDied: the local Dask cluster's workers could not start, {START_TRIES} "
-            f"times in a row ({'; '.join(causes)}): something at their start kills them "
-            f"(a sitecustomize or .pth file, a memory "
-            f"limit, the out-of-memory killer, a kill); fix that, or run in local processes "
-            f"(--jobs N, without --dask-local); finished runs are cached")
+    return out
+
+
+def _start_kind(exc: BaseException | None) -> str:
+    """Why a local cluster did not start: ``"network"`` (no port, no loopback, not allowed),
+    ``"timeout"`` (a worker did not start within :func:`start_timeout`), ``"died"`` (a worker
+    process ended as it started) or ``"other"`` (what Dask raised is in the message)."""
+    chain = _causes(exc)
+    if any(isinstance(e, OSError) and e.errno in _NETWORK_ERRNOS for e in chain):
+        return "network"
+    if any(isinstance(e, (TimeoutError, asyncio.TimeoutError)) for e in chain):
+        return "timeout"
+    if any(isinstance(e, RuntimeError) and "failed to start worker process" in str(e)
+           for e in chain):  # Dask's Nanny: the worker process ended before it said it ran
+        return "died"
+    return "other"
+
+
+def start_failure(exc: BaseException, tries: int = START_TRIES) -> str:
+    """A failed run's error when the local cluster could not start ``tries`` times in a row,
+    saying why and what to fix: it could not listen or connect on 127.0.0.1 (a port, the
+    loopback interface, a sandbox), a worker did not start in time, a worker died as it
+    started (h124: a worker killed then, or ended by a sitecustomize, was Dask's
+    ``RuntimeError: Nanny failed to start.`` traceback out of ``compare``, exit 1), or
+    anything else Dask raised (h137: every one of these was called a worker death). ``exc``:
+    the last start's error."""
+    causes = []
+    for e in _causes(exc)[:3]:
+        first = (str(e).splitlines() or [""])[0].strip()
+        causes.append(f"{type(e).__name__}: {first}" if first else type(e).__name__)
+    said = "; ".join(causes)
+    times = "once" if tries == 1 else f"{tries} times in a row"
+    instead = ("or run in local processes (--jobs N, without --dask-local); finished runs are "
+               "cached")
+    kind = _start_kind(exc)
+    if kind == "network":
+        said = next(f"{type(e).__name__}: {e}" for e in _causes(exc)
+                    if isinstance(e, OSError) and e.errno in _NETWORK_ERRNOS)
+        return (f"ClusterNetwork: the local Dask cluster could not listen or connect on "
+                f"127.0.0.1 ({said}): no free port on this machine (every port of "
+                f"net.ipv4.ip_local_port_range in use), no loopback interface or address (a "
+                f"sandbox, a container without a network), or not allowed here; free ports "
+                f"or bring the loopback interface up (ip link set lo up), {instead}")
+    if kind == "timeout":
+        return (f"WorkerStartTimeout: a worker of the local Dask cluster did not start within "
+                f"{start_timeout():g} s, {times}: the machine is overloaded or "
+                f"something at the workers' start waits (a sitecustomize or .pth file, a slow "
+                f"network file system); fix that, give them longer (twice Dask's "
+                f"distributed.comm.timeouts.connect: DASK_DISTRIBUTED__COMM__TIMEOUTS__CONNECT="
+                f"60s), {instead}")
+    if kind == "died":
+        return (f"WorkerDied: the local Dask cluster's workers could not start, {times} "
+                f"({said}): they died as they started; something at their start kills them "
+                f"(a sitecustomize or .pth file, a memory limit, the out-of-memory killer, a "
+                f"kill); fix that, {instead}")
+    return (f"ClusterNotStarted: the local Dask cluster could not start, {times} ({said}); "
+            f"fix that (Dask's configuration, DASK_* variables, what the workers import as "
+            f"they start), {instead}")
 
 
 def quiet_dask_logging() -> Callable[[], None]:
@@ -235,6 +300,32 @@ def _workers_hold_signals() -> Iterator[None]:
         yield
 
 
+#: The name of the process Dask's nanny starts for a local worker
+_WORKER_PROCESS = "Dask Worker process (from Nanny)"
+
+
+def _worker_processes() -> set[int]:
+    """The pids of this process's local Dask workers (``multiprocessing``'s children)."""
+    import multiprocessing
+
+    return {p.pid for p in multiprocessing.active_children() if p.name == _WORKER_PROCESS
+            and p.pid is not None}
+
+
+def _end_strays(before: set[int]) -> None:
+    """Kill (SIGKILL) the local workers a failed start left, those not in ``before``: Dask
+    cannot end a worker that has not yet started (its nanny's kill asserts that it did: the
+    ``AssertionError: Status.starting`` of a start that timed out), so one whose start hung
+    went on, and the command waited for it as it ended (h137: 2 minutes, a sitecustomize's
+    sleep)."""
+    import multiprocessing
+
+    for p in multiprocessing.active_children():
+        if p.name == _WORKER_PROCESS and p.pid not in before:
+            p.kill()
+            p.join(5)
+
+
 def _end_local_workers(cluster: Any) -> None:
     """End the local cluster's worker processes now (SIGKILL), their runs unfinished: nobody
     waits for those, and nothing of the command's output is theirs to write. Closing the
@@ -272,7 +363,9 @@ def dispatch(func: Callable[[int, Any], tuple[int, dict[str, Any]]], index: Sequ
     cluster could not run is ``(k, failed(k, reason))``. ``scheduler_named``: how errors
     name the address (:func:`check_scheduler`). Without ``scheduler``, ``n_local`` (the
     local cluster's workers) must be an integer >= 1: else :class:`ConfigError` at the call,
-    before any cluster starts (h123: ``n_local=-3`` waited forever for a worker).
+    before any cluster starts (h123: ``n_local=-3`` waited forever for a worker). No more
+    workers are started than tasks, nor than :data:`~bomgraph.processes.MAX_WORKERS_PER_CORE`
+    per core (:func:`~bomgraph.processes.worker_count`, as for local processes).
 
     Raises
     ------
@@ -281,6 +374,7 @@ def dispatch(func: Callable[[int, Any], tuple[int, dict[str, Any]]], index: Sequ
     """
     if not scheduler:
         integer(n_local, option_named("--dask-local", "n_local"), ConfigError, minimum=1)
+        n_local = worker_count(n_local, len(tasks))
     return _dispatch(func, index, tasks, scheduler=scheduler, n_local=n_local,
                      failed=failed, scheduler_named=scheduler_named)
 
@@ -305,21 +399,27 @@ def _dispatch(func: Callable[[int, Any], tuple[int, dict[str, Any]]], index: Seq
         else:
             folder = scratch.enter_context(_scratch_folder())
             not_started: Exception | None = None
-            for _ in range(START_TRIES):
+            tries = 0
+            while cluster is None and tries < START_TRIES:
+                tries += 1
+                before = _worker_processes()
                 with _workers_hold_signals():
                     try:
                         cluster = LocalCluster(n_workers=n_local, threads_per_worker=1,
                                                processes=True, host="127.0.0.1",
                                                dashboard_address=None, local_directory=folder,
+                                               death_timeout=start_timeout(),
                                                scheduler_kwargs={**LOCAL_SCHEDULER_HTTP,
                                                                  "local_directory": folder})
-                    except Exception as exc:  # a worker died as it started; Dask closed all
+                    except Exception as exc:  # start_failure's kinds; Dask closed the rest
                         not_started = exc
-                if cluster is not None:
-                    break
-                _log.debug("the local Dask cluster did not start", exc_info=not_started)
+                        _end_strays(before)
+                if cluster is None:
+                    _log.debug("the local Dask cluster did not start", exc_info=not_started)
+                    if _start_kind(not_started) == "network":  # the same again: not tried
+                        break
             if cluster is None:
-                why = start_failure(not_started)
+                why = start_failure(not_started, tries)
                 for k in index:
                     yield k, failed(k, why)
                 finished = True

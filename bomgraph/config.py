@@ -219,5 +219,37 @@ def resolve(cls: type[C], config: C | None = None, preset: str | None = None,
     return cls.preset(preset or "paper", **options)
 
 
+def check_plain_options(name: str, target: Callable[..., Any],
+                         params: Mapping[str, Any], cls: type | None,
+                         opts: Mapping[str, Any]) -> None:
+    """:func:`bomgraph.mapper.check_method_options` for a method without presets: names against the
+    factory's parameters and ``cls``'s fields, values against their annotations."""
+    import inspect
+
+    def hints_of(obj: Any) -> dict[str, Any]:
+        try:
+            return typing.get_type_hints(obj)
+        except Exception:  # unresolvable annotations in a plugin: nothing to check against
+            return {}
+
+    hints = {k: v for k, v in hints_of(target).items() if k in params}
+    known = {k for k in params if k not in ("self", "header", "truth")
+             and params[k].kind not in (inspect.Parameter.VAR_KEYWORD,
+                                        inspect.Parameter.VAR_POSITIONAL)}
+    if cls is not None and dataclasses.is_dataclass(cls):
+        fields = {f.name for f in dataclasses.fields(cls)}
+        hints.update({k: v for k, v in hints_of(cls).items() if k in fields})
+        known |= fields
+    takes_any = any(p.kind is inspect.Parameter.VAR_KEYWORD for p in params.values())
+    for key, value in opts.items():
+        if key not in known and not takes_any:
+            what = ("it has no presets" if key == "preset" else
+                    f"its options: {', '.join(sorted(known))}" if known else "it takes none")
+            raise ConfigError(f"method {name!r}: unknown option {key!r} ({what})")
+        problem = type_problem(hints.get(key), value)
+        if problem:
+            raise ConfigError(f"method {name!r}: bad option value {key}={value!r}: {problem}")
+
+
 __all__ = ["Presets", "requirement", "resolve", "OptionDoc", "describe_options", "type_problem",
-           "type_name"]
+           "type_name", "check_plain_options"]

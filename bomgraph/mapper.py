@@ -462,59 +462,65 @@ def check_method_options(name: str, options: Mapping[str, Any]) -> None:
     Raises
     ------
     ConfigError
+        Also for a ``seed_method`` (a plugin's too) that :func:`check_seed` refuses.
     """
     import inspect
 
-    from .config import Presets
+    from .config import Presets, check_plain_options
 
     cls = method_config_class(name)
     opts = dict(options)
     if "config" in opts:
-        return
+        return _check_method_seed(name, opts, opts.pop("config"))
     factory = method_factory(name)
     target = factory.__init__ if inspect.isclass(factory) else factory
     params = inspect.signature(target).parameters
     own = {k for k, p in params.items() if p.kind is not inspect.Parameter.VAR_KEYWORD}
+    config = None
     if cls is not None and issubclass(cls, Presets):
         preset = opts.pop("preset", None)
-        cls.preset(preset or "paper", **{k: v for k, v in opts.items() if k not in own})
+        config = cls.preset(preset or "paper", **{k: v for k, v in opts.items() if k not in own})
+    else:
+        check_plain_options(name, target, params, cls, opts)
+    _check_method_seed(name, opts, config)
+
+
+def _check_method_seed(name: str, opts: Mapping[str, Any], config: Any) -> None:
+    """:func:`check_seed` for the ``seed_method`` of ``name`` (a plugin's too, h137: a wrong
+    one failed every run mid-sweep), a circle of seeds refused (:mod:`bomgraph.seed_check`)."""
+    from .seed_check import seed_of, seeding
+
+    seed, seed_options = seed_of(name, opts, config, method_config_class(name),
+                                 method_factory(name))
+    if seed is not None:
+        with seeding(name, opts, seed, seed_options):
+            check_seed(f"method {name!r}", seed, seed_options)
+
+
+def check_seed(owner: str, seed_method: str, seed_options: Mapping[str, Any] | None) -> None:
+    """Refuse, as :class:`ConfigError` naming ``owner``, a seed (a hybrid's ``seed_method``,
+    built beside it) that is not a registered method or is a bound (it needs the truth), or
+    ``seed_options`` its configuration refuses: before any run (:func:`check_method_options`)."""
+    from .seed_check import accepted, canonical
+
+    options = dict(seed_options or {})
+    try:
+        info = method_info(seed_method)
+    except BomgraphError:
+        info = None                         # refused by check_method_options below
+    if info is not None and info.needs_truth:   # the seed runs beside the hybrid, truthless
+        raise ConfigError(f"{owner}: seed_method={seed_method!r} is a bound (it needs the "
+                          f"truth, as oracle does), and a seed maps from the stream alone: "
+                          f"choose a method that does (e.g. stmds-smacof)")
+    key = (seed_method, None if info is None else info.target, canonical(options))
+    if key in accepted:  # a dataclasses.replace of a hybrid's config: checked already
         return
-    _check_plain_options(name, target, params, cls, opts)
-
-
-def _check_plain_options(name: str, target: Callable[..., Any],
-                         params: Mapping[str, Any], cls: type | None,
-                         opts: Mapping[str, Any]) -> None:
-    """:func:`check_method_options` for a method without presets: names against the
-    factory's parameters and ``cls``'s fields, values against their annotations."""
-    import inspect
-    import typing
-
-    from .config import type_problem
-
-    def hints_of(obj: Any) -> dict[str, Any]:
-        try:
-            return typing.get_type_hints(obj)
-        except Exception:  # unresolvable annotations in a plugin: nothing to check against
-            return {}
-
-    hints = {k: v for k, v in hints_of(target).items() if k in params}
-    known = {k for k in params if k not in ("self", "header", "truth")
-             and params[k].kind not in (inspect.Parameter.VAR_KEYWORD,
-                                        inspect.Parameter.VAR_POSITIONAL)}
-    if cls is not None and dataclasses.is_dataclass(cls):
-        fields = {f.name for f in dataclasses.fields(cls)}
-        hints.update({k: v for k, v in hints_of(cls).items() if k in fields})
-        known |= fields
-    takes_any = any(p.kind is inspect.Parameter.VAR_KEYWORD for p in params.values())
-    for key, value in opts.items():
-        if key not in known and not takes_any:
-            what = ("it has no presets" if key == "preset" else
-                    f"its options: {', '.join(sorted(known))}" if known else "it takes none")
-            raise ConfigError(f"method {name!r}: unknown option {key!r} ({what})")
-        problem = type_problem(hints.get(key), value)
-        if problem:
-            raise ConfigError(f"method {name!r}: bad option value {key}={value!r}: {problem}")
+    try:
+        check_method_options(seed_method, options)
+    except BomgraphError as exc:
+        raise ConfigError(f"{owner}: seed_method={seed_method!r}, seed_options={options}: "
+                          f"{exc}") from None
+    accepted.add(key)
 
 
 def factory_options(name: str) -> list[Any]:
@@ -586,4 +592,5 @@ def create_mapper(name: str, header: StreamHeader, *, truth: Truth | None = None
 
 __all__ = ["MapEstimate", "Mapper", "Checkpoint", "RunResult", "run", "checkpoint_times",
            "MethodInfo", "register_method", "available_methods", "method_info", "method_factory",
-           "method_description", "method_config_class", "check_method_options", "factory_options", "create_mapper"]
+           "method_description", "method_config_class", "check_method_options", "check_seed",
+           "factory_options", "create_mapper"]

@@ -63,7 +63,7 @@ def dispatch(func: Callable[[int, Any], tuple[int, dict[str, Any]]], index: Sequ
     worker asked for (``n_jobs`` 1, or -1 on one core), which joblib would run here, is two
     given one task at a time (:func:`_pool`). More workers than tasks, or than
     :data:`MAX_WORKERS_PER_CORE` per core, are not started (``n_jobs=10**6`` started a
-    thousand).
+    thousand): :func:`worker_count`, which logs it.
 
     Raises
     ------
@@ -71,10 +71,41 @@ def dispatch(func: Callable[[int, Any], tuple[int, dict[str, Any]]], index: Sequ
         ``n_jobs`` is not an integer >= 1 nor -1 (0, -3, 1.5, True, "2"): at the call, before
         any worker starts (h124: 0 was joblib's ValueError, 1.5 and True were taken).
     """
-    n_jobs = workers_asked(n_jobs)
-    if n_jobs >= 1:
-        n_jobs = max(1, min(n_jobs, len(tasks), MAX_WORKERS_PER_CORE * (os.cpu_count() or 1)))
+    n_jobs = worker_count(workers_asked(n_jobs), len(tasks), one_at_a_time=True)
     return _dispatch(func, index, tasks, n_jobs, failed, fresh=fresh)
+
+
+def usable_cores() -> int:
+    """The cores this process may use, as joblib counts them for ``n_jobs=-1``: its CPU
+    affinity (``taskset``), a container's CPU quota and ``LOKY_MAX_CPU_COUNT`` taken into
+    account, where ``os.cpu_count()`` counts the machine's (h137: the cap counted those, so
+    ``taskset -c 0`` with ``--jobs 8`` started 8 workers on one core)."""
+    from joblib import cpu_count
+
+    return max(1, int(cpu_count()))
+
+
+def worker_count(requested: int, n_tasks: int, *, one_at_a_time: bool = False) -> int:
+    """The worker processes to start for ``n_tasks`` tasks (the one place that decides it,
+    for local processes and a local Dask cluster alike): ``requested`` (-1: one per usable
+    core, :func:`usable_cores`), but never more than the tasks nor :data:`MAX_WORKERS_PER_CORE`
+    per usable core; logged (INFO) when fewer than asked for are started. h137: -1 was passed
+    on to joblib as it was, one worker per core whatever the tasks (64 for 2 tasks on 64
+    cores), and the cap was decided twice (the command line's, logged, and
+    :func:`dispatch`'s for library callers, silent). ``one_at_a_time``: a pool of one is
+    started as two processes that take one task at a time (:func:`_pool`), as the log line
+    then says. ``requested`` is checked by the caller (:func:`workers_asked`)."""
+    cores = usable_cores()
+    asked = cores if requested == -1 else requested
+    n = max(1, min(asked, n_tasks, MAX_WORKERS_PER_CORE * cores))
+    if n < asked:
+        started = ("2, one task at a time (a pool of one would run it in this process)"
+                   if one_at_a_time and n == 1 else str(n))
+        what = (f"one worker process per core ({cores})" if requested == -1 else
+                f"{asked} worker processes")
+        _log.info("%s asked for %d task(s) on %d usable core(s): starting %s", what, n_tasks,
+                  cores, started)
+    return n
 
 
 def workers_asked(n_jobs: Any, name: str = "n_jobs") -> int:
@@ -340,4 +371,5 @@ def _start_workers(par: Any) -> None:
             workers.submit(int)  # the first task starts the processes, in this thread
 
 
-__all__ = ["MAX_WORKERS_PER_CORE", "daemonic", "dispatch", "workers_asked"]
+__all__ = ["MAX_WORKERS_PER_CORE", "daemonic", "dispatch", "usable_cores", "worker_count",
+           "workers_asked"]

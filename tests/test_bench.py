@@ -112,12 +112,11 @@ def test_the_command_lines_executor_overrides_the_sweep_files_whole() -> None:
 
 def test_local_processes_are_bounded_by_the_tasks_and_the_cores(
         monkeypatch: pytest.MonkeyPatch) -> None:
-    # `compare --jobs 100000` started 100,000 worker processes for one run (session 12)
-    import os
-
+    # `compare --jobs 100000` started 100,000 worker processes for one run (session 12);
+    # -1 was passed on, one per core whatever the tasks (h137)
     import joblib
 
-    from bomgraph import bench
+    from bomgraph import bench, processes
 
     asked: list[int] = []
 
@@ -135,12 +134,14 @@ def test_local_processes_are_bounded_by_the_tasks_and_the_cores(
             pass
 
     monkeypatch.setattr(joblib, "Parallel", Recorder)
-    monkeypatch.setattr(os, "cpu_count", lambda: 2)
+    monkeypatch.setattr(processes, "usable_cores", lambda: 2)
     task = _exp((Arm("tri", "triangulate"),)).tasks()[0]  # never run: the pool is fake
     for n_jobs in (100_000, 2, -1):
         list(bench._dispatch([task] * 3, [0, 1, 2], Executor("processes", n_jobs=n_jobs)))
     list(bench._dispatch([task] * 50, list(range(50)), Executor("processes", n_jobs=10**5)))
-    assert asked == [3, 2, -1, 8]
+    # h137: -1 for one task is one worker (two taking one task at a time); was -1, two
+    list(bench._dispatch([task], [0], Executor("processes", n_jobs=-1)))
+    assert asked == [3, 2, 2, 8, 2]
 
 
 def test_a_callers_sequential_joblib_backend_leaves_the_pool_its_workers(
@@ -389,7 +390,7 @@ def test_the_log_line_of_a_capped_pool_of_one_says_two_processes_start(
     import logging
 
     task = _exp((Arm("tri", "triangulate"),)).tasks()[0]
-    with caplog.at_level(logging.INFO, logger="bomgraph.bench"):
+    with caplog.at_level(logging.INFO, logger="bomgraph"):  # bomgraph.processes's (h137)
         (res,) = execute([task], Executor("processes", n_jobs=4))
     assert res["ok"], res.get("error")
     line = next(r.getMessage() for r in caplog.records if "asked for" in r.getMessage())

@@ -4,14 +4,13 @@ listed as reading the truth, and refused where the truth is not allowed."""
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
-from _plugin_dist import write_dist_info
+from _plugin_dist import installed
 
-from bomgraph import mapper, plugins
+from bomgraph import mapper
 from bomgraph.bench import run_file
 from bomgraph.errors import ConfigError
 from bomgraph.method_list import method_listing
@@ -47,15 +46,8 @@ class Plain(TruthMap):
 
 @pytest.fixture()
 def bound(tmp_path: Path, monkeypatch: pytest.MonkeyPatch):
-    (tmp_path / "h20bound.py").write_text(MODULE)
-    write_dist_info(tmp_path, "h20bound", {"truth-map": "h20bound:TruthMap",
-                                           "plain-map": "h20bound:Plain"})
-    monkeypatch.syspath_prepend(str(tmp_path))
-    plugins.refresh()
-    yield tmp_path
-    monkeypatch.undo()
-    sys.modules.pop("h20bound", None)
-    plugins.refresh()
+    yield from installed(tmp_path, monkeypatch, "h20bound", MODULE,
+                         {"truth-map": "h20bound:TruthMap", "plain-map": "h20bound:Plain"})
 
 
 def test_a_plugin_bound_is_given_the_truth_and_refused_without_it(bound: Path) -> None:
