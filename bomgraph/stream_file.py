@@ -17,7 +17,7 @@ from typing import IO, Any, Callable, Iterable, Iterator, Sequence
 import numpy as np
 
 from .checks import file_name
-from .errors import StreamFormatError
+from .errors import StreamFormatError, StreamValueError
 from .jsonio import (MAX_ID, DuplicateKeyError, decode_utf8, find_nonfinite, is_id, is_int,
                      is_num, line_not_json, loads_strict, version_problem)
 from .plausibility import (OdometryScale, PriorLandmarks, bearings_problem, header_problems,
@@ -531,5 +531,12 @@ def count_steps(stream_path: str | os.PathLike[str]) -> int:
     return max(n - 1, 0)
 
 
+def located(exc: StreamValueError, path: str | os.PathLike[str]) -> StreamValueError:
+    """A method's refusal of a value of the stream file ``path``, naming the file and the
+    line, as the reader names a line it refuses: the header's line 1, step ``t``'s line
+    ``t + 2`` (the format has no blank lines and no gaps in ``t``)."""
+    return exc if exc.path is not None else exc.in_file(path, 1 if exc.t is None else exc.t + 2)
+
+
 __all__ = ["StreamReader", "read_stream", "write_stream", "write_stream_parts", "header_to_json",
-           "step_to_json", "parse_priors", "count_steps", "FORMAT_NAME", "FORMAT_VERSION"]
+           "step_to_json", "parse_priors", "count_steps", "located", "FORMAT_NAME", "FORMAT_VERSION"]
