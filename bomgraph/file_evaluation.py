@@ -27,7 +27,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from .checks import option_named
-from .errors import BomgraphError, EvaluationError, StreamFormatError
+from .errors import BomgraphError, EvaluationError, StreamFormatError, shown_path
 from .evaluate import (CheckpointScore, MapScore, error_table, mean_landmark_nees, pose_nees,
                        score_checkpoints, score_estimate)
 from .estimate_file import EstimateFile, read_estimate, stream_identity
@@ -206,7 +206,10 @@ def evaluate_files(estimate_path: str | os.PathLike[str], stream_path: str | os.
         score = score_estimate(est.final, target, **kw)
     except EvaluationError as exc:  # say which file and map; the checkpoint rows say '-'
         at = f" (t = {est.checkpoints[-1].t})" if est.checkpoints else ""
-        raise type(exc)(f"{estimate_path}: the final map{at}: {exc}") from None
+        against = ("" if reference_path is None else " against the final map of "
+                   + option_named("--reference", "reference_path", reference_path))
+        raise type(exc)(f"{shown_path(estimate_path)}: the final map{at}{against}: "
+                        f"{exc}") from None
     rows = tuple(score_checkpoints(est.checkpoints, target, **kw)) if est.checkpoints else ()
     revised = est.version >= 2 and poses_revised(est)
     if revised:  # the earlier rows' trajectories are first estimates, not the method's then

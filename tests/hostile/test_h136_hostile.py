@@ -52,3 +52,32 @@ def test_an_stmds_refusal_in_compare_names_the_file_and_line(tmp_path: Path) -> 
     assert f"{stream}, line 6: 'odom_sigma': step 4: STMDS cannot use" in err, err
     result = json.loads((tmp_path / "cmp" / "results.json").read_text())
     assert "line 6: 'odom_sigma'" in json.dumps(result)
+
+
+def _estimate(folder: Path, name: str, keep, scale: float = 1.0) -> Path:
+    """``e.json`` (stmds-smacof on ``s.jsonl``) rewritten: its landmarks filtered by ``keep``
+    and multiplied by ``scale``, in every checkpoint."""
+    est = folder / "e.json"
+    if not est.exists():
+        assert bomgraph("run", folder / "s.jsonl", "--method", "stmds-smacof", "--out",
+                        est).returncode == 0
+    lines = [json.loads(ln) for ln in est.read_text().splitlines()]
+    for obj in lines:
+        if "landmarks" in obj:
+            obj["landmarks"] = [[i, x * scale, y * scale] for i, x, y in obj["landmarks"]
+                                if keep(i)]
+    out = folder / name
+    out.write_text("".join(json.dumps(obj) + "\n" for obj in lines))
+    return out
+
+
+def test_a_failed_alignment_to_a_reference_names_the_reference(work: Path) -> None:
+    """``evaluate --reference REF EST STREAM`` whose maps share 2 landmarks said "EST: the
+    final map (t = 60): the estimate shares 2 landmark(s) with the reference estimate",
+    naming EST but not REF."""
+    ref = _estimate(work, "two-landmarks.json", lambda i: i < 2)
+    est = work / "e.json"
+    for align in ("landmarks", "trajectory"):
+        proc = bomgraph("evaluate", "--reference", ref, "--align", align, est,
+                        work / "s.jsonl")
+        one_error(proc, f"{est}: the final map", f"--reference {ref}")
