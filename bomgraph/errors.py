@@ -61,6 +61,11 @@ class UndeterminedAlignmentError(EvaluationError):
     a trajectory fit, or every source point at one place for a similarity (no scale)."""
 
 
+class OutOfRangeError(EvaluationError):
+    """Coordinates so large (beyond :data:`bomgraph.evaluate.MAX_SCORED_M`) that their errors
+    leave the floating-point range: a diverged estimate, not scored."""
+
+
 class UnknownMethodError(BomgraphError, KeyError):
     """A method name is not in the registry."""
 

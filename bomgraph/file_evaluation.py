@@ -36,7 +36,7 @@ from .mapper import MapEstimate
 from .stream import Step, Truth
 from .stream_file import StreamReader
 from .stream_identity import StreamHasher, StreamIdentity
-from .tables import Column, format_table
+from .tables import Column, fixed_or_exponent, format_table
 from .trajectory import BearingResidualSums, bearing_arrays
 
 #: The per-checkpoint table of ``bomgraph evaluate`` (SI in JSON/CSV; cm and deg shown).
@@ -412,7 +412,8 @@ def format_evaluation(ev: FileEvaluation, fmt: str = "text") -> str:
     if fmt != "text":
         return format_table(EVALUATION_COLUMNS, rows, fmt, title=title)
     s = ev.score
-    na = (lambda v, k=100, f=".2f", u=" cm": "-" if not math.isfinite(v) else f"{k * v:{f}}{u}")
+    na = (lambda v, k=100, f=".2f", u=" cm": "-" if not math.isfinite(v)
+          else fixed_or_exponent(v, f, k) + u)
     lines = [f"method {ev.method}: {s.n_common} of {s.n_truth} landmarks of the {against} "
              f"mapped ({s.n_mapped} in the estimate); aligned on {s.align_on}"
              f"{', reflected' if s.alignment.reflected else ''}",
@@ -429,9 +430,10 @@ def format_evaluation(ev: FileEvaluation, fmt: str = "text") -> str:
                      f"{na(s.rpe_trans_rmse_m)}, heading "
                      f"{na(s.rpe_heading_rmse_rad, 180 / math.pi, '.3f', ' deg')}")
     n_lm, pose = ev.nees_undefined
-    nees = [f"{name} {v:.2f}" for name, v in (
+    nees = [f"{name} " + (fixed_or_exponent(v, ".2f") if math.isfinite(v) else
+                          "beyond the floating-point range") for name, v in (
         ("landmark (mean" + (f"; {n_lm} without a covariance left out)" if n_lm else ")"),
-         ev.nees_landmark), ("latest pose", ev.nees_pose)) if math.isfinite(v)]
+         ev.nees_landmark), ("latest pose", ev.nees_pose)) if not math.isnan(v)]
     if pose:
         nees.append("latest pose none (it has no covariance)")
     if nees:

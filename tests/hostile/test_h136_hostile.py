@@ -5,6 +5,7 @@ the field, exit status 2; never a traceback; nothing overwritten or lost; memory
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import pytest
@@ -54,18 +55,23 @@ def test_an_stmds_refusal_in_compare_names_the_file_and_line(tmp_path: Path) -> 
     assert "line 6: 'odom_sigma'" in json.dumps(result)
 
 
-def _estimate(folder: Path, name: str, keep, scale: float = 1.0) -> Path:
-    """``e.json`` (stmds-smacof on ``s.jsonl``) rewritten: its landmarks filtered by ``keep``
-    and multiplied by ``scale``, in every checkpoint."""
-    est = folder / "e.json"
+def _estimate(folder: Path, name: str, keep=lambda i: True, scale: float = 1.0,
+              method: str = "stmds-smacof") -> Path:
+    """``METHOD.json`` (``method`` on ``s.jsonl``) rewritten: its landmarks filtered by
+    ``keep``, and its landmarks and robot positions multiplied by ``scale``, in every
+    checkpoint (covariances, if any, as they were)."""
+    est = folder / f"{method}.json"
     if not est.exists():
-        assert bomgraph("run", folder / "s.jsonl", "--method", "stmds-smacof", "--out",
+        assert bomgraph("run", folder / "s.jsonl", "--method", method, "--out",
                         est).returncode == 0
     lines = [json.loads(ln) for ln in est.read_text().splitlines()]
     for obj in lines:
         if "landmarks" in obj:
             obj["landmarks"] = [[i, x * scale, y * scale] for i, x, y in obj["landmarks"]
                                 if keep(i)]
+        for key in ("poses", "new_poses"):
+            if obj.get(key):
+                obj[key] = [[t, x * scale, y * scale, h] for t, x, y, h in obj[key]]
     out = folder / name
     out.write_text("".join(json.dumps(obj) + "\n" for obj in lines))
     return out
@@ -76,8 +82,42 @@ def test_a_failed_alignment_to_a_reference_names_the_reference(work: Path) -> No
     final map (t = 60): the estimate shares 2 landmark(s) with the reference estimate",
     naming EST but not REF."""
     ref = _estimate(work, "two-landmarks.json", lambda i: i < 2)
-    est = work / "e.json"
+    est = work / "stmds-smacof.json"
     for align in ("landmarks", "trajectory"):
         proc = bomgraph("evaluate", "--reference", ref, "--align", align, est,
                         work / "s.jsonl")
         one_error(proc, f"{est}: the final map", f"--reference {ref}")
+
+
+@pytest.mark.parametrize("method", ["stmds-smacof", "ekf"])
+@pytest.mark.parametrize("fmt", ["text", "markdown", "json"])
+def test_a_map_near_1e300_is_scored_in_exponent_form_without_warnings(work: Path, method: str,
+                                                                       fmt: str) -> None:
+    """``evaluate`` of an estimate whose coordinates are near 1e300 m printed each landmark
+    error as 300 digits of cm; at 1e305 numpy's overflow warnings too, and "MPE -"."""
+    for scale in (1e300, 1e305):
+        est = _estimate(work, "huge.json", scale=scale, method=method)
+        proc = bomgraph("evaluate", "--format", fmt, est, work / "s.jsonl")
+        out = proc.stdout.decode()
+        assert proc.returncode == 0 and not proc.stderr, proc.stderr
+        assert not re.search(r"\d{20}", out), out
+        assert "inf" not in out.lower(), out
+        if fmt == "text":
+            assert re.search(rf"landmark MPE \d\.\d{{3}}e\+{301 if scale == 1e300 else 306} cm",
+                             out), out
+        if fmt == "text" and method == "ekf":
+            assert "NEES from the file's covariances: landmark (mean) beyond the " \
+                   "floating-point range" in out, out
+
+
+@pytest.mark.parametrize("scale,needle", [
+    (1e307, "the estimate's landmark coordinates reach"),
+    (1e-320, "the scale between the source and the target points leaves the floating-point")])
+def test_a_map_beyond_the_scored_range_is_refused_in_one_line(work: Path, scale: float,
+                                                              needle: str) -> None:
+    """Coordinates near 1e307 m gave "inf" errors with overflow warnings; subnormal ones a
+    traceback (an OverflowError in the alignment's rescaling)."""
+    est = _estimate(work, "extreme.json", scale=scale)
+    for args in (["--similarity"], ["--similarity", "--align", "both"]):
+        one_error(bomgraph("evaluate", *args, est, work / "s.jsonl"), f"{est}: the final map",
+                  needle)
