@@ -40,7 +40,6 @@ equivalent command line run the same tasks with the same cache keys.
 from __future__ import annotations
 
 import dataclasses
-import glob
 import math
 import os
 import re
@@ -51,9 +50,10 @@ from pathlib import Path
 from typing import Any, Mapping, Sequence
 
 from .checks import echo, file_name
-from .errors import BomgraphError, ConfigError
+from .errors import BomgraphError, ConfigError, shown_path
 from .jsonio import BOM_ADVICE
 from .sim import SimConfig
+from .stream_globs import GlobTooWideError, bounded_glob
 
 #: The folder of the sweep files shipped in the package (``--config NAME``).
 SHIPPED_DIR = Path(__file__).with_name("sweeps")
@@ -306,7 +306,7 @@ class _Reader:
                                  f"split it into several sweep files")
 
     def fail(self, key: str, message: str) -> SweepError:
-        return SweepError(f"{self.path}: {key}: {message}")
+        return SweepError(f"{shown_path(self.path)}: {key}: {message}")
 
     def keys(self, table: Any, allowed: set[str], where: str) -> Mapping[str, Any]:
         if not isinstance(table, dict):
@@ -420,7 +420,10 @@ class _Reader:
         for k, pat in enumerate(patterns):
             pat = self.str_(pat, f"{key}[{k}]")
             full = pat if os.path.isabs(pat) else str(self.path.parent / pat)
-            found = sorted(glob.glob(full, recursive=True))
+            try:
+                found = bounded_glob(full)
+            except GlobTooWideError as exc:
+                raise self.fail(f"{key}[{k}]", f"{pat!r}: {exc}") from None
             found = [str(Path(f).resolve()) for f in found if os.path.isfile(f)]
             if not found:
                 raise self.fail(f"{key}[{k}]", f"{pat!r} matches no file (relative to "

@@ -121,3 +121,58 @@ def test_a_map_beyond_the_scored_range_is_refused_in_one_line(work: Path, scale:
     for args in (["--similarity"], ["--similarity", "--align", "both"]):
         one_error(bomgraph("evaluate", *args, est, work / "s.jsonl"), f"{est}: the final map",
                   needle)
+
+
+def _sweep(folder: Path, pattern: str) -> Path:
+    sweep = folder / "sweep.toml"
+    sweep.write_text(f'streams = ["{pattern}"]\n[[methods]]\nname = "triangulate"\n')
+    return sweep
+
+
+def test_a_stream_glob_through_a_link_loop_is_refused(tmp_path: Path) -> None:
+    """``streams = ["loop/**/*.jsonl"]`` with two links in ``loop`` to itself searched 2^40
+    paths (a glob follows links to folders), without end in practice, as ``/**/*.jsonl``
+    searched the whole file system (over 90 s)."""
+    (tmp_path / "loop").mkdir()
+    for name in ("a", "b"):
+        (tmp_path / "loop" / name).symlink_to(".")
+    proc = bomgraph("compare", "--config", _sweep(tmp_path, "loop/**/*.jsonl"), "--out",
+                    tmp_path / "out", "--dry-run", timeout=60)
+    one_error(proc, "sweep.toml: streams[0]: 'loop/**/*.jsonl': '**' would search more than "
+                    "10,000 folders below", "start the pattern at the folder the streams are in")
+
+
+def test_a_stream_glob_over_a_wide_tree_is_refused_and_a_narrow_one_runs(tmp_path: Path,
+                                                                        work: Path) -> None:
+    """A tree of 10,100 folders is refused by its '**' (the bound, not the file system's
+    size, decides); the same streams found through a narrower '**' run."""
+    from bomgraph.stream_globs import MAX_GLOB_FOLDERS
+
+    wide = tmp_path / "wide"
+    for i in range(101):
+        for j in range(100):
+            (wide / str(i) / str(j)).mkdir(parents=True)
+    assert 101 * 101 > MAX_GLOB_FOLDERS
+    (wide / "7" / "s.jsonl").write_bytes((work / "s.jsonl").read_bytes())
+    proc = bomgraph("compare", "--config", _sweep(tmp_path, "wide/**/*.jsonl"), "--out",
+                    tmp_path / "out", "--dry-run")
+    one_error(proc, "'**' would search more than 10,000 folders below")
+    assert not (tmp_path / "out").exists()
+    proc = bomgraph("compare", "--config", _sweep(tmp_path, "wide/7/**/*.jsonl"), "--out",
+                    tmp_path / "out", "--dry-run")
+    assert proc.returncode == 0 and b"1 runs" in proc.stdout, proc.stderr
+
+
+def test_bounded_glob_matches_glob_below_its_bound(tmp_path: Path) -> None:
+    import glob
+
+    from bomgraph.stream_globs import GlobTooWideError, bounded_glob
+
+    for rel in ("a/x.jsonl", "a/b/y.jsonl", "c/.hidden/z.jsonl", "c/d/e/w.jsonl"):
+        (tmp_path / rel).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / rel).write_text("")
+    pattern = f"{tmp_path}/**/*.jsonl"
+    assert bounded_glob(pattern, limit=6) == sorted(glob.glob(pattern, recursive=True))
+    with pytest.raises(GlobTooWideError, match="more than 5 folders below"):  # 6: the top,
+        bounded_glob(pattern, limit=5)         # a, a/b, c, c/d, c/d/e (not c/.hidden)
+    assert bounded_glob(f"{tmp_path}/*/*.jsonl", limit=1) == [str(tmp_path / "a/x.jsonl")]
