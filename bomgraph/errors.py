@@ -21,6 +21,17 @@ def shown_path(path: str | bytes | os.PathLike[str] | os.PathLike[bytes]) -> str
     return text if text.isprintable() else repr(text)
 
 
+def one_line(text: str) -> str:
+    """``text`` with each character that is not printable (a newline, a tab, an escape, an
+    undecodable byte) written as its escape, as :func:`shown_path` writes it: the CLI's net
+    under every line it prints to stderr (an error, a warning), for a message that echoes
+    other input (a method name, an option value) or a file name not yet shown through
+    :func:`shown_path`."""
+    if text.isprintable():
+        return text
+    return "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
+
+
 class BomgraphError(Exception):
     """Base class of every error bomgraph raises on purpose."""
 

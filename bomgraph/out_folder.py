@@ -34,6 +34,7 @@ from .claims import remove_leftovers
 from .slugs import figure_names, slug, unique_slugs  # re-exported: out_folder.slug
 from .experiments import DatasetSource, Experiment, FileSource, Task
 from .checks import out_named
+from .errors import shown_path
 from .stdio import (FolderBusyError, InputTooLargeError, OutputPathError, folder_lock,
                     read_regular_file, write_text)
 
@@ -141,7 +142,7 @@ def refuse_inputs_among_outputs(out: Path, experiments: Sequence[Experiment]) ->
     for path in written:
         real = os.path.realpath(path)
         if real in inputs:
-            raise OutputPathError(f"{out_named('out_dir', out)}: compare writes {path}, which is the input "
+            raise OutputPathError(f"{out_named('out_dir', out)}: compare writes {shown_path(path)}, which is the input "
                                   f"{inputs[real]}; refusing to overwrite an input: move it "
                                   f"or choose another folder")
 
@@ -365,7 +366,7 @@ class OutputRecord:
         out, todo = self.out, "move it or choose another folder"
         listed = _read_manifest(out)
         if listed is None:
-            raise OutputPathError(f"{out_named('out_dir', out)}: {self.path} is not the list of files bomgraph "
+            raise OutputPathError(f"{out_named('out_dir', out)}: {shown_path(self.path)} is not the list of files bomgraph "
                                   f"compare keeps there; {todo}")
         by_path: dict[str, list[dict[str, Any]]] = {}
         for e in listed:
@@ -374,7 +375,7 @@ class OutputRecord:
             if os.path.lexists(folder) and not folder.is_dir():
                 what = (f"a link to {os.path.realpath(folder)}, which is not a folder"
                         if os.path.islink(folder) else "a file")
-                raise OutputPathError(f"{out_named('out_dir', out)}: compare writes a folder {folder}, which "
+                raise OutputPathError(f"{out_named('out_dir', out)}: compare writes a folder {shown_path(folder)}, which "
                                       f"is {what}; {todo}")
         for p in paths:
             if not os.path.lexists(p):

@@ -48,7 +48,7 @@ from .checks import file_name, items, out_named
 from .claims import new_temp_file, release, remove_leftovers
 from .descriptors import (CLOSED_AT_START, fd_name,  # noqa: F401
                           hold_standard_descriptors, open_input, own_descriptor)
-from .errors import BomgraphError
+from .errors import BomgraphError, shown_path
 
 _log = logging.getLogger(__name__)
 
@@ -79,13 +79,13 @@ def line_too_long(path: str | os.PathLike[str], line: int,
     """The refusal of a line longer than ``limit`` (:data:`MAX_LINE_BYTES`, or a smaller cap
     on the whole file) with no newline in sight."""
     return InputTooLargeError(
-        f"{os.fspath(path)}, line {line}: longer than {_mib(limit)} without a "
+        f"{shown_path(path)}, line {line}: longer than {_mib(limit)} without a "
         f"newline; not a bomgraph text file (is it binary data or a device like /dev/zero?)")
 
 
 def input_too_large(path: str | os.PathLike[str]) -> InputTooLargeError:
     """The refusal of an input larger than :data:`MAX_INPUT_BYTES`."""
-    return InputTooLargeError(f"{os.fspath(path)}: larger than {_mib(MAX_INPUT_BYTES)}, the "
+    return InputTooLargeError(f"{shown_path(path)}: larger than {_mib(MAX_INPUT_BYTES)}, the "
                               f"limit for one input file; split the run")
 
 
@@ -296,11 +296,11 @@ def check_output_path(path: str | os.PathLike[str],
         return
     folder = Path(target).parent
     if not folder.is_dir():
-        raise OutputPathError(f"{out_named(name, path)}: the folder {folder} does not exist")
+        raise OutputPathError(f"{out_named(name, path)}: the folder {shown_path(folder)} does not exist")
     if st is not None and not os.access(target, os.W_OK):
         raise OutputPathError(f"{out_named(name, path)}: the file is not writable")
     if not os.access(folder, os.W_OK | os.X_OK):  # a file too: replaced from one made beside it
-        raise OutputPathError(f"{out_named(name, path)}: the folder {folder} is not writable")
+        raise OutputPathError(f"{out_named(name, path)}: the folder {shown_path(folder)} is not writable")
 
 
 @contextlib.contextmanager
@@ -550,7 +550,7 @@ def folder_lock(folder: str | os.PathLike[str], what: str,
             if not shared and _lock_is_shared(fd):  # held by compares writing below it only
                 who, where = "", "below this folder, through a link or from a folder above"
             raise FolderBusyError(
-                f"{os.fspath(folder)}: another {what}{who} is writing {where}; wait for it to "
+                f"{shown_path(folder)}: another {what}{who} is writing {where}; wait for it to "
                 f"finish or choose another {out_named('out_dir')}") from None
         if os.fstat(fd).st_size > 64 or not re.fullmatch(rb"\s*\d*\s*", os.pread(fd, 64, 0)):
             raise OutputPathError(not_ours)  # not a pid (judged whole): not ours to empty

@@ -23,7 +23,7 @@ from typing import IO, Iterator, Literal, Sequence
 
 import numpy as np
 
-from ..errors import DatasetError
+from ..errors import DatasetError, shown_path
 from ..jsonio import BOM_ADVICE, MAX_ID
 from ..plausibility import MAX_BEARING_SIGMA_RAD, MIN_BEARING_SIGMA_RAD
 from ..stdio import MAX_LINE_BYTES, line_too_long, open_input
@@ -35,7 +35,7 @@ _CHUNK = 2**20
 def dataset_error(path: str | os.PathLike[str], line: int | None, field: str | None,
                   message: str) -> DatasetError:
     """A :class:`DatasetError` whose message starts with ``file, line N: field 'f':``."""
-    where = str(path)
+    where = shown_path(path)
     if line is not None:
         where += f", line {line}"
     if field is not None:

@@ -176,3 +176,86 @@ def test_bounded_glob_matches_glob_below_its_bound(tmp_path: Path) -> None:
     with pytest.raises(GlobTooWideError, match="more than 5 folders below"):  # 6: the top,
         bounded_glob(pattern, limit=5)         # a, a/b, c, c/d, c/d/e (not c/.hidden)
     assert bounded_glob(f"{tmp_path}/*/*.jsonl", limit=1) == [str(tmp_path / "a/x.jsonl")]
+
+
+NL = "a\nb"   # a file name with a newline: shown as 'a\nb' (errors.shown_path)
+
+
+@pytest.mark.parametrize("case", ["run-bad-line", "run-missing", "run-out-folder",
+                                  "evaluate-bad-reference", "evaluate-bad-estimate", "plot",
+                                  "compare-streams", "compare-config", "simulate-out",
+                                  "export-out", "run-stmds-refusal", "unknown-method"])
+def test_a_file_name_with_a_newline_keeps_the_error_on_one_line(work: Path, case: str) -> None:
+    """A file name holding a newline split a one-line error in two (``bomgraph: error: a`` /
+    ``b.jsonl, line 4: ...``); each message now shows such a name as a Python string
+    literal, in every command's error, and so does a warning naming it."""
+    s = work / "s.jsonl"
+    bad_stream = work / f"{NL}.jsonl"
+    lines = s.read_text().splitlines(keepends=True)
+    bad_stream.write_text("".join(lines[:3]) + '{"t": 2, "odom": [1, 0]}\n')
+    junk = work / f"{NL}.bad"
+    junk.write_text("garbage\n")
+    odd = work / f"{NL}.odd.jsonl"
+    step = json.loads(lines[5])
+    step["odom_sigma"] = [1e8, 0.0, 0.1]
+    odd.write_text("".join(lines[:5]) + json.dumps(step) + "\n" + "".join(lines[6:]))
+    est = _estimate(work, "e.json")
+    args, shown = {
+        "run-bad-line": (["run", bad_stream, "--method", "triangulate", "--out", "o.json"],
+                         repr(str(bad_stream)) + ", line 4: 'odom'"),
+        "run-missing": (["run", work / f"{NL}.none", "--method", "triangulate", "--out",
+                         "o.json"], repr(str(work / f"{NL}.none")) + ": cannot open"),
+        "run-out-folder": (["run", s, "--method", "triangulate", "--out", f"{NL}/o.json"],
+                           f"--out {NL + '/o.json'!r}: the folder"),
+        "evaluate-bad-reference": (["evaluate", est, s, "--reference", junk],
+                                   repr(str(junk)) + ", line 1: not valid JSON"),
+        "evaluate-bad-estimate": (["evaluate", junk, s], repr(str(junk)) + ", line 1"),
+        "plot": (["plot", junk, s, "--out", "x.png"], repr(str(junk)) + ", line 1"),
+        "compare-streams": (["compare", "--streams", bad_stream, "--methods", "triangulate",
+                             "--out", "cmp", "--jobs", "1", "--no-progress", "--no-figures"],
+                            repr(str(bad_stream)) + ", line 4: 'odom'"),
+        "compare-config": (["compare", "--config", junk, "--out", "cmp", "--jobs", "1"],
+                           repr(str(junk)) + ": not valid TOML"),
+        "simulate-out": (["simulate", "--steps", "5", "--out", f"{NL}/x.jsonl"],
+                         f"--out {NL + '/x.jsonl'!r}: the folder"),
+        "export-out": (["export", "--format", "csv", "--out", f"{NL}/o.csv", est],
+                       f"--out {NL + '/o.csv'!r}: the folder"),
+        "run-stmds-refusal": (["run", odd, "--method", "stmds-smacof", "--out", "o.json"],
+                              repr(str(odd)) + ", line 6: 'odom_sigma': step 4"),
+        "unknown-method": (["run", s, "--method", f"x{NL}", "--out", "o.json"],
+                           "unknown method 'xa\\nb'"),
+    }[case]
+    proc = bomgraph(*args, cwd=work)
+    line = one_error(proc, shown)
+    err = proc.stderr.decode()
+    assert err.count("\n") == len([ln for ln in err.splitlines() if ln.startswith(
+        "bomgraph: ")]), err     # every line of stderr is one of bomgraph's: none split
+    if case == "run-stmds-refusal":
+        assert f"bomgraph: WARNING: {str(odd)!r}, line 6" in err, err
+    assert not (work / "o.json").exists(), line
+
+
+def test_shown_path_quotes_only_what_needs_it() -> None:
+    from bomgraph.errors import one_line, shown_path
+
+    assert shown_path("runs/s 1.jsonl") == "runs/s 1.jsonl"
+    assert shown_path(Path("a\nb.jsonl")) == "'a\\nb.jsonl'"
+    assert shown_path(b"x\xff.jsonl") == "'x\\udcff.jsonl'"   # undecodable: never an encode
+    assert shown_path("tab\there\\") == "'tab\\there\\\\'"      # error on stderr
+    assert shown_path("") == "'' (an empty file name)"
+    assert one_line("ok: a\nb\x1b[2J") == "ok: a\\nb\\x1b[2J"
+    assert one_line("plain") == "plain"
+
+
+def test_a_warning_about_stdin_names_it_stdin(work: Path) -> None:
+    """A warning about a stream read from stdin named the temporary file it was spooled to
+    (``/tmp/bomgraph-stdin-XXXX/stdin, line 6``), where the error line says ``<stdin>``."""
+    lines = (work / "s.jsonl").read_text().splitlines(keepends=True)
+    step = json.loads(lines[5])
+    step["odom_sigma"] = [1e8, 0.0, 0.1]
+    data = ("".join(lines[:5]) + json.dumps(step) + "\n" + "".join(lines[6:])).encode()
+    proc = bomgraph("run", "-", "--method", "stmds-smacof", "--out", work / "o.json",
+                    stdin=data)
+    err = one_error(proc, "<stdin>, line 6: 'odom_sigma': step 4")
+    assert "bomgraph: WARNING: <stdin>, line 6: 'odom_sigma'" in proc.stderr.decode(), err
+    assert "bomgraph-stdin" not in proc.stderr.decode()
