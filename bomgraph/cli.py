@@ -75,7 +75,8 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         stream = with_priors(stream, make_priors(stream.truth, args.prior_fraction,
                                                  args.prior_sigma, rng))
     write_output(args.out, lambda p: write_stream(stream, p))  # `-`: stdout, not a file
-    _say(f"wrote {shown_path(args.out)}: {len(stream.steps)} steps, {config.n_landmarks} landmarks, "
+    _say(f"wrote {shown_path(args.out)}: {len(stream.steps)} steps, {config.n_landmarks} "
+         f"landmarks, "
          f"{len(stream.header.priors)} priors", to_stderr=is_stdout(args.out))
     return 0
 

@@ -71,7 +71,8 @@ def _scratch_folder() -> Iterator[str]:
         except OSError as exc:
             if root is None:
                 raise
-            raise ConfigError(f"Dask's temporary-directory {shown_path(root)} (DASK_TEMPORARY_DIRECTORY, "
+            raise ConfigError(f"Dask's temporary-directory {shown_path(root)} "
+                              f"(DASK_TEMPORARY_DIRECTORY, "
                               f"or temporary-directory in Dask's configuration): no folder "
                               f"can be made there ({exc.strerror or exc}); give a folder you "
                               f"can write to") from None

@@ -429,7 +429,8 @@ def real_experiments(data_dir: str | os.PathLike[str],
             sources=(DatasetSource("g2o", str(g2o_dir / "slam2D_bearing_only_initial_guess.g2o"),
                                    truth_path=str(gt), label="g2o"),))
     if not exps:
-        raise ConfigError(f"no dataset folders (mrclam6, bearing_only_sim_g2o) under {shown_path(root)}")
+        raise ConfigError(f"no dataset folders (mrclam6, bearing_only_sim_g2o) under "
+                          f"{shown_path(root)}")
     return exps
 
 

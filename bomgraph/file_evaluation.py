@@ -169,7 +169,8 @@ def evaluate_files(estimate_path: str | os.PathLike[str], stream_path: str | os.
             ident = _read_steps(reader, list(sums.values()))
     except StreamFormatError as exc:
         if _is_estimate_file(stream_path):
-            raise EvaluationError(f"{shown_path(stream_path)} is an estimate file, not a stream (arguments "
+            raise EvaluationError(f"{shown_path(stream_path)} is an estimate file, not a stream "
+                                  f"(arguments "
                                   f"swapped? usage: bomgraph evaluate ESTIMATE STREAM)") from None
         raise exc from None
     if est is None:  # the stream's errors first, as when it was read whole
@@ -178,8 +179,9 @@ def evaluate_files(estimate_path: str | os.PathLike[str], stream_path: str | os.
     last = ident.n_steps - 1
     beyond = [c.t for c in est.checkpoints if c.t > last]
     if beyond:
-        raise EvaluationError(f"{shown_path(estimate_path)}: checkpoint t = {beyond[0]} is beyond the last "
-                              f"step t = {last} of {stream_path}")
+        raise EvaluationError(f"{shown_path(estimate_path)}: checkpoint t = {beyond[0]} is beyond "
+                              f"the last "
+                              f"step t = {last} of {shown_path(stream_path)}")
     if ref_error is not None:
         raise ref_error
     if ref_est is not None:  # scored against its final map: it must be of the same stream
@@ -188,7 +190,8 @@ def evaluate_files(estimate_path: str | os.PathLike[str], stream_path: str | os.
         if with_scale or align_on != "landmarks" or delta != 1:
             given = ", ".join(option_named(o, p) for o, p in (
                 ("--similarity", "with_scale"), ("--align", "align_on"), ("--delta", "delta")))
-            raise EvaluationError(f"{shown_path(stream_path)}: the stream has no ground truth, so there is "
+            raise EvaluationError(f"{shown_path(stream_path)}: the stream has no ground truth, so "
+                                  f"there is "
                                   f"nothing to align to ({given}); give "
                                   f"{option_named('--reference EST', 'reference_path')}, or "
                                   f"drop them for the truth-free measures")
@@ -353,7 +356,8 @@ def _check_identity(est: EstimateFile, ident: StreamIdentity,
                 if ident.n_steps != est.stream.n_steps else
                 f"steps SHA-256 {est.stream.steps_sha256[:12]}... recorded, the stream's "
                 f"is {ident.steps_sha256[:12]}...")
-        raise error(f"{shown_path(estimate_path)} was computed from another stream than {stream_path} "
+        raise error(f"{shown_path(estimate_path)} was computed from another stream than "
+                    f"{shown_path(stream_path)} "
                     f"({what})")
 
 

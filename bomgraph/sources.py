@@ -158,7 +158,8 @@ class DatasetSource:
         for path in inputs.values():
             what = None if path is None else special_file(path)
             if what is not None:
-                raise DatasetError(f"{shown_path(path)}: a {what}, not a regular file; a recording's files "
+                raise DatasetError(f"{shown_path(path)}: a {what}, not a regular file; a "
+                                   f"recording's files "
                                    f"are hashed for the cache key and read by each run: copy "
                                    f"the data into a regular file")
         return _load_dataset(self.kind, self.path, self.robot, self.truth_path,

@@ -192,8 +192,8 @@ def _stdout_not_input(stdout: IO[str], inputs: Sequence[str | os.PathLike[str] |
             same = False
         if same:
             raise OutputPathError(f"{out_named(name, STDIO)}: the standard output is the input "
-                                  f"{os.fspath(inp)}; "
-                                  f"refusing to overwrite an input: choose another name")
+                                  f"{shown_path(inp)}; refusing to overwrite an input: choose "
+                                  f"another name")
 
 
 def _stat(path: str, name: str = "path") -> os.stat_result | None:
@@ -295,12 +295,13 @@ def check_output_path(path: str | os.PathLike[str],
     if direct:  # a file open as a descriptor (``>> f``): written where it is
         return
     folder = Path(target).parent
+    there = f"{out_named(name, path)}: the folder {shown_path(folder)}"
     if not folder.is_dir():
-        raise OutputPathError(f"{out_named(name, path)}: the folder {shown_path(folder)} does not exist")
+        raise OutputPathError(f"{there} does not exist")
     if st is not None and not os.access(target, os.W_OK):
         raise OutputPathError(f"{out_named(name, path)}: the file is not writable")
     if not os.access(folder, os.W_OK | os.X_OK):  # a file too: replaced from one made beside it
-        raise OutputPathError(f"{out_named(name, path)}: the folder {shown_path(folder)} is not writable")
+        raise OutputPathError(f"{there} is not writable")
 
 
 @contextlib.contextmanager
@@ -349,9 +350,9 @@ class AtomicOutput:
         except OSError as exc:
             where = os.path.dirname(self.path) or "."
             what = ("cannot open it for writing" if self.direct
-                    else f"cannot create a file in {where}")
-            raise OutputPathError(f"{self.given}: {what} ({exc.strerror or exc}); choose "
-                                  f"another {out_named('path')}") from None
+                    else f"cannot create a file in {shown_path(where)}")
+            raise OutputPathError(f"{shown_path(self.given)}: {what} ({exc.strerror or exc}); "
+                                  f"choose another {out_named('path')}") from None
 
     def _open(self) -> IO:
         kw = {} if self._binary else {"encoding": "utf-8", "newline": "\n"}
@@ -475,15 +476,15 @@ def check_folder(folder: str | os.PathLike[str]) -> None:
     for at in (path, *path.parents):   # the nearest one that exists must be a folder
         if os.path.isdir(at):
             if not os.access(at, os.W_OK | os.X_OK):  # not '[Errno 13] ...: OUT/.bomgraph.lock'
-                name = "" if at == path else f"{os.fspath(at)}, where it would be made, "
+                name = "" if at == path else f"{shown_path(at)}, where it would be made, "
                 raise OutputPathError(f"{out_named('out_dir', folder)}: {name}is not "
                                       f"writable; choose another folder")
             return
         if os.path.lexists(at):   # mkdir does not follow a link: [Errno 17] File exists
-            what = (f"a link to {os.readlink(at)}, which does not exist; create that folder, "
-                    f"or give another" if not os.path.exists(at) else
+            what = (f"a link to {shown_path(os.readlink(at))}, which does not exist; create "
+                    f"that folder, or give another" if not os.path.exists(at) else
                     "a file; give a folder (it is created if missing)")
-            name = "" if at == path else f"{os.fspath(at)} "
+            name = "" if at == path else f"{shown_path(at)} "
             raise OutputPathError(f"{out_named('out_dir', folder)}: {name}is {what}")
 
 

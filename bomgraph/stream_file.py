@@ -539,4 +539,5 @@ def located(exc: StreamValueError, path: str | os.PathLike[str]) -> StreamValueE
 
 
 __all__ = ["StreamReader", "read_stream", "write_stream", "write_stream_parts", "header_to_json",
-           "step_to_json", "parse_priors", "count_steps", "located", "FORMAT_NAME", "FORMAT_VERSION"]
+           "step_to_json", "parse_priors", "count_steps", "located", "FORMAT_NAME",
+           "FORMAT_VERSION"]

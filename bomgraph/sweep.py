@@ -137,7 +137,8 @@ def resolve_path(path_or_name: str | os.PathLike[str]) -> Path:
         return p
     if (SHIPPED_DIR / f"{p}.toml").is_file() and p.suffix != ".toml":
         return SHIPPED_DIR / f"{p}.toml"
-    raise SweepError(f"{shown_path(path_or_name)}: {'is a folder, not a' if p.is_dir() else 'no such'} "
+    raise SweepError(f"{shown_path(path_or_name)}: "
+                     f"{'is a folder, not a' if p.is_dir() else 'no such'} "
                      f"sweep file (a path, or a shipped one: {', '.join(shipped())})")
 
 
@@ -154,14 +155,16 @@ def read_sweep(path_or_name: str | os.PathLike[str]) -> SweepSpec:
         with open(path, "rb") as fh:
             raw = fh.read(MAX_SWEEP_BYTES + 1)
         if len(raw) > MAX_SWEEP_BYTES:
-            raise SweepError(f"{shown_path(path)}: larger than {MAX_SWEEP_BYTES // 2**20} MiB; not a sweep "
+            raise SweepError(f"{shown_path(path)}: larger than {MAX_SWEEP_BYTES // 2**20} MiB; "
+                             f"not a sweep "
                              f"file")
         data = tomllib.loads(raw.decode("utf-8"))
     except tomllib.TOMLDecodeError as exc:  # of a byte-order mark: "Invalid statement"
         why = BOM_ADVICE if raw.startswith(b"\xef\xbb\xbf") else f"not valid TOML: {exc}"
         raise SweepError(f"{shown_path(path)}: {why}") from None
     except RecursionError:
-        raise SweepError(f"{shown_path(path)}: not valid TOML: arrays or tables nested too deeply") from None
+        raise SweepError(f"{shown_path(path)}: not valid TOML: arrays or tables nested too "
+                         f"deeply") from None
     except (OSError, UnicodeDecodeError) as exc:
         raise SweepError(f"{shown_path(path)}: cannot be read: {exc}") from None
     return _Reader(path).sweep(data)
