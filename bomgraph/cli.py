@@ -184,8 +184,8 @@ def cmd_export(args: argparse.Namespace) -> int:
         stream = None if sp is None else read_stream(sp)
     if args.truth is not None:
         if stream is not None and stream.truth is None:
-            raise ExportError(f"{args.truth}, line 1: no 'truth' in the header: the stream "
-                              f"has no ground truth to export")
+            raise ExportError(f"{shown_path(args.truth)}, line 1: no 'truth' in the header: "
+                              f"the stream has no ground truth to export")
         src = truth_estimate(stream)  # type: ignore[arg-type]
     else:
         with input_path(args.estimate) as ep:

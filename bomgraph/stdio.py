@@ -525,8 +525,8 @@ def folder_lock(folder: str | os.PathLike[str], what: str,
         yield
         return
     lock = os.path.join(os.fspath(folder), ".bomgraph.lock")
-    not_ours = (f"{lock}: is not a bomgraph lock (a process id); move it or choose another "
-                f"{out_named('out_dir')}")
+    not_ours = (f"{shown_path(lock)}: is not a bomgraph lock (a process id); move it or "
+                f"choose another {out_named('out_dir')}")
     try:  # without blocking: a FIFO there is refused, not waited on; a link too (h100)
         fd = os.open(lock, (os.O_RDONLY if shared else os.O_RDWR | os.O_CREAT)
                      | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_NOFOLLOW", 0),

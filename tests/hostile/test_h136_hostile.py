@@ -184,7 +184,8 @@ NL = "a\nb"   # a file name with a newline: shown as 'a\nb' (errors.shown_path)
 @pytest.mark.parametrize("case", ["run-bad-line", "run-missing", "run-out-folder",
                                   "evaluate-bad-reference", "evaluate-bad-estimate", "plot",
                                   "compare-streams", "compare-config", "simulate-out",
-                                  "export-out", "run-stmds-refusal", "unknown-method"])
+                                  "export-out", "run-stmds-refusal", "unknown-method",
+                                  "import-missing", "compare-real"])
 def test_a_file_name_with_a_newline_keeps_the_error_on_one_line(work: Path, case: str) -> None:
     """A file name holding a newline split a one-line error in two (``bomgraph: error: a`` /
     ``b.jsonl, line 4: ...``); each message now shows such a name as a Python string
@@ -224,6 +225,10 @@ def test_a_file_name_with_a_newline_keeps_the_error_on_one_line(work: Path, case
                               repr(str(odd)) + ", line 6: 'odom_sigma': step 4"),
         "unknown-method": (["run", s, "--method", f"x{NL}", "--out", "o.json"],
                            "unknown method 'xa\\nb'"),
+        "import-missing": (["import", "g2o", f"{NL}.g2o", "--out", "o.json"],
+                           f"{NL + '.g2o'!r}: file not found"),
+        "compare-real": (["compare", "--real", NL, "--out", "cmp", "--dry-run"],
+                         f"no dataset folders (mrclam6, bearing_only_sim_g2o) under {NL!r}"),
     }[case]
     proc = bomgraph(*args, cwd=work)
     line = one_error(proc, shown)
