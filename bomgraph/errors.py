@@ -108,12 +108,22 @@ class StreamValueError(DegenerateGeometryError):
                     + ("" if t is None else f"step {t}: ") + message)
         super().__init__(text)
 
+    def __reduce__(self) -> tuple:   # keyword-only arguments: rebuilt from them (a worker's)
+        return (_stream_value_error, (self.message, self.t, self.key, self.path, self.line),
+                self.__dict__)
+
     def in_file(self, path: str | os.PathLike[str], line: int) -> StreamValueError:
         """The same refusal naming ``path`` and ``line`` (the header's, or step ``t``'s)."""
         located = StreamValueError(self.message, t=self.t, key=self.key, path=path, line=line)
         for note in getattr(self, "__notes__", ()):
             located.add_note(note)
         return located
+
+
+def _stream_value_error(message: str, t: int | None, key: str,
+                        path: str | os.PathLike[str] | None, line: int | None
+                        ) -> StreamValueError:
+    return StreamValueError(message, t=t, key=key, path=path, line=line)
 
 
 class ExportError(BomgraphError, ValueError):

@@ -264,3 +264,20 @@ def test_a_warning_about_stdin_names_it_stdin(work: Path) -> None:
     err = one_error(proc, "<stdin>, line 6: 'odom_sigma': step 4")
     assert "bomgraph: WARNING: <stdin>, line 6: 'odom_sigma'" in proc.stderr.decode(), err
     assert "bomgraph-stdin" not in proc.stderr.decode()
+
+
+def test_a_method_refusal_crosses_a_process_boundary() -> None:
+    """A worker's refusal is pickled to the process that reports it: keyword-only arguments
+    and notes survive (a plain Exception reduce called StreamValueError(text) and failed)."""
+    import pickle
+
+    from bomgraph.errors import StreamValueError
+
+    exc = StreamValueError("STMDS cannot use 1e8", t=4, key="odom_sigma")
+    exc.add_note("raised in StmdsMapper.step() at t = 4")
+    for e in (exc, exc.in_file("s.jsonl", 6)):
+        back = pickle.loads(pickle.dumps(e))
+        assert (str(back), back.t, back.key, back.line, back.__notes__) == (
+            str(e), 4, "odom_sigma", e.line, ["raised in StmdsMapper.step() at t = 4"])
+    assert str(exc.in_file("s.jsonl", 6)) == ("s.jsonl, line 6: 'odom_sigma': step 4: STMDS "
+                                              "cannot use 1e8")
