@@ -20,6 +20,8 @@ from typing import Any, Callable, Iterator
 
 import numpy as np
 
+from .errors import shown_path
+
 #: An error class taking one message (a :class:`~bomgraph.errors.BomgraphError` subclass).
 Raise = Callable[[str], Exception]
 
@@ -47,8 +49,9 @@ def option_named(option: str, param: str, value: Any = None) -> str:
     """An input as a refusal names it: the command line's ``option`` (``--out PATH``) while a
     command runs, else the library's parameter ``param`` (``out_dir='PATH'``); without
     ``value``, the name alone."""
-    if _ON_COMMAND_LINE.get():
-        return option if value is None else f"{option} {os.fspath(value)}"
+    if _ON_COMMAND_LINE.get():   # a file name (or another value) shown as every message shows
+        return option if value is None else (  # one (errors.shown_path)
+            f"{option} {shown_path(value) if os.fspath(value) else repr('')}")
     return param if value is None else f"{param}={os.fspath(value)!r}"
 
 

@@ -23,7 +23,7 @@ from typing import Any, Callable, Iterator, Sequence
 from .cli_parser import PROGRESS_MIN_STEPS, build_parser
 from .cli_signals import (Terminated, forget_unhandled_interrupt, own_signals, stdout_closed,
                           stop_status, stopped)
-from .errors import BomgraphError, ConfigError
+from .errors import BomgraphError, ConfigError, one_line, shown_path
 
 
 def _say(text: str, *, to_stderr: bool = False) -> None:
@@ -75,7 +75,8 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         stream = with_priors(stream, make_priors(stream.truth, args.prior_fraction,
                                                  args.prior_sigma, rng))
     write_output(args.out, lambda p: write_stream(stream, p))  # `-`: stdout, not a file
-    _say(f"wrote {args.out}: {len(stream.steps)} steps, {config.n_landmarks} landmarks, "
+    _say(f"wrote {shown_path(args.out)}: {len(stream.steps)} steps, {config.n_landmarks} "
+         f"landmarks, "
          f"{len(stream.header.priors)} priors", to_stderr=is_stdout(args.out))
     return 0
 
@@ -160,7 +161,7 @@ def cmd_plot(args: argparse.Namespace) -> int:
         if not (args.estimate and args.stream):
             raise ConfigError("plot needs EST STREAM, or --results DIR")
         path = plot_run(args.estimate, args.stream, args.out, t=args.t, align_on=args.align)
-    _say(f"wrote {path}")
+    _say(f"wrote {shown_path(path)}")
     return 0
 
 
@@ -183,8 +184,8 @@ def cmd_export(args: argparse.Namespace) -> int:
         stream = None if sp is None else read_stream(sp)
     if args.truth is not None:
         if stream is not None and stream.truth is None:
-            raise ExportError(f"{args.truth}, line 1: no 'truth' in the header: the stream "
-                              f"has no ground truth to export")
+            raise ExportError(f"{shown_path(args.truth)}, line 1: no 'truth' in the header: "
+                              f"the stream has no ground truth to export")
         src = truth_estimate(stream)  # type: ignore[arg-type]
     else:
         with input_path(args.estimate) as ep:
@@ -211,7 +212,7 @@ def cmd_export(args: argparse.Namespace) -> int:
     held = [f"{0 if src.poses is None else len(src.poses)} poses"]
     if args.format in ("csv", "g2o"):  # TUM and KITTI hold poses only
         held.append(f"{len(src.landmark_ids)} landmarks")
-    _say(f"wrote {args.out} ({args.format}): {', '.join(held)}", to_stderr=to_stderr)
+    _say(f"wrote {shown_path(args.out)} ({args.format}): {', '.join(held)}", to_stderr=to_stderr)
     return 0
 
 
@@ -335,16 +336,17 @@ def _compare(args: argparse.Namespace, seen: dict[str, int]) -> int:
     bad = [r["error"] for r in result.results if not r.get("ok") and str(
         r.get("error", "")).startswith(("StreamFormatError: ", "DatasetError: "))]
     if bad:  # a malformed input is the user's to fix, not a method's failure
-        print(f"bomgraph: error: {len(bad)} run(s) stopped on an input file that cannot be "
-              f"read: {bad[0].partition(': ')[2]}", file=sys.stderr)
+        print(one_line(f"bomgraph: error: {len(bad)} run(s) stopped on an input file that "
+                       f"cannot be read: {bad[0].partition(': ')[2]}"), file=sys.stderr)
         return 2
     failed = [r for r in result.results if not r.get("ok")]
     if failed:  # a method (or a reference) raised, or a worker was stale: status 1
         f = failed[0]
-        print(f"bomgraph: error: {len(failed)} of {len(result.results)} runs failed (first: "
-              f"{f['arm']} on {f['experiment']} {f['run']}: {f.get('error')}); the tables mark "
-              f"them FAILED and {os.path.join(args.out, 'results.json')} holds each error",
-              file=sys.stderr)
+        print(one_line(f"bomgraph: error: {len(failed)} of {len(result.results)} runs failed "
+                       f"(first: {f['arm']} on {f['experiment']} {f['run']}: "
+                       f"{f.get('error')}); the tables mark them FAILED and "
+                       f"{shown_path(os.path.join(args.out, 'results.json'))} holds each "
+                       f"error"), file=sys.stderr)
         return 1
     return 0
 
@@ -372,7 +374,7 @@ def _import(args: argparse.Namespace, make: Callable[[], Any], *inputs: str | No
     check_output_path(args.out, inputs)
     stream = make()
     write_output(args.out, lambda p: write_stream(stream, p, inputs=inputs))
-    _say(f"wrote {args.out}: {import_summary(stream)}", to_stderr=is_stdout(args.out))
+    _say(f"wrote {shown_path(args.out)}: {import_summary(stream)}", to_stderr=is_stdout(args.out))
     return 0
 
 
@@ -505,8 +507,8 @@ def _main(argv: Sequence[str] | None) -> int:
             if isinstance(exc, OSError) and exc.filename is None \
                     and exc.errno in _WRITE_ERRNOS and getattr(args, "out", None):
                 message = f"--out {args.out}: {exc.strerror}"  # a write error names no file
-            print(f"bomgraph: error: {display_path(message)}" + (f" ({note})" if note else ""),
-                  file=sys.stderr)
+            print(one_line(f"bomgraph: error: {display_path(message)}"
+                           + (f" ({note})" if note else "")), file=sys.stderr)
             return 2
         if note is None and isinstance(exc, MemoryError):  # no traceback helps here (h91)
             print(f"bomgraph: error: out of memory{f' ({exc})' if str(exc) else ''}; give a "
@@ -523,9 +525,9 @@ def _method_failed(args: argparse.Namespace, exc: BaseException, note: str) -> i
     import traceback
 
     verbose = getattr(args, "verbose", 0)
-    print(f"bomgraph: error: method {getattr(args, 'method', '?')} failed: "
-          f"{type(exc).__name__}: {exc} ({note})" + ("" if verbose else "; -v shows the traceback"),
-          file=sys.stderr)
+    print(one_line(f"bomgraph: error: method {getattr(args, 'method', '?')} failed: "
+                   f"{type(exc).__name__}: {exc} ({note})"
+                   + ("" if verbose else "; -v shows the traceback")), file=sys.stderr)
     if verbose:
         traceback.print_exception(exc, file=sys.stderr)
     return 1

@@ -25,7 +25,7 @@ from concurrent.futures import CancelledError
 from typing import Any, Callable, Iterator, Sequence
 
 from .checks import integer, option_named
-from .errors import ConfigError, UnknownMethodError
+from .errors import ConfigError, UnknownMethodError, shown_path
 from .owned_folders import owned_folder
 from .processes import worker_count
 from .stdio import signals_held
@@ -74,7 +74,8 @@ def _scratch_folder() -> Iterator[str]:
         except OSError as exc:
             if root is None:
                 raise
-            raise ConfigError(f"Dask's temporary-directory {root!r} (DASK_TEMPORARY_DIRECTORY, "
+            raise ConfigError(f"Dask's temporary-directory {shown_path(root)} "
+                              f"(DASK_TEMPORARY_DIRECTORY, "
                               f"or temporary-directory in Dask's configuration): no folder "
                               f"can be made there ({exc.strerror or exc}); give a folder you "
                               f"can write to") from None

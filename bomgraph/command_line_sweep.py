@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import Any, Mapping, Sequence
 
 from .checks import no_file, option_named
-from .errors import ConfigError
+from .errors import ConfigError, shown_path
 from .sweep import (ExperimentSpec, MethodSpec, SweepError, SweepSpec, check_unique,
                     checked_method, named_streams, parse_method, stream_header_problem,
                     unique_paths)
@@ -115,7 +115,7 @@ def command_line_spec(streams: Sequence[str], methods: Sequence[str],
     if again:
         _log.warning("%s: %s %s the same file as one before; each file runs once (a copy "
                      "under another name runs as a stream of its own)", st,
-                     ", ".join(again), "is" if len(again) == 1 else "are")
+                     ", ".join(map(shown_path, again)), "is" if len(again) == 1 else "are")
     arms = [with_options(a) for a in arms]
     check_unique([a.label for a in arms], ms)
     exp = ExperimentSpec(name, f"{len(streams)} stream(s), {len(arms)} method(s)",

@@ -5,6 +5,32 @@ Every message says what is wrong and, where it can, what to do about it.
 
 from __future__ import annotations
 
+import os
+
+
+def shown_path(path: str | bytes | os.PathLike[str] | os.PathLike[bytes]) -> str:
+    """A file name as every message shows it: as written when each of its characters is
+    printable, else as a Python string literal (``'a\\nb.jsonl'``: quoted, a backslash
+    doubled, a newline as ``\\n``, any other control or undecodable character as its escape),
+    so a name never splits a message's one line, moves the cursor or hides what follows;
+    an empty name is ``'' (an empty file name)``. Every message that names a file (the
+    errors' and the warnings') shows it through here."""
+    text = os.fsdecode(path)
+    if not text:
+        return "'' (an empty file name)"
+    return text if text.isprintable() else repr(text)
+
+
+def one_line(text: str) -> str:
+    """``text`` with each character that is not printable (a newline, a tab, an escape, an
+    undecodable byte) written as its escape, as :func:`shown_path` writes it: the CLI's net
+    under every line it prints to stderr (an error, a warning), for a message that echoes
+    other input (a method name, an option value) or a file name not yet shown through
+    :func:`shown_path`."""
+    if text.isprintable():
+        return text
+    return "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
+
 
 class BomgraphError(Exception):
     """Base class of every error bomgraph raises on purpose."""
@@ -17,7 +43,7 @@ class StreamFormatError(BomgraphError, ValueError):
                  key: str | None = None) -> None:
         where = []
         if path is not None:
-            where.append(str(path) or "'' (an empty file name)")
+            where.append(shown_path(path))
         if line is not None:
             where.append(f"line {line}")
         prefix = ": ".join([", ".join(where)]) if where else ""
@@ -46,6 +72,11 @@ class UndeterminedAlignmentError(EvaluationError):
     a trajectory fit, or every source point at one place for a similarity (no scale)."""
 
 
+class OutOfRangeError(EvaluationError):
+    """Coordinates so large (beyond :data:`bomgraph.evaluate.MAX_SCORED_M`) that their errors
+    leave the floating-point range: a diverged estimate, not scored."""
+
+
 class UnknownMethodError(BomgraphError, KeyError):
     """A method name is not in the registry."""
 
@@ -59,6 +90,40 @@ class DatasetError(BomgraphError, ValueError):
 
 class DegenerateGeometryError(BomgraphError, ValueError):
     """The geometry does not determine the quantity asked for (no parallax, too few points)."""
+
+
+class StreamValueError(DegenerateGeometryError):
+    """A method cannot use a value of a valid stream (a sigma or a move far beyond what it
+    can compute with): names the step ``t`` (None: the header) and the ``key``;
+    :meth:`in_file` names the file and the line first, as the reader's refusals do, for a
+    caller that read the stream from a file (``bomgraph run``, ``compare``)."""
+
+    def __init__(self, message: str, *, t: int | None, key: str,
+                 path: str | os.PathLike[str] | None = None, line: int | None = None) -> None:
+        self.t, self.key, self.message, self.path, self.line = t, key, message, path, line
+        if path is None:
+            text = f"{'the header' if t is None else f'step {t}'}: '{key}': {message}"
+        else:
+            text = (f"{shown_path(path)}, line {line}: '{key}': "
+                    + ("" if t is None else f"step {t}: ") + message)
+        super().__init__(text)
+
+    def __reduce__(self) -> tuple:   # keyword-only arguments: rebuilt from them (a worker's)
+        return (_stream_value_error, (self.message, self.t, self.key, self.path, self.line),
+                self.__dict__)
+
+    def in_file(self, path: str | os.PathLike[str], line: int) -> StreamValueError:
+        """The same refusal naming ``path`` and ``line`` (the header's, or step ``t``'s)."""
+        located = StreamValueError(self.message, t=self.t, key=self.key, path=path, line=line)
+        for note in getattr(self, "__notes__", ()):
+            located.add_note(note)
+        return located
+
+
+def _stream_value_error(message: str, t: int | None, key: str,
+                        path: str | os.PathLike[str] | None, line: int | None
+                        ) -> StreamValueError:
+    return StreamValueError(message, t=t, key=key, path=path, line=line)
 
 
 class ExportError(BomgraphError, ValueError):

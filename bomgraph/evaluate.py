@@ -22,7 +22,8 @@ import numpy as np
 
 from .angles import angle_residual
 from .checks import is_integer, row_array
-from .errors import EvaluationError, TooFewLandmarksError, UndeterminedAlignmentError
+from .errors import (EvaluationError, OutOfRangeError, TooFewLandmarksError,
+                     UndeterminedAlignmentError)
 from .mapper import Checkpoint, MapEstimate, RunResult
 from .stream import Truth
 from .trajectory import PoseErrors, absolute_pose_errors, relative_pose_errors, rms
@@ -66,13 +67,36 @@ RANK_TOL = 1e-9
 _SAFE_EXP = 400
 
 
-def _mean(x: np.ndarray) -> np.ndarray:
-    """Column means without overflow (scaled by a power of two when the values are huge)."""
+def _exponent(x: np.ndarray) -> int:
+    """The binary exponent of the largest magnitude in ``x`` (0 when all are 0 or none)."""
     m = float(np.max(np.abs(x))) if x.size else 0.0
-    if m == 0 or abs(math.frexp(m)[1]) < _SAFE_EXP:
+    return 0 if m == 0 else math.frexp(m)[1]
+
+
+def _mean(x: np.ndarray) -> np.ndarray:
+    """Column means (of a 1-D array: the mean) without overflow or underflow (scaled by a
+    power of two, exactly, when the values are huge or tiny)."""
+    e = _exponent(x)
+    if abs(e) < _SAFE_EXP:
         return x.mean(0)
-    f = 2.0 ** -math.frexp(m)[1]
-    return (x * f).mean(0) / f
+    return np.ldexp(np.ldexp(x, -e).mean(0), e)
+
+
+#: The largest coordinate magnitude (m) scored: beyond it an error (up to about 5x the
+#: coordinates, after the centring, the rotation and the difference) may leave the
+#: floating-point range (1.8e308). Below it every statistic is computed without overflow.
+MAX_SCORED_M = 1e306
+
+
+def _check_range(named: Sequence[tuple[str, np.ndarray]]) -> None:
+    """Refuse (:class:`OutOfRangeError`) the first of the named coordinate arrays holding a
+    magnitude above :data:`MAX_SCORED_M`."""
+    for name, xy in named:
+        top = float(np.max(np.abs(xy))) if xy.size else 0.0
+        if top > MAX_SCORED_M:
+            raise OutOfRangeError(f"the {name} reach {top:.3g} m, beyond the {MAX_SCORED_M:g} m "
+                                  f"that can be scored (their errors would leave the "
+                                  f"floating-point range): a diverged map, not scored")
 
 
 def align_candidates(source_xy: np.ndarray, target_xy: np.ndarray, *,
@@ -95,10 +119,8 @@ def align_candidates(source_xy: np.ndarray, target_xy: np.ndarray, *,
         raise TooFewLandmarksError(f"alignment needs at least 3 common landmarks, got {len(src)}")
     mu_s, mu_d = _mean(src), _mean(dst)
     a, b = src - mu_s, dst - mu_d
-    big = max(float(np.max(np.abs(a))), float(np.max(np.abs(b))))
-    if big > 0 and abs(math.frexp(big)[1]) >= _SAFE_EXP:  # exact rescaling, same rotation
-        f = 2.0 ** -math.frexp(big)[1]
-        a, b = a * f, b * f
+    ea, eb = (e if abs(e) >= _SAFE_EXP else 0 for e in (_exponent(a), _exponent(b)))
+    a, b = np.ldexp(a, -ea), np.ldexp(b, -eb)  # exact rescaling (each set): the same rotation
     u, sv, vt = np.linalg.svd(b.T @ a)
     d = np.ones(2)
     if not allow_reflection and np.linalg.det(u @ vt) < 0:
@@ -115,7 +137,11 @@ def align_candidates(source_xy: np.ndarray, target_xy: np.ndarray, *,
             if var == 0:
                 raise UndeterminedAlignmentError("align(): all source points coincide; scale "
                                                  "is undefined")
-            scale = float((sv * dd).sum() / var)
+            try:
+                scale = math.ldexp(float((sv * dd).sum() / var), eb - ea)
+            except OverflowError:
+                raise OutOfRangeError("align(): the scale between the source and the target "
+                                      "points leaves the floating-point range") from None
         out.append(Alignment(r, mu_d - scale * r @ mu_s, scale, rank))
     return tuple(out)
 
@@ -274,6 +300,8 @@ def score_estimate(estimate: MapEstimate, truth: Reference, *, allow_reflection:
     UndeterminedAlignmentError
         For a trajectory fit, fewer than 3 common poses; with ``with_scale``, every fitted
         point of the estimate at one place.
+    OutOfRangeError
+        A common landmark or pose beyond :data:`MAX_SCORED_M` (a diverged map).
     """
     _check_pair(estimate, truth, "score_estimate")
     if not (is_integer(delta) and delta >= 1):
@@ -298,6 +326,10 @@ def score_estimate(estimate: MapEstimate, truth: Reference, *, allow_reflection:
         raise UndeterminedAlignmentError(
             f"a trajectory alignment needs at least 3 common poses, got {len(est_p)}"
             + (f" (the {without} has no poses: align on landmarks)" if without else ""))
+    _check_range([("estimate's landmark coordinates", est_xy),
+                  ("estimate's robot positions", est_p[:, :2]),
+                  (f"{whose}'s landmark coordinates", true_xy),
+                  (f"{whose}'s robot positions", ref_p[:, :2])])
     if align_on == "both" and not len(est_p):  # no common poses: a fit on the landmarks,
         align_on = "landmarks"                  # and said so (MapScore.align_on)
     src = {"landmarks": est_xy, "trajectory": est_p[:, :2],
@@ -323,12 +355,12 @@ def score_estimate(estimate: MapEstimate, truth: Reference, *, allow_reflection:
         ape = absolute_pose_errors(t, moved, ref_p)
         rpe = relative_pose_errors(t, moved, ref_p, delta)
         robot_last = float(ape.translation_m[np.argmax(t)])
-        robot_mean = float(ape.translation_m.mean())
+        robot_mean = float(_mean(ape.translation_m))
         n_poses = int(len(t))
     if ambiguous and align_on != "landmarks":
         err = np.full(len(err), nan)
     stat = (lambda f: float(f(err))) if err.size else (lambda f: nan)
-    return MapScore(mpe_m=stat(np.mean), rmse_m=rms(err),
+    return MapScore(mpe_m=stat(_mean), rmse_m=rms(err),
                     median_m=stat(np.median), max_m=stat(np.max),
                     n_mapped=int(len(estimate.landmark_ids)),
                     n_truth=int(len(truth.landmark_ids)), n_common=int(common.size),
@@ -402,7 +434,7 @@ def _score_checkpoint(c: Checkpoint, truth: Reference, nees: bool, align_on: str
     try:
         s = score_estimate(c.estimate, truth, align_on=align_on, delta=delta,
                            with_scale=with_scale)
-    except (TooFewLandmarksError, UndeterminedAlignmentError):
+    except (TooFewLandmarksError, UndeterminedAlignmentError, OutOfRangeError):
         common = np.intersect1d(c.estimate.landmark_ids, truth.landmark_ids).size
         return CheckpointScore(c.t, len(c.estimate), c.estimate_s, nan, nan, nan, nan,
                                int(common), nan, nan, nan, nan)
@@ -437,7 +469,8 @@ def landmark_nees(estimate: MapEstimate, truth: Truth, alignment: Alignment) -> 
     ``R`` and scale ``s``; values are only meaningful when the method's frame is anchored like
     the truth's (a rigid alignment of a consistent estimate).
     Returns shape ``(n_common,)``, NaN for a landmark whose covariance block is all NaN (the
-    method reports none for it: not defined).
+    method reports none for it: not defined) or leaves the floating-point range when carried;
+    ``inf`` for a NEES beyond that range (computed without overflow below it).
     """
     if estimate.landmark_cov is None:
         raise EvaluationError("the estimate has no landmark covariances (landmark_cov): use a "
@@ -447,11 +480,15 @@ def landmark_nees(estimate: MapEstimate, truth: Truth, alignment: Alignment) -> 
                                     return_indices=True)
     e = alignment.apply(estimate.landmarks_xy[ie]) - truth.landmarks_xy[it]
     r = alignment.scale * alignment.rotation
-    cov = r @ estimate.landmark_cov[ie] @ r.T
+    with np.errstate(over="ignore", invalid="ignore"):  # a scale of 1e300: not defined
+        cov = r @ estimate.landmark_cov[ie] @ r.T
     out = np.full(len(ie), math.nan)
-    defined = ~np.isnan(cov).all(axis=(1, 2))
-    out[defined] = np.einsum("ni,nij,nj->n", e[defined], np.linalg.inv(cov[defined]),
-                             e[defined])
+    defined = np.isfinite(cov).all(axis=(1, 2))
+    k = _exponent(e[defined])   # e scaled by 2^-k (exactly): NEES = 4^k e'^T P^-1 e'
+    q = np.einsum("ni,nij,nj->n", np.ldexp(e[defined], -k), np.linalg.inv(cov[defined]),
+                  np.ldexp(e[defined], -k))
+    with np.errstate(over="ignore"):  # beyond the floating-point range: inf
+        out[defined] = np.ldexp(q, 2 * k)
     return out
 
 
@@ -465,8 +502,8 @@ def mean_landmark_nees(estimate: MapEstimate, truth: Truth, alignment: Alignment
         nees = landmark_nees(estimate, truth, alignment)
     except np.linalg.LinAlgError:
         return math.nan
-    nees = nees[np.isfinite(nees)]
-    return float(np.mean(nees)) if nees.size else math.nan
+    nees = nees[~np.isnan(nees)]  # inf (beyond the floating-point range) is a value
+    return float(_mean(nees)) if nees.size else math.nan
 
 
 def pose_nees(estimate: MapEstimate, truth: Truth, alignment: Alignment) -> float:
@@ -490,11 +527,20 @@ def pose_nees(estimate: MapEstimate, truth: Truth, alignment: Alignment) -> floa
     t[2, 2] = np.linalg.det(alignment.rotation)
     if np.isnan(estimate.pose_cov[k]).all():
         return math.nan
-    cov = t @ estimate.pose_cov[k] @ t.T
+    with np.errstate(over="ignore", invalid="ignore"):
+        cov = t @ estimate.pose_cov[k] @ t.T
+    if not np.all(np.isfinite(cov)):   # carried beyond the floating-point range
+        return math.nan
+    scale = _exponent(e)   # e scaled by 2^-scale (exactly), as in landmark_nees
+    e = np.ldexp(e, -scale)
     try:
-        return float(e @ np.linalg.solve(cov, e))
+        q = float(e @ np.linalg.solve(cov, e))
     except np.linalg.LinAlgError:
         return math.nan
+    try:
+        return math.ldexp(q, 2 * scale)
+    except OverflowError:   # beyond the floating-point range
+        return math.inf
 
 
 __all__ = ["Alignment", "RANK_TOL", "align_candidates", "align", "ALIGN_ON", "Reference", "MapScore", "score_estimate", "CheckpointScore",

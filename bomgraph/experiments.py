@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import Any, Mapping, Sequence
 
 from .checks import file_name, fraction, instance, integer, items, option_named
-from .errors import ConfigError, UnknownMethodError
+from .errors import ConfigError, UnknownMethodError, shown_path
 from .jsonio import options_to_json
 from .mapper import available_methods, method_config_class, method_info
 from .sim import RunSpec, SimConfig, paper_design
@@ -429,7 +429,8 @@ def real_experiments(data_dir: str | os.PathLike[str],
             sources=(DatasetSource("g2o", str(g2o_dir / "slam2D_bearing_only_initial_guess.g2o"),
                                    truth_path=str(gt), label="g2o"),))
     if not exps:
-        raise ConfigError(f"no dataset folders (mrclam6, bearing_only_sim_g2o) under {root}")
+        raise ConfigError(f"no dataset folders (mrclam6, bearing_only_sim_g2o) under "
+                          f"{shown_path(root)}")
     return exps
 
 

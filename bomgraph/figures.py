@@ -15,7 +15,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from .checks import option_named
-from .errors import BomgraphError, ConfigError, EvaluationError
+from .errors import BomgraphError, ConfigError, EvaluationError, shown_path
 from .estimate_file import read_estimate
 from .file_evaluation import check_stream_identity, method_label, poses_revised
 from .evaluate import score_estimate
@@ -34,7 +34,7 @@ def _check_out(out: str | os.PathLike[str], *inputs: str | os.PathLike[str]) -> 
         check_output_path(out, inputs, name="out")
     path = Path(out)
     if path.suffix.lower() not in FIGURE_SUFFIXES:
-        raise ConfigError(f"{out}: the figure's file name must end in "
+        raise ConfigError(f"{shown_path(out)}: the figure's file name must end in "
                           f"{', '.join(FIGURE_SUFFIXES)}")
     check_output_path(path, inputs, name="out")  # the parameter's name (h103), not 'path'
     return path
@@ -56,7 +56,7 @@ def plot_run(estimate_path: str | os.PathLike[str], stream_path: str | os.PathLi
     if t is not None:
         cps = {c.t: c for c in est_file.checkpoints}
         if t not in cps:
-            raise EvaluationError(f"{estimate_path}: no checkpoint at t = {t}; it has "
+            raise EvaluationError(f"{shown_path(estimate_path)}: no checkpoint at t = {t}; it has "
                                   f"{', '.join(map(str, sorted(cps))) or 'none'}")
         est, at = cps[t].estimate, f"t = {t}"
     which = "the final map" if t is None else f"the map at {at}"
@@ -67,21 +67,22 @@ def plot_run(estimate_path: str | os.PathLike[str], stream_path: str | os.PathLi
     truth = stream.truth
     label = method_label(est_file) or "estimate"
     if truth is None:
-        _refuse_overflow(est, None, None, f"{estimate_path}: {which}", "")
+        _refuse_overflow(est, None, None, f"{shown_path(estimate_path)}: {which}", "")
         fig = run_figure(None, est, None, label=label, landmark_cov=est.landmark_cov,
                          title=f"{label}, {at} (no truth: the estimate's own frame)")
         return write_figure(fig, path, dpi)
     if first and align_on != "landmarks":
-        raise EvaluationError(f"{estimate_path}: the poses at t = {t} are as first estimated "
-                              f"(the method revised them later), so they cannot place the "
+        raise EvaluationError(f"{shown_path(estimate_path)}: the poses at t = {t} are as "
+                              f"first estimated (the method revised them later), so they "
+                              f"cannot place the "
                               f"map: use {option_named('--align landmarks', _LANDMARKS)}, or "
                               f"plot the final map")
     try:
         s = score_estimate(est, truth, align_on=align_on)
     except EvaluationError as exc:  # say which file and map, as evaluate does
-        raise type(exc)(f"{estimate_path}: {which}: {exc}") from None
-    _refuse_overflow(est, s.alignment, truth, f"{estimate_path}: {which}",
-                     f"{stream_path}, line 1: 'truth'")
+        raise type(exc)(f"{shown_path(estimate_path)}: {which}: {exc}") from None
+    _refuse_overflow(est, s.alignment, truth, f"{shown_path(estimate_path)}: {which}",
+                     f"{shown_path(stream_path)}, line 1: 'truth'")
     if truth.poses is not None and t is not None:
         truth = type(truth)(truth.landmark_ids, truth.landmarks_xy, truth.poses[:t + 1])
     pe = None if s.ape is None or first else (s.ape.t, s.ape.translation_m, s.ape.heading_rad)
@@ -136,14 +137,16 @@ def plot_results(results_dir: str | os.PathLike[str], out: str | os.PathLike[str
         final, curves, titles = _results_data(json.loads(read_regular_file(src)), src,
                                               experiments)
     except OSError as exc:
-        raise ConfigError(f"{src}: cannot read ({exc.strerror}); give a `bomgraph compare` "
+        raise ConfigError(f"{shown_path(src)}: cannot read ({exc.strerror}); give a `bomgraph "
+                          f"compare` "
                           f"output folder") from None
     except BomgraphError:
         raise
     except (ValueError, KeyError, TypeError, AttributeError, IndexError,
             RecursionError) as exc:  # a row of the wrong shape anywhere in the file
         key = f" {str(exc.args[0])[:40]!r}" if isinstance(exc, KeyError) and exc.args else ""
-        raise ConfigError(f"{src}: not a compare results file ({type(exc).__name__}{key}); "
+        raise ConfigError(f"{shown_path(src)}: not a compare results file "
+                          f"({type(exc).__name__}{key}); "
                           f"give a folder that `bomgraph compare --out DIR` wrote") from None
     return write_figure(results_figure(final, curves, kind=kind, titles=titles), path, dpi)
 
@@ -159,7 +162,8 @@ def _results_data(obj: Any, src: Path, experiments: Sequence[str]) -> tuple[
     names = list(dict.fromkeys(r["experiment"] for r in results))
     unknown = sorted(set(experiments) - set(names))
     if unknown:
-        raise ConfigError(f"{src}: no experiment {unknown[0]!r}; it has {', '.join(names)}")
+        raise ConfigError(f"{shown_path(src)}: no experiment {unknown[0]!r}; it has "
+                          f"{', '.join(names)}")
     chosen = [n for n in names if not experiments or n in experiments]
     final: dict[str, dict[str, np.ndarray]] = {}
     own: dict[str, list[str]] = {}

@@ -27,7 +27,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from .checks import option_named
-from .errors import BomgraphError, EvaluationError, StreamFormatError
+from .errors import BomgraphError, EvaluationError, StreamFormatError, shown_path
 from .evaluate import (CheckpointScore, MapScore, error_table, mean_landmark_nees, pose_nees,
                        score_checkpoints, score_estimate)
 from .estimate_file import EstimateFile, read_estimate, stream_identity
@@ -36,7 +36,7 @@ from .mapper import MapEstimate
 from .stream import Step, Truth
 from .stream_file import StreamReader
 from .stream_identity import StreamHasher, StreamIdentity
-from .tables import Column, format_table
+from .tables import Column, fixed_or_exponent, format_table
 from .trajectory import BearingResidualSums, bearing_arrays
 
 #: The per-checkpoint table of ``bomgraph evaluate`` (SI in JSON/CSV; cm and deg shown).
@@ -169,7 +169,8 @@ def evaluate_files(estimate_path: str | os.PathLike[str], stream_path: str | os.
             ident = _read_steps(reader, list(sums.values()))
     except StreamFormatError as exc:
         if _is_estimate_file(stream_path):
-            raise EvaluationError(f"{stream_path} is an estimate file, not a stream (arguments "
+            raise EvaluationError(f"{shown_path(stream_path)} is an estimate file, not a stream "
+                                  f"(arguments "
                                   f"swapped? usage: bomgraph evaluate ESTIMATE STREAM)") from None
         raise exc from None
     if est is None:  # the stream's errors first, as when it was read whole
@@ -178,8 +179,9 @@ def evaluate_files(estimate_path: str | os.PathLike[str], stream_path: str | os.
     last = ident.n_steps - 1
     beyond = [c.t for c in est.checkpoints if c.t > last]
     if beyond:
-        raise EvaluationError(f"{estimate_path}: checkpoint t = {beyond[0]} is beyond the last "
-                              f"step t = {last} of {stream_path}")
+        raise EvaluationError(f"{shown_path(estimate_path)}: checkpoint t = {beyond[0]} is beyond "
+                              f"the last "
+                              f"step t = {last} of {shown_path(stream_path)}")
     if ref_error is not None:
         raise ref_error
     if ref_est is not None:  # scored against its final map: it must be of the same stream
@@ -188,7 +190,8 @@ def evaluate_files(estimate_path: str | os.PathLike[str], stream_path: str | os.
         if with_scale or align_on != "landmarks" or delta != 1:
             given = ", ".join(option_named(o, p) for o, p in (
                 ("--similarity", "with_scale"), ("--align", "align_on"), ("--delta", "delta")))
-            raise EvaluationError(f"{stream_path}: the stream has no ground truth, so there is "
+            raise EvaluationError(f"{shown_path(stream_path)}: the stream has no ground truth, so "
+                                  f"there is "
                                   f"nothing to align to ({given}); give "
                                   f"{option_named('--reference EST', 'reference_path')}, or "
                                   f"drop them for the truth-free measures")
@@ -206,7 +209,10 @@ def evaluate_files(estimate_path: str | os.PathLike[str], stream_path: str | os.
         score = score_estimate(est.final, target, **kw)
     except EvaluationError as exc:  # say which file and map; the checkpoint rows say '-'
         at = f" (t = {est.checkpoints[-1].t})" if est.checkpoints else ""
-        raise type(exc)(f"{estimate_path}: the final map{at}: {exc}") from None
+        against = ("" if reference_path is None else " against the final map of "
+                   + option_named("--reference", "reference_path", reference_path))
+        raise type(exc)(f"{shown_path(estimate_path)}: the final map{at}{against}: "
+                        f"{exc}") from None
     rows = tuple(score_checkpoints(est.checkpoints, target, **kw)) if est.checkpoints else ()
     revised = est.version >= 2 and poses_revised(est)
     if revised:  # the earlier rows' trajectories are first estimates, not the method's then
@@ -350,7 +356,8 @@ def _check_identity(est: EstimateFile, ident: StreamIdentity,
                 if ident.n_steps != est.stream.n_steps else
                 f"steps SHA-256 {est.stream.steps_sha256[:12]}... recorded, the stream's "
                 f"is {ident.steps_sha256[:12]}...")
-        raise error(f"{estimate_path} was computed from another stream than {stream_path} "
+        raise error(f"{shown_path(estimate_path)} was computed from another stream than "
+                    f"{shown_path(stream_path)} "
                     f"({what})")
 
 
@@ -409,7 +416,8 @@ def format_evaluation(ev: FileEvaluation, fmt: str = "text") -> str:
     if fmt != "text":
         return format_table(EVALUATION_COLUMNS, rows, fmt, title=title)
     s = ev.score
-    na = (lambda v, k=100, f=".2f", u=" cm": "-" if not math.isfinite(v) else f"{k * v:{f}}{u}")
+    na = (lambda v, k=100, f=".2f", u=" cm": "-" if not math.isfinite(v)
+          else fixed_or_exponent(v, f, k) + u)
     lines = [f"method {ev.method}: {s.n_common} of {s.n_truth} landmarks of the {against} "
              f"mapped ({s.n_mapped} in the estimate); aligned on {s.align_on}"
              f"{', reflected' if s.alignment.reflected else ''}",
@@ -426,9 +434,10 @@ def format_evaluation(ev: FileEvaluation, fmt: str = "text") -> str:
                      f"{na(s.rpe_trans_rmse_m)}, heading "
                      f"{na(s.rpe_heading_rmse_rad, 180 / math.pi, '.3f', ' deg')}")
     n_lm, pose = ev.nees_undefined
-    nees = [f"{name} {v:.2f}" for name, v in (
+    nees = [f"{name} " + (fixed_or_exponent(v, ".2f") if math.isfinite(v) else
+                          "beyond the floating-point range") for name, v in (
         ("landmark (mean" + (f"; {n_lm} without a covariance left out)" if n_lm else ")"),
-         ev.nees_landmark), ("latest pose", ev.nees_pose)) if math.isfinite(v)]
+         ev.nees_landmark), ("latest pose", ev.nees_pose)) if not math.isnan(v)]
     if pose:
         nees.append("latest pose none (it has no covariance)")
     if nees:

@@ -16,13 +16,13 @@ from typing import Any, Callable, Iterable, Iterator, Mapping
 import numpy as np
 
 from .checks import option_named, out_named
-from .errors import ConfigError, StreamFormatError
+from .errors import ConfigError, StreamFormatError, StreamValueError, shown_path
 from .experiments import Experiment, SimSource
 from .mapper import (MapEstimate, RunResult, checkpoint_times, create_mapper, method_info,
                      run)
 from .stream import Step, Stream
 from .stdio import check_output_path
-from .stream_file import StreamReader
+from .stream_file import StreamReader, located
 
 _log = logging.getLogger(__name__)
 
@@ -44,8 +44,6 @@ def run_file(stream_path: str | os.PathLike[str], method: str,
     ConfigError
         The method reads the ground truth (a benchmark bound) and ``allow_truth`` is False.
     """
-    from threadpoolctl import threadpool_limits
-
     if options is not None and not isinstance(options, Mapping):
         raise ConfigError(f"run_file(): options must be a mapping of option names to values "
                           f"(or None), got {type(options).__name__}")
@@ -59,11 +57,39 @@ def run_file(stream_path: str | os.PathLike[str], method: str,
                           f"file for the estimate")
     if out is not None:  # before the stream is read, and naming the parameter ``out`` (h103:
         check_output_path(out, name="out")  # EstimateWriter's refusal said path='x')
+    try:
+        result = _run_read(stream_path, method, options, checkpoint_every, progress, out)
+    except StreamValueError as exc:  # the method's refusal, naming the file and the line
+        raise located(exc, stream_path) from None
+    _log.info("%s: %d checkpoints, %d landmarks at t = %d, %.3f s", method,
+              len(checkpoint_times(result.checkpoints[-1].t + 1, checkpoint_every)),
+              len(result.final), result.checkpoints[-1].t, result.total_s)
+    if len(result.final) == 0:
+        _log.warning("%s mapped no landmark by t = %d (too few steps or too little parallax?)",
+                     method, result.checkpoints[-1].t)
+    failures = result.final.info.get("update_failures")
+    if failures:
+        _log.warning("%s: %d solver failure(s) recovered from (last: %s); see the estimate's "
+                     "info", method, failures, result.final.info.get("last_failure", "?"))
+    converged = result.final.info.get("converged")  # a numpy bool_ too (np.all(...))
+    if isinstance(converged, (bool, np.bool_)) and not converged:
+        _log.warning("%s: the final solve did not converge (%s)", method,
+                     result.final.info.get("stop", "see the estimate's info"))
+    return result
+
+
+def _run_read(stream_path: str | os.PathLike[str], method: str,
+              options: Mapping[str, Any] | None, checkpoint_every: int,
+              progress: Callable[[int], None] | None,
+              out: str | os.PathLike[str] | None) -> RunResult:
+    """:func:`run_file`'s reading and running, its arguments checked."""
+    from threadpoolctl import threadpool_limits
+
     with contextlib.ExitStack() as stack:
         reader = stack.enter_context(StreamReader(stream_path))
         stack.enter_context(threadpool_limits(limits=1))
         if reader.truth is None and method_info(method).needs_truth:
-            raise ConfigError(f"{os.fspath(stream_path)}: method {method!r} reads the ground "
+            raise ConfigError(f"{shown_path(stream_path)}: method {method!r} reads the ground "
                               f"truth, and this stream has none (no 'truth' in its header)")
         mapper = create_mapper(method, reader.header, truth=reader.truth, **dict(options or {}))
         _log.info("running %s on %s", method, stream_path)
@@ -90,20 +116,6 @@ def run_file(stream_path: str | os.PathLike[str], method: str,
                 if not isinstance(exc, StreamFormatError):  # as when it was read for its
                     _refuse_a_bad_rest(lines, refused)     # identity before the run
                 raise
-    _log.info("%s: %d checkpoints, %d landmarks at t = %d, %.3f s", method,
-              len(checkpoint_times(result.checkpoints[-1].t + 1, checkpoint_every)),
-              len(result.final), result.checkpoints[-1].t, result.total_s)
-    if len(result.final) == 0:
-        _log.warning("%s mapped no landmark by t = %d (too few steps or too little parallax?)",
-                     method, result.checkpoints[-1].t)
-    failures = result.final.info.get("update_failures")
-    if failures:
-        _log.warning("%s: %d solver failure(s) recovered from (last: %s); see the estimate's "
-                     "info", method, failures, result.final.info.get("last_failure", "?"))
-    converged = result.final.info.get("converged")  # a numpy bool_ too (np.all(...))
-    if isinstance(converged, (bool, np.bool_)) and not converged:
-        _log.warning("%s: the final solve did not converge (%s)", method,
-                     result.final.info.get("stop", "see the estimate's info"))
     return result
 
 

@@ -24,7 +24,7 @@ def configure_logging(verbose: int = 0, quiet: bool = False) -> None:
         # (:func:`logging_restored`)
         root.removeHandler(h)
     handler = logging.StreamHandler(sys.stderr)
-    handler.setFormatter(logging.Formatter("bomgraph: %(levelname)s: %(message)s"))
+    handler.setFormatter(_OneLine("bomgraph: %(levelname)s: %(message)s"))
     root.addHandler(handler)
     root.setLevel(level)
     logging.captureWarnings(True)
@@ -75,6 +75,20 @@ def _stderr_reopened() -> None:
                 os.close(2)  # closed as it was
 
     restore_after(undo)
+
+
+class _OneLine(logging.Formatter):
+    """A record's message on one line (:func:`bomgraph.errors.one_line`: a file name with a
+    newline split a warning in two), a spooled stdin's temporary file named ``<stdin>``
+    (:func:`bomgraph.std_streams.display_path`), as in the error line; a traceback logged
+    with it (``exc_info``) follows on its own lines."""
+
+    def formatMessage(self, record: logging.LogRecord) -> str:
+        from .errors import one_line
+        from .std_streams import display_path
+
+        record.message = one_line(display_path(record.message))
+        return super().formatMessage(record)
 
 
 def _first_line(record: logging.LogRecord) -> bool:

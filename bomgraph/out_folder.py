@@ -34,6 +34,7 @@ from .claims import remove_leftovers
 from .slugs import figure_names, slug, unique_slugs  # re-exported: out_folder.slug
 from .experiments import DatasetSource, Experiment, FileSource, Task
 from .checks import out_named
+from .errors import shown_path
 from .stdio import (FolderBusyError, InputTooLargeError, OutputPathError, folder_lock,
                     read_regular_file, write_text)
 
@@ -141,9 +142,10 @@ def refuse_inputs_among_outputs(out: Path, experiments: Sequence[Experiment]) ->
     for path in written:
         real = os.path.realpath(path)
         if real in inputs:
-            raise OutputPathError(f"{out_named('out_dir', out)}: compare writes {path}, which is the input "
-                                  f"{inputs[real]}; refusing to overwrite an input: move it "
-                                  f"or choose another folder")
+            raise OutputPathError(f"{out_named('out_dir', out)}: compare writes "
+                                  f"{shown_path(path)}, which is the input {inputs[real]}; "
+                                  f"refusing to overwrite an input: move it or choose another "
+                                  f"folder")
 
 
 #: The record of the files a compare wrote in its folder: each one's path relative to the
@@ -365,8 +367,8 @@ class OutputRecord:
         out, todo = self.out, "move it or choose another folder"
         listed = _read_manifest(out)
         if listed is None:
-            raise OutputPathError(f"{out_named('out_dir', out)}: {self.path} is not the list of files bomgraph "
-                                  f"compare keeps there; {todo}")
+            raise OutputPathError(f"{out_named('out_dir', out)}: {shown_path(self.path)} is not "
+                                  f"the list of files bomgraph compare keeps there; {todo}")
         by_path: dict[str, list[dict[str, Any]]] = {}
         for e in listed:
             by_path.setdefault(os.path.normpath(e["path"]), []).append(e)
@@ -374,8 +376,8 @@ class OutputRecord:
             if os.path.lexists(folder) and not folder.is_dir():
                 what = (f"a link to {os.path.realpath(folder)}, which is not a folder"
                         if os.path.islink(folder) else "a file")
-                raise OutputPathError(f"{out_named('out_dir', out)}: compare writes a folder {folder}, which "
-                                      f"is {what}; {todo}")
+                raise OutputPathError(f"{out_named('out_dir', out)}: compare writes a folder "
+                                      f"{shown_path(folder)}, which is {what}; {todo}")
         for p in paths:
             if not os.path.lexists(p):
                 continue

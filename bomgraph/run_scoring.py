@@ -29,11 +29,14 @@ import time
 from dataclasses import asdict, dataclass, replace
 from typing import Any, Callable, Collection, Mapping, Sequence
 
+from .errors import StreamValueError
 from .evaluate import CheckpointScore, score_checkpoints
 from .experiments import Arm, Experiment, Task
 from .mapper import Checkpoint, MapEstimate, RunResult, create_mapper, method_info, run
 from .method_code import method_code
+from .sources import FileSource
 from .stream import Stream, Truth
+from .stream_file import located
 from .trajectory import BearingResidualSums
 
 #: Reference maps kept per process (stream, reference, cadence); the oldest goes first.
@@ -69,10 +72,15 @@ def run_arm(task: Task, arm: Arm, stream: Stream,
     only the last kept (each map holds the trajectory so far: kept, they grow as T^2)."""
     truth = stream.truth
     needs_truth = method_info(arm.method).needs_truth
-    mapper = create_mapper(arm.method, stream.header, truth=truth if needs_truth else None,
-                           **dict(arm.options))
-    return run(mapper, stream.steps, checkpoint_every=_every(task, arm), method=arm.label,
-               on_checkpoint=on_checkpoint, keep_checkpoints=False)
+    try:
+        mapper = create_mapper(arm.method, stream.header,
+                               truth=truth if needs_truth else None, **dict(arm.options))
+        return run(mapper, stream.steps, checkpoint_every=_every(task, arm), method=arm.label,
+                   on_checkpoint=on_checkpoint, keep_checkpoints=False)
+    except StreamValueError as exc:  # the method's refusal: a stream file's name and line
+        if isinstance(task.source, FileSource):
+            raise located(exc, task.source.path) from None
+        raise
 
 
 def _every(task: Task, arm: Arm) -> int:

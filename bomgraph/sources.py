@@ -16,7 +16,7 @@ from typing import Any, Callable
 import numpy as np
 
 from .checks import file_name, fraction, instance, integer, items
-from .errors import ConfigError, DatasetError, StreamFormatError
+from .errors import ConfigError, DatasetError, StreamFormatError, shown_path
 from .file_digest import file_sha256, inputs_sha256, special_file
 from .sim import RunSpec, SimConfig, make_priors, simulate, simulate_run, with_priors
 from .stream import Stream
@@ -158,7 +158,8 @@ class DatasetSource:
         for path in inputs.values():
             what = None if path is None else special_file(path)
             if what is not None:
-                raise DatasetError(f"{path}: a {what}, not a regular file; a recording's files "
+                raise DatasetError(f"{shown_path(path)}: a {what}, not a regular file; a "
+                                   f"recording's files "
                                    f"are hashed for the cache key and read by each run: copy "
                                    f"the data into a regular file")
         return _load_dataset(self.kind, self.path, self.robot, self.truth_path,

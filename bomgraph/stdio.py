@@ -48,7 +48,7 @@ from .checks import file_name, items, out_named
 from .claims import new_temp_file, release, remove_leftovers
 from .descriptors import (CLOSED_AT_START, fd_name,  # noqa: F401
                           hold_standard_descriptors, open_input, own_descriptor)
-from .errors import BomgraphError
+from .errors import BomgraphError, shown_path
 
 _log = logging.getLogger(__name__)
 
@@ -79,13 +79,13 @@ def line_too_long(path: str | os.PathLike[str], line: int,
     """The refusal of a line longer than ``limit`` (:data:`MAX_LINE_BYTES`, or a smaller cap
     on the whole file) with no newline in sight."""
     return InputTooLargeError(
-        f"{os.fspath(path)}, line {line}: longer than {_mib(limit)} without a "
+        f"{shown_path(path)}, line {line}: longer than {_mib(limit)} without a "
         f"newline; not a bomgraph text file (is it binary data or a device like /dev/zero?)")
 
 
 def input_too_large(path: str | os.PathLike[str]) -> InputTooLargeError:
     """The refusal of an input larger than :data:`MAX_INPUT_BYTES`."""
-    return InputTooLargeError(f"{os.fspath(path)}: larger than {_mib(MAX_INPUT_BYTES)}, the "
+    return InputTooLargeError(f"{shown_path(path)}: larger than {_mib(MAX_INPUT_BYTES)}, the "
                               f"limit for one input file; split the run")
 
 
@@ -192,8 +192,8 @@ def _stdout_not_input(stdout: IO[str], inputs: Sequence[str | os.PathLike[str] |
             same = False
         if same:
             raise OutputPathError(f"{out_named(name, STDIO)}: the standard output is the input "
-                                  f"{os.fspath(inp)}; "
-                                  f"refusing to overwrite an input: choose another name")
+                                  f"{shown_path(inp)}; refusing to overwrite an input: choose "
+                                  f"another name")
 
 
 def _stat(path: str, name: str = "path") -> os.stat_result | None:
@@ -295,12 +295,13 @@ def check_output_path(path: str | os.PathLike[str],
     if direct:  # a file open as a descriptor (``>> f``): written where it is
         return
     folder = Path(target).parent
+    there = f"{out_named(name, path)}: the folder {shown_path(folder)}"
     if not folder.is_dir():
-        raise OutputPathError(f"{out_named(name, path)}: the folder {folder} does not exist")
+        raise OutputPathError(f"{there} does not exist")
     if st is not None and not os.access(target, os.W_OK):
         raise OutputPathError(f"{out_named(name, path)}: the file is not writable")
     if not os.access(folder, os.W_OK | os.X_OK):  # a file too: replaced from one made beside it
-        raise OutputPathError(f"{out_named(name, path)}: the folder {folder} is not writable")
+        raise OutputPathError(f"{there} is not writable")
 
 
 @contextlib.contextmanager
@@ -349,9 +350,9 @@ class AtomicOutput:
         except OSError as exc:
             where = os.path.dirname(self.path) or "."
             what = ("cannot open it for writing" if self.direct
-                    else f"cannot create a file in {where}")
-            raise OutputPathError(f"{self.given}: {what} ({exc.strerror or exc}); choose "
-                                  f"another {out_named('path')}") from None
+                    else f"cannot create a file in {shown_path(where)}")
+            raise OutputPathError(f"{shown_path(self.given)}: {what} ({exc.strerror or exc}); "
+                                  f"choose another {out_named('path')}") from None
 
     def _open(self) -> IO:
         kw = {} if self._binary else {"encoding": "utf-8", "newline": "\n"}
@@ -475,15 +476,15 @@ def check_folder(folder: str | os.PathLike[str]) -> None:
     for at in (path, *path.parents):   # the nearest one that exists must be a folder
         if os.path.isdir(at):
             if not os.access(at, os.W_OK | os.X_OK):  # not '[Errno 13] ...: OUT/.bomgraph.lock'
-                name = "" if at == path else f"{os.fspath(at)}, where it would be made, "
+                name = "" if at == path else f"{shown_path(at)}, where it would be made, "
                 raise OutputPathError(f"{out_named('out_dir', folder)}: {name}is not "
                                       f"writable; choose another folder")
             return
         if os.path.lexists(at):   # mkdir does not follow a link: [Errno 17] File exists
-            what = (f"a link to {os.readlink(at)}, which does not exist; create that folder, "
-                    f"or give another" if not os.path.exists(at) else
+            what = (f"a link to {shown_path(os.readlink(at))}, which does not exist; create "
+                    f"that folder, or give another" if not os.path.exists(at) else
                     "a file; give a folder (it is created if missing)")
-            name = "" if at == path else f"{os.fspath(at)} "
+            name = "" if at == path else f"{shown_path(at)} "
             raise OutputPathError(f"{out_named('out_dir', folder)}: {name}is {what}")
 
 
@@ -524,8 +525,8 @@ def folder_lock(folder: str | os.PathLike[str], what: str,
         yield
         return
     lock = os.path.join(os.fspath(folder), ".bomgraph.lock")
-    not_ours = (f"{lock}: is not a bomgraph lock (a process id); move it or choose another "
-                f"{out_named('out_dir')}")
+    not_ours = (f"{shown_path(lock)}: is not a bomgraph lock (a process id); move it or "
+                f"choose another {out_named('out_dir')}")
     try:  # without blocking: a FIFO there is refused, not waited on; a link too (h100)
         fd = os.open(lock, (os.O_RDONLY if shared else os.O_RDWR | os.O_CREAT)
                      | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_NOFOLLOW", 0),
@@ -550,7 +551,7 @@ def folder_lock(folder: str | os.PathLike[str], what: str,
             if not shared and _lock_is_shared(fd):  # held by compares writing below it only
                 who, where = "", "below this folder, through a link or from a folder above"
             raise FolderBusyError(
-                f"{os.fspath(folder)}: another {what}{who} is writing {where}; wait for it to "
+                f"{shown_path(folder)}: another {what}{who} is writing {where}; wait for it to "
                 f"finish or choose another {out_named('out_dir')}") from None
         if os.fstat(fd).st_size > 64 or not re.fullmatch(rb"\s*\d*\s*", os.pread(fd, 64, 0)):
             raise OutputPathError(not_ours)  # not a pid (judged whole): not ours to empty

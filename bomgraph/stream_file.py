@@ -17,7 +17,7 @@ from typing import IO, Any, Callable, Iterable, Iterator, Sequence
 import numpy as np
 
 from .checks import file_name
-from .errors import StreamFormatError
+from .errors import StreamFormatError, StreamValueError, shown_path
 from .jsonio import (MAX_ID, DuplicateKeyError, decode_utf8, find_nonfinite, is_id, is_int,
                      is_num, line_not_json, loads_strict, version_problem)
 from .plausibility import (OdometryScale, PriorLandmarks, bearings_problem, header_problems,
@@ -327,11 +327,11 @@ class StreamReader:
             raise
         self._started = False
         for key, msg in header_problems(self.header) if warn else ():  # valid, but no method can use it
-            _log.warning("%s, line 1: '%s': %s", self.path, key, msg)
+            _log.warning("%s, line 1: '%s': %s", shown_path(self.path), key, msg)
         if warn and self.truth is not None:
             msg = truth_problem(self.truth.landmarks_xy, self.truth.poses)
             if msg:
-                _log.warning("%s, line 1: 'truth': %s", self.path, msg)
+                _log.warning("%s, line 1: 'truth': %s", shown_path(self.path), msg)
 
     def __enter__(self) -> "StreamReader":
         return self
@@ -372,7 +372,7 @@ class StreamReader:
                     step, self.header.odometry_sigma[2])) is not None:
                 warned = True
                 _log.warning("%s, line %d: '%s': %s (implausible; later steps are not "
-                             "checked)", self.path, line_no, *problem)
+                             "checked)", shown_path(self.path), line_no, *problem)
             if self._warn:
                 scale.add(step, line_no)
                 priors.add(step)
@@ -390,9 +390,9 @@ class StreamReader:
                                     f"the file has {t} steps; give one pose per step",
                                     path=self.path, line=1, key="truth.poses")
         for key, msg, line in scale.problems():
-            _log.warning("%s, line %d: '%s': %s", self.path, line or 1, key, msg)
+            _log.warning("%s, line %d: '%s': %s", shown_path(self.path), line or 1, key, msg)
         if self._warn and (unseen := priors.problem()):
-            _log.warning("%s, line 1: '%s': %s", self.path, *unseen)
+            _log.warning("%s, line 1: '%s': %s", shown_path(self.path), *unseen)
 
 
 def _decode(raw: bytes, ctx: _Ctx) -> str:
@@ -531,5 +531,13 @@ def count_steps(stream_path: str | os.PathLike[str]) -> int:
     return max(n - 1, 0)
 
 
+def located(exc: StreamValueError, path: str | os.PathLike[str]) -> StreamValueError:
+    """A method's refusal of a value of the stream file ``path``, naming the file and the
+    line, as the reader names a line it refuses: the header's line 1, step ``t``'s line
+    ``t + 2`` (the format has no blank lines and no gaps in ``t``)."""
+    return exc if exc.path is not None else exc.in_file(path, 1 if exc.t is None else exc.t + 2)
+
+
 __all__ = ["StreamReader", "read_stream", "write_stream", "write_stream_parts", "header_to_json",
-           "step_to_json", "parse_priors", "count_steps", "FORMAT_NAME", "FORMAT_VERSION"]
+           "step_to_json", "parse_priors", "count_steps", "located", "FORMAT_NAME",
+           "FORMAT_VERSION"]

@@ -40,7 +40,6 @@ equivalent command line run the same tasks with the same cache keys.
 from __future__ import annotations
 
 import dataclasses
-import glob
 import math
 import os
 import re
@@ -51,9 +50,10 @@ from pathlib import Path
 from typing import Any, Mapping, Sequence
 
 from .checks import echo, file_name
-from .errors import BomgraphError, ConfigError
+from .errors import BomgraphError, ConfigError, shown_path
 from .jsonio import BOM_ADVICE
 from .sim import SimConfig
+from .stream_globs import GlobTooWideError, bounded_glob
 
 #: The folder of the sweep files shipped in the package (``--config NAME``).
 SHIPPED_DIR = Path(__file__).with_name("sweeps")
@@ -137,7 +137,8 @@ def resolve_path(path_or_name: str | os.PathLike[str]) -> Path:
         return p
     if (SHIPPED_DIR / f"{p}.toml").is_file() and p.suffix != ".toml":
         return SHIPPED_DIR / f"{p}.toml"
-    raise SweepError(f"{path_or_name}: {'is a folder, not a' if p.is_dir() else 'no such'} "
+    raise SweepError(f"{shown_path(path_or_name)}: "
+                     f"{'is a folder, not a' if p.is_dir() else 'no such'} "
                      f"sweep file (a path, or a shipped one: {', '.join(shipped())})")
 
 
@@ -154,16 +155,18 @@ def read_sweep(path_or_name: str | os.PathLike[str]) -> SweepSpec:
         with open(path, "rb") as fh:
             raw = fh.read(MAX_SWEEP_BYTES + 1)
         if len(raw) > MAX_SWEEP_BYTES:
-            raise SweepError(f"{path}: larger than {MAX_SWEEP_BYTES // 2**20} MiB; not a sweep "
+            raise SweepError(f"{shown_path(path)}: larger than {MAX_SWEEP_BYTES // 2**20} MiB; "
+                             f"not a sweep "
                              f"file")
         data = tomllib.loads(raw.decode("utf-8"))
     except tomllib.TOMLDecodeError as exc:  # of a byte-order mark: "Invalid statement"
         why = BOM_ADVICE if raw.startswith(b"\xef\xbb\xbf") else f"not valid TOML: {exc}"
-        raise SweepError(f"{path}: {why}") from None
+        raise SweepError(f"{shown_path(path)}: {why}") from None
     except RecursionError:
-        raise SweepError(f"{path}: not valid TOML: arrays or tables nested too deeply") from None
+        raise SweepError(f"{shown_path(path)}: not valid TOML: arrays or tables nested too "
+                         f"deeply") from None
     except (OSError, UnicodeDecodeError) as exc:
-        raise SweepError(f"{path}: cannot be read: {exc}") from None
+        raise SweepError(f"{shown_path(path)}: cannot be read: {exc}") from None
     return _Reader(path).sweep(data)
 
 
@@ -306,7 +309,7 @@ class _Reader:
                                  f"split it into several sweep files")
 
     def fail(self, key: str, message: str) -> SweepError:
-        return SweepError(f"{self.path}: {key}: {message}")
+        return SweepError(f"{shown_path(self.path)}: {key}: {message}")
 
     def keys(self, table: Any, allowed: set[str], where: str) -> Mapping[str, Any]:
         if not isinstance(table, dict):
@@ -420,7 +423,10 @@ class _Reader:
         for k, pat in enumerate(patterns):
             pat = self.str_(pat, f"{key}[{k}]")
             full = pat if os.path.isabs(pat) else str(self.path.parent / pat)
-            found = sorted(glob.glob(full, recursive=True))
+            try:
+                found = bounded_glob(full)
+            except GlobTooWideError as exc:
+                raise self.fail(f"{key}[{k}]", f"{pat!r}: {exc}") from None
             found = [str(Path(f).resolve()) for f in found if os.path.isfile(f)]
             if not found:
                 raise self.fail(f"{key}[{k}]", f"{pat!r} matches no file (relative to "
@@ -517,7 +523,7 @@ def _unique_or(reader: _Reader, labels: Sequence[str], key: str) -> None:
     try:
         check_unique(labels, key)
     except SweepError as exc:
-        raise SweepError(f"{reader.path}: {exc}") from None
+        raise SweepError(f"{shown_path(reader.path)}: {exc}") from None
 
 
 __all__ = ["SweepError", "SweepSpec", "ExperimentSpec", "MethodSpec", "WorldSpec",

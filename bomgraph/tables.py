@@ -14,6 +14,7 @@ import math
 import os
 import re
 from dataclasses import dataclass
+from decimal import Decimal
 from typing import Any, Callable, Mapping, Sequence
 
 from .stdio import output_file
@@ -39,14 +40,24 @@ def _shown(v: Any, col: Column) -> str:
         return str(v)
     if isinstance(v, int) and col.scale == 1.0:
         return str(v)
-    x = float(v) * col.scale
-    if abs(x) >= HUGE and col.fmt.endswith("f"):  # a 1e300 m map: not 300 digits of cm
-        return format(x, ".3e")
-    return format(x, col.fmt)
+    return fixed_or_exponent(float(v), col.fmt, col.scale)
 
 
 #: the magnitude from which a fixed-point column shows its value in exponent form.
 HUGE = 1e9
+
+
+def fixed_or_exponent(value: float, fmt: str, scale: float = 1.0) -> str:
+    """``value * scale`` formatted as ``fmt``, except a fixed-point ``fmt`` (``".2f"``) of a
+    magnitude of :data:`HUGE` or more, shown in exponent form (``"6.976e+301"``: a 1e300 m map
+    is not 300 digits of cm), the product taken exactly (a finite 1e307 m is 1e309 cm, beyond
+    a float, not ``inf``)."""
+    x = value * scale
+    if not (abs(x) >= HUGE and fmt.endswith("f")):
+        return format(x, fmt)
+    if math.isfinite(x):
+        return format(x, ".3e")
+    return format(Decimal(value) * Decimal(scale), ".3e")
 
 
 #: LaTeX's ten special characters and what prints each as itself (a method name or file name

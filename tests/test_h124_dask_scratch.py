@@ -116,7 +116,7 @@ def test_a_dask_temporary_directory_that_is_a_file_is_one_line_naming_it(
     afile = tmp_path / "afile"
     afile.write_text("")
     with dask.config.set({"temporary-directory": str(afile)}):
-        with pytest.raises(ConfigError, match=r"^Dask's temporary-directory '.*afile' "
-                                              r"\(DASK_TEMPORARY_DIRECTORY"):
+        with pytest.raises(ConfigError, match=r"^Dask's temporary-directory /.*afile "
+                                              r"\(DASK_TEMPORARY_DIRECTORY"):  # h136: shown_path
             list(dispatch(_task, [0], ["a"], scheduler=None, n_local=1, failed=_failed))
     assert sorted(p.name for p in temp_root.iterdir()) == []

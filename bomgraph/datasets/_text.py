@@ -23,7 +23,7 @@ from typing import IO, Iterator, Literal, Sequence
 
 import numpy as np
 
-from ..errors import DatasetError
+from ..errors import DatasetError, shown_path
 from ..jsonio import BOM_ADVICE, MAX_ID
 from ..plausibility import MAX_BEARING_SIGMA_RAD, MIN_BEARING_SIGMA_RAD
 from ..stdio import MAX_LINE_BYTES, line_too_long, open_input
@@ -35,7 +35,7 @@ _CHUNK = 2**20
 def dataset_error(path: str | os.PathLike[str], line: int | None, field: str | None,
                   message: str) -> DatasetError:
     """A :class:`DatasetError` whose message starts with ``file, line N: field 'f':``."""
-    where = str(path)
+    where = shown_path(path)
     if line is not None:
         where += f", line {line}"
     if field is not None:
@@ -70,12 +70,12 @@ def find_file(directory: str | os.PathLike[str], name: str) -> Path:
     d = Path(directory)
     for candidate in (d / name, d / (name + ".gz")):  # there, but not a file: say what it is
         if candidate.is_dir():
-            raise DatasetError(f"{candidate}: is a directory, not a data file; put the "
+            raise DatasetError(f"{shown_path(candidate)}: is a directory, not a data file; put the "
                                f"dataset's {name} there")
         if candidate.is_symlink():
-            raise DatasetError(f"{candidate}: is a broken or looping link (to "
+            raise DatasetError(f"{shown_path(candidate)}: is a broken or looping link (to "
                                f"{os.readlink(candidate)}); point it at the data file")
-    raise DatasetError(f"{d}: neither {name} nor {name}.gz exists; check the dataset "
+    raise DatasetError(f"{shown_path(d)}: neither {name} nor {name}.gz exists; check the dataset "
                        f"directory (each MRCLAM folder holds Barcodes.dat, "
                        f"Landmark_Groundtruth.dat and RobotN_*.dat)")
 
@@ -149,16 +149,16 @@ def read_lines(path: str | os.PathLike[str], *, comment: str | None = "#",
     try:
         fh = open_input(p)
     except FileNotFoundError:
-        raise DatasetError(f"{p}: file not found; check the path") from None
+        raise DatasetError(f"{shown_path(p)}: file not found; check the path") from None
     except OSError as exc:
-        raise DatasetError(f"{p}: cannot read ({exc.strerror or exc})") from None
+        raise DatasetError(f"{shown_path(p)}: cannot read ({exc.strerror or exc})") from None
     with fh:
         try:
             is_gzip = fh.peek(2)[:2] == GZIP_MAGIC
         except OSError as exc:
-            raise DatasetError(f"{p}: cannot read ({exc.strerror or exc})") from None
+            raise DatasetError(f"{shown_path(p)}: cannot read ({exc.strerror or exc})") from None
         if p.suffix == ".gz" and not is_gzip:
-            raise DatasetError(f"{p}: named .gz but not gzip data; drop the .gz suffix")
+            raise DatasetError(f"{shown_path(p)}: named .gz but not gzip data; drop the .gz suffix")
         if not is_gzip and os.fstat(fh.fileno()).st_size > max_bytes:
             raise _too_large(p, max_bytes)
         src: IO[bytes] = gzip.GzipFile(fileobj=fh) if p.suffix == ".gz" else fh
@@ -184,9 +184,9 @@ def read_lines(path: str | os.PathLike[str], *, comment: str | None = "#",
                             raise _line_too_wide(p, number, len(stripped), max_line_chars)
                         yield Line(number, stripped.split())
         except (EOFError, gzip.BadGzipFile, zlib.error) as exc:
-            raise DatasetError(f"{p}: corrupt gzip data ({exc})") from None
+            raise DatasetError(f"{shown_path(p)}: corrupt gzip data ({exc})") from None
         except OSError as exc:
-            raise DatasetError(f"{p}: cannot read ({exc.strerror or exc})") from None
+            raise DatasetError(f"{shown_path(p)}: cannot read ({exc.strerror or exc})") from None
 
 
 def _line_too_wide(p: Path, number: int, n: int, limit: int) -> DatasetError:
@@ -200,7 +200,7 @@ def _too_large(p: Path, max_bytes: int) -> DatasetError:
             if max_bytes == MAX_DATASET_BYTES else
             "a Victoria Park file, whose records are all held (the Victoria Park file is "
             "0.7 MB)")
-    return DatasetError(f"{p}: larger than {max_bytes >> 20} MiB"
+    return DatasetError(f"{shown_path(p)}: larger than {max_bytes >> 20} MiB"
                         f"{' decompressed' if p.suffix == '.gz' else ''}, the limit for {what}; "
                         f"split it")
 

@@ -61,7 +61,7 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import DatasetError, StreamFormatError
+from ..errors import DatasetError, StreamFormatError, shown_path
 from ..plausibility import MAX_ABS_ANGLE_RAD, MAX_ODOMETRY_SIGMA, refuse_implausible
 from ..stream import Step, Stream, StreamHeader, Truth
 from ..stream_file import parse_priors
@@ -382,8 +382,8 @@ def import_g2o(path: str | os.PathLike[str], *, truth_path: str | os.PathLike[st
     if beyond.size:   # valid (g2o wraps angles, and so does a Step), but most likely degrees
         _log.warning("%s, line %d: field 'bearing': %g is more than a full turn (%d such "
                      "bearing(s) in the file); bearings are radians (degrees?); wrapped to "
-                     "(-pi, pi]", g.path, int(b_line[beyond[0]]), float(b_brg[beyond[0]]),
-                     beyond.size)
+                     "(-pi, pi]", shown_path(g.path), int(b_line[beyond[0]]),
+                     float(b_brg[beyond[0]]), beyond.size)
     w_arr = b_w
     if bearing_sigma_rad is not None:
         sigma_b = checked_bearing_sigma(bearing_sigma_rad)
@@ -523,7 +523,7 @@ def _check_odometry_fits_truth(path: Path, truth_path: Path, odoms: np.ndarray,
     ratio = max(e / s if s > 0 else (math.inf if e > 0 else 0.0) for e, s in zip(rms, sigma))
     if trans > MAX_ODOMETRY_ERROR_STEP_FRACTION * step and ratio > MAX_ODOMETRY_ERROR_SIGMAS:
         raise DatasetError(
-            f"{path}: the odometry disagrees with the truth in {truth_path.name}: RMS "
+            f"{shown_path(path)}: the odometry disagrees with the truth in {truth_path.name}: RMS "
             f"translation error {trans:.3g} m per step (the median step is {step:.3g} m; up to "
             f"{ratio:.3g} odometry sigmas); is the EDGE_SE2 chain reversed (edges from j to "
             f"i), or is the truth another run's?")

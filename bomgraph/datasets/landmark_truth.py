@@ -30,7 +30,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from ..errors import DatasetError
+from ..errors import DatasetError, shown_path
 from .mrclam_files import MrclamRobotData
 
 MAX_PAIR_ERROR_M = 0.5
@@ -236,7 +236,8 @@ def checked_mrclam_landmarks(raw: MrclamRobotData, data_dir: str | os.PathLike[s
                 f"the detections, so the two rows (or their barcodes) are swapped"
                 if check["swap"] else "no exchange of two rows explains it")
         raise DatasetError(
-            f"{Path(data_dir)}: robot {robot}: {raw.files.get('landmarks')} contradicts the "
+            f"{shown_path(Path(data_dir))}: robot {robot}: {raw.files.get('landmarks')} "
+            f"contradicts the "
             f"measured ranges and bearings: landmarks seen together lie farther from their "
             f"tabulated distance than {check['limits']['max_pair_error_m']} m (median): {bad}; "
             f"{hint}. Every map would be scored against wrong positions: fix the table (or "

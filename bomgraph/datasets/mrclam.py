@@ -38,7 +38,7 @@ import numpy as np
 
 from ..angles import angle_residual, wrap_angle
 from ..config import requirement
-from ..errors import ConfigError, DatasetError
+from ..errors import ConfigError, DatasetError, shown_path
 from ..geometry import between, pair_bearings
 from ..plausibility import refuse_implausible
 from ..stream import Step, Stream, StreamHeader, Truth
@@ -424,7 +424,8 @@ def import_mrclam(data_dir: str | os.PathLike[str], robot: int, *,
         raw, landmark_truth = checked_mrclam_landmarks(raw, data_dir, robot)
     gt = raw.groundtruth
     if calibrate and gt is None:
-        raise DatasetError(f"{Path(data_dir)}: no Robot{robot}_Groundtruth.dat, so the sigmas "
+        raise DatasetError(f"{shown_path(Path(data_dir))}: no Robot{robot}_Groundtruth.dat, so "
+                           f"the sigmas "
                            f"cannot be calibrated; pass calibrate=False (CLI: --no-calibrate) "
                            f"to use the defaults measured on mrclam6")
     me = raw.measurements
@@ -434,7 +435,8 @@ def import_mrclam(data_dir: str | os.PathLike[str], robot: int, *,
         od["v_mps"] = od["v_mps"] * float(odometry_scale)
     subject, use, idx, rows = _classify_rows(raw, od["time_s"], keyframe)
     if idx.size == 0:
-        raise DatasetError(f"{Path(data_dir)}: robot {robot} has no landmark detection inside "
+        raise DatasetError(f"{shown_path(Path(data_dir))}: robot {robot} has no landmark "
+                           f"detection inside "
                            f"its odometry{' and ground-truth' if gt is not None else ''} time "
                            f"span; nothing to import")
 
@@ -481,7 +483,7 @@ def import_mrclam(data_dir: str | os.PathLike[str], robot: int, *,
             model, odo_info = calibrate_odometry(odoms, regress, truth_poses,
                                                  keyframe.min_distance_m, keyframe.min_turn_rad)
         except DatasetError as exc:  # h91: the message named neither the folder nor the robot
-            raise DatasetError(f"{Path(data_dir)}: robot {robot}: {exc}") from None
+            raise DatasetError(f"{shown_path(Path(data_dir))}: robot {robot}: {exc}") from None
     else:
         model = np.asarray(DEFAULT_ODOMETRY_MODEL, dtype=float)
         odo_info = {"source": "DEFAULT_ODOMETRY_MODEL (mrclam6 robots 1-5, default keyframes)"}
@@ -532,7 +534,8 @@ def import_mrclam(data_dir: str | os.PathLike[str], robot: int, *,
         meta["bearing_calibration"] = stats
         if bearing_sigma > MAX_CALIBRATED_BEARING_SIGMA_RAD:
             raise DatasetError(
-                f"{Path(data_dir)}: robot {robot}: the bearings fit the ground truth with a "
+                f"{shown_path(Path(data_dir))}: robot {robot}: the bearings fit the ground truth "
+                f"with a "
                 f"sigma of {bearing_sigma:.3g} rad (the mrclam6 robots give 0.01-0.03 rad): "
                 f"the truth does not belong to these measurements (x and y swapped? another "
                 f"robot's {raw.files.get('groundtruth', 'ground truth')}?); check the files, "

@@ -16,7 +16,7 @@ from typing import Mapping
 
 import numpy as np
 
-from ..errors import DatasetError
+from ..errors import DatasetError, shown_path
 from ._text import dataset_error, file_label, file_read, find_file, has_file, read_table
 
 ROBOT_SUBJECTS = (1, 2, 3, 4, 5)
@@ -120,7 +120,7 @@ def read_mrclam_robot(data_dir: str | os.PathLike[str], robot: int) -> MrclamRob
         raise DatasetError(f"robot must be one of 1, 2, 3, 4, 5, got {robot!r}")
     d = Path(data_dir)
     if not d.is_dir():
-        raise DatasetError(f"{d}: not a directory; pass the MRCLAM dataset folder")
+        raise DatasetError(f"{shown_path(d)}: not a directory; pass the MRCLAM dataset folder")
     files: dict[str, str] = {}
     names = mrclam_file_names(robot)
 
@@ -157,7 +157,7 @@ def read_mrclam_robot(data_dir: str | os.PathLike[str], robot: int) -> MrclamRob
     files["odometry"] = file_label(p)
     od, od_lines = read_table(p, [("time", "float"), ("v", "float"), ("w", "float")])
     if od["time"].size < 2:
-        raise DatasetError(f"{p}: needs at least 2 odometry rows to integrate, got "
+        raise DatasetError(f"{shown_path(p)}: needs at least 2 odometry rows to integrate, got "
                            f"{od['time'].size}")
     _check_sorted(p, od["time"], od_lines)
     _check_within(p, od_lines, od, {"v": MAX_SPEED_MPS, "w": MAX_TURN_RATE_RADPS})
@@ -182,7 +182,8 @@ def read_mrclam_robot(data_dir: str | os.PathLike[str], robot: int) -> MrclamRob
         g, g_lines = read_table(p, [("time", "float"), ("x", "float"), ("y", "float"),
                                     ("heading", "float")])
         if g["time"].size < 2:
-            raise DatasetError(f"{p}: needs at least 2 ground-truth rows to interpolate")
+            raise DatasetError(f"{shown_path(p)}: needs at least 2 ground-truth rows to "
+                               f"interpolate")
         _check_sorted(p, g["time"], g_lines)
         _check_within(p, g_lines, g, {"x": MAX_COORDINATE_M, "y": MAX_COORDINATE_M})
         gt = {"time_s": g["time"], "x_m": g["x"], "y_m": g["y"], "psi_rad": g["heading"]}

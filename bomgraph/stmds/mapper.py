@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 
 from ..config import resolve
-from ..errors import ConfigError, DegenerateGeometryError
+from ..errors import ConfigError, DegenerateGeometryError, StreamValueError
 from ..geometry import dead_reckon
 from ..mapper import MapEstimate
 from ..plausibility import MAX_COORDINATE_M
@@ -59,14 +59,15 @@ WARM_EVERY = 10
 BATCH_WINDOWS = 64
 
 
-def _check_sigmas(values: Any, what: str) -> None:
-    """Refuse sigmas above :data:`MAX_SIGMA` (or non-finite) with a message naming them."""
+def _check_sigmas(values: Any, t: int | None, key: str) -> None:
+    """Refuse sigmas above :data:`MAX_SIGMA` (or non-finite) of step ``t`` (None: the
+    header) under ``key``, with a message naming them."""
     arr = np.asarray(values, float).reshape(-1)
     if not np.all(np.isfinite(arr)) or np.any(np.abs(arr) > MAX_SIGMA):
-        raise DegenerateGeometryError(
-            f"STMDS cannot use {what} = {arr.tolist() if arr.size > 1 else float(arr[0])!r}: "
+        raise StreamValueError(
+            f"STMDS cannot use {arr.tolist() if arr.size > 1 else float(arr[0])!r}: "
             f"a std. dev. above {MAX_SIGMA:g} (m or rad) carries no information and overflows "
-            f"the variance arithmetic; fix the stream's sigmas")
+            f"the variance arithmetic; fix the stream's sigmas", t=t, key=key)
 
 
 class _GrowingFlags:
@@ -102,8 +103,8 @@ class StmdsMapper:
         self.config = config or StmdsConfig()
         cfg = self.config
         self.header = header
-        _check_sigmas(header.bearing_sigma_rad, "the header's bearing_sigma_rad")
-        _check_sigmas(header.odometry_sigma, "the header's odometry_sigma")
+        _check_sigmas(header.bearing_sigma_rad, None, "bearing_sigma_rad")
+        _check_sigmas(header.odometry_sigma, None, "odometry_sigma")
         self._bearing_sigma = float(header.bearing_sigma_rad)
         if cfg.max_range_m is not None:
             self._max_range = float(cfg.max_range_m)
@@ -173,13 +174,13 @@ class StmdsMapper:
         ids = step.landmark_ids
         brg = step.bearings_rad
         if step.odom_sigma is not None:
-            _check_sigmas(step.odom_sigma, f"step {step.t}'s odom_sigma")
+            _check_sigmas(step.odom_sigma, step.t, "odom_sigma")
         if step.odom is not None and not math.hypot(step.odom[0], step.odom[1]) \
                 <= MAX_COORDINATE_M:
-            raise DegenerateGeometryError(
-                f"STMDS cannot use step {step.t}'s odometry: it moves "
-                f"{math.hypot(step.odom[0], step.odom[1]):g} m, beyond {MAX_COORDINATE_M:g} m "
-                f"(squared distances leave double precision); fix the stream's odometry")
+            raise StreamValueError(
+                f"STMDS cannot use a move of {math.hypot(step.odom[0], step.odom[1]):g} m, "
+                f"beyond {MAX_COORDINATE_M:g} m (squared distances leave double precision); "
+                f"fix the stream's odometry", t=step.t, key="odom")
         if self._batch is not None:
             self._t = step.t
             self._batch.push(ids, brg, step.odom, step.odom_sigma)

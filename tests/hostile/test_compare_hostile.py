@@ -139,5 +139,5 @@ def test_stmds_refuses_an_odometry_step_beyond_double_precision_squares(work: Pa
     lines[11] = json.dumps(step) + "\n"
     (work / "huge.jsonl").write_text("".join(lines))
     one_error(bomgraph("run", "--method", method, "--out", work / "e.json", work / "huge.jsonl"),
-              "step 10's odometry", "1e+200 m", "fix the stream's odometry")
+              "huge.jsonl, line 12: 'odom': step 10:", "1e+200 m", "fix the stream's odometry")
     assert not (work / "e.json").exists()
