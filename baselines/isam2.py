@@ -202,7 +202,8 @@ class Isam2Mapper(WindowLongMode, NormalModeCheck):
     window also ``info["window_start"]``, its held pose, and ``info["window_rebuilds"]``).
     In long mode with the window, the map's older poses are back-substituted from the
     window's solution (:meth:`current_values`). At the end of a run, :meth:`finish` (called
-    by :func:`bomgraph.mapper.run`) checks the whole graph once more in long mode.
+    by :func:`bomgraph.mapper.run`) tries every pending landmark once more and checks the
+    whole graph once more in long mode.
 
     If an update raises (e.g. an indeterminate linear system), the external factors of that
     update (:meth:`add_factors`) are dropped and the solver is rebuilt from the factors held
@@ -504,13 +505,15 @@ class Isam2Mapper(WindowLongMode, NormalModeCheck):
         in as at a scheduled update, with its check and restart (not repeated where the last
         step's scheduled update already checked this very state, :meth:`_checked_here`)."""
         n = self.problem.n_steps
-        if self._batch or n == 0:
+        if n == 0:
             return
         if self.problem.admit(self._poses):   # every pending landmark, once more
-            entered = self._take_new(None)
-            if (self._long or self._external.size()
-                    or (self.config.isam2_update_on_entry and entered)):
+            entered = self._take_new(None)    # (in batch, estimate() solves with the buffer)
+            if not self._batch and (self._long or self._external.size()
+                                    or (self.config.isam2_update_on_entry and entered)):
                 self._flush(extra=False)
+        if self._batch:
+            return
         if not self._long:
             if self._external.size() or not self._polish()[2]["converged"]:
                 if self._buffer_values.size() or self._external.size():

@@ -40,18 +40,25 @@ def admissible_pending(mapper) -> list[int]:
     return [lid for lid, good in zip(ids, ok.tolist()) if good]
 
 
-def test_finish_lets_in_a_landmark_refused_at_its_last_sighting() -> None:
+#: the normal mode, and long mode (its window) from step 10
+MODES = [{}, {"long_after_steps": 10, "long_lag_steps": 5, "long_shift_steps": 5}]
+
+
+@pytest.mark.parametrize("options", MODES)
+def test_finish_lets_in_a_landmark_refused_at_its_last_sighting(options: dict) -> None:
     """21 steps at 0.5 m / 0.5 rad: landmark 12 was refused at its last sighting and its rays
     intersect on the final poses; on main it stayed out (4 landmarks)."""
     header, steps = prefix(0.5, 21)
-    mapper = create_mapper("gtsam-isam2", header, preset="paper")
+    mapper = create_mapper("gtsam-isam2", header, preset="paper", **options)
     for s in steps:
         mapper.step(s)
     waiting = admissible_pending(mapper)
     assert waiting, "the stream no longer shows the case"
-    est = run(create_mapper("gtsam-isam2", header, preset="paper"), steps,
+    est = run(create_mapper("gtsam-isam2", header, preset="paper", **options), steps,
               checkpoint_every=10, keep_checkpoints=False).final
     assert set(waiting) <= set(est.landmark_ids.tolist()), (waiting, est.landmark_ids)
+    assert est.info["mode"] == ("isam2-long" if options else "isam2")
+    assert np.all(np.isfinite(est.landmarks_xy))
 
 
 def _same(a: MapEstimate, b: MapEstimate) -> None:
@@ -62,11 +69,14 @@ def _same(a: MapEstimate, b: MapEstimate) -> None:
 
 @pytest.mark.parametrize("name", ["gtsam-isam2", "hybrid-isam2"])
 @pytest.mark.parametrize("n", [21, 31])
-def test_the_final_map_does_not_depend_on_the_checkpoints(name: str, n: int) -> None:
+@pytest.mark.parametrize("options", MODES)
+def test_the_final_map_does_not_depend_on_the_checkpoints(name: str, n: int,
+                                                          options: dict) -> None:
     """Issue 15: a checkpoint every step, every 10 steps, only at the end."""
     header, steps = prefix(0.5, n)
-    finals = [run(create_mapper(name, header, preset="paper"), steps, checkpoint_every=every,
-                  keep_checkpoints=False).final for every in (1, 10, 10**6)]
+    finals = [run(create_mapper(name, header, preset="paper", **options), steps,
+                  checkpoint_every=every, keep_checkpoints=False).final
+              for every in (1, 10, 10**6)]
     for other in finals[1:]:
         _same(finals[0], other)
 
