@@ -7,7 +7,6 @@ by a rebuild, and a rebuild that fails hands over to batch Levenberg-Marquardt
 
 from __future__ import annotations
 
-import math
 from dataclasses import asdict, dataclass, replace
 from typing import Any, ClassVar, Mapping, Sequence
 
@@ -203,7 +202,8 @@ class Isam2Mapper(WindowLongMode, NormalModeCheck):
     window also ``info["window_start"]``, its held pose, and ``info["window_rebuilds"]``).
     In long mode with the window, the map's older poses are back-substituted from the
     window's solution (:meth:`current_values`). At the end of a run, :meth:`finish` (called
-    by :func:`bomgraph.mapper.run`) checks the whole graph once more in long mode.
+    by :func:`bomgraph.mapper.run`) tries every pending landmark once more and checks the
+    whole graph once more in long mode.
 
     If an update raises (e.g. an indeterminate linear system), the external factors of that
     update (:meth:`add_factors`) are dropped and the solver is rebuilt from the factors held
@@ -274,6 +274,7 @@ class Isam2Mapper(WindowLongMode, NormalModeCheck):
         self._at_check = False   # the estimate is the one the last whole-graph check checked
         # the normal mode's polished map (_polish) and what it was computed from
         self._polished: tuple[tuple[Any, ...], Any, Any, dict[str, Any]] | None = None
+        self._checked: tuple[Any, ...] | None = None   # the state the last check left alone
         self._dims = (0, 0)   # factors of ``accepted`` counted, their residual dimensions
 
     def _new_isam(self) -> gtsam.ISAM2:
@@ -319,6 +320,16 @@ class Isam2Mapper(WindowLongMode, NormalModeCheck):
         prev = self._pose(t - 1) if t > 0 else None
         insert_pose(self._buffer_values, t, self.problem.predict_pose(t, prev), prev)
         self.problem.admit(self._poses, only_fresh=True)
+        entered = self._take_new(step)
+        scheduled = t % self.config.isam2_update_every == 0
+        if (scheduled or self._external.size()
+                or (self.config.isam2_update_on_entry and entered)):
+            self._flush(extra=scheduled)
+
+    def _take_new(self, step: Step | None) -> list[int]:
+        """The graph's new factors and values into the buffer (with the weak landmark priors)
+        and, for long mode's window, filed with ``step`` (None: at :meth:`finish`, filed with
+        the last step). Returns the ids of the landmarks that entered."""
         new = self.problem.take_new()
         self._gaussian = (self._gaussian and plain_gaussian(new.core)
                           and plain_gaussian(new.landmark))
@@ -335,10 +346,7 @@ class Isam2Mapper(WindowLongMode, NormalModeCheck):
             self._buffer.push_back(weak)
         if self._chunks is not None:
             self._file(step, new.core, weak, new.landmark_ids)
-        scheduled = t % self.config.isam2_update_every == 0
-        if (scheduled or self._external.size()
-                or (self.config.isam2_update_on_entry and new.landmark_ids)):
-            self._flush(extra=scheduled)
+        return list(new.landmark_ids)
 
     def _flush(self, extra: bool = True) -> None:
         """Hand the buffer (and queued external factors) to the solver; with ``extra``, the
@@ -449,42 +457,6 @@ class Isam2Mapper(WindowLongMode, NormalModeCheck):
         self._long_check = {**self._restart_if_stuck(False),
                             "checked_at_step": self.problem.n_steps}
 
-    def _restart_if_stuck(self, normal: bool) -> dict[str, Any]:
-        """The whole-graph check (long mode: Gauss-Newton, no step taken; ``normal``: the
-        normal mode's :meth:`_polish`, and only where the cost is also above
-        ``restart_cost_ratio`` x :meth:`_expected_cost`); where it fails, LM and iSAM2 rebuilt
-        there if LM lowered the error (``info["lm_restarts"]``; MRCLAM6 r3 at 0.5 m / 0.5 rad:
-        59 cm, 10 of 15 landmarks without). Returns the check's dict."""
-        if normal:
-            _, values, c = self._polish()
-            step, decrease, cost = c["gn_step"], c["predicted_decrease"], c["cost"]
-        else:
-            values, step, decrease, cost = polish(self.accepted, self.estimate_values, 0,
-                                                  self.config.decrease_tol,
-                                                  gaussian=self._gaussian)
-        converged = decrease <= self.config.decrease_tol and math.isfinite(step)
-        ratio = self.config.restart_cost_ratio
-        if not converged and (not normal or (ratio is not None
-                                             and cost > ratio * self._expected_cost())):
-            values, report = solve_lm(self.accepted, values, self.config)
-            if report.final_error < cost:
-                isam = self._new_isam()
-                try:
-                    isam.update(self.accepted, values)
-                    self._isam = isam
-                    self.estimate_values = self._isam.calculateEstimate()
-                    self.lm_restarts += 1
-                    if normal:
-                        return self._polish()[2]
-                    _, step, decrease, cost = polish(self.accepted, self.estimate_values, 0,
-                                                     self.config.decrease_tol,
-                                                     gaussian=self._gaussian)
-                    converged = decrease <= self.config.decrease_tol and math.isfinite(step)
-                except GTSAM_ERRORS as exc:   # the old solver is still usable
-                    self.failures.append(gtsam_error_line(exc))
-        return {"converged": bool(converged), "cost": cost, "gn_step": step,
-                "predicted_decrease": decrease}
-
     def _long_report(self, unbuffered: bool) -> dict[str, Any]:
         """What ``estimate()`` says of convergence in long mode (no whole-graph work per
         estimate): the last whole-graph check if it was made on this very graph and
@@ -523,19 +495,31 @@ class Isam2Mapper(WindowLongMode, NormalModeCheck):
 
     # -- the map --------------------------------------------------------------------------
     def finish(self) -> None:
-        """After the last step (:func:`bomgraph.mapper.run`). Long mode: the buffered steps in
+        """After the last step (:func:`bomgraph.mapper.run`). Every landmark still pending is
+        tried once more on the current estimate (a step tries only those it saw, so one refused
+        at its last sighting would stay out; ``gtsam-batch`` tries every one), and those let in
+        go to the solver as at a step where landmarks entered. Long mode: the buffered steps in
         and the whole graph polished and checked once more, LM if it fails (:meth:`_check_window`,
         :meth:`_check_long`), unless just done (``info["converged"]`` never None). Normal mode:
         if the map :meth:`estimate` gives is unconverged (:meth:`_polish`), the buffered steps
-        in as at a scheduled update, with its check and restart."""
+        in as at a scheduled update, with its check and restart (not repeated where the last
+        step's scheduled update already checked this very state, :meth:`_checked_here`)."""
         n = self.problem.n_steps
-        if self._batch or n == 0:
+        if n == 0:
+            return
+        if self.problem.admit(self._poses):   # every pending landmark, once more
+            entered = self._take_new(None)    # (in batch, estimate() solves with the buffer)
+            if not self._batch and (self._long or self._external.size()
+                                    or (self.config.isam2_update_on_entry and entered)):
+                self._flush(extra=False)
+        if self._batch:
             return
         if not self._long:
             if self._external.size() or not self._polish()[2]["converged"]:
                 if self._buffer_values.size() or self._external.size():
                     self._flush(extra=True)
-                elif self.config.restart_cost_ratio is not None:   # the last step updated
+                elif (self.config.restart_cost_ratio is not None
+                      and not self._checked_here()):   # the last step updated, unchecked
                     self._restart_if_stuck(True)
             return
         if self._buffer.size() or self._buffer_values.size() or self._external.size():

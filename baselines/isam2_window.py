@@ -35,17 +35,20 @@ class WindowLongMode:
     _chunks: StepChunks | None
     _gaussian: bool        # every factor plain Gaussian (lm_report.plain_gaussian)
 
-    def _file(self, step: Step, core: gtsam.NonlinearFactorGraph,
+    def _file(self, step: Step | None, core: gtsam.NonlinearFactorGraph,
               weak: gtsam.NonlinearFactorGraph, entered: list[int]) -> None:
         """File step ``step``'s factors for long mode's window (``long_window``): its core
         factors and weak landmark priors as the chunk of its step, the buffered bearings of the
         landmarks that entered in their steps' chunks (:meth:`StepChunks.add`), its bearings in
-        the arrays of :meth:`_bearings`."""
+        the arrays of :meth:`_bearings`. ``step`` None: landmarks let in after the last step
+        (:meth:`Isam2Mapper.finish`), filed with the last step's chunk."""
         assert self._chunks is not None
         chunk = gtsam.NonlinearFactorGraph(core)
         chunk.push_back(weak)
-        self._chunks.add(step.t, chunk, self.problem.entered_last())
-        self._log.add(step)
+        t = self.problem.n_steps - 1 if step is None else step.t
+        self._chunks.add(t, chunk, self.problem.entered_last())
+        if step is not None:
+            self._log.add(step)
         self._window_fresh += list(entered)
 
     def _bearings(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
