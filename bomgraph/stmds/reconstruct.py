@@ -10,8 +10,9 @@ eq. 7) :func:`reconstruct` keeps the nodes with ``min_degree`` triangulated dist
   (III-D.2, eq. 6) on the known pairs from then on, warm-started from the previous map the
   caller kept (:class:`.mapper.StmdsMapper` keeps one every ``WARM_EVERY`` steps; nodes new
   to it placed by the classical-scaling map aligned onto it) and, every
-  :data:`RESTART_EVERY` kept SMACOF maps, also from the classical-scaling map, keeping the
-  lower stress. Large maps start from landmark MDS (pivot shortest paths) instead.
+  ``smacof_restart_every`` kept SMACOF maps (every map in the recording settings), also from
+  the classical-scaling map, keeping the lower weighted stress. Large maps start from
+  landmark MDS (pivot shortest paths) instead.
 
 No state is kept here: the previous map and the number of SMACOF estimates made so far come in
 as arguments and the caller keeps what comes out.
@@ -30,10 +31,6 @@ from .completion import (Component, largest_component, pivot_shortest_paths, pru
 from .config import StmdsConfig
 from .mds import LaplacianSolver, classical_scaling, landmark_scaling, smacof, stress1
 
-#: "best" SMACOF starts also try the classical-scaling map every this many SMACOF estimates.
-RESTART_EVERY = 5
-
-
 @dataclass(frozen=True, eq=False)
 class Reconstruction:
     """The mapped nodes of one estimate.
@@ -47,10 +44,11 @@ class Reconstruction:
     left_out : ndarray of shape (m,), int64
         Nodes with known pairs that were not mapped (outside the core or the largest piece).
     used_smacof : bool
-        SMACOF ran (the caller counts these for :data:`RESTART_EVERY`).
+        SMACOF ran (the caller counts these for ``smacof_restart_every``).
     info : dict
         ``n_components``, ``n_mapped_pairs``, ``reconstruction``, SMACOF's iterations, start
-        and starts tried, ``stress1``; or ``reason`` when nothing could be mapped.
+        and starts tried (``smacof_start_stress1``: the Stress-1 each start reached),
+        ``stress1``; or ``reason`` when nothing could be mapped.
     """
 
     nodes: np.ndarray
@@ -136,7 +134,8 @@ def reconstruct(config: StmdsConfig, n_nodes: int, n_landmarks: int, first: np.n
     warm = None
     if use_smacof and cfg.smacof_init != "classical":
         warm = _previous_positions(previous_xy, kept_nodes)
-    restart = use_smacof and cfg.smacof_init == "best" and n_smacof % RESTART_EVERY == 0
+    restart = (use_smacof and cfg.smacof_init == "best"
+               and n_smacof % cfg.smacof_restart_every == 0)
     xy_cs = None
     if not use_smacof or cfg.smacof_init == "classical" or restart or warm is None \
             or not np.isfinite(warm).all():
@@ -160,16 +159,19 @@ def reconstruct(config: StmdsConfig, n_nodes: int, n_landmarks: int, first: np.n
             inits.append(("classical", xy_cs))
         solver = LaplacianSolver(n, ef, es, w)
         best = None
+        start_stress = {}
         for name, init in inits:
             res = smacof(n, ef, es, ed, init=init, weights=w, max_iter=cfg.smacof_max_iter,
                          tol=cfg.smacof_tol, relaxation=cfg.smacof_relaxation, solver=solver)
+            start_stress[name] = res.stress1
             if best is None or res.raw_stress < best[1].raw_stress:
                 best = (name, res)
         assert best is not None
         xy = best[1].points
         info.update(reconstruction="smacof", smacof_iterations=best[1].n_iter,
                     smacof_converged=best[1].converged, smacof_init=best[0],
-                    smacof_starts=[name for name, _ in inits])
+                    smacof_starts=[name for name, _ in inits],
+                    smacof_start_stress1=start_stress)
     assert xy is not None
     info["stress1"] = stress1(xy, ef, es, ed, w) if len(ed) else 0.0
     return Reconstruction(kept_nodes, xy, left, use_smacof, info)
@@ -223,4 +225,4 @@ def _complete_warm_start(warm: np.ndarray, xy_cs: np.ndarray) -> np.ndarray:
     return out
 
 
-__all__ = ["RESTART_EVERY", "Reconstruction", "reconstruct"]
+__all__ = ["Reconstruction", "reconstruct"]
