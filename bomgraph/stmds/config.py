@@ -27,9 +27,12 @@ _WINDOW: dict[str, Any] = {"tri_window": 6, "tri_stride": 1, "fusion": "scale-fr
                            "weights": "inverse-variance", "min_count": 3,
                            "max_range_factor": 1.3, "robot_ranges": "all-poses"}
 
-#: What the recording settings share: fuse every window estimate, inverse-variance weights.
+#: What the recording settings share: fuse every window estimate, inverse-variance weights,
+#: SMACOF from both starts at every map (the lower weighted stress kept; the runner-up is a
+#: start of the next map too).
 _RECORDING: dict[str, Any] = {"fusion": "scale-free", "weights": "inverse-variance",
-                              "min_count": 1, "robot_ranges": "all-poses"}
+                              "min_count": 1, "robot_ranges": "all-poses",
+                              "smacof_restart_every": 1, "smacof_keep": 2}
 
 
 @dataclass(frozen=True)
@@ -75,9 +78,19 @@ class StmdsConfig(Presets):
         Warm start of SMACOF: the previous scheduled map (the method's own, made every
         ``mapper.WARM_EVERY`` steps whether or not ``estimate()`` was called; landmarks new to
         it placed by the classical-scaling map aligned onto it), the DMC-SPL classical-scaling
-        map (the paper), or both, keeping the lower stress ("best"; the classical start is
-        tried at the first scheduled SMACOF map and every ``reconstruct.RESTART_EVERY`` after
-        it).
+        map (the paper), or both, keeping the lower weighted stress ("best"; the classical
+        start is tried at the first scheduled SMACOF map and every ``smacof_restart_every``-th
+        after it).
+    smacof_restart_every : int
+        With ``smacof_init="best"``: SMACOF also starts from the classical-scaling map when
+        the number of scheduled SMACOF maps made before is a multiple of this, keeping the
+        start that reaches the lower weighted stress (the objective SMACOF minimises). 1 (the
+        recording settings): every map tries both starts, so the local minimum kept depends
+        on the data alone, not on where a map falls in a count; 5 is the paper setting's.
+    smacof_keep : {1, 2}
+        SMACOF maps kept as warm starts of the next map: the lowest-stress one, or also the
+        runner-up of its starts (2, the recording settings: a beam of two local minima, as
+        the lower stress now can lead to a higher one later; ``docs/measurements.md``).
     landmark_mds_above : int
         Method 2 maps with more landmarks than this start SMACOF from landmark MDS (shortest
         paths from ``n_pivots`` pivots only) instead of the full DMC-SPL + classical scaling.
@@ -203,6 +216,8 @@ class StmdsConfig(Presets):
     max_relative_range_sigma: float = math.inf
     weights: str = "binary"
     smacof_init: str = "best"
+    smacof_restart_every: int = 5
+    smacof_keep: int = 1
     landmark_mds_above: int = 300
     n_pivots: int = 50
     smacof_max_iter: int = 300
@@ -246,6 +261,9 @@ class StmdsConfig(Presets):
         need(self.weights in WEIGHTS, f"weights must be one of {WEIGHTS}, got {self.weights!r}")
         need(self.smacof_init in INITS,
              f"smacof_init must be one of {INITS}, got {self.smacof_init!r}")
+        need(int(self.smacof_restart_every) == self.smacof_restart_every
+             and self.smacof_restart_every >= 1, "smacof_restart_every must be an integer >= 1")
+        need(self.smacof_keep in (1, 2), "smacof_keep must be 1 or 2")
         need(self.smacof_from_t >= 0, "smacof_from_t must be >= 0")
         need(self.min_count >= 1, "min_count must be >= 1")
         need(self.min_degree >= 1, "min_degree must be >= 1")

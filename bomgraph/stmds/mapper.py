@@ -139,9 +139,9 @@ class StmdsMapper:
         self._relative_gate = math.isfinite(cfg.max_relative_range_sigma)
         self._n_smacof = 0                        # SMACOF maps kept so far
         self._n_triangulated = 0
-        # the last scheduled map (_warm_scheduled) by dense landmark index (NaN: absent),
-        # SMACOF's warm start, and the step and reconstruction it was kept at
-        self._prev_xy = np.zeros((0, 2))
+        # SMACOF's warm starts: the last scheduled map (_warm_scheduled; and its runner-up)
+        # by dense landmark index (NaN: absent); the step and reconstruction it was kept at
+        self._prev_maps: tuple[np.ndarray, ...] = ()
         self._kept_t = -1
         self._kept: tuple | None = None
         self._robots = RobotPoses(cfg.n_robot_poses, cfg.fusion) if cfg.localise else None
@@ -469,7 +469,7 @@ class StmdsMapper:
             try:
                 self._reconstruction()
             except DegenerateGeometryError:
-                self._prev_xy = np.zeros((0, 2))
+                self._prev_maps = ()
                 self._kept_t, self._kept = self._t, None
 
     def _reconstruction(self) -> tuple[dict[str, Any], Any, int, bool]:
@@ -508,13 +508,11 @@ class StmdsMapper:
             n_nodes = n_lm + len(self._robots.t)
         rec = reconstruct(cfg, n_nodes, n_lm, first, second, dist, var, measured,
                           triangulated, t=self._t, n_smacof=self._n_smacof,
-                          previous_xy=self._prev_xy)
+                          previous_maps=self._prev_maps)
         if self._warm_scheduled(self._t):
             self._kept_t, self._kept = self._t, (dict(info), rec, n_lm, joint)
             self._n_smacof += int(rec.used_smacof)
-            self._prev_xy = np.full((n_lm, 2), np.nan)
-            is_lm = rec.nodes < n_lm
-            self._prev_xy[rec.nodes[is_lm]] = rec.points_xy[is_lm]
+            self._prev_maps = rec.landmark_maps(n_lm)
         return info, rec, n_lm, joint
 
     def estimate(self) -> MapEstimate:

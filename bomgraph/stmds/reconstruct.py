@@ -10,17 +10,20 @@ eq. 7) :func:`reconstruct` keeps the nodes with ``min_degree`` triangulated dist
   (III-D.2, eq. 6) on the known pairs from then on, warm-started from the previous map the
   caller kept (:class:`.mapper.StmdsMapper` keeps one every ``WARM_EVERY`` steps; nodes new
   to it placed by the classical-scaling map aligned onto it) and, every
-  :data:`RESTART_EVERY` kept SMACOF maps, also from the classical-scaling map, keeping the
-  lower stress. Large maps start from landmark MDS (pivot shortest paths) instead.
+  ``smacof_restart_every`` kept SMACOF maps (every map in the recording settings), also from
+  the classical-scaling map, keeping the lower weighted stress; with ``smacof_keep=2`` the
+  runner-up of the previous map's starts is a further start (a beam of two local minima: a
+  greedy choice at each map alone can lose the basin that is lowest later). Large maps start
+  from landmark MDS (pivot shortest paths) instead.
 
-No state is kept here: the previous map and the number of SMACOF estimates made so far come in
-as arguments and the caller keeps what comes out.
+No state is kept here: the previous map(s) and the number of SMACOF estimates made so far come
+in as arguments and the caller keeps what comes out.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Sequence
 
 import numpy as np
 
@@ -29,10 +32,6 @@ from .completion import (Component, largest_component, pivot_shortest_paths, pru
                          shortest_path_completion)
 from .config import StmdsConfig
 from .mds import LaplacianSolver, classical_scaling, landmark_scaling, smacof, stress1
-
-#: "best" SMACOF starts also try the classical-scaling map every this many SMACOF estimates.
-RESTART_EVERY = 5
-
 
 @dataclass(frozen=True, eq=False)
 class Reconstruction:
@@ -47,10 +46,14 @@ class Reconstruction:
     left_out : ndarray of shape (m,), int64
         Nodes with known pairs that were not mapped (outside the core or the largest piece).
     used_smacof : bool
-        SMACOF ran (the caller counts these for :data:`RESTART_EVERY`).
+        SMACOF ran (the caller counts these for ``smacof_restart_every``).
     info : dict
         ``n_components``, ``n_mapped_pairs``, ``reconstruction``, SMACOF's iterations, start
-        and starts tried, ``stress1``; or ``reason`` when nothing could be mapped.
+        and starts tried (``smacof_start_stress1``: the Stress-1 each start reached),
+        ``stress1``; or ``reason`` when nothing could be mapped.
+    runner_up_xy : ndarray of shape (n, 2) or None
+        With ``smacof_keep=2``: the SMACOF result of the start with the second-lowest stress
+        (the next map starts from it too).
     """
 
     nodes: np.ndarray
@@ -58,6 +61,19 @@ class Reconstruction:
     left_out: np.ndarray
     used_smacof: bool = False
     info: dict[str, Any] = field(default_factory=dict)
+    runner_up_xy: np.ndarray | None = None
+
+    def landmark_maps(self, n_landmarks: int) -> tuple[np.ndarray, ...]:
+        """The map and the runner-up (if kept) by landmark index (``(n_landmarks, 2)``, NaN
+        where not mapped): the next map's SMACOF starts."""
+        is_lm = self.nodes < n_landmarks
+        maps = []
+        for xy in (self.points_xy, self.runner_up_xy):
+            if xy is not None:
+                out = np.full((n_landmarks, 2), np.nan)
+                out[self.nodes[is_lm]] = xy[is_lm]
+                maps.append(out)
+        return tuple(maps)
 
 
 def _empty(reason: str, left_out: np.ndarray | None = None) -> Reconstruction:
@@ -69,7 +85,7 @@ def _empty(reason: str, left_out: np.ndarray | None = None) -> Reconstruction:
 def reconstruct(config: StmdsConfig, n_nodes: int, n_landmarks: int, first: np.ndarray,
                 second: np.ndarray, distance_m: np.ndarray, variance_m2: np.ndarray,
                 measured: np.ndarray, triangulated: np.ndarray, *, t: int,
-                n_smacof: int, previous_xy: np.ndarray) -> Reconstruction:
+                n_smacof: int, previous_maps: Sequence[np.ndarray]) -> Reconstruction:
     """Map the known pairs.
 
     Parameters
@@ -90,8 +106,10 @@ def reconstruct(config: StmdsConfig, n_nodes: int, n_landmarks: int, first: np.n
         The current step (Method 2 uses SMACOF from ``config.smacof_from_t``).
     n_smacof : int
         SMACOF estimates made before this one.
-    previous_xy : array of shape (n_prev, 2)
-        The previous map by landmark index, NaN where absent.
+    previous_maps : sequence of arrays of shape (n_prev, 2)
+        SMACOF's warm starts by landmark index, NaN where absent: the previous kept map and,
+        with ``smacof_keep=2``, the runner-up of that map's starts (:meth:`Reconstruction.
+        landmark_maps`); empty for none.
     """
     cfg = config
     n_lm = n_landmarks
@@ -133,13 +151,17 @@ def reconstruct(config: StmdsConfig, n_nodes: int, n_landmarks: int, first: np.n
 
     use_smacof = cfg.method == "smacof" and t >= cfg.smacof_from_t and n >= 2
     w = np.ones(len(ed)) if cfg.weights == "binary" else _inverse_variance(ev)
-    warm = None
+    warms: list[np.ndarray] = []
     if use_smacof and cfg.smacof_init != "classical":
-        warm = _previous_positions(previous_xy, kept_nodes)
-    restart = use_smacof and cfg.smacof_init == "best" and n_smacof % RESTART_EVERY == 0
+        for prev in previous_maps:
+            warm = _previous_positions(prev, kept_nodes)
+            if warm is not None:
+                warms.append(warm)
+    restart = (use_smacof and cfg.smacof_init == "best"
+               and n_smacof % cfg.smacof_restart_every == 0)
     xy_cs = None
-    if not use_smacof or cfg.smacof_init == "classical" or restart or warm is None \
-            or not np.isfinite(warm).all():
+    if not use_smacof or cfg.smacof_init == "classical" or restart or not warms \
+            or not all(np.isfinite(warm).all() for warm in warms):
         if use_smacof and n > cfg.landmark_mds_above:
             # only a starting point for SMACOF: landmark MDS on pivot shortest paths
             pivots, rows = pivot_shortest_paths(n, ef, es, ed, cfg.n_pivots)
@@ -148,31 +170,34 @@ def reconstruct(config: StmdsConfig, n_nodes: int, n_landmarks: int, first: np.n
         else:
             full = shortest_path_completion(n, ef, es, ed)
             xy_cs, _ = classical_scaling(full * full)
-        if warm is not None and not np.isfinite(warm).all():
-            warm = _complete_warm_start(warm, xy_cs)
+        warms = [warm if np.isfinite(warm).all() else _complete_warm_start(warm, xy_cs)
+                 for warm in warms]
     xy = xy_cs
+    runner_up = None
     info["reconstruction"] = "classical-scaling"
     if use_smacof:
-        inits = []
-        if warm is not None:
-            inits.append(("previous", warm))
+        inits = list(zip(("previous", "runner-up"), warms))
         if xy_cs is not None and (restart or not inits):
             inits.append(("classical", xy_cs))
         solver = LaplacianSolver(n, ef, es, w)
-        best = None
+        results = []
         for name, init in inits:
             res = smacof(n, ef, es, ed, init=init, weights=w, max_iter=cfg.smacof_max_iter,
                          tol=cfg.smacof_tol, relaxation=cfg.smacof_relaxation, solver=solver)
-            if best is None or res.raw_stress < best[1].raw_stress:
-                best = (name, res)
-        assert best is not None
-        xy = best[1].points
-        info.update(reconstruction="smacof", smacof_iterations=best[1].n_iter,
-                    smacof_converged=best[1].converged, smacof_init=best[0],
-                    smacof_starts=[name for name, _ in inits])
+            results.append((name, res))
+        # the lowest weighted stress first (stable: a tie keeps the earlier start)
+        results.sort(key=lambda r: r[1].raw_stress)
+        name, best = results[0]
+        xy = best.points
+        if cfg.smacof_keep >= 2 and len(results) >= 2:
+            runner_up = results[1][1].points
+        info.update(reconstruction="smacof", smacof_iterations=best.n_iter,
+                    smacof_converged=best.converged, smacof_init=name,
+                    smacof_starts=[name for name, _ in inits],
+                    smacof_start_stress1={name: res.stress1 for name, res in results})
     assert xy is not None
     info["stress1"] = stress1(xy, ef, es, ed, w) if len(ed) else 0.0
-    return Reconstruction(kept_nodes, xy, left, use_smacof, info)
+    return Reconstruction(kept_nodes, xy, left, use_smacof, info, runner_up)
 
 
 def _select(mask: np.ndarray, *arrays: np.ndarray) -> tuple[np.ndarray, ...]:
@@ -223,4 +248,4 @@ def _complete_warm_start(warm: np.ndarray, xy_cs: np.ndarray) -> np.ndarray:
     return out
 
 
-__all__ = ["RESTART_EVERY", "Reconstruction", "reconstruct"]
+__all__ = ["Reconstruction", "reconstruct"]
