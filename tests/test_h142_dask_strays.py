@@ -66,7 +66,7 @@ def test_a_failed_start_kills_none_of_the_callers_own_workers(tmp_path: Path,
     importlib.import_module("distributed")  # its configuration first: set() removes it after
     from distributed import Client, LocalCluster
 
-    from bomgraph.cluster import dispatch
+    from bomgraph.cluster import LOCAL_SCHEDULER_HTTP, dispatch
 
     marker, restarted = str(tmp_path / "marker"), str(tmp_path / "restarted")
     site = tmp_path / "site"
@@ -76,7 +76,8 @@ def test_a_failed_start_kills_none_of_the_callers_own_workers(tmp_path: Path,
     theirs = tmp_path / "theirs"
     theirs.mkdir()
     with LocalCluster(n_workers=1, threads_per_worker=1, processes=True, host="127.0.0.1",
-                      dashboard_address=None, local_directory=str(theirs)) as own, \
+                      dashboard_address=None, local_directory=str(theirs),
+                      scheduler_kwargs=LOCAL_SCHEDULER_HTTP) as own, \
             Client(own) as client:
         (first,) = client.run(os.getpid).values()
         Path(marker).write_text(str(first))
