@@ -11,6 +11,8 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+from _processes import alive
+
 ROOT = Path(__file__).resolve().parents[1]
 
 #: In the first local Dask worker to start after ``marker`` is made: kill the caller's worker
@@ -49,14 +51,6 @@ def _task(k: int, t: str) -> tuple[int, dict]:
     return k, {"ok": True, "t": t}
 
 
-def _alive(pid: int) -> bool:
-    try:
-        with open(f"/proc/{pid}/stat", encoding="ascii") as fh:
-            return fh.read().rsplit(")", 1)[1].split()[0] != "Z"
-    except FileNotFoundError:
-        return False
-
-
 def test_a_failed_start_kills_none_of_the_callers_own_workers(tmp_path: Path,
                                                               monkeypatch) -> None:
     import importlib
@@ -87,7 +81,7 @@ def test_a_failed_start_kills_none_of_the_callers_own_workers(tmp_path: Path,
         assert os.path.exists(marker + ".taken"), "no worker of ours hung"
         assert out == {0: {"ok": True, "t": "a"}, 1: {"ok": True, "t": "b"}}, out  # 2nd start
         again = int(Path(restarted).read_text())
-        assert not _alive(first)
-        assert _alive(again), "the caller's worker, started again by its nanny, was killed"
+        assert not alive(first)
+        assert alive(again), "the caller's worker, started again by its nanny, was killed"
         client.wait_for_workers(1, timeout=60)
         assert list(client.run(os.getpid).values()) == [again]

@@ -7,21 +7,17 @@ instead of the one-line refusal, exit 2."""
 
 from __future__ import annotations
 
-import os
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 from _plugin_dist import installed
 
+from bomgraph.cli import main
 from bomgraph.errors import ConfigError
 from bomgraph.mapper import check_method_options
 from bomgraph.sim import SimConfig, simulate
 from bomgraph.stream_file import write_stream
-
-ROOT = Path(__file__).resolve().parents[1]
 
 MODULE = '''
 """A plugin whose presets seed it with each other."""
@@ -81,18 +77,14 @@ def test_a_method_seeded_by_another_preset_of_its_own_is_taken(site: Path) -> No
     check_method_options("h142-ping", {"preset": "once"})  # once -> paper -> triangulate
 
 
-def test_compare_refuses_it_in_one_line(site: Path, tmp_path: Path) -> None:
+def test_compare_refuses_it_in_one_line(site: Path, tmp_path: Path, capsys) -> None:
     stream = tmp_path / "s.jsonl"
     write_stream(simulate(SimConfig(n_steps=20), np.random.default_rng(3)), stream)
     out = tmp_path / "out"
-    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(site), str(ROOT)]),
-           "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"}
-    proc = subprocess.run([sys.executable, "-m", "bomgraph", "compare", "--streams",
-                           str(stream), "--methods", "h142-ping@ping,h142-ping@once", "--jobs",
-                           "1", "--no-figures", "--out", str(out)], env=env, cwd=tmp_path,
-                          capture_output=True, text=True, timeout=300)
-    assert proc.returncode == 2, proc.stderr[-2000:]
-    lines = proc.stderr.splitlines()
+    code = main(["compare", "--streams", str(stream), "--methods", "h142-ping@ping,h142-ping@once",
+                 "--jobs", "1", "--no-figures", "--out", str(out)])
+    lines = capsys.readouterr().err.splitlines()
+    assert code == 2, lines[-20:]
     assert len(lines) == 1 and "seeds itself (h142-ping -> h142-ping -> h142-ping)" in lines[0], \
-        proc.stderr[-2000:]
+        lines[-20:]
     assert not out.exists()
