@@ -301,28 +301,38 @@ def _workers_hold_signals() -> Iterator[None]:
         yield
 
 
-#: The name of the process Dask's nanny starts for a local worker
-_WORKER_PROCESS = "Dask Worker process (from Nanny)"
+def _recording_nanny(started: list[Any]) -> type:
+    """Dask's ``Nanny``, keeping in ``started`` each worker process it starts (Dask's
+    ``WorkerProcess``, as it sets ``Nanny.process``): the workers of this cluster and no
+    other, for :func:`_end_strays`."""
+    from distributed import Nanny as DaskNanny
+
+    class Nanny(DaskNanny):  # named as Dask's: its errors say "Nanny failed to start."
+        @property
+        def process(self) -> Any:
+            return self.__dict__.get("_bomgraph_process")
+
+        @process.setter
+        def process(self, value: Any) -> None:
+            self.__dict__["_bomgraph_process"] = value
+            if value is not None:
+                started.append(value)
+
+    return Nanny
 
 
-def _worker_processes() -> set[int]:
-    """The pids of this process's local Dask workers (``multiprocessing``'s children)."""
+def _end_strays(started: list[Any]) -> None:
+    """Kill (SIGKILL) the workers a failed start left (``started``: :func:`_recording_nanny`'s,
+    those still children of this process): Dask cannot end a worker that has not yet started
+    (its nanny's kill asserts that it did: the ``AssertionError: Status.starting`` of a start
+    that timed out), so one whose start hung went on, and the command waited for it as it
+    ended (h137: 2 minutes, a sitecustomize's sleep). Only this start's: h137 killed every
+    Dask worker of this process started meanwhile, a caller's own cluster's too (h142)."""
     import multiprocessing
 
-    return {p.pid for p in multiprocessing.active_children() if p.name == _WORKER_PROCESS
-            and p.pid is not None}
-
-
-def _end_strays(before: set[int]) -> None:
-    """Kill (SIGKILL) the local workers a failed start left, those not in ``before``: Dask
-    cannot end a worker that has not yet started (its nanny's kill asserts that it did: the
-    ``AssertionError: Status.starting`` of a start that timed out), so one whose start hung
-    went on, and the command waited for it as it ended (h137: 2 minutes, a sitecustomize's
-    sleep)."""
-    import multiprocessing
-
+    ours = {getattr(w, "pid", None) for w in started} - {None}
     for p in multiprocessing.active_children():
-        if p.name == _WORKER_PROCESS and p.pid not in before:
+        if p.pid in ours:
             p.kill()
             p.join(5)
 
@@ -403,18 +413,19 @@ def _dispatch(func: Callable[[int, Any], tuple[int, dict[str, Any]]], index: Seq
             tries = 0
             while cluster is None and tries < START_TRIES:
                 tries += 1
-                before = _worker_processes()
+                started: list[Any] = []
                 with _workers_hold_signals():
                     try:
                         cluster = LocalCluster(n_workers=n_local, threads_per_worker=1,
                                                processes=True, host="127.0.0.1",
                                                dashboard_address=None, local_directory=folder,
                                                death_timeout=start_timeout(),
+                                               worker_class=_recording_nanny(started),
                                                scheduler_kwargs={**LOCAL_SCHEDULER_HTTP,
                                                                  "local_directory": folder})
                     except Exception as exc:  # start_failure's kinds; Dask closed the rest
                         not_started = exc
-                        _end_strays(before)
+                        _end_strays(started)
                 if cluster is None:
                     _log.debug("the local Dask cluster did not start", exc_info=not_started)
                     if _start_kind(not_started) == "network":  # the same again: not tried

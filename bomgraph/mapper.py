@@ -471,7 +471,7 @@ def check_method_options(name: str, options: Mapping[str, Any]) -> None:
     cls = method_config_class(name)
     opts = dict(options)
     if "config" in opts:
-        return _check_method_seed(name, opts, opts.pop("config"))
+        return _check_method_seed(name, options, opts["config"])
     factory = method_factory(name)
     target = factory.__init__ if inspect.isclass(factory) else factory
     params = inspect.signature(target).parameters
@@ -482,12 +482,13 @@ def check_method_options(name: str, options: Mapping[str, Any]) -> None:
         config = cls.preset(preset or "paper", **{k: v for k, v in opts.items() if k not in own})
     else:
         check_plain_options(name, target, params, cls, opts)
-    _check_method_seed(name, opts, config)
+    _check_method_seed(name, options, config)
 
 
 def _check_method_seed(name: str, opts: Mapping[str, Any], config: Any) -> None:
     """:func:`check_seed` for the ``seed_method`` of ``name`` (a plugin's too, h137: a wrong
-    one failed every run mid-sweep), a circle of seeds refused (:mod:`bomgraph.seed_check`)."""
+    one failed every run mid-sweep), a circle of seeds refused (:mod:`bomgraph.seed_check`):
+    ``opts`` whole, ``preset`` too (h142: without it, presets seeding each other recursed)."""
     from .seed_check import seed_of, seeding
 
     seed, seed_options = seed_of(name, opts, config, method_config_class(name),

@@ -18,6 +18,7 @@ import sys
 import textwrap
 from pathlib import Path
 
+from _processes import alive
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -143,15 +144,7 @@ def test_a_worker_whose_start_hangs_times_out(tmp_path: Path, monkeypatch) -> No
                             "overloaded"), error
     assert "DASK_DISTRIBUTED__COMM__TIMEOUTS__CONNECT" in error, error
     for name in slept.iterdir():  # each ended (the sleep is 120 s; Dask cannot end them)
-        assert not _alive(int(name.name)), name.name
-
-
-def _alive(pid: int) -> bool:
-    try:
-        with open(f"/proc/{pid}/stat", encoding="ascii") as fh:
-            return fh.read().rsplit(")", 1)[1].split()[0] != "Z"
-    except FileNotFoundError:
-        return False
+        assert not alive(int(name.name)), name.name
 
 
 def _workers(k: int, t: str) -> tuple[int, dict]:
