@@ -1,0 +1,74 @@
+"""Faults helper h143 found reviewing h136's merge (STMDS refusals located, one quoting of
+file names, evaluate near 1e300, bounded ``**`` globs); each test failed on that merge."""
+
+from __future__ import annotations
+
+import json
+import warnings
+from pathlib import Path
+
+import pytest
+from hostile_helpers import HEADER, bomgraph, write_jsonl
+
+DIVERGED = '''
+from baselines.triangulate import TriangulateMapper
+
+
+class Diverged(TriangulateMapper):
+    """triangulate's maps moved 1e307 times as far (a diverged method)."""
+
+    def estimate(self):
+        est = super().estimate()
+        poses = None if est.poses is None else est.poses * [1e307, 1e307, 1]
+        return type(est)(est.landmark_ids, est.landmarks_xy * 1e307, est.pose_t, poses,
+                         None, None, est.info)
+'''
+
+
+def test_a_diverged_run_beyond_the_scored_range_is_unscored_not_a_stopped_sweep(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A method whose map went beyond 1e306 m (evaluate.MAX_SCORED_M) scored '-' at each
+    checkpoint, and then the final map's alignment for the figures raised OutOfRangeError
+    out of run_task: a compare stopped there, every other run's result with it."""
+    from bomgraph import mapper
+    from bomgraph.bench import run_task
+    from bomgraph.experiments import Arm, Experiment
+    from bomgraph.sim import SimConfig
+
+    (tmp_path / "diverged_mapper.py").write_text(DIVERGED)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    monkeypatch.setattr(mapper, "_REGISTRY", dict(mapper._REGISTRY))
+    mapper.register_method("diverged", "diverged_mapper:Diverged", "triangulate, diverged")
+    task = Experiment("t", "test", (Arm("d", "diverged"),), SimConfig(n_steps=40,
+                      n_landmarks=20), seed=3, n_layouts=1, n_starts=1).tasks()[0]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")   # no overflow warning either
+        res = run_task(task)
+    assert res["ok"], res.get("error")
+    assert [c["t"] for c in res["checkpoints"]] == [10, 20, 30, 40]
+    assert all(c["mpe_m"] != c["mpe_m"] for c in res["checkpoints"])   # NaN: '-'
+    assert res["final_map"] is None
+
+
+def test_a_debug_traceback_of_a_failed_run_keeps_its_lines(tmp_path: Path) -> None:
+    """``compare -vv``: a failed run's traceback was logged inside the message, which the
+    one-line net (errors.one_line) flattened to one line of literal '\\n's."""
+    steps = [{"t": 0, "bearings": [[0, 0.5], [1, -0.5], [2, 2.0]]}] + [
+        {"t": t, "odom": [0.1, 0.0, 0.05],
+         "bearings": [[0, 0.5 + 0.05 * t], [1, -0.5 - 0.04 * t], [2, 2.0 + 0.03 * t]]}
+        for t in range(1, 8)]
+    steps[4]["odom_sigma"] = [1e8, 0.0, 0.1]
+    stream = write_jsonl(tmp_path / "odd.jsonl", HEADER, steps)
+    proc = bomgraph("compare", "-vv", "--streams", stream, "--methods", "stmds-smacof",
+                    "--out", tmp_path / "cmp", "--jobs", "1", "--no-progress", "--no-figures")
+    assert proc.returncode == 1, proc.stderr
+    lines = proc.stderr.decode().splitlines()
+    assert "bomgraph: DEBUG: stmds-smacof on odd failed" in lines, [
+        ln[:120] for ln in lines if "failed" in ln]
+    at = lines.index("bomgraph: DEBUG: stmds-smacof on odd failed")
+    assert lines[at + 1] == "Traceback (most recent call last):", lines[at:at + 3]
+    assert any("StreamValueError" in ln and "line 6: 'odom_sigma'" in ln
+               for ln in lines[at + 2:]), lines[at:]
+    assert "line 6: 'odom_sigma'" in json.dumps(
+        json.loads((tmp_path / "cmp" / "results.json").read_text()))
+
