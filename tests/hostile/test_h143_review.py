@@ -3,6 +3,7 @@ file names, evaluate near 1e300, bounded ``**`` globs); each test failed on that
 
 from __future__ import annotations
 
+import glob
 import json
 import warnings
 from pathlib import Path
@@ -72,3 +73,26 @@ def test_a_debug_traceback_of_a_failed_run_keeps_its_lines(tmp_path: Path) -> No
     assert "line 6: 'odom_sigma'" in json.dumps(
         json.loads((tmp_path / "cmp" / "results.json").read_text()))
 
+
+def test_a_glob_below_a_wildcard_counts_only_the_folders_it_searches(tmp_path: Path) -> None:
+    """``runs*/**/*.jsonl`` counted every folder below the sweep file's folder (the part
+    before the first wildcard), so a big folder beside ``runs1`` (a dataset, an
+    environment) refused a glob that searches two folders."""
+    from bomgraph.stream_globs import GlobTooWideError, bounded_glob
+
+    for rel in ("runs1/a.jsonl", "runs1/deep/b.jsonl", "runs2/c.jsonl", ".runs3/d.jsonl"):
+        (tmp_path / rel).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / rel).write_text("")
+    for i in range(20):
+        (tmp_path / "big" / str(i)).mkdir(parents=True)
+    pattern = f"{tmp_path}/runs*/**/*.jsonl"
+    expected = sorted(glob.glob(pattern, recursive=True))
+    assert len(expected) == 3
+    assert bounded_glob(pattern, limit=3) == expected   # runs1, runs1/deep, runs2
+    with pytest.raises(GlobTooWideError, match=r"more than 2 folders below .*/runs\*;"):
+        bounded_glob(pattern, limit=2)
+    for hidden in (f"{tmp_path}/.runs*/**/*.jsonl", f"{tmp_path}/*/**/*.jsonl"):
+        expected = sorted(glob.glob(hidden, recursive=True))
+        assert bounded_glob(hidden, limit=24) == expected   # glob's '*' skips .runs3 too
+    with pytest.raises(GlobTooWideError):
+        bounded_glob(f"{tmp_path}/**/*.jsonl", limit=24)    # the top too: 25
