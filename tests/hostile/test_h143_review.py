@@ -9,7 +9,7 @@ import warnings
 from pathlib import Path
 
 import pytest
-from hostile_helpers import HEADER, bomgraph, write_jsonl
+from hostile_helpers import HEADER, bomgraph, one_error, write_jsonl
 
 DIVERGED = '''
 from baselines.triangulate import TriangulateMapper
@@ -96,3 +96,32 @@ def test_a_glob_below_a_wildcard_counts_only_the_folders_it_searches(tmp_path: P
         assert bounded_glob(hidden, limit=24) == expected   # glob's '*' skips .runs3 too
     with pytest.raises(GlobTooWideError):
         bounded_glob(f"{tmp_path}/**/*.jsonl", limit=24)    # the top too: 25
+
+
+NL = "a\nb"
+
+
+@pytest.mark.parametrize("case", ["run-out-is-input", "compare-link", "compare-not-listed"])
+def test_a_file_name_the_output_checks_name_is_shown_as_every_message_shows_it(
+        work: Path, case: str) -> None:
+    """``--out 'a\\nb.jsonl': is the input a\\nb.jsonl``: the output checks named the input
+    and compare's files without errors.shown_path (escaped by the CLI's net, unquoted),
+    where every other message quotes such a name."""
+    (work / f"{NL}.jsonl").write_bytes((work / "s.jsonl").read_bytes())
+    out = work / NL
+    out.mkdir()
+    if case == "compare-link":
+        (out / "results.json").symlink_to(work / "nowhere")
+    else:
+        (out / "summary.csv").write_text("x\n")
+    args, shown = {
+        "run-out-is-input": (["run", f"{NL}.jsonl", "--method", "triangulate", "--out",
+                              f"{NL}.jsonl"], f"is the input {NL + '.jsonl'!r};"),
+        "compare-link": (["compare", "--streams", "s.jsonl", "--methods", "triangulate",
+                          "--out", NL, "--jobs", "1", "--no-progress", "--no-figures"],
+                         f"would replace {NL + '/results.json'!r}, which is a link"),
+        "compare-not-listed": (["compare", "--streams", "s.jsonl", "--methods", "triangulate",
+                                "--out", NL, "--jobs", "1", "--no-progress", "--no-figures"],
+                               f"would replace {NL + '/summary.csv'!r}, which is not listed"),
+    }[case]
+    one_error(bomgraph(*args, cwd=work), shown)
