@@ -125,3 +125,27 @@ def test_a_file_name_the_output_checks_name_is_shown_as_every_message_shows_it(
                                f"would replace {NL + '/summary.csv'!r}, which is not listed"),
     }[case]
     one_error(bomgraph(*args, cwd=work), shown)
+
+
+def test_a_fifo_with_a_newline_in_its_name_is_named_as_every_file(tmp_path: Path) -> None:
+    """A stream read from a named pipe is spooled to a temporary file; messages named the
+    pipe in its place as written, so ``a\\nb`` came out escaped by the CLI's net but
+    unquoted (``a\\nb, line 6``), where a regular file of that name is ``'a\\nb', line 6``."""
+    import os
+    import threading
+
+    steps = [{"t": 0, "bearings": [[0, 0.5], [1, -0.5], [2, 2.0]]}] + [
+        {"t": t, "odom": [0.1, 0.0, 0.05],
+         "bearings": [[0, 0.5 + 0.05 * t], [1, -0.5 - 0.04 * t], [2, 2.0 + 0.03 * t]]}
+        for t in range(1, 8)]
+    steps[4]["odom_sigma"] = [1e8, 0.0, 0.1]
+    data = write_jsonl(tmp_path / "odd.jsonl", HEADER, steps).read_bytes()
+    fifo = tmp_path / NL
+    os.mkfifo(fifo)
+    writer = threading.Thread(target=fifo.write_bytes, args=(data,), daemon=True)
+    writer.start()
+    proc = bomgraph("run", NL, "--method", "stmds-smacof", "--out", "o.json", cwd=tmp_path,
+                    timeout=120)
+    writer.join(10)
+    one_error(proc, f"{NL!r}, line 6: 'odom_sigma': step 4")
+    assert f"bomgraph: WARNING: {NL!r}, line 6" in proc.stderr.decode(), proc.stderr
