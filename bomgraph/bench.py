@@ -31,7 +31,7 @@ from typing import Any, Callable, Iterator, Mapping, Sequence
 import numpy as np
 
 from .checks import echo, instance, is_integer, option_named
-from .errors import (ConfigError, StreamFormatError, TooFewLandmarksError,
+from .errors import (ConfigError, OutOfRangeError, StreamFormatError, TooFewLandmarksError,
                      UnknownMethodError)
 from .estimate_file import write_estimate
 from .evaluate import score_estimate
@@ -185,7 +185,8 @@ def _run_task(task: Task) -> dict[str, Any]:
         out.update(ok=False, error=_failure(exc), traceback=_traceback(exc))
         if own:  # the reference failed: the other arms' runs here fail with it at once
             _reference_failed(task, exc)
-        _log.debug("%s on %s failed:\n%s", task.arm.label, task.source.name, out["traceback"])
+        _log.debug("%s on %s failed", task.arm.label, task.source.name,  # the traceback on
+                   exc_info=exc)                                           # lines of its own
         return out
     if own:  # kept for the other arms' runs on this stream in this process
         truth = result.final
@@ -220,7 +221,7 @@ def _run_task(task: Task) -> dict[str, Any]:
                 "poses": ([] if final.poses is None else
                           [[int(t), float(x), float(y)] for t, (x, y)
                            in zip(final.pose_t, al.apply(final.poses[:, :2]))])}
-        except TooFewLandmarksError:
+        except (TooFewLandmarksError, OutOfRangeError):  # no map to draw: its rows say '-'
             pass
     out.update(ok=True, checkpoints=score.rows, total_s=result.total_s - score.seconds,
                step_median_s=float(np.median(result.step_s)),

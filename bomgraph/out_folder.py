@@ -382,27 +382,27 @@ class OutputRecord:
             if not os.path.lexists(p):
                 continue
             if p.is_dir():
-                raise OutputPathError(f"{out_named('out_dir', out)}: compare writes the file {p}, which is a "
-                                      f"folder; {todo}")
+                raise OutputPathError(f"{out_named('out_dir', out)}: compare writes the file "
+                                      f"{shown_path(p)}, which is a folder; {todo}")
             rel = os.path.normpath(os.path.relpath(p, out))
             if os.path.islink(p):
-                raise OutputPathError(f"{out_named('out_dir', out)}: compare would replace {p}, which is a "
-                                      f"link to {os.path.realpath(p)} (compare writes through "
-                                      f"no link at a file's name); {todo}")
+                raise OutputPathError(f"{out_named('out_dir', out)}: compare would replace "
+                                      f"{shown_path(p)}, which is a link to {shown_path(os.path.realpath(p))}"
+                                      f" (compare writes through no link at a file's name); {todo}")
             if any(_proves(out, e) for e in by_path.get(rel, ())):
                 continue
             links = _links_on_the_way(out, rel)
             if by_path.get(rel) and all(e.get("via", {}) != links for e in by_path[rel]):
-                raise OutputPathError(f"{out_named('out_dir', out)}: compare would replace {p} "
-                                      f"{_link_changed(out, rel, by_path[rel][-1])}")
+                raise OutputPathError(f"{out_named('out_dir', out)}: compare would replace "
+                                      f"{shown_path(p)} {_link_changed(out, rel, by_path[rel][-1])}")
             # not listed: never compare's, or changed since and then left out of the list by
             # a compare that did not write it again (h75: "which compare did not write")
             why = ("which was changed since an earlier compare wrote it" if rel in by_path else
-                   f"which is not listed as compare's, unchanged, in {self.path}" if listed or
+                   f"which is not listed as compare's, unchanged, in {shown_path(self.path)}" if listed or
                    os.path.lexists(self.path) else
                    f"which is not listed as compare's (the folder has no {MANIFEST}: not "
                    f"compare's, or an older bomgraph's)")
-            raise OutputPathError(f"{out_named('out_dir', out)}: compare would replace {p}, {why}; {todo}")
+            raise OutputPathError(f"{out_named('out_dir', out)}: compare would replace {shown_path(p)}, {why}; {todo}")
 
     def remove_leftovers(self, paths: Sequence[Path]) -> int:
         """Remove the temporary files that compares killed while writing (``kill -9``, a

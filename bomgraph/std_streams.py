@@ -16,7 +16,7 @@ import sys
 import tempfile
 from typing import IO, Callable, Iterator
 
-from .errors import ConfigError
+from .errors import ConfigError, shown_path
 from .stdio import CHUNK_BYTES, STDIO, check_output_path, copy_bounded, standard_output
 
 #: temp paths standing for stdin, so messages can name ``<stdin>`` instead.
@@ -48,8 +48,8 @@ def input_path(path: str) -> Iterator[str]:
         source = standard_input()  # closed: refused before a temporary folder is made
     with tempfile.TemporaryDirectory(prefix="bomgraph-stdin-") as tmp:
         spooled = os.path.join(tmp, "stdin")
-        # kept: the message may be printed after the cleanup
-        _SPOOLED[spooled] = "<stdin>" if path == STDIO else path
+        # kept: the message may be printed after the cleanup; a FIFO named as every message
+        _SPOOLED[spooled] = "<stdin>" if path == STDIO else shown_path(path)  # names a file
         with open(spooled, "wb") as fh:
             if path == STDIO:
                 copy_bounded(source, fh, spooled)

@@ -289,8 +289,8 @@ def check_output_path(path: str | os.PathLike[str],
             same = os.path.dirname(target) == os.path.realpath(inp) and target in {
                 os.path.realpath(os.path.join(inp, f)) for f in os.listdir(inp)}
         if same:
-            raise OutputPathError(f"{out_named(name, path)}: is the input {inp}; refusing to "
-                                  f"overwrite "
+            raise OutputPathError(f"{out_named(name, path)}: is the input {shown_path(inp)}; "
+                                  f"refusing to overwrite "
                                   f"an input: choose another name")
     if direct:  # a file open as a descriptor (``>> f``): written where it is
         return

@@ -1,13 +1,15 @@
-"""A sweep file's stream globs, bounded: ``**`` searches every folder below the fixed part of
-its pattern (``/**/*.jsonl``: the whole file system, over 90 s; a folder holding two links
-to itself: without end), so a glob with ``**`` counts the folders it would search first and
-is refused beyond :data:`MAX_GLOB_FOLDERS`, naming the folder, before it is expanded.
+"""A sweep file's stream globs, bounded: ``**`` searches every folder below those the part of
+its pattern before it names (``/**/*.jsonl``: the whole file system, over 90 s; a folder
+holding two links to itself: without end), so a glob with ``**`` counts the folders it would
+search first (those below ``runs*`` for ``runs*/**/*.jsonl``, not the folders beside them)
+and is refused beyond :data:`MAX_GLOB_FOLDERS`, naming the folder, before it is expanded.
 """
 
 from __future__ import annotations
 
 import glob
 import os
+from typing import Iterable, Iterator
 
 from .errors import ConfigError, shown_path
 
@@ -21,52 +23,59 @@ class GlobTooWideError(ConfigError):
     """A glob with ``**`` that would search more than :data:`MAX_GLOB_FOLDERS` folders."""
 
 
-def _fixed_part(pattern: str) -> str:
-    """The folder of ``pattern`` before its first component with a wildcard."""
-    head: list[str] = []
-    for part in pattern.split(os.sep):
-        if glob.has_magic(part):
-            break
-        head.append(part)
-    return os.sep.join(head) or (os.sep if pattern.startswith(os.sep) else os.curdir)
+def _head(pattern: str) -> str:
+    """The part of ``pattern`` before its first ``**`` (``.`` or ``/`` when none)."""
+    parts = pattern.split(os.sep)
+    return os.sep.join(parts[:parts.index("**")]) or (
+        os.sep if pattern.startswith(os.sep) else os.curdir)
 
 
-def _more_folders_than(top: str, limit: int) -> bool:
-    """Whether more than ``limit`` folders are at or below ``top``, counted as ``**``
+def _searched_roots(head: str) -> Iterator[str]:
+    """The folders a ``**`` after ``head`` searches below: ``head`` as glob expands it
+    (``runs*/**/*.jsonl``: each ``runs*`` folder, not the folders beside them)."""
+    if glob.has_magic(head):
+        yield from (p for p in glob.iglob(head) if os.path.isdir(p))
+    else:
+        yield head
+
+
+def _more_folders_than(tops: Iterable[str], limit: int) -> bool:
+    """Whether more than ``limit`` folders are at or below ``tops``, counted as ``**``
     searches them (links to folders followed, names starting with ``.`` left out), stopping
     once ``limit + 1`` are found (searched or waiting to be)."""
-    stack, seen = [top], 0
-    while stack:
-        folder = stack.pop()
-        seen += 1
-        if seen > limit:
-            return True
-        try:
-            with os.scandir(folder) as entries:
-                for entry in entries:
-                    try:
-                        if not entry.name.startswith(".") and entry.is_dir():
-                            stack.append(entry.path)
-                    except OSError:
-                        continue
-                    if seen + len(stack) > limit:   # each to be searched: memory bounded
-                        return True
-        except OSError:   # unreadable, gone, not a folder: glob skips it too
-            continue
+    stack: list[str] = []
+    seen = 0
+    for top in tops:
+        stack.append(top)
+        while stack:
+            folder = stack.pop()
+            seen += 1
+            if seen > limit:
+                return True
+            try:
+                with os.scandir(folder) as entries:
+                    for entry in entries:
+                        try:
+                            if not entry.name.startswith(".") and entry.is_dir():
+                                stack.append(entry.path)
+                        except OSError:
+                            continue
+                        if seen + len(stack) > limit:   # each to be searched: memory bounded
+                            return True
+            except OSError:   # unreadable, gone, not a folder: glob skips it too
+                continue
     return False
 
 
 def bounded_glob(pattern: str, limit: int = MAX_GLOB_FOLDERS) -> list[str]:
     """``glob.glob(pattern, recursive=True)``, sorted, or, for a ``**`` that would search more
     than ``limit`` folders, :class:`GlobTooWideError` saying how to narrow it."""
-    parts = pattern.split(os.sep)
-    if "**" in parts:
-        top = _fixed_part(pattern)
-        if _more_folders_than(top, limit):
-            raise GlobTooWideError(
-                f"'**' would search more than {limit:,} folders below {shown_path(top)}; "
-                f"start the pattern at the folder the streams are in (e.g. "
-                f"'runs/**/*.jsonl', not '/**/*.jsonl'), or list the files")
+    if "**" in pattern.split(os.sep) and _more_folders_than(
+            _searched_roots(head := _head(pattern)), limit):
+        raise GlobTooWideError(
+            f"'**' would search more than {limit:,} folders below {shown_path(head)}; "
+            f"start the pattern at the folder the streams are in (e.g. "
+            f"'runs/**/*.jsonl', not '/**/*.jsonl'), or list the files")
     return sorted(glob.glob(pattern, recursive=True))
 
 
