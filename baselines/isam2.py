@@ -276,6 +276,7 @@ class Isam2Mapper(WindowLongMode, NormalModeCheck):
         self._polished: tuple[tuple[Any, ...], Any, Any, dict[str, Any]] | None = None
         self._checked: tuple[Any, ...] | None = None   # the state the last check left alone
         self._dims = (0, 0)   # factors of ``accepted`` counted, their residual dimensions
+        self._finished_n = -1   # the step count at the last finish() (a second one: nothing)
 
     def _new_isam(self) -> gtsam.ISAM2:
         """A fresh iSAM2: Cholesky, Powell's dogleg (a trust region) or Gauss-Newton."""
@@ -503,10 +504,17 @@ class Isam2Mapper(WindowLongMode, NormalModeCheck):
         :meth:`_check_long`), unless just done (``info["converged"]`` never None). Normal mode:
         if the map :meth:`estimate` gives is unconverged (:meth:`_polish`), the buffered steps
         in as at a scheduled update, with its check and restart (not repeated where the last
-        step's scheduled update already checked this very state, :meth:`_checked_here`)."""
+        step's scheduled update already checked this very state, :meth:`_checked_here`).
+        A second call with no step between does nothing (the first one's check moves the
+        poses, so its admission made again could let in more landmarks)."""
         n = self.problem.n_steps
-        if n == 0:
+        if n == 0 or self._finished_n == n:
             return
+        self._finish(n)
+        self._finished_n = n
+
+    def _finish(self, n: int) -> None:
+        """:meth:`finish` after ``n`` steps."""
         if self.problem.admit(self._poses):   # every pending landmark, once more
             entered = self._take_new(None)    # (in batch, estimate() solves with the buffer)
             if not self._batch and (self._long or self._external.size()

@@ -98,3 +98,23 @@ def test_finish_does_not_repeat_the_last_updates_check() -> None:
     assert mapper.failures == failures, mapper.failures[len(failures):]
     _same(before, after)
     assert after.info == before.info
+
+
+@pytest.mark.parametrize("options", MODES)
+def test_a_second_finish_changes_nothing(options: dict) -> None:
+    """41 steps at 0.5 m / 0.3 rad: in long mode the first ``finish()`` admits nothing, then
+    its whole-graph check (LM lowers the error) moves the poses until four pending landmarks'
+    rays intersect well; a second ``finish()`` let them in (4 -> 8 landmarks) and rebuilt the
+    window. ``gtsam-batch``'s ``finish()`` does nothing the second time either."""
+    header, steps = prefix(0.3, 41)
+    mapper = create_mapper("gtsam-isam2", header, preset="paper", **options)
+    for s in steps:
+        mapper.step(s)
+    mapper.finish()
+    first = mapper.estimate()
+    failures = list(mapper.failures)
+    mapper.finish()
+    again = mapper.estimate()
+    _same(first, again)
+    assert again.info == first.info
+    assert mapper.failures == failures
