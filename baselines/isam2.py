@@ -202,8 +202,8 @@ class Isam2Mapper(WindowLongMode, NormalModeCheck):
     window also ``info["window_start"]``, its held pose, and ``info["window_rebuilds"]``).
     In long mode with the window, the map's older poses are back-substituted from the
     window's solution (:meth:`current_values`). At the end of a run, :meth:`finish` (called
-    by :func:`bomgraph.mapper.run`) tries every pending landmark once more and checks the
-    whole graph once more in long mode.
+    by :func:`bomgraph.mapper.run`) tries every pending landmark once more (those it lets in:
+    ``info["entered_at_finish"]``) and checks the whole graph once more in long mode.
 
     If an update raises (e.g. an indeterminate linear system), the external factors of that
     update (:meth:`add_factors`) are dropped and the solver is rebuilt from the factors held
@@ -277,6 +277,7 @@ class Isam2Mapper(WindowLongMode, NormalModeCheck):
         self._checked: tuple[Any, ...] | None = None   # the state the last check left alone
         self._dims = (0, 0)   # factors of ``accepted`` counted, their residual dimensions
         self._finished_n = -1   # the step count at the last finish() (a second one: nothing)
+        self._finish_entered: list[int] = []   # the landmarks finish() let in
 
     def _new_isam(self) -> gtsam.ISAM2:
         """A fresh iSAM2: Cholesky, Powell's dogleg (a trust region) or Gauss-Newton."""
@@ -316,6 +317,7 @@ class Isam2Mapper(WindowLongMode, NormalModeCheck):
         return np.array([self._pose(int(t)) for t in ts]).reshape(-1, 3)
 
     def step(self, step: Step) -> None:
+        self._finish_entered = []
         self.problem.add_step(step)
         t = step.t
         prev = self._pose(t - 1) if t > 0 else None
@@ -515,7 +517,8 @@ class Isam2Mapper(WindowLongMode, NormalModeCheck):
 
     def _finish(self, n: int) -> None:
         """:meth:`finish` after ``n`` steps."""
-        if self.problem.admit(self._poses):   # every pending landmark, once more
+        self._finish_entered = sorted(self.problem.admit(self._poses))   # every pending one
+        if self._finish_entered:
             entered = self._take_new(None)    # (in batch, estimate() solves with the buffer)
             if not self._batch and (self._long or self._external.size()
                                     or (self.config.isam2_update_on_entry and entered)):
@@ -569,6 +572,8 @@ class Isam2Mapper(WindowLongMode, NormalModeCheck):
                 "update_failures": len(self.failures), "rebuilds": self.rebuilds,
                 "lm_restarts": self.lm_restarts,
                 "dropped_external_factors": self.dropped_external}
+        if self._finish_entered:
+            info["entered_at_finish"] = list(self._finish_entered)
         if self.failures:
             info["last_failure"] = self.failures[-1]
         if self._chunks is not None and self._chunks.marginal_failure:

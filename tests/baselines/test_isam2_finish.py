@@ -47,7 +47,8 @@ MODES = [{}, {"long_after_steps": 10, "long_lag_steps": 5, "long_shift_steps": 5
 @pytest.mark.parametrize("options", MODES)
 def test_finish_lets_in_a_landmark_refused_at_its_last_sighting(options: dict) -> None:
     """21 steps at 0.5 m / 0.5 rad: landmark 12 was refused at its last sighting and its rays
-    intersect on the final poses; on main it stayed out (4 landmarks)."""
+    intersect on the final poses; on main it stayed out (4 landmarks). ``info`` names the
+    landmarks ``finish()`` let in."""
     header, steps = prefix(0.5, 21)
     mapper = create_mapper("gtsam-isam2", header, preset="paper", **options)
     for s in steps:
@@ -57,6 +58,10 @@ def test_finish_lets_in_a_landmark_refused_at_its_last_sighting(options: dict) -
     est = run(create_mapper("gtsam-isam2", header, preset="paper", **options), steps,
               checkpoint_every=10, keep_checkpoints=False).final
     assert set(waiting) <= set(est.landmark_ids.tolist()), (waiting, est.landmark_ids)
+    # and said so (h144): before, info did not tell these from the landmarks the steps let in
+    entered = est.info.get("entered_at_finish", [])
+    assert set(waiting) <= set(entered) <= set(est.landmark_ids.tolist()), entered
+    assert entered == sorted(entered)
     assert est.info["mode"] == ("isam2-long" if options else "isam2")
     assert np.all(np.isfinite(est.landmarks_xy))
 
