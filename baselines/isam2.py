@@ -507,6 +507,7 @@ class Isam2Mapper(WindowLongMode, NormalModeCheck):
         if the map :meth:`estimate` gives is unconverged (:meth:`_polish`), the buffered steps
         in as at a scheduled update, with its check and restart (not repeated where the last
         step's scheduled update already checked this very state, :meth:`_checked_here`).
+        Batch mode: factors queued by :meth:`add_factors` go in (LM, as at an update).
         A second call with no step between does nothing (the first one's check moves the
         poses, so its admission made again could let in more landmarks)."""
         n = self.problem.n_steps
@@ -524,6 +525,8 @@ class Isam2Mapper(WindowLongMode, NormalModeCheck):
                                     or (self.config.isam2_update_on_entry and entered)):
                 self._flush(extra=False)
         if self._batch:
+            if self._external.size():   # queued factors into the map, as at an update
+                self._flush()
             return
         if not self._long:
             if self._external.size() or not self._polish()[2]["converged"]:
