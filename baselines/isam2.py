@@ -202,8 +202,8 @@ class Isam2Mapper(WindowLongMode, NormalModeCheck):
     window also ``info["window_start"]``, its held pose, and ``info["window_rebuilds"]``).
     In long mode with the window, the map's older poses are back-substituted from the
     window's solution (:meth:`current_values`). At the end of a run, :meth:`finish` (called
-    by :func:`bomgraph.mapper.run`) tries every pending landmark once more and checks the
-    whole graph once more in long mode.
+    by :func:`bomgraph.mapper.run`) tries every pending landmark once more (those it lets in:
+    ``info["entered_at_finish"]``) and checks the whole graph once more in long mode.
 
     If an update raises (e.g. an indeterminate linear system), the external factors of that
     update (:meth:`add_factors`) are dropped and the solver is rebuilt from the factors held
@@ -276,6 +276,8 @@ class Isam2Mapper(WindowLongMode, NormalModeCheck):
         self._polished: tuple[tuple[Any, ...], Any, Any, dict[str, Any]] | None = None
         self._checked: tuple[Any, ...] | None = None   # the state the last check left alone
         self._dims = (0, 0)   # factors of ``accepted`` counted, their residual dimensions
+        self._finished_n = -1   # the step count at the last finish() (a second one: nothing)
+        self._finish_entered: list[int] = []   # the landmarks finish() let in
 
     def _new_isam(self) -> gtsam.ISAM2:
         """A fresh iSAM2: Cholesky, Powell's dogleg (a trust region) or Gauss-Newton."""
@@ -315,6 +317,7 @@ class Isam2Mapper(WindowLongMode, NormalModeCheck):
         return np.array([self._pose(int(t)) for t in ts]).reshape(-1, 3)
 
     def step(self, step: Step) -> None:
+        self._finish_entered = []
         self.problem.add_step(step)
         t = step.t
         prev = self._pose(t - 1) if t > 0 else None
@@ -503,16 +506,27 @@ class Isam2Mapper(WindowLongMode, NormalModeCheck):
         :meth:`_check_long`), unless just done (``info["converged"]`` never None). Normal mode:
         if the map :meth:`estimate` gives is unconverged (:meth:`_polish`), the buffered steps
         in as at a scheduled update, with its check and restart (not repeated where the last
-        step's scheduled update already checked this very state, :meth:`_checked_here`)."""
+        step's scheduled update already checked this very state, :meth:`_checked_here`).
+        Batch mode: factors queued by :meth:`add_factors` go in (LM, as at an update).
+        A second call with no step between does nothing (the first one's check moves the
+        poses, so its admission made again could let in more landmarks)."""
         n = self.problem.n_steps
-        if n == 0:
+        if n == 0 or self._finished_n == n:
             return
-        if self.problem.admit(self._poses):   # every pending landmark, once more
+        self._finish(n)
+        self._finished_n = n
+
+    def _finish(self, n: int) -> None:
+        """:meth:`finish` after ``n`` steps."""
+        self._finish_entered = sorted(self.problem.admit(self._poses))   # every pending one
+        if self._finish_entered:
             entered = self._take_new(None)    # (in batch, estimate() solves with the buffer)
             if not self._batch and (self._long or self._external.size()
                                     or (self.config.isam2_update_on_entry and entered)):
                 self._flush(extra=False)
         if self._batch:
+            if self._external.size():   # queued factors into the map, as at an update
+                self._flush()
             return
         if not self._long:
             if self._external.size() or not self._polish()[2]["converged"]:
@@ -561,6 +575,8 @@ class Isam2Mapper(WindowLongMode, NormalModeCheck):
                 "update_failures": len(self.failures), "rebuilds": self.rebuilds,
                 "lm_restarts": self.lm_restarts,
                 "dropped_external_factors": self.dropped_external}
+        if self._finish_entered:
+            info["entered_at_finish"] = list(self._finish_entered)
         if self.failures:
             info["last_failure"] = self.failures[-1]
         if self._chunks is not None and self._chunks.marginal_failure:

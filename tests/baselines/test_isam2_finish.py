@@ -8,16 +8,21 @@ coarsely (a keyframing nobody tuned on; skipped without the data).
 - ``finish()`` repeated the check and LM of a last step that was a scheduled update whose
   check left the map as it was (the iSAM2 rebuild at the LM solution failed): the same solve
   again, and its failure counted twice in ``info["update_failures"]``.
+- (h144) A second ``finish()`` let in more landmarks; ``info`` did not name those ``finish()``
+  let in; in batch mode ``finish()`` left factors queued by ``add_factors`` out of the map.
 """
 
 from __future__ import annotations
 
 import functools
 
+import gtsam
 import numpy as np
 import pytest
 
+from baselines.bearing_graph import landmark_key
 from bomgraph.mapper import MapEstimate, create_mapper, run
+from bomgraph.sim import SimConfig, simulate
 from bomgraph.stream import Step, StreamHeader
 from _shared_data import DATA, missing  # tests/_shared_data.py
 
@@ -47,7 +52,8 @@ MODES = [{}, {"long_after_steps": 10, "long_lag_steps": 5, "long_shift_steps": 5
 @pytest.mark.parametrize("options", MODES)
 def test_finish_lets_in_a_landmark_refused_at_its_last_sighting(options: dict) -> None:
     """21 steps at 0.5 m / 0.5 rad: landmark 12 was refused at its last sighting and its rays
-    intersect on the final poses; on main it stayed out (4 landmarks)."""
+    intersect on the final poses; on main it stayed out (4 landmarks). ``info`` names the
+    landmarks ``finish()`` let in."""
     header, steps = prefix(0.5, 21)
     mapper = create_mapper("gtsam-isam2", header, preset="paper", **options)
     for s in steps:
@@ -57,6 +63,10 @@ def test_finish_lets_in_a_landmark_refused_at_its_last_sighting(options: dict) -
     est = run(create_mapper("gtsam-isam2", header, preset="paper", **options), steps,
               checkpoint_every=10, keep_checkpoints=False).final
     assert set(waiting) <= set(est.landmark_ids.tolist()), (waiting, est.landmark_ids)
+    # and said so (h144): before, info did not tell these from the landmarks the steps let in
+    entered = est.info.get("entered_at_finish", [])
+    assert set(waiting) <= set(entered) <= set(est.landmark_ids.tolist()), entered
+    assert entered == sorted(entered)
     assert est.info["mode"] == ("isam2-long" if options else "isam2")
     assert np.all(np.isfinite(est.landmarks_xy))
 
@@ -98,3 +108,45 @@ def test_finish_does_not_repeat_the_last_updates_check() -> None:
     assert mapper.failures == failures, mapper.failures[len(failures):]
     _same(before, after)
     assert after.info == before.info
+
+
+@pytest.mark.parametrize("options", MODES)
+def test_a_second_finish_changes_nothing(options: dict) -> None:
+    """41 steps at 0.5 m / 0.3 rad: in long mode the first ``finish()`` admits nothing, then
+    its whole-graph check (LM lowers the error) moves the poses until four pending landmarks'
+    rays intersect well; a second ``finish()`` let them in (4 -> 8 landmarks) and rebuilt the
+    window. ``gtsam-batch``'s ``finish()`` does nothing the second time either."""
+    header, steps = prefix(0.3, 41)
+    mapper = create_mapper("gtsam-isam2", header, preset="paper", **options)
+    for s in steps:
+        mapper.step(s)
+    mapper.finish()
+    first = mapper.estimate()
+    failures = list(mapper.failures)
+    mapper.finish()
+    again = mapper.estimate()
+    _same(first, again)
+    assert again.info == first.info
+    assert mapper.failures == failures
+
+
+def test_finish_in_batch_mode_puts_the_queued_factors_in() -> None:
+    """A simulated run with 5 % wrong associations ends in batch mode (seed 5); a tight prior
+    queued after the last step moves its landmark in the final map (main left it out of the
+    map in batch mode, neither used nor counted as dropped; other modes put it in)."""
+    s = simulate(SimConfig(n_steps=100, wrong_association_rate=0.05), np.random.default_rng(5))
+    mapper = create_mapper("gtsam-isam2", s.header)
+    for st in s.steps:
+        mapper.step(st)
+    before = mapper.estimate()
+    assert before.info["mode"] == "batch", "the stream no longer shows the case"
+    lid, target = int(before.landmark_ids[0]), before.landmarks_xy[0] + [1.0, 0.0]
+    prior = gtsam.NonlinearFactorGraph()
+    prior.add(gtsam.PriorFactorPoint2(landmark_key(lid), gtsam.Point2(*target),
+                                      gtsam.noiseModel.Isotropic.Sigma(2, 1e-3)))
+    mapper.add_factors(prior)
+    mapper.finish()
+    after = mapper.estimate()
+    xy = after.landmarks_xy[after.landmark_ids.tolist().index(lid)]
+    assert np.hypot(*(xy - target)) < 0.01, (xy, target)
+    assert after.info["dropped_external_factors"] == 0
