@@ -1,10 +1,11 @@
 """Which SMACOF start a map keeps (issue 15): the recording settings run SMACOF from both the
 previous scheduled map and the classical-scaling map at every map and keep the lower weighted
-stress, so the local minimum kept depends on the data, not on where the map falls in a count
-of maps; the runner-up is a start of the next map too (a beam of two). Before, the classical
-start was tried only at every fifth scheduled map; on MRCLAM6 robot 1 keyframed coarsely (``docs/measurements.md``) the final map kept the warm start's
-minimum, Stress-1 0.025 and 103 cm, beside the classical start's 0.008 and 27 cm. The paper
-setting keeps its count (its maps unchanged)."""
+stress, so the local minimum kept depends on the data, not on where the map falls in a count of
+maps; the runner-up is a start of the next map too (a beam of two). Before, the classical start
+was tried only at every fifth scheduled map; on MRCLAM6 robot 1 keyframed coarsely
+(``docs/measurements.md``) the final map kept the warm start's minimum, Stress-1 0.025 and 103
+cm, beside the classical start's 0.008 and 27 cm. The paper setting keeps its count (its maps
+unchanged)."""
 
 from __future__ import annotations
 
