@@ -13,6 +13,7 @@ import math
 from dataclasses import dataclass
 from typing import Any, ClassVar, Mapping
 
+from ..checks import is_integer
 from ..config import Presets, requirement
 from .distances import FUSION_RULES
 
@@ -261,9 +262,12 @@ class StmdsConfig(Presets):
         need(self.weights in WEIGHTS, f"weights must be one of {WEIGHTS}, got {self.weights!r}")
         need(self.smacof_init in INITS,
              f"smacof_init must be one of {INITS}, got {self.smacof_init!r}")
-        need(int(self.smacof_restart_every) == self.smacof_restart_every
-             and self.smacof_restart_every >= 1, "smacof_restart_every must be an integer >= 1")
-        need(self.smacof_keep in (1, 2), "smacof_keep must be 1 or 2")
+        # integers as resolve() takes them (a direct StmdsConfig(...) too: no int(nan) raised)
+        every = self.smacof_restart_every
+        need(is_integer(every) and every >= 1,
+             f"smacof_restart_every must be an integer >= 1, got {every!r:.40}")
+        need(is_integer(self.smacof_keep) and self.smacof_keep in (1, 2),
+             f"smacof_keep must be 1 or 2, got {self.smacof_keep!r:.40}")
         need(self.smacof_from_t >= 0, "smacof_from_t must be >= 0")
         need(self.min_count >= 1, "min_count must be >= 1")
         need(self.min_degree >= 1, "min_degree must be >= 1")

@@ -1,10 +1,11 @@
 """Which SMACOF start a map keeps (issue 15): the recording settings run SMACOF from both the
 previous scheduled map and the classical-scaling map at every map and keep the lower weighted
-stress, so the local minimum kept depends on the data, not on where the map falls in a count
-of maps; the runner-up is a start of the next map too (a beam of two). Before, the classical start was tried only at every fifth scheduled map; on MRCLAM6
-robot 1 keyframed coarsely (``docs/measurements.md``) the final map kept the warm start's
-minimum, Stress-1 0.025 and 103 cm, beside the classical start's 0.008 and 27 cm. The paper
-setting keeps its count (its maps unchanged)."""
+stress, so the local minimum kept depends on the data, not on where the map falls in a count of
+maps; the runner-up is a start of the next map too (a beam of two). Before, the classical start
+was tried only at every fifth scheduled map; on MRCLAM6 robot 1 keyframed coarsely
+(``docs/measurements.md``) the final map kept the warm start's minimum, Stress-1 0.025 and 103
+cm, beside the classical start's 0.008 and 27 cm. The paper setting keeps its count (its maps
+unchanged)."""
 
 from __future__ import annotations
 
@@ -12,6 +13,7 @@ import numpy as np
 import pytest
 
 from bomgraph.config import resolve
+from bomgraph.errors import ConfigError
 from bomgraph.mapper import create_mapper
 from bomgraph.stmds.config import StmdsConfig
 from bomgraph.stmds.reconstruct import reconstruct
@@ -91,3 +93,22 @@ def test_real_final_map_off_the_schedule_tries_both_starts(last: int) -> None:
     assert "previous" in info["smacof_starts"] and "classical" in info["smacof_starts"]
     assert info["stress1"] == pytest.approx(min(info["smacof_start_stress1"].values()),
                                             rel=1e-9)
+
+
+
+_BAD = ("x", None, float("nan"), float("inf"), 2.5, True, 0, -1)
+
+
+@pytest.mark.parametrize("field, bad", [("smacof_restart_every", v) for v in _BAD]
+                         + [("smacof_keep", v) for v in _BAD + (3, 2.0)])
+def test_a_bad_start_option_given_to_the_config_itself_is_a_config_error(field: str,
+                                                                          bad) -> None:
+    """Built directly (``config=`` of a factory), not through ``resolve``: a ConfigError that
+    names the field, not a ValueError from ``int(nan)`` nor ``True`` taken for 1 (h145)."""
+    with pytest.raises(ConfigError, match=field):
+        StmdsConfig(**{field: bad})
+
+
+def test_numpy_integers_are_start_options() -> None:
+    cfg = StmdsConfig(smacof_restart_every=np.int64(3), smacof_keep=np.int32(2))
+    assert (cfg.smacof_restart_every, cfg.smacof_keep) == (3, 2)
