@@ -10,8 +10,11 @@ Measured numbers behind the choices are in ``docs/measurements.md``.
 from __future__ import annotations
 
 import math
+import numbers
 from dataclasses import dataclass
 from typing import Any, ClassVar, Mapping
+
+import numpy as np
 
 from ..checks import is_integer
 from ..config import Presets, requirement
@@ -35,6 +38,13 @@ _RECORDING: dict[str, Any] = {"fusion": "scale-free", "weights": "inverse-varian
                               "min_count": 1, "robot_ranges": "all-poses",
                               "smacof_restart_every": 1, "smacof_keep": 2}
 
+
+
+def _whole(v: Any) -> bool:
+    """A whole number (an integer, or a finite float with no fraction), not a bool: what the
+    integer options accept without ``int()`` raising on NaN, infinity, None or a string."""
+    return (isinstance(v, numbers.Real) and not isinstance(v, (bool, np.bool_))
+            and math.isfinite(v) and float(v).is_integer())
 
 @dataclass(frozen=True)
 class StmdsConfig(Presets):
@@ -271,6 +281,9 @@ class StmdsConfig(Presets):
         need(self.smacof_from_t >= 0, "smacof_from_t must be >= 0")
         need(self.min_count >= 1, "min_count must be >= 1")
         need(self.min_degree >= 1, "min_degree must be >= 1")
+        need(isinstance(self.baseline_steps, (tuple, list, np.ndarray))
+             and all(_whole(k) for k in self.baseline_steps),
+             f"baseline_steps must be whole numbers of steps, got {self.baseline_steps!r:.60}")
         object.__setattr__(self, "baseline_steps", tuple(int(k) for k in self.baseline_steps))
         need(len(self.baseline_steps) >= 1 and all(k >= 1 for k in self.baseline_steps)
              and len(set(self.baseline_steps)) == len(self.baseline_steps),
@@ -299,20 +312,20 @@ class StmdsConfig(Presets):
         need(0 <= self.tri_parallax_quantile <= 1, "tri_parallax_quantile must be in [0, 1]")
         need(self.tri_window_m is None or self.tri_window_m > 0, "tri_window_m must be > 0")
         need(self.tri_overlap >= 1, "tri_overlap must be >= 1 (windows per reading)")
-        need(int(self.tri_max_poses) == self.tri_max_poses and self.tri_max_poses >= 2,
+        need(_whole(self.tri_max_poses) and self.tri_max_poses >= 2,
              "tri_max_poses must be an integer >= 2")
-        need(int(self.tri_prefixes) == self.tri_prefixes and self.tri_prefixes >= 1,
+        need(_whole(self.tri_prefixes) and self.tri_prefixes >= 1,
              "tri_prefixes must be an integer >= 1")
         need(not (self.geometric_windows and self.tri_window is not None),
              "give tri_window (keyframes) or tri_parallax_rad / tri_window_m (geometry), not "
              "both")
         need(self.tri_min_depth_m >= 0, "tri_min_depth_m must be >= 0")
-        need(int(self.tri_grow) == self.tri_grow and self.tri_grow >= 1,
+        need(_whole(self.tri_grow) and self.tri_grow >= 1,
              "tri_grow must be an integer >= 1")
         need(self.tri_outlier_sigma is None or self.tri_outlier_sigma > 0,
              "tri_outlier_sigma must be > 0 or None")
         if self.tri_window is not None:
-            need(int(self.tri_window) == self.tri_window and self.tri_window >= 2,
+            need(_whole(self.tri_window) and self.tri_window >= 2,
                  f"tri_window must be an integer >= 2 (poses per window), got "
                  f"{self.tri_window!r}")
             object.__setattr__(self, "tri_window", int(self.tri_window))
@@ -320,7 +333,7 @@ class StmdsConfig(Presets):
             need(self.baseline_steps == (1,),
                  "tri_window replaces baseline_steps: leave baseline_steps=(1,)")
             if self.tri_stride is not None and self.tri_window is not None:
-                need(int(self.tri_stride) == self.tri_stride
+                need(_whole(self.tri_stride)
                      and 1 <= self.tri_stride <= self.tri_window,
                      f"tri_stride must be an integer in [1, tri_window], got "
                      f"{self.tri_stride!r}")
