@@ -1,0 +1,54 @@
+"""Hostile-input faults helper h146 fixed: each test failed before its fix. The EKF
+baselines' refusals of a valid stream's values named the step only ("step 4: the predicted
+pose or its covariance overflows ...") or no place at all ("BearingEkf: bearing_sigma_rad
+must be in (0, pi]"); now they name the stream's file, line and field, as STMDS's do."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+from hostile_helpers import HEADER, bomgraph, one_error, write_jsonl
+
+
+
+def _steps(n: int = 8, **at_4) -> list[dict]:
+    steps = [{"t": 0, "bearings": [[0, 0.5], [1, -0.5], [2, 2.0]]}] + [
+        {"t": t, "odom": [0.1, 0.0, 0.05],
+         "bearings": [[0, 0.5 + 0.05 * t], [1, -0.5 - 0.04 * t], [2, 2.0 + 0.03 * t]]}
+        for t in range(1, n)]
+    steps[4].update(at_4)
+    return steps
+
+
+@pytest.mark.parametrize("method", ["ekf", "ekf-invdepth"])
+@pytest.mark.parametrize("header,at_4,where", [
+    ({}, {"odom_sigma": [1e200, 0.0, 0.1]}, "line 6: 'odom_sigma': step 4: the ekf cannot use"),
+    ({}, {"odom": [1e200, 0.0, 0.1]}, "line 6: 'odom': step 4: the ekf cannot use"),
+    ({"odometry_sigma": [1e200, 0.0, 0.1]}, {},
+     "line 1: 'odometry_sigma': the ekf cannot use step 1's odometry"),
+    ({"bearing_sigma_rad": 4.0}, {}, "line 1: 'bearing_sigma_rad': the ekf cannot use"),
+])
+def test_an_ekf_refusal_names_the_file_and_line(tmp_path: Path, method: str, header: dict,
+                                                at_4: dict, where: str) -> None:
+    """The reader accepts these values (with a warning); the EKF's predict overflows on them,
+    or its filter refuses a bearing sigma above pi."""
+    stream = write_jsonl(tmp_path / "odd.jsonl", {**HEADER, **header}, _steps(**at_4))
+    est = tmp_path / "e.json"
+    est.write_text("kept\n")
+    proc = bomgraph("run", stream, "--method", method, "--out", est)
+    one_error(proc, f"{stream}, {where}", "fix the stream's")
+    assert est.read_text() == "kept\n"
+
+
+def test_an_ekf_refusal_in_compare_names_the_file_and_line(tmp_path: Path) -> None:
+    """``compare --streams`` reported the EKF's refusal naming the step only."""
+    stream = write_jsonl(tmp_path / "odd.jsonl", HEADER, _steps(odom=[1e200, 0.0, 0.1]))
+    proc = bomgraph("compare", "--streams", stream, "--methods", "ekf", "--out",
+                    tmp_path / "cmp", "--jobs", "1", "--no-progress", "--no-figures")
+    assert proc.returncode == 1, proc.stderr
+    err = proc.stderr.decode()
+    assert f"{stream}, line 6: 'odom': step 4: the EKF cannot use" in err, err
+    result = json.loads((tmp_path / "cmp" / "results.json").read_text())
+    assert "line 6: 'odom': step 4: the EKF cannot use" in json.dumps(result)
