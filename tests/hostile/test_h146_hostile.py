@@ -6,10 +6,13 @@ must be in (0, pi]"); now they name the stream's file, line and field, as STMDS'
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 
 import pytest
 from hostile_helpers import HEADER, bomgraph, one_error, write_jsonl
+
+from bomgraph import tables
 
 
 
@@ -52,3 +55,17 @@ def test_an_ekf_refusal_in_compare_names_the_file_and_line(tmp_path: Path) -> No
     assert f"{stream}, line 6: 'odom': step 4: the EKF cannot use" in err, err
     result = json.loads((tmp_path / "cmp" / "results.json").read_text())
     assert "line 6: 'odom': step 4: the EKF cannot use" in json.dumps(result)
+
+
+@pytest.mark.parametrize("value,fmt,scale,shown", [
+    (math.inf, ".2f", 100.0, "-"), (-math.inf, ".2f", 1.0, "-"), (math.nan, ".2f", 1.0, "-"),
+    (math.inf, ".4g", 1.0, "-"), (1e308, ".4g", 100.0, "1.000e+310"),
+    (1e308, ".2f", 100.0, "1.000e+310"), (0.0123, ".2f", 100.0, "1.23"),
+])
+def test_fixed_or_exponent_shows_what_is_not_finite_as_a_table_cell_does(
+        value: float, fmt: str, scale: float, shown: str) -> None:
+    """``fixed_or_exponent(inf, ".2f")`` was ``"Infinity"`` (a table's cell shows ``"-"``)
+    and a finite 1e308 m in a ``".4g"`` column of cm was ``"inf"``."""
+    assert tables.fixed_or_exponent(value, fmt, scale) == shown
+    cell = tables.format_table([tables.Column("v", "v", scale, fmt)], [{"v": value}], "text")
+    assert cell.splitlines()[-1].strip() == shown
