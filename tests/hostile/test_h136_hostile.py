@@ -175,7 +175,9 @@ def test_bounded_glob_matches_glob_below_its_bound(tmp_path: Path) -> None:
     assert bounded_glob(pattern, limit=6) == sorted(glob.glob(pattern, recursive=True))
     with pytest.raises(GlobTooWideError, match="more than 5 folders below"):  # 6: the top,
         bounded_glob(pattern, limit=5)         # a, a/b, c, c/d, c/d/e (not c/.hidden)
-    assert bounded_glob(f"{tmp_path}/*/*.jsonl", limit=1) == [str(tmp_path / "a/x.jsonl")]
+    assert bounded_glob(f"{tmp_path}/*/*.jsonl", limit=3) == [str(tmp_path / "a/x.jsonl")]
+    with pytest.raises(GlobTooWideError, match="more than 2 folders"):   # h146: the top, a
+        bounded_glob(f"{tmp_path}/*/*.jsonl", limit=2)                   # and c
 
 
 NL = "a\nb"   # a file name with a newline: shown as 'a\nb' (errors.shown_path)

@@ -69,3 +69,37 @@ def test_fixed_or_exponent_shows_what_is_not_finite_as_a_table_cell_does(
     assert tables.fixed_or_exponent(value, fmt, scale) == shown
     cell = tables.format_table([tables.Column("v", "v", scale, fmt)], [{"v": value}], "text")
     assert cell.splitlines()[-1].strip() == shown
+
+
+def test_a_stream_glob_without_double_star_through_a_link_loop_is_refused(
+        tmp_path: Path) -> None:
+    """``loop/*/*/.../*.jsonl`` (40 levels) through a folder holding two links to itself
+    searched 2^40 paths (17 levels took 3.4 s, each level doubles it): only ``**`` globs
+    were bounded."""
+    (tmp_path / "loop").mkdir()
+    for name in ("a", "b"):
+        (tmp_path / "loop" / name).symlink_to(".")
+    pattern = "loop/" + "*/" * 40 + "*.jsonl"
+    sweep = tmp_path / "sweep.toml"
+    sweep.write_text(f'streams = ["{pattern}"]\n[[methods]]\nname = "triangulate"\n')
+    proc = bomgraph("compare", "--config", sweep, "--out", tmp_path / "out", "--dry-run",
+                    timeout=120)
+    one_error(proc, "sweep.toml: streams[0]:", "would search more than 10,000 folders",
+              "or list the files")
+    assert not (tmp_path / "out").exists()
+
+
+def test_a_glob_without_double_star_is_glob_below_its_bound(tmp_path: Path) -> None:
+    import glob
+
+    from bomgraph.stream_globs import GlobTooWideError, bounded_glob
+
+    for rel in ("a/x.jsonl", "a/b/y.jsonl", "c/.h/z.jsonl", "c/d/e/w.jsonl", "c/d/v.jsonl"):
+        (tmp_path / rel).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / rel).write_text("")
+    pattern = f"{tmp_path}/*/*/*.jsonl"   # searches the top, a and c, then a/b and c/d: 5
+    assert bounded_glob(pattern, limit=5) == sorted(glob.glob(pattern)) == [
+        str(tmp_path / "a/b/y.jsonl"), str(tmp_path / "c/d/v.jsonl")]
+    with pytest.raises(GlobTooWideError, match="more than 4 folders"):
+        bounded_glob(pattern, limit=4)
+    assert bounded_glob(f"{tmp_path}/c/d/*.jsonl", limit=1) == [str(tmp_path / "c/d/v.jsonl")]
