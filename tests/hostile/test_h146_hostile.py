@@ -5,24 +5,15 @@ must be in (0, pi]"); now they name the stream's file, line and field, as STMDS'
 
 from __future__ import annotations
 
-import json
 import math
 from pathlib import Path
 
 import pytest
-from hostile_helpers import HEADER, bomgraph, one_error, write_jsonl
+from hostile_helpers import (HEADER, bomgraph, odd_steps, one_error, refused_in_compare,
+                              write_jsonl)
 
 from bomgraph import tables
 
-
-
-def _steps(n: int = 8, **at_4) -> list[dict]:
-    steps = [{"t": 0, "bearings": [[0, 0.5], [1, -0.5], [2, 2.0]]}] + [
-        {"t": t, "odom": [0.1, 0.0, 0.05],
-         "bearings": [[0, 0.5 + 0.05 * t], [1, -0.5 - 0.04 * t], [2, 2.0 + 0.03 * t]]}
-        for t in range(1, n)]
-    steps[4].update(at_4)
-    return steps
 
 
 @pytest.mark.parametrize("method", ["ekf", "ekf-invdepth"])
@@ -37,7 +28,7 @@ def test_an_ekf_refusal_names_the_file_and_line(tmp_path: Path, method: str, hea
                                                 at_4: dict, where: str) -> None:
     """The reader accepts these values (with a warning); the EKF's predict overflows on them,
     or its filter refuses a bearing sigma above pi."""
-    stream = write_jsonl(tmp_path / "odd.jsonl", {**HEADER, **header}, _steps(**at_4))
+    stream = write_jsonl(tmp_path / "odd.jsonl", {**HEADER, **header}, odd_steps(**at_4))
     est = tmp_path / "e.json"
     est.write_text("kept\n")
     proc = bomgraph("run", stream, "--method", method, "--out", est)
@@ -47,14 +38,9 @@ def test_an_ekf_refusal_names_the_file_and_line(tmp_path: Path, method: str, hea
 
 def test_an_ekf_refusal_in_compare_names_the_file_and_line(tmp_path: Path) -> None:
     """``compare --streams`` reported the EKF's refusal naming the step only."""
-    stream = write_jsonl(tmp_path / "odd.jsonl", HEADER, _steps(odom=[1e200, 0.0, 0.1]))
-    proc = bomgraph("compare", "--streams", stream, "--methods", "ekf", "--out",
-                    tmp_path / "cmp", "--jobs", "1", "--no-progress", "--no-figures")
-    assert proc.returncode == 1, proc.stderr
-    err = proc.stderr.decode()
-    assert f"{stream}, line 6: 'odom': step 4: the EKF cannot use" in err, err
-    result = json.loads((tmp_path / "cmp" / "results.json").read_text())
-    assert "line 6: 'odom': step 4: the EKF cannot use" in json.dumps(result)
+    stream = write_jsonl(tmp_path / "odd.jsonl", HEADER, odd_steps(odom=[1e200, 0.0, 0.1]))
+    refused_in_compare(tmp_path, stream, "ekf",
+                       f"{stream}, line 6: 'odom': step 4: the EKF cannot use")
 
 
 @pytest.mark.parametrize("value,fmt,scale,shown", [
