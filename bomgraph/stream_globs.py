@@ -3,6 +3,10 @@ its pattern before it names (``/**/*.jsonl``: the whole file system, over 90 s; 
 holding two links to itself: without end), so a glob with ``**`` counts the folders it would
 search first (those below ``runs*`` for ``runs*/**/*.jsonl``, not the folders beside them)
 and is refused beyond :data:`MAX_GLOB_FOLDERS`, naming the folder, before it is expanded.
+A glob without ``**`` is bounded the same way, level by level: each ``*`` searches every
+folder the pattern before it matches (``/*/*/*/*/*.jsonl`` searches some 10,000 folders here;
+``loop/*/*/.../*.jsonl`` through a folder holding two links to itself, 2^k paths for k
+levels: 3.4 s for 17, an hour for 27).
 """
 
 from __future__ import annotations
@@ -13,14 +17,14 @@ from typing import Iterable, Iterator
 
 from .errors import ConfigError, shown_path
 
-#: The most folders a stream glob with ``**`` may search (a recording collection of a few
+#: The most folders a stream glob may search (a recording collection of a few
 #: hundred runs in folders of their own is far below; counting that many takes a fraction of
 #: a second).
 MAX_GLOB_FOLDERS = 10_000
 
 
 class GlobTooWideError(ConfigError):
-    """A glob with ``**`` that would search more than :data:`MAX_GLOB_FOLDERS` folders."""
+    """A glob that would search more than :data:`MAX_GLOB_FOLDERS` folders."""
 
 
 def _head(pattern: str) -> str:
@@ -67,9 +71,34 @@ def _more_folders_than(tops: Iterable[str], limit: int) -> bool:
     return False
 
 
+def _too_wide_level(pattern: str, limit: int) -> str | None:
+    """The part of ``pattern`` (without ``**``) before the magic level at which it would
+    have searched more than ``limit`` folders in all, or None: each magic level searches the
+    folders the part before it matches, counted lazily (stopping at ``limit + 1``), level by
+    level, so that a level is expanded only once the levels before it are within bounds."""
+    parts = pattern.split(os.sep)
+    searched = 0
+    for i, part in enumerate(parts):
+        if not glob.has_magic(part):
+            continue
+        prefix = os.sep.join(parts[:i]) or (os.sep if pattern.startswith(os.sep) else
+                                            os.curdir)
+        for _ in _searched_roots(prefix):
+            searched += 1
+            if searched > limit:
+                return prefix
+    return None
+
+
 def bounded_glob(pattern: str, limit: int = MAX_GLOB_FOLDERS) -> list[str]:
-    """``glob.glob(pattern, recursive=True)``, sorted, or, for a ``**`` that would search more
-    than ``limit`` folders, :class:`GlobTooWideError` saying how to narrow it."""
+    """``glob.glob(pattern, recursive=True)``, sorted, or, for a ``**`` (or the ``*`` levels
+    of a pattern without one) that would search more than ``limit`` folders,
+    :class:`GlobTooWideError` saying how to narrow it."""
+    if "**" not in pattern.split(os.sep) and (at := _too_wide_level(pattern, limit)):
+        raise GlobTooWideError(
+            f"the pattern would search more than {limit:,} folders below {shown_path(at)}; "
+            f"name more of the folders the streams are in (e.g. 'runs/*/*.jsonl', not "
+            f"'/*/*/*/*.jsonl'), or list the files")
     if "**" in pattern.split(os.sep) and _more_folders_than(
             _searched_roots(head := _head(pattern)), limit):
         raise GlobTooWideError(

@@ -51,13 +51,17 @@ def fixed_or_exponent(value: float, fmt: str, scale: float = 1.0) -> str:
     """``value * scale`` formatted as ``fmt``, except a fixed-point ``fmt`` (``".2f"``) of a
     magnitude of :data:`HUGE` or more, shown in exponent form (``"6.976e+301"``: a 1e300 m map
     is not 300 digits of cm), the product taken exactly (a finite 1e307 m is 1e309 cm, beyond
-    a float, not ``inf``)."""
+    a float, not ``inf``), and a value that is not finite, shown ``"-"`` as a table's cell
+    shows it (``format`` said ``"Infinity"`` for ``inf`` and ``".2f"``)."""
+    if not math.isfinite(value):
+        return "-"
     x = value * scale
-    if not (abs(x) >= HUGE and fmt.endswith("f")):
+    fixed = fmt.endswith("f")
+    if math.isfinite(x) and not (fixed and abs(x) >= HUGE):
         return format(x, fmt)
     if math.isfinite(x):
         return format(x, ".3e")
-    return format(Decimal(value) * Decimal(scale), ".3e")
+    return format(Decimal(value) * Decimal(scale), ".3e" if fixed else fmt)
 
 
 #: LaTeX's ten special characters and what prints each as itself (a method name or file name

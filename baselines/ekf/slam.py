@@ -23,6 +23,7 @@ from bomgraph.stream import Step, StreamHeader
 from .coloured import ColouredBearingError, ray_directions
 from .config import BearingEkfConfig
 from .filter import BearingEkf, BearingModel, FilterNumericalError, JacobianRows
+from .refusals import checked_header, odometry_refusal
 from .models import (bearing_and_jacobian, invdepth_bearing_and_jacobian, invdepth_to_xy,
                      path_heading_noise, second_order_variance)
 from .robust import BearingVariances
@@ -41,7 +42,7 @@ class EkfSlam:
 
     def __init__(self, header: StreamHeader, start_pose: tuple[float, float, float],
                  config: BearingEkfConfig) -> None:
-        self._header = header
+        self._header = checked_header(header)  # a refusal names the stream's file and line
         self.filter = BearingEkf(np.asarray(start_pose, dtype=float),
                                  np.diag(np.asarray(config.initial_pose_sigma, float) ** 2),
                                  header.bearing_sigma_rad,
@@ -536,8 +537,8 @@ class EkfSlam:
         if step.odom is not None:
             try:
                 self._predict(np.asarray(step.odom, float), step.odometry_sigma(self._header))
-            except FilterNumericalError as exc:
-                raise FilterNumericalError(f"step {step.t}: {exc}") from None
+            except FilterNumericalError as exc:  # the stream's file and line name the field
+                raise odometry_refusal(exc, step, self._header) from None
         ids, z = step.landmark_ids, step.bearings_rad
         if ids.size:
             in_state = self._update_mapped(ids, z)

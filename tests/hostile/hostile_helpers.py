@@ -98,6 +98,28 @@ HEADER = {"format": "bomgraph-stream", "version": 1, "bearing_sigma_rad": 0.05,
           "odometry_sigma": [0.03, 0.0, 0.05]}
 
 
+def odd_steps(n: int = 8, **at_4) -> list[dict]:
+    """``n`` steps seeing three landmarks, step 4's keys updated with ``at_4`` (its line is
+    line 6 of a stream file: a method's refusal of a value there names that line)."""
+    steps = [{"t": 0, "bearings": [[0, 0.5], [1, -0.5], [2, 2.0]]}] + [
+        {"t": t, "odom": [0.1, 0.0, 0.05],
+         "bearings": [[0, 0.5 + 0.05 * t], [1, -0.5 - 0.04 * t], [2, 2.0 + 0.03 * t]]}
+        for t in range(1, n)]
+    steps[4].update(at_4)
+    return steps
+
+
+def refused_in_compare(folder: Path, stream: Path, method: str, where: str) -> None:
+    """``compare --streams STREAM --methods METHOD`` fails the run (exit 1) and says ``where``
+    on stderr and in results.json."""
+    proc = bomgraph("compare", "--streams", stream, "--methods", method, "--out",
+                    folder / "cmp", "--jobs", "1", "--no-progress", "--no-figures")
+    assert proc.returncode == 1, proc.stderr
+    err = proc.stderr.decode()
+    assert where in err, err
+    assert where in (folder / "cmp" / "results.json").read_text()
+
+
 def holds_sigint_and_sigterm(pid: int) -> bool:
     """Whether the process ``pid`` has SIGINT and SIGTERM blocked (Linux ``/proc``)."""
     import signal

@@ -9,16 +9,8 @@ import re
 from pathlib import Path
 
 import pytest
-from hostile_helpers import HEADER, bomgraph, one_error, write_jsonl
-
-
-def _steps(n: int = 8, **at_4) -> list[dict]:
-    steps = [{"t": 0, "bearings": [[0, 0.5], [1, -0.5], [2, 2.0]]}] + [
-        {"t": t, "odom": [0.1, 0.0, 0.05],
-         "bearings": [[0, 0.5 + 0.05 * t], [1, -0.5 - 0.04 * t], [2, 2.0 + 0.03 * t]]}
-        for t in range(1, n)]
-    steps[4].update(at_4)
-    return steps
+from hostile_helpers import (HEADER, bomgraph, odd_steps, one_error, refused_in_compare,
+                              write_jsonl)
 
 
 @pytest.mark.parametrize("header,at_4,where", [
@@ -33,7 +25,7 @@ def test_an_stmds_refusal_names_the_file_and_line(tmp_path: Path, header: dict, 
     """``bomgraph run --method stmds-smacof`` on a stream whose odometry the reader accepts
     (with a warning) but STMDS refuses said "STMDS cannot use step 4's odom_sigma ...",
     naming the step, not the file and the line; an estimate already at --out is kept."""
-    stream = write_jsonl(tmp_path / "odd.jsonl", {**HEADER, **header}, _steps(**at_4))
+    stream = write_jsonl(tmp_path / "odd.jsonl", {**HEADER, **header}, odd_steps(**at_4))
     est = tmp_path / "e.json"
     est.write_text("kept\n")
     proc = bomgraph("run", stream, "--method", "stmds-smacof", "--out",
@@ -45,14 +37,9 @@ def test_an_stmds_refusal_names_the_file_and_line(tmp_path: Path, header: dict, 
 
 def test_an_stmds_refusal_in_compare_names_the_file_and_line(tmp_path: Path) -> None:
     """``compare --streams`` gave the same refusal naming the step only."""
-    stream = write_jsonl(tmp_path / "odd.jsonl", HEADER, _steps(odom_sigma=[1e8, 0.0, 0.1]))
-    proc = bomgraph("compare", "--streams", stream, "--methods", "stmds-smacof", "--out",
-                    tmp_path / "cmp", "--jobs", "1", "--no-progress", "--no-figures")
-    assert proc.returncode == 1, proc.stderr
-    err = proc.stderr.decode()
-    assert f"{stream}, line 6: 'odom_sigma': step 4: STMDS cannot use" in err, err
-    result = json.loads((tmp_path / "cmp" / "results.json").read_text())
-    assert "line 6: 'odom_sigma'" in json.dumps(result)
+    stream = write_jsonl(tmp_path / "odd.jsonl", HEADER, odd_steps(odom_sigma=[1e8, 0.0, 0.1]))
+    refused_in_compare(tmp_path, stream, "stmds-smacof",
+                       f"{stream}, line 6: 'odom_sigma': step 4: STMDS cannot use")
 
 
 def _estimate(folder: Path, name: str, keep=lambda i: True, scale: float = 1.0,
@@ -175,7 +162,9 @@ def test_bounded_glob_matches_glob_below_its_bound(tmp_path: Path) -> None:
     assert bounded_glob(pattern, limit=6) == sorted(glob.glob(pattern, recursive=True))
     with pytest.raises(GlobTooWideError, match="more than 5 folders below"):  # 6: the top,
         bounded_glob(pattern, limit=5)         # a, a/b, c, c/d, c/d/e (not c/.hidden)
-    assert bounded_glob(f"{tmp_path}/*/*.jsonl", limit=1) == [str(tmp_path / "a/x.jsonl")]
+    assert bounded_glob(f"{tmp_path}/*/*.jsonl", limit=3) == [str(tmp_path / "a/x.jsonl")]
+    with pytest.raises(GlobTooWideError, match="more than 2 folders"):   # h146: the top, a
+        bounded_glob(f"{tmp_path}/*/*.jsonl", limit=2)                   # and c
 
 
 NL = "a\nb"   # a file name with a newline: shown as 'a\nb' (errors.shown_path)

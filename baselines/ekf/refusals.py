@@ -1,0 +1,49 @@
+"""The EKF mappers' refusals of values of a valid stream (a bearing sigma above pi, an
+odometry increment or sigma the predict overflows on) as :class:`StreamValueError`: they name
+the step and the field, and ``bomgraph run`` and ``compare`` name the stream's file and line
+(:func:`bomgraph.stream_file.located`), as they do for the reader's refusals and STMDS's."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from bomgraph.errors import StreamValueError
+from bomgraph.stream import Step, StreamHeader
+
+from .filter import FilterNumericalError
+
+
+def checked_header(header: StreamHeader) -> StreamHeader:
+    """``header``, refused if its ``bearing_sigma_rad`` is outside ``(0, pi]`` (the reader
+    accepts one above pi with a warning; :class:`~baselines.ekf.filter.BearingEkf` cannot
+    use it)."""
+    sigma = header.bearing_sigma_rad
+    if not (math.isfinite(sigma) and 0 < sigma <= math.pi):
+        raise StreamValueError(
+            f"the EKF cannot use a bearing std. dev. of {sigma:g} rad: it must be in (0, pi] "
+            f"(a larger sigma carries no information); fix the stream's bearing_sigma_rad",
+            t=None, key="bearing_sigma_rad")
+    return header
+
+
+def odometry_refusal(exc: FilterNumericalError, step: Step,
+                     header: StreamHeader) -> StreamValueError:
+    """Step ``step``'s predict overflowed (``exc``): the refusal names the field at fault,
+    the larger of the move and its sigma: ``odom``, else the step's ``odom_sigma`` or, when
+    the step has none, the header's ``odometry_sigma`` (line 1)."""
+    odom = np.abs(np.asarray(step.odom, float))
+    sigma = np.abs(np.asarray(step.odometry_sigma(header), float))
+    if not float(np.nanmax(sigma, initial=0.0)) > float(np.nanmax(odom, initial=0.0)):
+        key, t, what = "odom", step.t, "odometry"
+    elif step.odom_sigma is not None:
+        key, t, what = "odom_sigma", step.t, "sigmas"
+    else:
+        key, t, what = "odometry_sigma", None, "sigmas"
+    whose = "this step's" if t is not None else f"step {step.t}'s"
+    return StreamValueError(f"the EKF cannot use {whose} odometry: {exc}; fix the stream's "
+                            f"{what}", t=t, key=key)
+
+
+__all__ = ["checked_header", "odometry_refusal"]
