@@ -6,6 +6,7 @@ import glob
 from pathlib import Path
 
 import pytest
+from hostile_helpers import HEADER, bomgraph, odd_steps, one_error, write_jsonl
 
 from bomgraph.stream_globs import GlobTooWideError, bounded_glob
 
@@ -32,3 +33,14 @@ def test_a_double_star_glob_is_glob_below_its_bound(tmp_path: Path) -> None:
     for pattern in (f"{tmp_path}/r*/*/**/*.jsonl", f"{tmp_path}/[rs]?/**/*.jsonl",
                     f"{tmp_path}/*/**/*.jsonl"):
         assert bounded_glob(pattern) == sorted(glob.glob(pattern, recursive=True)) != []
+
+
+def test_an_ekf_step_turning_too_far_for_its_sub_steps_is_refused(tmp_path: Path) -> None:
+    """With ``max_predict_turn_rad`` a step turning 1e12 rad (the reader warns and accepts
+    it) was predicted in 2e12 sub-steps, without end; now it is refused at its line."""
+    stream = write_jsonl(tmp_path / "odd.jsonl", HEADER, odd_steps(odom=[0.1, 0.0, 1e12]))
+    proc = bomgraph("run", stream, "--method", "ekf", "--option", "max_predict_turn_rad=0.5",
+                    "--out", tmp_path / "e.json", timeout=120)
+    one_error(proc, f"{stream}, line 6: 'odom': step 4: the EKF cannot use",
+              "more than 10,000 predicts of max_predict_turn_rad = 0.5 rad each")
+    assert not (tmp_path / "e.json").exists()
