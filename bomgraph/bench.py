@@ -31,8 +31,8 @@ from typing import Any, Callable, Iterator, Mapping, Sequence
 import numpy as np
 
 from .checks import echo, instance, is_integer, option_named
-from .errors import (ConfigError, OutOfRangeError, StreamFormatError, TooFewLandmarksError,
-                     UnknownMethodError)
+from .errors import (BomgraphError, ConfigError, OutOfRangeError, StreamFormatError,
+                     TooFewLandmarksError, UnknownMethodError)
 from .estimate_file import write_estimate
 from .evaluate import score_estimate
 from .experiments import Task
@@ -393,6 +393,25 @@ def execute_counted(tasks: Sequence[Task], executor: Executor = Executor(), *,
         return _execute_counted(tasks, executor, cache_dir, progress)
 
 
+def _check_arm_options(tasks: Sequence[Task]) -> None:
+    """Refuse, before any run, an arm (or reference) whose method or options would fail every
+    run alike (an unknown option, a hybrid's ``seed_method``), as ``compare``'s ``--methods``
+    and a sweep file's are (h148: ``execute`` ran the sweep, failing each such run)."""
+    from .mapper import check_method_options
+
+    seen: set[str] = set()
+    for arm in (a for t in tasks for a in (t.arm, t.reference) if a is not None):
+        key = json.dumps([arm.method, arm.key()["options"]], sort_keys=True)
+        if key in seen:
+            continue
+        try:
+            check_method_options(arm.method, arm.options)
+        except BomgraphError as exc:
+            raise ConfigError(f"execute(): arm {arm.label!r} ({arm.method}, options "
+                              f"{echo(dict(arm.options))}): {exc}") from None
+        seen.add(key)
+
+
 def _execute_counted(tasks: Sequence[Task], executor: Executor,
                      cache_dir: str | os.PathLike[str] | None,
                      progress: Callable[[int, int], None] | None
@@ -411,6 +430,7 @@ def _execute_counted(tasks: Sequence[Task], executor: Executor,
         executor = Executor("serial")
     if executor.backend != "serial":
         refuse_runtime_methods(tasks, executor.backend)
+    _check_arm_options(tasks)
     new_sweep()  # a plugin module reloaded, a value of it set since the last sweep: new keys
     forget_failures()  # a reference that failed in the last sweep here runs again (h73)
     if cache_dir is not None and bomgraph_edited():

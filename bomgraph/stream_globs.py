@@ -6,7 +6,8 @@ and is refused beyond :data:`MAX_GLOB_FOLDERS`, naming the folder, before it is 
 A glob without ``**`` is bounded the same way, level by level: each ``*`` searches every
 folder the pattern before it matches (``/*/*/*/*/*.jsonl`` searches some 10,000 folders here;
 ``loop/*/*/.../*.jsonl`` through a folder holding two links to itself, 2^k paths for k
-levels: 3.4 s for 17, an hour for 27).
+levels: 3.4 s for 17, an hour for 27), and so are the ``*`` levels before a ``**``
+(``loop/*/.../*/x/**/*.jsonl`` expands ``loop/*/.../*/x`` first).
 """
 
 from __future__ import annotations
@@ -91,15 +92,17 @@ def _too_wide_level(pattern: str, limit: int) -> str | None:
 
 
 def bounded_glob(pattern: str, limit: int = MAX_GLOB_FOLDERS) -> list[str]:
-    """``glob.glob(pattern, recursive=True)``, sorted, or, for a ``**`` (or the ``*`` levels
-    of a pattern without one) that would search more than ``limit`` folders,
+    """``glob.glob(pattern, recursive=True)``, sorted, or, for a ``**`` or the ``*`` levels
+    of a pattern (those before its ``**``) that would search more than ``limit`` folders,
     :class:`GlobTooWideError` saying how to narrow it."""
-    if "**" not in pattern.split(os.sep) and (at := _too_wide_level(pattern, limit)):
+    recursive = "**" in pattern.split(os.sep)
+    # the levels before a ** are expanded first (``loop/*/.../*/x/**/*.jsonl``): bounded too
+    if at := _too_wide_level(_head(pattern) if recursive else pattern, limit):
         raise GlobTooWideError(
             f"the pattern would search more than {limit:,} folders below {shown_path(at)}; "
             f"name more of the folders the streams are in (e.g. 'runs/*/*.jsonl', not "
             f"'/*/*/*/*.jsonl'), or list the files")
-    if "**" in pattern.split(os.sep) and _more_folders_than(
+    if recursive and _more_folders_than(
             _searched_roots(head := _head(pattern)), limit):
         raise GlobTooWideError(
             f"'**' would search more than {limit:,} folders below {shown_path(head)}; "

@@ -46,4 +46,24 @@ def odometry_refusal(exc: FilterNumericalError, step: Step,
                             f"{what}", t=t, key=key)
 
 
-__all__ = ["checked_header", "odometry_refusal"]
+#: The most sub-steps ``max_predict_turn_rad`` splits one step's predict into (h148: a step
+#: turning 1e12 rad, which the reader accepts with a warning, was 2e12 predicts, without end).
+MAX_PREDICT_SUBSTEPS = 10_000
+
+
+def predict_substeps(turn: float, max_turn: float | None) -> int:
+    """How many sub-steps a step turning ``turn`` rad is predicted in: one without
+    ``max_predict_turn_rad``, else ``ceil(|turn| / max_turn)``, refused as
+    :class:`FilterNumericalError` (which :func:`odometry_refusal` names) beyond
+    :data:`MAX_PREDICT_SUBSTEPS`."""
+    if max_turn is None:
+        return 1
+    ratio = abs(turn) / max_turn
+    if not ratio <= MAX_PREDICT_SUBSTEPS:
+        raise FilterNumericalError(
+            f"it turns {turn:g} rad, more than {MAX_PREDICT_SUBSTEPS:,} predicts of "
+            f"max_predict_turn_rad = {max_turn:g} rad each")
+    return max(math.ceil(ratio), 1)
+
+
+__all__ = ["MAX_PREDICT_SUBSTEPS", "checked_header", "odometry_refusal", "predict_substeps"]

@@ -23,7 +23,7 @@ from bomgraph.stream import Step, StreamHeader
 from .coloured import ColouredBearingError, ray_directions
 from .config import BearingEkfConfig
 from .filter import BearingEkf, BearingModel, FilterNumericalError, JacobianRows
-from .refusals import checked_header, odometry_refusal
+from .refusals import checked_header, odometry_refusal, predict_substeps
 from .models import (bearing_and_jacobian, invdepth_bearing_and_jacobian, invdepth_to_xy,
                      path_heading_noise, second_order_variance)
 from .robust import BearingVariances
@@ -558,7 +558,7 @@ class EkfSlam:
         """The odometry predict, in ``k`` sub-steps along the arc when the step turns by more
         than ``max_predict_turn_rad`` (each ``arc_root(odom, k)`` with ``sigma / sqrt(k)``),
         with :func:`~baselines.ekf.models.path_heading_noise` when ``path_heading_noise``."""
-        k = 1 if self._max_turn is None else math.ceil(abs(float(odom[2])) / self._max_turn)
+        k = predict_substeps(float(odom[2]), self._max_turn)  # refused beyond 10,000
         if k > 1:
             odom, sigma = arc_root(odom, k), np.asarray(sigma, float) / math.sqrt(k)
         extra = (path_heading_noise(odom, float(np.ravel(sigma)[2])),) if self._path_noise else ()
