@@ -28,11 +28,15 @@ class GlobTooWideError(ConfigError):
     """A glob that would search more than :data:`MAX_GLOB_FOLDERS` folders."""
 
 
+def _prefix(pattern: str, parts: list[str], i: int) -> str:
+    """The folder ``parts[:i]`` of ``pattern`` names (``.`` or ``/`` when none)."""
+    return os.sep.join(parts[:i]) or (os.sep if pattern.startswith(os.sep) else os.curdir)
+
+
 def _head(pattern: str) -> str:
     """The part of ``pattern`` before its first ``**`` (``.`` or ``/`` when none)."""
     parts = pattern.split(os.sep)
-    return os.sep.join(parts[:parts.index("**")]) or (
-        os.sep if pattern.startswith(os.sep) else os.curdir)
+    return _prefix(pattern, parts, parts.index("**"))
 
 
 def _searched_roots(head: str) -> Iterator[str]:
@@ -82,8 +86,7 @@ def _too_wide_level(pattern: str, limit: int) -> str | None:
     for i, part in enumerate(parts):
         if not glob.has_magic(part):
             continue
-        prefix = os.sep.join(parts[:i]) or (os.sep if pattern.startswith(os.sep) else
-                                            os.curdir)
+        prefix = _prefix(pattern, parts, i)
         for _ in _searched_roots(prefix):
             searched += 1
             if searched > limit:
