@@ -29,6 +29,9 @@ from .robust import ROBUST_UPDATES
 #: The linearisations of :attr:`BearingEkfConfig.jacobians`.
 JACOBIANS = ("oc", "fej", "plain")
 
+#: The choices of :attr:`EkfConfig.anchor_test` (:mod:`baselines.ekf.anchor`).
+ANCHOR_TESTS = ("none", "conversion", "sighting")
+
 #: The choices of :attr:`BearingEkfConfig.bearing_variance_scale`.
 BEARING_VARIANCE_SCALES = ("fixed", "innovation")
 
@@ -236,6 +239,13 @@ class EkfConfig(BearingEkfConfig):
         candidate is initialised) or ``"inverse-depth"`` (the candidate is an inverse-depth
         feature, as in ``ekf-invdepth``, updated by every bearing at once; it joins the map
         as ``[x, y]`` when Bailey's test passes on its conversion).
+    anchor_test : ``"none"`` (every preset): a feature's first bearing is never tested.
+        ``"conversion"``: an inverse-depth candidate's anchor bearing is tested against the
+        rest of the filter (its leave-one-out residual, at the gate) just before Bailey's
+        test, once the later sightings know its error at least as well as the anchor does;
+        a failing one is taken out of the filter and the feature goes on from its later
+        sightings. ``"sighting"``: also at each step the feature is sighted
+        (:mod:`baselines.ekf.anchor`). Needs ``candidates="inverse-depth"``.
     """
 
     PRESETS: ClassVar[Mapping[str, Mapping[str, Any]]] = {
@@ -247,9 +257,18 @@ class EkfConfig(BearingEkfConfig):
     inconsistent_parallax_rad: float = math.radians(15.0)
     max_pending_steps: int = 30
     candidates: str = "clones"
+    anchor_test: str = "none"
 
     def __post_init__(self) -> None:
         super().__post_init__()
+        if self.anchor_test not in ANCHOR_TESTS:
+            raise ConfigError(f"anchor_test must be one of {', '.join(ANCHOR_TESTS)} (never; "
+                              f"before a candidate joins the map; also at each sighting), got "
+                              f"{self.anchor_test!r}")
+        if self.anchor_test != "none" and self.candidates == "clones":
+            raise ConfigError(f"anchor_test={self.anchor_test!r} needs "
+                              f"candidates='inverse-depth' (preset 'real'): the clone "
+                              f"candidates test their anchor by triangulation already")
         if not (self.init_kl_max > 0):
             raise ConfigError(f"init_kl_max must be > 0, got {self.init_kl_max}")
         if not 0 < self.inconsistent_parallax_rad < math.pi:
@@ -303,4 +322,4 @@ class InverseDepthConfig(BearingEkfConfig):
                               f"{self.relative_depth_check!r}")
 
 
-__all__ = ["BEARING_VARIANCE_SCALES", "BearingEkfConfig", "EkfConfig", "InverseDepthConfig", "JACOBIANS"]
+__all__ = ["ANCHOR_TESTS", "BEARING_VARIANCE_SCALES", "BearingEkfConfig", "EkfConfig", "InverseDepthConfig", "JACOBIANS"]

@@ -248,6 +248,31 @@ class BearingEkf:
         k = np.flatnonzero(keep)
         self._set_state(self.kf.x[k], self.kf.P[k[:, None], k])
 
+    def retract(self, i: int, var: float) -> None:
+        """Take out of the state the information of a direct measurement ``0 = x_i + v``,
+        ``v ~ N(0, var)``, that an earlier update (or ``augment``) put in: the inverse of that
+        EKF update, in place. With ``s = var - P_ii``, ``x += P[:, i] x_i / s``, ``P +=
+        P[:, i] P[i, :] / s`` (``x_i / s`` is ``(z - x_i)`` against the residual's variance
+        ``var - P_ii``, the information form ``P'^-1 = P^-1 - e_i e_i^T / var``). ``O(n^2)``.
+
+        Raises
+        ------
+        FilterNumericalError
+            If ``s`` is not a finite number > 0 (the rest of the state does not know ``x_i``
+            at all); the state is left as it was.
+        """
+        kf = self.kf
+        P = kf.P
+        s = float(var) - float(P[i, i])
+        if not (math.isfinite(s) and s > 0):
+            raise FilterNumericalError(f"cannot retract a measurement of state {i}: its variance "
+                                       f"{var} does not exceed the state's {P[i, i]}")
+        col = P[:, i].copy()
+        self.version += 1
+        kf.x += col * (kf.x[i] / s)
+        kf.x[self._angle_index] = wrap_angle(kf.x[self._angle_index])
+        P += np.multiply.outer(col, col / s)
+
     # -- filtering --------------------------------------------------------------------------
     def predict(self, odom: np.ndarray, odom_sigma: np.ndarray,
                 odom_cov_extra: np.ndarray | None = None) -> None:

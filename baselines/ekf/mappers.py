@@ -80,6 +80,7 @@ from bomgraph.config import resolve
 from bomgraph.geometry import compose
 from bomgraph.stream import Step, StreamHeader
 
+from .anchor import AnchorTestMixin
 from .config import EkfConfig, InverseDepthConfig
 from .models import invdepth_conversion_kl, invdepth_to_xy, triangulation_kl
 from .range_prior import RhoPriorMixin
@@ -88,7 +89,7 @@ from .slam import BLOCK_CLONE, BLOCK_IDP, BLOCK_LM, EkfSlam
 _R3 = np.arange(3)
 
 
-class EkfMapper(RhoPriorMixin, EkfSlam):
+class EkfMapper(AnchorTestMixin, RhoPriorMixin, EkfSlam):
     """Bearing-only EKF-SLAM with Bailey's constrained (delayed) initialisation (``ekf``).
 
     Parameters
@@ -226,6 +227,7 @@ class EkfMapper(RhoPriorMixin, EkfSlam):
         pending = sorted(self._candidates) + sorted(k[1] for k in self._sizes if k[0] == BLOCK_IDP)
         return ids, xy, cov, {"pending": pending, "reanchored": self.n_reanchored,
                               "converted": self.n_converted, **self._rho_prior_info(),
+                              **self._anchor_info(),
                               **{f"init_rejected_{k}": v for k, v in self.n_rejected.items()}}
 
 

@@ -31,9 +31,9 @@ from .rows import feature_rows, landmark_rows, take_rows
 from .variance_scale import InnovationVarianceScale
 
 #: the kinds of state block, first in each block's key ``(kind, id)``: a landmark's xy, a pose
-#: clone, an inverse-depth feature (and a bias, of this module only).
-BLOCK_LM, BLOCK_CLONE, BLOCK_IDP, _BIAS = "lm", "clone", "idp", "bias"
-_SIZE = {BLOCK_LM: 2, BLOCK_CLONE: 3, BLOCK_IDP: 4, _BIAS: 1}
+#: clone, an inverse-depth feature, its anchor bearing's error (:mod:`.anchor`) and a bias.
+BLOCK_LM, BLOCK_CLONE, BLOCK_IDP, BLOCK_ANCHOR, _BIAS = "lm", "clone", "idp", "anchor", "bias"
+_SIZE = {BLOCK_LM: 2, BLOCK_CLONE: 3, BLOCK_IDP: 4, BLOCK_ANCHOR: 1, _BIAS: 1}
 _RANGE = np.arange(4)
 
 
@@ -597,4 +597,4 @@ class EkfSlam:
                            pose_cov=self._pose_covs[:n], info=info)
 
 
-__all__ = ["EkfSlam", "BLOCK_LM", "BLOCK_CLONE", "BLOCK_IDP"]
+__all__ = ["EkfSlam", "BLOCK_ANCHOR", "BLOCK_LM", "BLOCK_CLONE", "BLOCK_IDP"]
