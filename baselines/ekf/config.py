@@ -29,9 +29,6 @@ from .robust import ROBUST_UPDATES
 #: The linearisations of :attr:`BearingEkfConfig.jacobians`.
 JACOBIANS = ("oc", "fej", "plain")
 
-#: The choices of :attr:`EkfConfig.anchor_test` (:mod:`baselines.ekf.anchor`).
-ANCHOR_TESTS = ("none", "conversion", "sighting")
-
 #: The choices of :attr:`BearingEkfConfig.bearing_variance_scale`.
 BEARING_VARIANCE_SCALES = ("fixed", "innovation")
 
@@ -239,13 +236,12 @@ class EkfConfig(BearingEkfConfig):
         candidate is initialised) or ``"inverse-depth"`` (the candidate is an inverse-depth
         feature, as in ``ekf-invdepth``, updated by every bearing at once; it joins the map
         as ``[x, y]`` when Bailey's test passes on its conversion).
-    anchor_test : ``"none"`` (every preset): a feature's first bearing is never tested.
-        ``"conversion"``: an inverse-depth candidate's anchor bearing is tested against the
-        rest of the filter (its leave-one-out residual, at the gate) just before Bailey's
-        test, once the later sightings know its error at least as well as the anchor does;
-        a failing one is taken out of the filter and the feature goes on from its later
-        sightings. ``"sighting"``: also at each step the feature is sighted
-        (:mod:`baselines.ekf.anchor`). Needs ``candidates="inverse-depth"``.
+    anchor_test : True: each inverse-depth candidate's first (anchor) bearing, which no gate
+        can test, is tested once the later sightings know its error at least as well as the
+        anchor does (its leave-one-out residual, at the gate; before or after the feature
+        joins the map), and a failing one is taken out of the filter
+        (:mod:`baselines.ekf.anchor`). False (every preset): never. Needs
+        ``candidates="inverse-depth"``.
     """
 
     PRESETS: ClassVar[Mapping[str, Mapping[str, Any]]] = {
@@ -257,18 +253,16 @@ class EkfConfig(BearingEkfConfig):
     inconsistent_parallax_rad: float = math.radians(15.0)
     max_pending_steps: int = 30
     candidates: str = "clones"
-    anchor_test: str = "none"
+    anchor_test: bool = False
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        if self.anchor_test not in ANCHOR_TESTS:
-            raise ConfigError(f"anchor_test must be one of {', '.join(ANCHOR_TESTS)} (never; "
-                              f"before a candidate joins the map; also at each sighting), got "
-                              f"{self.anchor_test!r}")
-        if self.anchor_test != "none" and self.candidates == "clones":
-            raise ConfigError(f"anchor_test={self.anchor_test!r} needs "
-                              f"candidates='inverse-depth' (preset 'real'): the clone "
-                              f"candidates test their anchor by triangulation already")
+        if not isinstance(self.anchor_test, (bool, np.bool_)):
+            raise ConfigError(f"anchor_test must be true or false, got {self.anchor_test!r}")
+        if self.anchor_test and self.candidates == "clones":
+            raise ConfigError("anchor_test=true needs candidates='inverse-depth' (preset "
+                              "'real'): the clone candidates keep their bearings outside the "
+                              "filter")
         if not (self.init_kl_max > 0):
             raise ConfigError(f"init_kl_max must be > 0, got {self.init_kl_max}")
         if not 0 < self.inconsistent_parallax_rad < math.pi:
@@ -322,4 +316,4 @@ class InverseDepthConfig(BearingEkfConfig):
                               f"{self.relative_depth_check!r}")
 
 
-__all__ = ["ANCHOR_TESTS", "BEARING_VARIANCE_SCALES", "BearingEkfConfig", "EkfConfig", "InverseDepthConfig", "JACOBIANS"]
+__all__ = ["BEARING_VARIANCE_SCALES", "BearingEkfConfig", "EkfConfig", "InverseDepthConfig", "JACOBIANS"]

@@ -248,30 +248,36 @@ class BearingEkf:
         k = np.flatnonzero(keep)
         self._set_state(self.kf.x[k], self.kf.P[k[:, None], k])
 
-    def retract(self, i: int, var: float) -> None:
-        """Take out of the state the information of a direct measurement ``0 = x_i + v``,
-        ``v ~ N(0, var)``, that an earlier update (or ``augment``) put in: the inverse of that
-        EKF update, in place. With ``s = var - P_ii``, ``x += P[:, i] x_i / s``, ``P +=
-        P[:, i] P[i, :] / s`` (``x_i / s`` is ``(z - x_i)`` against the residual's variance
-        ``var - P_ii``, the information form ``P'^-1 = P^-1 - e_i e_i^T / var``). ``O(n^2)``.
+    def retract(self, idx: np.ndarray, var: float) -> None:
+        """Take out of the state the information of direct measurements ``0 = x_i + v_i``,
+        ``v_i ~ N(0, var)`` independent, ``i`` in ``idx``, that earlier updates (or
+        ``augment``) put in: the inverse of their EKF update, in place. With ``S = var I -
+        P[idx, idx]`` (the residuals' covariance), ``x += P[:, idx] S^-1 x[idx]``, ``P +=
+        P[:, idx] S^-1 P[idx, :]`` (the information form ``P'^-1 = P^-1 - E E^T / var``).
+        ``O(n^2 k)``.
 
         Raises
         ------
         FilterNumericalError
-            If ``s`` is not a finite number > 0 (the rest of the state does not know ``x_i``
-            at all); the state is left as it was.
+            If ``S`` is not positive definite (the rest of the state does not know those
+            states at all); the state is left as it was.
         """
         kf = self.kf
-        P = kf.P
-        s = float(var) - float(P[i, i])
-        if not (math.isfinite(s) and s > 0):
-            raise FilterNumericalError(f"cannot retract a measurement of state {i}: its variance "
-                                       f"{var} does not exceed the state's {P[i, i]}")
-        col = P[:, i].copy()
+        idx = np.asarray(idx, np.int64)
+        cols = kf.P[:, idx]                                       # (n, k)
+        s = var * np.eye(idx.size) - cols[idx]
+        chol, info = _potrf(0.5 * (s + s.T), lower=1)
+        if info == 0:
+            l_inv, info = _trtri(chol, lower=1)
+        if info != 0 or not math.isfinite(float(chol.sum())):
+            raise FilterNumericalError(f"cannot retract the measurements of states "
+                                       f"{idx.tolist()}: the rest of the state does not know "
+                                       f"them (variance {var} against theirs)")
+        w = cols @ l_inv.T                                        # P[:, idx] L^-T
         self.version += 1
-        kf.x += col * (kf.x[i] / s)
+        kf.x += w @ (l_inv @ kf.x[idx])
         kf.x[self._angle_index] = wrap_angle(kf.x[self._angle_index])
-        P += np.multiply.outer(col, col / s)
+        kf.P += w @ w.T
 
     # -- filtering --------------------------------------------------------------------------
     def predict(self, odom: np.ndarray, odom_sigma: np.ndarray,
