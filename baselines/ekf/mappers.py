@@ -46,7 +46,8 @@ Inverse-depth candidates, ``ekf`` with ``candidates="inverse-depth"`` (preset ``
     (:func:`~baselines.ekf.models.invdepth_conversion_kl` below ``init_kl_max``). Features not
     yet converted are not on the map (``info["pending"]``). A feature whose bearings fail the
     gate ``restart_after_gated`` times in a row started from an outlier and is started again
-    (``info["restarted"]``).
+    (``info["restarted"]``). With ``anchor_test`` (off in every preset) the first bearing is
+    also tested once the later sightings constrain it (:mod:`baselines.ekf.anchor`).
 
 Inverse depth, ``ekf-invdepth``
     A first sighting enters the state at once as ``[x0, y0, theta, rho]`` (anchor = robot
