@@ -42,7 +42,7 @@ from typing import Any, Callable
 import numpy as np
 
 from .filter import FilterNumericalError
-from .slam import _BIAS, BLOCK_ANCHOR, BLOCK_IDP, BLOCK_LM
+from .slam import BLOCK_ANCHOR, BLOCK_BIAS, BLOCK_IDP, BLOCK_LM
 
 #: The test is made once the rest of the filter holds at least this share of the anchor's own
 #: information on its error (``P_e <= sigma^2 / (1 + share)``).
@@ -73,7 +73,7 @@ class AnchorTestMixin:
         m = ids.size
         off = self._offset
         theta = [off[(BLOCK_IDP, i)] + 2 for i in ids.tolist()]
-        bias = [off[(_BIAS, i)] for i in ids.tolist() if (_BIAS, i) in off]
+        bias = [off[(BLOCK_BIAS, i)] for i in ids.tolist() if (BLOCK_BIAS, i) in off]
         idx = np.array([2, *theta, *bias], np.int64)
         jac = np.zeros((m, idx.size))
         jac[:, 0] = -1.0                                    # e = theta - psi (- z: the value 0)
