@@ -3,7 +3,7 @@
 ``models`` (motion and bearing models, Jacobians, Bailey's KL test, inverse depth), ``filter``
 (the filter: filterpy's ``ExtendedKalmanFilter`` holds the state, lean block predict and
 sparse update), ``config`` (options and presets), ``slam`` (the machinery both mappers share),
-``mappers`` (``ekf``, ``ekf-invdepth``).
+``mappers`` (``ekf``, ``ekf-invdepth``), ``anchor`` (``ekf``'s option ``anchor_test``).
 """
 
 from .config import BearingEkfConfig, EkfConfig, InverseDepthConfig

@@ -236,6 +236,12 @@ class EkfConfig(BearingEkfConfig):
         candidate is initialised) or ``"inverse-depth"`` (the candidate is an inverse-depth
         feature, as in ``ekf-invdepth``, updated by every bearing at once; it joins the map
         as ``[x, y]`` when Bailey's test passes on its conversion).
+    anchor_test : True: each inverse-depth candidate's first (anchor) bearing, which no gate
+        can test, is tested once the later sightings know its error at least as well as the
+        anchor does (its leave-one-out residual, at the gate; before or after the feature
+        joins the map), and a failing one is taken out of the filter
+        (:mod:`baselines.ekf.anchor`). False (every preset): never. Needs
+        ``candidates="inverse-depth"``.
     """
 
     PRESETS: ClassVar[Mapping[str, Mapping[str, Any]]] = {
@@ -247,9 +253,16 @@ class EkfConfig(BearingEkfConfig):
     inconsistent_parallax_rad: float = math.radians(15.0)
     max_pending_steps: int = 30
     candidates: str = "clones"
+    anchor_test: bool = False
 
     def __post_init__(self) -> None:
         super().__post_init__()
+        if not isinstance(self.anchor_test, (bool, np.bool_)):
+            raise ConfigError(f"anchor_test must be true or false, got {self.anchor_test!r}")
+        if self.anchor_test and self.candidates == "clones":
+            raise ConfigError("anchor_test=true needs candidates='inverse-depth' (preset "
+                              "'real'): the clone candidates keep their bearings outside the "
+                              "filter")
         if not (self.init_kl_max > 0):
             raise ConfigError(f"init_kl_max must be > 0, got {self.init_kl_max}")
         if not 0 < self.inconsistent_parallax_rad < math.pi:

@@ -248,6 +248,37 @@ class BearingEkf:
         k = np.flatnonzero(keep)
         self._set_state(self.kf.x[k], self.kf.P[k[:, None], k])
 
+    def retract(self, idx: np.ndarray, var: float) -> None:
+        """Take out of the state the information of direct measurements ``0 = x_i + v_i``,
+        ``v_i ~ N(0, var)`` independent, ``i`` in ``idx``, that earlier updates (or
+        ``augment``) put in: the inverse of their EKF update, in place. With ``S = var I -
+        P[idx, idx]`` (the residuals' covariance), ``x += P[:, idx] S^-1 x[idx]``, ``P +=
+        P[:, idx] S^-1 P[idx, :]`` (the information form ``P'^-1 = P^-1 - E E^T / var``).
+        ``O(n^2 k)``.
+
+        Raises
+        ------
+        FilterNumericalError
+            If ``S`` is not positive definite (the rest of the state does not know those
+            states at all); the state is left as it was.
+        """
+        kf = self.kf
+        idx = np.asarray(idx, np.int64)
+        cols = kf.P[:, idx]                                       # (n, k)
+        s = var * np.eye(idx.size) - cols[idx]
+        chol, info = _potrf(0.5 * (s + s.T), lower=1)
+        if info == 0:
+            l_inv, info = _trtri(chol, lower=1)
+        if info != 0 or not math.isfinite(float(chol.sum())):
+            raise FilterNumericalError(f"cannot retract the measurements of states "
+                                       f"{idx.tolist()}: the rest of the state does not know "
+                                       f"them (variance {var} against theirs)")
+        w = cols @ l_inv.T                                        # P[:, idx] L^-T
+        self.version += 1
+        kf.x += w @ (l_inv @ kf.x[idx])
+        kf.x[self._angle_index] = wrap_angle(kf.x[self._angle_index])
+        kf.P += w @ w.T
+
     # -- filtering --------------------------------------------------------------------------
     def predict(self, odom: np.ndarray, odom_sigma: np.ndarray,
                 odom_cov_extra: np.ndarray | None = None) -> None:

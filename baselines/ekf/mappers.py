@@ -46,7 +46,8 @@ Inverse-depth candidates, ``ekf`` with ``candidates="inverse-depth"`` (preset ``
     (:func:`~baselines.ekf.models.invdepth_conversion_kl` below ``init_kl_max``). Features not
     yet converted are not on the map (``info["pending"]``). A feature whose bearings fail the
     gate ``restart_after_gated`` times in a row started from an outlier and is started again
-    (``info["restarted"]``).
+    (``info["restarted"]``). With ``anchor_test`` (off in every preset) the first bearing is
+    also tested once the later sightings constrain it (:mod:`baselines.ekf.anchor`).
 
 Inverse depth, ``ekf-invdepth``
     A first sighting enters the state at once as ``[x0, y0, theta, rho]`` (anchor = robot
@@ -80,6 +81,7 @@ from bomgraph.config import resolve
 from bomgraph.geometry import compose
 from bomgraph.stream import Step, StreamHeader
 
+from .anchor import AnchorTestMixin
 from .config import EkfConfig, InverseDepthConfig
 from .models import invdepth_conversion_kl, invdepth_to_xy, triangulation_kl
 from .range_prior import RhoPriorMixin
@@ -88,7 +90,7 @@ from .slam import BLOCK_CLONE, BLOCK_IDP, BLOCK_LM, EkfSlam
 _R3 = np.arange(3)
 
 
-class EkfMapper(RhoPriorMixin, EkfSlam):
+class EkfMapper(AnchorTestMixin, RhoPriorMixin, EkfSlam):
     """Bearing-only EKF-SLAM with Bailey's constrained (delayed) initialisation (``ekf``).
 
     Parameters
@@ -226,6 +228,7 @@ class EkfMapper(RhoPriorMixin, EkfSlam):
         pending = sorted(self._candidates) + sorted(k[1] for k in self._sizes if k[0] == BLOCK_IDP)
         return ids, xy, cov, {"pending": pending, "reanchored": self.n_reanchored,
                               "converted": self.n_converted, **self._rho_prior_info(),
+                              **self._anchor_info(),
                               **{f"init_rejected_{k}": v for k, v in self.n_rejected.items()}}
 
 

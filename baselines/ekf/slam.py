@@ -31,9 +31,9 @@ from .rows import feature_rows, landmark_rows, take_rows
 from .variance_scale import InnovationVarianceScale
 
 #: the kinds of state block, first in each block's key ``(kind, id)``: a landmark's xy, a pose
-#: clone, an inverse-depth feature (and a bias, of this module only).
-BLOCK_LM, BLOCK_CLONE, BLOCK_IDP, _BIAS = "lm", "clone", "idp", "bias"
-_SIZE = {BLOCK_LM: 2, BLOCK_CLONE: 3, BLOCK_IDP: 4, _BIAS: 1}
+#: clone, an inverse-depth feature, its anchor bearing's error (:mod:`.anchor`), a coloured bias.
+BLOCK_LM, BLOCK_CLONE, BLOCK_IDP, BLOCK_ANCHOR, BLOCK_BIAS = "lm", "clone", "idp", "anchor", "bias"
+_SIZE = {BLOCK_LM: 2, BLOCK_CLONE: 3, BLOCK_IDP: 4, BLOCK_ANCHOR: 1, BLOCK_BIAS: 1}
 _RANGE = np.arange(4)
 
 
@@ -432,7 +432,7 @@ class EkfSlam:
             noise = np.tile([0.0, 0.0, self._white_sigma ** 2, self.rho_sigma ** 2], m)
             idx = np.arange(3)
             if col.enabled:         # theta = psi + z - b: the coloured error comes first
-                keys = [(_BIAS, int(i)) for i in ids]
+                keys = [(BLOCK_BIAS, int(i)) for i in ids]
                 self._add_blocks(keys, np.zeros(m), np.zeros(0, np.int64), np.zeros((m, 0)),
                                  np.full(m, col.bias_var_rad2))
                 bias = np.array([self._offset[k] for k in keys], np.int64)
@@ -504,7 +504,7 @@ class EkfSlam:
                     if run_length >= self._restart_after:
                         restart.append(i)
             if restart:
-                self._remove_blocks([(kind, i) for i in restart for kind in (BLOCK_IDP, _BIAS)
+                self._remove_blocks([(kind, i) for i in restart for kind in (BLOCK_IDP, BLOCK_BIAS)
                                      if (kind, i) in self._sizes])
                 self._coloured.forget(restart)
                 for i in restart:
@@ -521,7 +521,7 @@ class EkfSlam:
         col = self._coloured
         if not col.enabled:
             return None
-        bias = np.array([self._offset[(_BIAS, i)] for i in ids], np.int64)
+        bias = np.array([self._offset[(BLOCK_BIAS, i)] for i in ids], np.int64)
         x = self.filter.x
         a = col.factors(ids, ray_directions(x, kinds, offsets), float(x[2]))
         self.filter.decay(bias, a, (1.0 - a * a) * col.bias_var_rad2)
@@ -597,4 +597,4 @@ class EkfSlam:
                            pose_cov=self._pose_covs[:n], info=info)
 
 
-__all__ = ["EkfSlam", "BLOCK_LM", "BLOCK_CLONE", "BLOCK_IDP"]
+__all__ = ["EkfSlam", "BLOCK_ANCHOR", "BLOCK_BIAS", "BLOCK_LM", "BLOCK_CLONE", "BLOCK_IDP"]
