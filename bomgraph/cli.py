@@ -165,6 +165,19 @@ def cmd_plot(args: argparse.Namespace) -> int:
     return 0
 
 
+def _note_g2o_unmapped(src: Any, stream: Any) -> None:
+    """Say which observed landmarks a g2o export has no vertex for: g2o's loader drops
+    their bearing edges without a word."""
+    from .export import unmapped_landmarks
+
+    unmapped, n_bearings = unmapped_landmarks(src, stream)
+    if unmapped:
+        ids = " ".join(map(str, unmapped[:10])) + (" ..." if len(unmapped) > 10 else "")
+        print(f"bomgraph: note: {len(unmapped)} observed landmark(s) without an estimate "
+              f"have no VERTEX_XY (ids {ids}): g2o drops their {n_bearings} bearing edge(s) "
+              f"when it loads the file", file=sys.stderr)
+
+
 def cmd_export(args: argparse.Namespace) -> int:
     from .estimate_file import read_estimate
     from .errors import ExportError
@@ -207,6 +220,8 @@ def cmd_export(args: argparse.Namespace) -> int:
         print("bomgraph: note: the TUM time stamps are step indices; give --stream FILE to "
               "use the stream's time_s (as export --truth does), so that evo can pair them",
               file=sys.stderr)
+    if args.format == "g2o" and not getattr(args, "quiet", False):
+        _note_g2o_unmapped(src, stream)  # type: ignore[arg-type]
     if args.out == "-":
         return 0
     held = [f"{0 if src.poses is None else len(src.poses)} poses"]
