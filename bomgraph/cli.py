@@ -130,7 +130,8 @@ def cmd_run(args: argparse.Namespace) -> int:
                          "checkpoints": written,
                          "total_s": round(result.total_s, 6)}), to_stderr=to_stderr)
     else:
-        _say(f"{label}: {len(result.final)} landmarks mapped at t = "
+        n = len(result.final)
+        _say(f"{label}: {n} landmark{'s' * (n != 1)} mapped at t = "
              f"{result.checkpoints[-1].t} in {result.total_s:.3f} s; wrote {args.out}",
              to_stderr=to_stderr)
     return 0
