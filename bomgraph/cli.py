@@ -235,7 +235,8 @@ def cmd_export(args: argparse.Namespace) -> int:
 def cmd_methods(args: argparse.Namespace) -> int:
     from .jsonio import jsonable, options_to_json
     from .mapper import available_methods, factory_options, method_config_class, method_info
-    from .method_list import format_method_list, method_listing, no_presets_line, preset_summary
+    from .method_list import (format_method_list, method_listing, no_presets_line,
+                              options_heading, preset_summary)
 
     if args.name is None:
         rows = [method_listing(i) for i in available_methods()]
@@ -257,8 +258,8 @@ def cmd_methods(args: argparse.Namespace) -> int:
     _say(f"{r['name']}: {r['description']}")
     if r["origin"] == "plugin":
         _say(f"  plugin {method_info(args.name).target} from {r['distribution']} {r['version']}")
-    where = cls.__name__ if cls is not None else "the factory's keyword parameters"
-    _say(f"\noptions ({where}; --option KEY=VALUE):" if options else "\noptions: none")
+    _say("\n" + options_heading(args.name, cls.__name__ if cls is not None else None,
+                                 len(options)))
     width = max(len(o.name) for o in options) if options else 0
     for o in options:
         _say(f"  {o.name:{width}s}  {o.type}, default {o.default!r}"
