@@ -130,7 +130,8 @@ def cmd_run(args: argparse.Namespace) -> int:
                          "checkpoints": written,
                          "total_s": round(result.total_s, 6)}), to_stderr=to_stderr)
     else:
-        _say(f"{label}: {len(result.final)} landmarks mapped at t = "
+        n = len(result.final)
+        _say(f"{label}: {n} landmark{'s' * (n != 1)} mapped at t = "
              f"{result.checkpoints[-1].t} in {result.total_s:.3f} s; wrote {args.out}",
              to_stderr=to_stderr)
     return 0
@@ -163,6 +164,19 @@ def cmd_plot(args: argparse.Namespace) -> int:
         path = plot_run(args.estimate, args.stream, args.out, t=args.t, align_on=args.align)
     _say(f"wrote {shown_path(path)}")
     return 0
+
+
+def _note_g2o_unmapped(src: Any, stream: Any) -> None:
+    """Say which observed landmarks a g2o export has no vertex for: g2o's loader drops
+    their bearing edges without a word."""
+    from .export import unmapped_landmarks
+
+    unmapped, n_bearings = unmapped_landmarks(src, stream)
+    if unmapped:
+        ids = " ".join(map(str, unmapped[:10])) + (" ..." if len(unmapped) > 10 else "")
+        print(f"bomgraph: note: {len(unmapped)} observed landmark(s) without an estimate "
+              f"have no VERTEX_XY (ids {ids}): g2o drops their {n_bearings} bearing edge(s) "
+              f"when it loads the file", file=sys.stderr)
 
 
 def cmd_export(args: argparse.Namespace) -> int:
@@ -207,6 +221,8 @@ def cmd_export(args: argparse.Namespace) -> int:
         print("bomgraph: note: the TUM time stamps are step indices; give --stream FILE to "
               "use the stream's time_s (as export --truth does), so that evo can pair them",
               file=sys.stderr)
+    if args.format == "g2o" and not getattr(args, "quiet", False):
+        _note_g2o_unmapped(src, stream)  # type: ignore[arg-type]
     if args.out == "-":
         return 0
     held = [f"{0 if src.poses is None else len(src.poses)} poses"]
@@ -219,7 +235,8 @@ def cmd_export(args: argparse.Namespace) -> int:
 def cmd_methods(args: argparse.Namespace) -> int:
     from .jsonio import jsonable, options_to_json
     from .mapper import available_methods, factory_options, method_config_class, method_info
-    from .method_list import format_method_list, method_listing, no_presets_line, preset_summary
+    from .method_list import (format_method_list, method_listing, no_presets_line,
+                              options_heading, preset_summary)
 
     if args.name is None:
         rows = [method_listing(i) for i in available_methods()]
@@ -241,8 +258,8 @@ def cmd_methods(args: argparse.Namespace) -> int:
     _say(f"{r['name']}: {r['description']}")
     if r["origin"] == "plugin":
         _say(f"  plugin {method_info(args.name).target} from {r['distribution']} {r['version']}")
-    where = cls.__name__ if cls is not None else "the factory's keyword parameters"
-    _say(f"\noptions ({where}; --option KEY=VALUE):" if options else "\noptions: none")
+    _say("\n" + options_heading(args.name, cls.__name__ if cls is not None else None,
+                                 len(options)))
     width = max(len(o.name) for o in options) if options else 0
     for o in options:
         _say(f"  {o.name:{width}s}  {o.type}, default {o.default!r}"

@@ -25,8 +25,8 @@ rotation about ``z`` only:
     are the landmark ids; pose vertex ids are ``max landmark id + 1 + t`` (a stream whose
     last pose id would pass 2^63 - 1, which the importer refuses, is refused). The importer
     (:func:`bomgraph.datasets.import_g2o`) reads the file back to the same steps. A landmark that
-    is observed but not in the estimate gets no vertex (its edges stay; a comment line lists
-    it). The stream's sensor range, time stamps and known landmark distances (priors, for
+    is observed but not in the estimate gets no vertex (its edges stay, and g2o's loader
+    drops them without a word; a comment line lists it, :func:`unmapped_landmarks`). The stream's sensor range, time stamps and known landmark distances (priors, for
     which g2o has no edge) go into a ``# bomgraph header`` comment that the importer reads.
     Needs an estimate pose at every step. An odometry sigma of 0 (the simulator's
     ``sigma_dy``: its robot moves straight, then turns) has no finite information; it is written
@@ -237,7 +237,7 @@ def to_g2o(src: MapEstimate, stream: Stream) -> str:
     if stream.header.priors:
         lines.append(f"# {len(stream.header.priors)} known landmark distances (the stream's "
                      f"priors) are in the bomgraph header only: g2o has no edge for them")
-    unmapped = [int(i) for i in observed if int(i) not in lm]
+    unmapped, _ = unmapped_landmarks(src, stream)
     if unmapped:
         lines.append(f"# observed landmarks without an estimate (no VERTEX_XY): "
                      f"{' '.join(str(i) for i in unmapped)}")
@@ -266,6 +266,19 @@ def to_g2o(src: MapEstimate, stream: Stream) -> str:
         for lid, brg in zip(step.landmark_ids, step.bearings_rad):
             lines.append(f"EDGE_BEARING_SE2_XY {base + step.t} {int(lid)} {_r(brg)} {_r(w_b)}")
     return "\n".join(lines) + "\n"
+
+
+def unmapped_landmarks(src: MapEstimate, stream: Stream) -> tuple[list[int], int]:
+    """The landmarks ``stream`` observes that ``src`` has no position for (no ``VERTEX_XY``
+    in its g2o export), and how many of the stream's bearings are to them: g2o's loader
+    drops an edge to a missing vertex without a word, so those bearings are not in the
+    problem g2o optimises."""
+    mapped = set(src.landmark_ids.tolist())
+    unmapped = [int(i) for i in stream.landmark_ids() if int(i) not in mapped]
+    lost = set(unmapped)
+    n_bearings = sum(sum(int(i) in lost for i in step.landmark_ids.tolist())
+                     for step in stream.steps) if lost else 0
+    return unmapped, n_bearings
 
 
 class StreamExportError(ExportError):
@@ -319,4 +332,5 @@ def write_text_atomic(text: str, path: str | os.PathLike[str],
 
 __all__ = ["FORMATS", "ZERO_SIGMA_FLOOR", "CSV_HEADER", "g2o_header_comment", "ExportError",
            "MapEstimate", "export_text", "to_tum", "to_kitti", "to_csv", "to_g2o",
-           "odometry_information", "write_text_atomic", "StreamExportError"]
+           "odometry_information", "write_text_atomic", "StreamExportError",
+           "unmapped_landmarks"]

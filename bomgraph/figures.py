@@ -134,8 +134,9 @@ def plot_results(results_dir: str | os.PathLike[str], out: str | os.PathLike[str
     path = _check_out(out)
     src = Path(results_dir) / "results.json"
     try:
-        final, curves, titles = _results_data(json.loads(read_regular_file(src)), src,
-                                              experiments)
+        obj = json.loads(read_regular_file(src))
+        final, curves, titles = _results_data(obj, src, experiments)
+        failed = _failed_runs(obj)
     except OSError as exc:
         raise ConfigError(f"{shown_path(src)}: cannot read ({exc.strerror}); give a `bomgraph "
                           f"compare` "
@@ -148,7 +149,18 @@ def plot_results(results_dir: str | os.PathLike[str], out: str | os.PathLike[str
         raise ConfigError(f"{shown_path(src)}: not a compare results file "
                           f"({type(exc).__name__}{key}); "
                           f"give a folder that `bomgraph compare --out DIR` wrote") from None
-    return write_figure(results_figure(final, curves, kind=kind, titles=titles), path, dpi)
+    return write_figure(results_figure(final, curves, kind=kind, titles=titles,
+                                       failed=failed), path, dpi)
+
+
+def _failed_runs(obj: Any) -> dict[str, dict[str, int]]:
+    """Experiment -> arm -> how many of its runs in a parsed ``results.json`` failed (the
+    figure labels an arm with no map as FAILED when its runs raised, not "no map")."""
+    failed: dict[str, dict[str, int]] = {}
+    for r in obj["results"]:
+        arms = failed.setdefault(r["experiment"], {})
+        arms[r["arm"]] = arms.get(r["arm"], 0) + (not r.get("ok"))
+    return failed
 
 
 def _results_data(obj: Any, src: Path, experiments: Sequence[str]) -> tuple[

@@ -378,10 +378,14 @@ def _is_estimate_file(path: str | os.PathLike[str]) -> bool:
     return True
 
 
-#: Said where the rows before the last leave out what their trajectories decide.
-_REVISED_NOTE = ("before the last checkpoint no APE or RPE ('-'; aligned on the trajectory, "
-                 "no error): the method revised its poses later and the file keeps each pose "
-                 "only as first estimated")
+def _revised_note(align_on: str) -> str:
+    """Said where the rows before the last leave out what their trajectories decide
+    (:func:`_without_trajectory`): aligned on the landmarks, the APE and RPE; aligned on the
+    trajectory or on both, every error."""
+    left_out = ("no APE or RPE ('-')" if align_on == "landmarks" else
+                f"no error at all ('-'; aligned on {align_on}, which needs the trajectory)")
+    return (f"before the last checkpoint {left_out}: the method revised its poses later and "
+            f"the file keeps each pose only as first estimated")
 
 
 def _fit_note(s: MapScore) -> str:
@@ -409,7 +413,7 @@ def format_evaluation(ev: FileEvaluation, fmt: str = "text") -> str:
     rows = [asdict(r) for r in ev.rows] or [{**ev.score.as_dict(), "t": None}]
     against = f"reference {ev.reference}" if ev.reference else "truth"
     title = (f"{ev.method} against the {against}, aligned on {ev.score.align_on}; RPE over "
-             f"{ev.score.rpe_delta} step(s)" + (f"; {_REVISED_NOTE}" if ev.poses_revised
+             f"{ev.score.rpe_delta} step(s)" + (f"; {_revised_note(ev.score.align_on)}" if ev.poses_revised
                                                and len(ev.rows) > 1 else ""))
     if fmt == "json":
         return json.dumps(jsonable(ev.as_dict()), allow_nan=False)
@@ -450,7 +454,7 @@ def format_evaluation(ev: FileEvaluation, fmt: str = "text") -> str:
     if len(ev.rows) > 1:
         lines.append("")
         if ev.poses_revised:
-            lines.append(_REVISED_NOTE)
+            lines.append(_revised_note(s.align_on))
         lines.append(format_table(EVALUATION_COLUMNS, rows, "text"))
     return "\n".join(lines)
 

@@ -72,4 +72,33 @@ def no_presets_line(name: str) -> str:
     return "presets: none declared (NAME@PRESET is passed on to the factory as preset=PRESET)"
 
 
-__all__ = ["preset_summary", "method_listing", "format_method_list", "no_presets_line"]
+def options_heading(name: str, config_name: str | None, n_options: int) -> str:
+    """The line over ``bomgraph methods NAME``'s options. A method without a configuration
+    class whose factory takes ``**options`` (the README's ``Factory(header, **options)``) is
+    handed any option unchecked before it runs: said so, where the line said "options: none"
+    of one that took any (h152)."""
+    import inspect
+
+    from .mapper import method_factory
+
+    if config_name is not None:
+        return f"options ({config_name}; --option KEY=VALUE):"
+    factory = method_factory(name)
+    try:
+        params = inspect.signature(factory.__init__ if inspect.isclass(factory)
+                                   else factory).parameters.values()
+    except (TypeError, ValueError):  # no signature to read (a builtin)
+        params = []  # type: ignore[assignment]
+    if any(p.kind is inspect.Parameter.VAR_KEYWORD for p in params):
+        if not n_options:
+            return ("options: any (the factory takes **options: --option KEY=VALUE, "
+                    "checked only when it runs)")
+        return ("options (the factory's keyword parameters, and any other through its "
+                "**options, checked only when it runs; --option KEY=VALUE):")
+    if n_options:
+        return "options (the factory's keyword parameters; --option KEY=VALUE):"
+    return "options: none"
+
+
+__all__ = ["preset_summary", "method_listing", "format_method_list", "no_presets_line",
+           "options_heading"]

@@ -25,6 +25,7 @@ from .errors import ConfigError, PairingError, UnknownMethodError
 from .experiments import Experiment
 from .mapper import method_info
 from .run_scoring import self_scored, self_scored_arms
+from .tables import fixed_or_exponent
 
 #: Fewest pairs for a confidence interval: below it the bootstrap has too few distinct
 #: resamples to mean anything (2 runs have 3).
@@ -375,7 +376,9 @@ def scored_references(experiments: Sequence[Experiment], references: Mapping[str
 
 
 def _num(v: float | None, fmt: str, scale: float = 1.0) -> str:
-    return "-" if v is None or not math.isfinite(v) else format(scale * v, fmt)
+    """A cell: ``-`` for none, a huge fixed-point value in exponent form (a ratio over a
+    reference whose error is rounding: 896680534985135.25 overran its column, h152)."""
+    return "-" if v is None else fixed_or_exponent(v, fmt, scale)
 
 
 def format_paired(rows: Sequence[PairedRow], confidence: float = 0.95) -> str:

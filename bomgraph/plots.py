@@ -454,9 +454,17 @@ def run_figure(truth: TruthLike | None, estimate: EstimateLike, alignment: Align
     return fig
 
 
+def _no_map(n_failed: int, n_runs: int) -> str:
+    """Why an arm has no final MPE to draw: its runs failed, mapped too little, or both."""
+    if n_failed >= n_runs:
+        return "FAILED"
+    return "no map" if not n_failed else f"{n_failed} of {n_runs} FAILED, the others no map"
+
+
 def results_figure(final: Mapping[str, Mapping[str, np.ndarray]],
                    curves: Mapping[str, Mapping[str, tuple[np.ndarray, np.ndarray]]], *,
-                   kind: str = "box", titles: Mapping[str, str] | None = None):
+                   kind: str = "box", titles: Mapping[str, str] | None = None,
+                   failed: Mapping[str, Mapping[str, int]] | None = None):
     """A comparison across runs, one row per experiment: the final landmark MPE per arm as
     box or violin plots (``kind``), and the MPE against time (median and 25-75 % band).
 
@@ -464,6 +472,8 @@ def results_figure(final: Mapping[str, Mapping[str, np.ndarray]],
     ----------
     final : experiment -> arm -> final MPE [m] of each run (NaN: no map, left out)
     curves : experiment -> arm -> (t (k,), MPE [m] (runs, k))
+    failed : experiment -> arm -> how many of its runs failed: an arm without a map is
+        labelled FAILED when they all did, not "no map"
 
     Returns
     -------
@@ -479,8 +489,8 @@ def results_figure(final: Mapping[str, Mapping[str, np.ndarray]],
     axes = fig.subplots(max(len(exps), 1), 2, squeeze=False, width_ratios=(1.1, 1))
     for row, exp in zip(axes, exps):
         arms = list(final[exp])
-        data = [np.asarray(final[exp][a], float) * 100 for a in arms]
-        data = [d[np.isfinite(d)] for d in data]
+        raw = [np.asarray(final[exp][a], float) * 100 for a in arms]
+        data = [d[np.isfinite(d)] for d in raw]
         pos = [k for k, d in enumerate(data) if d.size]
         ax = row[0]
         if pos:
@@ -497,9 +507,10 @@ def results_figure(final: Mapping[str, Mapping[str, np.ndarray]],
                 for k, body in zip(pos, vp["bodies"]):
                     body.set_facecolor(method_colour(arms[k]))
                     body.set_alpha(0.75)
-        ax.set_xticks(range(len(arms)), [a if data[k].size else f"{a} (no map)"
-                                         for k, a in enumerate(arms)],
-                      rotation=55, ha="right", fontsize=8)
+        n_failed = (failed or {}).get(exp, {})
+        ticks = [a if data[k].size else f"{a} ({_no_map(n_failed.get(a, 0), len(data_all))})"
+                 for k, (a, data_all) in enumerate(zip(arms, raw))]
+        ax.set_xticks(range(len(arms)), ticks, rotation=55, ha="right", fontsize=8)
         ax.set_yscale("log")
         _plain_log_ticks(ax.yaxis)
         ax.set_ylabel("final landmark MPE [cm]")

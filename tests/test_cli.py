@@ -82,6 +82,22 @@ def test_run_json_summary_counts_the_checkpoints_written(tmp_path: Path,
     assert summary["checkpoints"] == len(read_estimate(est_file).checkpoints) == 5
 
 
+def test_run_summary_counts_one_landmark_in_the_singular(tmp_path: Path,
+                                                        capsys: pytest.CaptureFixture) -> None:
+    """h152: the stream format's own two-step example maps one landmark with triangulate;
+    the summary said "1 landmarks mapped"."""
+    stream = tmp_path / "ex.jsonl"
+    stream.write_text(
+        '{"format": "bomgraph-stream", "version": 1, "bearing_sigma_rad": 0.0524, '
+        '"odometry_sigma": [0.03, 0.0, 0.0524], "sensor_range_m": 1.0}\n'
+        '{"t": 0, "bearings": [[0, 1.93]]}\n'
+        '{"t": 1, "odom": [0.15, 0.0, 0.2], "bearings": [[0, 1.84], [1, -1.02]]}\n')
+    capsys.readouterr()
+    assert main(["run", str(stream), "--method", "triangulate",
+                 "--out", str(tmp_path / "e.est")]) == 0
+    assert capsys.readouterr().out.startswith("triangulate: 1 landmark mapped at t = 1 in ")
+
+
 def test_compare_shows_its_bar_on_a_terminal_only(tmp_path: Path) -> None:
     """Like ``run``: no progress bar when stderr is a file or a pipe (it filled logs with
     carriage returns, and began with an empty "0run" bar), ``--progress`` forces it."""

@@ -466,3 +466,25 @@ def test_evaluate_gives_no_ape_rpe_of_a_trajectory_the_method_never_had(tmp_path
             assert np.isnan(got_mean[:-1]).all()
         else:
             np.testing.assert_allclose(got_mean, want_mean, rtol=1e-9)
+
+
+def test_the_revised_poses_note_says_what_each_alignment_leaves_out(tmp_path: Path) -> None:
+    """h152: aligned on the trajectory or on both, an earlier checkpoint of a method that
+    revises its poses gets no error at all (not only no APE/RPE), and the note says so for
+    the alignment used; it read "aligned on the trajectory" under ``--align both``."""
+    from bomgraph.file_evaluation import format_evaluation
+
+    s = _stream(40)
+    write_stream(s, tmp_path / "s.jsonl")
+    write_estimate(run(_Smoother(s.header), s.steps, method="m"), tmp_path / "e.est",
+                   stream=stream_identity(s.steps))
+    for align_on in ("landmarks", "trajectory", "both"):
+        ev = evaluate_files(tmp_path / "e.est", tmp_path / "s.jsonl", align_on=align_on)
+        note = [ln for ln in format_evaluation(ev).splitlines() if "revised" in ln]
+        assert len(note) == 1, note
+        left_out = np.isnan(ev.rows[0].mpe_m)
+        assert left_out == (align_on != "landmarks")
+        if left_out:
+            assert f"no error at all ('-'; aligned on {align_on}" in note[0], note
+        else:
+            assert "no APE or RPE ('-')" in note[0] and "trajectory" not in note[0], note

@@ -300,3 +300,41 @@ def test_g2o_header_priors_are_checked_like_a_streams(tmp_path: Path, stream: St
     line = next(k for k, ln in enumerate(text.splitlines(), 1) if "bomgraph header" in ln)
     with pytest.raises(DatasetError, match=rf"p\.g2o, line {line}: .*{re.escape(key)}"):
         import_g2o(path)
+
+
+def test_cli_g2o_export_names_the_landmarks_g2o_will_drop(
+        tmp_path: Path, stream: Stream, estimate: MapEstimate,
+        capsys: pytest.CaptureFixture) -> None:
+    """h152: an observed landmark without an estimate gets no VERTEX_XY, and g2o's loader
+    drops its bearing edges without a word (g2opy read 5,833 of a triangulate export's
+    5,862): the command says so, naming them."""
+    from bomgraph.estimate_file import write_estimate
+    from bomgraph.mapper import run
+    from bomgraph.stream_identity import stream_identity
+
+    class Fixed:  # a mapper whose map is the fixture's
+        def step(self, step: object) -> None:
+            pass
+
+        def estimate(self) -> MapEstimate:
+            return estimate
+
+    s_path, e_path = tmp_path / "s.jsonl", tmp_path / "e.est"
+    write_stream(stream, s_path)
+    write_estimate(run(Fixed(), stream.steps), e_path, stream=stream_identity(stream.steps))
+    missing = sorted(set(stream.landmark_ids().tolist()) - set(estimate.landmark_ids.tolist()))
+    assert missing  # the fixture leaves landmarks out
+    n_edges = sum(int(i) in missing for s in stream.steps for i in s.landmark_ids.tolist())
+    capsys.readouterr()
+    assert main(["export", str(e_path), "--stream", str(s_path), "--format", "g2o",
+                 "--out", str(tmp_path / "e.g2o")]) == 0
+    err = capsys.readouterr().err
+    assert f"{len(missing)} observed landmark(s) without an estimate" in err, err
+    assert f"ids {' '.join(map(str, missing))}" in err and f"their {n_edges} bearing" in err
+    text = (tmp_path / "e.g2o").read_text()
+    assert sum(ln.startswith("EDGE_BEARING_SE2_XY") for ln in text.splitlines()) == sum(
+        len(s.landmark_ids) for s in stream.steps)  # the edges stay in the file
+    capsys.readouterr()
+    assert main(["export", "--truth", str(s_path), "--format", "g2o",
+                 "--out", str(tmp_path / "t.g2o")]) == 0
+    assert "without an estimate" not in capsys.readouterr().err

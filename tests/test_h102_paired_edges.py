@@ -70,3 +70,16 @@ def test_each_arm_draws_its_own_bootstrap() -> None:
     b, c = paired_comparison(_rows("ref", REF) + _rows("b", arm) + _rows("c", arm))
     assert b.ratio_of_means == c.ratio_of_means
     assert (b.ratio_ci_low, b.ratio_ci_high) != (c.ratio_ci_low, c.ratio_ci_high)
+
+
+def test_a_huge_ratio_is_shown_in_exponent_form_in_its_column() -> None:
+    """h152: against a plugin bound that returns the truth (errors of 1e-16 m) the printed
+    table showed ``896680534985135.25 1537981266303791.50``, overrunning its columns."""
+    from bomgraph.paired import format_paired
+
+    out, = paired_comparison(_rows("bound", [1e-16 * (1 + k) for k in range(9)])
+                             + _rows("mine", REF))
+    assert out.ratio_of_means > 1e9
+    line = next(ln for ln in format_paired([out]).splitlines() if ln.startswith("mine "))
+    assert f"{out.ratio_of_means:.3e}" in line and f"{out.ratio_median:.3e}" in line, line
+    assert not any(len(tok) > 12 and "." in tok and "e" not in tok for tok in line.split()), line

@@ -112,8 +112,11 @@ def test_methods_says_what_name_at_preset_does_for_a_method_without_presets(
     mapper.register_method("any-options", "h25_any:DepthMapper", "takes any option")
     capsys.readouterr()
     assert main(["methods", "any-options"]) == 0
-    assert capsys.readouterr().out.rstrip().endswith(
+    out = capsys.readouterr().out
+    assert out.rstrip().endswith(
         "presets: none declared (NAME@PRESET is passed on to the factory as preset=PRESET)")
+    # h152: its options are any, not "none" (the README's Factory(header, **options))
+    assert "options: any (the factory takes **options" in out and "options: none" not in out
 
 
 def test_methods_does_not_call_a_preset_parameter_of_the_factory_refused(

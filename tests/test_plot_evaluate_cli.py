@@ -325,3 +325,22 @@ def test_similarity_with_an_earlier_map_at_one_point_scores_the_rest(tmp_path, c
     code, _, err = _evaluate(capsys, one, s, "--similarity")
     assert code == 2 and len(err) == 1 and f"{one}: the final map (t = 11)" in err[0], err
     assert "scale is undefined" in err[0]
+
+
+def test_results_figure_labels_an_arm_whose_runs_failed_as_failed(tmp_path) -> None:
+    """h152: `bomgraph plot --results` labelled an arm whose every run raised "(no map)", as
+    if it had run and mapped too little; compare's tables say FAILED."""
+    from bomgraph.figures import _failed_runs
+
+    rows = [{"experiment": "e", "arm": a, "ok": ok} for a, ok in (
+        ("crash", False), ("crash", False), ("few", True), ("few", True), ("mixed", False),
+        ("mixed", True), ("good", True), ("good", True))]
+    failed = _failed_runs({"results": rows})
+    assert failed == {"e": {"crash": 2, "few": 0, "mixed": 1, "good": 0}}
+    nan = np.nan
+    final = {"e": {"crash": np.array([nan, nan]), "few": np.array([nan, nan]),
+                   "mixed": np.array([nan, nan]), "good": np.array([0.1, 0.2])}}
+    fig = results_figure(final, {}, failed=failed)
+    ticks = [t.get_text() for t in fig.axes[0].get_xticklabels()]
+    assert ticks == ["crash (FAILED)", "few (no map)",
+                     "mixed (1 of 2 FAILED, the others no map)", "good"], ticks
