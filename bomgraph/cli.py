@@ -130,8 +130,9 @@ def cmd_run(args: argparse.Namespace) -> int:
                          "checkpoints": written,
                          "total_s": round(result.total_s, 6)}), to_stderr=to_stderr)
     else:
-        n = len(result.final)
-        _say(f"{label}: {n} landmark{'s' * (n != 1)} mapped at t = "
+        from .tables import counted
+
+        _say(f"{label}: {counted(len(result.final), 'landmark')} mapped at t = "
              f"{result.checkpoints[-1].t} in {result.total_s:.3f} s; wrote {args.out}",
              to_stderr=to_stderr)
     return 0
@@ -170,13 +171,16 @@ def _note_g2o_unmapped(src: Any, stream: Any) -> None:
     """Say which observed landmarks a g2o export has no vertex for: g2o's loader drops
     their bearing edges without a word."""
     from .export import unmapped_landmarks
+    from .tables import counted
 
     unmapped, n_bearings = unmapped_landmarks(src, stream)
     if unmapped:
+        one = len(unmapped) == 1
         ids = " ".join(map(str, unmapped[:10])) + (" ..." if len(unmapped) > 10 else "")
-        print(f"bomgraph: note: {len(unmapped)} observed landmark(s) without an estimate "
-              f"have no VERTEX_XY (ids {ids}): g2o drops their {n_bearings} bearing edge(s) "
-              f"when it loads the file", file=sys.stderr)
+        print(f"bomgraph: note: {counted(len(unmapped), 'observed landmark')} without an "
+              f"estimate {'has' if one else 'have'} no VERTEX_XY (id{'' if one else 's'} "
+              f"{ids}): g2o drops {'its' if one else 'their'} "
+              f"{counted(n_bearings, 'bearing edge')} when it loads the file", file=sys.stderr)
 
 
 def cmd_export(args: argparse.Namespace) -> int:
@@ -225,9 +229,11 @@ def cmd_export(args: argparse.Namespace) -> int:
         _note_g2o_unmapped(src, stream)  # type: ignore[arg-type]
     if args.out == "-":
         return 0
-    held = [f"{0 if src.poses is None else len(src.poses)} poses"]
+    from .tables import counted
+
+    held = [counted(0 if src.poses is None else len(src.poses), "pose")]
     if args.format in ("csv", "g2o"):  # TUM and KITTI hold poses only
-        held.append(f"{len(src.landmark_ids)} landmarks")
+        held.append(counted(len(src.landmark_ids), "landmark"))
     _say(f"wrote {shown_path(args.out)} ({args.format}): {', '.join(held)}", to_stderr=to_stderr)
     return 0
 

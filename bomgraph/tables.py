@@ -64,6 +64,12 @@ def fixed_or_exponent(value: float, fmt: str, scale: float = 1.0) -> str:
     return format(Decimal(value) * Decimal(scale), ".3e" if fixed else fmt)
 
 
+def counted(n: int, noun: str) -> str:
+    """``n`` and ``noun``, with an ``s`` unless ``n`` is 1: ``"1 landmark"``, ``"2 poses"``
+    (a summary said "1 landmarks", h154)."""
+    return f"{n} {noun}{'s' * (n != 1)}"
+
+
 #: LaTeX's ten special characters and what prints each as itself (a method name or file name
 #: in a caption may hold any of them).
 _LATEX_SPECIAL = {"\\": r"\textbackslash{}", "&": r"\&", "%": r"\%", "$": r"\$", "#": r"\#",
@@ -153,4 +159,4 @@ def write_csv(path: str | os.PathLike[str], rows: Sequence[Mapping[str, Any]],
                         for k, v in r.items()})
 
 
-__all__ = ["FORMATS", "Column", "format_table", "write_csv"]
+__all__ = ["FORMATS", "Column", "counted", "format_table", "write_csv"]
