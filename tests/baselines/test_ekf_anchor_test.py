@@ -128,3 +128,7 @@ def test_the_option_is_checked_and_off_in_every_preset() -> None:
         EkfConfig(candidates="inverse-depth", anchor_test=1)
     with pytest.raises(ConfigError, match="anchor_test=true needs candidates='inverse-depth'"):
         EkfConfig.preset("paper", anchor_test=True)
+    # h154: `bomgraph methods ekf` shows a doc's first sentence only, which left the need out
+    from bomgraph.config import describe_options
+    doc = next(o.doc for o in describe_options(EkfConfig) if o.name == "anchor_test")
+    assert 'candidates="inverse-depth"' in doc and "False in every preset" in doc, doc
