@@ -59,6 +59,7 @@ class AnchorTestMixin:
     _offset: dict
     _gate: float
     _white_sigma: float
+    _coloured: Any
 
     def _anchor_on(self) -> bool:
         return bool(getattr(self.config, "anchor_test", False))
@@ -67,6 +68,8 @@ class AnchorTestMixin:
         on = self._anchor_on() and ids.size
         if on:
             self._drop_orphans()           # a restarted feature's old error, before its new one
+            per = 5 + bool(self._coloured.enabled)          # [x0, y0, theta, rho], (b,) e
+            self.filter.check_room(per * ids.size, f"{ids.size} new landmark features")
         super()._add_inverse_depth(ids, z)                 # type: ignore[misc]
         if not on:
             return

@@ -132,3 +132,18 @@ def test_the_option_is_checked_and_off_in_every_preset() -> None:
     from bomgraph.config import describe_options
     doc = next(o.doc for o in describe_options(EkfConfig) if o.name == "anchor_test")
     assert 'candidates="inverse-depth"' in doc and "False in every preset" in doc, doc
+
+
+def test_the_state_limit_counts_the_anchor_errors_before_anything_is_added() -> None:
+    """h154: the limit was checked for the features' 4 states each, then the anchor errors
+    refused as "new landmark or pose blocks", after the features had been added."""
+    from baselines.ekf.filter import StateLimitError
+
+    stream = _stream()
+    first = stream.steps[0]
+    n = first.landmark_ids.size
+    m = EkfMapper(stream.header, start_pose=tuple(stream.truth.poses[0]), preset="real",
+                  anchor_test=True, max_state=3 + 4 * n)     # room for the features alone
+    with pytest.raises(StateLimitError, match=f"with {n} new landmark features to {3 + 5 * n} "):
+        m.step(first)
+    assert m.filter.dim == 3 and not m._sizes
