@@ -242,7 +242,7 @@ def cmd_methods(args: argparse.Namespace) -> int:
     from .jsonio import jsonable, options_to_json
     from .mapper import available_methods, factory_options, method_config_class, method_info
     from .method_list import (format_method_list, method_listing, no_presets_line,
-                              options_heading, preset_summary)
+                              options_heading, preset_summary, takes_any_option)
 
     if args.name is None:
         rows = [method_listing(i) for i in available_methods()]
@@ -259,7 +259,8 @@ def cmd_methods(args: argparse.Namespace) -> int:
     if args.json:
         _say(json.dumps(jsonable(options_to_json({  # an infinite default as "Infinity"
             **r, "config": cls.__name__ if cls else None,
-            "options": [o._asdict() for o in options]}))))
+            "options": [o._asdict() for o in options],
+            "any_option": takes_any_option(args.name)}))))  # its **options (h154)
         return 0
     _say(f"{r['name']}: {r['description']}")
     if r["origin"] == "plugin":
