@@ -13,9 +13,11 @@ later update, with all correlations (the poses, the other features). The margina
 other states is unchanged (no row of any update touches ``e``).
 
 The test is the anchor's leave-one-out residual: with ``e_hat``, ``P_e`` its posterior, the
-residual ``-e_hat`` of that measurement has variance ``sigma^2 - P_e`` (the posterior of ``e``
-without the anchor, against the anchor), so ``e_hat^2 / (sigma^2 - P_e)`` is chi-square with
-1 dof when the anchor is as stated, tested at the filter's gate (``gate_probability``). Each
+residual ``-e_hat`` of that measurement has variance ``sigma^2 - P_e``, and ``e_hat^2 /
+(sigma^2 - P_e)`` is also the statistic of the anchor against the posterior of ``e`` without
+it (residual ``-e_hat sigma^2 / (sigma^2 - P_e)``, variance ``sigma^4 / (sigma^2 - P_e)``):
+chi-square with 1 dof when the anchor is as stated, tested at the filter's gate
+(``gate_probability``). Each
 anchor is tested once, at the first step after whose updates the rest of the filter knows
 ``e`` at least as well as the anchor alone does (``P_e <= sigma^2 / 2``: information from
 elsewhere ``>= 1 / sigma^2``), whether the feature is still in inverse depth (then before
