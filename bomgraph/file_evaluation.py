@@ -412,9 +412,10 @@ def format_evaluation(ev: FileEvaluation, fmt: str = "text") -> str:
         return _format_truth_free(ev, fmt)
     rows = [asdict(r) for r in ev.rows] or [{**ev.score.as_dict(), "t": None}]
     against = f"reference {ev.reference}" if ev.reference else "truth"
+    revised = ev.poses_revised and len(ev.rows) > 1
     title = (f"{ev.method} against the {against}, aligned on {ev.score.align_on}; RPE over "
-             f"{ev.score.rpe_delta} step(s)" + (f"; {_revised_note(ev.score.align_on)}" if ev.poses_revised
-                                               and len(ev.rows) > 1 else ""))
+             f"{ev.score.rpe_delta} step(s)"
+             + (f"; {_revised_note(ev.score.align_on)}" if revised else ""))
     if fmt == "json":
         return json.dumps(jsonable(ev.as_dict()), allow_nan=False)
     if fmt != "text":
