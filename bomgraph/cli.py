@@ -130,8 +130,9 @@ def cmd_run(args: argparse.Namespace) -> int:
                          "checkpoints": written,
                          "total_s": round(result.total_s, 6)}), to_stderr=to_stderr)
     else:
-        n = len(result.final)
-        _say(f"{label}: {n} landmark{'s' * (n != 1)} mapped at t = "
+        from .tables import counted
+
+        _say(f"{label}: {counted(len(result.final), 'landmark')} mapped at t = "
              f"{result.checkpoints[-1].t} in {result.total_s:.3f} s; wrote {args.out}",
              to_stderr=to_stderr)
     return 0
@@ -170,13 +171,16 @@ def _note_g2o_unmapped(src: Any, stream: Any) -> None:
     """Say which observed landmarks a g2o export has no vertex for: g2o's loader drops
     their bearing edges without a word."""
     from .export import unmapped_landmarks
+    from .tables import counted
 
     unmapped, n_bearings = unmapped_landmarks(src, stream)
     if unmapped:
+        one = len(unmapped) == 1
         ids = " ".join(map(str, unmapped[:10])) + (" ..." if len(unmapped) > 10 else "")
-        print(f"bomgraph: note: {len(unmapped)} observed landmark(s) without an estimate "
-              f"have no VERTEX_XY (ids {ids}): g2o drops their {n_bearings} bearing edge(s) "
-              f"when it loads the file", file=sys.stderr)
+        print(f"bomgraph: note: {counted(len(unmapped), 'observed landmark')} without an "
+              f"estimate {'has' if one else 'have'} no VERTEX_XY (id{'' if one else 's'} "
+              f"{ids}): g2o drops {'its' if one else 'their'} "
+              f"{counted(n_bearings, 'bearing edge')} when it loads the file", file=sys.stderr)
 
 
 def cmd_export(args: argparse.Namespace) -> int:
@@ -225,9 +229,11 @@ def cmd_export(args: argparse.Namespace) -> int:
         _note_g2o_unmapped(src, stream)  # type: ignore[arg-type]
     if args.out == "-":
         return 0
-    held = [f"{0 if src.poses is None else len(src.poses)} poses"]
+    from .tables import counted
+
+    held = [counted(0 if src.poses is None else len(src.poses), "pose")]
     if args.format in ("csv", "g2o"):  # TUM and KITTI hold poses only
-        held.append(f"{len(src.landmark_ids)} landmarks")
+        held.append(counted(len(src.landmark_ids), "landmark"))
     _say(f"wrote {shown_path(args.out)} ({args.format}): {', '.join(held)}", to_stderr=to_stderr)
     return 0
 
@@ -236,7 +242,7 @@ def cmd_methods(args: argparse.Namespace) -> int:
     from .jsonio import jsonable, options_to_json
     from .mapper import available_methods, factory_options, method_config_class, method_info
     from .method_list import (format_method_list, method_listing, no_presets_line,
-                              options_heading, preset_summary)
+                              options_heading, preset_summary, takes_any_option)
 
     if args.name is None:
         rows = [method_listing(i) for i in available_methods()]
@@ -253,7 +259,8 @@ def cmd_methods(args: argparse.Namespace) -> int:
     if args.json:
         _say(json.dumps(jsonable(options_to_json({  # an infinite default as "Infinity"
             **r, "config": cls.__name__ if cls else None,
-            "options": [o._asdict() for o in options]}))))
+            "options": [o._asdict() for o in options],
+            "any_option": takes_any_option(args.name)}))))  # its **options (h154)
         return 0
     _say(f"{r['name']}: {r['description']}")
     if r["origin"] == "plugin":

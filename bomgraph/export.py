@@ -26,8 +26,9 @@ rotation about ``z`` only:
     last pose id would pass 2^63 - 1, which the importer refuses, is refused). The importer
     (:func:`bomgraph.datasets.import_g2o`) reads the file back to the same steps. A landmark that
     is observed but not in the estimate gets no vertex (its edges stay, and g2o's loader
-    drops them without a word; a comment line lists it, :func:`unmapped_landmarks`). The stream's sensor range, time stamps and known landmark distances (priors, for
-    which g2o has no edge) go into a ``# bomgraph header`` comment that the importer reads.
+    drops them without a word; a comment line lists it, :func:`unmapped_landmarks`). The
+    stream's sensor range, time stamps and known landmark distances (priors, for which g2o
+    has no edge) go into a ``# bomgraph header`` comment that the importer reads.
     Needs an estimate pose at every step. An odometry sigma of 0 (the simulator's
     ``sigma_dy``: its robot moves straight, then turns) has no finite information; it is written
     as :data:`ZERO_SIGMA_FLOOR` (1e-4 m or rad, information 1e8) and a comment line says so, so

@@ -36,7 +36,7 @@ from .mapper import MapEstimate
 from .stream import Step, Truth
 from .stream_file import StreamReader
 from .stream_identity import StreamHasher, StreamIdentity
-from .tables import Column, fixed_or_exponent, format_table
+from .tables import Column, counted, fixed_or_exponent, format_table
 from .trajectory import BearingResidualSums, bearing_arrays
 
 #: The per-checkpoint table of ``bomgraph evaluate`` (SI in JSON/CSV; cm and deg shown).
@@ -412,9 +412,10 @@ def format_evaluation(ev: FileEvaluation, fmt: str = "text") -> str:
         return _format_truth_free(ev, fmt)
     rows = [asdict(r) for r in ev.rows] or [{**ev.score.as_dict(), "t": None}]
     against = f"reference {ev.reference}" if ev.reference else "truth"
+    revised = ev.poses_revised and len(ev.rows) > 1
     title = (f"{ev.method} against the {against}, aligned on {ev.score.align_on}; RPE over "
-             f"{ev.score.rpe_delta} step(s)" + (f"; {_revised_note(ev.score.align_on)}" if ev.poses_revised
-                                               and len(ev.rows) > 1 else ""))
+             f"{ev.score.rpe_delta} step(s)"
+             + (f"; {_revised_note(ev.score.align_on)}" if revised else ""))
     if fmt == "json":
         return json.dumps(jsonable(ev.as_dict()), allow_nan=False)
     if fmt != "text":
@@ -469,7 +470,7 @@ def _format_truth_free(ev: FileEvaluation, fmt: str) -> str:
     if fmt != "text":
         return format_table(TRUTH_FREE_COLUMNS, ev.free_rows, fmt, title=title)
     last = ev.free_rows[-1]
-    lines = [title, f"  final map: {last['n_mapped']} landmarks"]
+    lines = [title, f"  final map: {counted(int(last['n_mapped']), 'landmark')}"]
     b = ev.bearing
     if b is not None and b.n:
         lines.append(f"  bearing residual RMS against its own map and trajectory: "

@@ -72,24 +72,33 @@ def no_presets_line(name: str) -> str:
     return "presets: none declared (NAME@PRESET is passed on to the factory as preset=PRESET)"
 
 
-def options_heading(name: str, config_name: str | None, n_options: int) -> str:
-    """The line over ``bomgraph methods NAME``'s options. A method without a configuration
-    class whose factory takes ``**options`` (the README's ``Factory(header, **options)``) is
-    handed any option unchecked before it runs: said so, where the line said "options: none"
-    of one that took any (h152)."""
+def takes_any_option(name: str) -> bool:
+    """Whether the factory of ``name``, a method without a configuration class, takes
+    ``**options`` (the README's ``Factory(header, **options)``): then it is handed any option,
+    checked only when it runs."""
     import inspect
 
-    from .mapper import method_factory
+    from .mapper import method_config_class, method_factory
 
-    if config_name is not None:
-        return f"options ({config_name}; --option KEY=VALUE):"
+    if method_config_class(name) is not None:
+        return False
     factory = method_factory(name)
     try:
         params = inspect.signature(factory.__init__ if inspect.isclass(factory)
                                    else factory).parameters.values()
     except (TypeError, ValueError):  # no signature to read (a builtin)
-        params = []  # type: ignore[assignment]
-    if any(p.kind is inspect.Parameter.VAR_KEYWORD for p in params):
+        return False
+    return any(p.kind is inspect.Parameter.VAR_KEYWORD for p in params)
+
+
+def options_heading(name: str, config_name: str | None, n_options: int) -> str:
+    """The line over ``bomgraph methods NAME``'s options. A method without a configuration
+    class whose factory takes ``**options`` (:func:`takes_any_option`) is handed any option
+    unchecked before it runs: said so, where the line said "options: none" of one that took
+    any (h152)."""
+    if config_name is not None:
+        return f"options ({config_name}; --option KEY=VALUE):"
+    if takes_any_option(name):
         if not n_options:
             return ("options: any (the factory takes **options: --option KEY=VALUE, "
                     "checked only when it runs)")
@@ -101,4 +110,4 @@ def options_heading(name: str, config_name: str | None, n_options: int) -> str:
 
 
 __all__ = ["preset_summary", "method_listing", "format_method_list", "no_presets_line",
-           "options_heading"]
+           "options_heading", "takes_any_option"]

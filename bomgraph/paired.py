@@ -375,10 +375,16 @@ def scored_references(experiments: Sequence[Experiment], references: Mapping[str
     return out
 
 
+#: From this magnitude a cell is shown in exponent form: ``999999.99`` and ``1.000e+06`` fill
+#: the 9 characters of the narrowest column.
+_HUGE_CELL = 1e6
+
+
 def _num(v: float | None, fmt: str, scale: float = 1.0) -> str:
-    """A cell: ``-`` for none, a huge fixed-point value in exponent form (a ratio over a
-    reference whose error is rounding: 896680534985135.25 overran its column, h152)."""
-    return "-" if v is None else fixed_or_exponent(v, fmt, scale)
+    """A cell: ``-`` for none, a fixed-point value of a million or more in exponent form (a
+    ratio over a reference whose error is rounding: 896680534985135.25 overran its column,
+    h152; so did 100000000.00 from 1e6 to 1e9, h154)."""
+    return "-" if v is None else fixed_or_exponent(v, fmt, scale, _HUGE_CELL)
 
 
 def format_paired(rows: Sequence[PairedRow], confidence: float = 0.95) -> str:

@@ -458,7 +458,9 @@ def _no_map(n_failed: int, n_runs: int) -> str:
     """Why an arm has no final MPE to draw: its runs failed, mapped too little, or both."""
     if n_failed >= n_runs:
         return "FAILED"
-    return "no map" if not n_failed else f"{n_failed} of {n_runs} FAILED, the others no map"
+    if not n_failed:
+        return "no map"
+    return f"{n_failed} of {n_runs} FAILED, the other{'s' * (n_runs - n_failed > 1)} no map"
 
 
 def results_figure(final: Mapping[str, Mapping[str, np.ndarray]],

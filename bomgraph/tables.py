@@ -47,21 +47,29 @@ def _shown(v: Any, col: Column) -> str:
 HUGE = 1e9
 
 
-def fixed_or_exponent(value: float, fmt: str, scale: float = 1.0) -> str:
+def fixed_or_exponent(value: float, fmt: str, scale: float = 1.0, huge: float = HUGE) -> str:
     """``value * scale`` formatted as ``fmt``, except a fixed-point ``fmt`` (``".2f"``) of a
     magnitude of :data:`HUGE` or more, shown in exponent form (``"6.976e+301"``: a 1e300 m map
     is not 300 digits of cm), the product taken exactly (a finite 1e307 m is 1e309 cm, beyond
     a float, not ``inf``), and a value that is not finite, shown ``"-"`` as a table's cell
-    shows it (``format`` said ``"Infinity"`` for ``inf`` and ``".2f"``)."""
+    shows it (``format`` said ``"Infinity"`` for ``inf`` and ``".2f"``). ``huge``: the
+    magnitude from which a fixed-point value is shown in exponent form (a narrower column's
+    own)."""
     if not math.isfinite(value):
         return "-"
     x = value * scale
     fixed = fmt.endswith("f")
-    if math.isfinite(x) and not (fixed and abs(x) >= HUGE):
+    if math.isfinite(x) and not (fixed and abs(x) >= huge):
         return format(x, fmt)
     if math.isfinite(x):
         return format(x, ".3e")
     return format(Decimal(value) * Decimal(scale), ".3e" if fixed else fmt)
+
+
+def counted(n: int, noun: str) -> str:
+    """``n`` and ``noun``, with an ``s`` unless ``n`` is 1: ``"1 landmark"``, ``"2 poses"``
+    (a summary said "1 landmarks", h154)."""
+    return f"{n} {noun}{'s' * (n != 1)}"
 
 
 #: LaTeX's ten special characters and what prints each as itself (a method name or file name
@@ -153,4 +161,4 @@ def write_csv(path: str | os.PathLike[str], rows: Sequence[Mapping[str, Any]],
                         for k, v in r.items()})
 
 
-__all__ = ["FORMATS", "Column", "format_table", "write_csv"]
+__all__ = ["FORMATS", "Column", "counted", "format_table", "write_csv"]

@@ -96,6 +96,22 @@ def test_run_summary_counts_one_landmark_in_the_singular(tmp_path: Path,
     assert main(["run", str(stream), "--method", "triangulate",
                  "--out", str(tmp_path / "e.est")]) == 0
     assert capsys.readouterr().out.startswith("triangulate: 1 landmark mapped at t = 1 in ")
+    # h154: and so did export's summary, evaluate's truth-free line and the g2o note (landmark
+    # 1, seen once, is not mapped)
+    est = str(tmp_path / "e.est")
+    assert main(["export", est, "--format", "csv", "--out", str(tmp_path / "e.csv")]) == 0
+    assert capsys.readouterr().out.rstrip().endswith("(csv): 2 poses, 1 landmark")
+    assert main(["evaluate", est, str(stream)]) == 0
+    assert "  final map: 1 landmark\n" in capsys.readouterr().out
+    assert main(["export", est, "--stream", str(stream), "--format", "g2o",
+                 "--out", str(tmp_path / "e.g2o")]) == 0
+    out, err = capsys.readouterr()
+    assert out.rstrip().endswith("(g2o): 2 poses, 1 landmark")
+    assert err == ("bomgraph: note: 1 observed landmark without an estimate has no VERTEX_XY "
+                   "(id 1): g2o drops its 1 bearing edge when it loads the file\n"), err
+    assert main(["-q", "export", est, "--stream", str(stream), "--format", "g2o",
+                 "--out", str(tmp_path / "q.g2o")]) == 0
+    assert capsys.readouterr().err == ""
 
 
 def test_compare_shows_its_bar_on_a_terminal_only(tmp_path: Path) -> None:

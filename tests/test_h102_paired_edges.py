@@ -83,3 +83,10 @@ def test_a_huge_ratio_is_shown_in_exponent_form_in_its_column() -> None:
     line = next(ln for ln in format_paired([out]).splitlines() if ln.startswith("mine "))
     assert f"{out.ratio_of_means:.3e}" in line and f"{out.ratio_median:.3e}" in line, line
     assert not any(len(tok) > 12 and "." in tok and "e" not in tok for tok in line.split()), line
+    # h154: so did a ratio of 1e6 to 1e9 (below the 1e9 from which tables use exponents):
+    # "100000000.00" in the 9-character column of the median ratio
+    out, = paired_comparison(_rows("bound", [1e-9 * (1 + k) for k in range(9)])
+                             + _rows("mine", REF))
+    line = next(ln for ln in format_paired([out]).splitlines() if ln.startswith("mine "))
+    assert 1e6 <= out.ratio_median < 1e9 and f"{out.ratio_median:.3e}" in line, line
+    assert not any(len(tok.strip("[],")) > 9 for tok in line.split()[2:]), line

@@ -117,6 +117,11 @@ def test_methods_says_what_name_at_preset_does_for_a_method_without_presets(
         "presets: none declared (NAME@PRESET is passed on to the factory as preset=PRESET)")
     # h152: its options are any, not "none" (the README's Factory(header, **options))
     assert "options: any (the factory takes **options" in out and "options: none" not in out
+    # h154: and so does --json, where "options": [] read as none
+    assert main(["methods", "any-options", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["any_option"] is True
+    assert main(["methods", "triangulate", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["any_option"] is False
 
 
 def test_methods_does_not_call_a_preset_parameter_of_the_factory_refused(

@@ -334,13 +334,16 @@ def test_results_figure_labels_an_arm_whose_runs_failed_as_failed(tmp_path) -> N
 
     rows = [{"experiment": "e", "arm": a, "ok": ok} for a, ok in (
         ("crash", False), ("crash", False), ("few", True), ("few", True), ("mixed", False),
-        ("mixed", True), ("good", True), ("good", True))]
+        ("mixed", True), ("good", True), ("good", True), ("mixed3", False), ("mixed3", True),
+        ("mixed3", True))]
     failed = _failed_runs({"results": rows})
-    assert failed == {"e": {"crash": 2, "few": 0, "mixed": 1, "good": 0}}
+    assert failed == {"e": {"crash": 2, "few": 0, "mixed": 1, "good": 0, "mixed3": 1}}
     nan = np.nan
     final = {"e": {"crash": np.array([nan, nan]), "few": np.array([nan, nan]),
-                   "mixed": np.array([nan, nan]), "good": np.array([0.1, 0.2])}}
+                   "mixed": np.array([nan, nan]), "good": np.array([0.1, 0.2]),
+                   "mixed3": np.array([nan, nan, nan])}}
     fig = results_figure(final, {}, failed=failed)
     ticks = [t.get_text() for t in fig.axes[0].get_xticklabels()]
-    assert ticks == ["crash (FAILED)", "few (no map)",
-                     "mixed (1 of 2 FAILED, the others no map)", "good"], ticks
+    assert ticks == ["crash (FAILED)", "few (no map)",        # h154: "the other", one run
+                     "mixed (1 of 2 FAILED, the other no map)", "good",
+                     "mixed3 (1 of 3 FAILED, the others no map)"], ticks

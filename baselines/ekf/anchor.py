@@ -13,9 +13,11 @@ later update, with all correlations (the poses, the other features). The margina
 other states is unchanged (no row of any update touches ``e``).
 
 The test is the anchor's leave-one-out residual: with ``e_hat``, ``P_e`` its posterior, the
-residual ``-e_hat`` of that measurement has variance ``sigma^2 - P_e`` (the posterior of ``e``
-without the anchor, against the anchor), so ``e_hat^2 / (sigma^2 - P_e)`` is chi-square with
-1 dof when the anchor is as stated, tested at the filter's gate (``gate_probability``). Each
+residual ``-e_hat`` of that measurement has variance ``sigma^2 - P_e``, and ``e_hat^2 /
+(sigma^2 - P_e)`` is also the statistic of the anchor against the posterior of ``e`` without
+it (residual ``-e_hat sigma^2 / (sigma^2 - P_e)``, variance ``sigma^4 / (sigma^2 - P_e)``):
+chi-square with 1 dof when the anchor is as stated, tested at the filter's gate
+(``gate_probability``). Each
 anchor is tested once, at the first step after whose updates the rest of the filter knows
 ``e`` at least as well as the anchor alone does (``P_e <= sigma^2 / 2``: information from
 elsewhere ``>= 1 / sigma^2``), whether the feature is still in inverse depth (then before
@@ -59,6 +61,7 @@ class AnchorTestMixin:
     _offset: dict
     _gate: float
     _white_sigma: float
+    _coloured: Any
 
     def _anchor_on(self) -> bool:
         return bool(getattr(self.config, "anchor_test", False))
@@ -67,6 +70,8 @@ class AnchorTestMixin:
         on = self._anchor_on() and ids.size
         if on:
             self._drop_orphans()           # a restarted feature's old error, before its new one
+            per = 5 + bool(self._coloured.enabled)          # [x0, y0, theta, rho], (b,) e
+            self.filter.check_room(per * ids.size, f"{ids.size} new landmark features")
         super()._add_inverse_depth(ids, z)                 # type: ignore[misc]
         if not on:
             return

@@ -236,12 +236,12 @@ class EkfConfig(BearingEkfConfig):
         candidate is initialised) or ``"inverse-depth"`` (the candidate is an inverse-depth
         feature, as in ``ekf-invdepth``, updated by every bearing at once; it joins the map
         as ``[x, y]`` when Bailey's test passes on its conversion).
-    anchor_test : True: each inverse-depth candidate's first (anchor) bearing, which no gate
+    anchor_test : True (needs ``candidates="inverse-depth"``, as preset ``real``; False in
+        every preset): each inverse-depth candidate's first (anchor) bearing, which no gate
         can test, is tested once the later sightings know its error at least as well as the
         anchor does (its leave-one-out residual, at the gate; before or after the feature
         joins the map), and a failing one is taken out of the filter
-        (:mod:`baselines.ekf.anchor`). False (every preset): never. Needs
-        ``candidates="inverse-depth"``.
+        (:mod:`baselines.ekf.anchor`).
     """
 
     PRESETS: ClassVar[Mapping[str, Mapping[str, Any]]] = {

@@ -6,6 +6,7 @@ failing one is taken out of the filter (``BearingEkf.retract``, the inverse of a
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 import pytest
@@ -128,3 +129,106 @@ def test_the_option_is_checked_and_off_in_every_preset() -> None:
         EkfConfig(candidates="inverse-depth", anchor_test=1)
     with pytest.raises(ConfigError, match="anchor_test=true needs candidates='inverse-depth'"):
         EkfConfig.preset("paper", anchor_test=True)
+    # h154: `bomgraph methods ekf` shows a doc's first sentence only, which left the need out
+    from bomgraph.config import describe_options
+    doc = next(o.doc for o in describe_options(EkfConfig) if o.name == "anchor_test")
+    assert 'candidates="inverse-depth"' in doc and "False in every preset" in doc, doc
+
+
+def test_the_state_limit_counts_the_anchor_errors_before_anything_is_added() -> None:
+    """h154: the limit was checked for the features' 4 states each, then the anchor errors
+    refused as "new landmark or pose blocks", after the features had been added."""
+    from baselines.ekf.filter import StateLimitError
+
+    stream = _stream()
+    first = stream.steps[0]
+    n = first.landmark_ids.size
+    m = EkfMapper(stream.header, start_pose=tuple(stream.truth.poses[0]), preset="real",
+                  anchor_test=True, max_state=3 + 4 * n)     # room for the features alone
+    with pytest.raises(StateLimitError, match=f"with {n} new landmark features to {3 + 5 * n} "):
+        m.step(first)
+    assert m.filter.dim == 3 and not m._sizes
+
+
+def _linear_problem(rng: np.random.Generator, with_e: bool, s2: float
+                    ) -> tuple[BearingEkf, list[int], list[int], dict]:
+    """A linear-Gaussian stand-in for a run: a pose, a landmark, two features' ``theta`` from
+    anchors at pose 0 (``theta = psi + z + w``), the anchor errors as the mixin adds them
+    (``e = theta - psi - z``), then 12 linear predicts and updates of rows on the pose, one
+    ``theta`` and the landmark (none on ``e``)."""
+    T = 12
+    p = {"F": np.eye(3) + 0.05 * rng.normal(size=(3, 3)), "u": 0.01 * rng.normal(size=3),
+         "Q": np.diag([1e-4, 2e-4, 3e-4]), "m0": np.array([0.0, 0.0, 0.1]),
+         "P0": np.diag([1e-6, 1e-6, 1e-4]), "ml": np.array([1.0, 2.0]),
+         "Pl": np.diag([0.5, 0.7]), "z": np.array([0.3, -0.2]), "T": T, "rv": 1e-4,
+         "H": rng.normal(size=(T, 3, 6)), "y": 0.1 * rng.normal(size=(T, 3))}
+    f = BearingEkf(p["m0"], p["P0"], 0.05)
+    f.augment(p["ml"], np.zeros(0, np.int64), np.zeros((2, 0)), p["Pl"], np.zeros(2, bool))
+    th = [f.augment(np.array([f.x[2] + z]), np.array([2]), np.ones((1, 1)), np.array([s2]),
+                    np.zeros(1, bool)) for z in p["z"]]
+    eo = [f.augment(np.zeros(1), np.array([2, t]), np.array([[-1.0, 1.0]]), np.zeros(1),
+                    np.zeros(1, bool)) for t in th] if with_e else []
+    for t in range(T):
+        J = np.eye(f.dim)
+        J[:3, :3] = p["F"]
+        f.kf.x[:3] = p["F"] @ f.kf.x[:3] + p["u"]
+        f.kf.P[:] = J @ f.kf.P @ J.T
+        f.kf.P[:3, :3] += p["Q"]
+        cols = np.array([[0, 1, 2, th[r % 2], 3, 4] for r in range(3)])
+        y = p["y"][t] - np.einsum("ks,ks->k", p["H"][t], f.x[cols])
+        f.update_rows(cols, p["H"][t], y, np.full(3, p["rv"]))
+    return f, th, eo, p
+
+
+def _batch(p: dict, anchors: list[int], s2: float) -> tuple[np.ndarray, np.ndarray, Any]:
+    """The same problem solved at once over every pose, with the anchor factors ``anchors``
+    only; the mean and covariance of (last pose, landmark, thetas)."""
+    T = p["T"]
+    it, il = 3 * (T + 1), 3 * (T + 1) + 2
+    A, b = np.zeros((il + 2, il + 2)), np.zeros(il + 2)
+
+    def factor(row: np.ndarray, cols: np.ndarray, r: Any, R: Any) -> None:
+        W, row = np.linalg.inv(np.atleast_2d(R)), np.atleast_2d(row)
+        A[np.ix_(cols, cols)] += row.T @ W @ row
+        b[cols] += row.T @ W @ np.atleast_1d(r)
+
+    factor(np.eye(3), np.arange(3), p["m0"], p["P0"])
+    factor(np.eye(2), np.arange(il, il + 2), p["ml"], p["Pl"])
+    for t in range(T):
+        factor(np.hstack([-p["F"], np.eye(3)]), np.arange(3 * t, 3 * t + 6), p["u"], p["Q"])
+        for r in range(3):
+            factor(p["H"][t][r], np.r_[3 * t + 3:3 * t + 6, it + r % 2, il, il + 1],
+                   p["y"][t][r], p["rv"])
+    for j in anchors:
+        factor(np.array([1.0, -1.0]), np.array([it + j, 2]), p["z"][j], s2)
+    C = np.linalg.inv(A)
+    keep = np.r_[3 * T:3 * T + 3, il, il + 1, it, it + 1]
+    return (C @ b)[keep], C[np.ix_(keep, keep)], (C @ b, C, it)
+
+
+def test_retract_is_the_solve_without_the_anchor_and_the_test_its_leave_one_out() -> None:
+    """h154, derived apart from the module: on a linear problem with predicts between, the
+    anchor errors leave the other states as they were, the retraction of one or both
+    anchors is the batch solve without them, and ``e_hat^2 / (sigma^2 - P_e)`` is the
+    anchor's statistic against the batch posterior without it."""
+    s2 = 0.02 ** 2
+    f, th, eo, p = _linear_problem(np.random.default_rng(7), True, s2)
+    plain, _, _, _ = _linear_problem(np.random.default_rng(7), False, s2)
+    sel = np.r_[0:5, th]
+    np.testing.assert_allclose(f.x[sel], plain.x, atol=1e-13)
+    np.testing.assert_allclose(f.P[np.ix_(sel, sel)], plain.P, atol=1e-16)
+    mean, cov, _ = _batch(p, [0, 1], s2)
+    np.testing.assert_allclose(f.x[sel], mean, atol=1e-12)
+    _, _, (mu, C, it) = _batch(p, [1], s2)
+    d = np.zeros(len(mu))
+    d[[it, 2]] = 1.0, -1.0
+    loo = (p["z"][0] - d @ mu) ** 2 / (d @ C @ d + s2)
+    e_hat, pe = f.x[eo[0]], f.P[eo[0], eo[0]]
+    assert loo > 10 and e_hat ** 2 / (s2 - pe) == pytest.approx(loo, rel=1e-9)
+    for drop in ([0], [0, 1]):
+        g, th, eo, _ = _linear_problem(np.random.default_rng(7), True, s2)
+        g.retract(np.array([eo[j] for j in drop]), s2)
+        mean, cov, _ = _batch(p, [j for j in (0, 1) if j not in drop], s2)
+        assert np.abs(g.x[sel] - f.x[sel]).max() > 1e-3           # the anchor pulled
+        np.testing.assert_allclose(g.x[sel], mean, atol=1e-12)
+        np.testing.assert_allclose(g.P[np.ix_(sel, sel)], cov, atol=1e-16, rtol=1e-9)
