@@ -18,6 +18,7 @@ step or returning a map from numbers it could not represent.
   1e9 m. 1e9 m keeps every method a decade inside what it computes correctly.
 * **A factory's own options**, before any run (:func:`check_factory_options`, called by
   :func:`bomgraph.mapper.check_method_options`): ``start_pose``, a mapper object.
+* **Known distances** beyond it, or with a sigma above :data:`MAX_SIGMA` (:func:`check_priors`).
 * **Sigmas** above :data:`MAX_SIGMA` (:func:`check_sigmas`), a bearing sigma outside
   ``(0, pi]`` (:func:`check_bearing_sigma`; STMDS holds it to :data:`MAX_SIGMA` only).
 """
@@ -67,12 +68,26 @@ def check_bearing_sigma(header: StreamHeader, method: str) -> StreamHeader:
     return header
 
 
+def check_priors(header: StreamHeader, method: str) -> None:
+    """Refuse a known distance (``priors[k]``) beyond
+    :data:`~bomgraph.plausibility.MAX_COORDINATE_M` or with a sigma above :data:`MAX_SIGMA`
+    (h151: STMDS's squared distances overflowed, and it blamed its own distance matrix)."""
+    for k, p in enumerate(header.priors):
+        if not p.distance_m <= MAX_COORDINATE_M:
+            raise StreamValueError(
+                f"{method} cannot use a known distance of {p.distance_m:g} m, beyond "
+                f"{MAX_COORDINATE_M:g} m (squared, it leaves double precision); fix the "
+                f"stream's priors", t=None, key=f"priors[{k}].distance_m")
+        check_sigmas(p.sigma_m, None, f"priors[{k}].sigma_m", method)
+
+
 def checked_header(header: StreamHeader, method: str,
                    max_sigma: float = MAX_SIGMA) -> StreamHeader:
     """``header``, refused if ``method`` (a filter, a graph) cannot use its sigmas: its
     odometry sigmas above ``max_sigma`` (:func:`check_sigmas`), its bearing sigma outside
-    ``(0, pi]`` (:func:`check_bearing_sigma`)."""
+    ``(0, pi]`` (:func:`check_bearing_sigma`), a known distance (:func:`check_priors`)."""
     check_sigmas(header.odometry_sigma, None, "odometry_sigma", method, max_sigma)
+    check_priors(header, method)
     return check_bearing_sigma(header, method)
 
 
@@ -169,4 +184,4 @@ class Reach:
 
 
 __all__ = ["MAX_SIGMA", "Reach", "check_bearing_sigma", "check_distance", "check_factory_options",
-           "check_mapper_option", "checked_header", "check_sigmas", "checked_start_pose"]
+           "check_mapper_option", "check_priors", "checked_header", "check_sigmas", "checked_start_pose"]

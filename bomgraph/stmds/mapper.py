@@ -31,7 +31,7 @@ from ..config import resolve
 from ..errors import ConfigError, DegenerateGeometryError
 from ..geometry import dead_reckon
 from ..mapper import MapEstimate
-from ..method_limits import check_distance, check_sigmas
+from ..method_limits import check_distance, check_priors, check_sigmas
 from ..stream import Step, StreamHeader
 from .batch import BATCH_STEPS, StepBatch
 from .bundle import (SIGMA_RANGE, PrefixState, WindowBundle, bundle_adjust_window,
@@ -95,6 +95,7 @@ class StmdsMapper:
         self.header = header
         _check_sigmas(header.bearing_sigma_rad, None, "bearing_sigma_rad")
         _check_sigmas(header.odometry_sigma, None, "odometry_sigma")
+        check_priors(header, "STMDS")
         self._bearing_sigma = float(header.bearing_sigma_rad)
         if cfg.max_range_m is not None:
             self._max_range = float(cfg.max_range_m)
