@@ -149,3 +149,16 @@ def test_a_known_distance_no_method_can_square_is_refused_at_line_1(tmp_path: Pa
     one_error(_run(stream, method, tmp_path / "e.json"),
               f"{stream}, line 1: 'priors[0].distance_m': ", "cannot use a known distance of "
               "1e+300 m, beyond 1e+09 m", "fix the stream's priors")
+
+
+def test_an_initial_pose_sigma_the_filter_cannot_hold_is_refused_before_any_run(
+        tmp_path: Path) -> None:
+    """``initial_pose_sigma=[1e300, 1, 1]`` passed the configuration (finite, >= 0) and
+    failed every run of compare ("BearingEkf: the initial pose and its covariance must be
+    finite", exit 1): refused before any run now, with the odometry's bound."""
+    stream = write_jsonl(tmp_path / "odd.jsonl", HEADER, odd_steps())
+    proc = bomgraph("compare", "--streams", stream, "--methods", "ekf", "--option",
+                    "ekf:initial_pose_sigma=[1e300, 1, 1]", "--out", tmp_path / "cmp",
+                    "--jobs", "1", "--no-progress", "--no-figures")
+    one_error(proc, "initial_pose_sigma must be 3 numbers in [0, 100000]")
+    assert not (tmp_path / "cmp" / "results.json").exists()
