@@ -162,3 +162,18 @@ def test_an_initial_pose_sigma_the_filter_cannot_hold_is_refused_before_any_run(
                     "--jobs", "1", "--no-progress", "--no-figures")
     one_error(proc, "initial_pose_sigma must be 3 numbers in [0, 100000]")
     assert not (tmp_path / "cmp" / "results.json").exists()
+
+
+def test_an_estimate_header_of_another_format_is_named_at_line_1(tmp_path: Path) -> None:
+    """A version-2 estimate whose line-1 header had another ``format`` was read as one
+    version-1 JSON object and refused as "line 2: not valid JSON (Extra data at column 1)"."""
+    stream = write_jsonl(tmp_path / "odd.jsonl", HEADER, odd_steps())
+    est = tmp_path / "e.json"
+    assert bomgraph("run", stream, "--method", "triangulate", "--out", est).returncode == 0
+    lines = est.read_text().splitlines()
+    lines[0] = lines[0].replace('"bomgraph-estimate"', '"bomgraph-estimat"')
+    est.write_text("\n".join(lines) + "\n")
+    for args in (("evaluate", est, stream),
+                 ("export", est, "--format", "csv", "--out", tmp_path / "x.csv")):
+        one_error(bomgraph(*args), f"{est}, line 1: 'format': must be \"bomgraph-estimate\", "
+                                   f"got \"bomgraph-estimat\"")
