@@ -474,7 +474,7 @@ def check_method_options(name: str, options: Mapping[str, Any]) -> None:
     factory = method_factory(name)
     target = factory.__init__ if inspect.isclass(factory) else factory
     params = inspect.signature(target).parameters
-    check_factory_options(name, target, params, opts)
+    check_factory_options(name, target, params, opts, Mapper)
     if "config" in opts:
         return _check_method_seed(name, options, opts["config"])
     own = {k for k, p in params.items() if p.kind is not inspect.Parameter.VAR_KEYWORD}

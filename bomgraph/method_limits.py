@@ -131,14 +131,12 @@ def check_mapper_option(option: str, value: Any) -> None:
 
 
 def check_factory_options(name: str, target: Callable[..., Any], params: Mapping[str, Any],
-                          opts: Mapping[str, Any]) -> None:
+                          opts: Mapping[str, Any], mapper_type: type) -> None:
     """Refuse, before any run, an option of ``name`` that is a parameter of its factory
     ``target`` (not of its configuration) with a value the factory refuses at every run:
-    ``start_pose`` (:func:`checked_start_pose`: was a ValueError or
-    an IndexError per run, h151) and a parameter annotated as a :class:`Mapper`
-    (:func:`check_mapper_option`)."""
-    from .mapper import Mapper
-
+    ``start_pose`` (:func:`checked_start_pose`: was a ValueError or an IndexError per run,
+    h151) and a parameter annotated as a ``mapper_type``
+    (:class:`bomgraph.mapper.Mapper`, given by the caller: :func:`check_mapper_option`)."""
     try:
         hints = typing.get_type_hints(target)
     except Exception:  # unresolvable annotations in a plugin: start_pose only
@@ -150,7 +148,7 @@ def check_factory_options(name: str, target: Callable[..., Any], params: Mapping
         try:
             if key == "start_pose":
                 checked_start_pose(value)
-            elif hint is Mapper or Mapper in typing.get_args(hint):
+            elif hint is mapper_type or mapper_type in typing.get_args(hint):
                 check_mapper_option(key, value)
         except ConfigError as exc:
             raise ConfigError(f"method {name!r}: {exc}") from None
