@@ -47,7 +47,7 @@ import numpy as np
 from bomgraph.config import Presets, requirement
 from bomgraph.errors import ConfigError, StreamFormatError
 from bomgraph.geometry import compose, intersect_ray_groups
-from bomgraph.method_limits import Reach, checked_header
+from bomgraph.method_limits import MAX_SIGMA, Reach, checked_header
 from bomgraph.stream import Prior, Step, StreamHeader
 
 from .bearing_log import BearingLog
@@ -231,7 +231,9 @@ class FactorGraphConfig(Presets):
     def __post_init__(self) -> None:
         need = requirement(type(self).__name__)
 
-        need(self.sigma_floor_m > 0 and self.sigma_floor_rad > 0, "sigma floors must be > 0")
+        need(0 < self.sigma_floor_m <= MAX_SIGMA and 0 < self.sigma_floor_rad <= MAX_SIGMA,
+             f"sigma floors must be in (0, {MAX_SIGMA:g}] (above, no odometry factor carries "
+             f"information, and the graph's scale is free)")
         need(0 < self.min_parallax_rad < math.pi / 2, "min_parallax_rad must be in (0, pi/2)")
         need(self.range_gate >= 1.0, "range_gate must be >= 1")
         need(self.huber_k is None or self.huber_k > 0, "huber_k must be > 0 or None")

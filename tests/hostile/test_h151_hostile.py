@@ -177,3 +177,12 @@ def test_an_estimate_header_of_another_format_is_named_at_line_1(tmp_path: Path)
                  ("export", est, "--format", "csv", "--out", tmp_path / "x.csv")):
         one_error(bomgraph(*args), f"{est}, line 1: 'format': must be \"bomgraph-estimate\", "
                                    f"got \"bomgraph-estimat\"")
+
+
+@pytest.mark.parametrize("method", ["gtsam-batch", "gtsam-isam2", "hybrid"])
+def test_a_sigma_floor_that_removes_all_odometry_information_is_refused(method: str) -> None:
+    """``sigma_floor_m=1e300`` made every odometry factor carry no information, and
+    gtsam-batch reported its solve (of a graph whose scale is free) converged."""
+    with pytest.raises(ConfigError, match=r"sigma floors must be in \(0, 1e\+06\]"):
+        check_method_options(method, {"sigma_floor_m": 1e300})
+    check_method_options(method, {"sigma_floor_m": 0.01})
