@@ -47,6 +47,7 @@ import numpy as np
 from bomgraph.config import Presets, requirement
 from bomgraph.errors import ConfigError, StreamFormatError
 from bomgraph.geometry import compose, intersect_ray_groups
+from bomgraph.method_limits import MAX_SIGMA, Reach, checked_header
 from bomgraph.stream import Prior, Step, StreamHeader
 
 from .bearing_log import BearingLog
@@ -230,7 +231,9 @@ class FactorGraphConfig(Presets):
     def __post_init__(self) -> None:
         need = requirement(type(self).__name__)
 
-        need(self.sigma_floor_m > 0 and self.sigma_floor_rad > 0, "sigma floors must be > 0")
+        need(0 < self.sigma_floor_m <= MAX_SIGMA and 0 < self.sigma_floor_rad <= MAX_SIGMA,
+             f"sigma floors must be in (0, {MAX_SIGMA:g}] (above, no odometry factor carries "
+             f"information, and the graph's scale is free)")
         need(0 < self.min_parallax_rad < math.pi / 2, "min_parallax_rad must be in (0, pi/2)")
         need(self.range_gate >= 1.0, "range_gate must be >= 1")
         need(self.huber_k is None or self.huber_k > 0, "huber_k must be > 0 or None")
@@ -395,7 +398,9 @@ class BearingGraph:
                  start_pose: np.ndarray) -> None:
         self.header = header
         self.config = config
-        self.start_pose = np.asarray(start_pose, dtype=float).reshape(3)
+        checked_header(header, "GTSAM")   # refusals name the stream's file and line
+        self._reach = Reach(start_pose, "GTSAM")
+        self.start_pose = self._reach.start_pose
         self._noise = bearing_noise(header, cauchy_k=config.bearing_cauchy_k)
         self._robust_noise = (bearing_noise(header, config.huber_k)
                               if config.huber_k is not None else None)
@@ -434,6 +439,7 @@ class BearingGraph:
             if step.odom is None or np.shape(step.odom) != (3,):
                 raise StreamFormatError(f"step {step.t}: odometry [dx, dy, dpsi] is required "
                                         f"after t = 0", key="odom")
+            self._reach.advance(step)
             for f in odometry_factors(step.t, step.odom, step.odometry_sigma(self.header),
                                       self.config):
                 self._add(f)

@@ -75,13 +75,13 @@ class BatchState:
                  start_pose: Sequence[float]) -> None:
         self.config = config
         self.header = header
-        self.problem = BearingGraph(header, config, np.asarray(start_pose, dtype=float))
+        self.problem = BearingGraph(header, config, start_pose)   # refuses a bad start_pose
         self.graph = gtsam.NonlinearFactorGraph()
         self.robust_graph = (gtsam.NonlinearFactorGraph() if config.huber_k is not None
                              else None)
         self.values = gtsam.Values()
         self._lm_config = replace(config, relative_error_tol=config.warm_relative_error_tol)
-        self._last = np.asarray(start_pose, dtype=float)
+        self._last = self.problem.start_pose.copy()
         self._odom_sigma: list[np.ndarray] = []
         self._full_n = 0                  # steps at the last whole-graph solve
         self._window_b = 0                # held pose of the last solve if a window, else 0
@@ -524,7 +524,7 @@ class OracleMapper(ScheduledSolver):
         self.header = header
         self.state = BatchState(header, self.config, start_pose)
         p0 = truth.poses[0]
-        s = np.asarray(start_pose, dtype=float)
+        s = self.state.problem.start_pose
         r = rotation(s[2] - p0[2])
         self._true_poses = np.column_stack([(truth.poses[:, :2] - p0[:2]) @ r.T + s[:2],
                                             truth.poses[:, 2] - p0[2] + s[2]])

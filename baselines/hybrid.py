@@ -35,6 +35,7 @@ import numpy as np
 from bomgraph.config import requirement, resolve
 from bomgraph.errors import BomgraphError, ConfigError, TooFewLandmarksError
 from bomgraph.mapper import MapEstimate, Mapper, check_seed, create_mapper
+from bomgraph.method_limits import check_mapper_option
 from bomgraph.stream import Step, StreamHeader
 
 from .bearing_graph import FactorGraphConfig, landmark_key
@@ -144,8 +145,10 @@ def check_seed_mapper(owner: str, seed_mapper: Mapper | None,
     Raises
     ------
     ConfigError
-        ``seed_mapper`` given and ``seed_options`` set.
+        ``seed_mapper`` given and ``seed_options`` set, or a ``seed_mapper`` that is not a
+        mapper (:func:`~bomgraph.method_limits.check_mapper_option`).
     """
+    check_mapper_option("seed_mapper", seed_mapper)
     if seed_mapper is None or not seed_options:
         return
     if "seed_options" in options:

@@ -173,7 +173,7 @@ class HybridIsam2Mapper(Isam2Mapper):
         self.seed = seed_mapper if seed_mapper is not None else create_mapper(
             cfg.seed_method, header, **dict(cfg.seed_options or {}))
         # nothing has been fed yet: the plain graph is swapped for the seeded one
-        self.problem = _SeededGraph(header, cfg, np.asarray(start_pose, dtype=float))
+        self.problem = _SeededGraph(header, cfg, start_pose)
         self.problem.seeder = self._seed_pending
         self._rays: dict[int, tuple[list[int], list[float]]] = {}
         self._seed_map: MapEstimate | None = None

@@ -234,7 +234,7 @@ class Isam2Mapper(WindowLongMode, NormalModeCheck):
             config = Isam2Config(**asdict(config))               # iSAM2 fields at defaults
         self.config = resolve(Isam2Config, config, preset, options)
         self.header = header
-        self.problem = BearingGraph(header, self.config, np.asarray(start_pose, dtype=float))
+        self.problem = BearingGraph(header, self.config, start_pose)
         self.accepted = gtsam.NonlinearFactorGraph()   # every factor the solver holds
         self.estimate_values = gtsam.Values()          # its estimate after the last update
         self._long = False   # long mode (Isam2Config.long_after_steps)

@@ -16,8 +16,9 @@ from typing import Any, ClassVar, Mapping
 import numpy as np
 
 from bomgraph.config import Presets, requirement, resolve
-from bomgraph.geometry import compose, ray_normals, solve_ray_normal_equations
+from bomgraph.geometry import ray_normals, solve_ray_normal_equations
 from bomgraph.mapper import MapEstimate
+from bomgraph.method_limits import Reach
 from bomgraph.stream import Step, StreamHeader
 
 
@@ -58,8 +59,8 @@ class TriangulateMapper:
                  preset: str | None = None, **options: float) -> None:
         self.config = resolve(TriangulateConfig, config, preset, options)
         self._header = header
-        self._start = np.asarray(start_pose, dtype=float)
-        self._pose = self._start.copy()
+        self._reach = Reach(start_pose, "triangulate")   # refuses a bad start_pose
+        self._pose = self._reach.start_pose
         self._poses: list[np.ndarray] = []
         self._slot: dict[int, int] = {}
         self._a = np.zeros((0, 2, 2))
@@ -78,8 +79,7 @@ class TriangulateMapper:
         return np.array([self._slot[int(i)] for i in ids], dtype=np.int64)
 
     def step(self, step: Step) -> None:
-        if step.odom is not None:
-            self._pose = compose(self._pose, step.odom)
+        self._pose = self._reach.advance(step)  # dead reckoning, refused beyond 1e9 m
         self._poses.append(self._pose)
         if step.landmark_ids.size == 0:
             return

@@ -446,6 +446,11 @@ def read_estimate(path: str | os.PathLike[str]) -> EstimateFile:
             raise StreamFormatError("this is a stream file, not an estimate file (arguments "
                                     "swapped? an estimate comes from `bomgraph run`)",
                                     path=path, line=1, key="format")
+        if isinstance(head, dict) and head.get("format", ESTIMATE_FORMAT) != ESTIMATE_FORMAT:
+            # h151: was read as one version-1 object and refused at line 2 ("Extra data")
+            raise StreamFormatError(f"must be \"{ESTIMATE_FORMAT}\", got "
+                                    f"{json.dumps(head['format'])[:60]}", path=path, line=1,
+                                    key="format")
         fh.seek(0)
         try:
             chunks: list[bytes] = []  # in 1 MiB reads: read(4 GiB) reserves 4 GiB at once

@@ -451,9 +451,9 @@ def check_method_options(name: str, options: Mapping[str, Any]) -> None:
     """Refuse, before any run, the options of ``name`` that its configuration class refuses
     (an unknown name, a wrong type, a value out of range), as the factory would at every run.
 
-    Only the configuration's own checks are made: options that are parameters of the factory
-    itself (``start_pose``, ...) and checks that need the stream's header are left to the
-    factory. A method whose configuration has no presets (a plugin with a plain dataclass as
+    Options that are parameters of the factory itself are checked as the factories check
+    them (:func:`~bomgraph.method_limits.check_factory_options`: ``start_pose``, a mapper such as ``seed_mapper``);
+    checks that need the stream's header are left to the factory. A method whose configuration has no presets (a plugin with a plain dataclass as
     ``config_class``, or none) has its option names checked against the factory's parameters
     and the dataclass's fields, and their values against the type annotations (bool, int,
     float, str, tuples, unions, literals), so a typo or ``NAME@PRESET`` of a plugin without
@@ -467,14 +467,16 @@ def check_method_options(name: str, options: Mapping[str, Any]) -> None:
     import inspect
 
     from .config import Presets, check_plain_options
+    from .method_limits import check_factory_options
 
     cls = method_config_class(name)
     opts = dict(options)
-    if "config" in opts:
-        return _check_method_seed(name, options, opts["config"])
     factory = method_factory(name)
     target = factory.__init__ if inspect.isclass(factory) else factory
     params = inspect.signature(target).parameters
+    check_factory_options(name, target, params, opts, Mapper)
+    if "config" in opts:
+        return _check_method_seed(name, options, opts["config"])
     own = {k for k, p in params.items() if p.kind is not inspect.Parameter.VAR_KEYWORD}
     config = None
     if cls is not None and issubclass(cls, Presets):

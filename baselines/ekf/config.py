@@ -23,6 +23,7 @@ from bomgraph.config import Presets
 from bomgraph.errors import ConfigError
 
 from .range_prior import RHO_PRIORS
+from .refusals import MAX_EKF_SIGMA
 from .robust import ROBUST_UPDATES
 
 
@@ -194,10 +195,11 @@ class BearingEkfConfig(Presets):
         if not 0 < self.gate_probability <= 1:
             raise ConfigError(f"gate_probability must be in (0, 1] (1 disables the gate), got "
                               f"{self.gate_probability}")
-        if len(self.initial_pose_sigma) != 3 or not all(
-                math.isfinite(s) and s >= 0 for s in self.initial_pose_sigma):
-            raise ConfigError("initial_pose_sigma must be 3 finite numbers >= 0 "
-                              "(sigma_x_m, sigma_y_m, sigma_psi_rad)")
+        if len(self.initial_pose_sigma) != 3 or not all(     # as the odometry's (h151)
+                0 <= s <= MAX_EKF_SIGMA for s in self.initial_pose_sigma):
+            raise ConfigError(f"initial_pose_sigma must be 3 numbers in [0, "
+                              f"{MAX_EKF_SIGMA:g}] (sigma_x_m, sigma_y_m, sigma_psi_rad), got "
+                              f"{list(self.initial_pose_sigma)}")
         if not self.max_bearing_nonlinearity > 0:
             raise ConfigError(f"max_bearing_nonlinearity must be > 0 (inf: no limit), got "
                               f"{self.max_bearing_nonlinearity}")

@@ -78,7 +78,6 @@ import numpy as np
 
 from bomgraph.angles import angle_residual
 from bomgraph.config import resolve
-from bomgraph.geometry import compose
 from bomgraph.stream import Step, StreamHeader
 
 from .anchor import AnchorTestMixin
@@ -249,13 +248,13 @@ class InverseDepthEkfMapper(RhoPriorMixin, EkfSlam):
                  preset: str | None = None, **options: Any) -> None:
         self.config = resolve(InverseDepthConfig, config, preset, options)
         super().__init__(header, start_pose, self.config)
-        self._dr = np.asarray(start_pose, dtype=float)  # dead-reckoned pose (odometry only)
         self._anchor: dict[int, tuple[float, float, float]] = {}  # id -> x, y, ray angle
         self._baseline: dict[int, float] = {}  # feature id -> metres across its ray
 
     def _new_sightings(self, t: int, ids: np.ndarray, z: np.ndarray) -> None:
         for i, zi in zip(ids.tolist(), z.tolist()):  # a new anchor (first sighting, restart)
-            self._anchor[i] = (self._dr[0], self._dr[1], self._dr[2] + zi)
+            dr = self._reach.pose
+            self._anchor[i] = (dr[0], dr[1], dr[2] + zi)
             self._baseline[i] = 0.0
         self._add_inverse_depth(ids, z)
         self._convert(self._linear_enough)
@@ -263,16 +262,15 @@ class InverseDepthEkfMapper(RhoPriorMixin, EkfSlam):
     def step(self, step: Step) -> None:
         """As :meth:`EkfSlam.step`; and, for each feature sighted, the largest baseline so far
         across its anchor ray (metres, ``_baseline``), measured on the odometry alone (the
-        dead-reckoned pose ``_dr``): the parallax that can give the feature a depth. It does
-        not come from the filter's estimate, which its own updates move."""
-        if step.odom is not None:
-            self._dr = compose(self._dr, np.asarray(step.odom, dtype=float))
+        dead-reckoned pose ``_reach.pose``): the parallax that can give the feature a depth.
+        It does not come from the filter's estimate, which its own updates move."""
         super().step(step)
+        dr = self._reach.pose
         for i in step.landmark_ids.tolist():
             a = self._anchor.get(i)
             if a is not None:
-                perp = abs(math.cos(a[2]) * (self._dr[1] - a[1])
-                           - math.sin(a[2]) * (self._dr[0] - a[0]))
+                perp = abs(math.cos(a[2]) * (dr[1] - a[1])
+                           - math.sin(a[2]) * (dr[0] - a[0]))
                 self._baseline[i] = max(self._baseline[i], perp)
 
     def _linear_enough(self, features: np.ndarray, covs: np.ndarray) -> np.ndarray:

@@ -1,5 +1,6 @@
-"""The EKF mappers' refusals of values of a valid stream (a bearing sigma above pi, an
-odometry increment or sigma the predict overflows on) as :class:`StreamValueError`: they name
+"""The EKF mappers' refusals of values of a valid stream (an odometry increment or sigma the
+predict overflows on; the refusals every method shares, a bearing sigma above pi among them,
+are :mod:`bomgraph.method_limits`'s) as :class:`StreamValueError`: they name
 the step and the field, and ``bomgraph run`` and ``compare`` name the stream's file and line
 (:func:`bomgraph.stream_file.located`), as they do for the reader's refusals and STMDS's."""
 
@@ -13,19 +14,6 @@ from bomgraph.errors import StreamValueError
 from bomgraph.stream import Step, StreamHeader
 
 from .filter import FilterNumericalError
-
-
-def checked_header(header: StreamHeader) -> StreamHeader:
-    """``header``, refused if its ``bearing_sigma_rad`` is outside ``(0, pi]`` (the reader
-    accepts one above pi with a warning; :class:`~baselines.ekf.filter.BearingEkf` cannot
-    use it)."""
-    sigma = header.bearing_sigma_rad
-    if not (math.isfinite(sigma) and 0 < sigma <= math.pi):
-        raise StreamValueError(
-            f"the EKF cannot use a bearing std. dev. of {sigma:g} rad: it must be in (0, pi] "
-            f"(a larger sigma carries no information); fix the stream's bearing_sigma_rad",
-            t=None, key="bearing_sigma_rad")
-    return header
 
 
 def odometry_refusal(exc: FilterNumericalError, step: Step,
@@ -45,6 +33,14 @@ def odometry_refusal(exc: FilterNumericalError, step: Step,
     return StreamValueError(f"the EKF cannot use {whose} odometry: {exc}; fix the stream's "
                             f"{what}", t=t, key=key)
 
+
+#: The largest odometry std. dev. (m or rad, header or step) the EKFs accept (h151): a step
+#: of 3e5 m left ``ekf-invdepth``'s landmark covariances not positive semi-definite (their
+#: 1e-3 m^2 entries beside a pose variance of 1e11 m^2: the estimate was refused as it was
+#: written, naming no line of the stream), one of 1e100 m overflowed the predict 18 steps
+#: later, at that step's line; 1e5 m (the reader's warning, ``MAX_STEP_ODOMETRY_SIGMA``) in
+#: every 7th step of a 300-step run, or in the header, maps as before in both EKFs.
+MAX_EKF_SIGMA = 1e5
 
 #: The most sub-steps ``max_predict_turn_rad`` splits one step's predict into (h148: a step
 #: turning 1e12 rad, which the reader accepts with a warning, was 2e12 predicts, without end).
@@ -66,4 +62,4 @@ def predict_substeps(turn: float, max_turn: float | None) -> int:
     return max(math.ceil(ratio), 1)
 
 
-__all__ = ["MAX_PREDICT_SUBSTEPS", "checked_header", "odometry_refusal", "predict_substeps"]
+__all__ = ["MAX_EKF_SIGMA", "MAX_PREDICT_SUBSTEPS", "odometry_refusal", "predict_substeps"]

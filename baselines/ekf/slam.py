@@ -18,12 +18,13 @@ from bomgraph.angles import angle_residual, wrap_angle
 from bomgraph.errors import ConfigError
 from bomgraph.geometry import arc_root
 from bomgraph.mapper import MapEstimate
+from bomgraph.method_limits import Reach, checked_header
 from bomgraph.stream import Step, StreamHeader
 
 from .coloured import ColouredBearingError, ray_directions
 from .config import BearingEkfConfig
 from .filter import BearingEkf, BearingModel, FilterNumericalError, JacobianRows
-from .refusals import checked_header, odometry_refusal, predict_substeps
+from .refusals import MAX_EKF_SIGMA, odometry_refusal, predict_substeps
 from .models import (bearing_and_jacobian, invdepth_bearing_and_jacobian, invdepth_to_xy,
                      path_heading_noise, second_order_variance)
 from .robust import BearingVariances
@@ -42,8 +43,9 @@ class EkfSlam:
 
     def __init__(self, header: StreamHeader, start_pose: tuple[float, float, float],
                  config: BearingEkfConfig) -> None:
-        self._header = checked_header(header)  # a refusal names the stream's file and line
-        self.filter = BearingEkf(np.asarray(start_pose, dtype=float),
+        self._header = checked_header(header, "the EKF", MAX_EKF_SIGMA)  # name file, line
+        self._reach = Reach(start_pose, "the EKF", MAX_EKF_SIGMA)
+        self.filter = BearingEkf(self._reach.start_pose,
                                  np.diag(np.asarray(config.initial_pose_sigma, float) ** 2),
                                  header.bearing_sigma_rad,
                                  observability_constrained=config.jacobians != "plain",
@@ -534,6 +536,7 @@ class EkfSlam:
             raise ConfigError(f"steps must come in increasing t: got t = {step.t} after "
                               f"t = {self._last_t}")
         self._t = step.t
+        self._reach.advance(step)   # a step's refusal names its line, not a later one's
         if step.odom is not None:
             try:
                 self._predict(np.asarray(step.odom, float), step.odometry_sigma(self._header))
@@ -580,15 +583,12 @@ class EkfSlam:
         """The filtered map, the filtered trajectory (every step) and their covariances."""
         ids, xy, cov, info = self._landmarks()
         order = np.argsort(ids)
-        info = dict(info)
-        info.update(state_dim=self.filter.dim, gated_bearings=self.n_gated,
-                    nonlinear_bearings=self.n_nonlinear, used_bearings=self.n_updates,
-                    restarted=self.n_restarted)
-        info.update(self._variances.info())        # the variance options' own entries
+        info = {**info, "state_dim": self.filter.dim, "gated_bearings": self.n_gated,
+                "nonlinear_bearings": self.n_nonlinear, "used_bearings": self.n_updates,
+                "restarted": self.n_restarted, **self._variances.info()}  # options' own too
         if self.n_failures:
             info.update(update_failures=self.n_failures, last_failure=self.last_failure)
-        n = self._n_poses
-        if not n:
+        if not (n := self._n_poses):
             return MapEstimate.empty(reason="no steps yet", **info)
         if ids.size == 0:
             info["reason"] = "no landmark initialised yet"

@@ -28,10 +28,10 @@ from typing import Any
 import numpy as np
 
 from ..config import resolve
-from ..errors import ConfigError, DegenerateGeometryError, StreamValueError
+from ..errors import ConfigError, DegenerateGeometryError
 from ..geometry import dead_reckon
 from ..mapper import MapEstimate
-from ..plausibility import MAX_COORDINATE_M
+from ..method_limits import check_distance, check_priors, check_sigmas
 from ..stream import Step, StreamHeader
 from .batch import BATCH_STEPS, StepBatch
 from .bundle import (SIGMA_RANGE, PrefixState, WindowBundle, bundle_adjust_window,
@@ -46,10 +46,6 @@ from .window import (WindowSchedule, triangulate_window, triangulate_window_lsq,
                      triangulate_windows_lsq, window_pair_squared_distances)
 
 
-#: Largest std. dev. (metres or radians) STMDS accepts in a header or a step: beyond it no
-#: measurement carries information and the variances (fourth powers) leave double precision.
-MAX_SIGMA = 1e6
-
 #: SMACOF's warm start is the map of the last step ``t`` with ``t % WARM_EVERY == 0`` (made
 #: there whether or not the caller asked for an estimate: the paper's checkpoint cadence), so
 #: the map at a step does not depend on how often estimate() was called before it.
@@ -60,14 +56,8 @@ BATCH_WINDOWS = 64
 
 
 def _check_sigmas(values: Any, t: int | None, key: str) -> None:
-    """Refuse sigmas above :data:`MAX_SIGMA` (or non-finite) of step ``t`` (None: the
-    header) under ``key``, with a message naming them."""
-    arr = np.asarray(values, float).reshape(-1)
-    if not np.all(np.isfinite(arr)) or np.any(np.abs(arr) > MAX_SIGMA):
-        raise StreamValueError(
-            f"STMDS cannot use {arr.tolist() if arr.size > 1 else float(arr[0])!r}: "
-            f"a std. dev. above {MAX_SIGMA:g} (m or rad) carries no information and overflows "
-            f"the variance arithmetic; fix the stream's sigmas", t=t, key=key)
+    """:func:`~bomgraph.method_limits.check_sigmas` for STMDS."""
+    check_sigmas(values, t, key, "STMDS")
 
 
 class _GrowingFlags:
@@ -105,6 +95,7 @@ class StmdsMapper:
         self.header = header
         _check_sigmas(header.bearing_sigma_rad, None, "bearing_sigma_rad")
         _check_sigmas(header.odometry_sigma, None, "odometry_sigma")
+        check_priors(header, "STMDS")
         self._bearing_sigma = float(header.bearing_sigma_rad)
         if cfg.max_range_m is not None:
             self._max_range = float(cfg.max_range_m)
@@ -175,12 +166,9 @@ class StmdsMapper:
         brg = step.bearings_rad
         if step.odom_sigma is not None:
             _check_sigmas(step.odom_sigma, step.t, "odom_sigma")
-        if step.odom is not None and not math.hypot(step.odom[0], step.odom[1]) \
-                <= MAX_COORDINATE_M:
-            raise StreamValueError(
-                f"STMDS cannot use a move of {math.hypot(step.odom[0], step.odom[1]):g} m, "
-                f"beyond {MAX_COORDINATE_M:g} m (squared distances leave double precision); "
-                f"fix the stream's odometry", t=step.t, key="odom")
+        if step.odom is not None:
+            check_distance(math.hypot(step.odom[0], step.odom[1]), step.t, "STMDS",
+                           "a move of")
         if self._batch is not None:
             self._t = step.t
             self._batch.push(ids, brg, step.odom, step.odom_sigma)

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bomgraph.errors import BomgraphError
+from bomgraph.errors import BomgraphError, StreamValueError
 from bomgraph.mapper import create_mapper, run
 from bomgraph.sim import SimConfig, simulate
 from bomgraph.stream import Step, Stream, StreamHeader
@@ -80,13 +80,16 @@ def test_extreme_header_values_give_a_finite_map_or_a_bomgraph_error(
     assert np.all(np.isfinite(final.landmark_cov)) and np.all(np.isfinite(final.pose_cov))
 
 
-def test_a_huge_step_still_maps_with_every_filter() -> None:
-    """After a 1e12 m odometry step the filters go on (failed updates are skipped and
-    recorded in ``info``) and report a finite map."""
+def test_a_huge_step_is_refused_at_its_step_by_every_filter() -> None:
+    """A 1e12 m odometry step carries the robot beyond the coordinates the filters compute
+    with (:mod:`bomgraph.method_limits`; from 1e15 m their landmark covariances were not
+    positive semi-definite and the estimate was refused as it was written, naming no step):
+    every filter refuses that step's ``odom``. (Until h151 the filters went on after it.)"""
     header, steps = _extreme_cases()["one-1e12-m-step"]
     for method, options in CONFIGS:
-        final = run(create_mapper(method, header, **options), steps).final
-        assert len(final) >= 5, (method, options)
+        with pytest.raises(StreamValueError, match="1e[+]12 m, beyond 1e[+]09 m") as caught:
+            run(create_mapper(method, header, **options), steps)
+        assert (caught.value.t, caught.value.key) == (30, "odom"), (method, options)
 
 
 @pytest.mark.parametrize("method,options", CONFIGS, ids=IDS)

@@ -340,7 +340,8 @@ def test_item11_the_reader_warns_about_valid_but_absurd_values(tmp_path: Path,
         steps[12]["odom"] = [0.1, 0.0, 10.0]
     s = write_jsonl(tmp_path / "x.jsonl", header, steps)
     proc = bomgraph("run", s, "--method", "triangulate", "--out", tmp_path / "e.jsonl")
-    err = ok_or_one_error(proc)
+    ok_or_one_error(proc)     # "step": triangulate refuses the 1e12 m step at its line (h151)
+    err = proc.stderr.decode()
     key = {"sigma": "'bearing_sigma_rad'", "tiny sigma": "below 1e-09",
            "range": "'sensor_range_m'", "step": "line 17",
            "degrees": "line 22: 'bearings': step 20: a bearing of 51.5662 is more than a full",

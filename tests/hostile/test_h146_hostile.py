@@ -20,8 +20,8 @@ from bomgraph import tables
 @pytest.mark.parametrize("header,at_4,where", [
     ({}, {"odom_sigma": [1e200, 0.0, 0.1]}, "line 6: 'odom_sigma': step 4: the ekf cannot use"),
     ({}, {"odom": [1e200, 0.0, 0.1]}, "line 6: 'odom': step 4: the ekf cannot use"),
-    ({"odometry_sigma": [1e200, 0.0, 0.1]}, {},
-     "line 1: 'odometry_sigma': the ekf cannot use step 1's odometry"),
+    ({"odometry_sigma": [1e200, 0.0, 0.1]}, {},        # refused as read (h151), not at step 1
+     "line 1: 'odometry_sigma': the ekf cannot use [1e+200, 0.0, 0.1]: a std. dev. above"),
     ({"bearing_sigma_rad": 4.0}, {}, "line 1: 'bearing_sigma_rad': the ekf cannot use"),
 ])
 def test_an_ekf_refusal_names_the_file_and_line(tmp_path: Path, method: str, header: dict,

@@ -1,0 +1,185 @@
+"""The values of a valid stream no method can compute with, refused alike by every method that
+meets them (STMDS, the EKFs, the GTSAM graphs, ``triangulate``) as :class:`StreamValueError`:
+the refusal names the step ``t`` and the field, and ``bomgraph run`` and ``compare`` name the
+file and the line (:func:`bomgraph.stream_file.located`), as for the reader's refusals.
+
+The reader only warns about such values (:mod:`bomgraph.plausibility`: the file is valid);
+a method that cannot use one refuses it at its line, rather than failing later at another
+step or returning a map from numbers it could not represent.
+
+* **Distance from the map origin** beyond :data:`~bomgraph.plausibility.MAX_COORDINATE_M`
+  (1e9 m): :class:`Reach` dead-reckons the stream's odometry from ``start_pose`` and refuses
+  the step whose move carries the robot beyond it (and a ``start_pose`` beyond it, as an
+  option, :func:`checked_start_pose`). Measured (h151, ``docs/measurements.md``): with the
+  whole run moved to ``start_pose = (X, X, 0)`` every GTSAM method reproduces the map, cost
+  and convergence of the run at the origin up to X = 1e10 m; at 2e10 m ``gtsam-isam2`` and
+  ``hybrid-isam2`` no longer converge (cost +0.8 of 531.5), at 1e11 m the oracle's error
+  moves by 4 %, at 1e16 m no landmark enters any graph; ``ekf-invdepth`` moves by 1 % at
+  1e9 m. 1e9 m keeps every method a decade inside what it computes correctly.
+* **A factory's own options**, before any run (:func:`check_factory_options`, called by
+  :func:`bomgraph.mapper.check_method_options`): ``start_pose``, a mapper object.
+* **Known distances** beyond it, or with a sigma above :data:`MAX_SIGMA` (:func:`check_priors`).
+* **Sigmas** above :data:`MAX_SIGMA` (:func:`check_sigmas`), a bearing sigma outside
+  ``(0, pi]`` (:func:`check_bearing_sigma`; STMDS holds it to :data:`MAX_SIGMA` only).
+"""
+
+from __future__ import annotations
+
+import math
+import typing
+from numbers import Real
+from typing import Any, Callable, Mapping
+
+import numpy as np
+
+from .errors import ConfigError, StreamValueError
+from .geometry import compose
+from .plausibility import MAX_COORDINATE_M
+from .stream import Step, StreamHeader
+
+#: Largest std. dev. (metres or radians) a method accepts in a header or a step: beyond it no
+#: measurement carries information and the variances (fourth powers in STMDS) leave double
+#: precision; an EKF's covariance overflows some steps later, at another step's line.
+MAX_SIGMA = 1e6
+
+
+def check_sigmas(values: Any, t: int | None, key: str, method: str,
+                 max_sigma: float = MAX_SIGMA) -> None:
+    """Refuse sigmas above ``max_sigma`` (or non-finite) of step ``t`` (None: the header)
+    under ``key``, with a message naming ``method`` and them."""
+    arr = np.asarray(values, float).reshape(-1)
+    if not np.all(np.isfinite(arr)) or np.any(np.abs(arr) > max_sigma):
+        raise StreamValueError(
+            f"{method} cannot use {arr.tolist() if arr.size > 1 else float(arr[0])!r}: "
+            f"a std. dev. above {max_sigma:g} (m or rad) carries no information and overflows "
+            f"the variance arithmetic; fix the stream's sigmas", t=t, key=key)
+
+
+def check_bearing_sigma(header: StreamHeader, method: str) -> StreamHeader:
+    """``header``, refused if its ``bearing_sigma_rad`` is outside ``(0, pi]`` (the reader
+    accepts one above pi with a warning; a larger sigma carries no information: a filter's
+    update and a graph's bearing factors have no weight, and a graph maps nothing)."""
+    sigma = header.bearing_sigma_rad
+    if not (math.isfinite(sigma) and 0 < sigma <= math.pi):
+        raise StreamValueError(
+            f"{method} cannot use a bearing std. dev. of {sigma:g} rad: it must be in (0, pi] "
+            f"(a larger sigma carries no information); fix the stream's bearing_sigma_rad",
+            t=None, key="bearing_sigma_rad")
+    return header
+
+
+def check_priors(header: StreamHeader, method: str) -> None:
+    """Refuse a known distance (``priors[k]``) beyond
+    :data:`~bomgraph.plausibility.MAX_COORDINATE_M` or with a sigma above :data:`MAX_SIGMA`
+    (h151: STMDS's squared distances overflowed, and it blamed its own distance matrix)."""
+    for k, p in enumerate(header.priors):
+        if not p.distance_m <= MAX_COORDINATE_M:
+            raise StreamValueError(
+                f"{method} cannot use a known distance of {p.distance_m:g} m, beyond "
+                f"{MAX_COORDINATE_M:g} m (squared, it leaves double precision); fix the "
+                f"stream's priors", t=None, key=f"priors[{k}].distance_m")
+        check_sigmas(p.sigma_m, None, f"priors[{k}].sigma_m", method)
+
+
+def checked_header(header: StreamHeader, method: str,
+                   max_sigma: float = MAX_SIGMA) -> StreamHeader:
+    """``header``, refused if ``method`` (a filter, a graph) cannot use its sigmas: its
+    odometry sigmas above ``max_sigma`` (:func:`check_sigmas`), its bearing sigma outside
+    ``(0, pi]`` (:func:`check_bearing_sigma`), a known distance (:func:`check_priors`)."""
+    check_sigmas(header.odometry_sigma, None, "odometry_sigma", method, max_sigma)
+    check_priors(header, method)
+    return check_bearing_sigma(header, method)
+
+
+def check_distance(distance_m: float, t: int, method: str, what: str) -> None:
+    """Refuse (``'odom'`` of step ``t``) a distance of ``distance_m`` metres beyond
+    :data:`~bomgraph.plausibility.MAX_COORDINATE_M`: "``method`` cannot use ``what``
+    ``distance_m`` m, beyond ..."."""
+    if not distance_m <= MAX_COORDINATE_M:
+        raise StreamValueError(
+            f"{method} cannot use {what} {distance_m:g} m, beyond {MAX_COORDINATE_M:g} m "
+            f"(coordinates that far lose the precision the measurements need); fix the "
+            f"stream's odometry", t=t, key="odom")
+
+
+def checked_start_pose(value: Any, option: str = "start_pose") -> np.ndarray:
+    """``value`` as a pose ``(x_m, y_m, psi_rad)``, shape (3,), refused as
+    :class:`ConfigError` naming ``option`` unless it is three finite numbers with ``x`` and
+    ``y`` within :data:`~bomgraph.plausibility.MAX_COORDINATE_M` of the origin."""
+    items = list(value) if isinstance(value, (list, tuple, np.ndarray)) else None
+    if items is None or len(items) != 3 or not all(
+            isinstance(v, Real) and not isinstance(v, bool) for v in items):
+        raise ConfigError(f"option {option}: must be [x_m, y_m, psi_rad] (three numbers), "
+                          f"got {value!r:.80}")
+    pose = np.array([float(v) for v in items])
+    if not (np.all(np.isfinite(pose)) and math.hypot(pose[0], pose[1]) <= MAX_COORDINATE_M):
+        raise ConfigError(f"option {option}: {pose.tolist()} must be finite, with x and y "
+                          f"within {MAX_COORDINATE_M:g} m of the origin")
+    return pose
+
+
+def check_mapper_option(option: str, value: Any) -> None:
+    """Refuse, as :class:`ConfigError` naming ``option``, a ``value`` that is neither None
+    nor a mapper (an object with ``step`` and ``estimate`` methods): e.g. a hybrid's
+    ``seed_mapper=5`` from ``--option``, which failed every run at its first step."""
+    if value is None or (not isinstance(value, type) and callable(getattr(value, "step", None))
+                         and callable(getattr(value, "estimate", None))):
+        return
+    raise ConfigError(f"option {option}: must be a mapper object (with step() and estimate(), "
+                      f"built in Python), got {type(value).__name__} {value!r:.40}; the "
+                      f"command line and sweep files name a method instead (seed_method)")
+
+
+def check_factory_options(name: str, target: Callable[..., Any], params: Mapping[str, Any],
+                          opts: Mapping[str, Any], mapper_type: type) -> None:
+    """Refuse, before any run, an option of ``name`` that is a parameter of its factory
+    ``target`` (not of its configuration) with a value the factory refuses at every run:
+    ``start_pose`` (:func:`checked_start_pose`: was a ValueError or an IndexError per run,
+    h151) and a parameter annotated as a ``mapper_type``
+    (:class:`bomgraph.mapper.Mapper`, given by the caller: :func:`check_mapper_option`)."""
+    try:
+        hints = typing.get_type_hints(target)
+    except Exception:  # unresolvable annotations in a plugin: start_pose only
+        hints = {}
+    for key, value in opts.items():
+        if key not in params:
+            continue
+        hint = hints.get(key)
+        try:
+            if key == "start_pose":
+                checked_start_pose(value)
+            elif hint is mapper_type or mapper_type in typing.get_args(hint):
+                check_mapper_option(key, value)
+        except ConfigError as exc:
+            raise ConfigError(f"method {name!r}: {exc}") from None
+
+
+class Reach:
+    """The stream's odometry dead-reckoned from ``start_pose`` (:func:`checked_start_pose`):
+    :meth:`advance` refuses the step whose move carries the robot beyond
+    :data:`~bomgraph.plausibility.MAX_COORDINATE_M` from the map origin, or whose own
+    ``odom_sigma`` is above ``max_sigma``, naming ``method``."""
+
+    def __init__(self, start_pose: Any, method: str, max_sigma: float = MAX_SIGMA) -> None:
+        self.start_pose = checked_start_pose(start_pose)
+        self.pose = self.start_pose.copy()
+        self.method = method
+        self.max_sigma = max_sigma
+
+    def advance(self, step: Step) -> np.ndarray:
+        """The dead-reckoned pose after ``step`` (its odometry composed on), shape (3,);
+        the reach is left as it was when the step is refused."""
+        if step.odom_sigma is not None:   # refused here, not at the step it overflows at
+            check_sigmas(step.odom_sigma, step.t, "odom_sigma", self.method, self.max_sigma)
+        if step.odom is None:
+            return self.pose
+        pose = compose(self.pose, np.asarray(step.odom, float))
+        check_distance(math.hypot(pose[0], pose[1]), step.t, self.method,
+                       "this step's move: it carries the robot from the map origin to a "
+                       "distance of")
+        self.pose = pose
+        return pose
+
+
+__all__ = ["MAX_SIGMA", "Reach", "check_bearing_sigma", "check_distance", "check_factory_options",
+           "check_mapper_option", "check_priors", "checked_header", "check_sigmas", "checked_start_pose"]
