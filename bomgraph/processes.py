@@ -7,7 +7,9 @@ command's one line. They start with SIGINT and SIGTERM blocked, which they keep,
 workers they start later (a worker replaced after a memory leak); the command stops on the
 signal and ends them. A worker whose command is gone (``kill -9``: nothing could end its
 workers) ends within a second, in a task or idle (:func:`_watch_parent`), where before it
-finished its task and waited out joblib's idle timeout, about five minutes. Imports from
+finished its task and waited out joblib's idle timeout, about five minutes. A Ctrl-C just as
+tasks are submitted no longer ends in a KeyError of loky's manager thread on stderr
+(:func:`_queue_emptied_before_a_kill`). Imports from
 bomgraph only :mod:`bomgraph.stdio`, :mod:`bomgraph.owned_folders`, an error and a check.
 """
 
