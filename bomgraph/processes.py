@@ -7,7 +7,9 @@ command's one line. They start with SIGINT and SIGTERM blocked, which they keep,
 workers they start later (a worker replaced after a memory leak); the command stops on the
 signal and ends them. A worker whose command is gone (``kill -9``: nothing could end its
 workers) ends within a second, in a task or idle (:func:`_watch_parent`), where before it
-finished its task and waited out joblib's idle timeout, about five minutes. Imports from
+finished its task and waited out joblib's idle timeout, about five minutes. A Ctrl-C just as
+tasks are submitted no longer ends in a KeyError of loky's manager thread on stderr
+(:func:`_queue_emptied_before_a_kill`). Imports from
 bomgraph only :mod:`bomgraph.stdio`, :mod:`bomgraph.owned_folders`, an error and a check.
 """
 
@@ -367,8 +369,63 @@ def _start_workers(par: Any) -> None:
         # first: Python 3.11 starts it with both unblocked after (SIG_UNBLOCK, not the mask
         # it found), which would undo the hold below
         resource_tracker.ensure_running()
+        _queue_emptied_before_a_kill(workers)
         with signals_held():
             workers.submit(int)  # the first task starts the processes, in this thread
+
+
+def _queue_emptied_before_a_kill(executor: Any) -> None:
+    """Make ``executor`` (loky's) take the tasks that its manager thread has not yet moved
+    to the workers out of that thread's queue when it is shut down with ``kill_workers=True``
+    (joblib's abort: a Ctrl-C), before the shutdown itself.
+
+    On that shutdown loky's manager thread empties its dict of pending tasks, not the queue
+    of their ids, then looks the next queued id up in the dict: a task submitted since the
+    thread last ran (a Ctrl-C just as the first tasks were submitted, on a loaded machine)
+    was ``KeyError`` in that thread, "Exception in thread ExecutorManagerThread" and a
+    traceback above the command's one line (h151). CPython's ProcessPoolExecutor empties
+    that queue too. Here it is emptied under the lock that ``submit`` takes, which then
+    flags the shutdown, so that no task is queued between the two; each task taken out
+    fails as loky fails those it drops. Once per executor (joblib reuses it); a loky
+    without these attributes is left as it is."""
+    needed = ("_work_ids", "_pending_work_items", "_flags", "shutdown")
+    if getattr(executor, "_bomgraph_queue_emptied", False) or not all(
+            hasattr(executor, n) for n in needed):
+        return
+    shutdown = executor.shutdown
+
+    def emptied_then_shutdown(wait: bool = True, kill_workers: bool = False) -> None:
+        if kill_workers:
+            _empty_queue(executor)
+        shutdown(wait=wait, kill_workers=kill_workers)
+
+    executor.shutdown = emptied_then_shutdown
+    executor._bomgraph_queue_emptied = True
+
+
+def _empty_queue(executor: Any) -> None:
+    import queue
+    from concurrent.futures import InvalidStateError
+
+    from joblib.externals.loky.process_executor import ShutdownExecutorError
+
+    dropped = []
+    flags = executor._flags
+    with flags.shutdown_lock:
+        while True:
+            try:
+                work_id = executor._work_ids.get_nowait()
+            except queue.Empty:
+                break
+            dropped.append(executor._pending_work_items.pop(work_id, None))
+        flags.shutdown = flags.kill_workers = True  # as flag_as_shutting_down(True)
+    for item in filter(None, dropped):
+        try:
+            item.future.set_exception(ShutdownExecutorError(
+                "The Executor was shutdown with `kill_workers=True` before this job could "
+                "complete."))
+        except InvalidStateError:  # cancelled meanwhile
+            pass
 
 
 __all__ = ["MAX_WORKERS_PER_CORE", "daemonic", "dispatch", "usable_cores", "worker_count",

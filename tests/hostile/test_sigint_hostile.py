@@ -372,3 +372,41 @@ def test_runs_left_early_by_ctrl_c_close_the_workers_without_joblib_s_warning(
     runs.close()
     assert not [w for w in recwarn if "cancelled" in str(w.message)
                 or "not used" in str(w.message)], [str(w.message) for w in recwarn]
+
+
+#: loky's manager thread kept from taking tasks off its queue (a loaded machine: it gets no
+#: CPU) from the first task of the compare on, until the executor is shut down; the Ctrl-C
+#: comes as that task is submitted
+_MANAGER_THREAD_LATE = """
+import threading, time
+from joblib.externals.loky import process_executor as pe
+_gate, _held, _thread = threading.Lock(), threading.Event(), pe._ExecutorManagerThread
+_add, _submit = _thread.add_call_item_to_queue, pe.ProcessPoolExecutor.submit
+def add(self):
+    with _gate:
+        held = _held.is_set() and not self.executor_flags.shutdown
+        if not held:
+            return _add(self)
+    while not self.executor_flags.shutdown:
+        time.sleep(0.005)
+def submit(self, fn, *a, **kw):
+    if fn is int:  # bomgraph's own, to start the workers
+        return _submit(self, fn, *a, **kw)
+    with _gate:
+        _held.set()
+    future = _submit(self, fn, *a, **kw)
+    os.kill(os.getpid(), signal.SIGINT)
+    return future
+_thread.add_call_item_to_queue, pe.ProcessPoolExecutor.submit = add, submit
+"""
+
+
+def test_ctrl_c_before_loky_s_manager_thread_took_the_tasks_is_one_line(
+        tmp_path: Path, streams: list[Path]) -> None:
+    # h151, once under load: "Exception in thread ExecutorManagerThread: ... KeyError: 1"
+    # above the line. joblib's abort shuts loky's executor down with kill_workers=True; its
+    # manager thread then empties pending_work_items but not the queue of their ids, and
+    # looks the ids still queued up in it (tasks submitted since it last ran)
+    out = tmp_path / "out"
+    _one_line(_compare(streams, out, _MANAGER_THREAD_LATE, "--jobs", "2"))
+    _no_temporary_files(out)
