@@ -1,7 +1,8 @@
 """The values of a valid stream no method can compute with, refused alike by every method that
 meets them (STMDS, the EKFs, the GTSAM graphs, ``triangulate``; the exceptions are listed) as
-:class:`StreamValueError`: the refusal names the step ``t`` and the field, and ``bomgraph run`` and ``compare`` name the
-file and the line (:func:`bomgraph.stream_file.located`), as for the reader's refusals.
+:class:`StreamValueError`: the refusal names the step ``t`` and the field, and ``bomgraph run``
+and ``compare`` name the file and the line (:func:`bomgraph.stream_file.located`), as for the
+reader's refusals.
 
 The reader only warns about such values (:mod:`bomgraph.plausibility`: the file is valid);
 a method that cannot use one refuses it at its line, rather than failing later at another
