@@ -59,7 +59,8 @@ class TriangulateMapper:
                  preset: str | None = None, **options: float) -> None:
         self.config = resolve(TriangulateConfig, config, preset, options)
         self._header = header
-        self._reach = Reach(start_pose, "triangulate")   # refuses a bad start_pose
+        # refuses a bad start_pose; no sigma is checked: triangulate uses none (h158)
+        self._reach = Reach(start_pose, "triangulate", max_sigma=None)
         self._pose = self._reach.start_pose
         self._poses: list[np.ndarray] = []
         self._slot: dict[int, int] = {}
