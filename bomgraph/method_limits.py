@@ -218,5 +218,6 @@ class Reach:
         return self.pose
 
 
-__all__ = ["MAX_SIGMA", "Reach", "check_bearing_sigma", "check_distance", "check_factory_options",
-           "check_mapper_option", "check_priors", "checked_header", "check_sigmas", "checked_start_pose"]
+__all__ = ["MAX_SIGMA", "Reach", "check_bearing_sigma", "check_distance",
+           "check_factory_options", "check_mapper_option", "check_priors", "checked_header",
+           "check_sigmas", "checked_start_pose"]
