@@ -86,7 +86,7 @@ def type_problem(annotation: Any, value: Any) -> str | None:
         for item in value:
             problem = type_problem(args[0] if args else None, item)
             if problem:
-                return f"each item {problem[5:] if problem.startswith('must ') else problem}"
+                return f"each item {problem}"
         return None
     if annotation is bool:
         return None if isinstance(value, (bool, np.bool_)) else "must be true or false"

@@ -129,3 +129,15 @@ def test_an_abbreviation_does_not_end_an_option_doc() -> None:
     assert seed["seed_sigma_m"].startswith("Std. dev. (m) of a prior put on a seeded landmark")
     ekf = {o.name: o.doc for o in describe_options(method_config_class("ekf"))}
     assert "std. dev. (rad) exceeds this" in ekf["wide_prior_heading_sd_rad"]
+
+
+
+@dataclass(frozen=True)
+class _Pair(Presets):
+    sigma: tuple[float, ...] = (1.0, 1.0)
+
+
+def test_a_bad_item_of_a_tuple_option_says_it_must_be_a_number() -> None:
+    # the message read "each item be a number" (its "must" cut off)
+    with pytest.raises(ConfigError, match="sigma=.*: each item must be a number$"):
+        _Pair.preset(sigma=["a", 1])
