@@ -166,13 +166,15 @@ class FactorGraphConfig(Presets):
         bearing flips by pi under LM's steps and stalls it, :mod:`baselines.near_range`).
         None: the stream's odometry translation sigma, ``hypot(sigma_dx, sigma_dy)`` of its
         header; 0: keep every bearing.
-    lag_after_steps, lag_steps, full_growth :
+    lag_after_steps, lag_steps, full_growth, long_ordering :
         Long recordings (``gtsam-batch``, ``oracle``, ``hybrid``): past ``lag_after_steps``
         steps a scheduled solve relinearises only the last ``lag_steps`` poses and the
         landmarks they see (fixed-lag: the older poses held, their bearings folded into one
         Gaussian prior per landmark), and the whole graph is solved again each time it has
         grown by the factor ``full_growth`` (:class:`baselines.factor_graph.BatchState`,
-        :mod:`baselines.lm_window`).
+        :mod:`baselines.lm_window`); those whole-graph solves eliminate in the ordering
+        ``long_ordering`` (``"metis"`` or ``"colamd"``, :data:`baselines.lm_report.ORDERINGS`;
+        every other solve in COLAMD's).
     lag_marginal_landmarks : int
         The older poses of a window are eliminated into a marginal on the boundary pose and
         the landmarks while the graph has at most this many landmarks (the window solve is
@@ -219,6 +221,7 @@ class FactorGraphConfig(Presets):
     lag_after_steps: int = 500
     lag_steps: int = 100
     full_growth: float = 1.25
+    long_ordering: str = "metis"
     lag_marginal_landmarks: int = 200
     warm_presolve_sigma_m: float | None = 3e-3
     presolved_relative_error_tol: float = 1e-6
@@ -252,6 +255,7 @@ class FactorGraphConfig(Presets):
         need(self.lag_steps >= 2 and self.lag_after_steps >= self.lag_steps,
              "lag_steps must be >= 2 and lag_after_steps >= lag_steps")
         need(self.full_growth > 1, "full_growth must be > 1")
+        need(self.long_ordering in ("metis", "colamd"), "long_ordering must be 'metis' or 'colamd'")
         need(self.lag_marginal_landmarks >= 0, "lag_marginal_landmarks must be >= 0")
         need(self.warm_presolve_sigma_m is None or self.warm_presolve_sigma_m > 0,
              "warm_presolve_sigma_m must be > 0 or None")

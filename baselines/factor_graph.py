@@ -258,7 +258,7 @@ class BatchState:
         self.chunks.reset_folds()
         graph, robust = self.without_near()
         values, report = solve_lm(graph, initial, lm_config, robust,
-                                  looks_off=self._looks_off_again)
+                                  looks_off=self._looks_off_again, ordering=self._ordering())
         if "huber" in report.passes:
             self._unreached = self.out_of_reach(values)
             r, at = self.whitened_residuals(values)
@@ -298,12 +298,20 @@ class BatchState:
         converged its solution becomes the current values and no bearing is left out any
         more; otherwise nothing changes. Returns its solution and report."""
         values, report = solve_lm(self.graph, self.values, self._lm_config,
-                                  looks_off=never_off)
+                                  looks_off=never_off, ordering=self._ordering())
         if report.converged:
             self._near = np.zeros(0, np.int64)
             self.solved_graph = self.graph
             self.set_values(values)
         return values, report
+
+    def _ordering(self) -> str:
+        """The elimination ordering of a whole-graph solve (a name of
+        :data:`baselines.lm_report.ORDERINGS`): past
+        ``lag_after_steps`` steps ``config.long_ordering`` (METIS by default: a long run's
+        graph is large and closes loops), before it COLAMD (the paper runs)."""
+        return (self.config.long_ordering
+                if self.problem.n_steps > self.config.lag_after_steps else "colamd")
 
     def _looks_off_again(self, values: gtsam.Values) -> bool:
         """:meth:`looks_off` for a whole-graph solve, except that what the last robust pass

@@ -74,6 +74,19 @@ class SolveReport:
 ABSURD_STEP = 1e3
 
 
+#: The elimination orderings :func:`solve_lm` computes for its plain passes and Gauss-Newton
+#: check, by name: COLAMD (GTSAM's default) and METIS (nested dissection). On the large
+#: loop-closing graphs of a long run METIS leaves smaller cliques: on the 12,861-variable graph
+#: of ``scripts/bench_batch_scale.py`` at 5,931 steps one elimination takes 0.55 s against
+#: COLAMD's 0.99 s, for 0.26 s against 0.11 s to compute the ordering, which a solve computes
+#: once for all its eliminations (``docs/measurements.md``, "METIS orderings for the long
+#: mode's whole-graph solves").
+ORDERINGS: dict[str, Callable[[gtsam.NonlinearFactorGraph], gtsam.Ordering]] = {
+    "colamd": gtsam.Ordering.ColamdNonlinearFactorGraph,
+    "metis": gtsam.Ordering.MetisNonlinearFactorGraph,
+}
+
+
 def lm_params(config: FactorGraphConfig) -> gtsam.LevenbergMarquardtParams:
     """GTSAM LM parameters from the config (tight tolerances, a large lambda bound)."""
     p = gtsam.LevenbergMarquardtParams()
@@ -200,8 +213,8 @@ def polish(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, iterations: 
 def solve_lm(graph: gtsam.NonlinearFactorGraph, initial: gtsam.Values,
              config: FactorGraphConfig,
              robust_graph: gtsam.NonlinearFactorGraph | None = None, *,
-             looks_off: Callable[[gtsam.Values], bool] | None = None
-             ) -> tuple[gtsam.Values, SolveReport]:
+             looks_off: Callable[[gtsam.Values], bool] | None = None,
+             ordering: str = "colamd") -> tuple[gtsam.Values, SolveReport]:
     """Levenberg-Marquardt on ``graph`` from ``initial``, with a robust pass if called for.
 
     Without ``looks_off`` (the default): the Huber pass on ``robust_graph`` (if given) runs
@@ -214,18 +227,23 @@ def solve_lm(graph: gtsam.NonlinearFactorGraph, initial: gtsam.Values,
     predicts more than ``decrease_tol`` of decrease is never "converged". Never raises on a
     failed solve: returns the best values reached and a report saying why
     (:class:`SolveReport`).
+
+    ``ordering``: the elimination ordering of the plain passes and the check, a name of
+    :data:`ORDERINGS` (the robust pass orders itself, by COLAMD).
     """
     params = lm_params(config)
-    # the plain passes and the Gauss-Newton check all eliminate ``graph``: its COLAMD ordering,
-    # computed once, is the one each would compute for itself (results the same bit for bit)
+    order_of = ORDERINGS[ordering]
+    # the plain passes and the Gauss-Newton check all eliminate ``graph``: its ordering,
+    # computed once, is the one each would compute for itself (with COLAMD, GTSAM's default,
+    # results the same bit for bit as without it)
     plain: list[tuple[gtsam.LevenbergMarquardtParams, gtsam.Ordering]] = []
 
     def plain_params() -> tuple[gtsam.LevenbergMarquardtParams, gtsam.Ordering]:
         if not plain:
-            ordering = gtsam.Ordering.ColamdNonlinearFactorGraph(graph)
+            elimination = order_of(graph)
             p = lm_params(config)
-            p.setOrdering(ordering)
-            plain.append((p, ordering))
+            p.setOrdering(elimination)
+            plain.append((p, elimination))
         return plain[0]
 
     iterations = 0
@@ -497,7 +515,7 @@ def estimate_from_values(graph: BearingGraph, values: gtsam.Values,
                        info=info)
 
 
-__all__ = ["GTSAM_ERRORS", "ABSURD_STEP", "DENSE_MARGINALS_MAX", "MarginalCovariances",
+__all__ = ["GTSAM_ERRORS", "ABSURD_STEP", "ORDERINGS", "DENSE_MARGINALS_MAX", "MarginalCovariances",
            "SolveReport", "lm_params", "solve_lm",
            "gauss_newton_check", "plain_gaussian", "polish", "all_poses",
            "marginal_covariances", "estimate_from_values", "gtsam_error_line"]
