@@ -51,49 +51,7 @@ from bomgraph.method_limits import MAX_SIGMA, Reach, checked_header
 from bomgraph.stream import Prior, Step, StreamHeader
 
 from .bearing_log import BearingLog
-from .graph_values import points_at, poses_at
-
-# --------------------------------------------------------------------------------------------
-# Keys
-# --------------------------------------------------------------------------------------------
-
-def pose_key(t: int) -> int:
-    """GTSAM key of the robot pose at step ``t``."""
-    return gtsam.symbol("x", int(t))
-
-
-def mid_key(t: int) -> int:
-    """GTSAM key of the intermediate pose of step ``t`` (after the move, before the turn)."""
-    return gtsam.symbol("m", int(t))
-
-
-#: ``gtsam.symbol`` holds an index of 56 bits; stream ids go up to 2^63 - 1 (int64).
-_SYMBOL_INDEX_LIMIT = 1 << 56
-_WIDE_LANDMARK = 1 << 63
-
-
-def landmark_key(landmark_id: int) -> int:
-    """GTSAM key of landmark ``landmark_id``, for every id the stream format allows
-    (``0 <= id < 2**63``).
-
-    Ids below 2^56 get ``symbol("l", id)``; larger ids (which ``gtsam.symbol`` refuses) get
-    the key ``2**63 | id``, whose top byte (>= 0x80) no symbol key of this module (``l``,
-    ``m``, ``x``) uses, so the map is injective without a table and the keys of ordinary ids,
-    hence every solve on them, are unchanged.
-
-    Raises
-    ------
-    ConfigError
-        For a negative id or one of 2^63 or more.
-    """
-    i = int(landmark_id)
-    if 0 <= i < _SYMBOL_INDEX_LIMIT:
-        return gtsam.symbol("l", i)
-    if _SYMBOL_INDEX_LIMIT <= i < _WIDE_LANDMARK:
-        return _WIDE_LANDMARK | i
-    raise ConfigError(f"landmark id {i} is outside 0 .. 2**63 - 1, the range of the stream "
-                      f"format; renumber the landmarks")
-
+from .graph_values import landmark_key, mid_key, points_at, pose_key, poses_at
 
 # --------------------------------------------------------------------------------------------
 # Configuration

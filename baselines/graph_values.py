@@ -1,8 +1,9 @@
 """Keys and values of the bearing-only graph read in bulk, without a Python loop per variable.
 
-The keys (:mod:`baselines.bearing_graph`): a robot pose ``x_t`` is ``gtsam.symbol("x", t)``,
-an intermediate pose ``m_t`` is ``symbol("m", t)``, both ``(char << 56) | index``; landmark
-``i`` is ``symbol("l", i)`` below ``2**56`` and ``2**63 | i`` above. Here the same keys are
+The keys (:func:`pose_key`, :func:`mid_key`, :func:`landmark_key`): a robot pose ``x_t`` is
+``gtsam.symbol("x", t)``, an intermediate pose ``m_t`` is ``symbol("m", t)``, both
+``(char << 56) | index``; landmark ``i`` is ``symbol("l", i)`` below ``2**56`` and
+``2**63 | i`` above. Here the same keys are also
 computed as ``uint64`` arrays, and poses and points are read from a ``gtsam.Values`` with one
 ``Values.extract`` of the keys (a copy of those entries, C++) and one
 ``gtsam.utilities.extractPose2`` / ``extractPoint2``, which return the entries in key order.
@@ -22,9 +23,45 @@ from typing import Sequence
 import gtsam
 import numpy as np
 
+from bomgraph.errors import ConfigError
+
 _CHAR_SHIFT = np.uint64(56)
+#: ``gtsam.symbol`` holds an index of 56 bits; stream ids go up to 2^63 - 1 (int64).
 _SYMBOL_INDEX_LIMIT = 1 << 56
 _WIDE_LANDMARK = np.uint64(1 << 63)
+
+
+def pose_key(t: int) -> int:
+    """GTSAM key of the robot pose at step ``t``."""
+    return gtsam.symbol("x", int(t))
+
+
+def mid_key(t: int) -> int:
+    """GTSAM key of the intermediate pose of step ``t`` (after the move, before the turn)."""
+    return gtsam.symbol("m", int(t))
+
+
+def landmark_key(landmark_id: int) -> int:
+    """GTSAM key of landmark ``landmark_id``, for every id the stream format allows
+    (``0 <= id < 2**63``).
+
+    Ids below 2^56 get ``symbol("l", id)``; larger ids (which ``gtsam.symbol`` refuses) get
+    the key ``2**63 | id``, whose top byte (>= 0x80) no symbol key of this module (``l``,
+    ``m``, ``x``) uses, so the map is injective without a table and the keys of ordinary ids,
+    hence every solve on them, are unchanged.
+
+    Raises
+    ------
+    ConfigError
+        For a negative id or one of 2^63 or more.
+    """
+    i = int(landmark_id)
+    if 0 <= i < _SYMBOL_INDEX_LIMIT:
+        return gtsam.symbol("l", i)
+    if _SYMBOL_INDEX_LIMIT <= i < 1 << 63:
+        return (1 << 63) | i
+    raise ConfigError(f"landmark id {i} is outside 0 .. 2**63 - 1, the range of the stream "
+                      f"format; renumber the landmarks")
 
 
 def symbol_keys(char: str, indices: np.ndarray) -> np.ndarray:
@@ -33,7 +70,7 @@ def symbol_keys(char: str, indices: np.ndarray) -> np.ndarray:
 
 
 def landmark_keys(ids: np.ndarray) -> np.ndarray:
-    """:func:`baselines.bearing_graph.landmark_key` of every id (0 <= id < 2^63): (k,) uint64,
+    """:func:`landmark_key` of every id (0 <= id < 2^63): (k,) uint64,
     increasing with the id."""
     i = np.asarray(ids, dtype=np.int64).astype(np.uint64)
     return np.where(i < np.uint64(_SYMBOL_INDEX_LIMIT), symbol_keys("l", i), _WIDE_LANDMARK | i)

@@ -61,7 +61,7 @@ _POSE_CHARS = (ord("x"), ord("m"))
 
 def _is_landmark(key: int) -> bool:
     """Every key of the graph is a pose (``x``, ``m``) or a landmark
-    (:func:`baselines.bearing_graph.landmark_key`, wide ids included)."""
+    (:func:`baselines.graph_values.landmark_key`, wide ids included)."""
     return (int(key) >> 56) not in _POSE_CHARS
 
 
