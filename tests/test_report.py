@@ -23,20 +23,20 @@ def _exp(arms: tuple[Arm, ...]) -> Experiment:
 
 
 def test_a_failing_method_is_reported_not_dropped() -> None:
-    # a start pose of two values fails every run in the factory's mapper (IndexError); an
-    # option the configuration refuses (min_parallax_rad=-1) is refused before any run (h148)
-    exp = _exp((Arm("tri", "triangulate"), Arm("bad", "triangulate",
-                                                {"start_pose": [0.0, 0.0]})))
+    # an EKF state limit too small for one pose clone fails every run as it runs
+    # (StateLimitError at t = 1); options refused before any run (min_parallax_rad=-1, h148;
+    # a start pose of two values, h151) cannot make a run fail
+    exp = _exp((Arm("tri", "triangulate"), Arm("bad", "ekf", {"max_state": 6})))
     results = execute(exp.tasks(), Executor("serial"))
     assert len(results) == 8
     bad = [r for r in results if r["arm"] == "bad"]
-    assert all(not r["ok"] and "IndexError" in r["error"] for r in bad)
+    assert all(not r["ok"] and "StateLimitError" in r["error"] for r in bad)
     rows = {r["arm"]: r for r in summarise(results)}
     assert rows["bad"]["failed"] == 4 and rows["tri"]["failed"] == 0
     # the per-run table names each failure and each run's own final score
     per_run = final_by_run(results)
     assert len(per_run) == 8
-    assert all(not r["ok"] and "IndexError" in r["error"] for r in per_run
+    assert all(not r["ok"] and "StateLimitError" in r["error"] for r in per_run
                if r["arm"] == "bad")
     tri = [r for r in per_run if r["arm"] == "tri"]
     assert all(r["t"] == 40 and 0 < r["mpe_m"] < 1.0 and r["n_mapped"] >= 3 for r in tri)
@@ -255,8 +255,8 @@ def test_results_json_is_strict_json(tmp_path: Path) -> None:
     now; the figures read null as a missing value."""
     src = tmp_path / "s25.jsonl"
     write_stream(simulate(SimConfig(n_steps=25, n_landmarks=12), np.random.default_rng(5)), src)
-    exp = Experiment("f", "files", (Arm("tri", "triangulate"), Arm("bad", "triangulate",
-                                                                    {"start_pose": [0.0, 0.0]})),
+    exp = Experiment("f", "files", (Arm("tri", "triangulate"), Arm("bad", "ekf",
+                                                                    {"max_state": 6})),
                      sources=(FileSource(str(src)),))
     compare([exp], tmp_path / "out", executor=Executor("serial"), figures=False)
 
