@@ -254,7 +254,7 @@ def seed_landmarks(state: BatchState, estimate: MapEstimate, *, trim: float = 3.
     a whole run may admit none (a drifting recording; 11 of the 25 300-step runs of
     ``paper_design(0)`` admit fewer than 3). Then start the poses from the map first:
     ``state.values.update(seed_start(state, estimate).values())`` (:func:`seed_start`, as
-    the hybrid does), ``state.absorb()``, and seed again (README, "GTSAM helpers").
+    the hybrid does), ``state.absorb()``, and seed again (docs/USAGE.md, "GTSAM helpers").
     """
     check_map("seed_landmarks", estimate)
     problem = state.problem
@@ -285,7 +285,7 @@ def seed_landmarks(state: BatchState, estimate: MapEstimate, *, trim: float = 3.
             f"{len(pending)} landmarks are pending, and {why} start the poses from the map "
             f"first (as the hybrid does): state.values.update(seed_start(state, "
             f"map).values()); state.absorb() (the rays on those poses intersect); then "
-            f"seed_landmarks again (README, GTSAM helpers)")
+            f"seed_landmarks again (docs/USAGE.md, GTSAM helpers)")
     aligned = align_map(estimate, ids, ref_xy, trim=trim)
     where = aligned.as_dict()
     for lid, n_rays in sorted(problem.pending().items()):

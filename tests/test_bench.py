@@ -92,9 +92,10 @@ def test_executor_choose_follows_the_command_line() -> None:
 
 
 def test_the_command_lines_executor_overrides_the_sweep_files_whole() -> None:
-    """README: "The command line's `--jobs`, `--dask-local` and `--scheduler` override
-    `[executor]`". Before h89 a file's `dask_local = 2` (or `scheduler`) still won over
-    `--jobs 1`: the sweep started a Dask cluster and printed "--jobs 1 is not used"."""
+    """docs/USAGE.md, "Sweep files": "The command line's `--jobs`, `--dask-local` and
+    `--scheduler` override `[executor]`". Before h89 a file's `dask_local = 2` (or
+    `scheduler`) still won over `--jobs 1`: the sweep started a Dask cluster and printed
+    "--jobs 1 is not used"."""
     file_dask = {"dask_local": 2}
     assert Executor.choose(1, defaults=file_dask) == Executor("serial")
     assert Executor.choose(3, defaults={"scheduler": "tcp://x:1"}) == Executor(

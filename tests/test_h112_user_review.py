@@ -153,7 +153,7 @@ def test_landmark_nees_without_covariances_says_which_methods_give_them() -> Non
 
 def test_a_runtime_method_refused_for_worker_processes_leaves_no_folder(
         work: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    """README, "A sweep from Python", with ``Executor("processes", n_jobs=2)``: the refusal
+    """docs/USAGE.md, "A sweep from Python", with ``Executor("processes", n_jobs=2)``: the refusal
     (workers cannot see a method registered in this process) came after compare had made the
     output folder and its lock file, which stayed behind, empty but for ``.bomgraph.lock``."""
     from bomgraph.bench import Executor

@@ -115,7 +115,7 @@ def test_methods_says_what_name_at_preset_does_for_a_method_without_presets(
     out = capsys.readouterr().out
     assert out.rstrip().endswith(
         "presets: none declared (NAME@PRESET is passed on to the factory as preset=PRESET)")
-    # h152: its options are any, not "none" (the README's Factory(header, **options))
+    # h152: its options are any, not "none" (docs/USAGE.md's Factory(header, **options))
     assert "options: any (the factory takes **options" in out and "options: none" not in out
     # h154: and so does --json, where "options": [] read as none
     assert main(["methods", "any-options", "--json"]) == 0

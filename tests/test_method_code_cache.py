@@ -273,7 +273,7 @@ def test_an_edit_not_reloaded_is_not_served_from_the_cache_of_the_old_code(
     """The same sweep twice in one process with a cache (a notebook), the module edited and
     not reloaded between: the second sweep keyed the task with the code still loaded, found
     the first sweep's result and returned it, where without that cache entry the run fails
-    saying to reload (the README: "edited and not reloaded, its runs fail saying so")."""
+    saying to reload (docs/USAGE.md: "edited and not reloaded, its runs fail saying so")."""
     src, exp = file_method
     cache = tmp_path / "cache"
     first = _final_mpe(exp, cache)

@@ -19,22 +19,25 @@ from _plugin_dist import write_dist_info
 from _shared_data import DATA, missing  # tests/_shared_data.py
 
 ROOT = Path(__file__).resolve().parents[1]
-DOCS = ("README.md", "docs/FORMATS.md", "docs/measurements.md", "docs/measurements-early.md")
+DOCS = ("README.md", "docs/USAGE.md", "docs/METHODS.md", "docs/FORMATS.md", "docs/measurements.md",
+        "docs/measurements-early.md")
+#: the README and the reference pages its details moved to (h164): prose checks read them all
+READ = ("README.md", "docs/USAGE.md", "docs/METHODS.md")
 BOMGRAPH = f'"{sys.executable}" -m bomgraph'
 
 # (document, how the block starts): the test that runs it, or why it is left out
 RUN = {
-    ("README.md", "bomgraph simulate --seed 0 --out s.jsonl;"): "test_export_block",
+    ("docs/USAGE.md", "bomgraph simulate --seed 0 --out s.jsonl;"): "test_export_block",
     ("README.md", "bomgraph import mrclam"): "test_benchmark_your_own_method_blocks",
     ("README.md", "== streams, final map per run =="): "test_benchmark_your_own_method_blocks",
-    ("README.md", '[project.entry-points."bomgraph.methods"]'):
+    ("docs/USAGE.md", '[project.entry-points."bomgraph.methods"]'):
         "test_benchmark_your_own_method_blocks",
-    ("README.md", 'name = "mine"'): "test_sweep_file_block_plans_and_its_quoted_mistakes",
-    ("README.md", "import numpy as np\nfrom bomgraph import create_mapper"):
+    ("docs/USAGE.md", 'name = "mine"'): "test_sweep_file_block_plans_and_its_quoted_mistakes",
+    ("docs/USAGE.md", "import numpy as np\nfrom bomgraph import create_mapper"):
         "test_library_use_and_gtsam_helper_blocks",
-    ("README.md", "from baselines import gtsam_tools as gt"):
+    ("docs/USAGE.md", "from baselines import gtsam_tools as gt"):
         "test_library_use_and_gtsam_helper_blocks",
-    ("README.md", "from bomgraph.bench import Executor"): "test_library_sweep_block",
+    ("docs/USAGE.md", "from bomgraph.bench import Executor"): "test_library_sweep_block",
     ("docs/FORMATS.md", '{"format": "bomgraph-stream"'): "test_formats_stream_blocks",
     ("docs/FORMATS.md", "import numpy as np\nfrom bomgraph.stream import"):
         "test_formats_stream_blocks",
@@ -57,6 +60,12 @@ LEFT_OUT = {
 #: what to do when a block is new, or its entry no longer names one block
 HOW = ("in tests/test_readme_blocks.py, add the block's first line(s) to RUN with the test that "
        "runs it, or to LEFT_OUT with the reason it is not run")
+
+
+def read_docs() -> str:
+    """The README and its reference pages as one text, for the checks of what the prose says
+    (a section moved from one to another is still found)."""
+    return "\n\n".join((ROOT / doc).read_text() for doc in READ)
 
 
 def blocks(doc: str) -> list[str]:
@@ -115,13 +124,14 @@ def test_every_block_is_run_or_left_out_with_a_reason() -> None:
 
 
 def test_export_block(tmp_path: Path) -> None:
-    """README, "Export": the commands as written; evo's figures (its comment) are bomgraph's
+    """docs/USAGE.md, "Export" (from the README, h164): the commands as written; evo's figures
+    (its comment) are bomgraph's
     APE and mean robot error aligned on the trajectory, when evo is not installed; and the
     mirrored estimate's "landmark MPE 1.68 cm, robot 1.04 cm mean" is what evaluate prints.
     evo is no dependency of bomgraph, so the block installs it before it calls ``evo_ape``
     (h112: in a fresh `pip install .` venv the block stopped at "evo_ape: command not found");
     the test does not run that pip line (the test extra has evo)."""
-    text = block("README.md", "bomgraph simulate --seed 0 --out s.jsonl;")
+    text = block("docs/USAGE.md", "bomgraph simulate --seed 0 --out s.jsonl;")
     *commands, install, evo = text.splitlines()
     assert install.split("#")[0].split() == ["pip", "install", "evo"], text
     shell("\n".join(commands), tmp_path)
@@ -135,7 +145,7 @@ def test_export_block(tmp_path: Path) -> None:
     ev = json.loads(shell(f"{BOMGRAPH} evaluate e.est s.jsonl --align trajectory --json",
                           tmp_path).stdout)
     assert (round(ev["ape_trans_rmse_m"], 6), round(ev["robot_mean_m"], 6)) == (rmse, mean)
-    readme = (ROOT / "README.md").read_text()
+    readme = read_docs()
     mpe, robot = re.search(r"unchanged \(landmark MPE ([\d.]+) cm, robot ([\d.]+) cm mean",
                            readme).groups()
     out = shell(f"{BOMGRAPH} evaluate e.est s.jsonl", tmp_path).stdout
@@ -143,13 +153,13 @@ def test_export_block(tmp_path: Path) -> None:
 
 
 def test_library_use_and_gtsam_helper_blocks(tmp_path: Path) -> None:
-    """README, "Library use" then "GTSAM helpers", with ``stmds_map`` as the text after the
+    """docs/USAGE.md, "Library use" then "GTSAM helpers", with ``stmds_map`` as the text after the
     second block defines it; the second prints what its comment says."""
-    lib = block("README.md", "import numpy as np\nfrom bomgraph import create_mapper")
-    gt = block("README.md", "from baselines import gtsam_tools as gt")
+    lib = block("docs/USAGE.md", "import numpy as np\nfrom bomgraph import create_mapper")
+    gt = block("docs/USAGE.md", "from baselines import gtsam_tools as gt")
     defined = 'run(create_mapper("stmds-smacof", stream.header), stream.steps).final'
     assert f"`stmds_map` any `MapEstimate` (e.g. `{defined}`)" in " ".join(
-        (ROOT / "README.md").read_text().split())
+        read_docs().split())
     (tmp_path / "lib.py").write_text(f"{lib}\nstmds_map = {defined}\n{gt}")
     out = shell(f'"{sys.executable}" lib.py', tmp_path).stdout.splitlines()
     assert len(out) == 2 and 0 < float(out[0]) < 0.1, out
@@ -157,10 +167,10 @@ def test_library_use_and_gtsam_helper_blocks(tmp_path: Path) -> None:
 
 
 def test_library_sweep_block(tmp_path: Path) -> None:
-    """README, "Library use", "A sweep from Python": a method registered in-process and the
+    """docs/USAGE.md, "Library use", "A sweep from Python": a method registered in-process and the
     toy plugin's class, swept serially twice through the library, print what its comment
     says (the second time from the cache); the numbers are the README's final-map table's."""
-    code = block("README.md", "from bomgraph.bench import Executor")
+    code = block("docs/USAGE.md", "from bomgraph.bench import Executor")
     shell("bomgraph simulate --seed 7 --out sim7.jsonl", tmp_path)
     (tmp_path / "sweep.py").write_text(code)
     out = shell(f'"{sys.executable}" sweep.py', tmp_path, _toy_plugin_env(tmp_path)).stdout
@@ -172,7 +182,7 @@ def test_library_sweep_block(tmp_path: Path) -> None:
 def _toy_plugin_env(tmp_path: Path) -> dict:
     """An environment with the README's toy plugin installed as pip would, from its
     pyproject.toml, whose entry point is the README's."""
-    entry = tomllib.loads(block("README.md", '[project.entry-points."bomgraph.methods"]'))
+    entry = tomllib.loads(block("docs/USAGE.md", '[project.entry-points."bomgraph.methods"]'))
     plugin = ROOT / "docs" / "examples" / "toy_plugin"
     project = tomllib.loads((plugin / "pyproject.toml").read_text())
     methods = project["project"]["entry-points"]["bomgraph.methods"]
@@ -203,13 +213,14 @@ def test_benchmark_your_own_method_blocks(tmp_path: Path) -> None:
 
 
 def test_sweep_file_block_plans_and_its_quoted_mistakes(tmp_path: Path) -> None:
-    """README, the sweep file further down plans its runs, and its three quoted mistakes are
+    """docs/USAGE.md, "Sweep files": the sweep file plans its runs, and its three quoted
+    mistakes are
     the messages given (no data needed: a simulated stream stands in for MRCLAM6's robot 3,
     which the file names but a plan does not read)."""
     for name, seed in (("sim7.jsonl", 7), ("m6r3.jsonl", 3)):
         shell(f"{BOMGRAPH} simulate --seed {seed} --out {name}", tmp_path)
     env = _toy_plugin_env(tmp_path)
-    (tmp_path / "sweep.toml").write_text(block("README.md", 'name = "mine"'))
+    (tmp_path / "sweep.toml").write_text(block("docs/USAGE.md", 'name = "mine"'))
     (tmp_path / "runs").mkdir()
     shutil.copy(tmp_path / "sim7.jsonl", tmp_path / "runs" / "a.jsonl")
     out = shell(f"{BOMGRAPH} compare --config sweep.toml --dry-run --out plan", tmp_path,
@@ -217,7 +228,7 @@ def test_sweep_file_block_plans_and_its_quoted_mistakes(tmp_path: Path) -> None:
     assert re.search(r"mine +first-sight +5 runs", out), out
     assert re.search(r"mine +stmds-smacof@real +5 runs", out), out
 
-    text = " ".join((ROOT / "README.md").read_text().split())
+    text = " ".join(read_docs().split())
     quoted = re.findall(r"`(sweep\.toml: [^`]+)`", text)
     mistakes = ['methods = ["triangulate", "stmds-cs@fast"]\nstreams = ["sim7.jsonl"]\n',
                 'methods = ["triangulate"]\n[[worlds]]\nname = "w"\nn_steps = "many"\n',
@@ -283,14 +294,15 @@ def test_a_block_added_to_the_docs_fails_saying_what_to_do(
 
 
 def test_gtsam_helpers_seed_start_recipe_runs_as_written(tmp_path: Path) -> None:
-    """README, "GTSAM helpers": the prose recipe after ``seed_landmarks`` raises (three calls
+    """docs/USAGE.md, "GTSAM helpers": the prose recipe after ``seed_landmarks`` raises (three
+    calls
     in backticks, not a block) runs as written on run 0 of ``paper_design(0)``, where the text
     says all 50 landmarks then enter and LM converges (h123)."""
-    text = " ".join((ROOT / "README.md").read_text().split())
+    text = " ".join(read_docs().split())
     m = re.search(r"with the hybrid's own seeding, and seed again: `([^`]+)`, `([^`]+)` \(the "
                   r"rays on those poses intersect\), `([^`]+)` \(on run 0 of "
                   r"`paper_design\(0\)` all 50 landmarks then enter and LM converges", text)
-    assert m, "README's seed_start recipe changed: update this test"
+    assert m, "docs/USAGE.md's seed_start recipe changed: update this test"
     script = "\n".join([
         "from baselines import gtsam_tools as gt",
         "from bomgraph.mapper import create_mapper, run",

@@ -179,7 +179,7 @@ def test_a_stream_without_truth_gets_truth_free_scores_or_a_reference(
     ("streams = [\"runs/*.jsonl\"]\nmethods = [\"triangulate\"]\n[executor]\n"
      "dask_local = 2\nscheduler = \"tcp://127.0.0.1:8786\"\n",
      "executor: give one of dask_local and scheduler"),
-    # h94: dask_local = 0 with a scheduler passed (the README: "together are refused", and
+    # h94: dask_local = 0 with a scheduler passed (docs/USAGE.md: "together are refused", and
     # --dask-local 0 --scheduler ADDR is); h103: refused for its 0, as --dask-local 0 (h101)
     ("streams = [\"runs/*.jsonl\"]\nmethods = [\"triangulate\"]\n[executor]\n"
      "dask_local = 0\nscheduler = \"tcp://127.0.0.1:8786\"\n",
@@ -268,7 +268,7 @@ def test_methods_lists_every_preset_on_a_line_of_its_own(capsys: pytest.CaptureF
 
 def test_jobs_on_the_command_line_overrides_the_files_dask_executor(
         tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
-    """README: the command line's `--jobs` overrides `[executor]`. Before h89 a file's
+    """docs/USAGE.md: the command line's `--jobs` overrides `[executor]`. Before h89 a file's
     `dask_local` won: `--jobs 1` started a Dask cluster and said "--jobs 1 is not used"."""
     assert main(["simulate", "--seed", "1", "--steps", "20", "--out",
                  str(tmp_path / "s.jsonl"), "-q"]) == 0

@@ -6,7 +6,8 @@
 graph), aligns any map into its frame (reflection allowed) as the landmarks' start, names
 what is not yet constrained before solving, and reports honestly whether LM converged. The
 map is aligned on 3 or more landmarks the graph holds; where the dead-reckoned rays let in
-fewer, ``seed_landmarks`` raises: start the poses with ``gt.seed_start`` first (README).
+fewer, ``seed_landmarks`` raises: start the poses with ``gt.seed_start`` first
+(docs/USAGE.md, "GTSAM helpers").
 """
 
 import argparse
