@@ -172,13 +172,20 @@ def align_seed(state: BatchState, estimate: MapEstimate, *, use_solution: bool =
                 ref = ids_out, xy_out, False
                 break
     if ref is None:
-        # h123: a map whose ids are not the stream's was told to "give more steps"
+        # h123: a map whose ids are not the stream's was told to "give more steps"; h163: a
+        # map holding every landmark of a whole recording was told to hold more of them
         n_seen = np.intersect1d(seed_ids, state.bearings()[1]).size
+        fix = ("give more steps or a map holding more of the landmarks the stream sees (by the "
+               "stream's landmark ids)" if n_seen < 3 else
+               "give more steps, or, where the dead reckoning drifts (a recording), start the "
+               "poses from a map that carries them in the graph's frame (pose 0 at the start "
+               "pose, as ekf's and gtsam-batch's maps do): insert_pose(state.values, t, "
+               "pose, previous pose) for every step, state.absorb(), then seed_landmarks")
         raise TooFewLandmarksError(
             f"align_seed: fewer than 3 of the map's {seed_ids.size} landmarks ({n_seen} of "
-            f"them seen in the stream) intersect on the dead-reckoned poses of the "
-            f"{problem.n_steps} steps, so the map cannot be aligned: give more steps or a map "
-            f"holding more of the landmarks the stream sees (by the stream's landmark ids)")
+            f"them seen in the stream) intersect with min_parallax_rad = "
+            f"{state.config.min_parallax_rad:g} on the dead-reckoned poses of the "
+            f"{problem.n_steps} steps, so the map cannot be aligned: {fix}")
     ref_ids, ref_xy, in_solution_frame = ref
     _, i_seed, i_ref = np.intersect1d(seed_ids, ref_ids, return_indices=True)
     al = trimmed_align(estimate.landmarks_xy[i_seed], ref_xy[i_ref], trim)

@@ -32,7 +32,7 @@ import numpy as np
 
 from .checks import echo, instance, is_integer, option_named
 from .errors import (BomgraphError, ConfigError, OutOfRangeError, StreamFormatError,
-                     TooFewLandmarksError, UnknownMethodError)
+                     TooFewLandmarksError, UnknownMethodError, exception_line)
 from .estimate_file import write_estimate
 from .evaluate import score_estimate
 from .experiments import Task
@@ -106,7 +106,7 @@ _IN_WORKER: contextvars.ContextVar[bool] = contextvars.ContextVar("in_worker", d
 def _failure(exc: BaseException) -> str:
     """``"Type: message (raised in Name.step() at t = 5)"``: a failed run's error."""
     note = method_failure_note(exc)
-    return f"{type(exc).__name__}: {exc}" + (f" ({note})" if note else "")
+    return exception_line(exc) + (f" ({note})" if note else "")
 
 
 def _unloadable(exc: BaseException) -> str:

@@ -23,7 +23,7 @@ from typing import Any, Callable, Iterator, Sequence
 from .cli_parser import PROGRESS_MIN_STEPS, build_parser
 from .cli_signals import (Terminated, forget_unhandled_interrupt, own_signals, stdout_closed,
                           stop_status, stopped)
-from .errors import BomgraphError, ConfigError, one_line, shown_path
+from .errors import BomgraphError, ConfigError, exception_line, one_line, shown_path
 
 
 def _say(text: str, *, to_stderr: bool = False) -> None:
@@ -550,7 +550,7 @@ def _method_failed(args: argparse.Namespace, exc: BaseException, note: str) -> i
 
     verbose = getattr(args, "verbose", 0)
     print(one_line(f"bomgraph: error: method {getattr(args, 'method', '?')} failed: "
-                   f"{type(exc).__name__}: {exc} ({note})"
+                   f"{exception_line(exc)} ({note})"
                    + ("" if verbose else "; -v shows the traceback")), file=sys.stderr)
     if verbose:
         traceback.print_exception(exc, file=sys.stderr)

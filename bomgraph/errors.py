@@ -32,6 +32,15 @@ def one_line(text: str) -> str:
     return "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
 
 
+def exception_line(exc: BaseException) -> str:
+    """``"Type: message"`` of an exception a method raised, its message's line breaks (and the
+    blanks around them) turned into single spaces, so a message written over several lines
+    (GTSAM's "Indeterminate linear system ...") reads as one sentence, not with the literal
+    ``\\n``s of :func:`one_line`, which still escapes any other control character."""
+    lines = [part.strip() for part in str(exc).splitlines()]
+    return f"{type(exc).__name__}: " + " ".join(part for part in lines if part)
+
+
 class BomgraphError(Exception):
     """Base class of every error bomgraph raises on purpose."""
 

@@ -18,6 +18,8 @@ from bomgraph.sim import SimConfig, simulate
 from bomgraph.stream_file import write_stream
 
 CRASHER = textwrap.dedent('''
+    import gtsam
+
     from bomgraph.mapper import MapEstimate
 
 
@@ -35,6 +37,22 @@ CRASHER = textwrap.dedent('''
             if self.at_step < 0:
                 raise ZeroDivisionError("no map")
             return MapEstimate.empty()
+
+
+    class Singular(Crasher):
+        """Gauss-Newton on a landmark seen once: GTSAM's indeterminate system at t = at_step"""
+
+        def step(self, step) -> None:
+            if step.t == self.at_step:
+                graph = gtsam.NonlinearFactorGraph()
+                noise = gtsam.noiseModel.Isotropic.Sigma(3, 0.01)
+                graph.add(gtsam.PriorFactorPose2(0, gtsam.Pose2(), noise))
+                graph.add(gtsam.BearingFactor2D(0, 1, gtsam.Rot2(0.3),
+                                                gtsam.noiseModel.Isotropic.Sigma(1, 0.01)))
+                values = gtsam.Values()
+                values.insert(0, gtsam.Pose2())
+                values.insert(1, gtsam.Point2(2.0, 0.5))
+                gtsam.GaussNewtonOptimizer(graph, values).optimize()
 ''')
 
 
@@ -44,6 +62,7 @@ def crasher(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
     monkeypatch.syspath_prepend(str(tmp_path))
     monkeypatch.setattr(mapper, "_REGISTRY", dict(mapper._REGISTRY))
     mapper.register_method("crasher", "crasher_plugin:Crasher", "raises")
+    mapper.register_method("singular", "crasher_plugin:Singular", "raises GTSAM's error")
     stream = simulate(SimConfig(n_steps=30, n_landmarks=8), np.random.default_rng(0))
     write_stream(stream, tmp_path / "s.jsonl")
     return tmp_path / "s.jsonl"
@@ -95,3 +114,27 @@ def test_compare_records_where_and_exits_1_when_a_run_failed(crasher: Path, tmp_
 def test_compare_exits_0_when_every_run_succeeded(crasher: Path, tmp_path: Path) -> None:
     assert main(["compare", "--streams", str(crasher), "--methods", "triangulate",
                  "--out", str(tmp_path / "ok"), "--no-figures", "--jobs", "1"]) == 0
+
+
+def test_run_and_compare_show_a_multiline_method_error_as_one_readable_line(
+        crasher: Path, tmp_path: Path, capsys) -> None:
+    """h163: GTSAM's "Indeterminate linear system" message, over several lines (the first
+    failure a hybrid of one's own meets), was shown with literal ``\\n``s by the CLI's
+    one-line net; its line breaks are now spaces, in ``run``, ``compare`` and results.json."""
+    assert main(["run", str(crasher), "--method", "singular", "--out",
+                 str(tmp_path / "e.est")]) == 1
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1, err
+    assert "\\n" not in err, err
+    assert ("failed: RuntimeError: Indeterminate linear system detected while working near "
+            "variable 1") in err, err
+    assert "(raised in Singular.step() at t = 5); -v shows the traceback" in err, err
+    out = tmp_path / "c"
+    assert main(["compare", "--streams", str(crasher), "--methods", "singular", "--out",
+                 str(out), "--no-figures", "--jobs", "1"]) == 1
+    err = capsys.readouterr().err
+    assert "\\n" not in err and "RuntimeError: Indeterminate linear system detected" in err, err
+    run = json.loads((out / "results.json").read_text())["results"][0]
+    assert run["error"].startswith("RuntimeError: Indeterminate linear system detected while "
+                                   "working near variable 1"), run["error"]
+    assert "\n" not in run["error"] and "Traceback" in run["traceback"]

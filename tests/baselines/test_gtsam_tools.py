@@ -287,3 +287,29 @@ def test_the_recipe_with_seed_start_maps_a_paper_run_seed_landmarks_alone_cannot
     estimate = state.to_estimate(values, report.as_info())
     assert report.converged and len(estimate) >= 3
     assert score_estimate(estimate, stream.truth).mpe_m < 0.1
+
+
+def test_on_a_recording_the_map_s_own_poses_start_the_graph_seed_start_cannot() -> None:
+    """h163: on MRCLAM6 robot 3 no 3 of the 15 landmarks intersect on the dead-reckoned poses
+    of all 160 steps, so seed_start (the README's remedy) raises too; its message told to give
+    "a map holding more of the landmarks" though the ekf map holds all 15. It now names the
+    parallax threshold and the remedy that works: the poses of a map in the graph's frame."""
+    from tests._cadence_streams import mrclam6_robot3
+
+    stream = mrclam6_robot3()
+    ekf = run(create_mapper("ekf", stream.header, preset="real"), stream.steps).final
+    state = gt.build_graph(stream.header, stream.steps)
+    with pytest.raises(TooFewLandmarksError) as err:
+        gt.seed_start(state, ekf)
+    message = str(err.value)
+    assert "(15 of them seen in the stream)" in message and "min_parallax_rad = 0.3" in message
+    assert "a map holding more" not in message and "insert_pose(state.values, t," in message
+    previous = None
+    for t, pose in zip(ekf.pose_t, ekf.poses):
+        gt.insert_pose(state.values, int(t), pose, previous)
+        previous = pose
+    state.absorb()
+    assert gt.seed_landmarks(state, ekf).n_common >= 3
+    values, report = gt.checked_solve(state.graph, state.values, state.config)
+    assert report.converged
+    assert score_estimate(state.to_estimate(values, report.as_info()), stream.truth).mpe_m < 0.1

@@ -38,7 +38,8 @@ def test_a_map_of_two_landmarks_cannot_be_aligned(noise_free: Stream) -> None:
             call(state, _true_map(noise_free, n=2))
         assert str(err.value) == (
             "align_seed: fewer than 3 of the map's 2 landmarks (2 of them seen in the stream) "
-            "intersect on the dead-reckoned poses of the 61 steps, so the map cannot be "
+            "intersect with min_parallax_rad = 0.3 on the dead-reckoned poses of the 61 "
+            "steps, so the map cannot be "
             "aligned: give more steps or a map holding more of the landmarks the stream sees "
             "(by the stream's landmark ids)")
 
