@@ -299,6 +299,16 @@ class InverseDepthConfig(BearingEkfConfig):
         (so ``sigma_rho / rho <= 0.25``) and 5 with Civera's range-free ``0.1 +- 0.5`` per m,
         where the test admits nearly every feature. False (``"paper"``): the first test
         only, as the paper's runs were made.
+    conversion_kl_max : None (every preset): a feature becomes Euclidean once Civera's index
+        passes. A number (nats): also Bailey's Gaussianity test on the conversion, as the
+        inverse-depth candidates of ``ekf`` use it (:func:`~baselines.ekf.models.
+        invdepth_conversion_kl`, the KL divergence between the unscented and the linearised
+        Gaussian of ``[x, y]``, at most this). Civera's index asks whether the bearing is
+        linear in ``[x, y]`` seen from the current pose (it passes whenever the robot views
+        the anchor ray side-on or from afar, e.g. after a long blind step), not whether the
+        feature's Gaussian survives the conversion: one converted with its depth still
+        uncertain (``sigma_rho / rho`` 0.2-0.35) becomes an overconfident ``[x, y]`` block
+        (docs/measurements.md, h159).
     """
 
     PRESETS: ClassVar[Mapping[str, Mapping[str, Any]]] = {
@@ -308,11 +318,17 @@ class InverseDepthConfig(BearingEkfConfig):
 
     linearity_max: float = 0.1
     relative_depth_check: bool = False
+    conversion_kl_max: float | None = None
 
     def __post_init__(self) -> None:
         super().__post_init__()
         if not self.linearity_max > 0:
             raise ConfigError("linearity_max must be > 0")
+        kl = self.conversion_kl_max
+        if kl is not None and (isinstance(kl, bool) or not isinstance(
+                kl, (int, float, np.integer, np.floating)) or not (math.isfinite(kl) and kl > 0)):
+            raise ConfigError(f"conversion_kl_max must be a finite number > 0 (nats) or None "
+                              f"(Civera's index alone), got {kl!r}")
         if not isinstance(self.relative_depth_check, (bool, np.bool_)):
             raise ConfigError(f"relative_depth_check must be true or false, got "
                               f"{self.relative_depth_check!r}")

@@ -53,7 +53,8 @@ Inverse depth, ``ekf-invdepth``
     A first sighting enters the state at once as ``[x0, y0, theta, rho]`` (anchor = robot
     position, ``theta = psi + z``, ``rho ~ N(rho_init, rho_sigma^2)``); it is converted to a
     Euclidean ``[x, y]`` block once Civera's linearity index ``4 sigma_d / d |cos alpha|``
-    falls below ``linearity_max``. Features still in inverse depth are reported through the
+    falls below ``linearity_max`` (with ``conversion_kl_max``, and Bailey's test passes on
+    the conversion, as for ``ekf``'s candidates). Features still in inverse depth are reported through the
     same conversion by ``estimate()``; left out are those with ``rho <= 0`` and those whose
     depth the bearings have not determined (the std. dev. of ``rho`` still above half its
     prior's: no parallax yet, e.g. from a robot that has not moved; with
@@ -284,7 +285,11 @@ class InverseDepthEkfMapper(RhoPriorMixin, EkfSlam):
             d = np.sqrt(dx * dx + dy * dy)
             lin = 4.0 * (np.sqrt(covs[:, 3, 3]) / (rho * rho)) / d * np.abs((ct * dx + st * dy)
                                                                             / d)
-        return (rho > 0) & (lin < self.config.linearity_max)
+        ready = (rho > 0) & (lin < self.config.linearity_max)
+        kl_max = self.config.conversion_kl_max
+        if kl_max is not None and np.any(ready):       # and Gaussian after the conversion
+            ready[ready] = invdepth_conversion_kl(features[ready], covs[ready]) <= kl_max
+        return ready
 
     def _landmarks(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
         ids, xy, cov, _ = super()._landmarks()
