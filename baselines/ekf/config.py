@@ -299,8 +299,9 @@ class InverseDepthConfig(BearingEkfConfig):
         (so ``sigma_rho / rho <= 0.25``) and 5 with Civera's range-free ``0.1 +- 0.5`` per m,
         where the test admits nearly every feature. False (``"paper"``): the first test
         only, as the paper's runs were made.
-    conversion_kl_max : None (every preset): a feature becomes Euclidean once Civera's index
-        passes. A number (nats): also Bailey's Gaussianity test on the conversion, as the
+    conversion_kl_max : None (``"paper"``, as the paper's runs were made): a feature becomes
+        Euclidean once Civera's index passes. A number (nats; ``"real"``: 0.01, the
+        ``init_kl_max`` of ``ekf``'s candidates, not tuned here): also Bailey's Gaussianity test on the conversion, as the
         inverse-depth candidates of ``ekf`` use it (:func:`~baselines.ekf.models.
         invdepth_conversion_kl`, the KL divergence between the unscented and the linearised
         Gaussian of ``[x, y]``, at most this). Civera's index asks whether the bearing is
@@ -313,7 +314,7 @@ class InverseDepthConfig(BearingEkfConfig):
 
     PRESETS: ClassVar[Mapping[str, Mapping[str, Any]]] = {
         "paper": {},
-        "real": {**_REAL, "relative_depth_check": True},
+        "real": {**_REAL, "relative_depth_check": True, "conversion_kl_max": 0.01},
     }
 
     linearity_max: float = 0.1

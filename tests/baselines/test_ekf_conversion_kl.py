@@ -37,7 +37,7 @@ def _features(rel_sd: float) -> tuple[np.ndarray, np.ndarray]:
 @pytest.mark.parametrize("rel_sd, converts", [(0.3, False), (0.02, True)])
 def test_the_conversion_waits_for_a_gaussian_depth(rel_sd, converts) -> None:
     f, c = _features(rel_sd)
-    civera = InverseDepthEkfMapper(_HEADER, preset="real")
+    civera = InverseDepthEkfMapper(_HEADER, preset="real", conversion_kl_max=None)
     assert civera._linear_enough(f, c).tolist() == [True]        # the index passes either way
     bailey = InverseDepthEkfMapper(_HEADER, preset="real", conversion_kl_max=0.01)
     assert bailey._linear_enough(f, c).tolist() == [converts]
@@ -57,9 +57,9 @@ def test_the_test_only_narrows_civeras() -> None:
     assert both._linear_enough(f, c).tolist() == [False]
 
 
-def test_off_in_every_preset_and_checked() -> None:
-    for name in ("paper", "real"):
-        assert InverseDepthConfig.preset(name).conversion_kl_max is None
+def test_on_in_real_off_in_paper_and_checked() -> None:
+    assert InverseDepthConfig.preset("paper").conversion_kl_max is None
+    assert InverseDepthConfig.preset("real").conversion_kl_max == 0.01
     assert InverseDepthConfig(conversion_kl_max=0.5).conversion_kl_max == 0.5
     for bad in (0, -1.0, math.inf, math.nan, True, "0.01"):
         with pytest.raises(ConfigError, match="conversion_kl_max"):
