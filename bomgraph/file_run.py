@@ -61,7 +61,7 @@ def run_file(stream_path: str | os.PathLike[str], method: str,
     try:
         result = _run_read(stream_path, method, options, checkpoint_every, progress, out)
     except StreamValueError as exc:  # the method's refusal, naming the file and the line
-        raise located(exc, stream_path) from None
+        raise located(exc, stream_path, method) from None
     _log.info("%s: %d checkpoints, %d landmarks at t = %d, %.3f s", method,
               len(checkpoint_times(result.checkpoints[-1].t + 1, checkpoint_every)),
               len(result.final), result.checkpoints[-1].t, result.total_s)

@@ -61,7 +61,7 @@ def check_sigmas(values: Any, t: int | None, key: str, method: str,
         raise StreamValueError(
             f"{method} cannot use {arr.tolist() if arr.size > 1 else float(arr[0])!r}: "
             f"a std. dev. above {max_sigma:g} (m or rad) carries no information and overflows "
-            f"the variance arithmetic; fix the stream's sigmas", t=t, key=key)
+            f"the variance arithmetic; fix the stream's sigmas", t=t, key=key, method=method)
 
 
 def check_bearing_sigma(header: StreamHeader, method: str) -> StreamHeader:
@@ -73,7 +73,7 @@ def check_bearing_sigma(header: StreamHeader, method: str) -> StreamHeader:
         raise StreamValueError(
             f"{method} cannot use a bearing std. dev. of {sigma:g} rad: it must be in (0, pi] "
             f"(a larger sigma carries no information); fix the stream's bearing_sigma_rad",
-            t=None, key="bearing_sigma_rad")
+            t=None, key="bearing_sigma_rad", method=method)
     return header
 
 
@@ -86,7 +86,7 @@ def check_priors(header: StreamHeader, method: str) -> None:
             raise StreamValueError(
                 f"{method} cannot use a known distance of {p.distance_m:g} m, beyond "
                 f"{MAX_COORDINATE_M:g} m (squared, it leaves double precision); fix the "
-                f"stream's priors", t=None, key=f"priors[{k}].distance_m")
+                f"stream's priors", t=None, key=f"priors[{k}].distance_m", method=method)
         check_sigmas(p.sigma_m, None, f"priors[{k}].sigma_m", method)
 
 
@@ -108,7 +108,7 @@ def check_distance(distance_m: float, t: int, method: str, what: str) -> None:
         raise StreamValueError(
             f"{method} cannot use {what} {distance_m:g} m, beyond {MAX_COORDINATE_M:g} m "
             f"(coordinates that far lose the precision the measurements need); fix the "
-            f"stream's odometry", t=t, key="odom")
+            f"stream's odometry", t=t, key="odom", method=method)
 
 
 def checked_start_pose(value: Any, option: str = "start_pose") -> np.ndarray:

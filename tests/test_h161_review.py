@@ -41,3 +41,46 @@ def test_simulate_counts_one_step_and_one_landmark_in_the_singular(
     assert main(["simulate", "--steps", "0", "--landmarks", "1", "--out",
                  str(tmp_path / "s.jsonl")]) == 0
     assert ": 1 step, 1 landmark, 0 priors" in capsys.readouterr().out
+
+
+def _edited(src: Path, dst: Path, header: dict | None = None, step_4: dict | None = None) -> Path:
+    lines = [json.loads(ln) for ln in src.read_text().splitlines()]
+    lines[0].update(header or {})
+    lines[5].update(step_4 or {})
+    dst.write_text("".join(json.dumps(o) + "\n" for o in lines))
+    return dst
+
+
+def _refusal(capsys: pytest.CaptureFixture, *args: str) -> str:
+    capsys.readouterr()
+    assert main(["run", *map(str, args), "--allow-truth", "-q"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("bomgraph: error: "), err
+    return err[0]
+
+
+@pytest.mark.parametrize("method", ["gtsam-batch", "gtsam-isam2", "hybrid", "hybrid-isam2",
+                                    "oracle", "ekf-invdepth", "stmds-smacof"])
+def test_a_refusal_names_the_method_run(tmp_path: Path, one_stream: Path, method: str,
+                                        capsys: pytest.CaptureFixture) -> None:
+    """Every GTSAM method's refusal said "GTSAM cannot use", the EKFs' "the EKF", and a
+    hybrid-isam2 run's refusal of an odometry sigma, raised by its STMDS seed, "STMDS"."""
+    bad = _edited(one_stream, tmp_path / "bad.jsonl", step_4={"odom_sigma": [1e200, 0.0, 0.1]})
+    line = _refusal(capsys, bad, "--method", method, "--out", tmp_path / "e.est")
+    assert f"bad.jsonl, line 6: 'odom_sigma': step 4: {method} cannot use [1e+200" in line
+    if method.startswith("stmds"):
+        return   # STMDS's bearing sigma: test_stmds_refuses_a_bearing_sigma_above_pi
+    bad = _edited(one_stream, tmp_path / "bad.jsonl", {"bearing_sigma_rad": 4.0})
+    line = _refusal(capsys, bad, "--method", method, "--out", tmp_path / "e.est")
+    assert f"bad.jsonl, line 1: 'bearing_sigma_rad': {method} cannot use a bearing" in line
+
+
+def test_a_refusal_keeps_its_words_when_it_does_not_begin_with_them() -> None:
+    from bomgraph.errors import StreamValueError
+
+    exc = StreamValueError("GTSAM cannot use 5", t=4, key="odom", method="GTSAM")
+    assert str(exc.in_file("s.jsonl", 6, "gtsam-batch")) == (
+        "s.jsonl, line 6: 'odom': step 4: gtsam-batch cannot use 5")
+    odd = StreamValueError("a GTSAM limit", t=4, key="odom", method="GTSAM")
+    assert str(odd.in_file("s.jsonl", 6, "hybrid")).endswith(": a GTSAM limit")
+    assert str(exc.in_file("s.jsonl", 6)).endswith(": GTSAM cannot use 5")
