@@ -100,15 +100,19 @@ def checked_header(header: StreamHeader, method: str,
     return check_bearing_sigma(header, method)
 
 
-def check_distance(distance_m: float, t: int, method: str, what: str) -> None:
+def check_distance(distance_m: float, t: int, method: str, what: str,
+                   fix: str = "the stream's odometry") -> None:
     """Refuse (``'odom'`` of step ``t``) a distance of ``distance_m`` metres beyond
     :data:`~bomgraph.plausibility.MAX_COORDINATE_M`: "``method`` cannot use ``what``
-    ``distance_m`` m, beyond ..."."""
+    ``distance_m`` m, beyond ...; fix ``fix``" (the distance shown with the digits that set it
+    apart from the bound: "1e+09 m, beyond 1e+09 m" said nothing, h161)."""
     if not distance_m <= MAX_COORDINATE_M:
+        shown = next((f"{distance_m:.{k}g}" for k in range(6, 18)
+                      if float(f"{distance_m:.{k}g}") > MAX_COORDINATE_M), repr(distance_m))
         raise StreamValueError(
-            f"{method} cannot use {what} {distance_m:g} m, beyond {MAX_COORDINATE_M:g} m "
-            f"(coordinates that far lose the precision the measurements need); fix the "
-            f"stream's odometry", t=t, key="odom", method=method)
+            f"{method} cannot use {what} {shown} m, beyond {MAX_COORDINATE_M:g} m "
+            f"(coordinates that far lose the precision the measurements need); fix {fix}",
+            t=t, key="odom", method=method)
 
 
 def checked_start_pose(value: Any, option: str = "start_pose") -> np.ndarray:
@@ -190,6 +194,10 @@ class Reach:
                  max_sigma: float | None = MAX_SIGMA) -> None:
         self.start_pose = checked_start_pose(start_pose)
         self.pose = self.start_pose.copy()
+        x, y = self.start_pose[:2].tolist()  # a far start is the user's option, not the stream
+        self._fix = "the stream's odometry" + ("" if x == y == 0 else (
+            f", or the option start_pose: it starts the robot {math.hypot(x, y):g} m from the "
+            f"map origin"))
         self.method = method
         self.max_sigma = max_sigma
 
@@ -213,7 +221,7 @@ class Reach:
         x, y = x + c * dx - s * dy, y + s * dx + c * dy
         check_distance(math.hypot(x, y), step.t, self.method,
                        "this step's move: it carries the robot from the map origin to a "
-                       "distance of")
+                       "distance of", self._fix)
         self.pose = np.array([x, y, float(wrap_angle(psi + dpsi))])
         return self.pose
 

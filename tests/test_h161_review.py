@@ -84,3 +84,24 @@ def test_a_refusal_keeps_its_words_when_it_does_not_begin_with_them() -> None:
     odd = StreamValueError("a GTSAM limit", t=4, key="odom", method="GTSAM")
     assert str(odd.in_file("s.jsonl", 6, "hybrid")).endswith(": a GTSAM limit")
     assert str(exc.in_file("s.jsonl", 6)).endswith(": GTSAM cannot use 5")
+
+
+@pytest.mark.parametrize("method", ["triangulate", "gtsam-isam2"])
+def test_a_move_past_the_bound_from_a_far_start_names_the_start_pose(
+        tmp_path: Path, one_stream: Path, method: str, capsys: pytest.CaptureFixture) -> None:
+    """``--option start_pose=[1e9,0,0]``: the first move was refused as "a distance of 1e+09
+    m, beyond 1e+09 m ...; fix the stream's odometry", though the odometry was fine: the
+    distance is shown apart from the bound, and the start_pose named as the other fix."""
+    line = _refusal(capsys, one_stream, "--method", method, "--option", "start_pose=[1e9,0,0]",
+                    "--out", tmp_path / "e.est")
+    assert f"line 3: 'odom': step 1: {method} cannot use this step's move" in line
+    shown = line.split("a distance of ")[1].split(" m, beyond 1e+09 m")[0]
+    assert float(shown) > 1e9, line
+    assert ("fix the stream's odometry, or the option start_pose: it starts the robot 1e+09 m "
+            "from the map origin") in line
+    far = _edited(one_stream, tmp_path / "far.jsonl", step_4={"odom": [2e9, 0.0, 0.0]})
+    line = _refusal(capsys, far, "--method", method, "--out", tmp_path / "e.est")
+    assert line.endswith("distance of 2e+09 m, beyond 1e+09 m (coordinates that far lose the "
+                         "precision the measurements need); fix the stream's odometry "
+                         f"(raised in {line.split('(raised in ')[1]}")
+    assert "start_pose" not in line
