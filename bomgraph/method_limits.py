@@ -27,7 +27,8 @@ step or returning a map from numbers it could not represent.
   :func:`bomgraph.mapper.check_method_options`): ``start_pose``, a mapper object.
 * **Known distances** beyond it, or with a sigma above :data:`MAX_SIGMA` (:func:`check_priors`).
 * **Sigmas** above :data:`MAX_SIGMA` (:func:`check_sigmas`), a bearing sigma outside
-  ``(0, pi]`` (:func:`check_bearing_sigma`; STMDS holds it to :data:`MAX_SIGMA` only).
+  ``(0, pi]`` (:func:`check_bearing_sigma`; STMDS too, h161: it weights its distances,
+  bundle and localisation by it, and had taken one of 4 rad with the reader's warning only).
 """
 
 from __future__ import annotations

@@ -5,6 +5,7 @@ bounds of a few refusals."""
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 
 import pytest
@@ -68,8 +69,6 @@ def test_a_refusal_names_the_method_run(tmp_path: Path, one_stream: Path, method
     bad = _edited(one_stream, tmp_path / "bad.jsonl", step_4={"odom_sigma": [1e200, 0.0, 0.1]})
     line = _refusal(capsys, bad, "--method", method, "--out", tmp_path / "e.est")
     assert f"bad.jsonl, line 6: 'odom_sigma': step 4: {method} cannot use [1e+200" in line
-    if method.startswith("stmds"):
-        return   # STMDS's bearing sigma: test_stmds_refuses_a_bearing_sigma_above_pi
     bad = _edited(one_stream, tmp_path / "bad.jsonl", {"bearing_sigma_rad": 4.0})
     line = _refusal(capsys, bad, "--method", method, "--out", tmp_path / "e.est")
     assert f"bad.jsonl, line 1: 'bearing_sigma_rad': {method} cannot use a bearing" in line
@@ -84,6 +83,21 @@ def test_a_refusal_keeps_its_words_when_it_does_not_begin_with_them() -> None:
     odd = StreamValueError("a GTSAM limit", t=4, key="odom", method="GTSAM")
     assert str(odd.in_file("s.jsonl", 6, "hybrid")).endswith(": a GTSAM limit")
     assert str(exc.in_file("s.jsonl", 6)).endswith(": GTSAM cannot use 5")
+
+
+@pytest.mark.parametrize("method", ["stmds-cs", "stmds-smacof-loc"])
+def test_stmds_refuses_a_bearing_sigma_above_pi(tmp_path: Path, one_stream: Path, method: str,
+                                                capsys: pytest.CaptureFixture) -> None:
+    """STMDS weights its distances, bundle and localisation by the bearing sigma; it took
+    4 rad (the reader's warning only) and wrote a map, where every other method refused."""
+    bad = _edited(one_stream, tmp_path / "bad.jsonl", {"bearing_sigma_rad": 4.0})
+    est = tmp_path / "e.est"
+    line = _refusal(capsys, bad, "--method", method, "--out", est)
+    assert f"bad.jsonl, line 1: 'bearing_sigma_rad': {method} cannot use a bearing std. " \
+           f"dev. of 4 rad: it must be in (0, pi]" in line
+    assert not est.exists()
+    ok = _edited(one_stream, tmp_path / "ok.jsonl", {"bearing_sigma_rad": math.pi})
+    assert main(["run", str(ok), "--method", method, "--out", str(est), "-q"]) == 0
 
 
 @pytest.mark.parametrize("method", ["triangulate", "gtsam-isam2"])
