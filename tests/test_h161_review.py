@@ -119,3 +119,28 @@ def test_a_move_past_the_bound_from_a_far_start_names_the_start_pose(
                          "precision the measurements need); fix the stream's odometry "
                          f"(raised in {line.split('(raised in ')[1]}")
     assert "start_pose" not in line
+
+
+@pytest.mark.parametrize("address, reason", [
+    ("tcp://127.0.0.1:1", "the connection was refused: nothing listens on that port"),
+    ("127.0.0.1:1", "the connection was refused: nothing listens on that port"),
+    ("tcp://no-such-host.invalid:8786", "the host name does not resolve: ")])
+def test_a_scheduler_address_that_refuses_or_does_not_resolve_is_refused_at_once(
+        tmp_path: Path, one_stream: Path, address: str, reason: str,
+        capsys: pytest.CaptureFixture) -> None:
+    """Dask's connect retries a refused port or an unresolvable host until its connect
+    timeout: ``compare --scheduler tcp://127.0.0.1:1`` took 32 s and said "Timed out trying
+    to connect ... after 30 s" (1.3 s now; the time is measured by hand, not asserted). With a
+    connect timeout of 20 s, main's check ended at it with that message."""
+    import dask.config
+    pytest.importorskip("distributed")  # its configuration's defaults, beside the timeout
+
+    capsys.readouterr()
+    with dask.config.set({"distributed.comm.timeouts.connect": "20s"}):
+        assert main(["compare", "--streams", str(one_stream), "--methods", "triangulate",
+                     "--scheduler", address, "--out", str(tmp_path / "c"),
+                     "--no-progress"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1, err
+    assert err[0].startswith(f"bomgraph: error: --scheduler {address}: no Dask scheduler there "
+                             f"({reason}"), err
