@@ -243,11 +243,11 @@ def warn_sourceless(tasks: Sequence[Task], disk: bool = True) -> None:
             info := method_info(m)).origin != "builtin" and method_values(info.target,
                                                                           info.version))
         if unseen:
-            _log.warning("method(s) %s: a value of their modules was set in this process "
+            _log.warning("%s %s: a value of their modules was set in this process "
                          "(a global or class attribute changed since loaded), which the "
                          "worker processes do not see: they run the files' values; run "
                          "serially (--jobs 1, Executor('serial')) to run this process's",
-                         ", ".join(repr(m) for m in unseen))
+                         plural(len(unseen), "method"), ", ".join(repr(m) for m in unseen))
     odd = dict.fromkeys(method_info(m).target for t in tasks for m in unhashable(t, disk))
     if odd:
         n = sum(1 for t in tasks if unhashable(t, disk))
