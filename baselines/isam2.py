@@ -503,7 +503,8 @@ class Isam2Mapper(WindowLongMode, NormalModeCheck):
         at its last sighting would stay out; ``gtsam-batch`` tries every one), and those let in
         go to the solver as at a step where landmarks entered. Long mode: the buffered steps in
         and the whole graph polished and checked once more, LM if it fails (:meth:`_check_window`,
-        :meth:`_check_long`), unless just done (``info["converged"]`` never None). Normal mode:
+        :meth:`_check_long`), unless just done on this graph (``info["converged"]`` never None;
+        h161: the last step's check was kept after landmarks entered here). Normal mode:
         if the map :meth:`estimate` gives is unconverged (:meth:`_polish`), the buffered steps
         in as at a scheduled update, with its check and restart (not repeated where the last
         step's scheduled update already checked this very state, :meth:`_checked_here`).
@@ -518,6 +519,7 @@ class Isam2Mapper(WindowLongMode, NormalModeCheck):
 
     def _finish(self, n: int) -> None:
         """:meth:`finish` after ``n`` steps."""
+        graph_size = self.accepted.size()   # what this adds is checked, even after a check at n
         self._finish_entered = sorted(self.problem.admit(self._poses))   # every pending one
         if self._finish_entered:
             entered = self._take_new(None)    # (in batch, estimate() solves with the buffer)
@@ -538,8 +540,9 @@ class Isam2Mapper(WindowLongMode, NormalModeCheck):
             return
         if self._buffer.size() or self._buffer_values.size() or self._external.size():
             self._flush(extra=True)
-        if self._batch or not self._long or self._long_check.get("checked_at_step") == n:
-            return
+        if self._batch or not self._long or (self._long_check.get("checked_at_step") == n
+                                             and self.accepted.size() == graph_size):
+            return   # (h161: landmarks let in here were reported checked, by the last step's)
         if self._window_b:
             try:
                 self._check_window()

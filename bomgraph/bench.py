@@ -52,6 +52,7 @@ from .file_run import run_example, run_file  # re-exported: bench.run_file, benc
 from .stream_file import count_steps  # re-exported: bench.count_steps
 from .stream_identity import identity_of_stream
 from .sweep import scheduler_address_problem
+from .tables import counted
 from .worker_log import SAID, kept_warnings, said_once, say_kept
 
 #: Bump to invalidate every cached result (the code fingerprint covers code changes).
@@ -425,8 +426,8 @@ def _execute_counted(tasks: Sequence[Task], executor: Executor,
                           f"{type(bad).__name__}")
     if executor.backend == "processes" and daemonic():
         _log.warning("this process is daemonic (a multiprocessing.Pool or Dask worker), which "
-                     "cannot start worker processes: running the %d run(s) here, one at a time "
-                     "(as Executor('serial'), --jobs 1)", len(tasks))
+                     "cannot start worker processes: running the %s here, one at a time "
+                     "(as Executor('serial'), --jobs 1)", counted(len(tasks), "run"))
         executor = Executor("serial")
     if executor.backend != "serial":
         refuse_runtime_methods(tasks, executor.backend)
@@ -493,10 +494,10 @@ def _execute_counted(tasks: Sequence[Task], executor: Executor,
             if progress:
                 progress(done, len(tasks))
     if other_key:  # one line, not one a run
-        _log.warning("%d run(s) not cached (first: %s): the workers keyed them otherwise than "
+        _log.warning("%s not cached (first: %s): the workers keyed them otherwise than "
                      "this process: other bomgraph or plugin code, library versions or data "
                      "files there; give them this process's (and restart them)",
-                     len(other_key), other_key[0])
+                     counted(len(other_key), "run"), other_key[0])
     _odd_converged(results)
     return [r for r in results if r is not None], n_cached
 

@@ -75,9 +75,11 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         stream = with_priors(stream, make_priors(stream.truth, args.prior_fraction,
                                                  args.prior_sigma, rng))
     write_output(args.out, lambda p: write_stream(stream, p))  # `-`: stdout, not a file
-    _say(f"wrote {shown_path(args.out)}: {len(stream.steps)} steps, {config.n_landmarks} "
-         f"landmarks, "
-         f"{len(stream.header.priors)} priors", to_stderr=is_stdout(args.out))
+    from .tables import counted
+
+    _say(f"wrote {shown_path(args.out)}: {counted(len(stream.steps), 'step')}, "
+         f"{counted(config.n_landmarks, 'landmark')}, "
+         f"{counted(len(stream.header.priors), 'prior')}", to_stderr=is_stdout(args.out))
     return 0
 
 
@@ -285,7 +287,10 @@ def cmd_compare(args: argparse.Namespace) -> int:
     try:
         return _compare(args, seen)
     except (KeyboardInterrupt, Terminated) as exc:  # anywhere: imports, runs, writes, printing
-        cached = "" if args.no_cache else f"; {seen['done']} runs cached, rerun to resume"
+        from .tables import counted
+
+        cached = ("" if args.no_cache else
+                  f"; {counted(seen['done'], 'run')} cached, rerun to resume")
         print(f"bomgraph: {stopped(exc)}{cached}", file=sys.stderr)
         return stop_status(exc)
 
@@ -346,27 +351,31 @@ def _compare(args: argparse.Namespace, seen: dict[str, int]) -> int:
     if recorded:
         _say(format_by_run(final_by_run([r for r in result.results
                                          if r["experiment"] in recorded])))
+    from .tables import counted
+
     est = [f for f in result.files if f.endswith(".est")]
     streams = [f for f in result.files if f.endswith(".jsonl")]
     wrote = [f for f in result.files if not f.endswith((".est", ".jsonl"))]
     if est:
-        wrote.append(f"{len(est)} estimate files under {os.path.join(args.out, 'estimates')}")
+        wrote.append(f"{counted(len(est), 'estimate file')} under "
+                     f"{os.path.join(args.out, 'estimates')}")
     if streams:
-        wrote.append(f"{len(streams)} stream files under {os.path.join(args.out, 'streams')}")
+        wrote.append(f"{counted(len(streams), 'stream file')} under "
+                     f"{os.path.join(args.out, 'streams')}")
     cache = f" ({result.n_cached} from the cache)" if result.n_cached else ""
-    n = len(result.results)
-    _say(f"\n{n} run{'' if n == 1 else 's'} in {result.wall_s:.1f} s{cache}; wrote "
+    _say(f"\n{counted(len(result.results), 'run')} in {result.wall_s:.1f} s{cache}; wrote "
           f"{', '.join(wrote)}")
     bad = [r["error"] for r in result.results if not r.get("ok") and str(
         r.get("error", "")).startswith(("StreamFormatError: ", "DatasetError: "))]
     if bad:  # a malformed input is the user's to fix, not a method's failure
-        print(one_line(f"bomgraph: error: {len(bad)} run(s) stopped on an input file that "
-                       f"cannot be read: {bad[0].partition(': ')[2]}"), file=sys.stderr)
+        print(one_line(f"bomgraph: error: {counted(len(bad), 'run')} stopped on an input file "
+                       f"that cannot be read: {bad[0].partition(': ')[2]}"), file=sys.stderr)
         return 2
     failed = [r for r in result.results if not r.get("ok")]
     if failed:  # a method (or a reference) raised, or a worker was stale: status 1
         f = failed[0]
-        print(one_line(f"bomgraph: error: {len(failed)} of {len(result.results)} runs failed "
+        print(one_line(f"bomgraph: error: {len(failed)} of "
+                       f"{counted(len(result.results), 'run')} failed "
                        f"(first: {f['arm']} on {f['experiment']} {f['run']}: "
                        f"{f.get('error')}); the tables mark them FAILED and "
                        f"{shown_path(os.path.join(args.out, 'results.json'))} holds each "
@@ -377,14 +386,17 @@ def _compare(args: argparse.Namespace, seen: dict[str, int]) -> int:
 
 def _print_plan(rows: list[dict[str, Any]], out: str) -> int:
     """``compare --dry-run``: the runs per experiment and arm, and how many are cached."""
+    from .tables import counted, plural
+
     groups: dict[tuple[str, str], list[bool]] = {}
     for r in rows:
         groups.setdefault((r["experiment"], r["arm"]), []).append(r["cached"])
     width = max([len(a) for _, a in groups] + [3])
     for (exp, arm), cached in groups.items():
-        _say(f"{exp:12s} {arm:{width}s} {len(cached):6d} runs, {sum(cached):6d} cached")
+        runs = plural(len(cached), "run") + ","
+        _say(f"{exp:12s} {arm:{width}s} {len(cached):6d} {runs:5s} {sum(cached):6d} cached")
     done = sum(r["cached"] for r in rows)
-    _say(f"\n{len(rows)} runs: {len(rows) - done} to run, {done} in "
+    _say(f"\n{counted(len(rows), 'run')}: {len(rows) - done} to run, {done} in "
           f"{os.path.join(out, 'cache')}; nothing was run or written (--dry-run)")
     return 0
 

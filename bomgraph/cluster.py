@@ -4,7 +4,8 @@
 Before connecting, the scheduler is asked who it is within Dask's connect timeout
 (:func:`check_scheduler`): ``distributed.Client`` waits forever on a port that accepts the
 connection and never answers (a dashboard's), and dies with a traceback on one that answers
-something else. A task that fails on the cluster itself (every worker that ran it died, or a
+something else; an address that refuses the connection or does not resolve is refused at
+once (Dask retries it until its timeout: :func:`_connect`). A task that fails on the cluster itself (every worker that ran it died, or a
 worker could not import it) becomes a failed run with the reason, so the other runs finish and
 are cached. Ctrl-C kills a local cluster's workers at once (:func:`_end_local_workers`); they
 never take it themselves (:func:`_workers_hold_signals`). Imports from bomgraph only the
@@ -21,6 +22,7 @@ import contextlib
 import errno
 import importlib
 import logging
+import socket
 from concurrent.futures import CancelledError
 from typing import Any, Callable, Iterator, Sequence
 
@@ -105,10 +107,43 @@ def connect_timeout() -> float:
                                  default="seconds"))
 
 
-async def _identity(address: str, timeout: float) -> Any:
+#: Seconds :func:`check_scheduler` leaves Dask's connect alone before it tries a TCP address
+#: once itself (:func:`_connect`): Dask retries an address that refuses the connection or does
+#: not resolve until its connect timeout, so a typo in a port or host took 30 s (h161).
+PROBE_AFTER_S = 0.5
+
+
+async def _reachable(address: str, timeout: float) -> None:
+    """Connect once to ``address`` if it is a TCP one (``tcp://``, ``tls://``, no scheme),
+    raising the OSError of a refusal or a host that does not resolve at once."""
+    from distributed.comm.addressing import parse_address, parse_host_port
+
+    scheme, loc = parse_address(address)
+    if scheme in ("tcp", "tls"):
+        host, port = parse_host_port(loc)
+        _, writer = await asyncio.wait_for(asyncio.open_connection(host, port), timeout)
+        writer.close()
+
+
+async def _connect(address: str, timeout: float) -> Any:
+    """Dask's connect to ``address``; one still trying after :data:`PROBE_AFTER_S` (retrying
+    a refusal?) is given up at once if a connection of :func:`_reachable`'s fails."""
     from distributed.comm import connect
 
-    comm = await asyncio.wait_for(connect(address, timeout=timeout), timeout)
+    task = asyncio.ensure_future(connect(address, timeout=timeout))
+    done, _ = await asyncio.wait({task}, timeout=min(PROBE_AFTER_S, timeout))
+    if not done:
+        try:
+            await _reachable(address, timeout)
+        except BaseException:
+            task.cancel()
+            await asyncio.gather(task, return_exceptions=True)
+            raise
+    return await asyncio.wait_for(task, timeout)
+
+
+async def _identity(address: str, timeout: float) -> Any:
+    comm = await _connect(address, timeout)
     try:
         await asyncio.wait_for(comm.write({"op": "identity"}), timeout)
         return await asyncio.wait_for(comm.read(), timeout)
@@ -140,7 +175,11 @@ def check_scheduler(address: str, timeout: float | None = None, *,
             raise ConfigError(f"{named}: no Dask scheduler answered within "
                               f"{timeout:g} s; {hint}") from None
         except Exception as exc:  # refused, unresolvable, or a reply Dask cannot read
-            reason = ((str(exc).splitlines() or [type(exc).__name__])[0]
+            reason = ("the connection was refused: nothing listens on that port"
+                      if isinstance(exc, ConnectionRefusedError) else
+                      f"the host name does not resolve: {exc.strerror}"
+                      if isinstance(exc, socket.gaierror) else
+                      (str(exc).splitlines() or [type(exc).__name__])[0]
                       if isinstance(exc, OSError) else "what answers speaks no Dask")
             raise ConfigError(f"{named}: no Dask scheduler there ({reason}); "
                               f"{hint}") from None

@@ -16,6 +16,7 @@ from typing import Any, Mapping, Sequence
 
 from .checks import no_file, option_named
 from .errors import ConfigError, shown_path
+from .tables import counted
 from .sweep import (ExperimentSpec, MethodSpec, SweepError, SweepSpec, check_unique,
                     checked_method, named_streams, parse_method, stream_header_problem,
                     unique_paths)
@@ -118,7 +119,8 @@ def command_line_spec(streams: Sequence[str], methods: Sequence[str],
                      ", ".join(map(shown_path, again)), "is" if len(again) == 1 else "are")
     arms = [with_options(a) for a in arms]
     check_unique([a.label for a in arms], ms)
-    exp = ExperimentSpec(name, f"{len(streams)} stream(s), {len(arms)} method(s)",
+    exp = ExperimentSpec(name, f"{counted(len(streams), 'stream')}, "
+                               f"{counted(len(arms), 'method')}",
                          tuple(arms),
                          streams=named_streams([str(Path(s).resolve()) for s in streams]),
                          reference=None if ref is None else with_options(ref),

@@ -20,6 +20,7 @@ from typing import Any, Callable, ClassVar, Mapping, NamedTuple, TypeVar
 import numpy as np
 
 from .checks import echo, echo_name
+from .tables import plural
 from .errors import ConfigError
 
 C = TypeVar("C", bound="Presets")
@@ -44,7 +45,7 @@ class Presets:
         fields = {f.name for f in dataclasses.fields(cls)}  # type: ignore[arg-type]
         unknown = sorted(set(overrides) - fields)
         if unknown:
-            raise ConfigError(f"{cls.__name__}: unknown option(s) "
+            raise ConfigError(f"{cls.__name__}: unknown {plural(len(unknown), 'option')} "
                               f"{', '.join(map(echo_name, unknown))}; "
                               f"valid options: {', '.join(sorted(fields))}")
         hints = typing.get_type_hints(cls)

@@ -105,11 +105,16 @@ class StreamValueError(DegenerateGeometryError):
     """A method cannot use a value of a valid stream (a sigma or a move far beyond what it
     can compute with): names the step ``t`` (None: the header) and the ``key``;
     :meth:`in_file` names the file and the line first, as the reader's refusals do, for a
-    caller that read the stream from a file (``bomgraph run``, ``compare``)."""
+    caller that read the stream from a file (``bomgraph run``, ``compare``). ``method``: the
+    words ``message`` begins with, naming what refused (``"GTSAM"``, ``"the EKF"``), which
+    :meth:`in_file` replaces with the method the user ran (h161: a ``hybrid-isam2`` run's
+    refusal said "STMDS cannot use", a ``gtsam-isam2`` run's "GTSAM cannot use")."""
 
     def __init__(self, message: str, *, t: int | None, key: str,
-                 path: str | os.PathLike[str] | None = None, line: int | None = None) -> None:
+                 path: str | os.PathLike[str] | None = None, line: int | None = None,
+                 method: str | None = None) -> None:
         self.t, self.key, self.message, self.path, self.line = t, key, message, path, line
+        self.method = method
         if path is None:
             text = f"{'the header' if t is None else f'step {t}'}: '{key}': {message}"
         else:
@@ -118,21 +123,27 @@ class StreamValueError(DegenerateGeometryError):
         super().__init__(text)
 
     def __reduce__(self) -> tuple:   # keyword-only arguments: rebuilt from them (a worker's)
-        return (_stream_value_error, (self.message, self.t, self.key, self.path, self.line),
-                self.__dict__)
+        return (_stream_value_error, (self.message, self.t, self.key, self.path, self.line,
+                                      self.method), self.__dict__)
 
-    def in_file(self, path: str | os.PathLike[str], line: int) -> StreamValueError:
-        """The same refusal naming ``path`` and ``line`` (the header's, or step ``t``'s)."""
-        located = StreamValueError(self.message, t=self.t, key=self.key, path=path, line=line)
+    def in_file(self, path: str | os.PathLike[str], line: int,
+                method: str | None = None) -> StreamValueError:
+        """The same refusal naming ``path`` and ``line`` (the header's, or step ``t``'s) and,
+        given ``method``, naming it instead of the words :attr:`method` it begins with."""
+        message, named = self.message, self.method
+        if method and named and message.startswith(named + " "):
+            message, named = method + message[len(named):], method
+        located = StreamValueError(message, t=self.t, key=self.key, path=path, line=line,
+                                   method=named)
         for note in getattr(self, "__notes__", ()):
             located.add_note(note)
         return located
 
 
 def _stream_value_error(message: str, t: int | None, key: str,
-                        path: str | os.PathLike[str] | None, line: int | None
-                        ) -> StreamValueError:
-    return StreamValueError(message, t=t, key=key, path=path, line=line)
+                        path: str | os.PathLike[str] | None, line: int | None,
+                        method: str | None = None) -> StreamValueError:
+    return StreamValueError(message, t=t, key=key, path=path, line=line, method=method)
 
 
 class ExportError(BomgraphError, ValueError):

@@ -26,6 +26,7 @@ from .errors import (EvaluationError, OutOfRangeError, TooFewLandmarksError,
                      UndeterminedAlignmentError)
 from .mapper import Checkpoint, MapEstimate, RunResult
 from .stream import Truth
+from .tables import counted
 from .trajectory import PoseErrors, absolute_pose_errors, relative_pose_errors, rms
 
 
@@ -313,8 +314,8 @@ def score_estimate(estimate: MapEstimate, truth: Reference, *, allow_reflection:
                                     return_indices=True)
     whose = "reference estimate" if isinstance(truth, MapEstimate) else "truth"
     if common.size < 3 and align_on != "trajectory":
-        raise TooFewLandmarksError(f"the estimate shares {common.size} landmark(s) with the "
-                                   f"{whose}; alignment needs at least 3")
+        raise TooFewLandmarksError(f"the estimate shares {counted(common.size, 'landmark')} "
+                                   f"with the {whose}; alignment needs at least 3")
     est_xy = estimate.landmarks_xy[ie]
     true_xy = truth.landmarks_xy[it]
     pr = _reference_poses(truth, estimate)

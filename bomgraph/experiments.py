@@ -27,6 +27,7 @@ from .sim import RunSpec, SimConfig, paper_design
 from .sources import (SIMULATED, DatasetSource, FileSource, SimSource, SimulatedStreams, World,
                       WorldSource)
 from .stream import Stream
+from .tables import plural
 
 #: What the paper reports (simulation, 25 runs), for the tables: (experiment, arm) -> text.
 PAPER_REPORTED: dict[tuple[str, str], str] = {
@@ -447,7 +448,8 @@ def select(experiments: Mapping[str, Experiment], names: Sequence[str] = ()) -> 
                  ) or list(experiments)
     unknown = [n for n in names if n not in experiments]
     if unknown:
-        raise ConfigError(f"unknown experiment(s) {unknown}; choose from {list(experiments)}")
+        raise ConfigError(f"unknown {plural(len(unknown), 'experiment')} {unknown}; choose from "
+                          f"{list(experiments)}")
     return [experiments[n] for n in names]
 
 

@@ -24,6 +24,7 @@ from .run_scoring import not_drawn_line, scores_left_out, self_scored
 from .stdio import check_output_path, read_regular_file, write_figure
 from .stream_file import read_stream
 from .summaries import error_curves
+from .tables import plural
 
 FIGURE_SUFFIXES = (".png", ".pdf", ".svg")
 _LANDMARKS = "align_on='landmarks'"
@@ -194,7 +195,8 @@ def _results_data(obj: Any, src: Path, experiments: Sequence[str]) -> tuple[
     curves: dict[str, dict[str, Any]] = {}
     for (exp, arm), c in error_curves([r for r in results if r["experiment"] in chosen]).items():
         curves.setdefault(exp, {})[arm] = c
-    titles = {m["name"]: f"{m.get('title', m['name'])} ({m.get('runs', '?')} runs)"
+    titles = {m["name"]: f"{m.get('title', m['name'])} ({m.get('runs', '?')} "
+                         f"{plural(m.get('runs'), 'run')})"
               for m in meta if isinstance(m, dict) and "name" in m}
     for exp in own:
         titles[exp] = titles.get(exp, exp) + not_drawn_line(

@@ -414,7 +414,7 @@ def format_evaluation(ev: FileEvaluation, fmt: str = "text") -> str:
     against = f"reference {ev.reference}" if ev.reference else "truth"
     revised = ev.poses_revised and len(ev.rows) > 1
     title = (f"{ev.method} against the {against}, aligned on {ev.score.align_on}; RPE over "
-             f"{ev.score.rpe_delta} step(s)"
+             f"{counted(ev.score.rpe_delta, 'step')}"
              + (f"; {_revised_note(ev.score.align_on)}" if revised else ""))
     if fmt == "json":
         return json.dumps(jsonable(ev.as_dict()), allow_nan=False)

@@ -23,6 +23,7 @@ from .mapper import (MapEstimate, RunResult, checkpoint_times, create_mapper, me
 from .stream import Step, Stream
 from .stdio import check_output_path
 from .stream_file import StreamReader, located
+from .tables import counted
 
 _log = logging.getLogger(__name__)
 
@@ -60,7 +61,7 @@ def run_file(stream_path: str | os.PathLike[str], method: str,
     try:
         result = _run_read(stream_path, method, options, checkpoint_every, progress, out)
     except StreamValueError as exc:  # the method's refusal, naming the file and the line
-        raise located(exc, stream_path) from None
+        raise located(exc, stream_path, method) from None
     _log.info("%s: %d checkpoints, %d landmarks at t = %d, %.3f s", method,
               len(checkpoint_times(result.checkpoints[-1].t + 1, checkpoint_every)),
               len(result.final), result.checkpoints[-1].t, result.total_s)
@@ -69,8 +70,9 @@ def run_file(stream_path: str | os.PathLike[str], method: str,
                      method, result.checkpoints[-1].t)
     failures = result.final.info.get("update_failures")
     if failures:
-        _log.warning("%s: %d solver failure(s) recovered from (last: %s); see the estimate's "
-                     "info", method, failures, result.final.info.get("last_failure", "?"))
+        _log.warning("%s: %s recovered from (last: %s); see the estimate's "
+                     "info", method, counted(failures, "solver failure"),
+                     result.final.info.get("last_failure", "?"))
     converged = result.final.info.get("converged")  # a numpy bool_ too (np.all(...))
     if isinstance(converged, (bool, np.bool_)) and not converged:
         _log.warning("%s: the final solve did not converge (%s)", method,

@@ -24,6 +24,7 @@ from .loaded_values import Unhashable, note_run, values_fingerprint
 from .mapper import method_info
 from .plugins import code_changed, disk_fingerprint, loaded_modules, source_fingerprint
 from .processes import daemonic
+from .tables import counted, plural
 
 _log = logging.getLogger(__name__)
 
@@ -232,27 +233,29 @@ def warn_sourceless(tasks: Sequence[Task], disk: bool = True) -> None:
     names = dict.fromkeys(m for t in tasks for m in sourceless(t))
     if names:
         n = sum(1 for t in tasks if sourceless(t))
-        _log.warning("%d run(s) not cached: method(s) %s have no source file to hash (defined "
+        _log.warning("%s not cached: %s %s %s no source file to hash (defined "
                      "in a notebook cell or `python -c`), so a cached result could be from "
                      "before an edit; put the class in a .py module to cache its runs",
-                     n, ", ".join(repr(m) for m in names))
+                     counted(n, "run"), plural(len(names), "method"),
+                     ", ".join(repr(m) for m in names), "has" if len(names) == 1 else "have")
     if disk:  # the workers import the files: a value set here is not theirs
         unseen = dict.fromkeys(m for t in tasks for m in t.methods() if _known(m) and (
             info := method_info(m)).origin != "builtin" and method_values(info.target,
                                                                           info.version))
         if unseen:
-            _log.warning("method(s) %s: a value of their modules was set in this process "
+            _log.warning("%s %s: a value of their modules was set in this process "
                          "(a global or class attribute changed since loaded), which the "
                          "worker processes do not see: they run the files' values; run "
                          "serially (--jobs 1, Executor('serial')) to run this process's",
-                         ", ".join(repr(m) for m in unseen))
+                         plural(len(unseen), "method"), ", ".join(repr(m) for m in unseen))
     odd = dict.fromkeys(method_info(m).target for t in tasks for m in unhashable(t, disk))
     if odd:
         n = sum(1 for t in tasks if unhashable(t, disk))
-        _log.warning("%d run(s) not cached: %s, a value the method's code reads that bomgraph "
+        _log.warning("%s not cached: %s, a value the method's code reads that bomgraph "
                      "cannot hash, so a cached result could be of another value; make it a "
                      "number, string, array, dataclass or container of them, or make it in "
-                     "the method", n, "; ".join(_UNHASHABLE.get(t, t) for t in odd))
+                     "the method", counted(n, "run"),
+                     "; ".join(_UNHASHABLE.get(t, t) for t in odd))
 
 
 def bomgraph_edited() -> bool:

@@ -27,7 +27,8 @@ step or returning a map from numbers it could not represent.
   :func:`bomgraph.mapper.check_method_options`): ``start_pose``, a mapper object.
 * **Known distances** beyond it, or with a sigma above :data:`MAX_SIGMA` (:func:`check_priors`).
 * **Sigmas** above :data:`MAX_SIGMA` (:func:`check_sigmas`), a bearing sigma outside
-  ``(0, pi]`` (:func:`check_bearing_sigma`; STMDS holds it to :data:`MAX_SIGMA` only).
+  ``(0, pi]`` (:func:`check_bearing_sigma`; STMDS too, h161: it weights its distances,
+  bundle and localisation by it, and had taken one of 4 rad with the reader's warning only).
 """
 
 from __future__ import annotations
@@ -61,7 +62,7 @@ def check_sigmas(values: Any, t: int | None, key: str, method: str,
         raise StreamValueError(
             f"{method} cannot use {arr.tolist() if arr.size > 1 else float(arr[0])!r}: "
             f"a std. dev. above {max_sigma:g} (m or rad) carries no information and overflows "
-            f"the variance arithmetic; fix the stream's sigmas", t=t, key=key)
+            f"the variance arithmetic; fix the stream's sigmas", t=t, key=key, method=method)
 
 
 def check_bearing_sigma(header: StreamHeader, method: str) -> StreamHeader:
@@ -73,7 +74,7 @@ def check_bearing_sigma(header: StreamHeader, method: str) -> StreamHeader:
         raise StreamValueError(
             f"{method} cannot use a bearing std. dev. of {sigma:g} rad: it must be in (0, pi] "
             f"(a larger sigma carries no information); fix the stream's bearing_sigma_rad",
-            t=None, key="bearing_sigma_rad")
+            t=None, key="bearing_sigma_rad", method=method)
     return header
 
 
@@ -86,7 +87,7 @@ def check_priors(header: StreamHeader, method: str) -> None:
             raise StreamValueError(
                 f"{method} cannot use a known distance of {p.distance_m:g} m, beyond "
                 f"{MAX_COORDINATE_M:g} m (squared, it leaves double precision); fix the "
-                f"stream's priors", t=None, key=f"priors[{k}].distance_m")
+                f"stream's priors", t=None, key=f"priors[{k}].distance_m", method=method)
         check_sigmas(p.sigma_m, None, f"priors[{k}].sigma_m", method)
 
 
@@ -100,15 +101,19 @@ def checked_header(header: StreamHeader, method: str,
     return check_bearing_sigma(header, method)
 
 
-def check_distance(distance_m: float, t: int, method: str, what: str) -> None:
+def check_distance(distance_m: float, t: int, method: str, what: str,
+                   fix: str = "the stream's odometry") -> None:
     """Refuse (``'odom'`` of step ``t``) a distance of ``distance_m`` metres beyond
     :data:`~bomgraph.plausibility.MAX_COORDINATE_M`: "``method`` cannot use ``what``
-    ``distance_m`` m, beyond ..."."""
+    ``distance_m`` m, beyond ...; fix ``fix``" (the distance shown with the digits that set it
+    apart from the bound: "1e+09 m, beyond 1e+09 m" said nothing, h161)."""
     if not distance_m <= MAX_COORDINATE_M:
+        shown = next((f"{distance_m:.{k}g}" for k in range(6, 18)
+                      if float(f"{distance_m:.{k}g}") > MAX_COORDINATE_M), repr(distance_m))
         raise StreamValueError(
-            f"{method} cannot use {what} {distance_m:g} m, beyond {MAX_COORDINATE_M:g} m "
-            f"(coordinates that far lose the precision the measurements need); fix the "
-            f"stream's odometry", t=t, key="odom")
+            f"{method} cannot use {what} {shown} m, beyond {MAX_COORDINATE_M:g} m "
+            f"(coordinates that far lose the precision the measurements need); fix {fix}",
+            t=t, key="odom", method=method)
 
 
 def checked_start_pose(value: Any, option: str = "start_pose") -> np.ndarray:
@@ -190,6 +195,10 @@ class Reach:
                  max_sigma: float | None = MAX_SIGMA) -> None:
         self.start_pose = checked_start_pose(start_pose)
         self.pose = self.start_pose.copy()
+        x, y = self.start_pose[:2].tolist()  # a far start is the user's option, not the stream
+        self._fix = "the stream's odometry" + ("" if x == y == 0 else (
+            f", or the option start_pose: it starts the robot {math.hypot(x, y):g} m from the "
+            f"map origin"))
         self.method = method
         self.max_sigma = max_sigma
 
@@ -213,7 +222,7 @@ class Reach:
         x, y = x + c * dx - s * dy, y + s * dx + c * dy
         check_distance(math.hypot(x, y), step.t, self.method,
                        "this step's move: it carries the robot from the map origin to a "
-                       "distance of")
+                       "distance of", self._fix)
         self.pose = np.array([x, y, float(wrap_angle(psi + dpsi))])
         return self.pose
 

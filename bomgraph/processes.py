@@ -29,6 +29,7 @@ from .checks import is_integer
 from .errors import ConfigError
 from .owned_folders import OWNER, alive as _alive, owned_folder
 from .stdio import signals_held
+from .tables import counted
 
 _log = logging.getLogger(__name__)
 
@@ -105,8 +106,8 @@ def worker_count(requested: int, n_tasks: int, *, one_at_a_time: bool = False) -
                    if one_at_a_time and n == 1 else str(n))
         what = (f"one worker process per core ({cores})" if requested == -1 else
                 f"{asked} worker processes")
-        _log.info("%s asked for %d task(s) on %d usable core(s): starting %s", what, n_tasks,
-                  cores, started)
+        _log.info("%s asked for %s on %s: starting %s", what, counted(n_tasks, "task"),
+                  counted(cores, "usable core"), started)
     return n
 
 

@@ -41,7 +41,7 @@ from .slugs import figure_names
 from .stdio import OutputPathError, check_folder, write_figure, write_text
 from .summaries import (REPORT_TIMES, error_curves, final_by_run, group_rows,
                         results_to_csv_rows, summarise)
-from .tables import HUGE, write_csv
+from .tables import HUGE, counted, write_csv
 from .worker_log import said_once
 
 _log = logging.getLogger(__name__)
@@ -126,8 +126,8 @@ def _nees_landmark_note(rows: Sequence[Mapping[str, Any]]) -> list[str]:
     for r in rows:
         ran, n = r["runs"] - r["failed"], r.get("n_nees_landmark", 0)
         partial = r.get("n_nees_landmark_partial", 0)
-        what = ([f"{ran - n} of {ran} runs without one"] if 0 < n < ran else []) + (
-            [f"{partial} run(s) leaving out landmarks without a covariance "
+        what = ([f"{ran - n} of {counted(ran, 'run')} without one"] if 0 < n < ran else []) + (
+            [f"{counted(partial, 'run')} leaving out landmarks without a covariance "
              f"(info covariances_undefined)"] if partial else [])
         if what:
             parts.append(f"{r['arm']}: {', '.join(what)}")
@@ -415,7 +415,7 @@ def write_compare_figures(out_dir: str | os.PathLike[str], experiments: Sequence
                if e == exp.name and np.any(np.isfinite(c[1]))}
         own = not_drawn_line([r for r in results if r["experiment"] == exp.name])
         fig = error_vs_time_figure(curves, robot_curves=rob, title=f"{exp.title}: landmarks "
-                                   f"({exp.n_runs()} runs)" + own)  # self-scored: NaN
+                                   f"({counted(exp.n_runs(), 'run')})" + own)  # self-scored: NaN
         path = out / names[exp.name]
         write_figure(fig, path, dpi=120, ready=ready(path))
         files.append(path)

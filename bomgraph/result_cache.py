@@ -12,6 +12,7 @@ from typing import Any, Iterable, Mapping
 from .claims import remove_leftovers_like
 from .estimate_file import untimed_estimate_text
 from .stdio import InputTooLargeError, output_file, read_regular_file
+from .tables import counted
 
 _log = logging.getLogger(__name__)
 
@@ -95,8 +96,8 @@ def remove_cache_leftovers(cache: Path) -> int:
     many, logged."""
     removed = remove_leftovers_like(os.fspath(cache), r"[0-9a-f]+\.json")
     if removed:
-        _log.info("removed %d temporary file(s) that killed sweeps left in the cache %s",
-                  removed, cache)
+        _log.info("removed %s that killed sweeps left in the cache %s",
+                  counted(removed, "temporary file"), cache)
     return removed
 
 

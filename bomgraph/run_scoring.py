@@ -79,7 +79,7 @@ def run_arm(task: Task, arm: Arm, stream: Stream,
                    on_checkpoint=on_checkpoint, keep_checkpoints=False)
     except StreamValueError as exc:  # the method's refusal: a stream file's name and line
         if isinstance(task.source, FileSource):
-            raise located(exc, task.source.path) from None
+            raise located(exc, task.source.path, arm.method) from None
         raise
 
 

@@ -531,11 +531,14 @@ def count_steps(stream_path: str | os.PathLike[str]) -> int:
     return max(n - 1, 0)
 
 
-def located(exc: StreamValueError, path: str | os.PathLike[str]) -> StreamValueError:
+def located(exc: StreamValueError, path: str | os.PathLike[str],
+            method: str | None = None) -> StreamValueError:
     """A method's refusal of a value of the stream file ``path``, naming the file and the
     line, as the reader names a line it refuses: the header's line 1, step ``t``'s line
-    ``t + 2`` (the format has no blank lines and no gaps in ``t``)."""
-    return exc if exc.path is not None else exc.in_file(path, 1 if exc.t is None else exc.t + 2)
+    ``t + 2`` (the format has no blank lines and no gaps in ``t``); and naming ``method``, the
+    method run, rather than the part of it that refused (``GTSAM``, a hybrid's ``STMDS``)."""
+    return exc if exc.path is not None else exc.in_file(
+        path, 1 if exc.t is None else exc.t + 2, method)
 
 
 __all__ = ["StreamReader", "read_stream", "write_stream", "write_stream_parts", "header_to_json",

@@ -54,6 +54,7 @@ from .errors import BomgraphError, ConfigError, shown_path
 from .jsonio import BOM_ADVICE
 from .sim import SimConfig
 from .stream_globs import GlobTooWideError, bounded_glob
+from .tables import counted
 
 #: The folder of the sweep files shipped in the package (``--config NAME``).
 SHIPPED_DIR = Path(__file__).with_name("sweeps")
@@ -408,8 +409,8 @@ class _Reader:
         _unique_or(self, [a.label for a in arms], f"{at}methods[].label")
         ref = t.get("reference")
         reference = None if ref is None else self.method(ref, f"{at}reference")
-        title = t.get("title", f"{name}: {len(streams)} stream(s), "
-                               f"{sum(len(w.seeds) for w in worlds)} simulated run(s)")
+        title = t.get("title", f"{name}: {counted(len(streams), 'stream')}, "
+                               f"{counted(sum(len(w.seeds) for w in worlds), 'simulated run')}")
         return ExperimentSpec(name, self.str_(title, f"{at}title"), arms, streams,
                               tuple(worlds), reference, every)
 

@@ -66,10 +66,15 @@ def fixed_or_exponent(value: float, fmt: str, scale: float = 1.0, huge: float = 
     return format(Decimal(value) * Decimal(scale), ".3e" if fixed else fmt)
 
 
+def plural(n: int, noun: str) -> str:
+    """``noun`` with an ``s`` unless ``n`` is 1 (for a count printed apart, in a column)."""
+    return f"{noun}{'s' * (n != 1)}"
+
+
 def counted(n: int, noun: str) -> str:
     """``n`` and ``noun``, with an ``s`` unless ``n`` is 1: ``"1 landmark"``, ``"2 poses"``
     (a summary said "1 landmarks", h154)."""
-    return f"{n} {noun}{'s' * (n != 1)}"
+    return f"{n} {plural(n, noun)}"
 
 
 #: LaTeX's ten special characters and what prints each as itself (a method name or file name

@@ -15,6 +15,8 @@ import contextvars
 import logging
 from typing import Any, Iterable, Iterator
 
+from .tables import counted
+
 #: the key of a worker's result that holds the warnings its run logged (never cached)
 SAID = "_worker_warnings"
 
@@ -109,9 +111,9 @@ def kept_warnings() -> Iterator[list[tuple[str, int, str]]]:
         _KEPT.reset(token)
         if kept.dropped:
             kept.append(("bomgraph", logging.WARNING,
-                         f"a run gave {kept.dropped} other warning(s) than these {MAX_KEPT} "
-                         f"(a worker sends back {MAX_KEPT} a run; run it with --jobs 1 to "
-                         f"see them all)"))
+                         f"a run gave {counted(kept.dropped, 'other warning')} than these "
+                         f"{MAX_KEPT} (a worker sends back {MAX_KEPT} a run; run it with "
+                         f"--jobs 1 to see them all)"))
 
 
 def say_kept(kept: Iterable[Any]) -> None:

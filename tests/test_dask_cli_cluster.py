@@ -295,7 +295,7 @@ def test_workers_with_other_bomgraph_code_log_one_line_and_cache_nothing(
         proc = _compare(setup, address, "triangulate,crashy", out)
     line = _one_line(proc)
     assert proc.returncode == 0
-    assert "WARNING: 4 run(s) not cached (first: " in line
+    assert "WARNING: 4 runs not cached (first: " in line
     assert "the workers keyed them otherwise than this process" in line
     assert list((out / "cache").glob("*.json")) == []
     assert all(_ok_runs(out).values())

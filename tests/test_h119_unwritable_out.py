@@ -59,7 +59,7 @@ def test_a_cache_holding_every_run_is_only_read(tmp_path: Path, stream: Path,
     assert len(list((out / "cache").iterdir())) == 1
     with not_writable(out / "cache"):
         assert main(_compare(stream, out, "--no-figures", "--estimates", "--dry-run")) == 0
-        assert "1 runs: 0 to run, 1 in" in capsys.readouterr().out
+        assert "1 run: 0 to run, 1 in" in capsys.readouterr().out
         assert main(_compare(stream, out, "--no-figures", "--estimates")) == 0
         assert "(1 from the cache)" in capsys.readouterr().out
         assert main(_compare(stream, out, "--no-figures")) == 2  # a run without estimates

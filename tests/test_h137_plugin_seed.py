@@ -93,7 +93,7 @@ BAD = [
      "method 'h137-seeded': seed_method='oracle' is a bound (it needs the truth"),
     ("h137-seeded", {"seed_options": {"bogus": 1}},
      "method 'h137-seeded': seed_method='triangulate', seed_options={'bogus': 1}: "
-     "TriangulateConfig: unknown option(s) bogus"),
+     "TriangulateConfig: unknown option bogus"),
     ("h137-seeded", {"seed_options": 3},
      "method 'h137-seeded': seed_options must be a mapping (a JSON object) of the options of "
      "'triangulate', got 3"),

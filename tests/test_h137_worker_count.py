@@ -26,6 +26,7 @@ from bomgraph.experiments import Arm, Experiment, FileSource
 from bomgraph.processes import MAX_WORKERS_PER_CORE, dispatch, usable_cores, worker_count
 from bomgraph.sim import SimConfig, simulate
 from bomgraph.stream_file import write_stream
+from bomgraph.tables import counted
 
 CAPPED = " asked for "
 
@@ -51,10 +52,10 @@ def test_minus_one_is_one_per_usable_core_and_no_more_than_the_tasks(
     assert worker_count(10**6, 10**6) == MAX_WORKERS_PER_CORE * cores
     assert worker_count(3, 0) == 1 and worker_count(3, 2) == 2 and worker_count(1, 5) == 1
     said = _capped(caplog)
-    start = [] if cores == 1 else [f"one worker process per core ({cores}) asked for 1 task(s) "
-                                   f"on {cores} usable core(s): starting 1"]
+    start = [] if cores == 1 else [f"one worker process per core ({cores}) asked for 1 task "
+                                   f"on {cores} usable cores: starting 1"]
     assert said[:len(start) + 1] == start + [
-        f"{10**6} worker processes asked for {10**6} task(s) on {cores} usable core(s): "
+        f"{10**6} worker processes asked for {10**6} tasks on {counted(cores, 'usable core')}: "
         f"starting {MAX_WORKERS_PER_CORE * cores}"], said
 
 
@@ -64,8 +65,9 @@ def test_a_library_dispatch_says_what_it_started(caplog: pytest.LogCaptureFixtur
     caplog.set_level(logging.INFO, logger="bomgraph")
     out = dict(dispatch(_pid, [0, 1], ["a", "b"], 40, _failed, fresh=True))
     assert sorted(out) == [0, 1] and all("pid" in r for r in out.values()), out
-    assert _capped(caplog) == [f"40 worker processes asked for 2 task(s) on {usable_cores()} "
-                               f"usable core(s): starting 2"], caplog.text
+    assert _capped(caplog) == [f"40 worker processes asked for 2 tasks on "
+                               f"{counted(usable_cores(), 'usable core')}: starting 2"], \
+        caplog.text
 
 
 def test_a_sweep_says_it_once(tmp_path, caplog: pytest.LogCaptureFixture) -> None:
@@ -76,9 +78,10 @@ def test_a_sweep_says_it_once(tmp_path, caplog: pytest.LogCaptureFixture) -> Non
     caplog.set_level(logging.INFO, logger="bomgraph")
     res = execute(exp.tasks(), Executor("processes", n_jobs=50))
     assert [r["ok"] for r in res] == [True], res
-    assert _capped(caplog) == [f"50 worker processes asked for 1 task(s) on {usable_cores()} "
-                               f"usable core(s): starting 2, one task at a time (a pool of one "
-                               f"would run it in this process)"], caplog.text
+    assert _capped(caplog) == [f"50 worker processes asked for 1 task on "
+                               f"{counted(usable_cores(), 'usable core')}: starting 2, one "
+                               f"task at a time (a pool of one would run it in this process)"], \
+        caplog.text
 
 
 _ONE_CORE = textwrap.dedent("""

@@ -56,5 +56,5 @@ def test_a_sweep_in_a_pool_worker_runs_serially_saying_so_once(tmp_path) -> None
     assert res == [(True, ""), (True, "")], res
     assert caught == [], caught
     daemonic = [m for m in logs if "daemonic" in m]
-    assert len(daemonic) == 1 and "running the 2 run(s) here" in daemonic[0], logs
+    assert len(daemonic) == 1 and "running the 2 runs here" in daemonic[0], logs
     assert not any("worker processes asked for" in m for m in logs), logs

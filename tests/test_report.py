@@ -307,7 +307,7 @@ def test_the_summary_says_when_landmark_nees_values_were_left_out() -> None:
     assert (k["n_nees_landmark"], k["n_nees_landmark_partial"]) == (2, 0)
     note = format_summary(rows).splitlines()[-1]
     assert note == ("note: the landmark NEES (summary.csv nees_landmark_mean) is the mean over "
-                    "the values there are; left out: g: 1 of 3 runs without one, 1 run(s) "
+                    "the values there are; left out: g: 1 of 3 runs without one, 1 run "
                     "leaving out landmarks without a covariance (info covariances_undefined)")
     every = summarise([result("k", "a", 2.0, None), result("k", "b", 2.0, None)])
     assert not format_summary(every).splitlines()[-1].startswith("note:")

@@ -192,7 +192,7 @@ def test_a_stream_without_truth_gets_truth_free_scores_or_a_reference(
     ("streams = [\"runs/*.jsonl\"]\n[[methods]]\nname = \"stmds-smacof\"\n"
      "options = { tri_window = -3 }\n", "methods[0]: options {'tri_window': -3}: StmdsConfig"),
     ("streams = [\"runs/*.jsonl\"]\n[[methods]]\nname = \"ekf\"\noptions = { nope = 1 }\n",
-     "methods[0]: options {'nope': 1}: EkfConfig: unknown option(s) nope"),
+     "methods[0]: options {'nope': 1}: EkfConfig: unknown option nope"),
     ("streams = [\"runs/*.jsonl\"]\n[[methods]]\nname = \"ekf\"\noptions = { preset = [1] }\n",
      "methods[0]: preset must be a name"),
     ("methods = [\"triangulate\"]\n[[worlds]]\nseeds = 1000000000\n",

@@ -31,7 +31,7 @@ def odometry_refusal(exc: FilterNumericalError, step: Step,
         key, t, what = "odometry_sigma", None, "sigmas"
     whose = "this step's" if t is not None else f"step {step.t}'s"
     return StreamValueError(f"the EKF cannot use {whose} odometry: {exc}; fix the stream's "
-                            f"{what}", t=t, key=key)
+                            f"{what}", t=t, key=key, method="the EKF")
 
 
 #: The largest odometry std. dev. (m or rad, header or step) the EKFs accept (h151): a step

@@ -64,6 +64,7 @@ import numpy as np
 from ..errors import DatasetError, StreamFormatError, shown_path
 from ..plausibility import MAX_ABS_ANGLE_RAD, MAX_ODOMETRY_SIGMA, refuse_implausible
 from ..stream import Step, Stream, StreamHeader, Truth
+from ..tables import counted
 from ..stream_file import parse_priors
 from ._text import (chain_order, checked_bearing_sigma, dataset_error,
                     file_label, parse_float, parse_int, read_lines)
@@ -380,10 +381,10 @@ def import_g2o(path: str | os.PathLike[str], *, truth_path: str | os.PathLike[st
         raise first_bad
     beyond = np.flatnonzero(np.abs(b_brg) > MAX_ABS_ANGLE_RAD)  # beyond a full turn
     if beyond.size:   # valid (g2o wraps angles, and so does a Step), but most likely degrees
-        _log.warning("%s, line %d: field 'bearing': %g is more than a full turn (%d such "
-                     "bearing(s) in the file); bearings are radians (degrees?); wrapped to "
+        _log.warning("%s, line %d: field 'bearing': %g is more than a full turn (%s "
+                     "in the file); bearings are radians (degrees?); wrapped to "
                      "(-pi, pi]", shown_path(g.path), int(b_line[beyond[0]]),
-                     float(b_brg[beyond[0]]), beyond.size)
+                     float(b_brg[beyond[0]]), counted(beyond.size, "such bearing"))
     w_arr = b_w
     if bearing_sigma_rad is not None:
         sigma_b = checked_bearing_sigma(bearing_sigma_rad)

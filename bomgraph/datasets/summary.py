@@ -8,10 +8,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..stream import Stream
-
-
-def _plural(n: int, word: str) -> str:
-    return f"{n} {word}{'' if n == 1 else 's'}"
+from ..tables import counted
 
 
 def import_summary(stream: Stream) -> str:
@@ -29,11 +26,11 @@ def import_summary(stream: Stream) -> str:
     # one pose, no odometry (h93): not "odometry sigma 0.0000 m, ...", as if it were exact
     odo_s = (f"odometry sigma {per_step}{odo[0]:.4f} m, {odo[1]:.4f} m, {odo[2]:.4f} rad"
              if moved else "no odometry")
-    parts = [f"{_plural(len(stream.steps), 'step')}, {_plural(n_brg, 'bearing')}, "
-             f"{_plural(len(stream.landmark_ids()), 'landmark')}",
+    parts = [f"{counted(len(stream.steps), 'step')}, {counted(n_brg, 'bearing')}, "
+             f"{counted(len(stream.landmark_ids()), 'landmark')}",
              f"bearing sigma {header.bearing_sigma_rad:.4f} rad, {odo_s}"]
     if header.priors:
-        parts.append(f"{_plural(len(header.priors), 'prior')} (landmark distances)")
+        parts.append(f"{counted(len(header.priors), 'prior')} (landmark distances)")
     fixed = (header.meta or {}).get("fixed_vertex_ids") or []
     if fixed:
         steps = (header.meta or {}).get("fixed_steps") or []

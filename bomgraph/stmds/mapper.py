@@ -31,7 +31,7 @@ from ..config import resolve
 from ..errors import ConfigError, DegenerateGeometryError
 from ..geometry import dead_reckon
 from ..mapper import MapEstimate
-from ..method_limits import check_distance, check_priors, check_sigmas
+from ..method_limits import check_bearing_sigma, check_distance, check_priors, check_sigmas
 from ..stream import Step, StreamHeader
 from .batch import BATCH_STEPS, StepBatch
 from .bundle import (SIGMA_RANGE, PrefixState, WindowBundle, bundle_adjust_window,
@@ -93,7 +93,7 @@ class StmdsMapper:
         self.config = config or StmdsConfig()
         cfg = self.config
         self.header = header
-        _check_sigmas(header.bearing_sigma_rad, None, "bearing_sigma_rad")
+        check_bearing_sigma(header, "STMDS")  # its weights and variances (h161: warned only)
         _check_sigmas(header.odometry_sigma, None, "odometry_sigma")
         check_priors(header, "STMDS")
         self._bearing_sigma = float(header.bearing_sigma_rad)

@@ -120,7 +120,7 @@ def test_a_stream_malformed_further_in_ends_compare_with_exit_2(work: Path) -> N
     (work / "late.jsonl").write_text("".join(lines))
     proc = bomgraph("compare", "--streams", work / "late.jsonl", work / "s.jsonl", *COMPARE,
                     "--out", work / "o", "--no-cache")
-    one_error(proc, "1 run(s)", "late.jsonl", "line 8")
+    one_error(proc, "1 run stopped", "late.jsonl", "line 8")
     assert "2 runs in" in proc.stdout.decode()      # the table and files are still written
     assert (work / "o" / "results.json").is_file()
 

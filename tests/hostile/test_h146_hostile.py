@@ -18,11 +18,11 @@ from bomgraph import tables
 
 @pytest.mark.parametrize("method", ["ekf", "ekf-invdepth"])
 @pytest.mark.parametrize("header,at_4,where", [
-    ({}, {"odom_sigma": [1e200, 0.0, 0.1]}, "line 6: 'odom_sigma': step 4: the ekf cannot use"),
-    ({}, {"odom": [1e200, 0.0, 0.1]}, "line 6: 'odom': step 4: the ekf cannot use"),
+    ({}, {"odom_sigma": [1e200, 0.0, 0.1]}, "line 6: 'odom_sigma': step 4: {method} cannot use"),
+    ({}, {"odom": [1e200, 0.0, 0.1]}, "line 6: 'odom': step 4: {method} cannot use"),
     ({"odometry_sigma": [1e200, 0.0, 0.1]}, {},        # refused as read (h151), not at step 1
-     "line 1: 'odometry_sigma': the ekf cannot use [1e+200, 0.0, 0.1]: a std. dev. above"),
-    ({"bearing_sigma_rad": 4.0}, {}, "line 1: 'bearing_sigma_rad': the ekf cannot use"),
+     "line 1: 'odometry_sigma': {method} cannot use [1e+200, 0.0, 0.1]: a std. dev. above"),
+    ({"bearing_sigma_rad": 4.0}, {}, "line 1: 'bearing_sigma_rad': {method} cannot use"),
 ])
 def test_an_ekf_refusal_names_the_file_and_line(tmp_path: Path, method: str, header: dict,
                                                 at_4: dict, where: str) -> None:
@@ -32,7 +32,7 @@ def test_an_ekf_refusal_names_the_file_and_line(tmp_path: Path, method: str, hea
     est = tmp_path / "e.json"
     est.write_text("kept\n")
     proc = bomgraph("run", stream, "--method", method, "--out", est)
-    one_error(proc, f"{stream}, {where}", "fix the stream's")
+    one_error(proc, f"{stream}, {where.format(method=method)}", "fix the stream's")
     assert est.read_text() == "kept\n"
 
 
@@ -40,7 +40,7 @@ def test_an_ekf_refusal_in_compare_names_the_file_and_line(tmp_path: Path) -> No
     """``compare --streams`` reported the EKF's refusal naming the step only."""
     stream = write_jsonl(tmp_path / "odd.jsonl", HEADER, odd_steps(odom=[1e200, 0.0, 0.1]))
     refused_in_compare(tmp_path, stream, "ekf",
-                       f"{stream}, line 6: 'odom': step 4: the EKF cannot use")
+                       f"{stream}, line 6: 'odom': step 4: ekf cannot use")
 
 
 @pytest.mark.parametrize("value,fmt,scale,shown", [

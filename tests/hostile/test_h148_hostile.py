@@ -41,6 +41,6 @@ def test_an_ekf_step_turning_too_far_for_its_sub_steps_is_refused(tmp_path: Path
     stream = write_jsonl(tmp_path / "odd.jsonl", HEADER, odd_steps(odom=[0.1, 0.0, 1e12]))
     proc = bomgraph("run", stream, "--method", "ekf", "--option", "max_predict_turn_rad=0.5",
                     "--out", tmp_path / "e.json", timeout=120)
-    one_error(proc, f"{stream}, line 6: 'odom': step 4: the EKF cannot use",
+    one_error(proc, f"{stream}, line 6: 'odom': step 4: ekf cannot use",
               "more than 10,000 predicts of max_predict_turn_rad = 0.5 rad each")
     assert not (tmp_path / "e.json").exists()

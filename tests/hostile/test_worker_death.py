@@ -101,7 +101,7 @@ def test_one_run_left_for_two_workers_still_runs_in_a_worker(tmp_path: Path) -> 
     proc, results = _compare(tmp_path, "one", "dying", "2", streams)
     err = no_traceback(proc)
     assert proc.returncode == 1, (proc.returncode, err)
-    assert "1 of 1 runs failed" in err and "WorkerDied" in err, err
+    assert "1 of 1 run failed" in err and "WorkerDied" in err, err
     assert [r["ok"] for r in results] == [False]
 
 
