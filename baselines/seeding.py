@@ -185,7 +185,8 @@ def align_seed(state: BatchState, estimate: MapEstimate, *, use_solution: bool =
             f"align_seed: fewer than 3 of the map's {seed_ids.size} landmarks ({n_seen} of "
             f"them seen in the stream) intersect with min_parallax_rad = "
             f"{state.config.min_parallax_rad:g} on the dead-reckoned poses of the "
-            f"{problem.n_steps} steps, so the map cannot be aligned: {fix}")
+            f"{problem.n_steps} step{'s' * (problem.n_steps != 1)}, so the map cannot be "
+            f"aligned: {fix}")
     ref_ids, ref_xy, in_solution_frame = ref
     _, i_seed, i_ref = np.intersect1d(seed_ids, ref_ids, return_indices=True)
     al = trimmed_align(estimate.landmarks_xy[i_seed], ref_xy[i_ref], trim)

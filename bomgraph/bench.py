@@ -145,7 +145,7 @@ def _run_task(task: Task) -> dict[str, Any]:
                 raise
             # its stream file went (or changed into garbage) during the sweep: a source that
             # cannot be read is a failed run, as below
-            out.update(ok=False, error=f"{type(exc).__name__}: {exc}")
+            out.update(ok=False, error=exception_line(exc))
             return out
         out.update(ok=False, error=_unloadable(exc))
         if not isinstance(exc, (UnknownMethodError, ImportError, StreamFormatError, OSError)):
@@ -157,7 +157,7 @@ def _run_task(task: Task) -> dict[str, Any]:
     try:
         stream = task.stream()
     except Exception as exc:  # a source that cannot be read is a failed run, with the reason
-        out.update(ok=False, error=f"{type(exc).__name__}: {exc}")
+        out.update(ok=False, error=exception_line(exc))
         return out
     truth: Truth | MapEstimate | None = stream.truth
     own = truth is None and runs_as_reference(task)

@@ -23,7 +23,8 @@ from typing import Any, Callable, Iterator, Sequence
 from .cli_parser import PROGRESS_MIN_STEPS, build_parser
 from .cli_signals import (Terminated, forget_unhandled_interrupt, own_signals, stdout_closed,
                           stop_status, stopped)
-from .errors import BomgraphError, ConfigError, exception_line, one_line, shown_path
+from .errors import (BomgraphError, ConfigError, exception_line, message_line, one_line,
+                     shown_path)
 
 
 def _say(text: str, *, to_stderr: bool = False) -> None:
@@ -539,7 +540,8 @@ def _main(argv: Sequence[str] | None) -> int:
             # a refusal, with what to fix (also one a method made, then with where): exit 2
             from .std_streams import display_path
 
-            message = str(exc)
+            # a method's, as compare shows it: its lines joined (exception_line)
+            message = str(exc) if note is None else message_line(str(exc))
             if isinstance(exc, OSError) and exc.filename is None \
                     and exc.errno in _WRITE_ERRNOS and getattr(args, "out", None):
                 message = f"--out {args.out}: {exc.strerror}"  # a write error names no file

@@ -201,7 +201,8 @@ def build_parser() -> argparse.ArgumentParser:
                  "streams and methods, or a sweep file")
     c.add_argument("--config", default=None, metavar="SWEEP",
                    help="a sweep file (TOML: streams, [[worlds]], [[methods]], [executor]; see "
-                        "the README) or a shipped one by name: paper (the default)")
+                        "docs/USAGE.md, 'Sweep files') or a shipped one by name: paper (the "
+                        "default)")
     c.add_argument("--streams", nargs="+", default=None, metavar="FILE",
                    help="stream files to run --methods on (any recording or simulation)")
     c.add_argument("--methods", default=None, metavar="NAME[@PRESET],...",

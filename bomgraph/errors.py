@@ -33,12 +33,21 @@ def one_line(text: str) -> str:
 
 
 def exception_line(exc: BaseException) -> str:
-    """``"Type: message"`` of an exception a method raised, its message's line breaks (and the
-    blanks around them) turned into single spaces, so a message written over several lines
-    (GTSAM's "Indeterminate linear system ...") reads as one sentence, not with the literal
-    ``\\n``s of :func:`one_line`, which still escapes any other control character."""
-    lines = [part.strip() for part in str(exc).splitlines()]
-    return f"{type(exc).__name__}: " + " ".join(part for part in lines if part)
+    """``"Type: message"`` of an exception a method raised, as every place shows it (``run``,
+    ``compare``'s table and stderr line, results.json, the CSVs): its message's line breaks
+    (and the blanks around them) turned into single spaces, so a message written over several
+    lines (GTSAM's "Indeterminate linear system ...") reads as one sentence, and any other
+    character that is not printable (a tab, an escape sequence) written as its escape
+    (:func:`one_line`), so the table on a terminal is not recoloured or cut; ``"Type"`` alone
+    for an empty message (``ZeroDivisionError()``), not a dangling ``"Type: "``."""
+    text = message_line(str(exc))
+    return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
+
+
+def message_line(text: str) -> str:
+    """``text`` on one line: its line breaks (and the blanks around them) a single space,
+    any other character that is not printable escaped (:func:`one_line`)."""
+    return one_line(" ".join(part for part in (p.strip() for p in text.splitlines()) if part))
 
 
 class BomgraphError(Exception):

@@ -29,7 +29,7 @@ import time
 from dataclasses import asdict, dataclass, replace
 from typing import Any, Callable, Collection, Mapping, Sequence
 
-from .errors import StreamValueError
+from .errors import StreamValueError, exception_line
 from .evaluate import CheckpointScore, score_checkpoints
 from .experiments import Arm, Experiment, Task
 from .mapper import Checkpoint, MapEstimate, RunResult, create_mapper, method_info, run
@@ -296,7 +296,7 @@ class CheckpointScorer:
             else:
                 self.rows.append(self._row(c, self.truth))
         except Exception as exc:  # an unscorable estimate is a failed run, with the reason
-            self.failure = f"scoring failed: {type(exc).__name__}: {exc}"
+            self.failure = "scoring failed: " + exception_line(exc)
         self.seconds += time.perf_counter() - t0
 
     def against(self, reference: MapEstimate) -> None:
@@ -308,7 +308,7 @@ class CheckpointScorer:
             try:
                 self.rows.append(self._row(c, reference, brg))
             except Exception as exc:
-                self.failure = f"scoring failed: {type(exc).__name__}: {exc}"
+                self.failure = "scoring failed: " + exception_line(exc)
 
     def _row(self, c: Checkpoint, truth: Truth | MapEstimate | None,
              brg: float | None = None) -> dict[str, Any]:

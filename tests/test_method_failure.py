@@ -53,6 +53,21 @@ CRASHER = textwrap.dedent('''
                 values.insert(0, gtsam.Pose2())
                 values.insert(1, gtsam.Point2(2.0, 0.5))
                 gtsam.GaussNewtonOptimizer(graph, values).optimize()
+
+
+    class Odd(Crasher):
+        """at t = 5: kind 0 a colouring escape and a tab, 1 no message, 2 a refusal over
+        two lines"""
+
+        def __init__(self, header, *, kind: int = 0) -> None:
+            self.at_step, self.kind = 5, kind
+
+        def step(self, step) -> None:
+            from bomgraph.errors import ConfigError
+
+            if step.t == 5:
+                raise [RuntimeError("red \\x1b[31mtext\\tthen\\n  more"), ZeroDivisionError(),
+                       ConfigError("first line\\n  second line")][self.kind]
 ''')
 
 
@@ -63,6 +78,7 @@ def crasher(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
     monkeypatch.setattr(mapper, "_REGISTRY", dict(mapper._REGISTRY))
     mapper.register_method("crasher", "crasher_plugin:Crasher", "raises")
     mapper.register_method("singular", "crasher_plugin:Singular", "raises GTSAM's error")
+    mapper.register_method("odd", "crasher_plugin:Odd", "raises odd messages")
     stream = simulate(SimConfig(n_steps=30, n_landmarks=8), np.random.default_rng(0))
     write_stream(stream, tmp_path / "s.jsonl")
     return tmp_path / "s.jsonl"
@@ -138,3 +154,30 @@ def test_run_and_compare_show_a_multiline_method_error_as_one_readable_line(
     assert run["error"].startswith("RuntimeError: Indeterminate linear system detected while "
                                    "working near variable 1"), run["error"]
     assert "\n" not in run["error"] and "Traceback" in run["traceback"]
+
+
+@pytest.mark.parametrize("kind, shown, status", [
+    (0, "RuntimeError: red \\x1b[31mtext\\tthen more", 1), (1, "ZeroDivisionError", 1),
+    (2, "ConfigError: first line second line", 2)])
+def test_a_method_error_s_control_characters_and_empty_message_are_shown_as_one_line(
+        crasher: Path, tmp_path: Path, capsys, kind: int, shown: str, status: int) -> None:
+    """h166: a method's message with an escape sequence reached the compare table on stdout
+    raw (recolouring the terminal), an empty one was shown as a dangling "ZeroDivisionError: ",
+    and a refusal a method raised over two lines kept a literal \\n in ``run`` (though its
+    lines were joined in compare): each is one line of printable text wherever it is shown."""
+    status_run = main(["run", str(crasher), "--method", "odd", "--option", f"kind={kind}",
+                       "--out", str(tmp_path / "e.est")])
+    err = capsys.readouterr().err
+    assert status_run == status and len(err.strip().splitlines()) == 1, err
+    said = shown.partition(": ")[2] if status == 2 else shown   # a refusal: its message
+    assert f"bomgraph: error: {'' if status == 2 else 'method odd failed: '}{said} (raised in " \
+           "Odd.step() at t = 5)" in err, err
+    out = tmp_path / "c"
+    assert main(["compare", "--streams", str(crasher), "--methods", "odd",
+                 "--option", f"odd:kind={kind}", "--out", str(out), "--no-figures",
+                 "--jobs", "1"]) in (1, 2)
+    captured = capsys.readouterr()
+    assert f"FAILED 1: {shown} (raised in Odd.step() at t = 5)" in captured.out, captured.out
+    assert all(c.isprintable() for line in captured.out.splitlines() for c in line)
+    run = json.loads((out / "results.json").read_text())["results"][0]
+    assert run["error"] == f"{shown} (raised in Odd.step() at t = 5)"

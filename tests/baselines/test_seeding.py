@@ -44,6 +44,24 @@ def test_a_map_of_two_landmarks_cannot_be_aligned(noise_free: Stream) -> None:
             "(by the stream's landmark ids)")
 
 
+def test_a_map_the_stream_sees_on_too_short_a_stream_is_told_its_remedies(
+        noise_free: Stream) -> None:
+    """h166: align_seed's other branch (3 or more of the map's landmarks seen, none
+    intersecting): more steps, or the poses of a map in the graph's frame; "1 step" (was
+    "1 steps")."""
+    state = gt.build_graph(noise_free.header, noise_free.steps[:1])
+    with pytest.raises(TooFewLandmarksError) as err:
+        gt.align_seed(state, _true_map(noise_free))
+    assert str(err.value) == (
+        "align_seed: fewer than 3 of the map's 20 landmarks (8 of them seen in the stream) "
+        "intersect with min_parallax_rad = 0.3 on the dead-reckoned poses of the 1 step, so "
+        "the map cannot be aligned: give more steps, or, where the dead reckoning drifts (a "
+        "recording), start the poses from a map that carries them in the graph's frame (pose "
+        "0 at the start pose, as ekf's and gtsam-batch's maps do): insert_pose(state.values, "
+        "t, pose, previous pose) for every step, state.absorb(), then seed_landmarks")
+    assert "a map holding more" not in str(err.value)
+
+
 def test_a_map_of_other_ids_is_told_so(noise_free: Stream) -> None:
     """The whole true map under other ids: not "more steps", none of them is the stream's."""
     state = gt.build_graph(noise_free.header, noise_free.steps)
