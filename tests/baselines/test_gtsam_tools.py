@@ -313,3 +313,27 @@ def test_on_a_recording_the_map_s_own_poses_start_the_graph_seed_start_cannot() 
     values, report = gt.checked_solve(state.graph, state.values, state.config)
     assert report.converged
     assert score_estimate(state.to_estimate(values, report.as_info()), stream.truth).mpe_m < 0.1
+
+
+def test_isam2_params_are_the_ones_gtsam_isam2_runs_with(noisy: Stream) -> None:
+    """h163: with plain ``gtsam.ISAM2Params()`` an incremental hybrid mapped sim7 at 8.3 m;
+    the mapper's settings were private (``Isam2Mapper._new_isam``)."""
+    from baselines.isam2 import Isam2Config, Isam2Mapper
+
+    for cfg in (gt.FactorGraphConfig(), gt.FactorGraphConfig.preset("robust"),
+                Isam2Config(), Isam2Config.preset("real"), Isam2Config(isam2_optimizer="gauss-newton")):
+        mapper = Isam2Mapper(noisy.header, config=cfg)
+        for step in noisy.steps[:12]:
+            mapper.step(step)
+        mine = gt.isam2_params(cfg)
+        assert str(mine) == str(mapper._isam.params())    # every field GTSAM prints
+        assert mine.getFactorization() == mapper._isam.params().getFactorization()
+        assert f"relinearizeThreshold:              {mapper.config.relinearize_threshold:g}" \
+            in str(mine)
+        mapper._long = True                                # long mode's solver
+        assert str(gt.isam2_params(cfg, long=True)) == str(mapper._new_isam().params())
+    assert "ISAM2DoglegParams" in str(gt.isam2_params(gt.FactorGraphConfig()))
+    assert str(gt.isam2_params()) == str(gt.isam2_params(Isam2Config()))   # paper
+    assert str(gt.isam2_params()) != str(gtsam.ISAM2Params())
+    with pytest.raises(ConfigError, match="config= must be a Isam2Config, got dict"):
+        gt.isam2_params({"relinearize_threshold": 0.1})   # type: ignore[arg-type]
