@@ -337,3 +337,21 @@ def test_isam2_params_are_the_ones_gtsam_isam2_runs_with(noisy: Stream) -> None:
     assert str(gt.isam2_params()) != str(gtsam.ISAM2Params())
     with pytest.raises(ConfigError, match="config= must be a Isam2Config, got dict"):
         gt.isam2_params({"relinearize_threshold": 0.1})   # type: ignore[arg-type]
+
+
+def test_a_bearing_graph_gives_its_bearings_as_batch_state_does(noisy: Stream) -> None:
+    """An incremental method holds a BearingGraph, not a BatchState: the same arrays."""
+    graph = gt.BearingGraph(noisy.header, gt.FactorGraphConfig(), np.zeros(3))
+    owner, ids, brg = graph.bearings()
+    assert owner.shape == ids.shape == brg.shape == (0,)
+    for step in noisy.steps:
+        graph.add_step(step)
+    state = gt.build_graph(noisy.header, noisy.steps)
+    mine, theirs = graph.bearings(), state.bearings()
+    assert [a.dtype for a in mine] == [np.int64, np.int64, np.float64]
+    for a, b in zip(mine, theirs):
+        assert a.shape == b.shape and np.array_equal(a, b)
+    every = [(s.t, i, b) for s in noisy.steps
+             for i, b in zip(s.landmark_ids.tolist(), s.bearings_rad.tolist())]
+    assert list(zip(*(a.tolist() for a in mine))) == every
+    assert graph.pending() and graph.landmark_ids == []   # pending ones' bearings too
