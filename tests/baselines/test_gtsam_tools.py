@@ -320,8 +320,8 @@ def test_isam2_params_are_the_ones_gtsam_isam2_runs_with(noisy: Stream) -> None:
     the mapper's settings were private (``Isam2Mapper._new_isam``)."""
     from baselines.isam2 import Isam2Config, Isam2Mapper
 
-    for cfg in (gt.FactorGraphConfig(), gt.FactorGraphConfig.preset("robust"),
-                Isam2Config(), Isam2Config.preset("real"), Isam2Config(isam2_optimizer="gauss-newton")):
+    for cfg in (gt.FactorGraphConfig(), gt.FactorGraphConfig.preset("robust"), Isam2Config(),
+                Isam2Config.preset("real"), Isam2Config(isam2_optimizer="gauss-newton")):
         mapper = Isam2Mapper(noisy.header, config=cfg)
         for step in noisy.steps[:12]:
             mapper.step(step)
@@ -355,3 +355,17 @@ def test_a_bearing_graph_gives_its_bearings_as_batch_state_does(noisy: Stream) -
              for i, b in zip(s.landmark_ids.tolist(), s.bearings_rad.tolist())]
     assert list(zip(*(a.tolist() for a in mine))) == every
     assert graph.pending() and graph.landmark_ids == []   # pending ones' bearings too
+
+
+def test_estimate_from_values_names_its_two_graphs(noisy: Stream) -> None:
+    """``graph`` was the BearingGraph and ``solved`` the factor graph: named for what they are."""
+    import inspect
+
+    names = list(inspect.signature(gt.estimate_from_values).parameters)
+    assert names == ["bearing_graph", "values", "factors", "info", "covariances"]
+    state = gt.build_graph(noisy.header, noisy.steps)
+    est = gt.estimate_from_values(bearing_graph=state.problem, values=state.values,
+                                  factors=state.graph)
+    assert est.info["n_factors"] == state.graph.size()
+    assert len(est) == len(state.problem.landmark_ids)
+    assert est.landmark_cov is None
