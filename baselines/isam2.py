@@ -181,16 +181,13 @@ class Isam2Config(FactorGraphConfig):
 
 def isam2_params(config: FactorGraphConfig | None = None, *,
                  long: bool = False) -> gtsam.ISAM2Params:
-    """``gtsam-isam2``'s iSAM2 settings for ``config`` (:class:`Isam2Config`; None: ``paper``;
-    a :class:`FactorGraphConfig`: iSAM2 fields at their defaults, as the mapper takes one), with
-    ``long`` those of long mode. Not in them: ``checkpoint_updates`` empty ``isam.update()``
-    calls follow an update with new factors. (GTSAM's defaults are far coarser: 0.1, skip 10.)"""
-    if isinstance(config, FactorGraphConfig) and not isinstance(config, Isam2Config):
-        config = Isam2Config(**asdict(config))
-    cfg = resolve(Isam2Config, config)   # None: paper; not a config: ConfigError
+    """``gtsam-isam2``'s iSAM2 settings for ``config`` (:class:`Isam2Config`, None: ``paper``, a
+    :class:`FactorGraphConfig`: iSAM2 fields at their defaults), ``long``: long mode's. Not in
+    them: ``checkpoint_updates`` empty ``isam.update()`` calls after one with new factors."""
+    plain = isinstance(config, FactorGraphConfig) and not isinstance(config, Isam2Config)
+    cfg = resolve(Isam2Config, Isam2Config(**asdict(config)) if plain else config)
     p = gtsam.ISAM2Params()
-    p.setRelinearizeThreshold(cfg.long_relinearize_threshold if long
-                              else cfg.relinearize_threshold)
+    p.setRelinearizeThreshold(cfg.long_relinearize_threshold if long else cfg.relinearize_threshold)
     p.relinearizeSkip = cfg.relinearize_skip
     p.enablePartialRelinearizationCheck = cfg.isam2_partial_check
     p.setFactorization("CHOLESKY")
