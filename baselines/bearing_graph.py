@@ -383,6 +383,7 @@ class BearingGraph:
         self._rows: list[tuple[int, int, int, int, int]] = []     # NewFactors.bearing_rows
         self._entered: dict[int, tuple[list[int], list[float]]] = {}
         self._last_batch: dict[int, tuple[list[int], list[float]]] = {}
+        self._log = BearingLog()                    # every bearing, for bearings()
 
     # -- measurements ---------------------------------------------------------------------
     def add_step(self, step: Step) -> None:
@@ -415,6 +416,7 @@ class BearingGraph:
                 ts.append(t)
                 bs.append(brg)
                 self._fresh.add(lid)
+        self._log.add(step)
         self.n_steps += 1
 
     def predict_pose(self, t: int, previous_pose: np.ndarray) -> np.ndarray:
@@ -422,6 +424,11 @@ class BearingGraph:
         if t == 0:
             return self.start_pose.copy()
         return compose(previous_pose, self.odoms[t])
+
+    def bearings(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Every bearing so far, of landmarks in the graph and pending ones, in step order:
+        owner step (int64), landmark id (int64), bearing (rad, float64), each ``(J,)``."""
+        return self._log.arrays()
 
     # -- landmarks ------------------------------------------------------------------------
     def pending(self) -> dict[int, int]:

@@ -33,7 +33,7 @@ from bomgraph.geometry import origin_spread, pair_bearings, rotation
 from bomgraph.mapper import MapEstimate
 from bomgraph.stream import Step, StreamHeader, Truth
 
-from .bearing_graph import (BearingGraph, BearingLog, FactorGraphConfig, NewFactors, insert_pose,
+from .bearing_graph import (BearingGraph, FactorGraphConfig, NewFactors, insert_pose,
                             landmark_key, landmarks_from_values, pose_key, poses_from_values)
 from .lm_report import (GTSAM_ERRORS, SolveReport, all_poses,  # noqa: F401 (re-exported)
                         estimate_from_values, gauss_newton_check, lm_params,
@@ -87,7 +87,6 @@ class BatchState:
         self._window_b = 0                # held pose of the last solve if a window, else 0
         self.whole_only = False           # set by ScheduledSolver.finish: no window solve
         self._fresh: list[int] = []       # landmarks entered since the last solution
-        self._log = BearingLog()
         self.chunks = StepChunks(header, config, keep_conditionals=True)
         self._chunk_start = 0
         # landmarks out of reach after the last whole-graph solve that ran the robust pass
@@ -110,7 +109,6 @@ class BatchState:
         insert_pose(self.values, t, pose, prev)
         self._last = np.asarray(pose, dtype=float)
         self._odom_sigma.append(np.asarray(step.odometry_sigma(self.header), dtype=float))
-        self._log.add(step)
 
     def set_values(self, values: gtsam.Values) -> None:
         """Make ``values`` the current solution (the next poses are predicted from it)."""
@@ -126,8 +124,9 @@ class BatchState:
         return np.array(self._odom_sigma)
 
     def bearings(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Every bearing so far: owner step, landmark id, bearing (rad), each (J,)."""
-        return self._log.arrays()
+        """Every bearing so far: owner step, landmark id, bearing (rad), each (J,)
+        (:meth:`BearingGraph.bearings`)."""
+        return self.problem.bearings()
 
     def poses(self, ts: np.ndarray) -> np.ndarray:
         """Poses ``ts`` in the current values, shape (k, 3)."""

@@ -45,7 +45,8 @@ What is here, each the same object the baselines run (re-exported, never copied)
 * **solving**: :func:`solve_lm` (Levenberg-Marquardt with an honest :class:`SolveReport`:
   a run that gave up is never "converged"), :func:`checked_solve` (diagnose, then solve,
   raising :class:`UnconstrainedGraphError` with the names instead of GTSAM's message),
-  :func:`gauss_newton_check`, :func:`estimate_from_values` (a solution as a MapEstimate).
+  :func:`gauss_newton_check`, :func:`estimate_from_values` (a solution as a MapEstimate),
+  :func:`isam2_params` (the ``gtsam.ISAM2Params`` ``gtsam-isam2`` runs with for a config).
 
 Units: metres and radians; poses ``(x_m, y_m, psi_rad)``; points are ``(n, 2)`` arrays with
 their ids beside them. The paper's section IV, Exp. 2 compares BOM-STMDS with such graphs.
@@ -75,6 +76,7 @@ from .bearing_graph import (BearingGraph, FactorGraphConfig, NewFactors, bearing
                             odometry_factors, pose_key, poses_from_values, prior_factor)
 from .factor_graph import (GTSAM_ERRORS, BatchState, SolveReport, estimate_from_values,
                            gauss_newton_check, lm_params, marginal_covariances, solve_lm)
+from .isam2 import Isam2Config, isam2_params
 from .resection import resect_pose, resect_trajectory
 from .seeding import (SeedAlignment, SeedStart, align_seed, check_map, seed_start,
                       triangulate_arrays, trimmed_align)
@@ -574,5 +576,5 @@ __all__ = [
     "diagnose", "Diagnosis", "key_name", "UnconstrainedGraphError",
     # solving
     "solve_lm", "checked_solve", "SolveReport", "lm_params", "gauss_newton_check",
-    "marginal_covariances", "estimate_from_values",
+    "marginal_covariances", "estimate_from_values", "isam2_params", "Isam2Config",
 ]

@@ -179,6 +179,26 @@ class Isam2Config(FactorGraphConfig):
              "restart_cost_ratio must be >= 0 or None")
 
 
+def isam2_params(config: FactorGraphConfig | None = None, *,
+                 long: bool = False) -> gtsam.ISAM2Params:
+    """``gtsam-isam2``'s iSAM2 settings for ``config`` (:class:`Isam2Config`, None: ``paper``, a
+    :class:`FactorGraphConfig`: iSAM2 fields at their defaults), ``long``: long mode's. Not in
+    them: ``checkpoint_updates`` empty ``isam.update()`` calls after one with new factors."""
+    plain = isinstance(config, FactorGraphConfig) and not isinstance(config, Isam2Config)
+    cfg = resolve(Isam2Config, Isam2Config(**asdict(config)) if plain else config)
+    p = gtsam.ISAM2Params()
+    p.setRelinearizeThreshold(cfg.long_relinearize_threshold if long else cfg.relinearize_threshold)
+    p.relinearizeSkip = cfg.relinearize_skip
+    p.enablePartialRelinearizationCheck = cfg.isam2_partial_check
+    p.setFactorization("CHOLESKY")
+    if cfg.isam2_optimizer == "dogleg" and not long:
+        p.setOptimizationParams(gtsam.ISAM2DoglegParams())
+    else:
+        p.setOptimizationParams(gtsam.ISAM2GaussNewtonParams(
+            cfg.long_wildfire_threshold if long else 0.001))
+    return p
+
+
 class Isam2Mapper(WindowLongMode, NormalModeCheck):
     """``gtsam-isam2``: iSAM2 updates with only the new factors and values, on an internal
     schedule (every ``isam2_update_every`` steps, and at a step where landmarks entered).
@@ -280,19 +300,8 @@ class Isam2Mapper(WindowLongMode, NormalModeCheck):
         self._finish_entered: list[int] = []   # the landmarks finish() let in
 
     def _new_isam(self) -> gtsam.ISAM2:
-        """A fresh iSAM2: Cholesky, Powell's dogleg (a trust region) or Gauss-Newton."""
-        p = gtsam.ISAM2Params()
-        p.setRelinearizeThreshold(self.config.long_relinearize_threshold if self._long
-                                  else self.config.relinearize_threshold)
-        p.relinearizeSkip = self.config.relinearize_skip
-        p.enablePartialRelinearizationCheck = self.config.isam2_partial_check
-        p.setFactorization("CHOLESKY")
-        if self.config.isam2_optimizer == "dogleg" and not self._long:
-            p.setOptimizationParams(gtsam.ISAM2DoglegParams())
-        else:
-            p.setOptimizationParams(gtsam.ISAM2GaussNewtonParams(
-                self.config.long_wildfire_threshold if self._long else 0.001))
-        return gtsam.ISAM2(p)
+        """A fresh iSAM2 with :func:`isam2_params` (long mode's settings in long mode)."""
+        return gtsam.ISAM2(isam2_params(self.config, long=self._long))
 
     def add_factors(self, factors: gtsam.NonlinearFactorGraph,
                     values: gtsam.Values | None = None) -> None:
@@ -588,4 +597,4 @@ class Isam2Mapper(WindowLongMode, NormalModeCheck):
                                      self.config.covariances)
 
 
-__all__ = ["Isam2Config", "Isam2Mapper", "polish"]
+__all__ = ["Isam2Config", "Isam2Mapper", "isam2_params", "polish"]

@@ -490,22 +490,26 @@ def marginal_covariances(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values
         reason)
 
 
-def estimate_from_values(graph: BearingGraph, values: gtsam.Values,
-                         solved: gtsam.NonlinearFactorGraph, info: dict[str, Any],
-                         covariances: bool) -> MapEstimate:
-    """The MapEstimate of a solution: every pose, the landmarks in the graph (sorted by id),
-    ``info`` plus the graph's counts, and marginal covariances of ``solved`` if asked."""
-    ids = np.array(sorted(graph.landmark_ids), dtype=np.int64)
-    pose_t = np.arange(graph.n_steps, dtype=np.int64)
-    poses = all_poses(values, graph.n_steps)
+def estimate_from_values(bearing_graph: BearingGraph, values: gtsam.Values,
+                         factors: gtsam.NonlinearFactorGraph,
+                         info: dict[str, Any] | None = None,
+                         covariances: bool = False) -> MapEstimate:
+    """The MapEstimate of a solution ``values``: every pose of ``bearing_graph`` (the
+    :class:`BearingGraph` that made the factors), its landmarks in the graph (sorted by id),
+    ``info`` plus its counts, and, if ``covariances``, the marginal covariances of ``factors``
+    (the factor graph ``values`` solves, e.g. every factor handed to iSAM2) at ``values``."""
+    ids = np.array(sorted(bearing_graph.landmark_ids), dtype=np.int64)
+    pose_t = np.arange(bearing_graph.n_steps, dtype=np.int64)
+    poses = all_poses(values, bearing_graph.n_steps)
     xy = landmarks_from_values(values, ids)
-    info = dict(info)
-    info.update({"n_landmarks": int(ids.size), "pending": len(graph.pending()),
-                 "n_bearing_factors": graph.n_bearing_factors,
-                 "n_prior_factors": graph.n_prior_factors, "n_factors": int(solved.size())})
+    info = dict(info or {})
+    info.update({"n_landmarks": int(ids.size), "pending": len(bearing_graph.pending()),
+                 "n_bearing_factors": bearing_graph.n_bearing_factors,
+                 "n_prior_factors": bearing_graph.n_prior_factors,
+                 "n_factors": int(factors.size())})
     lc = pc = None
     if covariances and ids.size:
-        marg = marginal_covariances(solved, values, pose_t, ids)
+        marg = marginal_covariances(factors, values, pose_t, ids)
         info.update(marg.as_info())
         if info["covariances"] is not False:   # NaN blocks mark the undefined ones
             lc, pc = marg.landmark_cov, marg.pose_cov

@@ -30,7 +30,7 @@ def simulated(tmp_path: Path, steps: int = 40) -> Path:
 
 def test_examples_are_short() -> None:
     files = sorted(EXAMPLES.glob("*.py"))
-    assert len(files) == 3
+    assert len(files) == 4
     assert all(len(f.read_text().splitlines()) < 60 for f in files)
 
 
@@ -68,6 +68,20 @@ def test_custom_hybrid_runs_and_its_solve_converges() -> None:
     assert out[1].startswith("custom hybrid: ") and out[1].endswith("converged True")
     mpe_cm = float(out[1].split("MPE")[1].split()[0])
     assert 0 < mpe_cm < 50
+
+
+def test_incremental_hybrid_maps_as_gtsam_isam2_does() -> None:
+    """The same map within 0.5 cm on ``simulate --seed 7 --steps 100`` (1.82 vs 1.95 cm);
+    with GTSAM's default ISAM2Params instead of ``gt.isam2_params`` it maps at 7.84 cm."""
+    out = run_example("incremental_hybrid.py", "--steps", "100").splitlines()
+    assert len(out) == 2 and out[0].startswith("incremental hybrid (")
+    assert out[1].startswith("gtsam-isam2: ")
+    seeded = int(out[0].split("(")[1].split()[0])
+    (n_mine, mpe_mine), (n_ref, mpe_ref) = [
+        (int(line.split(": ")[1].split()[0]), float(line.split("MPE")[1].split()[0]))
+        for line in out]
+    assert seeded >= 1 and n_mine == n_ref == 50
+    assert abs(mpe_mine - mpe_ref) < 0.5 and mpe_ref < 5   # cm
 
 
 def test_custom_hybrid_is_under_40_lines() -> None:

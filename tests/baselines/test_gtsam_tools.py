@@ -313,3 +313,59 @@ def test_on_a_recording_the_map_s_own_poses_start_the_graph_seed_start_cannot() 
     values, report = gt.checked_solve(state.graph, state.values, state.config)
     assert report.converged
     assert score_estimate(state.to_estimate(values, report.as_info()), stream.truth).mpe_m < 0.1
+
+
+def test_isam2_params_are_the_ones_gtsam_isam2_runs_with(noisy: Stream) -> None:
+    """h163: with plain ``gtsam.ISAM2Params()`` an incremental hybrid mapped sim7 at 8.3 m;
+    the mapper's settings were private (``Isam2Mapper._new_isam``)."""
+    from baselines.isam2 import Isam2Config, Isam2Mapper
+
+    for cfg in (gt.FactorGraphConfig(), gt.FactorGraphConfig.preset("robust"), Isam2Config(),
+                Isam2Config.preset("real"), Isam2Config(isam2_optimizer="gauss-newton")):
+        mapper = Isam2Mapper(noisy.header, config=cfg)
+        for step in noisy.steps[:12]:
+            mapper.step(step)
+        mine = gt.isam2_params(cfg)
+        assert str(mine) == str(mapper._isam.params())    # every field GTSAM prints
+        assert mine.getFactorization() == mapper._isam.params().getFactorization()
+        assert f"relinearizeThreshold:              {mapper.config.relinearize_threshold:g}" \
+            in str(mine)
+        mapper._long = True                                # long mode's solver
+        assert str(gt.isam2_params(cfg, long=True)) == str(mapper._new_isam().params())
+    assert "ISAM2DoglegParams" in str(gt.isam2_params(gt.FactorGraphConfig()))
+    assert str(gt.isam2_params()) == str(gt.isam2_params(Isam2Config()))   # paper
+    assert str(gt.isam2_params()) != str(gtsam.ISAM2Params())
+    with pytest.raises(ConfigError, match="config= must be a Isam2Config, got dict"):
+        gt.isam2_params({"relinearize_threshold": 0.1})   # type: ignore[arg-type]
+
+
+def test_a_bearing_graph_gives_its_bearings_as_batch_state_does(noisy: Stream) -> None:
+    """An incremental method holds a BearingGraph, not a BatchState: the same arrays."""
+    graph = gt.BearingGraph(noisy.header, gt.FactorGraphConfig(), np.zeros(3))
+    owner, ids, brg = graph.bearings()
+    assert owner.shape == ids.shape == brg.shape == (0,)
+    for step in noisy.steps:
+        graph.add_step(step)
+    state = gt.build_graph(noisy.header, noisy.steps)
+    mine, theirs = graph.bearings(), state.bearings()
+    assert [a.dtype for a in mine] == [np.int64, np.int64, np.float64]
+    for a, b in zip(mine, theirs):
+        assert a.shape == b.shape and np.array_equal(a, b)
+    every = [(s.t, i, b) for s in noisy.steps
+             for i, b in zip(s.landmark_ids.tolist(), s.bearings_rad.tolist())]
+    assert list(zip(*(a.tolist() for a in mine))) == every
+    assert graph.pending() and graph.landmark_ids == []   # pending ones' bearings too
+
+
+def test_estimate_from_values_names_its_two_graphs(noisy: Stream) -> None:
+    """``graph`` was the BearingGraph and ``solved`` the factor graph: named for what they are."""
+    import inspect
+
+    names = list(inspect.signature(gt.estimate_from_values).parameters)
+    assert names == ["bearing_graph", "values", "factors", "info", "covariances"]
+    state = gt.build_graph(noisy.header, noisy.steps)
+    est = gt.estimate_from_values(bearing_graph=state.problem, values=state.values,
+                                  factors=state.graph)
+    assert est.info["n_factors"] == state.graph.size()
+    assert len(est) == len(state.problem.landmark_ids)
+    assert est.landmark_cov is None
