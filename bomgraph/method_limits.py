@@ -202,10 +202,6 @@ class Reach:
                  max_sigma: float | None = MAX_SIGMA) -> None:
         self.start_pose = checked_start_pose(start_pose)
         self.pose = self.start_pose.copy()
-        x, y = self.start_pose[:2].tolist()  # a far start is the user's option, not the stream
-        self._fix = "the stream's odometry" + ("" if x == y == 0 else (
-            f", or the option start_pose: it starts the robot {math.hypot(x, y):g} m from the "
-            f"map origin"))
         self.method = method
         self.max_sigma = max_sigma
 
@@ -227,13 +223,24 @@ class Reach:
         dx, dy, dpsi = np.asarray(step.odom, float).tolist()
         c, s = float(np.cos(psi)), float(np.sin(psi))   # numpy's, as compose's
         x, y = x + c * dx - s * dy, y + s * dx + c * dy
-        check_distance(math.hypot(x, y), step.t, self.method,
-                       "this step's move: it carries the robot from the map origin to a "
-                       "distance of", self._fix)
+        distance = math.hypot(x, y)
+        if not distance <= MAX_COORDINATE_M:
+            check_distance(distance, step.t, self.method, "this step's move: it carries the "
+                           "robot from the map origin to a distance of", self._fix(x, y))
         self.pose = np.array([x, y, float(wrap_angle(psi + dpsi))])
         return self.pose
+
+    def _fix(self, x: float, y: float) -> str:
+        """What to fix for a move to ``(x, y)`` beyond the bound: the odometry, and the option
+        ``start_pose`` where the odometry alone stays within it (a far start is the user's
+        option, not the stream's; h167: a start 1 m out was named for a move of 2e9 m)."""
+        x0, y0 = self.start_pose[:2].tolist()
+        if not math.hypot(x - x0, y - y0) <= MAX_COORDINATE_M:
+            return "the stream's odometry"
+        return (f"the stream's odometry, or the option start_pose: it starts the robot "
+                f"{math.hypot(x0, y0):g} m from the map origin")
 
 
 __all__ = ["MAX_SIGMA", "Reach", "check_bearing_sigma", "check_distance",
            "check_factory_options", "check_mapper_option", "check_priors", "checked_header",
-           "check_sigmas", "checked_start_pose"]
+           "check_sigmas", "checked_start_pose", "shown_beyond"]

@@ -62,3 +62,31 @@ def test_a_scheduler_slow_to_answer_is_still_used() -> None:
         local.loop.add_callback(time.sleep, 4 * cluster.PROBE_AFTER_S)   # busy, not gone
         time.sleep(0.1)   # (the sleep has started: not a timing assertion)
         assert cluster.check_scheduler(local.scheduler_address, 30) == 1
+
+
+@pytest.mark.parametrize("method", ["triangulate", "gtsam-isam2"])
+def test_a_near_start_pose_is_not_named_for_a_far_move(tmp_path: Path, method: str,
+                                                       capsys: pytest.CaptureFixture) -> None:
+    """``--option start_pose=[1,0,0]`` and a step's move of 2e9 m: the refusal said "fix the
+    stream's odometry, or the option start_pose: it starts the robot 1 m from the map origin",
+    a start that no value could mend. It is named where the odometry alone stays within the
+    bound (a start 6e8 m out and a move of 6e8 m)."""
+    s = _with_bearing_sigma(tmp_path, 0.01)
+    lines = [json.loads(ln) for ln in s.read_text().splitlines()]
+
+    def refusal(start: str, move: float) -> str:
+        lines[5]["odom"] = [move, 0.0, 0.0]
+        far = tmp_path / "far.jsonl"
+        far.write_text("".join(json.dumps(o) + "\n" for o in lines))
+        capsys.readouterr()
+        assert main(["run", str(far), "--method", method, "--option", f"start_pose={start}",
+                     "--out", str(tmp_path / "e.est"), "--allow-truth", "-q"]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and "line 6: 'odom': step 4: " in err[0], err
+        return err[0]
+
+    line = refusal("[1,0,0]", 2e9)
+    assert "beyond 1e+09 m" in line and "option start_pose" not in line, line
+    line = refusal("[6e8,0,0]", 6e8)
+    assert ("fix the stream's odometry, or the option start_pose: it starts the robot 6e+08 m "
+            "from the map origin") in line, line
