@@ -53,6 +53,14 @@ from .stream import Step, StreamHeader
 MAX_SIGMA = 1e6
 
 
+def shown_beyond(value: float, bound: float) -> str:
+    """``value``, beyond ``bound``, with the digits (6 at least) that set it apart from it:
+    "1e+09 m, beyond 1e+09 m" said nothing (h161), nor "3.14159 rad: it must be in (0, pi]"
+    of a bearing sigma of 3.1415927 (h167)."""
+    return next((f"{value:.{k}g}" for k in range(6, 18) if float(f"{value:.{k}g}") > bound),
+                repr(value))
+
+
 def check_sigmas(values: Any, t: int | None, key: str, method: str,
                  max_sigma: float = MAX_SIGMA) -> None:
     """Refuse sigmas above ``max_sigma`` (or non-finite) of step ``t`` (None: the header)
@@ -72,8 +80,9 @@ def check_bearing_sigma(header: StreamHeader, method: str) -> StreamHeader:
     sigma = header.bearing_sigma_rad
     if not (math.isfinite(sigma) and 0 < sigma <= math.pi):
         raise StreamValueError(
-            f"{method} cannot use a bearing std. dev. of {sigma:g} rad: it must be in (0, pi] "
-            f"(a larger sigma carries no information); fix the stream's bearing_sigma_rad",
+            f"{method} cannot use a bearing std. dev. of {shown_beyond(sigma, math.pi)} rad: it "
+            f"must be in (0, pi] (a larger sigma carries no information); fix the stream's "
+            f"bearing_sigma_rad",
             t=None, key="bearing_sigma_rad", method=method)
     return header
 
@@ -105,14 +114,12 @@ def check_distance(distance_m: float, t: int, method: str, what: str,
                    fix: str = "the stream's odometry") -> None:
     """Refuse (``'odom'`` of step ``t``) a distance of ``distance_m`` metres beyond
     :data:`~bomgraph.plausibility.MAX_COORDINATE_M`: "``method`` cannot use ``what``
-    ``distance_m`` m, beyond ...; fix ``fix``" (the distance shown with the digits that set it
-    apart from the bound: "1e+09 m, beyond 1e+09 m" said nothing, h161)."""
+    ``distance_m`` m, beyond ...; fix ``fix``" (the distance shown by :func:`shown_beyond`)."""
     if not distance_m <= MAX_COORDINATE_M:
-        shown = next((f"{distance_m:.{k}g}" for k in range(6, 18)
-                      if float(f"{distance_m:.{k}g}") > MAX_COORDINATE_M), repr(distance_m))
         raise StreamValueError(
-            f"{method} cannot use {what} {shown} m, beyond {MAX_COORDINATE_M:g} m "
-            f"(coordinates that far lose the precision the measurements need); fix {fix}",
+            f"{method} cannot use {what} {shown_beyond(distance_m, MAX_COORDINATE_M)} m, "
+            f"beyond {MAX_COORDINATE_M:g} m (coordinates that far lose the precision the "
+            f"measurements need); fix {fix}",
             t=t, key="odom", method=method)
 
 
@@ -195,10 +202,6 @@ class Reach:
                  max_sigma: float | None = MAX_SIGMA) -> None:
         self.start_pose = checked_start_pose(start_pose)
         self.pose = self.start_pose.copy()
-        x, y = self.start_pose[:2].tolist()  # a far start is the user's option, not the stream
-        self._fix = "the stream's odometry" + ("" if x == y == 0 else (
-            f", or the option start_pose: it starts the robot {math.hypot(x, y):g} m from the "
-            f"map origin"))
         self.method = method
         self.max_sigma = max_sigma
 
@@ -220,13 +223,24 @@ class Reach:
         dx, dy, dpsi = np.asarray(step.odom, float).tolist()
         c, s = float(np.cos(psi)), float(np.sin(psi))   # numpy's, as compose's
         x, y = x + c * dx - s * dy, y + s * dx + c * dy
-        check_distance(math.hypot(x, y), step.t, self.method,
-                       "this step's move: it carries the robot from the map origin to a "
-                       "distance of", self._fix)
+        distance = math.hypot(x, y)
+        if not distance <= MAX_COORDINATE_M:
+            check_distance(distance, step.t, self.method, "this step's move: it carries the "
+                           "robot from the map origin to a distance of", self._fix(x, y))
         self.pose = np.array([x, y, float(wrap_angle(psi + dpsi))])
         return self.pose
+
+    def _fix(self, x: float, y: float) -> str:
+        """What to fix for a move to ``(x, y)`` beyond the bound: the odometry, and the option
+        ``start_pose`` where the odometry alone stays within it (a far start is the user's
+        option, not the stream's; h167: a start 1 m out was named for a move of 2e9 m)."""
+        x0, y0 = self.start_pose[:2].tolist()
+        if not math.hypot(x - x0, y - y0) <= MAX_COORDINATE_M:
+            return "the stream's odometry"
+        return (f"the stream's odometry, or the option start_pose: it starts the robot "
+                f"{math.hypot(x0, y0):g} m from the map origin")
 
 
 __all__ = ["MAX_SIGMA", "Reach", "check_bearing_sigma", "check_distance",
            "check_factory_options", "check_mapper_option", "check_priors", "checked_header",
-           "check_sigmas", "checked_start_pose"]
+           "check_sigmas", "checked_start_pose", "shown_beyond"]
