@@ -4,8 +4,9 @@
 Before connecting, the scheduler is asked who it is within Dask's connect timeout
 (:func:`check_scheduler`): ``distributed.Client`` waits forever on a port that accepts the
 connection and never answers (a dashboard's), and dies with a traceback on one that answers
-something else; an address that refuses the connection or does not resolve is refused at
-once (Dask retries it until its timeout: :func:`_connect`). A task that fails on the cluster itself (every worker that ran it died, or a
+something else; an address that does not resolve is refused at once, one that refuses the
+connection after :data:`REFUSED_GRACE_S` (Dask retries both until its timeout:
+:func:`_connect`). A task that fails on the cluster itself (every worker that ran it died, or a
 worker could not import it) becomes a failed run with the reason, so the other runs finish and
 are cached. Ctrl-C kills a local cluster's workers at once (:func:`_end_local_workers`); they
 never take it themselves (:func:`_workers_hold_signals`). Imports from bomgraph only the
@@ -108,9 +109,14 @@ def connect_timeout() -> float:
 
 
 #: Seconds :func:`check_scheduler` leaves Dask's connect alone before it tries a TCP address
-#: once itself (:func:`_connect`): Dask retries an address that refuses the connection or does
+#: itself (:func:`_connect`): Dask retries an address that refuses the connection or does
 #: not resolve until its connect timeout, so a typo in a port or host took 30 s (h161).
 PROBE_AFTER_S = 0.5
+#: Seconds a refused connection is tried again (every :data:`PROBE_AFTER_S`) before it is
+#: given up: a scheduler started beside the command (``dask scheduler & bomgraph compare
+#: --scheduler ...``) listens a second or two later. A host that does not resolve is given
+#: up at once.
+REFUSED_GRACE_S = 5.0
 
 
 async def _reachable(address: str, timeout: float) -> None:
@@ -127,18 +133,24 @@ async def _reachable(address: str, timeout: float) -> None:
 
 async def _connect(address: str, timeout: float) -> Any:
     """Dask's connect to ``address``; one still trying after :data:`PROBE_AFTER_S` (retrying
-    a refusal?) is given up at once if a connection of :func:`_reachable`'s fails."""
+    a refusal?) is given up once a connection of :func:`_reachable`'s fails: at once for a
+    host that does not resolve, after :data:`REFUSED_GRACE_S` of refusals."""
     from distributed.comm import connect
 
+    loop = asyncio.get_running_loop()
+    give_up_at = loop.time() + min(REFUSED_GRACE_S, timeout)
     task = asyncio.ensure_future(connect(address, timeout=timeout))
     done, _ = await asyncio.wait({task}, timeout=min(PROBE_AFTER_S, timeout))
-    if not done:
+    while not done:
         try:
             await _reachable(address, timeout)
-        except BaseException:
-            task.cancel()
-            await asyncio.gather(task, return_exceptions=True)
-            raise
+            break
+        except BaseException as exc:
+            if not (isinstance(exc, ConnectionRefusedError) and loop.time() < give_up_at):
+                task.cancel()
+                await asyncio.gather(task, return_exceptions=True)
+                raise
+        done, _ = await asyncio.wait({task}, timeout=PROBE_AFTER_S)
     return await asyncio.wait_for(task, timeout)
 
 

@@ -90,3 +90,42 @@ def test_a_near_start_pose_is_not_named_for_a_far_move(tmp_path: Path, method: s
     line = refusal("[6e8,0,0]", 6e8)
     assert ("fix the stream's odometry, or the option start_pose: it starts the robot 6e+08 m "
             "from the map origin") in line, line
+
+
+def test_a_scheduler_that_starts_beside_the_command_is_used() -> None:
+    """``dask scheduler & bomgraph compare --scheduler ...``: the scheduler listens a second
+    or so after the command asks. h161's probe refused the first refusal it met (after 0.5 s),
+    where Dask's connect would have waited for it; refusals are now tried again for
+    :data:`~bomgraph.cluster.REFUSED_GRACE_S`. Here the scheduler opens its port 3 probes
+    after the check began (the check's outcome is asserted, not its time)."""
+    pytest.importorskip("distributed")
+    import socket
+    import threading
+
+    from distributed import LocalCluster
+
+    from bomgraph import cluster
+
+    with socket.socket() as s:               # a free port, closed again: refused until used
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    started = threading.Event()
+    stop = threading.Event()
+
+    def later() -> None:
+        time.sleep(3 * cluster.PROBE_AFTER_S)
+        with LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
+                          protocol="tcp://", host="127.0.0.1", scheduler_port=port,
+                          dashboard_address=None,
+                          scheduler_kwargs=cluster.LOCAL_SCHEDULER_HTTP):
+            started.set()
+            stop.wait(60)
+
+    t = threading.Thread(target=later, daemon=True)
+    t.start()
+    try:
+        assert cluster.check_scheduler(f"tcp://127.0.0.1:{port}", 30) >= 0
+        assert started.is_set()
+    finally:
+        stop.set()
+        t.join(30)
