@@ -42,3 +42,15 @@ def test_the_first_address_that_listens_is_taken() -> None:
 def test_a_probe_of_a_refusing_address_still_says_refused() -> None:
     with pytest.raises(ConnectionRefusedError):
         asyncio.run(cluster._reachable(f"tcp://127.0.0.1:{_free_port()}", 5))
+
+
+def test_methods_says_what_conversion_kl_max_does_and_real_uses() -> None:
+    """``bomgraph methods ekf-invdepth`` shows an option's first sentence: c857885's entry
+    began with the None case ("a feature becomes Euclidean once Civera's index passes") and
+    left the number, the test and the ``real`` preset's 0.01 to later sentences."""
+    from baselines.ekf import InverseDepthConfig
+    from bomgraph.config import describe_options
+
+    doc = {o.name: o.doc for o in describe_options(InverseDepthConfig)}["conversion_kl_max"]
+    assert "Bailey" in doc and "0.01" in doc and '"real"' in doc and "None" in doc, doc
+    assert InverseDepthConfig.preset("real").conversion_kl_max == 0.01
