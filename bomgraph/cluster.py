@@ -127,8 +127,30 @@ async def _reachable(address: str, timeout: float) -> None:
     scheme, loc = parse_address(address)
     if scheme in ("tcp", "tls"):
         host, port = parse_host_port(loc)
-        _, writer = await asyncio.wait_for(asyncio.open_connection(host, port), timeout)
-        writer.close()
+        loop = asyncio.get_running_loop()
+
+        async def probe() -> None:
+            await _connect_any(await loop.getaddrinfo(host, port, type=socket.SOCK_STREAM))
+        await asyncio.wait_for(probe(), timeout)
+
+
+async def _connect_any(infos: Sequence[tuple]) -> None:
+    """Connect to the first of ``getaddrinfo``'s addresses that takes it. If none does, a
+    ConnectionRefusedError if one refused: ``localhost`` is ``::1`` and ``127.0.0.1`` on many
+    hosts, and asyncio's ``open_connection`` raised a plain ``OSError("Multiple exceptions:
+    ...")`` for two refusals, which :func:`_connect` gave up at once (h168)."""
+    loop = asyncio.get_running_loop()
+    errors: list[OSError] = []
+    for family, kind, proto, _, sockaddr in infos:
+        with socket.socket(family, kind, proto) as sock:
+            sock.setblocking(False)
+            try:
+                await loop.sock_connect(sock, sockaddr)
+                return
+            except OSError as exc:
+                errors.append(exc)
+    refused = [e for e in errors if isinstance(e, ConnectionRefusedError)]
+    raise (refused or errors or [OSError("the host name resolves to no address")])[0]
 
 
 async def _connect(address: str, timeout: float) -> Any:

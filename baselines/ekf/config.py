@@ -299,12 +299,13 @@ class InverseDepthConfig(BearingEkfConfig):
         (so ``sigma_rho / rho <= 0.25``) and 5 with Civera's range-free ``0.1 +- 0.5`` per m,
         where the test admits nearly every feature. False (``"paper"``): the first test
         only, as the paper's runs were made.
-    conversion_kl_max : None (``"paper"``, as the paper's runs were made): a feature becomes
-        Euclidean once Civera's index passes. A number (nats; ``"real"``: 0.01, the
-        ``init_kl_max`` of ``ekf``'s candidates, not tuned here): also Bailey's Gaussianity test on the conversion, as the
-        inverse-depth candidates of ``ekf`` use it (:func:`~baselines.ekf.models.
-        invdepth_conversion_kl`, the KL divergence between the unscented and the linearised
-        Gaussian of ``[x, y]``, at most this). Civera's index asks whether the bearing is
+    conversion_kl_max : a number (nats; preset ``"real"``: 0.01, the ``init_kl_max`` of
+        ``ekf``'s candidates, not tuned here): a feature becomes Euclidean once Civera's index
+        passes and Bailey's Gaussianity test on the conversion, the KL divergence between the
+        unscented and the linearised Gaussian of ``[x, y]``, is at most this; None (preset
+        ``"paper"``, as the paper's runs were made): Civera's index alone. The test is
+        :func:`~baselines.ekf.models.invdepth_conversion_kl`, as the inverse-depth
+        candidates of ``ekf`` use it. Civera's index asks whether the bearing is
         linear in ``[x, y]`` seen from the current pose (it passes whenever the robot views
         the anchor ray side-on or from afar, e.g. after a long blind step), not whether the
         feature's Gaussian survives the conversion: one converted with its depth still
