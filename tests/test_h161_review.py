@@ -131,7 +131,7 @@ def test_a_scheduler_address_that_refuses_or_does_not_resolve_is_refused_at_once
     """Dask's connect retries a refused port or an unresolvable host until its connect
     timeout: ``compare --scheduler tcp://127.0.0.1:1`` took 32 s and said "Timed out trying
     to connect ... after 30 s" (1.3 s after h161, 5.5 s since a refusal is tried again for
-    ``REFUSED_GRACE_S``, h35; the time is measured by hand, not asserted). With a
+    ``REFUSED_GRACE_S``, found by h167; the time is measured by hand, not asserted). With a
     connect timeout of 20 s, main's check ended at it with that message."""
     import dask.config
     pytest.importorskip("distributed")  # its configuration's defaults, beside the timeout

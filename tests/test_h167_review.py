@@ -92,7 +92,8 @@ def test_a_near_start_pose_is_not_named_for_a_far_move(tmp_path: Path, method: s
             "from the map origin") in line, line
 
 
-def test_a_scheduler_that_starts_beside_the_command_is_used() -> None:
+def test_a_scheduler_that_starts_beside_the_command_is_used(
+        monkeypatch: pytest.MonkeyPatch) -> None:
     """``dask scheduler & bomgraph compare --scheduler ...``: the scheduler listens a second
     or so after the command asks. h161's probe refused the first refusal it met (after 0.5 s),
     where Dask's connect would have waited for it; refusals are now tried again for
@@ -106,6 +107,7 @@ def test_a_scheduler_that_starts_beside_the_command_is_used() -> None:
 
     from bomgraph import cluster
 
+    monkeypatch.setattr(cluster, "REFUSED_GRACE_S", 60.0)   # a loaded machine's slow start
     with socket.socket() as s:               # a free port, closed again: refused until used
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
