@@ -253,7 +253,7 @@ def test_too_few_common_landmarks_names_the_file_the_map_and_whom(tmp_path, caps
     code, out, err = _evaluate(capsys, two, s)
     assert code == 2 and out == "" and len(err) == 1, err
     assert str(two) in err[0] and "final map (t = 11)" in err[0]
-    assert "2 landmark(s) with the truth" in err[0]
+    assert "2 landmarks with the truth" in err[0]
     code, out, err = _evaluate(capsys, full, s, "--reference", two)
     assert code == 2 and len(err) == 1 and str(full) in err[0], err
     assert "with the reference estimate" in err[0] and "truth" not in err[0], err
