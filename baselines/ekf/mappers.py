@@ -53,9 +53,9 @@ Inverse depth, ``ekf-invdepth``
     A first sighting enters the state at once as ``[x0, y0, theta, rho]`` (anchor = robot
     position, ``theta = psi + z``, ``rho ~ N(rho_init, rho_sigma^2)``); it is converted to a
     Euclidean ``[x, y]`` block once Civera's linearity index ``4 sigma_d / d |cos alpha|``
-    falls below ``linearity_max`` (with ``conversion_kl_max``, and Bailey's test passes on
-    the conversion, as for ``ekf``'s candidates). Features still in inverse depth are reported through the
-    same conversion by ``estimate()``; left out are those with ``rho <= 0`` and those whose
+    falls below ``linearity_max`` and, with ``conversion_kl_max`` set (preset ``real``),
+    Bailey's test on the conversion passes, as for ``ekf``'s candidates. Features still in
+    inverse depth are reported through the same conversion by ``estimate()``; left out are those with ``rho <= 0`` and those whose
     depth the bearings have not determined (the std. dev. of ``rho`` still above half its
     prior's: no parallax yet, e.g. from a robot that has not moved; with
     ``relative_depth_check``, preset ``"real"``, also its ratio to ``rho``: the std. dev. is
